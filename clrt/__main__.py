@@ -1,0 +1,5 @@
+import sys
+
+from clrt.cli import main
+
+sys.exit(main())

@@ -1,0 +1,175 @@
+"""Command line: ``clrt render`` and ``clrt info`` (also ``python -m clrt``).
+
+Every error a user can cause ends as one line on stderr, ``clrt: <what went
+wrong>``, and a non-zero exit: 2 for bad input, 3 for OpenCL trouble.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from clrt.errors import ClrtError, DeviceError, InputError
+
+DEFAULT_OUTPUT = "clrt-default.png"
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse, but a usage error is one line and exit code 2."""
+
+    def error(self, message):
+        raise InputError(f"{self.prog}: {message} (see --help)")
+
+
+def _vector(text: str) -> tuple:
+    try:
+        values = tuple(float(x) for x in text.split(","))
+    except ValueError:
+        values = ()
+    if len(values) != 3 or not all(np.isfinite(values)):
+        raise argparse.ArgumentTypeError(f"expected three numbers x,y,z, got {text!r}")
+    return values
+
+
+def _parser() -> argparse.ArgumentParser:
+    p = _Parser(prog="clrt", description="Ray trace triangle meshes with OpenCL.")
+    sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
+
+    r = sub.add_parser("render", help="render a mesh (or the built-in scene) to an image",
+                       description="Render MESH (OBJ, PLY, OFF, STL, GLB/GLTF, 3DS) or, with no MESH, "
+                                   "the built-in scene. Prints the output path.")
+    r.add_argument("mesh", nargs="?", help="mesh file; omit for the built-in scene")
+    r.add_argument("-o", "--output", help=f"image to write (default: MESH name .png, or {DEFAULT_OUTPUT}); "
+                                          "an existing file is replaced only once the render succeeded")
+    r.add_argument("--width", type=int, default=640, help="image width in pixels (default 640)")
+    r.add_argument("--height", type=int, default=480, help="image height in pixels (default 480)")
+    r.add_argument("--eye", type=_vector, help="camera position x,y,z (default: framed from the bounds)")
+    r.add_argument("--target", type=_vector, help="point looked at (default: centre of the bounds)")
+    r.add_argument("--up", type=_vector, default=(0.0, 1.0, 0.0), help="up vector (default 0,1,0)")
+    r.add_argument("--fov", type=float, default=45.0, help="vertical field of view in degrees (default 45)")
+    r.add_argument("--light", type=_vector, action="append", metavar="X,Y,Z",
+                   help="point light position; repeat for more lights (default: one above the eye)")
+    r.add_argument("--color", type=_vector, help="material colour r,g,b, linear 0..1 (default .8,.8,.8)")
+    r.add_argument("--ambient", type=float, help="ambient coefficient (default 0.1)")
+    r.add_argument("--diffuse", type=float, help="diffuse coefficient (default 0.7)")
+    r.add_argument("--specular", type=float, help="specular coefficient (default 0.3)")
+    r.add_argument("--shininess", type=float, help="Phong exponent (default 32)")
+    r.add_argument("--flat", action="store_true", help="flat shading (no vertex-normal interpolation)")
+    r.add_argument("--background", type=_vector, help="background colour r,g,b, linear 0..1")
+    r.add_argument("--device", help="'gpu', 'cpu' or P:D platform/device indices (default: PYOPENCL_CTX, "
+                                    "else the first GPU, else the first CPU)")
+    r.add_argument("-q", "--quiet", action="store_true", help="print only the output path")
+
+    i = sub.add_parser("info", help="list OpenCL platforms and devices, and the one clrt would use")
+    i.add_argument("--device", help="device to mark as selected (same forms as render --device)")
+    return p
+
+
+def _output_path(args) -> Path:
+    if args.output:
+        out = Path(args.output)
+    elif args.mesh:
+        out = Path(Path(args.mesh).stem + ".png")
+    else:
+        out = Path(DEFAULT_OUTPUT)
+    from PIL import Image
+    if out.suffix.lower() not in Image.registered_extensions():
+        raise InputError(f"cannot write {out}: unknown image type {out.suffix!r} (use .png)")
+    if not out.parent.is_dir():
+        raise InputError(f"cannot write {out}: folder {out.parent} does not exist")
+    if out.is_dir():
+        raise InputError(f"cannot write {out}: it is a folder")
+    return out
+
+
+def write_image(image: np.ndarray, path: Path) -> None:
+    """Write through a temporary file in the same folder and a rename, so that
+    a reader never sees a half-written image and a failure leaves no file behind."""
+    from PIL import Image
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=path.suffix, dir=path.parent)
+    try:
+        with os.fdopen(fd, "wb") as f:
+            Image.fromarray(image).save(f, format=Image.registered_extensions()[path.suffix.lower()])
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def _render(args) -> int:
+    from clrt.render import Renderer
+    from clrt.scene.default import default_scene
+    from clrt.scene.scene import Camera, Light, Material, default_light, scene_from_mesh
+
+    out = _output_path(args)
+    if args.mesh:
+        from clrt.scene.load import load_mesh
+        base = Material()
+        overrides = {k: getattr(args, k) for k in ("ambient", "diffuse", "specular", "shininess")
+                     if getattr(args, k) is not None}
+        material = Material(color=args.color or base.color, smooth=not args.flat, **overrides)
+        scene = scene_from_mesh(load_mesh(args.mesh), material)
+        scene.lights = []
+    else:
+        scene = default_scene()
+    if args.background:
+        scene.background = args.background
+
+    bounds = scene.bounds
+    if args.eye is None and args.target is None and scene.camera is not None:
+        eye, target = scene.camera.eye, scene.camera.target
+    else:
+        framed = Camera.framing(bounds, args.width, args.height, args.fov, up=args.up)
+        target = args.target or framed.target
+        eye = args.eye or tuple(np.add(target, np.subtract(framed.eye, framed.target)))
+    camera = Camera(eye, target, args.up, args.fov, args.width, args.height)
+    if args.light:
+        scene.lights = [Light(p) for p in args.light]
+    elif not scene.lights:
+        scene.lights = [default_light(bounds, camera)]
+
+    renderer = Renderer(scene, args.device)
+    frame = renderer.render(camera)
+    write_image(frame.image, out)
+    if not args.quiet:
+        print(f"{camera.width}x{camera.height} pixels, {frame.triangles:,} triangles, "
+              f"{len(scene.lights)} light(s), device: {frame.device}")
+        for stage, ms in frame.timings.items():
+            print(f"  {stage:<20} {ms:10.2f} ms")
+    print(out.resolve() if not args.quiet else out)
+    return 0
+
+
+def _info(args) -> int:
+    from clrt.device.context import describe_devices, list_devices
+    print(describe_devices(args.device))
+    if not list_devices():
+        return DeviceError.exit_code
+    return 0
+
+
+def main(argv=None) -> int:
+    try:
+        args = _parser().parse_args(argv)
+        return {"render": _render, "info": _info}[args.command](args)
+    except ClrtError as exc:
+        print(f"clrt: {exc}", file=sys.stderr)
+        return exc.exit_code
+    except KeyboardInterrupt:
+        print("clrt: interrupted", file=sys.stderr)
+        return 130
+    except Exception as exc:  # noqa: BLE001 -- driver errors arrive as many types
+        import pyopencl as cl
+        if isinstance(exc, (cl.Error, MemoryError)):
+            print(f"clrt: OpenCL error: {exc}".splitlines()[0], file=sys.stderr)
+            return DeviceError.exit_code
+        raise
+
+
+if __name__ == "__main__":
+    sys.exit(main())

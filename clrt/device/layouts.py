@@ -1,0 +1,64 @@
+"""Every buffer the host shares with the kernels, defined once.
+
+Each numpy structured dtype below has a twin struct in ``clrt/kernels/layouts.h``;
+``tests/test_layouts.py`` asks the OpenCL compiler for ``sizeof``/``offsetof`` of
+each struct and compares with these dtypes.  Remember that OpenCL ``float3`` is
+16 bytes, so positions are stored as ``float4`` with the 4th lane spare or used.
+
+Byte layout (offset: field):
+
+``Ray`` (32 B) -- one per pixel, written by ``generate_rays``
+    0: origin  float4  xyz = origin, w = tmin
+   16: dir     float4  xyz = unit direction, w = tmax
+
+``Hit`` (16 B) -- result of a closest-hit query
+    0: t       float   distance along the unit direction, INFINITY on a miss
+    4: prim    int     triangle index (row of ``Mesh.faces``), -1 on a miss
+    8: u       float   barycentric weight of vertex 1
+   12: v       float   barycentric weight of vertex 2
+
+``TriangleVerts`` (48 B) -- the three corners, gathered for the intersection test
+    0: v0, 16: v1, 32: v2   float4 each, w unused (0)
+
+``TriangleInfo`` (16 B) -- what shading needs beyond the corners
+    0: vertex  int[3]  indices into the vertex-normal buffer
+   12: material int    row of the material buffer
+
+``Material`` (48 B)
+    0: color     float4  linear RGB albedo, a unused
+   16: ambient   float   coefficients of the Phong model
+   20: diffuse   float
+   24: specular  float
+   28: shininess float   Phong exponent
+   32: flags     uint    bit 0: smooth shading (interpolate vertex normals)
+   36: pad       uint[3]
+
+``Light`` (32 B) -- point light
+    0: position float4  xyz, w unused
+   16: color    float4  linear RGB intensity, a unused
+"""
+
+import numpy as np
+
+float4 = np.dtype((np.float32, 4))
+
+RAY = np.dtype([("origin", float4), ("dir", float4)])
+HIT = np.dtype([("t", np.float32), ("prim", np.int32), ("u", np.float32), ("v", np.float32)])
+TRIANGLE_VERTS = np.dtype([("v0", float4), ("v1", float4), ("v2", float4)])
+TRIANGLE_INFO = np.dtype([("vertex", np.int32, 3), ("material", np.int32)])
+MATERIAL = np.dtype([("color", float4), ("ambient", np.float32), ("diffuse", np.float32),
+                     ("specular", np.float32), ("shininess", np.float32),
+                     ("flags", np.uint32), ("pad", np.uint32, 3)])
+LIGHT = np.dtype([("position", float4), ("color", float4)])
+
+MATERIAL_SMOOTH = 1
+
+# struct name in layouts.h -> numpy dtype; the layout test walks this table.
+STRUCTS = {
+    "Ray": RAY,
+    "Hit": HIT,
+    "TriangleVerts": TRIANGLE_VERTS,
+    "TriangleInfo": TRIANGLE_INFO,
+    "Material": MATERIAL,
+    "Light": LIGHT,
+}

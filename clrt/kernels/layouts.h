@@ -1,0 +1,41 @@
+// Structs shared with the host.  The byte layout of each is documented once,
+// in clrt/device/layouts.py next to its numpy dtype; tests/test_layouts.py
+// checks that both sides agree on every offset.
+#ifndef CLRT_LAYOUTS_H
+#define CLRT_LAYOUTS_H
+
+typedef struct {
+    float4 origin;   // xyz origin, w = tmin
+    float4 dir;      // xyz unit direction, w = tmax
+} Ray;
+
+typedef struct {
+    float t;         // INFINITY on a miss
+    int prim;        // -1 on a miss
+    float u, v;      // barycentric weights of vertices 1 and 2
+} Hit;
+
+typedef struct {
+    float4 v0, v1, v2;
+} TriangleVerts;
+
+typedef struct {
+    int vertex[3];
+    int material;
+} TriangleInfo;
+
+typedef struct {
+    float4 color;
+    float ambient, diffuse, specular, shininess;
+    uint flags;
+    uint pad[3];
+} Material;
+
+#define MATERIAL_SMOOTH 1u
+
+typedef struct {
+    float4 position;
+    float4 color;
+} Light;
+
+#endif

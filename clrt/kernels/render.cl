@@ -1,0 +1,58 @@
+// Entry file of the render program: the paper's two global kernels (ray
+// generation, pixel colour) plus the conversion of linear colour to 8-bit
+// sRGB.  The acceleration structure is chosen when the program is built:
+// today only accel_none.cl exists.
+#include "layouts.h"
+#include "camera.cl"
+#include "accel_none.cl"
+#include "shading.cl"
+
+__kernel void generate_rays(__global Ray* rays, const float4 eye, const float4 forward,
+                            const float4 right, const float4 up, const float scale_x,
+                            const float scale_y, const uint width, const uint height)
+{
+    const uint px = get_global_id(0), py = get_global_id(1);
+    if (px >= width || py >= height)
+        return;
+    Camera cam;
+    cam.eye = eye.xyz;
+    cam.forward = forward.xyz;
+    cam.right = right.xyz;
+    cam.up = up.xyz;
+    cam.scale_x = scale_x;
+    cam.scale_y = scale_y;
+    cam.width = width;
+    cam.height = height;
+    rays[py * width + px] = camera_ray(&cam, px, py);
+}
+
+__kernel void shade_pixels(__global const Ray* rays, __global float4* image, __global Hit* hits,
+                           const uint num_pixels, ACCEL_PARAMS, SHADING_PARAMS)
+{
+    const uint i = get_global_id(0);
+    if (i >= num_pixels)
+        return;
+    const Ray ray = rays[i];
+    const float3 o = ray.origin.xyz, d = ray.dir.xyz;
+    const Hit hit = closest_hit(ACCEL_ARGS, o, d, ray.origin.w, ray.dir.w);
+    hits[i] = hit;
+    image[i] = (float4)(shade_hit(ACCEL_ARGS, SHADING_ARGS, o, d, &hit), 1.0f);
+}
+
+// IEC 61966-2-1 transfer function; linear values are clamped to [0, 1].
+inline float srgb_encode(float c)
+{
+    c = clamp(c, 0.0f, 1.0f);
+    return c <= 0.0031308f ? 12.92f * c : 1.055f * pow(c, 1.0f / 2.4f) - 0.055f;
+}
+
+__kernel void encode_srgb8(__global const float4* image, __global uchar4* out, const uint num_pixels)
+{
+    const uint i = get_global_id(0);
+    if (i >= num_pixels)
+        return;
+    const float4 c = image[i];
+    out[i] = (uchar4)(convert_uchar_sat_rte(255.0f * srgb_encode(c.x)),
+                      convert_uchar_sat_rte(255.0f * srgb_encode(c.y)),
+                      convert_uchar_sat_rte(255.0f * srgb_encode(c.z)), 255);
+}

@@ -1,0 +1,73 @@
+// Whitted-style local shading of one hit: Phong ambient + diffuse + specular
+// from every point light, each light blocked or not by one shadow ray.
+#ifndef CLRT_SHADING_CL
+#define CLRT_SHADING_CL
+
+#include "layouts.h"
+
+#define SHADING_PARAMS __global const TriangleInfo* tri_info, __global const float4* vertex_normals, \
+    __global const Material* materials, __global const Light* lights, const uint num_lights, \
+    const float4 ambient_light, const float4 background, const float ray_epsilon
+#define SHADING_ARGS tri_info, vertex_normals, materials, lights, num_lights, \
+    ambient_light, background, ray_epsilon
+
+// Geometric normal, facing the incoming ray (surfaces are two-sided).
+inline float3 facing_normal(__global const TriangleVerts* tri, float3 dir)
+{
+    const float3 n = normalize(cross(tri->v1.xyz - tri->v0.xyz, tri->v2.xyz - tri->v0.xyz));
+    return dot(n, dir) > 0.0f ? -n : n;
+}
+
+// Shading normal: interpolated vertex normals for smooth materials, turned
+// to the same side as the geometric normal.
+inline float3 shading_normal(__global const TriangleInfo* info, __global const float4* vertex_normals,
+                             const Hit* hit, float3 geometric, uint flags)
+{
+    if (!(flags & MATERIAL_SMOOTH))
+        return geometric;
+    const float w0 = 1.0f - hit->u - hit->v;
+    const float3 n = w0 * vertex_normals[info->vertex[0]].xyz
+                   + hit->u * vertex_normals[info->vertex[1]].xyz
+                   + hit->v * vertex_normals[info->vertex[2]].xyz;
+    const float len = length(n);
+    if (!(len > 0.0f))
+        return geometric;
+    const float3 s = n / len;
+    return dot(s, geometric) < 0.0f ? -s : s;
+}
+
+inline float3 shade_hit(ACCEL_PARAMS, SHADING_PARAMS, float3 origin, float3 dir, const Hit* hit)
+{
+    if (hit->prim < 0)
+        return background.xyz;
+    __global const TriangleInfo* info = tri_info + hit->prim;
+    const Material m = materials[info->material];
+    const float3 ng = facing_normal(tris + hit->prim, dir);
+    const float3 n = shading_normal(info, vertex_normals, hit, ng, m.flags);
+    const float3 p = origin + hit->t * dir;
+    // Shadow rays start just off the surface, on the side the ray came from.
+    const float3 shadow_origin = p + ray_epsilon * ng;
+    const float3 to_eye = -dir;
+
+    float3 color = m.ambient * m.color.xyz * ambient_light.xyz;
+    for (uint i = 0; i < num_lights; ++i) {
+        const float3 to_light = lights[i].position.xyz - shadow_origin;
+        const float dist = length(to_light);
+        const float3 l = to_light / dist;
+        // A light behind the geometric surface is blocked by the surface itself.
+        if (!(dot(ng, l) > 0.0f) || !(dot(n, l) > 0.0f))
+            continue;
+        if (any_hit(ACCEL_ARGS, shadow_origin, l, 0.0f, dist))
+            continue;
+        const float n_dot_l = dot(n, l);
+        const float3 reflected = 2.0f * n_dot_l * n - l;
+        const float r_dot_v = fmax(dot(reflected, to_eye), 0.0f);
+        const float3 light = lights[i].color.xyz;
+        color += m.diffuse * n_dot_l * m.color.xyz * light;
+        if (m.specular > 0.0f && r_dot_v > 0.0f)
+            color += m.specular * pow(r_dot_v, m.shininess) * light;
+    }
+    return color;
+}
+
+#endif

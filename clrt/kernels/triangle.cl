@@ -1,0 +1,76 @@
+// Ray/triangle intersection: the watertight test of Woop, Benthin and Wald
+// (JCGT 2013).  Rays are sheared so that they run along +z; the three 2D edge
+// functions are then evaluated with the same operands for the two triangles
+// that share an edge, so a ray through an edge or a vertex can never slip
+// between neighbours.  Contraction into FMA would break that symmetry, hence
+// FP_CONTRACT OFF; exact zeros are recomputed in double where available.
+#ifndef CLRT_TRIANGLE_CL
+#define CLRT_TRIANGLE_CL
+
+#include "layouts.h"
+
+#pragma OPENCL FP_CONTRACT OFF
+#ifdef cl_khr_fp64
+#pragma OPENCL EXTENSION cl_khr_fp64 : enable
+#endif
+
+// Per-ray constants of the shear transform, computed once per ray.
+typedef struct {
+    float4 origin;
+    uint4 perm;        // (kx, ky, kz, 3): kz = dominant axis of the direction
+    float3 shear;      // (Sx, Sy, Sz)
+} ShearedRay;
+
+inline ShearedRay shear_ray(float3 origin, float3 dir)
+{
+    const float3 a = fabs(dir);
+    uint kz = (a.x >= a.y) ? ((a.x >= a.z) ? 0u : 2u) : ((a.y >= a.z) ? 1u : 2u);
+    uint kx = (kz + 1u) % 3u;
+    uint ky = (kx + 1u) % 3u;
+    const float d[3] = {dir.x, dir.y, dir.z};
+    if (d[kz] < 0.0f) { const uint s = kx; kx = ky; ky = s; }   // keep winding
+    ShearedRay s;
+    s.origin = (float4)(origin, 0.0f);
+    s.perm = (uint4)(kx, ky, kz, 3u);
+    s.shear = (float3)(d[kx] / d[kz], d[ky] / d[kz], 1.0f / d[kz]);
+    return s;
+}
+
+// On a hit with tmin < t <= tmax, store t and the barycentric weights of
+// vertices 1 and 2.  Both faces count as front faces.
+inline bool intersect_triangle(const ShearedRay* r, __global const TriangleVerts* tri,
+                               float tmin, float tmax, float* t_out, float* u_out, float* v_out)
+{
+    const float4 A = shuffle(tri->v0 - r->origin, r->perm);
+    const float4 B = shuffle(tri->v1 - r->origin, r->perm);
+    const float4 C = shuffle(tri->v2 - r->origin, r->perm);
+    const float Ax = A.x - r->shear.x * A.z, Ay = A.y - r->shear.y * A.z;
+    const float Bx = B.x - r->shear.x * B.z, By = B.y - r->shear.y * B.z;
+    const float Cx = C.x - r->shear.x * C.z, Cy = C.y - r->shear.y * C.z;
+
+    float U = Cx * By - Cy * Bx;
+    float V = Ax * Cy - Ay * Cx;
+    float W = Bx * Ay - By * Ax;
+#ifdef cl_khr_fp64
+    if (U == 0.0f || V == 0.0f || W == 0.0f) {
+        U = (float)((double)Cx * (double)By - (double)Cy * (double)Bx);
+        V = (float)((double)Ax * (double)Cy - (double)Ay * (double)Cx);
+        W = (float)((double)Bx * (double)Ay - (double)By * (double)Ax);
+    }
+#endif
+    if ((U < 0.0f || V < 0.0f || W < 0.0f) && (U > 0.0f || V > 0.0f || W > 0.0f))
+        return false;
+    const float det = U + V + W;
+    if (det == 0.0f)
+        return false;
+    const float T = U * (r->shear.z * A.z) + V * (r->shear.z * B.z) + W * (r->shear.z * C.z);
+    const float t = T / det;
+    if (!(t > tmin && t <= tmax))
+        return false;
+    *t_out = t;
+    *u_out = V / det;
+    *v_out = W / det;
+    return true;
+}
+
+#endif

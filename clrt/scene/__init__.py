@@ -1,0 +1,1 @@
+"""Stage 1 of the pipeline: what is rendered (meshes, materials, lights, camera)."""

@@ -1,0 +1,150 @@
+"""Materials, lights, camera and the scene that groups them (the paper's configuration)."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from clrt.errors import InputError
+from clrt.scene.mesh import Mesh
+
+
+def _vec3(value, what: str) -> np.ndarray:
+    try:
+        v = np.asarray(value, dtype=np.float64).reshape(-1)
+    except (TypeError, ValueError):
+        raise InputError(f"{what} must be three numbers, got {value!r}") from None
+    if v.shape != (3,) or not np.all(np.isfinite(v)):
+        raise InputError(f"{what} must be three finite numbers, got {value!r}")
+    return v
+
+
+@dataclass(frozen=True)
+class Material:
+    """Phong material.  ``color`` is linear RGB in [0, 1]; ``smooth`` interpolates vertex normals."""
+
+    color: tuple = (0.8, 0.8, 0.8)
+    ambient: float = 0.1
+    diffuse: float = 0.7
+    specular: float = 0.3
+    shininess: float = 32.0
+    smooth: bool = True
+
+    def __post_init__(self):
+        _vec3(self.color, "material colour")
+        for name in ("ambient", "diffuse", "specular", "shininess"):
+            value = getattr(self, name)
+            if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
+                raise InputError(f"material {name} must be a finite number >= 0, got {value!r}")
+
+
+@dataclass(frozen=True)
+class Light:
+    """Point light at ``position`` with linear RGB ``color`` (intensity)."""
+
+    position: tuple
+    color: tuple = (1.0, 1.0, 1.0)
+
+    def __post_init__(self):
+        _vec3(self.position, "light position")
+        _vec3(self.color, "light colour")
+
+
+@dataclass(frozen=True)
+class Camera:
+    """Pinhole camera: ``fov`` is the vertical field of view in degrees."""
+
+    eye: tuple
+    target: tuple
+    up: tuple = (0.0, 1.0, 0.0)
+    fov: float = 45.0
+    width: int = 640
+    height: int = 480
+
+    def __post_init__(self):
+        eye, target, up = (_vec3(self.eye, "eye"), _vec3(self.target, "target"), _vec3(self.up, "up"))
+        for name in ("width", "height"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or not 0 < value <= 65536:
+                raise InputError(f"{name} must be an integer in 1..65536, got {value!r}")
+        if not (isinstance(self.fov, (int, float)) and 0.0 < self.fov < 180.0):
+            raise InputError(f"fov must be between 0 and 180 degrees (exclusive), got {self.fov!r}")
+        forward = target - eye
+        if not np.linalg.norm(forward) > 0:
+            raise InputError("eye and target must differ")
+        if not np.linalg.norm(np.cross(forward, up)) > 1e-9 * np.linalg.norm(forward) * np.linalg.norm(up):
+            raise InputError("up must not be zero or parallel to the viewing direction")
+
+    def basis(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(forward, right, up) unit vectors, float64: r = f x up, u = r x f."""
+        f = _vec3(self.target, "target") - _vec3(self.eye, "eye")
+        f /= np.linalg.norm(f)
+        r = np.cross(f, _vec3(self.up, "up"))
+        r /= np.linalg.norm(r)
+        return f, r, np.cross(r, f)
+
+    def scales(self) -> tuple[float, float]:
+        """(scale_x, scale_y): half-extent of the image plane at distance 1."""
+        sy = math.tan(math.radians(self.fov) / 2.0)
+        return sy * self.width / self.height, sy
+
+    @classmethod
+    def framing(cls, bounds, width: int = 640, height: int = 480, fov: float = 45.0,
+                direction=(0.35, 0.3, 1.0), up=(0.0, 1.0, 0.0)) -> "Camera":
+        """A camera looking at the centre of ``bounds`` (2x3) from ``direction``,
+        far enough that the bounding sphere fits in the narrower field of view."""
+        bounds = np.asarray(bounds, dtype=np.float64)
+        centre = bounds.mean(axis=0)
+        radius = max(0.5 * float(np.linalg.norm(bounds[1] - bounds[0])), 1e-6 * (1 + np.abs(centre).max()))
+        half = math.radians(fov) / 2.0
+        half = min(half, math.atan(math.tan(half) * width / height))
+        d = np.asarray(direction, dtype=np.float64)
+        eye = centre + d / np.linalg.norm(d) * radius / math.sin(half) * 1.05
+        return cls(tuple(eye), tuple(centre), tuple(up), fov, width, height)
+
+
+@dataclass(frozen=True)
+class SceneObject:
+    mesh: Mesh
+    material: Material = field(default_factory=Material)
+
+
+@dataclass
+class Scene:
+    """Objects (mesh + material), point lights and the colours of empty space."""
+
+    objects: list
+    lights: list
+    background: tuple = (0.0, 0.0, 0.0)
+    ambient_light: tuple = (1.0, 1.0, 1.0)
+    camera: Camera | None = None   # suggested view; renderers may override
+
+    @property
+    def bounds(self) -> np.ndarray:
+        b = np.stack([o.mesh.bounds for o in self.objects])
+        return np.stack([b[:, 0].min(axis=0), b[:, 1].max(axis=0)])
+
+    @property
+    def num_triangles(self) -> int:
+        return sum(len(o.mesh.faces) for o in self.objects)
+
+
+def default_light(bounds, camera: Camera) -> Light:
+    """A white light above and to the left of the eye, so shapes read clearly."""
+    f, r, u = camera.basis()
+    bounds = np.asarray(bounds, dtype=np.float64)
+    diag = float(np.linalg.norm(bounds[1] - bounds[0]))
+    pos = np.asarray(camera.eye, dtype=np.float64) + (0.8 * u - 0.5 * r) * diag
+    return Light(tuple(pos))
+
+
+def scene_from_mesh(mesh: Mesh, material: Material | None = None, lights=None,
+                    background=(0.0, 0.0, 0.0)) -> Scene:
+    """The paper's scene: one mesh, one material, point lights (default: one above the eye)."""
+    scene = Scene([SceneObject(mesh, material or Material())], list(lights or []), background)
+    scene.camera = Camera.framing(scene.bounds)
+    if not scene.lights:
+        scene.lights = [default_light(scene.bounds, scene.camera)]
+    return scene

@@ -1,0 +1,46 @@
+"""Shared fixtures: the OpenCL device under test and small generated meshes.
+
+Tests run on the device clrt would choose (PoCL on a machine without a GPU);
+set CLRT_TEST_DEVICE (e.g. 'cpu', 'gpu', '0:1') to pick another.
+"""
+
+import os
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from clrt.scene import primitives
+from clrt.scene.mesh import Mesh
+
+SHARED_MESHES = Path(__file__).resolve().parents[1].parent / "shared" / "meshes"
+
+
+@pytest.fixture(scope="session")
+def device():
+    return os.environ.get("CLRT_TEST_DEVICE") or None
+
+
+def _crossing_quads() -> Mesh:
+    """Two quads crossing at right angles plus an exact duplicate of one
+    triangle: intersecting, non-manifold, with coincident faces."""
+    v = np.array([[-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0],
+                  [0, -1, -1], [0, -1, 1], [0, 1, 1], [0, 1, -1]], dtype=np.float64)
+    f = np.array([[0, 1, 2], [0, 2, 3], [4, 5, 6], [4, 6, 7], [0, 1, 2]])
+    return Mesh.from_arrays(v, f, "crossing quads")
+
+
+# Meshes made by our own code, so the suite needs no files: closed and open,
+# smooth and faceted, with coincident triangles.
+TEST_MESHES = {
+    "icosphere": lambda: primitives.icosphere(2),
+    "box": lambda: primitives.box((1.0, 0.6, 1.4)),
+    "torus": lambda: primitives.torus(1.0, 0.35, 24, 12),
+    "heightfield": lambda: primitives.heightfield(16),
+    "crossing": _crossing_quads,
+}
+
+
+@pytest.fixture(params=sorted(TEST_MESHES))
+def test_mesh(request) -> Mesh:
+    return TEST_MESHES[request.param]()
