@@ -153,9 +153,26 @@ def _info(args) -> int:
     return 0
 
 
+_VECTOR_OPTIONS = {"--eye", "--target", "--up", "--light", "--color", "--background"}
+
+
+def _glue_vector_values(argv: list[str]) -> list[str]:
+    """``--eye -1,2,3`` -> ``--eye=-1,2,3``: argparse would take ``-1,2,3`` for an option."""
+    out, i = [], 0
+    while i < len(argv):
+        if argv[i] in _VECTOR_OPTIONS and i + 1 < len(argv):
+            out.append(f"{argv[i]}={argv[i + 1]}")
+            i += 2
+        else:
+            out.append(argv[i])
+            i += 1
+    return out
+
+
 def main(argv=None) -> int:
     try:
-        args = _parser().parse_args(argv)
+        argv = list(sys.argv[1:] if argv is None else argv)
+        args = _parser().parse_args(_glue_vector_values(argv))
         return {"render": _render, "info": _info}[args.command](args)
     except ClrtError as exc:
         print(f"clrt: {exc}", file=sys.stderr)

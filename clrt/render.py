@@ -88,8 +88,8 @@ class Frame:
     """One rendered image and how long each stage took (milliseconds)."""
 
     image: np.ndarray            # (H, W, 3) uint8 sRGB, or float32 linear RGB
-    prim: np.ndarray             # (H, W) int32 triangle seen by each pixel, -1 for background
-    t: np.ndarray                # (H, W) float32 distance along the camera ray, inf for background
+    prim: np.ndarray | None      # (H, W) int32 triangle seen by each pixel, -1 for background
+    t: np.ndarray | None         # (H, W) float32 distance along the camera ray, inf for background
     timings: dict = field(default_factory=dict)
     device: str = ""
     triangles: int = 0
@@ -141,7 +141,9 @@ class Renderer:
         kernel.set_args(*args)
         return cl.enqueue_nd_range_kernel(queue, kernel, global_size, local_size)
 
-    def render(self, camera: Camera | None = None, linear: bool = False) -> Frame:
+    def render(self, camera: Camera | None = None, linear: bool = False, hits: bool = False) -> Frame:
+        """Render one frame; ``hits=True`` also reads back the primary hits
+        (``Frame.prim`` and ``Frame.t``, otherwise None)."""
         camera = camera or self.scene.camera or Camera.framing(self.arrays.bounds)
         w, h = camera.width, camera.height
         pixels = w * h
@@ -179,10 +181,12 @@ class Renderer:
                 out = np.empty((h, w, 4), np.uint8)
                 cl.enqueue_copy(q, out, buf["srgb8"], wait_for=[enc])
                 image = out[:, :, :3].copy()
-            hits = np.empty((h, w), layouts.HIT)
-            cl.enqueue_copy(q, hits, buf["hits"])
-        return Frame(image, hits["prim"].copy(), hits["t"].copy(), timings, self.device,
-                     len(a.tri_verts))
+            prim = t = None
+            if hits:
+                records = np.empty((h, w), layouts.HIT)
+                cl.enqueue_copy(q, records, buf["hits"])
+                prim, t = records["prim"].copy(), records["t"].copy()
+        return Frame(image, prim, t, timings, self.device, len(a.tri_verts))
 
 
 class _stage:

@@ -13,7 +13,7 @@ from clrt.scene.scene import Camera, Light, Material, Scene, SceneObject, scene_
 
 
 def _compare(scene, camera, device):
-    frame = Renderer(scene, device).render(camera, linear=True)
+    frame = Renderer(scene, device).render(camera, linear=True, hits=True)
     ref_color, ref_prim, ref_t = render_reference(scene, camera)
     return frame, ref_color, ref_prim, ref_t
 
@@ -56,7 +56,8 @@ def test_srgb_output_is_encoded_linear(device):
 def test_coincident_triangles_resolve_to_lower_index(device):
     quad = primitives.box((1, 1, 1))
     doubled = Mesh.from_arrays(quad.vertices, np.concatenate([quad.faces, quad.faces]))
-    frame = Renderer(scene_from_mesh(doubled), device).render(Camera.framing(doubled.bounds, 48, 48))
+    camera = Camera.framing(doubled.bounds, 48, 48)
+    frame = Renderer(scene_from_mesh(doubled), device).render(camera, hits=True)
     assert (frame.prim >= 0).any()
     assert frame.prim.max() < len(quad.faces)
 
@@ -66,7 +67,7 @@ def test_shadow_of_a_box_on_the_floor(device):
     block = primitives.box((1, 1, 1), center=(0, 1.5, 0))
     scene = Scene([SceneObject(floor, Material(specular=0)), SceneObject(block)], [Light((3, 6, 0))])
     camera = Camera(eye=(0, 12, 0.01), target=(0, 0, 0), fov=40, width=64, height=64)
-    frame = Renderer(scene, device).render(camera, linear=True)
+    frame = Renderer(scene, device).render(camera, linear=True, hits=True)
     origins, dirs = camera_rays(camera)
     x, z = (origins + frame.t.reshape(-1, 1) * dirs)[:, [0, 2]].T
     on_floor = frame.prim.ravel() < 2
@@ -83,7 +84,7 @@ def test_shadow_of_a_box_on_the_floor(device):
 def test_miss_is_background(device):
     scene = scene_from_mesh(primitives.icosphere(1), background=(0.25, 0.5, 0.75))
     camera = Camera(eye=(0, 0, 5), target=(5, 0, 5), width=8, height=8)   # looking away
-    frame = Renderer(scene, device).render(camera, linear=True)
+    frame = Renderer(scene, device).render(camera, linear=True, hits=True)
     assert (frame.prim == -1).all() and np.isinf(frame.t).all()
     np.testing.assert_allclose(frame.image, np.broadcast_to([0.25, 0.5, 0.75], (8, 8, 3)), atol=1e-6)
 

@@ -36,6 +36,21 @@ Byte layout (offset: field):
 ``Light`` (32 B) -- point light
     0: position float4  xyz, w unused
    16: color    float4  linear RGB intensity, a unused
+
+``BvhNode`` (48 B) -- one node of a binary BVH, nodes in depth-first order, root at 0.
+The bounding-volume shape is fixed per tree (a build-time ``-D`` of the program):
+    0: bound_a    float4  box: min corner xyz | sphere: centre xyz, w = radius
+                          | ellipsoid: centre xyz
+   16: bound_b    float4  box: max corner xyz | sphere: unused
+                          | ellipsoid: reciprocal semi-axes xyz (1/Rx, 1/Ry, 1/Rz)
+   32: left_first int     inner: index of the left child | leaf: first slot in the
+                          leaf-ordered triangle buffers
+   36: count      int     0 for an inner node, else the number of triangles in the leaf
+   40: right      int     inner: index of the right child | leaf: -1
+   44: pad        int
+Every volume encloses all triangles of its subtree, rounded outwards in float32.
+The triangle buffers of a BVH scene are stored in leaf order; ``prim_id`` (int32 per
+slot) maps a slot back to the input triangle index, which is what queries report.
 """
 
 import numpy as np
@@ -50,6 +65,8 @@ MATERIAL = np.dtype([("color", float4), ("ambient", np.float32), ("diffuse", np.
                      ("specular", np.float32), ("shininess", np.float32),
                      ("flags", np.uint32), ("pad", np.uint32, 3)])
 LIGHT = np.dtype([("position", float4), ("color", float4)])
+BVH_NODE = np.dtype([("bound_a", float4), ("bound_b", float4), ("left_first", np.int32),
+                     ("count", np.int32), ("right", np.int32), ("pad", np.int32)])
 
 MATERIAL_SMOOTH = 1
 
@@ -61,4 +78,5 @@ STRUCTS = {
     "TriangleInfo": TRIANGLE_INFO,
     "Material": MATERIAL,
     "Light": LIGHT,
+    "BvhNode": BVH_NODE,
 }

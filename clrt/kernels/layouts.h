@@ -38,4 +38,13 @@ typedef struct {
     float4 color;
 } Light;
 
+typedef struct {
+    float4 bound_a;    // box: min | sphere: centre, w = radius | ellipsoid: centre
+    float4 bound_b;    // box: max | ellipsoid: 1 / semi-axes
+    int left_first;    // inner: left child | leaf: first triangle slot
+    int count;         // 0: inner node, else triangles in the leaf
+    int right;         // inner: right child | leaf: -1
+    int pad;
+} BvhNode;
+
 #endif
