@@ -11,6 +11,7 @@ layouts, programs) -> ``clrt/kernels/*.cl`` -> ``clrt.render`` (the frame).
 from clrt.errors import ClrtError, DeviceError, InputError, KernelBuildError, MeshLoadError
 from clrt.render import Frame, Renderer, render
 from clrt.scene.default import default_scene
+from clrt.trace import Accel, Hits, occluded, trace
 from clrt.scene.mesh import Mesh
 from clrt.scene.scene import Camera, Light, Material, Scene, SceneObject, scene_from_mesh
 
@@ -22,8 +23,8 @@ def load_mesh(path) -> Mesh:
 
 
 __all__ = [
-    "Camera", "ClrtError", "DeviceError", "Frame", "InputError", "KernelBuildError", "Light",
+    "Accel", "Camera", "ClrtError", "DeviceError", "Frame", "InputError", "KernelBuildError", "Light",
     "Material", "Mesh", "MeshLoadError", "Renderer", "Scene", "SceneObject", "default_scene",
-    "load_mesh", "render", "scene_from_mesh",
+    "Hits", "load_mesh", "occluded", "render", "scene_from_mesh", "trace",
 ]
 __version__ = "0.1.0"

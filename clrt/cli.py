@@ -63,11 +63,24 @@ def _parser() -> argparse.ArgumentParser:
     r.add_argument("--background", type=_vector, help="background colour r,g,b, linear 0..1")
     r.add_argument("--device", help="'gpu', 'cpu' or P:D platform/device indices (default: PYOPENCL_CTX, "
                                     "else the first GPU, else the first CPU)")
+    _accel_options(r)
     r.add_argument("-q", "--quiet", action="store_true", help="print only the output path")
 
-    i = sub.add_parser("info", help="list OpenCL platforms and devices, and the one clrt would use")
+    i = sub.add_parser("info", help="list OpenCL devices; with MESH, build statistics of its BVH",
+                       description="Without MESH: OpenCL platforms and devices, '*' marking the one "
+                                   "clrt would use. With MESH: statistics of the acceleration build.")
+    i.add_argument("mesh", nargs="?", help="mesh file to build a BVH for")
     i.add_argument("--device", help="device to mark as selected (same forms as render --device)")
+    _accel_options(i)
     return p
+
+
+def _accel_options(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--accel", default="box", choices=("none", "box", "sphere", "ellipse"),
+                   help="BVH bounding-volume shape, or none for brute force (default box)")
+    p.add_argument("--builder", default="sah", choices=("paper", "sah"),
+                   help="BVH builder: the paper's median split, or binned SAH (default sah)")
+    p.add_argument("--leaf-size", type=int, default=4, help="most triangles per BVH leaf (default 4)")
 
 
 def _output_path(args) -> Path:
@@ -133,12 +146,13 @@ def _render(args) -> int:
     elif not scene.lights:
         scene.lights = [default_light(bounds, camera)]
 
-    renderer = Renderer(scene, args.device)
+    renderer = Renderer(scene, args.device, args.accel, args.builder, args.leaf_size)
     frame = renderer.render(camera)
     write_image(frame.image, out)
     if not args.quiet:
+        accel = "brute force" if args.accel == "none" else f"{args.builder} BVH of {args.accel}es"
         print(f"{camera.width}x{camera.height} pixels, {frame.triangles:,} triangles, "
-              f"{len(scene.lights)} light(s), device: {frame.device}")
+              f"{len(scene.lights)} light(s), {accel}, device: {frame.device}")
         for stage, ms in frame.timings.items():
             print(f"  {stage:<20} {ms:10.2f} ms")
     print(out.resolve() if not args.quiet else out)
@@ -147,9 +161,33 @@ def _render(args) -> int:
 
 def _info(args) -> int:
     from clrt.device.context import describe_devices, list_devices
+    if args.mesh:
+        return _info_mesh(args)
     print(describe_devices(args.device))
     if not list_devices():
         return DeviceError.exit_code
+    return 0
+
+
+def _info_mesh(args) -> int:
+    """Build statistics of the acceleration structure over MESH, and its size on the device."""
+    from clrt.device.geometry import order_triangles
+    from clrt.render import flatten_scene
+    from clrt.scene.load import load_mesh
+    from clrt.scene.scene import scene_from_mesh
+
+    mesh = load_mesh(args.mesh)
+    tri_verts = flatten_scene(scene_from_mesh(mesh)).tri_verts
+    order = order_triangles(tri_verts, args.accel, args.builder, args.leaf_size)
+    print(f"{args.mesh}: {len(mesh.faces):,} triangles, {len(mesh.vertices):,} vertices")
+    if order.bvh is None:
+        size = tri_verts.nbytes + order.prim_ids.nbytes
+        print(f"accel none: brute force, {size:,} bytes on the device")
+        return 0
+    print(f"accel {args.accel}, builder {args.builder}, leaf size {args.leaf_size}:")
+    for key, value in order.bvh.stats().items():
+        text = f"{value:,.3f}" if isinstance(value, float) else f"{value:,}"
+        print(f"  {key:<22} {text}")
     return 0
 
 
@@ -180,6 +218,9 @@ def main(argv=None) -> int:
     except KeyboardInterrupt:
         print("clrt: interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError:   # output piped into e.g. head, which stopped reading
+        sys.stderr = open(os.devnull, "w")
+        return 1
     except Exception as exc:  # noqa: BLE001 -- driver errors arrive as many types
         import pyopencl as cl
         if isinstance(exc, (cl.Error, MemoryError)):

@@ -1,7 +1,8 @@
 """The host side of a frame, stage by stage as in the paper:
 
 1. initialisation      -- flatten the scene into typed arrays (``flatten_scene``)
-2. acceleration build  -- none yet: every ray is tested against every triangle
+2. acceleration build  -- a BVH (box, sphere or ellipsoid volumes; ``accel="none"``
+                          tests every ray against every triangle)
 3. copy to device      -- context, program build, buffer upload (once per Renderer)
 4. ray generation      -- ``generate_rays`` kernel, one ray per pixel
 5. pixel colour        -- ``shade_pixels`` kernel: nearest hit, Phong, shadow rays
@@ -22,6 +23,7 @@ import pyopencl as cl
 
 from clrt.device import layouts
 from clrt.device.context import create_context, device_label
+from clrt.device.geometry import DeviceGeometry, order_triangles
 from clrt.device.program import build_program
 from clrt.errors import InputError
 from clrt.scene.mesh import Mesh
@@ -96,19 +98,26 @@ class Frame:
 
 
 class Renderer:
-    """A scene uploaded to one OpenCL device, ready to render frames."""
+    """A scene uploaded to one OpenCL device, ready to render frames.
 
-    def __init__(self, scene: Scene, device: str | None = None):
+    ``accel``: "box" (default), "sphere", "ellipse" (BVH volume shape) or "none"
+    (brute force); ``builder``: "sah" (default) or "paper"; ``leaf_size``: the
+    most triangles in a BVH leaf.  Every choice renders the same image.
+    """
+
+    def __init__(self, scene: Scene, device: str | None = None, accel: str = "box",
+                 builder: str = "sah", leaf_size: int = 4):
         self.timings: dict[str, float] = {}
         with _stage(self.timings, "initialisation"):
             self.scene = scene
             self.arrays = flatten_scene(scene)
         with _stage(self.timings, "acceleration build"):
-            pass   # brute force: nothing to build
+            self.order = order_triangles(self.arrays.tri_verts, accel, builder, leaf_size)
+            tri_info = self.arrays.tri_info[self.order.prim_ids]   # shading data in slot order
         with _stage(self.timings, "copy to device"):
             self.context, self.queue = create_context(device)
             self.device = device_label(self.queue.device)
-            program = build_program(self.context, "render.cl")
+            program = build_program(self.context, "render.cl", self.order.defines)
             # Kernel objects are made once: each attribute lookup on a Program makes a new one.
             self.kernels = {name: cl.Kernel(program, name)
                             for name in ("generate_rays", "shade_pixels", "encode_srgb8")}
@@ -118,8 +127,10 @@ class Renderer:
             def upload(array):
                 return cl.Buffer(self.context, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=array)
 
+            self.geometry = DeviceGeometry(self.context, self.order)
             self.buffers = {name: upload(getattr(a, name)) for name in
-                            ("tri_verts", "tri_info", "vertex_normals", "materials", "lights")}
+                            ("vertex_normals", "materials", "lights")}
+            self.buffers["tri_info"] = upload(tri_info)
         self._frame_buffers: dict[str, cl.Buffer] = {}
         self._frame_pixels = -1
 
@@ -160,8 +171,7 @@ class Renderer:
             np.float32(scale_x), np.float32(scale_y), np.uint32(w), np.uint32(h))
         shade = self._launch(
             "shade_pixels", q, (pixels,), None, buf["rays"], buf["linear"], buf["hits"], np.uint32(pixels),
-            self.buffers["tri_verts"], np.uint32(len(a.tri_verts)),
-            self.buffers["tri_info"], self.buffers["vertex_normals"], self.buffers["materials"],
+            *self.geometry.args, self.buffers["tri_info"], self.buffers["vertex_normals"], self.buffers["materials"],
             self.buffers["lights"], np.uint32(len(self.scene.lights)),
             vec4(self.scene.ambient_light), vec4(self.scene.background),
             np.float32(ray_epsilon(a.bounds, camera)))
@@ -224,7 +234,8 @@ def as_scene(source) -> Scene:
 
 
 def render(source, camera: Camera | None = None, *, width: int | None = None,
-           height: int | None = None, device: str | None = None, linear: bool = False) -> np.ndarray:
+           height: int | None = None, device: str | None = None, linear: bool = False,
+           accel: str = "box", builder: str = "sah", leaf_size: int = 4) -> np.ndarray:
     """Render ``source`` and return an (H, W, 3) image: uint8 sRGB, or float32 linear RGB
     with ``linear=True``.  Without a camera the scene's own (or a framing of its
     bounds) is used; ``width``/``height`` override the camera's resolution."""
@@ -234,4 +245,4 @@ def render(source, camera: Camera | None = None, *, width: int | None = None,
     if width is not None or height is not None:
         camera = Camera(camera.eye, camera.target, camera.up, camera.fov,
                         width or camera.width, height or camera.height)
-    return Renderer(scene, device).render(camera, linear=linear).image
+    return Renderer(scene, device, accel, builder, leaf_size).render(camera, linear=linear).image

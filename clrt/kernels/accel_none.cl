@@ -2,14 +2,11 @@
 // This is the paper's "basic" program and the reference every BVH layout
 // must reproduce exactly.  It provides the same two queries as a traversal:
 // closest_hit (camera and reflected rays) and any_hit (shadow rays).
-#ifndef CLRT_ACCEL_CL
-#define CLRT_ACCEL_CL
+// Slots are the input order here, so Hit.prim is the triangle index.
+#ifndef CLRT_ACCEL_NONE_CL
+#define CLRT_ACCEL_NONE_CL
 
 #include "hit.cl"
-
-// The buffers a query needs, as kernel parameters and as call arguments.
-#define ACCEL_PARAMS __global const TriangleVerts* tris, const uint num_tris
-#define ACCEL_ARGS tris, num_tris
 
 inline Hit closest_hit(ACCEL_PARAMS, float3 origin, float3 dir, float tmin, float tmax)
 {

@@ -1,10 +1,10 @@
 // Entry file of the render program: the paper's two global kernels (ray
 // generation, pixel colour) plus the conversion of linear colour to 8-bit
-// sRGB.  The acceleration structure is chosen when the program is built:
-// today only accel_none.cl exists.
+// sRGB.  The acceleration structure is chosen when the program is built
+// (accel.cl).
 #include "layouts.h"
 #include "camera.cl"
-#include "accel_none.cl"
+#include "accel.cl"
 #include "shading.cl"
 
 __kernel void generate_rays(__global Ray* rays, const float4 eye, const float4 forward,
@@ -35,7 +35,7 @@ __kernel void shade_pixels(__global const Ray* rays, __global float4* image, __g
     const Ray ray = rays[i];
     const float3 o = ray.origin.xyz, d = ray.dir.xyz;
     const Hit hit = closest_hit(ACCEL_ARGS, o, d, ray.origin.w, ray.dir.w);
-    hits[i] = hit;
+    hits[i] = reported_hit(hit, prim_ids);
     image[i] = (float4)(shade_hit(ACCEL_ARGS, SHADING_ARGS, o, d, &hit), 1.0f);
 }
 

@@ -1,0 +1,101 @@
+"""Bounding-volume shapes: fit a box, sphere or ellipsoid to every node.
+
+Input is the exact box of each node's triangles; output is ``bound_a``/``bound_b``
+of the ``BVH_NODE`` layout.  Everything is computed in float64 from the float32
+corners and then rounded *outwards* to float32, after padding by
+
+    pad = REL_PAD * (largest extent of the node) + ULP_PAD * ulp32(|coordinate|) + PAD_FLOOR
+
+per axis.  The exact box already contains every corner, but the kernel tests a
+ray against the volume in float32 (slab or quadratic), whose rounding can lose a
+ray that grazes a face or edge lying on the volume's boundary; the pad moves the
+boundary a few hundred float32 ulps of the node's size away from every triangle.
+Sphere radii and ellipsoid semi-axes are also inflated by ``EVAL_SLACK`` so that
+the float32 evaluation of ``|p - c|^2 <= r^2`` or ``sum(((p - c) * inv)^2) <= 1``
+holds for every point of the padded box.
+"""
+
+from __future__ import annotations
+
+from typing import Tuple
+
+import numpy as np
+
+VOLUMES = ("box", "sphere", "ellipse")
+
+REL_PAD = 1e-6          # of the node's largest extent: ~17 float32 ulps of the node size
+ULP_PAD = 4             # float32 ulps of the coordinate magnitude (covers tiny/flat nodes)
+PAD_FLOOR = 1e-30       # keeps a point-sized node's volume a normal float32
+EVAL_SLACK = 1e-6       # relative inflation of radius / semi-axes for float32 tests
+ELLIPSE_FLOOR = 1e-3    # smallest semi-axis, relative to the node's largest semi-axis
+SQRT3 = np.sqrt(3.0)
+
+
+def round_down32(x: np.ndarray) -> np.ndarray:
+    """float64 -> the largest float32 <= x."""
+    y = x.astype(np.float32)
+    low = y.astype(np.float64) > x
+    y[low] = np.nextafter(y[low], np.float32(-np.inf))
+    return y
+
+
+def round_up32(x: np.ndarray) -> np.ndarray:
+    """float64 -> the smallest float32 >= x."""
+    y = x.astype(np.float32)
+    high = y.astype(np.float64) < x
+    y[high] = np.nextafter(y[high], np.float32(np.inf))
+    return y
+
+
+def padded_boxes(boxes: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
+    """(N, 2, 3) node boxes -> padded min, max (N, 3) float64 (not yet rounded)."""
+    lo = boxes[:, 0].astype(np.float64)
+    hi = boxes[:, 1].astype(np.float64)
+    extent = (hi - lo).max(axis=1, keepdims=True)
+    magnitude = np.maximum(np.abs(lo), np.abs(hi)).astype(np.float32)
+    pad = REL_PAD * extent + ULP_PAD * np.spacing(magnitude).astype(np.float64) + PAD_FLOOR
+    return lo - pad, hi + pad
+
+
+def fit(volume: str, boxes: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
+    """Bounds of every node for ``volume`` in ``VOLUMES``.
+
+    boxes: (N, 2, 3) exact min/max of each node's triangles.
+    Returns bound_a, bound_b: (N, 4) float32, as ``clrt.device.layouts.BVH_NODE`` says:
+    box (min, max), sphere (centre + radius in w, zeros), ellipse (centre,
+    reciprocal semi-axes); unused lanes are 0.
+    """
+    lo, hi = padded_boxes(boxes)
+    a = np.zeros((len(lo), 4), np.float32)
+    b = np.zeros((len(lo), 4), np.float32)
+    if volume == "box":
+        a[:, :3] = round_down32(lo)
+        b[:, :3] = round_up32(hi)
+        return a, b
+    if volume not in VOLUMES:
+        raise ValueError(f"volume must be one of {VOLUMES}, got {volume!r}")
+
+    # The paper's centre: midpoint of min and max.  It is rounded to float32 first
+    # and the size is measured from the rounded centre, so rounding cannot
+    # uncover a corner.
+    centre = (0.5 * (lo + hi)).astype(np.float32)
+    c = centre.astype(np.float64)
+    half = np.maximum(c - lo, hi - c)                     # (N, 3) reach to the far face
+    a[:, :3] = centre
+    if volume == "sphere":
+        # Radius = distance from the centre to the (farthest) box corner.
+        radius = np.sqrt((half ** 2).sum(axis=1)) * (1.0 + EVAL_SLACK)
+        a[:, 3] = round_up32(radius)
+        return a, b
+
+    # Axis-aligned ellipsoid with semi-axes sqrt(3) * half-extent: a box corner
+    # (+-h_x, +-h_y, +-h_z) gives sum(h_i^2 / (3 h_i^2)) = 1, on the surface, so the
+    # box is enclosed.  A flat (zero) extent would make 1/R infinite; it is raised
+    # to a floor instead.  That still encloses the box: along a flat axis the corner
+    # coordinate equals the centre's, its term is 0 whatever R is, and the other
+    # terms sum to at most 2/3 < 1.  Raising any semi-axis only grows the ellipsoid.
+    semi = SQRT3 * half
+    semi = np.maximum(semi, ELLIPSE_FLOOR * semi.max(axis=1, keepdims=True))
+    semi *= 1.0 + EVAL_SLACK
+    b[:, :3] = round_down32(1.0 / semi)                   # smaller 1/R = larger R
+    return a, b

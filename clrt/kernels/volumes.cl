@@ -1,0 +1,88 @@
+// Ray tests against one bounding volume, the shape fixed when the program is
+// built: -DVOLUME_BOX (slab test), -DVOLUME_SPHERE or -DVOLUME_ELLIPSE
+// (quadratic in t, solved through the closest approach to the centre, which
+// loses far less precision than the textbook discriminant).  Each test is
+// conservative: a ray that reaches a triangle inside the volume within
+// [tmin, tmax] always passes, grazing rays included, so a BVH can never lose a
+// hit that brute force finds.  The builders pad every volume outwards; the
+// tests add a few ulps of slack for their own rounding.
+#ifndef CLRT_VOLUMES_CL
+#define CLRT_VOLUMES_CL
+
+#include "layouts.h"
+
+typedef struct {
+    float3 origin;
+    float3 dir;
+    float3 inv_dir;    // +-INFINITY for zero components: the slab test relies on IEEE rules
+} VolumeRay;
+
+inline VolumeRay volume_ray(float3 origin, float3 dir)
+{
+    VolumeRay r;
+    r.origin = origin;
+    r.dir = dir;
+    r.inv_dir = (float3)(1.0f) / dir;
+    return r;
+}
+
+// Relative slack for rounding in the tests below (a few float32 ulps).
+#define VOLUME_SLACK 1e-6f
+
+#if defined(VOLUME_BOX)
+// Slab test (Kay & Kajiya).  fmin/fmax drop the NaN of 0 * inf, which only
+// arises for a ray lying exactly in a padded face plane -- outside all content.
+// The exit distance is widened as in Ize's "Robust BVH ray traversal".
+inline bool volume_hit(const VolumeRay* r, __global const BvhNode* n, float tmin, float tmax, float* t_enter)
+{
+    const float3 t0 = (n->bound_a.xyz - r->origin) * r->inv_dir;
+    const float3 t1 = (n->bound_b.xyz - r->origin) * r->inv_dir;
+    const float3 lo = fmin(t0, t1), hi = fmax(t0, t1);
+    const float enter = fmax(fmax(lo.x, lo.y), fmax(lo.z, tmin));
+    const float exit = fmin(fmin(hi.x, hi.y), fmin(hi.z, tmax * (1.0f + VOLUME_SLACK))) * (1.0f + VOLUME_SLACK);
+    *t_enter = enter;
+    return enter <= exit;
+}
+#elif defined(VOLUME_SPHERE)
+inline bool volume_hit(const VolumeRay* r, __global const BvhNode* n, float tmin, float tmax, float* t_enter)
+{
+    const float3 oc = n->bound_a.xyz - r->origin;
+    const float radius = n->bound_a.w;
+    const float along = dot(oc, r->dir);                 // distance to the closest approach
+    const float3 perp = oc - along * r->dir;
+    const float slack = VOLUME_SLACK * (length(oc) + radius);
+    const float reach = radius + slack;
+    const float h2 = reach * reach - dot(perp, perp);
+    if (h2 < 0.0f)
+        return false;
+    const float h = sqrt(h2);
+    const float enter = along - h - slack, exit = along + h + slack;
+    *t_enter = fmax(enter, tmin);
+    return exit >= tmin && enter <= tmax;
+}
+#elif defined(VOLUME_ELLIPSE)
+// Axis-aligned ellipsoid: scale space so it becomes the unit sphere; the ray
+// direction then has length^2 = a, and t is unchanged by the scaling.
+inline bool volume_hit(const VolumeRay* r, __global const BvhNode* n, float tmin, float tmax, float* t_enter)
+{
+    const float3 inv_axes = n->bound_b.xyz;
+    const float3 o = (r->origin - n->bound_a.xyz) * inv_axes;
+    const float3 d = r->dir * inv_axes;
+    const float a = dot(d, d);
+    const float along = -dot(o, d) / a;                  // t of the closest approach
+    const float3 perp = o + along * d;
+    const float reach = 1.0f + VOLUME_SLACK * (1.0f + length(o));
+    const float h2 = reach * reach - dot(perp, perp);
+    if (h2 < 0.0f)
+        return false;
+    const float h = sqrt(h2 / a);
+    const float slack = VOLUME_SLACK * (fabs(along) + h);
+    const float enter = along - h - slack, exit = along + h + slack;
+    *t_enter = fmax(enter, tmin);
+    return exit >= tmin && enter <= tmax;
+}
+#else
+#error "build with -DVOLUME_BOX, -DVOLUME_SPHERE or -DVOLUME_ELLIPSE"
+#endif
+
+#endif

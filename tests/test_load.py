@@ -1,0 +1,443 @@
+"""Mesh file loading: every format, face order, triangulation, and hostile input.
+
+All files are generated in ``tmp_path``; only ``test_shared_cow_3ds_matches_off``
+needs ``../shared/meshes`` and skips without it.
+"""
+
+import io
+import struct
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+import trimesh
+
+from clrt.errors import MeshLoadError
+from clrt.scene import load as load_module
+from clrt.scene.load import SUPPORTED_EXTENSIONS, load_mesh
+from clrt.scene.load_3ds import encode_3ds, parse_3ds, write_3ds
+from clrt.scene.mesh import Mesh
+
+SHARED_MESHES = Path(__file__).resolve().parents[2] / "shared" / "meshes"
+
+TETRA_V = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], dtype=np.float64)
+TETRA_F = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]])
+
+
+def tetra(name="tetra", offset=(0.0, 0.0, 0.0)) -> Mesh:
+    return Mesh.from_arrays(TETRA_V + offset, TETRA_F, name)
+
+
+def triangles(mesh: Mesh) -> np.ndarray:
+    """(F, 3, 3) corner coordinates: compares meshes independent of vertex numbering."""
+    return mesh.vertices[mesh.faces].astype(np.float64)
+
+
+def write(tmp_path, name, data) -> Path:
+    path = tmp_path / name
+    path.write_bytes(data.encode() if isinstance(data, str) else data)
+    return path
+
+
+def assert_one_line_error(path, *fragments):
+    """load_mesh(path) raises MeshLoadError with a one-line message naming the file."""
+    with pytest.raises(MeshLoadError) as info:
+        load_mesh(path)
+    message = str(info.value)
+    assert "\n" not in message
+    assert str(path) in message
+    for fragment in fragments:
+        assert fragment in message, message
+    return message
+
+
+# ---------------------------------------------------------------------------
+# Formats
+
+
+def test_obj_keeps_face_order_across_materials(tmp_path):
+    # trimesh would emit the usemtl sections in reverse order.
+    text = """mtllib /nonexistent/materials.mtl
+v 0 0 0
+v 1 0 0
+v 1 1 0
+v 0 1 0
+vt 0 0
+vn 0 0 1
+usemtl a
+f 1/1/1 2/1/1 3/1/1
+usemtl b
+f 1//1 3//1 4//1
+usemtl a
+f 2 3 4 # trailing comment
+"""
+    mesh = load_mesh(write(tmp_path, "order.obj", text))
+    assert mesh.faces.tolist() == [[0, 1, 2], [0, 2, 3], [1, 2, 3]]
+    assert mesh.vertices.dtype == np.float32 and mesh.faces.dtype == np.int32
+    assert mesh.name == "order"
+
+
+def test_obj_polygons_fan_triangulated_in_place(tmp_path):
+    text = "\n".join(f"v {x} {y} 0" for x, y in [(0, 0), (1, 0), (1, 1), (0, 1), (2, 0), (2, 1), (3, 0.5)])
+    text += "\nf 1 2 3 4\nf 2 5 6\nf 2 5 7 6 3\n"
+    mesh = load_mesh(write(tmp_path, "quads.obj", text))
+    assert mesh.faces.tolist() == [[0, 1, 2], [0, 2, 3], [1, 4, 5],
+                                   [1, 4, 6], [1, 6, 5], [1, 5, 2]]
+
+
+def test_obj_only_quads_fan_triangulated_in_place(tmp_path):
+    text = "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 0 0 1\nv 1 0 1\nf 1 2 3 4\nf 2 3 6 5\n"
+    mesh = load_mesh(write(tmp_path, "q.obj", text))
+    assert mesh.faces.tolist() == [[0, 1, 2], [0, 2, 3], [1, 2, 5], [1, 5, 4]]
+
+
+def test_obj_negative_indices_are_relative(tmp_path):
+    text = "v 0 0 0\nv 1 0 0\nv 0 1 0\nf -3 -2 -1\nv 0 0 1\nf -4 -1 -3\n"
+    mesh = load_mesh(write(tmp_path, "rel.obj", text))
+    assert mesh.faces.tolist() == [[0, 1, 2], [0, 3, 1]]
+
+
+def test_off_polygons_colours_and_comments(tmp_path):
+    text = """# a comment before the header
+COFF
+7 3 0
+0 0 0 255 0 0 255
+1 0 0 255 0 0 255
+1 1 0 255 0 0 255
+0 1 0 255 0 0 255   # comment
+2 0 0 255 0 0 255
+2 1 0 255 0 0 255
+3 0.5 0 255 0 0 255
+4 0 1 2 3 0.5 0.5 0.5
+3 1 4 5
+5 1 4 6 5 2
+"""
+    mesh = load_mesh(write(tmp_path, "poly.off", text))
+    assert mesh.faces.tolist() == [[0, 1, 2], [0, 2, 3], [1, 4, 5],
+                                   [1, 4, 6], [1, 6, 5], [1, 5, 2]]
+    assert mesh.vertices.tolist()[6] == [3.0, 0.5, 0.0]
+
+
+def test_off_counts_on_header_line_and_upper_case_extension(tmp_path):
+    text = "OFF 4 4 6\n" + "\n".join(" ".join(map(str, v)) for v in TETRA_V) + "\n"
+    text += "\n".join("3 " + " ".join(map(str, f)) for f in TETRA_F) + "\n"
+    mesh = load_mesh(write(tmp_path, "T.OFF", text))
+    np.testing.assert_array_equal(mesh.faces, TETRA_F)
+    np.testing.assert_array_equal(mesh.vertices, TETRA_V)
+
+
+@pytest.mark.parametrize("encoding", ["ascii", "binary"])
+def test_ply_round_trip(tmp_path, encoding):
+    source = trimesh.Trimesh(TETRA_V, TETRA_F, process=False)
+    path = write(tmp_path, "t.ply", source.export(file_type="ply", encoding=encoding))
+    mesh = load_mesh(path)
+    np.testing.assert_array_equal(mesh.faces, TETRA_F)
+    np.testing.assert_allclose(mesh.vertices, TETRA_V)
+
+
+def test_ply_quads_fan_triangulated_in_place(tmp_path):
+    text = """ply
+format ascii 1.0
+element vertex 6
+property float x
+property float y
+property float z
+element face 2
+property list uchar int vertex_indices
+end_header
+0 0 0
+1 0 0
+1 1 0
+0 1 0
+0 0 1
+1 0 1
+4 0 1 2 3
+4 1 2 5 4
+"""
+    mesh = load_mesh(write(tmp_path, "q.ply", text))
+    assert mesh.faces.tolist() == [[0, 1, 2], [0, 2, 3], [1, 2, 5], [1, 5, 4]]
+
+
+@pytest.mark.parametrize("file_type", ["stl", "stl_ascii"])
+def test_stl_round_trip(tmp_path, file_type):
+    source = trimesh.Trimesh(TETRA_V, TETRA_F, process=False)
+    mesh = load_mesh(write(tmp_path, "t.stl", source.export(file_type=file_type)))
+    np.testing.assert_allclose(triangles(mesh), TETRA_V[TETRA_F])
+
+
+def _two_object_scene() -> "tuple[trimesh.Scene, np.ndarray]":
+    """A scene with two transformed instances and the (F, 3, 3) triangles expected."""
+    scene = trimesh.Scene()
+    rotate = trimesh.transformations.rotation_matrix(np.pi / 2, [0, 0, 1])
+    shift = trimesh.transformations.translation_matrix([5, 0, 0])
+    scale = np.diag([2.0, 2.0, 2.0, 1.0])
+    expected = []
+    for name, matrix in [("a", rotate), ("b", shift @ scale)]:
+        scene.add_geometry(trimesh.Trimesh(TETRA_V, TETRA_F, process=False),
+                           node_name=name, geom_name=name, transform=matrix)
+        expected.append(TETRA_V[TETRA_F] @ matrix[:3, :3].T + matrix[:3, 3])
+    return scene, np.concatenate(expected)
+
+
+def _sorted_triangles(tris: np.ndarray) -> np.ndarray:
+    """Triangles in a canonical order, so scene node order does not matter."""
+    flat = np.round(tris.reshape(len(tris), 9), 5)
+    return flat[np.lexsort(flat.T[::-1])]
+
+
+def test_glb_scene_is_flattened_with_transforms(tmp_path):
+    scene, expected = _two_object_scene()
+    mesh = load_mesh(write(tmp_path, "scene.glb", scene.export(file_type="glb")))
+    assert len(mesh.faces) == 8
+    np.testing.assert_allclose(_sorted_triangles(triangles(mesh)),
+                               _sorted_triangles(expected), atol=1e-5)
+
+
+def test_gltf_with_external_buffer(tmp_path):
+    scene, expected = _two_object_scene()
+    for name, data in scene.export(file_type="gltf").items():
+        write(tmp_path, name, data)
+    mesh = load_mesh(tmp_path / "model.gltf")
+    np.testing.assert_allclose(_sorted_triangles(triangles(mesh)),
+                               _sorted_triangles(expected), atol=1e-5)
+
+
+# ---------------------------------------------------------------------------
+# 3DS
+
+
+def test_3ds_round_trip_two_objects(tmp_path):
+    path = tmp_path / "two.3ds"
+    write_3ds(path, [tetra("a"), tetra("b", offset=(3, 0, 0))])
+    mesh = load_mesh(path)
+    assert len(mesh.faces) == 8 and mesh.name == "two"
+    expected = np.concatenate([TETRA_V[TETRA_F], (TETRA_V + [3, 0, 0])[TETRA_F]])
+    np.testing.assert_allclose(triangles(mesh), expected)
+
+
+def test_3ds_upper_case_extension(tmp_path):
+    path = tmp_path / "UP.3DS"
+    write_3ds(path, [tetra()])
+    assert len(load_mesh(path).faces) == 4
+
+
+def test_3ds_write_splits_over_uint16_limits(tmp_path):
+    n = 70_000  # triangles with unshared corners: 210000 vertices
+    rng = np.random.default_rng(1)
+    big = Mesh.from_arrays(rng.random((3 * n, 3)), np.arange(3 * n).reshape(n, 3), "big")
+    path = tmp_path / "big.3ds"
+    write_3ds(path, [big])
+    mesh = load_mesh(path)
+    np.testing.assert_array_equal(triangles(mesh), triangles(big))
+
+
+def _chunk(cid, *payload):
+    body = b"".join(payload)
+    return struct.pack("<HI", cid, 6 + len(body)) + body
+
+
+def _hand_built_3ds(matrix=None, extra=b"") -> bytes:
+    """One object with an unknown chunk, a material group after the faces, and a matrix."""
+    v = TETRA_V.astype("<f4")
+    faces = np.column_stack([TETRA_F, np.full(4, 7)]).astype("<u2")
+    material_group = _chunk(0x4130, b"mat\0", struct.pack("<HHH", 2, 0, 3))
+    smoothing = _chunk(0x4150, struct.pack("<4I", 1, 1, 1, 1))
+    local = np.eye(4, 3) if matrix is None else matrix
+    mesh = _chunk(
+        0x4100,
+        _chunk(0x4110, struct.pack("<H", 4), v.tobytes()),
+        _chunk(0x4111, b"\x00" * 8),  # vertex flags: unknown to us, skipped
+        _chunk(0x4120, struct.pack("<H", 4), faces.tobytes(), material_group, smoothing),
+        _chunk(0x4160, np.asarray(local, dtype="<f4").tobytes()),
+    )
+    light = _chunk(0x4000, b"lamp\0", _chunk(0x4600, struct.pack("<3f", 1, 2, 3)))
+    obj = _chunk(0x4000, b"tetra\0", mesh)
+    material = _chunk(0xAFFF, _chunk(0xA000, b"mat\0"))
+    editor = _chunk(0x3D3D, _chunk(0x3D3E, struct.pack("<I", 3)), material, light, obj, extra)
+    return _chunk(0x4D4D, _chunk(0x0002, struct.pack("<I", 3)), editor,
+                  _chunk(0xB000, b"\x00" * 10))
+
+
+def test_3ds_hand_built_with_unknown_and_sub_chunks(tmp_path):
+    mesh = load_mesh(write(tmp_path, "hand.3ds", _hand_built_3ds()))
+    np.testing.assert_array_equal(mesh.faces, TETRA_F)
+    np.testing.assert_array_equal(mesh.vertices, TETRA_V)
+
+
+def test_3ds_local_matrix_is_not_applied(tmp_path):
+    # Vertices are stored in world space; the matrix is only the pivot frame.
+    matrix = np.array([[2, 0, 0], [0, 2, 0], [0, 0, 2], [10, 20, 30]])
+    mesh = load_mesh(write(tmp_path, "m.3ds", _hand_built_3ds(matrix=matrix)))
+    np.testing.assert_array_equal(mesh.vertices, TETRA_V)
+
+
+def test_3ds_registered_with_trimesh(tmp_path):
+    path = tmp_path / "reg.3ds"
+    write_3ds(path, [tetra()])
+    loaded = trimesh.load(str(path), process=False)
+    geometry = loaded.to_geometry() if hasattr(loaded, "to_geometry") else loaded.dump(concatenate=True)
+    np.testing.assert_array_equal(np.asarray(geometry.faces), TETRA_F)
+
+
+def _in_editor(*chunks) -> bytes:
+    return _chunk(0x4D4D, _chunk(0x3D3D, *chunks))
+
+
+def _one_mesh(*chunks) -> bytes:
+    return _in_editor(_chunk(0x4000, b"x\0", _chunk(0x4100, *chunks)))
+
+
+@pytest.mark.parametrize("data, reason", [
+    (b"MM\x06\x00\x00", "too short"),
+    (b"\x00\x00" + struct.pack("<I", 6), "not a 3DS file"),
+    (_chunk(0x4D4D, struct.pack("<HI", 0x3D3D, 3)), "invalid length 3"),
+    (_chunk(0x4D4D, struct.pack("<HI", 0x3D3D, 100)), "only 6 remain"),
+    (_chunk(0x4D4D)[:2] + struct.pack("<I", 99), "truncated"),
+    (_in_editor(_chunk(0x4000, b"noname")), "not NUL-terminated"),
+    (_one_mesh(_chunk(0x4110, struct.pack("<H", 50), b"\0" * 24)), "claims 50 vertices"),
+    (_one_mesh(_chunk(0x4110, struct.pack("<H", 1), b"\0" * 12),
+               _chunk(0x4120, struct.pack("<H", 9), b"\0" * 8)), "claims 9 faces"),
+    (_one_mesh(_chunk(0x4110, struct.pack("<H", 1), b"\0" * 12),
+               _chunk(0x4120, struct.pack("<5H", 1, 0, 1, 0, 0))), "out of range"),
+    (_one_mesh(_chunk(0x4120, struct.pack("<5H", 1, 0, 0, 0, 0))), "no vertex list"),
+    (_one_mesh(_chunk(0x4110, struct.pack("<H", 1), b"\0" * 12),
+               _chunk(0x4120, struct.pack("<5H", 1, 0, 0, 0, 0), b"\0\0")),
+     "truncated chunk header"),
+    (_in_editor(), "contains no triangles"),
+])
+def test_3ds_corruption_reasons(data, reason):
+    with pytest.raises(MeshLoadError, match=reason):
+        parse_3ds(data, label="bad.3ds")
+
+
+def test_3ds_truncated_at_every_offset(tmp_path):
+    data = encode_3ds([tetra("a"), tetra("b", offset=(2, 0, 0))])
+    for size in range(len(data)):
+        path = write(tmp_path, f"cut{size}.3ds", data[:size])
+        with pytest.raises(MeshLoadError):
+            load_mesh(path)
+
+
+# ---------------------------------------------------------------------------
+# Errors
+
+
+def test_missing_file(tmp_path):
+    assert_one_line_error(tmp_path / "nope.off", "no such file")
+
+
+def test_directory(tmp_path):
+    folder = tmp_path / "dir.obj"
+    folder.mkdir()
+    assert_one_line_error(folder, "directory")
+
+
+def test_unknown_extension_lists_supported(tmp_path):
+    message = assert_one_line_error(write(tmp_path, "mesh.xyz", "1 2 3\n"), "'.xyz'")
+    for ext in SUPPORTED_EXTENSIONS:
+        assert ext in message
+
+
+@pytest.mark.parametrize("ext", SUPPORTED_EXTENSIONS)
+def test_empty_file(tmp_path, ext):
+    assert_one_line_error(write(tmp_path, "empty" + ext, b""), "empty")
+
+
+def test_unreadable_file(tmp_path, monkeypatch):
+    path = write(tmp_path, "secret.off", "OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n")
+
+    def denied(*args, **kwargs):
+        raise PermissionError(13, "Permission denied")
+    # chmod 000 does not stop root, so simulate the refusal at open().
+    monkeypatch.setattr(load_module, "open", denied, raising=False)
+    assert_one_line_error(path, "permission denied")
+
+
+def test_off_nan_vertex(tmp_path):
+    text = "OFF\n3 1 0\n0 0 0\nnan 0 0\n0 1 0\n3 0 1 2\n"
+    assert_one_line_error(write(tmp_path, "nan.off", text), "NaN")
+
+
+def test_off_huge_header_count_fails_fast(tmp_path):
+    text = "OFF\n1000000000000 1000000000000 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n"
+    assert len(text) < 100
+    start = time.perf_counter()
+    assert_one_line_error(write(tmp_path, "huge.off", text), "truncated")
+    assert time.perf_counter() - start < 1.0
+
+
+def test_off_face_index_out_of_range(tmp_path):
+    text = "OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 3\n"
+    assert_one_line_error(write(tmp_path, "range.off", text), "out of range")
+
+
+@pytest.mark.parametrize("name, data", [
+    ("points.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\n"),
+    ("lines.obj", "v 0 0 0\nv 1 0 0\nl 1 2\n"),
+    ("points.ply", "ply\nformat ascii 1.0\nelement vertex 2\nproperty float x\n"
+                   "property float y\nproperty float z\nend_header\n0 0 0\n1 0 0\n"),
+    ("nofaces.off", "OFF\n3 0 0\n0 0 0\n1 0 0\n0 1 0\n"),
+])
+def test_no_triangles(tmp_path, name, data):
+    assert_one_line_error(write(tmp_path, name, data), "no triangles")
+
+
+def test_glb_point_cloud_has_no_triangles(tmp_path):
+    cloud = trimesh.Scene(trimesh.PointCloud(TETRA_V))
+    assert_one_line_error(write(tmp_path, "cloud.glb", cloud.export(file_type="glb")),
+                          "no triangles")
+
+
+def _samples() -> "dict[str, bytes]":
+    """One small valid file per format, for the mutation test."""
+    source = trimesh.Trimesh(TETRA_V, TETRA_F, process=False)
+    obj = "".join(f"v {x} {y} {z}\n" for x, y, z in TETRA_V)
+    obj += "".join(f"f {a + 1} {b + 1} {c + 1}\n" for a, b, c in TETRA_F)
+    return {
+        ".3ds": encode_3ds([tetra("a"), tetra("b", offset=(2, 0, 0))]),
+        ".off": trimesh.exchange.off.export_off(source).encode(),
+        ".obj": obj.encode(),
+        ".ply": source.export(file_type="ply", encoding="binary"),
+        ".stl": source.export(file_type="stl"),
+        ".glb": source.export(file_type="glb"),
+    }
+
+
+@pytest.mark.parametrize("ext", [".3ds", ".off", ".obj", ".ply", ".stl", ".glb"])
+def test_random_byte_mutations(tmp_path, ext):
+    """200 mutated copies per format: each loads or raises MeshLoadError, quickly."""
+    data = _samples()[ext]
+    rng = np.random.default_rng(20240521)
+    for case in range(200):
+        mutated = bytearray(data)
+        for _ in range(rng.integers(1, 4)):
+            position = rng.integers(len(mutated))
+            if rng.random() < 0.5:
+                mutated[position] = rng.integers(256)
+            else:  # text formats mostly break on digits, so favour plausible ones
+                mutated[position] = ord(str(rng.integers(10)))
+        path = write(tmp_path, f"m{case}{ext}", bytes(mutated))
+        start = time.perf_counter()
+        try:
+            mesh = load_mesh(path)
+        except MeshLoadError as exc:
+            assert "\n" not in str(exc)
+        else:
+            assert mesh.faces.dtype == np.int32 and len(mesh.faces) > 0
+            assert mesh.faces.max() < len(mesh.vertices)
+            assert np.isfinite(mesh.vertices).all()
+        assert time.perf_counter() - start < 1.0, f"case {case} of {ext} was slow"
+
+
+# ---------------------------------------------------------------------------
+# Shared data
+
+
+def test_shared_cow_3ds_matches_off():
+    if not SHARED_MESHES.is_dir():
+        pytest.skip(f"shared meshes not present at {SHARED_MESHES}")
+    from_3ds = load_mesh(SHARED_MESHES / "cow.3ds")
+    from_off = load_mesh(SHARED_MESHES / "cow.off")
+    assert len(from_3ds.faces) == len(from_off.faces)
+    np.testing.assert_allclose(from_3ds.bounds, from_off.bounds, rtol=1e-4, atol=1e-4)
