@@ -8,6 +8,7 @@ camera) -> acceleration build -> ``clrt.device`` (OpenCL context, buffer
 layouts, programs) -> ``clrt/kernels/*.cl`` -> ``clrt.render`` (the frame).
 """
 
+import clrt.scene.load  # noqa: F401 -- registers our 3DS reader with trimesh.load as well
 from clrt.errors import ClrtError, DeviceError, InputError, KernelBuildError, MeshLoadError
 from clrt.render import Frame, Renderer, render
 from clrt.scene.default import default_scene

@@ -1,10 +1,12 @@
 """A brute-force ray tracer in plain numpy: the yardstick for the OpenCL kernels.
 
-It follows the kernels step by step -- the same camera rays, the same watertight
-triangle test in float32 (Woop, Benthin and Wald 2013), the same closest-hit
-rule (lower triangle index wins a tie), the same Phong shading and shadow rays
--- but shares no code with them, so agreement between the two is evidence.
-Vectorised over rays x a block of triangles; meant for small images.
+It follows the kernels step by step -- the same camera rays and anti-aliasing
+jitter, the same watertight triangle test in float32 (Woop, Benthin and Wald
+2013), the same closest-hit rule (lower triangle index wins a tie), the same
+Phong shading, shadow rays, reflection and Fresnel-weighted refraction -- but
+shares no code with them, so agreement between the two is evidence.
+Vectorised over rays x a block of triangles; meant for small images.  Where
+the kernels keep pending rays on a stack, it traces them in waves.
 """
 
 from __future__ import annotations
@@ -17,14 +19,15 @@ from clrt.scene.scene import Camera, Scene
 f32 = np.float32
 
 
-def camera_rays(camera: Camera) -> tuple[np.ndarray, np.ndarray]:
-    """(H*W, 3) origins and unit directions, row 0 at the top, float32."""
+def camera_rays(camera: Camera, ox=0.5, oy=0.5) -> tuple[np.ndarray, np.ndarray]:
+    """(H*W, 3) origins and unit directions through (px + ox, py + oy), row 0 at
+    the top, float32; ox, oy scalars or per pixel."""
     w, h = camera.width, camera.height
     forward, right, up = (v.astype(f32) for v in camera.basis())
     scale_x, scale_y = (f32(s) for s in camera.scales())
     px, py = np.meshgrid(np.arange(w, dtype=f32), np.arange(h, dtype=f32))
-    sx = (f32(2) * (px.ravel() + f32(0.5)) / f32(w) - f32(1)) * scale_x
-    sy = (f32(1) - f32(2) * (py.ravel() + f32(0.5)) / f32(h)) * scale_y
+    sx = (f32(2) * (px.ravel() + np.asarray(ox, f32)) / f32(w) - f32(1)) * scale_x
+    sy = (f32(1) - f32(2) * (py.ravel() + np.asarray(oy, f32)) / f32(h)) * scale_y
     d = forward + sx[:, None] * right + sy[:, None] * up
     d /= np.linalg.norm(d, axis=1, keepdims=True)
     o = np.broadcast_to(np.asarray(camera.eye, f32), d.shape)
@@ -102,36 +105,37 @@ def intersect(origins, dirs, corners, tmin, tmax, block: int = 64, any_hit: bool
     return best_t, best_prim.astype(np.int32), best_u, best_v
 
 
-def shade(arrays: SceneArrays, scene: Scene, origins, dirs, t, prim, u, v, eps: float) -> np.ndarray:
-    """(N, 3) linear colour: background, or Phong ambient + diffuse + specular with shadows."""
-    n = len(origins)
-    color = np.tile(np.asarray(scene.background, np.float64), (n, 1))
-    hit = np.nonzero(prim >= 0)[0]
-    if len(hit) == 0:
-        return color
-    p_id = prim[hit]
-    tv = arrays.tri_verts[p_id]
+def surface(arrays: SceneArrays, origins, dirs, t, prim, u, v) -> dict:
+    """What shading needs at each hit (all rays must hit): point, normals, side, material."""
+    tv = arrays.tri_verts[prim]
     v0, v1, v2 = (tv[k][:, :3].astype(np.float64) for k in ("v0", "v1", "v2"))
-    d = dirs[hit].astype(np.float64)
-    ng = np.cross(v1 - v0, v2 - v0)
-    ng /= np.linalg.norm(ng, axis=1, keepdims=True)
-    ng[np.einsum("ij,ij->i", ng, d) > 0] *= -1
-    info = arrays.tri_info[p_id]
+    d = dirs.astype(np.float64)
+    wound = np.cross(v1 - v0, v2 - v0)
+    wound /= np.linalg.norm(wound, axis=1, keepdims=True)
+    front = np.einsum("ij,ij->i", wound, d) < 0
+    ng = np.where(front[:, None], wound, -wound)
+    info = arrays.tri_info[prim]
     mat = arrays.materials[info["material"]]
     smooth = (mat["flags"] & 1).astype(bool)
     vn = arrays.vertex_normals[:, :3].astype(np.float64)
-    w0 = 1.0 - u[hit] - v[hit]
-    ns = (w0[:, None] * vn[info["vertex"][:, 0]] + u[hit, None] * vn[info["vertex"][:, 1]]
-          + v[hit, None] * vn[info["vertex"][:, 2]])
+    w0 = 1.0 - u - v
+    ns = (w0[:, None] * vn[info["vertex"][:, 0]] + u[:, None] * vn[info["vertex"][:, 1]]
+          + v[:, None] * vn[info["vertex"][:, 2]])
     ns_len = np.linalg.norm(ns, axis=1, keepdims=True)
     use = smooth & (ns_len[:, 0] > 0)
-    n_s = np.where(use[:, None], ns / np.where(ns_len > 0, ns_len, 1), ng)
-    n_s[np.einsum("ij,ij->i", n_s, ng) < 0] *= -1
+    n = np.where(use[:, None], ns / np.where(ns_len > 0, ns_len, 1), ng)
+    n[np.einsum("ij,ij->i", n, ng) < 0] *= -1
+    p = origins.astype(np.float64) + t[:, None].astype(np.float64) * d
+    return {"p": p, "ng": ng, "n": n, "front": front, "mat": mat, "d": d}
 
+
+def local_shading(arrays: SceneArrays, scene: Scene, s: dict, eps: float) -> np.ndarray:
+    """(N, 3) Phong ambient + diffuse + specular, each light behind one shadow ray
+    (every surface blocks light fully, transparent ones included)."""
+    mat, n_s, ng, d = s["mat"], s["n"], s["ng"], s["d"]
     albedo = mat["color"][:, :3].astype(np.float64)
     out = mat["ambient"][:, None] * albedo * np.asarray(scene.ambient_light, np.float64)
-    p = origins[hit].astype(np.float64) + t[hit, None].astype(np.float64) * d
-    shadow_origin = p + eps * ng
+    shadow_origin = s["p"] + eps * ng
     for light in scene.lights:
         to_light = np.asarray(light.position, np.float64) - shadow_origin
         dist = np.linalg.norm(to_light, axis=1)
@@ -148,8 +152,74 @@ def shade(arrays: SceneArrays, scene: Scene, origins, dirs, t, prim, u, v, eps: 
         diffuse = mat["diffuse"][:, None] * n_dot_l[:, None] * albedo * lc
         spec = (mat["specular"] * np.power(r_dot_v, mat["shininess"]))[:, None] * lc
         out += np.where(lit[:, None], diffuse + spec, 0.0)
-    color[hit] = out
-    return color
+    return out
+
+
+MIN_RAY_WEIGHT = 1e-3
+
+
+def _bounce(s: dict):
+    """Reflected direction, refracted direction and Fresnel reflectance F (Schlick;
+    1 under total internal reflection) -- whitted.cl's reflect_dir and fresnel_refract."""
+    d, n, ng, front = s["d"], s["n"], s["ng"], s["front"]
+    dot = lambda a, b: np.einsum("ij,ij->i", a, b)   # noqa: E731
+    r = d - 2 * dot(d, n)[:, None] * n
+    r = np.where((dot(r, ng) > 0)[:, None], r, d - 2 * dot(d, ng)[:, None] * ng)
+    ior = s["mat"]["ior"].astype(np.float64)
+    eta = np.where(front, 1 / ior, ior)
+    cos_i = -dot(d, n)
+    flip = ~(cos_i > 0)
+    n = np.where(flip[:, None], ng, n)
+    cos_i = -dot(d, n)
+    k = 1 - eta ** 2 * (1 - cos_i ** 2)
+    tir = k < 0
+    cos_t = np.sqrt(np.maximum(k, 0))
+    refr = eta[:, None] * d + (eta * cos_i - cos_t)[:, None] * n
+    refr /= np.maximum(np.linalg.norm(refr, axis=1, keepdims=True), 1e-300)
+    r0 = ((ior - 1) / (ior + 1)) ** 2
+    c = 1 - np.where(front, cos_i, cos_t)
+    f = np.where(tir, 1.0, r0 + (1 - r0) * c ** 5)
+    return r, refr, f
+
+
+def trace_whitted(arrays: SceneArrays, scene: Scene, origins, dirs, max_depth: int, eps: float):
+    """Colour along each camera ray (whitted.cl's model), traced in waves of
+    secondary rays; also the camera rays' (t, prim)."""
+    corners = _corners(arrays)
+    n = len(origins)
+    color = np.zeros((n, 3))
+    o, d = origins.astype(f32), dirs.astype(f32)
+    weight = np.ones((n, 3))
+    pixel = np.arange(n)
+    depth = 0
+    first = None
+    while len(o):
+        t, prim, u, v = intersect(o, d, corners, np.zeros(len(o), f32), np.full(len(o), np.inf, f32))
+        if first is None:
+            first = (t, prim)
+        miss = prim < 0
+        np.add.at(color, pixel[miss], weight[miss] * np.asarray(scene.background, np.float64))
+        hit = np.nonzero(~miss)[0]
+        if len(hit) == 0:
+            break
+        s = surface(arrays, o[hit], d[hit], t[hit], prim[hit], u[hit], v[hit])
+        np.add.at(color, pixel[hit], weight[hit] * local_shading(arrays, scene, s, eps))
+        if depth >= max_depth:
+            break
+        kr, kt = s["mat"]["reflectivity"].astype(np.float64), s["mat"]["transparency"].astype(np.float64)
+        refl, refr, f = _bounce(s)
+        f = np.where(kt > 0, f, 0.0)
+        w_refl = weight[hit] * (kr + kt * f)[:, None]
+        w_refr = weight[hit] * (kt * (1 - f))[:, None] * s["mat"]["color"][:, :3]
+        go_refl = (w_refl.max(axis=1) >= MIN_RAY_WEIGHT) & ((kr > 0) | (kt > 0))
+        go_refr = (kt > 0) & (f < 1) & (w_refr.max(axis=1) >= MIN_RAY_WEIGHT)
+        o = np.concatenate([s["p"][go_refl] + eps * s["ng"][go_refl],
+                            s["p"][go_refr] - eps * s["ng"][go_refr]]).astype(f32)
+        d = np.concatenate([refl[go_refl], refr[go_refr]]).astype(f32)
+        weight = np.concatenate([w_refl[go_refl], w_refr[go_refr]])
+        pixel = np.concatenate([pixel[hit][go_refl], pixel[hit][go_refr]])
+        depth += 1
+    return color, first
 
 
 def _corners(arrays: SceneArrays) -> np.ndarray:
@@ -164,12 +234,45 @@ def srgb8(linear: np.ndarray) -> np.ndarray:
     return np.rint(255.0 * s).astype(np.uint8)
 
 
-def render_reference(scene: Scene, camera: Camera):
-    """(image float64 (H, W, 3) linear, prim (H, W) int32, t (H, W) float32)."""
+def hash_u32(x: np.ndarray) -> np.ndarray:
+    """camera.cl's lowbias32 integer hash, in uint32 arithmetic."""
+    x = np.asarray(x, np.uint32)
+    x = x ^ (x >> np.uint32(16))
+    x = x * np.uint32(0x7FEB352D)
+    x = x ^ (x >> np.uint32(15))
+    x = x * np.uint32(0x846CA68B)
+    return x ^ (x >> np.uint32(16))
+
+
+def sample_offsets(pixels: int, sample: int, n: int, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """camera.cl's sample_offset for every pixel: the centre, or a jittered point
+    in cell (sample % n, sample // n) of an n x n grid."""
+    if n <= 1:
+        half = np.full(pixels, 0.5, f32)
+        return half, half
+    with np.errstate(over="ignore"):
+        key = hash_u32(np.uint32(seed)) ^ ((np.arange(pixels, dtype=np.uint32) * np.uint32(n * n)
+                                            + np.uint32(sample)) * np.uint32(2))
+        jx = (hash_u32(key) >> np.uint32(8)).astype(f32) * f32(1 / 16777216)
+        jy = (hash_u32(key + np.uint32(1)) >> np.uint32(8)).astype(f32) * f32(1 / 16777216)
+    return (f32(sample % n) + jx) / f32(n), (f32(sample // n) + jy) / f32(n)
+
+
+def render_reference(scene: Scene, camera: Camera, samples: int | None = None,
+                     max_depth: int | None = None, seed: int = 0):
+    """(image float64 (H, W, 3) linear, prim (H, W) int32, t (H, W) float32) --
+    prim and t of the first sample's camera rays."""
+    samples = scene.samples if samples is None else samples
+    max_depth = scene.max_depth if max_depth is None else max_depth
     arrays = flatten_scene(scene)
-    o, d = camera_rays(camera)
-    n = len(o)
-    t, prim, u, v = intersect(o, d, _corners(arrays), np.zeros(n, f32), np.full(n, np.inf, f32))
-    color = shade(arrays, scene, o, d, t, prim, u, v, ray_epsilon(arrays.bounds, camera))
+    eps = ray_epsilon(arrays.bounds, camera)
     shape = (camera.height, camera.width)
-    return color.reshape(*shape, 3), prim.reshape(shape), t.reshape(shape)
+    image = np.zeros((camera.width * camera.height, 3))
+    first = None
+    for sample in range(samples * samples):
+        o, d = camera_rays(camera, *sample_offsets(image.shape[0], sample, samples, seed))
+        color, hits = trace_whitted(arrays, scene, o, d, max_depth, eps)
+        image += color / (samples * samples)
+        first = first or hits
+    t, prim = first
+    return image.reshape(*shape, 3), prim.reshape(shape), t.reshape(shape)

@@ -66,7 +66,7 @@ def flatten_scene(scene: Scene) -> SceneArrays:
     for i, o in enumerate(scene.objects):
         mat = o.material
         materials[i]["color"][:3] = mat.color
-        for name in ("ambient", "diffuse", "specular", "shininess"):
+        for name in ("ambient", "diffuse", "specular", "shininess", "reflectivity", "transparency", "ior"):
             materials[i][name] = getattr(mat, name)
         materials[i]["flags"] = layouts.MATERIAL_SMOOTH if mat.smooth else 0
 
@@ -152,10 +152,22 @@ class Renderer:
         kernel.set_args(*args)
         return cl.enqueue_nd_range_kernel(queue, kernel, global_size, local_size)
 
-    def render(self, camera: Camera | None = None, linear: bool = False, hits: bool = False) -> Frame:
-        """Render one frame; ``hits=True`` also reads back the primary hits
-        (``Frame.prim`` and ``Frame.t``, otherwise None)."""
+    def render(self, camera: Camera | None = None, linear: bool = False, hits: bool = False,
+               samples: int | None = None, max_depth: int | None = None, seed: int = 0) -> Frame:
+        """Render one frame.
+
+        ``samples``: anti-aliasing with samples x samples stratified, jittered rays
+        per pixel (the jitter is a hash of pixel, sample and ``seed``, so renders
+        are reproducible; 1 = one ray through each pixel centre).  ``max_depth``:
+        reflection/refraction bounces.  Both default to the scene's.
+        ``hits=True`` also reads back the camera rays' hits (``Frame.prim`` and
+        ``Frame.t``, of the first sample; otherwise None).
+        """
         camera = camera or self.scene.camera or Camera.framing(self.arrays.bounds)
+        samples = self.scene.samples if samples is None else samples
+        max_depth = self.scene.max_depth if max_depth is None else max_depth
+        _check_int("samples", samples, 1, 16)
+        _check_int("max_depth", max_depth, 0, MAX_BOUNCES)
         w, h = camera.width, camera.height
         pixels = w * h
         timings = dict(self.timings)
@@ -165,20 +177,24 @@ class Renderer:
         vec4 = lambda v: np.array([*v, 0.0], np.float32)   # noqa: E731
         a = self.arrays
         q = self.queue
-
-        gen = self._launch(
-            "generate_rays", q, (w, h), None, buf["rays"], vec4(camera.eye), vec4(forward), vec4(right), vec4(up),
-            np.float32(scale_x), np.float32(scale_y), np.uint32(w), np.uint32(h))
-        shade = self._launch(
-            "shade_pixels", q, (pixels,), None, buf["rays"], buf["linear"], buf["hits"], np.uint32(pixels),
-            *self.geometry.args, self.buffers["tri_info"], self.buffers["vertex_normals"], self.buffers["materials"],
-            self.buffers["lights"], np.uint32(len(self.scene.lights)),
-            vec4(self.scene.ambient_light), vec4(self.scene.background),
-            np.float32(ray_epsilon(a.bounds, camera)))
-        gen.wait()
-        shade.wait()
-        timings["ray generation"] = _event_ms(gen)
-        timings["pixel colour"] = _event_ms(shade)
+        camera_args = (vec4(camera.eye), vec4(forward), vec4(right), vec4(up), np.float32(scale_x),
+                       np.float32(scale_y), np.uint32(w), np.uint32(h))
+        shading_args = (*self.geometry.args, self.buffers["tri_info"], self.buffers["vertex_normals"],
+                        self.buffers["materials"], self.buffers["lights"], np.uint32(len(self.scene.lights)),
+                        vec4(self.scene.ambient_light), vec4(self.scene.background),
+                        np.float32(ray_epsilon(a.bounds, camera)))
+        n = samples * samples
+        events = []
+        for sample in range(n):
+            gen = self._launch("generate_rays", q, (w, h), None, buf["rays"], *camera_args,
+                               np.uint32(sample), np.uint32(samples), np.uint32(seed))
+            shade = self._launch("shade_pixels", q, (pixels,), None, buf["rays"], buf["linear"], buf["hits"],
+                                 np.uint32(pixels), np.uint32(max_depth), np.float32(1.0 / n),
+                                 np.uint32(sample == 0), *shading_args)
+            events.append((gen, shade))
+        cl.wait_for_events([e for pair in events for e in pair])
+        timings["ray generation"] = sum(_event_ms(g) for g, _ in events)
+        timings["pixel colour"] = sum(_event_ms(s) for _, s in events)
 
         with _stage(timings, "read back"):
             if linear:
@@ -197,6 +213,14 @@ class Renderer:
                 cl.enqueue_copy(q, records, buf["hits"])
                 prim, t = records["prim"].copy(), records["t"].copy()
         return Frame(image, prim, t, timings, self.device, len(a.tri_verts))
+
+
+MAX_BOUNCES = 16   # the stack bound in whitted.cl
+
+
+def _check_int(name: str, value, lo: int, hi: int) -> None:
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or not lo <= value <= hi:
+        raise InputError(f"{name} must be an integer in {lo}..{hi}, got {value!r}")
 
 
 class _stage:

@@ -4,7 +4,6 @@ All files are generated in ``tmp_path``; only ``test_shared_cow_3ds_matches_off`
 needs ``../shared/meshes`` and skips without it.
 """
 
-import io
 import struct
 import time
 from pathlib import Path
@@ -79,7 +78,8 @@ f 2 3 4 # trailing comment
 
 
 def test_obj_polygons_fan_triangulated_in_place(tmp_path):
-    text = "\n".join(f"v {x} {y} 0" for x, y in [(0, 0), (1, 0), (1, 1), (0, 1), (2, 0), (2, 1), (3, 0.5)])
+    corners = [(0, 0), (1, 0), (1, 1), (0, 1), (2, 0), (2, 1), (3, 0.5)]
+    text = "\n".join(f"v {x} {y} 0" for x, y in corners)
     text += "\nf 1 2 3 4\nf 2 5 6\nf 2 5 7 6 3\n"
     mesh = load_mesh(write(tmp_path, "quads.obj", text))
     assert mesh.faces.tolist() == [[0, 1, 2], [0, 2, 3], [1, 4, 5],
@@ -157,6 +157,65 @@ end_header
 """
     mesh = load_mesh(write(tmp_path, "q.ply", text))
     assert mesh.faces.tolist() == [[0, 1, 2], [0, 2, 3], [1, 2, 5], [1, 5, 4]]
+
+
+def test_ply_mixed_polygons_and_extra_properties(tmp_path):
+    text = """ply
+format ascii 1.0
+comment mixed polygon sizes, a colour per face, an edge element
+element vertex 7
+property float x
+property float y
+property float z
+property uchar red
+element face 3
+property list uchar int vertex_indices
+property uchar red
+element edge 1
+property int vertex1
+property int vertex2
+end_header
+0 0 0 1
+1 0 0 1
+1 1 0 1
+0 1 0 1
+2 0 0 1
+2 1 0 1
+3 0.5 0 1
+4 0 1 2 3 9
+3 1 4 5 9
+5 1 4 6 5 2 9
+0 1
+"""
+    mesh = load_mesh(write(tmp_path, "mixed.ply", text))
+    assert mesh.faces.tolist() == [[0, 1, 2], [0, 2, 3], [1, 4, 5],
+                                   [1, 4, 6], [1, 6, 5], [1, 5, 2]]
+    assert mesh.vertices.tolist()[6] == [3.0, 0.5, 0.0]
+
+
+def test_binary_ply_quads_fan_triangulated_in_place(tmp_path):
+    header = (b"ply\nformat binary_little_endian 1.0\nelement vertex 6\n"
+              b"property float x\nproperty float y\nproperty float z\nelement face 2\n"
+              b"property list uchar int vertex_indices\nend_header\n")
+    vertices = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [0, 0, 1], [1, 0, 1]], "<f4")
+    faces = b"".join(struct.pack("<B4i", 4, *quad) for quad in [(0, 1, 2, 3), (1, 2, 5, 4)])
+    mesh = load_mesh(write(tmp_path, "q.ply", header + vertices.tobytes() + faces))
+    assert mesh.faces.tolist() == [[0, 1, 2], [0, 2, 3], [1, 2, 5], [1, 5, 4]]
+
+
+def test_ascii_ply_truncated_at_every_offset(tmp_path):
+    source = trimesh.Trimesh(TETRA_V, TETRA_F, process=False)
+    data = source.export(file_type="ply", encoding="ascii").rstrip()
+    for size in range(len(data)):
+        with pytest.raises(MeshLoadError):
+            load_mesh(write(tmp_path, f"cut{size}.ply", data[:size]))
+    assert len(load_mesh(write(tmp_path, "whole.ply", data)).faces) == 4
+
+
+def test_obj_tabs_and_indentation(tmp_path):
+    text = "  v\t0 0 0\n\tv 1 0 0\nv 0 1 0 1.0\n   f\t1 2 \\\n 3\n"
+    mesh = load_mesh(write(tmp_path, "tabs.obj", text))
+    assert mesh.faces.tolist() == [[0, 1, 2]]
 
 
 @pytest.mark.parametrize("file_type", ["stl", "stl_ascii"])
@@ -275,9 +334,8 @@ def test_3ds_local_matrix_is_not_applied(tmp_path):
 def test_3ds_registered_with_trimesh(tmp_path):
     path = tmp_path / "reg.3ds"
     write_3ds(path, [tetra()])
-    loaded = trimesh.load(str(path), process=False)
-    geometry = loaded.to_geometry() if hasattr(loaded, "to_geometry") else loaded.dump(concatenate=True)
-    np.testing.assert_array_equal(np.asarray(geometry.faces), TETRA_F)
+    loaded = trimesh.load(str(path), force="mesh", process=False)
+    np.testing.assert_array_equal(np.asarray(loaded.faces), TETRA_F)
 
 
 def _in_editor(*chunks) -> bytes:
@@ -367,6 +425,16 @@ def test_off_huge_header_count_fails_fast(tmp_path):
     assert time.perf_counter() - start < 1.0
 
 
+@pytest.mark.parametrize("encoding", ["ascii", "binary_little_endian"])
+def test_ply_huge_header_count_fails_fast(tmp_path, encoding):
+    header = (f"ply\nformat {encoding} 1.0\nelement vertex 1000000000000\nproperty float x\n"
+              "property float y\nproperty float z\nelement face 1\n"
+              "property list uchar int vertex_indices\nend_header\n")
+    start = time.perf_counter()
+    assert_one_line_error(write(tmp_path, "huge.ply", header + "0 0 0\n"))
+    assert time.perf_counter() - start < 1.0
+
+
 def test_off_face_index_out_of_range(tmp_path):
     text = "OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 3\n"
     assert_one_line_error(write(tmp_path, "range.off", text), "out of range")
@@ -395,19 +463,23 @@ def _samples() -> "dict[str, bytes]":
     obj = "".join(f"v {x} {y} {z}\n" for x, y, z in TETRA_V)
     obj += "".join(f"f {a + 1} {b + 1} {c + 1}\n" for a, b, c in TETRA_F)
     return {
-        ".3ds": encode_3ds([tetra("a"), tetra("b", offset=(2, 0, 0))]),
-        ".off": trimesh.exchange.off.export_off(source).encode(),
-        ".obj": obj.encode(),
-        ".ply": source.export(file_type="ply", encoding="binary"),
-        ".stl": source.export(file_type="stl"),
-        ".glb": source.export(file_type="glb"),
+        "3ds": encode_3ds([tetra("a"), tetra("b", offset=(2, 0, 0))]),
+        "off": trimesh.exchange.off.export_off(source).encode(),
+        "obj": obj.encode(),
+        "ply": source.export(file_type="ply", encoding="binary"),
+        "ply-ascii": source.export(file_type="ply", encoding="ascii"),
+        "stl": source.export(file_type="stl"),
+        "stl-ascii": source.export(file_type="stl_ascii").encode(),
+        "glb": source.export(file_type="glb"),
     }
 
 
-@pytest.mark.parametrize("ext", [".3ds", ".off", ".obj", ".ply", ".stl", ".glb"])
-def test_random_byte_mutations(tmp_path, ext):
+@pytest.mark.parametrize("kind", ["3ds", "off", "obj", "ply", "ply-ascii", "stl", "stl-ascii",
+                                  "glb"])
+def test_random_byte_mutations(tmp_path, kind, capfd):
     """200 mutated copies per format: each loads or raises MeshLoadError, quickly."""
-    data = _samples()[ext]
+    data = _samples()[kind]
+    ext = "." + kind.split("-")[0]
     rng = np.random.default_rng(20240521)
     for case in range(200):
         mutated = bytearray(data)
@@ -427,7 +499,9 @@ def test_random_byte_mutations(tmp_path, ext):
             assert mesh.faces.dtype == np.int32 and len(mesh.faces) > 0
             assert mesh.faces.max() < len(mesh.vertices)
             assert np.isfinite(mesh.vertices).all()
-        assert time.perf_counter() - start < 1.0, f"case {case} of {ext} was slow"
+        assert time.perf_counter() - start < 1.0, f"case {case} of {kind} was slow"
+    # trimesh's logged warnings (with tracebacks) must not reach the terminal.
+    assert capfd.readouterr().err == ""
 
 
 # ---------------------------------------------------------------------------

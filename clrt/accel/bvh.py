@@ -23,8 +23,9 @@ import numpy as np
 from clrt.device.layouts import BVH_NODE
 
 # Cost model of Bvh.stats()["sah_cost"] and of the SAH builder (sah.py): one unit
-# per node visited and one unit per ray/triangle test.  Equal costs, as in
-# Wald 2007, keep the number an easy-to-read "expected work per ray".
+# per node visited (its children's volume tests) and one unit per ray/triangle
+# test.  Equal costs keep the number readable as "expected node visits plus
+# triangle tests of a ray that hits the root box".
 C_TRAVERSAL = 1.0
 C_INTERSECT = 1.0
 
@@ -92,8 +93,9 @@ def surface_area(lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
 def triangle_bounds(triangles: np.ndarray) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(F, 3, 3) float32 corners -> box min (F, 3) float32, box max (F, 3) float32,
     centroid (F, 3) float64 (mean of the corners, computed in float64)."""
-    lo = triangles.min(axis=1)
-    hi = triangles.max(axis=1)
+    v0, v1, v2 = triangles[:, 0], triangles[:, 1], triangles[:, 2]
+    lo = np.minimum(np.minimum(v0, v1), v2)
+    hi = np.maximum(np.maximum(v0, v1), v2)
     centroids = triangles[:, 0].astype(np.float64)
     centroids += triangles[:, 1]
     centroids += triangles[:, 2]
@@ -128,10 +130,6 @@ class Level:
     counts: np.ndarray
     cmin: np.ndarray
     cmax: np.ndarray
-
-    def per_triangle(self, per_node: np.ndarray) -> np.ndarray:
-        """Broadcast a per-node array (S, ...) to the n list positions."""
-        return np.repeat(per_node, self.counts, axis=0)
 
 
 # A split rule returns, per node of the level, (axis (S,) int, n_left (S,) int):
@@ -184,8 +182,9 @@ def build_topdown(centroids: np.ndarray, rule: SplitRule, carry_keys: bool = Fal
     a prefix of one list; the other two lists are *stably partitioned* by the same
     per-triangle side flag, so every list stays sorted inside every node without
     re-sorting (the presorted-lists technique of kd-tree builders).  A partition is
-    a cumulative sum and a gather: O(n) per level and list.  Triangles of finished
-    leaves are written to their slots and dropped from the lists.
+    two order-keeping ``compress`` and one gather: O(n) per level and list.
+    Triangles of finished leaves are written to their slots and dropped from the
+    lists.
     """
     F = len(centroids)
     ids = np.stack([np.argsort(centroids[:, a], kind="stable") for a in range(3)]).astype(np.int32)
@@ -222,39 +221,45 @@ def build_topdown(centroids: np.ndarray, rule: SplitRule, carry_keys: bool = Fal
             if leaf.all():
                 break
             keep = ~in_leaf
-            ids = ids[:, keep]
-            keys = None if keys is None else keys[:, keep]
-            boxes = None if boxes is None else boxes[:, :, keep]
+            ids = np.compress(keep, ids, axis=1)
+            keys = None if keys is None else np.compress(keep, keys, axis=1)
+            boxes = None if boxes is None else np.compress(keep, boxes, axis=2)
             split = ~leaf
             counts, slots, axis, n_left = counts[split], slots[split], axis[split], n_left[split]
             offsets = _exclusive_cumsum(counts)[:-1]
 
         # Side of every triangle, read off the chosen axis' list.
         n = ids.shape[1]
-        position = np.arange(n)
-        rank = position - np.repeat(offsets, counts)
-        right = rank >= np.repeat(n_left, counts)
-        for a in np.unique(axis):
-            mine = np.repeat(axis == a, counts)
-            goes_right[ids[a, mine]] = right[mine]
+        rank = np.arange(n, dtype=np.int32) - np.repeat(offsets.astype(np.int32), counts)
+        right = rank >= np.repeat(n_left.astype(np.int32), counts)
+        chosen = np.unique(axis)
+        if len(chosen) == 1:
+            goes_right[ids[chosen[0]]] = right
+        else:
+            for a in chosen:
+                mine = np.repeat(axis == a, counts)
+                goes_right[np.compress(mine, ids[a])] = np.compress(mine, right)
 
-        # Stable partition of every list: a left triangle moves to
-        #   offset + (lefts before it in its node),
-        # a right one to offset + n_left + (rights before it in its node).
+        # Stable partition of every list.  Node sizes do not change, so position j
+        # of the new list is a left slot exactly where ``right[j]`` is False; the
+        # k-th left slot takes the k-th left triangle of the old list (compress
+        # keeps the order), the k-th right slot the k-th right triangle.
+        n_lefts = n - int(np.count_nonzero(right))
+        gather = np.cumsum(right, dtype=np.int32)
+        gather += n_lefts - 1
+        np.copyto(gather, np.cumsum(~right, dtype=np.int32) - 1, where=~right)
+        position = np.arange(n, dtype=np.int32)
+        carried = [x for x in (ids, keys, boxes) if x is not None]
+        moved = [np.empty_like(x) for x in carried]
         for a in range(3):
-            is_left = ~np.take(goes_right, ids[a])
-            lefts_before = np.cumsum(is_left)
-            lefts_before -= is_left
-            base = lefts_before[offsets]
-            target = np.where(is_left, lefts_before + np.repeat(offsets - base, counts),
-                              position - lefts_before + np.repeat(n_left + base, counts))
-            perm = np.empty(n, np.int64)
-            perm[target] = position
-            ids[a] = np.take(ids[a], perm)
-            if keys is not None:
-                keys[a] = np.take(keys[a], perm)
-            if boxes is not None:
-                boxes[a] = np.take(boxes[a], perm, axis=1)
+            is_right = np.take(goes_right, ids[a])
+            perm = np.take(np.concatenate([np.compress(~is_right, position),
+                                           np.compress(is_right, position)]), gather)
+            for old, new in zip(carried, moved):
+                np.take(old[a], perm, axis=-1, out=new[a])
+        ids = moved[0]
+        keys = moved[1] if keys is not None else None
+        boxes = moved[-1] if boxes is not None else None
         counts = np.stack([n_left, counts - n_left], 1).ravel()
         offsets = _exclusive_cumsum(counts)[:-1]
         slots = np.stack([slots, slots + n_left], 1).ravel()
@@ -286,16 +291,18 @@ def _assemble(per_level, prim_id) -> Topology:
 def node_boxes(topo: Topology, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
     """(N, 2, 3) float32 exact box of each node's triangles, in topology order.
 
-    Leaves cover consecutive slot ranges, so one ``reduceat`` over the leaf-ordered
-    triangle boxes gives every leaf box; inner boxes are then merged bottom-up, one
-    level per step.
+    Leaf boxes come from their slots; inner boxes are merged bottom-up, one level
+    per step.
     """
     boxes = np.empty((len(topo.first), 2, 3), np.float32)
     leaves = np.flatnonzero(topo.is_leaf)
-    leaves = leaves[np.argsort(topo.first[leaves])]
-    starts = topo.first[leaves]
-    boxes[leaves, 0] = np.minimum.reduceat(lo[topo.prim_id], starts, axis=0)
-    boxes[leaves, 1] = np.maximum.reduceat(hi[topo.prim_id], starts, axis=0)
+    first, count = topo.first[leaves], topo.count[leaves]
+    # Leaf boxes: one (m, L) gather per slot index r < m = largest leaf (short leaves
+    # repeat their last triangle), reduced over r with contiguous min/max.
+    slot = first + np.minimum(np.arange(count.max())[:, None], count - 1)
+    tri = topo.prim_id[slot]
+    boxes[leaves, 0] = np.take(lo, tri, axis=0).min(axis=0)
+    boxes[leaves, 1] = np.take(hi, tri, axis=0).max(axis=0)
     for lvl in range(len(topo.level_offsets) - 2, -1, -1):
         nodes = np.arange(topo.level_offsets[lvl], topo.level_offsets[lvl + 1])
         nodes = nodes[~topo.is_leaf[nodes]]

@@ -25,6 +25,8 @@ def median_split(level: Level, leaf_size: int, axis_rule: str = "longest"):
         axis = np.full(len(level.counts), level.depth % 3, np.int64)
     else:
         axis = np.argmax(level.cmax - level.cmin, axis=1)     # first maximum on ties
+    # Each node's list for ``axis`` is kept sorted by (centroid, id), so the median
+    # split is a count: the first floor(n/2) entries go left.
     n_left = np.where(level.counts <= leaf_size, 0, level.counts // 2)
     return axis, n_left
 

@@ -1,32 +1,38 @@
 """Binned SAH builder (Wald 2007, "On fast construction of SAH-based bounding
 volume hierarchies").
 
-Each open node bins its triangles by centroid into ``BINS`` equal slots of its
-centroid bounds on each axis and evaluates the surface area heuristic at the
-``BINS - 1`` bin boundaries:
+Every open node evaluates, on each axis, the surface area heuristic
 
-    cost(split) = C_TRAVERSAL + (A(L) * N(L) + A(R) * N(R)) / A(node) * C_INTERSECT
-    cost(leaf)  = N * C_INTERSECT
+    cost(split) = C_TRAVERSAL + C_INTERSECT * (A(L) N(L) + A(R) N(R)) / A(node)
+    cost(leaf)  = C_INTERSECT * N
 
-with boxes (whatever the final volume shape) and the constants of ``bvh.py``.
+(boxes, whatever the final volume shape; constants in ``bvh.py``) at candidate
+planes:
+
+* a node of more than ``SWEEP_MAX`` triangles bins their centroids into ``BINS``
+  equal slots of its centroid bounds and tries the ``BINS - 1`` bin boundaries;
+* a smaller node tries every plane between consecutive distinct centroids (an
+  exact sweep: never worse than binning, and cheaper here than short bins, which
+  cost one reduction each).
 
 Leaf policy (``leaf_size`` is a hard maximum, SAH decides below it):
 
 * 1 triangle -> leaf;
-* more than ``leaf_size`` triangles -> always split, at the cheapest boundary even
-  when its cost exceeds the leaf cost;
+* more than ``leaf_size`` triangles -> always split, at the cheapest candidate even
+  when that costs more than a leaf;
 * otherwise split only when the best split is strictly cheaper than a leaf.
 
-Degenerate nodes whose centroids coincide (no axis with a positive centroid extent)
-are split at the median of triangle ids.  Below depth ``MAX_SAH_DEPTH`` the
-paper's median split on the longest axis takes over, which bounds the depth by
-``MAX_SAH_DEPTH + ceil(log2 F)`` even on adversarial inputs (e.g. exponentially
-spaced triangles, where every SAH split peels off one bin).
+A node whose centroids all coincide has no candidate plane; when it must split it
+is halved by triangle id.  From depth ``MAX_SAH_DEPTH`` on, the paper's median
+split on the longest axis takes over, which bounds the depth (nodes on a path) by
+``MAX_SAH_DEPTH + ceil(log2 F) + 1`` even on adversarial input (e.g. geometrically
+growing triangles, where every SAH split peels off a single one).
 
-Vectorisation: the engine keeps the triangles of each node sorted by centroid on
-every axis, so bin numbers ascend inside a node; the bins are runs, reduced with
-``ufunc.reduceat``, and the left/right sweeps over bins are segmented prefix scans
-(Hillis-Steele doubling, log2(BINS) steps) over all nodes of the level at once.
+Vectorisation: the engine keeps each node's triangles sorted by centroid on every
+axis, so bins are runs of the sorted lists (one ``minimum.reduceat``).  Bins, or
+the triangles of small nodes, are then laid out as dense planes ``(6, m, K)`` --
+box coordinate, bin/triangle, node -- so that the left and right sweeps are ``m``
+contiguous ``np.minimum`` calls over all K nodes of the level at once.
 """
 
 from __future__ import annotations
@@ -35,69 +41,116 @@ from functools import partial
 
 import numpy as np
 
-from clrt.accel.bvh import C_INTERSECT, C_TRAVERSAL, Level, Topology, build_topdown, surface_area
+from clrt.accel.bvh import C_INTERSECT, C_TRAVERSAL, Level, Topology, build_topdown
 from clrt.accel.paper import median_split
 
 BINS = 32
+SWEEP_MAX = 128         # nodes of at most this many triangles are swept exactly
 MAX_SAH_DEPTH = 48
+# Costs are evaluated in float32, on coordinates scaled by a power of two (exact)
+# so that the largest is about 2**45: area * count then stays below float32's
+# maximum for any count < 2**31, and small nodes stay far from underflow.
+SCALE_TO = 45
 
 
-def _segmented_prefix_min(values: np.ndarray, seg: np.ndarray, span: int) -> np.ndarray:
-    """Inclusive running minimum of ``values`` (R, k) restarting where ``seg`` (R,)
-    changes; no segment is longer than ``span``."""
-    out = values.copy()
-    step = 1
-    while step < span:
-        same = (seg[step:] == seg[:-step])[:, None]
-        out[step:] = np.where(same, np.minimum(out[step:], out[:-step]), out[step:])
-        step *= 2
+def _area(box: np.ndarray) -> np.ndarray:
+    """Half surface area of boxes stored as (6, ...) rows min xyz, -max xyz."""
+    d = -box[3:] - box[:3]
+    return d[0] * d[1] + d[1] * d[2] + d[2] * d[0]
+
+
+def _sweep(planes: np.ndarray, n_before: np.ndarray, counts: np.ndarray, tied=None):
+    """Best split of K nodes from their m slots (bins or single triangles).
+
+    planes:   (6, m, K) float32 slot boxes (+inf rows for empty slots), destroyed.
+    n_before: (m, K) float32 triangles in slots 0..r (inclusive running count).
+    counts:   (K,) int64 triangles per node.
+    tied:     optional (m - 1, K) bool, True where slots r and r + 1 have equal
+              centroids (no plane can separate them).
+    Returns cost (K,) float32 ``A(L) N(L) + A(R) N(R)`` (inf: no candidate),
+    n_left (K,) int64 and the node box area (K,) float32.
+    """
+    m = planes.shape[1]
+    left = planes.copy()
+    for r in range(1, m):                        # running box of slots 0..r
+        np.minimum(left[:, r], left[:, r - 1], out=left[:, r])
+    for r in range(m - 2, -1, -1):               # running box of slots r..m-1
+        np.minimum(planes[:, r], planes[:, r + 1], out=planes[:, r])
+    n_left = n_before[:-1]
+    total = counts.astype(np.float32)
+    with np.errstate(invalid="ignore", over="ignore"):    # empty running boxes are +-inf
+        cost = _area(left[:, :-1])
+        cost *= n_left
+        cost += _area(planes[:, 1:]) * (total - n_left)
+        area = _area(left[:, -1])
+    cost[(n_left == 0) | (n_left == total)] = np.inf
+    if tied is not None:
+        cost[tied] = np.inf
+    best = np.argmin(cost, axis=0)                        # first (lowest) plane on ties
+    cols = np.arange(len(counts))
+    return cost[best, cols], n_left[best, cols].astype(np.int64), area
+
+
+def _binned(level: Level, a: int, nodes: np.ndarray, elems):
+    """Binned candidates on axis ``a`` for the given ``nodes`` (K,), whose triangles
+    are the list positions selected by ``elems`` (slice or boolean mask)."""
+    counts = level.counts[nodes]
+    K = len(nodes)
+    keys = level.keys[a, elems]
+    boxes = level.boxes[a][:, elems]
+    lo = level.cmin[nodes, a]
+    extent = level.cmax[nodes, a] - lo
+    scale = np.divide(BINS, extent, out=np.zeros(K), where=extent > 0)
+    t = (keys - np.repeat(lo, counts)) * np.repeat(scale, counts)
+    cell = np.minimum(t.astype(np.int32), BINS - 1) * K
+    cell += np.repeat(np.arange(K, dtype=np.int32), counts)
+    # Keys ascend inside a node, so each bin is one run of the list.
+    starts = np.flatnonzero(np.concatenate(([True], cell[1:] != cell[:-1])))
+    planes = np.full((6, BINS * K), np.inf, np.float32)
+    planes[:, cell[starts]] = np.minimum.reduceat(boxes, starts, axis=1)
+    n_in = np.zeros(BINS * K, np.float32)
+    n_in[cell[starts]] = np.diff(np.append(starts, len(cell)))
+    return _sweep(planes.reshape(6, BINS, K), np.cumsum(n_in.reshape(BINS, K), axis=0), counts)
+
+
+def _swept(level: Level, a: int, nodes: np.ndarray):
+    """Exact sweep on axis ``a`` for small ``nodes`` (K,): one slot per triangle,
+    nodes grouped by power-of-two size so that padding stays below half."""
+    counts = level.counts[nodes]
+    keys = level.keys[a]
+    tied_next = np.append(keys[1:] == keys[:-1], False)       # list position i ties i + 1
+    out = (np.full(len(nodes), np.inf), np.zeros(len(nodes), np.int64), np.zeros(len(nodes)))
+    m = 2
+    while m // 2 < counts.max():
+        group = np.flatnonzero((counts > m // 2) & (counts <= m))
+        if len(group):
+            c = counts[group]
+            slot = np.arange(m)[:, None]
+            # Padding slots repeat the node's last triangle: a duplicate changes no
+            # running box, and splits after the last triangle are invalid anyway.
+            index = level.offsets[nodes[group]] + np.minimum(slot, c - 1)
+            planes = np.take(level.boxes[a], index, axis=1)          # (6, m, K)
+            n_before = np.minimum(slot + 1, c).astype(np.float32)
+            result = _sweep(planes, n_before, c, tied=np.take(tied_next, index[:-1]))
+            for dst, src in zip(out, result):
+                dst[group] = src
+        m *= 2
     return out
 
 
-def _best_split_on_axis(level: Level, a: int):
-    """Cheapest bin boundary of every node along axis ``a``.
-
-    Returns cost (S,) float64 = A(L) N(L) + A(R) N(R) (inf when the centroid extent
-    is zero), n_left (S,) int64, and the node's box area (S,) float64.
-    """
+def _best_on_axis(level: Level, a: int):
+    """cost, n_left, area (S,) of every node's best candidate on axis ``a``."""
     S = len(level.counts)
-    ids = level.order[a]
-    seg = level.seg
-    extent = level.cmax[:, a] - level.cmin[:, a]
-    scale = np.divide(BINS, extent, out=np.zeros(S), where=extent > 0)
-    b = (level.centroids[ids, a] - level.cmin[seg, a]) * scale[seg]
-    key = seg * BINS + np.minimum(b.astype(np.int64), BINS - 1)
-
-    # Bins are runs of equal key (ascending within a node): reduce each run once.
-    starts = np.flatnonzero(np.concatenate(([True], key[1:] != key[:-1])))
-    run_seg = seg[starts]
-    run_count = np.diff(np.append(starts, len(ids)))
-    # One min-reduction for both corners: store -max next to min.
-    box = np.concatenate([level.lo[ids], -level.hi[ids]], axis=1)
-    run_box = np.minimum.reduceat(box, starts, axis=0)
-    first_run = np.flatnonzero(np.concatenate(([True], run_seg[1:] != run_seg[:-1])))  # (S,)
-    last = np.append(first_run[1:] - 1, len(starts) - 1)                               # (S,)
-
-    before = _segmented_prefix_min(run_box, run_seg, BINS)
-    after = _segmented_prefix_min(run_box[::-1], run_seg[::-1], BINS)[::-1]
-    count_left = np.cumsum(run_count)
-    count_left -= (count_left - run_count)[first_run][run_seg]
-
-    area_before = surface_area(before[:, :3].astype(np.float64), -before[:, 3:].astype(np.float64))
-    area_after = surface_area(after[:, :3].astype(np.float64), -after[:, 3:].astype(np.float64))
-    cost = np.full(len(starts), np.inf)
-    cut = np.ones(len(starts), bool)
-    cut[last] = False
-    cut = np.flatnonzero(cut)                                 # split after run j
-    cost[cut] = (area_before[cut] * count_left[cut]
-                 + area_after[cut + 1] * (level.counts[run_seg[cut]] - count_left[cut]))
-
-    best_cost = np.minimum.reduceat(cost, first_run)
-    # First run reaching the minimum of its node (lowest boundary on ties).
-    hits = np.flatnonzero(cost == best_cost[run_seg])
-    hits = hits[np.concatenate(([True], run_seg[hits][1:] != run_seg[hits][:-1]))]
-    n_left = np.where(np.isfinite(best_cost), count_left[hits], 0)
-    return best_cost, n_left, area_before[last]
+    cost, n_left, area = np.full(S, np.inf), np.zeros(S, np.int64), np.zeros(S)
+    big = level.counts > SWEEP_MAX
+    small = np.flatnonzero(~big & (level.counts > 1))
+    if big.any():
+        nodes = np.flatnonzero(big)
+        elems = slice(None) if big.all() else np.repeat(big, level.counts)
+        cost[nodes], n_left[nodes], area[nodes] = _binned(level, a, nodes, elems)
+    if len(small):
+        cost[small], n_left[small], area[small] = _swept(level, a, small)
+    return cost, n_left, area
 
 
 def sah_split(level: Level, leaf_size: int):
@@ -105,9 +158,9 @@ def sah_split(level: Level, leaf_size: int):
     if level.depth >= MAX_SAH_DEPTH:
         return median_split(level, leaf_size, "longest")
     counts = level.counts
-    per_axis = [_best_split_on_axis(level, a) for a in range(3)]
+    per_axis = [_best_on_axis(level, a) for a in range(3)]
     cost = np.stack([c for c, _, _ in per_axis], 1)
-    axis = np.argmin(cost, axis=1)
+    axis = np.argmin(cost, axis=1)                               # x before y before z on ties
     rows = np.arange(len(counts))
     best = cost[rows, axis]
     n_left = np.stack([n for _, n, _ in per_axis], 1)[rows, axis]
@@ -118,10 +171,10 @@ def sah_split(level: Level, leaf_size: int):
     split_cost = C_TRAVERSAL + C_INTERSECT * ratio
     splittable = np.isfinite(best)
     forced = counts > leaf_size
-    do_split = splittable & (forced | (split_cost < C_INTERSECT * counts)) & (counts > 1)
+    do_split = splittable & (forced | (split_cost < C_INTERSECT * counts))
     n_left = np.where(do_split, n_left, 0)
-    # Coincident centroids: no binned split exists; halve by triangle id (every
-    # list is in id order inside such a node, so axis 0 will do).
+    # Coincident centroids: no candidate plane; halve by triangle id (inside such a
+    # node every list is in id order, so axis 0 will do).
     by_id = forced & ~splittable
     n_left[by_id] = counts[by_id] // 2
     axis[by_id] = 0
@@ -129,6 +182,11 @@ def sah_split(level: Level, leaf_size: int):
 
 
 def build(lo: np.ndarray, hi: np.ndarray, centroids: np.ndarray, leaf_size: int) -> Topology:
-    """Binned-SAH tree over triangles given by box min/max (F, 3) float32 and
-    centroids (F, 3) float64."""
-    return build_topdown(centroids, lo, hi, partial(sah_split, leaf_size=leaf_size))
+    """SAH tree over triangles given by box min/max (F, 3) float32 and centroids
+    (F, 3) float64."""
+    boxes = np.concatenate([lo, -hi], axis=1)
+    biggest = float(np.abs(boxes).max())
+    if biggest > 0:
+        boxes = np.ldexp(boxes, SCALE_TO - int(np.ceil(np.log2(biggest))))
+    return build_topdown(centroids, partial(sah_split, leaf_size=leaf_size),
+                         carry_keys=True, boxes=boxes)

@@ -9,7 +9,8 @@ corners and then rounded *outwards* to float32, after padding by
 per axis.  The exact box already contains every corner, but the kernel tests a
 ray against the volume in float32 (slab or quadratic), whose rounding can lose a
 ray that grazes a face or edge lying on the volume's boundary; the pad moves the
-boundary a few hundred float32 ulps of the node's size away from every triangle.
+boundary about ten float32 ulps of the node's size (and at least four ulps of the
+coordinates) away from every triangle.
 Sphere radii and ellipsoid semi-axes are also inflated by ``EVAL_SLACK`` so that
 the float32 evaluation of ``|p - c|^2 <= r^2`` or ``sum(((p - c) * inv)^2) <= 1``
 holds for every point of the padded box.
@@ -23,7 +24,7 @@ import numpy as np
 
 VOLUMES = ("box", "sphere", "ellipse")
 
-REL_PAD = 1e-6          # of the node's largest extent: ~17 float32 ulps of the node size
+REL_PAD = 1e-6          # of the node's largest extent: ~10 float32 ulps of the node size
 ULP_PAD = 4             # float32 ulps of the coordinate magnitude (covers tiny/flat nodes)
 PAD_FLOOR = 1e-30       # keeps a point-sized node's volume a normal float32
 EVAL_SLACK = 1e-6       # relative inflation of radius / semi-axes for float32 tests
@@ -90,10 +91,12 @@ def fit(volume: str, boxes: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
 
     # Axis-aligned ellipsoid with semi-axes sqrt(3) * half-extent: a box corner
     # (+-h_x, +-h_y, +-h_z) gives sum(h_i^2 / (3 h_i^2)) = 1, on the surface, so the
-    # box is enclosed.  A flat (zero) extent would make 1/R infinite; it is raised
-    # to a floor instead.  That still encloses the box: along a flat axis the corner
-    # coordinate equals the centre's, its term is 0 whatever R is, and the other
-    # terms sum to at most 2/3 < 1.  Raising any semi-axis only grows the ellipsoid.
+    # box is enclosed.  A flat node (zero extent on an axis, only the pad left)
+    # would get a needle-thin semi-axis and a huge 1/R, badly conditioned in
+    # float32; it is raised to a floor instead.  Raising a semi-axis only grows the
+    # ellipsoid, and sqrt(3) stays enough on the other axes: on a flat axis the
+    # corner's coordinate is the centre's, its term is 0 whatever R is, and the
+    # two other terms sum to 2/3 < 1.
     semi = SQRT3 * half
     semi = np.maximum(semi, ELLIPSE_FLOOR * semi.max(axis=1, keepdims=True))
     semi *= 1.0 + EVAL_SLACK

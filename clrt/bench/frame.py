@@ -1,19 +1,29 @@
-"""Per-stage times of whole frames: ``python -m clrt.bench.frame MESH --size 200x200 ...``.
+"""Per-stage times of whole frames, acceleration variants side by side:
+
+    python -m clrt.bench.frame MESH --size 200x200 --size 1920x1080 --accel none --accel box
 
 Set-up stages (initialisation, acceleration build, copy to device) are timed
-once, cold, as a user meets them.  Frame stages are medians over ``--repeat``
-frames after ``--warmup`` frames; kernel stages come from OpenCL profiling
-events, ``frame wall`` is the host clock around a whole ``Renderer.render``.
+once per variant, as a user meets them (the first variant's copy includes the
+context and program build).  Frame stages are medians over ``--repeat`` frames
+after ``--warmup`` frames; kernel stages come from OpenCL profiling events,
+``frame wall`` is the host clock around a whole ``Renderer.render`` (without
+reading back the hit buffer).  Every variant's image is compared with the
+first variant's: ``same image`` must say yes.
 """
 
 from __future__ import annotations
 
 import argparse
+import itertools
 import statistics
 import sys
 import time
 
+import numpy as np
+
 from clrt.errors import ClrtError
+
+FRAME_STAGES = ("ray generation", "pixel colour", "read back")
 
 
 def _size(text: str) -> tuple[int, int]:
@@ -24,39 +34,54 @@ def _size(text: str) -> tuple[int, int]:
         raise argparse.ArgumentTypeError(f"expected WxH, got {text!r}") from None
 
 
-def run(mesh_path, sizes, device=None, repeat=5, warmup=1, out=sys.stdout) -> list[dict]:
+def run(mesh_path, sizes, variants, device=None, repeat=5, warmup=1, leaf_size=4, out=sys.stdout):
     from clrt.render import Renderer
     from clrt.scene.default import default_scene
     from clrt.scene.load import load_mesh
     from clrt.scene.scene import Camera, default_light, scene_from_mesh
 
     scene = scene_from_mesh(load_mesh(mesh_path)) if mesh_path else default_scene()
-    name = mesh_path or "built-in scene"
-    renderer = Renderer(scene, device)
-    rows = []
-    print(f"mesh: {name}, {scene.num_triangles:,} triangles; device: {renderer.device}", file=out)
-    print(f"set-up (cold): " + ", ".join(f"{k} {v:.2f} ms" for k, v in renderer.timings.items()), file=out)
-    stages = ("ray generation", "pixel colour", "read back")
-    print(f"\n| resolution | {' | '.join(stages)} | frame wall | Mrays/s (primary, wall) |", file=out)
-    print("|---|" + "---|" * (len(stages) + 2), file=out)
+    cameras = []
     for w, h in sizes:
-        base = scene.camera or Camera.framing(scene.bounds)
-        camera = Camera(base.eye, base.target, base.up, base.fov, w, h)
         if mesh_path:
-            camera = Camera.framing(scene.bounds, w, h)
-            scene.lights = [default_light(scene.bounds, camera)]
-        samples = []
-        for i in range(warmup + repeat):
-            start = time.perf_counter()
-            frame = renderer.render(camera)
-            wall = 1e3 * (time.perf_counter() - start)
-            if i >= warmup:
-                samples.append({**{s: frame.timings[s] for s in stages}, "frame wall": wall})
-        med = {k: statistics.median(s[k] for s in samples) for k in samples[0]}
-        rows.append({"width": w, "height": h, **med})
-        mrays = w * h / med["frame wall"] / 1e3
-        print(f"| {w}x{h} | " + " | ".join(f"{med[s]:.3f} ms" for s in stages)
-              + f" | {med['frame wall']:.3f} ms | {mrays:.3g} |", file=out, flush=True)
+            cameras.append(Camera.framing(scene.bounds, w, h))
+        else:
+            c = scene.camera
+            cameras.append(Camera(c.eye, c.target, c.up, c.fov, w, h))
+    if mesh_path:
+        scene.lights = [default_light(scene.bounds, cameras[0])]
+    print(f"mesh: {mesh_path or 'built-in scene'}, {scene.num_triangles:,} triangles, "
+          f"{len(scene.lights)} light(s); warm-up {warmup}, median of {repeat}", file=out)
+    print("\n| accel | builder | resolution | build | copy to device | ray generation | pixel colour "
+          "| read back | frame wall | Mrays/s (primary, wall) | same image |", file=out)
+    print("|---|---|---|---|---|---|---|---|---|---|---|", file=out)
+    first_images = {}
+    rows = []
+    for accel, builder in variants:
+        renderer = Renderer(scene, device, accel, builder, leaf_size)
+        for camera in cameras:
+            samples = []
+            for i in range(warmup + repeat):
+                start = time.perf_counter()
+                frame = renderer.render(camera)
+                wall = 1e3 * (time.perf_counter() - start)
+                if i >= warmup:
+                    samples.append({**{s: frame.timings[s] for s in FRAME_STAGES}, "frame wall": wall})
+            med = {k: statistics.median(s[k] for s in samples) for k in samples[0]}
+            key = (camera.width, camera.height)
+            same = np.array_equal(first_images.setdefault(key, frame.image), frame.image)
+            row = {"accel": accel, "builder": builder if accel != "none" else "-",
+                   "resolution": f"{camera.width}x{camera.height}",
+                   "build": renderer.timings["acceleration build"],
+                   "copy to device": renderer.timings["copy to device"], **med,
+                   "mrays": camera.width * camera.height / med["frame wall"] / 1e3, "same": same}
+            rows.append(row)
+            print(f"| {row['accel']} | {row['builder']} | {row['resolution']} | {row['build']:.1f} ms "
+                  f"| {row['copy to device']:.1f} ms | "
+                  + " | ".join(f"{med[s]:.3f} ms" for s in FRAME_STAGES)
+                  + f" | {med['frame wall']:.3f} ms | {row['mrays']:.3g} | {'yes' if same else 'NO'} |",
+                  file=out, flush=True)
+    print(f"\ndevice: {renderer.device}", file=out)
     return rows
 
 
@@ -64,12 +89,20 @@ def main(argv=None) -> int:
     p = argparse.ArgumentParser(prog="python -m clrt.bench.frame", description=__doc__.split("\n")[0])
     p.add_argument("mesh", nargs="?", help="mesh file (default: the built-in scene)")
     p.add_argument("--size", type=_size, action="append", help="WxH, repeatable (default 200x200, 1920x1080)")
+    p.add_argument("--accel", action="append", choices=("none", "box", "sphere", "ellipse"),
+                   help="repeatable (default: box)")
+    p.add_argument("--builder", action="append", choices=("paper", "sah"), help="repeatable (default: sah)")
+    p.add_argument("--leaf-size", type=int, default=4)
     p.add_argument("--device", help="'gpu', 'cpu' or P:D")
     p.add_argument("--repeat", type=int, default=5)
     p.add_argument("--warmup", type=int, default=1)
     args = p.parse_args(argv)
+    accels, builders = args.accel or ["box"], args.builder or ["sah"]
+    variants = [("none", "-")] if "none" in accels else []
+    variants += [v for v in itertools.product([a for a in accels if a != "none"], builders)]
     try:
-        run(args.mesh, args.size or [(200, 200), (1920, 1080)], args.device, args.repeat, args.warmup)
+        run(args.mesh, args.size or [(200, 200), (1920, 1080)], variants, args.device,
+            args.repeat, args.warmup, args.leaf_size)
     except ClrtError as exc:
         print(f"clrt: {exc}", file=sys.stderr)
         return exc.exit_code

@@ -30,8 +30,10 @@ Byte layout (offset: field):
    20: diffuse   float
    24: specular  float
    28: shininess float   Phong exponent
-   32: flags     uint    bit 0: smooth shading (interpolate vertex normals)
-   36: pad       uint[3]
+   32: flags        uint  bit 0: smooth shading (interpolate vertex normals)
+   36: reflectivity float weight of the mirror ray (0..1)
+   40: transparency float weight of the refracted ray (0..1)
+   44: ior          float index of refraction (>= 1)
 
 ``Light`` (32 B) -- point light
     0: position float4  xyz, w unused
@@ -63,7 +65,8 @@ TRIANGLE_VERTS = np.dtype([("v0", float4), ("v1", float4), ("v2", float4)])
 TRIANGLE_INFO = np.dtype([("vertex", np.int32, 3), ("material", np.int32)])
 MATERIAL = np.dtype([("color", float4), ("ambient", np.float32), ("diffuse", np.float32),
                      ("specular", np.float32), ("shininess", np.float32),
-                     ("flags", np.uint32), ("pad", np.uint32, 3)])
+                     ("flags", np.uint32), ("reflectivity", np.float32), ("transparency", np.float32),
+                     ("ior", np.float32)])
 LIGHT = np.dtype([("position", float4), ("color", float4)])
 BVH_NODE = np.dtype([("bound_a", float4), ("bound_b", float4), ("left_first", np.int32),
                      ("count", np.int32), ("right", np.int32), ("pad", np.int32)])

@@ -28,7 +28,9 @@ typedef struct {
     float4 color;
     float ambient, diffuse, specular, shininess;
     uint flags;
-    uint pad[3];
+    float reflectivity;   // weight of the mirror ray
+    float transparency;   // weight of the refracted ray
+    float ior;            // index of refraction
 } Material;
 
 #define MATERIAL_SMOOTH 1u

@@ -1,15 +1,17 @@
 // Entry file of the render program: the paper's two global kernels (ray
 // generation, pixel colour) plus the conversion of linear colour to 8-bit
 // sRGB.  The acceleration structure is chosen when the program is built
-// (accel.cl).
+// (accel.cl).  Anti-aliasing runs the pair once per sample, accumulating
+// into the linear image, so memory stays one ray per pixel.
 #include "layouts.h"
 #include "camera.cl"
 #include "accel.cl"
-#include "shading.cl"
+#include "whitted.cl"
 
 __kernel void generate_rays(__global Ray* rays, const float4 eye, const float4 forward,
                             const float4 right, const float4 up, const float scale_x,
-                            const float scale_y, const uint width, const uint height)
+                            const float scale_y, const uint width, const uint height,
+                            const uint sample, const uint samples_per_axis, const uint seed)
 {
     const uint px = get_global_id(0), py = get_global_id(1);
     if (px >= width || py >= height)
@@ -23,20 +25,30 @@ __kernel void generate_rays(__global Ray* rays, const float4 eye, const float4 f
     cam.scale_y = scale_y;
     cam.width = width;
     cam.height = height;
-    rays[py * width + px] = camera_ray(&cam, px, py);
+    const uint pixel = py * width + px;
+    const float2 o = sample_offset(pixel, sample, samples_per_axis, seed);
+    rays[pixel] = camera_ray(&cam, px, py, o.x, o.y);
 }
 
+// image = (first sample ? 0 : image) + sample_weight * colour.  hits receives
+// the camera ray's hit (of the first sample).
 __kernel void shade_pixels(__global const Ray* rays, __global float4* image, __global Hit* hits,
-                           const uint num_pixels, ACCEL_PARAMS, SHADING_PARAMS)
+                           const uint num_pixels, const uint max_depth, const float sample_weight,
+                           const uint first_sample, ACCEL_PARAMS, SHADING_PARAMS)
 {
     const uint i = get_global_id(0);
     if (i >= num_pixels)
         return;
     const Ray ray = rays[i];
-    const float3 o = ray.origin.xyz, d = ray.dir.xyz;
-    const Hit hit = closest_hit(ACCEL_ARGS, o, d, ray.origin.w, ray.dir.w);
-    hits[i] = reported_hit(hit, prim_ids);
-    image[i] = (float4)(shade_hit(ACCEL_ARGS, SHADING_ARGS, o, d, &hit), 1.0f);
+    Hit hit;
+    const float3 c = trace_whitted(ACCEL_ARGS, SHADING_ARGS, max_depth, ray.origin.xyz, ray.dir.xyz,
+                                   ray.origin.w, ray.dir.w, &hit);
+    if (first_sample) {
+        hits[i] = reported_hit(hit, prim_ids);
+        image[i] = (float4)(sample_weight * c, 1.0f);
+    } else {
+        image[i] += (float4)(sample_weight * c, 0.0f);
+    }
 }
 
 // IEC 61966-2-1 transfer function; linear values are clamped to [0, 1].

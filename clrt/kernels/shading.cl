@@ -36,36 +36,54 @@ inline float3 shading_normal(__global const TriangleInfo* info, __global const f
     return dot(s, geometric) < 0.0f ? -s : s;
 }
 
-inline float3 shade_hit(ACCEL_PARAMS, SHADING_PARAMS, float3 origin, float3 dir, const Hit* hit)
-{
-    if (hit->prim < 0)
-        return background.xyz;
-    __global const TriangleInfo* info = tri_info + hit->prim;
-    const Material m = materials[info->material];
-    const float3 ng = facing_normal(tris + hit->prim, dir);
-    const float3 n = shading_normal(info, vertex_normals, hit, ng, m.flags);
-    const float3 p = origin + hit->t * dir;
-    // Shadow rays start just off the surface, on the side the ray came from.
-    const float3 shadow_origin = p + ray_epsilon * ng;
-    const float3 to_eye = -dir;
+// What shading needs to know about the point a ray hit.
+typedef struct {
+    float3 p;          // hit point
+    float3 ng;         // geometric normal, facing the incoming ray
+    float3 n;          // shading normal, on the same side as ng
+    bool front;        // the ray hit the side the triangle's winding faces (it is entering)
+    Material m;
+} SurfacePoint;
 
-    float3 color = m.ambient * m.color.xyz * ambient_light.xyz;
+inline SurfacePoint surface_point(ACCEL_PARAMS, SHADING_PARAMS, float3 origin, float3 dir, const Hit* hit)
+{
+    __global const TriangleInfo* info = tri_info + hit->prim;
+    __global const TriangleVerts* tri = tris + hit->prim;
+    SurfacePoint s;
+    s.m = materials[info->material];
+    const float3 wound = normalize(cross(tri->v1.xyz - tri->v0.xyz, tri->v2.xyz - tri->v0.xyz));
+    s.front = dot(wound, dir) < 0.0f;
+    s.ng = s.front ? wound : -wound;
+    s.n = shading_normal(info, vertex_normals, hit, s.ng, s.m.flags);
+    s.p = origin + hit->t * dir;
+    return s;
+}
+
+// Phong ambient + diffuse + specular at a surface point, each light tested by
+// a shadow ray.  Every surface blocks light fully, transparent ones included
+// (no caustics): the same rule in the kernel and the reference tracer.
+inline float3 local_shading(ACCEL_PARAMS, SHADING_PARAMS, const SurfacePoint* s, float3 dir)
+{
+    // Shadow rays start just off the surface, on the side the ray came from.
+    const float3 shadow_origin = s->p + ray_epsilon * s->ng;
+    const float3 to_eye = -dir;
+    float3 color = s->m.ambient * s->m.color.xyz * ambient_light.xyz;
     for (uint i = 0; i < num_lights; ++i) {
         const float3 to_light = lights[i].position.xyz - shadow_origin;
         const float dist = length(to_light);
         const float3 l = to_light / dist;
         // A light behind the geometric surface is blocked by the surface itself.
-        if (!(dot(ng, l) > 0.0f) || !(dot(n, l) > 0.0f))
+        if (!(dot(s->ng, l) > 0.0f) || !(dot(s->n, l) > 0.0f))
             continue;
         if (any_hit(ACCEL_ARGS, shadow_origin, l, 0.0f, dist))
             continue;
-        const float n_dot_l = dot(n, l);
-        const float3 reflected = 2.0f * n_dot_l * n - l;
+        const float n_dot_l = dot(s->n, l);
+        const float3 reflected = 2.0f * n_dot_l * s->n - l;
         const float r_dot_v = fmax(dot(reflected, to_eye), 0.0f);
         const float3 light = lights[i].color.xyz;
-        color += m.diffuse * n_dot_l * m.color.xyz * light;
-        if (m.specular > 0.0f && r_dot_v > 0.0f)
-            color += m.specular * pow(r_dot_v, m.shininess) * light;
+        color += s->m.diffuse * n_dot_l * s->m.color.xyz * light;
+        if (s->m.specular > 0.0f && r_dot_v > 0.0f)
+            color += s->m.specular * pow(r_dot_v, s->m.shininess) * light;
     }
     return color;
 }

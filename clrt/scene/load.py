@@ -432,7 +432,8 @@ def _load_trimesh(data: bytes, file_type: str, path: str):
                 vertices = vertices @ matrix[:3, :3].T + matrix[:3, 3]
             parts.append((vertices, np.asarray(geometry.faces)))
     except Exception as exc:  # trimesh raises anything from KeyError to struct.error
-        raise _fail(path, f"corrupt or unsupported {file_type.upper()} file ({_short(exc)})") from exc
+        reason = f"corrupt or unsupported {file_type.upper()} file ({_short(exc)})"
+        raise _fail(path, reason) from exc
     if not parts:
         raise _fail(path, "contains no triangles")
     return parts

@@ -129,7 +129,8 @@ def _read_object(data: bytes, start: int, end: int):
     nul = data.find(b"\0", start, end)
     if nul < 0:
         raise _Corrupt(f"object name at offset {start} is not NUL-terminated")
-    name = data[start:nul].decode("latin-1")
+    # Only used in messages; 3DS names are at most 10 characters when valid.
+    name = data[start:min(nul, start + 40)].decode("latin-1")
     vertices = faces = None
     for cid, s, e in _chunks(data, nul + 1, end):
         if cid == TRIMESH:

@@ -23,7 +23,13 @@ def _vec3(value, what: str) -> np.ndarray:
 
 @dataclass(frozen=True)
 class Material:
-    """Phong material.  ``color`` is linear RGB in [0, 1]; ``smooth`` interpolates vertex normals."""
+    """Phong material with Whitted optics.
+
+    ``color`` is linear RGB in [0, 1]; ``smooth`` interpolates vertex normals.
+    ``reflectivity`` (0..1) is the weight of the mirror reflection;
+    ``transparency`` (0..1) the weight of the refracted ray, with index of
+    refraction ``ior`` (Fresnel-weighted, total internal reflection included).
+    """
 
     color: tuple = (0.8, 0.8, 0.8)
     ambient: float = 0.1
@@ -31,13 +37,21 @@ class Material:
     specular: float = 0.3
     shininess: float = 32.0
     smooth: bool = True
+    reflectivity: float = 0.0
+    transparency: float = 0.0
+    ior: float = 1.5
 
     def __post_init__(self):
         _vec3(self.color, "material colour")
-        for name in ("ambient", "diffuse", "specular", "shininess"):
+        for name in ("ambient", "diffuse", "specular", "shininess", "reflectivity", "transparency"):
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
                 raise InputError(f"material {name} must be a finite number >= 0, got {value!r}")
+        for name in ("reflectivity", "transparency"):
+            if getattr(self, name) > 1:
+                raise InputError(f"material {name} must be between 0 and 1, got {getattr(self, name)!r}")
+        if not (isinstance(self.ior, (int, float)) and math.isfinite(self.ior) and self.ior >= 1.0):
+            raise InputError(f"material ior must be a finite number >= 1, got {self.ior!r}")
 
 
 @dataclass(frozen=True)
@@ -120,6 +134,8 @@ class Scene:
     background: tuple = (0.0, 0.0, 0.0)
     ambient_light: tuple = (1.0, 1.0, 1.0)
     camera: Camera | None = None   # suggested view; renderers may override
+    max_depth: int = 5             # reflection / refraction bounces after the camera ray
+    samples: int = 1               # anti-aliasing: samples x samples rays per pixel
 
     @property
     def bounds(self) -> np.ndarray:

@@ -1,0 +1,351 @@
+"""BVH builders, depth-first layout and bounding volumes (host only, no OpenCL).
+
+Every (builder x volume x leaf size) is checked on generated meshes, a triangle soup
+full of tiny, degenerate and coincident triangles, and a mesh whose centroids all
+coincide: tree structure, conservative volumes tested in float32 the way the kernel
+tests them, the paper builder's median / axis rule, and determinism.
+"""
+
+from functools import lru_cache
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from clrt.accel import BUILDERS, VOLUMES, build_bvh, sah
+from clrt.device.layouts import BVH_NODE
+from clrt.errors import InputError
+from clrt.scene import primitives
+
+SHARED_MESHES = Path(__file__).resolve().parents[1].parent / "shared" / "meshes"
+LEAF_SIZES = (1, 4, 8)
+
+
+def _soup() -> np.ndarray:
+    """Random triangles plus many tiny, zero-area, needle, duplicate, axis-flat and
+    far-away ones."""
+    rng = np.random.default_rng(7)
+    centres = rng.uniform(-2, 2, (400, 1, 3))
+    normal = centres + 0.05 * rng.standard_normal((400, 3, 3))
+    tiny = centres[:120] + 1e-7 * rng.standard_normal((120, 3, 3))
+    points = np.repeat(centres[:40], 3, axis=1)                       # zero area
+    t = rng.random((40, 3, 1))
+    needles = centres[40:80] + t * rng.standard_normal((40, 1, 3))    # collinear corners
+    duplicates = normal[:60].copy()                                   # coincident faces
+    flat = normal[100:140].copy()
+    flat[:, :, 2] = 0.5                                               # in the plane z = 0.5
+    far = normal[200:230] + np.array([1e4, -3e3, 7e2])                # large coordinates
+    return np.concatenate([normal, tiny, points, needles, duplicates, flat, far]).astype(np.float32)
+
+
+def _same_centroid() -> np.ndarray:
+    """Triangles of many shapes whose centroids are exactly equal: dyadic offsets
+    summing to zero around one point, so no rounding anywhere."""
+    rng = np.random.default_rng(3)
+    d = rng.integers(-64, 65, (150, 2, 3)) / 64.0
+    offsets = np.concatenate([d, -d.sum(axis=1, keepdims=True)], axis=1)
+    offsets[:10] = 0.0                                                # point triangles
+    offsets[10:20] = offsets[20:30]                                   # duplicates
+    return (np.array([0.25, -0.5, 1.0]) + offsets).astype(np.float32)
+
+
+def _mesh_triangles(mesh) -> np.ndarray:
+    return mesh.vertices[mesh.faces]
+
+
+MESHES = {
+    "icosphere": lambda: _mesh_triangles(primitives.icosphere(2)),
+    "torus": lambda: _mesh_triangles(primitives.torus(1.0, 0.35, 24, 12)),
+    "heightfield": lambda: _mesh_triangles(primitives.heightfield(16)),
+    "box": lambda: _mesh_triangles(primitives.box((1.0, 0.6, 1.4))),
+    "soup": _soup,
+    "same_centroid": _same_centroid,
+}
+
+
+@lru_cache(maxsize=None)
+def triangles(name: str) -> np.ndarray:
+    return MESHES[name]()
+
+
+@lru_cache(maxsize=None)
+def built(name: str, builder: str, volume: str, leaf_size: int):
+    return build_bvh(triangles(name), volume=volume, builder=builder, leaf_size=leaf_size)
+
+
+def centroids(tri: np.ndarray) -> np.ndarray:
+    """The builders' centroid: mean of the float32 corners, summed in float64."""
+    return (tri[:, 0].astype(np.float64) + tri[:, 1] + tri[:, 2]) / 3.0
+
+
+# --------------------------------------------------------------------------------------
+# Independent walks of the depth-first layout (plain loops: the meshes are small).
+
+
+def subtree_info(nodes):
+    """Per node: number of nodes in its subtree, depth (root 1) and slot range."""
+    n = len(nodes)
+    size = np.ones(n, np.int64)
+    lo = np.zeros(n, np.int64)
+    hi = np.zeros(n, np.int64)
+    for i in range(n - 1, -1, -1):
+        node = nodes[i]
+        if node["count"] > 0:
+            lo[i], hi[i] = node["left_first"], node["left_first"] + node["count"]
+        else:
+            left, right = node["left_first"], node["right"]
+            size[i] = 1 + size[left] + size[right]
+            assert hi[left] == lo[right], "subtree slot ranges are not contiguous"
+            lo[i], hi[i] = lo[left], hi[right]
+    depth = np.zeros(n, np.int64)
+    depth[0] = 1
+    for i in range(n):
+        if nodes[i]["count"] == 0:
+            depth[nodes[i]["left_first"]] = depth[nodes[i]["right"]] = depth[i] + 1
+    return size, depth, lo, hi
+
+
+def check_structure(bvh, n_tri: int, leaf_size: int):
+    nodes = bvh.nodes
+    assert nodes.dtype == BVH_NODE and nodes.ndim == 1
+    assert bvh.prim_id.dtype == np.int32 and bvh.prim_id.shape == (n_tri,)
+    assert np.array_equal(np.sort(bvh.prim_id), np.arange(n_tri)), "prim_id is not a permutation"
+    N = len(nodes)
+    idx = np.arange(N)
+    leaf = nodes["count"] > 0
+    inner = ~leaf
+    assert (nodes["count"] >= 0).all()
+    assert (nodes["count"][leaf] <= leaf_size).all(), "leaf larger than leaf_size"
+    assert (nodes["right"][leaf] == -1).all()
+    left, right = nodes["left_first"][inner], nodes["right"][inner]
+    assert ((left > idx[inner]) & (left < N) & (right > left) & (right < N)).all()
+
+    # Depth-first order: left child right after its parent, right child after the
+    # whole left subtree; the root's subtree holds every node exactly once.
+    size, depth, lo, hi = subtree_info(nodes)
+    assert (left == idx[inner] + 1).all()
+    assert (right == left + size[left]).all()
+    assert size[0] == N
+    # Leaves, in node order, tile the slots 0..F-1 with no gap and no overlap.
+    first, count = nodes["left_first"][leaf], nodes["count"][leaf]
+    assert first[0] == 0 and (first[1:] == first[:-1] + count[:-1]).all()
+    assert first[-1] + count[-1] == n_tri
+    assert lo[0] == 0 and hi[0] == n_tri
+    assert bvh.depth == depth.max()
+    stats = bvh.stats()
+    assert stats["nodes"] == N and stats["leaves"] == leaf.sum() and stats["depth"] == bvh.depth
+    assert stats["max_leaf_size"] == count.max() <= leaf_size
+    assert stats["device_bytes"] == N * 48 + n_tri * 4 + n_tri * 48
+    assert np.isfinite(stats["sah_cost"]) and stats["sah_cost"] >= 1.0
+
+
+def check_conservative(bvh, tri: np.ndarray):
+    """Every corner of every subtree's triangles passes the node's float32 test."""
+    nodes = bvh.nodes
+    _, _, lo, hi = subtree_info(nodes)
+    owner = np.repeat(np.arange(len(nodes)), hi - lo)                    # (node, slot) pairs
+    slot = np.arange(len(owner)) - np.repeat(np.cumsum(hi - lo) - (hi - lo), hi - lo) \
+        + np.repeat(lo, hi - lo)
+    p = tri[bvh.prim_id[slot]]                                          # (M, 3, 3) float32
+    a = nodes["bound_a"][owner][:, None, :]                             # (M, 1, 4)
+    b = nodes["bound_b"][owner][:, None, :]
+    assert p.dtype == np.float32 and a.dtype == np.float32
+    if bvh.volume == "box":
+        inside = ((p >= a[..., :3]) & (p <= b[..., :3])).all(axis=2)
+        # Strictly outside the exact box, so faces on the box never graze its boundary.
+        exact = bvh.boxes
+        assert (nodes["bound_a"][:, :3] < exact[:, 0]).all()
+        assert (nodes["bound_b"][:, :3] > exact[:, 1]).all()
+    elif bvh.volume == "sphere":
+        d = p - a[..., :3]
+        r = a[..., 3]
+        inside = d[..., 0] * d[..., 0] + d[..., 1] * d[..., 1] + d[..., 2] * d[..., 2] <= r * r
+    else:
+        q = (p - a[..., :3]) * b[..., :3]
+        inside = q[..., 0] * q[..., 0] + q[..., 1] * q[..., 1] + q[..., 2] * q[..., 2] <= 1
+        assert (nodes["bound_b"][:, :3] > 0).all() and np.isfinite(nodes["bound_b"]).all()
+    assert inside.all(), f"{int((~inside).sum())} corners outside their node's {bvh.volume}"
+
+
+def check_tight(bvh):
+    """Padding stays tiny: volumes are close to the exact box they enclose."""
+    box = bvh.boxes.astype(np.float64)
+    extent = (box[:, 1] - box[:, 0]).max(axis=1)
+    mag = np.abs(box).max(axis=(1, 2))
+    slack = 1e-5 * extent + 1e-6 * mag + 1e-25
+    a = bvh.nodes["bound_a"].astype(np.float64)
+    b = bvh.nodes["bound_b"].astype(np.float64)
+    if bvh.volume == "box":
+        assert (box[:, 0] - a[:, :3] <= slack[:, None]).all()
+        assert (b[:, :3] - box[:, 1] <= slack[:, None]).all()
+    elif bvh.volume == "sphere":
+        half_diag = 0.5 * np.linalg.norm(box[:, 1] - box[:, 0], axis=1)
+        assert (a[:, 3] <= half_diag + 2 * slack).all()
+
+
+# --------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("leaf_size", LEAF_SIZES)
+@pytest.mark.parametrize("volume", VOLUMES)
+@pytest.mark.parametrize("builder", BUILDERS)
+@pytest.mark.parametrize("mesh", sorted(MESHES))
+def test_structure_and_conservative_volumes(mesh, builder, volume, leaf_size):
+    tri = triangles(mesh)
+    bvh = built(mesh, builder, volume, leaf_size)
+    assert (bvh.volume, bvh.builder, bvh.leaf_size) == (volume, builder, leaf_size)
+    check_structure(bvh, len(tri), leaf_size)
+    check_conservative(bvh, tri)
+    check_tight(bvh)
+
+
+@pytest.mark.parametrize("leaf_size", LEAF_SIZES)
+@pytest.mark.parametrize("volume", VOLUMES)
+@pytest.mark.parametrize("mesh", sorted(MESHES))
+def test_paper_builder_splits_at_the_median(mesh, volume, leaf_size):
+    """Leaf iff <= leaf_size triangles; otherwise the left child holds exactly the
+    floor(n/2) triangles with the smallest (centroid[axis], id), where axis is the
+    longest axis of the centroid bounds, or depth mod 3 for spheres."""
+    tri = triangles(mesh)
+    cen = centroids(tri)
+    bvh = built(mesh, "paper", volume, leaf_size)
+    nodes = bvh.nodes
+    _, depth, lo, hi = subtree_info(nodes)
+    for i, node in enumerate(nodes):
+        ids = bvh.prim_id[lo[i]:hi[i]]
+        if node["count"] > 0:
+            assert len(ids) <= leaf_size
+            continue
+        assert len(ids) > leaf_size
+        c = cen[ids]
+        if volume == "sphere":
+            axis = (depth[i] - 1) % 3
+        else:
+            axis = int(np.argmax(c.max(axis=0) - c.min(axis=0)))
+        order = ids[np.lexsort((ids, c[:, axis]))]
+        child = node["left_first"]
+        assert hi[child] - lo[child] == len(ids) // 2
+        assert set(order[:len(ids) // 2]) == set(bvh.prim_id[lo[child]:hi[child]])
+
+
+def test_paper_sphere_cycles_axes_even_when_one_is_longest():
+    """A soup stretched 100x along x: boxes always split x, spheres x, y, z, x."""
+    rng = np.random.default_rng(1)
+    tri = (rng.random((512, 1, 3)) * [100.0, 1.0, 1.0]
+           + 0.01 * rng.standard_normal((512, 3, 3))).astype(np.float32)
+    cen = centroids(tri)
+    for volume, expected in (("box", [0, 0, 0, 0]), ("sphere", [0, 1, 2, 0])):
+        bvh = build_bvh(tri, volume=volume, builder="paper", leaf_size=4)
+        _, depth, lo, hi = subtree_info(bvh.nodes)
+        for i, node in enumerate(bvh.nodes):
+            if node["count"] > 0 or depth[i] > 4:
+                continue
+            l_ids = bvh.prim_id[lo[node["left_first"]]:hi[node["left_first"]]]
+            r_ids = bvh.prim_id[lo[node["right"]]:hi[node["right"]]]
+            axis = expected[depth[i] - 1]
+            assert cen[l_ids, axis].max() <= cen[r_ids, axis].min()
+
+
+@pytest.mark.parametrize("builder", BUILDERS)
+def test_coincident_centroids_split_by_triangle_id(builder):
+    tri = _same_centroid()
+    bvh = build_bvh(tri, builder=builder, leaf_size=4)
+    # Halving by id at every level leaves the slots in id order.
+    assert np.array_equal(bvh.prim_id, np.arange(len(tri)))
+    assert bvh.depth == int(np.ceil(np.log2(len(tri) / 4))) + 1
+
+
+@pytest.mark.parametrize("mesh", ["icosphere", "torus", "soup"])
+def test_sah_builder_beats_the_median_split(mesh):
+    paper_cost = built(mesh, "paper", "box", 4).stats()["sah_cost"]
+    sah_cost = built(mesh, "sah", "box", 4).stats()["sah_cost"]
+    assert sah_cost < paper_cost
+
+
+def test_sah_leaf_rule_below_leaf_size():
+    """Two far-apart triangles: splitting is cheaper than one leaf even though the
+    leaf size allows both; two coincident triangles stay one leaf."""
+    one = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]], np.float32)
+    apart = np.stack([one, one + [100, 0, 0]])
+    assert build_bvh(apart, builder="sah", leaf_size=8).stats()["leaves"] == 2
+    same = np.stack([one, one])
+    assert build_bvh(same, builder="sah", leaf_size=8).stats()["leaves"] == 1
+    # leaf_size is a hard cap even when SAH would rather not split.
+    assert build_bvh(same, builder="sah", leaf_size=1).stats()["leaves"] == 2
+
+
+def test_sah_depth_is_bounded_on_adversarial_input():
+    """Triangles growing geometrically: SAH would peel one off per level."""
+    k = np.arange(300, dtype=np.float64)
+    scale = 1.3 ** k
+    one = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]], np.float64)
+    tri = (one[None] * scale[:, None, None] + np.stack([scale, 0 * k, 0 * k], 1)[:, None]).astype(np.float32)
+    bvh = build_bvh(tri, builder="sah", leaf_size=1)
+    check_structure(bvh, len(tri), 1)
+    check_conservative(bvh, tri)
+    assert bvh.depth <= sah.MAX_SAH_DEPTH + int(np.ceil(np.log2(len(tri)))) + 1
+
+
+@pytest.mark.parametrize("volume", VOLUMES)
+@pytest.mark.parametrize("builder", BUILDERS)
+def test_builds_are_deterministic(builder, volume):
+    tri = triangles("soup")
+    a = build_bvh(tri, volume=volume, builder=builder, leaf_size=4)
+    b = build_bvh(tri.copy(), volume=volume, builder=builder, leaf_size=4)
+    assert a.nodes.tobytes() == b.nodes.tobytes()
+    assert np.array_equal(a.prim_id, b.prim_id)
+    assert a.depth == b.depth
+
+
+@pytest.mark.parametrize("builder", BUILDERS)
+def test_tiny_inputs(builder):
+    one = np.array([[[0, 0, 0], [1, 0, 0], [0, 1, 0]]], np.float32)
+    bvh = build_bvh(one, builder=builder, leaf_size=1)
+    assert len(bvh.nodes) == 1 and bvh.depth == 1 and bvh.nodes[0]["count"] == 1
+    assert bvh.stats()["sah_cost"] == 1.0
+    tri = triangles("torus")[:200]
+    big_leaves = build_bvh(tri, builder=builder, leaf_size=255)
+    check_structure(big_leaves, len(tri), 255)
+    if builder == "paper":
+        assert len(big_leaves.nodes) == 1
+
+
+def test_accepts_a_mesh():
+    mesh = primitives.torus(1.0, 0.35, 16, 8)
+    a = build_bvh(mesh, volume="ellipse", builder="sah")
+    b = build_bvh(mesh.vertices[mesh.faces], volume="ellipse", builder="sah")
+    assert a.nodes.tobytes() == b.nodes.tobytes()
+
+
+@pytest.mark.parametrize("kwargs", [
+    {"volume": "cube"}, {"builder": "lbvh"}, {"leaf_size": 0}, {"leaf_size": 256},
+    {"leaf_size": 2.5}, {"leaf_size": True}, {"leaf_size": "4"},
+])
+def test_bad_options_raise_input_error(kwargs):
+    with pytest.raises(InputError) as info:
+        build_bvh(triangles("box"), **kwargs)
+    assert "\n" not in str(info.value)
+
+
+@pytest.mark.parametrize("tri", [
+    np.zeros((0, 3, 3), np.float32), np.zeros((4, 3), np.float32), np.zeros((2, 3, 2)),
+    np.array([[[0, 0, 0], [1, 0, 0], [0, np.nan, 0]]]), [["a"]],
+    np.array([[[0, 0, 0], [1e39, 0, 0], [0, 1, 0]]]),
+])
+def test_bad_triangles_raise_input_error(tri):
+    with pytest.raises(InputError) as info:
+        build_bvh(tri)
+    assert "\n" not in str(info.value)
+
+
+@pytest.mark.skipif(not SHARED_MESHES.is_dir(), reason=f"{SHARED_MESHES} not present")
+@pytest.mark.parametrize("name", ["camel.off", "cow.off"])
+def test_conservative_on_shared_meshes(name):
+    trimesh = pytest.importorskip("trimesh")
+    mesh = trimesh.load(SHARED_MESHES / name, process=False, force="mesh")
+    tri = np.asarray(mesh.vertices, np.float32)[np.asarray(mesh.faces)]
+    for builder in BUILDERS:
+        for volume in VOLUMES:
+            bvh = build_bvh(tri, volume=volume, builder=builder, leaf_size=4)
+            check_structure(bvh, len(tri), 4)
+            check_conservative(bvh, tri)
