@@ -41,17 +41,18 @@ def _parser() -> argparse.ArgumentParser:
     sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
 
     r = sub.add_parser("render", help="render a mesh (or the built-in scene) to an image",
-                       description="Render MESH (OBJ, PLY, OFF, STL, GLB/GLTF, 3DS) or, with no MESH, "
-                                   "the built-in scene. Prints the output path.")
-    r.add_argument("mesh", nargs="?", help="mesh file; omit for the built-in scene")
+                       description="Render MESH (OBJ, PLY, OFF, STL, GLB/GLTF, 3DS), a TOML scene file "
+                                   "(docs/scene-files.md) or, with no argument, the built-in scene. "
+                                   "Options override the scene file. Prints the output path.")
+    r.add_argument("mesh", nargs="?", help="mesh file or TOML scene file; omit for the built-in scene")
     r.add_argument("-o", "--output", help=f"image to write (default: MESH name .png, or {DEFAULT_OUTPUT}); "
                                           "an existing file is replaced only once the render succeeded")
-    r.add_argument("--width", type=int, default=640, help="image width in pixels (default 640)")
-    r.add_argument("--height", type=int, default=480, help="image height in pixels (default 480)")
+    r.add_argument("--width", type=int, help="image width in pixels (default: the scene file's, else 640)")
+    r.add_argument("--height", type=int, help="image height in pixels (default: the scene file's, else 480)")
     r.add_argument("--eye", type=_vector, help="camera position x,y,z (default: framed from the bounds)")
     r.add_argument("--target", type=_vector, help="point looked at (default: centre of the bounds)")
-    r.add_argument("--up", type=_vector, default=(0.0, 1.0, 0.0), help="up vector (default 0,1,0)")
-    r.add_argument("--fov", type=float, default=45.0, help="vertical field of view in degrees (default 45)")
+    r.add_argument("--up", type=_vector, help="up vector (default 0,1,0)")
+    r.add_argument("--fov", type=float, help="vertical field of view in degrees (default 45)")
     r.add_argument("--light", type=_vector, action="append", metavar="X,Y,Z",
                    help="point light position; repeat for more lights (default: one above the eye)")
     r.add_argument("--color", type=_vector, help="material colour r,g,b, linear 0..1 (default .8,.8,.8)")
@@ -61,6 +62,9 @@ def _parser() -> argparse.ArgumentParser:
     r.add_argument("--shininess", type=float, help="Phong exponent (default 32)")
     r.add_argument("--flat", action="store_true", help="flat shading (no vertex-normal interpolation)")
     r.add_argument("--background", type=_vector, help="background colour r,g,b, linear 0..1")
+    r.add_argument("--samples", type=int, help="anti-aliasing: N x N rays per pixel (default: the scene's; "
+                                               "1 for a mesh, 2 for the built-in scene)")
+    r.add_argument("--max-depth", type=int, help="reflection/refraction bounces (default: the scene's, 5)")
     r.add_argument("--device", help="'gpu', 'cpu' or P:D platform/device indices (default: PYOPENCL_CTX, "
                                     "else the first GPU, else the first CPU)")
     _accel_options(r)
@@ -120,27 +124,39 @@ def _render(args) -> int:
     from clrt.scene.scene import Camera, Light, Material, default_light, scene_from_mesh
 
     out = _output_path(args)
-    if args.mesh:
+    if args.mesh and args.mesh.lower().endswith(".toml"):
+        from clrt.scene.scene_file import load_scene
+        scene = load_scene(args.mesh)
+    elif args.mesh:
         from clrt.scene.load import load_mesh
         base = Material()
         overrides = {k: getattr(args, k) for k in ("ambient", "diffuse", "specular", "shininess")
                      if getattr(args, k) is not None}
         material = Material(color=args.color or base.color, smooth=not args.flat, **overrides)
         scene = scene_from_mesh(load_mesh(args.mesh), material)
-        scene.lights = []
+        scene.lights, scene.camera = [], None   # framed below, from the options
     else:
         scene = default_scene()
     if args.background:
         scene.background = args.background
+    if args.samples is not None:
+        scene.samples = args.samples
+    if args.max_depth is not None:
+        scene.max_depth = args.max_depth
 
-    bounds = scene.bounds
-    if args.eye is None and args.target is None and scene.camera is not None:
-        eye, target = scene.camera.eye, scene.camera.target
+    # Options override the scene's camera; what neither gives is framed from the bounds.
+    bounds, base = scene.bounds, scene.camera
+    width = args.width if args.width is not None else (base.width if base else 640)
+    height = args.height if args.height is not None else (base.height if base else 480)
+    fov = args.fov if args.fov is not None else (base.fov if base else 45.0)
+    up = args.up or (base.up if base else (0.0, 1.0, 0.0))
+    if args.eye is None and args.target is None and base is not None:
+        eye, target = base.eye, base.target
     else:
-        framed = Camera.framing(bounds, args.width, args.height, args.fov, up=args.up)
-        target = args.target or framed.target
-        eye = args.eye or tuple(np.add(target, np.subtract(framed.eye, framed.target)))
-    camera = Camera(eye, target, args.up, args.fov, args.width, args.height)
+        framed = Camera.framing(bounds, width, height, fov, up=up)
+        target = args.target or (base.target if base else framed.target)
+        eye = args.eye or (base.eye if base else tuple(np.add(target, np.subtract(framed.eye, framed.target))))
+    camera = Camera(eye, target, up, fov, width, height)
     if args.light:
         scene.lights = [Light(p) for p in args.light]
     elif not scene.lights:

@@ -72,15 +72,17 @@ def intersect(origins, dirs, corners, tmin, tmax, block: int = 64, any_hit: bool
             p = np.take_along_axis(p, np.broadcast_to(idx, p.shape), 2)
             proj.append((p[..., 0] - sx * p[..., 2], p[..., 1] - sy * p[..., 2], sz * p[..., 2]))
         (ax, ay, az), (bx, by, bz), (cx, cy, cz) = proj
-        U = cx * by - cy * bx
-        V = ax * cy - ay * cx
-        W = bx * ay - by * ax
-        zero = (U == 0) | (V == 0) | (W == 0)
-        if zero.any():
-            d = lambda a: a[zero].astype(np.float64)   # noqa: E731
-            U[zero] = (d(cx) * d(by) - d(cy) * d(bx)).astype(f32)
-            V[zero] = (d(ax) * d(cy) - d(ay) * d(cx)).astype(f32)
-            W[zero] = (d(bx) * d(ay) - d(by) * d(ax)).astype(f32)
+        # Kahan's difference of products, as triangle.cl computes it; float64
+        # stands in for fma (products of float32 values are exact in it).
+        def dop(a, b, c, d):
+            a, b, c, d = (x.astype(np.float64) for x in (a, b, c, d))
+            w = (c * d).astype(f32).astype(np.float64)
+            e = (w - c * d).astype(f32)
+            f = (a * b - w).astype(f32)
+            return f + e
+        U = dop(cx, by, cy, bx)
+        V = dop(ax, cy, ay, cx)
+        W = dop(bx, ay, by, ax)
         inside = ~(((U < 0) | (V < 0) | (W < 0)) & ((U > 0) | (V > 0) | (W > 0)))
         det = U + V + W
         with np.errstate(divide="ignore", invalid="ignore"):

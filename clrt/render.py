@@ -172,13 +172,9 @@ class Renderer:
         pixels = w * h
         timings = dict(self.timings)
         buf = self._buffers_for(pixels)
-        forward, right, up = camera.basis()
-        scale_x, scale_y = camera.scales()
-        vec4 = lambda v: np.array([*v, 0.0], np.float32)   # noqa: E731
         a = self.arrays
         q = self.queue
-        camera_args = (vec4(camera.eye), vec4(forward), vec4(right), vec4(up), np.float32(scale_x),
-                       np.float32(scale_y), np.uint32(w), np.uint32(h))
+        vec4 = _vec4
         shading_args = (*self.geometry.args, self.buffers["tri_info"], self.buffers["vertex_normals"],
                         self.buffers["materials"], self.buffers["lights"], np.uint32(len(self.scene.lights)),
                         vec4(self.scene.ambient_light), vec4(self.scene.background),
@@ -186,7 +182,7 @@ class Renderer:
         n = samples * samples
         events = []
         for sample in range(n):
-            gen = self._launch("generate_rays", q, (w, h), None, buf["rays"], *camera_args,
+            gen = self._launch("generate_rays", q, (w, h), None, buf["rays"], *camera_args(camera),
                                np.uint32(sample), np.uint32(samples), np.uint32(seed))
             shade = self._launch("shade_pixels", q, (pixels,), None, buf["rays"], buf["linear"], buf["hits"],
                                  np.uint32(pixels), np.uint32(max_depth), np.float32(1.0 / n),
@@ -216,6 +212,18 @@ class Renderer:
 
 
 MAX_BOUNCES = 16   # the stack bound in whitted.cl
+
+
+def _vec4(v) -> np.ndarray:
+    return np.array([*v, 0.0], np.float32)
+
+
+def camera_args(camera: Camera) -> tuple:
+    """The camera as the kernels' CAMERA_PARAMS (camera.cl)."""
+    forward, right, up = camera.basis()
+    scale_x, scale_y = camera.scales()
+    return (_vec4(camera.eye), _vec4(forward), _vec4(right), _vec4(up), np.float32(scale_x),
+            np.float32(scale_y), np.uint32(camera.width), np.uint32(camera.height))
 
 
 def _check_int(name: str, value, lo: int, hi: int) -> None:

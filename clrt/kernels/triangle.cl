@@ -2,17 +2,26 @@
 // (JCGT 2013).  Rays are sheared so that they run along +z; the three 2D edge
 // functions are then evaluated with the same operands for the two triangles
 // that share an edge, so a ray through an edge or a vertex can never slip
-// between neighbours.  Contraction into FMA would break that symmetry, hence
-// FP_CONTRACT OFF; exact zeros are recomputed in double where available.
+// between neighbours -- provided each edge function has the sign of its exact
+// value.  A plain a*b - c*d does not guarantee that, least of all when a
+// compiler contracts it into an FMA (NVIDIA's does, FP_CONTRACT OFF or not),
+// so the edge functions use Kahan's difference of products: within 1.5 ulp,
+// exactly zero only when the exact value is, and so always correctly signed.
 #ifndef CLRT_TRIANGLE_CL
 #define CLRT_TRIANGLE_CL
 
 #include "layouts.h"
 
 #pragma OPENCL FP_CONTRACT OFF
-#ifdef cl_khr_fp64
-#pragma OPENCL EXTENSION cl_khr_fp64 : enable
-#endif
+
+// a*b - c*d with the sign of the exact value (Kahan; see Jeannerod et al. 2013).
+inline float diff_of_products(float a, float b, float c, float d)
+{
+    const float w = c * d;
+    const float e = fma(-c, d, w);     // w - c*d, exactly
+    const float f = fma(a, b, -w);
+    return f + e;
+}
 
 // Per-ray constants of the shear transform, computed once per ray.
 typedef struct {
@@ -48,16 +57,9 @@ inline bool intersect_triangle(const ShearedRay* r, __global const TriangleVerts
     const float Bx = B.x - r->shear.x * B.z, By = B.y - r->shear.y * B.z;
     const float Cx = C.x - r->shear.x * C.z, Cy = C.y - r->shear.y * C.z;
 
-    float U = Cx * By - Cy * Bx;
-    float V = Ax * Cy - Ay * Cx;
-    float W = Bx * Ay - By * Ax;
-#ifdef cl_khr_fp64
-    if (U == 0.0f || V == 0.0f || W == 0.0f) {
-        U = (float)((double)Cx * (double)By - (double)Cy * (double)Bx);
-        V = (float)((double)Ax * (double)Cy - (double)Ay * (double)Cx);
-        W = (float)((double)Bx * (double)Ay - (double)By * (double)Ax);
-    }
-#endif
+    const float U = diff_of_products(Cx, By, Cy, Bx);
+    const float V = diff_of_products(Ax, Cy, Ay, Cx);
+    const float W = diff_of_products(Bx, Ay, By, Ax);
     if ((U < 0.0f || V < 0.0f || W < 0.0f) && (U > 0.0f || V > 0.0f || W > 0.0f))
         return false;
     const float det = U + V + W;

@@ -90,3 +90,28 @@ def _grid_faces(rows: int, cols: int, wrap: bool) -> np.ndarray:
     c = ((i + 1) % rows) * cols + (j + 1) % cols
     d = i * cols + (j + 1) % cols
     return np.concatenate([np.stack([a, b, c], 1), np.stack([a, c, d], 1)])
+
+
+def torus_knot(p: int = 2, q: int = 3, radius: float = 1.0, tube: float = 0.12, segments: int = 256,
+               sides: int = 24, name="torus knot") -> Mesh:
+    """A tube of radius ``tube`` around the (p, q) torus knot, scaled to fit in
+    ``radius``; 2 * segments * sides triangles.  The tube's frame is the curve's
+    Frenet frame, which is well defined since a torus knot never straightens."""
+    t = np.linspace(0, 2 * np.pi, segments, endpoint=False)
+
+    def curve(t):
+        r = 2 + np.cos(q * t)
+        return np.stack([r * np.cos(p * t), -np.sin(q * t), r * np.sin(p * t)], -1) / 3.0 * radius
+
+    h = 1e-4
+    c, c_next, c_prev = curve(t), curve(t + h), curve(t - h)
+    tangent = c_next - c_prev
+    tangent /= np.linalg.norm(tangent, axis=1, keepdims=True)
+    normal = c_next - 2 * c + c_prev
+    normal -= np.sum(normal * tangent, axis=1, keepdims=True) * tangent
+    normal /= np.linalg.norm(normal, axis=1, keepdims=True)
+    binormal = np.cross(tangent, normal)
+    a = np.linspace(0, 2 * np.pi, sides, endpoint=False)
+    ring = np.cos(a)[None, :, None] * normal[:, None] + np.sin(a)[None, :, None] * binormal[:, None]
+    v = (c[:, None] + tube * ring).reshape(-1, 3)
+    return Mesh.from_arrays(v, _grid_faces(segments, sides, wrap=True)[:, ::-1], name)

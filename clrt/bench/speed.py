@@ -1,0 +1,107 @@
+"""Primary-ray throughput on fixed cameras: ``python -m clrt.bench.speed``.
+
+The cameras are those of the speed issue, so figures can be set beside other
+systems' on the same GPU: 1920x1080, one ray through each pixel centre, vertical
+fov 45 degrees, up +y, tmin 0.  The kernel makes each ray and finds its
+closest hit (``trace_camera`` in trace.cl), or only whether anything is hit
+(``occlude_camera``).  Times are medians after warm-up: ``kernel`` from OpenCL
+profiling events, ``wall`` the host clock around enqueue + finish.  After
+timing, the hits are read back and checked: their count and the sum of their
+distances identify the result.
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pyopencl as cl
+
+from clrt.device import layouts
+from clrt.errors import ClrtError
+
+# mesh file, eye, target (from the speed issue)
+CASES = {
+    "bunny00": ("bunny00.off", (0.00013, 0.000166, 1.63733), (0.00013, 0.000166, -0.000202)),
+    "camel": ("camel.off", (0.539021, 0.359347, 1.796735), (0.0, 0.0, 0.0)),
+}
+
+
+def _time(queue, launch, repeat: int, warmup: int) -> tuple[float, float]:
+    kernel_ms, wall_ms = [], []
+    for i in range(warmup + repeat):
+        start = time.perf_counter()
+        event = launch()
+        queue.finish()
+        wall = 1e3 * (time.perf_counter() - start)
+        if i >= warmup:
+            kernel_ms.append(1e-6 * (event.profile.end - event.profile.start))
+            wall_ms.append(wall)
+    return statistics.median(kernel_ms), statistics.median(wall_ms)
+
+
+def run(mesh_dir: Path, cases, variants, device=None, size=(1920, 1080), repeat=20, warmup=3,
+        leaf_size=4, out=sys.stdout):
+    from clrt.scene.load import load_mesh
+    from clrt.scene.scene import Camera
+    from clrt.trace import Accel
+
+    w, h = size
+    print(f"| mesh | triangles | accel | builder | closest: kernel ms | Mrays/s | wall ms | Mrays/s "
+          f"| hits | sum of t | any-hit: kernel ms | Mrays/s | any / closest |", file=out)
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|", file=out)
+    for name in cases:
+        file, eye, target = CASES[name]
+        mesh = load_mesh(mesh_dir / file)
+        camera = Camera(eye, target, (0.0, 1.0, 0.0), 45.0, w, h)
+        for accel_name, builder in variants:
+            accel = Accel(mesh, accel_name, builder, leaf_size, device)
+            hit_buf = cl.Buffer(accel.context, cl.mem_flags.READ_WRITE, w * h * layouts.HIT.itemsize)
+            occ_buf = cl.Buffer(accel.context, cl.mem_flags.READ_WRITE, w * h)
+            closest = _time(accel.queue, lambda: accel.launch_camera(camera, hit_buf), repeat, warmup)
+            anyhit = _time(accel.queue, lambda: accel.launch_camera(camera, occ_buf, occlusion=True),
+                           repeat, warmup)
+            hits = np.empty(w * h, layouts.HIT)
+            cl.enqueue_copy(accel.queue, hits, hit_buf)
+            occluded = np.empty(w * h, np.uint8)
+            cl.enqueue_copy(accel.queue, occluded, occ_buf)
+            hit = hits["prim"] >= 0
+            if not np.array_equal(hit, occluded.astype(bool)):
+                raise ClrtError(f"{name}: any-hit and closest-hit disagree on {int((hit != occluded).sum())} rays")
+            mrays = lambda ms: w * h / ms / 1e3   # noqa: E731
+            print(f"| {name} | {len(mesh.faces):,} | {accel_name} | {builder if accel_name != 'none' else '-'} "
+                  f"| {closest[0]:.3f} | {mrays(closest[0]):,.0f} | {closest[1]:.3f} | {mrays(closest[1]):,.0f} "
+                  f"| {int(hit.sum()):,} | {hits['t'][hit].astype(np.float64).sum():.3f} "
+                  f"| {anyhit[0]:.3f} | {mrays(anyhit[0]):,.0f} | {closest[0] / anyhit[0]:.2f}x |",
+                  file=out, flush=True)
+    print(f"\ndevice: {accel.device}; {w}x{h}, warm-up {warmup}, median of {repeat}", file=out)
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(prog="python -m clrt.bench.speed", description=__doc__.split("\n")[0])
+    default_dir = Path(__file__).resolve().parents[2].parent / "shared" / "meshes"
+    p.add_argument("--mesh-dir", type=Path, default=default_dir, help=f"folder of the meshes (default {default_dir})")
+    p.add_argument("--case", action="append", choices=sorted(CASES), help="repeatable (default: all)")
+    p.add_argument("--accel", action="append", choices=("none", "box", "sphere", "ellipse"))
+    p.add_argument("--builder", action="append", choices=("paper", "sah"))
+    p.add_argument("--leaf-size", type=int, default=4)
+    p.add_argument("--device", default="gpu")
+    p.add_argument("--repeat", type=int, default=20)
+    p.add_argument("--warmup", type=int, default=3)
+    args = p.parse_args(argv)
+    variants = [(a, b) for a in (args.accel or ["box"]) for b in (args.builder or ["sah"])]
+    try:
+        run(args.mesh_dir, args.case or sorted(CASES), variants, args.device, repeat=args.repeat,
+            warmup=args.warmup, leaf_size=args.leaf_size)
+    except ClrtError as exc:
+        print(f"clrt: {exc}", file=sys.stderr)
+        return exc.exit_code
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
