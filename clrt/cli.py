@@ -76,6 +76,9 @@ def _parser() -> argparse.ArgumentParser:
     i.add_argument("mesh", nargs="?", help="mesh file to build a BVH for")
     i.add_argument("--device", help="device to mark as selected (same forms as render --device)")
     _accel_options(i)
+
+    from clrt.bench.paper import add_bench_parser
+    add_bench_parser(sub)
     return p
 
 
@@ -227,7 +230,8 @@ def main(argv=None) -> int:
     try:
         argv = list(sys.argv[1:] if argv is None else argv)
         args = _parser().parse_args(_glue_vector_values(argv))
-        return {"render": _render, "info": _info}[args.command](args)
+        from clrt.bench.paper import run_bench
+        return {"render": _render, "info": _info, "bench": run_bench}[args.command](args)
     except ClrtError as exc:
         print(f"clrt: {exc}", file=sys.stderr)
         return exc.exit_code

@@ -1,37 +1,22 @@
 // No acceleration structure: every ray is tested against every triangle.
 // This is the paper's "basic" program and the reference every BVH layout
-// must reproduce exactly.  It provides the same two queries as a traversal:
-// closest_hit (camera and reflected rays) and any_hit (shadow rays).
-// Slots are the input order here, so Hit.prim is the triangle index.
+// must reproduce exactly.  Slots are the input order here.
 #ifndef CLRT_ACCEL_NONE_CL
 #define CLRT_ACCEL_NONE_CL
 
 #include "hit.cl"
 
-inline Hit closest_hit(ACCEL_PARAMS, float3 origin, float3 dir, float tmin, float tmax)
+// Answer `query` for one ray (see hit.cl); the returned Hit.prim is a slot.
+inline Hit query_hits(ACCEL_PARAMS, float3 origin, float3 dir, float tmin, float tmax,
+                      const int query, HitSink* sink)
 {
     const ShearedRay r = shear_ray(origin, dir);
     Hit best = miss_hit();
-    for (uint i = 0; i < num_tris; ++i) {
-        float t, u, v;
-        if (intersect_triangle(&r, tris + i, tmin, tmax, &t, &u, &v)
-            && hit_is_closer(t, (int)i, &best)) {
-            best = make_hit(t, (int)i, u, v);
-            tmax = t;
-        }
-    }
+    int best_id = -1;
+    for (uint i = 0; i < num_tris; ++i)
+        if (visit_triangle(ACCEL_ARGS, &r, (int)i, tmin, &tmax, query, &best, &best_id, sink))
+            break;
     return best;
-}
-
-inline bool any_hit(ACCEL_PARAMS, float3 origin, float3 dir, float tmin, float tmax)
-{
-    const ShearedRay r = shear_ray(origin, dir);
-    for (uint i = 0; i < num_tris; ++i) {
-        float t, u, v;
-        if (intersect_triangle(&r, tris + i, tmin, tmax, &t, &u, &v))
-            return true;
-    }
-    return false;
 }
 
 #endif

@@ -1,10 +1,17 @@
-// The hit record and the one rule that orders hits.  Every query uses
-// hit_is_closer, so the nearest hit does not depend on the order in which
-// triangles are visited: equal distances go to the lower triangle index.
+// The hit record, the one rule that orders hits, and the leaf action every
+// acceleration structure shares (visit_triangle), so that brute force and
+// each BVH answer every query by the same code.
+//
+// Ties: equal distances go to the lower input triangle index, so the nearest
+// hit never depends on the order in which triangles are visited.
 #ifndef CLRT_HIT_CL
 #define CLRT_HIT_CL
 
 #include "triangle.cl"
+
+#define QUERY_CLOSEST 0   // the nearest hit; tmax shrinks to it as the walk goes on
+#define QUERY_ANY 1       // stop at the first hit found
+#define QUERY_ALL 2       // hand every hit in (tmin, tmax] to a HitSink
 
 inline Hit miss_hit(void)
 {
@@ -26,9 +33,54 @@ inline Hit make_hit(float t, int prim, float u, float v)
     return h;
 }
 
-inline bool hit_is_closer(float t, int prim, const Hit* best)
+// Where QUERY_ALL puts hits: appended to shared output arrays through one
+// atomic counter (a full output still counts every hit, so the host can size
+// a second try).  With ray_ids == 0 hits are only counted.
+typedef struct {
+    __global int* ray_ids;
+    __global int* prims;
+    __global float* ts;
+    __global uint* next;      // shared append position
+    uint capacity;            // length of the output arrays
+    int ray;                  // this ray's index
+    uint count;               // hits seen along this ray
+} HitSink;
+
+inline void sink_hit(HitSink* sink, int prim, float t)
 {
-    return t < best->t || (t == best->t && prim < best->prim);
+    sink->count++;
+    if (sink->ray_ids) {
+        const uint k = atomic_inc(sink->next);
+        if (k < sink->capacity) {
+            sink->ray_ids[k] = sink->ray;
+            sink->prims[k] = prim;
+            sink->ts[k] = t;
+        }
+    }
+}
+
+// Test the triangle in `slot` for `query`; true once the query is answered.
+inline bool visit_triangle(ACCEL_PARAMS, const ShearedRay* r, int slot, float tmin, float* tmax,
+                           const int query, Hit* best, int* best_id, HitSink* sink)
+{
+    float t, u, v;
+    if (!intersect_triangle(r, tris + slot, tmin, *tmax, &t, &u, &v))
+        return false;
+    if (query == QUERY_ANY) {
+        *best = make_hit(t, slot, u, v);
+        return true;
+    }
+    const int id = prim_ids[slot];
+    if (query == QUERY_ALL) {
+        sink_hit(sink, id, t);
+        return false;
+    }
+    if (t < best->t || (t == best->t && id < *best_id)) {
+        *best = make_hit(t, slot, u, v);
+        *best_id = id;
+        *tmax = t;   // inclusive: an equal distance with a lower index is still taken
+    }
+    return false;
 }
 
 #endif

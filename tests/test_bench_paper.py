@@ -1,0 +1,181 @@
+"""`clrt bench` (clrt.bench.paper) and its mesh suite (clrt.bench.paper_meshes)."""
+
+import argparse
+import csv
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from clrt.bench import paper, paper_meshes
+from clrt.bench.paper_meshes import GENERATED, MeshSuite, write_mesh
+from clrt.scene.load import load_mesh
+
+# The paper's face counts of the meshes we generate (its Tables 1-5).
+PAPER_FACES = {"triangle": 1, "triangle2": 2, "triangle3": 3, "triangle4": 4, "box1": 8, "diamond": 33,
+               "icosphere": 80, "sphere": 960, "ellipse": 960, "teapot": 6320}
+
+
+@pytest.fixture(scope="module")
+def generated():
+    return {name: g.make() for name, g in GENERATED.items()}
+
+
+def test_generated_face_counts_match_the_paper(generated):
+    assert {name: len(m.faces) for name, m in generated.items()} == PAPER_FACES
+    for name, g in GENERATED.items():
+        assert g.faces == PAPER_FACES[name] == paper.PAPER[name].faces
+
+
+@pytest.mark.parametrize("name", sorted(PAPER_FACES))
+def test_generated_meshes_are_valid(generated, name):
+    m = generated[name]
+    assert np.all(np.isfinite(m.vertices))
+    assert m.faces.min() >= 0 and m.faces.max() < len(m.vertices)
+    tri = m.vertices[m.faces].astype(np.float64)
+    area = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
+    assert area.min() > 1e-6 * area.max(), "no zero-area triangles"
+    # Consistent winding: no directed edge is walked twice.
+    f = m.faces
+    edges = np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]])
+    assert len(np.unique(edges, axis=0)) == len(edges)
+
+
+def test_teapot_is_newells(generated):
+    control = paper_meshes.teapot_control_points()
+    assert control.shape == (32, 4, 4, 3)
+    # Rim, body and lid: each patch is the previous one turned a quarter about z;
+    # handle and spout: the second patch of a pair mirrors the first in y.
+    quarter = np.stack([control[..., 1], -control[..., 0], control[..., 2]], -1)
+    for group in (0, 4, 8, 20, 24):
+        for k in range(group, group + 3):
+            np.testing.assert_array_equal(quarter[k], control[k + 1])
+    for a in (12, 14, 16, 18):
+        np.testing.assert_array_equal((control[a] * [1, -1, 1])[:, ::-1], control[a + 1])
+    lo, hi = generated["teapot"].bounds
+    np.testing.assert_allclose(lo, [-3.0, 0.0, -2.0], atol=1e-6)   # y up, spout towards +x
+    np.testing.assert_allclose(hi[1], 3.15, atol=1e-6)
+    # Outward: the enclosed (signed) volume is positive.
+    tri = generated["teapot"].vertices[generated["teapot"].faces].astype(np.float64)
+    assert np.einsum("ij,ij->i", tri[:, 0], np.cross(tri[:, 1], tri[:, 2])).sum() > 0
+
+
+@pytest.mark.parametrize("fmt", ["obj", "off"])
+def test_written_meshes_read_back_bit_for_bit(generated, tmp_path, fmt):
+    m = generated["diamond"]
+    back = load_mesh(write_mesh(m, tmp_path / f"diamond.{fmt}"))
+    np.testing.assert_array_equal(back.vertices, m.vertices)
+    np.testing.assert_array_equal(back.faces, m.faces)
+
+
+def test_reduction_is_the_papers_formula_8():
+    assert paper.reduction(667, 632) == pytest.approx(5.2474, abs=1e-4)       # Table 1, triangle.obj: 5.25%
+    assert paper.reduction(7158953, 901752) == pytest.approx(87.40, abs=0.01)  # dragon.ply: 87.40%
+    assert paper.reduction(100.0, 150.0) == -50.0
+    assert paper.reduction(10.0, 0.0) == 100.0
+
+
+def test_paper_times_lookup():
+    assert paper.paper_time("teapot", 6320, "basic") == 1254613
+    assert paper.paper_time("teapot", 6320, "gpu") == 397596
+    assert paper.paper_time("teapot", 6320, "bvh-sphere") == 371324
+    assert paper.paper_time("teapot", 6320, "bvh-gpu-ellipse") == 18332
+    assert paper.paper_time("icosphere", 80, "bvh-gpu-box") is None    # not in the paper's Table 5
+    assert paper.paper_time("camel", 19536, "basic") is None           # not the paper's face count
+    assert paper.paper_time("cow", 5804, "basic") is None
+
+
+def _sphere_off(path, segments, stacks):
+    write_mesh(paper_meshes.uv_sphere(segments, stacks), path)
+
+
+def test_suite_reads_scans_from_a_folder(tmp_path):
+    _sphere_off(tmp_path / "camel.off", 16, 8)        # 224 faces: fewer than the paper's 4,884
+    _sphere_off(tmp_path / "cow.off", 8, 4)
+    (tmp_path / "readme.txt").write_text("not a mesh")
+    suite = MeshSuite(tmp_path)
+    assert "camel-full" in suite and "cow" in suite and "camel" not in suite
+    assert any(n.startswith("camel:") for n in suite.notes)
+    assert len(suite.make("cow").faces) == 2 * 8 * 3
+    with pytest.raises(Exception, match="camel"):
+        suite["camel"]
+    assert MeshSuite(tmp_path / "missing").names() == list(GENERATED)
+
+
+def test_suite_decimates_to_the_papers_count(tmp_path):
+    pytest.importorskip("fast_simplification")
+    _sphere_off(tmp_path / "bunny00.off", 96, 64)     # 12,096 faces
+    suite = MeshSuite(tmp_path)
+    assert suite["bunny"].faces == 6966
+    bunny = suite.make("bunny")
+    assert abs(len(bunny.faces) - 6966) <= 2
+    assert len(suite.make("bunny-full").faces) == 2 * 96 * 63
+
+
+def _parse(argv):
+    parser = argparse.ArgumentParser()
+    sub = parser.add_subparsers(dest="command")
+    paper.add_bench_parser(sub)
+    return parser.parse_args(["bench", *argv])
+
+
+def test_tiny_bench_run_writes_the_tables(tmp_path, monkeypatch, device, capsys):
+    # Pretend there is no GPU, so that the run must say so and go on with the CPU programs.
+    monkeypatch.setattr(paper, "_available_kinds", lambda cpu, gpu: {"CPU": True, "GPU": False})
+    out = tmp_path / "results"
+    args = _parse(["--meshes", "triangle2,icosphere", "--programs", "basic,bvh-box,bvh-ellipse,gpu",
+                   "--builder", "paper", "--size", "16x16", "--repeat", "1", "--warmup", "1",
+                   "--out", str(out), "--mesh-dir", str(tmp_path / "none"),
+                   "--cpu-device", device or "cpu", "--detail-meshes", "triangle2,icosphere"])
+    assert paper.run_bench(args) == 0
+    err = capsys.readouterr().err
+    assert "no GPU OpenCL device" in err and "[6/6]" in err
+
+    with open(out / "times.csv", newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    assert list(rows[0]) == paper.CSV_COLUMNS
+    assert [(r["mesh"], r["program"], r["builder"]) for r in rows] == [
+        (m, p, b) for m in ("triangle2", "icosphere")
+        for p, b in (("basic", "-"), ("bvh-box", "paper"), ("bvh-ellipse", "paper"))]
+    for r in rows:
+        parts = sum(float(r[k]) for k in ("load_ms", "init_ms", "build_ms", "upload_ms", "frame_wall_ms"))
+        assert float(r["total_ms"]) == pytest.approx(parts, rel=1e-4)
+        assert float(r["kernel_ms"]) > 0 and float(r["mrays_wall"]) > 0
+        assert r["width"] == r["height"] == "16"
+        assert float(r["paper_ms"]) == paper.paper_time(r["mesh"], int(r["faces"]), r["program"])
+
+    md = (out / "tables.md").read_text()
+    assert "no GPU OpenCL device" in md and "clrt bench --meshes triangle2,icosphere" in md
+    assert "## Table 4 of the paper: basic vs BVH on the CPU device, builder paper" in md
+    assert "Not run: needs both the basic and the gpu program." in md
+    header = "| mesh | faces | basic | BVH | BVH ms | reduction | paper BVH | paper reduction | speed-up | Mrays/s |"
+    assert header in md
+    assert "| icosphere | 80 |" in md and "| 3,803 | 73.31% |" in md    # paper's icosphere box: 3803 ms
+    assert "sah" not in md.split("## All measurements")[1].split("## Detail")[0]
+
+    for png in ("time-vs-faces.png", "kernel-vs-faces.png", "detail-loss.png"):
+        with Image.open(out / png) as im:
+            assert im.format == "PNG" and im.width > 300
+    assert sorted(p.name for p in (out / "meshes").iterdir()) == ["icosphere.obj", "triangle2.obj"]
+    assert not list(out.glob(".*")), "no temporary files left behind"
+
+    with open(out / "detail-loss.csv", newline="") as fh:
+        detail = list(csv.DictReader(fh))
+    assert len(detail) == 2 * 3
+    assert {d["placement"].split(":")[0] for d in detail} == {"apel.obj", "sample1.3DS"}
+    assert all(d["differ_from_basic"] == "0" and d["differ_same_device"] == "0" for d in detail)
+    assert "every program draws the same image" in md
+
+
+def test_unknown_names_are_input_errors(tmp_path):
+    from clrt.errors import InputError
+    with pytest.raises(InputError, match="unknown program"):
+        paper.run_bench(_parse(["--programs", "fastest", "--out", str(tmp_path)]))
+    with pytest.raises(InputError, match="not available"):
+        paper.run_bench(_parse(["--meshes", "apel", "--out", str(tmp_path)]))
+
+
+def test_chart_draws_without_data_and_with_one_point():
+    for series in ([], [("basic", "#000000", False, [(80, 1.5)])]):
+        png = paper.loglog_chart(series, "t", "ms")
+        assert png.startswith(b"\x89PNG")
