@@ -53,6 +53,19 @@ The bounding-volume shape is fixed per tree (a build-time ``-D`` of the program)
 Every volume encloses all triangles of its subtree, rounded outwards in float32.
 The triangle buffers of a BVH scene are stored in leaf order; ``prim_id`` (int32 per
 slot) maps a slot back to the input triangle index, which is what queries report.
+This is the builders' output; the device walks the layout below, made from it.
+
+``BvhPairNode`` (80 B) -- what the kernels walk: one row per inner node, holding
+both children's volumes (as Aila & Laine 2009 do with boxes), so that one fetch
+decides which children to enter.  Rows in depth-first order, the root at 0.
+    0: left_a      float4  left child's volume, fields as BvhNode.bound_a
+   16: left_b      float4  left child's volume, fields as BvhNode.bound_b
+   32: right_a     float4
+   48: right_b     float4
+   64: left        int     left_count == 0: row of the left child | > 0: its first slot
+   68: right       int     likewise for the right child
+   72: left_count  int     0: inner child | > 0: leaf of that many triangles | -1: no child
+   76: right_count int     (-1 only when the whole tree is one leaf, held on the left)
 """
 
 import numpy as np
@@ -68,6 +81,9 @@ MATERIAL = np.dtype([("color", float4), ("ambient", np.float32), ("diffuse", np.
                      ("flags", np.uint32), ("reflectivity", np.float32), ("transparency", np.float32),
                      ("ior", np.float32)])
 LIGHT = np.dtype([("position", float4), ("color", float4)])
+BVH_PAIR_NODE = np.dtype([("left_a", float4), ("left_b", float4), ("right_a", float4),
+                          ("right_b", float4), ("left", np.int32), ("right", np.int32),
+                          ("left_count", np.int32), ("right_count", np.int32)])
 BVH_NODE = np.dtype([("bound_a", float4), ("bound_b", float4), ("left_first", np.int32),
                      ("count", np.int32), ("right", np.int32), ("pad", np.int32)])
 
@@ -82,4 +98,5 @@ STRUCTS = {
     "Material": MATERIAL,
     "Light": LIGHT,
     "BvhNode": BVH_NODE,
+    "BvhPairNode": BVH_PAIR_NODE,
 }

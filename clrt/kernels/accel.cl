@@ -2,7 +2,7 @@
 // is built: -DACCEL_BVH (with a VOLUME_* shape) or nothing (brute force).
 // Both take the same buffers, so kernels and host need no variants:
 //   tris      triangle corners in slot order (leaf order for a BVH)
-//   nodes     BVH nodes (one unused node without a BVH)
+//   nodes     BVH inner nodes with their children's volumes (one unused without a BVH)
 //   prim_ids  input triangle index of each slot (the identity without a BVH)
 // and both provide query_hits(), from which the queries below are made.
 #ifndef CLRT_ACCEL_CL
@@ -11,7 +11,7 @@
 #include "layouts.h"
 
 #define ACCEL_PARAMS __global const TriangleVerts* tris, const uint num_tris, \
-    __global const BvhNode* nodes, __global const int* prim_ids
+    __global const BvhPairNode* nodes, __global const int* prim_ids
 #define ACCEL_ARGS tris, num_tris, nodes, prim_ids
 
 // Included here, before the choice below: the host expands each include once,

@@ -49,4 +49,11 @@ typedef struct {
     int pad;
 } BvhNode;
 
+typedef struct {
+    float4 left_a, left_b;     // left child's volume (fields as BvhNode.bound_a / bound_b)
+    float4 right_a, right_b;   // right child's volume
+    int left, right;           // count 0: row of the child | count > 0: first slot of its leaf
+    int left_count, right_count;   // 0 inner, > 0 leaf triangles, -1 no child
+} BvhPairNode;
+
 #endif

@@ -5,7 +5,8 @@
 // conservative: a ray that reaches a triangle inside the volume within
 // [tmin, tmax] always passes, grazing rays included, so a BVH can never lose a
 // hit that brute force finds.  The builders pad every volume outwards; the
-// tests add a few ulps of slack for their own rounding.
+// tests add a few ulps of slack for their own rounding.  *t_enter is a lower
+// bound of where the ray enters, so that "t_enter <= tmax" is conservative too.
 #ifndef CLRT_VOLUMES_CL
 #define CLRT_VOLUMES_CL
 
@@ -33,21 +34,23 @@ inline VolumeRay volume_ray(float3 origin, float3 dir)
 // Slab test (Kay & Kajiya).  fmin/fmax drop the NaN of 0 * inf, which only
 // arises for a ray lying exactly in a padded face plane -- outside all content.
 // The exit distance is widened as in Ize's "Robust BVH ray traversal".
-inline bool volume_hit(const VolumeRay* r, __global const BvhNode* n, float tmin, float tmax, float* t_enter)
+inline bool volume_hit(const VolumeRay* r, float4 bound_a, float4 bound_b, float tmin, float tmax,
+                       float* t_enter)
 {
-    const float3 t0 = (n->bound_a.xyz - r->origin) * r->inv_dir;
-    const float3 t1 = (n->bound_b.xyz - r->origin) * r->inv_dir;
+    const float3 t0 = (bound_a.xyz - r->origin) * r->inv_dir;
+    const float3 t1 = (bound_b.xyz - r->origin) * r->inv_dir;
     const float3 lo = fmin(t0, t1), hi = fmax(t0, t1);
     const float enter = fmax(fmax(lo.x, lo.y), fmax(lo.z, tmin));
     const float exit = fmin(fmin(hi.x, hi.y), fmin(hi.z, tmax * (1.0f + VOLUME_SLACK))) * (1.0f + VOLUME_SLACK);
-    *t_enter = enter;
+    *t_enter = enter - VOLUME_SLACK * enter;   // a lower bound: callers compare it with tmax
     return enter <= exit;
 }
 #elif defined(VOLUME_SPHERE)
-inline bool volume_hit(const VolumeRay* r, __global const BvhNode* n, float tmin, float tmax, float* t_enter)
+inline bool volume_hit(const VolumeRay* r, float4 bound_a, float4 bound_b, float tmin, float tmax,
+                       float* t_enter)
 {
-    const float3 oc = n->bound_a.xyz - r->origin;
-    const float radius = n->bound_a.w;
+    const float3 oc = bound_a.xyz - r->origin;
+    const float radius = bound_a.w;
     const float along = dot(oc, r->dir);                 // distance to the closest approach
     const float3 perp = oc - along * r->dir;
     const float slack = VOLUME_SLACK * (length(oc) + radius);
@@ -63,10 +66,11 @@ inline bool volume_hit(const VolumeRay* r, __global const BvhNode* n, float tmin
 #elif defined(VOLUME_ELLIPSE)
 // Axis-aligned ellipsoid: scale space so it becomes the unit sphere; the ray
 // direction then has length^2 = a, and t is unchanged by the scaling.
-inline bool volume_hit(const VolumeRay* r, __global const BvhNode* n, float tmin, float tmax, float* t_enter)
+inline bool volume_hit(const VolumeRay* r, float4 bound_a, float4 bound_b, float tmin, float tmax,
+                       float* t_enter)
 {
-    const float3 inv_axes = n->bound_b.xyz;
-    const float3 o = (r->origin - n->bound_a.xyz) * inv_axes;
+    const float3 inv_axes = bound_b.xyz;
+    const float3 o = (r->origin - bound_a.xyz) * inv_axes;
     const float3 d = r->dir * inv_axes;
     const float a = dot(d, d);
     const float along = -dot(o, d) / a;                  // t of the closest approach
