@@ -67,7 +67,7 @@ def torus(major: float = 1.0, minor: float = 0.35, n_major: int = 32, n_minor: i
                        np.linspace(0, 2 * np.pi, n_minor, endpoint=False), indexing="ij")
     ring = major + minor * np.cos(b)
     v = np.stack([ring * np.cos(a), minor * np.sin(b), ring * np.sin(a)], -1).reshape(-1, 3)
-    return Mesh.from_arrays(v, _grid_faces(n_major, n_minor, wrap=True), name)
+    return Mesh.from_arrays(v, _grid_faces(n_major, n_minor, wrap=True)[:, ::-1], name)   # outward
 
 
 def heightfield(n: int = 24, size: float = 2.0, seed: int = 0, name="heightfield") -> Mesh:

@@ -1,0 +1,432 @@
+"""Scene files: several objects, materials, lights and a camera described in TOML.
+
+``load_scene(path)`` reads a file with :mod:`tomllib` (data only, nothing is
+executed) and returns a :class:`~clrt.scene.scene.Scene`.  The schema is
+documented key by key in ``docs/scene-files.md``; the tables below are its
+single source of truth in code.
+
+Every problem raises :class:`~clrt.errors.InputError` with one line naming the
+file, the key path and what was expected, e.g.::
+
+    scene.toml: objects[2].material: unknown material 'glas' (did you mean 'glass'?)
+
+Unknown keys are errors everywhere, so that a typo never silently falls back
+to a default.
+"""
+
+from __future__ import annotations
+
+import difflib
+import json
+import math
+import os
+import re
+import tomllib
+
+import numpy as np
+
+from clrt.errors import InputError, MeshLoadError
+from clrt.scene import primitives
+from clrt.scene.load import load_mesh
+from clrt.scene.mesh import Mesh
+from clrt.scene.scene import Camera, Light, Material, Scene, SceneObject, default_light
+
+__all__ = ["load_scene", "transform_matrix", "OBJECT_TYPES"]
+
+
+# ---------------------------------------------------------------------------
+# Value checks.  Each takes the raw TOML value and returns the converted value
+# or raises _Bad with what was expected; _Doc adds the file and key path.
+
+class _Bad(Exception):
+    """A value is wrong; the message says what was expected (no location)."""
+
+
+_REQUIRED = object()
+
+
+def _show(value) -> str:
+    """A short rendering of a TOML value for messages."""
+    text = repr(value)
+    return text if len(text) <= 40 else text[:37] + "..."
+
+
+def _is_number(value) -> bool:
+    # TOML booleans are Python ints; "true" is never a number here.
+    return isinstance(value, (int, float)) and not isinstance(value, bool)
+
+
+_COMPARE = {"gt": (">", float.__gt__), "ge": (">=", float.__ge__),
+            "lt": ("<", float.__lt__), "le": ("<=", float.__le__)}
+
+
+def number(**limits):
+    """A finite number, as float, within ``limits`` (gt, ge, lt, le: e.g. ``number(gt=0, lt=180)``)."""
+    text = " and ".join(f"{_COMPARE[op][0]} {bound:g}" for op, bound in limits.items())
+    want = f"a number {text}" if text else "a number"
+
+    def check(value):
+        if not _is_number(value) or not math.isfinite(value) or not all(
+                _COMPARE[op][1](float(value), float(bound)) for op, bound in limits.items()):
+            raise _Bad(f"expected {want}, got {_show(value)}")
+        return float(value)
+    check.want = want
+    return check
+
+
+def integer(lo, hi=None):
+    """An integer in lo..hi (TOML floats such as 2.0 are refused: counts are whole)."""
+    want = f"an integer in {lo}..{hi}" if hi is not None else f"an integer >= {lo}"
+
+    def check(value):
+        if isinstance(value, bool) or not isinstance(value, int) or value < lo or (hi is not None and value > hi):
+            raise _Bad(f"expected {want}, got {_show(value)}")
+        return value
+    return check
+
+
+def vector(n: int, **limits):
+    """A list of ``n`` numbers, each checked like :func:`number`; a tuple of floats."""
+    each = number(**limits)
+    want = f"{n} numbers" + each.want[len("a number"):]
+
+    def check(value):
+        if not isinstance(value, list) or len(value) != n:
+            raise _Bad(f"expected {want}, got {_show(value)}")
+        try:
+            return tuple(each(v) for v in value)
+        except _Bad:
+            raise _Bad(f"expected {want}, got {_show(value)}") from None
+    return check
+
+
+def scale_value(value):
+    """A uniform scale (one number > 0) or a per-axis one (3 numbers > 0)."""
+    if _is_number(value):
+        return (number(gt=0)(value),) * 3
+    if isinstance(value, list):
+        return vector(3, gt=0)(value)
+    raise _Bad(f"expected a number > 0 or 3 numbers > 0, got {_show(value)}")
+
+
+def boolean(value):
+    if not isinstance(value, bool):
+        raise _Bad(f"expected true or false, got {_show(value)}")
+    return value
+
+
+def string(value):
+    if not isinstance(value, str):
+        raise _Bad(f"expected a string, got {_show(value)}")
+    return value
+
+
+def anything(value):
+    """Passed through; checked later by code that needs more context (material references)."""
+    return value
+
+
+# ---------------------------------------------------------------------------
+# The schema: key -> (check, default).  _REQUIRED marks keys without a default.
+
+_COLOR = vector(3, ge=0, le=1)
+_INTENSITY_RGB = vector(3, ge=0)
+
+_MATERIAL_DEFAULTS = Material()
+MATERIAL_KEYS = {
+    "color": (_COLOR, _MATERIAL_DEFAULTS.color),
+    "ambient": (number(ge=0), _MATERIAL_DEFAULTS.ambient),
+    "diffuse": (number(ge=0), _MATERIAL_DEFAULTS.diffuse),
+    "specular": (number(ge=0), _MATERIAL_DEFAULTS.specular),
+    "shininess": (number(ge=0), _MATERIAL_DEFAULTS.shininess),
+    "smooth": (boolean, _MATERIAL_DEFAULTS.smooth),
+    "reflectivity": (number(ge=0, le=1), _MATERIAL_DEFAULTS.reflectivity),
+    "transparency": (number(ge=0, le=1), _MATERIAL_DEFAULTS.transparency),
+    "ior": (number(ge=1), _MATERIAL_DEFAULTS.ior),
+}
+
+# checkerboard's second material when the file gives none: dark tiles.
+DEFAULT_MATERIAL2 = Material(color=(0.1, 0.1, 0.1))
+
+_DEFAULT_CAMERA = Camera((0.0, 0.0, 1.0), (0.0, 0.0, 0.0))
+CAMERA_KEYS = {
+    # eye and target are optional together: without them the scene is framed.
+    "eye": (vector(3), None),
+    "target": (vector(3), None),
+    "up": (vector(3), _DEFAULT_CAMERA.up),
+    "fov": (number(gt=0, lt=180), _DEFAULT_CAMERA.fov),
+    "width": (integer(1, 65536), _DEFAULT_CAMERA.width),
+    "height": (integer(1, 65536), _DEFAULT_CAMERA.height),
+}
+
+RENDER_KEYS = {
+    "max_depth": (integer(0, 16), 5),   # the kernels keep at most 16 bounces (whitted.cl)
+    "samples": (integer(1, 16), 1),
+    "background": (_INTENSITY_RGB, (0.0, 0.0, 0.0)),
+    "ambient_light": (_INTENSITY_RGB, (1.0, 1.0, 1.0)),
+}
+
+LIGHT_KEYS = {
+    "position": (vector(3), _REQUIRED),
+    "color": (_INTENSITY_RGB, (1.0, 1.0, 1.0)),
+    "intensity": (number(ge=0), 1.0),
+}
+
+TOP_KEYS = {"camera", "render", "materials", "objects", "lights"}
+
+# Keys every object accepts, then the keys of each type.
+OBJECT_KEYS = {
+    "type": (string, _REQUIRED),
+    "name": (string, ""),
+    "material": (anything, None),
+    "translate": (vector(3), (0.0, 0.0, 0.0)),
+    "rotate": (vector(3), (0.0, 0.0, 0.0)),
+    "scale": (scale_value, (1.0, 1.0, 1.0)),
+}
+OBJECT_TYPES = {
+    "mesh": {"path": (string, _REQUIRED)},
+    "sphere": {"radius": (number(gt=0), 1.0), "subdivisions": (integer(0, 7), 4),
+               "centre": (vector(3), (0.0, 0.0, 0.0))},
+    "box": {"size": (vector(3, gt=0), (1.0, 1.0, 1.0))},
+    "plane": {"size": (vector(2, gt=0), (1.0, 1.0))},
+    "checkerboard": {"tiles": (integer(1, 1024), 8), "size": (number(gt=0), 8.0),
+                     "material2": (anything, None)},
+    "torus": {"major": (number(gt=0), 1.0), "minor": (number(gt=0), 0.35)},
+}
+TORUS_SEGMENTS = (48, 24)   # finer than primitives.torus's default: it is seen close up
+
+
+# ---------------------------------------------------------------------------
+
+def _join(path: str, key) -> str:
+    """``objects[2]`` + ``material`` -> ``objects[2].material``; odd keys are quoted as in TOML."""
+    if isinstance(key, int):
+        return f"{path}[{key}]"
+    key = key if re.fullmatch(r"[A-Za-z0-9_-]+", key) else json.dumps(key)
+    return f"{path}.{key}" if path else key
+
+
+def _unknown(what: str, name: str, known) -> str:
+    """'unknown <what> 'x' (did you mean 'y'?)', or the list of valid names when nothing is close."""
+    close = difflib.get_close_matches(name, list(known), n=1)
+    if close:
+        return f"unknown {what} {name!r} (did you mean {close[0]!r}?)"
+    if not known:
+        return f"unknown {what} {name!r} (no {what}s are defined)"
+    return f"unknown {what} {name!r} (expected one of: {', '.join(sorted(known))})"
+
+
+class _Doc:
+    """Reads one scene file's tables; every error names the file and the key path."""
+
+    def __init__(self, label: str):
+        self.label = label
+
+    def error(self, path: str, message: str, cls=InputError) -> InputError:
+        where = f"{self.label}: {path}: " if path else f"{self.label}: "
+        return cls(where + " ".join(str(message).split()))
+
+    def check(self, value, path: str, check):
+        try:
+            return check(value)
+        except _Bad as exc:
+            raise self.error(path, exc) from None
+
+    def table(self, value, path: str, schema: dict) -> dict:
+        """Validate a TOML table against ``schema``: no unknown keys, required keys
+        present, every value checked; returns key -> converted value (or default)."""
+        if not isinstance(value, dict):
+            raise self.error(path, f"expected a table, got {_show(value)}")
+        for key in value:
+            if key not in schema:
+                raise self.error(_join(path, key), _unknown("key", key, schema))
+        out = {}
+        for key, (check, default) in schema.items():
+            if key in value:
+                out[key] = self.check(value[key], _join(path, key), check)
+            elif default is _REQUIRED:
+                raise self.error(_join(path, key), "missing (this key is required)")
+            else:
+                out[key] = default
+        return out
+
+    def array_of_tables(self, value, path: str) -> list:
+        if not isinstance(value, list) or not all(isinstance(v, dict) for v in value):
+            raise self.error(path, f"expected an array of tables ([[{path}]]), got {_show(value)}")
+        return value
+
+
+def transform_matrix(translate=(0.0, 0.0, 0.0), rotate=(0.0, 0.0, 0.0), scale=(1.0, 1.0, 1.0)) -> np.ndarray:
+    """4x4 affine matrix T @ Rz @ Ry @ Rx @ S: scale, then rotate about X, Y, Z
+    (degrees, right-handed: 90 about y takes +x to -z), then translate."""
+    def rotation(axis: int, degrees: float) -> np.ndarray:
+        c, s = math.cos(math.radians(degrees)), math.sin(math.radians(degrees))
+        i, j = [(1, 2), (2, 0), (0, 1)][axis]   # the plane the axis turns
+        m = np.eye(4)
+        m[i, i], m[i, j], m[j, i], m[j, j] = c, -s, s, c
+        return m
+
+    m = np.diag([*map(float, scale), 1.0])
+    for axis in range(3):
+        m = rotation(axis, rotate[axis]) @ m
+    m[:3, 3] += np.asarray(translate, dtype=np.float64)
+    return m
+
+
+def _plane(size) -> Mesh:
+    """A size[0] x size[1] quad in y = 0 centred on the origin, facing +y."""
+    x, z = 0.5 * size[0], 0.5 * size[1]
+    v = [[-x, 0, -z], [-x, 0, z], [x, 0, z], [x, 0, -z]]
+    return Mesh.from_arrays(v, [[0, 1, 2], [0, 2, 3]], "plane")
+
+
+def _read_toml(label: str, path: str) -> dict:
+    try:
+        with open(path, "rb") as fh:
+            data = fh.read()
+    except FileNotFoundError:
+        raise InputError(f"{label}: scene file not found") from None
+    except IsADirectoryError:
+        raise InputError(f"{label}: is a directory, not a scene file") from None
+    except OSError as exc:
+        raise InputError(f"{label}: cannot read scene file ({exc.strerror or exc})") from None
+    try:
+        return tomllib.loads(data.decode("utf-8"))
+    except UnicodeDecodeError as exc:
+        raise InputError(f"{label}: not UTF-8 text (byte {exc.start}); scene files are TOML") from None
+    except tomllib.TOMLDecodeError as exc:   # its message carries "(at line L, column C)"
+        raise InputError(f"{label}: invalid TOML: {exc}") from None
+
+
+class _Loader:
+    def __init__(self, path):
+        self.path = os.fspath(path)
+        self.folder = os.path.dirname(os.path.abspath(self.path))
+        self.doc = _Doc(self.path)
+        self.materials: dict[str, Material] = {}
+
+    def material(self, value, path: str) -> Material:
+        """A material from its fields; the Material's own checks are a backstop."""
+        fields = self.doc.table(value, path, MATERIAL_KEYS)
+        try:
+            return Material(**fields)
+        except InputError as exc:
+            raise self.doc.error(path, exc) from None
+
+    def material_ref(self, value, path: str, default: Material) -> Material:
+        """``material = "name"`` or an inline ``material = { ... }`` table."""
+        if value is None:
+            return default
+        if isinstance(value, str):
+            if value not in self.materials:
+                raise self.doc.error(path, _unknown("material", value, self.materials))
+            return self.materials[value]
+        if isinstance(value, dict):
+            return self.material(value, path)
+        raise self.doc.error(path, f"expected a material name or an inline table, got {_show(value)}")
+
+    def mesh_file(self, name: str, path: str) -> Mesh:
+        # Relative to the scene file, so a scene renders the same from any directory.
+        full = os.path.normpath(os.path.join(self.folder, os.path.expanduser(name)))
+        if not os.path.isfile(full):
+            raise self.doc.error(path, f"mesh file not found: {full}", MeshLoadError)
+        try:
+            return load_mesh(full)
+        except MeshLoadError as exc:
+            raise self.doc.error(path, exc, MeshLoadError) from None
+
+    def objects(self, raw: list) -> list[SceneObject]:
+        out = []
+        for index, value in enumerate(raw):
+            path = _join("objects", index)
+            if not isinstance(value, dict):
+                raise self.doc.error(path, f"expected a table, got {_show(value)}")
+            types = ", ".join(OBJECT_TYPES)
+            if "type" not in value:
+                raise self.doc.error(_join(path, "type"), f"missing (this key is required: one of {types})")
+            kind = self.doc.check(value["type"], _join(path, "type"), string)
+            if kind not in OBJECT_TYPES:
+                raise self.doc.error(_join(path, "type"), _unknown("object type", kind, OBJECT_TYPES))
+            schema = {**OBJECT_KEYS, **OBJECT_TYPES[kind]}
+            for key in value:   # a key of another type: say so rather than guess a spelling
+                if key not in schema and any(key in keys for keys in OBJECT_TYPES.values()):
+                    raise self.doc.error(_join(path, key), f"key {key!r} does not apply to type {kind!r} "
+                                         f"(its own keys: {', '.join(OBJECT_TYPES[kind])})")
+            o = self.doc.table(value, path, schema)
+            material = self.material_ref(o["material"], _join(path, "material"), Material())
+            if kind == "mesh":
+                meshes = [self.mesh_file(o["path"], _join(path, "path"))]
+            elif kind == "sphere":
+                meshes = [primitives.icosphere(o["subdivisions"], o["radius"], o["centre"])]
+            elif kind == "box":
+                meshes = [primitives.box(o["size"])]
+            elif kind == "plane":
+                meshes = [_plane(o["size"])]
+            elif kind == "checkerboard":
+                meshes = list(primitives.checkerboard(o["tiles"], o["size"]))
+            else:
+                meshes = [primitives.torus(o["major"], o["minor"], *TORUS_SEGMENTS)]
+            materials = [material]
+            if kind == "checkerboard":
+                materials.append(self.material_ref(o["material2"], _join(path, "material2"), DEFAULT_MATERIAL2))
+            matrix = transform_matrix(o["translate"], o["rotate"], o["scale"])
+            name = o["name"] or f"{path} ({kind})"
+            for k, (mesh, mat) in enumerate(zip(meshes, materials)):
+                suffix = f" tiles {k}" if len(meshes) > 1 else ""
+                mesh = Mesh(mesh.transformed(matrix).vertices, mesh.faces, name + suffix)
+                out.append(SceneObject(mesh, mat))
+        return out
+
+    def load(self) -> Scene:
+        doc = self.doc
+        data = _read_toml(self.path, self.path)
+        for key in data:
+            if key not in TOP_KEYS:
+                raise doc.error(_join("", key), _unknown("key", key, TOP_KEYS))
+
+        render = doc.table(data.get("render", {}), "render", RENDER_KEYS)
+        materials = data.get("materials", {})
+        if not isinstance(materials, dict):
+            raise doc.error("materials", f"expected a table of [materials.NAME] tables, got {_show(materials)}")
+        for name, value in materials.items():
+            self.materials[name] = self.material(value, _join("materials", name))
+
+        raw_objects = doc.array_of_tables(data.get("objects", []), "objects")
+        if not raw_objects:
+            raise doc.error("objects", "no objects: add at least one [[objects]] table")
+        objects = self.objects(raw_objects)
+
+        lights = []
+        for index, value in enumerate(doc.array_of_tables(data.get("lights", []), "lights")):
+            light = doc.table(value, _join("lights", index), LIGHT_KEYS)
+            color = tuple(c * light["intensity"] for c in light["color"])
+            lights.append(Light(light["position"], color))
+
+        scene = Scene(objects, lights, background=render["background"], ambient_light=render["ambient_light"],
+                      max_depth=render["max_depth"], samples=render["samples"])
+        scene.camera = self.camera(data.get("camera", {}), scene)
+        if "lights" not in data:   # as for a single mesh: one light above the eye
+            scene.lights = [default_light(scene.bounds, scene.camera)]
+        return scene
+
+    def camera(self, value, scene: Scene) -> Camera:
+        c = self.doc.table(value, "camera", CAMERA_KEYS)
+        if (c["eye"] is None) != (c["target"] is None):
+            missing = "eye" if c["eye"] is None else "target"
+            raise self.doc.error(_join("camera", missing), "missing (give both eye and target, or neither "
+                                 "to frame the scene)")
+        try:
+            if c["eye"] is None:
+                return Camera.framing(scene.bounds, c["width"], c["height"], c["fov"], up=c["up"])
+            return Camera(c["eye"], c["target"], c["up"], c["fov"], c["width"], c["height"])
+        except InputError as exc:   # eye == target, up parallel to the view
+            raise self.doc.error("camera", exc) from None
+
+
+def load_scene(path) -> Scene:
+    """Load the TOML scene file at ``path`` (see ``docs/scene-files.md``).
+
+    Mesh paths inside are relative to the file's folder.  Raises
+    :class:`~clrt.errors.InputError` (one line: file, key path, what was expected).
+    """
+    return _Loader(path).load()

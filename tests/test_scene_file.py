@@ -1,0 +1,223 @@
+"""TOML scene files: the example scene, transforms, path resolution and every validation error."""
+
+import textwrap
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from clrt.errors import InputError
+from clrt.render import Renderer
+from clrt.scene.scene import Camera, Material
+from clrt.scene.scene_file import load_scene, transform_matrix
+
+ROOT = Path(__file__).resolve().parents[1]
+SHOWCASE = ROOT / "assets" / "scenes" / "showcase.toml"
+
+SPHERE = '[[objects]]\ntype = "sphere"\nsubdivisions = 1\n'
+
+
+def write(tmp_path, text, name="scene.toml") -> Path:
+    path = tmp_path / name
+    path.write_text(textwrap.dedent(text))
+    return path
+
+
+@pytest.fixture(scope="module")
+def showcase():
+    return load_scene(SHOWCASE)
+
+
+def by_name(scene, name):
+    return next(o for o in scene.objects if o.mesh.name == name)
+
+
+def test_showcase_loads(showcase):
+    # floor (two halves), glass ball, mirror ball, mirror slab, torus, knot
+    assert len(showcase.objects) == 7
+    assert all(len(o.mesh.faces) > 0 for o in showcase.objects)
+    assert showcase.num_triangles > 4000
+    assert (showcase.max_depth, showcase.samples) == (6, 2)
+    assert len(showcase.lights) == 2
+    np.testing.assert_allclose(showcase.lights[1].color, (0.28, 0.32, 0.4))   # colour x intensity
+    assert (showcase.camera.width, showcase.camera.height) == (800, 600)
+
+
+def test_showcase_materials(showcase):
+    glass = by_name(showcase, "glass ball").material
+    assert (glass.transparency, glass.ior, glass.diffuse) == (0.9, 1.5, 0.05)
+    assert by_name(showcase, "mirror ball").material.reflectivity == 0.8
+    assert by_name(showcase, "mirror slab").material is by_name(showcase, "mirror ball").material
+    assert by_name(showcase, "red torus").material.color == (0.85, 0.15, 0.1)
+    assert by_name(showcase, "red torus").material.ior == Material().ior   # unset -> default
+    tiles = [by_name(showcase, f"floor tiles {k}").material for k in (0, 1)]
+    assert tiles[0].color != tiles[1].color and not tiles[0].smooth
+
+
+def test_showcase_transforms(showcase):
+    centre = by_name(showcase, "glass ball").mesh.bounds.mean(axis=0)
+    np.testing.assert_allclose(centre, (-1.3, 1.0, 1.4), atol=1e-5)
+    knot = by_name(showcase, "knot").mesh
+    np.testing.assert_allclose(knot.bounds.mean(axis=0), (-0.2, 0.8, -1.6), atol=0.02)
+    # the knot lies in the xz plane in its file; rotate x 90 stands it up in the xy plane
+    extent = np.ptp(knot.bounds, axis=0)
+    assert extent[2] < 0.5 * extent[1]
+
+
+def test_showcase_renders(showcase):
+    c = showcase.camera
+    frame = Renderer(showcase).render(Camera(c.eye, c.target, c.up, c.fov, 32, 24))
+    assert frame.image.shape == (24, 32, 3)
+    background = np.round(255 * np.asarray(showcase.background) ** (1 / 2.2))
+    differs = np.abs(frame.image.astype(int) - background).max(axis=2) > 8
+    assert differs.mean() > 0.3
+
+
+def test_rotation_convention(tmp_path):
+    # Documented: right-handed, degrees, X then Y then Z; 90 about y takes +x to -z.
+    np.testing.assert_allclose(transform_matrix(rotate=(0, 90, 0)) @ [1, 0, 0, 1], [0, 0, -1, 1], atol=1e-12)
+    np.testing.assert_allclose(transform_matrix(rotate=(90, 0, 0)) @ [0, 1, 0, 1], [0, 0, 1, 1], atol=1e-12)
+    # X is applied before Z: +y -> +z (X), which Z leaves alone.
+    np.testing.assert_allclose(transform_matrix(rotate=(90, 0, 90)) @ [0, 1, 0, 1], [0, 0, 1, 1], atol=1e-12)
+    # scale -> rotate -> translate
+    np.testing.assert_allclose(transform_matrix((1, 2, 3), (0, 90, 0), (2, 1, 1)) @ [1, 0, 0, 1], [1, 2, 1, 1],
+                               atol=1e-12)
+    # the same through a file: a box 2 long in x, rotated 90 about y, is 2 long in z
+    scene = load_scene(write(tmp_path, """
+        [[objects]]
+        type = "box"
+        size = [2.0, 0.5, 0.5]
+        rotate = [0, 90, 0]
+        translate = [5, 0, 0]
+        """))
+    np.testing.assert_allclose(scene.objects[0].mesh.bounds, [[4.75, -0.25, -1], [5.25, 0.25, 1]], atol=1e-6)
+
+
+def test_defaults_and_primitives(tmp_path):
+    scene = load_scene(write(tmp_path, """
+        [[objects]]
+        type = "plane"
+        size = [4, 2]
+        [[objects]]
+        type = "checkerboard"
+        tiles = 2
+        [[objects]]
+        type = "torus"
+        scale = [1, 2, 1]
+        """))
+    plane, light, dark, torus = scene.objects
+    np.testing.assert_allclose(plane.mesh.bounds, [[-2, 0, -1], [2, 0, 1]])
+    assert np.allclose(plane.mesh.face_normals(), [0, 1, 0])
+    assert len(light.mesh.faces) == len(dark.mesh.faces) == 4
+    assert light.material == Material() and dark.material != light.material
+    np.testing.assert_allclose(np.ptp(torus.mesh.bounds, axis=0)[1], 4 * 0.35, rtol=1e-3)   # non-uniform scale
+    assert (scene.max_depth, scene.samples, scene.background) == (5, 1, (0.0, 0.0, 0.0))
+    assert scene.camera is not None and len(scene.lights) == 1   # framed, default light
+
+
+def test_camera_without_eye_is_framed(tmp_path):
+    scene = load_scene(write(tmp_path, SPHERE + "[camera]\nwidth = 64\nheight = 32\nfov = 30\n"))
+    assert (scene.camera.width, scene.camera.height, scene.camera.fov) == (64, 32, 30)
+    np.testing.assert_allclose(scene.camera.target, (0, 0, 0), atol=1e-6)
+
+
+def test_mesh_path_is_relative_to_scene_file(tmp_path, monkeypatch):
+    (tmp_path / "meshes").mkdir()
+    (tmp_path / "meshes" / "tri.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
+    scene_dir = tmp_path / "scenes"
+    scene_dir.mkdir()
+    path = write(scene_dir, '[[objects]]\ntype = "mesh"\npath = "../meshes/tri.obj"\n')
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    monkeypatch.chdir(elsewhere)
+    assert len(load_scene(path).objects[0].mesh.faces) == 1
+    monkeypatch.chdir(scene_dir)
+    assert len(load_scene("scene.toml").objects[0].mesh.faces) == 1
+    # absolute paths are used as they are
+    absolute = write(elsewhere, f'[[objects]]\ntype = "mesh"\npath = "{(tmp_path / "meshes" / "tri.obj").as_posix()}"\n')
+    assert len(load_scene(absolute).objects[0].mesh.faces) == 1
+
+
+@pytest.mark.parametrize("text, where, expected", [
+    ('[materials.m]\ncolour = [1, 0, 0]\n' + SPHERE, "materials.m.colour",
+     "unknown key 'colour' (did you mean 'color'?)"),
+    (SPHERE + 'translate = [1, 2, 3]\ncentr = [0, 0, 0]\n', "objects[0].centr", "did you mean 'centre'?"),
+    (SPHERE + 'raduis = 2\n', "objects[0].raduis", "did you mean 'radius'?"),
+    ('[camra]\nfov = 40\n' + SPHERE, "camra", "did you mean 'camera'?"),
+    (SPHERE + 'size = [1, 1, 1]\n', "objects[0].size", "does not apply to type 'sphere'"),
+    (SPHERE + 'radius = "big"\n', "objects[0].radius", "expected a number > 0, got 'big'"),
+    (SPHERE + 'radius = -1\n', "objects[0].radius", "expected a number > 0"),
+    ('[[objects]]\ntype = "sphere"\nsubdivisions = 2.0\n', "objects[0].subdivisions", "expected an integer in 0..7"),
+    (SPHERE + 'translate = [1, 2]\n', "objects[0].translate", "expected 3 numbers"),
+    (SPHERE + 'rotate = [1, 2, "x"]\n', "objects[0].rotate", "expected 3 numbers"),
+    (SPHERE + 'scale = [1, 0, 1]\n', "objects[0].scale", "expected 3 numbers > 0"),
+    (SPHERE + 'material = { color = [2, 0, 0] }\n', "objects[0].material.color",
+     "expected 3 numbers >= 0 and <= 1"),
+    (SPHERE + 'material = { smooth = 1 }\n', "objects[0].material.smooth", "expected true or false"),
+    ('[materials.glass]\nior = 0.5\n' + SPHERE, "materials.glass.ior", "expected a number >= 1"),
+    ('[materials.glass]\ntransparency = 1.5\n' + SPHERE, "materials.glass.transparency", "<= 1"),
+    ('[materials.glass]\n' + SPHERE + 'material = "glas"\n', "objects[0].material",
+     "unknown material 'glas' (did you mean 'glass'?)"),
+    (SPHERE + 'material = 3\n', "objects[0].material", "expected a material name or an inline table"),
+    ('[[objects]]\ntype = "cube"\n', "objects[0].type", "unknown object type 'cube' (expected one of"),
+    ('[[objects]]\nradius = 1\n', "objects[0].type", "missing"),
+    ('[[objects]]\ntype = "mesh"\n', "objects[0].path", "missing"),
+    ('[[objects]]\ntype = "mesh"\npath = "nope.obj"\n', "objects[0].path", "mesh file not found: "),
+    (SPHERE + '[[lights]]\nposition = [1, 2]\n', "lights[0].position", "expected 3 numbers"),
+    (SPHERE + '[[lights]]\ncolor = [1, 1, 1]\n', "lights[0].position", "missing"),
+    (SPHERE + '[[lights]]\nposition = [0, 5, 0]\nintensity = -1\n', "lights[0].intensity", ">= 0"),
+    ('[render]\nsamples = 17\n' + SPHERE, "render.samples", "expected an integer in 1..16, got 17"),
+    ('[render]\nsamples = 0\n' + SPHERE, "render.samples", "expected an integer in 1..16"),
+    ('[render]\nmax_depth = -1\n' + SPHERE, "render.max_depth", "expected an integer in 0..16"),
+    ('[render]\nbackground = [0, 0, 0, 1]\n' + SPHERE, "render.background", "expected 3 numbers"),
+    ('[camera]\nfov = 180\n' + SPHERE, "camera.fov", "expected a number > 0 and < 180"),
+    ('[camera]\neye = [0, 0, 5]\n' + SPHERE, "camera.target", "give both eye and target"),
+    ('[camera]\neye = [0, 0, 5]\ntarget = [0, 0, 5]\n' + SPHERE, "camera", "eye and target must differ"),
+    ('[camera]\nwidth = true\n' + SPHERE, "camera.width", "expected an integer in 1..65536"),
+    ('[render]\n', "objects", "no objects"),
+    ('objects = []\n', "objects", "no objects"),
+    ('objects = 3\n', "objects", "expected an array of tables"),
+    ('render = 3\n' + SPHERE, "render", "expected a table"),
+])
+def test_validation_errors(tmp_path, text, where, expected):
+    path = write(tmp_path, text)
+    with pytest.raises(InputError) as info:
+        load_scene(path)
+    message = str(info.value)
+    assert message.startswith(f"{path}: {where}: "), message
+    assert expected in message, message
+    assert "\n" not in message
+
+
+def test_toml_syntax_error_names_the_line(tmp_path):
+    path = write(tmp_path, SPHERE + "radius 2\n")
+    with pytest.raises(InputError, match=r"scene\.toml: invalid TOML: .*line 4"):
+        load_scene(path)
+
+
+def test_missing_and_unreadable_files(tmp_path):
+    with pytest.raises(InputError, match="scene file not found"):
+        load_scene(tmp_path / "nothing.toml")
+    with pytest.raises(InputError, match="is a directory"):
+        load_scene(tmp_path)
+    (tmp_path / "bad.toml").write_bytes(b'[[objects]]\ntype = "\xff"\n')
+    with pytest.raises(InputError, match="not UTF-8"):
+        load_scene(tmp_path / "bad.toml")
+
+
+def test_corrupt_mesh_file_names_the_key(tmp_path):
+    (tmp_path / "broken.obj").write_text("v 0 0 0\nf 1 2 3\n")
+    path = write(tmp_path, '[[objects]]\ntype = "mesh"\npath = "broken.obj"\n')
+    with pytest.raises(InputError, match=r"objects\[0\]\.path: .*broken\.obj"):
+        load_scene(path)
+
+
+def test_docs_example_loads(tmp_path):
+    # The example in docs/scene-files.md must stay valid.
+    text = (ROOT / "docs" / "scene-files.md").read_text()
+    example = text.split("## Example", 1)[1].split("```toml\n", 1)[1].split("```", 1)[0]
+    (tmp_path / "meshes").mkdir()
+    (tmp_path / "meshes" / "knot.obj").write_bytes((ROOT / "assets" / "meshes" / "knot.obj").read_bytes())
+    (tmp_path / "scenes").mkdir()
+    scene = load_scene(write(tmp_path / "scenes", example))
+    assert len(scene.objects) == 6 and len(scene.lights) == 2
