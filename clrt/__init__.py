@@ -9,10 +9,12 @@ layouts, programs) -> ``clrt/kernels/*.cl`` -> ``clrt.render`` (the frame).
 """
 
 import clrt.scene.load  # noqa: F401 -- registers our 3DS reader with trimesh.load as well
-from clrt.errors import ClrtError, DeviceError, InputError, KernelBuildError, MeshLoadError
+from clrt.errors import (ClrtError, DeviceError, DeviceMemoryError, InputError, KernelBuildError,
+                         MeshLoadError, OutputError, TooLargeError)
 from clrt.render import Frame, Renderer, render
 from clrt.scene.default import default_scene
-from clrt.trace import Accel, Hits, occluded, trace
+from clrt.intersector import RayMeshIntersector
+from clrt.trace import Accel, AllHits, CameraImages, Hits, all_hits, camera_images, count_hits, occluded, trace
 from clrt.scene.mesh import Mesh
 from clrt.scene.scene import Camera, Light, Material, Scene, SceneObject, scene_from_mesh
 
@@ -24,8 +26,9 @@ def load_mesh(path) -> Mesh:
 
 
 __all__ = [
-    "Accel", "Camera", "ClrtError", "DeviceError", "Frame", "InputError", "KernelBuildError", "Light",
+    "Accel", "Camera", "ClrtError", "DeviceError", "DeviceMemoryError", "OutputError", "TooLargeError", "Frame", "InputError", "KernelBuildError", "Light",
     "Material", "Mesh", "MeshLoadError", "Renderer", "Scene", "SceneObject", "default_scene",
     "Hits", "load_mesh", "occluded", "render", "scene_from_mesh", "trace",
+    "AllHits", "CameraImages", "RayMeshIntersector", "all_hits", "camera_images", "count_hits",
 ]
 __version__ = "0.1.0"

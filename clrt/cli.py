@@ -9,12 +9,12 @@ from __future__ import annotations
 import argparse
 import os
 import sys
-import tempfile
 from pathlib import Path
 
 import numpy as np
 
-from clrt.errors import ClrtError, DeviceError, InputError
+from clrt.errors import ClrtError, DeviceError, InputError, OutputError
+from clrt.output import check_replace, write_image
 
 DEFAULT_OUTPUT = "clrt-default.png"
 
@@ -46,7 +46,11 @@ def _parser() -> argparse.ArgumentParser:
                                    "Options override the scene file. Prints the output path.")
     r.add_argument("mesh", nargs="?", help="mesh file or TOML scene file; omit for the built-in scene")
     r.add_argument("-o", "--output", help=f"image to write (default: MESH name .png, or {DEFAULT_OUTPUT}); "
-                                          "an existing file is replaced only once the render succeeded")
+                                          "an existing file is replaced only once the render succeeded, "
+                                          "and only if clrt wrote it (see --force)")
+    r.add_argument("-f", "--force", action="store_true",
+                   help="replace the output even if clrt did not write it (by default an existing "
+                        "file is replaced only if it is an image clrt wrote, such as the previous render)")
     r.add_argument("--width", type=int, help="image width in pixels (default: the scene file's, else 640)")
     r.add_argument("--height", type=int, help="image height in pixels (default: the scene file's, else 480)")
     r.add_argument("--eye", type=_vector, help="camera position x,y,z (default: framed from the bounds)")
@@ -68,6 +72,11 @@ def _parser() -> argparse.ArgumentParser:
     r.add_argument("--device", help="'gpu', 'cpu' or P:D platform/device indices (default: PYOPENCL_CTX, "
                                     "else the first GPU, else the first CPU)")
     _accel_options(r)
+    r.add_argument("--aov", type=_aov_list, metavar="NAMES",
+                   help="also write per-pixel images, comma-separated: depth (along the view axis), "
+                        "distance (along the ray), normal, prim (triangle index), hit, front; each as "
+                        "OUT.NAME.npy (the values; inf / -1 / 0 where nothing is hit) and OUT.NAME.png "
+                        "(a picture of them); see docs/ray-queries.md")
     r.add_argument("-q", "--quiet", action="store_true", help="print only the output path")
 
     i = sub.add_parser("info", help="list OpenCL devices; with MESH, build statistics of its BVH",
@@ -80,6 +89,14 @@ def _parser() -> argparse.ArgumentParser:
     from clrt.bench.paper import add_bench_parser
     add_bench_parser(sub)
     return p
+
+
+def _aov_list(text: str) -> tuple:
+    from clrt.trace import parse_aovs
+    try:
+        return parse_aovs(text)
+    except InputError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
 
 
 def _accel_options(p: argparse.ArgumentParser) -> None:
@@ -99,30 +116,20 @@ def _output_path(args) -> Path:
         out = Path(DEFAULT_OUTPUT)
     from PIL import Image
     if out.suffix.lower() not in Image.registered_extensions():
-        raise InputError(f"cannot write {out}: unknown image type {out.suffix!r} (use .png)")
+        raise OutputError(f"cannot write {out}: unknown image type {out.suffix!r} (use .png)")
+    if Image.registered_extensions()[out.suffix.lower()] not in Image.SAVE:
+        raise OutputError(f"cannot write {out}: {out.suffix} images can be read but not written (use .png)")
     if not out.parent.is_dir():
-        raise InputError(f"cannot write {out}: folder {out.parent} does not exist")
+        raise OutputError(f"cannot write {out}: folder {out.parent} does not exist")
     if out.is_dir():
-        raise InputError(f"cannot write {out}: it is a folder")
+        raise OutputError(f"cannot write {out}: it is a folder")
+    if not os.access(out.parent, os.W_OK):
+        raise OutputError(f"cannot write {out}: no permission to create files in {out.parent}")
     return out
 
 
-def write_image(image: np.ndarray, path: Path) -> None:
-    """Write through a temporary file in the same folder and a rename, so that
-    a reader never sees a half-written image and a failure leaves no file behind."""
-    from PIL import Image
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=path.suffix, dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as f:
-            Image.fromarray(image).save(f, format=Image.registered_extensions()[path.suffix.lower()])
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-
-
 def _render(args) -> int:
-    from clrt.render import Renderer
+    from clrt.render import Renderer, check_host_memory
     from clrt.scene.default import default_scene
     from clrt.scene.scene import Camera, Light, Material, default_light, scene_from_mesh
 
@@ -165,15 +172,24 @@ def _render(args) -> int:
     elif not scene.lights:
         scene.lights = [default_light(bounds, camera)]
 
+    # Checked before the (possibly long) render; write_image checks again.
+    check_replace(out, args.force)
+    # The image, its sRGB staging and PIL's copy (4 bytes a pixel) live on the host together.
+    check_host_memory(camera.width * camera.height * 10, f"a {camera.width}x{camera.height} image")
     renderer = Renderer(scene, args.device, args.accel, args.builder, args.leaf_size)
     frame = renderer.render(camera)
-    write_image(frame.image, out)
+    write_image(frame.image, out, force=args.force)
+    if args.aov:
+        from clrt.trace import write_aovs
+        aov_files = write_aovs(renderer, camera, args.aov, out, force=args.force)
     if not args.quiet:
         accel = "brute force" if args.accel == "none" else f"{args.builder} BVH of {args.accel}es"
         print(f"{camera.width}x{camera.height} pixels, {frame.triangles:,} triangles, "
               f"{len(scene.lights)} light(s), {accel}, device: {frame.device}")
         for stage, ms in frame.timings.items():
             print(f"  {stage:<20} {ms:10.2f} ms")
+        if args.aov:
+            print("  AOVs: " + " ".join(str(p) for p in aov_files))
     print(out.resolve() if not args.quiet else out)
     return 0
 

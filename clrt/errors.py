@@ -22,6 +22,15 @@ class MeshLoadError(InputError):
     """A mesh file is missing, unreadable, of an unknown format, corrupt or empty."""
 
 
+class OutputError(InputError):
+    """The output cannot be written: an existing file clrt did not write (replace
+    it with ``--force``), a missing folder, no permission, a full disk."""
+
+
+class TooLargeError(InputError):
+    """A job needs more host memory than is available; the message gives the size needed."""
+
+
 class DeviceError(ClrtError):
     """No usable OpenCL platform or device, or the device failed."""
 
@@ -30,3 +39,8 @@ class DeviceError(ClrtError):
 
 class KernelBuildError(DeviceError):
     """An OpenCL program failed to compile; the message carries the build log."""
+
+
+class DeviceMemoryError(DeviceError):
+    """The scene does not fit in the device's memory even with the image split
+    into the smallest tiles; the message gives the size needed and the device's."""

@@ -25,7 +25,7 @@ from clrt.device import layouts
 from clrt.device.context import create_context, device_label
 from clrt.device.geometry import DeviceGeometry, order_triangles
 from clrt.device.program import build_program
-from clrt.errors import InputError
+from clrt.errors import DeviceMemoryError, InputError, TooLargeError
 from clrt.scene.mesh import Mesh
 from clrt.scene.scene import Camera, Scene, scene_from_mesh
 
@@ -95,6 +95,7 @@ class Frame:
     timings: dict = field(default_factory=dict)
     device: str = ""
     triangles: int = 0
+    tiles: int = 1               # tiles the frame was rendered in (each: one launch per sample)
 
 
 class Renderer:
@@ -103,7 +104,19 @@ class Renderer:
     ``accel``: "box" (default), "sphere", "ellipse" (BVH volume shape) or "none"
     (brute force); ``builder``: "sah" (default) or "paper"; ``leaf_size``: the
     most triangles in a BVH leaf.  Every choice renders the same image.
+
+    A frame is rendered in tiles, runs of pixels in row-major order, each with
+    its own launches: a tile is sized so that one launch takes about
+    ``launch_ms`` (display watchdogs kill longer kernels; Ctrl-C takes effect
+    between launches) and its buffers fit the device.  When the device runs out
+    of memory the tiles shrink and the tile is retried; the image is the same
+    for every tiling.
     """
+
+    launch_ms = 200.0                 # target kernel time of one launch (watchdogs allow 2-5 s)
+    first_launch_pixels = 1 << 21     # the first tile, before any launch was timed (1920x1080 fits)
+    max_tile_pixels: int | None = None  # cap on the pixels of a tile (None: from device memory)
+    min_tile_pixels = 256             # a failed allocation below this is reported, not retried
 
     def __init__(self, scene: Scene, device: str | None = None, accel: str = "box",
                  builder: str = "sah", leaf_size: int = 4):
@@ -123,20 +136,32 @@ class Renderer:
                             for name in ("generate_rays", "shade_pixels", "encode_srgb8")}
             mf = cl.mem_flags
             a = self.arrays
+            o = self.order
+            scene_arrays = {"triangles": o.tri_verts, "BVH nodes": o.nodes, "triangle ids": o.prim_ids,
+                            "shading data": tri_info, "vertex normals": a.vertex_normals,
+                            "materials": a.materials, "lights": a.lights}
+            self.device_bytes = sum(x.nbytes for x in scene_arrays.values())
+            _check_fits(self.queue.device, self.device, scene_arrays)
 
             def upload(array):
                 return cl.Buffer(self.context, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=array)
 
-            self.geometry = DeviceGeometry(self.context, self.order)
-            self.buffers = {name: upload(getattr(a, name)) for name in
-                            ("vertex_normals", "materials", "lights")}
-            self.buffers["tri_info"] = upload(tri_info)
+            try:
+                self.geometry = DeviceGeometry(self.context, self.order)
+                self.buffers = {name: upload(getattr(a, name)) for name in
+                                ("vertex_normals", "materials", "lights")}
+                self.buffers["tri_info"] = upload(tri_info)
+            except (cl.Error, MemoryError) as exc:
+                if not _out_of_memory(exc):
+                    raise
+                raise self._memory_error(exc, 0) from None
         self._frame_buffers: dict[str, cl.Buffer] = {}
         self._frame_pixels = -1
 
     def _buffers_for(self, pixels: int) -> dict:
-        """Per-frame buffers, reallocated only when the resolution changes."""
+        """Per-tile buffers for up to ``pixels`` pixels, reallocated only when that changes."""
         if pixels != self._frame_pixels:
+            self._release_frame_buffers()
             mf = cl.mem_flags
             self._frame_buffers = {
                 "rays": cl.Buffer(self.context, mf.READ_WRITE, pixels * layouts.RAY.itemsize),
@@ -146,6 +171,31 @@ class Renderer:
             }
             self._frame_pixels = pixels
         return self._frame_buffers
+
+    def _release_frame_buffers(self) -> None:
+        for b in self._frame_buffers.values():
+            b.release()
+        self._frame_buffers, self._frame_pixels = {}, -1
+
+    def tile_capacity(self, pixels: int) -> int:
+        """The most pixels of one tile: the whole image if the device memory allows,
+        at most half of what the scene leaves free and one buffer's size limit."""
+        dev = self.queue.device
+        free = max(dev.global_mem_size - self.device_bytes, 0) // 2
+        cap = min(pixels, MAX_TILE_PIXELS, dev.max_mem_alloc_size // layouts.RAY.itemsize,
+                  free // FRAME_BYTES_PER_PIXEL)
+        cap = max(cap, min(pixels, self.min_tile_pixels))   # if even that fails, the error says so
+        if self.max_tile_pixels is not None:
+            cap = min(cap, self.max_tile_pixels)
+        return max(int(cap), 1)
+
+    def _memory_error(self, exc, tile: int) -> DeviceMemoryError:
+        dev = self.queue.device
+        frame = f" and {_size(tile * FRAME_BYTES_PER_PIXEL)} for a tile of {tile:,} pixels" if tile else ""
+        return DeviceMemoryError(
+            f"out of device memory on {self.device} ({_error_name(exc)}): the scene needs "
+            f"{_size(self.device_bytes)}{frame}; the device has {_size(dev.global_mem_size)} "
+            f"({_size(dev.max_mem_alloc_size)} at most per buffer), shared with other programs")
 
     def _launch(self, name: str, queue, global_size, local_size, *args) -> cl.Event:
         kernel = self.kernels[name]
@@ -170,48 +220,178 @@ class Renderer:
         _check_int("max_depth", max_depth, 0, MAX_BOUNCES)
         w, h = camera.width, camera.height
         pixels = w * h
+        check_host_memory(pixels * ((12 if linear else 3) + (8 if hits else 0)), f"a {w}x{h} image")
         timings = dict(self.timings)
-        buf = self._buffers_for(pixels)
-        a = self.arrays
-        q = self.queue
-        vec4 = _vec4
+        timings.update({"ray generation": 0.0, "pixel colour": 0.0, "read back": 0.0})
+        image = np.empty((pixels, 3), np.float32 if linear else np.uint8)
+        prim = np.empty(pixels, np.int32) if hits else None
+        t = np.empty(pixels, np.float32) if hits else None
         shading_args = (*self.geometry.args, self.buffers["tri_info"], self.buffers["vertex_normals"],
                         self.buffers["materials"], self.buffers["lights"], np.uint32(len(self.scene.lights)),
-                        vec4(self.scene.ambient_light), vec4(self.scene.background),
-                        np.float32(ray_epsilon(a.bounds, camera)))
-        n = samples * samples
-        events = []
-        for sample in range(n):
-            gen = self._launch("generate_rays", q, (w, h), None, buf["rays"], *camera_args(camera),
-                               np.uint32(sample), np.uint32(samples), np.uint32(seed))
-            shade = self._launch("shade_pixels", q, (pixels,), None, buf["rays"], buf["linear"], buf["hits"],
-                                 np.uint32(pixels), np.uint32(max_depth), np.float32(1.0 / n),
-                                 np.uint32(sample == 0), *shading_args)
-            events.append((gen, shade))
-        cl.wait_for_events([e for pair in events for e in pair])
-        timings["ray generation"] = sum(_event_ms(g) for g, _ in events)
-        timings["pixel colour"] = sum(_event_ms(s) for _, s in events)
+                        _vec4(self.scene.ambient_light), _vec4(self.scene.background),
+                        np.float32(ray_epsilon(self.arrays.bounds, camera)))
+        job = _Job(camera, samples, max_depth, seed, linear, shading_args, image, prim, t, timings)
+        capacity = self.tile_capacity(pixels)
+        tile = min(capacity, max(self.first_launch_pixels, 1))
+        first = launches = 0
+        ms_per_pixel = 0.0   # the most expensive tile so far: rows differ in cost (sky vs. mesh)
+        try:
+            while first < pixels:
+                count = min(tile, pixels - first)
+                try:
+                    slowest_ms = self._render_tile(job, first, count, capacity)
+                except (cl.Error, MemoryError) as exc:
+                    if not _out_of_memory(exc):
+                        raise
+                    # Lazy allocation means buffers may fail at their first use: retry smaller.
+                    self._release_frame_buffers()
+                    if capacity <= self.min_tile_pixels:
+                        raise self._memory_error(exc, capacity) from None
+                    capacity = tile = max(capacity // 4, self.min_tile_pixels)
+                    continue
+                first += count
+                launches += 1
+                # Size the next tile for launch_ms at the highest cost per pixel seen,
+                # growing at most twofold: the next rows may cost more than these.
+                ms_per_pixel = max(ms_per_pixel, slowest_ms / count)
+                fitting = self.launch_ms / ms_per_pixel if ms_per_pixel > 0 else capacity
+                tile = int(min(max(fitting, 1), 2 * count, capacity))
+        except KeyboardInterrupt:
+            self.queue.finish()   # no kernel may still write into buffers we drop
+            raise
+        if hits:
+            prim, t = prim.reshape(h, w), t.reshape(h, w)
+        return Frame(image.reshape(h, w, 3), prim, t, timings, self.device, len(self.arrays.tri_verts),
+                     tiles=launches)
 
-        with _stage(timings, "read back"):
-            if linear:
-                out = np.empty((h, w, 4), np.float32)
+    def _render_tile(self, job: "_Job", first: int, count: int, capacity: int) -> float:
+        """Render pixels first .. first + count - 1 into the job's host arrays; return
+        the kernel time of the slowest launch (ms).  Each launch is waited for, so
+        that Ctrl-C (raised by Python between calls) stops within one launch."""
+        buf = self._buffers_for(capacity)
+        q = self.queue
+        n = job.samples * job.samples
+        slowest = 0.0
+        for sample in range(n):
+            gen = self._launch("generate_rays", q, (count,), None, buf["rays"], *camera_args(job.camera),
+                               np.uint32(sample), np.uint32(job.samples), np.uint32(job.seed),
+                               np.uint32(first), np.uint32(count))
+            shade = self._launch("shade_pixels", q, (count,), None, buf["rays"], buf["linear"], buf["hits"],
+                                 np.uint32(count), np.uint32(job.max_depth), np.float32(1.0 / n),
+                                 np.uint32(sample == 0), *job.shading_args)
+            _wait_for(shade)
+            job.timings["ray generation"] += _event_ms(gen)
+            job.timings["pixel colour"] += _event_ms(shade)
+            slowest = max(slowest, _event_ms(gen) + _event_ms(shade))
+
+        with _stage(job.timings, "read back"):
+            rows = slice(first, first + count)
+            if job.linear:
+                out = np.empty((count, 4), np.float32)
                 cl.enqueue_copy(q, out, buf["linear"])
-                image = out[:, :, :3].copy()
             else:
-                enc = self._launch("encode_srgb8", q, (pixels,), None, buf["linear"], buf["srgb8"],
-                                   np.uint32(pixels))
-                out = np.empty((h, w, 4), np.uint8)
+                enc = self._launch("encode_srgb8", q, (count,), None, buf["linear"], buf["srgb8"],
+                                   np.uint32(count))
+                out = np.empty((count, 4), np.uint8)
                 cl.enqueue_copy(q, out, buf["srgb8"], wait_for=[enc])
-                image = out[:, :, :3].copy()
-            prim = t = None
-            if hits:
-                records = np.empty((h, w), layouts.HIT)
+            job.image[rows] = out[:, :3]
+            if job.prim is not None:
+                records = np.empty(count, layouts.HIT)
                 cl.enqueue_copy(q, records, buf["hits"])
-                prim, t = records["prim"].copy(), records["t"].copy()
-        return Frame(image, prim, t, timings, self.device, len(a.tri_verts))
+                job.prim[rows], job.t[rows] = records["prim"], records["t"]
+        return slowest
 
 
 MAX_BOUNCES = 16   # the stack bound in whitted.cl
+
+# Device bytes per pixel of a tile: its ray, hit record, linear and sRGB colour.
+FRAME_BYTES_PER_PIXEL = layouts.RAY.itemsize + layouts.HIT.itemsize + 16 + 4
+MAX_TILE_PIXELS = 1 << 23   # 8M pixels (a 4K frame), 544 MiB of tile buffers
+
+# OpenCL status codes that mean "not enough memory" (on the device or the host).
+_OUT_OF_MEMORY_CODES = {cl.status_code.MEM_OBJECT_ALLOCATION_FAILURE, cl.status_code.OUT_OF_RESOURCES,
+                        cl.status_code.OUT_OF_HOST_MEMORY, cl.status_code.INVALID_BUFFER_SIZE}
+
+
+@dataclass
+class _Job:
+    """What one render call needs in every tile."""
+
+    camera: Camera
+    samples: int
+    max_depth: int
+    seed: int
+    linear: bool
+    shading_args: tuple
+    image: np.ndarray            # (pixels, 3), filled tile by tile
+    prim: np.ndarray | None      # (pixels,)
+    t: np.ndarray | None         # (pixels,)
+    timings: dict
+
+
+def _wait_for(event: cl.Event) -> None:
+    """Wait for one launch.  Python raises KeyboardInterrupt once this returns, so
+    Ctrl-C stops a render between launches (tests replace this to simulate it)."""
+    event.wait()
+
+
+def _out_of_memory(exc: BaseException) -> bool:
+    if isinstance(exc, MemoryError):
+        return True
+    try:
+        return isinstance(exc, cl.Error) and exc.code in _OUT_OF_MEMORY_CODES
+    except Exception:   # noqa: BLE001 -- an Error made without a status code
+        return False
+
+
+def _error_name(exc: BaseException) -> str:
+    try:
+        return cl.status_code.to_string(exc.code)
+    except Exception:   # noqa: BLE001
+        return type(exc).__name__
+
+
+def _size(nbytes: float) -> str:
+    for unit, scale in (("GiB", 1 << 30), ("MiB", 1 << 20), ("KiB", 1 << 10)):
+        if nbytes >= scale:
+            return f"{nbytes / scale:.1f} {unit}"
+    return f"{int(nbytes)} B"
+
+
+def _check_fits(device, label: str, arrays: dict) -> None:
+    """DeviceMemoryError, before any upload, if the scene cannot fit on ``device``."""
+    total = sum(a.nbytes for a in arrays.values())
+    name, biggest = max(((k, a.nbytes) for k, a in arrays.items()), key=lambda kv: kv[1])
+    if biggest > device.max_mem_alloc_size:
+        raise DeviceMemoryError(
+            f"the scene needs {_size(total)} on the device, {_size(biggest)} of it for the {name} "
+            f"in one buffer, but {label} allows at most {_size(device.max_mem_alloc_size)} per buffer")
+    if total + MIN_FRAME_BYTES > device.global_mem_size:
+        raise DeviceMemoryError(
+            f"the scene needs {_size(total)} on the device, but {label} has {_size(device.global_mem_size)}")
+
+
+MIN_FRAME_BYTES = 256 * FRAME_BYTES_PER_PIXEL
+
+
+def available_host_memory() -> int | None:
+    """Bytes of host memory available to a new allocation (Linux: MemAvailable), or None."""
+    try:
+        with open("/proc/meminfo") as fh:
+            for line in fh:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    return None
+
+
+def check_host_memory(nbytes: int, what: str) -> None:
+    """TooLargeError naming the size needed when ``nbytes`` exceed the available host memory."""
+    available = available_host_memory()
+    if available is not None and nbytes > available:
+        raise TooLargeError(f"{what} needs {_size(nbytes)} of host memory, only {_size(available)} "
+                            "is available: render a smaller image")
 
 
 def _vec4(v) -> np.ndarray:

@@ -1,7 +1,6 @@
 """The OpenCL renderer against the numpy reference tracer, on several meshes."""
 
 import numpy as np
-import pytest
 
 import clrt
 from clrt.reference import camera_rays, render_reference, srgb8

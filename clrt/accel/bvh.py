@@ -273,7 +273,6 @@ def _assemble(per_level, prim_id) -> Topology:
     level_offsets = _exclusive_cumsum(np.array(sizes, np.int64))
     first = np.concatenate([s for s, _, _ in per_level])
     count = np.concatenate([c for _, c, _ in per_level])
-    leaf = np.concatenate([lf for _, _, lf in per_level])
     level = np.repeat(np.arange(len(sizes)), sizes)
     left = np.full(len(first), -1, np.int64)
     right = np.full(len(first), -1, np.int64)

@@ -51,8 +51,8 @@ def run(mesh_dir: Path, cases, variants, device=None, size=(1920, 1080), repeat=
     from clrt.trace import Accel
 
     w, h = size
-    print(f"| mesh | triangles | accel | builder | closest: kernel ms | Mrays/s | wall ms | Mrays/s "
-          f"| hits | sum of t | any-hit: kernel ms | Mrays/s | any / closest |", file=out)
+    print("| mesh | triangles | accel | builder | closest: kernel ms | Mrays/s | wall ms | Mrays/s "
+          "| hits | sum of t | any-hit: kernel ms | Mrays/s | any / closest |", file=out)
     print("|---|---|---|---|---|---|---|---|---|---|---|---|---|", file=out)
     for name in cases:
         file, eye, target = CASES[name]

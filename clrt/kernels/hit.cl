@@ -35,7 +35,9 @@ inline Hit make_hit(float t, int prim, float u, float v)
 
 // Where QUERY_ALL puts hits: appended to shared output arrays through one
 // atomic counter (a full output still counts every hit, so the host can size
-// a second try).  With ray_ids == 0 hits are only counted.
+// a second try).  With ray_ids == 0 hits are only counted.  It also carries the
+// query's face culling (triangle.cl), for every query kind; without a sink
+// (sink == 0) triangles are double-sided.
 typedef struct {
     __global int* ray_ids;
     __global int* prims;
@@ -44,6 +46,7 @@ typedef struct {
     uint capacity;            // length of the output arrays
     int ray;                  // this ray's index
     uint count;               // hits seen along this ray
+    int cull;                 // CULL_NONE, CULL_BACK or CULL_FRONT
 } HitSink;
 
 inline void sink_hit(HitSink* sink, int prim, float t)
@@ -64,7 +67,7 @@ inline bool visit_triangle(ACCEL_PARAMS, const ShearedRay* r, int slot, float tm
                            const int query, Hit* best, int* best_id, HitSink* sink)
 {
     float t, u, v;
-    if (!intersect_triangle(r, tris + slot, tmin, *tmax, &t, &u, &v))
+    if (!intersect_triangle_culled(r, tris + slot, tmin, *tmax, sink ? sink->cull : CULL_NONE, &t, &u, &v))
         return false;
     if (query == QUERY_ANY) {
         *best = make_hit(t, slot, u, v);

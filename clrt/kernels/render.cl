@@ -8,19 +8,24 @@
 #include "accel.cl"
 #include "whitted.cl"
 
-__kernel void generate_rays(__global Ray* rays, CAMERA_PARAMS, const uint sample, const uint samples_per_axis, const uint seed)
+// Rays of the image pixels first_pixel .. first_pixel + num_pixels - 1 (row
+// major), into rays[0 .. num_pixels - 1]: the host renders the image in such
+// runs ("tiles") so that device memory and the length of one launch stay bounded.
+__kernel void generate_rays(__global Ray* rays, CAMERA_PARAMS, const uint sample, const uint samples_per_axis,
+                            const uint seed, const uint first_pixel, const uint num_pixels)
 {
-    const uint px = get_global_id(0), py = get_global_id(1);
-    if (px >= width || py >= height)
+    const uint i = get_global_id(0);
+    if (i >= num_pixels)
         return;
     const Camera cam = make_camera(CAMERA_ARGS);
-    const uint pixel = py * width + px;
+    const uint pixel = first_pixel + i;
+    const uint px = pixel % width, py = pixel / width;
     const float2 o = sample_offset(pixel, sample, samples_per_axis, seed);
-    rays[pixel] = camera_ray(&cam, px, py, o.x, o.y);
+    rays[i] = camera_ray(&cam, px, py, o.x, o.y);
 }
 
 // image = (first sample ? 0 : image) + sample_weight * colour.  hits receives
-// the camera ray's hit (of the first sample).
+// the camera ray's hit (of the first sample).  Indices are within the tile.
 __kernel void shade_pixels(__global const Ray* rays, __global float4* image, __global Hit* hits,
                            const uint num_pixels, const uint max_depth, const float sample_weight,
                            const uint first_sample, ACCEL_PARAMS, SHADING_PARAMS)

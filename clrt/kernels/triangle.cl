@@ -45,10 +45,19 @@ inline ShearedRay shear_ray(float3 origin, float3 dir)
     return s;
 }
 
+// Face culling, a choice of each query.  A triangle shows its front face to a
+// ray that meets it against its normal (v1 - v0) x (v2 - v0), i.e. that sees
+// v0, v1, v2 counter-clockwise; the determinant below is then positive (the
+// shear keeps orientation).
+#define CULL_NONE 0    // double-sided
+#define CULL_BACK 1    // ignore triangles seen from behind
+#define CULL_FRONT 2   // ignore triangles seen from the front
+
 // On a hit with tmin < t <= tmax, store t and the barycentric weights of
-// vertices 1 and 2.  Both faces count as front faces.
-inline bool intersect_triangle(const ShearedRay* r, __global const TriangleVerts* tri,
-                               float tmin, float tmax, float* t_out, float* u_out, float* v_out)
+// vertices 1 and 2.  With CULL_NONE both faces count.
+inline bool intersect_triangle_culled(const ShearedRay* r, __global const TriangleVerts* tri,
+                                      float tmin, float tmax, const int cull,
+                                      float* t_out, float* u_out, float* v_out)
 {
     const float4 A = shuffle(tri->v0 - r->origin, r->perm);
     const float4 B = shuffle(tri->v1 - r->origin, r->perm);
@@ -65,6 +74,8 @@ inline bool intersect_triangle(const ShearedRay* r, __global const TriangleVerts
     const float det = U + V + W;
     if (det == 0.0f)
         return false;
+    if ((cull == CULL_BACK && det < 0.0f) || (cull == CULL_FRONT && det > 0.0f))
+        return false;
     const float T = U * (r->shear.z * A.z) + V * (r->shear.z * B.z) + W * (r->shear.z * C.z);
     const float t = T / det;
     if (!(t > tmin && t <= tmax))
@@ -73,6 +84,13 @@ inline bool intersect_triangle(const ShearedRay* r, __global const TriangleVerts
     *u_out = V / det;
     *v_out = W / det;
     return true;
+}
+
+// Double-sided: both faces count as front faces.
+inline bool intersect_triangle(const ShearedRay* r, __global const TriangleVerts* tri,
+                               float tmin, float tmax, float* t_out, float* u_out, float* v_out)
+{
+    return intersect_triangle_culled(r, tri, tmin, tmax, CULL_NONE, t_out, u_out, v_out);
 }
 
 #endif

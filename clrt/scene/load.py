@@ -404,6 +404,22 @@ def _load_ply(data: bytes, label: str):
 # STL and glTF through trimesh
 
 
+def _BufferFileResolver(path: str):
+    """trimesh's resolver for the buffers a .gltf names: only regular files in the
+    .gltf's folder (trimesh refuses paths leaving it; a FIFO or device there would
+    block the read forever)."""
+    import trimesh
+
+    class Resolver(trimesh.resolvers.FilePathResolver):
+        def get(self, name: str):
+            full = self.absolute(name)
+            if not full.is_file():
+                raise ValueError(f"buffer '{name}' is not a regular file")
+            return super().get(name)
+
+    return Resolver(path)
+
+
 def _load_trimesh(data: bytes, file_type: str, path: str):
     """``[(vertices, faces), ...]`` of every triangle mesh in an STL or glTF file.
 
@@ -415,7 +431,7 @@ def _load_trimesh(data: bytes, file_type: str, path: str):
     kwargs = {"process": False, "validate": False, "skip_materials": True}
     if file_type == "gltf":
         # A .gltf names its buffers as files beside it.
-        kwargs["resolver"] = trimesh.resolvers.FilePathResolver(os.path.abspath(path))
+        kwargs["resolver"] = _BufferFileResolver(os.path.abspath(path))
     try:
         with np.errstate(all="ignore"):  # bad numbers are reported by Mesh.from_arrays
             scene = trimesh.load(io.BytesIO(data), file_type=file_type, force="scene", **kwargs)

@@ -18,6 +18,8 @@ def _vec3(value, what: str) -> np.ndarray:
         raise InputError(f"{what} must be three numbers, got {value!r}") from None
     if v.shape != (3,) or not np.all(np.isfinite(v)):
         raise InputError(f"{what} must be three finite numbers, got {value!r}")
+    if np.abs(v).max() > 1e30:   # the device computes in float32 (largest 3.4e38)
+        raise InputError(f"{what} must lie within +-1e30 (the device computes in float32), got {value!r}")
     return v
 
 

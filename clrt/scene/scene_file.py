@@ -281,7 +281,12 @@ def _plane(size) -> Mesh:
 
 
 def _read_toml(label: str, path: str) -> dict:
+    import os
+    import stat
     try:
+        # A FIFO or device would block open() or read() forever: regular files only.
+        if os.path.exists(path) and not os.path.isdir(path) and not stat.S_ISREG(os.stat(path).st_mode):
+            raise InputError(f"{label}: not a regular file")
         with open(path, "rb") as fh:
             data = fh.read()
     except FileNotFoundError:

@@ -1,0 +1,180 @@
+"""Batch ray queries, clrt against trimesh: ``python -m clrt.bench.rays [MESH]``.
+
+The same rays go to clrt (``clrt.Accel`` on the chosen OpenCL device), to
+trimesh's numpy intersector (``trimesh.ray.ray_triangle``, needs ``rtree``) and,
+when ``embreex`` is installed, to trimesh's Embree intersector
+(``pip install -e '.[raybench]'`` installs both).  Three queries: the first
+hit of each ray, whether it hits anything, and every hit along it.
+
+Rays: origins spread over a sphere of twice the mesh's bounding radius, aimed
+at uniform random points of its bounding box (a fixed seed), so most hit and
+some graze.  Times are wall-clock medians of ``--repeat`` calls after one
+warm-up call (which builds the BVH program, trimesh's r-tree, Embree's scene),
+host<->device copies included; the one-off set-up is printed apart.  The numpy
+intersector is slow (about a hundred rays a second on a 30,000-triangle mesh),
+so it gets the first ``--reference-rays`` rays only, timed once after a warm-up
+on ten rays.
+
+Agreement with clrt on the same rays: first hit -- the same triangle, or the
+same distance within 1e-5 of the mesh's size (a ray through an edge may name
+either triangle); any hit -- the same answer; all hits -- the same set of
+triangles along the ray.  The table is markdown, for docs/benchmarks.md.
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from clrt.errors import ClrtError
+
+QUERIES = ("first", "any", "all")
+
+
+def make_rays(mesh, count: int, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """(count, 3) float64 origins and directions (not unit) around ``mesh``."""
+    rng = np.random.default_rng(seed)
+    lo, hi = mesh.bounds
+    centre, radius = (lo + hi) / 2, 0.5 * float(np.linalg.norm(hi - lo))
+    o = rng.normal(size=(count, 3))
+    o = centre + 2.0 * radius * o / np.linalg.norm(o, axis=1, keepdims=True)
+    targets = lo + rng.random((count, 3)) * (hi - lo)
+    return o, targets - o
+
+
+def _median_time(call, repeat: int, warmup=None):
+    (warmup or call)()   # program build, r-tree, Embree scene
+    times, result = [], None
+    for _ in range(repeat):
+        start = time.perf_counter()
+        result = call()
+        times.append(time.perf_counter() - start)
+    return statistics.median(times), result
+
+
+def _plane_t(vertices, faces, o, d, tri):
+    """Distance along unit d to the plane of each triangle (inf where tri < 0)."""
+    t = np.full(len(o), np.inf)
+    hit = tri >= 0
+    v = vertices[faces[tri[hit]]]
+    n = np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t[hit] = np.einsum("ij,ij->i", v[:, 0] - o[hit], n) / np.einsum("ij,ij->i", d[hit], n)
+    return t
+
+
+def _agree_first(ref_tri, tri, ref_t, t, tol):
+    same_hit = (ref_tri >= 0) == (tri >= 0)
+    close = np.abs(np.where(np.isfinite(ref_t), ref_t, 0) - np.where(np.isfinite(t), t, 0)) <= tol
+    return float(np.mean(same_hit & ((ref_tri == tri) | close)))
+
+
+def _agree_sets(n, faces, ref, other):
+    """Fraction of rays whose sets of (ray, triangle) hits are equal."""
+    key = lambda pairs: np.unique(pairs[0].astype(np.int64) * faces + pairs[1].astype(np.int64))  # noqa: E731
+    differ = np.setxor1d(key(ref), key(other))
+    return 1.0 - len(np.unique(differ // faces)) / max(n, 1)
+
+
+def run(mesh_path, rays: int = 1_000_000, reference_rays: int = 2_000, device=None, accel="box",
+        builder="sah", repeat: int = 3, seed: int = 0, systems=("clrt", "trimesh", "embree"), out=sys.stdout):
+    import trimesh
+    from clrt.scene import primitives
+    from clrt.scene.load import load_mesh
+    from clrt.trace import Accel
+
+    mesh = load_mesh(mesh_path) if mesh_path else primitives.torus_knot(segments=512, sides=32)
+    name = Path(mesh_path).name if mesh_path else "torus knot (generated)"
+    o, d = make_rays(mesh, rays, seed)
+    unit = d / np.linalg.norm(d, axis=1, keepdims=True)
+    tm = trimesh.Trimesh(mesh.vertices.astype(np.float64), mesh.faces, process=False)
+    vertices, faces = tm.vertices.view(np.ndarray), tm.faces.view(np.ndarray)
+    tol = 1e-5 * float(np.linalg.norm(mesh.bounds[1] - mesh.bounds[0]))
+
+    start = time.perf_counter()
+    acc = Accel(mesh, accel, builder, device=device)
+    setup = time.perf_counter() - start
+    print(f"mesh: {name}, {len(mesh.faces):,} triangles; {rays:,} rays (seed {seed}); "
+          f"clrt: {accel}/{builder} on {acc.device}, set-up {setup:.2f} s; median of {repeat}", file=out)
+    print("\n| system | query | rays | seconds | rays/s | agrees with clrt |", file=out)
+    print("|---|---|---|---|---|---|", file=out)
+
+    def row(system, query, n, seconds, agree):
+        text = "-" if agree is None else f"{100 * agree:.3f} %"
+        print(f"| {system} | {query} | {n:,} | {seconds:.4f} | {n / seconds:,.0f} | {text} |", file=out, flush=True)
+
+    # clrt, on every ray; kept to compare the others with
+    ours = {}
+    sec, hits = _median_time(lambda: acc.trace(o, d), repeat)
+    ours["first"] = hits
+    row("clrt", "first", rays, sec, None)
+    sec, ours["any"] = _median_time(lambda: acc.any_hit(o, d), repeat)
+    row("clrt", "any", rays, sec, None)
+    sec, ours["all"] = _median_time(lambda: acc.all_hits(o, d), repeat)
+    row("clrt", "all", rays, sec, None)
+
+    others = []
+    if "trimesh" in systems:
+        try:
+            import rtree  # noqa: F401 -- trimesh's numpy intersector needs it
+            from trimesh.ray.ray_triangle import RayMeshIntersector
+            others.append(("trimesh numpy", RayMeshIntersector(tm), min(reference_rays, rays)))
+        except ImportError:
+            print("| trimesh numpy | - | - | - | - | not run: `pip install rtree` |", file=out)
+    if "embree" in systems:
+        try:
+            from trimesh.ray.ray_pyembree import RayMeshIntersector as EmbreeIntersector
+            others.append(("trimesh embreex", EmbreeIntersector(tm), rays))
+        except ImportError:
+            print("| trimesh embreex | - | - | - | - | not run: `pip install embreex` |", file=out)
+
+    for system, intersector, n in others:
+        oo, dd = o[:n], d[:n]
+        # The numpy intersector is timed once, after a warm-up on a few rays.
+        reps, warm = (1, lambda: intersector.intersects_first(o[:10], d[:10])) if "numpy" in system \
+            else (repeat, None)
+        sec, tri = _median_time(lambda: intersector.intersects_first(oo, dd), reps, warm)
+        tri = np.asarray(tri, np.int64)
+        agree = _agree_first(tri, ours["first"].prim[:n], _plane_t(vertices, faces, oo, unit[:n], tri),
+                             ours["first"].t[:n].astype(np.float64), tol)
+        row(system, "first", n, sec, agree)
+        sec, anyhit = _median_time(lambda: intersector.intersects_any(oo, dd), reps, warm)
+        row(system, "any", n, sec, float(np.mean(np.asarray(anyhit, bool) == ours["any"][:n])))
+        sec, (tri, ray) = _median_time(lambda: intersector.intersects_id(oo, dd, multiple_hits=True), reps, warm)
+        mine = ours["all"]
+        keep = mine.ray_id < n
+        row(system, "all", n, sec, _agree_sets(n, len(faces), (ray, tri), (mine.ray_id[keep], mine.prim[keep])))
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(prog="python -m clrt.bench.rays", description=__doc__.split("\n")[0])
+    p.add_argument("mesh", nargs="?", help="mesh file (default: a generated torus knot, 32,768 triangles)")
+    p.add_argument("--rays", type=int, default=1_000_000)
+    p.add_argument("--reference-rays", type=int, default=2_000,
+                   help="rays given to trimesh's numpy intersector (default 2,000)")
+    p.add_argument("--device", help="OpenCL device for clrt (default: as clrt render)")
+    p.add_argument("--accel", default="box", choices=("none", "box", "sphere", "ellipse"))
+    p.add_argument("--builder", default="sah", choices=("paper", "sah"))
+    p.add_argument("--repeat", type=int, default=3)
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--only", action="append", choices=("clrt", "trimesh", "embree"),
+                   help="systems to run besides clrt (repeatable; default all)")
+    args = p.parse_args(argv)
+    if args.rays < 1 or args.reference_rays < 1 or args.repeat < 1:
+        p.error("--rays, --reference-rays and --repeat must be positive")
+    try:
+        run(args.mesh, args.rays, args.reference_rays, args.device, args.accel, args.builder, args.repeat,
+            args.seed, tuple(args.only or ("clrt", "trimesh", "embree")))
+    except ClrtError as exc:
+        print(f"clrt: {exc}", file=sys.stderr)
+        return exc.exit_code
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

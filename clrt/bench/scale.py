@@ -1,0 +1,138 @@
+"""Scale limits, measured: build time, host and device memory, frame time of
+generated meshes of millions of triangles.
+
+    python -m clrt.bench.scale --triangles 1M,2M --builder paper,sah --size 640x480
+    python -m clrt.bench.scale --triangles 10M,20M --builder paper --size 1920x1080 --device gpu
+
+The mesh is a torus tessellated into about N triangles (``n x n`` quads), framed
+so that it fills most of the image.  Per mesh size and builder: the set-up
+stages (mesh generation, initialisation, acceleration build, copy to device),
+the scene's device bytes (and per triangle: what bounds the largest mesh per GB,
+see docs/limits.md), the process's peak host memory so far, and per image size
+the median frame stages over ``--repeat`` frames after one warm-up frame, with
+the number of tiles the frame was split into.  Prints a markdown table;
+``--out FILE`` appends it to FILE as well.
+"""
+
+from __future__ import annotations
+
+import argparse
+import gc
+import math
+import resource
+import statistics
+import sys
+import time
+
+from clrt.errors import ClrtError
+
+
+def _count(text: str) -> int:
+    text = text.strip().upper()
+    scale = {"K": 10**3, "M": 10**6, "G": 10**9}.get(text[-1:], 1)
+    try:
+        return int(float(text.rstrip("KMG")) * scale)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a count such as 500K or 10M, got {text!r}") from None
+
+
+def _size(text: str) -> tuple[int, int]:
+    try:
+        w, h = (int(x) for x in text.lower().split("x"))
+        return w, h
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected WxH, got {text!r}") from None
+
+
+def _peak_rss_gib() -> float:
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20   # kB on Linux
+
+
+def run(counts, builders, sizes, accel="box", device=None, repeat=3, leaf_size=4, out=(sys.stdout,)):
+    from clrt.render import Renderer
+    from clrt.scene import primitives
+    from clrt.scene.scene import Camera, scene_from_mesh
+
+    def emit(line: str = "") -> None:
+        for f in out:
+            print(line, file=f, flush=True)
+
+    header = ("| triangles | builder | mesh | init | build | copy | device MiB | B/triangle | "
+              "triangles per GiB | host peak GiB | resolution | tiles | ray gen | pixel colour | "
+              "read back | frame wall |")
+    rows = []
+    printed_device = False
+    for count in counts:
+        n = max(3, math.ceil(math.sqrt(count / 2)))
+        for builder in builders:
+            start = time.perf_counter()
+            mesh = primitives.torus(1.0, 0.35, n, n)
+            mesh_ms = 1e3 * (time.perf_counter() - start)
+            scene = scene_from_mesh(mesh)
+            renderer = Renderer(scene, device, accel, builder, leaf_size)
+            if not printed_device:
+                dev = renderer.queue.device
+                emit(f"device: {renderer.device}, {dev.global_mem_size / 2**30:.1f} GiB, "
+                     f"{dev.max_mem_alloc_size / 2**30:.1f} GiB per buffer; accel {accel}, leaf size {leaf_size}")
+                emit()
+                emit(header)
+                emit("|" + "---|" * (header.count("|") - 1))
+                printed_device = True
+            t = renderer.timings
+            per_tri = renderer.device_bytes / len(mesh.faces)
+            for w, h in sizes:
+                camera = Camera((0.0, 1.9, 2.3), (0.0, 0.0, 0.0), fov=50, width=w, height=h)
+                frames = []
+                for i in range(1 + repeat):
+                    begin = time.perf_counter()
+                    frame = renderer.render(camera)
+                    wall = 1e3 * (time.perf_counter() - begin)
+                    if i:
+                        frames.append({**{k: frame.timings[k] for k in ("ray generation", "pixel colour",
+                                                                          "read back")}, "wall": wall})
+                med = {k: statistics.median(f[k] for f in frames) for k in frames[0]}
+                row = (f"| {len(mesh.faces):,} | {builder} | {mesh_ms / 1e3:.1f} s | {t['initialisation'] / 1e3:.1f} s "
+                       f"| {t['acceleration build'] / 1e3:.1f} s | {t['copy to device'] / 1e3:.1f} s "
+                       f"| {renderer.device_bytes / 2**20:,.0f} | {per_tri:.0f} | {2**30 / per_tri / 1e6:.1f}M "
+                       f"| {_peak_rss_gib():.1f} | {w}x{h} | {frame.tiles} | {med['ray generation']:.1f} ms "
+                       f"| {med['pixel colour']:.1f} ms | {med['read back']:.1f} ms | {med['wall']:.1f} ms |")
+                rows.append(row)
+                emit(row)
+            del renderer, scene, mesh
+            gc.collect()
+    return rows
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(prog="python -m clrt.bench.scale", description=__doc__.split("\n\n")[0])
+    p.add_argument("--triangles", type=lambda s: [_count(x) for x in s.split(",")], default=[10**6, 2 * 10**6],
+                   help="comma-separated mesh sizes, e.g. 1M,2M,10M (default 1M,2M)")
+    p.add_argument("--builder", type=lambda s: s.split(","), default=["paper", "sah"],
+                   help="comma-separated builders (default paper,sah)")
+    p.add_argument("--accel", default="box", choices=("none", "box", "sphere", "ellipse"))
+    p.add_argument("--leaf-size", type=int, default=4)
+    p.add_argument("--size", type=_size, action="append", help="image size WxH, repeatable (default 640x480)")
+    p.add_argument("--repeat", type=int, default=3, help="frames timed after one warm-up (default 3)")
+    p.add_argument("--device", help="'gpu', 'cpu' or P:D (default: clrt's choice)")
+    p.add_argument("--out", help="also append the table to this file")
+    args = p.parse_args(argv)
+    for b in args.builder:
+        if b not in ("paper", "sah"):
+            p.error(f"unknown builder {b!r}")
+    outs = [sys.stdout]
+    try:
+        if args.out:
+            outs.append(open(args.out, "a"))
+        run(args.triangles, args.builder, args.size or [(640, 480)], args.accel, args.device, args.repeat,
+            args.leaf_size, outs)
+    except ClrtError as exc:
+        print(f"clrt: {exc}", file=sys.stderr)
+        return exc.exit_code
+    finally:
+        for f in outs[1:]:
+            f.close()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
