@@ -167,12 +167,22 @@ class Renderer:
                 "rays": cl.Buffer(self.context, mf.READ_WRITE, pixels * layouts.RAY.itemsize),
                 "hits": cl.Buffer(self.context, mf.READ_WRITE, pixels * layouts.HIT.itemsize),
                 "linear": cl.Buffer(self.context, mf.READ_WRITE, pixels * 16),
-                "srgb8": cl.Buffer(self.context, mf.WRITE_ONLY, pixels * 4),
+                "srgb8": cl.Buffer(self.context, mf.WRITE_ONLY, pixels * 3),
+                # Page-locked host memory: the device writes the 8-bit image there
+                # by DMA, several times faster than into ordinary (pageable) memory.
+                "staging": cl.Buffer(self.context, mf.READ_WRITE | mf.ALLOC_HOST_PTR, pixels * 3),
             }
+            self._staging, _ = cl.enqueue_map_buffer(
+                self.queue, self._frame_buffers["staging"], cl.map_flags.READ | cl.map_flags.WRITE,
+                0, (pixels, 3), np.uint8)
             self._frame_pixels = pixels
         return self._frame_buffers
 
     def _release_frame_buffers(self) -> None:
+        staging = getattr(self, "_staging", None)
+        if staging is not None:
+            staging.base.release(self.queue)
+            self._staging = None
         for b in self._frame_buffers.values():
             b.release()
         self._frame_buffers, self._frame_pixels = {}, -1
@@ -292,7 +302,7 @@ class Renderer:
             else:
                 enc = self._launch("encode_srgb8", q, (count,), None, buf["linear"], buf["srgb8"],
                                    np.uint32(count))
-                out = np.empty((count, 4), np.uint8)
+                out = self._staging[:count]
                 cl.enqueue_copy(q, out, buf["srgb8"], wait_for=[enc])
             job.image[rows] = out[:, :3]
             if job.prim is not None:
@@ -305,7 +315,7 @@ class Renderer:
 MAX_BOUNCES = 16   # the stack bound in whitted.cl
 
 # Device bytes per pixel of a tile: its ray, hit record, linear and sRGB colour.
-FRAME_BYTES_PER_PIXEL = layouts.RAY.itemsize + layouts.HIT.itemsize + 16 + 4
+FRAME_BYTES_PER_PIXEL = layouts.RAY.itemsize + layouts.HIT.itemsize + 16 + 3
 MAX_TILE_PIXELS = 1 << 23   # 8M pixels (a 4K frame), 544 MiB of tile buffers
 
 # OpenCL status codes that mean "not enough memory" (on the device or the host).

@@ -21,17 +21,9 @@ import time
 
 import numpy as np
 
-from clrt.errors import ClrtError
+from clrt.bench.common import parse_size, exit_code
 
 FRAME_STAGES = ("ray generation", "pixel colour", "read back")
-
-
-def _size(text: str) -> tuple[int, int]:
-    try:
-        w, h = (int(x) for x in text.lower().split("x"))
-        return w, h
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected WxH, got {text!r}") from None
 
 
 def run(mesh_path, sizes, variants, device=None, repeat=5, warmup=1, leaf_size=4, out=sys.stdout):
@@ -88,7 +80,7 @@ def run(mesh_path, sizes, variants, device=None, repeat=5, warmup=1, leaf_size=4
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(prog="python -m clrt.bench.frame", description=__doc__.split("\n")[0])
     p.add_argument("mesh", nargs="?", help="mesh file (default: the built-in scene)")
-    p.add_argument("--size", type=_size, action="append", help="WxH, repeatable (default 200x200, 1920x1080)")
+    p.add_argument("--size", type=parse_size, action="append", help="WxH, repeatable (default 200x200, 1920x1080)")
     p.add_argument("--accel", action="append", choices=("none", "box", "sphere", "ellipse"),
                    help="repeatable (default: box)")
     p.add_argument("--builder", action="append", choices=("paper", "sah"), help="repeatable (default: sah)")
@@ -100,13 +92,8 @@ def main(argv=None) -> int:
     accels, builders = args.accel or ["box"], args.builder or ["sah"]
     variants = [("none", "-")] if "none" in accels else []
     variants += [v for v in itertools.product([a for a in accels if a != "none"], builders)]
-    try:
-        run(args.mesh, args.size or [(200, 200), (1920, 1080)], variants, args.device,
-            args.repeat, args.warmup, args.leaf_size)
-    except ClrtError as exc:
-        print(f"clrt: {exc}", file=sys.stderr)
-        return exc.exit_code
-    return 0
+    return exit_code(run, args.mesh, args.size or [(200, 200), (1920, 1080)], variants, args.device,
+                     args.repeat, args.warmup, args.leaf_size)
 
 
 if __name__ == "__main__":

@@ -31,7 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
-from clrt.errors import ClrtError
+from clrt.bench.common import exit_code
 
 QUERIES = ("first", "any", "all")
 
@@ -167,13 +167,8 @@ def main(argv=None) -> int:
     args = p.parse_args(argv)
     if args.rays < 1 or args.reference_rays < 1 or args.repeat < 1:
         p.error("--rays, --reference-rays and --repeat must be positive")
-    try:
-        run(args.mesh, args.rays, args.reference_rays, args.device, args.accel, args.builder, args.repeat,
-            args.seed, tuple(args.only or ("clrt", "trimesh", "embree")))
-    except ClrtError as exc:
-        print(f"clrt: {exc}", file=sys.stderr)
-        return exc.exit_code
-    return 0
+    return exit_code(run, args.mesh, args.rays, args.reference_rays, args.device, args.accel, args.builder,
+                     args.repeat, args.seed, tuple(args.only or ("clrt", "trimesh", "embree")))
 
 
 if __name__ == "__main__":

@@ -24,6 +24,7 @@ import statistics
 import sys
 import time
 
+from clrt.bench.common import parse_size
 from clrt.errors import ClrtError
 
 
@@ -34,14 +35,6 @@ def _count(text: str) -> int:
         return int(float(text.rstrip("KMG")) * scale)
     except ValueError:
         raise argparse.ArgumentTypeError(f"expected a count such as 500K or 10M, got {text!r}") from None
-
-
-def _size(text: str) -> tuple[int, int]:
-    try:
-        w, h = (int(x) for x in text.lower().split("x"))
-        return w, h
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected WxH, got {text!r}") from None
 
 
 def _peak_rss_gib() -> float:
@@ -111,7 +104,7 @@ def main(argv=None) -> int:
                    help="comma-separated builders (default paper,sah)")
     p.add_argument("--accel", default="box", choices=("none", "box", "sphere", "ellipse"))
     p.add_argument("--leaf-size", type=int, default=4)
-    p.add_argument("--size", type=_size, action="append", help="image size WxH, repeatable (default 640x480)")
+    p.add_argument("--size", type=parse_size, action="append", help="image size WxH, repeatable (default 640x480)")
     p.add_argument("--repeat", type=int, default=3, help="frames timed after one warm-up (default 3)")
     p.add_argument("--device", help="'gpu', 'cpu' or P:D (default: clrt's choice)")
     p.add_argument("--out", help="also append the table to this file")

@@ -22,6 +22,7 @@ import numpy as np
 import pyopencl as cl
 
 from clrt.device import layouts
+from clrt.bench.common import exit_code
 from clrt.errors import ClrtError
 
 # mesh file, eye, target (from the speed issue)
@@ -94,13 +95,8 @@ def main(argv=None) -> int:
     p.add_argument("--warmup", type=int, default=3)
     args = p.parse_args(argv)
     variants = [(a, b) for a in (args.accel or ["box"]) for b in (args.builder or ["sah"])]
-    try:
-        run(args.mesh_dir, args.case or sorted(CASES), variants, args.device, repeat=args.repeat,
-            warmup=args.warmup, leaf_size=args.leaf_size)
-    except ClrtError as exc:
-        print(f"clrt: {exc}", file=sys.stderr)
-        return exc.exit_code
-    return 0
+    return exit_code(run, args.mesh_dir, args.case or sorted(CASES), variants, args.device,
+                     repeat=args.repeat, warmup=args.warmup, leaf_size=args.leaf_size)
 
 
 if __name__ == "__main__":

@@ -52,13 +52,14 @@ inline float srgb_encode(float c)
     return c <= 0.0031308f ? 12.92f * c : 1.055f * pow(c, 1.0f / 2.4f) - 0.055f;
 }
 
-__kernel void encode_srgb8(__global const float4* image, __global uchar4* out, const uint num_pixels)
+// Packed RGB, 3 bytes a pixel: the host array's own layout, so no repacking there.
+__kernel void encode_srgb8(__global const float4* image, __global uchar* out, const uint num_pixels)
 {
     const uint i = get_global_id(0);
     if (i >= num_pixels)
         return;
     const float4 c = image[i];
-    out[i] = (uchar4)(convert_uchar_sat_rte(255.0f * srgb_encode(c.x)),
-                      convert_uchar_sat_rte(255.0f * srgb_encode(c.y)),
-                      convert_uchar_sat_rte(255.0f * srgb_encode(c.z)), 255);
+    out[3 * i] = convert_uchar_sat_rte(255.0f * srgb_encode(c.x));
+    out[3 * i + 1] = convert_uchar_sat_rte(255.0f * srgb_encode(c.y));
+    out[3 * i + 2] = convert_uchar_sat_rte(255.0f * srgb_encode(c.z));
 }
