@@ -57,7 +57,7 @@ from pathlib import Path
 
 import numpy as np
 
-from clrt.bench.frame import _size
+from clrt.bench.common import parse_size
 from clrt.bench.paper_meshes import MeshSuite, atomic_write, write_mesh
 from clrt.errors import ClrtError, DeviceError, InputError
 
@@ -286,7 +286,7 @@ def add_bench_parser(subparsers) -> argparse.ArgumentParser:
                    + ", or cpu / gpu / all (default all)")
     b.add_argument("--builder", choices=("paper", "sah", "both"), default="both",
                    help="BVH builder: the paper's, binned SAH, or both (default both)")
-    b.add_argument("--size", type=_size, default=(200, 200), help="WxH (default 200x200, the paper's)")
+    b.add_argument("--size", type=parse_size, default=(200, 200), help="WxH (default 200x200, the paper's)")
     b.add_argument("--repeat", type=_positive, default=3, help="timed frames, median reported (default 3)")
     b.add_argument("--warmup", type=_non_negative, default=1, help="untimed frames first (default 1)")
     b.add_argument("--leaf-size", type=_positive, default=4, help="most triangles per BVH leaf (default 4)")
