@@ -144,7 +144,7 @@ def _render(args) -> int:
                      if getattr(args, k) is not None}
         material = Material(color=args.color or base.color, smooth=not args.flat, **overrides)
         scene = scene_from_mesh(load_mesh(args.mesh), material)
-        scene.lights, scene.camera = [], None   # framed below, from the options
+        scene.lights = []   # default light placed below, from the final camera
     else:
         scene = default_scene()
     if args.background:
@@ -160,20 +160,25 @@ def _render(args) -> int:
     height = args.height if args.height is not None else (base.height if base else 480)
     fov = args.fov if args.fov is not None else (base.fov if base else 45.0)
     up = args.up or (base.up if base else (0.0, 1.0, 0.0))
-    if args.eye is None and args.target is None and base is not None:
-        eye, target = base.eye, base.target
-    else:
+    placed = base if base is not None and not scene.camera_framed else None   # by the user
+    if args.eye is None and args.target is None and placed is not None:
+        eye, target = placed.eye, placed.target
+    else:   # frame for the final size, fov and up
         framed = Camera.framing(bounds, width, height, fov, up=up)
-        target = args.target or (base.target if base else framed.target)
-        eye = args.eye or (base.eye if base else tuple(np.add(target, np.subtract(framed.eye, framed.target))))
+        target = args.target or (placed.target if placed else framed.target)
+        eye = args.eye or (placed.eye if placed else tuple(np.add(target, np.subtract(framed.eye, framed.target))))
     camera = Camera(eye, target, up, fov, width, height)
     if args.light:
         scene.lights = [Light(p) for p in args.light]
     elif not scene.lights:
         scene.lights = [default_light(bounds, camera)]
 
-    # Checked before the (possibly long) render; write_image checks again.
+    # Checked before the (possibly long) render; the writers check again.
     check_replace(out, args.force)
+    if args.aov:
+        from clrt.trace import aov_paths
+        for path in aov_paths(out, args.aov):
+            check_replace(path, args.force)
     # The image, its sRGB staging and PIL's copy (4 bytes a pixel) live on the host together.
     check_host_memory(camera.width * camera.height * 10, f"a {camera.width}x{camera.height} image")
     renderer = Renderer(scene, args.device, args.accel, args.builder, args.leaf_size)
@@ -220,7 +225,10 @@ def _info_mesh(args) -> int:
         print(f"accel none: brute force, {size:,} bytes on the device")
         return 0
     print(f"accel {args.accel}, builder {args.builder}, leaf size {args.leaf_size}:")
-    for key, value in order.bvh.stats().items():
+    stats = order.bvh.stats()
+    # What the device really holds: slot-ordered triangles, ids and the pair-node rows.
+    stats["device_bytes"] = order.tri_verts.nbytes + order.prim_ids.nbytes + order.nodes.nbytes
+    for key, value in stats.items():
         text = f"{value:,.3f}" if isinstance(value, float) else f"{value:,}"
         print(f"  {key:<22} {text}")
     return 0

@@ -23,6 +23,7 @@ import pyopencl as cl
 
 from clrt.device import layouts
 from clrt.device.context import create_context, device_label
+from clrt.device.context import format_bytes as _size
 from clrt.device.geometry import DeviceGeometry, order_triangles
 from clrt.device.program import build_program
 from clrt.errors import DeviceMemoryError, InputError, TooLargeError
@@ -361,13 +362,6 @@ def _error_name(exc: BaseException) -> str:
         return type(exc).__name__
 
 
-def _size(nbytes: float) -> str:
-    for unit, scale in (("GiB", 1 << 30), ("MiB", 1 << 20), ("KiB", 1 << 10)):
-        if nbytes >= scale:
-            return f"{nbytes / scale:.1f} {unit}"
-    return f"{int(nbytes)} B"
-
-
 def _check_fits(device, label: str, arrays: dict) -> None:
     """DeviceMemoryError, before any upload, if the scene cannot fit on ``device``."""
     total = sum(a.nbytes for a in arrays.values())
@@ -462,8 +456,10 @@ def render(source, camera: Camera | None = None, *, width: int | None = None,
     with ``linear=True``.  Without a camera the scene's own (or a framing of its
     bounds) is used; ``width``/``height`` override the camera's resolution."""
     scene = as_scene(source)
-    if camera is None:
-        camera = scene.camera or Camera.framing(scene.bounds)
+    if camera is None and (scene.camera is None or scene.camera_framed):
+        base = scene.camera or Camera.framing(scene.bounds)
+        camera = Camera.framing(scene.bounds, width or base.width, height or base.height, base.fov, up=base.up)
+    camera = camera or scene.camera
     if width is not None or height is not None:
         camera = Camera(camera.eye, camera.target, camera.up, camera.fov,
                         width or camera.width, height or camera.height)

@@ -279,6 +279,9 @@ class Accel:
         tri_verts = flatten_scene(Scene([SceneObject(self.mesh)], [])).tri_verts
         order = order_triangles(tri_verts, accel, builder, leaf_size)
         context, queue = create_context(device)
+        from clrt.render import _check_fits   # a clear DeviceMemoryError before any upload
+        _check_fits(queue.device, device_label(queue.device),
+                    {"triangles": order.tri_verts, "BVH nodes": order.nodes, "triangle ids": order.prim_ids})
         self._setup(self.mesh, order, context, queue, DeviceGeometry(context, order), chunk_rays)
 
     @classmethod
@@ -614,6 +617,16 @@ def aov_arrays(images: CameraImages, name: str) -> tuple[np.ndarray, np.ndarray]
     return flag, flag.astype(np.uint8) * 255
 
 
+def aov_paths(image_path, names) -> list[Path]:
+    """IMAGE.NAME.npy and IMAGE.NAME.png for each AOV name, beside ``image_path``."""
+    image_path = Path(image_path)
+    paths = []
+    for name in names:
+        base = f"{image_path.stem}.{name}"
+        paths += [image_path.with_name(base + ".npy"), image_path.with_name(base + ".png")]
+    return paths
+
+
 def write_aovs(source, camera, names, image_path, force: bool = False) -> list[Path]:
     """Write each AOV of ``camera`` as IMAGE.NAME.npy (the values) and
     IMAGE.NAME.png (a picture of them), next to ``image_path``.  ``source``: a
@@ -629,8 +642,7 @@ def write_aovs(source, camera, names, image_path, force: bool = False) -> list[P
     written = []
     for name in names:
         values, picture = aov_arrays(images, name)
-        base = image_path.with_name(f"{image_path.stem}.{name}")
-        npy, png = base.with_name(base.name + ".npy"), base.with_name(base.name + ".png")
+        npy, png = aov_paths(image_path, [name])
         write_array(values, npy, marked_by=png, force=force)
         write_image(picture, png, force=force)
         written += [npy, png]

@@ -439,7 +439,7 @@ def run_bench(args) -> int:
             _progress(f"[{done}/{total_runs}] {name} {run.variant} on {p.kind}: total {total:.1f} ms "
                       f"(build {times['build_ms']:.1f}, upload {times['upload_ms']:.1f}, "
                       f"frame {times['frame_wall_ms']:.2f}, kernel {times['kernel_ms']:.3f})"
-                      + (f", paper {paper:,} ms: {paper / total:,.0f}x faster" if paper else ""))
+                      + (f", paper {paper:,} ms: {_x(paper / total)} its speed" if paper else ""))
         report.write()
 
     if not args.no_detail:

@@ -90,7 +90,7 @@ def main(argv=None) -> int:
     p.add_argument("--accel", action="append", choices=("none", "box", "sphere", "ellipse"))
     p.add_argument("--builder", action="append", choices=("paper", "sah"))
     p.add_argument("--leaf-size", type=int, default=4)
-    p.add_argument("--device", default="gpu")
+    p.add_argument("--device", help="'gpu', 'cpu' or P:D (default: clrt's choice, the first GPU if any)")
     p.add_argument("--repeat", type=int, default=20)
     p.add_argument("--warmup", type=int, default=3)
     args = p.parse_args(argv)

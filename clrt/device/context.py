@@ -347,11 +347,12 @@ def _short_version(version: str) -> str:
     return " ".join(version.split()[:2])
 
 
-def _bytes(n: int) -> str:
+def format_bytes(n: float) -> str:
+    """'1.5 GiB', '12.0 MiB', '512 B'."""
     for unit, size in (("GiB", 1 << 30), ("MiB", 1 << 20), ("KiB", 1 << 10)):
         if n >= size:
             return f"{n / size:.1f} {unit}"
-    return f"{n} B"
+    return f"{int(n)} B"
 
 
 def device_label(device) -> str:
@@ -391,8 +392,8 @@ def describe_devices(selected=None) -> str:
             lines.append(f"  {mark} {info.index}  {info.name}")
             lines.append(
                 f"        {info.type}, {info.compute_units} compute units,"
-                f" {_bytes(info.global_mem_bytes)} global, {_bytes(info.max_alloc_bytes)} max alloc,"
-                f" {_bytes(info.local_mem_bytes)} local, {_short_version(info.opencl_version)},"
+                f" {format_bytes(info.global_mem_bytes)} global, {format_bytes(info.max_alloc_bytes)} max alloc,"
+                f" {format_bytes(info.local_mem_bytes)} local, {_short_version(info.opencl_version)},"
                 f" driver {info.driver_version}")
     if chosen is not None:
         lines.append(f"selected: {chosen.index} {chosen.name} ({reason})")

@@ -11,13 +11,6 @@
 #define SHADING_ARGS tri_info, vertex_normals, materials, lights, num_lights, \
     ambient_light, background, ray_epsilon
 
-// Geometric normal, facing the incoming ray (surfaces are two-sided).
-inline float3 facing_normal(__global const TriangleVerts* tri, float3 dir)
-{
-    const float3 n = normalize(cross(tri->v1.xyz - tri->v0.xyz, tri->v2.xyz - tri->v0.xyz));
-    return dot(n, dir) > 0.0f ? -n : n;
-}
-
 // Shading normal: interpolated vertex normals for smooth materials, turned
 // to the same side as the geometric normal.
 inline float3 shading_normal(__global const TriangleInfo* info, __global const float4* vertex_normals,

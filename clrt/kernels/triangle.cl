@@ -86,11 +86,4 @@ inline bool intersect_triangle_culled(const ShearedRay* r, __global const Triang
     return true;
 }
 
-// Double-sided: both faces count as front faces.
-inline bool intersect_triangle(const ShearedRay* r, __global const TriangleVerts* tri,
-                               float tmin, float tmax, float* t_out, float* u_out, float* v_out)
-{
-    return intersect_triangle_culled(r, tri, tmin, tmax, CULL_NONE, t_out, u_out, v_out);
-}
-
 #endif

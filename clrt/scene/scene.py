@@ -44,7 +44,9 @@ class Material:
     ior: float = 1.5
 
     def __post_init__(self):
-        _vec3(self.color, "material colour")
+        color = _vec3(self.color, "material colour")
+        if not ((color >= 0) & (color <= 1)).all():
+            raise InputError(f"material colour must be three numbers in 0..1, got {self.color!r}")
         for name in ("ambient", "diffuse", "specular", "shininess", "reflectivity", "transparency"):
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
@@ -68,6 +70,14 @@ class Light:
         _vec3(self.color, "light colour")
 
 
+def _check_image(width, height, fov) -> None:
+    for name, value in (("width", width), ("height", height)):
+        if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or not 0 < value <= 65536:
+            raise InputError(f"{name} must be an integer in 1..65536, got {value!r}")
+    if not (isinstance(fov, (int, float)) and 0.0 < fov < 180.0):
+        raise InputError(f"fov must be between 0 and 180 degrees (exclusive), got {fov!r}")
+
+
 @dataclass(frozen=True)
 class Camera:
     """Pinhole camera: ``fov`` is the vertical field of view in degrees."""
@@ -81,12 +91,7 @@ class Camera:
 
     def __post_init__(self):
         eye, target, up = (_vec3(self.eye, "eye"), _vec3(self.target, "target"), _vec3(self.up, "up"))
-        for name in ("width", "height"):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or not 0 < value <= 65536:
-                raise InputError(f"{name} must be an integer in 1..65536, got {value!r}")
-        if not (isinstance(self.fov, (int, float)) and 0.0 < self.fov < 180.0):
-            raise InputError(f"fov must be between 0 and 180 degrees (exclusive), got {self.fov!r}")
+        _check_image(self.width, self.height, self.fov)
         forward = target - eye
         if not np.linalg.norm(forward) > 0:
             raise InputError("eye and target must differ")
@@ -111,6 +116,7 @@ class Camera:
                 direction=(0.35, 0.3, 1.0), up=(0.0, 1.0, 0.0)) -> "Camera":
         """A camera looking at the centre of ``bounds`` (2x3) from ``direction``,
         far enough that the bounding sphere fits in the narrower field of view."""
+        _check_image(width, height, fov)
         bounds = np.asarray(bounds, dtype=np.float64)
         centre = bounds.mean(axis=0)
         radius = max(0.5 * float(np.linalg.norm(bounds[1] - bounds[0])), 1e-6 * (1 + np.abs(centre).max()))
@@ -136,6 +142,7 @@ class Scene:
     background: tuple = (0.0, 0.0, 0.0)
     ambient_light: tuple = (1.0, 1.0, 1.0)
     camera: Camera | None = None   # suggested view; renderers may override
+    camera_framed: bool = False    # the camera was framed from the bounds, not placed by the user
     max_depth: int = 5             # reflection / refraction bounces after the camera ray
     samples: int = 1               # anti-aliasing: samples x samples rays per pixel
 
@@ -162,7 +169,7 @@ def scene_from_mesh(mesh: Mesh, material: Material | None = None, lights=None,
                     background=(0.0, 0.0, 0.0)) -> Scene:
     """The paper's scene: one mesh, one material, point lights (default: one above the eye)."""
     scene = Scene([SceneObject(mesh, material or Material())], list(lights or []), background)
-    scene.camera = Camera.framing(scene.bounds)
+    scene.camera, scene.camera_framed = Camera.framing(scene.bounds), True
     if not scene.lights:
         scene.lights = [default_light(scene.bounds, scene.camera)]
     return scene

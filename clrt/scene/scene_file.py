@@ -410,6 +410,7 @@ class _Loader:
         scene = Scene(objects, lights, background=render["background"], ambient_light=render["ambient_light"],
                       max_depth=render["max_depth"], samples=render["samples"])
         scene.camera = self.camera(data.get("camera", {}), scene)
+        scene.camera_framed = "eye" not in data.get("camera", {})
         if "lights" not in data:   # as for a single mesh: one light above the eye
             scene.lights = [default_light(scene.bounds, scene.camera)]
         return scene
