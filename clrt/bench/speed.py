@@ -22,7 +22,7 @@ import numpy as np
 import pyopencl as cl
 
 from clrt.device import layouts
-from clrt.bench.common import exit_code
+from clrt.bench.common import exit_code, parse_size
 from clrt.errors import ClrtError
 
 # mesh file, eye, target (from the speed issue)
@@ -46,12 +46,13 @@ def _time(queue, launch, repeat: int, warmup: int) -> tuple[float, float]:
 
 
 def run(mesh_dir: Path, cases, variants, device=None, size=(1920, 1080), repeat=20, warmup=3,
-        leaf_size=4, out=sys.stdout):
+        leaf_size=4, tile=None, out=sys.stdout):
     from clrt.scene.load import load_mesh
     from clrt.scene.scene import Camera
     from clrt.trace import Accel
 
     w, h = size
+    launch = {} if tile is None else {"tile": None if tile == (0, 0) else tile}
     print("| mesh | triangles | accel | builder | closest: kernel ms | Mrays/s | wall ms | Mrays/s "
           "| hits | sum of t | any-hit: kernel ms | Mrays/s | any / closest |", file=out)
     print("|---|---|---|---|---|---|---|---|---|---|---|---|---|", file=out)
@@ -63,8 +64,8 @@ def run(mesh_dir: Path, cases, variants, device=None, size=(1920, 1080), repeat=
             accel = Accel(mesh, accel_name, builder, leaf_size, device)
             hit_buf = cl.Buffer(accel.context, cl.mem_flags.READ_WRITE, w * h * layouts.HIT.itemsize)
             occ_buf = cl.Buffer(accel.context, cl.mem_flags.READ_WRITE, w * h)
-            closest = _time(accel.queue, lambda: accel.launch_camera(camera, hit_buf), repeat, warmup)
-            anyhit = _time(accel.queue, lambda: accel.launch_camera(camera, occ_buf, occlusion=True),
+            closest = _time(accel.queue, lambda: accel.launch_camera(camera, hit_buf, **launch), repeat, warmup)
+            anyhit = _time(accel.queue, lambda: accel.launch_camera(camera, occ_buf, occlusion=True, **launch),
                            repeat, warmup)
             hits = np.empty(w * h, layouts.HIT)
             cl.enqueue_copy(accel.queue, hits, hit_buf)
@@ -79,7 +80,8 @@ def run(mesh_dir: Path, cases, variants, device=None, size=(1920, 1080), repeat=
                   f"| {int(hit.sum()):,} | {hits['t'][hit].astype(np.float64).sum():.3f} "
                   f"| {anyhit[0]:.3f} | {mrays(anyhit[0]):,.0f} | {closest[0] / anyhit[0]:.2f}x |",
                   file=out, flush=True)
-    print(f"\ndevice: {accel.device}; {w}x{h}, warm-up {warmup}, median of {repeat}", file=out)
+    print(f"\ndevice: {accel.device}; {w}x{h}, work-group {'8x8' if tile is None else ('chosen by the driver' if tile == (0, 0) else tile)}, "
+          f"warm-up {warmup}, median of {repeat}", file=out)
 
 
 def main(argv=None) -> int:
@@ -90,13 +92,15 @@ def main(argv=None) -> int:
     p.add_argument("--accel", action="append", choices=("none", "box", "sphere", "ellipse"))
     p.add_argument("--builder", action="append", choices=("paper", "sah"))
     p.add_argument("--leaf-size", type=int, default=4)
+    p.add_argument("--tile", type=parse_size,
+                   help="work-group as a WxH block of pixels (default 8x8; 0x0: the driver's choice)")
     p.add_argument("--device", help="'gpu', 'cpu' or P:D (default: clrt's choice, the first GPU if any)")
     p.add_argument("--repeat", type=int, default=20)
     p.add_argument("--warmup", type=int, default=3)
     args = p.parse_args(argv)
     variants = [(a, b) for a in (args.accel or ["box"]) for b in (args.builder or ["sah"])]
     return exit_code(run, args.mesh_dir, args.case or sorted(CASES), variants, args.device,
-                     repeat=args.repeat, warmup=args.warmup, leaf_size=args.leaf_size)
+                     repeat=args.repeat, warmup=args.warmup, leaf_size=args.leaf_size, tile=args.tile)
 
 
 if __name__ == "__main__":
