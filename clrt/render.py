@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
 import pyopencl as cl
@@ -26,9 +25,9 @@ from clrt.device.context import create_context, device_label
 from clrt.device.context import format_bytes as _size
 from clrt.device.geometry import DeviceGeometry, order_triangles
 from clrt.device.program import build_program
-from clrt.errors import DeviceMemoryError, InputError, TooLargeError
+from clrt.errors import DeviceMemoryError, TooLargeError
 from clrt.scene.mesh import Mesh
-from clrt.scene.scene import Camera, Scene, scene_from_mesh
+from clrt.scene.scene import Camera, Scene, check_int, scene_from_mesh
 
 
 @dataclass
@@ -227,8 +226,8 @@ class Renderer:
         camera = camera or self.scene.camera or Camera.framing(self.arrays.bounds)
         samples = self.scene.samples if samples is None else samples
         max_depth = self.scene.max_depth if max_depth is None else max_depth
-        _check_int("samples", samples, 1, 16)
-        _check_int("max_depth", max_depth, 0, MAX_BOUNCES)
+        check_int("samples", samples, 1, 16)
+        check_int("max_depth", max_depth, 0, MAX_BOUNCES)
         w, h = camera.width, camera.height
         pixels = w * h
         check_host_memory(pixels * ((12 if linear else 3) + (8 if hits else 0)), f"a {w}x{h} image")
@@ -410,11 +409,6 @@ def camera_args(camera: Camera) -> tuple:
             np.float32(scale_y), np.uint32(camera.width), np.uint32(camera.height))
 
 
-def _check_int(name: str, value, lo: int, hi: int) -> None:
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or not lo <= value <= hi:
-        raise InputError(f"{name} must be an integer in {lo}..{hi}, got {value!r}")
-
-
 class _stage:
     """Context manager adding the wall time of a block to ``timings[name]`` in ms."""
 
@@ -433,20 +427,12 @@ def _event_ms(event: cl.Event) -> float:
 
 
 def as_scene(source) -> Scene:
-    """A Scene from a Scene, a Mesh, a file path, a trimesh object or (vertices, faces)."""
+    """A Scene from a Scene, or from anything :func:`clrt.trace.as_mesh` takes (a Mesh,
+    a file path, a trimesh object, (vertices, faces)) with the default framing and light."""
     if isinstance(source, Scene):
         return source
-    if isinstance(source, Mesh):
-        return scene_from_mesh(source)
-    if isinstance(source, (str, Path)):
-        from clrt.scene.load import load_mesh
-        return scene_from_mesh(load_mesh(source))
-    if hasattr(source, "vertices") and hasattr(source, "faces"):
-        return scene_from_mesh(Mesh.from_arrays(source.vertices, source.faces))
-    if isinstance(source, tuple) and len(source) == 2:
-        return scene_from_mesh(Mesh.from_arrays(*source))
-    raise InputError(f"cannot render a {type(source).__name__}: give a Scene, a Mesh, a path "
-                     "or (vertices, faces)")
+    from clrt.trace import as_mesh
+    return scene_from_mesh(as_mesh(source))
 
 
 def render(source, camera: Camera | None = None, *, width: int | None = None,

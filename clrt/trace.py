@@ -198,9 +198,9 @@ class PinholeRays:
     """
 
     def __init__(self, K, pose, width: int, height: int, pixel_center: float = 0.0):
-        for name, value in (("width", width), ("height", height)):
-            if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or not 0 < value <= 65536:
-                raise InputError(f"{name} must be an integer in 1..65536, got {value!r}")
+        from clrt.scene.scene import check_int
+        check_int("width", width, 1, 65536)
+        check_int("height", height, 1, 65536)
         K = _real_array(K, "K").astype(np.float64)
         if K.shape != (3, 3) or not np.isfinite(K).all():
             raise InputError(f"K must be a finite 3x3 matrix, got shape {K.shape}")

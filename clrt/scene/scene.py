@@ -70,10 +70,15 @@ class Light:
         _vec3(self.color, "light colour")
 
 
+def check_int(name: str, value, lo: int, hi: int) -> None:
+    """InputError unless ``value`` is an integer (not a bool) in lo..hi."""
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or not lo <= value <= hi:
+        raise InputError(f"{name} must be an integer in {lo}..{hi}, got {value!r}")
+
+
 def _check_image(width, height, fov) -> None:
-    for name, value in (("width", width), ("height", height)):
-        if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or not 0 < value <= 65536:
-            raise InputError(f"{name} must be an integer in 1..65536, got {value!r}")
+    check_int("width", width, 1, 65536)
+    check_int("height", height, 1, 65536)
     if not (isinstance(fov, (int, float)) and 0.0 < fov < 180.0):
         raise InputError(f"fov must be between 0 and 180 degrees (exclusive), got {fov!r}")
 
