@@ -14,6 +14,7 @@ so frames after the first reuse the uploaded scene and the built program.
 
 from __future__ import annotations
 
+import sys
 import time
 from dataclasses import dataclass, field
 
@@ -105,8 +106,9 @@ class Renderer:
     (brute force); ``builder``: "sah" (default) or "paper"; ``leaf_size``: the
     most triangles in a BVH leaf.  Every choice renders the same image.
 
-    A frame is rendered in tiles, runs of pixels in row-major order, each with
-    its own launches: a tile is sized so that one launch takes about
+    A frame is rendered in tiles -- bands of whole rows, or pieces of a row when
+    memory is very short -- each with its own launches, which run the pixels in
+    8 x 8 blocks (see ``_launch_shape``).  A tile is sized so that one launch takes about
     ``launch_ms`` (display watchdogs kill longer kernels; Ctrl-C takes effect
     between launches) and its buffers fit the device.  When the device runs out
     of memory the tiles shrink and the tile is retried; the image is the same
@@ -130,10 +132,6 @@ class Renderer:
         with _stage(self.timings, "copy to device"):
             self.context, self.queue = create_context(device)
             self.device = device_label(self.queue.device)
-            program = build_program(self.context, "render.cl", self.order.defines)
-            # Kernel objects are made once: each attribute lookup on a Program makes a new one.
-            self.kernels = {name: cl.Kernel(program, name)
-                            for name in ("generate_rays", "shade_pixels", "encode_srgb8")}
             mf = cl.mem_flags
             a = self.arrays
             o = self.order
@@ -142,21 +140,24 @@ class Renderer:
                             "materials": a.materials, "lights": a.lights}
             self.device_bytes = sum(x.nbytes for x in scene_arrays.values())
             _check_fits(self.queue.device, self.device, scene_arrays)
-
-            def upload(array):
-                return cl.Buffer(self.context, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=array)
-
             try:
-                self.geometry = DeviceGeometry(self.context, self.order)
-                self.buffers = {name: upload(getattr(a, name)) for name in
-                                ("vertex_normals", "materials", "lights")}
-                self.buffers["tri_info"] = upload(tri_info)
+                # Buffers larger than one allocation are uploaded in parts (split.cl).
+                self.geometry = DeviceGeometry(self.context, self.order,
+                                               {"tri_info": tri_info, "vertex_normals": a.vertex_normals})
+                self.buffers = {name: cl.Buffer(self.context, mf.READ_ONLY | mf.COPY_HOST_PTR,
+                                                hostbuf=getattr(a, name)) for name in ("materials", "lights")}
             except (cl.Error, MemoryError) as exc:
                 if not _out_of_memory(exc):
                     raise
                 raise self._memory_error(exc, 0) from None
+            program = build_program(self.context, "render.cl", {**self.order.defines, **self.geometry.defines})
+            # Kernel objects are made once: each attribute lookup on a Program makes a new one.
+            self.kernels = {name: cl.Kernel(program, name)
+                            for name in ("generate_rays", "shade_pixels", "encode_srgb8")}
         self._frame_buffers: dict[str, cl.Buffer] = {}
         self._frame_pixels = -1
+        self._image_pool: list[np.ndarray] = []   # see _image_array
+        self._block = None                        # see _launch_shape
 
     def _buffers_for(self, pixels: int) -> dict:
         """Per-tile buffers for up to ``pixels`` pixels, reallocated only when that changes."""
@@ -230,26 +231,32 @@ class Renderer:
         check_int("max_depth", max_depth, 0, MAX_BOUNCES)
         w, h = camera.width, camera.height
         pixels = w * h
-        check_host_memory(pixels * ((12 if linear else 3) + (8 if hits else 0)), f"a {w}x{h} image")
+        host_bytes = pixels * ((12 if linear else 3) + (8 if hits else 0))
+        if host_bytes > HOST_CHECK_BYTES:   # reading /proc/meminfo costs more than a small frame
+            check_host_memory(host_bytes, f"a {w}x{h} image")
         timings = dict(self.timings)
         timings.update({"ray generation": 0.0, "pixel colour": 0.0, "read back": 0.0})
-        image = np.empty((pixels, 3), np.float32 if linear else np.uint8)
-        prim = np.empty(pixels, np.int32) if hits else None
-        t = np.empty(pixels, np.float32) if hits else None
-        shading_args = (*self.geometry.args, self.buffers["tri_info"], self.buffers["vertex_normals"],
-                        self.buffers["materials"], self.buffers["lights"], np.uint32(len(self.scene.lights)),
+        if linear:
+            image, pinned = np.empty((h, w, 3), np.float32), False
+        else:
+            image, pinned = self._image_array(pixels)
+            image = image.reshape(h, w, 3)
+        prim = np.empty((h, w), np.int32) if hits else None
+        t = np.empty((h, w), np.float32) if hits else None
+        shading_args = (*self.geometry.args, *self.geometry.buffers["tri_info"],
+                        *self.geometry.buffers["vertex_normals"], self.buffers["materials"], self.buffers["lights"], np.uint32(len(self.scene.lights)),
                         _vec4(self.scene.ambient_light), _vec4(self.scene.background),
                         np.float32(ray_epsilon(self.arrays.bounds, camera)))
-        job = _Job(camera, samples, max_depth, seed, linear, shading_args, image, prim, t, timings)
+        job = _Job(camera, samples, max_depth, seed, linear, shading_args, image, pinned, prim, t, timings)
         capacity = self.tile_capacity(pixels)
-        tile = min(capacity, max(self.first_launch_pixels, 1))
-        first = launches = 0
+        budget = min(capacity, max(self.first_launch_pixels, 1))   # pixels of the next tile
+        x = y = launches = 0
         ms_per_pixel = 0.0   # the most expensive tile so far: rows differ in cost (sky vs. mesh)
         try:
-            while first < pixels:
-                count = min(tile, pixels - first)
+            while y < h:
+                tw, th = _tile_shape(x, y, w, h, budget)
                 try:
-                    slowest_ms = self._render_tile(job, first, count, capacity)
+                    slowest_ms = self._render_tile(job, x, y, tw, th, capacity)
                 except (cl.Error, MemoryError) as exc:
                     if not _out_of_memory(exc):
                         raise
@@ -257,59 +264,117 @@ class Renderer:
                     self._release_frame_buffers()
                     if capacity <= self.min_tile_pixels:
                         raise self._memory_error(exc, capacity) from None
-                    capacity = tile = max(capacity // 4, self.min_tile_pixels)
+                    capacity = budget = max(capacity // 4, self.min_tile_pixels)
                     continue
-                first += count
+                x += tw
+                if x == w:
+                    x, y = 0, y + th
                 launches += 1
                 # Size the next tile for launch_ms at the highest cost per pixel seen,
                 # growing at most twofold: the next rows may cost more than these.
+                count = tw * th
                 ms_per_pixel = max(ms_per_pixel, slowest_ms / count)
                 fitting = self.launch_ms / ms_per_pixel if ms_per_pixel > 0 else capacity
-                tile = int(min(max(fitting, 1), 2 * count, capacity))
+                budget = int(min(max(fitting, 1), 2 * max(count, budget), capacity))
         except KeyboardInterrupt:
             self.queue.finish()   # no kernel may still write into buffers we drop
             raise
-        if hits:
-            prim, t = prim.reshape(h, w), t.reshape(h, w)
-        return Frame(image.reshape(h, w, 3), prim, t, timings, self.device, len(self.arrays.tri_verts),
-                     tiles=launches)
+        return Frame(image, prim, t, timings, self.device, len(self.arrays.tri_verts), tiles=launches)
 
-    def _render_tile(self, job: "_Job", first: int, count: int, capacity: int) -> float:
-        """Render pixels first .. first + count - 1 into the job's host arrays; return
-        the kernel time of the slowest launch (ms).  Each launch is waited for, so
-        that Ctrl-C (raised by Python between calls) stops within one launch."""
+    def _image_array(self, pixels: int) -> tuple[np.ndarray, bool]:
+        """(pixels * 3,) uint8 for a frame's image and whether it is page-locked: in page-locked host memory when
+        possible: the device writes the image there directly by DMA, several
+        times faster than into ordinary (pageable) memory, and no host copy
+        follows.  The arrays are pooled: one is reused once nothing outside the
+        pool refers to it any more (every view of it holds a reference, which
+        ``sys.getrefcount`` sees), so an image handed out is never overwritten.
+        With all pooled arrays still in use, ordinary memory is used (through
+        the staging buffer)."""
+        pool = self._image_pool
+        for k in range(len(pool)):
+            if sys.getrefcount(pool[k]) <= 2 and len(pool[k]) >= 3 * pixels:   # the pool's and the argument's
+                return pool[k][:3 * pixels], True
+        unused = [k for k in range(len(pool)) if sys.getrefcount(pool[k]) <= 2]
+        for k in reversed(unused):   # too small for this frame: make room
+            del pool[k]
+        if len(pool) >= IMAGE_POOL_SIZE:
+            return np.empty(3 * pixels, np.uint8), False
+        try:
+            buffer = cl.Buffer(self.context, cl.mem_flags.READ_WRITE | cl.mem_flags.ALLOC_HOST_PTR, 3 * pixels)
+            array, _ = cl.enqueue_map_buffer(self.queue, buffer, cl.map_flags.READ | cl.map_flags.WRITE,
+                                             0, (3 * pixels,), np.uint8)
+        except (cl.Error, MemoryError):   # page-locked memory is scarce: fall back to ordinary
+            return np.empty(3 * pixels, np.uint8), False
+        pool.append(array)
+        return array, True
+
+    def _render_tile(self, job: "_Job", x: int, y: int, w: int, h: int, capacity: int) -> float:
+        """Render the w x h pixels at (x, y) into the job's host arrays; return the
+        kernel time of the slowest launch (ms).  Each sample's launches are waited
+        for -- the last together with the read back, so a frame of one tile and one
+        sample waits only once -- so that Ctrl-C (raised by Python between calls)
+        stops within one launch."""
         buf = self._buffers_for(capacity)
         q = self.queue
+        count = w * h
+        tile = (np.uint32(x), np.uint32(y), np.uint32(w), np.uint32(h))
+        size, local = self._launch_shape(w, h)
         n = job.samples * job.samples
-        slowest = 0.0
+        launches = []
         for sample in range(n):
-            gen = self._launch("generate_rays", q, (count,), None, buf["rays"], *camera_args(job.camera),
-                               np.uint32(sample), np.uint32(job.samples), np.uint32(job.seed),
-                               np.uint32(first), np.uint32(count))
-            shade = self._launch("shade_pixels", q, (count,), None, buf["rays"], buf["linear"], buf["hits"],
-                                 np.uint32(count), np.uint32(job.max_depth), np.float32(1.0 / n),
+            gen = self._launch("generate_rays", q, size, local, buf["rays"], *camera_args(job.camera),
+                               np.uint32(sample), np.uint32(job.samples), np.uint32(job.seed), *tile)
+            shade = self._launch("shade_pixels", q, size, local, buf["rays"], buf["linear"], buf["hits"],
+                                 np.uint32(w), np.uint32(h), np.uint32(job.max_depth), np.float32(1.0 / n),
                                  np.uint32(sample == 0), *job.shading_args)
-            _wait_for(shade)
+            launches.append((gen, shade))
+            if sample < n - 1:
+                _wait_for(shade)
+
+        image = job.image[y:y + h, x:x + w]
+        # Straight into the image where the tile is one run of page-locked memory
+        # (full-width tiles of a pooled image); else through the staging buffer.
+        direct = job.pinned and w == job.image.shape[1]
+        if job.linear:
+            out = np.empty((count, 4), np.float32)
+            copies = [cl.enqueue_copy(q, out, buf["linear"], is_blocking=False)]
+        else:
+            copies = [self._launch("encode_srgb8", q, (count,), None, buf["linear"], buf["srgb8"],
+                                   np.uint32(count))]
+            out = image.reshape(count * 3) if direct else self._staging[:count]
+            copies.append(cl.enqueue_copy(q, out, buf["srgb8"], is_blocking=False))
+        if job.prim is not None:
+            records = np.empty(count, layouts.HIT)
+            copies.append(cl.enqueue_copy(q, records, buf["hits"], is_blocking=False))
+        _wait_for(copies[-1])
+        host_start = time.perf_counter()
+        if job.linear:
+            image[...] = out[:, :3].reshape(h, w, 3)
+        elif not direct:
+            image[...] = out.reshape(h, w, 3)
+        if job.prim is not None:
+            job.prim[y:y + h, x:x + w] = records["prim"].reshape(h, w)
+            job.t[y:y + h, x:x + w] = records["t"].reshape(h, w)
+        # Read back: the encode kernel, the copies and any host copy after them.
+        job.timings["read back"] += sum(_event_ms(e) for e in copies) + 1e3 * (time.perf_counter() - host_start)
+        slowest = 0.0
+        for gen, shade in launches:
             job.timings["ray generation"] += _event_ms(gen)
             job.timings["pixel colour"] += _event_ms(shade)
             slowest = max(slowest, _event_ms(gen) + _event_ms(shade))
-
-        with _stage(job.timings, "read back"):
-            rows = slice(first, first + count)
-            if job.linear:
-                out = np.empty((count, 4), np.float32)
-                cl.enqueue_copy(q, out, buf["linear"])
-            else:
-                enc = self._launch("encode_srgb8", q, (count,), None, buf["linear"], buf["srgb8"],
-                                   np.uint32(count))
-                out = self._staging[:count]
-                cl.enqueue_copy(q, out, buf["srgb8"], wait_for=[enc])
-            job.image[rows] = out[:, :3]
-            if job.prim is not None:
-                records = np.empty(count, layouts.HIT)
-                cl.enqueue_copy(q, records, buf["hits"])
-                job.prim[rows], job.t[rows] = records["prim"], records["t"]
         return slowest
+
+    def _launch_shape(self, w: int, h: int) -> tuple:
+        """Global and local size of a tile's launches: work-groups of 8 x 8 pixels
+        (rays of neighbouring pixels run together), the driver's choice where the
+        kernels cannot run that many work-items at once."""
+        if self._block is None:
+            fits = all(k.get_work_group_info(cl.kernel_work_group_info.WORK_GROUP_SIZE, self.queue.device) >= 64
+                       for name, k in self.kernels.items() if name != "encode_srgb8")
+            self._block = (8, 8) if fits else False
+        if not self._block:
+            return (w, h), None
+        return (-(-w // 8) * 8, -(-h // 8) * 8), self._block
 
 
 MAX_BOUNCES = 16   # the stack bound in whitted.cl
@@ -317,6 +382,20 @@ MAX_BOUNCES = 16   # the stack bound in whitted.cl
 # Device bytes per pixel of a tile: its ray, hit record, linear and sRGB colour.
 FRAME_BYTES_PER_PIXEL = layouts.RAY.itemsize + layouts.HIT.itemsize + 16 + 3
 MAX_TILE_PIXELS = 1 << 23   # 8M pixels (a 4K frame), 544 MiB of tile buffers
+IMAGE_POOL_SIZE = 3         # page-locked images per renderer (see Renderer._image_array)
+HOST_CHECK_BYTES = 1 << 28  # frames needing more host memory than this check that it is there
+
+
+def _tile_shape(x: int, y: int, width: int, height: int, budget: int) -> tuple[int, int]:
+    """Width and height of the tile at (x, y) of at most ``budget`` pixels: whole
+    rows where the budget allows (a multiple of 8 of them, to fill the launches'
+    8 x 8 blocks), else a piece of one row.  Tiles go row-major through the image."""
+    if x == 0 and budget >= width:
+        rows = min(budget // width, height - y)
+        if rows > 8 and rows < height - y:
+            rows -= rows % 8
+        return width, rows
+    return min(budget, width - x), 1
 
 # OpenCL status codes that mean "not enough memory" (on the device or the host).
 _OUT_OF_MEMORY_CODES = {cl.status_code.MEM_OBJECT_ALLOCATION_FAILURE, cl.status_code.OUT_OF_RESOURCES,
@@ -333,9 +412,10 @@ class _Job:
     seed: int
     linear: bool
     shading_args: tuple
-    image: np.ndarray            # (pixels, 3), filled tile by tile
-    prim: np.ndarray | None      # (pixels,)
-    t: np.ndarray | None         # (pixels,)
+    image: np.ndarray            # (H, W, 3), filled tile by tile
+    pinned: bool                 # image is page-locked memory of the image pool
+    prim: np.ndarray | None      # (H, W)
+    t: np.ndarray | None         # (H, W)
     timings: dict
 
 
@@ -362,13 +442,9 @@ def _error_name(exc: BaseException) -> str:
 
 
 def _check_fits(device, label: str, arrays: dict) -> None:
-    """DeviceMemoryError, before any upload, if the scene cannot fit on ``device``."""
+    """DeviceMemoryError, before any upload, if the scene cannot fit on ``device``.
+    (A buffer larger than one allocation is split, see DeviceGeometry.)"""
     total = sum(a.nbytes for a in arrays.values())
-    name, biggest = max(((k, a.nbytes) for k, a in arrays.items()), key=lambda kv: kv[1])
-    if biggest > device.max_mem_alloc_size:
-        raise DeviceMemoryError(
-            f"the scene needs {_size(total)} on the device, {_size(biggest)} of it for the {name} "
-            f"in one buffer, but {label} allows at most {_size(device.max_mem_alloc_size)} per buffer")
     if total + MIN_FRAME_BYTES > device.global_mem_size:
         raise DeviceMemoryError(
             f"the scene needs {_size(total)} on the device, but {label} has {_size(device.global_mem_size)}")

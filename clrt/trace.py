@@ -302,7 +302,7 @@ class Accel:
         self.chunk_rays = chunk_rays
         self.max_alloc = int(queue.device.max_mem_alloc_size)   # bytes of the largest buffer
         self.all_hits_capacity = ALL_HITS_CAPACITY
-        program = build_program(context, "trace.cl", order.defines)
+        program = build_program(context, "trace.cl", {**order.defines, **geometry.defines})
         self.kernels = {name: cl.Kernel(program, name) for name in
                         ("query_closest", "query_any", "query_count", "query_all", "camera_rays",
                          "trace_camera", "occlude_camera")}

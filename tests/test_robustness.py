@@ -30,6 +30,7 @@ import clrt.device.program as program_module
 from clrt import cli, output
 from clrt.errors import (DeviceError, DeviceMemoryError, InputError, KernelBuildError,
                          MeshLoadError, OutputError, TooLargeError)
+from clrt.device.geometry import part_shifts
 from clrt.reference import render_reference
 from clrt.render import Renderer
 from clrt.scene import primitives
@@ -417,13 +418,38 @@ def test_tiny_tiles_give_the_identical_image(device):
     expected = whole.render(hits=True, samples=2)
     assert expected.tiles == 1
     tiled = Renderer(scene, device)
-    tiled.max_tile_pixels = tiled.first_launch_pixels = 37       # tiles end mid-row
+    tiled.max_tile_pixels = tiled.first_launch_pixels = 37       # pieces of rows: 37 + 3 pixels
     frame = tiled.render(hits=True, samples=2)
-    assert frame.tiles == -(-40 * 30 // 37)
+    assert frame.tiles == 2 * 30
     for name in ("image", "prim", "t"):
         assert np.array_equal(getattr(frame, name), getattr(expected, name)), name
     linear = tiled.render(linear=True)
     assert np.array_equal(linear.image, whole.render(linear=True).image)
+    banded = Renderer(scene, device)
+    banded.max_tile_pixels = banded.first_launch_pixels = 40 * 9   # bands of 8 rows, read back in place
+    frame = banded.render(hits=True, samples=2)
+    assert frame.tiles == 4
+    for name in ("image", "prim", "t"):
+        assert np.array_equal(getattr(frame, name), getattr(expected, name)), name
+
+
+def test_frames_kept_by_the_caller_are_never_overwritten(device):
+    scene = default_scene(40, 30, coarse=True)
+    r = Renderer(scene, device)
+    near = scene.camera
+    far = Camera(tuple(3 * np.asarray(near.eye)), near.target, near.up, near.fov, 40, 30)
+    kept = [r.render(near).image for _ in range(5)]        # more frames than the pool holds
+    copies = [k.copy() for k in kept]
+    view = kept[0][10:20]                                  # a view keeps its image in use too
+    del kept[0]
+    other = r.render(far).image
+    assert not np.array_equal(other, copies[0])
+    assert np.array_equal(view, copies[0][10:20])
+    for image, copy in zip(kept, copies[1:]):
+        assert np.array_equal(image, copy)
+    del view, kept, other
+    again = [r.render(far).image for _ in range(10)]       # dropped images are reused, not piled up
+    assert len(r._image_pool) <= 3 and all(np.array_equal(a, again[0]) for a in again)
 
 
 def test_launches_are_split_to_stay_short(device):
@@ -444,8 +470,9 @@ def _fake_allocation_failure(monkeypatch, above_pixels: int):
     failures = []
 
     def launch(queue, kernel, global_size, local_size, *args, **kwargs):
-        if global_size[0] > above_pixels:
-            failures.append(global_size[0])
+        work_items = int(np.prod(global_size))
+        if work_items > above_pixels:
+            failures.append(work_items)
             record = cl._cl._ErrorRecord("clEnqueueNDRangeKernel",
                                          cl.status_code.MEM_OBJECT_ALLOCATION_FAILURE, "fake")
             raise cl.MemoryError(record)
@@ -461,8 +488,9 @@ def test_out_of_memory_shrinks_the_tiles(device, monkeypatch):
     r = Renderer(scene, device)
     failures = _fake_allocation_failure(monkeypatch, 500)
     frame = r.render(camera, hits=True)
-    assert failures == [48 * 36]            # one failure, then tiles of 1728 / 4 = 432 pixels
-    assert frame.tiles == 4
+    # One failure, then tiles of at most 1728 / 4 = 432 pixels: bands of 8 rows (and the last 4).
+    assert failures == [48 * 40]            # 36 rows, launched in blocks of 8
+    assert frame.tiles == 5
     assert np.array_equal(frame.image, expected.image) and np.array_equal(frame.prim, expected.prim)
 
 
@@ -482,9 +510,12 @@ def test_out_of_memory_at_the_smallest_tile_says_what_is_needed(tmp_path, device
 
 def test_scene_larger_than_the_device_is_refused_with_sizes():
     arrays = {"triangles": np.zeros((1000, 12), np.float32), "BVH nodes": np.zeros((10, 12), np.float32)}
-    small = SimpleNamespace(max_mem_alloc_size=10_000, global_mem_size=10 << 20)
-    with pytest.raises(DeviceMemoryError, match=r"46.9 KiB of it for the triangles .* at most 9.8 KiB per buffer"):
-        render_module._check_fits(small, "a small GPU", arrays)
+    # Larger than one allocation: split into parts, up to four of them (split.cl).
+    assert part_shifts(arrays, 1 << 20) is None
+    assert part_shifts(arrays, 20_000) == {"triangles": 8, "BVH nodes": 8}    # 256 rows of 48 B a part
+    with pytest.raises(DeviceMemoryError, match=r"triangles buffer needs 46.9 KiB, more than 4 buffers of "
+                                                r"at most 9.8 KiB"):
+        part_shifts(arrays, 10_000)
     tiny = SimpleNamespace(max_mem_alloc_size=1 << 20, global_mem_size=50_000)
     with pytest.raises(DeviceMemoryError, match="has 48.8 KiB"):
         render_module._check_fits(tiny, "a tiny GPU", arrays)

@@ -8,6 +8,10 @@ closest hit (``trace_camera`` in trace.cl), or only whether anything is hit
 profiling events, ``wall`` the host clock around enqueue + finish.  After
 timing, the hits are read back and checked: their count and the sum of their
 distances identify the result.
+
+``--max-buffer-mib`` lowers the largest allocation, so that the scene's buffers
+are split into parts as a scene larger than the device's largest allocation
+would be (split.cl): what splitting costs, measured on a small mesh.
 """
 
 from __future__ import annotations
@@ -46,16 +50,19 @@ def _time(queue, launch, repeat: int, warmup: int) -> tuple[float, float]:
 
 
 def run(mesh_dir: Path, cases, variants, device=None, size=(1920, 1080), repeat=20, warmup=3,
-        leaf_size=4, tile=None, out=sys.stdout):
+        leaf_size=4, tile=None, max_buffer_mib=None, out=sys.stdout):
     from clrt.scene.load import load_mesh
     from clrt.scene.scene import Camera
+    from clrt.device.geometry import DeviceGeometry
     from clrt.trace import Accel
 
+    if max_buffer_mib is not None:
+        DeviceGeometry.max_buffer_bytes = int(max_buffer_mib * 2**20)
     w, h = size
     launch = {} if tile is None else {"tile": None if tile == (0, 0) else tile}
-    print("| mesh | triangles | accel | builder | closest: kernel ms | Mrays/s | wall ms | Mrays/s "
+    print("| mesh | triangles | accel | builder | buffer parts | closest: kernel ms | Mrays/s | wall ms | Mrays/s "
           "| hits | sum of t | any-hit: kernel ms | Mrays/s | any / closest |", file=out)
-    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|", file=out)
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|", file=out)
     for name in cases:
         file, eye, target = CASES[name]
         mesh = load_mesh(mesh_dir / file)
@@ -76,7 +83,7 @@ def run(mesh_dir: Path, cases, variants, device=None, size=(1920, 1080), repeat=
                 raise ClrtError(f"{name}: any-hit and closest-hit disagree on {int((hit != occluded).sum())} rays")
             mrays = lambda ms: w * h / ms / 1e3   # noqa: E731
             print(f"| {name} | {len(mesh.faces):,} | {accel_name} | {builder if accel_name != 'none' else '-'} "
-                  f"| {closest[0]:.3f} | {mrays(closest[0]):,.0f} | {closest[1]:.3f} | {mrays(closest[1]):,.0f} "
+                  f"| {accel.geometry.parts()} | {closest[0]:.3f} | {mrays(closest[0]):,.0f} | {closest[1]:.3f} | {mrays(closest[1]):,.0f} "
                   f"| {int(hit.sum()):,} | {hits['t'][hit].astype(np.float64).sum():.3f} "
                   f"| {anyhit[0]:.3f} | {mrays(anyhit[0]):,.0f} | {closest[0] / anyhit[0]:.2f}x |",
                   file=out, flush=True)
@@ -97,10 +104,12 @@ def main(argv=None) -> int:
     p.add_argument("--device", help="'gpu', 'cpu' or P:D (default: clrt's choice, the first GPU if any)")
     p.add_argument("--repeat", type=int, default=20)
     p.add_argument("--warmup", type=int, default=3)
+    p.add_argument("--max-buffer-mib", type=float, help="split scene buffers larger than this (default: the device's limit)")
     args = p.parse_args(argv)
     variants = [(a, b) for a in (args.accel or ["box"]) for b in (args.builder or ["sah"])]
     return exit_code(run, args.mesh_dir, args.case or sorted(CASES), variants, args.device,
-                     repeat=args.repeat, warmup=args.warmup, leaf_size=args.leaf_size, tile=args.tile)
+                     repeat=args.repeat, warmup=args.warmup, leaf_size=args.leaf_size, tile=args.tile,
+                     max_buffer_mib=args.max_buffer_mib)
 
 
 if __name__ == "__main__":

@@ -13,7 +13,8 @@ import numpy as np
 import pyopencl as cl
 
 from clrt.device import layouts
-from clrt.errors import InputError
+from clrt.device.context import format_bytes
+from clrt.errors import DeviceMemoryError, InputError
 
 ACCELS = ("none", "box", "sphere", "ellipse")
 _DEFINE_OF_VOLUME = {"box": "VOLUME_BOX", "sphere": "VOLUME_SPHERE", "ellipse": "VOLUME_ELLIPSE"}
@@ -71,23 +72,77 @@ def pair_nodes(nodes: np.ndarray) -> np.ndarray:
     return pair
 
 
-class DeviceGeometry:
-    """Uploaded slot-ordered triangles, BVH nodes and slot -> triangle ids."""
+MAX_PARTS = 4   # parts per split buffer: the SPLIT_PARAMS of split.cl
 
-    def __init__(self, context: cl.Context, order: SlotOrder):
+
+class DeviceGeometry:
+    """Uploaded slot-ordered triangles, BVH nodes and slot -> triangle ids, and
+    any further per-slot or per-vertex ``extra`` arrays the kernels index (the
+    renderer's shading data), by their kernel parameter names.
+
+    A buffer larger than the device's largest allocation is uploaded in parts
+    (see split.cl): then every buffer here is, and ``defines`` says so to the
+    program build.  ``max_buffer_bytes`` lowers the limit below the device's
+    (tests and benchmarks use it to split small scenes).
+    """
+
+    max_buffer_bytes: int | None = None
+
+    def __init__(self, context: cl.Context, order: SlotOrder, extra: dict | None = None):
         self.order = order
+        arrays = {"tris": order.tri_verts, "nodes": order.nodes, "prim_ids": order.prim_ids, **(extra or {})}
+        arrays = {name: np.ascontiguousarray(a) for name, a in arrays.items()}
+        limit = min(d.max_mem_alloc_size for d in context.devices)
+        if self.max_buffer_bytes is not None:
+            limit = min(limit, int(self.max_buffer_bytes))
+        self.shifts = part_shifts(arrays, limit)
+        self.defines = {} if self.shifts is None else {
+            "SPLIT_BUFFERS": None, **{f"{name}_PART_SHIFT": shift for name, shift in self.shifts.items()}}
         mf = cl.mem_flags
 
         def upload(array):
-            return cl.Buffer(context, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=np.ascontiguousarray(array))
+            return cl.Buffer(context, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=array)
 
-        self.tris = upload(order.tri_verts)
-        self.nodes = upload(order.nodes)
-        self.prim_ids = upload(order.prim_ids)
+        self.buffers: dict[str, tuple] = {}
+        for name, array in arrays.items():
+            if self.shifts is None:
+                self.buffers[name] = (upload(array),)
+                continue
+            step = 1 << self.shifts[name]
+            parts = [upload(array[k:k + step]) for k in range(0, max(len(array), 1), step)]
+            self.buffers[name] = tuple(parts + parts[-1:] * (MAX_PARTS - len(parts)))
         self.num_tris = np.uint32(len(order.tri_verts))
-        self.nbytes = order.tri_verts.nbytes + order.nodes.nbytes + order.prim_ids.nbytes
+        self.nbytes = sum(a.nbytes for a in arrays.values())
 
     @property
     def args(self) -> tuple:
         """Kernel arguments matching ACCEL_PARAMS in accel.cl."""
-        return (self.tris, self.num_tris, self.nodes, self.prim_ids)
+        b = self.buffers
+        return (*b["tris"], self.num_tris, *b["nodes"], *b["prim_ids"])
+
+    def parts(self) -> int:
+        """Buffers of the largest split array (1: nothing split)."""
+        return max(len(set(b)) for b in self.buffers.values())
+
+
+def part_shifts(arrays: dict, limit: int) -> dict | None:
+    """None when every array fits in one buffer of ``limit`` bytes, else per array
+    log2 of the elements per part: the most whole elements, a power of two
+    (the kernels find the part with a shift), that fit in ``limit``.
+    DeviceMemoryError when an array needs more than MAX_PARTS parts."""
+    if all(a.nbytes <= limit for a in arrays.values()):
+        return None
+    shifts = {}
+    for name, a in arrays.items():
+        row = max(a[:1].nbytes, 1) if len(a) else a.itemsize
+        per_part = limit // row
+        if per_part < 1:
+            raise DeviceMemoryError(f"one element of the {name} buffer ({row} B) exceeds the "
+                                    f"largest allocation of {format_bytes(limit)}")
+        shift = min(int(per_part).bit_length() - 1, 30)
+        if -(-len(a) // (1 << shift)) > MAX_PARTS:
+            raise DeviceMemoryError(
+                f"the {name} buffer needs {format_bytes(a.nbytes)}, more than {MAX_PARTS} buffers of at "
+                f"most {format_bytes(limit)} (the device's largest allocation) can hold")
+        shifts[name] = shift
+    return shifts

@@ -5,14 +5,17 @@
 //   nodes     BVH inner nodes with their children's volumes (one unused without a BVH)
 //   prim_ids  input triangle index of each slot (the identity without a BVH)
 // and both provide query_hits(), from which the queries below are made.
+// Each buffer may arrive in parts (split.cl): elements are reached through
+// SPLIT_AT, never by indexing the parameter.
 #ifndef CLRT_ACCEL_CL
 #define CLRT_ACCEL_CL
 
 #include "layouts.h"
+#include "split.cl"
 
-#define ACCEL_PARAMS __global const TriangleVerts* tris, const uint num_tris, \
-    __global const BvhPairNode* nodes, __global const int* prim_ids
-#define ACCEL_ARGS tris, num_tris, nodes, prim_ids
+#define ACCEL_PARAMS SPLIT_PARAMS(TriangleVerts, tris), const uint num_tris, \
+    SPLIT_PARAMS(BvhPairNode, nodes), SPLIT_PARAMS(int, prim_ids)
+#define ACCEL_ARGS SPLIT_ARGS(tris), num_tris, SPLIT_ARGS(nodes), SPLIT_ARGS(prim_ids)
 
 // Included here, before the choice below: the host expands each include once,
 // so a file first met inside a disabled #if branch would be lost to the other.
@@ -37,10 +40,10 @@ inline bool any_hit(ACCEL_PARAMS, float3 origin, float3 dir, float tmin, float t
 }
 
 // A hit as reported to the host: Hit.prim turned from slot to triangle index.
-inline Hit reported_hit(Hit hit, __global const int* prim_ids)
+inline Hit reported_hit(Hit hit, SPLIT_PARAMS(int, prim_ids))
 {
     if (hit.prim >= 0)
-        hit.prim = prim_ids[hit.prim];
+        hit.prim = *SPLIT_AT(prim_ids, hit.prim);
     return hit;
 }
 

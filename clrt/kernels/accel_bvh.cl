@@ -41,7 +41,7 @@ inline Hit query_hits(ACCEL_PARAMS, float3 origin, float3 dir, float tmin, float
                 if (visit_triangle(ACCEL_ARGS, &r, s, tmin, &tmax, query, &best, &best_id, sink))
                     return best;
         } else {
-            const BvhPairNode n = nodes[current.x];
+            const BvhPairNode n = *SPLIT_AT(nodes, current.x);
             float t_left, t_right;
             const bool left = n.left_count >= 0 && volume_hit(&vr, n.left_a, n.left_b, tmin, tmax, &t_left);
             const bool right = n.right_count >= 0 && volume_hit(&vr, n.right_a, n.right_b, tmin, tmax, &t_right);

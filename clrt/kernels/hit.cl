@@ -67,13 +67,13 @@ inline bool visit_triangle(ACCEL_PARAMS, const ShearedRay* r, int slot, float tm
                            const int query, Hit* best, int* best_id, HitSink* sink)
 {
     float t, u, v;
-    if (!intersect_triangle_culled(r, tris + slot, tmin, *tmax, sink ? sink->cull : CULL_NONE, &t, &u, &v))
+    if (!intersect_triangle_culled(r, SPLIT_AT(tris, slot), tmin, *tmax, sink ? sink->cull : CULL_NONE, &t, &u, &v))
         return false;
     if (query == QUERY_ANY) {
         *best = make_hit(t, slot, u, v);
         return true;
     }
-    const int id = prim_ids[slot];
+    const int id = *SPLIT_AT(prim_ids, slot);
     if (query == QUERY_ALL) {
         sink_hit(sink, id, t);
         return false;

@@ -8,37 +8,42 @@
 #include "accel.cl"
 #include "whitted.cl"
 
-// Rays of the image pixels first_pixel .. first_pixel + num_pixels - 1 (row
-// major), into rays[0 .. num_pixels - 1]: the host renders the image in such
-// runs ("tiles") so that device memory and the length of one launch stay bounded.
+// The host renders an image in rectangles ("tiles") so that device memory and
+// the length of one launch stay bounded.  Both kernels below run one work-item
+// per pixel of the tile (tile_x + gx, tile_y + gy) in a 2-D launch, whose
+// work-groups are blocks of neighbouring pixels: their rays walk much the same
+// BVH nodes.  Per-pixel buffers are the tile's pixels in row-major order.
+#define TILE_PARAMS const uint tile_x, const uint tile_y, const uint tile_w, const uint tile_h
+
+// Rays of the tile's pixels, into rays[0 .. tile_w * tile_h - 1].
 __kernel void generate_rays(__global Ray* rays, CAMERA_PARAMS, const uint sample, const uint samples_per_axis,
-                            const uint seed, const uint first_pixel, const uint num_pixels)
+                            const uint seed, TILE_PARAMS)
 {
-    const uint i = get_global_id(0);
-    if (i >= num_pixels)
+    const uint gx = get_global_id(0), gy = get_global_id(1);
+    if (gx >= tile_w || gy >= tile_h)
         return;
     const Camera cam = make_camera(CAMERA_ARGS);
-    const uint pixel = first_pixel + i;
-    const uint px = pixel % width, py = pixel / width;
-    const float2 o = sample_offset(pixel, sample, samples_per_axis, seed);
-    rays[i] = camera_ray(&cam, px, py, o.x, o.y);
+    const uint px = tile_x + gx, py = tile_y + gy;
+    const float2 o = sample_offset(py * width + px, sample, samples_per_axis, seed);
+    rays[gy * tile_w + gx] = camera_ray(&cam, px, py, o.x, o.y);
 }
 
 // image = (first sample ? 0 : image) + sample_weight * colour.  hits receives
 // the camera ray's hit (of the first sample).  Indices are within the tile.
 __kernel void shade_pixels(__global const Ray* rays, __global float4* image, __global Hit* hits,
-                           const uint num_pixels, const uint max_depth, const float sample_weight,
+                           const uint tile_w, const uint tile_h, const uint max_depth, const float sample_weight,
                            const uint first_sample, ACCEL_PARAMS, SHADING_PARAMS)
 {
-    const uint i = get_global_id(0);
-    if (i >= num_pixels)
+    const uint gx = get_global_id(0), gy = get_global_id(1);
+    if (gx >= tile_w || gy >= tile_h)
         return;
+    const uint i = gy * tile_w + gx;
     const Ray ray = rays[i];
     Hit hit;
     const float3 c = trace_whitted(ACCEL_ARGS, SHADING_ARGS, max_depth, ray.origin.xyz, ray.dir.xyz,
                                    ray.origin.w, ray.dir.w, &hit);
     if (first_sample) {
-        hits[i] = reported_hit(hit, prim_ids);
+        hits[i] = reported_hit(hit, SPLIT_ARGS(prim_ids));
         image[i] = (float4)(sample_weight * c, 1.0f);
     } else {
         image[i] += (float4)(sample_weight * c, 0.0f);

@@ -4,24 +4,25 @@
 #define CLRT_SHADING_CL
 
 #include "layouts.h"
+#include "split.cl"
 
-#define SHADING_PARAMS __global const TriangleInfo* tri_info, __global const float4* vertex_normals, \
+#define SHADING_PARAMS SPLIT_PARAMS(TriangleInfo, tri_info), SPLIT_PARAMS(float4, vertex_normals), \
     __global const Material* materials, __global const Light* lights, const uint num_lights, \
     const float4 ambient_light, const float4 background, const float ray_epsilon
-#define SHADING_ARGS tri_info, vertex_normals, materials, lights, num_lights, \
+#define SHADING_ARGS SPLIT_ARGS(tri_info), SPLIT_ARGS(vertex_normals), materials, lights, num_lights, \
     ambient_light, background, ray_epsilon
 
 // Shading normal: interpolated vertex normals for smooth materials, turned
 // to the same side as the geometric normal.
-inline float3 shading_normal(__global const TriangleInfo* info, __global const float4* vertex_normals,
+inline float3 shading_normal(__global const TriangleInfo* info, SPLIT_PARAMS(float4, vertex_normals),
                              const Hit* hit, float3 geometric, uint flags)
 {
     if (!(flags & MATERIAL_SMOOTH))
         return geometric;
     const float w0 = 1.0f - hit->u - hit->v;
-    const float3 n = w0 * vertex_normals[info->vertex[0]].xyz
-                   + hit->u * vertex_normals[info->vertex[1]].xyz
-                   + hit->v * vertex_normals[info->vertex[2]].xyz;
+    const float3 n = w0 * SPLIT_AT(vertex_normals, info->vertex[0])->xyz
+                   + hit->u * SPLIT_AT(vertex_normals, info->vertex[1])->xyz
+                   + hit->v * SPLIT_AT(vertex_normals, info->vertex[2])->xyz;
     const float len = length(n);
     if (!(len > 0.0f))
         return geometric;
@@ -40,14 +41,14 @@ typedef struct {
 
 inline SurfacePoint surface_point(ACCEL_PARAMS, SHADING_PARAMS, float3 origin, float3 dir, const Hit* hit)
 {
-    __global const TriangleInfo* info = tri_info + hit->prim;
-    __global const TriangleVerts* tri = tris + hit->prim;
+    __global const TriangleInfo* info = SPLIT_AT(tri_info, hit->prim);
+    __global const TriangleVerts* tri = SPLIT_AT(tris, hit->prim);
     SurfacePoint s;
     s.m = materials[info->material];
     const float3 wound = normalize(cross(tri->v1.xyz - tri->v0.xyz, tri->v2.xyz - tri->v0.xyz));
     s.front = dot(wound, dir) < 0.0f;
     s.ng = s.front ? wound : -wound;
-    s.n = shading_normal(info, vertex_normals, hit, s.ng, s.m.flags);
+    s.n = shading_normal(info, SPLIT_ARGS(vertex_normals), hit, s.ng, s.m.flags);
     s.p = origin + hit->t * dir;
     return s;
 }

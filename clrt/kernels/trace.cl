@@ -24,13 +24,13 @@ inline HitSink query_options(const int cull)
     return s;
 }
 
-// Does the ray see the front face of the triangle in `slot`?  Asked only of a
+// Does the ray see the front face of triangle `tri`?  Asked only of a
 // triangle it hit: the same arithmetic as the hit test, so culling and this
 // flag always agree.
-inline bool sees_front(const ShearedRay* r, __global const TriangleVerts* tris, int slot)
+inline bool sees_front(const ShearedRay* r, __global const TriangleVerts* tri)
 {
     float t, u, v;
-    return intersect_triangle_culled(r, tris + slot, -INFINITY, INFINITY, CULL_BACK, &t, &u, &v);
+    return intersect_triangle_culled(r, tri, -INFINITY, INFINITY, CULL_BACK, &t, &u, &v);
 }
 
 // Closest hit of each ray: the hit record (Hit.prim the triangle index) and
@@ -48,10 +48,10 @@ __kernel void query_closest(__global const Ray* rays, __global Hit* hits, __glob
     uchar f = 0;
     if (hit.prim >= 0) {
         const ShearedRay r = shear_ray(ray.origin.xyz, ray.dir.xyz);
-        f = sees_front(&r, tris, hit.prim) ? 1 : 0;
+        f = sees_front(&r, SPLIT_AT(tris, hit.prim)) ? 1 : 0;
     }
     front[i] = f;
-    hits[i] = reported_hit(hit, prim_ids);
+    hits[i] = reported_hit(hit, SPLIT_ARGS(prim_ids));
 }
 
 // Is anything hit?  Stops at the first hit found.
@@ -125,7 +125,7 @@ __kernel void trace_camera(__global Hit* hits, CAMERA_PARAMS, ACCEL_PARAMS)
     const Camera cam = make_camera(CAMERA_ARGS);
     const Ray ray = camera_ray(&cam, px, py, 0.5f, 0.5f);
     hits[py * width + px] = reported_hit(closest_hit(ACCEL_ARGS, ray.origin.xyz, ray.dir.xyz, 0.0f, INFINITY),
-                                         prim_ids);
+                                         SPLIT_ARGS(prim_ids));
 }
 
 // The same rays as any-hit queries (occlusion), for comparing query kinds.
