@@ -46,30 +46,46 @@ def order_triangles(tri_verts: np.ndarray, accel: str = "box", builder: str = "s
     bvh = build_bvh(corners, volume=accel, builder=builder, leaf_size=leaf_size)
     prim_ids = np.ascontiguousarray(bvh.prim_id, dtype=np.int32)
     defines = {"ACCEL_BVH": None, _DEFINE_OF_VOLUME[accel]: None, "BVH_STACK_SIZE": max(int(bvh.depth), 1)}
-    return SlotOrder(tri_verts[prim_ids], prim_ids, pair_nodes(bvh.nodes), defines, bvh,
+    return SlotOrder(tri_verts[prim_ids], prim_ids, pair_nodes(bvh.nodes, accel), defines, bvh,
                      1e3 * (time.perf_counter() - start))
 
 
-def pair_nodes(nodes: np.ndarray) -> np.ndarray:
-    """BVH_NODE rows (depth-first, root at 0) -> BVH_PAIR_NODE rows, one per inner
-    node, each holding both children's volumes (see layouts.py)."""
+def pair_nodes(nodes: np.ndarray, volume: str = "box") -> np.ndarray:
+    """BVH_NODE rows (depth-first, root at 0) of a tree of ``volume``s ->
+    BVH_PAIR_NODE rows, one per inner node, each holding both children's volumes
+    and references (see layouts.py)."""
     inner = np.nonzero(nodes["count"] == 0)[0]
     if len(inner) == 0:   # the whole tree is one leaf: hang it on the left of a root row
         pair = np.zeros(1, layouts.BVH_PAIR_NODE)
-        pair["left_a"], pair["left_b"] = nodes["bound_a"][0], nodes["bound_b"][0]
-        pair["left"], pair["left_count"] = nodes["left_first"][0], nodes["count"][0]
-        pair["right"], pair["right_count"] = -1, -1
+        _set_child(pair, "left", nodes[:1], nodes["left_first"][:1], volume)
+        pair_child_refs(pair)[:, 2:] = -1        # no right child
         return pair
     row = np.full(len(nodes), -1, np.int64)
     row[inner] = np.arange(len(inner))      # the root (node 0) is inner: row 0
     pair = np.zeros(len(inner), layouts.BVH_PAIR_NODE)
     for side, child in (("left", nodes["left_first"][inner]), ("right", nodes["right"][inner])):
-        pair[f"{side}_a"] = nodes["bound_a"][child]
-        pair[f"{side}_b"] = nodes["bound_b"][child]
         leaf = nodes["count"][child] > 0
-        pair[side] = np.where(leaf, nodes["left_first"][child], row[child])
-        pair[f"{side}_count"] = nodes["count"][child]
+        _set_child(pair, side, nodes[child], np.where(leaf, nodes["left_first"][child], row[child]), volume)
     return pair
+
+
+def pair_child_refs(pair: np.ndarray) -> np.ndarray:
+    """(N, 4) int32 view of the rows' child references: left, left_count, right,
+    right_count (the w lanes of left_a, left_b, right_a, right_b)."""
+    return pair.view(np.int32).reshape(len(pair), 16)[:, 3::4]
+
+
+def _set_child(pair: np.ndarray, side: str, child: np.ndarray, ref: np.ndarray, volume: str) -> None:
+    """Write one side of rows: the child's volume (xyz lanes) and reference (w lanes)."""
+    pair[f"{side}_a"][:, :3] = child["bound_a"][:, :3]
+    if volume == "sphere":   # the radius leaves bound_a.w, which holds the reference here
+        pair[f"{side}_b"][:, 0] = child["bound_a"][:, 3]
+    else:
+        pair[f"{side}_b"][:, :3] = child["bound_b"][:, :3]
+    refs = pair_child_refs(pair)
+    k = 0 if side == "left" else 2
+    refs[:, k] = ref
+    refs[:, k + 1] = child["count"]
 
 
 MAX_PARTS = 4   # parts per split buffer: the SPLIT_PARAMS of split.cl

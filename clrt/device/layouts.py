@@ -55,17 +55,21 @@ The triangle buffers of a BVH scene are stored in leaf order; ``prim_id`` (int32
 slot) maps a slot back to the input triangle index, which is what queries report.
 This is the builders' output; the device walks the layout below, made from it.
 
-``BvhPairNode`` (80 B) -- what the kernels walk: one row per inner node, holding
-both children's volumes (as Aila & Laine 2009 do with boxes), so that one fetch
-decides which children to enter.  Rows in depth-first order, the root at 0.
-    0: left_a      float4  left child's volume, fields as BvhNode.bound_a
-   16: left_b      float4  left child's volume, fields as BvhNode.bound_b
-   32: right_a     float4
-   48: right_b     float4
-   64: left        int     left_count == 0: row of the left child | > 0: its first slot
-   68: right       int     likewise for the right child
-   72: left_count  int     0: inner child | > 0: leaf of that many triangles | -1: no child
-   76: right_count int     (-1 only when the whole tree is one leaf, held on the left)
+``BvhPairNode`` (64 B) -- what the kernels walk: one row per inner node, holding
+both children's volumes and references (as Aila & Laine 2009 do with boxes), so
+that one fetch decides which children to enter: four float4 loads, two 32-byte
+memory sectors.  Rows in depth-first order, the root at 0.  A volume takes six
+floats, the xyz lanes of *_a and *_b; the w lanes hold int32 bits (``as_int`` in
+the kernels, ``geometry.pair_child_refs`` on the host):
+    0: left_a      float4  xyz: volume part a, as BvhNode.bound_a.xyz
+                           w: left -- left_count == 0: row of the left child | > 0: its first slot
+   16: left_b      float4  xyz: volume part b, as BvhNode.bound_b.xyz, except that
+                           a sphere keeps its radius in x
+                           w: left_count -- 0: inner child | > 0: leaf of that many
+                           triangles | -1: no child (only the right one, when the
+                           whole tree is one leaf, held on the left)
+   32: right_a     float4  as left_a, w: right
+   48: right_b     float4  as left_b, w: right_count
 """
 
 import numpy as np
@@ -81,9 +85,7 @@ MATERIAL = np.dtype([("color", float4), ("ambient", np.float32), ("diffuse", np.
                      ("flags", np.uint32), ("reflectivity", np.float32), ("transparency", np.float32),
                      ("ior", np.float32)])
 LIGHT = np.dtype([("position", float4), ("color", float4)])
-BVH_PAIR_NODE = np.dtype([("left_a", float4), ("left_b", float4), ("right_a", float4),
-                          ("right_b", float4), ("left", np.int32), ("right", np.int32),
-                          ("left_count", np.int32), ("right_count", np.int32)])
+BVH_PAIR_NODE = np.dtype([("left_a", float4), ("left_b", float4), ("right_a", float4), ("right_b", float4)])
 BVH_NODE = np.dtype([("bound_a", float4), ("bound_b", float4), ("left_first", np.int32),
                      ("count", np.int32), ("right", np.int32), ("pad", np.int32)])
 

@@ -42,19 +42,20 @@ inline Hit query_hits(ACCEL_PARAMS, float3 origin, float3 dir, float tmin, float
                     return best;
         } else {
             const BvhPairNode n = *SPLIT_AT(nodes, current.x);
+            const int2 left_child = PAIR_LEFT(n), right_child = PAIR_RIGHT(n);
             float t_left, t_right;
-            const bool left = n.left_count >= 0 && volume_hit(&vr, n.left_a, n.left_b, tmin, tmax, &t_left);
-            const bool right = n.right_count >= 0 && volume_hit(&vr, n.right_a, n.right_b, tmin, tmax, &t_right);
+            const bool left = left_child.y >= 0 && volume_hit(&vr, n.left_a, n.left_b, tmin, tmax, &t_left);
+            const bool right = right_child.y >= 0 && volume_hit(&vr, n.right_a, n.right_b, tmin, tmax, &t_right);
             if (left && right) {
                 // Near first finds the closest hit early, and any hit early too.
                 const bool right_first = query != QUERY_ALL && t_right < t_left;
-                stack[sp] = right_first ? (int2)(n.left, n.left_count) : (int2)(n.right, n.right_count);
+                stack[sp] = right_first ? left_child : right_child;
                 stack_t[sp++] = right_first ? t_left : t_right;
-                current = right_first ? (int2)(n.right, n.right_count) : (int2)(n.left, n.left_count);
+                current = right_first ? right_child : left_child;
                 continue;
             }
             if (left || right) {
-                current = left ? (int2)(n.left, n.left_count) : (int2)(n.right, n.right_count);
+                current = left ? left_child : right_child;
                 continue;
             }
         }

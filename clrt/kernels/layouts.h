@@ -50,10 +50,13 @@ typedef struct {
 } BvhNode;
 
 typedef struct {
-    float4 left_a, left_b;     // left child's volume (fields as BvhNode.bound_a / bound_b)
-    float4 right_a, right_b;   // right child's volume
-    int left, right;           // count 0: row of the child | count > 0: first slot of its leaf
-    int left_count, right_count;   // 0 inner, > 0 leaf triangles, -1 no child
+    float4 left_a, left_b;     // left child: volume in the xyz lanes; w: as_int -> left, left_count
+    float4 right_a, right_b;   // right child: likewise -> right, right_count
 } BvhPairNode;
+
+// A child reference: count 0: row of the child | count > 0: first slot of its
+// leaf, count triangles | count -1: no child.
+#define PAIR_LEFT(n) ((int2)(as_int((n).left_a.w), as_int((n).left_b.w)))
+#define PAIR_RIGHT(n) ((int2)(as_int((n).right_a.w), as_int((n).right_b.w)))
 
 #endif

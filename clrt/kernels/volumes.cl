@@ -7,6 +7,9 @@
 // hit that brute force finds.  The builders pad every volume outwards; the
 // tests add a few ulps of slack for their own rounding.  *t_enter is a lower
 // bound of where the ray enters, so that "t_enter <= tmax" is conservative too.
+// The volume comes as the xyz lanes of a BvhPairNode's *_a and *_b (layouts.py;
+// their w lanes are child references): box min / max, sphere centre / radius
+// in x, ellipsoid centre / reciprocal semi-axes.
 #ifndef CLRT_VOLUMES_CL
 #define CLRT_VOLUMES_CL
 
@@ -50,7 +53,7 @@ inline bool volume_hit(const VolumeRay* r, float4 bound_a, float4 bound_b, float
                        float* t_enter)
 {
     const float3 oc = bound_a.xyz - r->origin;
-    const float radius = bound_a.w;
+    const float radius = bound_b.x;       // BvhPairNode: the w lanes hold child references
     const float along = dot(oc, r->dir);                 // distance to the closest approach
     const float3 perp = oc - along * r->dir;
     const float slack = VOLUME_SLACK * (length(oc) + radius);
