@@ -3,14 +3,19 @@ generated meshes of millions of triangles.
 
     python -m clrt.bench.scale --triangles 1M,2M --builder paper,sah --size 640x480
     python -m clrt.bench.scale --triangles 10M,20M --builder paper --size 1920x1080 --device gpu
+    python -m clrt.bench.scale --mesh ../shared/meshes/bunny00.off --triangles 10M --device gpu
 
 The mesh is a torus tessellated into about N triangles (``n x n`` quads), framed
-so that it fills most of the image.  Per mesh size and builder: the set-up
+so that it fills most of the image, or with ``--mesh`` copies of that mesh on a
+square grid (N rounded up to whole copies).  Per mesh size and builder: the set-up
 stages (mesh generation, initialisation, acceleration build, copy to device),
 the scene's device bytes (and per triangle: what bounds the largest mesh per GB,
 see docs/limits.md), the process's peak host memory so far, and per image size
 the median frame stages over ``--repeat`` frames after one warm-up frame, with
-the number of tiles the frame was split into.  Prints a markdown table;
+the number of tiles the frame was split into, and the primary-ray rate: one
+closest-hit ray per pixel made and traced in one kernel (``trace_camera``, as in
+``clrt.bench.speed``).  ``parts``: buffers of the largest scene array (more than
+one when it exceeds the device's largest allocation, see split.cl).  Prints a markdown table;
 ``--out FILE`` appends it to FILE as well.
 """
 
@@ -23,6 +28,8 @@ import resource
 import statistics
 import sys
 import time
+
+import numpy as np
 
 from clrt.bench.common import parse_size
 from clrt.errors import ClrtError
@@ -41,9 +48,43 @@ def _peak_rss_gib() -> float:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20   # kB on Linux
 
 
-def run(counts, builders, sizes, accel="box", device=None, repeat=3, leaf_size=4, out=(sys.stdout,)):
+def instanced(mesh, count: int):
+    """ceil(count / F) copies of ``mesh`` (F triangles) on a square grid in the xz plane."""
+    from clrt.scene.mesh import Mesh
+    copies = -(-count // len(mesh.faces))
+    side = math.ceil(math.sqrt(copies))
+    lo, hi = mesh.bounds
+    step = 1.25 * float(max(hi[0] - lo[0], hi[2] - lo[2]))
+    k = np.arange(copies)
+    offsets = np.zeros((copies, 1, 3), np.float32)
+    offsets[:, 0, 0], offsets[:, 0, 2] = step * (k % side), step * (k // side)
+    vertices = (mesh.vertices[None] + offsets).reshape(-1, 3)
+    faces = (mesh.faces[None] + (len(mesh.vertices) * k).astype(np.int32)[:, None, None]).reshape(-1, 3)
+    return Mesh(vertices, faces, f"{copies} x {mesh.name}")
+
+
+def _primary_rays_ms(renderer, camera, repeat: int) -> float:
+    """Median kernel time of one closest-hit camera ray per pixel (trace_camera)."""
+    import pyopencl as cl
+    from clrt.device import layouts
+    from clrt.trace import Accel
+    accel = Accel.from_renderer(renderer)
+    hits = cl.Buffer(renderer.context, cl.mem_flags.READ_WRITE, camera.width * camera.height * layouts.HIT.itemsize)
+    times = []
+    for i in range(1 + repeat):
+        event = accel.launch_camera(camera, hits)
+        event.wait()
+        if i:
+            times.append(1e-6 * (event.profile.end - event.profile.start))
+    hits.release()
+    return statistics.median(times)
+
+
+def run(counts, builders, sizes, accel="box", device=None, repeat=3, leaf_size=4, out=(sys.stdout,),
+        mesh_path=None):
     from clrt.render import Renderer
     from clrt.scene import primitives
+    from clrt.scene.load import load_mesh
     from clrt.scene.scene import Camera, scene_from_mesh
 
     def emit(line: str = "") -> None:
@@ -52,14 +93,14 @@ def run(counts, builders, sizes, accel="box", device=None, repeat=3, leaf_size=4
 
     header = ("| triangles | builder | mesh | init | build | copy | device MiB | B/triangle | "
               "triangles per GiB | host peak GiB | resolution | tiles | ray gen | pixel colour | "
-              "read back | frame wall |")
+              "read back | frame wall | parts | primary rays | Mrays/s |")
     rows = []
     printed_device = False
     for count in counts:
         n = max(3, math.ceil(math.sqrt(count / 2)))
         for builder in builders:
             start = time.perf_counter()
-            mesh = primitives.torus(1.0, 0.35, n, n)
+            mesh = instanced(load_mesh(mesh_path), count) if mesh_path else primitives.torus(1.0, 0.35, n, n)
             mesh_ms = 1e3 * (time.perf_counter() - start)
             scene = scene_from_mesh(mesh)
             renderer = Renderer(scene, device, accel, builder, leaf_size)
@@ -74,7 +115,10 @@ def run(counts, builders, sizes, accel="box", device=None, repeat=3, leaf_size=4
             t = renderer.timings
             per_tri = renderer.device_bytes / len(mesh.faces)
             for w, h in sizes:
-                camera = Camera((0.0, 1.9, 2.3), (0.0, 0.0, 0.0), fov=50, width=w, height=h)
+                if mesh_path:
+                    camera = Camera.framing(scene.bounds, w, h)
+                else:
+                    camera = Camera((0.0, 1.9, 2.3), (0.0, 0.0, 0.0), fov=50, width=w, height=h)
                 frames = []
                 for i in range(1 + repeat):
                     begin = time.perf_counter()
@@ -84,11 +128,13 @@ def run(counts, builders, sizes, accel="box", device=None, repeat=3, leaf_size=4
                         frames.append({**{k: frame.timings[k] for k in ("ray generation", "pixel colour",
                                                                           "read back")}, "wall": wall})
                 med = {k: statistics.median(f[k] for f in frames) for k in frames[0]}
+                primary = _primary_rays_ms(renderer, camera, max(repeat, 5))
                 row = (f"| {len(mesh.faces):,} | {builder} | {mesh_ms / 1e3:.1f} s | {t['initialisation'] / 1e3:.1f} s "
                        f"| {t['acceleration build'] / 1e3:.1f} s | {t['copy to device'] / 1e3:.1f} s "
                        f"| {renderer.device_bytes / 2**20:,.0f} | {per_tri:.0f} | {2**30 / per_tri / 1e6:.1f}M "
-                       f"| {_peak_rss_gib():.1f} | {w}x{h} | {frame.tiles} | {med['ray generation']:.1f} ms "
-                       f"| {med['pixel colour']:.1f} ms | {med['read back']:.1f} ms | {med['wall']:.1f} ms |")
+                       f"| {_peak_rss_gib():.1f} | {w}x{h} | {frame.tiles} | {med['ray generation']:.2f} ms "
+                       f"| {med['pixel colour']:.2f} ms | {med['read back']:.2f} ms | {med['wall']:.2f} ms "
+                       f"| {renderer.geometry.parts()} | {primary:.3f} ms | {w * h / primary / 1e3:,.0f} |")
                 rows.append(row)
                 emit(row)
             del renderer, scene, mesh
@@ -108,6 +154,7 @@ def main(argv=None) -> int:
     p.add_argument("--repeat", type=int, default=3, help="frames timed after one warm-up (default 3)")
     p.add_argument("--device", help="'gpu', 'cpu' or P:D (default: clrt's choice)")
     p.add_argument("--out", help="also append the table to this file")
+    p.add_argument("--mesh", help="copies of this mesh file instead of a torus")
     args = p.parse_args(argv)
     for b in args.builder:
         if b not in ("paper", "sah"):
@@ -117,7 +164,7 @@ def main(argv=None) -> int:
         if args.out:
             outs.append(open(args.out, "a"))
         run(args.triangles, args.builder, args.size or [(640, 480)], args.accel, args.device, args.repeat,
-            args.leaf_size, outs)
+            args.leaf_size, outs, args.mesh)
     except ClrtError as exc:
         print(f"clrt: {exc}", file=sys.stderr)
         return exc.exit_code
