@@ -108,9 +108,9 @@ class Renderer:
 
     A frame is rendered in tiles -- bands of whole rows, or pieces of a row when
     memory is very short -- each with its own launches, which run the pixels in
-    8 x 8 blocks (see ``_launch_shape``).  A tile is sized so that one launch takes about
-    ``launch_ms`` (display watchdogs kill longer kernels; Ctrl-C takes effect
-    between launches) and its buffers fit the device.  When the device runs out
+    work-groups of ``block`` (16 x 8) pixels.  A tile is sized so that one launch
+    takes about ``launch_ms`` (display watchdogs kill longer kernels; Ctrl-C
+    takes effect between launches) and its buffers fit the device.  When the device runs out
     of memory the tiles shrink and the tile is retried; the image is the same
     for every tiling.
     """
@@ -119,6 +119,7 @@ class Renderer:
     first_launch_pixels = 1 << 21     # the first tile, before any launch was timed (1920x1080 fits)
     max_tile_pixels: int | None = None  # cap on the pixels of a tile (None: from device memory)
     min_tile_pixels = 256             # a failed allocation below this is reported, not retried
+    block: tuple[int, int] | None = (16, 8)  # pixels of a work-group (None: the driver's choice)
 
     def __init__(self, scene: Scene, device: str | None = None, accel: str = "box",
                  builder: str = "sah", leaf_size: int = 4):
@@ -365,16 +366,19 @@ class Renderer:
         return slowest
 
     def _launch_shape(self, w: int, h: int) -> tuple:
-        """Global and local size of a tile's launches: work-groups of 8 x 8 pixels
-        (rays of neighbouring pixels run together), the driver's choice where the
-        kernels cannot run that many work-items at once."""
+        """Global and local size of a tile's launches: work-groups of ``block``
+        pixels (rays of neighbouring pixels run together), the driver's choice
+        where the kernels cannot run that many work-items at once."""
         if self._block is None:
-            fits = all(k.get_work_group_info(cl.kernel_work_group_info.WORK_GROUP_SIZE, self.queue.device) >= 64
-                       for name, k in self.kernels.items() if name != "encode_srgb8")
-            self._block = (8, 8) if fits else False
+            bw, bh = self.block or (0, 0)
+            fits = bw * bh > 0 and all(
+                k.get_work_group_info(cl.kernel_work_group_info.WORK_GROUP_SIZE, self.queue.device) >= bw * bh
+                for name, k in self.kernels.items() if name != "encode_srgb8")
+            self._block = (bw, bh) if fits else False
         if not self._block:
             return (w, h), None
-        return (-(-w // 8) * 8, -(-h // 8) * 8), self._block
+        bw, bh = self._block
+        return (-(-w // bw) * bw, -(-h // bh) * bh), self._block
 
 
 MAX_BOUNCES = 16   # the stack bound in whitted.cl
@@ -389,7 +393,7 @@ HOST_CHECK_BYTES = 1 << 28  # frames needing more host memory than this check th
 def _tile_shape(x: int, y: int, width: int, height: int, budget: int) -> tuple[int, int]:
     """Width and height of the tile at (x, y) of at most ``budget`` pixels: whole
     rows where the budget allows (a multiple of 8 of them, to fill the launches'
-    8 x 8 blocks), else a piece of one row.  Tiles go row-major through the image."""
+    16 x 8 blocks), else a piece of one row.  Tiles go row-major through the image."""
     if x == 0 and budget >= width:
         rows = min(budget // width, height - y)
         if rows > 8 and rows < height - y:

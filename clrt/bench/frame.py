@@ -26,7 +26,7 @@ from clrt.bench.common import parse_size, exit_code
 FRAME_STAGES = ("ray generation", "pixel colour", "read back")
 
 
-def run(mesh_path, sizes, variants, device=None, repeat=5, warmup=1, leaf_size=4, out=sys.stdout):
+def run(mesh_path, sizes, variants, device=None, repeat=5, warmup=1, leaf_size=4, block=None, out=sys.stdout):
     from clrt.render import Renderer
     from clrt.scene.default import default_scene
     from clrt.scene.load import load_mesh
@@ -51,6 +51,8 @@ def run(mesh_path, sizes, variants, device=None, repeat=5, warmup=1, leaf_size=4
     rows = []
     for accel, builder in variants:
         renderer = Renderer(scene, device, accel, builder, leaf_size)
+        if block is not None:
+            renderer.block = None if block == (0, 0) else block
         for camera in cameras:
             samples = []
             for i in range(warmup + repeat):
@@ -88,12 +90,13 @@ def main(argv=None) -> int:
     p.add_argument("--device", help="'gpu', 'cpu' or P:D")
     p.add_argument("--repeat", type=int, default=5)
     p.add_argument("--warmup", type=int, default=1)
+    p.add_argument("--block", type=parse_size, help="work-group as WxH pixels (default 16x8; 0x0: the driver's choice)")
     args = p.parse_args(argv)
     accels, builders = args.accel or ["box"], args.builder or ["sah"]
     variants = [("none", "-")] if "none" in accels else []
     variants += [v for v in itertools.product([a for a in accels if a != "none"], builders)]
     return exit_code(run, args.mesh, args.size or [(200, 200), (1920, 1080)], variants, args.device,
-                     args.repeat, args.warmup, args.leaf_size)
+                     args.repeat, args.warmup, args.leaf_size, args.block)
 
 
 if __name__ == "__main__":
