@@ -1,10 +1,11 @@
 """BVH builders, depth-first layout and bounding volumes (host only, no OpenCL).
 
 Every (builder x volume x leaf size) is checked on generated meshes, a triangle soup
-full of tiny, degenerate and coincident triangles, and a mesh whose centroids all
-coincide: tree structure, conservative volumes tested in float32 the way the kernel
-tests them (corners inside, rays along edges entering every ancestor), the paper
-builder's median / axis rule, the SAH leaf policy, and determinism.
+full of tiny, degenerate and coincident triangles, and a mesh whose centroids and
+box centres all coincide: tree structure, conservative volumes tested in float32
+the way the kernel tests them (corners inside, rays along edges entering every
+ancestor), the paper builder's median / axis rule, the SAH leaf policy, and
+determinism (threads included).
 """
 
 from functools import lru_cache
@@ -14,6 +15,7 @@ import numpy as np
 import pytest
 
 from clrt.accel import BUILDERS, VOLUMES, build_bvh, sah
+from clrt.accel import bvh as bvh_module
 from clrt.device.layouts import BVH_NODE
 from clrt.errors import InputError
 from clrt.scene import primitives
@@ -39,12 +41,14 @@ def _soup() -> np.ndarray:
     return np.concatenate([normal, tiny, points, needles, duplicates, flat, far]).astype(np.float32)
 
 
-def _same_centroid() -> np.ndarray:
-    """Triangles of many shapes whose centroids are exactly equal: dyadic offsets
-    summing to zero around one point, so no rounding anywhere."""
+def _same_centre() -> np.ndarray:
+    """Triangles of many shapes whose centroids and box centres are all exactly
+    equal: on each axis the three corners sit at offsets t, -t and 0 (in some
+    order) around one point, dyadic values, so no rounding anywhere."""
     rng = np.random.default_rng(3)
-    d = rng.integers(-64, 65, (150, 2, 3)) / 64.0
-    offsets = np.concatenate([d, -d.sum(axis=1, keepdims=True)], axis=1)
+    t = rng.integers(-64, 65, (150, 1, 3)) / 64.0
+    corner_offsets = np.stack([rng.permutation([1.0, -1.0, 0.0]) for _ in range(150 * 3)])
+    offsets = corner_offsets.reshape(150, 3, 3).transpose(0, 2, 1) * t   # (triangle, corner, axis)
     offsets[:10] = 0.0                                                # point triangles
     offsets[10:20] = offsets[20:30]                                   # duplicates
     return (np.array([0.25, -0.5, 1.0]) + offsets).astype(np.float32)
@@ -60,7 +64,7 @@ MESHES = {
     "heightfield": lambda: _mesh_triangles(primitives.heightfield(16)),
     "box": lambda: _mesh_triangles(primitives.box((1.0, 0.6, 1.4))),
     "soup": _soup,
-    "same_centroid": _same_centroid,
+    "same_centre": _same_centre,
 }
 
 
@@ -300,8 +304,9 @@ def test_paper_sphere_cycles_axes_even_when_one_is_longest():
 
 
 @pytest.mark.parametrize("builder", BUILDERS)
-def test_coincident_centroids_split_by_triangle_id(builder):
-    tri = _same_centroid()
+def test_coincident_centres_split_by_triangle_id(builder):
+    """Neither the paper's key (centroid) nor SAH's (box centre) tells these apart."""
+    tri = _same_centre()
     bvh = build_bvh(tri, builder=builder, leaf_size=4)
     # Halving by id at every level leaves the slots in id order.
     assert np.array_equal(bvh.prim_id, np.arange(len(tri)))
@@ -348,6 +353,29 @@ def test_builds_are_deterministic(builder, volume):
     assert a.nodes.tobytes() == b.nodes.tobytes()
     assert np.array_equal(a.prim_id, b.prim_id)
     assert a.depth == b.depth
+
+
+@pytest.mark.parametrize("builder", BUILDERS)
+def test_threads_do_not_change_the_tree(builder, monkeypatch):
+    """Every level in threads (one per axis) builds the tree of the serial build."""
+    tri = np.concatenate([triangles("soup"), triangles("torus")])
+    monkeypatch.setattr(bvh_module, "BUILD_THREADS", 1)
+    serial = build_bvh(tri, builder=builder, leaf_size=4)
+    monkeypatch.setattr(bvh_module, "BUILD_THREADS", 3)
+    monkeypatch.setattr(bvh_module, "THREADED_MIN", 0)
+    threaded = build_bvh(tri, builder=builder, leaf_size=4)
+    assert threaded.nodes.tobytes() == serial.nodes.tobytes()
+    assert np.array_equal(threaded.prim_id, serial.prim_id)
+
+
+def test_float32_key_order_is_the_stable_argsort():
+    """The engine's packed integer sort of float32 keys: ties (-0.0 == +0.0
+    included) by id, subnormals and huge values in place."""
+    rng = np.random.default_rng(5)
+    special = np.array([-3e38, -1.5, -1e-40, -0.0, 0.0, 1e-45, 2.0, 7e37], np.float32)
+    keys = rng.choice(special, 5000)
+    keys[::3] = rng.standard_normal(len(keys[::3])).astype(np.float32)
+    assert np.array_equal(bvh_module._sorted_ids(keys), np.argsort(keys, kind="stable"))
 
 
 @pytest.mark.parametrize("builder", BUILDERS)

@@ -19,7 +19,7 @@ import time
 import numpy as np
 
 from clrt.accel import paper, sah
-from clrt.accel.bvh import Bvh, linearise, node_boxes, triangle_bounds
+from clrt.accel.bvh import Bvh, linearise, node_boxes, triangle_centroids
 from clrt.accel.volumes import VOLUMES, fit
 from clrt.errors import InputError
 from clrt.scene.mesh import Mesh
@@ -48,14 +48,13 @@ def build_bvh(triangles, volume: str = "box", builder: str = "sah", leaf_size: i
     leaf_size = int(leaf_size)
     tri = _triangles(triangles)
 
-    lo, hi, centroids = triangle_bounds(tri)
     if builder == "paper":
         # The paper: longest axis, except for spheres, which cycle the axis by depth.
         rule = "round_robin" if volume == "sphere" else "longest"
-        topo = paper.build(centroids, leaf_size, rule)
+        topo = paper.build(triangle_centroids(tri), leaf_size, rule)
     else:
-        topo = sah.build(lo, hi, centroids, leaf_size)
-    boxes = node_boxes(topo, lo, hi)
+        topo = sah.build(tri, leaf_size)
+    boxes = node_boxes(topo, tri)
     nodes, order = linearise(topo)
     boxes = boxes[order]
     nodes["bound_a"], nodes["bound_b"] = fit(volume, boxes)

@@ -5,7 +5,8 @@ Three separate pieces (see ``../shared/STYLE.md``):
 
 * a *builder* (``paper.py``, ``sah.py``) is only a split rule: given the open nodes
   of one tree level it says, per node, "leaf" or "split along axis a, the first k
-  triangles in centroid order go left".  It sees triangle boxes and centroids only.
+  triangles in key order go left" (keys: centroids for the paper, box centres for
+  SAH).  It sees triangle boxes and keys only.
 * :func:`build_topdown` runs a split rule level by level over all nodes of a level
   at once (numpy, no per-node or per-triangle Python loop) and returns a
   :class:`Topology`.
@@ -15,8 +16,11 @@ Three separate pieces (see ``../shared/STYLE.md``):
 
 from __future__ import annotations
 
+import os
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
-from typing import Callable, Optional, Tuple
+from functools import lru_cache
+from typing import Callable, List, Optional, Tuple
 
 import numpy as np
 
@@ -31,6 +35,33 @@ C_INTERSECT = 1.0
 
 # Bytes per triangle in the leaf-ordered TriangleVerts buffer (three float4).
 TRIANGLE_BYTES = 48
+
+# numpy releases the GIL inside its array loops, so the per-axis work of a large
+# level (partitioning the three sorted lists; the SAH candidates of the three axes)
+# runs in one thread per axis.  The threads share no output: the tree is the same
+# for any BUILD_THREADS (1: everything in the calling thread).  Levels of fewer than
+# THREADED_MIN triangles stay in the calling thread, where threads cost more than
+# they save.
+BUILD_THREADS = min(3, os.cpu_count() or 1)
+THREADED_MIN = 2 ** 18
+
+
+@lru_cache(maxsize=None)
+def _thread_pool() -> ThreadPoolExecutor:
+    return ThreadPoolExecutor(BUILD_THREADS, thread_name_prefix="clrt-bvh")
+
+
+# A forked child has none of its parent's threads: it makes a pool of its own.
+if hasattr(os, "register_at_fork"):                  # POSIX only
+    os.register_at_fork(after_in_child=_thread_pool.cache_clear)
+
+
+def for_each_axis(work: Callable[[int], object], n_triangles: int) -> List[object]:
+    """[work(0), work(1), work(2)] for a level of ``n_triangles``, in threads if it
+    is large (see ``BUILD_THREADS``)."""
+    if BUILD_THREADS < 2 or n_triangles < THREADED_MIN:
+        return [work(a) for a in range(3)]
+    return list(_thread_pool().map(work, range(3)))
 
 
 @dataclass
@@ -90,17 +121,14 @@ def surface_area(lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
     return d[..., 0] * d[..., 1] + d[..., 1] * d[..., 2] + d[..., 2] * d[..., 0]
 
 
-def triangle_bounds(triangles: np.ndarray) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(F, 3, 3) float32 corners -> box min (F, 3) float32, box max (F, 3) float32,
-    centroid (F, 3) float64 (mean of the corners, computed in float64)."""
-    v0, v1, v2 = triangles[:, 0], triangles[:, 1], triangles[:, 2]
-    lo = np.minimum(np.minimum(v0, v1), v2)
-    hi = np.maximum(np.maximum(v0, v1), v2)
+def triangle_centroids(triangles: np.ndarray) -> np.ndarray:
+    """(F, 3, 3) float32 corners -> centroid (F, 3) float64 (mean of the corners,
+    computed in float64)."""
     centroids = triangles[:, 0].astype(np.float64)
     centroids += triangles[:, 1]
     centroids += triangles[:, 2]
     centroids /= 3.0
-    return lo, hi, centroids
+    return centroids
 
 
 # --------------------------------------------------------------------------------------
@@ -112,35 +140,46 @@ class Level:
     """The open nodes of one tree level (all at the same ``depth``, root = 0), as a
     split rule sees them: S nodes holding n triangles in total.
 
-    ids:     (3, n) int32 triangle ids; node s owns positions
-             ``offsets[s] : offsets[s] + counts[s]`` of every row, and row ``a`` is
-             sorted there by (centroid[:, a], triangle id).
-    keys:    (3, n) float64 ``centroid[ids[a], a]``, or None if not carried.
-    boxes:   (3, 6, n) float32 triangle boxes in the order of ``ids[a]``, rows
-             (min x, min y, min z, -max x, -max y, -max z), or None if not carried.
+    Every per-triangle array comes as one *sorted list* per axis ``a`` (a tuple of
+    three): node s owns positions ``offsets[s] : offsets[s] + counts[s]`` of each,
+    and list ``a`` is sorted there by (key[a], triangle id), ``key`` being the
+    builder's sort key (see :func:`build_topdown`).
+
+    ids:     3 x (n,) int32 triangle ids.
+    boxes:   3 x 6 rows (n,) float32, the builder's triangle boxes in the order of
+             ``ids[a]`` (rows min x, min y, min z, -max x, -max y, -max z for SAH),
+             or None if not carried.
     offsets, counts: (S,) int64.
-    cmin, cmax: (S, 3) float64 centroid bounds of each node.
+    keys:    3 x (F,) the sort keys, by triangle id (see :meth:`key_bounds`).
     """
 
     depth: int
-    ids: np.ndarray
-    keys: Optional[np.ndarray]
-    boxes: Optional[np.ndarray]
+    ids: Tuple[np.ndarray, ...]
+    boxes: Optional[Tuple[Tuple[np.ndarray, ...], ...]]
     offsets: np.ndarray
     counts: np.ndarray
-    cmin: np.ndarray
-    cmax: np.ndarray
+    keys: Tuple[np.ndarray, ...]
+
+    def key_bounds(self, a: int, nodes: Optional[np.ndarray] = None
+                   ) -> Tuple[np.ndarray, np.ndarray]:
+        """Smallest and largest axis-``a`` key of each of ``nodes`` (default: all):
+        the keys of the node's first and last triangle in list ``a``."""
+        first = self.offsets if nodes is None else self.offsets[nodes]
+        last = first + (self.counts if nodes is None else self.counts[nodes]) - 1
+        return self.keys[a][self.ids[a][first]], self.keys[a][self.ids[a][last]]
 
 
 # A split rule returns, per node of the level, (axis (S,) int, n_left (S,) int):
-# n_left == 0 makes a leaf, else the first n_left triangles of row ``axis`` go left
+# n_left == 0 makes a leaf, else the first n_left triangles of list ``axis`` go left
 # (1 <= n_left < count, so no child is ever empty).
 SplitRule = Callable[[Level], Tuple[np.ndarray, np.ndarray]]
 
 
 @dataclass
 class Topology:
-    """A builder's tree in level order (parents before children, left before right).
+    """A builder's tree in level order: parents before children; inside a level,
+    the left children of the previous level's inner nodes (in their order), then
+    their right children.
 
     left, right: (N,) int64 child node ids, -1 at leaves.
     first, count: (N,) int64 first leaf slot and number of triangles of the subtree
@@ -170,42 +209,110 @@ def _exclusive_cumsum(x: np.ndarray) -> np.ndarray:
     return out
 
 
-def build_topdown(centroids: np.ndarray, rule: SplitRule, carry_keys: bool = False,
-                  boxes: Optional[np.ndarray] = None) -> Topology:
+def _sorted_ids(key: np.ndarray) -> np.ndarray:
+    """(F,) int32 ids ordered by (key, id)."""
+    if key.dtype != np.float32:
+        return np.argsort(key, kind="stable").astype(np.int32)
+    # float32 keys: sort (key bits mapped to ascending unsigned, id) as one 64-bit
+    # integer.  These are unique, so any sort is stable, and numpy's (SIMD) integer
+    # sort is several times faster than a stable argsort.  (+0.0 turns -0.0 into
+    # +0.0: equal keys must differ only by id.)
+    bits = (key + np.float32(0.0)).view(np.int32)
+    ascending = (bits ^ ((bits >> 31) | np.int32(-2 ** 31))).view(np.uint32)
+    packed = ascending.astype(np.uint64) << np.uint64(32)
+    del bits, ascending
+    packed |= np.arange(len(key), dtype=np.uint64)
+    packed.sort()
+    return packed.astype(np.uint32).view(np.int32)     # the low 32 bits: the id
+
+
+def _ranges(starts: np.ndarray, lengths: np.ndarray) -> np.ndarray:
+    """The ranges ``starts[i] : starts[i] + lengths[i]``, concatenated (int64)."""
+    out = np.arange(int(lengths.sum()), dtype=np.int64)
+    out += np.repeat(starts - _exclusive_cumsum(lengths)[:-1], lengths)
+    return out
+
+
+class _SortedList:
+    """The rows (ids, and box rows if carried) of one axis' sorted list:
+    the first n entries of full-length buffers, reused level after level."""
+
+    def __init__(self, rows: List[np.ndarray]):
+        self.buffers = rows
+        self.n = len(rows[0])
+
+    @property
+    def rows(self) -> List[np.ndarray]:
+        return [buffer[:self.n] for buffer in self.buffers]
+
+    def permute(self, order: np.ndarray, spares: dict) -> None:
+        """Keep the entries ``order`` (int64) in that order; each row is gathered into
+        the spare buffer of its dtype, and its old buffer becomes that spare."""
+        for i, buffer in enumerate(self.buffers):
+            spare = spares[buffer.dtype]
+            np.take(buffer[:self.n], order, out=spare[:len(order)], mode="clip")  # clip: unbuffered
+            self.buffers[i], spares[buffer.dtype] = spare, buffer
+        self.n = len(order)
+
+
+# Where a triangle goes when its node is done with (``build_topdown``'s side codes).
+LEFT, RIGHT, LEAF = 0, 1, 2
+
+
+def build_topdown(keys, rule: SplitRule, boxes: Optional[np.ndarray] = None) -> Topology:
     """Grow a binary tree top-down, one level per iteration, all nodes of a level at once.
 
-    centroids: (F, 3) float64.  ``carry_keys`` / ``boxes`` ((F, 6) float32, rows
-    min xyz, -max xyz) ask for per-list copies in :class:`Level` (what SAH needs).
+    keys: the sort key of every triangle on each axis, (3, F) (or three (F,)
+    arrays), or a function of ``boxes`` that returns them.  ``boxes``: (6, F)
+    float32 rows to carry in every list (:attr:`Level.boxes`); the engine keeps
+    only the per-list copies, so a caller that passes ``boxes`` without keeping a
+    reference lets the (6, F) array go.
 
-    The triangles are kept in three id lists, each sorted once by one centroid axis
-    (stable sort from id order, so ties go by triangle id).  Splitting a node takes
-    a prefix of one list; the other two lists are *stably partitioned* by the same
-    per-triangle side flag, so every list stays sorted inside every node without
-    re-sorting (the presorted-lists technique of kd-tree builders).  A partition is
-    two order-keeping ``compress`` and one gather: O(n) per level and list.
-    Triangles of finished leaves are written to their slots and dropped from the
-    lists.
+    The triangles are kept in three sorted lists, one per axis (stable sort from
+    id order, so ties go by triangle id), each a few separate rows: ids and the
+    carried box rows.  Splitting a node takes a prefix of one list; the other two
+    lists are *stably partitioned* by the same per-triangle side, so every list
+    stays sorted inside every node without re-sorting (the presorted-lists
+    technique of kd-tree builders).  The next level holds first the left children
+    of all split nodes, then all right children: a list's new order is then just
+    "its left triangles, then its right ones", one order-keeping index per list
+    and one gather per row, into a reused buffer.  Triangles of finished leaves go
+    to their slots and leave the lists in the same gather.
     """
-    F = len(centroids)
-    ids = np.stack([np.argsort(centroids[:, a], kind="stable") for a in range(3)]).astype(np.int32)
-    keys = np.stack([centroids[ids[a], a] for a in range(3)]) if carry_keys else None
-    if boxes is not None:
-        boxes = np.stack([np.take(boxes.T, ids[a], axis=1) for a in range(3)])
+    if callable(keys):
+        keys = keys(boxes)
+    F = len(keys[0])
+
+    def sorted_list(a: int) -> _SortedList:
+        ids = _sorted_ids(keys[a])
+        rows = [ids]
+        if boxes is not None:
+            rows.extend(np.take(row, ids) for row in boxes)
+        return _SortedList(rows)
+
+    # One axis at a time: the sorts' temporaries would outweigh the lists otherwise.
+    lists = [sorted_list(a) for a in range(3)]    # per axis: rows [ids, (6 box rows)]
+    carry_boxes = boxes is not None
+    del boxes                                # only the per-list copies from here on
+    # One spare buffer per row type: a partition gathers a row into the spare and
+    # the row's old buffer becomes the spare, so no level allocates (and page-faults
+    # in) fresh rows.
+    spares = [{row.dtype: np.empty(F, row.dtype) for row in lists[0].rows}
+              for _ in range(3 if BUILD_THREADS > 1 else 1)]     # one set per thread
+
     offsets = np.zeros(1, np.int64)
     counts = np.array([F], np.int64)
     slots = np.zeros(1, np.int64)            # first leaf slot of each open node
     prim_id = np.empty(F, np.int32)
-    goes_right = np.zeros(F, bool)           # per triangle, rewritten every level
+    side = np.empty(F, np.int8)              # per triangle id, rewritten every level
     per_level = []                           # (first, count, leaf) of each level's nodes
     depth = 0
     while True:
-        ends = offsets + counts - 1
-        if keys is not None:
-            cmin, cmax = keys[:, offsets].T, keys[:, ends].T
-        else:
-            cmin = np.stack([centroids[ids[a, offsets], a] for a in range(3)], 1)
-            cmax = np.stack([centroids[ids[a, ends], a] for a in range(3)], 1)
-        axis, n_left = rule(Level(depth, ids, keys, boxes, offsets, counts, cmin, cmax))
+        level = Level(depth, tuple(lst.rows[0] for lst in lists),
+                      tuple(tuple(lst.rows[1:]) for lst in lists) if carry_boxes else None,
+                      offsets, counts, tuple(keys))
+        axis, n_left = rule(level)
+        del level                            # its rows are views of buffers reused below
         axis = np.asarray(axis, np.int64)
         n_left = np.asarray(n_left, np.int64)
         if np.any((n_left < 0) | (n_left >= counts) | ((n_left > 0) & ((axis < 0) | (axis > 2)))):
@@ -213,56 +320,46 @@ def build_topdown(centroids: np.ndarray, rule: SplitRule, carry_keys: bool = Fal
         leaf = n_left == 0
         per_level.append((slots, counts, leaf))
 
+        # Side of every triangle: LEFT unless marked otherwise below.
+        split = ~leaf
+        side.fill(LEFT)
         if leaf.any():
-            # Leaves take the slots [first, first + count); their triangles leave the lists.
-            in_leaf = np.repeat(leaf, counts)
-            slot = np.arange(len(in_leaf)) + np.repeat(slots - offsets, counts)
-            prim_id[slot[in_leaf]] = ids[0, in_leaf]
+            # Leaves take the slots [first, first + count), in the order of list 0,
+            # and their triangles leave the lists.
+            leaf_ids = np.take(lists[0].rows[0], _ranges(offsets[leaf], counts[leaf]))
+            prim_id[_ranges(slots[leaf], counts[leaf])] = leaf_ids
             if leaf.all():
                 break
-            keep = ~in_leaf
-            ids = np.compress(keep, ids, axis=1)
-            keys = None if keys is None else np.compress(keep, keys, axis=1)
-            boxes = None if boxes is None else np.compress(keep, boxes, axis=2)
-            split = ~leaf
-            counts, slots, axis, n_left = counts[split], slots[split], axis[split], n_left[split]
-            offsets = _exclusive_cumsum(counts)[:-1]
+            side[leaf_ids] = LEAF
+            del leaf_ids
+        # A split node's RIGHT triangles, read off its split list: all but the first
+        # n_left.
+        chosen = np.unique(axis[split])
+        for a in chosen:
+            mine = split & (axis == a)
+            right_part = _ranges(offsets[mine] + n_left[mine], counts[mine] - n_left[mine])
+            side[np.take(lists[a].rows[0], right_part)] = RIGHT
 
-        # Side of every triangle, read off the chosen axis' list.
-        n = ids.shape[1]
-        rank = np.arange(n, dtype=np.int32) - np.repeat(offsets.astype(np.int32), counts)
-        right = rank >= np.repeat(n_left.astype(np.int32), counts)
-        chosen = np.unique(axis)
-        if len(chosen) == 1:
-            goes_right[ids[chosen[0]]] = right
-        else:
-            for a in chosen:
-                mine = np.repeat(axis == a, counts)
-                goes_right[np.compress(mine, ids[a])] = np.compress(mine, right)
+        # Stable partition of every list: lefts in order, then rights in order (the
+        # next level's nodes); leaf triangles are in neither and drop out.
+        def partition(a: int) -> None:
+            if len(chosen) == 1 and chosen[0] == a:
+                # Every split is along this list: its sides are plain prefix/suffix.
+                order = np.concatenate((_ranges(offsets[split], n_left[split]),
+                                        _ranges(offsets[split] + n_left[split],
+                                                counts[split] - n_left[split])))
+            else:
+                sides = np.take(side, lists[a].rows[0], mode="clip")
+                order = np.concatenate((np.flatnonzero(sides == LEFT),
+                                        np.flatnonzero(sides == RIGHT)))
+                del sides
+            lists[a].permute(order, spares[a % len(spares)])
 
-        # Stable partition of every list.  Node sizes do not change, so position j
-        # of the new list is a left slot exactly where ``right[j]`` is False; the
-        # k-th left slot takes the k-th left triangle of the old list (compress
-        # keeps the order), the k-th right slot the k-th right triangle.
-        n_lefts = n - int(np.count_nonzero(right))
-        gather = np.cumsum(right, dtype=np.int32)
-        gather += n_lefts - 1
-        np.copyto(gather, np.cumsum(~right, dtype=np.int32) - 1, where=~right)
-        position = np.arange(n, dtype=np.int32)
-        carried = [x for x in (ids, keys, boxes) if x is not None]
-        moved = [np.empty_like(x) for x in carried]
-        for a in range(3):
-            is_right = np.take(goes_right, ids[a])
-            perm = np.take(np.concatenate([np.compress(~is_right, position),
-                                           np.compress(is_right, position)]), gather)
-            for old, new in zip(carried, moved):
-                np.take(old[a], perm, axis=-1, out=new[a])
-        ids = moved[0]
-        keys = moved[1] if keys is not None else None
-        boxes = moved[-1] if boxes is not None else None
-        counts = np.stack([n_left, counts - n_left], 1).ravel()
+        for_each_axis(partition, lists[0].n)
+        n_left, counts, slots = n_left[split], counts[split], slots[split]
+        counts = np.concatenate((n_left, counts - n_left))
+        slots = np.concatenate((slots, slots + n_left))
         offsets = _exclusive_cumsum(counts)[:-1]
-        slots = np.stack([slots, slots + n_left], 1).ravel()
         depth += 1
     return _assemble(per_level, prim_id)
 
@@ -278,8 +375,9 @@ def _assemble(per_level, prim_id) -> Topology:
     right = np.full(len(first), -1, np.int64)
     for lvl, (_, _, lf) in enumerate(per_level[:-1]):
         parents = level_offsets[lvl] + np.flatnonzero(~lf)
-        left[parents] = level_offsets[lvl + 1] + 2 * np.arange(len(parents))
-        right[parents] = left[parents] + 1
+        # The next level: left children of these parents in order, then right children.
+        left[parents] = level_offsets[lvl + 1] + np.arange(len(parents))
+        right[parents] = left[parents] + len(parents)
     return Topology(left, right, first, count, level, level_offsets, prim_id)
 
 
@@ -287,26 +385,41 @@ def _assemble(per_level, prim_id) -> Topology:
 # From the builder's tree to the device layout.
 
 
-def node_boxes(topo: Topology, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
-    """(N, 2, 3) float32 exact box of each node's triangles, in topology order.
+def _inner_by_level(topo: Topology) -> List[np.ndarray]:
+    """The inner nodes of each level, as node ids."""
+    inner = topo.left >= 0
+    bounds = topo.level_offsets
+    return [bounds[lvl] + np.flatnonzero(inner[bounds[lvl]:bounds[lvl + 1]])
+            for lvl in range(len(bounds) - 1)]
 
-    Leaf boxes come from their slots; inner boxes are merged bottom-up, one level
-    per step.
+
+def node_boxes(topo: Topology, triangles: np.ndarray) -> np.ndarray:
+    """(N, 2, 3) float32 exact box of each node's triangles (corners (F, 3, 3)
+    float32), in topology order.
+
+    Leaf boxes come from the corners of their slots; inner boxes are merged
+    bottom-up, one level per step.
     """
-    boxes = np.empty((len(topo.first), 2, 3), np.float32)
-    leaves = np.flatnonzero(topo.is_leaf)
+    leaves = np.flatnonzero(topo.left < 0)
     first, count = topo.first[leaves], topo.count[leaves]
-    # Leaf boxes: one (m, L) gather per slot index r < m = largest leaf (short leaves
-    # repeat their last triangle), reduced over r with contiguous min/max.
-    slot = first + np.minimum(np.arange(count.max())[:, None], count - 1)
-    tri = topo.prim_id[slot]
-    boxes[leaves, 0] = np.take(lo, tri, axis=0).min(axis=0)
-    boxes[leaves, 1] = np.take(hi, tri, axis=0).max(axis=0)
-    for lvl in range(len(topo.level_offsets) - 2, -1, -1):
-        nodes = np.arange(topo.level_offsets[lvl], topo.level_offsets[lvl + 1])
-        nodes = nodes[~topo.is_leaf[nodes]]
-        boxes[nodes, 0] = np.minimum(boxes[topo.left[nodes], 0], boxes[topo.right[nodes], 0])
-        boxes[nodes, 1] = np.maximum(boxes[topo.left[nodes], 1], boxes[topo.right[nodes], 1])
+    # Slot r of every leaf at once (short leaves repeat their last triangle): one
+    # (L, 3, 3) gather and contiguous min/max per r.
+    lo = np.full((len(leaves), 3), np.inf, np.float32)
+    hi = np.full((len(leaves), 3), -np.inf, np.float32)
+    for r in range(int(count.max())):
+        corners = np.take(triangles, topo.prim_id[first + np.minimum(r, count - 1)], axis=0)
+        for xyz in corners.transpose(1, 0, 2):
+            np.minimum(lo, xyz, out=lo)
+            np.maximum(hi, xyz, out=hi)
+    # Merged as rows (min xyz, -max xyz), so that one minimum merges a whole box.
+    boxes = np.empty((len(topo.first), 2, 3), np.float32)
+    boxes[leaves, 0] = lo
+    boxes[leaves, 1] = -hi
+    del lo, hi
+    rows = boxes.reshape(-1, 6)
+    for parents in reversed(_inner_by_level(topo)):
+        rows[parents] = np.minimum(rows[topo.left[parents]], rows[topo.right[parents]])
+    np.negative(boxes[:, 1], out=boxes[:, 1])
     return boxes
 
 
@@ -314,17 +427,27 @@ def linearise(topo: Topology) -> Tuple[np.ndarray, np.ndarray]:
     """Depth-first ``BVH_NODE`` records (bounds still zero) and ``order`` (N,) int64,
     the topology node stored at each depth-first position.
 
-    Preorder without a traversal: every subtree covers a contiguous, non-empty slot
-    range, so two nodes are either nested (same first slot only along a leftmost
-    chain, ancestor at the smaller level) or disjoint (ordered by first slot).
-    Sorting by (first slot, level) is therefore exactly the preorder.
+    Preorder positions without a traversal, one level per step: a node's left child
+    comes right after it, its right child after the whole left subtree, whose node
+    count is summed bottom-up first.
     """
-    order = np.lexsort((topo.level, topo.first))
-    position = np.empty_like(order)
-    position[order] = np.arange(len(order))
-    leaf = topo.is_leaf[order]
-    nodes = np.zeros(len(order), BVH_NODE)
-    nodes["left_first"] = np.where(leaf, topo.first[order], position[topo.left[order]])
+    N = len(topo.first)
+    inner = _inner_by_level(topo)
+    size = np.ones(N, np.int64)                  # nodes in each subtree
+    for p in reversed(inner):
+        size[p] += size[topo.left[p]] + size[topo.right[p]]
+    position = np.zeros(N, np.int64)
+    right = np.full(N, -1, np.int32)             # right child's position, by position
+    for p in inner:
+        left_position = position[p] + 1
+        position[topo.left[p]] = left_position
+        position[topo.right[p]] = right[position[p]] = left_position + size[topo.left[p]]
+    del size
+    order = np.empty(N, np.int64)
+    order[position] = np.arange(N)
+    leaf = right < 0
+    nodes = np.zeros(N, BVH_NODE)
+    nodes["left_first"] = np.where(leaf, topo.first[order], np.arange(1, N + 1))
     nodes["count"] = np.where(leaf, topo.count[order], 0)
-    nodes["right"] = np.where(leaf, -1, position[topo.right[order]])
+    nodes["right"] = right
     return nodes, order

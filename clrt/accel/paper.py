@@ -24,7 +24,8 @@ def median_split(level: Level, leaf_size: int, axis_rule: str = "longest"):
     if axis_rule == "round_robin":
         axis = np.full(len(level.counts), level.depth % 3, np.int64)
     else:
-        axis = np.argmax(level.cmax - level.cmin, axis=1)     # first maximum on ties
+        extent = np.stack([hi - lo for lo, hi in map(level.key_bounds, range(3))], 1)
+        axis = np.argmax(extent, axis=1)                      # first maximum on ties
     # Each node's list for ``axis`` is kept sorted by (centroid, id), so the median
     # split is a count: the first floor(n/2) entries go left.
     n_left = np.where(level.counts <= leaf_size, 0, level.counts // 2)
@@ -36,4 +37,5 @@ def build(centroids: np.ndarray, leaf_size: int, axis_rule: str = "longest") -> 
     needs no boxes).  ``axis_rule``: "longest" or "round_robin"."""
     if axis_rule not in AXIS_RULES:
         raise ValueError(f"axis_rule must be one of {AXIS_RULES}, got {axis_rule!r}")
-    return build_topdown(centroids, partial(median_split, leaf_size=leaf_size, axis_rule=axis_rule))
+    return build_topdown(centroids.T,
+                         partial(median_split, leaf_size=leaf_size, axis_rule=axis_rule))

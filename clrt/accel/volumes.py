@@ -30,21 +30,20 @@ PAD_FLOOR = 1e-30       # keeps a point-sized node's volume a normal float32
 EVAL_SLACK = 1e-6       # relative inflation of radius / semi-axes for float32 tests
 ELLIPSE_FLOOR = 1e-3    # smallest semi-axis, relative to the node's largest semi-axis
 SQRT3 = np.sqrt(3.0)
+FIT_CHUNK = 2 ** 16     # nodes fitted at once
 
 
 def round_down32(x: np.ndarray) -> np.ndarray:
     """float64 -> the largest float32 <= x."""
     y = x.astype(np.float32)
-    low = y.astype(np.float64) > x
-    y[low] = np.nextafter(y[low], np.float32(-np.inf))
+    np.nextafter(y, np.float32(-np.inf), out=y, where=y.astype(np.float64) > x)
     return y
 
 
 def round_up32(x: np.ndarray) -> np.ndarray:
     """float64 -> the smallest float32 >= x."""
     y = x.astype(np.float32)
-    high = y.astype(np.float64) < x
-    y[high] = np.nextafter(y[high], np.float32(np.inf))
+    np.nextafter(y, np.float32(np.inf), out=y, where=y.astype(np.float64) < x)
     return y
 
 
@@ -52,10 +51,15 @@ def padded_boxes(boxes: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
     """(N, 2, 3) node boxes -> padded min, max (N, 3) float64 (not yet rounded)."""
     lo = boxes[:, 0].astype(np.float64)
     hi = boxes[:, 1].astype(np.float64)
-    extent = (hi - lo).max(axis=1, keepdims=True)
-    magnitude = np.maximum(np.abs(lo), np.abs(hi)).astype(np.float32)
-    pad = REL_PAD * extent + ULP_PAD * np.spacing(magnitude).astype(np.float64) + PAD_FLOOR
-    return lo - pad, hi + pad
+    d = hi - lo
+    extent = np.maximum(np.maximum(d[:, 0], d[:, 1]), d[:, 2])[:, None]
+    magnitude = np.maximum(np.abs(boxes[:, 0]), np.abs(boxes[:, 1]))       # float32
+    pad = ULP_PAD * np.spacing(magnitude).astype(np.float64)
+    pad += REL_PAD * extent
+    pad += PAD_FLOOR
+    lo -= pad
+    hi += pad
+    return lo, hi
 
 
 def fit(volume: str, boxes: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
@@ -66,15 +70,24 @@ def fit(volume: str, boxes: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
     box (min, max), sphere (centre + radius in w, zeros), ellipse (centre,
     reciprocal semi-axes); unused lanes are 0.
     """
+    if volume not in VOLUMES:
+        raise ValueError(f"volume must be one of {VOLUMES}, got {volume!r}")
+    a = np.zeros((len(boxes), 4), np.float32)
+    b = np.zeros((len(boxes), 4), np.float32)
+    # In chunks: the float64 temporaries stay small next to the tree itself.
+    for start in range(0, len(boxes), FIT_CHUNK):
+        end = start + FIT_CHUNK
+        _fit(volume, boxes[start:end], a[start:end], b[start:end])
+    return a, b
+
+
+def _fit(volume: str, boxes: np.ndarray, a: np.ndarray, b: np.ndarray) -> None:
+    """``fit`` of some nodes, written to their rows ``a``, ``b`` (zeroed)."""
     lo, hi = padded_boxes(boxes)
-    a = np.zeros((len(lo), 4), np.float32)
-    b = np.zeros((len(lo), 4), np.float32)
     if volume == "box":
         a[:, :3] = round_down32(lo)
         b[:, :3] = round_up32(hi)
-        return a, b
-    if volume not in VOLUMES:
-        raise ValueError(f"volume must be one of {VOLUMES}, got {volume!r}")
+        return
 
     # The paper's centre: midpoint of min and max.  It is rounded to float32 first
     # and the size is measured from the rounded centre, so rounding cannot
@@ -87,7 +100,7 @@ def fit(volume: str, boxes: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
         # Radius = distance from the centre to the (farthest) box corner.
         radius = np.sqrt((half ** 2).sum(axis=1)) * (1.0 + EVAL_SLACK)
         a[:, 3] = round_up32(radius)
-        return a, b
+        return
 
     # Axis-aligned ellipsoid with semi-axes sqrt(3) * half-extent: a box corner
     # (+-h_x, +-h_y, +-h_z) gives sum(h_i^2 / (3 h_i^2)) = 1, on the surface, so the
@@ -101,4 +114,3 @@ def fit(volume: str, boxes: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
     semi = np.maximum(semi, ELLIPSE_FLOOR * semi.max(axis=1, keepdims=True))
     semi *= 1.0 + EVAL_SLACK
     b[:, :3] = round_down32(1.0 / semi)                   # smaller 1/R = larger R
-    return a, b
