@@ -283,7 +283,7 @@ def build_topdown(keys, rule: SplitRule, boxes: Optional[np.ndarray] = None) -> 
         keys = keys(boxes)
     F = len(keys[0])
 
-    def sorted_list(a: int) -> _SortedList:
+    def sorted_list(a: int, boxes) -> _SortedList:
         ids = _sorted_ids(keys[a])
         rows = [ids]
         if boxes is not None:
@@ -291,7 +291,7 @@ def build_topdown(keys, rule: SplitRule, boxes: Optional[np.ndarray] = None) -> 
         return _SortedList(rows)
 
     # One axis at a time: the sorts' temporaries would outweigh the lists otherwise.
-    lists = [sorted_list(a) for a in range(3)]    # per axis: rows [ids, (6 box rows)]
+    lists = [sorted_list(a, boxes) for a in range(3)]    # per axis: rows [ids, (6 box rows)]
     carry_boxes = boxes is not None
     del boxes                                # only the per-list copies from here on
     # One spare buffer per row type: a partition gathers a row into the spare and
