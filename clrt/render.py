@@ -158,7 +158,7 @@ class Renderer:
         self._frame_buffers: dict[str, cl.Buffer] = {}
         self._frame_pixels = -1
         self._image_pool: list[np.ndarray] = []   # see _image_array
-        self._block = None                        # see _launch_shape
+        self._max_group = None                    # work-items a launch's group may have, see _launch_shape
 
     def _buffers_for(self, pixels: int) -> dict:
         """Per-tile buffers for up to ``pixels`` pixels, reallocated only when that changes."""
@@ -245,7 +245,8 @@ class Renderer:
         prim = np.empty((h, w), np.int32) if hits else None
         t = np.empty((h, w), np.float32) if hits else None
         shading_args = (*self.geometry.args, *self.geometry.buffers["tri_info"],
-                        *self.geometry.buffers["vertex_normals"], self.buffers["materials"], self.buffers["lights"], np.uint32(len(self.scene.lights)),
+                        *self.geometry.buffers["vertex_normals"], self.buffers["materials"],
+                        self.buffers["lights"], np.uint32(len(self.scene.lights)),
                         _vec4(self.scene.ambient_light), _vec4(self.scene.background),
                         np.float32(ray_epsilon(self.arrays.bounds, camera)))
         job = _Job(camera, samples, max_depth, seed, linear, shading_args, image, pinned, prim, t, timings)
@@ -255,7 +256,7 @@ class Renderer:
         ms_per_pixel = 0.0   # the most expensive tile so far: rows differ in cost (sky vs. mesh)
         try:
             while y < h:
-                tw, th = _tile_shape(x, y, w, h, budget)
+                tw, th = _tile_shape(x, y, w, h, budget, (self.block or (1, 1))[1])
                 try:
                     slowest_ms = self._render_tile(job, x, y, tw, th, capacity)
                 except (cl.Error, MemoryError) as exc:
@@ -283,10 +284,10 @@ class Renderer:
         return Frame(image, prim, t, timings, self.device, len(self.arrays.tri_verts), tiles=launches)
 
     def _image_array(self, pixels: int) -> tuple[np.ndarray, bool]:
-        """(pixels * 3,) uint8 for a frame's image and whether it is page-locked: in page-locked host memory when
-        possible: the device writes the image there directly by DMA, several
-        times faster than into ordinary (pageable) memory, and no host copy
-        follows.  The arrays are pooled: one is reused once nothing outside the
+        """(pixels * 3,) uint8 for a frame's image, and whether it is page-locked.
+        Page-locked where possible: the device writes the image there directly
+        by DMA, several times faster than into ordinary (pageable) memory, and
+        no host copy follows.  The arrays are pooled: one is reused once nothing outside the
         pool refers to it any more (every view of it holds a reference, which
         ``sys.getrefcount`` sees), so an image handed out is never overwritten.
         With all pooled arrays still in use, ordinary memory is used (through
@@ -369,16 +370,14 @@ class Renderer:
         """Global and local size of a tile's launches: work-groups of ``block``
         pixels (rays of neighbouring pixels run together), the driver's choice
         where the kernels cannot run that many work-items at once."""
-        if self._block is None:
-            bw, bh = self.block or (0, 0)
-            fits = bw * bh > 0 and all(
-                k.get_work_group_info(cl.kernel_work_group_info.WORK_GROUP_SIZE, self.queue.device) >= bw * bh
+        if self._max_group is None:
+            self._max_group = min(
+                k.get_work_group_info(cl.kernel_work_group_info.WORK_GROUP_SIZE, self.queue.device)
                 for name, k in self.kernels.items() if name != "encode_srgb8")
-            self._block = (bw, bh) if fits else False
-        if not self._block:
+        bw, bh = self.block or (0, 0)
+        if not 0 < bw * bh <= self._max_group:
             return (w, h), None
-        bw, bh = self._block
-        return (-(-w // bw) * bw, -(-h // bh) * bh), self._block
+        return (-(-w // bw) * bw, -(-h // bh) * bh), (bw, bh)
 
 
 MAX_BOUNCES = 16   # the stack bound in whitted.cl
@@ -390,14 +389,15 @@ IMAGE_POOL_SIZE = 3         # page-locked images per renderer (see Renderer._ima
 HOST_CHECK_BYTES = 1 << 28  # frames needing more host memory than this check that it is there
 
 
-def _tile_shape(x: int, y: int, width: int, height: int, budget: int) -> tuple[int, int]:
+def _tile_shape(x: int, y: int, width: int, height: int, budget: int, block_rows: int) -> tuple[int, int]:
     """Width and height of the tile at (x, y) of at most ``budget`` pixels: whole
-    rows where the budget allows (a multiple of 8 of them, to fill the launches'
-    16 x 8 blocks), else a piece of one row.  Tiles go row-major through the image."""
+    rows where the budget allows (a multiple of ``block_rows`` of them, to fill
+    the launches' blocks), else a piece of one row.  Tiles go row-major through
+    the image."""
     if x == 0 and budget >= width:
         rows = min(budget // width, height - y)
-        if rows > 8 and rows < height - y:
-            rows -= rows % 8
+        if block_rows < rows < height - y:
+            rows -= rows % block_rows
         return width, rows
     return min(budget, width - x), 1
 

@@ -197,10 +197,6 @@ class Topology:
     level_offsets: np.ndarray
     prim_id: np.ndarray
 
-    @property
-    def is_leaf(self) -> np.ndarray:
-        return self.left < 0
-
 
 def _exclusive_cumsum(x: np.ndarray) -> np.ndarray:
     out = np.empty(len(x) + 1, np.int64)

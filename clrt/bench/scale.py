@@ -66,18 +66,14 @@ def instanced(mesh, count: int):
 def _primary_rays_ms(renderer, camera, repeat: int) -> float:
     """Median kernel time of one closest-hit camera ray per pixel (trace_camera)."""
     import pyopencl as cl
+    from clrt.bench.speed import time_launches
     from clrt.device import layouts
     from clrt.trace import Accel
     accel = Accel.from_renderer(renderer)
     hits = cl.Buffer(renderer.context, cl.mem_flags.READ_WRITE, camera.width * camera.height * layouts.HIT.itemsize)
-    times = []
-    for i in range(1 + repeat):
-        event = accel.launch_camera(camera, hits)
-        event.wait()
-        if i:
-            times.append(1e-6 * (event.profile.end - event.profile.start))
+    kernel_ms, _ = time_launches(accel.queue, lambda: accel.launch_camera(camera, hits), repeat, warmup=1)
     hits.release()
-    return statistics.median(times)
+    return kernel_ms
 
 
 def run(counts, builders, sizes, accel="box", device=None, repeat=3, leaf_size=4, out=(sys.stdout,),

@@ -36,7 +36,9 @@ CASES = {
 }
 
 
-def _time(queue, launch, repeat: int, warmup: int) -> tuple[float, float]:
+def time_launches(queue, launch, repeat: int, warmup: int) -> tuple[float, float]:
+    """Median kernel and wall ms of ``launch()`` (returns its event) over ``repeat``
+    launches after ``warmup``."""
     kernel_ms, wall_ms = [], []
     for i in range(warmup + repeat):
         start = time.perf_counter()
@@ -71,8 +73,8 @@ def run(mesh_dir: Path, cases, variants, device=None, size=(1920, 1080), repeat=
             accel = Accel(mesh, accel_name, builder, leaf_size, device)
             hit_buf = cl.Buffer(accel.context, cl.mem_flags.READ_WRITE, w * h * layouts.HIT.itemsize)
             occ_buf = cl.Buffer(accel.context, cl.mem_flags.READ_WRITE, w * h)
-            closest = _time(accel.queue, lambda: accel.launch_camera(camera, hit_buf, **launch), repeat, warmup)
-            anyhit = _time(accel.queue, lambda: accel.launch_camera(camera, occ_buf, occlusion=True, **launch),
+            closest = time_launches(accel.queue, lambda: accel.launch_camera(camera, hit_buf, **launch), repeat, warmup)
+            anyhit = time_launches(accel.queue, lambda: accel.launch_camera(camera, occ_buf, occlusion=True, **launch),
                            repeat, warmup)
             hits = np.empty(w * h, layouts.HIT)
             cl.enqueue_copy(accel.queue, hits, hit_buf)
