@@ -1,0 +1,77 @@
+"""One table of clrt's names, defaults and limits.
+
+Everything a user can choose by name (acceleration structure, builder, face
+culling), every default of those choices, and every limit that more than one
+place checks lives here once.  The CLI, the Python API, the scene-file reader
+and the benchmarks read their choices and ranges from this module; the limits
+the kernels also need reach them as ``-D`` defines (:func:`kernel_defines`,
+added to every program build), so no ``.cl`` file repeats a number.
+``tests/test_config.py`` checks that the kernels see the same values.
+"""
+
+from __future__ import annotations
+
+# --------------------------------------------------------------------------- acceleration
+
+#: Bounding-volume shapes of a BVH.  A shape is chosen when the program is
+#: built (``VOLUME_DEFINES``); a new shape needs a fit in ``clrt/accel/volumes.py``
+#: and a ray test in ``clrt/kernels/volumes.cl`` (docs/architecture.md).
+VOLUMES = ("box", "sphere", "ellipse")
+VOLUME_DEFINES = {"box": "VOLUME_BOX", "sphere": "VOLUME_SPHERE", "ellipse": "VOLUME_ELLIPSE"}
+#: What ``accel=`` takes: a volume shape, or "none" (every ray against every triangle).
+ACCELS = ("none",) + VOLUMES
+#: BVH builders: the paper's median split, binned SAH (both on the host).
+BUILDERS = ("paper", "sah")
+
+DEFAULT_ACCEL = "box"
+DEFAULT_BUILDER = "sah"
+DEFAULT_LEAF_SIZE = 4
+MAX_LEAF_SIZE = 255
+
+#: Traversal stacks are sized from the tree's depth, rounded up to a multiple of
+#: this, so one compiled program serves every tree of about the same depth
+#: instead of one program per depth.
+STACK_SIZE_STEP = 16
+
+# --------------------------------------------------------------------------- rendering
+
+#: Reflection/refraction bounces: ``max_depth`` is checked against this, and
+#: the kernels' explicit ray stack (whitted.cl) holds MAX_BOUNCES + 1 rays.
+MAX_BOUNCES = 16
+DEFAULT_MAX_DEPTH = 5
+#: Anti-aliasing: ``samples`` x ``samples`` rays per pixel.
+MAX_SAMPLES = 16
+#: Largest image side in pixels (width, height, and the pinhole images of queries).
+MAX_IMAGE_SIDE = 65536
+DEFAULT_WIDTH = 640
+DEFAULT_HEIGHT = 480
+DEFAULT_FOV = 45.0
+
+#: Material flag bits (``Material.flags`` in layouts.py).
+MATERIAL_SMOOTH = 1
+
+# --------------------------------------------------------------------------- ray queries
+
+#: Face culling of ray queries: name -> the code the kernels compare with.
+CULL_MODES = {"none": 0, "back": 1, "front": 2}
+
+# --------------------------------------------------------------------------- device buffers
+
+#: Most parts one scene buffer is split into when it exceeds the device's
+#: largest allocation (split.cl).  Four always suffice: OpenCL promises a
+#: largest allocation of at least a quarter of the device memory.
+MAX_PARTS = 4
+
+
+def kernel_defines() -> dict:
+    """The limits above that the kernels use, as ``-D`` defines of every program."""
+    return {
+        "MAX_BOUNCES": MAX_BOUNCES,
+        "MATERIAL_SMOOTH": f"{MATERIAL_SMOOTH}u",
+        **{f"CULL_{name.upper()}": code for name, code in CULL_MODES.items()},
+    }
+
+
+def stack_size(depth: int) -> int:
+    """Traversal stack entries for a tree of ``depth`` levels (see STACK_SIZE_STEP)."""
+    return max(STACK_SIZE_STEP, -(-int(depth) // STACK_SIZE_STEP) * STACK_SIZE_STEP)
