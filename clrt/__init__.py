@@ -3,26 +3,49 @@
     >>> import clrt
     >>> image = clrt.render("bunny.off", width=320, height=240)   # (240, 320, 3) uint8
 
-The pipeline, one module each: ``clrt.scene`` (meshes, materials, lights,
-camera) -> acceleration build -> ``clrt.device`` (OpenCL context, buffer
-layouts, programs) -> ``clrt/kernels/*.cl`` -> ``clrt.render`` (the frame).
+The pipeline, one package each: ``clrt.scene`` (meshes, materials, lights,
+camera, scene files) -> ``clrt.accel`` (BVH builders and volumes) ->
+``clrt.device`` (OpenCL context, programs, uploads) -> ``clrt/kernels/*.cl`` ->
+``clrt.renderer`` (frames) and ``clrt.query`` (batch ray queries); see
+docs/architecture.md.
+
+The names below are imported on first use, so ``import clrt`` stays cheap: no
+OpenCL, trimesh or benchmark code is loaded until something needs it.
 """
+
+from importlib import import_module
 
 from clrt.errors import (ClrtError, DeviceError, DeviceMemoryError, InputError, KernelBuildError,
                          MeshLoadError, OutputError, TooLargeError)
-from clrt.intersector import RayMeshIntersector
-from clrt.render import Frame, Renderer, render
-from clrt.scene.default import default_scene
-from clrt.scene.load import load_mesh  # also registers our 3DS reader with trimesh.load
-from clrt.scene.mesh import Mesh
-from clrt.scene.scene import Camera, Light, Material, Scene, SceneObject, scene_from_mesh
-from clrt.trace import Accel, AllHits, CameraImages, Hits, all_hits, camera_images, count_hits, occluded, trace
 
-__all__ = [
-    "Accel", "AllHits", "Camera", "CameraImages", "ClrtError", "DeviceError", "DeviceMemoryError",
-    "Frame", "Hits", "InputError", "KernelBuildError", "Light", "Material", "Mesh", "MeshLoadError",
-    "OutputError", "RayMeshIntersector", "Renderer", "Scene", "SceneObject", "TooLargeError",
-    "all_hits", "camera_images", "count_hits", "default_scene", "load_mesh", "occluded", "render",
-    "scene_from_mesh", "trace",
-]
 __version__ = "0.1.0"
+
+# public name -> module that defines it
+_LAZY = {
+    "Accel": "clrt.query", "AllHits": "clrt.query", "CameraImages": "clrt.query", "Hits": "clrt.query",
+    "all_hits": "clrt.query", "any_hit": "clrt.query", "camera_images": "clrt.query",
+    "count_hits": "clrt.query", "occluded": "clrt.query", "trace": "clrt.query",
+    "RayMeshIntersector": "clrt.query.intersector",
+    "Frame": "clrt.renderer", "Renderer": "clrt.renderer", "TileLimits": "clrt.renderer", "render": "clrt.renderer",
+    "default_scene": "clrt.scene.default",
+    "load_mesh": "clrt.scene.load",
+    "Mesh": "clrt.scene.mesh",
+    "Camera": "clrt.scene.scene", "Light": "clrt.scene.scene", "Material": "clrt.scene.scene",
+    "Scene": "clrt.scene.scene", "SceneObject": "clrt.scene.scene", "scene_from_mesh": "clrt.scene.scene",
+}
+
+__all__ = sorted(["ClrtError", "DeviceError", "DeviceMemoryError", "InputError", "KernelBuildError",
+                  "MeshLoadError", "OutputError", "TooLargeError", *_LAZY])
+
+
+def __getattr__(name: str):
+    module = _LAZY.get(name)
+    if module is None:
+        raise AttributeError(f"module 'clrt' has no attribute {name!r}")
+    value = getattr(import_module(module), name)
+    globals()[name] = value      # the next lookup is a plain attribute
+    return value
+
+
+def __dir__():
+    return __all__

@@ -13,6 +13,8 @@ from pathlib import Path
 
 import numpy as np
 
+from clrt.config import (ACCELS, BUILDERS, DEFAULT_ACCEL, DEFAULT_BUILDER, DEFAULT_FOV, DEFAULT_HEIGHT,
+                         DEFAULT_LEAF_SIZE, DEFAULT_WIDTH)
 from clrt.errors import ClrtError, DeviceError, InputError, OutputError
 from clrt.output import check_replace, write_image
 
@@ -36,7 +38,9 @@ def _vector(text: str) -> tuple:
     return values
 
 
-def _parser() -> argparse.ArgumentParser:
+def _parser(bench: bool = False) -> argparse.ArgumentParser:
+    """The CLI's parser; ``bench`` adds the real ``clrt bench`` options (the
+    benchmark package is imported only for that command)."""
     p = _Parser(prog="clrt", description="Ray trace triangle meshes with OpenCL.")
     sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
 
@@ -86,13 +90,17 @@ def _parser() -> argparse.ArgumentParser:
     i.add_argument("--device", help="device to mark as selected (same forms as render --device)")
     _accel_options(i)
 
-    from clrt.bench.paper import add_bench_parser
-    add_bench_parser(sub)
+    if bench:
+        from clrt.bench.paper import add_bench_parser
+        add_bench_parser(sub)
+    else:
+        sub.add_parser("bench", help="rerun the paper's timing and detail-loss experiments on this machine",
+                       add_help=False)
     return p
 
 
 def _aov_list(text: str) -> tuple:
-    from clrt.trace import parse_aovs
+    from clrt.query.aov import parse_aovs
     try:
         return parse_aovs(text)
     except InputError as exc:
@@ -100,11 +108,12 @@ def _aov_list(text: str) -> tuple:
 
 
 def _accel_options(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--accel", default="box", choices=("none", "box", "sphere", "ellipse"),
-                   help="BVH bounding-volume shape, or none for brute force (default box)")
-    p.add_argument("--builder", default="sah", choices=("paper", "sah"),
-                   help="BVH builder: the paper's median split, or binned SAH (default sah)")
-    p.add_argument("--leaf-size", type=int, default=4, help="most triangles per BVH leaf (default 4)")
+    p.add_argument("--accel", default=DEFAULT_ACCEL, choices=ACCELS,
+                   help=f"BVH bounding-volume shape, or none for brute force (default {DEFAULT_ACCEL})")
+    p.add_argument("--builder", default=DEFAULT_BUILDER, choices=BUILDERS,
+                   help=f"BVH builder: the paper's median split, or binned SAH (default {DEFAULT_BUILDER})")
+    p.add_argument("--leaf-size", type=int, default=DEFAULT_LEAF_SIZE,
+                   help=f"most triangles per BVH leaf (default {DEFAULT_LEAF_SIZE})")
 
 
 def _output_path(args) -> Path:
@@ -129,7 +138,7 @@ def _output_path(args) -> Path:
 
 
 def _render(args) -> int:
-    from clrt.render import Renderer, check_host_memory
+    from clrt.renderer import Renderer, check_host_memory
     from clrt.scene.default import default_scene
     from clrt.scene.scene import Camera, Light, Material, default_light, scene_from_mesh
 
@@ -156,9 +165,9 @@ def _render(args) -> int:
 
     # Options override the scene's camera; what neither gives is framed from the bounds.
     bounds, base = scene.bounds, scene.camera
-    width = args.width if args.width is not None else (base.width if base else 640)
-    height = args.height if args.height is not None else (base.height if base else 480)
-    fov = args.fov if args.fov is not None else (base.fov if base else 45.0)
+    width = args.width if args.width is not None else (base.width if base else DEFAULT_WIDTH)
+    height = args.height if args.height is not None else (base.height if base else DEFAULT_HEIGHT)
+    fov = args.fov if args.fov is not None else (base.fov if base else DEFAULT_FOV)
     up = args.up or (base.up if base else (0.0, 1.0, 0.0))
     placed = base if base is not None and not scene.camera_framed else None   # by the user
     if args.eye is None and args.target is None and placed is not None:
@@ -176,7 +185,7 @@ def _render(args) -> int:
     # Checked before the (possibly long) render; the writers check again.
     check_replace(out, args.force)
     if args.aov:
-        from clrt.trace import aov_paths
+        from clrt.query.aov import aov_paths
         for path in aov_paths(out, args.aov):
             check_replace(path, args.force)
     # The image, its sRGB staging and PIL's copy (4 bytes a pixel) live on the host together.
@@ -185,7 +194,7 @@ def _render(args) -> int:
     frame = renderer.render(camera)
     write_image(frame.image, out, force=args.force)
     if args.aov:
-        from clrt.trace import write_aovs
+        from clrt.query.aov import write_aovs
         aov_files = write_aovs(renderer, camera, args.aov, out, force=args.force)
     if not args.quiet:
         accel = "brute force" if args.accel == "none" else f"{args.builder} BVH of {args.accel}es"
@@ -211,23 +220,18 @@ def _info(args) -> int:
 
 def _info_mesh(args) -> int:
     """Build statistics of the acceleration structure over MESH, and its size on the device."""
-    from clrt.device.geometry import order_triangles
-    from clrt.render import flatten_scene
+    from clrt import accel
+    from clrt.scene.arrays import triangle_corners
     from clrt.scene.load import load_mesh
-    from clrt.scene.scene import scene_from_mesh
 
     mesh = load_mesh(args.mesh)
-    tri_verts = flatten_scene(scene_from_mesh(mesh)).tri_verts
-    order = order_triangles(tri_verts, args.accel, args.builder, args.leaf_size)
+    built = accel.build(triangle_corners(mesh), args.accel, args.builder, args.leaf_size)
     print(f"{args.mesh}: {len(mesh.faces):,} triangles, {len(mesh.vertices):,} vertices")
-    if order.bvh is None:
-        size = tri_verts.nbytes + order.prim_ids.nbytes
-        print(f"accel none: brute force, {size:,} bytes on the device")
+    if not built.is_bvh:
+        print(f"accel none: brute force, {built.device_bytes():,} bytes on the device")
         return 0
     print(f"accel {args.accel}, builder {args.builder}, leaf size {args.leaf_size}:")
-    stats = order.bvh.stats()
-    # What the device really holds: slot-ordered triangles, ids and the pair-node rows.
-    stats["device_bytes"] = order.tri_verts.nbytes + order.prim_ids.nbytes + order.nodes.nbytes
+    stats = built.stats()
     for key, value in stats.items():
         text = f"{value:,.3f}" if isinstance(value, float) else f"{value:,}"
         print(f"  {key:<22} {text}")
@@ -253,9 +257,12 @@ def _glue_vector_values(argv: list[str]) -> list[str]:
 def main(argv=None) -> int:
     try:
         argv = list(sys.argv[1:] if argv is None else argv)
-        args = _parser().parse_args(_glue_vector_values(argv))
-        from clrt.bench.paper import run_bench
-        return {"render": _render, "info": _info, "bench": run_bench}[args.command](args)
+        bench = argv[:1] == ["bench"]
+        args = _parser(bench).parse_args(_glue_vector_values(argv))
+        if bench:
+            from clrt.bench.paper import run_bench
+            return run_bench(args)
+        return {"render": _render, "info": _info}[args.command](args)
     except ClrtError as exc:
         print(f"clrt: {exc}", file=sys.stderr)
         return exc.exit_code

@@ -68,6 +68,7 @@ def kernel_defines() -> dict:
     return {
         "MAX_BOUNCES": MAX_BOUNCES,
         "MATERIAL_SMOOTH": f"{MATERIAL_SMOOTH}u",
+        "MAX_PARTS": MAX_PARTS,
         **{f"CULL_{name.upper()}": code for name, code in CULL_MODES.items()},
     }
 

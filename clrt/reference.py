@@ -13,10 +13,37 @@ from __future__ import annotations
 
 import numpy as np
 
-from clrt.render import SceneArrays, flatten_scene, ray_epsilon
-from clrt.scene.scene import Camera, Scene
+from clrt.scene.scene import Camera, Scene, ray_epsilon
 
 f32 = np.float32
+
+
+class SceneData:
+    """The scene as plain arrays, read here independently of the device's
+    layouts: corners (F, 3, 3) float32, each triangle's global vertex indices
+    and object, per-object vertex normals, and per-object material fields."""
+
+    FIELDS = ("ambient", "diffuse", "specular", "shininess", "reflectivity", "transparency", "ior")
+
+    def __init__(self, scene: Scene):
+        corners, vertex, material, normals = [], [], [], []
+        offset = 0
+        for k, o in enumerate(scene.objects):
+            m = o.mesh
+            corners.append(m.vertices[m.faces].astype(f32))
+            vertex.append(m.faces.astype(np.int64) + offset)
+            material.append(np.full(len(m.faces), k))
+            normals.append(m.vertex_normals().astype(f32))   # per object: normals never blend across objects
+            offset += len(m.vertices)
+        self.corners = np.concatenate(corners)
+        self.vertex = np.concatenate(vertex)
+        self.material = np.concatenate(material)
+        self.vertex_normals = np.concatenate(normals).astype(np.float64)
+        mats = [o.material for o in scene.objects]
+        self.color = np.array([m.color for m in mats], f32).astype(np.float64)
+        self.smooth = np.array([m.smooth for m in mats])
+        for name in self.FIELDS:
+            setattr(self, name, np.array([getattr(m, name) for m in mats], f32))
 
 
 def camera_rays(camera: Camera, ox=0.5, oy=0.5) -> tuple[np.ndarray, np.ndarray]:
@@ -107,22 +134,21 @@ def intersect(origins, dirs, corners, tmin, tmax, block: int = 64, any_hit: bool
     return best_t, best_prim.astype(np.int32), best_u, best_v
 
 
-def surface(arrays: SceneArrays, origins, dirs, t, prim, u, v) -> dict:
+def surface(data: SceneData, origins, dirs, t, prim, u, v) -> dict:
     """What shading needs at each hit (all rays must hit): point, normals, side, material."""
-    tv = arrays.tri_verts[prim]
-    v0, v1, v2 = (tv[k][:, :3].astype(np.float64) for k in ("v0", "v1", "v2"))
+    v0, v1, v2 = (data.corners[prim, k].astype(np.float64) for k in range(3))
     d = dirs.astype(np.float64)
     wound = np.cross(v1 - v0, v2 - v0)
     wound /= np.linalg.norm(wound, axis=1, keepdims=True)
     front = np.einsum("ij,ij->i", wound, d) < 0
     ng = np.where(front[:, None], wound, -wound)
-    info = arrays.tri_info[prim]
-    mat = arrays.materials[info["material"]]
-    smooth = (mat["flags"] & 1).astype(bool)
-    vn = arrays.vertex_normals[:, :3].astype(np.float64)
+    k = data.material[prim]
+    mat = {name: getattr(data, name)[k] for name in SceneData.FIELDS + ("color", "smooth")}
+    smooth = mat["smooth"]
+    vn = data.vertex_normals
+    corner = data.vertex[prim]
     w0 = 1.0 - u - v
-    ns = (w0[:, None] * vn[info["vertex"][:, 0]] + u[:, None] * vn[info["vertex"][:, 1]]
-          + v[:, None] * vn[info["vertex"][:, 2]])
+    ns = w0[:, None] * vn[corner[:, 0]] + u[:, None] * vn[corner[:, 1]] + v[:, None] * vn[corner[:, 2]]
     ns_len = np.linalg.norm(ns, axis=1, keepdims=True)
     use = smooth & (ns_len[:, 0] > 0)
     n = np.where(use[:, None], ns / np.where(ns_len > 0, ns_len, 1), ng)
@@ -131,11 +157,11 @@ def surface(arrays: SceneArrays, origins, dirs, t, prim, u, v) -> dict:
     return {"p": p, "ng": ng, "n": n, "front": front, "mat": mat, "d": d}
 
 
-def local_shading(arrays: SceneArrays, scene: Scene, s: dict, eps: float) -> np.ndarray:
+def local_shading(data: SceneData, scene: Scene, s: dict, eps: float) -> np.ndarray:
     """(N, 3) Phong ambient + diffuse + specular, each light behind one shadow ray
     (every surface blocks light fully, transparent ones included)."""
     mat, n_s, ng, d = s["mat"], s["n"], s["ng"], s["d"]
-    albedo = mat["color"][:, :3].astype(np.float64)
+    albedo = mat["color"]
     out = mat["ambient"][:, None] * albedo * np.asarray(scene.ambient_light, np.float64)
     shadow_origin = s["p"] + eps * ng
     for light in scene.lights:
@@ -145,7 +171,7 @@ def local_shading(arrays: SceneArrays, scene: Scene, s: dict, eps: float) -> np.
         n_dot_l = np.einsum("ij,ij->i", n_s, l)
         lit = (np.einsum("ij,ij->i", ng, l) > 0) & (n_dot_l > 0)
         rows = np.nonzero(lit)[0]
-        blocked = intersect(shadow_origin[rows].astype(f32), l[rows].astype(f32), _corners(arrays),
+        blocked = intersect(shadow_origin[rows].astype(f32), l[rows].astype(f32), data.corners,
                             np.zeros(len(rows), f32), dist[rows].astype(f32), any_hit=True)
         lit[rows[blocked]] = False
         reflected = 2 * n_dot_l[:, None] * n_s - l
@@ -184,10 +210,10 @@ def _bounce(s: dict):
     return r, refr, f
 
 
-def trace_whitted(arrays: SceneArrays, scene: Scene, origins, dirs, max_depth: int, eps: float):
+def trace_whitted(data: SceneData, scene: Scene, origins, dirs, max_depth: int, eps: float):
     """Colour along each camera ray (whitted.cl's model), traced in waves of
     secondary rays; also the camera rays' (t, prim)."""
-    corners = _corners(arrays)
+    corners = data.corners
     n = len(origins)
     color = np.zeros((n, 3))
     o, d = origins.astype(f32), dirs.astype(f32)
@@ -204,15 +230,15 @@ def trace_whitted(arrays: SceneArrays, scene: Scene, origins, dirs, max_depth: i
         hit = np.nonzero(~miss)[0]
         if len(hit) == 0:
             break
-        s = surface(arrays, o[hit], d[hit], t[hit], prim[hit], u[hit], v[hit])
-        np.add.at(color, pixel[hit], weight[hit] * local_shading(arrays, scene, s, eps))
+        s = surface(data, o[hit], d[hit], t[hit], prim[hit], u[hit], v[hit])
+        np.add.at(color, pixel[hit], weight[hit] * local_shading(data, scene, s, eps))
         if depth >= max_depth:
             break
         kr, kt = s["mat"]["reflectivity"].astype(np.float64), s["mat"]["transparency"].astype(np.float64)
         refl, refr, f = _bounce(s)
         f = np.where(kt > 0, f, 0.0)
         w_refl = weight[hit] * (kr + kt * f)[:, None]
-        w_refr = weight[hit] * (kt * (1 - f))[:, None] * s["mat"]["color"][:, :3]
+        w_refr = weight[hit] * (kt * (1 - f))[:, None] * s["mat"]["color"]
         go_refl = (w_refl.max(axis=1) >= MIN_RAY_WEIGHT) & ((kr > 0) | (kt > 0))
         go_refr = (kt > 0) & (f < 1) & (w_refr.max(axis=1) >= MIN_RAY_WEIGHT)
         o = np.concatenate([s["p"][go_refl] + eps * s["ng"][go_refl],
@@ -222,11 +248,6 @@ def trace_whitted(arrays: SceneArrays, scene: Scene, origins, dirs, max_depth: i
         pixel = np.concatenate([pixel[hit][go_refl], pixel[hit][go_refr]])
         depth += 1
     return color, first
-
-
-def _corners(arrays: SceneArrays) -> np.ndarray:
-    tv = arrays.tri_verts
-    return np.stack([tv["v0"][:, :3], tv["v1"][:, :3], tv["v2"][:, :3]], axis=1).astype(f32)
 
 
 def srgb8(linear: np.ndarray) -> np.ndarray:
@@ -266,14 +287,14 @@ def render_reference(scene: Scene, camera: Camera, samples: int | None = None,
     prim and t of the first sample's camera rays."""
     samples = scene.samples if samples is None else samples
     max_depth = scene.max_depth if max_depth is None else max_depth
-    arrays = flatten_scene(scene)
-    eps = ray_epsilon(arrays.bounds, camera)
+    data = SceneData(scene)
+    eps = ray_epsilon(scene.bounds, camera.eye)
     shape = (camera.height, camera.width)
     image = np.zeros((camera.width * camera.height, 3))
     first = None
     for sample in range(samples * samples):
         o, d = camera_rays(camera, *sample_offsets(image.shape[0], sample, samples, seed))
-        color, hits = trace_whitted(arrays, scene, o, d, max_depth, eps)
+        color, hits = trace_whitted(data, scene, o, d, max_depth, eps)
         image += color / (samples * samples)
         first = first or hits
     t, prim = first

@@ -14,7 +14,7 @@ import pytest
 
 import clrt
 from clrt.reference import intersect
-from clrt.render import Renderer
+from clrt.renderer import Renderer
 from clrt.scene.default import default_scene
 from clrt.scene.scene import Camera, scene_from_mesh
 
@@ -79,7 +79,7 @@ def test_trace_is_identical_for_every_bvh_on_grazing_rays(name, device):
     mesh = TEST_MESHES[name]()
     o, d = _hard_rays(mesh, np.random.default_rng(7))
     base = clrt.trace(mesh, o, d, accel="none", device=device)
-    base_blocked = clrt.occluded(mesh, o, d, 1e30, accel="none", device=device)
+    base_blocked = clrt.occluded(mesh, o, d, tmax=1e30, accel="none", device=device)
     assert (base.prim >= 0).mean() > 0.3 and (base.prim < 0).any(), "the ray set must hit and miss"
     for volume, builder, leaf in VARIANTS:
         accel = clrt.Accel(mesh, volume, builder, leaf, device=device)
@@ -87,7 +87,7 @@ def test_trace_is_identical_for_every_bvh_on_grazing_rays(name, device):
         label = f"{volume}/{builder}/leaf {leaf}"
         for field in ("t", "prim", "u", "v"):
             assert np.array_equal(getattr(hits, field), getattr(base, field)), (label, field)
-        assert np.array_equal(accel.occluded(o, d, 1e30), base_blocked), label
+        assert np.array_equal(accel.occluded(o, d, tmax=1e30), base_blocked), label
 
 
 def test_trace_matches_numpy_reference(test_mesh, device):
@@ -104,7 +104,7 @@ def test_trace_matches_numpy_reference(test_mesh, device):
     same = both & (hits.prim == prim)
     assert same.sum() >= 0.95 * both.sum()
     np.testing.assert_allclose(hits.u[same], u[same], atol=1e-4)
-    blocked = clrt.occluded(test_mesh, o, d, 1e30, device=device)
+    blocked = clrt.occluded(test_mesh, o, d, tmax=1e30, device=device)
     assert (blocked == intersect(o, d, corners, np.zeros(len(o), np.float32),
                                  np.full(len(o), 1e30, np.float32), any_hit=True)).mean() >= 0.995
 
@@ -118,8 +118,8 @@ def test_trace_inputs(device):
     assert miss.prim[0] == -1 and np.isinf(miss.t[0])
     short = accel.trace([0, 0, 5], [0, 0, -1], tmax=3.0)
     assert short.prim[0] == -1
-    assert accel.occluded([0, 0, 5], [0, 0, -1], 3.0).tolist() == [False]
-    assert accel.occluded([0, 0, 5], [0, 0, -1], 5.0).tolist() == [True]
+    assert accel.occluded([0, 0, 5], [0, 0, -1], tmax=3.0).tolist() == [False]
+    assert accel.occluded([0, 0, 5], [0, 0, -1], tmax=5.0).tolist() == [True]
     for bad in ([0, 0, 0], [np.nan, 0, 1]):
         with pytest.raises(clrt.InputError):
             accel.trace([0, 0, 5], bad)

@@ -2,7 +2,7 @@
 
 Each case is a mutated real file loaded in a worker process with bounded time
 and address space; only MeshLoadError (or a valid mesh) may come out.  The
-long run is a separate command: ``python -m clrt.fuzz --seconds 600 --jobs 2
+long run is a separate command: ``python -m clrt.tools.fuzz --seconds 600 --jobs 2
 --corpus ../shared/meshes``.  tests/test_load.py has the in-process byte
 mutations; this adds truncation, huge header counts, NaN/inf numbers, slices
 and splices, real files as seeds, and the memory and hang bounds.
@@ -11,7 +11,7 @@ and splices, real files as seeds, and the memory and hang bounds.
 import numpy as np
 import pytest
 
-from clrt import fuzz
+from clrt.tools import fuzz
 
 from conftest import SHARED_MESHES
 

@@ -1,11 +1,11 @@
-"""The numpy dtypes in clrt.device.layouts and the structs in layouts.h agree byte for byte."""
+"""The numpy dtypes in clrt.layouts and the structs in layouts.h agree byte for byte."""
 
 import numpy as np
 import pyopencl as cl
 
-from clrt.device import layouts
+from clrt import layouts
 from clrt.device.context import create_context
-from clrt.device.program import expand_source
+from clrt.device.program import build_options, expand_source
 
 
 def test_every_struct_matches_its_dtype(device):
@@ -21,7 +21,7 @@ def test_every_struct_matches_its_dtype(device):
     source = expand_source("layouts.h") + (
         "#define offsetof(T, f) ((uint)(size_t)&(((T*)0)->f))\n"
         f"__kernel void probe(__global uint* out) {{ {body} }}")
-    program = cl.Program(context, source).build()
+    program = cl.Program(context, source).build(options=build_options(context))
     out = np.zeros(len(checks), np.uint32)
     buf = cl.Buffer(context, cl.mem_flags.WRITE_ONLY, out.nbytes)
     program.probe(queue, (1,), None, buf)

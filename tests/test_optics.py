@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from clrt.reference import _bounce, camera_rays, intersect, render_reference, surface, _corners
-from clrt.render import Renderer, flatten_scene
+from clrt.reference import SceneData, _bounce, camera_rays, intersect, render_reference, surface
+from clrt.renderer import Renderer
 from clrt.scene import primitives
 from clrt.scene.mesh import Mesh
 from clrt.scene.scene import Camera, Light, Material, Scene, SceneObject
@@ -62,12 +62,12 @@ def test_total_internal_reflection_inside_glass(device):
     scene = Scene([SceneObject(sphere, GLASS), *_floor(12.0)], [Light((0, 8, 0))],
                   background=(0.5, 0.6, 0.8))
     camera = Camera(eye=(0, 0, 2.6), target=(2.5, 0.3, 2.6), fov=50, width=40, height=30)
-    arrays = flatten_scene(scene)
+    data = SceneData(scene)
     o, d = camera_rays(camera)
-    t, prim, u, v = intersect(o, d, _corners(arrays), np.zeros(len(o), np.float32),
+    t, prim, u, v = intersect(o, d, data.corners, np.zeros(len(o), np.float32),
                               np.full(len(o), np.inf, np.float32))
     hit = prim >= 0
-    s = surface(arrays, o[hit], d[hit], t[hit], prim[hit], u[hit], v[hit])
+    s = surface(data, o[hit], d[hit], t[hit], prim[hit], u[hit], v[hit])
     _, _, fresnel = _bounce(s)
     assert (~s["front"]).all() and (fresnel == 1.0).mean() > 0.3, "the scene must exercise TIR"
     _agree(scene, camera, device)

@@ -103,7 +103,7 @@ def test_tmin_tmax_per_call_and_per_ray(torus_accel):
     windowed = acc.all_hits(o, d, tmin=lo, tmax=hi)
     inside = (every.t > lo) & (every.t <= hi)
     assert np.array_equal(windowed.ray_id, every.ray_id[inside])
-    assert np.array_equal(acc.count(o, d, lo, hi), np.bincount(every.ray_id[inside], minlength=len(o)))
+    assert np.array_equal(acc.count(o, d, tmin=lo, tmax=hi), np.bincount(every.ray_id[inside], minlength=len(o)))
     assert ((windowed.t > lo) & (windowed.t <= hi)).all()
 
 

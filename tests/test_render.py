@@ -4,7 +4,7 @@ import numpy as np
 
 import clrt
 from clrt.reference import camera_rays, render_reference, srgb8
-from clrt.render import Renderer
+from clrt.renderer import Renderer
 from clrt.scene import primitives
 from clrt.scene.default import default_scene
 from clrt.scene.mesh import Mesh

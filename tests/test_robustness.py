@@ -8,6 +8,7 @@ same image -- or reported with the sizes involved.
 """
 
 import ast
+import functools
 import importlib
 import os
 import pickle
@@ -30,9 +31,9 @@ import clrt.device.program as program_module
 from clrt import cli, output
 from clrt.errors import (DeviceError, DeviceMemoryError, InputError, KernelBuildError,
                          MeshLoadError, OutputError, TooLargeError)
-from clrt.device.geometry import part_shifts
+from clrt.device.geometry import check_fits, part_shifts
 from clrt.reference import render_reference
-from clrt.render import Renderer
+from clrt.renderer import Renderer, TileLimits
 from clrt.scene import primitives
 from clrt.scene.default import default_scene
 from clrt.scene.mesh import Mesh
@@ -40,7 +41,7 @@ from clrt.scene.scene import Camera, Light, Scene, SceneObject, scene_from_mesh
 from clrt.scene.scene_file import load_scene
 
 REPO = Path(__file__).resolve().parents[1]
-render_module = importlib.import_module("clrt.render")   # clrt.render is also the function
+render_module = importlib.import_module("clrt.renderer.frame")
 
 
 def _obj(mesh: Mesh) -> str:
@@ -417,16 +418,16 @@ def test_tiny_tiles_give_the_identical_image(device):
     whole = Renderer(scene, device)
     expected = whole.render(hits=True, samples=2)
     assert expected.tiles == 1
-    tiled = Renderer(scene, device)
-    tiled.max_tile_pixels = tiled.first_launch_pixels = 37       # pieces of rows: 37 + 3 pixels
+    tiled = Renderer(scene, device, limits=TileLimits(max_tile_pixels=37, first_launch_pixels=37))
+    # pieces of rows: 37 + 3 pixels
     frame = tiled.render(hits=True, samples=2)
     assert frame.tiles == 2 * 30
     for name in ("image", "prim", "t"):
         assert np.array_equal(getattr(frame, name), getattr(expected, name)), name
     linear = tiled.render(linear=True)
     assert np.array_equal(linear.image, whole.render(linear=True).image)
-    banded = Renderer(scene, device)
-    banded.max_tile_pixels = banded.first_launch_pixels = 40 * 9   # bands of 8 rows, read back in place
+    # bands of 8 rows, read back in place
+    banded = Renderer(scene, device, limits=TileLimits(max_tile_pixels=40 * 9, first_launch_pixels=40 * 9))
     frame = banded.render(hits=True, samples=2)
     assert frame.tiles == 4
     for name in ("image", "prim", "t"):
@@ -449,15 +450,15 @@ def test_frames_kept_by_the_caller_are_never_overwritten(device):
         assert np.array_equal(image, copy)
     del view, kept, other
     again = [r.render(far).image for _ in range(10)]       # dropped images are reused, not piled up
-    assert len(r._image_pool) <= 3 and all(np.array_equal(a, again[0]) for a in again)
+    assert r.image_pool.buffers() <= 3 and all(np.array_equal(a, again[0]) for a in again)
 
 
 def test_launches_are_split_to_stay_short(device):
     scene = scene_from_mesh(primitives.torus())
     camera = Camera.framing(scene.bounds, 48, 36)
     expected = Renderer(scene, device).render(camera)
-    r = Renderer(scene, device)
-    r.launch_ms, r.first_launch_pixels = 1e-4, 64    # "a watchdog of 0.1 microseconds"
+    # "a watchdog of 0.1 microseconds"
+    r = Renderer(scene, device, limits=TileLimits(launch_ms=1e-4, first_launch_pixels=64))
     frame = r.render(camera)
     assert frame.tiles > 20
     assert np.array_equal(frame.image, expected.image)
@@ -518,7 +519,7 @@ def test_scene_larger_than_the_device_is_refused_with_sizes():
         part_shifts(arrays, 10_000)
     tiny = SimpleNamespace(max_mem_alloc_size=1 << 20, global_mem_size=50_000)
     with pytest.raises(DeviceMemoryError, match="has 48.8 KiB"):
-        render_module._check_fits(tiny, "a tiny GPU", arrays)
+        check_fits(tiny, "a tiny GPU", sum(a.nbytes for a in arrays.values()), render_module.MIN_FRAME_BYTES)
 
 
 def test_failed_upload_is_a_device_memory_error(device, monkeypatch):
@@ -534,15 +535,15 @@ def test_ctrl_c_between_launches_stops_cleanly(tmp_path, device, capsys, monkeyp
     scene = default_scene(32, 24, coarse=True)
     r = Renderer(scene, device)
     expected = r.render()
-    real_wait, calls = render_module._wait_for, []
+    real_wait, calls = render_module.wait_for, []
 
     def interrupted(event):
         real_wait(event)
         calls.append(1)
         if len(calls) == 3:
             raise KeyboardInterrupt
-    monkeypatch.setattr(render_module, "_wait_for", interrupted)
-    r.first_launch_pixels = r.max_tile_pixels = 100
+    monkeypatch.setattr(render_module, "wait_for", interrupted)
+    r.limits = TileLimits(first_launch_pixels=100, max_tile_pixels=100)
     with pytest.raises(KeyboardInterrupt):
         r.render()
     assert len(calls) == 3
@@ -550,7 +551,8 @@ def test_ctrl_c_between_launches_stops_cleanly(tmp_path, device, capsys, monkeyp
     # Through the CLI: exit 130, no output, an existing output untouched, no temporary file.
     (tmp_path / "keep.png").write_bytes(b"old")
     calls.clear()
-    monkeypatch.setattr(Renderer, "first_launch_pixels", 50)
+    # Renderers the CLI makes start with tiles of 50 pixels, as on a slow device.
+    monkeypatch.setattr(render_module, "TileLimits", functools.partial(TileLimits, first_launch_pixels=50))
     code, out, err = _cli(_render_args("-o", "keep.png", "-f"), device, capsys)
     assert code == 130 and _one_line(err) == "clrt: interrupted"
     assert [p.name for p in tmp_path.iterdir()] == ["keep.png"]
@@ -562,13 +564,14 @@ def test_real_sigint_stops_the_cli_between_launches(tmp_path):
     script = textwrap.dedent("""
         import importlib, sys
         from clrt import cli
-        r = importlib.import_module("clrt.render")
-        r.Renderer.first_launch_pixels = r.Renderer.max_tile_pixels = 64
-        real = r._wait_for
+        import functools
+        r = importlib.import_module("clrt.renderer.frame")
+        r.TileLimits = functools.partial(r.TileLimits, first_launch_pixels=64, max_tile_pixels=64)
+        real = r.wait_for
         def wait(event):
             real(event)
             print("launch", flush=True)
-        r._wait_for = wait
+        r.wait_for = wait
         sys.exit(cli.main(sys.argv[1:]))
     """)
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(REPO), os.environ.get("PYTHONPATH", "")])}
@@ -636,7 +639,7 @@ def test_a_pickle_or_script_in_a_mesh_file_is_never_run(ext, tmp_path, monkeypat
 def test_gltf_buffers_only_from_regular_files_beside_it(tmp_path):
     import json
 
-    from clrt.fuzz import builtin_corpus
+    from clrt.tools.fuzz import builtin_corpus
     doc = json.loads(next(s for s in builtin_corpus() if s.ext == "gltf").data)
     secret = tmp_path / "secret.bin"
     secret.write_bytes(b"\0" * 4096)

@@ -10,7 +10,7 @@ meshes, on the GPU too.
 import numpy as np
 
 from clrt.reference import camera_rays
-from clrt.render import Renderer
+from clrt.renderer import Renderer
 from clrt.scene import primitives
 from clrt.scene.scene import Camera, scene_from_mesh
 
@@ -35,6 +35,6 @@ def test_two_million_triangles_build_and_render(device):
     np.testing.assert_allclose(tube, MINOR, atol=1e-4)
     # Lit: the image is not just the ambient term.
     assert frame.image[hit].max() > 100
-    stats = renderer.order.bvh.stats()
+    stats = renderer.acceleration.stats()
     assert renderer.device_bytes < 300 * 2**20, "about 130 bytes per triangle on the device"
     assert stats["device_bytes"] <= renderer.device_bytes

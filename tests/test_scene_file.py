@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from clrt.errors import InputError
-from clrt.render import Renderer
+from clrt.renderer import Renderer
 from clrt.scene.scene import Camera, Material
 from clrt.scene.scene_file import load_scene, transform_matrix
 

@@ -7,11 +7,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from clrt.device.geometry import DeviceGeometry
-from clrt.render import Renderer
+from clrt.renderer import Renderer
 from clrt.scene.load import load_mesh
 from clrt.scene.scene import Camera, scene_from_mesh
-from clrt.trace import Accel
+from clrt.query import Accel
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -28,18 +27,17 @@ def _limit_for_parts(triangles: int, parts: int = 4) -> int:
 
 
 @pytest.mark.parametrize("accel", ["none", "box", "sphere"])
-def test_split_buffers_render_the_same_frame(knot, accel, device, monkeypatch):
+def test_split_buffers_render_the_same_frame(knot, accel, device):
     scene = scene_from_mesh(knot)
     camera = Camera.framing(scene.bounds, 64, 48)
     whole = Renderer(scene, device, accel)
-    assert whole.geometry.parts() == 1 and whole.geometry.defines == {}
+    assert whole.geometry.parts() == 1 and "SPLIT_BUFFERS" not in whole.geometry.defines
     expected = whole.render(camera, hits=True)
-    monkeypatch.setattr(DeviceGeometry, "max_buffer_bytes", _limit_for_parts(len(knot.faces)))
-    split = Renderer(scene, device, accel)
+    split = Renderer(scene, device, accel, max_buffer_bytes=_limit_for_parts(len(knot.faces)))
     assert split.geometry.parts() >= 3 and "SPLIT_BUFFERS" in split.geometry.defines
     frame = split.render(camera, hits=True)
     # The image shows triangles of every part.
-    prim_ids = split.order.prim_ids
+    prim_ids = split.acceleration.prim_ids
     slot_of = np.empty_like(prim_ids)
     slot_of[prim_ids] = np.arange(len(prim_ids))
     seen = np.unique(expected.prim[expected.prim >= 0])
@@ -48,14 +46,13 @@ def test_split_buffers_render_the_same_frame(knot, accel, device, monkeypatch):
         assert np.array_equal(getattr(frame, name), getattr(expected, name)), name
 
 
-def test_split_buffers_answer_every_query_alike(knot, device, monkeypatch):
+def test_split_buffers_answer_every_query_alike(knot, device):
     rng = np.random.default_rng(7)
     centre = knot.vertices.mean(axis=0)
     origins = centre + rng.normal(size=(3000, 3)) * 3.0
     directions = centre + rng.normal(size=(3000, 3)) * 0.5 - origins
     whole = Accel(knot, device=device)
-    monkeypatch.setattr(DeviceGeometry, "max_buffer_bytes", _limit_for_parts(len(knot.faces), 3))
-    split = Accel(knot, device=device)
+    split = Accel(knot, device=device, max_buffer_bytes=_limit_for_parts(len(knot.faces), 3))
     assert split.geometry.parts() >= 2
     a, b = whole.trace(origins, directions), split.trace(origins, directions)
     assert a.hit.mean() > 0.2

@@ -152,5 +152,5 @@ def test_rays_at_vertices_and_edges_never_pass_through(name, device):
         label = f"{name}, accel {accel}/{builder}"
         assert not through.any(), (f"{label}: {through.sum()} of {len(o)} rays passed through, "
                                    f"kinds {sorted(set(kinds[through]))}, first at ray {np.argmax(through)}")
-        blocked = a.occluded(o, d, limit)
+        blocked = a.occluded(o, d, tmax=limit)
         assert blocked.all(), f"{label}: occluded() missed {(~blocked).sum()} rays"

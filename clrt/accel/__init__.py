@@ -1,15 +1,18 @@
-"""Stage 2 of the pipeline: the bounding volume hierarchy over a scene's triangles.
+"""Stage 2 of the pipeline: the acceleration structure over a scene's triangles.
 
-    >>> from clrt.accel import build_bvh
-    >>> bvh = build_bvh(mesh.vertices[mesh.faces], volume="ellipse", builder="paper")
-    >>> bvh.nodes          # (N,) BVH_NODE, depth-first, ready for upload
-    >>> bvh.prim_id        # (F,) int32: leaf slot -> input triangle id
-    >>> bvh.stats()
+    >>> from clrt import accel
+    >>> built = accel.build(mesh.vertices[mesh.faces], accel="ellipse", builder="paper")
+    >>> built.rows         # (R,) BVH_PAIR_NODE, depth-first, ready for upload
+    >>> built.prim_ids     # (F,) int32: slot -> input triangle id
+    >>> built.stats()
 
-Three independent choices, combined here: the *builder* (``paper``: the paper's
-median split; ``sah``: binned surface area heuristic) decides the tree, the
-*volume* (``box``, ``sphere``, ``ellipse``) is fitted to each node afterwards,
-and ``bvh.linearise`` writes the device layout (``clrt.device.layouts.BVH_NODE``).
+Three independent choices, combined here and nowhere else: the *builder*
+(``paper.py``: the paper's median split; ``sah.py``: binned surface area
+heuristic -- each only a split rule for the engine in ``topdown.py``) decides
+the tree, the *volume* (``volumes.py``: box, sphere, ellipsoid) is fitted to
+each node afterwards, and ``rows.py`` writes the device layout
+(``BVH_PAIR_NODE`` in clrt/layouts.py).  The names and limits of the choices
+are in clrt/config.py.
 """
 
 from __future__ import annotations
@@ -19,54 +22,60 @@ import time
 import numpy as np
 
 from clrt.accel import paper, sah
-from clrt.accel.bvh import Bvh, linearise, node_boxes, triangle_centroids
-from clrt.accel.volumes import VOLUMES, fit
+from clrt.accel.bvh import Acceleration
+from clrt.accel.rows import pair_rows
+from clrt.accel.topdown import linearise, node_boxes, triangle_centroids
+from clrt.accel.volumes import fit
+from clrt.config import ACCELS, BUILDERS, DEFAULT_ACCEL, DEFAULT_BUILDER, DEFAULT_LEAF_SIZE, MAX_LEAF_SIZE
 from clrt.errors import InputError
-from clrt.scene.mesh import Mesh
-
-BUILDERS = ("paper", "sah")
-MAX_LEAF_SIZE = 255
 
 
-def build_bvh(triangles, volume: str = "box", builder: str = "sah", leaf_size: int = 4) -> Bvh:
-    """Build a BVH over triangles.
+def build(triangles, accel: str = DEFAULT_ACCEL, builder: str = DEFAULT_BUILDER,
+          leaf_size: int = DEFAULT_LEAF_SIZE) -> Acceleration:
+    """Build the acceleration structure over triangles.
 
-    triangles: (F, 3, 3) corners (converted to float32, the device precision), or a
-        :class:`~clrt.scene.mesh.Mesh`.  Row order is the triangle id.
-    volume: one of ``VOLUMES``; builder: one of ``BUILDERS``;
-    leaf_size: int 1..255, the most triangles a leaf may hold.
+    triangles: (F, 3, 3) corners (converted to float32, the device precision).
+        Row order is the triangle id.
+    accel: one of ``clrt.config.ACCELS`` -- a volume shape, or "none" (no BVH);
+    builder: one of ``clrt.config.BUILDERS``; leaf_size: int 1..255, the most
+    triangles a leaf may hold.
     Raises :class:`~clrt.errors.InputError` on a bad argument.
     """
     start = time.perf_counter()
-    if volume not in VOLUMES:
-        raise InputError(f"unknown bounding volume {volume!r} (choose from {', '.join(VOLUMES)})")
-    if builder not in BUILDERS:
-        raise InputError(f"unknown BVH builder {builder!r} (choose from {', '.join(BUILDERS)})")
-    if (isinstance(leaf_size, bool) or not isinstance(leaf_size, (int, np.integer))
-            or not 1 <= leaf_size <= MAX_LEAF_SIZE):
-        raise InputError(f"leaf size must be an integer from 1 to {MAX_LEAF_SIZE}, got {leaf_size!r}")
+    check_options(accel, builder, leaf_size)
+    tri = as_triangles(triangles)
+    if accel == "none":
+        return Acceleration.brute_force(len(tri))
     leaf_size = int(leaf_size)
-    tri = _triangles(triangles)
-
     if builder == "paper":
         # The paper: longest axis, except for spheres, which cycle the axis by depth.
-        rule = "round_robin" if volume == "sphere" else "longest"
+        rule = "round_robin" if accel == "sphere" else "longest"
         topo = paper.build(triangle_centroids(tri), leaf_size, rule)
     else:
         topo = sah.build(tri, leaf_size)
     boxes = node_boxes(topo, tri)
-    nodes, order = linearise(topo)
-    boxes = boxes[order]
-    nodes["bound_a"], nodes["bound_b"] = fit(volume, boxes)
-    return Bvh(nodes=nodes, prim_id=topo.prim_id, volume=volume, builder=builder,
-               leaf_size=leaf_size, depth=int(topo.level[-1]) + 1,
-               build_ms=(time.perf_counter() - start) * 1e3, boxes=boxes)
+    tree = linearise(topo)
+    boxes = boxes[tree.order]
+    bound_a, bound_b = fit(accel, boxes)
+    rows = pair_rows(tree.first, tree.count, tree.right, bound_a, bound_b, accel)
+    return Acceleration(accel, builder, rows, np.ascontiguousarray(topo.prim_id, np.int32),
+                        depth=int(topo.level[-1]) + 1, build_ms=(time.perf_counter() - start) * 1e3,
+                        leaf_size=leaf_size, counts=tree.count, boxes=boxes)
 
 
-def _triangles(triangles) -> np.ndarray:
+def check_options(accel, builder, leaf_size) -> None:
+    """InputError naming the first bad choice."""
+    if accel not in ACCELS:
+        raise InputError(f"unknown accel {accel!r}: choose one of {', '.join(ACCELS)}")
+    if builder not in BUILDERS:
+        raise InputError(f"unknown BVH builder {builder!r}: choose one of {', '.join(BUILDERS)}")
+    if (isinstance(leaf_size, bool) or not isinstance(leaf_size, (int, np.integer))
+            or not 1 <= leaf_size <= MAX_LEAF_SIZE):
+        raise InputError(f"leaf size must be an integer from 1 to {MAX_LEAF_SIZE}, got {leaf_size!r}")
+
+
+def as_triangles(triangles) -> np.ndarray:
     """Validate to a C-contiguous (F, 3, 3) float32 array with finite values."""
-    if isinstance(triangles, Mesh):
-        return triangles.vertices[triangles.faces]
     try:
         with np.errstate(over="ignore", invalid="ignore"):
             tri = np.ascontiguousarray(triangles, dtype=np.float32)
@@ -75,7 +84,7 @@ def _triangles(triangles) -> np.ndarray:
     if tri.ndim != 3 or tri.shape[1:] != (3, 3):
         raise InputError(f"triangles must have shape (F, 3, 3), got {tri.shape}")
     if len(tri) == 0:
-        raise InputError("cannot build a BVH over zero triangles")
+        raise InputError("cannot build an acceleration structure over zero triangles")
     if len(tri) >= 2 ** 31 - 1:
         raise InputError(f"too many triangles for int32 ids ({len(tri)})")
     if not np.isfinite(tri).all():
@@ -83,4 +92,4 @@ def _triangles(triangles) -> np.ndarray:
     return tri
 
 
-__all__ = ["BUILDERS", "VOLUMES", "Bvh", "build_bvh"]
+__all__ = ["Acceleration", "as_triangles", "build", "check_options"]

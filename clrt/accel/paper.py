@@ -14,7 +14,7 @@ from functools import partial
 
 import numpy as np
 
-from clrt.accel.bvh import Level, Topology, build_topdown
+from clrt.accel.topdown import Level, Topology, build_topdown
 
 AXIS_RULES = ("longest", "round_robin")
 

@@ -51,7 +51,7 @@ from functools import partial
 
 import numpy as np
 
-from clrt.accel.bvh import C_INTERSECT, C_TRAVERSAL, Level, Topology, build_topdown, for_each_axis
+from clrt.accel.topdown import C_INTERSECT, C_TRAVERSAL, Level, Topology, build_topdown, for_each_axis
 from clrt.accel.paper import median_split
 
 BINS = 32

@@ -1,7 +1,7 @@
 """Bounding-volume shapes: fit a box, sphere or ellipsoid to every node.
 
-Input is the exact box of each node's triangles; output is ``bound_a``/``bound_b``
-of the ``BVH_NODE`` layout.  Everything is computed in float64 from the float32
+Input is the exact box of each node's triangles; output is two float4 rows per
+node, ``bound_a``/``bound_b``, which ``rows.py`` writes into the device layout.  Everything is computed in float64 from the float32
 corners and then rounded *outwards* to float32, after padding by
 
     pad = REL_PAD * (largest extent of the node) + ULP_PAD * ulp32(|coordinate|) + PAD_FLOOR
@@ -22,7 +22,8 @@ from typing import Tuple
 
 import numpy as np
 
-VOLUMES = ("box", "sphere", "ellipse")
+from clrt.config import VOLUMES
+
 
 REL_PAD = 1e-6          # of the node's largest extent: ~10 float32 ulps of the node size
 ULP_PAD = 4             # float32 ulps of the coordinate magnitude (covers tiny/flat nodes)
@@ -66,9 +67,8 @@ def fit(volume: str, boxes: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
     """Bounds of every node for ``volume`` in ``VOLUMES``.
 
     boxes: (N, 2, 3) exact min/max of each node's triangles.
-    Returns bound_a, bound_b: (N, 4) float32, as ``clrt.device.layouts.BVH_NODE`` says:
-    box (min, max), sphere (centre + radius in w, zeros), ellipse (centre,
-    reciprocal semi-axes); unused lanes are 0.
+    Returns bound_a, bound_b: (N, 4) float32: box (min, max), sphere (centre +
+    radius in w, zeros), ellipse (centre, reciprocal semi-axes); unused lanes 0.
     """
     if volume not in VOLUMES:
         raise ValueError(f"volume must be one of {VOLUMES}, got {volume!r}")

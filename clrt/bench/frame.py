@@ -21,13 +21,14 @@ import time
 
 import numpy as np
 
+from clrt.config import ACCELS, BUILDERS
 from clrt.bench.common import parse_size, exit_code
 
 FRAME_STAGES = ("ray generation", "pixel colour", "read back")
 
 
 def run(mesh_path, sizes, variants, device=None, repeat=5, warmup=1, leaf_size=4, block=None, out=sys.stdout):
-    from clrt.render import Renderer
+    from clrt.renderer import Renderer, TileLimits
     from clrt.scene.default import default_scene
     from clrt.scene.load import load_mesh
     from clrt.scene.scene import Camera, default_light, scene_from_mesh
@@ -50,9 +51,8 @@ def run(mesh_path, sizes, variants, device=None, repeat=5, warmup=1, leaf_size=4
     first_images = {}
     rows = []
     for accel, builder in variants:
-        renderer = Renderer(scene, device, accel, builder, leaf_size)
-        if block is not None:
-            renderer.block = None if block == (0, 0) else block
+        limits = TileLimits() if block is None else TileLimits(block=None if block == (0, 0) else block)
+        renderer = Renderer(scene, device, accel, builder, leaf_size, limits=limits)
         for camera in cameras:
             samples = []
             for i in range(warmup + repeat):
@@ -83,9 +83,9 @@ def main(argv=None) -> int:
     p = argparse.ArgumentParser(prog="python -m clrt.bench.frame", description=__doc__.split("\n")[0])
     p.add_argument("mesh", nargs="?", help="mesh file (default: the built-in scene)")
     p.add_argument("--size", type=parse_size, action="append", help="WxH, repeatable (default 200x200, 1920x1080)")
-    p.add_argument("--accel", action="append", choices=("none", "box", "sphere", "ellipse"),
+    p.add_argument("--accel", action="append", choices=ACCELS,
                    help="repeatable (default: box)")
-    p.add_argument("--builder", action="append", choices=("paper", "sah"), help="repeatable (default: sah)")
+    p.add_argument("--builder", action="append", choices=BUILDERS, help="repeatable (default: sah)")
     p.add_argument("--leaf-size", type=int, default=4)
     p.add_argument("--device", help="'gpu', 'cpu' or P:D")
     p.add_argument("--repeat", type=int, default=5)

@@ -57,6 +57,7 @@ from pathlib import Path
 
 import numpy as np
 
+from clrt.config import BUILDERS
 from clrt.bench.common import parse_size
 from clrt.bench.paper_meshes import MeshSuite, atomic_write, write_mesh
 from clrt.errors import ClrtError, DeviceError, InputError
@@ -151,7 +152,6 @@ PROGRAMS = {p.name: p for p in (
     *(Program(f"bvh-{s}", "CPU", s) for s in SHAPES),
     *(Program(f"bvh-gpu-{s}", "GPU", s) for s in SHAPES),
 )}
-BUILDERS = ("paper", "sah")
 LABELS = {"basic": "basic", "gpu": "GPU", **{f"bvh-{s}": f"BVH {s}" for s in SHAPES},
           **{f"bvh-gpu-{s}": f"BVH+GPU {s}" for s in SHAPES}}
 
@@ -217,7 +217,7 @@ def measure(scene, camera, device: str, accel: str, builder: str, leaf_size: int
             warmup: int, repeat: int) -> tuple[dict, np.ndarray, str]:
     """Times of one program on one scene (see the module notes), its last image
     and the device's label."""
-    from clrt.render import Renderer
+    from clrt.renderer import Renderer
     cold = None
     if warmup > 0:
         renderer = Renderer(scene, device, accel, builder, leaf_size)
@@ -284,7 +284,7 @@ def add_bench_parser(subparsers) -> argparse.ArgumentParser:
                                                  "see --list)")
     b.add_argument("--programs", type=_names, help="comma-separated: " + ", ".join(PROGRAMS)
                    + ", or cpu / gpu / all (default all)")
-    b.add_argument("--builder", choices=("paper", "sah", "both"), default="both",
+    b.add_argument("--builder", choices=(*BUILDERS, "both"), default="both",
                    help="BVH builder: the paper's, binned SAH, or both (default both)")
     b.add_argument("--size", type=parse_size, default=(200, 200), help="WxH (default 200x200, the paper's)")
     b.add_argument("--repeat", type=_positive, default=3, help="timed frames, median reported (default 3)")
@@ -476,7 +476,7 @@ class DetailRow:
 def detail_loss(suite: MeshSuite, names: list[str], programs, builders, specs, args, out: Path) -> list[DetailRow]:
     """Render every program once on each mesh with the paper's eye/light placement
     scaled to the mesh; count pixels that differ from basic's image."""
-    from clrt.render import Renderer
+    from clrt.renderer import Renderer
     from clrt.scene.scene import Camera
     width, height = args.size
     rows: list[DetailRow] = []

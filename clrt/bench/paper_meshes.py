@@ -54,7 +54,7 @@ import numpy as np
 
 from clrt.errors import InputError
 from clrt.scene.mesh import Mesh
-from clrt.scene.primitives import _grid_faces, icosphere
+from clrt.scene.primitives import grid_faces, icosphere
 
 # --------------------------------------------------------------------------- simple shapes
 
@@ -320,7 +320,7 @@ def teapot(steps: int = 10, name: str = "teapot") -> Mesh:
     bern = np.stack([(1 - u) ** 3, 3 * u * (1 - u) ** 2, 3 * u ** 2 * (1 - u), u ** 3], 1)   # (S, 4)
     surface = np.einsum("ui,pijc,vj->puvc", bern, control, bern)    # (32, S, S, 3)
     n = steps + 1
-    grid = _grid_faces(n, n, wrap=False)                           # (2 * steps**2, 3)
+    grid = grid_faces(n, n, wrap=False)                           # (2 * steps**2, 3)
     faces = (np.arange(len(control))[:, None, None] * n * n + grid).reshape(-1, 3)
     points = surface.reshape(-1, 3)
     # Weld: patches share their boundary curves, and a row of equal control

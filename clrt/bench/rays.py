@@ -31,6 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
+from clrt.config import ACCELS, BUILDERS
 from clrt.bench.common import exit_code
 
 QUERIES = ("first", "any", "all")
@@ -86,7 +87,7 @@ def run(mesh_path, rays: int = 1_000_000, reference_rays: int = 2_000, device=No
     import trimesh
     from clrt.scene import primitives
     from clrt.scene.load import load_mesh
-    from clrt.trace import Accel
+    from clrt.query import Accel
 
     mesh = load_mesh(mesh_path) if mesh_path else primitives.torus_knot(segments=512, sides=32)
     name = Path(mesh_path).name if mesh_path else "torus knot (generated)"
@@ -158,8 +159,8 @@ def main(argv=None) -> int:
     p.add_argument("--reference-rays", type=int, default=2_000,
                    help="rays given to trimesh's numpy intersector (default 2,000)")
     p.add_argument("--device", help="OpenCL device for clrt (default: as clrt render)")
-    p.add_argument("--accel", default="box", choices=("none", "box", "sphere", "ellipse"))
-    p.add_argument("--builder", default="sah", choices=("paper", "sah"))
+    p.add_argument("--accel", default="box", choices=ACCELS)
+    p.add_argument("--builder", default="sah", choices=BUILDERS)
     p.add_argument("--repeat", type=int, default=3)
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--only", action="append", choices=("clrt", "trimesh", "embree"),

@@ -31,6 +31,7 @@ import time
 
 import numpy as np
 
+from clrt.config import ACCELS, BUILDERS
 from clrt.bench.common import parse_size
 from clrt.errors import ClrtError
 
@@ -67,8 +68,8 @@ def _primary_rays_ms(renderer, camera, repeat: int) -> float:
     """Median kernel time of one closest-hit camera ray per pixel (trace_camera)."""
     import pyopencl as cl
     from clrt.bench.speed import time_launches
-    from clrt.device import layouts
-    from clrt.trace import Accel
+    from clrt import layouts
+    from clrt.query import Accel
     accel = Accel.from_renderer(renderer)
     hits = cl.Buffer(renderer.context, cl.mem_flags.READ_WRITE, camera.width * camera.height * layouts.HIT.itemsize)
     kernel_ms, _ = time_launches(accel.queue, lambda: accel.launch_camera(camera, hits), repeat, warmup=1)
@@ -78,7 +79,7 @@ def _primary_rays_ms(renderer, camera, repeat: int) -> float:
 
 def run(counts, builders, sizes, accel="box", device=None, repeat=3, leaf_size=4, out=(sys.stdout,),
         mesh_path=None):
-    from clrt.render import Renderer
+    from clrt.renderer import Renderer
     from clrt.scene import primitives
     from clrt.scene.load import load_mesh
     from clrt.scene.scene import Camera, scene_from_mesh
@@ -144,7 +145,7 @@ def main(argv=None) -> int:
                    help="comma-separated mesh sizes, e.g. 1M,2M,10M (default 1M,2M)")
     p.add_argument("--builder", type=lambda s: s.split(","), default=["paper", "sah"],
                    help="comma-separated builders (default paper,sah)")
-    p.add_argument("--accel", default="box", choices=("none", "box", "sphere", "ellipse"))
+    p.add_argument("--accel", default="box", choices=ACCELS)
     p.add_argument("--leaf-size", type=int, default=4)
     p.add_argument("--size", type=parse_size, action="append", help="image size WxH, repeatable (default 640x480)")
     p.add_argument("--repeat", type=int, default=3, help="frames timed after one warm-up (default 3)")
@@ -153,7 +154,7 @@ def main(argv=None) -> int:
     p.add_argument("--mesh", help="copies of this mesh file instead of a torus")
     args = p.parse_args(argv)
     for b in args.builder:
-        if b not in ("paper", "sah"):
+        if b not in BUILDERS:
             p.error(f"unknown builder {b!r}")
     outs = [sys.stdout]
     try:

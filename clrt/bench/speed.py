@@ -25,7 +25,8 @@ from pathlib import Path
 import numpy as np
 import pyopencl as cl
 
-from clrt.device import layouts
+from clrt import layouts
+from clrt.config import ACCELS, BUILDERS
 from clrt.bench.common import exit_code, parse_size
 from clrt.errors import ClrtError
 
@@ -55,11 +56,9 @@ def run(mesh_dir: Path, cases, variants, device=None, size=(1920, 1080), repeat=
         leaf_size=4, tile=None, max_buffer_mib=None, out=sys.stdout):
     from clrt.scene.load import load_mesh
     from clrt.scene.scene import Camera
-    from clrt.device.geometry import DeviceGeometry
-    from clrt.trace import Accel
+    from clrt.query import Accel
 
-    if max_buffer_mib is not None:
-        DeviceGeometry.max_buffer_bytes = int(max_buffer_mib * 2**20)
+    max_buffer_bytes = None if max_buffer_mib is None else int(max_buffer_mib * 2**20)
     w, h = size
     launch = {} if tile is None else {"tile": None if tile == (0, 0) else tile}
     print("| mesh | triangles | accel | builder | buffer parts | closest: kernel ms | Mrays/s | wall ms | Mrays/s "
@@ -70,7 +69,7 @@ def run(mesh_dir: Path, cases, variants, device=None, size=(1920, 1080), repeat=
         mesh = load_mesh(mesh_dir / file)
         camera = Camera(eye, target, (0.0, 1.0, 0.0), 45.0, w, h)
         for accel_name, builder in variants:
-            accel = Accel(mesh, accel_name, builder, leaf_size, device)
+            accel = Accel(mesh, accel_name, builder, leaf_size, device, max_buffer_bytes=max_buffer_bytes)
             hit_buf = cl.Buffer(accel.context, cl.mem_flags.READ_WRITE, w * h * layouts.HIT.itemsize)
             occ_buf = cl.Buffer(accel.context, cl.mem_flags.READ_WRITE, w * h)
             closest = time_launches(accel.queue, lambda: accel.launch_camera(camera, hit_buf, **launch), repeat, warmup)
@@ -98,8 +97,8 @@ def main(argv=None) -> int:
     default_dir = Path(__file__).resolve().parents[2].parent / "shared" / "meshes"
     p.add_argument("--mesh-dir", type=Path, default=default_dir, help=f"folder of the meshes (default {default_dir})")
     p.add_argument("--case", action="append", choices=sorted(CASES), help="repeatable (default: all)")
-    p.add_argument("--accel", action="append", choices=("none", "box", "sphere", "ellipse"))
-    p.add_argument("--builder", action="append", choices=("paper", "sah"))
+    p.add_argument("--accel", action="append", choices=ACCELS)
+    p.add_argument("--builder", action="append", choices=BUILDERS)
     p.add_argument("--leaf-size", type=int, default=4)
     p.add_argument("--tile", type=parse_size,
                    help="work-group as a WxH block of pixels (default 8x8; 0x0: the driver's choice)")

@@ -2,22 +2,35 @@
 
 ``#include "x"`` lines are expanded here, on the host, rather than by the
 OpenCL compiler with ``-I``: the text handed to the compiler is then the whole
-program, so every cache keyed on the source (ours below, pyopencl's on-disk
-binary cache, the driver's) notices a change in any included file.
+program, so every cache keyed on the source (ours below, the driver's) notices
+a change in any included file.
+
+Programs are built once per context and option set, and their binaries are
+kept on disk (``$CLRT_CACHE_DIR``, else ``$XDG_CACHE_HOME/clrt`` or
+``~/.cache/clrt``), keyed by the expanded source, the options, the device and
+its driver version: a new process loads the binary instead of compiling
+(seconds on NVIDIA's compiler).  ``CLRT_NO_PROGRAM_CACHE=1`` turns the disk
+cache off.
 """
 
 from __future__ import annotations
 
+import hashlib
+import os
 import re
+import tempfile
 import warnings
 from functools import lru_cache
 from importlib import resources
+from pathlib import Path
 
 import pyopencl as cl
 
+from clrt.config import kernel_defines
 from clrt.errors import KernelBuildError
 
-_INCLUDE = re.compile(r'^\s*#\s*include\s+"([^"]+)"\s*$', re.MULTILINE)
+_INCLUDE = re.compile(r'^\s*#\s*include\s+"([^"]+)"\s*$')
+_CONDITIONAL = re.compile(r"^\s*#\s*(if|ifdef|ifndef|elif|else|endif)\b")
 
 
 @lru_cache(maxsize=None)
@@ -27,20 +40,60 @@ def kernel_text(name: str) -> str:
 
 
 def expand_source(entry: str) -> str:
-    """The entry file with every include expanded once (include guards not needed)."""
+    """The entry file with every include expanded once (include guards not needed).
+
+    An include inside a conditional block (other than a file's own include
+    guard) is refused: expanded here it would be taken whatever the condition,
+    and a file included once under a false condition would be lost to a later
+    include.  Such a choice belongs in the included file (see accel.cl).
+    """
     seen: set[str] = set()
 
     def expand(name: str) -> str:
         if name in seen:
             return f"// (already included: {name})\n"
         seen.add(name)
-        body = _INCLUDE.sub(lambda m: expand(m.group(1)), kernel_text(name))
-        return f"// ---- {name} ----\n{body}\n"
+        out, depth = [], 0
+        for number, line in enumerate(kernel_text(name).splitlines(), 1):
+            conditional = _CONDITIONAL.match(line)
+            if conditional:
+                depth += {"if": 1, "ifdef": 1, "ifndef": 1, "endif": -1}.get(conditional.group(1), 0)
+            include = _INCLUDE.match(line)
+            if include is None:
+                out.append(line)
+                continue
+            # depth 1 is the include guard that wraps every file (#ifndef CLRT_..._CL).
+            guarded = name.endswith((".cl", ".h")) and depth == 1 and _has_guard(name)
+            if depth > (1 if guarded else 0):
+                raise KernelBuildError(f"{name}:{number}: #include inside #if is not supported "
+                                       "(the host expands includes unconditionally)")
+            out.append(expand(include.group(1)))
+        return f"// ---- {name} ----\n" + "\n".join(out) + "\n"
 
     return expand(entry)
 
 
+def _has_guard(name: str) -> bool:
+    """Does the file open with an include guard (#ifndef X / #define X)?"""
+    lines = [line.strip() for line in kernel_text(name).splitlines()
+             if line.strip() and not line.strip().startswith("//")]
+    return (len(lines) >= 2 and lines[0].startswith("#ifndef ")
+            and lines[1].startswith("#define ") and lines[0].split()[1] == lines[1].split()[1])
+
+
 _programs: dict[tuple, cl.Program] = {}
+
+
+def build_options(context: cl.Context, defines: dict | None = None,
+                  extra_options: tuple[str, ...] = ()) -> list[str]:
+    """Compiler options: ``config.kernel_defines()`` and ``defines`` as ``-D NAME=VALUE``,
+    and correctly rounded division and sqrt where every device offers them."""
+    merged = {**kernel_defines(), **(defines or {})}
+    options = [f"-D{k}" if v is None else f"-D{k}={v}" for k, v in sorted(merged.items())]
+    # NVIDIA's default is within 2.5 ulp; devices that round alike give alike images.
+    if all(d.single_fp_config & cl.device_fp_config.CORRECTLY_ROUNDED_DIVIDE_SQRT for d in context.devices):
+        options.append("-cl-fp32-correctly-rounded-divide-sqrt")
+    return options + list(extra_options)
 
 
 def build_program(context: cl.Context, entry: str, defines: dict | None = None,
@@ -51,23 +104,81 @@ def build_program(context: cl.Context, entry: str, defines: dict | None = None,
     (the acceleration structure, the bounding-volume shape) reach the kernels.
     Raises :class:`KernelBuildError` with the compiler log on failure.
     """
-    options = [f"-D{k}" if v is None else f"-D{k}={v}" for k, v in sorted((defines or {}).items())]
-    # Correctly rounded division and sqrt where the device offers them: NVIDIA's
-    # default is within 2.5 ulp, and devices that round alike give alike images.
-    if all(d.single_fp_config & cl.device_fp_config.CORRECTLY_ROUNDED_DIVIDE_SQRT for d in context.devices):
-        options.append("-cl-fp32-correctly-rounded-divide-sqrt")
-    options += list(extra_options)
+    options = build_options(context, defines, extra_options)
     source = expand_source(entry)
     key = (context.int_ptr, source, tuple(options))
     program = _programs.get(key)
     if program is None:
-        try:
-            with warnings.catch_warnings():
-                # pyopencl turns any non-empty build log into a warning; the
-                # log is only worth showing when the build fails.
-                warnings.simplefilter("ignore", cl.CompilerWarning)
-                program = cl.Program(context, source).build(options=options)
-        except cl.RuntimeError as exc:
-            raise KernelBuildError(f"OpenCL build of {entry} failed:\n{exc}") from None
+        program = _load_cached(context, source, options) or _compile(context, entry, source, options)
         _programs[key] = program
     return program
+
+
+def _compile(context: cl.Context, entry: str, source: str, options: list[str]) -> cl.Program:
+    try:
+        with warnings.catch_warnings():
+            # pyopencl turns any non-empty build log into a warning; the
+            # log is only worth showing when the build fails.
+            warnings.simplefilter("ignore", cl.CompilerWarning)
+            program = cl.Program(context, source).build(options=options)
+    except cl.RuntimeError as exc:
+        raise KernelBuildError(f"OpenCL build of {entry} failed:\n{exc}") from None
+    _store_cached(context, source, options, program)
+    return program
+
+
+def cache_dir() -> Path | None:
+    """Where program binaries are kept, or None when the disk cache is off."""
+    if os.environ.get("CLRT_NO_PROGRAM_CACHE", "").strip() not in ("", "0"):
+        return None
+    root = os.environ.get("CLRT_CACHE_DIR") or os.path.join(
+        os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache"), "clrt")
+    return Path(root) / "programs"
+
+
+def _cache_path(context: cl.Context, source: str, options: list[str]) -> Path | None:
+    folder = cache_dir()
+    if folder is None:
+        return None
+    h = hashlib.sha256()
+    for part in (source, "\0".join(options), cl.VERSION_TEXT):
+        h.update(part.encode())
+        h.update(b"\1")
+    for d in context.devices:
+        for part in (d.platform.name, d.platform.version, d.name, d.driver_version, d.version):
+            h.update(part.encode(errors="replace"))
+            h.update(b"\1")
+    return folder / f"{h.hexdigest()}.bin"
+
+
+def _load_cached(context: cl.Context, source: str, options: list[str]) -> cl.Program | None:
+    path = _cache_path(context, source, options)
+    if path is None or len(context.devices) != 1:
+        return None
+    try:
+        binary = path.read_bytes()
+    except OSError:
+        return None
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", cl.CompilerWarning)
+            return cl.Program(context, context.devices, [binary]).build(" ".join(options))
+    except (cl.Error, cl.RuntimeError):   # a stale or damaged binary: compile instead
+        return None
+
+
+def _store_cached(context: cl.Context, source: str, options: list[str], program: cl.Program) -> None:
+    path = _cache_path(context, source, options)
+    if path is None or len(context.devices) != 1:
+        return
+    try:
+        binary = program.get_info(cl.program_info.BINARIES)[0]
+        if not binary:
+            return
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(dir=path.parent, suffix=".tmp")
+        with os.fdopen(fd, "wb") as fh:
+            fh.write(binary)
+        os.replace(tmp, path)     # whole or not at all: another process may read it now
+    except (OSError, cl.Error):   # a read-only home or a full disk only costs the next compile
+        pass

@@ -2,19 +2,23 @@
 // volume test comes from volumes.cl, chosen at build time) and every query
 // (the leaf action comes from hit.cl).  Each row holds both children's
 // volumes, so one fetch decides where to go.  The stack holds BVH_STACK_SIZE
-// entries, set by the host from the tree's real depth: a depth-first walk
-// that pushes at most one child per level cannot overflow it.
+// entries, at least the tree's real depth (the host rounds the depth up, so
+// that trees of similar depth share one program): a depth-first walk that
+// pushes at most one child per level cannot overflow it.
 //
 // Triangles are stored in leaf order ("slots"); prim_ids maps a slot to the
 // input triangle index, which is what decides ties and what queries report.
 #ifndef CLRT_ACCEL_BVH_CL
 #define CLRT_ACCEL_BVH_CL
 
+#include "geometry.cl"
 #include "hit.cl"
 #include "volumes.cl"
 
+#ifdef ACCEL_BVH
+
 #ifndef BVH_STACK_SIZE
-#error "build with -DBVH_STACK_SIZE=<tree depth>"
+#error "build with -DBVH_STACK_SIZE=<at least the tree depth>"
 #endif
 
 // Answer `query` for one ray (see hit.cl); the returned Hit.prim is a slot.
@@ -24,7 +28,7 @@
 // best hit so far -- inclusively, so that a triangle at the same distance with
 // a lower index is still reached -- and a postponed child whose volume starts
 // beyond tmax is dropped when it is popped.
-inline Hit query_hits(ACCEL_PARAMS, float3 origin, float3 dir, float tmin, float tmax,
+inline Hit query_hits(const Geometry* g, float3 origin, float3 dir, float tmin, float tmax,
                       const int query, HitSink* sink)
 {
     const ShearedRay r = shear_ray(origin, dir);
@@ -38,10 +42,10 @@ inline Hit query_hits(ACCEL_PARAMS, float3 origin, float3 dir, float tmin, float
     for (;;) {
         if (current.y > 0) {
             for (int s = current.x; s < current.x + current.y; ++s)
-                if (visit_triangle(ACCEL_ARGS, &r, s, tmin, &tmax, query, &best, &best_id, sink))
+                if (visit_triangle(g, &r, s, tmin, &tmax, query, &best, &best_id, sink))
                     return best;
         } else {
-            const BvhPairNode n = *SPLIT_AT(nodes, current.x);
+            const BvhPairNode n = *SPLIT_AT(g, nodes, current.x);
             const int2 left_child = PAIR_LEFT(n), right_child = PAIR_RIGHT(n);
             float t_left, t_right;
             const bool left = left_child.y >= 0 && volume_hit(&vr, n.left_a, n.left_b, tmin, tmax, &t_left);
@@ -67,5 +71,7 @@ inline Hit query_hits(ACCEL_PARAMS, float3 origin, float3 dir, float tmin, float
         current = stack[sp];
     }
 }
+
+#endif
 
 #endif

@@ -4,19 +4,24 @@
 #ifndef CLRT_ACCEL_NONE_CL
 #define CLRT_ACCEL_NONE_CL
 
+#include "geometry.cl"
 #include "hit.cl"
 
+#ifndef ACCEL_BVH
+
 // Answer `query` for one ray (see hit.cl); the returned Hit.prim is a slot.
-inline Hit query_hits(ACCEL_PARAMS, float3 origin, float3 dir, float tmin, float tmax,
+inline Hit query_hits(const Geometry* g, float3 origin, float3 dir, float tmin, float tmax,
                       const int query, HitSink* sink)
 {
     const ShearedRay r = shear_ray(origin, dir);
     Hit best = miss_hit();
     int best_id = -1;
-    for (uint i = 0; i < num_tris; ++i)
-        if (visit_triangle(ACCEL_ARGS, &r, (int)i, tmin, &tmax, query, &best, &best_id, sink))
+    for (uint i = 0; i < g->num_tris; ++i)
+        if (visit_triangle(g, &r, (int)i, tmin, &tmax, query, &best, &best_id, sink))
             break;
     return best;
 }
+
+#endif
 
 #endif

@@ -7,6 +7,7 @@
 #ifndef CLRT_HIT_CL
 #define CLRT_HIT_CL
 
+#include "geometry.cl"
 #include "triangle.cl"
 
 #define QUERY_CLOSEST 0   // the nearest hit; tmax shrinks to it as the walk goes on
@@ -63,17 +64,17 @@ inline void sink_hit(HitSink* sink, int prim, float t)
 }
 
 // Test the triangle in `slot` for `query`; true once the query is answered.
-inline bool visit_triangle(ACCEL_PARAMS, const ShearedRay* r, int slot, float tmin, float* tmax,
+inline bool visit_triangle(const Geometry* g, const ShearedRay* r, int slot, float tmin, float* tmax,
                            const int query, Hit* best, int* best_id, HitSink* sink)
 {
     float t, u, v;
-    if (!intersect_triangle_culled(r, SPLIT_AT(tris, slot), tmin, *tmax, sink ? sink->cull : CULL_NONE, &t, &u, &v))
+    if (!intersect_triangle_culled(r, SPLIT_AT(g, tris, slot), tmin, *tmax, sink ? sink->cull : CULL_NONE, &t, &u, &v))
         return false;
     if (query == QUERY_ANY) {
         *best = make_hit(t, slot, u, v);
         return true;
     }
-    const int id = *SPLIT_AT(prim_ids, slot);
+    const int id = *SPLIT_AT(g, prim_ids, slot);
     if (query == QUERY_ALL) {
         sink_hit(sink, id, t);
         return false;

@@ -1,8 +1,14 @@
 // Structs shared with the host.  The byte layout of each is documented once,
-// in clrt/device/layouts.py next to its numpy dtype; tests/test_layouts.py
-// checks that both sides agree on every offset.
+// in clrt/layouts.py next to its numpy dtype; tests/test_layouts.py checks that
+// both sides agree on every offset.  Limits and flag values (MAX_BOUNCES,
+// MATERIAL_SMOOTH, CULL_*) come from clrt/config.py as -D defines of every
+// program build, never from a #define here.
 #ifndef CLRT_LAYOUTS_H
 #define CLRT_LAYOUTS_H
+
+#ifndef MAX_BOUNCES
+#error "build through clrt.device.program.build_program: it passes clrt.config.kernel_defines()"
+#endif
 
 typedef struct {
     float4 origin;   // xyz origin, w = tmin
@@ -33,21 +39,10 @@ typedef struct {
     float ior;            // index of refraction
 } Material;
 
-#define MATERIAL_SMOOTH 1u
-
 typedef struct {
     float4 position;
     float4 color;
 } Light;
-
-typedef struct {
-    float4 bound_a;    // box: min | sphere: centre, w = radius | ellipsoid: centre
-    float4 bound_b;    // box: max | ellipsoid: 1 / semi-axes
-    int left_first;    // inner: left child | leaf: first triangle slot
-    int count;         // 0: inner node, else triangles in the leaf
-    int right;         // inner: right child | leaf: -1
-    int pad;
-} BvhNode;
 
 typedef struct {
     float4 left_a, left_b;     // left child: volume in the xyz lanes; w: as_int -> left, left_count

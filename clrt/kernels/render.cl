@@ -5,7 +5,9 @@
 // into the linear image, so memory stays one ray per pixel.
 #include "layouts.h"
 #include "camera.cl"
+#include "geometry.cl"
 #include "accel.cl"
+#include "shading.cl"
 #include "whitted.cl"
 
 // The host renders an image in rectangles ("tiles") so that device memory and
@@ -32,18 +34,20 @@ __kernel void generate_rays(__global Ray* rays, CAMERA_PARAMS, const uint sample
 // the camera ray's hit (of the first sample).  Indices are within the tile.
 __kernel void shade_pixels(__global const Ray* rays, __global float4* image, __global Hit* hits,
                            const uint tile_w, const uint tile_h, const uint max_depth, const float sample_weight,
-                           const uint first_sample, ACCEL_PARAMS, SHADING_PARAMS)
+                           const uint first_sample, GEOMETRY_PARAMS, SHADING_PARAMS)
 {
     const uint gx = get_global_id(0), gy = get_global_id(1);
     if (gx >= tile_w || gy >= tile_h)
         return;
     const uint i = gy * tile_w + gx;
+    const Geometry g = make_geometry(GEOMETRY_ARGS);
+    const Shading sh = make_shading(SHADING_ARGS);
     const Ray ray = rays[i];
     Hit hit;
-    const float3 c = trace_whitted(ACCEL_ARGS, SHADING_ARGS, max_depth, ray.origin.xyz, ray.dir.xyz,
+    const float3 c = trace_whitted(&g, &sh, max_depth, ray.origin.xyz, ray.dir.xyz,
                                    ray.origin.w, ray.dir.w, &hit);
     if (first_sample) {
-        hits[i] = reported_hit(hit, SPLIT_ARGS(prim_ids));
+        hits[i] = reported_hit(&g, hit);
         image[i] = (float4)(sample_weight * c, 1.0f);
     } else {
         image[i] += (float4)(sample_weight * c, 0.0f);

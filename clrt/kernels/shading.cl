@@ -5,24 +5,62 @@
 
 #include "layouts.h"
 #include "split.cl"
+#include "geometry.cl"
+#include "accel.cl"
+
+// What shading reads beyond the geometry, gathered once per work-item from the
+// kernel's SHADING_PARAMS by make_shading(SHADING_ARGS), as geometry.cl does.
+//   tri_info        per slot: vertex indices and material (split like the geometry)
+//   vertex_normals  per vertex (split too)
+//   materials, lights, num_lights, ambient_light, background
+//   ray_epsilon     how far secondary rays start off the surface
+typedef struct {
+    SPLIT_FIELD(TriangleInfo, tri_info);
+    SPLIT_FIELD(float4, vertex_normals);
+    __global const Material* materials;
+    __global const Light* lights;
+    uint num_lights;
+    float4 ambient_light, background;
+    float ray_epsilon;
+} Shading;
 
 #define SHADING_PARAMS SPLIT_PARAMS(TriangleInfo, tri_info), SPLIT_PARAMS(float4, vertex_normals), \
     __global const Material* materials, __global const Light* lights, const uint num_lights, \
     const float4 ambient_light, const float4 background, const float ray_epsilon
-#define SHADING_ARGS SPLIT_ARGS(tri_info), SPLIT_ARGS(vertex_normals), materials, lights, num_lights, \
-    ambient_light, background, ray_epsilon
+#ifdef SPLIT_BUFFERS
+#define SHADING_ARGS tri_info0, tri_info1, tri_info2, tri_info3, \
+    vertex_normals0, vertex_normals1, vertex_normals2, vertex_normals3, \
+    materials, lights, num_lights, ambient_light, background, ray_epsilon
+#else
+#define SHADING_ARGS tri_info, vertex_normals, materials, lights, num_lights, ambient_light, background, \
+    ray_epsilon
+#endif
+
+inline Shading make_shading(SHADING_PARAMS)
+{
+    Shading sh;
+    SPLIT_STORE(sh, tri_info);
+    SPLIT_STORE(sh, vertex_normals);
+    sh.materials = materials;
+    sh.lights = lights;
+    sh.num_lights = num_lights;
+    sh.ambient_light = ambient_light;
+    sh.background = background;
+    sh.ray_epsilon = ray_epsilon;
+    return sh;
+}
 
 // Shading normal: interpolated vertex normals for smooth materials, turned
 // to the same side as the geometric normal.
-inline float3 shading_normal(__global const TriangleInfo* info, SPLIT_PARAMS(float4, vertex_normals),
-                             const Hit* hit, float3 geometric, uint flags)
+inline float3 shading_normal(const Shading* sh, __global const TriangleInfo* info, const Hit* hit,
+                             float3 geometric, uint flags)
 {
     if (!(flags & MATERIAL_SMOOTH))
         return geometric;
     const float w0 = 1.0f - hit->u - hit->v;
-    const float3 n = w0 * SPLIT_AT(vertex_normals, info->vertex[0])->xyz
-                   + hit->u * SPLIT_AT(vertex_normals, info->vertex[1])->xyz
-                   + hit->v * SPLIT_AT(vertex_normals, info->vertex[2])->xyz;
+    const float3 n = w0 * SPLIT_AT(sh, vertex_normals, info->vertex[0])->xyz
+                   + hit->u * SPLIT_AT(sh, vertex_normals, info->vertex[1])->xyz
+                   + hit->v * SPLIT_AT(sh, vertex_normals, info->vertex[2])->xyz;
     const float len = length(n);
     if (!(len > 0.0f))
         return geometric;
@@ -39,16 +77,17 @@ typedef struct {
     Material m;
 } SurfacePoint;
 
-inline SurfacePoint surface_point(ACCEL_PARAMS, SHADING_PARAMS, float3 origin, float3 dir, const Hit* hit)
+inline SurfacePoint surface_point(const Geometry* g, const Shading* sh, float3 origin, float3 dir,
+                                  const Hit* hit)
 {
-    __global const TriangleInfo* info = SPLIT_AT(tri_info, hit->prim);
-    __global const TriangleVerts* tri = SPLIT_AT(tris, hit->prim);
+    __global const TriangleInfo* info = SPLIT_AT(sh, tri_info, hit->prim);
+    __global const TriangleVerts* tri = SPLIT_AT(g, tris, hit->prim);
     SurfacePoint s;
-    s.m = materials[info->material];
+    s.m = sh->materials[info->material];
     const float3 wound = normalize(cross(tri->v1.xyz - tri->v0.xyz, tri->v2.xyz - tri->v0.xyz));
     s.front = dot(wound, dir) < 0.0f;
     s.ng = s.front ? wound : -wound;
-    s.n = shading_normal(info, SPLIT_ARGS(vertex_normals), hit, s.ng, s.m.flags);
+    s.n = shading_normal(sh, info, hit, s.ng, s.m.flags);
     s.p = origin + hit->t * dir;
     return s;
 }
@@ -56,25 +95,25 @@ inline SurfacePoint surface_point(ACCEL_PARAMS, SHADING_PARAMS, float3 origin, f
 // Phong ambient + diffuse + specular at a surface point, each light tested by
 // a shadow ray.  Every surface blocks light fully, transparent ones included
 // (no caustics): the same rule in the kernel and the reference tracer.
-inline float3 local_shading(ACCEL_PARAMS, SHADING_PARAMS, const SurfacePoint* s, float3 dir)
+inline float3 local_shading(const Geometry* g, const Shading* sh, const SurfacePoint* s, float3 dir)
 {
     // Shadow rays start just off the surface, on the side the ray came from.
-    const float3 shadow_origin = s->p + ray_epsilon * s->ng;
+    const float3 shadow_origin = s->p + sh->ray_epsilon * s->ng;
     const float3 to_eye = -dir;
-    float3 color = s->m.ambient * s->m.color.xyz * ambient_light.xyz;
-    for (uint i = 0; i < num_lights; ++i) {
-        const float3 to_light = lights[i].position.xyz - shadow_origin;
+    float3 color = s->m.ambient * s->m.color.xyz * sh->ambient_light.xyz;
+    for (uint i = 0; i < sh->num_lights; ++i) {
+        const float3 to_light = sh->lights[i].position.xyz - shadow_origin;
         const float dist = length(to_light);
         const float3 l = to_light / dist;
         // A light behind the geometric surface is blocked by the surface itself.
         if (!(dot(s->ng, l) > 0.0f) || !(dot(s->n, l) > 0.0f))
             continue;
-        if (any_hit(ACCEL_ARGS, shadow_origin, l, 0.0f, dist))
+        if (any_hit(g, shadow_origin, l, 0.0f, dist))
             continue;
         const float n_dot_l = dot(s->n, l);
         const float3 reflected = 2.0f * n_dot_l * s->n - l;
         const float r_dot_v = fmax(dot(reflected, to_eye), 0.0f);
-        const float3 light = lights[i].color.xyz;
+        const float3 light = sh->lights[i].color.xyz;
         color += s->m.diffuse * n_dot_l * s->m.color.xyz * light;
         if (s->m.specular > 0.0f && r_dot_v > 0.0f)
             color += s->m.specular * pow(r_dot_v, s->m.shininess) * light;

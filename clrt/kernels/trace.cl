@@ -1,4 +1,4 @@
-// Entry file of the ray-query program (clrt/trace.py): batches of rays from
+// Entry file of the ray-query program (clrt/query/): batches of rays from
 // the host, one work-item per ray, answered by the same query_hits() as the
 // renderer's closest_hit / any_hit.  The host cuts a batch into chunks; each
 // launch covers one chunk, so indices here are chunk-local.
@@ -7,6 +7,7 @@
 // handed to the leaf action through a HitSink (hit.cl).
 #include "layouts.h"
 #include "camera.cl"
+#include "geometry.cl"
 #include "accel.cl"
 
 // A sink that stores nothing: the query's options only.
@@ -36,47 +37,50 @@ inline bool sees_front(const ShearedRay* r, __global const TriangleVerts* tri)
 // Closest hit of each ray: the hit record (Hit.prim the triangle index) and
 // whether its front face was hit.
 __kernel void query_closest(__global const Ray* rays, __global Hit* hits, __global uchar* front,
-                            const uint num_rays, const int cull, ACCEL_PARAMS)
+                            const uint num_rays, const int cull, GEOMETRY_PARAMS)
 {
     const uint i = get_global_id(0);
     if (i >= num_rays)
         return;
+    const Geometry g = make_geometry(GEOMETRY_ARGS);
     const Ray ray = rays[i];
     HitSink options = query_options(cull);
-    const Hit hit = query_hits(ACCEL_ARGS, ray.origin.xyz, ray.dir.xyz, ray.origin.w, ray.dir.w,
+    const Hit hit = query_hits(&g, ray.origin.xyz, ray.dir.xyz, ray.origin.w, ray.dir.w,
                                QUERY_CLOSEST, &options);
     uchar f = 0;
     if (hit.prim >= 0) {
         const ShearedRay r = shear_ray(ray.origin.xyz, ray.dir.xyz);
-        f = sees_front(&r, SPLIT_AT(tris, hit.prim)) ? 1 : 0;
+        f = sees_front(&r, SPLIT_AT(&g, tris, hit.prim)) ? 1 : 0;
     }
     front[i] = f;
-    hits[i] = reported_hit(hit, SPLIT_ARGS(prim_ids));
+    hits[i] = reported_hit(&g, hit);
 }
 
 // Is anything hit?  Stops at the first hit found.
 __kernel void query_any(__global const Ray* rays, __global uchar* occluded, const uint num_rays,
-                        const int cull, ACCEL_PARAMS)
+                        const int cull, GEOMETRY_PARAMS)
 {
     const uint i = get_global_id(0);
     if (i >= num_rays)
         return;
+    const Geometry g = make_geometry(GEOMETRY_ARGS);
     const Ray ray = rays[i];
     HitSink options = query_options(cull);
-    occluded[i] = query_hits(ACCEL_ARGS, ray.origin.xyz, ray.dir.xyz, ray.origin.w, ray.dir.w,
+    occluded[i] = query_hits(&g, ray.origin.xyz, ray.dir.xyz, ray.origin.w, ray.dir.w,
                              QUERY_ANY, &options).prim >= 0 ? 1 : 0;
 }
 
 // Number of triangles each ray meets in (tmin, tmax].
 __kernel void query_count(__global const Ray* rays, __global uint* counts, const uint num_rays,
-                          const int cull, ACCEL_PARAMS)
+                          const int cull, GEOMETRY_PARAMS)
 {
     const uint i = get_global_id(0);
     if (i >= num_rays)
         return;
+    const Geometry g = make_geometry(GEOMETRY_ARGS);
     const Ray ray = rays[i];
     HitSink sink = query_options(cull);
-    query_hits(ACCEL_ARGS, ray.origin.xyz, ray.dir.xyz, ray.origin.w, ray.dir.w, QUERY_ALL, &sink);
+    query_hits(&g, ray.origin.xyz, ray.dir.xyz, ray.origin.w, ray.dir.w, QUERY_ALL, &sink);
     counts[i] = sink.count;
 }
 
@@ -86,11 +90,12 @@ __kernel void query_count(__global const Ray* rays, __global uint* counts, const
 // chunk again with room for all of them).
 __kernel void query_all(__global const Ray* rays, __global int* ray_ids, __global int* prims,
                         __global float* ts, __global uint* next, const uint capacity,
-                        const uint num_rays, const int cull, ACCEL_PARAMS)
+                        const uint num_rays, const int cull, GEOMETRY_PARAMS)
 {
     const uint i = get_global_id(0);
     if (i >= num_rays)
         return;
+    const Geometry g = make_geometry(GEOMETRY_ARGS);
     const Ray ray = rays[i];
     HitSink sink = query_options(cull);
     sink.ray_ids = ray_ids;
@@ -99,7 +104,7 @@ __kernel void query_all(__global const Ray* rays, __global int* ray_ids, __globa
     sink.next = next;
     sink.capacity = capacity;
     sink.ray = (int)i;
-    query_hits(ACCEL_ARGS, ray.origin.xyz, ray.dir.xyz, ray.origin.w, ray.dir.w, QUERY_ALL, &sink);
+    query_hits(&g, ray.origin.xyz, ray.dir.xyz, ray.origin.w, ray.dir.w, QUERY_ALL, &sink);
 }
 
 // The camera's pixel-centre rays for pixels first .. first + count - 1 (row
@@ -117,24 +122,25 @@ __kernel void camera_rays(__global Ray* rays, CAMERA_PARAMS, const ulong first, 
 // ---- one-launch kernels of the primary-ray benchmark (clrt/bench/speed.py)
 
 // Camera rays made and traced in one kernel (no ray buffer).  Ray model: camera.cl.
-__kernel void trace_camera(__global Hit* hits, CAMERA_PARAMS, ACCEL_PARAMS)
+__kernel void trace_camera(__global Hit* hits, CAMERA_PARAMS, GEOMETRY_PARAMS)
 {
     const uint px = get_global_id(0), py = get_global_id(1);
     if (px >= width || py >= height)
         return;
     const Camera cam = make_camera(CAMERA_ARGS);
+    const Geometry g = make_geometry(GEOMETRY_ARGS);
     const Ray ray = camera_ray(&cam, px, py, 0.5f, 0.5f);
-    hits[py * width + px] = reported_hit(closest_hit(ACCEL_ARGS, ray.origin.xyz, ray.dir.xyz, 0.0f, INFINITY),
-                                         SPLIT_ARGS(prim_ids));
+    hits[py * width + px] = reported_hit(&g, closest_hit(&g, ray.origin.xyz, ray.dir.xyz, 0.0f, INFINITY));
 }
 
 // The same rays as any-hit queries (occlusion), for comparing query kinds.
-__kernel void occlude_camera(__global uchar* occluded, CAMERA_PARAMS, ACCEL_PARAMS)
+__kernel void occlude_camera(__global uchar* occluded, CAMERA_PARAMS, GEOMETRY_PARAMS)
 {
     const uint px = get_global_id(0), py = get_global_id(1);
     if (px >= width || py >= height)
         return;
     const Camera cam = make_camera(CAMERA_ARGS);
+    const Geometry g = make_geometry(GEOMETRY_ARGS);
     const Ray ray = camera_ray(&cam, px, py, 0.5f, 0.5f);
-    occluded[py * width + px] = any_hit(ACCEL_ARGS, ray.origin.xyz, ray.dir.xyz, 0.0f, INFINITY) ? 1 : 0;
+    occluded[py * width + px] = any_hit(&g, ray.origin.xyz, ray.dir.xyz, 0.0f, INFINITY) ? 1 : 0;
 }

@@ -48,10 +48,9 @@ inline ShearedRay shear_ray(float3 origin, float3 dir)
 // Face culling, a choice of each query.  A triangle shows its front face to a
 // ray that meets it against its normal (v1 - v0) x (v2 - v0), i.e. that sees
 // v0, v1, v2 counter-clockwise; the determinant below is then positive (the
-// shear keeps orientation).
-#define CULL_NONE 0    // double-sided
-#define CULL_BACK 1    // ignore triangles seen from behind
-#define CULL_FRONT 2   // ignore triangles seen from the front
+// shear keeps orientation).  The codes come from clrt.config.CULL_MODES as -D
+// defines: CULL_NONE double-sided, CULL_BACK ignores triangles seen from
+// behind, CULL_FRONT those seen from the front.
 
 // On a hit with tmin < t <= tmax, store t and the barycentric weights of
 // vertices 1 and 2.  With CULL_NONE both faces count.

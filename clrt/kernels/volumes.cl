@@ -88,7 +88,7 @@ inline bool volume_hit(const VolumeRay* r, float4 bound_a, float4 bound_b, float
     *t_enter = fmax(enter, tmin);
     return exit >= tmin && enter <= tmax;
 }
-#else
+#elif defined(ACCEL_BVH)
 #error "build with -DVOLUME_BOX, -DVOLUME_SPHERE or -DVOLUME_ELLIPSE"
 #endif
 

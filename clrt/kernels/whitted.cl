@@ -14,7 +14,7 @@
 
 #include "shading.cl"
 
-#define MAX_BOUNCES 16           // the host rejects a larger max_depth
+// MAX_BOUNCES (clrt.config, a -D define): the host rejects a larger max_depth.
 #define MIN_RAY_WEIGHT 1e-3f
 
 typedef struct {
@@ -68,7 +68,7 @@ inline bool worth_tracing(float3 w)
 }
 
 // Colour seen along one camera ray; *first receives the camera ray's own hit.
-inline float3 trace_whitted(ACCEL_PARAMS, SHADING_PARAMS, const uint max_depth,
+inline float3 trace_whitted(const Geometry* g, const Shading* sh, const uint max_depth,
                             float3 origin, float3 dir, float tmin, float tmax, Hit* first)
 {
     PendingRay stack[MAX_BOUNCES + 1];
@@ -78,17 +78,17 @@ inline float3 trace_whitted(ACCEL_PARAMS, SHADING_PARAMS, const uint max_depth,
     bool camera_ray = true;
     while (sp > 0) {
         const PendingRay r = stack[--sp];
-        const Hit hit = closest_hit(ACCEL_ARGS, r.origin, r.dir, camera_ray ? tmin : 0.0f,
+        const Hit hit = closest_hit(g, r.origin, r.dir, camera_ray ? tmin : 0.0f,
                                     camera_ray ? tmax : INFINITY);
         if (camera_ray)
             *first = hit;
         camera_ray = false;
         if (hit.prim < 0) {
-            color += r.weight * background.xyz;
+            color += r.weight * sh->background.xyz;
             continue;
         }
-        const SurfacePoint s = surface_point(ACCEL_ARGS, SHADING_ARGS, r.origin, r.dir, &hit);
-        color += r.weight * local_shading(ACCEL_ARGS, SHADING_ARGS, &s, r.dir);
+        const SurfacePoint s = surface_point(g, sh, r.origin, r.dir, &hit);
+        color += r.weight * local_shading(g, sh, &s, r.dir);
         const float kr = s.m.reflectivity, kt = s.m.transparency;
         if (r.depth >= max_depth || (kr <= 0.0f && kt <= 0.0f))
             continue;
@@ -99,11 +99,11 @@ inline float3 trace_whitted(ACCEL_PARAMS, SHADING_PARAMS, const uint max_depth,
             reflect_weight += kt * f;
             const float3 w = r.weight * (kt * (1.0f - f)) * s.m.color.xyz;
             if (f < 1.0f && worth_tracing(w))
-                stack[sp++] = pending_ray(s.p - ray_epsilon * s.ng, refracted, w, r.depth + 1);
+                stack[sp++] = pending_ray(s.p - sh->ray_epsilon * s.ng, refracted, w, r.depth + 1);
         }
         const float3 w = r.weight * reflect_weight;
         if (worth_tracing(w))
-            stack[sp++] = pending_ray(s.p + ray_epsilon * s.ng, reflect_dir(r.dir, &s), w, r.depth + 1);
+            stack[sp++] = pending_ray(s.p + sh->ray_epsilon * s.ng, reflect_dir(r.dir, &s), w, r.depth + 1);
     }
     return color;
 }

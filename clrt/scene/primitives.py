@@ -67,7 +67,7 @@ def torus(major: float = 1.0, minor: float = 0.35, n_major: int = 32, n_minor: i
                        np.linspace(0, 2 * np.pi, n_minor, endpoint=False), indexing="ij")
     ring = major + minor * np.cos(b)
     v = np.stack([ring * np.cos(a), minor * np.sin(b), ring * np.sin(a)], -1).reshape(-1, 3)
-    return Mesh.from_arrays(v, _grid_faces(n_major, n_minor, wrap=True)[:, ::-1], name)   # outward
+    return Mesh.from_arrays(v, grid_faces(n_major, n_minor, wrap=True)[:, ::-1], name)   # outward
 
 
 def heightfield(n: int = 24, size: float = 2.0, seed: int = 0, name="heightfield") -> Mesh:
@@ -77,10 +77,10 @@ def heightfield(n: int = 24, size: float = 2.0, seed: int = 0, name="heightfield
                        indexing="ij")
     y = 0.15 * size * (np.sin(3 * x) * np.cos(2 * z)) + 0.02 * size * rng.standard_normal(x.shape)
     v = np.stack([x, y, z], -1).reshape(-1, 3)
-    return Mesh.from_arrays(v, _grid_faces(n + 1, n + 1, wrap=False), name)
+    return Mesh.from_arrays(v, grid_faces(n + 1, n + 1, wrap=False), name)
 
 
-def _grid_faces(rows: int, cols: int, wrap: bool) -> np.ndarray:
+def grid_faces(rows: int, cols: int, wrap: bool) -> np.ndarray:
     """Two triangles per cell of a rows x cols vertex grid (wrapping in both directions or not)."""
     r_end, c_end = (rows, cols) if wrap else (rows - 1, cols - 1)
     i, j = np.meshgrid(np.arange(r_end), np.arange(c_end), indexing="ij")
@@ -114,4 +114,4 @@ def torus_knot(p: int = 2, q: int = 3, radius: float = 1.0, tube: float = 0.12, 
     a = np.linspace(0, 2 * np.pi, sides, endpoint=False)
     ring = np.cos(a)[None, :, None] * normal[:, None] + np.sin(a)[None, :, None] * binormal[:, None]
     v = (c[:, None] + tube * ring).reshape(-1, 3)
-    return Mesh.from_arrays(v, _grid_faces(segments, sides, wrap=True)[:, ::-1], name)
+    return Mesh.from_arrays(v, grid_faces(segments, sides, wrap=True)[:, ::-1], name)

@@ -4,9 +4,11 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 
+from clrt.config import DEFAULT_FOV, DEFAULT_HEIGHT, DEFAULT_MAX_DEPTH, DEFAULT_WIDTH, MAX_IMAGE_SIDE
 from clrt.errors import InputError
 from clrt.scene.mesh import Mesh
 
@@ -77,8 +79,8 @@ def check_int(name: str, value, lo: int, hi: int) -> None:
 
 
 def _check_image(width, height, fov) -> None:
-    check_int("width", width, 1, 65536)
-    check_int("height", height, 1, 65536)
+    check_int("width", width, 1, MAX_IMAGE_SIDE)
+    check_int("height", height, 1, MAX_IMAGE_SIDE)
     if not (isinstance(fov, (int, float)) and 0.0 < fov < 180.0):
         raise InputError(f"fov must be between 0 and 180 degrees (exclusive), got {fov!r}")
 
@@ -90,9 +92,9 @@ class Camera:
     eye: tuple
     target: tuple
     up: tuple = (0.0, 1.0, 0.0)
-    fov: float = 45.0
-    width: int = 640
-    height: int = 480
+    fov: float = DEFAULT_FOV
+    width: int = DEFAULT_WIDTH
+    height: int = DEFAULT_HEIGHT
 
     def __post_init__(self):
         eye, target, up = (_vec3(self.eye, "eye"), _vec3(self.target, "target"), _vec3(self.up, "up"))
@@ -117,7 +119,7 @@ class Camera:
         return sy * self.width / self.height, sy
 
     @classmethod
-    def framing(cls, bounds, width: int = 640, height: int = 480, fov: float = 45.0,
+    def framing(cls, bounds, width: int = DEFAULT_WIDTH, height: int = DEFAULT_HEIGHT, fov: float = DEFAULT_FOV,
                 direction=(0.35, 0.3, 1.0), up=(0.0, 1.0, 0.0)) -> "Camera":
         """A camera looking at the centre of ``bounds`` (2x3) from ``direction``,
         far enough that the bounding sphere fits in the narrower field of view."""
@@ -148,7 +150,7 @@ class Scene:
     ambient_light: tuple = (1.0, 1.0, 1.0)
     camera: Camera | None = None   # suggested view; renderers may override
     camera_framed: bool = False    # the camera was framed from the bounds, not placed by the user
-    max_depth: int = 5             # reflection / refraction bounces after the camera ray
+    max_depth: int = DEFAULT_MAX_DEPTH  # reflection / refraction bounces after the camera ray
     samples: int = 1               # anti-aliasing: samples x samples rays per pixel
 
     @property
@@ -178,3 +180,37 @@ def scene_from_mesh(mesh: Mesh, material: Material | None = None, lights=None,
     if not scene.lights:
         scene.lights = [default_light(scene.bounds, scene.camera)]
     return scene
+
+
+def ray_epsilon(bounds, eye) -> float:
+    """How far secondary rays start off the surface: well above float32 rounding of
+    hit points (relative to the coordinates' magnitude) yet small against the scene."""
+    bounds = np.asarray(bounds, dtype=np.float64)
+    diag = float(np.linalg.norm(bounds[1] - bounds[0]))
+    magnitude = max(float(np.abs(bounds).max()), float(np.abs(np.asarray(eye, dtype=np.float64)).max()))
+    return 1e-4 * diag + 1e-6 * magnitude
+
+
+def as_mesh(source) -> Mesh:
+    """A Mesh from a Mesh, a Scene (all objects, in order), a path, a trimesh.Trimesh
+    or (vertices, faces)."""
+    if isinstance(source, Mesh):
+        return source
+    if isinstance(source, Scene):
+        return Mesh.concatenate([o.mesh for o in source.objects])
+    if isinstance(source, (str, Path)):
+        from clrt.scene.load import load_mesh   # trimesh is imported only when a file is read
+        return load_mesh(source)
+    if hasattr(source, "vertices") and hasattr(source, "faces"):
+        return Mesh.from_arrays(source.vertices, source.faces)
+    if isinstance(source, tuple) and len(source) == 2:
+        return Mesh.from_arrays(*source)
+    raise InputError(f"expected a mesh, a path or (vertices, faces), got {type(source).__name__}")
+
+
+def as_scene(source) -> Scene:
+    """A Scene from a Scene, or from anything :func:`as_mesh` takes (a Mesh, a file
+    path, a trimesh object, (vertices, faces)) with the default framing and light."""
+    if isinstance(source, Scene):
+        return source
+    return scene_from_mesh(as_mesh(source))

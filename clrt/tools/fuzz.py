@@ -1,9 +1,9 @@
 """Fuzzing the mesh loaders with mutated real files, each case bounded in time and memory.
 
-    python -m clrt.fuzz --seconds 600                   # every format, ten minutes
-    python -m clrt.fuzz --cases 5000 --format 3ds,ply   # a fixed number of cases
-    python -m clrt.fuzz --corpus ../shared/meshes --save fuzz-failures --jobs 2
-    python -m clrt.fuzz --replay 0:1234                 # rerun one case here, with a traceback
+    python -m clrt.tools.fuzz --seconds 600                   # every format, ten minutes
+    python -m clrt.tools.fuzz --cases 5000 --format 3ds,ply   # a fixed number of cases
+    python -m clrt.tools.fuzz --corpus ../shared/meshes --save fuzz-failures --jobs 2
+    python -m clrt.tools.fuzz --replay 0:1234                 # rerun one case here, with a traceback
 
 The corpus is a set of valid files: small meshes written by trimesh's exporters
 and our 3DS writer in every format (always), plus the files of ``--corpus``
@@ -411,7 +411,7 @@ class Report:
 
 class _Worker:
     def __init__(self, options: list[str], start: int, stride: int, end: int | None):
-        cmd = [sys.executable, "-m", "clrt.fuzz", "--worker", "--start", str(start), "--stride", str(stride),
+        cmd = [sys.executable, "-m", "clrt.tools.fuzz", "--worker", "--start", str(start), "--stride", str(stride),
                *options] + ([] if end is None else ["--end", str(end)])
         env = {**os.environ, "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
         root = str(Path(__file__).resolve().parents[1])
@@ -564,7 +564,7 @@ def _formats(text: str) -> tuple:
 
 
 def main(argv=None) -> int:
-    p = argparse.ArgumentParser(prog="python -m clrt.fuzz", description=__doc__.split("\n\n")[0],
+    p = argparse.ArgumentParser(prog="python -m clrt.tools.fuzz", description=__doc__.split("\n\n")[0],
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--seconds", type=float, help="run for this long (default: 60 unless --cases)")
     p.add_argument("--cases", type=int, help="run this many cases")
@@ -600,7 +600,7 @@ def main(argv=None) -> int:
                  log=lambda line: print(line, flush=True))
     print(report.summary())
     if report.failures:
-        print(f"replay one with: python -m clrt.fuzz --replay {report.seed}:<case>"
+        print(f"replay one with: python -m clrt.tools.fuzz --replay {report.seed}:<case>"
               + "".join(f" --corpus {d}" for d in args.corpus))
     return 1 if report.failures else 0
 

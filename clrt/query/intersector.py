@@ -27,7 +27,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from clrt.trace import Accel, RayBatch, as_mesh
+from clrt.query.accel import Accel
+from clrt.query.rays import RayBatch
+from clrt.scene.scene import as_mesh
 
 
 class RayMeshIntersector:

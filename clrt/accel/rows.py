@@ -1,0 +1,50 @@
+"""The device rows of a BVH (``BVH_PAIR_NODE`` in clrt/layouts.py): one row per
+inner node, holding both children's volumes and references, depth-first, the
+root at row 0.  Written from a depth-first tree (``topdown.DepthFirst``) and
+the fitted volumes of its nodes (``volumes.fit``)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from clrt.layouts import BVH_PAIR_NODE
+
+
+def pair_rows(first: np.ndarray, count: np.ndarray, right: np.ndarray, bound_a: np.ndarray,
+              bound_b: np.ndarray, volume: str) -> np.ndarray:
+    """Rows of a tree given per depth-first node: ``first``, ``count``, ``right`` as
+    in :class:`clrt.accel.topdown.DepthFirst`, volumes ``bound_a``/``bound_b``
+    (N, 4) float32 of ``volume`` (volumes.fit)."""
+    inner = np.nonzero(count == 0)[0]
+    if len(inner) == 0:   # the whole tree is one leaf: hang it on the left of a root row
+        rows = np.zeros(1, BVH_PAIR_NODE)
+        _set_child(rows, "left", bound_a[:1], bound_b[:1], first[:1], count[:1], volume)
+        child_refs(rows)[:, 2:] = -1        # no right child
+        return rows
+    row = np.full(len(count), -1, np.int64)
+    row[inner] = np.arange(len(inner))      # the root (node 0) is inner: row 0
+    rows = np.zeros(len(inner), BVH_PAIR_NODE)
+    for side, child in (("left", first[inner]), ("right", right[inner])):
+        leaf = count[child] > 0
+        _set_child(rows, side, bound_a[child], bound_b[child], np.where(leaf, first[child], row[child]),
+                   count[child], volume)
+    return rows
+
+
+def child_refs(rows: np.ndarray) -> np.ndarray:
+    """(N, 4) int32 view of the rows' child references: left, left_count, right,
+    right_count (the w lanes of left_a, left_b, right_a, right_b)."""
+    return rows.view(np.int32).reshape(len(rows), 16)[:, 3::4]
+
+
+def _set_child(rows, side: str, bound_a, bound_b, ref, count, volume: str) -> None:
+    """Write one side of rows: the child's volume (xyz lanes) and reference (w lanes)."""
+    rows[f"{side}_a"][:, :3] = bound_a[:, :3]
+    if volume == "sphere":   # the radius leaves bound_a.w, which holds the reference here
+        rows[f"{side}_b"][:, 0] = bound_a[:, 3]
+    else:
+        rows[f"{side}_b"][:, :3] = bound_b[:, :3]
+    refs = child_refs(rows)
+    k = 0 if side == "left" else 2
+    refs[:, k] = ref
+    refs[:, k + 1] = count

@@ -1,0 +1,20 @@
+"""Scene values passed to kernels by value (not in buffers)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from clrt.scene.scene import Camera
+
+
+def vec4(v) -> np.ndarray:
+    """Three numbers as an OpenCL float4 argument (w = 0)."""
+    return np.array([*v, 0.0], np.float32)
+
+
+def camera_args(camera: Camera) -> tuple:
+    """The camera as the kernels' CAMERA_PARAMS (camera.cl)."""
+    forward, right, up = camera.basis()
+    scale_x, scale_y = camera.scales()
+    return (vec4(camera.eye), vec4(forward), vec4(right), vec4(up), np.float32(scale_x),
+            np.float32(scale_y), np.uint32(camera.width), np.uint32(camera.height))

@@ -1,0 +1,15 @@
+"""Batch ray queries on the device: closest, any, count and all hits, camera
+images, and a drop-in for trimesh's intersector.
+
+``rays.py`` (the rays a query takes), ``accel.py`` (:class:`Accel`: a mesh
+uploaded once, queried often), ``results.py`` (what queries return),
+``api.py`` (one-call forms), ``intersector.py`` (trimesh's interface),
+``aov.py`` (camera images written as files).
+"""
+
+from clrt.query.accel import Accel
+from clrt.query.api import all_hits, any_hit, camera_images, count_hits, occluded, trace
+from clrt.query.results import AllHits, CameraImages, Hits
+
+__all__ = ["Accel", "AllHits", "CameraImages", "Hits", "all_hits", "any_hit", "camera_images", "count_hits",
+           "occluded", "trace"]

@@ -1,0 +1,79 @@
+"""Per-pixel images of a camera written as files (``clrt render --aov``)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from clrt.errors import InputError
+from clrt.output import write_array, write_image
+from clrt.query.accel import Accel
+from clrt.query.results import CameraImages
+
+
+AOVS = ("depth", "distance", "normal", "prim", "hit", "front")
+
+
+def parse_aovs(text) -> tuple[str, ...]:
+    """'depth,normal' -> ('depth', 'normal'); InputError naming an unknown one."""
+    names = tuple(dict.fromkeys(n.strip().lower() for n in str(text).split(",") if n.strip()))
+    if not names:
+        raise InputError(f"--aov needs one or more of {','.join(AOVS)}")
+    unknown = [n for n in names if n not in AOVS]
+    if unknown:
+        raise InputError(f"unknown AOV {unknown[0]!r}: choose from {','.join(AOVS)}")
+    return names
+
+
+def aov_arrays(images: CameraImages, name: str) -> tuple[np.ndarray, np.ndarray]:
+    """(values for the .npy, 8-bit picture for the .png) of one AOV."""
+    hit = images.hit
+    if name in ("depth", "distance"):
+        values = images.depth if name == "depth" else images.t
+        picture = np.zeros(hit.shape, np.uint8)
+        if hit.any():
+            near, far = float(values[hit].min()), float(values[hit].max())
+            scale = (values[hit] - near) / (far - near) if far > near else np.zeros(int(hit.sum()))
+            picture[hit] = np.round(255 - 215 * scale).astype(np.uint8)   # near bright, misses black
+        return values, picture
+    if name == "normal":
+        picture = np.where(hit[..., None], np.round((images.normal + 1) * 127.5), 0).astype(np.uint8)
+        return images.normal, picture
+    if name == "prim":
+        key = images.prim.astype(np.uint32) * np.uint32(2654435761)
+        rgb = np.stack([(key >> s) & 0xFF for s in (8, 16, 24)], axis=-1).astype(np.uint8) | 0x30
+        return images.prim, np.where(hit[..., None], rgb, 0).astype(np.uint8)
+    flag = images.hit if name == "hit" else images.front
+    return flag, flag.astype(np.uint8) * 255
+
+
+def aov_paths(image_path, names) -> list[Path]:
+    """IMAGE.NAME.npy and IMAGE.NAME.png for each AOV name, beside ``image_path``."""
+    image_path = Path(image_path)
+    paths = []
+    for name in names:
+        base = f"{image_path.stem}.{name}"
+        paths += [image_path.with_name(base + ".npy"), image_path.with_name(base + ".png")]
+    return paths
+
+
+def write_aovs(source, camera, names, image_path, force: bool = False) -> list[Path]:
+    """Write each AOV of ``camera`` as IMAGE.NAME.npy (the values) and
+    IMAGE.NAME.png (a picture of them), next to ``image_path``.  ``source``: a
+    Renderer (its uploaded scene is reused) or an Accel.  Existing files are
+    replaced only if clrt wrote them, or with ``force`` (clrt.output).
+    Returns the paths."""
+    if isinstance(names, str):
+        names = parse_aovs(names)
+    accel = source if isinstance(source, Accel) else Accel.from_renderer(source)
+    images = accel.camera_images(camera)
+    image_path = Path(image_path)
+    written = []
+    for name in names:
+        values, picture = aov_arrays(images, name)
+        npy, png = aov_paths(image_path, [name])
+        write_array(values, npy, marked_by=png, force=force)
+        write_image(picture, png, force=force)
+        written += [npy, png]
+    return written

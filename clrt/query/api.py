@@ -1,0 +1,63 @@
+"""The one-call forms of the ray queries: build an Accel, ask once.
+
+All share one keyword-only signature after the rays: the query's own range
+(``tmin``, ``tmax``) and ``cull``, then the acceleration options of
+:class:`~clrt.query.accel.Accel` (``accel``, ``builder``, ``leaf_size``,
+``device``, ``chunk_rays``).  To query a mesh many times, build an Accel once.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from clrt.config import DEFAULT_ACCEL, DEFAULT_BUILDER, DEFAULT_LEAF_SIZE
+from clrt.query.accel import Accel
+from clrt.query.results import AllHits, CameraImages, Hits
+
+
+def _accel(mesh, accel, builder, leaf_size, device, chunk_rays) -> Accel:
+    return Accel(mesh, accel, builder, leaf_size, device, chunk_rays)
+
+
+def trace(mesh, origins, directions, *, tmin=0.0, tmax=np.inf, cull: str = "none",
+          accel: str = DEFAULT_ACCEL, builder: str = DEFAULT_BUILDER, leaf_size: int = DEFAULT_LEAF_SIZE,
+          device: str | None = None, chunk_rays: int | None = None) -> Hits:
+    """Closest hits of a batch of rays (:meth:`Accel.trace`)."""
+    return _accel(mesh, accel, builder, leaf_size, device, chunk_rays).trace(
+        origins, directions, tmin=tmin, tmax=tmax, cull=cull)
+
+
+def any_hit(mesh, origins, directions, *, tmin=0.0, tmax=np.inf, cull: str = "none",
+            accel: str = DEFAULT_ACCEL, builder: str = DEFAULT_BUILDER, leaf_size: int = DEFAULT_LEAF_SIZE,
+            device: str | None = None, chunk_rays: int | None = None) -> np.ndarray:
+    """(N,) bool: is each ray blocked in (tmin, tmax]? (:meth:`Accel.any_hit`)"""
+    return _accel(mesh, accel, builder, leaf_size, device, chunk_rays).any_hit(
+        origins, directions, tmin=tmin, tmax=tmax, cull=cull)
+
+
+occluded = any_hit
+
+
+def count_hits(mesh, origins, directions, *, tmin=0.0, tmax=np.inf, cull: str = "none",
+               accel: str = DEFAULT_ACCEL, builder: str = DEFAULT_BUILDER, leaf_size: int = DEFAULT_LEAF_SIZE,
+               device: str | None = None, chunk_rays: int | None = None) -> np.ndarray:
+    """(N,) int32 hits along each ray (:meth:`Accel.count`)."""
+    return _accel(mesh, accel, builder, leaf_size, device, chunk_rays).count(
+        origins, directions, tmin=tmin, tmax=tmax, cull=cull)
+
+
+def all_hits(mesh, origins, directions, *, tmin=0.0, tmax=np.inf, cull: str = "none",
+             accel: str = DEFAULT_ACCEL, builder: str = DEFAULT_BUILDER, leaf_size: int = DEFAULT_LEAF_SIZE,
+             device: str | None = None, chunk_rays: int | None = None) -> AllHits:
+    """Every hit of every ray (:meth:`Accel.all_hits`)."""
+    return _accel(mesh, accel, builder, leaf_size, device, chunk_rays).all_hits(
+        origins, directions, tmin=tmin, tmax=tmax, cull=cull)
+
+
+def camera_images(mesh, camera=None, *, K=None, pose=None, width=None, height=None,
+                  pixel_center: float = 0.0, cull: str = "none",
+                  accel: str = DEFAULT_ACCEL, builder: str = DEFAULT_BUILDER, leaf_size: int = DEFAULT_LEAF_SIZE,
+                  device: str | None = None, chunk_rays: int | None = None) -> CameraImages:
+    """Depth, normal, triangle and hit images (:meth:`Accel.camera_images`)."""
+    return _accel(mesh, accel, builder, leaf_size, device, chunk_rays).camera_images(
+        camera, K=K, pose=pose, width=width, height=height, pixel_center=pixel_center, cull=cull)

@@ -1,0 +1,11 @@
+"""Stages 4-6 of the pipeline: frames of a scene uploaded to one device.
+
+``renderer.py`` (the Renderer: upload once, render many frames), ``tiles.py``
+(how a frame is cut into launches, the out-of-memory fallback, Ctrl-C),
+``pool.py`` (page-locked images that are never reused while a caller holds them).
+"""
+
+from clrt.renderer.frame import Frame, Renderer, check_host_memory, render
+from clrt.renderer.tiles import TileLimits
+
+__all__ = ["Frame", "Renderer", "TileLimits", "check_host_memory", "render"]

@@ -1,0 +1,361 @@
+"""The host side of a frame, stage by stage as in the paper:
+
+1. initialisation      -- flatten the scene into typed arrays (clrt.scene.arrays)
+2. acceleration build  -- a BVH (box, sphere or ellipsoid volumes; ``accel="none"``
+                          tests every ray against every triangle) (clrt.accel)
+3. copy to device      -- context, program build, buffer upload (once per Renderer)
+4. ray generation      -- ``generate_rays`` kernel, one ray per pixel
+5. pixel colour        -- ``shade_pixels`` kernel: nearest hit, Phong, shadow rays
+6. read back           -- ``encode_srgb8`` (or the linear image) copied to the host
+
+Stages 1-3 happen when a :class:`Renderer` is made; 4-6 on every ``render`` call,
+so frames after the first reuse the uploaded scene and the built program.
+Tiling and the memory fallback: tiles.py; page-locked images: pool.py.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+import pyopencl as cl
+
+from clrt import accel as acceleration
+from clrt.config import DEFAULT_ACCEL, DEFAULT_BUILDER, DEFAULT_LEAF_SIZE, MAX_BOUNCES, MAX_SAMPLES
+from clrt.device.args import camera_args, vec4
+from clrt.device.context import create_context, device_label
+from clrt.device.context import format_bytes as _size
+from clrt.device.geometry import DeviceGeometry, check_fits
+from clrt.device.program import build_program
+from clrt.errors import DeviceMemoryError, TooLargeError
+from clrt.layouts import HIT, RAY
+from clrt.renderer.pool import PinnedImagePool
+from clrt.renderer.tiles import TileLimits, error_name, is_out_of_memory, run_tiles
+from clrt.scene.arrays import flatten_scene
+from clrt.scene.scene import Camera, Scene, as_scene, check_int, ray_epsilon
+
+
+@dataclass
+class Frame:
+    """One rendered image and how long each stage took (milliseconds)."""
+
+    image: np.ndarray            # (H, W, 3) uint8 sRGB, or float32 linear RGB
+    prim: np.ndarray | None      # (H, W) int32 triangle seen by each pixel, -1 for background
+    t: np.ndarray | None         # (H, W) float32 distance along the camera ray, inf for background
+    timings: dict = field(default_factory=dict)
+    device: str = ""
+    triangles: int = 0
+    tiles: int = 1               # tiles the frame was rendered in (each: one launch per sample)
+
+
+class Renderer:
+    """A scene uploaded to one OpenCL device, ready to render frames.
+
+    ``accel``: "box" (default), "sphere", "ellipse" (BVH volume shape) or "none"
+    (brute force); ``builder``: "sah" (default) or "paper"; ``leaf_size``: the
+    most triangles in a BVH leaf.  Every choice renders the same image.
+    ``limits``: how frames are cut into launches (:class:`TileLimits`);
+    ``max_buffer_bytes``: split scene buffers above this size (as scenes larger
+    than the device's largest allocation are; tests and benchmarks use it).
+    """
+
+    def __init__(self, scene: Scene, device: str | None = None, accel: str = DEFAULT_ACCEL,
+                 builder: str = DEFAULT_BUILDER, leaf_size: int = DEFAULT_LEAF_SIZE, *,
+                 limits: TileLimits | None = None, max_buffer_bytes: int | None = None):
+        self.limits = limits or TileLimits()
+        self.timings: dict[str, float] = {}
+        with _stage(self.timings, "initialisation"):
+            self.scene = as_scene(scene)
+            self.arrays = flatten_scene(self.scene)
+        with _stage(self.timings, "acceleration build"):
+            self.acceleration = acceleration.build(self.arrays.corners, accel, builder, leaf_size)
+            tri_info = self.arrays.tri_info[self.acceleration.prim_ids]   # shading data in slot order
+        with _stage(self.timings, "copy to device"):
+            self.context, self.queue = create_context(device)
+            self.device = device_label(self.queue.device)
+            a = self.arrays
+            self.device_bytes = (self.acceleration.device_bytes() + tri_info.nbytes + a.vertex_normals.nbytes
+                                 + a.materials.nbytes + a.lights.nbytes)
+            check_fits(self.queue.device, self.device, self.device_bytes, MIN_FRAME_BYTES)
+            try:
+                # Buffers larger than one allocation are uploaded in parts (split.cl).
+                self.geometry = DeviceGeometry(self.context, a.corners, self.acceleration,
+                                               {"tri_info": tri_info, "vertex_normals": a.vertex_normals},
+                                               max_buffer_bytes)
+                mf = cl.mem_flags
+                self.buffers = {name: cl.Buffer(self.context, mf.READ_ONLY | mf.COPY_HOST_PTR,
+                                                hostbuf=getattr(a, name)) for name in ("materials", "lights")}
+            except (cl.Error, MemoryError) as exc:
+                if not is_out_of_memory(exc):
+                    raise
+                raise self._memory_error(exc, 0) from None
+            program = build_program(self.context, "render.cl", self.geometry.defines)
+            # Kernel objects are made once: each attribute lookup on a Program makes a new one.
+            self.kernels = {name: cl.Kernel(program, name)
+                            for name in ("generate_rays", "shade_pixels", "encode_srgb8")}
+        self._frame_buffers: dict[str, cl.Buffer] = {}
+        self._frame_pixels = -1
+        self._staging = None
+        self.image_pool = PinnedImagePool(self.context, self.queue, IMAGE_POOL_SIZE)
+        self._max_group = min(   # work-items a launch's group may have, see _launch_shape
+            k.get_work_group_info(cl.kernel_work_group_info.WORK_GROUP_SIZE, self.queue.device)
+            for name, k in self.kernels.items() if name != "encode_srgb8")
+
+    # ----------------------------------------------------------------------- a frame
+
+    def render(self, camera: Camera | None = None, linear: bool = False, hits: bool = False,
+               samples: int | None = None, max_depth: int | None = None, seed: int = 0) -> Frame:
+        """Render one frame.
+
+        ``samples``: anti-aliasing with samples x samples stratified, jittered rays
+        per pixel (the jitter is a hash of pixel, sample and ``seed``, so renders
+        are reproducible; 1 = one ray through each pixel centre).  ``max_depth``:
+        reflection/refraction bounces.  Both default to the scene's.
+        ``hits=True`` also reads back the camera rays' hits (``Frame.prim`` and
+        ``Frame.t``, of the first sample; otherwise None).
+        """
+        job = self._job(camera, linear, hits, samples, max_depth, seed)
+        capacity = self.tile_capacity(job.camera.width * job.camera.height)
+        try:
+            tiles = run_tiles(job.camera.width, job.camera.height, capacity, self.limits,
+                              lambda x, y, w, h, cap: self._render_tile(job, x, y, w, h, cap),
+                              self._release_frame_buffers, self._memory_error)
+        except KeyboardInterrupt:
+            self.queue.finish()   # no kernel may still write into buffers we drop
+            raise
+        return Frame(job.image, job.prim, job.t, job.timings, self.device, len(self.arrays.corners), tiles=tiles)
+
+    def _job(self, camera, linear, hits, samples, max_depth, seed) -> "_Job":
+        """The arguments of one render call checked and defaulted, and its outputs."""
+        camera = camera or self.scene.camera or Camera.framing(self.arrays.bounds)
+        samples = self.scene.samples if samples is None else samples
+        max_depth = self.scene.max_depth if max_depth is None else max_depth
+        check_int("samples", samples, 1, MAX_SAMPLES)
+        check_int("max_depth", max_depth, 0, MAX_BOUNCES)
+        w, h = camera.width, camera.height
+        host_bytes = w * h * ((12 if linear else 3) + (8 if hits else 0))
+        if host_bytes > HOST_CHECK_BYTES:   # reading /proc/meminfo costs more than a small frame
+            check_host_memory(host_bytes, f"a {w}x{h} image")
+        timings = dict(self.timings)
+        timings.update({"ray generation": 0.0, "pixel colour": 0.0, "read back": 0.0})
+        if linear:
+            image, pinned = np.empty((h, w, 3), np.float32), False
+        else:
+            image = self.image_pool.take(3 * w * h)
+            pinned = image is not None
+            image = (image if pinned else np.empty(3 * w * h, np.uint8)).reshape(h, w, 3)
+        prim = np.empty((h, w), np.int32) if hits else None
+        t = np.empty((h, w), np.float32) if hits else None
+        shading_args = (*self.geometry.buffers["tri_info"], *self.geometry.buffers["vertex_normals"],
+                        self.buffers["materials"], self.buffers["lights"], np.uint32(len(self.scene.lights)),
+                        vec4(self.scene.ambient_light), vec4(self.scene.background),
+                        np.float32(ray_epsilon(self.arrays.bounds, camera.eye)))
+        return _Job(camera, samples, max_depth, seed, linear, (*self.geometry.args, *shading_args),
+                    image, pinned, prim, t, timings)
+
+    # ----------------------------------------------------------------------- memory
+
+    def tile_capacity(self, pixels: int) -> int:
+        """The most pixels of one tile: the whole image if the device memory allows,
+        at most half of what the scene leaves free and one buffer's size limit."""
+        dev = self.queue.device
+        free = max(dev.global_mem_size - self.device_bytes, 0) // 2
+        cap = min(pixels, MAX_TILE_PIXELS, dev.max_mem_alloc_size // RAY.itemsize,
+                  free // FRAME_BYTES_PER_PIXEL)
+        cap = max(cap, min(pixels, self.limits.min_tile_pixels))   # if even that fails, the error says so
+        if self.limits.max_tile_pixels is not None:
+            cap = min(cap, self.limits.max_tile_pixels)
+        return max(int(cap), 1)
+
+    def _buffers_for(self, pixels: int) -> dict:
+        """Per-tile buffers for up to ``pixels`` pixels, reallocated only when that changes."""
+        if pixels != self._frame_pixels:
+            self._release_frame_buffers()
+            mf = cl.mem_flags
+            self._frame_buffers = {
+                "rays": cl.Buffer(self.context, mf.READ_WRITE, pixels * RAY.itemsize),
+                "hits": cl.Buffer(self.context, mf.READ_WRITE, pixels * HIT.itemsize),
+                "linear": cl.Buffer(self.context, mf.READ_WRITE, pixels * 16),
+                "srgb8": cl.Buffer(self.context, mf.WRITE_ONLY, pixels * 3),
+                # Page-locked host memory for tiles that cannot be read back in place.
+                "staging": cl.Buffer(self.context, mf.READ_WRITE | mf.ALLOC_HOST_PTR, pixels * 3),
+            }
+            self._staging, _ = cl.enqueue_map_buffer(
+                self.queue, self._frame_buffers["staging"], cl.map_flags.READ | cl.map_flags.WRITE,
+                0, (pixels, 3), np.uint8)
+            self._frame_pixels = pixels
+        return self._frame_buffers
+
+    def _release_frame_buffers(self) -> None:
+        if self._staging is not None:
+            self._staging.base.release(self.queue)
+            self._staging = None
+        for b in self._frame_buffers.values():
+            b.release()
+        self._frame_buffers, self._frame_pixels = {}, -1
+
+    def _memory_error(self, exc, tile: int) -> DeviceMemoryError:
+        dev = self.queue.device
+        frame = f" and {_size(tile * FRAME_BYTES_PER_PIXEL)} for a tile of {tile:,} pixels" if tile else ""
+        return DeviceMemoryError(
+            f"out of device memory on {self.device} ({error_name(exc)}): the scene needs "
+            f"{_size(self.device_bytes)}{frame}; the device has {_size(dev.global_mem_size)} "
+            f"({_size(dev.max_mem_alloc_size)} at most per buffer), shared with other programs")
+
+    # ----------------------------------------------------------------------- launches
+
+    def _launch(self, name: str, global_size, local_size, *args) -> cl.Event:
+        kernel = self.kernels[name]
+        kernel.set_args(*args)
+        return cl.enqueue_nd_range_kernel(self.queue, kernel, global_size, local_size)
+
+    def _render_tile(self, job: "_Job", x: int, y: int, w: int, h: int, capacity: int) -> float:
+        """Render the w x h pixels at (x, y) into the job's host arrays; return the
+        kernel time of the slowest launch (ms).  Each sample's launches are waited
+        for -- the last together with the read back, so a frame of one tile and one
+        sample waits only once -- so that Ctrl-C (raised by Python between calls)
+        stops within one launch."""
+        buf = self._buffers_for(capacity)
+        count = w * h
+        tile = (np.uint32(x), np.uint32(y), np.uint32(w), np.uint32(h))
+        size, local = self._launch_shape(w, h)
+        n = job.samples * job.samples
+        launches = []
+        for sample in range(n):
+            gen = self._launch("generate_rays", size, local, buf["rays"], *camera_args(job.camera),
+                               np.uint32(sample), np.uint32(job.samples), np.uint32(job.seed), *tile)
+            shade = self._launch("shade_pixels", size, local, buf["rays"], buf["linear"], buf["hits"],
+                                 np.uint32(w), np.uint32(h), np.uint32(job.max_depth), np.float32(1.0 / n),
+                                 np.uint32(sample == 0), *job.kernel_args)
+            launches.append((gen, shade))
+            if sample < n - 1:
+                wait_for(shade)
+
+        image = job.image[y:y + h, x:x + w]
+        # Straight into the image where the tile is one run of page-locked memory
+        # (full-width tiles of a pooled image); else through the staging buffer.
+        direct = job.pinned and w == job.image.shape[1]
+        q = self.queue
+        if job.linear:
+            out = np.empty((count, 4), np.float32)
+            copies = [cl.enqueue_copy(q, out, buf["linear"], is_blocking=False)]
+        else:
+            copies = [self._launch("encode_srgb8", (count,), None, buf["linear"], buf["srgb8"], np.uint32(count))]
+            out = image.reshape(count * 3) if direct else self._staging[:count]
+            copies.append(cl.enqueue_copy(q, out, buf["srgb8"], is_blocking=False))
+        if job.prim is not None:
+            records = np.empty(count, HIT)
+            copies.append(cl.enqueue_copy(q, records, buf["hits"], is_blocking=False))
+        wait_for(copies[-1])
+        host_start = time.perf_counter()
+        if job.linear:
+            image[...] = out[:, :3].reshape(h, w, 3)
+        elif not direct:
+            image[...] = out.reshape(h, w, 3)
+        if job.prim is not None:
+            job.prim[y:y + h, x:x + w] = records["prim"].reshape(h, w)
+            job.t[y:y + h, x:x + w] = records["t"].reshape(h, w)
+        # Read back: the encode kernel, the copies and any host copy after them.
+        job.timings["read back"] += sum(_event_ms(e) for e in copies) + 1e3 * (time.perf_counter() - host_start)
+        slowest = 0.0
+        for gen, shade in launches:
+            job.timings["ray generation"] += _event_ms(gen)
+            job.timings["pixel colour"] += _event_ms(shade)
+            slowest = max(slowest, _event_ms(gen) + _event_ms(shade))
+        return slowest
+
+    def _launch_shape(self, w: int, h: int) -> tuple:
+        """Global and local size of a tile's launches: work-groups of ``limits.block``
+        pixels (rays of neighbouring pixels run together), the driver's choice
+        where the kernels cannot run that many work-items at once."""
+        bw, bh = self.limits.block or (0, 0)
+        if not 0 < bw * bh <= self._max_group:
+            return (w, h), None
+        return (-(-w // bw) * bw, -(-h // bh) * bh), (bw, bh)
+
+
+# Device bytes per pixel of a tile: its ray, hit record, linear and sRGB colour.
+FRAME_BYTES_PER_PIXEL = RAY.itemsize + HIT.itemsize + 16 + 3
+MIN_FRAME_BYTES = 256 * FRAME_BYTES_PER_PIXEL
+MAX_TILE_PIXELS = 1 << 23   # 8M pixels (a 4K frame), 544 MiB of tile buffers
+IMAGE_POOL_SIZE = 3         # page-locked images per renderer (pool.py)
+HOST_CHECK_BYTES = 1 << 28  # frames needing more host memory than this check that it is there
+
+
+@dataclass
+class _Job:
+    """What one render call needs in every tile."""
+
+    camera: Camera
+    samples: int
+    max_depth: int
+    seed: int
+    linear: bool
+    kernel_args: tuple           # GEOMETRY_PARAMS and SHADING_PARAMS of shade_pixels
+    image: np.ndarray            # (H, W, 3), filled tile by tile
+    pinned: bool                 # image is page-locked memory of the image pool
+    prim: np.ndarray | None      # (H, W)
+    t: np.ndarray | None         # (H, W)
+    timings: dict
+
+
+def wait_for(event: cl.Event) -> None:
+    """Wait for one launch.  Python raises KeyboardInterrupt once this returns, so
+    Ctrl-C stops a render between launches (tests replace this to simulate it)."""
+    event.wait()
+
+
+def available_host_memory() -> int | None:
+    """Bytes of host memory available to a new allocation (Linux: MemAvailable), or None."""
+    try:
+        with open("/proc/meminfo") as fh:
+            for line in fh:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    return None
+
+
+def check_host_memory(nbytes: int, what: str) -> None:
+    """TooLargeError naming the size needed when ``nbytes`` exceed the available host memory."""
+    available = available_host_memory()
+    if available is not None and nbytes > available:
+        raise TooLargeError(f"{what} needs {_size(nbytes)} of host memory, only {_size(available)} "
+                            "is available: render a smaller image")
+
+
+class _stage:
+    """Context manager adding the wall time of a block to ``timings[name]`` in ms."""
+
+    def __init__(self, timings: dict, name: str):
+        self.timings, self.name = timings, name
+
+    def __enter__(self):
+        self.start = time.perf_counter()
+
+    def __exit__(self, *exc):
+        self.timings[self.name] = self.timings.get(self.name, 0.0) + 1e3 * (time.perf_counter() - self.start)
+
+
+def _event_ms(event: cl.Event) -> float:
+    return 1e-6 * (event.profile.end - event.profile.start)
+
+
+def render(source, camera: Camera | None = None, *, width: int | None = None,
+           height: int | None = None, device: str | None = None, linear: bool = False,
+           accel: str = DEFAULT_ACCEL, builder: str = DEFAULT_BUILDER,
+           leaf_size: int = DEFAULT_LEAF_SIZE) -> np.ndarray:
+    """Render ``source`` and return an (H, W, 3) image: uint8 sRGB, or float32 linear RGB
+    with ``linear=True``.  Without a camera the scene's own (or a framing of its
+    bounds) is used; ``width``/``height`` override the camera's resolution."""
+    scene = as_scene(source)
+    if camera is None and (scene.camera is None or scene.camera_framed):
+        base = scene.camera or Camera.framing(scene.bounds)
+        camera = Camera.framing(scene.bounds, width or base.width, height or base.height, base.fov, up=base.up)
+    camera = camera or scene.camera
+    if width is not None or height is not None:
+        camera = Camera(camera.eye, camera.target, camera.up, camera.fov,
+                        width or camera.width, height or camera.height)
+    return Renderer(scene, device, accel, builder, leaf_size).render(camera, linear=linear).image

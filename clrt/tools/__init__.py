@@ -1,0 +1,1 @@
+"""Developer tools (the loader fuzzer); never imported by ``import clrt``."""
