@@ -25,6 +25,7 @@ import tomllib
 
 import numpy as np
 
+from clrt.config import DEFAULT_MAX_DEPTH, MAX_BOUNCES, MAX_IMAGE_SIDE, MAX_SAMPLES
 from clrt.errors import InputError, MeshLoadError
 from clrt.scene import primitives
 from clrt.scene.load import load_mesh
@@ -155,13 +156,13 @@ CAMERA_KEYS = {
     "target": (vector(3), None),
     "up": (vector(3), _DEFAULT_CAMERA.up),
     "fov": (number(gt=0, lt=180), _DEFAULT_CAMERA.fov),
-    "width": (integer(1, 65536), _DEFAULT_CAMERA.width),
-    "height": (integer(1, 65536), _DEFAULT_CAMERA.height),
+    "width": (integer(1, MAX_IMAGE_SIDE), _DEFAULT_CAMERA.width),
+    "height": (integer(1, MAX_IMAGE_SIDE), _DEFAULT_CAMERA.height),
 }
 
 RENDER_KEYS = {
-    "max_depth": (integer(0, 16), 5),   # the kernels keep at most 16 bounces (whitted.cl)
-    "samples": (integer(1, 16), 1),
+    "max_depth": (integer(0, MAX_BOUNCES), DEFAULT_MAX_DEPTH),
+    "samples": (integer(1, MAX_SAMPLES), 1),
     "background": (_INTENSITY_RGB, (0.0, 0.0, 0.0)),
     "ambient_light": (_INTENSITY_RGB, (1.0, 1.0, 1.0)),
 }
