@@ -54,6 +54,9 @@ MATERIAL_SMOOTH = 1
 
 #: Face culling of ray queries: name -> the code the kernels compare with.
 CULL_MODES = {"none": 0, "back": 1, "front": 2}
+#: What the query kernels check of every ray (rays.cl), in the order of their
+#: report slots: the kernels see BAD_ORIGIN = 0, BAD_DIRECTION = 1, ...
+RAY_CHECKS = ("origin", "direction", "tmin", "tmax")
 
 # --------------------------------------------------------------------------- device buffers
 
@@ -70,6 +73,7 @@ def kernel_defines() -> dict:
         "MATERIAL_SMOOTH": f"{MATERIAL_SMOOTH}u",
         "MAX_PARTS": MAX_PARTS,
         **{f"CULL_{name.upper()}": code for name, code in CULL_MODES.items()},
+        **{f"BAD_{name.upper()}": slot for slot, name in enumerate(RAY_CHECKS)},
     }
 
 

@@ -39,7 +39,8 @@ def test_the_kernels_see_the_table(device):
     program.probe(queue, (1,), None, buf)
     cl.enqueue_copy(queue, out, buf)
     expected = {"MAX_BOUNCES": config.MAX_BOUNCES, "MATERIAL_SMOOTH": config.MATERIAL_SMOOTH,
-                "MAX_PARTS": config.MAX_PARTS, **{f"CULL_{k.upper()}": v for k, v in config.CULL_MODES.items()}}
+                "MAX_PARTS": config.MAX_PARTS, **{f"CULL_{k.upper()}": v for k, v in config.CULL_MODES.items()},
+                **{f"BAD_{k.upper()}": i for i, k in enumerate(config.RAY_CHECKS)}}
     assert dict(zip(names, out.tolist())) == expected
 
 

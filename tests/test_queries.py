@@ -128,6 +128,60 @@ def test_bad_input_is_an_input_error(torus_accel, call):
         call(torus_accel)
 
 
+@pytest.mark.parametrize("chunk_rays", [None, 7])
+def test_the_first_bad_ray_is_named_by_its_index(torus_accel, chunk_rays):
+    """The kernels check every ray (rays.cl); the error names the lowest bad ray
+    of a batch, in any chunk, and the value the caller gave."""
+    acc = clrt.Accel(torus_accel.mesh, chunk_rays=chunk_rays, device=None) if chunk_rays else torus_accel
+    o, d = _rays(acc.mesh, 40, seed=3)
+    d[23] = 0.0
+    d[31] = np.nan
+    o[29, 1] = np.inf
+    for query in (acc.trace, acc.any_hit, acc.count, acc.all_hits):
+        with pytest.raises(clrt.InputError, match=r"^direction 23 is \[0\.0, 0\.0, 0\.0\]: directions must be"):
+            query(o, d)
+    d[23] = 1.0
+    with pytest.raises(clrt.InputError, match=r"^origin 29 is \[.*inf.*\]: origins must be finite"):
+        acc.trace(o, d)
+    o[29, 1] = 0.0
+    tmax = np.full(40, 5.0)
+    tmax[17] = np.nan
+    with pytest.raises(clrt.InputError, match=r"tmax of ray 17 is nan: tmax must not be NaN"):
+        acc.trace(o, d, tmax=tmax)
+    with pytest.raises(clrt.InputError, match=r"direction 31"):
+        acc.trace(o, d)
+    d[31] = 1.0
+    assert acc.trace(o, d).t.shape == (40,)          # all good again, the same Accel
+
+
+def test_fields_and_device_arrays(torus_accel):
+    """Only the fields asked for are computed and returned; rays given as device
+    arrays give device arrays back, equal to the numpy path."""
+    cla = pytest.importorskip("pyopencl.array")
+    acc = torus_accel
+    o, d = _rays(acc.mesh, 3000, seed=5)
+    full = acc.trace(o, d)
+    some = acc.trace(o, d, fields=("prim", "t"))
+    assert some.u is None and some.normal is None and some.hit is None
+    assert np.array_equal(some.t, full.t) and np.array_equal(some.prim, full.prim)
+    with pytest.raises(clrt.InputError, match="unknown hit field 'depth'"):
+        acc.trace(o, d, fields=("t", "depth"))
+    o32, d32 = o.astype(np.float32), d.astype(np.float32)
+    o_dev, d_dev = cla.to_device(acc.queue, o32), cla.to_device(acc.queue, d32)
+    small = clrt.Accel(acc.mesh, chunk_rays=1000)           # device arrays across several chunks
+    for accel in (acc, small):
+        on_device = accel.trace(o_dev, d_dev)
+        assert isinstance(on_device.t, cla.Array) and isinstance(on_device.normal, cla.Array)
+        for name in full._fields:     # the flags come as uint8 0 / 1 on the device
+            assert np.array_equal(getattr(on_device, name).get(), getattr(full, name)), name
+        assert np.array_equal(accel.any_hit(o_dev, d_dev).get(), full.hit.astype(np.uint8))
+        assert np.array_equal(accel.count(o_dev, d_dev).get(), accel.count(o, d))
+        # a device array beside host arrays and a single shared origin
+        shared = accel.trace(o32[0], d_dev, tmax=cla.to_device(acc.queue, np.full(len(d32), 2.5, np.float32)))
+        expected = acc.trace(o32[0], d32, tmax=2.5)
+        assert np.array_equal(shared.t.get(), expected.t) and np.array_equal(shared.prim.get(), expected.prim)
+
+
 def test_empty_batches(torus_accel):
     acc = torus_accel
     none = np.zeros((0, 3))
@@ -258,17 +312,19 @@ def test_chunks_respect_the_allocation_limit_and_launch_size(torus_accel, device
     acc = clrt.Accel(torus_accel.mesh, device=device, chunk_rays=1000)
     o, d = _rays(acc.mesh, 4500, seed=8)
     hits = acc.trace(o, d)
-    assert acc._buffers["rays"].size <= 1000 * 32
+    # Chunk buffers hold 1000 rays: 12 bytes of origin and of direction each.
+    assert acc._buffers["in_0"].size <= 1000 * 12 and acc._buffers["in_1"].size <= 1000 * 12
+    assert acc._buffers["out_normal"].size <= 1000 * 12
     for field in hits._fields:
         assert np.array_equal(getattr(hits, field), getattr(torus_accel.trace(o, d), field))
     acc.chunk_rays = None
-    acc.max_alloc = 32 * 100
+    acc.max_alloc = 12 * 100
     assert acc.chunk_size() == 100
     brute = clrt.Accel(acc.mesh, "none", device=device)
     assert brute.chunk_size() == min(1 << 20, (1 << 30) // len(acc.mesh.faces))
     assert torus_accel.chunk_size() == 1 << 20
     memory = torus_accel.memory()
-    assert memory["chunk"] == (1 << 20) * 49 and memory["scene"] > 0
+    assert memory["chunk"] == (1 << 20) * (32 + 30) and memory["scene"] > 0
 
 
 # --------------------------------------------------------------------------- trimesh compatibility

@@ -152,6 +152,74 @@ def run(mesh_path, rays: int = 1_000_000, reference_rays: int = 2_000, device=No
         row(system, "all", n, sec, _agree_sets(n, len(faces), (ray, tri), (mine.ray_id[keep], mine.prim[keep])))
 
 
+def random_rays(mesh, count: int, seed: int = 0, dtype=np.float32) -> tuple[np.ndarray, np.ndarray]:
+    """The incoherent rays of the throughput issue: origins uniform in the mesh's
+    bounding box, directions uniform on the sphere."""
+    rng = np.random.default_rng(seed)
+    lo, hi = mesh.bounds
+    o = (lo + rng.random((count, 3)) * (hi - lo)).astype(dtype)
+    d = rng.normal(size=(count, 3))
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    return o, d.astype(dtype)
+
+
+def throughput(mesh_path, sizes, device=None, repeat: int = 5, seed: int = 0, out=sys.stdout):
+    """Per query and size: wall ms of the whole call from numpy (or device) arrays
+    to results, kernel ms (profiling events), and the host's share."""
+    import pyopencl.array as cla
+    from clrt.query import Accel
+    from clrt.scene import primitives
+    from clrt.scene.load import load_mesh
+
+    mesh = load_mesh(mesh_path) if mesh_path else primitives.torus_knot(segments=512, sides=32)
+    name = Path(mesh_path).name if mesh_path else "torus knot (generated)"
+    acc = Accel(mesh, device=device)
+    print(f"mesh: {name}, {len(mesh.faces):,} triangles; random rays (origins in the box, directions on the "
+          f"sphere); {acc.device}; median of {repeat} after a warm-up", file=out)
+    print("\n| rays | call | wall ms | kernel ms | host share | Mrays/s (wall) | hits |", file=out)
+    print("|---|---|---|---|---|---|---|", file=out)
+    for n in sizes:
+        o, d = random_rays(mesh, n, seed)
+        o_dev, d_dev = cla.to_device(acc.queue, o), cla.to_device(acc.queue, d)
+        o64, d64 = o.astype(np.float64), d.astype(np.float64)
+        calls = {
+            "trace, float32 numpy -> Hits (all fields)": lambda: acc.trace(o, d),
+            "trace, float64 numpy -> Hits": lambda: acc.trace(o64, d64),
+            "trace, fields=(t, prim)": lambda: acc.trace(o, d, fields=("t", "prim")),
+            "trace, device arrays in and out": lambda: acc.trace(o_dev, d_dev),
+            "any_hit, numpy": lambda: acc.any_hit(o, d),
+            "count, numpy": lambda: acc.count(o, d),
+        }
+        expected = None
+        for label, call in calls.items():
+            call()
+            acc.kernel_ms()
+            walls, kernels = [], []
+            for _ in range(repeat):
+                start = time.perf_counter()
+                result = call()
+                acc.queue.finish()
+                walls.append(1e3 * (time.perf_counter() - start))
+                kernels.append(acc.kernel_ms())
+            wall, kernel = statistics.median(walls), statistics.median(kernels)
+            hits = "-"
+            if label.startswith("trace"):
+                prim = result.prim.get() if isinstance(result.prim, cla.Array) else result.prim
+                expected = prim if expected is None else expected
+                hits = f"{int((prim >= 0).sum()):,}" + ("" if np.array_equal(prim, expected) else " DIFFERENT")
+            print(f"| {n:,} | {label} | {wall:.2f} | {kernel:.3f} | {100 * (1 - kernel / wall):.0f} % "
+                  f"| {n / wall / 1e3:,.0f} | {hits} |", file=out, flush=True)
+
+
+def _count(text: str) -> int:
+    text = text.strip().upper()
+    scale = {"K": 10 ** 3, "M": 10 ** 6}.get(text[-1:], 1)
+    value = int(float(text[:-1] if scale > 1 else text) * scale)
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"expected a positive count such as 1M, got {text!r}")
+    return value
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(prog="python -m clrt.bench.rays", description=__doc__.split("\n")[0])
     p.add_argument("mesh", nargs="?", help="mesh file (default: a generated torus knot, 32,768 triangles)")
@@ -165,7 +233,12 @@ def main(argv=None) -> int:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--only", action="append", choices=("clrt", "trimesh", "embree"),
                    help="systems to run besides clrt (repeatable; default all)")
+    p.add_argument("--throughput", type=lambda t: [_count(x) for x in t.split(",")], metavar="1M,10M",
+                   help="instead: wall and kernel time of each query from numpy or device arrays, "
+                        "random rays of these counts")
     args = p.parse_args(argv)
+    if args.throughput:
+        return exit_code(throughput, args.mesh, args.throughput, args.device, max(args.repeat, 1), args.seed)
     if args.rays < 1 or args.reference_rays < 1 or args.repeat < 1:
         p.error("--rays, --reference-rays and --repeat must be positive")
     return exit_code(run, args.mesh, args.rays, args.reference_rays, args.device, args.accel, args.builder,

@@ -1,7 +1,8 @@
 // Entry file of the ray-query program (clrt/query/): batches of rays from
 // the host, one work-item per ray, answered by the same query_hits() as the
-// renderer's closest_hit / any_hit.  The host cuts a batch into chunks; each
-// launch covers one chunk, so indices here are chunk-local.
+// renderer's closest_hit / any_hit.  The host cuts a batch into chunks, one
+// launch each; rays come in through rays.cl, results go straight into the
+// caller's arrays, field by field.
 //
 // Every query takes `cull` (CULL_NONE, CULL_BACK or CULL_FRONT, triangle.cl),
 // handed to the leaf action through a HitSink (hit.cl).
@@ -9,6 +10,7 @@
 #include "camera.cl"
 #include "geometry.cl"
 #include "accel.cl"
+#include "rays.cl"
 
 // A sink that stores nothing: the query's options only.
 inline HitSink query_options(const int cull)
@@ -34,61 +36,114 @@ inline bool sees_front(const ShearedRay* r, __global const TriangleVerts* tri)
     return intersect_triangle_culled(r, tri, -INFINITY, INFINITY, CULL_BACK, &t, &u, &v);
 }
 
-// Closest hit of each ray: the hit record (Hit.prim the triangle index) and
-// whether its front face was hit.
-__kernel void query_closest(__global const Ray* rays, __global Hit* hits, __global uchar* front,
+// Unit geometric normal (v1 - v0) x (v2 - v0) of a triangle, computed in
+// double precision where the device has it (as the host's Mesh.face_normals);
+// zero for a triangle of no area.
+inline float3 face_normal(__global const TriangleVerts* tri)
+{
+#ifdef cl_khr_fp64
+    const double3 a = convert_double3(tri->v0.xyz), b = convert_double3(tri->v1.xyz);
+    const double3 c = convert_double3(tri->v2.xyz);
+    const double3 n = cross(b - a, c - a);
+    const double len = sqrt(n.x * n.x + n.y * n.y + n.z * n.z);
+    return len > 0.0 ? convert_float3(n / len) : (float3)(0.0f);
+#else
+    const float3 n = cross(tri->v1.xyz - tri->v0.xyz, tri->v2.xyz - tri->v0.xyz);
+    const float len = length(n);
+    return len > 0.0f ? n / len : (float3)(0.0f);
+#endif
+}
+
+// Closest hit of each ray, written field by field into the arrays the caller
+// gets (any output may be 0: not asked for).  Index out_first + i; a miss
+// writes t = INFINITY, prim = -1, u = v = 0, normal = 0, front = hit = 0.
+__kernel void query_closest(RAY_INPUT_PARAMS, __global float* t_out, __global int* prim_out,
+                            __global float* u_out, __global float* v_out, __global float* normal_out,
+                            __global uchar* front_out, __global uchar* hit_out, const uint out_first,
                             const uint num_rays, const int cull, GEOMETRY_PARAMS)
 {
     const uint i = get_global_id(0);
     if (i >= num_rays)
         return;
     const Geometry g = make_geometry(GEOMETRY_ARGS);
-    const Ray ray = rays[i];
-    HitSink options = query_options(cull);
-    const Hit hit = query_hits(&g, ray.origin.xyz, ray.dir.xyz, ray.origin.w, ray.dir.w,
-                               QUERY_CLOSEST, &options);
-    uchar f = 0;
-    if (hit.prim >= 0) {
-        const ShearedRay r = shear_ray(ray.origin.xyz, ray.dir.xyz);
-        f = sees_front(&r, SPLIT_AT(&g, tris, hit.prim)) ? 1 : 0;
+    const RayInput in = make_ray_input(RAY_INPUT_ARGS);
+    float3 origin, dir;
+    float tmin, tmax;
+    Hit hit = miss_hit();
+    if (load_ray(&in, i, &origin, &dir, &tmin, &tmax)) {
+        HitSink options = query_options(cull);
+        hit = query_hits(&g, origin, dir, tmin, tmax, QUERY_CLOSEST, &options);
     }
-    front[i] = f;
-    hits[i] = reported_hit(&g, hit);
+    const size_t k = (size_t)out_first + i;
+    const bool found = hit.prim >= 0;
+    if (normal_out || front_out) {
+        float3 n = (float3)(0.0f);
+        uchar f = 0;
+        if (found) {
+            __global const TriangleVerts* tri = SPLIT_AT(&g, tris, hit.prim);
+            const ShearedRay r = shear_ray(origin, dir);
+            f = sees_front(&r, tri) ? 1 : 0;
+            n = face_normal(tri);
+        }
+        if (normal_out)
+            vstore3(n, k, normal_out);
+        if (front_out)
+            front_out[k] = f;
+    }
+    hit = reported_hit(&g, hit);
+    if (t_out)
+        t_out[k] = hit.t;
+    if (prim_out)
+        prim_out[k] = hit.prim;
+    if (u_out)
+        u_out[k] = hit.u;
+    if (v_out)
+        v_out[k] = hit.v;
+    if (hit_out)
+        hit_out[k] = found ? 1 : 0;
 }
 
 // Is anything hit?  Stops at the first hit found.
-__kernel void query_any(__global const Ray* rays, __global uchar* occluded, const uint num_rays,
+__kernel void query_any(RAY_INPUT_PARAMS, __global uchar* occluded, const uint out_first, const uint num_rays,
                         const int cull, GEOMETRY_PARAMS)
 {
     const uint i = get_global_id(0);
     if (i >= num_rays)
         return;
     const Geometry g = make_geometry(GEOMETRY_ARGS);
-    const Ray ray = rays[i];
-    HitSink options = query_options(cull);
-    occluded[i] = query_hits(&g, ray.origin.xyz, ray.dir.xyz, ray.origin.w, ray.dir.w,
-                             QUERY_ANY, &options).prim >= 0 ? 1 : 0;
+    const RayInput in = make_ray_input(RAY_INPUT_ARGS);
+    float3 origin, dir;
+    float tmin, tmax;
+    uchar found = 0;
+    if (load_ray(&in, i, &origin, &dir, &tmin, &tmax)) {
+        HitSink options = query_options(cull);
+        found = query_hits(&g, origin, dir, tmin, tmax, QUERY_ANY, &options).prim >= 0 ? 1 : 0;
+    }
+    occluded[(size_t)out_first + i] = found;
 }
 
 // Number of triangles each ray meets in (tmin, tmax].
-__kernel void query_count(__global const Ray* rays, __global uint* counts, const uint num_rays,
+__kernel void query_count(RAY_INPUT_PARAMS, __global int* counts, const uint out_first, const uint num_rays,
                           const int cull, GEOMETRY_PARAMS)
 {
     const uint i = get_global_id(0);
     if (i >= num_rays)
         return;
     const Geometry g = make_geometry(GEOMETRY_ARGS);
-    const Ray ray = rays[i];
+    const RayInput in = make_ray_input(RAY_INPUT_ARGS);
+    float3 origin, dir;
+    float tmin, tmax;
     HitSink sink = query_options(cull);
-    query_hits(&g, ray.origin.xyz, ray.dir.xyz, ray.origin.w, ray.dir.w, QUERY_ALL, &sink);
-    counts[i] = sink.count;
+    if (load_ray(&in, i, &origin, &dir, &tmin, &tmax))
+        query_hits(&g, origin, dir, tmin, tmax, QUERY_ALL, &sink);
+    counts[(size_t)out_first + i] = (int)sink.count;
 }
 
 // Every hit of every ray in one traversal, appended in no particular order to
-// (ray_ids, prims, ts) at *next.  *next ends as the number of hits of the
-// whole launch, also when that exceeds `capacity` (then the host runs the
-// chunk again with room for all of them).
-__kernel void query_all(__global const Ray* rays, __global int* ray_ids, __global int* prims,
+// (ray_ids, prims, ts) at *next, ray ids relative to the launch's first ray.
+// *next ends as the number of hits of the whole launch, also when that exceeds
+// `capacity` (then the host runs the chunk again with room for all of them).
+__kernel void query_all(RAY_INPUT_PARAMS, __global int* ray_ids, __global int* prims,
                         __global float* ts, __global uint* next, const uint capacity,
                         const uint num_rays, const int cull, GEOMETRY_PARAMS)
 {
@@ -96,7 +151,11 @@ __kernel void query_all(__global const Ray* rays, __global int* ray_ids, __globa
     if (i >= num_rays)
         return;
     const Geometry g = make_geometry(GEOMETRY_ARGS);
-    const Ray ray = rays[i];
+    const RayInput in = make_ray_input(RAY_INPUT_ARGS);
+    float3 origin, dir;
+    float tmin, tmax;
+    if (!load_ray(&in, i, &origin, &dir, &tmin, &tmax))
+        return;
     HitSink sink = query_options(cull);
     sink.ray_ids = ray_ids;
     sink.prims = prims;
@@ -104,19 +163,20 @@ __kernel void query_all(__global const Ray* rays, __global int* ray_ids, __globa
     sink.next = next;
     sink.capacity = capacity;
     sink.ray = (int)i;
-    query_hits(&g, ray.origin.xyz, ray.dir.xyz, ray.origin.w, ray.dir.w, QUERY_ALL, &sink);
+    query_hits(&g, origin, dir, tmin, tmax, QUERY_ALL, &sink);
 }
 
-// The camera's pixel-centre rays for pixels first .. first + count - 1 (row
-// major, row 0 at the top): exactly the renderer's camera rays (camera.cl).
-__kernel void camera_rays(__global Ray* rays, CAMERA_PARAMS, const ulong first, const uint count)
+// The directions of the camera's pixel-centre rays (packed float3) for pixels
+// first .. first + count - 1 (row major, row 0 at the top): exactly the
+// renderer's camera rays (camera.cl); every ray starts at the eye.
+__kernel void camera_rays(__global float* dirs, CAMERA_PARAMS, const ulong first, const uint count)
 {
     const uint i = get_global_id(0);
     if (i >= count)
         return;
     const Camera cam = make_camera(CAMERA_ARGS);
     const ulong pixel = first + i;
-    rays[i] = camera_ray(&cam, (uint)(pixel % width), (uint)(pixel / width), 0.5f, 0.5f);
+    vstore3(camera_ray(&cam, (uint)(pixel % width), (uint)(pixel / width), 0.5f, 0.5f).dir.xyz, i, dirs);
 }
 
 // ---- one-launch kernels of the primary-ray benchmark (clrt/bench/speed.py)

@@ -41,8 +41,8 @@ from clrt.device.context import create_context, device_label
 from clrt.device.geometry import DeviceGeometry, check_fits
 from clrt.device.program import build_program
 from clrt.errors import InputError
-from clrt.layouts import HIT, RAY
-from clrt.query.rays import CameraRays, PinholeRays, RayBatch, cull_code
+from clrt.config import RAY_CHECKS
+from clrt.query.rays import CameraRays, PinholeRays, RayBatch, cull_code, is_device_array
 from clrt.query.results import AllHits, CameraImages, Hits
 from clrt.scene.arrays import triangle_corners
 from clrt.scene.scene import as_mesh
@@ -52,6 +52,25 @@ BRUTE_FORCE_TESTS = 1 << 30         # ray-triangle tests per launch without a BV
 MIN_CHUNK_RAYS = 4096
 ALL_HITS_PER_RAY = 4                # first guess of room for all_hits, grown as hits show up
 ALL_HITS_CAPACITY = 1 << 24         # most hits of one launch kept on the device (192 MiB)
+RAY_INPUT_BYTES = 32                # origin, direction, tmin, tmax of a ray in its chunk buffers
+# The closest hit's outputs (query_closest in trace.cl), in kernel order: bytes a ray, dtype.
+CLOSEST_FIELDS = {"t": 4, "prim": 4, "u": 4, "v": 4, "normal": 12, "front": 1, "hit": 1}
+CLOSEST_DTYPES = {"t": np.float32, "prim": np.int32, "u": np.float32, "v": np.float32, "normal": np.float32,
+                  "front": np.uint8, "hit": np.uint8}
+_ZERO = np.zeros(1, np.float32)
+_INFINITY = np.full(1, np.inf, np.float32)
+
+
+def _check_fields(fields) -> list:
+    """The closest-hit fields asked for (default: all), in kernel order."""
+    if fields is None:
+        return list(CLOSEST_FIELDS)
+    if isinstance(fields, str):
+        fields = (fields,)
+    unknown = [f for f in fields if f not in CLOSEST_FIELDS]
+    if unknown:
+        raise InputError(f"unknown hit field {unknown[0]!r}: choose from {', '.join(CLOSEST_FIELDS)}")
+    return [f for f in CLOSEST_FIELDS if f in fields]
 
 
 def _check_chunk_rays(chunk_rays) -> None:
@@ -104,9 +123,9 @@ class Accel:
         self.kernels = {name: cl.Kernel(program, name) for name in
                         ("query_closest", "query_any", "query_count", "query_all", "camera_rays",
                          "trace_camera", "occlude_camera")}
-        self.face_normals = mesh.face_normals().astype(np.float32)
         self._buffers: dict[str, cl.Buffer] = {}
         self._hits_per_ray = float(ALL_HITS_PER_RAY)
+        self.launches: list[cl.Event] = []   # query launches, see kernel_ms
 
     # ----------------------------------------------------------------------- chunks and memory
 
@@ -121,17 +140,18 @@ class Accel:
             if not self.acceleration.is_bvh:
                 triangles = len(self.acceleration.prim_ids)
                 size = min(size, max(MIN_CHUNK_RAYS, BRUTE_FORCE_TESTS // max(triangles, 1)))
-        return max(1, min(size, self.max_alloc // RAY.itemsize, 2**31 - 1))
+        return max(1, min(size, self.max_alloc // 12, 2**31 - 1))
 
     def memory(self) -> dict:
         """Upper bounds, in bytes, of what queries keep on the device: ``scene``
         (triangles, BVH, triangle ids), ``chunk`` (rays and results of one chunk:
-        49 bytes a ray for the closest hit, the largest query) and ``all_hits``
-        (12 bytes a hit for at most ``all_hits_capacity`` hits; a chunk with
-        more hits is split in halves).  Host memory beyond the caller's arrays
-        and the results is one chunk's temporaries (about 200 bytes a ray)."""
+        62 bytes a ray for the closest hit with every field, the largest query)
+        and ``all_hits`` (12 bytes a hit for at most ``all_hits_capacity`` hits; a
+        chunk with more hits is split in halves).  Host memory beyond the
+        caller's arrays and the results: a float32 copy of the rays where they
+        are not float32 already."""
         chunk = self.chunk_size()
-        per_ray = RAY.itemsize + HIT.itemsize + 1
+        per_ray = RAY_INPUT_BYTES + sum(CLOSEST_FIELDS.values())
         return {"scene": int(self.geometry.nbytes), "chunk_rays": chunk, "chunk": chunk * per_ray,
                 "all_hits": 12 * self._all_hits_limit()}
 
@@ -152,98 +172,171 @@ class Accel:
         for start in range(0, n, step):
             yield start, min(n, start + step)
 
-    def _load_rays(self, source, start: int, stop: int) -> tuple[cl.Buffer, np.ndarray | None]:
-        """Rays start..stop-1 of ``source`` in the device's ray buffer; their RAY
-        records when they were made on the host."""
+    # ----------------------------------------------------------------------- rays in
+
+    def _begin(self, source) -> None:
+        """Before the first chunk of a batch: no bad ray reported yet."""
+        cl.enqueue_copy(self.queue, self._buffer("bad", 4 * len(RAY_CHECKS)),
+                        np.full(len(RAY_CHECKS), np.iinfo(np.int32).max, np.int32), is_blocking=False)
+
+    def _check(self, source) -> None:
+        """After the last chunk: InputError for the first bad ray the kernels saw."""
+        bad = np.empty(len(RAY_CHECKS), np.int32)
+        cl.enqueue_copy(self.queue, bad, self._buffer("bad", bad.nbytes))   # waits for every launch
+        if (bad < np.iinfo(np.int32).max).any():
+            kind = int(np.argmin(bad))          # the lowest ray; on a tie, the first check
+            raise InputError(source.bad_ray_message(RAY_CHECKS[kind], int(bad[kind])))
+
+    def _ray_args(self, source, start: int, stop: int) -> tuple:
+        """RAY_INPUT_PARAMS (rays.cl) for rays start..stop-1 of ``source``: host
+        arrays uploaded as they are into chunk buffers, device arrays used in
+        place, camera rays made on the device."""
         m = stop - start
-        buf = self._buffer("rays", m * RAY.itemsize)
-        if isinstance(source, CameraRays):
-            kernel = self.kernels["camera_rays"]
-            kernel.set_args(buf, *source.args, np.uint64(start), np.uint32(m))
-            cl.enqueue_nd_range_kernel(self.queue, kernel, (m,), None)
-            return buf, None
-        records = source.records(start, stop)
-        cl.enqueue_copy(self.queue, buf, records)
-        return buf, records
+        if isinstance(source, (CameraRays, PinholeRays)):
+            eye = np.asarray(source.camera.eye if isinstance(source, CameraRays) else source.eye, np.float32)
+            dirs = self._buffer("in_1", 12 * m)
+            if isinstance(source, CameraRays):
+                kernel = self.kernels["camera_rays"]
+                kernel.set_args(dirs, *source.args, np.uint64(start), np.uint32(m))
+                cl.enqueue_nd_range_kernel(self.queue, kernel, (m,), None)
+            else:
+                cl.enqueue_copy(self.queue, dirs, source.directions(start, stop), is_blocking=False)
+            inputs = [(self._upload("in_0", eye), 0), (dirs, 3), (self._upload("in_2", _ZERO), 0),
+                      (self._upload("in_3", _INFINITY), 0)]
+            in_first = 0
+        elif source.on_device:
+            # Whole arrays, indexed from the chunk's first ray (in_first): device
+            # arrays in place, any host array beside them uploaded whole.
+            inputs = [((a if a.offset == 0 else a.copy()).data if is_device_array(a)
+                       else self._upload(f"in_{k}", a), stride) for k, (a, stride) in enumerate(source.inputs)]
+            in_first = start
+        else:
+            inputs = [(self._upload(f"in_{k}", source.host_chunk(k, start, stop)), stride)
+                      for k, (_, stride) in enumerate(source.inputs)]
+            in_first = 0
+        flat = [x for buf, stride in inputs for x in (buf, np.uint32(stride))]
+        return (*flat, np.uint32(in_first), np.uint32(start), np.uint32(bool(source.normalise)),
+                self._buffer("bad", 4 * len(RAY_CHECKS)))
+
+    def _upload(self, name: str, array: np.ndarray) -> cl.Buffer:
+        """``array`` into the kept buffer ``name``, without waiting (the queue is in
+        order: the launch that reads it comes after)."""
+        buf = self._buffer(name, array.nbytes)
+        if array.nbytes:
+            cl.enqueue_copy(self.queue, buf, array, is_blocking=False)
+        return buf
 
     def _run(self, name: str, m: int, *args) -> None:
         kernel = self.kernels[name]
         kernel.set_args(*args, *self.geometry.args)
-        cl.enqueue_nd_range_kernel(self.queue, kernel, (m,), None)
+        self.launches.append(cl.enqueue_nd_range_kernel(self.queue, kernel, (m,), None))
+
+    def kernel_ms(self) -> float:
+        """Kernel time (ms, profiling events) of the query launches since the last
+        call of this method -- for benchmarks: what a query costs on the device."""
+        done, self.launches = self.launches, []
+        return sum(1e-6 * (e.profile.end - e.profile.start) for e in done)
 
     # ----------------------------------------------------------------------- the queries
 
-    def _closest(self, source, cull: str, depth_axis=None) -> tuple[Hits, np.ndarray | None]:
-        """Closest hits of every ray of ``source``; with ``depth_axis`` also the
-        cosine between each ray and that unit vector (for depth images)."""
+    def _outputs(self, n: int, fields, on_device: bool) -> dict:
+        """The arrays the caller gets, by field: numpy, or pyopencl arrays for
+        rays that came as device arrays."""
+        if on_device:
+            import pyopencl.array as cla
+            make = lambda shape, dtype: cla.empty(self.queue, shape, dtype)   # noqa: E731
+        else:
+            make = np.empty
+        return {name: make((n, 3) if name == "normal" else (n,), CLOSEST_DTYPES[name]) for name in fields}
+
+    def _closest(self, source, cull: str, fields=None) -> Hits:
+        """Closest hits of every ray of ``source``, the ``fields`` asked for (all by
+        default; the others None)."""
+        fields = _check_fields(fields)
         code = cull_code(cull)
         n = len(source)
-        t, prim = np.empty(n, np.float32), np.empty(n, np.int32)
-        u, v = np.empty(n, np.float32), np.empty(n, np.float32)
-        front = np.empty(n, np.uint8)
-        cosine = np.empty(n, np.float64) if depth_axis is not None else None
-        chunk = np.empty(min(n, self.chunk_size()), HIT)
+        on_device = getattr(source, "on_device", False)
+        out = self._outputs(n, fields, on_device)
+        self._begin(source)
         for start, stop in self._chunks(n):
             m = stop - start
-            rays, records = self._load_rays(source, start, stop)
-            hit_buf = self._buffer("hits", m * HIT.itemsize)
-            front_buf = self._buffer("front", m)
-            self._run("query_closest", m, rays, hit_buf, front_buf, np.uint32(m), code)
-            cl.enqueue_copy(self.queue, chunk[:m], hit_buf)
-            cl.enqueue_copy(self.queue, front[start:stop], front_buf)
-            for name, out in (("t", t), ("prim", prim), ("u", u), ("v", v)):
-                out[start:stop] = chunk[name][:m]
-            if cosine is not None:
-                if records is None:
-                    records = np.empty(m, RAY)
-                    cl.enqueue_copy(self.queue, records, rays)
-                cosine[start:stop] = records["dir"][:, :3].astype(np.float64) @ depth_axis
-        return self._hits(t, prim, u, v, front.astype(bool)), cosine
+            if on_device:
+                targets = [out[name].data if name in out else None for name in CLOSEST_FIELDS]
+                first = start
+            else:
+                targets = [self._buffer(f"out_{name}", m * CLOSEST_FIELDS[name]) if name in out else None
+                           for name in CLOSEST_FIELDS]
+                first = 0
+            self._run("query_closest", m, *self._ray_args(source, start, stop), *targets,
+                      np.uint32(first), np.uint32(m), code)
+            if not on_device:
+                for name, buf in zip(CLOSEST_FIELDS, targets):
+                    if buf is not None:
+                        cl.enqueue_copy(self.queue, out[name][start:stop], buf, is_blocking=False)
+        self._check(source)   # also waits for the copies
+        if not on_device:   # device arrays keep the flags as uint8 0 / 1 (OpenCL has no bool arrays)
+            for name in ("front", "hit"):
+                if name in out:
+                    out[name] = out[name].view(bool)
+        return Hits(*(out.get(name) for name in Hits._fields))
 
-    def _hits(self, t, prim, u, v, front) -> Hits:
-        hit = prim >= 0
-        normal = np.zeros(prim.shape + (3,), np.float32)
-        normal[hit] = self.face_normals[prim[hit]]
-        return Hits(t, prim, u, v, normal, front & hit, hit)
+    def trace(self, origins, directions, *, tmin=0.0, tmax=np.inf, cull: str = "none", fields=None) -> Hits:
+        """Closest hit of each ray with tmin < t <= tmax (scalars or per-ray arrays).
 
-    def trace(self, origins, directions, *, tmin=0.0, tmax=np.inf, cull: str = "none") -> Hits:
-        """Closest hit of each ray with tmin < t <= tmax (scalars or per-ray arrays)."""
-        return self._closest(RayBatch(origins, directions, tmin, tmax), cull)[0]
+        ``fields``: the :class:`Hits` fields to compute and return, e.g.
+        ``("t", "prim")`` (default: all); the others are None.  Rays given as
+        ``pyopencl.array.Array`` give hits as device arrays, without host copies
+        (``front`` and ``hit`` then as uint8 0 / 1).
+        """
+        return self._closest(RayBatch(origins, directions, tmin, tmax), cull, fields)
 
     closest = trace
 
-    def _flags(self, kernel: str, batch: RayBatch, cull: str, dtype) -> np.ndarray:
+    def _flags(self, kernel: str, batch: RayBatch, cull: str, dtype):
         code = cull_code(cull)
-        out = np.empty(len(batch), dtype)
-        for start, stop in self._chunks(len(batch)):
+        n = len(batch)
+        if batch.on_device:
+            import pyopencl.array as cla
+            out = cla.empty(self.queue, (n,), dtype)
+        else:
+            out = np.empty(n, dtype)
+        self._begin(batch)
+        for start, stop in self._chunks(n):
             m = stop - start
-            rays, _ = self._load_rays(batch, start, stop)
-            buf = self._buffer(kernel, m * out.itemsize)
-            self._run(kernel, m, rays, buf, np.uint32(m), code)
-            cl.enqueue_copy(self.queue, out[start:stop], buf)
+            if batch.on_device:
+                target, first = out.data, start
+            else:
+                target, first = self._buffer(kernel, m * out.itemsize), 0
+            self._run(kernel, m, *self._ray_args(batch, start, stop), target, np.uint32(first), np.uint32(m), code)
+            if not batch.on_device:
+                cl.enqueue_copy(self.queue, out[start:stop], target, is_blocking=False)
+        self._check(batch)
         return out
 
-    def any_hit(self, origins, directions, *, tmin=0.0, tmax=np.inf, cull: str = "none") -> np.ndarray:
+    def any_hit(self, origins, directions, *, tmin=0.0, tmax=np.inf, cull: str = "none"):
         """(N,) bool: does anything lie on each ray with tmin < t <= tmax?  Stops at
         the first hit found (occlusion, shadow rays)."""
-        return self._flags("query_any", RayBatch(origins, directions, tmin, tmax), cull, np.uint8).astype(bool)
+        out = self._flags("query_any", RayBatch(origins, directions, tmin, tmax), cull, np.uint8)
+        return out.view(bool) if isinstance(out, np.ndarray) else out   # device: uint8 0 / 1
 
     occluded = any_hit
 
-    def count(self, origins, directions, *, tmin=0.0, tmax=np.inf, cull: str = "none") -> np.ndarray:
+    def count(self, origins, directions, *, tmin=0.0, tmax=np.inf, cull: str = "none"):
         """(N,) int32: how many triangles each ray meets in (tmin, tmax] (a ray
         through a shared edge or vertex meets each triangle there)."""
-        return self._flags("query_count", RayBatch(origins, directions, tmin, tmax), cull,
-                           np.uint32).astype(np.int32)
+        return self._flags("query_count", RayBatch(origins, directions, tmin, tmax), cull, np.int32)
 
     def all_hits(self, origins, directions, *, tmin=0.0, tmax=np.inf, cull: str = "none") -> AllHits:
         """Every hit in (tmin, tmax] of every ray, found in one traversal per ray,
-        as flat arrays sorted by ray, then t, then triangle."""
+        as flat arrays sorted by ray, then t, then triangle (numpy arrays, also
+        for rays given on the device)."""
         batch = RayBatch(origins, directions, tmin, tmax)
         code = cull_code(cull)
         parts = []
+        self._begin(batch)
         for start, stop in self._chunks(len(batch)):
             self._all_hits_chunk(batch, start, stop, code, parts)
+        self._check(batch)
         if not parts:
             return AllHits(np.zeros(0, np.int64), np.zeros(0, np.int32), np.zeros(0, np.float32))
         return AllHits(*(np.concatenate(p) for p in zip(*parts)))
@@ -256,13 +349,13 @@ class Accel:
         m = stop - start
         limit = self._all_hits_limit()
         capacity = int(min(limit, max(1024, np.ceil(self._hits_per_ray * m))))
-        rays, _ = self._load_rays(batch, start, stop)
+        rays = self._ray_args(batch, start, stop)
         counter = self._buffer("all_next", 4)
         total = np.zeros(1, np.uint32)
         for _attempt in range(2):
             outs = [self._buffer(f"all_{k}", capacity * 4) for k in ("ray", "prim", "t")]
             cl.enqueue_copy(self.queue, counter, np.zeros(1, np.uint32))
-            self._run("query_all", m, rays, *outs, counter, np.uint32(capacity), np.uint32(m), code)
+            self._run("query_all", m, *rays, *outs, counter, np.uint32(capacity), np.uint32(m), code)
             cl.enqueue_copy(self.queue, total, counter)
             found = int(total[0])
             self._hits_per_ray = max(self._hits_per_ray, found / m)
@@ -311,7 +404,8 @@ class Accel:
                 raise InputError("camera_images needs a camera, or K with width and height")
             source = PinholeRays(K, pose, width, height, pixel_center)
             axis, shape = source.R[:, 2], (source.height, source.width)
-        hits, cosine = self._closest(source, cull, depth_axis=np.asarray(axis, np.float64))
+        hits = self._closest(source, cull)
+        cosine = self._directions(source) @ np.asarray(axis, np.float64)
         with np.errstate(invalid="ignore", over="ignore"):
             depth = np.where(hits.hit, hits.t * cosine, np.inf).astype(np.float32)
         h, w = shape
@@ -319,9 +413,19 @@ class Accel:
                             hits.prim.reshape(h, w), hits.hit.reshape(h, w), hits.front.reshape(h, w),
                             hits.u.reshape(h, w), hits.v.reshape(h, w))
 
+    def _directions(self, source) -> np.ndarray:
+        """(N, 3) float64 of the float32 directions a camera's rays were traced with."""
+        if isinstance(source, PinholeRays):
+            return source.directions(0, len(source)).astype(np.float64)
+        dirs = np.empty((len(source), 3), np.float32)
+        for start, stop in self._chunks(len(source)):
+            self._ray_args(source, start, stop)
+            cl.enqueue_copy(self.queue, dirs[start:stop], self._buffer("in_1", 12 * (stop - start)))
+        return dirs.astype(np.float64)
+
     def trace_camera(self, camera) -> Hits:
         """Closest hits of the camera's pixel-centre rays, as (H, W) arrays."""
-        hits, _ = self._closest(CameraRays(camera), "none")
+        hits = self._closest(CameraRays(camera), "none")
         shape = (camera.height, camera.width)
         return Hits(*(a.reshape(shape + a.shape[1:]) for a in hits))
 

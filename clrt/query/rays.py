@@ -1,8 +1,11 @@
-"""Rays as the queries take them: validated batches from numpy, pinhole
-cameras given by intrinsics and pose, and clrt's own cameras (made on the device).
+"""Rays as the queries take them: batches from numpy or device arrays,
+pinhole cameras given by intrinsics and pose, and clrt's own cameras (made on
+the device).
 
-Every query goes through one input path (:class:`RayBatch`, or a camera), so a
-ray gives the same answer alone or in a batch, in any chunk.
+Every query goes through one input path (rays.cl reads and checks every ray on
+the device), so a ray gives the same answer alone or in a batch, in any chunk,
+and the host makes no pass over the caller's rays beyond one conversion to
+float32 where they are not float32 already.
 """
 
 from __future__ import annotations
@@ -12,7 +15,6 @@ import numpy as np
 from clrt.config import CULL_MODES, MAX_IMAGE_SIDE
 from clrt.device.args import camera_args
 from clrt.errors import InputError
-from clrt.layouts import RAY
 from clrt.scene.scene import check_int
 
 
@@ -33,7 +35,26 @@ def _real_array(value, what: str) -> np.ndarray:
     return a
 
 
-def _ray_rows(value, what: str) -> np.ndarray:
+def is_device_array(value) -> bool:
+    """A pyopencl.array.Array (checked without importing pyopencl.array)."""
+    return type(value).__module__.startswith("pyopencl") and hasattr(value, "base_data")
+
+
+def _device_rows(a, what: str, width: int):
+    """A device array of float32 rows of ``width`` (3: points, 1: numbers), C-contiguous."""
+    shape = tuple(a.shape)
+    if width == 3 and shape == (3,):
+        shape = (1, 3)
+    ok = shape[1:] == (3,) if width == 3 else len(shape) == 1
+    if not ok or len(shape) != (2 if width == 3 else 1):
+        expected = "(3,) or (N, 3)" if width == 3 else "(N,)"
+        raise InputError(f"{what} must have shape {expected}, got {tuple(a.shape)}")
+    if a.dtype != np.float32 or not a.flags.c_contiguous:
+        raise InputError(f"{what} on the device must be C-contiguous float32, got {a.dtype}")
+    return a, shape[0]
+
+
+def _host_rows(value, what: str) -> np.ndarray:
     a = _real_array(value, what)
     if a.shape == (3,):
         a = a.reshape(1, 3)
@@ -42,62 +63,99 @@ def _ray_rows(value, what: str) -> np.ndarray:
     return a
 
 
-def _per_ray(value, n: int, what: str) -> np.ndarray:
-    a = _real_array(value, what)
-    if a.ndim > 1 or (a.ndim == 1 and len(a) not in (1, n)):
-        raise InputError(f"{what} must be a number or have shape ({n},), got {a.shape}")
-    a = a.astype(np.float64, copy=False)
-    if np.isnan(a).any():
-        raise InputError(f"{what} must not be NaN")
-    return np.broadcast_to(a.reshape(-1) if a.ndim else a, (n,))
-
-
 class RayBatch:
-    """Validated rays, turned into device RAY records one chunk at a time.
+    """Rays as the caller gave them, checked for shape and type only.
 
-    The single input path of every query: shapes and dtypes are checked here
-    once; values (finite, non-zero directions) chunk by chunk, so no copy of
-    the whole batch is made beyond the caller's arrays.
+    The single input path of every query.  ``origins`` and ``directions`` are
+    (N, 3) or (3,) arrays -- numpy arrays of any real dtype, converted once to
+    float32 (as they are if already float32 and contiguous), or
+    ``pyopencl.array.Array`` float32 arrays already on the device.  One of them
+    may be a single row for all rays.  ``tmin``/``tmax`` are numbers or (N,)
+    arrays.  Values are checked by the kernels (rays.cl), which report the
+    first bad ray of each kind; :meth:`bad_ray_message` turns that into the
+    error the caller sees.  ``inputs`` holds (array, floats per ray: 3, 1 or 0
+    for one value shared by every ray) for origins, directions, tmin, tmax.
     """
 
+    normalise = True   # directions from callers need not be unit length
+
     def __init__(self, origins, directions, tmin=0.0, tmax=np.inf):
-        o = _ray_rows(origins, "origins")
-        d = _ray_rows(directions, "directions")
-        if len(o) != len(d) and 1 not in (len(o), len(d)):
-            raise InputError(f"{len(o)} origins but {len(d)} directions")
-        n = max(len(o), len(d)) if min(len(o), len(d)) > 0 else 0
-        self.origins = np.broadcast_to(o, (n, 3))
-        self.directions = np.broadcast_to(d, (n, 3))
-        self.tmin = _per_ray(tmin, n, "tmin")
-        self.tmax = _per_ray(tmax, n, "tmax")
+        self.given = {"origin": origins, "direction": directions, "tmin": tmin, "tmax": tmax}
+        self.on_device = any(is_device_array(v) for v in self.given.values())
+        rows = []
+        for what, value in (("origins", origins), ("directions", directions)):
+            if is_device_array(value):
+                rows.append(_device_rows(value, what, 3))
+            else:
+                a = _host_rows(value, what)
+                rows.append((a, len(a)))
+        (o, no), (d, nd) = rows
+        if no != nd and 1 not in (no, nd):
+            raise InputError(f"{no} origins but {nd} directions")
+        n = max(no, nd) if min(no, nd) > 0 else 0
+        self.n = n
+        self.inputs = [self._points(o, no, n), self._points(d, nd, n),
+                       self._numbers(tmin, n, "tmin"), self._numbers(tmax, n, "tmax")]
 
     def __len__(self) -> int:
-        return len(self.origins)
+        return self.n
 
-    def unit_directions(self, start: int, stop: int) -> np.ndarray:
-        """(M, 3) float64 unit directions of rays start..stop-1."""
-        d = self.directions[start:stop].astype(np.float64)
-        length = np.linalg.norm(d, axis=1)
-        bad = ~np.isfinite(length) | (length == 0)
-        if bad.any():
-            i = start + int(np.argmax(bad))
-            raise InputError(f"direction {i} is {self.directions[i].tolist()}: "
-                             "directions must be finite and non-zero")
-        return d / length[:, None]
+    @staticmethod
+    def _points(a, rows: int, n: int):
+        stride = 0 if rows == 1 and n != 1 else 3
+        if is_device_array(a):
+            return a, stride
+        with np.errstate(over="ignore"):   # beyond float32: inf, reported by the kernel as not finite
+            return np.ascontiguousarray(a, dtype=np.float32).reshape(-1), stride
 
-    def records(self, start: int, stop: int) -> np.ndarray:
-        """RAY records (layouts.py) of rays start..stop-1."""
-        o = self.origins[start:stop].astype(np.float64)
-        bad = ~np.isfinite(o).all(axis=1)
-        if bad.any():
-            i = start + int(np.argmax(bad))
-            raise InputError(f"origin {i} is {self.origins[i].tolist()}: origins must be finite")
-        rays = np.empty(stop - start, RAY)
-        rays["origin"][:, :3] = o
-        rays["origin"][:, 3] = self.tmin[start:stop]
-        rays["dir"][:, :3] = self.unit_directions(start, stop)
-        rays["dir"][:, 3] = self.tmax[start:stop]
-        return rays
+    @staticmethod
+    def _numbers(value, n: int, what: str):
+        if is_device_array(value):
+            a, rows = _device_rows(value, what, 1)
+            if rows != n:
+                raise InputError(f"{what} must be a number or have shape ({n},), got {tuple(value.shape)}")
+            return a, 1
+        a = _real_array(value, what)
+        if a.ndim > 1 or (a.ndim == 1 and len(a) not in (1, n)):
+            raise InputError(f"{what} must be a number or have shape ({n},), got {a.shape}")
+        if a.size == 1:
+            if np.isnan(a).any():
+                raise InputError(f"{what} must not be NaN")
+            with np.errstate(over="ignore"):
+                return a.reshape(1).astype(np.float32), 0
+        with np.errstate(over="ignore"):
+            return np.ascontiguousarray(a, dtype=np.float32), 1
+
+    @property
+    def origins(self) -> np.ndarray:
+        """(N, 3) the caller's origins as given (broadcast; host arrays only)."""
+        return np.broadcast_to(_host_rows(self.given["origin"], "origins"), (self.n, 3))
+
+    @property
+    def directions(self) -> np.ndarray:
+        """(N, 3) the caller's directions as given (broadcast; host arrays only)."""
+        return np.broadcast_to(_host_rows(self.given["direction"], "directions"), (self.n, 3))
+
+    def host_chunk(self, k: int, start: int, stop: int):
+        """Input ``k`` of rays start..stop-1 as a host array to upload (the whole
+        single row when shared)."""
+        a, stride = self.inputs[k]
+        return a if stride == 0 else a[start * stride:stop * stride]
+
+    def bad_ray_message(self, kind: str, i: int) -> str:
+        """The error for ray ``i`` failing check ``kind`` (clrt.config.RAY_CHECKS)."""
+        given = self.given[kind]
+        if is_device_array(given):
+            value = "not finite" if kind == "origin" else "invalid"
+        else:
+            a = np.asarray(given)
+            row = a if a.ndim <= (0 if kind in ("tmin", "tmax") else 1) else a[i]
+            value = np.asarray(row).tolist()
+        if kind == "origin":
+            return f"origin {i} is {value}: origins must be finite"
+        if kind == "direction":
+            return f"direction {i} is {value}: directions must be finite and non-zero"
+        return f"{kind} of ray {i} is {value}: {kind} must not be NaN"
 
 
 class PinholeRays:
@@ -106,8 +164,11 @@ class PinholeRays:
 
     Pixel (col, row) is traced through image point (col + c, row + c), c =
     ``pixel_center``: 0 (default) is OpenCV's convention, the top-left pixel's
-    centre at (0, 0); 0.5 puts it at (0.5, 0.5).  Made one chunk at a time.
+    centre at (0, 0); 0.5 puts it at (0.5, 0.5).  Made one chunk at a time,
+    on the host (float64, then float32), from one shared origin.
     """
+
+    normalise = False   # made unit length here
 
     def __init__(self, K, pose, width: int, height: int, pixel_center: float = 0.0):
         check_int("width", width, 1, MAX_IMAGE_SIDE)
@@ -141,18 +202,16 @@ class PinholeRays:
         d = p @ self.K_inv.T
         return d / np.linalg.norm(d, axis=1, keepdims=True)
 
-    def records(self, start: int, stop: int) -> np.ndarray:
-        rays = np.empty(stop - start, RAY)
-        rays["origin"][:, :3] = self.eye
-        rays["origin"][:, 3] = 0.0
-        rays["dir"][:, :3] = self.camera_directions(start, stop) @ self.R.T
-        rays["dir"][:, 3] = np.inf
-        return rays
+    def directions(self, start: int, stop: int) -> np.ndarray:
+        """(M, 3) float32 unit world directions of pixels start..stop-1."""
+        return (self.camera_directions(start, stop) @ self.R.T).astype(np.float32)
 
 
 class CameraRays:
     """Our Camera's pixel-centre rays, made on the device (``camera_rays`` in
-    trace.cl): exactly the rays the renderer traces."""
+    trace.cl): exactly the rays the renderer traces, from the eye."""
+
+    normalise = False   # camera.cl makes them unit length
 
     def __init__(self, camera):
         self.camera = camera

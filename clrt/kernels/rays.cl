@@ -1,0 +1,105 @@
+// Rays as the host hands them to the query kernels: packed float3 arrays (12
+// bytes a ray, the caller's own numpy layout, uploaded as they are), any of
+// which may be a single row for every ray (stride 0), and the range (tmin,
+// tmax] per ray or one for all (stride 0).  The rays are checked and their
+// directions normalised here, on the device, so the host makes no pass over
+// them: a bad ray is reported by its index, the lowest of each kind, through
+// atomic_min on `bad` (one int per kind, BAD_ORIGIN .. BAD_TMAX from
+// clrt.config.RAY_CHECKS, which the host sets to INT_MAX before the batch).
+#ifndef CLRT_RAYS_CL
+#define CLRT_RAYS_CL
+
+typedef struct {
+    __global const float* origins;
+    __global const float* dirs;
+    __global const float* tmins;
+    __global const float* tmaxs;
+    uint origin_stride, dir_stride, tmin_stride, tmax_stride;   // floats from one ray to the next
+    uint in_first;      // element of the input arrays that holds this launch's first ray
+    uint ray_first;     // index in the caller's batch of this launch's first ray
+    uint normalise;     // 0: the directions are unit vectors already (clrt's own cameras)
+    __global int* bad;
+} RayInput;
+
+#define RAY_INPUT_PARAMS __global const float* origins, const uint origin_stride, \
+    __global const float* dirs, const uint dir_stride, __global const float* tmins, const uint tmin_stride, \
+    __global const float* tmaxs, const uint tmax_stride, const uint in_first, const uint ray_first, \
+    const uint normalise, __global int* bad
+#define RAY_INPUT_ARGS origins, origin_stride, dirs, dir_stride, tmins, tmin_stride, tmaxs, tmax_stride, \
+    in_first, ray_first, normalise, bad
+
+inline RayInput make_ray_input(RAY_INPUT_PARAMS)
+{
+    RayInput in;
+    in.origins = origins;
+    in.dirs = dirs;
+    in.tmins = tmins;
+    in.tmaxs = tmaxs;
+    in.origin_stride = origin_stride;
+    in.dir_stride = dir_stride;
+    in.tmin_stride = tmin_stride;
+    in.tmax_stride = tmax_stride;
+    in.in_first = in_first;
+    in.ray_first = ray_first;
+    in.normalise = normalise;
+    in.bad = bad;
+    return in;
+}
+
+// Unit direction of d, normalised in double precision where the device has it
+// (as numpy would on the host), so that every device gets the same float32
+// direction; false for a zero, infinite or NaN direction.  With `normalise`
+// 0, d is taken as it is.
+inline bool unit_direction(float3 d, uint normalise, float3* unit)
+{
+    if (!all(isfinite(d)))
+        return false;
+    if (!normalise) {
+        *unit = d;
+        return any(d != 0.0f);
+    }
+#ifdef cl_khr_fp64
+    const double3 dd = convert_double3(d);
+    const double len = sqrt(dd.x * dd.x + dd.y * dd.y + dd.z * dd.z);
+    if (!(len > 0.0))
+        return false;
+    *unit = convert_float3(dd / len);
+#else
+    const float len = length(d);
+    if (!(len > 0.0f))
+        return false;
+    *unit = d / len;
+#endif
+    return true;
+}
+
+// Ray i of the launch: false (and the ray reported in `bad`) when it is not a
+// valid ray; then the query answers "no hit" for it and the host raises.
+inline bool load_ray(const RayInput* in, uint i, float3* origin, float3* dir, float* tmin, float* tmax)
+{
+    const size_t k = (size_t)in->in_first + i;
+    const int ray = (int)(in->ray_first + i);
+    bool ok = true;
+    *origin = vload3(0, in->origins + k * in->origin_stride);
+    if (!all(isfinite(*origin))) {
+        atomic_min(in->bad + BAD_ORIGIN, ray);
+        ok = false;
+    }
+    if (!unit_direction(vload3(0, in->dirs + k * in->dir_stride), in->normalise, dir)) {
+        atomic_min(in->bad + BAD_DIRECTION, ray);
+        ok = false;
+    }
+    *tmin = in->tmins[k * in->tmin_stride];
+    *tmax = in->tmaxs[k * in->tmax_stride];
+    if (isnan(*tmin)) {
+        atomic_min(in->bad + BAD_TMIN, ray);
+        ok = false;
+    }
+    if (isnan(*tmax)) {
+        atomic_min(in->bad + BAD_TMAX, ray);
+        ok = false;
+    }
+    return ok;
+}
+
+#endif
