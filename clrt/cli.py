@@ -111,7 +111,8 @@ def _accel_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--accel", default=DEFAULT_ACCEL, choices=ACCELS,
                    help=f"BVH bounding-volume shape, or none for brute force (default {DEFAULT_ACCEL})")
     p.add_argument("--builder", default=DEFAULT_BUILDER, choices=BUILDERS,
-                   help=f"BVH builder: the paper's median split, or binned SAH (default {DEFAULT_BUILDER})")
+                   help=f"BVH builder: the paper's median split, binned SAH (default {DEFAULT_BUILDER}), "
+                        "or PLOC on the OpenCL device")
     p.add_argument("--leaf-size", type=int, default=DEFAULT_LEAF_SIZE,
                    help=f"most triangles per BVH leaf (default {DEFAULT_LEAF_SIZE})")
 
@@ -220,12 +221,12 @@ def _info(args) -> int:
 
 def _info_mesh(args) -> int:
     """Build statistics of the acceleration structure over MESH, and its size on the device."""
-    from clrt import accel
+    from clrt.device.build import build_acceleration
     from clrt.scene.arrays import triangle_corners
     from clrt.scene.load import load_mesh
 
     mesh = load_mesh(args.mesh)
-    built = accel.build(triangle_corners(mesh), args.accel, args.builder, args.leaf_size)
+    built = build_acceleration(triangle_corners(mesh), args.accel, args.builder, args.leaf_size, args.device)
     print(f"{args.mesh}: {len(mesh.faces):,} triangles, {len(mesh.vertices):,} vertices")
     if not built.is_bvh:
         print(f"accel none: brute force, {built.device_bytes():,} bytes on the device")

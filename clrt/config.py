@@ -20,8 +20,10 @@ VOLUMES = ("box", "sphere", "ellipse")
 VOLUME_DEFINES = {"box": "VOLUME_BOX", "sphere": "VOLUME_SPHERE", "ellipse": "VOLUME_ELLIPSE"}
 #: What ``accel=`` takes: a volume shape, or "none" (every ray against every triangle).
 ACCELS = ("none",) + VOLUMES
-#: BVH builders: the paper's median split, binned SAH (both on the host).
-BUILDERS = ("paper", "sah")
+#: BVH builders: the paper's median split and binned SAH on the host
+#: (clrt.accel), PLOC on the OpenCL device (clrt.device.build).
+HOST_BUILDERS = ("paper", "sah")
+BUILDERS = HOST_BUILDERS + ("device",)
 
 DEFAULT_ACCEL = "box"
 DEFAULT_BUILDER = "sah"

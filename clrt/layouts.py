@@ -61,6 +61,23 @@ Every volume encloses all triangles of its subtree, rounded outwards in float32
 (clrt/accel/volumes.py).  The triangle buffers of a BVH scene are stored in leaf
 order ("slots"); ``prim_ids`` (int32 per slot) maps a slot back to the input
 triangle index, which is what queries report.
+
+``BuildNode`` (48 B) -- scratch of the device builder (clrt/device/build.py), one per
+node of its binary tree: triangles are nodes 0..F-1 (in Morton order), merged
+nodes F..2F-2 in the order they are made, the root last:
+    0: lo      float4  xyz: exact min corner of the node's triangles
+                       w: as_int, left child (-1: the node is a triangle)
+   16: hi      float4  xyz: exact max corner; w: as_int, right child (-1: a triangle)
+   32: parent  int     -1 at the root
+   36: count   int     triangles under the node
+   40: rows    int     BvhPairNode rows its emitted subtree takes: 0 when it is
+                       emitted as a leaf (a triangle, or a subtree SAH collapses)
+   44: cost    float   SAH cost of that subtree, not yet divided by the root's area
+
+``BuildCluster`` (32 B) -- one cluster of the device builder's PLOC merging:
+    0: lo      float4  xyz: min corner of the cluster's box; w: as_int, its BuildNode
+   16: hi      float4  xyz: max corner; w: as_int, scratch between two kernels of an
+                       iteration: rank among the kept clusters of its block (-1: merged away)
 """
 
 import numpy as np
@@ -77,6 +94,9 @@ MATERIAL = np.dtype([("color", float4), ("ambient", np.float32), ("diffuse", np.
                      ("ior", np.float32)])
 LIGHT = np.dtype([("position", float4), ("color", float4)])
 BVH_PAIR_NODE = np.dtype([("left_a", float4), ("left_b", float4), ("right_a", float4), ("right_b", float4)])
+BUILD_NODE = np.dtype([("lo", float4), ("hi", float4), ("parent", np.int32), ("count", np.int32),
+                       ("rows", np.int32), ("cost", np.float32)])
+BUILD_CLUSTER = np.dtype([("lo", float4), ("hi", float4)])
 
 # struct name in layouts.h -> numpy dtype; the layout test walks this table.
 STRUCTS = {
@@ -87,4 +107,6 @@ STRUCTS = {
     "Material": MATERIAL,
     "Light": LIGHT,
     "BvhPairNode": BVH_PAIR_NODE,
+    "BuildNode": BUILD_NODE,
+    "BuildCluster": BUILD_CLUSTER,
 }

@@ -18,7 +18,7 @@ from clrt import accel
 from clrt.accel import sah
 from clrt.accel.rows import child_refs
 from clrt.accel.volumes import fit
-from clrt.config import BUILDERS, VOLUMES
+from clrt.config import HOST_BUILDERS as BUILDERS, VOLUMES
 from clrt.layouts import BVH_PAIR_NODE
 from clrt.accel import topdown as bvh_module
 from clrt.errors import InputError

@@ -26,7 +26,8 @@ from clrt.accel.bvh import Acceleration
 from clrt.accel.rows import pair_rows
 from clrt.accel.topdown import linearise, node_boxes, triangle_centroids
 from clrt.accel.volumes import fit
-from clrt.config import ACCELS, BUILDERS, DEFAULT_ACCEL, DEFAULT_BUILDER, DEFAULT_LEAF_SIZE, MAX_LEAF_SIZE
+from clrt.config import (ACCELS, BUILDERS, DEFAULT_ACCEL, DEFAULT_BUILDER, DEFAULT_LEAF_SIZE, HOST_BUILDERS,
+                         MAX_LEAF_SIZE)
 from clrt.errors import InputError
 
 
@@ -43,6 +44,9 @@ def build(triangles, accel: str = DEFAULT_ACCEL, builder: str = DEFAULT_BUILDER,
     """
     start = time.perf_counter()
     check_options(accel, builder, leaf_size)
+    if builder not in HOST_BUILDERS:
+        raise InputError(f"builder {builder!r} runs on an OpenCL device: use clrt.device.build.build_acceleration "
+                         f"(clrt.accel builds with {', '.join(HOST_BUILDERS)})")
     tri = as_triangles(triangles)
     if accel == "none":
         return Acceleration.brute_force(len(tri))

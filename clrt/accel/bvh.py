@@ -28,6 +28,8 @@ class Acceleration:
                (statistics; None without a BVH).
     boxes:     (N, 2, 3) float32 exact (unpadded) box of each depth-first node
                (statistics; None without a BVH).
+    summary:   the tree numbers of :meth:`stats`, from a builder that keeps no
+               ``counts`` and ``boxes`` on the host (the device builder).
     """
 
     accel: str
@@ -39,6 +41,7 @@ class Acceleration:
     leaf_size: int = 0
     counts: np.ndarray | None = field(repr=False, default=None)
     boxes: np.ndarray | None = field(repr=False, default=None)
+    summary: dict | None = field(repr=False, default=None)
 
     @classmethod
     def brute_force(cls, num_triangles: int) -> "Acceleration":
@@ -64,6 +67,8 @@ class Acceleration:
         """
         if not self.is_bvh:
             return {"build_ms": float(self.build_ms), "device_bytes": self.device_bytes()}
+        if self.summary is not None:
+            return {**self.summary, "build_ms": float(self.build_ms), "device_bytes": self.device_bytes()}
         count = self.counts
         leaf = count > 0
         area = surface_area(self.boxes[:, 0].astype(np.float64), self.boxes[:, 1].astype(np.float64))

@@ -284,8 +284,8 @@ def add_bench_parser(subparsers) -> argparse.ArgumentParser:
                                                  "see --list)")
     b.add_argument("--programs", type=_names, help="comma-separated: " + ", ".join(PROGRAMS)
                    + ", or cpu / gpu / all (default all)")
-    b.add_argument("--builder", choices=(*BUILDERS, "both"), default="both",
-                   help="BVH builder: the paper's, binned SAH, or both (default both)")
+    b.add_argument("--builder", choices=(*BUILDERS, "all"), default="all",
+                   help="BVH builder: the paper's, binned SAH, PLOC on the device, or all (default all)")
     b.add_argument("--size", type=parse_size, default=(200, 200), help="WxH (default 200x200, the paper's)")
     b.add_argument("--repeat", type=_positive, default=3, help="timed frames, median reported (default 3)")
     b.add_argument("--warmup", type=_non_negative, default=1, help="untimed frames first (default 1)")
@@ -377,7 +377,7 @@ def run_bench(args) -> int:
             print(f"note: {note}")
         return 0
     width, height = args.size
-    builders = list(BUILDERS) if args.builder == "both" else [args.builder]
+    builders = list(BUILDERS) if args.builder == "all" else [args.builder]
     programs = _select_programs(args.programs)
     meshes = args.meshes or suite.names()
     for name in meshes:

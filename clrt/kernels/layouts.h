@@ -54,4 +54,19 @@ typedef struct {
 #define PAIR_LEFT(n) ((int2)(as_int((n).left_a.w), as_int((n).left_b.w)))
 #define PAIR_RIGHT(n) ((int2)(as_int((n).right_a.w), as_int((n).right_b.w)))
 
+// Scratch of the device builder (build_bvh.cl); fields as layouts.py says.
+typedef struct {
+    float4 lo;      // xyz: exact min corner; w: as_int, left child (-1: a triangle)
+    float4 hi;      // xyz: exact max corner; w: as_int, right child (-1: a triangle)
+    int parent;     // -1 at the root
+    int count;      // triangles under the node
+    int rows;       // pair rows of its emitted subtree: 0 when emitted as a leaf
+    float cost;     // SAH cost of that subtree (not divided by the root's area)
+} BuildNode;
+
+typedef struct {
+    float4 lo;      // xyz: min corner of the cluster's box; w: as_int, its BuildNode
+    float4 hi;      // xyz: max corner; w: as_int, rank among its block's kept clusters
+} BuildCluster;
+
 #endif

@@ -34,9 +34,9 @@ from __future__ import annotations
 import numpy as np
 import pyopencl as cl
 
-from clrt import accel as acceleration
 from clrt.config import DEFAULT_ACCEL, DEFAULT_BUILDER, DEFAULT_LEAF_SIZE
 from clrt.device.args import camera_args
+from clrt.device.build import build_acceleration
 from clrt.device.context import create_context, device_label
 from clrt.device.geometry import DeviceGeometry, check_fits
 from clrt.device.program import build_program
@@ -83,7 +83,8 @@ class Accel:
     """A mesh and its acceleration structure, uploaded once to one device.
 
     ``accel``: "box" (default), "sphere", "ellipse" or "none"; ``builder``:
-    "sah" (default) or "paper"; ``leaf_size``: most triangles per leaf.
+    "sah" (default), "paper" or "device" (built on ``device``); ``leaf_size``:
+    most triangles per leaf.
     ``chunk_rays``: most rays per kernel launch (default: see :meth:`chunk_size`);
     ``max_buffer_bytes``: split scene buffers above this size (split.cl).
     Not thread-safe: give each thread its own Accel.
@@ -95,7 +96,7 @@ class Accel:
         _check_chunk_rays(chunk_rays)
         self.mesh = as_mesh(mesh)
         corners = triangle_corners(self.mesh)
-        built = acceleration.build(corners, accel, builder, leaf_size)
+        built = build_acceleration(corners, accel, builder, leaf_size, device)
         context, queue = create_context(device)
         check_fits(queue.device, device_label(queue.device), built.device_bytes())   # before any upload
         geometry = DeviceGeometry(context, corners, built, max_buffer_bytes=max_buffer_bytes)

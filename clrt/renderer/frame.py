@@ -21,9 +21,9 @@ from dataclasses import dataclass, field
 import numpy as np
 import pyopencl as cl
 
-from clrt import accel as acceleration
 from clrt.config import DEFAULT_ACCEL, DEFAULT_BUILDER, DEFAULT_LEAF_SIZE, MAX_BOUNCES, MAX_SAMPLES
 from clrt.device.args import camera_args, vec4
+from clrt.device.build import build_acceleration
 from clrt.device.context import create_context, device_label
 from clrt.device.context import format_bytes as _size
 from clrt.device.geometry import DeviceGeometry, check_fits
@@ -53,7 +53,8 @@ class Renderer:
     """A scene uploaded to one OpenCL device, ready to render frames.
 
     ``accel``: "box" (default), "sphere", "ellipse" (BVH volume shape) or "none"
-    (brute force); ``builder``: "sah" (default) or "paper"; ``leaf_size``: the
+    (brute force); ``builder``: "sah" (default), "paper" (on the host) or
+    "device" (PLOC on the device, clrt.device.build); ``leaf_size``: the
     most triangles in a BVH leaf.  Every choice renders the same image.
     ``limits``: how frames are cut into launches (:class:`TileLimits`);
     ``max_buffer_bytes``: split scene buffers above this size (as scenes larger
@@ -69,7 +70,7 @@ class Renderer:
             self.scene = as_scene(scene)
             self.arrays = flatten_scene(self.scene)
         with _stage(self.timings, "acceleration build"):
-            self.acceleration = acceleration.build(self.arrays.corners, accel, builder, leaf_size)
+            self.acceleration = build_acceleration(self.arrays.corners, accel, builder, leaf_size, device)
             tri_info = self.arrays.tri_info[self.acceleration.prim_ids]   # shading data in slot order
         with _stage(self.timings, "copy to device"):
             self.context, self.queue = create_context(device)

@@ -1,0 +1,170 @@
+"""BVH build time and tree quality per builder: ``python -m clrt.bench.build``.
+
+    python -m clrt.bench.build --device gpu
+    python -m clrt.bench.build --device gpu --triangles 1M,10M --builders sah,device
+    python -m clrt.bench.build --device cpu --meshes camel --repeat 3
+
+For each scene and builder (``paper``, ``sah``: on the host; ``device``: PLOC
+on the OpenCL device, clrt.device.build), one table row:
+
+* build ms, ``first`` (the first build in this process: for the device
+  builder it includes compiling the program) and ``warm`` (median of
+  ``--repeat`` after that): wall time from the triangles in a host numpy array
+  to the rows, slot-ordered triangles and ids in device buffers -- for the
+  host builders the build, the pair rows, the triangle gather and the upload;
+* ``device ms``: the device builder's kernels and copies (profiling events),
+  and its phases;
+* the tree: SAH cost (bvh.py's formula), depth, bytes on the device;
+* ``trace ms``: median kernel time of one closest-hit primary ray per pixel
+  at 1920x1080 (``trace_camera``, timed with clrt.bench.speed.time_launches),
+  on the fixed cameras of clrt.bench.speed for its meshes, and a framing
+  camera for the generated scenes: ``--triangles N`` makes a grid of copies of
+  the bunny (clrt.bench.scale.instanced).
+
+Prints a markdown table; timing is done here, never in tests.
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pyopencl as cl
+
+from clrt.bench.common import exit_code
+from clrt.bench.scale import _count, instanced
+from clrt.bench.speed import CASES, time_launches
+from clrt.config import BUILDERS
+
+SIZE = (1920, 1080)
+
+
+def _corners(mesh) -> np.ndarray:
+    return np.ascontiguousarray(mesh.vertices[mesh.faces], dtype=np.float32)
+
+
+def _host_build(context, queue, corners, volume, builder, leaf_size) -> tuple[dict, list]:
+    """A host build up to device buffers; returns (stats, buffers)."""
+    from clrt.accel import build
+    from clrt.scene.arrays import triangle_verts
+    built = build(corners, volume, builder, leaf_size)
+    tris = triangle_verts(corners[built.prim_ids])
+    mf = cl.mem_flags
+    buffers = [cl.Buffer(context, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=a)
+               for a in (built.rows, tris, built.prim_ids)]
+    queue.finish()
+    return built.stats(), buffers
+
+
+def _device_build(context, queue, corners, volume, leaf_size) -> tuple[dict, object]:
+    from clrt.device.build import build_on_device
+    bvh = build_on_device(context, queue, corners, volume=volume, leaf_size=leaf_size, keep_boxes=True)
+    return bvh, bvh
+
+
+def time_builds(context, queue, corners, volume, builder, leaf_size, repeat):
+    """(first ms, warm median ms, stats, device timings or None)."""
+    walls, last = [], None
+    for _ in range(1 + repeat):
+        start = time.perf_counter()
+        if builder == "device":
+            last, _ = _device_build(context, queue, corners, volume, leaf_size)
+        else:
+            last = _host_build(context, queue, corners, volume, builder, leaf_size)
+        walls.append(1e3 * (time.perf_counter() - start))
+    if builder == "device":
+        stats = last.stats()
+        timings = last.timings
+        last.release()
+    else:
+        stats, buffers = last
+        for b in buffers:
+            b.release()
+        timings = None
+    return walls[0], statistics.median(walls[1:]) if repeat else walls[0], stats, timings
+
+
+def _trace_ms(mesh, camera, volume, builder, leaf_size, device) -> float:
+    from clrt import layouts
+    from clrt.query import Accel
+    accel = Accel(mesh, volume, builder, leaf_size, device)
+    hits = cl.Buffer(accel.context, cl.mem_flags.READ_WRITE, camera.width * camera.height * layouts.HIT.itemsize)
+    kernel_ms, _ = time_launches(accel.queue, lambda: accel.launch_camera(camera, hits), 10, 2)
+    hits.release()
+    return kernel_ms
+
+
+def scenes(mesh_dir: Path, meshes, counts):
+    """(name, mesh, camera) of each scene."""
+    from clrt.scene.load import load_mesh
+    from clrt.scene.scene import Camera
+    for name in meshes:
+        file, eye, target = CASES[name]
+        yield name, load_mesh(mesh_dir / file), Camera(eye, target, (0.0, 1.0, 0.0), 45.0, *SIZE)
+    if counts:
+        bunny = load_mesh(mesh_dir / CASES["bunny00"][0])
+        for count in counts:
+            mesh = instanced(bunny, count)
+            lo, hi = mesh.bounds
+            yield mesh.name, mesh, Camera.framing(np.array([lo, hi]), *SIZE)
+
+
+def run(mesh_dir, meshes, counts, builders, volume="box", leaf_size=4, device=None, repeat=5, trace=True,
+        out=sys.stdout):
+    from clrt.device.context import create_context, device_label
+    context, queue = create_context(device)
+    print(f"device: {device_label(queue.device)}; volume {volume}, leaf size {leaf_size}; build: first, "
+          f"then median of {repeat}; trace: {SIZE[0]}x{SIZE[1]} primary rays, kernel ms\n", file=out)
+    print("| scene | triangles | builder | build first ms | build warm ms | device ms | phases (device ms) "
+          "| SAH cost | SAH / sah | depth | device MiB | trace ms | Mrays/s |", file=out)
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|", file=out)
+    for name, mesh, camera in scenes(mesh_dir, meshes, counts):
+        corners = _corners(mesh)
+        results = {}
+        for builder in builders:
+            first, warm, stats, timings = time_builds(context, queue, corners, volume, builder, leaf_size, repeat)
+            trace_ms = _trace_ms(mesh, camera, volume, builder, leaf_size, device) if trace else float("nan")
+            results[builder] = (first, warm, stats, timings, trace_ms)
+        sah_cost = results["sah"][2]["sah_cost"] if "sah" in results else None
+        for builder, (first, warm, stats, timings, trace_ms) in results.items():
+            device_ms = "-" if timings is None else f"{timings['device']:.2f}"
+            phases = "-" if timings is None else " / ".join(
+                f"{k} {v:.1f}" for k, v in timings.items() if k not in ("device", "wall"))
+            ratio = f"{stats['sah_cost'] / sah_cost:.3f}" if sah_cost else "-"
+            print(f"| {name} | {len(corners):,} | {builder} | {first:,.1f} | {warm:,.1f} | {device_ms} | {phases} "
+                  f"| {stats['sah_cost']:.2f} | {ratio} | {stats['depth']} | {stats['device_bytes'] / 2**20:,.1f} "
+                  f"| {trace_ms:.3f} | {SIZE[0] * SIZE[1] / trace_ms / 1e3:,.0f} |", file=out, flush=True)
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(prog="python -m clrt.bench.build", description=__doc__.split("\n")[0])
+    default_dir = Path(__file__).resolve().parents[2].parent / "shared" / "meshes"
+    p.add_argument("--mesh-dir", type=Path, default=default_dir, help=f"folder of the meshes (default {default_dir})")
+    p.add_argument("--meshes", type=lambda s: [x for x in s.split(",") if x], default=sorted(CASES),
+                   help=f"comma-separated, of {', '.join(sorted(CASES))} (default all; '' for none)")
+    p.add_argument("--triangles", type=lambda s: [_count(x) for x in s.split(",")], default=[],
+                   help="also grids of bunny copies of about these many triangles, e.g. 1M,10M")
+    p.add_argument("--builders", type=lambda s: s.split(","), default=list(BUILDERS),
+                   help="comma-separated, of paper, sah, device (default all)")
+    p.add_argument("--volume", default="box", choices=("box", "sphere", "ellipse"))
+    p.add_argument("--leaf-size", type=int, default=4)
+    p.add_argument("--repeat", type=int, default=5, help="warm builds timed after the first (default 5)")
+    p.add_argument("--no-trace", action="store_true", help="skip the primary-ray timing")
+    p.add_argument("--device", help="'gpu', 'cpu' or P:D (default: clrt's choice)")
+    args = p.parse_args(argv)
+    for b in args.builders:
+        if b not in BUILDERS:
+            p.error(f"unknown builder {b!r}")
+    for m in args.meshes:
+        if m not in CASES:
+            p.error(f"unknown mesh {m!r} (choose from {', '.join(sorted(CASES))})")
+    return exit_code(run, args.mesh_dir, args.meshes, args.triangles, args.builders, args.volume,
+                     args.leaf_size, args.device, args.repeat, not args.no_trace)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,409 @@
+"""The BVH built on the device: triangles in host memory -> rows ready to trace.
+
+    >>> from clrt.device.build import build_on_device
+    >>> bvh = build_on_device(context, queue, corners, volume="box", leaf_size=4)
+    >>> bvh.rows, bvh.tri_verts, bvh.prim_ids      # cl.Buffers, ready for the traversal
+    >>> rows, prim_ids = bvh.read_back()            # host copies (tests, statistics)
+
+The algorithm (kernels in ``clrt/kernels/build_*.cl``, entry ``build_bvh.cl``):
+
+1. bounds of the triangles' box centres, and a 30-bit Morton code per triangle;
+2. a least-significant-digit radix sort of (code, triangle id), ``RADIX_BITS``
+   per pass, three launches a pass;
+3. PLOC (Meister & Bittner 2018; the one-block search of PLOC++, Benthin et
+   al. 2022): clusters start as the sorted triangles; in each iteration every
+   cluster finds the cluster within ``PLOC_RADIUS`` places on either side whose
+   merged box has the least area, and mutual nearest neighbours merge; three
+   launches an iteration, until one cluster is left.  Every new node decides
+   by the SAH whether its subtree (at most ``leaf_size`` triangles) is emitted
+   as one leaf;
+4. rows and slots as sums along each node's path from the root (pointer
+   jumping, ceil(log2(depth)) launches), then one launch writes the
+   ``BVH_PAIR_NODE`` rows, fitting each child's volume exactly as
+   ``clrt/accel/volumes.py`` does (float64 on the device), the triangles in
+   slot order and the slot -> triangle ids.
+
+The host only queues launches: the cluster count lives in a device buffer
+that the PLOC kernels read, so iterations are queued ahead and the host reads
+the count of each iteration back without waiting for it (``AHEAD``); once it
+sees one cluster, it stops queueing.  Besides those, a build reads back two
+ints: the root's row count (to size the row buffer) and the depth.
+
+Builds on one context share scratch buffers and kernel objects: they are not
+thread-safe (as clrt.query.Accel is not).
+
+:func:`build_acceleration` is the front end the renderer and the ray queries
+call: clrt.accel.build for the host builders, this one for ``builder="device"``.
+"""
+
+from __future__ import annotations
+
+import time
+from collections import deque
+from dataclasses import dataclass, field
+
+import numpy as np
+import pyopencl as cl
+
+from clrt import layouts
+from clrt.accel import Acceleration, as_triangles, check_options, volumes
+from clrt.accel import build as build_on_host
+from clrt.accel.rows import child_refs
+from clrt.accel.topdown import C_INTERSECT, C_TRAVERSAL, surface_area
+from clrt.config import VOLUME_DEFINES, VOLUMES
+from clrt.device.program import build_program
+from clrt.errors import DeviceError, InputError
+
+BUILD_GROUP = 256        # work-items per work-group of every build kernel
+RADIX_BITS = 4           # digit of one radix-sort pass: 16 bins, 8 passes for 30-bit codes
+MORTON_BITS = 30
+# Clusters searched on each side (Meister & Bittner's default; PLOC++ uses 8).
+# Measured SAH cost over the host SAH builder's (leaf size 4): camel 1.13 / 1.11
+# / 1.06 and bunny 1.09 / 1.08 / - at radius 8 / 16 / 32; the search time grows
+# with the radius, and at 32 the pair table no longer fits 48 KiB of local
+# memory.  ``python -m clrt.bench.build`` prints the ratio.
+PLOC_RADIUS = 16
+AHEAD = 4                # PLOC iterations queued before the host waits for a count
+MAX_REDUCE_GROUPS = 256  # work-groups of the bounds reduction (grid-stride beyond)
+
+# The state buffer (build_state.cl): int offsets, and the ring of cluster counts.
+STATE = {"STATE_NEXT_NODE": 0, "STATE_DEPTH": 1, "STATE_ERROR": 2, "STATE_BOUNDS": 4, "STATE_COUNTS": 16,
+         "COUNT_RING": 64}
+STATE_INTS = STATE["STATE_COUNTS"] + STATE["COUNT_RING"]
+
+_KERNELS = ("init_build_state", "centroid_bounds", "morton_codes", "radix_histogram", "scan_counts",
+            "radix_scatter", "init_leaves", "ploc_merge", "ploc_count_kept", "ploc_compact",
+            "init_root_paths", "jump_root_paths", "emit_tree")
+
+
+def build_defines(volume: str) -> dict:
+    """Program defines: the shape, the work-group and state layout, and the
+    constants of bvh.py and volumes.py (one source of truth: repr() of a float
+    is a C double literal of the same value)."""
+    return {
+        VOLUME_DEFINES[volume]: None, "BUILD_GROUP": BUILD_GROUP, "RADIX_BITS": RADIX_BITS,
+        "PLOC_RADIUS": PLOC_RADIUS, **STATE,
+        "C_TRAVERSAL": f"((float){C_TRAVERSAL!r})", "C_INTERSECT": f"((float){C_INTERSECT!r})",
+        "REL_PAD": repr(float(volumes.REL_PAD)), "ULP_PAD": int(volumes.ULP_PAD),
+        "PAD_FLOOR": repr(float(volumes.PAD_FLOOR)), "EVAL_SLACK": repr(float(volumes.EVAL_SLACK)),
+        "ELLIPSE_FLOOR": repr(float(volumes.ELLIPSE_FLOOR)), "SQRT3": repr(float(volumes.SQRT3)),
+    }
+
+
+@dataclass
+class DeviceBvh:
+    """A BVH built on the device, its buffers ready for the traversal.
+
+    rows:      ``num_rows`` BVH_PAIR_NODE, depth-first, root at row 0.
+    tri_verts: ``num_triangles`` TRIANGLE_VERTS in slot (leaf) order.
+    prim_ids:  ``num_triangles`` int32, slot -> input triangle index.
+    exact_rows: the rows with the exact (unpadded) boxes of the children in
+               box layout, only when built with ``keep_boxes``; for statistics.
+    depth:     nodes on the longest root-to-leaf path (root counts 1): the
+               traversal stack (BVH_STACK_SIZE) must hold it.
+    iterations: PLOC iterations; timings: device ms per phase (profiling
+               events; ``device`` is the sum), and ``wall`` (host clock, from
+               the call to the rows being ready).
+    """
+
+    rows: cl.Buffer
+    tri_verts: cl.Buffer
+    prim_ids: cl.Buffer
+    num_rows: int
+    num_triangles: int
+    depth: int
+    volume: str
+    leaf_size: int
+    iterations: int
+    timings: dict
+    queue: cl.CommandQueue = field(repr=False)
+    exact_rows: cl.Buffer | None = field(default=None, repr=False)
+    builder: str = "device"
+    _stats: dict | None = field(default=None, repr=False)
+
+    @property
+    def device_bytes(self) -> int:
+        return self.num_rows * layouts.BVH_PAIR_NODE.itemsize + self.num_triangles * (
+            layouts.TRIANGLE_VERTS.itemsize + 4)
+
+    @property
+    def build_ms(self) -> float:
+        return self.timings["wall"]
+
+    def read_back(self) -> tuple[np.ndarray, np.ndarray]:
+        """Host copies: rows (num_rows,) BVH_PAIR_NODE and prim_ids (F,) int32."""
+        rows = np.empty(self.num_rows, layouts.BVH_PAIR_NODE)
+        prim_ids = np.empty(self.num_triangles, np.int32)
+        cl.enqueue_copy(self.queue, rows, self.rows)
+        cl.enqueue_copy(self.queue, prim_ids, self.prim_ids, is_blocking=True)
+        return rows, prim_ids
+
+    def read_triangles(self) -> np.ndarray:
+        """Host copy of the slot-ordered triangles, (F,) TRIANGLE_VERTS."""
+        tris = np.empty(self.num_triangles, layouts.TRIANGLE_VERTS)
+        cl.enqueue_copy(self.queue, tris, self.tri_verts, is_blocking=True)
+        return tris
+
+    def read_exact_rows(self) -> np.ndarray:
+        if self.exact_rows is None:
+            raise ValueError("build with keep_boxes=True to keep the exact boxes")
+        exact = np.empty(self.num_rows, layouts.BVH_PAIR_NODE)
+        cl.enqueue_copy(self.queue, exact, self.exact_rows, is_blocking=True)
+        return exact
+
+    def stats(self) -> dict:
+        """The numbers of clrt.accel.bvh.Bvh.stats, from the exact rows (needs
+        ``keep_boxes``); computed once, so they outlive :meth:`release`."""
+        if self._stats is None:
+            self._stats = {**tree_stats(self.read_exact_rows(), self.depth), "build_ms": self.build_ms,
+                           "device_bytes": self.device_bytes}
+        return self._stats
+
+    def release(self) -> None:
+        """Free the device buffers now (statistics computed before stay)."""
+        for buffer in (self.rows, self.tri_verts, self.prim_ids, self.exact_rows):
+            if buffer is not None:
+                buffer.release()
+        self.rows = self.tri_verts = self.prim_ids = self.exact_rows = None
+
+
+def tree_stats(exact_rows: np.ndarray, depth: int) -> dict:
+    """Bvh.stats()'s tree numbers from BVH_PAIR_NODE rows that hold exact boxes
+    (box layout): nodes, leaves, depth, leaf sizes and the SAH cost -- inner
+    nodes' areas plus leaves' areas times their counts, over the root's area
+    (constants of bvh.py)."""
+    refs = child_refs(exact_rows)
+    counts = refs[:, [1, 3]].reshape(-1)
+    present = counts >= 0
+    lo = np.stack([exact_rows["left_a"][:, :3], exact_rows["right_a"][:, :3]], 1).reshape(-1, 3)
+    hi = np.stack([exact_rows["left_b"][:, :3], exact_rows["right_b"][:, :3]], 1).reshape(-1, 3)
+    area = surface_area(lo.astype(np.float64), hi.astype(np.float64))
+    root_lo = lo[present].min(axis=0).astype(np.float64)
+    root_hi = hi[present].max(axis=0).astype(np.float64)
+    root_area = float(surface_area(root_lo, root_hi))
+    ratio = area / root_area if root_area > 0 else np.ones_like(area)
+    leaf = counts > 0
+    inner = counts == 0
+    one_leaf = not inner.any() and leaf.sum() == 1          # a root row holding the whole tree
+    sah = (0.0 if one_leaf else C_TRAVERSAL) + C_TRAVERSAL * ratio[inner].sum() \
+        + C_INTERSECT * (ratio[leaf] * counts[leaf]).sum()
+    return {"nodes": int(leaf.sum() + inner.sum() + (0 if one_leaf else 1)), "leaves": int(leaf.sum()),
+            "depth": int(depth), "max_leaf_size": int(counts.max()),
+            "mean_leaf_size": float(counts[leaf].mean()), "sah_cost": float(sah)}
+
+
+class _Workspace:
+    """Scratch buffers of one context, kept between builds and grown when a
+    build needs more (allocations are not free on a GPU)."""
+
+    def __init__(self, context: cl.Context):
+        self.context = context
+        self.buffers: dict[str, cl.Buffer] = {}
+
+    def get(self, name: str, nbytes: int) -> cl.Buffer:
+        nbytes = max(int(nbytes), 4)
+        buffer = self.buffers.get(name)
+        if buffer is None or buffer.size < nbytes:
+            if buffer is not None:
+                buffer.release()
+            buffer = cl.Buffer(self.context, cl.mem_flags.READ_WRITE, nbytes)
+            self.buffers[name] = buffer
+        return buffer
+
+
+_workspaces: dict[int, _Workspace] = {}
+_kernel_sets: dict[int, dict] = {}
+
+
+def _kernels(program: cl.Program) -> dict:
+    key = program.int_ptr
+    if key not in _kernel_sets:
+        _kernel_sets[key] = {name: cl.Kernel(program, name) for name in _KERNELS}
+    return _kernel_sets[key]
+
+
+def _groups(n: int) -> int:
+    return max(-(-int(n) // BUILD_GROUP), 1)
+
+
+class _Phases:
+    """First and last profiling event of each phase (device ms = their span)."""
+
+    def __init__(self):
+        self.spans: dict[str, list] = {}
+
+    def add(self, phase: str, event: cl.Event) -> cl.Event:
+        span = self.spans.setdefault(phase, [event, event])
+        span[1] = event
+        return event
+
+    def ms(self) -> dict:
+        out = {phase: 1e-6 * (last.profile.end - first.profile.start)
+               for phase, (first, last) in self.spans.items()}
+        out["device"] = sum(out.values())
+        return out
+
+
+def build_on_device(context: cl.Context, queue: cl.CommandQueue, corners, volume: str = "box",
+                    leaf_size: int = 4, keep_boxes: bool = False) -> DeviceBvh:
+    """Build a BVH over ``corners`` on the queue's device.
+
+    corners: (F, 3, 3) triangle corners (converted to float32, checked as
+        clrt.accel.build checks them); row order is the triangle id.
+    volume: one of ``VOLUMES``; leaf_size: 1..255, the most triangles per leaf.
+    keep_boxes: also keep the exact child boxes (``DeviceBvh.stats``).
+    ``queue`` must have profiling enabled (clrt.device.context.create_context's does).
+    Raises InputError on bad input, DeviceError when the device lacks float64.
+    """
+    start = time.perf_counter()
+    if volume not in VOLUMES:
+        raise InputError(f"unknown bounding volume {volume!r} (choose from {', '.join(VOLUMES)})")
+    check_options(volume, "device", leaf_size)
+    leaf_size = int(leaf_size)
+    tri = as_triangles(corners)
+    device = queue.device
+    if "cl_khr_fp64" not in device.extensions:
+        raise DeviceError(f"the device BVH builder fits volumes in float64, which {device.name.strip()} lacks")
+    program = build_program(context, "build_bvh.cl", build_defines(volume))
+    k = _kernels(program)
+    ws = _workspaces.setdefault(context.int_ptr, _Workspace(context))
+    F = len(tri)
+    num_nodes = 2 * F - 1
+    root = 2 * F - 2 if F > 1 else 0        # the last merge makes the root
+    phases = _Phases()
+
+    def launch(phase: str, kernel: cl.Kernel, groups: int, *args) -> cl.Event:
+        if args:
+            kernel.set_args(*args)
+        return phases.add(phase, cl.enqueue_nd_range_kernel(queue, kernel, (groups * BUILD_GROUP,),
+                                                            (BUILD_GROUP,)))
+
+    state = ws.get("state", 4 * STATE_INTS)
+    corners_buf = ws.get("corners", tri.nbytes)
+    phases.add("upload", cl.enqueue_copy(queue, corners_buf, tri, is_blocking=False))
+    keys = [ws.get("keys0", 4 * F), ws.get("keys1", 4 * F)]
+    ids = [ws.get("ids0", 4 * F), ws.get("ids1", 4 * F)]
+
+    # 1. Morton codes.
+    launch("morton", k["init_build_state"], 1, state, np.uint32(F))
+    launch("morton", k["centroid_bounds"], min(_groups(F), MAX_REDUCE_GROUPS), corners_buf, np.uint32(F), state)
+    launch("morton", k["morton_codes"], _groups(F), corners_buf, np.uint32(F), state, keys[0], ids[0])
+
+    # 2. Radix sort, ping-ponging between the two key/id buffers.
+    tiles = max(-(-F // (BUILD_GROUP * 8)), 1)          # SORT_TILE = BUILD_GROUP * SORT_ITEMS
+    bins = 1 << RADIX_BITS
+    tile_counts = ws.get("tile_counts", 4 * bins * tiles)
+    passes = -(-MORTON_BITS // RADIX_BITS)
+    for p in range(passes):
+        src, dst = p % 2, 1 - p % 2
+        shift = np.uint32(p * RADIX_BITS)
+        launch("sort", k["radix_histogram"], tiles, keys[src], np.uint32(F), shift, tile_counts)
+        launch("sort", k["scan_counts"], 1, tile_counts, np.uint32(bins * tiles))
+        launch("sort", k["radix_scatter"], tiles, keys[src], ids[src], np.uint32(F), shift, tile_counts,
+               keys[dst], ids[dst])
+    sorted_ids = ids[passes % 2]
+
+    # 3. PLOC.
+    nodes = ws.get("nodes", layouts.BUILD_NODE.itemsize * num_nodes)
+    clusters = ws.get("clusters", layouts.BUILD_CLUSTER.itemsize * F)
+    merged = ws.get("merged", layouts.BUILD_CLUSTER.itemsize * F)
+    tile_kept = ws.get("tile_kept", 4 * _groups(F))
+    launch("ploc", k["init_leaves"], _groups(F), corners_buf, sorted_ids, np.uint32(F), nodes, clusters)
+    iterations = _ploc(queue, k, launch, F, clusters, merged, tile_kept, nodes, state, leaf_size)
+
+    # 4. Path sums, then the rows.
+    ancestor = [ws.get("ancestor0", 4 * num_nodes), ws.get("ancestor1", 4 * num_nodes)]
+    path = [ws.get("path0", 16 * num_nodes), ws.get("path1", 16 * num_nodes)]
+    launch("emit", k["init_root_paths"], _groups(num_nodes), nodes, np.uint32(num_nodes), ancestor[0], path[0])
+    jumps = iterations.bit_length()          # 2**jumps > the longest path's edges (<= iterations)
+    for j in range(jumps):
+        launch("emit", k["jump_root_paths"], _groups(num_nodes), ancestor[j % 2], path[j % 2],
+               np.uint32(num_nodes), ancestor[1 - j % 2], path[1 - j % 2])
+    root_rows = np.empty(1, np.int32)
+    offset = root * layouts.BUILD_NODE.itemsize + layouts.BUILD_NODE.fields["rows"][1]
+    cl.enqueue_copy(queue, root_rows, nodes, src_offset=offset, is_blocking=True)
+    num_rows = max(int(root_rows[0]), 1)
+    mf = cl.mem_flags
+    rows = cl.Buffer(context, mf.READ_WRITE, num_rows * layouts.BVH_PAIR_NODE.itemsize)
+    exact_rows = cl.Buffer(context, mf.READ_WRITE, num_rows * layouts.BVH_PAIR_NODE.itemsize) if keep_boxes else None
+    tri_verts = cl.Buffer(context, mf.READ_WRITE, F * layouts.TRIANGLE_VERTS.itemsize)
+    prim_ids = cl.Buffer(context, mf.READ_WRITE, F * 4)
+    launch("emit", k["emit_tree"], _groups(num_nodes), nodes, np.uint32(num_nodes), np.int32(root), corners_buf,
+           sorted_ids, ancestor[jumps % 2], path[jumps % 2], rows, exact_rows, tri_verts, prim_ids, state)
+    head = np.empty(4, np.int32)
+    cl.enqueue_copy(queue, head, state, is_blocking=True)
+    if head[STATE["STATE_ERROR"]]:
+        raise RuntimeError("device BVH build: a node did not reach the root (too few pointer jumps)")
+    timings = phases.ms()
+    timings["wall"] = 1e3 * (time.perf_counter() - start)
+    return DeviceBvh(rows=rows, tri_verts=tri_verts, prim_ids=prim_ids, num_rows=num_rows, num_triangles=F,
+                     depth=int(head[STATE["STATE_DEPTH"]]), volume=volume, leaf_size=leaf_size,
+                     iterations=iterations, timings=timings, queue=queue, exact_rows=exact_rows)
+
+
+def _ploc(queue, k, launch, F, clusters, merged, tile_kept, nodes, state, leaf_size) -> int:
+    """Queue PLOC iterations until one cluster is left; returns how many it took.
+
+    Iteration i's kernels read its cluster count from the state ring, and a
+    non-blocking read brings the next count back.  The host queues with the
+    last count it has seen (an upper bound: counts only fall), at most AHEAD
+    iterations beyond it; iterations queued after the last merge do nothing.
+    """
+    ring = STATE["COUNT_RING"]
+    known = F                         # clusters before iteration `seen`
+    seen = 0
+    pending: deque = deque()          # (iteration, event, host int32[1]) of reads in flight
+    k["ploc_merge"].set_args(clusters, merged, tile_kept, nodes, state, np.int32(0), np.uint32(leaf_size))
+    k["ploc_count_kept"].set_args(tile_kept, state, np.int32(0))
+    k["ploc_compact"].set_args(merged, clusters, tile_kept, state, np.int32(0))
+    iteration = 0
+    while known > 1:
+        groups = _groups(known)
+        for name in ("ploc_merge", "ploc_count_kept", "ploc_compact"):
+            kernel = k[name]
+            kernel.set_arg(5 if name == "ploc_merge" else 2 if name == "ploc_count_kept" else 4,
+                           np.int32(iteration))
+            launch("ploc", kernel, 1 if name == "ploc_count_kept" else groups)
+        count = np.empty(1, np.int32)
+        offset = 4 * (STATE["STATE_COUNTS"] + (iteration + 1) % ring)
+        pending.append((iteration + 1, cl.enqueue_copy(queue, count, state, src_offset=offset,
+                                                       is_blocking=False), count))
+        iteration += 1
+        if iteration > F + AHEAD:     # every iteration merges at least one pair
+            raise RuntimeError("device BVH build: PLOC did not converge")
+        # Take every count that has arrived; wait only when AHEAD iterations are in flight.
+        while pending and (len(pending) > AHEAD
+                           or pending[0][1].command_execution_status == cl.command_execution_status.COMPLETE):
+            seen, event, count = pending.popleft()
+            event.wait()
+            known = int(count[0])
+            if known <= 1:
+                break
+    for _, event, _ in pending:       # iterations queued past the end: no-ops
+        event.wait()
+    return seen if F > 1 else 0
+
+
+def build_acceleration(corners: np.ndarray, accel: str, builder: str, leaf_size: int,
+                       device: str | None = None) -> Acceleration:
+    """The acceleration structure over ``corners`` (F, 3, 3): clrt.accel.build for
+    the host builders, for ``builder="device"`` a build on ``device`` (clrt's
+    device choice, as the renderer and queries use it).
+
+    The device build is read back into an :class:`Acceleration` for now, and
+    uploaded again by DeviceGeometry like a host build (a second copy while the
+    build's buffers live); the traversal could take DeviceBvh's buffers as
+    they are.
+    """
+    if builder != "device" or accel == "none":
+        return build_on_host(corners, accel, "sah" if builder == "device" else builder, leaf_size)
+    from clrt.device.context import create_context
+    start = time.perf_counter()
+    context, queue = create_context(device)
+    bvh = build_on_device(context, queue, corners, volume=accel, leaf_size=leaf_size, keep_boxes=True)
+    rows, prim_ids = bvh.read_back()
+    summary = bvh.stats()
+    bvh.release()
+    return Acceleration(accel, "device", rows, prim_ids, depth=int(bvh.depth),
+                        build_ms=1e3 * (time.perf_counter() - start), leaf_size=int(leaf_size),
+                        summary={k: v for k, v in summary.items() if k not in ("build_ms", "device_bytes")})

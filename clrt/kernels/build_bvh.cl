@@ -1,0 +1,14 @@
+// The device BVH builder (issue #17), one program: triangles -> Morton codes
+// -> radix sort -> PLOC merging with SAH leaf collapse -> depth-first
+// BvhPairNode rows, slot-ordered triangles and slot -> triangle ids.  The
+// host driver, and the order of the launches, is clrt/device/build.py.
+// Build-time choices arrive as -D defines: BUILD_GROUP, RADIX_BITS,
+// PLOC_RADIUS, the state offsets, the SAH constants of clrt/accel/bvh.py, the
+// padding constants of clrt/accel/volumes.py and the volume shape (VOLUME_*).
+#include "layouts.h"
+#include "build_state.cl"
+#include "build_scan.cl"
+#include "build_morton.cl"
+#include "build_sort.cl"
+#include "build_ploc.cl"
+#include "build_emit.cl"

@@ -1,0 +1,269 @@
+// PLOC: Parallel Locally-Ordered Clustering (Meister & Bittner 2018), with the
+// single-block neighbour search and merge of PLOC++ (Benthin et al. 2022).
+//
+// Why PLOC and not LBVH with treelet restructuring: LBVH alone traces about
+// 20-30 % slower than SAH trees, and treelet optimisation needs many
+// enumerated treelet shapes per node; PLOC reaches the quality of a full SAH
+// sweep with one simple step repeated -- every cluster finds the cluster
+// whose merged box has the least surface area among the PLOC_RADIUS clusters
+// on each side of it in the Morton order, and mutual nearest neighbours
+// merge -- three launches per iteration; each iteration removes a fifth to
+// a quarter of the clusters (about 50 iterations for 75k triangles, most of
+// them on a few hundred clusters).
+//
+// The clusters start as the triangles in Morton order (init_leaves).  An iteration:
+//   ploc_merge       per tile of BUILD_GROUP clusters: loads the tile and
+//                    2 * PLOC_RADIUS clusters on each side into local memory,
+//                    finds the nearest neighbour of the tile's clusters and of
+//                    PLOC_RADIUS on each side (enough to know whether a
+//                    neighbour's choice is mutual), merges mutual pairs into
+//                    new nodes (the merged cluster takes the lower place, the
+//                    higher one drops out), and counts the kept clusters
+//   ploc_count_kept  prefix sum of the tiles' kept counts (one work-group); the
+//                    total is the next iteration's cluster count
+//   ploc_compact     moves the kept clusters together, in order.
+// Each kernel reads the cluster count from the state buffer, so the host can
+// queue iterations without waiting for one; once one cluster is left the
+// kernels do nothing.
+//
+// Each new node also decides, bottom-up as it is made, whether its subtree
+// is cheaper as a leaf by the surface area heuristic (see make_node).
+#ifndef CLRT_BUILD_PLOC_CL
+#define CLRT_BUILD_PLOC_CL
+
+#include "layouts.h"
+#include "build_state.cl"
+#include "build_scan.cl"
+#include "build_morton.cl"
+
+#ifndef PLOC_RADIUS
+#error "build with -DPLOC_RADIUS=<clusters searched on each side>"
+#endif
+#if !defined(C_TRAVERSAL) || !defined(C_INTERSECT)
+#error "build with the SAH constants C_TRAVERSAL and C_INTERSECT of clrt/accel/bvh.py"
+#endif
+
+#define TILE_SPAN (BUILD_GROUP + 4 * PLOC_RADIUS)     // clusters a tile loads
+#define SEARCHED (BUILD_GROUP + 2 * PLOC_RADIUS)      // clusters whose neighbour it finds
+#define PAIR_ROWS (BUILD_GROUP + 3 * PLOC_RADIUS)     // first places of the pairs those need
+
+// Half the surface area of a box, as bvh.py's surface_area (only ratios matter).
+inline float half_area(float3 lo, float3 hi)
+{
+    const float3 d = hi - lo;
+    const float a = d.x * d.y + d.y * d.z + d.z * d.x;
+    return isnan(a) ? INFINITY : a;           // inf * 0 of huge, flat boxes
+}
+
+// Tie-break between neighbours at the same distance, a hash of the pair (its
+// two places, lower first).  Any order of pairs that both members agree on
+// guarantees progress -- the least pair of all is always mutual -- but an
+// order by place alone makes chains on regular meshes (identical distances
+// everywhere: each cluster picks its left neighbour, and one pair merges per
+// iteration); a hash makes the choices look random, and a fixed fraction of
+// the clusters merge in every iteration.
+inline uint pair_hash(uint lower, uint upper)
+{
+    uint h = lower * 0x9E3779B1u ^ (upper + 0x7F4A7C15u) * 0x85EBCA77u;
+    h ^= h >> 15;
+    h *= 0x2C1B3C6Du;
+    h ^= h >> 12;
+    return h;
+}
+
+// Leaf nodes and the first clusters: node i is the triangle ids[i], the i-th in Morton order.
+__kernel __attribute__((reqd_work_group_size(BUILD_GROUP, 1, 1)))
+void init_leaves(const global float* corners, const global uint* sorted_ids, const uint num_tris,
+                 global BuildNode* nodes, global BuildCluster* clusters)
+{
+    const uint i = get_global_id(0);
+    if (i >= num_tris)
+        return;
+    float3 lo, hi;
+    triangle_box(corners, sorted_ids[i], &lo, &hi);
+    BuildNode node;
+    node.lo = (float4)(lo, as_float(-1));
+    node.hi = (float4)(hi, as_float(-1));
+    node.parent = -1;
+    node.count = 1;
+    node.rows = 0;
+    node.cost = C_INTERSECT * half_area(lo, hi);
+    nodes[i] = node;
+    clusters[i].lo = (float4)(lo, as_float((int)i));
+    clusters[i].hi = (float4)(hi, 0.0f);
+}
+
+// The node that merges clusters a (left) and b (right).  The SAH decides
+// whether the new subtree is emitted as one leaf: with at most leaf_size
+// triangles and a leaf cost (C_INTERSECT * count * area) no higher than
+// keeping the node (C_TRAVERSAL * area plus the children's best costs) --
+// the same rule as the host's SAH builder (sah.py: split only when strictly
+// cheaper).  Returns the new cluster.
+inline BuildCluster make_node(global BuildNode* nodes, int index, BuildCluster a, BuildCluster b,
+                              uint leaf_size)
+{
+    const int left = as_int(a.lo.w), right = as_int(b.lo.w);
+    const float3 lo = fmin(a.lo.xyz, b.lo.xyz), hi = fmax(a.hi.xyz, b.hi.xyz);
+    const BuildNode l = nodes[left], r = nodes[right];
+    const float area = half_area(lo, hi);
+    BuildNode node;
+    node.lo = (float4)(lo, as_float(left));
+    node.hi = (float4)(hi, as_float(right));
+    node.parent = -1;
+    node.count = l.count + r.count;
+    node.cost = C_TRAVERSAL * area + l.cost + r.cost;
+    node.rows = 1 + l.rows + r.rows;
+    const float leaf_cost = C_INTERSECT * (float)node.count * area;
+    if (node.count <= (int)leaf_size && leaf_cost <= node.cost) {
+        node.cost = leaf_cost;
+        node.rows = 0;
+    }
+    nodes[index] = node;
+    nodes[left].parent = index;
+    nodes[right].parent = index;
+    BuildCluster merged;
+    merged.lo = node.lo;
+    merged.lo.w = as_float(index);
+    merged.hi = (float4)(hi, 0.0f);
+    return merged;
+}
+
+__kernel __attribute__((reqd_work_group_size(BUILD_GROUP, 1, 1)))
+void ploc_merge(const global BuildCluster* clusters, global BuildCluster* merged, global uint* tile_kept,
+                global BuildNode* nodes, global int* state, const int iteration, const uint leaf_size)
+{
+    local float4 box_lo[TILE_SPAN], box_hi[TILE_SPAN];    // w: node of the cluster
+    local float pair_area[PAIR_ROWS * PLOC_RADIUS];
+    local int nearest[SEARCHED];
+    local uint scratch[BUILD_GROUP];
+    local int node_base;
+    const int count = state[CLUSTERS_BEFORE(iteration)];
+    const int start = get_group_id(0) * BUILD_GROUP;
+    if (count <= 1 || start >= count)
+        return;                                   // the same for the whole work-group
+    const int lid = get_local_id(0);
+    const int loaded = start - 2 * PLOC_RADIUS;   // place of box_lo[0]
+    for (int k = lid; k < TILE_SPAN; k += BUILD_GROUP) {
+        const int p = loaded + k;
+        if (p >= 0 && p < count) {
+            box_lo[k] = clusters[p].lo;
+            box_hi[k] = clusters[p].hi;
+        }
+    }
+    barrier(CLK_LOCAL_MEM_FENCE);
+
+    // The merged area of every pair (a, a + o), o = 1..PLOC_RADIUS, that a
+    // search below needs, computed once per pair (PLOC++): row a - loaded of
+    // pair_area, INFINITY where a + o is past the last cluster.
+    for (int k = lid; k < PAIR_ROWS; k += BUILD_GROUP) {
+        const int a = loaded + k;
+        const bool valid = a >= 0;
+        const float3 lo = box_lo[k].xyz, hi = box_hi[k].xyz;
+        for (int o = 1; o <= PLOC_RADIUS; ++o) {
+            const bool pair = valid && a + o < count;
+            pair_area[k * PLOC_RADIUS + o - 1] = pair
+                ? half_area(fmin(lo, box_lo[k + o].xyz), fmax(hi, box_hi[k + o].xyz)) : INFINITY;
+        }
+    }
+    barrier(CLK_LOCAL_MEM_FENCE);
+
+    // Nearest neighbour of places start - PLOC_RADIUS .. start + BUILD_GROUP + PLOC_RADIUS - 1,
+    // by (area, pair hash); candidates in increasing place, and equal keys
+    // keep the earlier one: the lower pair (see pair_hash), so both ends of a
+    // pair see one order.  INFINITY marks no pair: a real area is finite
+    // here or, for huge boxes, ties with it and loses nothing.
+    for (int k = lid; k < SEARCHED; k += BUILD_GROUP) {
+        const int p = start - PLOC_RADIUS + k;
+        int best = -1;
+        if (p >= 0 && p < count) {
+            float best_area = INFINITY;
+            uint best_hash = 0;
+            const int row = p - loaded;
+            for (int o = -PLOC_RADIUS; o <= PLOC_RADIUS; ++o) {
+                const int q = p + o;
+                if (o == 0 || q < 0 || q >= count)
+                    continue;
+                const float area = o < 0 ? pair_area[(row + o) * PLOC_RADIUS - o - 1]
+                                         : pair_area[row * PLOC_RADIUS + o - 1];
+                if (best < 0 || area < best_area) {
+                    best = q;
+                    best_area = area;
+                    best_hash = pair_hash(min(p, q), max(p, q));
+                } else if (area == best_area) {
+                    const uint hash = pair_hash(min(p, q), max(p, q));
+                    if (hash < best_hash) {
+                        best = q;
+                        best_hash = hash;
+                    }
+                }
+            }
+        }
+        nearest[k] = best;
+    }
+    barrier(CLK_LOCAL_MEM_FENCE);
+
+    const int i = start + lid;
+    int partner = -1;            // i merges with partner (i < partner)
+    bool kept = false;
+    if (i < count) {
+        const int j = nearest[i - start + PLOC_RADIUS];
+        const bool mutual = nearest[j - start + PLOC_RADIUS] == i;
+        kept = !mutual || i < j;
+        if (mutual && i < j)
+            partner = j;
+    }
+    // New nodes: consecutive indices per work-group, from one atomic.
+    uint merges;
+    const uint my_merge = group_exclusive_scan(partner >= 0 ? 1u : 0u, scratch, &merges);
+    if (lid == 0)
+        node_base = merges > 0 ? atomic_add(state + STATE_NEXT_NODE, (int)merges) : 0;
+    uint kept_in_tile;
+    const uint rank = group_exclusive_scan(kept ? 1u : 0u, scratch, &kept_in_tile);   // its barriers publish node_base
+    // (An if, not a return: PoCL 3.1 ran the writes of returned work-items when
+    // the return followed the barriers.)
+    if (i < count) {
+        BuildCluster out;
+        out.lo = box_lo[i - loaded];
+        out.hi = box_hi[i - loaded];
+        if (partner >= 0) {
+            BuildCluster b;
+            b.lo = box_lo[partner - loaded];
+            b.hi = box_hi[partner - loaded];
+            out = make_node(nodes, node_base + (int)my_merge, out, b, leaf_size);
+        }
+        out.hi.w = as_float(kept ? (int)rank : -1);
+        merged[i] = out;
+    }
+    if (lid == 0)
+        tile_kept[get_group_id(0)] = kept_in_tile;
+}
+
+// One work-group: exclusive prefix sum of the tiles' kept counts (where each
+// tile's clusters go) and the next iteration's cluster count.
+__kernel __attribute__((reqd_work_group_size(BUILD_GROUP, 1, 1)))
+void ploc_count_kept(global uint* tile_kept, global int* state, const int iteration)
+{
+    local uint scratch[BUILD_GROUP];
+    const int count = state[CLUSTERS_BEFORE(iteration)];
+    int next = count;
+    if (count > 1)
+        next = (int)scan_in_one_group(tile_kept, (count + BUILD_GROUP - 1) / BUILD_GROUP, scratch);
+    if (get_local_id(0) == 0)
+        state[CLUSTERS_BEFORE(iteration + 1)] = next;
+}
+
+__kernel __attribute__((reqd_work_group_size(BUILD_GROUP, 1, 1)))
+void ploc_compact(const global BuildCluster* merged, global BuildCluster* clusters,
+                  const global uint* tile_offsets, const global int* state, const int iteration)
+{
+    const int count = state[CLUSTERS_BEFORE(iteration)];
+    const int i = get_global_id(0);
+    if (count <= 1 || i >= count)
+        return;
+    const BuildCluster c = merged[i];
+    const int rank = as_int(c.hi.w);
+    if (rank >= 0)
+        clusters[tile_offsets[get_group_id(0)] + rank] = c;
+}
+
+#endif

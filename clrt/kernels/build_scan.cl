@@ -1,0 +1,61 @@
+// Prefix sums for the device builder: over one work-group (local memory), and
+// over a short global array by one work-group.  Every kernel of the builder
+// runs in work-groups of BUILD_GROUP work-items (-D from clrt/device/build.py).
+#ifndef CLRT_BUILD_SCAN_CL
+#define CLRT_BUILD_SCAN_CL
+
+#ifndef BUILD_GROUP
+#error "build with -DBUILD_GROUP=<work-group size, a power of two>"
+#endif
+
+// Entries each work-item sums serially in scan_in_one_group: fewer, longer
+// steps than one entry per work-item, so a short array takes few barriers.
+#define SCAN_ITEMS 8
+
+// Exclusive prefix sum of one value per work-item over the work-group
+// (Hillis-Steele in local memory: log2(BUILD_GROUP) steps); *total gets the
+// sum of all.  Every work-item of the group must call it.
+inline uint group_exclusive_scan(uint x, local uint* scratch, uint* total)
+{
+    const uint lid = get_local_id(0);
+    scratch[lid] = x;
+    barrier(CLK_LOCAL_MEM_FENCE);
+    for (uint offset = 1; offset < BUILD_GROUP; offset <<= 1) {
+        const uint add = lid >= offset ? scratch[lid - offset] : 0u;
+        barrier(CLK_LOCAL_MEM_FENCE);
+        scratch[lid] += add;
+        barrier(CLK_LOCAL_MEM_FENCE);
+    }
+    const uint inclusive = scratch[lid];
+    *total = scratch[BUILD_GROUP - 1];
+    barrier(CLK_LOCAL_MEM_FENCE);       // the caller may reuse scratch at once
+    return inclusive - x;
+}
+
+// Exclusive prefix sum, in place, of data[0, n) by one work-group, chunk after
+// chunk (each work-item takes SCAN_ITEMS consecutive entries); returns the
+// total.  For the short arrays of per-tile counts, where one work-group
+// suffices.
+inline uint scan_in_one_group(global uint* data, uint n, local uint* scratch)
+{
+    uint carry = 0;
+    for (uint base = 0; base < n; base += BUILD_GROUP * SCAN_ITEMS) {
+        const uint first = base + get_local_id(0) * SCAN_ITEMS;
+        uint sum = 0;
+        for (uint k = 0; k < SCAN_ITEMS; ++k)
+            if (first + k < n)
+                sum += data[first + k];
+        uint chunk_total;
+        uint prefix = carry + group_exclusive_scan(sum, scratch, &chunk_total);
+        for (uint k = 0; k < SCAN_ITEMS; ++k)
+            if (first + k < n) {
+                const uint value = data[first + k];
+                data[first + k] = prefix;
+                prefix += value;
+            }
+        carry += chunk_total;
+    }
+    return carry;
+}
+
+#endif

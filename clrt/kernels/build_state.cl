@@ -1,0 +1,32 @@
+// The device builder's small state buffer (ints), written and read by its
+// kernels so that the host need not look at it between launches:
+//   STATE_NEXT_NODE      next free BuildNode index (atomic allocation)
+//   STATE_DEPTH          tree depth: nodes on the longest root-to-leaf path
+//   STATE_ERROR          non-zero: a kernel found the tree inconsistent
+//   STATE_BOUNDS + 0..5  centre bounds min xyz, max xyz (order-preserving bits)
+//   STATE_COUNTS + k     clusters before PLOC iteration j, j % COUNT_RING == k
+// Offsets are -D defines from clrt/device/build.py, which reads the same values.
+#ifndef CLRT_BUILD_STATE_CL
+#define CLRT_BUILD_STATE_CL
+
+#if !defined(STATE_NEXT_NODE) || !defined(STATE_DEPTH) || !defined(STATE_ERROR) \
+    || !defined(STATE_BOUNDS) || !defined(STATE_COUNTS) || !defined(COUNT_RING)
+#error "build with the STATE_* and COUNT_RING defines of clrt/device/build.py"
+#endif
+
+#define CLUSTERS_BEFORE(iteration) (STATE_COUNTS + (iteration) % COUNT_RING)
+
+// One work-item: the state before a build of num_tris triangles.
+__kernel void init_build_state(global uint* state, const uint num_tris)
+{
+    for (uint k = 0; k < STATE_COUNTS + COUNT_RING; ++k)
+        state[k] = 0u;
+    state[STATE_NEXT_NODE] = num_tris;
+    for (uint k = 0; k < 3; ++k) {
+        state[STATE_BOUNDS + k] = 0xffffffffu;     // min: atomic_min from the largest
+        state[STATE_BOUNDS + 3 + k] = 0u;          // max: atomic_max from the smallest
+    }
+    state[CLUSTERS_BEFORE(0)] = num_tris;
+}
+
+#endif

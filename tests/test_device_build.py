@@ -1,0 +1,235 @@
+"""The BVH built on the device (clrt.device.build): a valid tree, conservative
+volumes, no detail loss, and a SAH cost near the host SAH builder's.
+
+The rows are walked on the host independently of the kernels: depth-first
+with the root at 0, every slot in exactly one leaf, leaves within leaf_size,
+the depth the device reports; every child volume holds every corner under it
+(float64), and is bit for bit what clrt.accel.volumes.fit makes of the exact
+box; the exact boxes are the corners' true bounds.  Queries and images through
+``builder="device"`` equal brute force bit for bit, grazing rays included.
+"""
+
+import numpy as np
+import pytest
+
+import clrt
+from clrt import accel
+from clrt.accel.rows import child_refs as pair_child_refs
+from clrt.accel.volumes import fit
+from clrt.config import VOLUMES
+from clrt.device.build import build_on_device
+from clrt.device.context import create_context
+from clrt.errors import InputError
+from clrt.renderer import Renderer
+from clrt.scene.scene import Camera, scene_from_mesh
+
+from conftest import SHARED_MESHES, TEST_MESHES
+from test_accel import _hard_rays
+from test_bvh import _same_centre, _soup
+
+
+def _random_triangles(n=3000, seed=5) -> np.ndarray:
+    """Small random triangles scattered in a unit cube, some of them large."""
+    rng = np.random.default_rng(seed)
+    centre = rng.random((n, 1, 3))
+    size = np.where(rng.random((n, 1, 1)) < 0.05, 0.3, 0.02)
+    return (centre + size * rng.standard_normal((n, 3, 3))).astype(np.float32)
+
+
+def _flat() -> np.ndarray:
+    tri = _random_triangles(500, 2)
+    tri[:, :, 1] = 0.25                      # every corner in the plane y = 0.25
+    return tri
+
+
+def _degenerate_mix() -> np.ndarray:
+    """Zero-area triangles (points and needles) and exact duplicates."""
+    rng = np.random.default_rng(9)
+    points = np.repeat(rng.random((50, 1, 3)), 3, axis=1)
+    needles = rng.random((50, 1, 3)) + rng.random((50, 3, 1)) * np.array([1.0, 0.0, 0.0])
+    dup = np.repeat(rng.random((1, 3, 3)), 40, axis=0)
+    return np.concatenate([points, needles, dup]).astype(np.float32)
+
+
+CORNERS = {
+    **{name: (lambda make=make: (lambda m: m.vertices[m.faces].astype(np.float32))(make()))
+       for name, make in TEST_MESHES.items()},
+    "random": _random_triangles,
+    "soup": _soup,
+    "same_centre": _same_centre,
+    "flat": _flat,
+    "degenerate": _degenerate_mix,
+    "one point": lambda: np.full((30, 3, 3), 0.5, np.float32),
+    "F=1": lambda: np.array([[[0, 0, 0], [1, 0, 0], [0, 1, 0]]], np.float32),
+    "F=2": lambda: np.array([[[0, 0, 0], [1, 0, 0], [0, 1, 0]], [[0, 0, 1], [1, 0, 1], [0, 1, 1]]], np.float32),
+    "F=3": lambda: _random_triangles(3, 1),
+}
+
+
+@pytest.fixture(scope="module")
+def queue(device):
+    return create_context(device)
+
+
+def tree_ranges(rows: np.ndarray, n_tri: int, leaf_size: int):
+    """Walk the rows depth-first on the host.  Checks: rows come in preorder
+    (left subtree first, root at 0), leaves take the slots 0..F-1 in that order,
+    exactly once each, within leaf_size.  Returns the depth (nodes on the
+    longest root-to-leaf path) and the slot range (first, end) of every row's
+    two children, (R, 2, 2)."""
+    refs = pair_child_refs(rows)
+    R = len(rows)
+    ranges = np.zeros((R, 2, 2), np.int64)
+    if refs[0, 3] == -1:                               # the whole tree is one leaf
+        assert R == 1 and refs[0].tolist() == [0, n_tri, -1, -1] and n_tri <= leaf_size
+        ranges[0, 0] = (0, n_tri)
+        return 1, ranges
+    counts = refs[:, [1, 3]]
+    assert ((counts >= 0) & (counts <= leaf_size)).all(), "a leaf larger than leaf_size"
+    next_row, next_slot, depth = 0, 0, 0
+
+    def visit(row, level):                             # recursion depth = tree depth (small meshes)
+        nonlocal next_row, next_slot, depth
+        assert row == next_row, "rows are not in depth-first order with the root at 0"
+        next_row += 1
+        for side in (0, 1):
+            ref, count = refs[row, 2 * side], refs[row, 2 * side + 1]
+            first = next_slot
+            if count > 0:
+                assert ref == next_slot, "leaves do not take the slots in depth-first order"
+                next_slot += count
+                depth = max(depth, level + 1)
+            else:
+                visit(ref, level + 1)
+            ranges[row, side] = (first, next_slot)
+
+    visit(0, 1)
+    assert next_row == R and next_slot == n_tri, "not every row / slot is in the tree exactly once"
+    return depth, ranges
+
+
+def check_volumes(rows, exact, ranges, corners_in_slots, volume):
+    """Exact boxes are the corners' bounds; volumes are volumes.fit of them, bit
+    for bit, and hold every corner (float64)."""
+    refs = pair_child_refs(rows)
+    assert np.array_equal(refs, pair_child_refs(exact))
+    for side, name in enumerate(("left", "right")):
+        present = refs[:, 2 * side + 1] >= 0
+        lo = exact[f"{name}_a"][present, :3]
+        hi = exact[f"{name}_b"][present, :3]
+        for (first, end), box_lo, box_hi in zip(ranges[present, side], lo, hi):
+            p = corners_in_slots[first:end].reshape(-1, 3)
+            assert np.array_equal(p.min(axis=0), box_lo) and np.array_equal(p.max(axis=0), box_hi)
+        a, b = fit(volume, np.stack([lo, hi], axis=1))
+        if volume == "sphere":                       # BvhPairNode: the radius in b.x
+            b[:, 0], a[:, 3] = a[:, 3], 0.0
+        got_a, got_b = rows[f"{name}_a"][present, :3], rows[f"{name}_b"][present, :3]
+        assert np.array_equal(got_a.view(np.int32), a[:, :3].view(np.int32)), (volume, name)
+        assert np.array_equal(got_b.view(np.int32), b[:, :3].view(np.int32)), (volume, name)
+        # Enclosure, checked directly in float64 for every corner under the child.
+        ga, gb = got_a.astype(np.float64), got_b.astype(np.float64)
+        for (first, end), va, vb in zip(ranges[present, side], ga, gb):
+            p = corners_in_slots[first:end].reshape(-1, 3).astype(np.float64)
+            if volume == "box":
+                assert ((p >= va) & (p <= vb)).all()
+            elif volume == "sphere":
+                assert (((p - va) ** 2).sum(axis=1) <= vb[0] ** 2).all()
+            else:
+                assert ((((p - va) * vb) ** 2).sum(axis=1) <= 1.0).all()
+
+
+@pytest.mark.parametrize("leaf_size", (1, 4))
+@pytest.mark.parametrize("volume", VOLUMES)
+@pytest.mark.parametrize("name", sorted(CORNERS))
+def test_tree_is_valid_and_volumes_conservative(name, volume, leaf_size, queue):
+    corners = CORNERS[name]()
+    F = len(corners)
+    bvh = build_on_device(*queue, corners, volume=volume, leaf_size=leaf_size, keep_boxes=True)
+    rows, prim_ids = bvh.read_back()
+    assert np.array_equal(np.sort(prim_ids), np.arange(F)), "prim_ids is not a permutation"
+    tris = bvh.read_triangles()
+    slotted = np.stack([tris[k][:, :3] for k in ("v0", "v1", "v2")], axis=1)
+    assert np.array_equal(slotted, corners[prim_ids]), "triangles are not in slot order"
+    assert all((tris[k][:, 3] == 0).all() for k in ("v0", "v1", "v2"))
+    assert bvh.num_rows == len(rows)
+    if leaf_size == 1 and F > 1:
+        assert len(rows) == F - 1
+    depth, ranges = tree_ranges(rows, F, leaf_size)
+    assert bvh.depth == depth
+    check_volumes(rows, bvh.read_exact_rows(), ranges, slotted, volume)
+    stats = bvh.stats()
+    assert stats["depth"] == depth and stats["max_leaf_size"] <= leaf_size
+    assert np.isfinite(stats["sah_cost"])
+
+
+def test_builds_are_deterministic(queue):
+    corners = _random_triangles()
+    first = build_on_device(*queue, corners, leaf_size=4).read_back()
+    again = build_on_device(*queue, corners, leaf_size=4).read_back()
+    assert all(np.array_equal(a.view(np.uint8), b.view(np.uint8)) for a, b in zip(first, again))
+
+
+def test_bad_input_raises_input_error(queue):
+    ok = _random_triangles(10)
+    for bad in (np.zeros((0, 3, 3)), np.zeros((4, 3)), np.array([[[0, 0, np.nan]] * 3]), "triangles"):
+        with pytest.raises(InputError):
+            build_on_device(*queue, bad)
+    for kwargs in ({"volume": "cone"}, {"leaf_size": 0}, {"leaf_size": 256}, {"leaf_size": 2.5}):
+        with pytest.raises(InputError):
+            build_on_device(*queue, ok, **kwargs)
+
+
+@pytest.mark.parametrize("name", sorted(TEST_MESHES))
+def test_queries_and_renders_equal_brute_force(name, device):
+    mesh = TEST_MESHES[name]()
+    o, d = _hard_rays(mesh, np.random.default_rng(7))
+    base = clrt.trace(mesh, o, d, accel="none", device=device)
+    base_blocked = clrt.occluded(mesh, o, d, tmax=1e30, accel="none", device=device)
+    scene = scene_from_mesh(mesh)
+    camera = Camera.framing(scene.bounds, 40, 30)
+    reference = Renderer(scene, device, accel="none").render(camera, hits=True)
+    for volume in VOLUMES:
+        for leaf in (1, 4):
+            label = f"{volume}/leaf {leaf}"
+            accel = clrt.Accel(mesh, volume, "device", leaf, device=device)
+            hits = accel.trace(o, d)
+            for field in ("t", "prim", "u", "v"):
+                assert np.array_equal(getattr(hits, field), getattr(base, field)), (label, field)
+            assert np.array_equal(accel.occluded(o, d, tmax=1e30), base_blocked), label
+            frame = Renderer(scene, device, volume, "device", leaf).render(camera, hits=True)
+            assert np.array_equal(frame.prim, reference.prim), label
+            assert np.array_equal(frame.t, reference.t), label
+            assert np.array_equal(frame.image, reference.image), label
+
+
+def _sah_meshes():
+    names = ["icosphere", "torus", "heightfield", "box", "random"]
+    if SHARED_MESHES.is_dir():
+        names.append("camel")
+    return names
+
+
+@pytest.mark.parametrize("name", _sah_meshes())
+def test_sah_cost_near_the_host_sah_builder(name, queue):
+    if name == "camel":
+        mesh = clrt.load_mesh(SHARED_MESHES / "camel.off")
+        corners = mesh.vertices[mesh.faces].astype(np.float32)
+    else:
+        corners = CORNERS[name]()
+    for leaf_size in (1, 4):
+        device_cost = build_on_device(*queue, corners, leaf_size=leaf_size, keep_boxes=True).stats()["sah_cost"]
+        host_cost = accel.build(corners, "box", "sah", leaf_size).stats()["sah_cost"]
+        print(f"{name} leaf {leaf_size}: device / host SAH cost = {device_cost / host_cost:.3f}")
+        assert device_cost <= 1.15 * host_cost, (name, leaf_size, device_cost / host_cost)
+
+
+def test_info_mesh_with_the_device_builder(tmp_path, device, capsys):
+    from clrt.cli import main
+    mesh = TEST_MESHES["icosphere"]()
+    path = tmp_path / "sphere.obj"
+    path.write_text("".join(f"v {x} {y} {z}\n" for x, y, z in mesh.vertices)
+                    + "".join(f"f {a + 1} {b + 1} {c + 1}\n" for a, b, c in mesh.faces))
+    args = ["info", str(path), "--builder", "device"] + (["--device", device] if device else [])
+    assert main(args) == 0
+    out = capsys.readouterr().out
+    assert "builder device" in out and "sah_cost" in out
