@@ -35,8 +35,8 @@ from pathlib import Path
 import numpy as np
 import pyopencl as cl
 
-from clrt.bench.common import exit_code
-from clrt.bench.scale import _count, instanced
+from clrt.bench.common import exit_code, parse_count
+from clrt.bench.scale import instanced
 from clrt.bench.speed import CASES, time_launches
 from clrt.config import BUILDERS
 
@@ -146,7 +146,7 @@ def main(argv=None) -> int:
     p.add_argument("--mesh-dir", type=Path, default=default_dir, help=f"folder of the meshes (default {default_dir})")
     p.add_argument("--meshes", type=lambda s: [x for x in s.split(",") if x], default=sorted(CASES),
                    help=f"comma-separated, of {', '.join(sorted(CASES))} (default all; '' for none)")
-    p.add_argument("--triangles", type=lambda s: [_count(x) for x in s.split(",")], default=[],
+    p.add_argument("--triangles", type=lambda s: [parse_count(x) for x in s.split(",")], default=[],
                    help="also grids of bunny copies of about these many triangles, e.g. 1M,10M")
     p.add_argument("--builders", type=lambda s: s.split(","), default=list(BUILDERS),
                    help="comma-separated, of paper, sah, device (default all)")

@@ -17,6 +17,19 @@ def parse_size(text: str) -> tuple[int, int]:
         raise argparse.ArgumentTypeError(f"expected WxH, got {text!r}") from None
 
 
+def parse_count(text: str) -> int:
+    """argparse type for a positive count such as 500K, 10M or 1G."""
+    text = text.strip().upper()
+    scale = {"K": 10**3, "M": 10**6, "G": 10**9}.get(text[-1:], 1)
+    try:
+        value = int(float(text.rstrip("KMG")) * scale)
+    except ValueError:
+        value = 0
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"expected a count such as 500K or 10M, got {text!r}")
+    return value
+
+
 def exit_code(run, *args, **kwargs) -> int:
     """Call ``run``; a ClrtError becomes one line on stderr and its exit code."""
     try:

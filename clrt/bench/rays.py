@@ -32,7 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from clrt.config import ACCELS, BUILDERS
-from clrt.bench.common import exit_code
+from clrt.bench.common import exit_code, parse_count
 
 QUERIES = ("first", "any", "all")
 
@@ -211,15 +211,6 @@ def throughput(mesh_path, sizes, device=None, repeat: int = 5, seed: int = 0, ou
                   f"| {n / wall / 1e3:,.0f} | {hits} |", file=out, flush=True)
 
 
-def _count(text: str) -> int:
-    text = text.strip().upper()
-    scale = {"K": 10 ** 3, "M": 10 ** 6}.get(text[-1:], 1)
-    value = int(float(text[:-1] if scale > 1 else text) * scale)
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"expected a positive count such as 1M, got {text!r}")
-    return value
-
-
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(prog="python -m clrt.bench.rays", description=__doc__.split("\n")[0])
     p.add_argument("mesh", nargs="?", help="mesh file (default: a generated torus knot, 32,768 triangles)")
@@ -233,7 +224,7 @@ def main(argv=None) -> int:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--only", action="append", choices=("clrt", "trimesh", "embree"),
                    help="systems to run besides clrt (repeatable; default all)")
-    p.add_argument("--throughput", type=lambda t: [_count(x) for x in t.split(",")], metavar="1M,10M",
+    p.add_argument("--throughput", type=lambda t: [parse_count(x) for x in t.split(",")], metavar="1M,10M",
                    help="instead: wall and kernel time of each query from numpy or device arrays, "
                         "random rays of these counts")
     args = p.parse_args(argv)

@@ -32,17 +32,8 @@ import time
 import numpy as np
 
 from clrt.config import ACCELS, BUILDERS
-from clrt.bench.common import parse_size
+from clrt.bench.common import parse_count, parse_size
 from clrt.errors import ClrtError
-
-
-def _count(text: str) -> int:
-    text = text.strip().upper()
-    scale = {"K": 10**3, "M": 10**6, "G": 10**9}.get(text[-1:], 1)
-    try:
-        return int(float(text.rstrip("KMG")) * scale)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a count such as 500K or 10M, got {text!r}") from None
 
 
 def _peak_rss_gib() -> float:
@@ -141,7 +132,7 @@ def run(counts, builders, sizes, accel="box", device=None, repeat=3, leaf_size=4
 
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(prog="python -m clrt.bench.scale", description=__doc__.split("\n\n")[0])
-    p.add_argument("--triangles", type=lambda s: [_count(x) for x in s.split(",")], default=[10**6, 2 * 10**6],
+    p.add_argument("--triangles", type=lambda s: [parse_count(x) for x in s.split(",")], default=[10**6, 2 * 10**6],
                    help="comma-separated mesh sizes, e.g. 1M,2M,10M (default 1M,2M)")
     p.add_argument("--builder", type=lambda s: s.split(","), default=["paper", "sah"],
                    help="comma-separated builders (default paper,sah)")
