@@ -21,6 +21,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import pyopencl as cl
 
+from clrt import checks, config
 from clrt.device import layouts
 from clrt.device.context import create_context, device_label
 from clrt.device.context import format_bytes as _size
@@ -28,7 +29,7 @@ from clrt.device.geometry import DeviceGeometry, order_triangles
 from clrt.device.program import build_program
 from clrt.errors import DeviceMemoryError, TooLargeError
 from clrt.scene.mesh import Mesh
-from clrt.scene.scene import Camera, Scene, check_int, scene_from_mesh
+from clrt.scene.scene import Camera, Scene, scene_from_mesh
 
 
 @dataclass
@@ -123,6 +124,9 @@ class Renderer:
 
     def __init__(self, scene: Scene, device: str | None = None, accel: str = "box",
                  builder: str = "sah", leaf_size: int = 4):
+        scene = as_scene(scene)   # or a mesh, a mesh or scene file: what clrt.render takes
+        device = checks.device(device)
+        accel, builder, leaf_size = checks.accel_options(accel, builder, leaf_size)
         self.timings: dict[str, float] = {}
         with _stage(self.timings, "initialisation"):
             self.scene = scene
@@ -225,11 +229,12 @@ class Renderer:
         ``hits=True`` also reads back the camera rays' hits (``Frame.prim`` and
         ``Frame.t``, of the first sample; otherwise None).
         """
+        if camera is not None and not isinstance(camera, Camera):
+            raise checks.fail("camera", "a clrt.Camera or None", camera)
         camera = camera or self.scene.camera or Camera.framing(self.arrays.bounds)
-        samples = self.scene.samples if samples is None else samples
-        max_depth = self.scene.max_depth if max_depth is None else max_depth
-        check_int("samples", samples, 1, 16)
-        check_int("max_depth", max_depth, 0, MAX_BOUNCES)
+        samples = checks.samples(self.scene.samples if samples is None else samples)
+        max_depth = checks.max_depth(self.scene.max_depth if max_depth is None else max_depth)
+        seed = checks.integer("seed", seed, 0, 2**32 - 1)
         w, h = camera.width, camera.height
         pixels = w * h
         host_bytes = pixels * ((12 if linear else 3) + (8 if hits else 0))
@@ -507,26 +512,42 @@ def _event_ms(event: cl.Event) -> float:
 
 
 def as_scene(source) -> Scene:
-    """A Scene from a Scene, or from anything :func:`clrt.trace.as_mesh` takes (a Mesh,
-    a file path, a trimesh object, (vertices, faces)) with the default framing and light."""
+    """A Scene from a Scene, a TOML scene file (``.toml``), or anything
+    :func:`~clrt.scene.scene.scene_from_mesh` takes (a Mesh, a mesh file path --
+    a glTF camera node becomes the scene's camera --, a trimesh object,
+    (vertices, faces)) with the default framing and light; InputError otherwise."""
     if isinstance(source, Scene):
         return source
-    from clrt.trace import as_mesh
-    return scene_from_mesh(as_mesh(source))
+    import os
+    if isinstance(source, (str, os.PathLike)) and os.fspath(source).lower().endswith(".toml"):
+        from clrt.scene.scene_file import load_scene
+        return load_scene(source)
+    return scene_from_mesh(source)
 
 
 def render(source, camera: Camera | None = None, *, width: int | None = None,
            height: int | None = None, device: str | None = None, linear: bool = False,
            accel: str = "box", builder: str = "sah", leaf_size: int = 4) -> np.ndarray:
     """Render ``source`` and return an (H, W, 3) image: uint8 sRGB, or float32 linear RGB
-    with ``linear=True``.  Without a camera the scene's own (or a framing of its
-    bounds) is used; ``width``/``height`` override the camera's resolution."""
+    with ``linear=True``.  ``source``: a Scene, a TOML scene file, a mesh file or
+    anything else :func:`as_scene` takes.  Without a camera the scene's own (or
+    a framing of its bounds) is used; ``width``/``height`` override the camera's
+    resolution.  Values are checked as the CLI checks them (clrt.checks)."""
+    if camera is not None and not isinstance(camera, Camera):
+        raise checks.fail("camera", "a clrt.Camera or None", camera)
+    if width is not None:
+        checks.integer("width", width, 1, config.MAX_IMAGE_SIDE)
+    if height is not None:
+        checks.integer("height", height, 1, config.MAX_IMAGE_SIDE)
+    device = checks.device(device)
+    checks.accel_options(accel, builder, leaf_size)
     scene = as_scene(source)
     if camera is None and (scene.camera is None or scene.camera_framed):
         base = scene.camera or Camera.framing(scene.bounds)
-        camera = Camera.framing(scene.bounds, width or base.width, height or base.height, base.fov, up=base.up)
+        camera = Camera.framing(scene.bounds, base.width if width is None else width,
+                                base.height if height is None else height, base.fov, up=base.up)
     camera = camera or scene.camera
     if width is not None or height is not None:
         camera = Camera(camera.eye, camera.target, camera.up, camera.fov,
-                        width or camera.width, height or camera.height)
+                        camera.width if width is None else width, camera.height if height is None else height)
     return Renderer(scene, device, accel, builder, leaf_size).render(camera, linear=linear).image

@@ -36,6 +36,7 @@ from typing import NamedTuple
 import numpy as np
 import pyopencl as cl
 
+from clrt import checks
 from clrt.device import layouts
 from clrt.device.context import create_context, device_label
 from clrt.device.geometry import DeviceGeometry, order_triangles
@@ -552,36 +553,51 @@ class Accel:
 
 # --------------------------------------------------------------------------- one-call forms
 
+def _accel_for(mesh, device, accel="box", builder="sah", leaf_size=4, **unknown) -> Accel:
+    """The Accel of a one-call form, with its arguments checked as the CLI checks them."""
+    if unknown:
+        raise InputError(f"unexpected argument {next(iter(unknown))!r} (accel options: accel, builder, leaf_size)")
+    device = checks.device(device)
+    accel, builder, leaf_size = checks.accel_options(accel, builder, leaf_size)
+    return Accel(mesh, accel, builder, leaf_size, device)
+
+
 def trace(mesh, origins, directions, accel: str = "box", builder: str = "sah", leaf_size: int = 4,
           device: str | None = None, tmin=0.0, tmax=np.inf, cull: str = "none") -> Hits:
     """Closest hits of a batch of rays (:meth:`Accel.trace`); build an :class:`Accel`
     once to query a mesh many times."""
-    return Accel(mesh, accel, builder, leaf_size, device).trace(origins, directions, tmin, tmax, cull=cull)
+    cull_code(cull)
+    return _accel_for(mesh, device, accel, builder, leaf_size).trace(origins, directions, tmin, tmax, cull=cull)
 
 
 def occluded(mesh, origins, directions, t_max=np.inf, accel: str = "box", builder: str = "sah",
-             leaf_size: int = 4, device: str | None = None, cull: str = "none") -> np.ndarray:
-    """(N,) bool: is each ray blocked before ``t_max``?"""
-    return Accel(mesh, accel, builder, leaf_size, device).occluded(origins, directions, t_max, cull=cull)
+             leaf_size: int = 4, device: str | None = None, cull: str = "none", tmin=0.0) -> np.ndarray:
+    """(N,) bool: is each ray blocked in (tmin, t_max]?"""
+    cull_code(cull)
+    return _accel_for(mesh, device, accel, builder, leaf_size).occluded(origins, directions, t_max, tmin,
+                                                                        cull=cull)
 
 
 def count_hits(mesh, origins, directions, tmin=0.0, tmax=np.inf, cull: str = "none",
                device: str | None = None, **accel_options) -> np.ndarray:
     """(N,) int32 hits along each ray (:meth:`Accel.count`)."""
-    return Accel(mesh, device=device, **accel_options).count(origins, directions, tmin, tmax, cull=cull)
+    cull_code(cull)
+    return _accel_for(mesh, device, **accel_options).count(origins, directions, tmin, tmax, cull=cull)
 
 
 def all_hits(mesh, origins, directions, tmin=0.0, tmax=np.inf, cull: str = "none",
              device: str | None = None, **accel_options) -> AllHits:
     """Every hit of every ray (:meth:`Accel.all_hits`)."""
-    return Accel(mesh, device=device, **accel_options).all_hits(origins, directions, tmin, tmax, cull=cull)
+    cull_code(cull)
+    return _accel_for(mesh, device, **accel_options).all_hits(origins, directions, tmin, tmax, cull=cull)
 
 
 def camera_images(mesh, camera=None, *, K=None, pose=None, width=None, height=None,
                   pixel_center: float = 0.0, cull: str = "none", device: str | None = None,
                   **accel_options) -> CameraImages:
     """Depth, normal, triangle and hit images (:meth:`Accel.camera_images`)."""
-    return Accel(mesh, device=device, **accel_options).camera_images(
+    cull_code(cull)
+    return _accel_for(mesh, device, **accel_options).camera_images(
         camera, K=K, pose=pose, width=width, height=height, pixel_center=pixel_center, cull=cull)
 
 
