@@ -542,6 +542,8 @@ def render(source, camera: Camera | None = None, *, width: int | None = None,
     device = checks.device(device)
     checks.accel_options(accel, builder, leaf_size)
     scene = as_scene(source)
+    # A mesh (not a Scene, not a scene file) gets the default light from the final camera, as in the CLI.
+    mesh_light = not isinstance(source, Scene) and not str(source).lower().endswith(".toml")
     if camera is None and (scene.camera is None or scene.camera_framed):
         base = scene.camera or Camera.framing(scene.bounds)
         camera = Camera.framing(scene.bounds, base.width if width is None else width,
@@ -550,4 +552,7 @@ def render(source, camera: Camera | None = None, *, width: int | None = None,
     if width is not None or height is not None:
         camera = Camera(camera.eye, camera.target, camera.up, camera.fov,
                         camera.width if width is None else width, camera.height if height is None else height)
+    if mesh_light:
+        from clrt.scene.scene import default_light
+        scene.lights = [default_light(scene.bounds, camera)]
     return Renderer(scene, device, accel, builder, leaf_size).render(camera, linear=linear).image
