@@ -178,3 +178,15 @@ def test_python_api_takes_what_the_cli_takes(tmp_path):
         clrt.render(MESH, camera=(0, 0, 5))
     with pytest.raises(clrt.MeshLoadError, match="is a scene file, not a mesh"):
         clrt.load_mesh(Path("assets/scenes/showcase.toml"))
+
+
+def test_python_api_renders_and_queries_like_the_cli(tmp_path, device):
+    """Renderer takes a mesh; occluded takes the documented tmin; the float32 limit is named right."""
+    frame = clrt.Renderer(MESH, device).render(clrt.Camera((0, 0, 5), (0, 0, 0), width=8, height=6))
+    assert frame.image.shape == (6, 8, 3)
+    origins, directions = [[0, 0, 5], [0, 0, 5]], [0, 0, -1]
+    blocked = clrt.occluded(MESH, origins, directions, t_max=10.0, tmin=[0.5, 6.5], device=device)
+    assert blocked.tolist() == [True, False]   # the sphere spans t = 4 .. 6 along these rays
+    (tmp_path / "far.obj").write_text("v 0 0 0\nv 1e38 1 0\nv 0 1 0\nf 1 2 3\n")
+    with pytest.raises(clrt.MeshLoadError, match=r"within \+-1e30 \(the device computes in float32\)"):
+        clrt.load_mesh(tmp_path / "far.obj")
