@@ -59,7 +59,8 @@ def test_material_options_change_the_pixels(source, tmp_path, device, capsys):
         changed = (np.abs(image - plain).max(axis=2) > 2).sum()
         assert changed > 8, f"{option} left the {source} scene as it was ({changed} pixels changed)"
     red = images["--color 1,0,0"]
-    assert (red[..., 1] <= plain[..., 1]).all() and (red[..., 0] - red[..., 1]).mean() > (plain[..., 0] - plain[..., 1]).mean()
+    redness = (red[..., 0] - red[..., 1]).mean(), (plain[..., 0] - plain[..., 1]).mean()
+    assert (red[..., 1] <= plain[..., 1]).all() and redness[0] > redness[1] + 10
 
 
 def test_override_materials_replaces_only_the_fields_given():
