@@ -13,6 +13,32 @@ The names below are imported on first use, so ``import clrt`` stays cheap: no
 OpenCL, trimesh or benchmark code is loaded until something needs it.
 """
 
+import os as _os
+import sys as _sys
+
+
+def _started_as_command() -> bool:
+    """Is this process the clrt command (the console script, or python -m clrt)?"""
+    argv = list(getattr(_sys, "orig_argv", ()))
+    by_module = "-m" in argv[:-1] and argv[argv.index("-m") + 1] == "clrt"
+    return by_module or _os.path.basename(_sys.argv[0] if _sys.argv else "") == "clrt"
+
+
+if _started_as_command():
+    # Ctrl-C during the imports below (about half a second) ends like a later one:
+    # one line and exit 130, not a traceback.  clrt.cli.main turns Ctrl-C back into
+    # KeyboardInterrupt first thing, and handles it there.
+    import signal as _signal
+
+    def _interrupted_while_starting(signum, frame):
+        _os.write(2, b"clrt: interrupted\n")
+        _os._exit(130)
+
+    try:
+        _signal.signal(_signal.SIGINT, _interrupted_while_starting)
+    except ValueError:   # not the main thread: leave signals alone
+        pass
+
 from importlib import import_module
 
 from clrt.errors import (ClrtError, DeviceError, DeviceMemoryError, InputError, KernelBuildError,
@@ -32,6 +58,7 @@ _LAZY = {
     "Mesh": "clrt.scene.mesh",
     "Camera": "clrt.scene.scene", "Light": "clrt.scene.scene", "Material": "clrt.scene.scene",
     "Scene": "clrt.scene.scene", "SceneObject": "clrt.scene.scene", "scene_from_mesh": "clrt.scene.scene",
+    "load_scene": "clrt.scene.scene_file",
 }
 
 __all__ = sorted(["ClrtError", "DeviceError", "DeviceMemoryError", "InputError", "KernelBuildError",

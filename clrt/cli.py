@@ -8,73 +8,130 @@ from __future__ import annotations
 
 import argparse
 import os
+import signal
 import sys
 from pathlib import Path
 
-import numpy as np
-
-from clrt.config import (ACCELS, BUILDERS, DEFAULT_ACCEL, DEFAULT_BUILDER, DEFAULT_FOV, DEFAULT_HEIGHT,
-                         DEFAULT_LEAF_SIZE, DEFAULT_WIDTH)
+from clrt import checks, config
 from clrt.errors import ClrtError, DeviceError, InputError, OutputError
-from clrt.output import check_replace, write_image
 
 DEFAULT_OUTPUT = "clrt-default.png"
+_ACCEL_WORDS = {"box": "boxes", "sphere": "spheres", "ellipse": "ellipsoids"}
 
 
 class _Parser(argparse.ArgumentParser):
     """argparse, but a usage error is one line and exit code 2."""
 
     def error(self, message):
-        raise InputError(f"{self.prog}: {message} (see --help)")
+        raise InputError(f"{message} (see {self.prog} --help)")
 
 
-def _vector(text: str) -> tuple:
-    try:
-        values = tuple(float(x) for x in text.split(","))
-    except ValueError:
-        values = ()
-    if len(values) != 3 or not all(np.isfinite(values)):
-        raise argparse.ArgumentTypeError(f"expected three numbers x,y,z, got {text!r}")
-    return values
+# Option types.  Each parses the text and checks the value with clrt.checks under
+# the option's name, so the CLI says what the Python API and scene files say:
+# "--width must be an integer in 1..65536, got 0".
+
+def _number_text(text: str):
+    """'3' -> 3, '2.5' -> 2.5, anything else stays text (the check then names it)."""
+    for kind in (int, float):
+        try:
+            return kind(text)
+        except ValueError:
+            pass
+    return text
+
+
+def _vector_text(text: str):
+    values = [_number_text(x.strip()) for x in text.split(",")]
+    return tuple(values) if all(checks.is_number(v) for v in values) else text
+
+
+def _typed(check, parse=_number_text):
+    """argparse type: ``check(parse(text))``; the check raises InputError itself."""
+    def convert(text: str):
+        return check(parse(text))
+    return convert
+
+
+def _integer(name: str, lo: int, hi: int | None = None):
+    return _typed(lambda v: checks.integer(name, v, lo, hi))
+
+
+def _number(name: str, **limits):
+    return _typed(lambda v: checks.number(name, v, **limits))
+
+
+def _vector(name: str, check=checks.position):
+    return _typed(lambda v: check(name, v), _vector_text)
+
+
+def _device(text: str) -> str:
+    return checks.device(text, "--device")
+
+
+_MATERIAL_OPTIONS = ("color", "ambient", "diffuse", "specular", "shininess", "crease")
 
 
 def _parser(bench: bool = False) -> argparse.ArgumentParser:
     """The CLI's parser; ``bench`` adds the real ``clrt bench`` options (the
     benchmark package is imported only for that command)."""
+    from clrt import __version__
     p = _Parser(prog="clrt", description="Ray trace triangle meshes with OpenCL.")
+    p.add_argument("--version", action="version", version=f"clrt {__version__}")
     sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
 
     r = sub.add_parser("render", help="render a mesh (or the built-in scene) to an image",
                        description="Render MESH (OBJ, PLY, OFF, STL, GLB/GLTF, 3DS), a TOML scene file "
                                    "(docs/scene-files.md) or, with no argument, the built-in scene. "
-                                   "Options override the scene file. Prints the output path.")
+                                   "Options override the scene: camera and render options replace the "
+                                   "scene's, material options replace that field of every object's "
+                                   "material. Prints the output path (absolute).")
     r.add_argument("mesh", nargs="?", help="mesh file or TOML scene file; omit for the built-in scene")
-    r.add_argument("-o", "--output", help=f"image to write (default: MESH name .png, or {DEFAULT_OUTPUT}); "
-                                          "an existing file is replaced only once the render succeeded, "
-                                          "and only if clrt wrote it (see --force)")
+    formats = ", ".join(config.IMAGE_FORMATS)
+    r.add_argument("-o", "--output", help=f"image to write ({formats}; default: MESH name .png, or "
+                                          f"{DEFAULT_OUTPUT}); an existing file is replaced only once the "
+                                          "render succeeded, and only if clrt wrote it (see --force)")
     r.add_argument("-f", "--force", action="store_true",
                    help="replace the output even if clrt did not write it (by default an existing "
-                        "file is replaced only if it is an image clrt wrote, such as the previous render)")
-    r.add_argument("--width", type=int, help="image width in pixels (default: the scene file's, else 640)")
-    r.add_argument("--height", type=int, help="image height in pixels (default: the scene file's, else 480)")
-    r.add_argument("--eye", type=_vector, help="camera position x,y,z (default: framed from the bounds)")
-    r.add_argument("--target", type=_vector, help="point looked at (default: centre of the bounds)")
-    r.add_argument("--up", type=_vector, help="up vector (default 0,1,0)")
-    r.add_argument("--fov", type=float, help="vertical field of view in degrees (default 45)")
-    r.add_argument("--light", type=_vector, action="append", metavar="X,Y,Z",
-                   help="point light position; repeat for more lights (default: one above the eye)")
-    r.add_argument("--color", type=_vector, help="material colour r,g,b, linear 0..1 (default .8,.8,.8)")
-    r.add_argument("--ambient", type=float, help="ambient coefficient (default 0.1)")
-    r.add_argument("--diffuse", type=float, help="diffuse coefficient (default 0.7)")
-    r.add_argument("--specular", type=float, help="specular coefficient (default 0.3)")
-    r.add_argument("--shininess", type=float, help="Phong exponent (default 32)")
+                        "file is replaced only if clrt wrote it, such as the previous render)")
+    side = f"1..{config.MAX_IMAGE_SIDE}"
+    r.add_argument("--width", type=_integer("--width", 1, config.MAX_IMAGE_SIDE),
+                   help=f"image width in pixels, {side} (default: the scene's, else {config.DEFAULT_WIDTH})")
+    r.add_argument("--height", type=_integer("--height", 1, config.MAX_IMAGE_SIDE),
+                   help=f"image height in pixels, {side} (default: the scene's, else {config.DEFAULT_HEIGHT})")
+    r.add_argument("--eye", type=_vector("--eye"), help="camera position x,y,z (default: the file's camera, "
+                                                       "else framed from the bounds)")
+    r.add_argument("--target", type=_vector("--target"), help="point looked at (default: centre of the bounds)")
+    r.add_argument("--up", type=_vector("--up"), help="up vector (default 0,1,0)")
+    r.add_argument("--fov", type=_typed(lambda v: checks.fov(v, "--fov")),
+                   help=f"vertical field of view in degrees, > 0 and < 180 (default {config.DEFAULT_FOV:g})")
+    r.add_argument("--light", type=_vector("--light"), action="append", metavar="X,Y,Z",
+                   help="point light position; repeat for more lights (default: the scene's, else one "
+                        "above the eye)")
+    r.add_argument("--color", type=_vector("--color", checks.color),
+                   help="material colour r,g,b, linear 0..1 (default .8,.8,.8); like every material "
+                        "option it replaces that field of every object's material")
+    r.add_argument("--ambient", type=_number("--ambient", ge=0),
+                   help=f"ambient coefficient (default {config.DEFAULT_AMBIENT:g})")
+    r.add_argument("--diffuse", type=_number("--diffuse", ge=0),
+                   help=f"diffuse coefficient (default {config.DEFAULT_DIFFUSE:g})")
+    r.add_argument("--specular", type=_number("--specular", ge=0),
+                   help=f"specular coefficient (default {config.DEFAULT_SPECULAR:g})")
+    r.add_argument("--shininess", type=_number("--shininess", ge=0),
+                   help=f"Phong exponent (default {config.DEFAULT_SHININESS:g})")
     r.add_argument("--flat", action="store_true", help="flat shading (no vertex-normal interpolation)")
-    r.add_argument("--background", type=_vector, help="background colour r,g,b, linear 0..1")
-    r.add_argument("--samples", type=int, help="anti-aliasing: N x N rays per pixel (default: the scene's; "
-                                               "1 for a mesh, 2 for the built-in scene)")
-    r.add_argument("--max-depth", type=int, help="reflection/refraction bounces (default: the scene's, 5)")
-    r.add_argument("--device", help="'gpu', 'cpu' or P:D platform/device indices (default: PYOPENCL_CTX, "
-                                    "else the first GPU, else the first CPU)")
+    r.add_argument("--crease", type=_typed(lambda v: checks.crease(v, "--crease")), metavar="DEG",
+                   help="smooth shading keeps edges whose faces meet at more than DEG degrees sharp "
+                        f"(0..180; default {config.DEFAULT_CREASE_ANGLE:g}; 180 smooths every edge)")
+    r.add_argument("--background", type=_vector("--background", checks.intensity),
+                   help="background colour r,g,b, linear, >= 0 (default: the scene's, else black)")
+    r.add_argument("--samples", type=_typed(lambda v: checks.samples(v, "--samples")),
+                   help=f"anti-aliasing: N x N rays per pixel, 1..{config.MAX_SAMPLES} (default: the "
+                        "scene's; 1 for a mesh, 2 for the built-in scene)")
+    r.add_argument("--max-depth", type=_typed(lambda v: checks.max_depth(v, "--max-depth")),
+                   help=f"reflection/refraction bounces, 0..{config.MAX_BOUNCES} (default: the scene's, "
+                        f"{config.DEFAULT_MAX_DEPTH})")
+    r.add_argument("--device", type=_device, help="'gpu', 'cpu' or P:D platform/device indices (default: "
+                                                  "PYOPENCL_CTX, else the first GPU, else the first CPU)")
     _accel_options(r)
     r.add_argument("--aov", type=_aov_list, metavar="NAMES",
                    help="also write per-pixel images, comma-separated: depth (along the view axis), "
@@ -85,9 +142,10 @@ def _parser(bench: bool = False) -> argparse.ArgumentParser:
 
     i = sub.add_parser("info", help="list OpenCL devices; with MESH, build statistics of its BVH",
                        description="Without MESH: OpenCL platforms and devices, '*' marking the one "
-                                   "clrt would use. With MESH: statistics of the acceleration build.")
+                                   "clrt would use. With MESH: statistics of the acceleration build "
+                                   "for the device clrt would use (or --device).")
     i.add_argument("mesh", nargs="?", help="mesh file to build a BVH for")
-    i.add_argument("--device", help="device to mark as selected (same forms as render --device)")
+    i.add_argument("--device", type=_device, help="device to use (same forms as render --device)")
     _accel_options(i)
 
     if bench:
@@ -101,63 +159,65 @@ def _parser(bench: bool = False) -> argparse.ArgumentParser:
 
 def _aov_list(text: str) -> tuple:
     from clrt.query.aov import parse_aovs
-    try:
-        return parse_aovs(text)
-    except InputError as exc:
-        raise argparse.ArgumentTypeError(str(exc)) from None
+    return parse_aovs(text)
 
 
 def _accel_options(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--accel", default=DEFAULT_ACCEL, choices=ACCELS,
-                   help=f"BVH bounding-volume shape, or none for brute force (default {DEFAULT_ACCEL})")
-    p.add_argument("--builder", default=DEFAULT_BUILDER, choices=BUILDERS,
-                   help=f"BVH builder: the paper's median split, binned SAH (default {DEFAULT_BUILDER}), "
-                        "or PLOC on the OpenCL device")
-    p.add_argument("--leaf-size", type=int, default=DEFAULT_LEAF_SIZE,
-                   help=f"most triangles per BVH leaf (default {DEFAULT_LEAF_SIZE})")
+    p.add_argument("--accel", default=config.DEFAULT_ACCEL, type=_typed(
+        lambda v: checks.choice("--accel", v, config.ACCELS), str),
+        help=f"BVH bounding-volume shape ({', '.join(config.VOLUMES)}), or none for brute force "
+             f"(default {config.DEFAULT_ACCEL})")
+    p.add_argument("--builder", default=config.DEFAULT_BUILDER, type=_typed(
+        lambda v: checks.choice("--builder", v, config.BUILDERS), str),
+        help=f"BVH builder: paper (the paper's median split), sah (binned SAH; default "
+             f"{config.DEFAULT_BUILDER}) or device (PLOC on the OpenCL device)")
+    p.add_argument("--leaf-size", default=config.DEFAULT_LEAF_SIZE,
+                   type=_integer("--leaf-size", 1, config.MAX_LEAF_SIZE),
+                   help=f"most triangles per BVH leaf, 1..{config.MAX_LEAF_SIZE} (default {config.DEFAULT_LEAF_SIZE})")
 
 
 def _output_path(args) -> Path:
-    if args.output:
+    """The image to write, checked before any work: a writable file of a format clrt writes."""
+    if args.output is not None:
+        if not args.output.strip():
+            raise OutputError("-o must name an image file, got ''")
         out = Path(args.output)
+        if out.is_dir():
+            raise OutputError(f"cannot write {args.output}: it is a folder (give a file name, e.g. "
+                              f"{out / 'image.png'})")
+        if args.output.endswith(("/", os.sep)):
+            raise OutputError(f"cannot write {args.output}: names a folder (ends with '/'), and there is "
+                              "no such folder")
     elif args.mesh:
         out = Path(Path(args.mesh).stem + ".png")
     else:
         out = Path(DEFAULT_OUTPUT)
-    from PIL import Image
-    if out.suffix.lower() not in Image.registered_extensions():
-        raise OutputError(f"cannot write {out}: unknown image type {out.suffix!r} (use .png)")
-    if Image.registered_extensions()[out.suffix.lower()] not in Image.SAVE:
-        raise OutputError(f"cannot write {out}: {out.suffix} images can be read but not written (use .png)")
+    if out.suffix.lower() not in config.IMAGE_FORMATS:
+        kind = f"unknown image type {out.suffix!r}" if out.suffix else "no image type suffix"
+        raise OutputError(f"cannot write {out}: {kind} (use one of {', '.join(config.IMAGE_FORMATS)})")
     if not out.parent.is_dir():
         raise OutputError(f"cannot write {out}: folder {out.parent} does not exist")
-    if out.is_dir():
-        raise OutputError(f"cannot write {out}: it is a folder")
     if not os.access(out.parent, os.W_OK):
         raise OutputError(f"cannot write {out}: no permission to create files in {out.parent}")
     return out
 
 
 def _render(args) -> int:
+    from clrt.output import check_replace, write_image
     from clrt.renderer import Renderer, check_host_memory
+    from clrt.scene.scene import as_scene
     from clrt.scene.default import default_scene
-    from clrt.scene.scene import Camera, Light, Material, default_light, scene_from_mesh
+    from clrt.scene.scene import Camera, Light, default_light
 
     out = _output_path(args)
-    if args.mesh and args.mesh.lower().endswith(".toml"):
-        from clrt.scene.scene_file import load_scene
-        scene = load_scene(args.mesh)
-    elif args.mesh:
-        from clrt.scene.load import load_mesh
-        base = Material()
-        overrides = {k: getattr(args, k) for k in ("ambient", "diffuse", "specular", "shininess")
-                     if getattr(args, k) is not None}
-        material = Material(color=args.color or base.color, smooth=not args.flat, **overrides)
-        scene = scene_from_mesh(load_mesh(args.mesh), material)
-        scene.lights = []   # default light placed below, from the final camera
-    else:
-        scene = default_scene()
-    if args.background:
+    scene = as_scene(args.mesh) if args.mesh else default_scene()
+    from_file = bool(args.mesh) and not scene.camera_framed   # a scene file's or a glTF camera
+    if not (args.mesh or "").lower().endswith(".toml") and args.mesh:
+        scene.lights = []   # a mesh: the default light is placed below, from the final camera
+    # Material options replace that field of every object's material (documented in README).
+    scene.override_materials(smooth=False if args.flat else None,
+                             **{k: getattr(args, k) for k in _MATERIAL_OPTIONS})
+    if args.background is not None:
         scene.background = args.background
     if args.samples is not None:
         scene.samples = args.samples
@@ -166,17 +226,19 @@ def _render(args) -> int:
 
     # Options override the scene's camera; what neither gives is framed from the bounds.
     bounds, base = scene.bounds, scene.camera
-    width = args.width if args.width is not None else (base.width if base else DEFAULT_WIDTH)
-    height = args.height if args.height is not None else (base.height if base else DEFAULT_HEIGHT)
-    fov = args.fov if args.fov is not None else (base.fov if base else DEFAULT_FOV)
-    up = args.up or (base.up if base else (0.0, 1.0, 0.0))
-    placed = base if base is not None and not scene.camera_framed else None   # by the user
+    width = args.width if args.width is not None else (base.width if base else config.DEFAULT_WIDTH)
+    height = args.height if args.height is not None else (base.height if base else config.DEFAULT_HEIGHT)
+    fov = args.fov if args.fov is not None else (base.fov if base else config.DEFAULT_FOV)
+    up = args.up or (base.up if base else config.DEFAULT_UP)
+    placed = base if base is not None and not scene.camera_framed else None   # by the user or the file
     if args.eye is None and args.target is None and placed is not None:
         eye, target = placed.eye, placed.target
     else:   # frame for the final size, fov and up
+        from_file = False
         framed = Camera.framing(bounds, width, height, fov, up=up)
         target = args.target or (placed.target if placed else framed.target)
-        eye = args.eye or (placed.eye if placed else tuple(np.add(target, np.subtract(framed.eye, framed.target))))
+        eye = args.eye or (placed.eye if placed else tuple(
+            t + e - f for t, e, f in zip(target, framed.eye, framed.target)))
     camera = Camera(eye, target, up, fov, width, height)
     if args.light:
         scene.lights = [Light(p) for p in args.light]
@@ -198,14 +260,15 @@ def _render(args) -> int:
         from clrt.query.aov import write_aovs
         aov_files = write_aovs(renderer, camera, args.aov, out, force=args.force)
     if not args.quiet:
-        accel = "brute force" if args.accel == "none" else f"{args.builder} BVH of {args.accel}es"
+        accel = "brute force" if args.accel == "none" else f"{args.builder} BVH of {_ACCEL_WORDS[args.accel]}"
+        view = f", camera from {args.mesh}" if from_file else ""
         print(f"{camera.width}x{camera.height} pixels, {frame.triangles:,} triangles, "
-              f"{len(scene.lights)} light(s), {accel}, device: {frame.device}")
+              f"{len(scene.lights)} light(s), {accel}{view}, device: {frame.device}")
         for stage, ms in frame.timings.items():
             print(f"  {stage:<20} {ms:10.2f} ms")
         if args.aov:
-            print("  AOVs: " + " ".join(str(p) for p in aov_files))
-    print(out.resolve() if not args.quiet else out)
+            print("  AOVs: " + " ".join(str(p.resolve()) for p in aov_files))
+    print(out.resolve())
     return 0
 
 
@@ -222,12 +285,15 @@ def _info(args) -> int:
 def _info_mesh(args) -> int:
     """Build statistics of the acceleration structure over MESH, and its size on the device."""
     from clrt.device.build import build_acceleration
+    from clrt.device.context import device_label, select_device
     from clrt.scene.arrays import triangle_corners
     from clrt.scene.load import load_mesh
 
     mesh = load_mesh(args.mesh)
+    device = select_device(args.device)   # as render would: a missing device is exit 3, not ignored
     built = build_acceleration(triangle_corners(mesh), args.accel, args.builder, args.leaf_size, args.device)
-    print(f"{args.mesh}: {len(mesh.faces):,} triangles, {len(mesh.vertices):,} vertices")
+    print(f"{args.mesh}: {len(mesh.faces):,} triangles, {len(mesh.vertices):,} vertices; "
+          f"device: {device_label(device)}")
     if not built.is_bvh:
         print(f"accel none: brute force, {built.device_bytes():,} bytes on the device")
         return 0
@@ -256,10 +322,16 @@ def _glue_vector_values(argv: list[str]) -> list[str]:
 
 
 def main(argv=None) -> int:
+    # Ctrl-C from here on is KeyboardInterrupt, caught below (the early handler
+    # installed by clrt/__init__.py covered the imports before this line).
+    signal.signal(signal.SIGINT, signal.default_int_handler)
     try:
         argv = list(sys.argv[1:] if argv is None else argv)
         bench = argv[:1] == ["bench"]
-        args = _parser(bench).parse_args(_glue_vector_values(argv))
+        try:
+            args = _parser(bench).parse_args(_glue_vector_values(argv))
+        except SystemExit as exc:   # --help, --version: argparse printed them
+            return exc.code if isinstance(exc.code, int) else 0
         if bench:
             from clrt.bench.paper import run_bench
             return run_bench(args)

@@ -48,6 +48,26 @@ MAX_IMAGE_SIDE = 65536
 DEFAULT_WIDTH = 640
 DEFAULT_HEIGHT = 480
 DEFAULT_FOV = 45.0
+#: Largest coordinate of a vertex, eye, target or light: the device computes in
+#: float32 (largest 3.4e38), and products of coordinates must stay finite there.
+MAX_COORDINATE = 1e30
+#: Smooth shading: faces meeting at an edge at more than this angle (degrees)
+#: keep the edge hard (a crease); flatter edges are smoothed over.  Blender's
+#: auto-smooth and trimesh use 30; 45 keeps octagonal tubes round too, while
+#: box edges (90) stay sharp.
+DEFAULT_CREASE_ANGLE = 45.0
+#: Default material, light and render values (docs/scene-files.md lists them).
+DEFAULT_COLOR = (0.8, 0.8, 0.8)
+DEFAULT_AMBIENT = 0.1
+DEFAULT_DIFFUSE = 0.7
+DEFAULT_SPECULAR = 0.3
+DEFAULT_SHININESS = 32.0
+DEFAULT_IOR = 1.5
+DEFAULT_BACKGROUND = (0.0, 0.0, 0.0)
+DEFAULT_AMBIENT_LIGHT = (1.0, 1.0, 1.0)
+DEFAULT_LIGHT_COLOR = (1.0, 1.0, 1.0)
+DEFAULT_UP = (0.0, 1.0, 0.0)
+DEFAULT_SAMPLES = 1
 
 #: Material flag bits (``Material.flags`` in layouts.py).
 MATERIAL_SMOOTH = 1
@@ -59,6 +79,16 @@ CULL_MODES = {"none": 0, "back": 1, "front": 2}
 #: What the query kernels check of every ray (rays.cl), in the order of their
 #: report slots: the kernels see BAD_ORIGIN = 0, BAD_DIRECTION = 1, ...
 RAY_CHECKS = ("origin", "direction", "tmin", "tmax")
+
+# --------------------------------------------------------------------------- devices and files
+
+#: What ``device=`` / ``--device`` takes besides "P:D" or "P" (platform and device indices).
+DEVICE_KINDS = ("gpu", "cpu")
+#: Image formats clrt writes (file extension -> PIL format).  clrt marks each file it
+#: writes -- inside the image where the format has room, else in a record beside
+#: it -- so that a re-run recognises its own outputs (clrt/output.py).
+IMAGE_FORMATS = {".png": "PNG", ".jpg": "JPEG", ".jpeg": "JPEG", ".tif": "TIFF", ".tiff": "TIFF",
+                 ".webp": "WEBP", ".gif": "GIF", ".bmp": "BMP", ".ppm": "PPM"}
 
 # --------------------------------------------------------------------------- device buffers
 

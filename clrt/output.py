@@ -1,14 +1,25 @@
 """Writing files safely: through a temporary file and a rename, and never over a
-file that clrt did not write unless asked to (``force``)."""
+file that clrt did not write unless asked to (``force``).
+
+One rule for every file clrt writes: an existing file is replaced without
+``force`` only if clrt can tell that it wrote it.  Images in formats with room
+for text carry clrt's mark inside (PNG and TIFF "Software", JPEG and GIF
+comment, WebP XMP); files without such room (.npy arrays, BMP, PPM) get a
+record beside them, the hidden file ``.NAME.clrt`` holding the SHA-256 of
+what clrt wrote -- so a re-run replaces its own outputs, and a file a user
+made or changed since is refused.
+"""
 
 from __future__ import annotations
 
+import hashlib
 import os
 import tempfile
 from pathlib import Path
 
 import numpy as np
 
+from clrt import config
 from clrt.errors import OutputError
 
 # Every image clrt writes carries this mark ("Software" in PNG and TIFF, a comment in
@@ -35,8 +46,50 @@ def _mark_options(fmt: str) -> dict:
     return {}
 
 
+MARKED_FORMATS = ("PNG", "TIFF", "JPEG", "GIF", "WEBP")   # _mark_options can mark these
+RECORD_PREFIX, RECORD_SUFFIX = ".", ".clrt"
+
+
+def record_path(path: Path) -> Path:
+    """The record beside a file clrt cannot mark: ``dir/.NAME.clrt``."""
+    path = Path(path)
+    return path.with_name(f"{RECORD_PREFIX}{path.name}{RECORD_SUFFIX}")
+
+
+def _sha256(path: Path) -> str:
+    digest = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()
+
+
+def _record_text(digest: str) -> str:
+    from clrt import __version__
+    return f"{SOFTWARE_MARK} {__version__} sha256 {digest}\n"
+
+
+def _matches_record(path: Path) -> bool:
+    """Is ``path`` exactly the file that clrt recorded writing there?"""
+    try:
+        words = record_path(path).read_text(encoding="ascii", errors="replace").split()
+        return (len(words) == 4 and words[0] == SOFTWARE_MARK and words[2] == "sha256"
+                and words[3] == _sha256(path))
+    except OSError:
+        return False
+
+
 def written_by_clrt(path: Path) -> bool:
-    """Does the image file at ``path`` carry clrt's mark?  Only its header is read."""
+    """Did clrt write the file at ``path``?  Images of MARKED_FORMATS: does the
+    file carry clrt's mark (only its header is read)?  Any other file: does its
+    record (:func:`record_path`) hold the file's SHA-256?"""
+    path = Path(path)
+    if config.IMAGE_FORMATS.get(path.suffix.lower()) not in MARKED_FORMATS:
+        return _matches_record(path)
+    return _has_mark(path)
+
+
+def _has_mark(path: Path) -> bool:
     import warnings
 
     from PIL import Image
@@ -70,8 +123,8 @@ def check_replace(path: Path, force: bool) -> None:
     if path.is_dir() or (path.exists() and not path.is_file()):
         raise OutputError(f"cannot write {path}: it is not a regular file")
     if not force and not written_by_clrt(path):
-        raise OutputError(f"{path} exists and was not written by clrt; "
-                          "pass --force (-f) to replace it, or choose another -o")
+        raise OutputError(f"{path} exists and was not written by clrt (or was changed since); "
+                          "pass --force (-f; force=True in Python) to replace it, or choose another -o")
 
 
 def _new_file_mode(path: Path) -> int:
@@ -92,12 +145,17 @@ def write_image(image: np.ndarray, path: Path, force: bool = False) -> None:
     from PIL import Image
     path = Path(path)
     check_replace(path, force)
-    fmt = Image.registered_extensions()[path.suffix.lower()]
-    _replace_atomically(path, lambda f: Image.fromarray(image).save(f, format=fmt, **_mark_options(fmt)))
+    fmt = config.IMAGE_FORMATS.get(path.suffix.lower())
+    if fmt is None:
+        raise OutputError(f"cannot write {path}: unknown image type {path.suffix!r} "
+                          f"(use one of {', '.join(config.IMAGE_FORMATS)})")
+    _replace_atomically(path, lambda f: Image.fromarray(image).save(f, format=fmt, **_mark_options(fmt)),
+                        record=fmt not in MARKED_FORMATS)
 
 
-def _replace_atomically(path: Path, write) -> None:
-    """Call ``write(file)`` on a temporary file beside ``path``, then rename it into place."""
+def _replace_atomically(path: Path, write, record: bool = False) -> None:
+    """Call ``write(file)`` on a temporary file beside ``path``, then rename it into
+    place; with ``record``, also (re)write the record of its SHA-256 beside it."""
     try:
         fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=path.suffix, dir=path.parent)
     except OSError as exc:
@@ -107,7 +165,10 @@ def _replace_atomically(path: Path, write) -> None:
         os.fchmod(fd, _new_file_mode(path))
         with os.fdopen(fd, "wb") as f:
             write(f)
+        digest = _sha256(Path(tmp)) if record else None
         os.replace(tmp, path)
+        if record:   # after the file: a crash in between leaves a stale record, which refuses (safe)
+            _write_record(path, digest)
     except BaseException as exc:
         Path(tmp).unlink(missing_ok=True)
         if isinstance(exc, (OSError, ValueError, KeyError)):
@@ -116,11 +177,23 @@ def _replace_atomically(path: Path, write) -> None:
         raise
 
 
-def write_array(values: np.ndarray, path: Path, marked_by: Path, force: bool = False) -> None:
-    """Write ``values`` as .npy.  A .npy file carries no mark, so an existing one is
-    replaced only if the image ``marked_by`` beside it was written by clrt, or
-    with ``force``."""
+def _write_record(path: Path, digest: str) -> None:
+    target = record_path(path)
+    fd, tmp = tempfile.mkstemp(prefix=f"{target.name}.", dir=path.parent)
+    try:
+        os.fchmod(fd, _new_file_mode(target))
+        with os.fdopen(fd, "w", encoding="ascii") as f:
+            f.write(_record_text(digest))
+        os.replace(tmp, target)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def write_array(values: np.ndarray, path: Path, marked_by: Path | None = None, force: bool = False) -> None:
+    """Write ``values`` as .npy, with its record beside it (a .npy file has no room
+    for a mark): an existing file is replaced only if it is what clrt wrote there,
+    or with ``force``.  (``marked_by`` is no longer used.)"""
     path = Path(path)
-    if os.path.lexists(path) and not force:
-        check_replace(path, force=written_by_clrt(Path(marked_by)))
-    _replace_atomically(path, lambda f: np.save(f, values))
+    check_replace(path, force)
+    _replace_atomically(path, lambda f: np.save(f, values), record=True)

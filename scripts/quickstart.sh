@@ -6,8 +6,12 @@
 # installed in editable mode, and -- only when no OpenCL device is found --
 # Debian's CPU driver, pocl-opencl-icd (PyPI's pocl-binary-distribution does
 # not work on these machines: "unknown target CPU 'generic'").
+# Paths given to `render` (the mesh, -o) are relative to the directory the
+# script is run from, as for clrt itself; set-up and `test` run in the repository.
 set -euo pipefail
-cd "$(dirname "$0")/.."
+caller=$PWD
+repo=$(cd "$(dirname "$0")/.." && pwd)
+cd "$repo"
 
 usage() { echo "usage: $0 render [clrt render options] | test [pytest options]" >&2; exit 2; }
 [ $# -ge 1 ] || usage
@@ -15,6 +19,10 @@ command=$1; shift
 case "$command" in render|test) ;; *) usage ;; esac
 
 venv=${CLRT_VENV:-.venv}
+case "$venv" in   # a CLRT_VENV given by the caller is relative to the caller's directory
+    /*) ;;
+    *) if [ -n "${CLRT_VENV:-}" ]; then venv="$caller/$venv"; else venv="$repo/$venv"; fi ;;
+esac
 if [ ! -x "$venv/bin/python" ]; then
     echo "quickstart: creating virtual environment $venv" >&2
     python3 -m venv "$venv"
@@ -42,6 +50,6 @@ if ! has_opencl_device; then
 fi
 
 case "$command" in
-    render) exec "$venv/bin/clrt" render "$@" ;;
+    render) cd "$caller" && exec "$venv/bin/clrt" render "$@" ;;
     test) exec "$venv/bin/python" -m pytest "$@" ;;
 esac

@@ -12,6 +12,7 @@ from clrt import config
 from clrt.cli import _parser
 from clrt.device.context import create_context
 from clrt.device.program import build_options, expand_source
+from clrt.errors import InputError
 
 
 def _kernel_files():
@@ -46,11 +47,20 @@ def test_the_kernels_see_the_table(device):
 
 def test_the_cli_offers_the_tables_choices():
     render = _parser()._subparsers._group_actions[0].choices["render"]
-    options = {a.dest: a for a in render._actions}
-    assert tuple(options["accel"].choices) == config.ACCELS and options["accel"].default == config.DEFAULT_ACCEL
-    assert tuple(options["builder"].choices) == config.BUILDERS
-    assert options["builder"].default == config.DEFAULT_BUILDER
-    assert options["leaf_size"].default == config.DEFAULT_LEAF_SIZE
+    for accel in config.ACCELS:
+        for builder in config.BUILDERS:
+            args = render.parse_args(["--accel", accel, "--builder", builder])
+            assert (args.accel, args.builder) == (accel, builder)
+    defaults = render.parse_args([])
+    assert (defaults.accel, defaults.builder, defaults.leaf_size) == (
+        config.DEFAULT_ACCEL, config.DEFAULT_BUILDER, config.DEFAULT_LEAF_SIZE)
+    for option, bad in (("--accel", "cube"), ("--builder", "lbvh")):
+        try:
+            render.parse_args([option, bad])
+        except InputError as exc:
+            assert bad in str(exc)
+        else:
+            raise AssertionError(f"{option} {bad} was accepted")
 
 
 def test_stack_sizes_are_shared_by_trees_of_similar_depth(device):

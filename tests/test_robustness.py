@@ -124,15 +124,15 @@ def test_missing_unreadable_and_folder_inputs(tmp_path, device, capsys, monkeypa
     (["--fov", "nan"], "fov"),
     (["--fov", "inf"], "fov"),
     (["--samples", "0"], "samples"),
-    (["--max-depth", "-1"], "max_depth"),
-    (["--leaf-size", "0"], "leaf size"),
+    (["--max-depth", "-1"], "--max-depth"),
+    (["--leaf-size", "0"], "--leaf-size"),
     (["--eye", "nan,0,0"], "--eye"),
     (["--eye", "1e39,0,0"], "eye"),
     (["--light", "0,inf,0"], "--light"),
     (["--target", "1,2"], "--target"),
     (["--up", "0,0,0"], "up"),
     (["--accel", "octree"], "--accel"),
-    (["-o", "out.psd"], "can be read but not written"),
+    (["-o", "out.psd"], "unknown image type '.psd'"),
     (["--width", "65536", "--height", "65536"], "host memory"),
 ])
 def test_bad_options(args, fragment, tmp_path, device, capsys, monkeypatch):

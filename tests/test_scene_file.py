@@ -145,17 +145,17 @@ def test_mesh_path_is_relative_to_scene_file(tmp_path, monkeypatch):
     (SPHERE + 'raduis = 2\n', "objects[0].raduis", "did you mean 'radius'?"),
     ('[camra]\nfov = 40\n' + SPHERE, "camra", "did you mean 'camera'?"),
     (SPHERE + 'size = [1, 1, 1]\n', "objects[0].size", "does not apply to type 'sphere'"),
-    (SPHERE + 'radius = "big"\n', "objects[0].radius", "expected a number > 0, got 'big'"),
-    (SPHERE + 'radius = -1\n', "objects[0].radius", "expected a number > 0"),
-    ('[[objects]]\ntype = "sphere"\nsubdivisions = 2.0\n', "objects[0].subdivisions", "expected an integer in 0..7"),
-    (SPHERE + 'translate = [1, 2]\n', "objects[0].translate", "expected 3 numbers"),
-    (SPHERE + 'rotate = [1, 2, "x"]\n', "objects[0].rotate", "expected 3 numbers"),
-    (SPHERE + 'scale = [1, 0, 1]\n', "objects[0].scale", "expected 3 numbers > 0"),
+    (SPHERE + 'radius = "big"\n', "objects[0].radius", "must be a number > 0, got 'big'"),
+    (SPHERE + 'radius = -1\n', "objects[0].radius", "must be a number > 0"),
+    ('[[objects]]\ntype = "sphere"\nsubdivisions = 2.0\n', "objects[0].subdivisions", "must be an integer in 0..7"),
+    (SPHERE + 'translate = [1, 2]\n', "objects[0].translate", "must be 3 numbers"),
+    (SPHERE + 'rotate = [1, 2, "x"]\n', "objects[0].rotate", "must be 3 numbers"),
+    (SPHERE + 'scale = [1, 0, 1]\n', "objects[0].scale", "must be 3 numbers > 0"),
     (SPHERE + 'material = { color = [2, 0, 0] }\n', "objects[0].material.color",
-     "expected 3 numbers >= 0 and <= 1"),
-    (SPHERE + 'material = { smooth = 1 }\n', "objects[0].material.smooth", "expected true or false"),
-    ('[materials.glass]\nior = 0.5\n' + SPHERE, "materials.glass.ior", "expected a number >= 1"),
-    ('[materials.glass]\ntransparency = 1.5\n' + SPHERE, "materials.glass.transparency", "<= 1"),
+     "must be 3 numbers in 0..1"),
+    (SPHERE + 'material = { smooth = 1 }\n', "objects[0].material.smooth", "must be true or false"),
+    ('[materials.glass]\nior = 0.5\n' + SPHERE, "materials.glass.ior", "must be a number >= 1"),
+    ('[materials.glass]\ntransparency = 1.5\n' + SPHERE, "materials.glass.transparency", "in 0..1"),
     ('[materials.glass]\n' + SPHERE + 'material = "glas"\n', "objects[0].material",
      "unknown material 'glas' (did you mean 'glass'?)"),
     (SPHERE + 'material = 3\n', "objects[0].material", "expected a material name or an inline table"),
@@ -163,17 +163,17 @@ def test_mesh_path_is_relative_to_scene_file(tmp_path, monkeypatch):
     ('[[objects]]\nradius = 1\n', "objects[0].type", "missing"),
     ('[[objects]]\ntype = "mesh"\n', "objects[0].path", "missing"),
     ('[[objects]]\ntype = "mesh"\npath = "nope.obj"\n', "objects[0].path", "mesh file not found: "),
-    (SPHERE + '[[lights]]\nposition = [1, 2]\n', "lights[0].position", "expected 3 numbers"),
+    (SPHERE + '[[lights]]\nposition = [1, 2]\n', "lights[0].position", "must be 3 numbers"),
     (SPHERE + '[[lights]]\ncolor = [1, 1, 1]\n', "lights[0].position", "missing"),
     (SPHERE + '[[lights]]\nposition = [0, 5, 0]\nintensity = -1\n', "lights[0].intensity", ">= 0"),
-    ('[render]\nsamples = 17\n' + SPHERE, "render.samples", "expected an integer in 1..16, got 17"),
-    ('[render]\nsamples = 0\n' + SPHERE, "render.samples", "expected an integer in 1..16"),
-    ('[render]\nmax_depth = -1\n' + SPHERE, "render.max_depth", "expected an integer in 0..16"),
-    ('[render]\nbackground = [0, 0, 0, 1]\n' + SPHERE, "render.background", "expected 3 numbers"),
-    ('[camera]\nfov = 180\n' + SPHERE, "camera.fov", "expected a number > 0 and < 180"),
+    ('[render]\nsamples = 17\n' + SPHERE, "render.samples", "must be an integer in 1..16, got 17"),
+    ('[render]\nsamples = 0\n' + SPHERE, "render.samples", "must be an integer in 1..16"),
+    ('[render]\nmax_depth = -1\n' + SPHERE, "render.max_depth", "must be an integer in 0..16"),
+    ('[render]\nbackground = [0, 0, 0, 1]\n' + SPHERE, "render.background", "must be 3 numbers"),
+    ('[camera]\nfov = 180\n' + SPHERE, "camera.fov", "must be a number > 0 and < 180"),
     ('[camera]\neye = [0, 0, 5]\n' + SPHERE, "camera.target", "give both eye and target"),
     ('[camera]\neye = [0, 0, 5]\ntarget = [0, 0, 5]\n' + SPHERE, "camera", "eye and target must differ"),
-    ('[camera]\nwidth = true\n' + SPHERE, "camera.width", "expected an integer in 1..65536"),
+    ('[camera]\nwidth = true\n' + SPHERE, "camera.width", "must be an integer in 1..65536"),
     ('[render]\n', "objects", "no objects"),
     ('objects = []\n', "objects", "no objects"),
     ('objects = 3\n', "objects", "expected an array of tables"),
@@ -184,7 +184,8 @@ def test_validation_errors(tmp_path, text, where, expected):
     with pytest.raises(InputError) as info:
         load_scene(path)
     message = str(info.value)
-    assert message.startswith(f"{path}: {where}: "), message
+    # Structural problems read "FILE: KEY: ...", values "FILE: KEY must be ..." (clrt.checks).
+    assert message.startswith((f"{path}: {where}: ", f"{path}: {where} must be ")), message
     assert expected in message, message
     assert "\n" not in message
 

@@ -9,12 +9,16 @@ from clrt.errors import ClrtError
 
 
 def parse_size(text: str) -> tuple[int, int]:
-    """argparse type for an image size 'WxH'."""
+    """argparse type for an image size 'WxH', each side in 1..MAX_IMAGE_SIDE (checked
+    while parsing, so that a bad size fails before any output folder is made)."""
+    from clrt.config import MAX_IMAGE_SIDE
     try:
         w, h = (int(x) for x in text.lower().split("x"))
-        return w, h
     except ValueError:
-        raise argparse.ArgumentTypeError(f"expected WxH, got {text!r}") from None
+        w = h = 0
+    if not (1 <= w <= MAX_IMAGE_SIDE and 1 <= h <= MAX_IMAGE_SIDE):
+        raise argparse.ArgumentTypeError(f"expected WxH with each side in 1..{MAX_IMAGE_SIDE}, got {text!r}")
+    return w, h
 
 
 def parse_count(text: str) -> int:

@@ -481,8 +481,12 @@ class MeshSuite:
             return self.entries[name]
         except KeyError:
             why = [n for n in self.notes if n.startswith(f"{name}:")]
-            raise InputError(f"mesh {name!r} is not available: " + (why[0] if why else
-                             f"choose from {', '.join(self.entries)}")) from None
+            message = f"mesh {name!r} is not available: " + (why[0] if why else
+                                                               f"choose from {', '.join(self.entries)}")
+            if self.mesh_dir is None or not self.mesh_dir.is_dir():
+                where = f"{self.mesh_dir} does not exist" if self.mesh_dir else "no mesh folder"
+                message += f" ({where}; scanned meshes are read from --mesh-dir DIR)"
+            raise InputError(message) from None
 
     def make(self, name: str) -> Mesh:
         return self[name].make()

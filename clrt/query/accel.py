@@ -34,6 +34,7 @@ from __future__ import annotations
 import numpy as np
 import pyopencl as cl
 
+from clrt import checks
 from clrt.config import DEFAULT_ACCEL, DEFAULT_BUILDER, DEFAULT_LEAF_SIZE
 from clrt.device.args import camera_args
 from clrt.device.build import build_acceleration
@@ -94,6 +95,8 @@ class Accel:
                  leaf_size: int = DEFAULT_LEAF_SIZE, device: str | None = None, chunk_rays: int | None = None,
                  *, max_buffer_bytes: int | None = None):
         _check_chunk_rays(chunk_rays)
+        device = checks.device(device)
+        accel, builder, leaf_size = checks.accel_options(accel, builder, leaf_size)
         self.mesh = as_mesh(mesh)
         corners = triangle_corners(self.mesh)
         built = build_acceleration(corners, accel, builder, leaf_size, device)

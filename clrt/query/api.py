@@ -12,10 +12,13 @@ import numpy as np
 
 from clrt.config import DEFAULT_ACCEL, DEFAULT_BUILDER, DEFAULT_LEAF_SIZE
 from clrt.query.accel import Accel
+from clrt.query.rays import cull_code
 from clrt.query.results import AllHits, CameraImages, Hits
 
 
-def _accel(mesh, accel, builder, leaf_size, device, chunk_rays) -> Accel:
+def _accel(mesh, accel, builder, leaf_size, device, chunk_rays, cull) -> Accel:
+    """The Accel of a one-call form; ``cull`` is checked before the (long) build."""
+    cull_code(cull)
     return Accel(mesh, accel, builder, leaf_size, device, chunk_rays)
 
 
@@ -23,7 +26,7 @@ def trace(mesh, origins, directions, *, tmin=0.0, tmax=np.inf, cull: str = "none
           accel: str = DEFAULT_ACCEL, builder: str = DEFAULT_BUILDER, leaf_size: int = DEFAULT_LEAF_SIZE,
           device: str | None = None, chunk_rays: int | None = None) -> Hits:
     """Closest hits of a batch of rays (:meth:`Accel.trace`)."""
-    return _accel(mesh, accel, builder, leaf_size, device, chunk_rays).trace(
+    return _accel(mesh, accel, builder, leaf_size, device, chunk_rays, cull).trace(
         origins, directions, tmin=tmin, tmax=tmax, cull=cull)
 
 
@@ -31,7 +34,7 @@ def any_hit(mesh, origins, directions, *, tmin=0.0, tmax=np.inf, cull: str = "no
             accel: str = DEFAULT_ACCEL, builder: str = DEFAULT_BUILDER, leaf_size: int = DEFAULT_LEAF_SIZE,
             device: str | None = None, chunk_rays: int | None = None) -> np.ndarray:
     """(N,) bool: is each ray blocked in (tmin, tmax]? (:meth:`Accel.any_hit`)"""
-    return _accel(mesh, accel, builder, leaf_size, device, chunk_rays).any_hit(
+    return _accel(mesh, accel, builder, leaf_size, device, chunk_rays, cull).any_hit(
         origins, directions, tmin=tmin, tmax=tmax, cull=cull)
 
 
@@ -42,7 +45,7 @@ def count_hits(mesh, origins, directions, *, tmin=0.0, tmax=np.inf, cull: str = 
                accel: str = DEFAULT_ACCEL, builder: str = DEFAULT_BUILDER, leaf_size: int = DEFAULT_LEAF_SIZE,
                device: str | None = None, chunk_rays: int | None = None) -> np.ndarray:
     """(N,) int32 hits along each ray (:meth:`Accel.count`)."""
-    return _accel(mesh, accel, builder, leaf_size, device, chunk_rays).count(
+    return _accel(mesh, accel, builder, leaf_size, device, chunk_rays, cull).count(
         origins, directions, tmin=tmin, tmax=tmax, cull=cull)
 
 
@@ -50,7 +53,7 @@ def all_hits(mesh, origins, directions, *, tmin=0.0, tmax=np.inf, cull: str = "n
              accel: str = DEFAULT_ACCEL, builder: str = DEFAULT_BUILDER, leaf_size: int = DEFAULT_LEAF_SIZE,
              device: str | None = None, chunk_rays: int | None = None) -> AllHits:
     """Every hit of every ray (:meth:`Accel.all_hits`)."""
-    return _accel(mesh, accel, builder, leaf_size, device, chunk_rays).all_hits(
+    return _accel(mesh, accel, builder, leaf_size, device, chunk_rays, cull).all_hits(
         origins, directions, tmin=tmin, tmax=tmax, cull=cull)
 
 
@@ -59,5 +62,5 @@ def camera_images(mesh, camera=None, *, K=None, pose=None, width=None, height=No
                   accel: str = DEFAULT_ACCEL, builder: str = DEFAULT_BUILDER, leaf_size: int = DEFAULT_LEAF_SIZE,
                   device: str | None = None, chunk_rays: int | None = None) -> CameraImages:
     """Depth, normal, triangle and hit images (:meth:`Accel.camera_images`)."""
-    return _accel(mesh, accel, builder, leaf_size, device, chunk_rays).camera_images(
+    return _accel(mesh, accel, builder, leaf_size, device, chunk_rays, cull).camera_images(
         camera, K=K, pose=pose, width=width, height=height, pixel_center=pixel_center, cull=cull)

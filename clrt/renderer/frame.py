@@ -21,7 +21,8 @@ from dataclasses import dataclass, field
 import numpy as np
 import pyopencl as cl
 
-from clrt.config import DEFAULT_ACCEL, DEFAULT_BUILDER, DEFAULT_LEAF_SIZE, MAX_BOUNCES, MAX_SAMPLES
+from clrt import checks, config
+from clrt.config import DEFAULT_ACCEL, DEFAULT_BUILDER, DEFAULT_LEAF_SIZE
 from clrt.device.args import camera_args, vec4
 from clrt.device.build import build_acceleration
 from clrt.device.context import create_context, device_label
@@ -33,7 +34,7 @@ from clrt.layouts import HIT, RAY
 from clrt.renderer.pool import PinnedImagePool
 from clrt.renderer.tiles import TileLimits, error_name, is_out_of_memory, run_tiles
 from clrt.scene.arrays import flatten_scene
-from clrt.scene.scene import Camera, Scene, as_scene, check_int, ray_epsilon
+from clrt.scene.scene import Camera, Scene, as_scene, default_light, ray_epsilon
 
 
 @dataclass
@@ -64,10 +65,12 @@ class Renderer:
     def __init__(self, scene: Scene, device: str | None = None, accel: str = DEFAULT_ACCEL,
                  builder: str = DEFAULT_BUILDER, leaf_size: int = DEFAULT_LEAF_SIZE, *,
                  limits: TileLimits | None = None, max_buffer_bytes: int | None = None):
+        device = checks.device(device)
+        accel, builder, leaf_size = checks.accel_options(accel, builder, leaf_size)
         self.limits = limits or TileLimits()
         self.timings: dict[str, float] = {}
         with _stage(self.timings, "initialisation"):
-            self.scene = as_scene(scene)
+            self.scene = as_scene(scene)   # or a mesh, a mesh or scene file: what clrt.render takes
             self.arrays = flatten_scene(self.scene)
         with _stage(self.timings, "acceleration build"):
             self.acceleration = build_acceleration(self.arrays.corners, accel, builder, leaf_size, device)
@@ -129,11 +132,12 @@ class Renderer:
 
     def _job(self, camera, linear, hits, samples, max_depth, seed) -> "_Job":
         """The arguments of one render call checked and defaulted, and its outputs."""
+        if camera is not None and not isinstance(camera, Camera):
+            raise checks.fail("camera", "a clrt.Camera or None", camera)
         camera = camera or self.scene.camera or Camera.framing(self.arrays.bounds)
-        samples = self.scene.samples if samples is None else samples
-        max_depth = self.scene.max_depth if max_depth is None else max_depth
-        check_int("samples", samples, 1, MAX_SAMPLES)
-        check_int("max_depth", max_depth, 0, MAX_BOUNCES)
+        samples = checks.samples(self.scene.samples if samples is None else samples)
+        max_depth = checks.max_depth(self.scene.max_depth if max_depth is None else max_depth)
+        seed = checks.integer("seed", seed, 0, 2**32 - 1)
         w, h = camera.width, camera.height
         host_bytes = w * h * ((12 if linear else 3) + (8 if hits else 0))
         if host_bytes > HOST_CHECK_BYTES:   # reading /proc/meminfo costs more than a small frame
@@ -349,14 +353,30 @@ def render(source, camera: Camera | None = None, *, width: int | None = None,
            accel: str = DEFAULT_ACCEL, builder: str = DEFAULT_BUILDER,
            leaf_size: int = DEFAULT_LEAF_SIZE) -> np.ndarray:
     """Render ``source`` and return an (H, W, 3) image: uint8 sRGB, or float32 linear RGB
-    with ``linear=True``.  Without a camera the scene's own (or a framing of its
-    bounds) is used; ``width``/``height`` override the camera's resolution."""
+    with ``linear=True``.  ``source``: a Scene, a TOML scene file, a mesh file or
+    anything else :func:`~clrt.scene.scene.as_scene` takes.  Without a camera the
+    scene's own (or a framing of its bounds) is used; ``width``/``height``
+    override the camera's resolution.  Values are checked as the CLI checks them
+    (clrt.checks)."""
+    if camera is not None and not isinstance(camera, Camera):
+        raise checks.fail("camera", "a clrt.Camera or None", camera)
+    if width is not None:
+        checks.integer("width", width, 1, config.MAX_IMAGE_SIDE)
+    if height is not None:
+        checks.integer("height", height, 1, config.MAX_IMAGE_SIDE)
+    device = checks.device(device)
+    checks.accel_options(accel, builder, leaf_size)
     scene = as_scene(source)
+    # A mesh (not a Scene, not a scene file) gets the default light from the final camera, as in the CLI.
+    mesh_light = not isinstance(source, Scene) and not str(source).lower().endswith(".toml")
     if camera is None and (scene.camera is None or scene.camera_framed):
         base = scene.camera or Camera.framing(scene.bounds)
-        camera = Camera.framing(scene.bounds, width or base.width, height or base.height, base.fov, up=base.up)
+        camera = Camera.framing(scene.bounds, base.width if width is None else width,
+                                base.height if height is None else height, base.fov, up=base.up)
     camera = camera or scene.camera
     if width is not None or height is not None:
         camera = Camera(camera.eye, camera.target, camera.up, camera.fov,
-                        width or camera.width, height or camera.height)
+                        camera.width if width is None else width, camera.height if height is None else height)
+    if mesh_light:
+        scene.lights = [default_light(scene.bounds, camera)]
     return Renderer(scene, device, accel, builder, leaf_size).render(camera, linear=linear).image

@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import io
 import logging
+import math
 import os
 import re
 import stat
@@ -473,6 +474,9 @@ def _read_bytes(path: str) -> bytes:
     if not stat.S_ISREG(info.st_mode):
         raise _fail(path, "not a regular file")
     ext = os.path.splitext(path)[1].lower()
+    if ext == ".toml":
+        raise _fail(path, "is a scene file, not a mesh (render it with clrt render or clrt.render, "
+                          "or read it with clrt.load_scene)")
     if ext not in SUPPORTED_EXTENSIONS:
         shown = f"'{ext}'" if ext else "no extension"
         raise _fail(path, f"unknown mesh format ({shown}); supported: "
@@ -528,6 +532,100 @@ def load_mesh(path) -> Mesh:
         raise
     except Exception as exc:  # a parser bug must still not leak a traceback to the user
         raise _fail(path, f"cannot parse {ext[1:].upper()} file ({_short(exc)})") from exc
+
+
+# ---------------------------------------------------------------------------
+# Camera nodes of glTF files
+
+
+def _gltf_json(data: bytes, ext: str) -> dict:
+    """The JSON document of a .gltf file or of a .glb file's first chunk."""
+    import json
+    import struct
+    if ext == ".glb":
+        if len(data) < 20 or data[:4] != b"glTF":
+            raise ValueError("not a GLB file")
+        length, kind = struct.unpack_from("<II", data, 12)
+        if kind != 0x4E4F534A:   # "JSON"
+            raise ValueError("GLB file without a JSON chunk first")
+        data = data[20:20 + length]
+    return json.loads(data.decode("utf-8"))
+
+
+def _node_matrix(node: dict) -> np.ndarray:
+    """A glTF node's local transform: ``matrix``, else T * R * S."""
+    if "matrix" in node:
+        return np.asarray(node["matrix"], dtype=np.float64).reshape(4, 4).T   # column-major
+    m = np.eye(4)
+    if "translation" in node:
+        m[:3, 3] = node["translation"]
+    if "rotation" in node:
+        x, y, z, w = (float(c) for c in node["rotation"])
+        m[:3, :3] = [[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+                     [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+                     [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]]
+    if "scale" in node:
+        m[:3, :3] = m[:3, :3] @ np.diag(np.asarray(node["scale"], dtype=np.float64))
+    return m
+
+
+def file_camera(path) -> dict | None:
+    """The first perspective camera node of a glTF/GLB file, in world space:
+    ``{"eye", "forward", "up", "fov" (vertical, degrees), "aspect" (width / height
+    or None), "name"}``; None for other formats, a file without one, or a camera
+    clrt cannot use (orthographic, degenerate).  glTF cameras look down their
+    node's -z axis with +y up; parent nodes' transforms apply."""
+    path = os.fspath(path)
+    ext = os.path.splitext(path)[1].lower()
+    if ext not in (".glb", ".gltf"):
+        return None
+    try:
+        doc = _gltf_json(_read_bytes(path), ext)
+        nodes, cameras = doc.get("nodes", []), doc.get("cameras", [])
+        scenes = doc.get("scenes", [])
+        roots = scenes[doc.get("scene", 0)].get("nodes", []) if scenes else range(len(nodes))
+        stack = [(int(i), np.eye(4)) for i in reversed(list(roots))]
+        seen = set()
+        while stack:   # depth first, in file order
+            index, parent = stack.pop()
+            if index in seen:   # a cycle would never end
+                continue
+            seen.add(index)
+            node = nodes[index]
+            world = parent @ _node_matrix(node)
+            if "camera" in node:
+                perspective = cameras[node["camera"]].get("perspective")
+                if perspective is not None:
+                    forward, up = -world[:3, 2], world[:3, 1]
+                    if np.linalg.norm(forward) > 0 and np.linalg.norm(np.cross(forward, up)) > 0:
+                        aspect = perspective.get("aspectRatio")
+                        return {"eye": world[:3, 3].copy(), "forward": forward / np.linalg.norm(forward),
+                                "up": up / np.linalg.norm(up), "fov": math.degrees(float(perspective["yfov"])),
+                                "aspect": float(aspect) if aspect else None,
+                                "name": cameras[node["camera"]].get("name", "")}
+            stack += [(int(c), world) for c in reversed(node.get("children", []))]
+    except MeshLoadError:
+        raise
+    except Exception as exc:  # noqa: BLE001 -- a malformed camera is reported, not a traceback
+        raise _fail(path, f"cannot read the file's camera ({_short(exc)})") from None
+    return None
+
+
+def as_mesh(source) -> Mesh:
+    """A Mesh from a Mesh, a mesh file path (str or os.PathLike), a trimesh.Trimesh
+    (anything with ``vertices`` and ``faces``) or ``(vertices, faces)``; InputError
+    for anything else, MeshLoadError for a bad file or bad arrays."""
+    from clrt.errors import InputError
+    if isinstance(source, Mesh):
+        return source
+    if isinstance(source, (str, os.PathLike)):
+        return load_mesh(source)
+    if hasattr(source, "vertices") and hasattr(source, "faces"):
+        return Mesh.from_arrays(source.vertices, source.faces)
+    if isinstance(source, tuple) and len(source) == 2:
+        return Mesh.from_arrays(*source)
+    raise InputError(f"expected a mesh (a clrt.Mesh, a file path, a trimesh object or (vertices, faces)), "
+                     f"got {type(source).__name__}")
 
 
 # trimesh logs warnings with tracebacks (e.g. for a corrupt ASCII STL) while we

@@ -3,86 +3,112 @@
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 
 import numpy as np
 
-from clrt.config import DEFAULT_FOV, DEFAULT_HEIGHT, DEFAULT_MAX_DEPTH, DEFAULT_WIDTH, MAX_IMAGE_SIDE
+from clrt import checks, config
 from clrt.errors import InputError
 from clrt.scene.mesh import Mesh
 
 
 def _vec3(value, what: str) -> np.ndarray:
-    try:
-        v = np.asarray(value, dtype=np.float64).reshape(-1)
-    except (TypeError, ValueError):
-        raise InputError(f"{what} must be three numbers, got {value!r}") from None
-    if v.shape != (3,) or not np.all(np.isfinite(v)):
-        raise InputError(f"{what} must be three finite numbers, got {value!r}")
-    if np.abs(v).max() > 1e30:   # the device computes in float32 (largest 3.4e38)
-        raise InputError(f"{what} must lie within +-1e30 (the device computes in float32), got {value!r}")
-    return v
+    return np.asarray(checks.position(what, value), dtype=np.float64)
+
+
+_MATERIAL_NUMBERS = {"ambient": {"ge": 0}, "diffuse": {"ge": 0}, "specular": {"ge": 0}, "shininess": {"ge": 0},
+                     "reflectivity": {"ge": 0, "le": 1}, "transparency": {"ge": 0, "le": 1}, "ior": {"ge": 1}}
 
 
 @dataclass(frozen=True)
 class Material:
     """Phong material with Whitted optics.
 
-    ``color`` is linear RGB in [0, 1]; ``smooth`` interpolates vertex normals.
+    ``color`` is linear RGB in [0, 1]; ``smooth`` interpolates vertex normals,
+    blending them over edges where faces meet at up to ``crease`` degrees (box
+    edges stay sharp, curved surfaces look round; 180 blends over every edge).
     ``reflectivity`` (0..1) is the weight of the mirror reflection;
     ``transparency`` (0..1) the weight of the refracted ray, with index of
     refraction ``ior`` (Fresnel-weighted, total internal reflection included).
     """
 
-    color: tuple = (0.8, 0.8, 0.8)
-    ambient: float = 0.1
-    diffuse: float = 0.7
-    specular: float = 0.3
-    shininess: float = 32.0
+    color: tuple = config.DEFAULT_COLOR
+    ambient: float = config.DEFAULT_AMBIENT
+    diffuse: float = config.DEFAULT_DIFFUSE
+    specular: float = config.DEFAULT_SPECULAR
+    shininess: float = config.DEFAULT_SHININESS
     smooth: bool = True
     reflectivity: float = 0.0
     transparency: float = 0.0
-    ior: float = 1.5
+    ior: float = config.DEFAULT_IOR
+    crease: float = config.DEFAULT_CREASE_ANGLE
 
     def __post_init__(self):
-        color = _vec3(self.color, "material colour")
-        if not ((color >= 0) & (color <= 1)).all():
-            raise InputError(f"material colour must be three numbers in 0..1, got {self.color!r}")
-        for name in ("ambient", "diffuse", "specular", "shininess", "reflectivity", "transparency"):
-            value = getattr(self, name)
-            if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
-                raise InputError(f"material {name} must be a finite number >= 0, got {value!r}")
-        for name in ("reflectivity", "transparency"):
-            if getattr(self, name) > 1:
-                raise InputError(f"material {name} must be between 0 and 1, got {getattr(self, name)!r}")
-        if not (isinstance(self.ior, (int, float)) and math.isfinite(self.ior) and self.ior >= 1.0):
-            raise InputError(f"material ior must be a finite number >= 1, got {self.ior!r}")
+        object.__setattr__(self, "color", checks.color("material color", self.color))
+        for name, limits in _MATERIAL_NUMBERS.items():
+            object.__setattr__(self, name, checks.number(f"material {name}", getattr(self, name), **limits))
+        checks.boolean("material smooth", self.smooth)
+        object.__setattr__(self, "crease", checks.crease(self.crease, "material crease"))
+
+    @classmethod
+    def of(cls, value) -> "Material":
+        """A Material from a Material, None (the defaults) or a dict of its fields
+        (as a scene file's material table): ``Material.of({"color": (1, 0, 0)})``."""
+        if value is None:
+            return cls()
+        if isinstance(value, cls):
+            return value
+        if isinstance(value, dict):
+            known = [f.name for f in fields(cls)]
+            for key in value:
+                if key not in known:
+                    raise InputError(unknown_name("material field", key, known))
+            return cls(**value)
+        raise InputError(f"material must be a clrt.Material or a dict of its fields, got {type(value).__name__}")
+
+    def with_overrides(self, **overrides) -> "Material":
+        """A copy with the fields given (not None) replaced."""
+        return replace(self, **{k: v for k, v in overrides.items() if v is not None})
+
+
+def unknown_name(what: str, name, known) -> str:
+    """'unknown <what> 'x' (did you mean 'y'?)', or the list of valid names when nothing is close."""
+    import difflib
+    known = list(known)
+    close = difflib.get_close_matches(str(name), known, n=1)
+    if close:
+        return f"unknown {what} {name!r} (did you mean {close[0]!r}?)"
+    if not known:
+        return f"unknown {what} {name!r} (no {what}s are defined)"
+    return f"unknown {what} {name!r} (expected one of: {', '.join(sorted(known))})"
 
 
 @dataclass(frozen=True)
 class Light:
-    """Point light at ``position`` with linear RGB ``color`` (intensity)."""
+    """Point light at ``position`` with linear RGB ``color`` (an intensity: >= 0, may exceed 1)."""
 
     position: tuple
-    color: tuple = (1.0, 1.0, 1.0)
+    color: tuple = config.DEFAULT_LIGHT_COLOR
 
     def __post_init__(self):
-        _vec3(self.position, "light position")
-        _vec3(self.color, "light colour")
+        object.__setattr__(self, "position", checks.position("light position", self.position))
+        object.__setattr__(self, "color", checks.intensity("light color", self.color))
+
+    @classmethod
+    def of(cls, value) -> "Light":
+        """A Light from a Light or a position (x, y, z) (a white light there)."""
+        return value if isinstance(value, cls) else cls(value)
 
 
 def check_int(name: str, value, lo: int, hi: int) -> None:
-    """InputError unless ``value`` is an integer (not a bool) in lo..hi."""
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or not lo <= value <= hi:
-        raise InputError(f"{name} must be an integer in {lo}..{hi}, got {value!r}")
+    """InputError unless ``value`` is an integer (not a bool) in lo..hi (see :func:`clrt.checks.integer`)."""
+    checks.integer(name, value, lo, hi)
 
 
 def _check_image(width, height, fov) -> None:
-    check_int("width", width, 1, MAX_IMAGE_SIDE)
-    check_int("height", height, 1, MAX_IMAGE_SIDE)
-    if not (isinstance(fov, (int, float)) and 0.0 < fov < 180.0):
-        raise InputError(f"fov must be between 0 and 180 degrees (exclusive), got {fov!r}")
+    checks.image_size(width, height)
+    checks.fov(fov)
 
 
 @dataclass(frozen=True)
@@ -91,14 +117,18 @@ class Camera:
 
     eye: tuple
     target: tuple
-    up: tuple = (0.0, 1.0, 0.0)
-    fov: float = DEFAULT_FOV
-    width: int = DEFAULT_WIDTH
-    height: int = DEFAULT_HEIGHT
+    up: tuple = config.DEFAULT_UP
+    fov: float = config.DEFAULT_FOV
+    width: int = config.DEFAULT_WIDTH
+    height: int = config.DEFAULT_HEIGHT
 
     def __post_init__(self):
-        eye, target, up = (_vec3(self.eye, "eye"), _vec3(self.target, "target"), _vec3(self.up, "up"))
-        _check_image(self.width, self.height, self.fov)
+        for name in ("eye", "target", "up"):
+            object.__setattr__(self, name, checks.position(name, getattr(self, name)))
+        eye, target, up = (np.asarray(v) for v in (self.eye, self.target, self.up))
+        object.__setattr__(self, "width", checks.integer("width", self.width, 1, config.MAX_IMAGE_SIDE))
+        object.__setattr__(self, "height", checks.integer("height", self.height, 1, config.MAX_IMAGE_SIDE))
+        object.__setattr__(self, "fov", checks.fov(self.fov))
         forward = target - eye
         if not np.linalg.norm(forward) > 0:
             raise InputError("eye and target must differ")
@@ -119,8 +149,8 @@ class Camera:
         return sy * self.width / self.height, sy
 
     @classmethod
-    def framing(cls, bounds, width: int = DEFAULT_WIDTH, height: int = DEFAULT_HEIGHT, fov: float = DEFAULT_FOV,
-                direction=(0.35, 0.3, 1.0), up=(0.0, 1.0, 0.0)) -> "Camera":
+    def framing(cls, bounds, width: int = config.DEFAULT_WIDTH, height: int = config.DEFAULT_HEIGHT,
+                fov: float = config.DEFAULT_FOV, direction=(0.35, 0.3, 1.0), up=config.DEFAULT_UP) -> "Camera":
         """A camera looking at the centre of ``bounds`` (2x3) from ``direction``,
         far enough that the bounding sphere fits in the narrower field of view."""
         _check_image(width, height, fov)
@@ -136,22 +166,83 @@ class Camera:
 
 @dataclass(frozen=True)
 class SceneObject:
+    """A mesh and its material.
+
+    ``mesh`` may be anything :func:`clrt.scene.load.as_mesh` takes (a Mesh, a
+    file path, a trimesh object, ``(vertices, faces)``), ``material`` a
+    Material or a dict of its fields.  For a smooth material ``mesh`` becomes
+    the mesh prepared for smooth shading (:meth:`Mesh.split_at_creases` with
+    the material's crease angle): the same triangles in the same order at the
+    same positions, with vertices shared where normals blend.
+    """
+
     mesh: Mesh
     material: Material = field(default_factory=Material)
+
+    def __post_init__(self):
+        from clrt.scene.load import as_mesh
+        material = Material.of(self.material)
+        mesh = as_mesh(self.mesh)
+        if material.smooth:
+            mesh = mesh.split_at_creases(material.crease)
+        object.__setattr__(self, "material", material)
+        object.__setattr__(self, "mesh", mesh)
+
+
+def _objects(value) -> list:
+    if not isinstance(value, (list, tuple)) or not value:
+        raise checks.fail("objects", "a non-empty list of SceneObject", value)
+    return [o if isinstance(o, SceneObject) else SceneObject(o) for o in value]
+
+
+def _lights(value) -> list:
+    if isinstance(value, Light):
+        return [value]
+    if value is None or isinstance(value, (str, bytes, dict)) or not hasattr(value, "__iter__"):
+        raise checks.fail("lights", "a list of Light or of positions (x, y, z)", value)
+    return [Light.of(light) for light in value]
+
+
+def _camera(value):
+    if value is not None and not isinstance(value, Camera):
+        raise checks.fail("camera", "a clrt.Camera or None", value)
+    return value
+
+
+# Scene attribute -> its check; run on every assignment, so a value set after
+# construction (as the CLI's options do) is checked like one given to Scene().
+_SCENE_CHECKS = {
+    "objects": _objects,
+    "lights": _lights,
+    "background": lambda v: checks.intensity("background", v),
+    "ambient_light": lambda v: checks.intensity("ambient_light", v),
+    "camera": _camera,
+    "camera_framed": lambda v: checks.boolean("camera_framed", v),
+    "max_depth": checks.max_depth,
+    "samples": checks.samples,
+}
 
 
 @dataclass
 class Scene:
-    """Objects (mesh + material), point lights and the colours of empty space."""
+    """Objects (mesh + material), point lights and the colours of empty space.
+
+    Every attribute is checked when it is set (``InputError``); ``lights`` may
+    be given as positions, ``objects`` as meshes (default material).
+    """
 
     objects: list
     lights: list
-    background: tuple = (0.0, 0.0, 0.0)
-    ambient_light: tuple = (1.0, 1.0, 1.0)
+    background: tuple = config.DEFAULT_BACKGROUND
+    ambient_light: tuple = config.DEFAULT_AMBIENT_LIGHT
     camera: Camera | None = None   # suggested view; renderers may override
     camera_framed: bool = False    # the camera was framed from the bounds, not placed by the user
-    max_depth: int = DEFAULT_MAX_DEPTH  # reflection / refraction bounces after the camera ray
-    samples: int = 1               # anti-aliasing: samples x samples rays per pixel
+    max_depth: int = config.DEFAULT_MAX_DEPTH   # reflection / refraction bounces after the camera ray
+    samples: int = config.DEFAULT_SAMPLES       # anti-aliasing: samples x samples rays per pixel
+
+    def __setattr__(self, name, value):
+        check = _SCENE_CHECKS.get(name)
+        super().__setattr__(name, value if check is None else check(value))
 
     @property
     def bounds(self) -> np.ndarray:
@@ -161,6 +252,15 @@ class Scene:
     @property
     def num_triangles(self) -> int:
         return sum(len(o.mesh.faces) for o in self.objects)
+
+    def override_materials(self, **fields) -> None:
+        """Replace the fields given (not None) of every object's material, e.g.
+        ``scene.override_materials(color=(1, 0, 0), smooth=False)`` -- what the
+        CLI's material options (``--color``, ``--flat``, ...) do to a scene file
+        or the built-in scene."""
+        fields = {k: v for k, v in fields.items() if v is not None}
+        if fields:
+            self.objects = [SceneObject(o.mesh, o.material.with_overrides(**fields)) for o in self.objects]
 
 
 def default_light(bounds, camera: Camera) -> Light:
@@ -172,11 +272,25 @@ def default_light(bounds, camera: Camera) -> Light:
     return Light(tuple(pos))
 
 
-def scene_from_mesh(mesh: Mesh, material: Material | None = None, lights=None,
-                    background=(0.0, 0.0, 0.0)) -> Scene:
-    """The paper's scene: one mesh, one material, point lights (default: one above the eye)."""
-    scene = Scene([SceneObject(mesh, material or Material())], list(lights or []), background)
+def scene_from_mesh(mesh, material=None, lights=None, background=config.DEFAULT_BACKGROUND) -> Scene:
+    """The paper's scene: one mesh, one material, point lights (default: one above the eye).
+
+    ``mesh``: a Mesh, a mesh file path, a trimesh object or ``(vertices, faces)``;
+    ``material``: a :class:`Material` or a dict of its fields; ``lights``: a list
+    of :class:`Light` or of positions ``(x, y, z)``.  Bad values raise InputError here.
+    The camera is the file's own where a glTF/GLB file has a camera node,
+    else framed from the bounds (``scene.camera_framed``).
+    """
+    import os
+    view = None
+    if isinstance(mesh, (str, os.PathLike)):
+        from clrt.scene.load import file_camera, load_mesh
+        view = file_camera(mesh)
+        mesh = load_mesh(mesh)
+    scene = Scene([SceneObject(mesh, Material.of(material))], [] if lights is None else lights, background)
     scene.camera, scene.camera_framed = Camera.framing(scene.bounds), True
+    if view is not None:
+        scene.camera, scene.camera_framed = file_view(view, scene.bounds, mesh.name), False
     if not scene.lights:
         scene.lights = [default_light(scene.bounds, scene.camera)]
     return scene
@@ -192,25 +306,40 @@ def ray_epsilon(bounds, eye) -> float:
 
 
 def as_mesh(source) -> Mesh:
-    """A Mesh from a Mesh, a Scene (all objects, in order), a path, a trimesh.Trimesh
-    or (vertices, faces)."""
-    if isinstance(source, Mesh):
-        return source
+    """A Mesh from a Scene (all objects, in order) or from anything
+    :func:`clrt.scene.load.as_mesh` takes (a Mesh, a path, a trimesh object,
+    (vertices, faces))."""
     if isinstance(source, Scene):
         return Mesh.concatenate([o.mesh for o in source.objects])
-    if isinstance(source, (str, Path)):
-        from clrt.scene.load import load_mesh   # trimesh is imported only when a file is read
-        return load_mesh(source)
-    if hasattr(source, "vertices") and hasattr(source, "faces"):
-        return Mesh.from_arrays(source.vertices, source.faces)
-    if isinstance(source, tuple) and len(source) == 2:
-        return Mesh.from_arrays(*source)
-    raise InputError(f"expected a mesh, a path or (vertices, faces), got {type(source).__name__}")
+    from clrt.scene.load import as_mesh as mesh_of   # trimesh is imported only when a file is read
+    return mesh_of(source)
 
 
 def as_scene(source) -> Scene:
-    """A Scene from a Scene, or from anything :func:`as_mesh` takes (a Mesh, a file
-    path, a trimesh object, (vertices, faces)) with the default framing and light."""
+    """A Scene from a Scene, a TOML scene file (``.toml``), or anything
+    :func:`scene_from_mesh` takes (a Mesh, a mesh file path -- a glTF camera node
+    becomes the scene's camera --, a trimesh object, (vertices, faces)) with the
+    default framing and light; InputError otherwise."""
     if isinstance(source, Scene):
         return source
-    return scene_from_mesh(as_mesh(source))
+    if isinstance(source, (str, Path)) and str(source).lower().endswith(".toml"):
+        from clrt.scene.scene_file import load_scene
+        return load_scene(source)
+    return scene_from_mesh(source)
+
+
+def file_view(view: dict, bounds, label: str = "") -> Camera:
+    """A Camera from :func:`clrt.scene.load.file_camera`'s description: the target
+    on the view axis as far away as the scene's centre, 480 pixels high and as
+    wide as the file's aspect ratio (else 640)."""
+    eye = np.asarray(view["eye"], dtype=np.float64)
+    centre = np.asarray(bounds, dtype=np.float64).mean(axis=0)
+    distance = max(float(np.linalg.norm(centre - eye)), 1e-6 * (1.0 + float(np.abs(eye).max())))
+    height = config.DEFAULT_HEIGHT
+    width = config.DEFAULT_WIDTH if not view["aspect"] else int(min(max(round(height * view["aspect"]), 1),
+                                                                    config.MAX_IMAGE_SIDE))
+    try:
+        return Camera(tuple(eye), tuple(eye + distance * np.asarray(view["forward"])), tuple(view["up"]),
+                      view["fov"], width, height)
+    except InputError as exc:
+        raise InputError(f"{label}: the file's camera: {exc}" if label else f"the file's camera: {exc}") from None

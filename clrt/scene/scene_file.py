@@ -16,7 +16,6 @@ to a default.
 
 from __future__ import annotations
 
-import difflib
 import json
 import math
 import os
@@ -25,22 +24,20 @@ import tomllib
 
 import numpy as np
 
-from clrt.config import DEFAULT_MAX_DEPTH, MAX_BOUNCES, MAX_IMAGE_SIDE, MAX_SAMPLES
+from clrt import checks, config
 from clrt.errors import InputError, MeshLoadError
 from clrt.scene import primitives
 from clrt.scene.load import load_mesh
 from clrt.scene.mesh import Mesh
-from clrt.scene.scene import Camera, Light, Material, Scene, SceneObject, default_light
+from clrt.scene.scene import Camera, Light, Material, Scene, SceneObject, default_light, unknown_name
 
 __all__ = ["load_scene", "transform_matrix", "OBJECT_TYPES"]
 
 
 # ---------------------------------------------------------------------------
-# Value checks.  Each takes the raw TOML value and returns the converted value
-# or raises _Bad with what was expected; _Doc adds the file and key path.
-
-class _Bad(Exception):
-    """A value is wrong; the message says what was expected (no location)."""
+# Value checks: clrt.checks, the rules the CLI and the Python API use too.  Each
+# takes (key path, raw TOML value) and returns the converted value or raises
+# InputError("<key path> must be <rule>, got <value>"); _Doc adds the file.
 
 
 _REQUIRED = object()
@@ -48,99 +45,61 @@ _REQUIRED = object()
 
 def _show(value) -> str:
     """A short rendering of a TOML value for messages."""
-    text = repr(value)
-    return text if len(text) <= 40 else text[:37] + "..."
-
-
-def _is_number(value) -> bool:
-    # TOML booleans are Python ints; "true" is never a number here.
-    return isinstance(value, (int, float)) and not isinstance(value, bool)
-
-
-_COMPARE = {"gt": (">", float.__gt__), "ge": (">=", float.__ge__),
-            "lt": ("<", float.__lt__), "le": ("<=", float.__le__)}
+    return checks.show(value)
 
 
 def number(**limits):
     """A finite number, as float, within ``limits`` (gt, ge, lt, le: e.g. ``number(gt=0, lt=180)``)."""
-    text = " and ".join(f"{_COMPARE[op][0]} {bound:g}" for op, bound in limits.items())
-    want = f"a number {text}" if text else "a number"
-
-    def check(value):
-        if not _is_number(value) or not math.isfinite(value) or not all(
-                _COMPARE[op][1](float(value), float(bound)) for op, bound in limits.items()):
-            raise _Bad(f"expected {want}, got {_show(value)}")
-        return float(value)
-    check.want = want
-    return check
+    return lambda name, value: checks.number(name, value, **limits)
 
 
 def integer(lo, hi=None):
     """An integer in lo..hi (TOML floats such as 2.0 are refused: counts are whole)."""
-    want = f"an integer in {lo}..{hi}" if hi is not None else f"an integer >= {lo}"
-
-    def check(value):
-        if isinstance(value, bool) or not isinstance(value, int) or value < lo or (hi is not None and value > hi):
-            raise _Bad(f"expected {want}, got {_show(value)}")
-        return value
-    return check
+    return lambda name, value: checks.integer(name, value, lo, hi)
 
 
 def vector(n: int, **limits):
     """A list of ``n`` numbers, each checked like :func:`number`; a tuple of floats."""
-    each = number(**limits)
-    want = f"{n} numbers" + each.want[len("a number"):]
-
-    def check(value):
-        if not isinstance(value, list) or len(value) != n:
-            raise _Bad(f"expected {want}, got {_show(value)}")
-        try:
-            return tuple(each(v) for v in value)
-        except _Bad:
-            raise _Bad(f"expected {want}, got {_show(value)}") from None
-    return check
+    return lambda name, value: checks.vector(name, value, n, **limits)
 
 
-def scale_value(value):
+def scale_value(name, value):
     """A uniform scale (one number > 0) or a per-axis one (3 numbers > 0)."""
-    if _is_number(value):
-        return (number(gt=0)(value),) * 3
+    if checks.is_number(value):
+        return (checks.number(name, value, gt=0),) * 3
     if isinstance(value, list):
-        return vector(3, gt=0)(value)
-    raise _Bad(f"expected a number > 0 or 3 numbers > 0, got {_show(value)}")
+        return checks.vector(name, value, 3, gt=0)
+    raise checks.fail(name, "a number > 0 or 3 numbers > 0", value)
 
 
-def boolean(value):
-    if not isinstance(value, bool):
-        raise _Bad(f"expected true or false, got {_show(value)}")
-    return value
+def boolean(name, value):
+    return checks.boolean(name, value)
 
 
-def string(value):
+def string(name, value):
     if not isinstance(value, str):
-        raise _Bad(f"expected a string, got {_show(value)}")
+        raise checks.fail(name, "a string", value)
     return value
 
 
-def anything(value):
+def anything(name, value):
     """Passed through; checked later by code that needs more context (material references)."""
     return value
 
 
 # ---------------------------------------------------------------------------
 # The schema: key -> (check, default).  _REQUIRED marks keys without a default.
-
-_COLOR = vector(3, ge=0, le=1)
-_INTENSITY_RGB = vector(3, ge=0)
+# Ranges and defaults come from clrt.config, as for the CLI and the Python API.
 
 _MATERIAL_DEFAULTS = Material()
 MATERIAL_KEYS = {
-    "color": (_COLOR, _MATERIAL_DEFAULTS.color),
+    "color": (checks.color, _MATERIAL_DEFAULTS.color),
     "ambient": (number(ge=0), _MATERIAL_DEFAULTS.ambient),
     "diffuse": (number(ge=0), _MATERIAL_DEFAULTS.diffuse),
     "specular": (number(ge=0), _MATERIAL_DEFAULTS.specular),
     "shininess": (number(ge=0), _MATERIAL_DEFAULTS.shininess),
     "smooth": (boolean, _MATERIAL_DEFAULTS.smooth),
+    "crease": (lambda name, value: checks.crease(value, name), _MATERIAL_DEFAULTS.crease),
     "reflectivity": (number(ge=0, le=1), _MATERIAL_DEFAULTS.reflectivity),
     "transparency": (number(ge=0, le=1), _MATERIAL_DEFAULTS.transparency),
     "ior": (number(ge=1), _MATERIAL_DEFAULTS.ior),
@@ -149,27 +108,26 @@ MATERIAL_KEYS = {
 # checkerboard's second material when the file gives none: dark tiles.
 DEFAULT_MATERIAL2 = Material(color=(0.1, 0.1, 0.1))
 
-_DEFAULT_CAMERA = Camera((0.0, 0.0, 1.0), (0.0, 0.0, 0.0))
 CAMERA_KEYS = {
     # eye and target are optional together: without them the scene is framed.
-    "eye": (vector(3), None),
-    "target": (vector(3), None),
-    "up": (vector(3), _DEFAULT_CAMERA.up),
-    "fov": (number(gt=0, lt=180), _DEFAULT_CAMERA.fov),
-    "width": (integer(1, MAX_IMAGE_SIDE), _DEFAULT_CAMERA.width),
-    "height": (integer(1, MAX_IMAGE_SIDE), _DEFAULT_CAMERA.height),
+    "eye": (checks.position, None),
+    "target": (checks.position, None),
+    "up": (checks.position, config.DEFAULT_UP),
+    "fov": (lambda name, value: checks.fov(value, name), config.DEFAULT_FOV),
+    "width": (integer(1, config.MAX_IMAGE_SIDE), config.DEFAULT_WIDTH),
+    "height": (integer(1, config.MAX_IMAGE_SIDE), config.DEFAULT_HEIGHT),
 }
 
 RENDER_KEYS = {
-    "max_depth": (integer(0, MAX_BOUNCES), DEFAULT_MAX_DEPTH),
-    "samples": (integer(1, MAX_SAMPLES), 1),
-    "background": (_INTENSITY_RGB, (0.0, 0.0, 0.0)),
-    "ambient_light": (_INTENSITY_RGB, (1.0, 1.0, 1.0)),
+    "max_depth": (lambda name, value: checks.max_depth(value, name), config.DEFAULT_MAX_DEPTH),
+    "samples": (lambda name, value: checks.samples(value, name), config.DEFAULT_SAMPLES),
+    "background": (checks.intensity, config.DEFAULT_BACKGROUND),
+    "ambient_light": (checks.intensity, config.DEFAULT_AMBIENT_LIGHT),
 }
 
 LIGHT_KEYS = {
-    "position": (vector(3), _REQUIRED),
-    "color": (_INTENSITY_RGB, (1.0, 1.0, 1.0)),
+    "position": (checks.position, _REQUIRED),
+    "color": (checks.intensity, config.DEFAULT_LIGHT_COLOR),
     "intensity": (number(ge=0), 1.0),
 }
 
@@ -180,14 +138,14 @@ OBJECT_KEYS = {
     "type": (string, _REQUIRED),
     "name": (string, ""),
     "material": (anything, None),
-    "translate": (vector(3), (0.0, 0.0, 0.0)),
-    "rotate": (vector(3), (0.0, 0.0, 0.0)),
+    "translate": (checks.position, (0.0, 0.0, 0.0)),
+    "rotate": (checks.position, (0.0, 0.0, 0.0)),
     "scale": (scale_value, (1.0, 1.0, 1.0)),
 }
 OBJECT_TYPES = {
     "mesh": {"path": (string, _REQUIRED)},
     "sphere": {"radius": (number(gt=0), 1.0), "subdivisions": (integer(0, 7), 4),
-               "centre": (vector(3), (0.0, 0.0, 0.0))},
+               "centre": (checks.position, (0.0, 0.0, 0.0))},
     "box": {"size": (vector(3, gt=0), (1.0, 1.0, 1.0))},
     "plane": {"size": (vector(2, gt=0), (1.0, 1.0))},
     "checkerboard": {"tiles": (integer(1, 1024), 8), "size": (number(gt=0), 8.0),
@@ -207,14 +165,7 @@ def _join(path: str, key) -> str:
     return f"{path}.{key}" if path else key
 
 
-def _unknown(what: str, name: str, known) -> str:
-    """'unknown <what> 'x' (did you mean 'y'?)', or the list of valid names when nothing is close."""
-    close = difflib.get_close_matches(name, list(known), n=1)
-    if close:
-        return f"unknown {what} {name!r} (did you mean {close[0]!r}?)"
-    if not known:
-        return f"unknown {what} {name!r} (no {what}s are defined)"
-    return f"unknown {what} {name!r} (expected one of: {', '.join(sorted(known))})"
+_unknown = unknown_name
 
 
 class _Doc:
@@ -228,10 +179,11 @@ class _Doc:
         return cls(where + " ".join(str(message).split()))
 
     def check(self, value, path: str, check):
+        """``check(path, value)``; its InputError ("<path> must be ...") gains the file's name."""
         try:
-            return check(value)
-        except _Bad as exc:
-            raise self.error(path, exc) from None
+            return check(path, value)
+        except InputError as exc:
+            raise InputError(f"{self.label}: {exc}") from None
 
     def table(self, value, path: str, schema: dict) -> dict:
         """Validate a TOML table against ``schema``: no unknown keys, required keys

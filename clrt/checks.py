@@ -1,0 +1,188 @@
+"""One set of rules for every value a user gives clrt.
+
+The command line, the Python API (``Camera``, ``Material``, ``Light``,
+``Scene``, ``render``, ``trace``, ...) and the scene-file reader all check
+their values with these functions, so the same bad value gets the same
+message and the same exit code (2, :class:`~clrt.errors.InputError`) whichever
+way it came in.  Only the name differs -- each entry point names the value the
+way its user wrote it::
+
+    --width must be an integer in 1..65536, got 0                    (CLI)
+    width must be an integer in 1..65536, got 0                      (Python)
+    scene.toml: camera.width must be an integer in 1..65536, got 0   (scene file)
+
+Every check returns the value converted (``int``, ``float``, a tuple of
+floats) or raises ``InputError("<name> must be <rule>, got <value>")``.
+Ranges and names come from :mod:`clrt.config`.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from numbers import Integral, Real
+
+from clrt import config
+from clrt.errors import InputError
+
+
+def show(value) -> str:
+    """A value as a message shows it: numbers as written (2, 0.5, 1e+40),
+    sequences of numbers as (1, 2, 3), anything else by repr, shortened."""
+    if isinstance(value, Real) and not isinstance(value, bool):
+        return _number_text(value)
+    if isinstance(value, (list, tuple)) or type(value).__name__ == "ndarray":
+        try:
+            items = list(value)
+        except TypeError:
+            items = None
+        if items is not None and all(isinstance(v, Real) and not isinstance(v, bool) for v in items):
+            text = "(" + ", ".join(_number_text(v) for v in items) + ")"
+            return text if len(text) <= 60 else text[:57] + "..."
+    text = repr(value)
+    return text if len(text) <= 60 else text[:57] + "..."
+
+
+def _number_text(value) -> str:
+    if isinstance(value, Integral):
+        return str(int(value))
+    value = float(value)
+    text = f"{value:g}" if math.isfinite(value) and value == round(value, 6) else repr(value)
+    return text.replace("e+", "e")
+
+
+def fail(name: str, rule: str, value) -> InputError:
+    """The one message shape: ``<name> must be <rule>, got <value>``."""
+    return InputError(f"{name} must be {rule}, got {show(value)}")
+
+
+# --------------------------------------------------------------------------- numbers
+
+_OPS = {"gt": (">", lambda a, b: a > b), "ge": (">=", lambda a, b: a >= b),
+        "lt": ("<", lambda a, b: a < b), "le": ("<=", lambda a, b: a <= b)}
+
+
+def _range_text(limits: dict) -> str:
+    if set(limits) == {"ge", "le"}:
+        return f" in {_number_text(limits['ge'])}..{_number_text(limits['le'])}"
+    return "".join(f"{' and' if i else ''} {_OPS[op][0]} {_number_text(bound)}"
+                   for i, (op, bound) in enumerate(limits.items()))
+
+
+def is_number(value) -> bool:
+    """A real number; booleans are not numbers (TOML and Python both make them ints)."""
+    return isinstance(value, Real) and not isinstance(value, bool)
+
+
+def integer(name: str, value, lo: int, hi: int | None = None) -> int:
+    """An integer (not a bool, not a float such as 2.0) in lo..hi."""
+    rule = f"an integer in {lo}..{hi}" if hi is not None else f"an integer >= {lo}"
+    if not isinstance(value, Integral) or isinstance(value, bool) or value < lo or (hi is not None and value > hi):
+        raise fail(name, rule, value)
+    return int(value)
+
+
+def number(name: str, value, **limits) -> float:
+    """A finite number within ``limits`` (gt, ge, lt, le), e.g. ``number("fov", x, gt=0, lt=180)``."""
+    rule = "a number" + _range_text(limits)
+    if not is_number(value) or not math.isfinite(value) or not all(
+            _OPS[op][1](float(value), bound) for op, bound in limits.items()):
+        raise fail(name, rule, value)
+    return float(value)
+
+
+def vector(name: str, value, n: int = 3, **limits) -> tuple:
+    """``n`` finite numbers (a list, tuple or array), each within ``limits``
+    and within +-MAX_COORDINATE (the device computes in float32); a tuple of floats."""
+    rule = f"{n} numbers" + _range_text(limits)
+    try:
+        items = list(value) if not isinstance(value, (str, bytes, dict)) else None
+    except TypeError:
+        items = None
+    if items is None or len(items) != n or not all(
+            is_number(v) and math.isfinite(v) and all(_OPS[op][1](float(v), b) for op, b in limits.items())
+            for v in items):
+        raise fail(name, rule, value)
+    if any(abs(float(v)) > config.MAX_COORDINATE for v in items):
+        raise fail(name, f"{n} numbers within +-{_number_text(config.MAX_COORDINATE)} "
+                   "(the device computes in float32)",
+                   value)
+    return tuple(float(v) for v in items)
+
+
+def position(name: str, value) -> tuple:
+    """A point or direction: 3 finite numbers within +-MAX_COORDINATE."""
+    return vector(name, value)
+
+
+def color(name: str, value) -> tuple:
+    """A material colour: linear RGB, 3 numbers in 0..1."""
+    return vector(name, value, ge=0, le=1)
+
+
+def intensity(name: str, value) -> tuple:
+    """A light colour, background or ambient light: linear RGB >= 0 (may exceed 1)."""
+    return vector(name, value, ge=0)
+
+
+def boolean(name: str, value) -> bool:
+    if not isinstance(value, bool):
+        raise fail(name, "true or false", value)
+    return value
+
+
+def choice(name: str, value, choices) -> str:
+    """One of ``choices`` (a config table)."""
+    choices = tuple(choices)
+    if not isinstance(value, str) or value not in choices:
+        raise fail(name, "one of " + ", ".join(choices), value)
+    return value
+
+
+# --------------------------------------------------------------------------- clrt's own values
+
+def image_size(width, height, names=("width", "height")) -> tuple[int, int]:
+    return (integer(names[0], width, 1, config.MAX_IMAGE_SIDE),
+            integer(names[1], height, 1, config.MAX_IMAGE_SIDE))
+
+
+def fov(value, name: str = "fov") -> float:
+    return number(name, value, gt=0, lt=180)
+
+
+def samples(value, name: str = "samples") -> int:
+    return integer(name, value, 1, config.MAX_SAMPLES)
+
+
+def max_depth(value, name: str = "max_depth") -> int:
+    return integer(name, value, 0, config.MAX_BOUNCES)
+
+
+def crease(value, name: str = "crease") -> float:
+    """A crease angle in degrees, 0..180 (180: smooth over every edge)."""
+    return number(name, value, ge=0, le=180)
+
+
+def accel_options(accel, builder, leaf_size, names=("accel", "builder", "leaf_size")) -> tuple:
+    """The acceleration choices of Renderer, Accel and the CLI, from config's tables."""
+    return (choice(names[0], accel, config.ACCELS), choice(names[1], builder, config.BUILDERS),
+            integer(names[2], leaf_size, 1, config.MAX_LEAF_SIZE))
+
+
+_DEVICE_SPEC = re.compile(r"\d+(:\d+)?")
+
+
+def device(value, name: str = "device") -> str | None:
+    """A device spec: None (the default choice), 'gpu', 'cpu', 'P' or 'P:D'
+    (platform and device indices, as ``clrt info`` lists them).  Only the
+    syntax is checked here; a device that does not exist on this machine is
+    OpenCL trouble (:class:`~clrt.errors.DeviceError`, exit 3)."""
+    if value is None:
+        return None
+    rule = "'" + "', '".join(config.DEVICE_KINDS) + "', 'P' or 'P:D' (platform:device indices, see clrt info)"
+    if not isinstance(value, str):
+        raise fail(name, rule, value)
+    spec = value.strip().lower()
+    if spec not in config.DEVICE_KINDS and not _DEVICE_SPEC.fullmatch(spec):
+        raise fail(name, rule, value)
+    return spec

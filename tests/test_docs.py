@@ -1,0 +1,90 @@
+"""Docs that run: every ```python block of README.md and docs/*.md, and the quick start.
+
+The blocks of one file run in order in one namespace (later blocks use names
+from earlier ones), in a temporary folder holding a copy of the repository's
+``assets/``, on the device the suite tests (PoCL here).  A block that cannot
+run here is preceded by ``<!-- docs-test: skip (reason) -->``; keep those few.
+"""
+
+import os
+import re
+import shutil
+import subprocess
+from pathlib import Path
+
+import numpy as np
+import pytest
+from PIL import Image
+
+REPO = Path(__file__).resolve().parents[1]
+DOC_FILES = [REPO / "README.md", *sorted((REPO / "docs").glob("*.md"))]
+FENCE = re.compile(r"(?P<before>(?:^[^\n]*\n){0,2})```python\n(?P<code>.*?)^```", re.S | re.M)
+SKIP = re.compile(r"<!--\s*docs-test:\s*skip\s*\((?P<reason>[^)]+)\)\s*-->")
+
+
+def python_blocks(path: Path) -> list[tuple[int, str, str | None]]:
+    """(line, code, skip reason or None) of each python block of ``path``."""
+    text = path.read_text()
+    out = []
+    for match in FENCE.finditer(text):
+        skip = SKIP.search(match.group("before"))
+        line = text.count("\n", 0, match.start("code")) + 1
+        out.append((line, match.group("code"), skip.group("reason") if skip else None))
+    return out
+
+
+RUNNABLE = [p for p in DOC_FILES if python_blocks(p)]
+
+
+def test_the_readme_and_the_guides_have_python_blocks():
+    names = {p.name for p in RUNNABLE}
+    assert {"README.md", "ray-queries.md", "scene-files.md"} <= names
+    for path in RUNNABLE:
+        for line, code, reason in python_blocks(path):
+            if reason is None:
+                assert 'device="gpu"' not in code, f"{path.name}:{line} needs a GPU: mark it skipped"
+
+
+@pytest.mark.parametrize("path", RUNNABLE, ids=[p.name for p in RUNNABLE])
+def test_python_blocks_run(path, tmp_path, monkeypatch, device):
+    shutil.copytree(REPO / "assets", tmp_path / "assets")
+    monkeypatch.chdir(tmp_path)
+    if device:
+        monkeypatch.setenv("PYOPENCL_CTX", device)
+    namespace = {"__name__": "__docs__"}
+    ran = 0
+    for line, code, reason in python_blocks(path):
+        if reason is not None:
+            continue
+        # Line numbers in a traceback point into the Markdown file.
+        exec(compile("\n" * (line - 1) + code, str(path), "exec"), namespace)
+        ran += 1
+    assert ran >= 1
+
+
+def test_quickstart_resolves_paths_from_the_callers_directory(tmp_path, device):
+    """`scripts/quickstart.sh render ../x/mesh.obj -o out.png` from any folder."""
+    python = REPO / ".venv" / "bin" / "python"
+    if not python.exists():
+        pytest.skip("needs the repository's .venv (the quick start's own environment)")
+    venv = tmp_path / "venv"   # stands in for a set-up environment: no install is attempted
+    (venv / "bin").mkdir(parents=True)
+    for name in ("python", "clrt"):
+        (venv / "bin" / name).write_text(f'#!/bin/sh\nexec "{REPO / ".venv" / "bin" / name}" "$@"\n')
+        (venv / "bin" / name).chmod(0o755)
+    (venv / ".clrt-installed").touch()
+    os.utime(venv / ".clrt-installed", (2**31, 2**31))   # newer than pyproject.toml
+    (tmp_path / "meshes").mkdir()
+    (tmp_path / "meshes" / "tri.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
+    work = tmp_path / "work"
+    work.mkdir()
+    env = {**os.environ, "CLRT_VENV": "../venv"}
+    if device:
+        env["PYOPENCL_CTX"] = device
+    result = subprocess.run([str(REPO / "scripts" / "quickstart.sh"), "render", "../meshes/tri.obj",
+                             "-o", "tri.png", "--width", "16", "--height", "12", "-q"],
+                            cwd=work, env=env, capture_output=True, text=True, timeout=300)
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.strip() == str(work / "tri.png")
+    assert (work / "tri.png").is_file() and not (REPO / "tri.png").exists()
+    assert np.asarray(Image.open(work / "tri.png")).shape == (12, 16, 3)
