@@ -205,7 +205,7 @@ def _output_path(args) -> Path:
 def _render(args) -> int:
     from clrt.output import check_replace, write_image
     from clrt.renderer import Renderer, check_host_memory
-    from clrt.scene.scene import as_scene
+    from clrt.scene.sources import as_scene
     from clrt.scene.default import default_scene
     from clrt.scene.scene import Camera, Light, default_light
 

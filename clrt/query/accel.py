@@ -46,7 +46,7 @@ from clrt.config import RAY_CHECKS
 from clrt.query.rays import CameraRays, PinholeRays, RayBatch, cull_code, is_device_array
 from clrt.query.results import AllHits, CameraImages, Hits
 from clrt.scene.arrays import triangle_corners
-from clrt.scene.scene import as_mesh
+from clrt.scene.sources import as_mesh
 
 DEFAULT_CHUNK_RAYS = 1 << 20        # rays per launch: ~50 MB of device buffers
 BRUTE_FORCE_TESTS = 1 << 30         # ray-triangle tests per launch without a BVH

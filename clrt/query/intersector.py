@@ -29,7 +29,7 @@ import numpy as np
 
 from clrt.query.accel import Accel
 from clrt.query.rays import RayBatch
-from clrt.scene.scene import as_mesh
+from clrt.scene.sources import as_mesh
 
 
 class RayMeshIntersector:

@@ -34,7 +34,8 @@ from clrt.layouts import HIT, RAY
 from clrt.renderer.pool import PinnedImagePool
 from clrt.renderer.tiles import TileLimits, error_name, is_out_of_memory, run_tiles
 from clrt.scene.arrays import flatten_scene
-from clrt.scene.scene import Camera, Scene, as_scene, default_light, ray_epsilon
+from clrt.scene.scene import Camera, Scene, default_light, ray_epsilon
+from clrt.scene.sources import as_scene
 
 
 @dataclass

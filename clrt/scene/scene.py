@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, fields, replace
-from pathlib import Path
 
 import numpy as np
 
@@ -303,29 +302,6 @@ def ray_epsilon(bounds, eye) -> float:
     diag = float(np.linalg.norm(bounds[1] - bounds[0]))
     magnitude = max(float(np.abs(bounds).max()), float(np.abs(np.asarray(eye, dtype=np.float64)).max()))
     return 1e-4 * diag + 1e-6 * magnitude
-
-
-def as_mesh(source) -> Mesh:
-    """A Mesh from a Scene (all objects, in order) or from anything
-    :func:`clrt.scene.load.as_mesh` takes (a Mesh, a path, a trimesh object,
-    (vertices, faces))."""
-    if isinstance(source, Scene):
-        return Mesh.concatenate([o.mesh for o in source.objects])
-    from clrt.scene.load import as_mesh as mesh_of   # trimesh is imported only when a file is read
-    return mesh_of(source)
-
-
-def as_scene(source) -> Scene:
-    """A Scene from a Scene, a TOML scene file (``.toml``), or anything
-    :func:`scene_from_mesh` takes (a Mesh, a mesh file path -- a glTF camera node
-    becomes the scene's camera --, a trimesh object, (vertices, faces)) with the
-    default framing and light; InputError otherwise."""
-    if isinstance(source, Scene):
-        return source
-    if isinstance(source, (str, Path)) and str(source).lower().endswith(".toml"):
-        from clrt.scene.scene_file import load_scene
-        return load_scene(source)
-    return scene_from_mesh(source)
 
 
 def file_view(view: dict, bounds, label: str = "") -> Camera:
