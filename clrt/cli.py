@@ -322,11 +322,17 @@ def _glue_vector_values(argv: list[str]) -> list[str]:
 
 
 def main(argv=None) -> int:
-    # Ctrl-C from here on is KeyboardInterrupt, caught below (the early handler
-    # installed by clrt/__init__.py covered the imports before this line).
-    signal.signal(signal.SIGINT, signal.default_int_handler)
     try:
         argv = list(sys.argv[1:] if argv is None else argv)
+        # The heavy imports first, still under the start-up handler that
+        # clrt/__init__.py installs for the clrt command (Ctrl-C there exits at
+        # once: a KeyboardInterrupt inside a C extension's import can abort the
+        # interpreter).  Ctrl-C from then on is KeyboardInterrupt, caught below;
+        # the handler is set inside the try, so a signal already pending lands here.
+        if argv[:1] in (["render"], ["info"]):
+            import pyopencl  # noqa: F401
+            import clrt.renderer  # noqa: F401
+        signal.signal(signal.SIGINT, signal.default_int_handler)
         bench = argv[:1] == ["bench"]
         try:
             args = _parser(bench).parse_args(_glue_vector_values(argv))

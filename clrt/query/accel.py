@@ -40,6 +40,7 @@ from clrt.device.args import camera_args
 from clrt.device.build import build_acceleration
 from clrt.device.context import create_context, device_label
 from clrt.device.geometry import DeviceGeometry, check_fits
+from clrt.device.pinned import PinnedPool
 from clrt.device.program import build_program
 from clrt.errors import InputError
 from clrt.config import RAY_CHECKS
@@ -54,10 +55,16 @@ MIN_CHUNK_RAYS = 4096
 ALL_HITS_PER_RAY = 4                # first guess of room for all_hits, grown as hits show up
 ALL_HITS_CAPACITY = 1 << 24         # most hits of one launch kept on the device (192 MiB)
 RAY_INPUT_BYTES = 32                # origin, direction, tmin, tmax of a ray in its chunk buffers
-# The closest hit's outputs (query_closest in trace.cl), in kernel order: bytes a ray, dtype.
-CLOSEST_FIELDS = {"t": 4, "prim": 4, "u": 4, "v": 4, "normal": 12, "front": 1, "hit": 1}
-CLOSEST_DTYPES = {"t": np.float32, "prim": np.int32, "u": np.float32, "v": np.float32, "normal": np.float32,
-                  "front": np.uint8, "hit": np.uint8}
+# The closest hit's outputs (query_closest in trace.cl), in kernel order.
+CLOSEST_FIELDS = ("t", "prim", "u", "v", "normal", "front", "hit")
+# Bytes a ray and dtype of every per-ray result (count: query_count's).
+RESULT_BYTES = {"t": 4, "prim": 4, "u": 4, "v": 4, "normal": 12, "count": 4, "front": 1, "hit": 1}
+RESULT_DTYPES = {"t": np.float32, "prim": np.int32, "u": np.float32, "v": np.float32, "normal": np.float32,
+                 "count": np.int32, "front": np.uint8, "hit": np.uint8}
+PIPELINE_CHUNKS = 4                 # a host batch goes in at least this many chunks, on two queues
+MIN_PIPELINE_RAYS = 1 << 16         # ... of at least this many rays
+RESULT_POOL_SIZE = 3                # page-locked result blocks per Accel (clrt/device/pinned.py)
+RESULT_POOL_MAX_BYTES = 1 << 30     # larger results go to ordinary memory
 _ZERO = np.zeros(1, np.float32)
 _INFINITY = np.full(1, np.inf, np.float32)
 
@@ -130,6 +137,8 @@ class Accel:
         self._buffers: dict[str, cl.Buffer] = {}
         self._hits_per_ray = float(ALL_HITS_PER_RAY)
         self.launches: list[cl.Event] = []   # query launches, see kernel_ms
+        self._queues = [queue]                # the pipeline's lanes, see _lane
+        self.result_pool = PinnedPool(context, queue, RESULT_POOL_SIZE, RESULT_POOL_MAX_BYTES)
 
     # ----------------------------------------------------------------------- chunks and memory
 
@@ -148,15 +157,16 @@ class Accel:
 
     def memory(self) -> dict:
         """Upper bounds, in bytes, of what queries keep on the device: ``scene``
-        (triangles, BVH, triangle ids), ``chunk`` (rays and results of one chunk:
-        62 bytes a ray for the closest hit with every field, the largest query)
+        (triangles, BVH, triangle ids), ``chunk`` (rays and results of the two
+        chunks in flight: 62 bytes a ray for the closest hit with every field,
+        the largest query)
         and ``all_hits`` (12 bytes a hit for at most ``all_hits_capacity`` hits; a
         chunk with more hits is split in halves).  Host memory beyond the
         caller's arrays and the results: a float32 copy of the rays where they
         are not float32 already."""
         chunk = self.chunk_size()
-        per_ray = RAY_INPUT_BYTES + sum(CLOSEST_FIELDS.values())
-        return {"scene": int(self.geometry.nbytes), "chunk_rays": chunk, "chunk": chunk * per_ray,
+        per_ray = RAY_INPUT_BYTES + sum(RESULT_BYTES[name] for name in CLOSEST_FIELDS)
+        return {"scene": int(self.geometry.nbytes), "chunk_rays": chunk, "chunk": 2 * chunk * per_ray,
                 "all_hits": 12 * self._all_hits_limit()}
 
     def _all_hits_limit(self) -> int:
@@ -178,23 +188,35 @@ class Accel:
 
     # ----------------------------------------------------------------------- rays in
 
+    def _lane(self, k: int) -> cl.CommandQueue:
+        """Queue ``k`` (0 or 1) of the pipeline: successive chunks of a batch go to
+        alternate queues, so that one chunk's upload overlaps the other's kernel
+        and read back.  Each lane has its own chunk buffers (names end in k)."""
+        while len(self._queues) <= k:
+            self._queues.append(cl.CommandQueue(self.context, self.queue.device,
+                                                properties=cl.command_queue_properties.PROFILING_ENABLE))
+        return self._queues[k]
+
     def _begin(self, source) -> None:
-        """Before the first chunk of a batch: no bad ray reported yet."""
+        """Before the first chunk of a batch: no bad ray reported yet (waited for:
+        both lanes' kernels report into this buffer)."""
         cl.enqueue_copy(self.queue, self._buffer("bad", 4 * len(RAY_CHECKS)),
-                        np.full(len(RAY_CHECKS), np.iinfo(np.int32).max, np.int32), is_blocking=False)
+                        np.full(len(RAY_CHECKS), np.iinfo(np.int32).max, np.int32), is_blocking=True)
 
     def _check(self, source) -> None:
         """After the last chunk: InputError for the first bad ray the kernels saw."""
+        for queue in self._queues[1:]:
+            queue.finish()
         bad = np.empty(len(RAY_CHECKS), np.int32)
-        cl.enqueue_copy(self.queue, bad, self._buffer("bad", bad.nbytes))   # waits for every launch
+        cl.enqueue_copy(self.queue, bad, self._buffer("bad", bad.nbytes))   # waits for lane 0
         if (bad < np.iinfo(np.int32).max).any():
             kind = int(np.argmin(bad))          # the lowest ray; on a tie, the first check
             raise InputError(source.bad_ray_message(RAY_CHECKS[kind], int(bad[kind])))
 
-    def _ray_args(self, source, start: int, stop: int) -> tuple:
+    def _ray_args(self, source, start: int, stop: int, lane: int = 0) -> tuple:
         """RAY_INPUT_PARAMS (rays.cl) for rays start..stop-1 of ``source``: host
-        arrays uploaded as they are into chunk buffers, device arrays used in
-        place, camera rays made on the device."""
+        arrays uploaded as they are into the lane's chunk buffers, device arrays
+        used in place, camera rays made on the device."""
         m = stop - start
         if isinstance(source, (CameraRays, PinholeRays)):
             eye = np.asarray(source.camera.eye if isinstance(source, CameraRays) else source.eye, np.float32)
@@ -215,25 +237,37 @@ class Accel:
                        else self._upload(f"in_{k}", a), stride) for k, (a, stride) in enumerate(source.inputs)]
             in_first = start
         else:
-            inputs = [(self._upload(f"in_{k}", source.host_chunk(k, start, stop)), stride)
+            inputs = [(self._upload(f"in_{k}{'_' * lane}", source.host_chunk(k, start, stop), lane), stride)
                       for k, (_, stride) in enumerate(source.inputs)]
             in_first = 0
         flat = [x for buf, stride in inputs for x in (buf, np.uint32(stride))]
         return (*flat, np.uint32(in_first), np.uint32(start), np.uint32(bool(source.normalise)),
                 self._buffer("bad", 4 * len(RAY_CHECKS)))
 
-    def _upload(self, name: str, array: np.ndarray) -> cl.Buffer:
-        """``array`` into the kept buffer ``name``, without waiting (the queue is in
-        order: the launch that reads it comes after)."""
+    def _upload(self, name: str, array: np.ndarray, lane: int = 0) -> cl.Buffer:
+        """``array`` into the kept buffer ``name``, without waiting (the lane's queue
+        is in order: the launch that reads it comes after)."""
         buf = self._buffer(name, array.nbytes)
         if array.nbytes:
-            cl.enqueue_copy(self.queue, buf, array, is_blocking=False)
+            cl.enqueue_copy(self._lane(lane), buf, array, is_blocking=False)
         return buf
 
-    def _run(self, name: str, m: int, *args) -> None:
+    def _run(self, name: str, m: int, *args, lane: int = 0) -> None:
         kernel = self.kernels[name]
         kernel.set_args(*args, *self.geometry.args)
-        self.launches.append(cl.enqueue_nd_range_kernel(self.queue, kernel, (m,), None))
+        self.launches.append(cl.enqueue_nd_range_kernel(self._lane(lane), kernel, (m,), None))
+
+    def _pipeline(self, n: int, on_host: bool):
+        """(start, stop, lane) of the chunks of a batch: host batches in at least
+        PIPELINE_CHUNKS chunks on alternate lanes (so transfers overlap), others
+        in plain chunks on lane 0."""
+        if not on_host:
+            for start, stop in self._chunks(n):
+                yield start, stop, 0
+            return
+        step = max(1, min(self.chunk_size(), max(MIN_PIPELINE_RAYS, -(-n // PIPELINE_CHUNKS))))
+        for k, start in enumerate(range(0, n, step)):
+            yield start, min(n, start + step), k % 2
 
     def kernel_ms(self) -> float:
         """Kernel time (ms, profiling events) of the query launches since the last
@@ -244,14 +278,22 @@ class Accel:
     # ----------------------------------------------------------------------- the queries
 
     def _outputs(self, n: int, fields, on_device: bool) -> dict:
-        """The arrays the caller gets, by field: numpy, or pyopencl arrays for
-        rays that came as device arrays."""
+        """The arrays the caller gets, by field: pyopencl arrays for rays that came
+        as device arrays, else numpy arrays -- views of one block of page-locked
+        memory when the pool has one (the device writes there directly)."""
+        shapes = {name: (n, 3) if name == "normal" else (n,) for name in fields}
         if on_device:
             import pyopencl.array as cla
-            make = lambda shape, dtype: cla.empty(self.queue, shape, dtype)   # noqa: E731
-        else:
-            make = np.empty
-        return {name: make((n, 3) if name == "normal" else (n,), CLOSEST_DTYPES[name]) for name in fields}
+            return {name: cla.empty(self.queue, shapes[name], RESULT_DTYPES[name]) for name in fields}
+        sizes = {name: n * RESULT_BYTES[name] for name in fields}
+        block = self.result_pool.take(sum(sizes.values())) if n else None
+        if block is None:
+            return {name: np.empty(shapes[name], RESULT_DTYPES[name]) for name in fields}
+        out, offset = {}, 0
+        for name in fields:   # 4-byte fields first (RESULT_BYTES' order), so every view is aligned
+            out[name] = block[offset:offset + sizes[name]].view(RESULT_DTYPES[name]).reshape(shapes[name])
+            offset += sizes[name]
+        return out
 
     def _closest(self, source, cull: str, fields=None) -> Hits:
         """Closest hits of every ray of ``source``, the ``fields`` asked for (all by
@@ -262,21 +304,21 @@ class Accel:
         on_device = getattr(source, "on_device", False)
         out = self._outputs(n, fields, on_device)
         self._begin(source)
-        for start, stop in self._chunks(n):
+        for start, stop, lane in self._pipeline(n, isinstance(source, RayBatch) and not on_device):
             m = stop - start
             if on_device:
                 targets = [out[name].data if name in out else None for name in CLOSEST_FIELDS]
                 first = start
             else:
-                targets = [self._buffer(f"out_{name}", m * CLOSEST_FIELDS[name]) if name in out else None
-                           for name in CLOSEST_FIELDS]
+                targets = [self._buffer(f"out_{name}{'_' * lane}", m * RESULT_BYTES[name]) if name in out
+                           else None for name in CLOSEST_FIELDS]
                 first = 0
-            self._run("query_closest", m, *self._ray_args(source, start, stop), *targets,
-                      np.uint32(first), np.uint32(m), code)
+            self._run("query_closest", m, *self._ray_args(source, start, stop, lane), *targets,
+                      np.uint32(first), np.uint32(m), code, lane=lane)
             if not on_device:
                 for name, buf in zip(CLOSEST_FIELDS, targets):
                     if buf is not None:
-                        cl.enqueue_copy(self.queue, out[name][start:stop], buf, is_blocking=False)
+                        cl.enqueue_copy(self._lane(lane), out[name][start:stop], buf, is_blocking=False)
         self._check(source)   # also waits for the copies
         if not on_device:   # device arrays keep the flags as uint8 0 / 1 (OpenCL has no bool arrays)
             for name in ("front", "hit"):
@@ -296,31 +338,29 @@ class Accel:
 
     closest = trace
 
-    def _flags(self, kernel: str, batch: RayBatch, cull: str, dtype):
+    def _flags(self, kernel: str, batch: RayBatch, cull: str, field: str):
+        """One value a ray (query_any: ``hit``, query_count: ``count``) for every ray."""
         code = cull_code(cull)
         n = len(batch)
-        if batch.on_device:
-            import pyopencl.array as cla
-            out = cla.empty(self.queue, (n,), dtype)
-        else:
-            out = np.empty(n, dtype)
+        out = self._outputs(n, [field], batch.on_device)[field]
         self._begin(batch)
-        for start, stop in self._chunks(n):
+        for start, stop, lane in self._pipeline(n, not batch.on_device):
             m = stop - start
             if batch.on_device:
                 target, first = out.data, start
             else:
-                target, first = self._buffer(kernel, m * out.itemsize), 0
-            self._run(kernel, m, *self._ray_args(batch, start, stop), target, np.uint32(first), np.uint32(m), code)
+                target, first = self._buffer(f"{kernel}{'_' * lane}", m * out.itemsize), 0
+            self._run(kernel, m, *self._ray_args(batch, start, stop, lane), target, np.uint32(first),
+                      np.uint32(m), code, lane=lane)
             if not batch.on_device:
-                cl.enqueue_copy(self.queue, out[start:stop], target, is_blocking=False)
+                cl.enqueue_copy(self._lane(lane), out[start:stop], target, is_blocking=False)
         self._check(batch)
         return out
 
     def any_hit(self, origins, directions, *, tmin=0.0, tmax=np.inf, cull: str = "none"):
         """(N,) bool: does anything lie on each ray with tmin < t <= tmax?  Stops at
         the first hit found (occlusion, shadow rays)."""
-        out = self._flags("query_any", RayBatch(origins, directions, tmin, tmax), cull, np.uint8)
+        out = self._flags("query_any", RayBatch(origins, directions, tmin, tmax), cull, "hit")
         return out.view(bool) if isinstance(out, np.ndarray) else out   # device: uint8 0 / 1
 
     occluded = any_hit
@@ -328,7 +368,7 @@ class Accel:
     def count(self, origins, directions, *, tmin=0.0, tmax=np.inf, cull: str = "none"):
         """(N,) int32: how many triangles each ray meets in (tmin, tmax] (a ray
         through a shared edge or vertex meets each triangle there)."""
-        return self._flags("query_count", RayBatch(origins, directions, tmin, tmax), cull, np.int32)
+        return self._flags("query_count", RayBatch(origins, directions, tmin, tmax), cull, "count")
 
     def all_hits(self, origins, directions, *, tmin=0.0, tmax=np.inf, cull: str = "none") -> AllHits:
         """Every hit in (tmin, tmax] of every ray, found in one traversal per ray,

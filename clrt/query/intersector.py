@@ -43,6 +43,8 @@ class RayMeshIntersector:
     def __init__(self, mesh, accel: str = "box", builder: str = "sah", leaf_size: int = 4,
                  device: str | None = None, chunk_rays: int | None = None):
         import trimesh
+        from clrt.scene.load_3ds import register_with_trimesh
+        register_with_trimesh()   # trimesh.load("x.3ds") works for users of the drop-in too
         self._trimesh = isinstance(mesh, trimesh.Trimesh)
         self.mesh = mesh if self._trimesh else as_mesh(mesh)
         self._options = dict(accel=accel, builder=builder, leaf_size=leaf_size, device=device,

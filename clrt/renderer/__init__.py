@@ -2,7 +2,7 @@
 
 ``renderer.py`` (the Renderer: upload once, render many frames), ``tiles.py``
 (how a frame is cut into launches, the out-of-memory fallback, Ctrl-C),
-``pool.py`` (page-locked images that are never reused while a caller holds them).
+and page-locked images from ``clrt/device/pinned.py`` (never reused while a caller holds them).
 """
 
 from clrt.renderer.frame import Frame, Renderer, check_host_memory, render

@@ -10,7 +10,7 @@
 
 Stages 1-3 happen when a :class:`Renderer` is made; 4-6 on every ``render`` call,
 so frames after the first reuse the uploaded scene and the built program.
-Tiling and the memory fallback: tiles.py; page-locked images: pool.py.
+Tiling and the memory fallback: tiles.py; page-locked images: clrt/device/pinned.py.
 """
 
 from __future__ import annotations
@@ -28,10 +28,10 @@ from clrt.device.build import build_acceleration
 from clrt.device.context import create_context, device_label
 from clrt.device.context import format_bytes as _size
 from clrt.device.geometry import DeviceGeometry, check_fits
+from clrt.device.pinned import PinnedPool
 from clrt.device.program import build_program
 from clrt.errors import DeviceMemoryError, TooLargeError
 from clrt.layouts import HIT, RAY
-from clrt.renderer.pool import PinnedImagePool
 from clrt.renderer.tiles import TileLimits, error_name, is_out_of_memory, run_tiles
 from clrt.scene.arrays import flatten_scene
 from clrt.scene.scene import Camera, Scene, default_light, ray_epsilon
@@ -102,7 +102,7 @@ class Renderer:
         self._frame_buffers: dict[str, cl.Buffer] = {}
         self._frame_pixels = -1
         self._staging = None
-        self.image_pool = PinnedImagePool(self.context, self.queue, IMAGE_POOL_SIZE)
+        self.image_pool = PinnedPool(self.context, self.queue, IMAGE_POOL_SIZE)
         self._max_group = min(   # work-items a launch's group may have, see _launch_shape
             k.get_work_group_info(cl.kernel_work_group_info.WORK_GROUP_SIZE, self.queue.device)
             for name, k in self.kernels.items() if name != "encode_srgb8")
@@ -285,7 +285,7 @@ class Renderer:
 FRAME_BYTES_PER_PIXEL = RAY.itemsize + HIT.itemsize + 16 + 3
 MIN_FRAME_BYTES = 256 * FRAME_BYTES_PER_PIXEL
 MAX_TILE_PIXELS = 1 << 23   # 8M pixels (a 4K frame), 544 MiB of tile buffers
-IMAGE_POOL_SIZE = 3         # page-locked images per renderer (pool.py)
+IMAGE_POOL_SIZE = 3         # page-locked images per renderer (clrt/device/pinned.py)
 HOST_CHECK_BYTES = 1 << 28  # frames needing more host memory than this check that it is there
 
 

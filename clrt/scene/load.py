@@ -426,8 +426,11 @@ def _load_trimesh(data: bytes, file_type: str, path: str):
 
     Scenes are flattened in graph order with each node's transform applied to
     its geometry's vertices (an instanced geometry appears once per node).
+    trimesh is imported here, when a file needs it (it takes seconds on some
+    machines), and learns our 3DS reader then.
     """
     import trimesh
+    load_3ds.register_with_trimesh()
 
     kwargs = {"process": False, "validate": False, "skip_materials": True}
     if file_type == "gltf":
@@ -635,4 +638,3 @@ def as_mesh(source) -> Mesh:
 if not any(isinstance(h, logging.NullHandler) for h in logging.getLogger("trimesh").handlers):
     logging.getLogger("trimesh").addHandler(logging.NullHandler())
 
-load_3ds.register_with_trimesh()

@@ -1,11 +1,12 @@
-"""Page-locked host memory for images, reused once the caller lets go.
+"""Page-locked host memory for results, reused once the caller lets go.
 
-The device writes a frame's 8-bit image straight into page-locked memory by
-DMA, several times faster than into ordinary (pageable) memory, and no host
-copy follows.  Allocating page-locked memory is slow, so it is pooled.  Each
-image handed out is a numpy array whose base is a :class:`_Lease`: every view
-of the image keeps the lease alive, and when the last one goes the lease
-returns its memory to the pool.  So an image a caller keeps is never reused.
+The device writes a frame's image or a query's results straight into
+page-locked memory by DMA, several times faster than into ordinary (pageable)
+memory, and no host copy follows.  Allocating page-locked memory is slow, so
+it is pooled.  Each block handed out is a numpy array whose base is a
+:class:`_Lease`: every view of it keeps the lease alive, and when the last one
+goes the lease returns its memory to the pool.  So results a caller keeps are
+never reused.
 """
 
 from __future__ import annotations
@@ -27,11 +28,12 @@ class _Lease:
         self._free.append(self._mapped)
 
 
-class PinnedImagePool:
-    """Up to ``size`` page-locked byte buffers of one context."""
+class PinnedPool:
+    """Up to ``size`` page-locked byte buffers of one context, none larger than
+    ``max_bytes`` (page-locked memory is a scarce resource of the whole system)."""
 
-    def __init__(self, context: cl.Context, queue: cl.CommandQueue, size: int = 3):
-        self.context, self.queue, self.size = context, queue, size
+    def __init__(self, context: cl.Context, queue: cl.CommandQueue, size: int = 3, max_bytes: int = 1 << 30):
+        self.context, self.queue, self.size, self.max_bytes = context, queue, size, max_bytes
         self._free: list[np.ndarray] = []    # mapped buffers not lent out
         self._count = 0                      # buffers made (free or lent)
 
@@ -45,7 +47,7 @@ class PinnedImagePool:
         if self._free:                       # free but too small for this frame: make room
             self._count -= 1
             self._free.pop()
-        if self._count >= self.size:
+        if self._count >= self.size or nbytes > self.max_bytes:
             return None
         try:
             buffer = cl.Buffer(self.context, cl.mem_flags.READ_WRITE | cl.mem_flags.ALLOC_HOST_PTR, nbytes)
