@@ -16,7 +16,7 @@ import pytest
 
 from clrt.accel import BUILDERS, VOLUMES, build_bvh, sah
 from clrt.accel import bvh as bvh_module
-from clrt.device.layouts import BVH_NODE
+from clrt.device.geometry import pair_child_refs, pair_nodes
 from clrt.errors import InputError
 from clrt.scene import primitives
 
@@ -112,7 +112,7 @@ def subtree_info(nodes):
 
 def check_structure(bvh, n_tri: int, leaf_size: int):
     nodes = bvh.nodes
-    assert nodes.dtype == BVH_NODE and nodes.ndim == 1
+    assert nodes.ndim == 1
     assert bvh.prim_id.dtype == np.int32 and bvh.prim_id.shape == (n_tri,)
     assert np.array_equal(np.sort(bvh.prim_id), np.arange(n_tri)), "prim_id is not a permutation"
     N = len(nodes)
@@ -140,8 +140,51 @@ def check_structure(bvh, n_tri: int, leaf_size: int):
     stats = bvh.stats()
     assert stats["nodes"] == N and stats["leaves"] == leaf.sum() and stats["depth"] == bvh.depth
     assert stats["max_leaf_size"] == count.max() <= leaf_size
-    assert stats["device_bytes"] == N * 48 + n_tri * 4 + n_tri * 48
+    rows = pair_nodes(nodes, bvh.volume)                   # what is uploaded
+    assert stats["device_bytes"] == rows.nbytes + bvh.prim_id.nbytes + n_tri * 48
     assert np.isfinite(stats["sah_cost"]) and stats["sah_cost"] >= 1.0
+
+
+def check_pair_rows(bvh):
+    """The rows the kernels walk (one per inner node, both children's volumes and
+    references, layouts.py) against the depth-first tree: walked from row 0 as
+    accel_bvh.cl walks them, they hold each child's volume bit for bit and reach
+    every leaf slot exactly once."""
+    nodes = bvh.nodes
+    rows = pair_nodes(nodes, bvh.volume)
+    refs = pair_child_refs(rows)
+    assert len(rows) == max(int((nodes["count"] == 0).sum()), 1)
+    reached = np.zeros(len(bvh.prim_id), np.int64)
+
+    def volume(row, side):
+        a, b = rows[f"{side}_a"][row], rows[f"{side}_b"][row]
+        if bvh.volume == "sphere":
+            return np.r_[a[:3], b[0]]                  # radius kept in b.x
+        return np.r_[a[:3], b[:3]]
+
+    def expected(node):
+        a, b = nodes["bound_a"][node], nodes["bound_b"][node]
+        return np.r_[a[:3], a[3]] if bvh.volume == "sphere" else np.r_[a[:3], b[:3]]
+
+    if nodes["count"][0] > 0:                          # one leaf: hung on the left of row 0
+        assert tuple(refs[0]) == (0, nodes["count"][0], -1, -1)
+        assert np.array_equal(volume(0, "left"), expected(0))
+        reached[:nodes["count"][0]] += 1
+    else:
+        todo = [(0, 0)]                                # (row, its node)
+        while todo:
+            row, node = todo.pop()
+            for k, (side, child) in enumerate((("left", nodes["left_first"][node]),
+                                               ("right", nodes["right"][node]))):
+                ref, count = refs[row, 2 * k], refs[row, 2 * k + 1]
+                assert count == nodes["count"][child]
+                assert np.array_equal(volume(row, side), expected(child)), (row, side)
+                if count > 0:
+                    assert ref == nodes["left_first"][child]
+                    reached[ref:ref + count] += 1
+                else:
+                    todo.append((ref, child))
+    assert (reached == 1).all(), "every slot in exactly one leaf row"
 
 
 def check_conservative(bvh, tri: np.ndarray):
@@ -200,6 +243,7 @@ def test_structure_and_conservative_volumes(mesh, builder, volume, leaf_size):
     bvh = built(mesh, builder, volume, leaf_size)
     assert (bvh.volume, bvh.builder, bvh.leaf_size) == (volume, builder, leaf_size)
     check_structure(bvh, len(tri), leaf_size)
+    check_pair_rows(bvh)
     check_conservative(bvh, tri)
     check_tight(bvh)
 
@@ -350,7 +394,8 @@ def test_builds_are_deterministic(builder, volume):
     tri = triangles("soup")
     a = build_bvh(tri, volume=volume, builder=builder, leaf_size=4)
     b = build_bvh(tri.copy(), volume=volume, builder=builder, leaf_size=4)
-    assert a.nodes.tobytes() == b.nodes.tobytes()
+    # the uploaded rows and slot order, byte for byte
+    assert pair_nodes(a.nodes, volume).tobytes() == pair_nodes(b.nodes, volume).tobytes()
     assert np.array_equal(a.prim_id, b.prim_id)
     assert a.depth == b.depth
 
@@ -364,7 +409,7 @@ def test_threads_do_not_change_the_tree(builder, monkeypatch):
     monkeypatch.setattr(bvh_module, "BUILD_THREADS", 3)
     monkeypatch.setattr(bvh_module, "THREADED_MIN", 0)
     threaded = build_bvh(tri, builder=builder, leaf_size=4)
-    assert threaded.nodes.tobytes() == serial.nodes.tobytes()
+    assert pair_nodes(threaded.nodes).tobytes() == pair_nodes(serial.nodes).tobytes()
     assert np.array_equal(threaded.prim_id, serial.prim_id)
 
 
@@ -395,7 +440,8 @@ def test_accepts_a_mesh():
     mesh = primitives.torus(1.0, 0.35, 16, 8)
     a = build_bvh(mesh, volume="ellipse", builder="sah")
     b = build_bvh(mesh.vertices[mesh.faces], volume="ellipse", builder="sah")
-    assert a.nodes.tobytes() == b.nodes.tobytes()
+    assert pair_nodes(a.nodes, "ellipse").tobytes() == pair_nodes(b.nodes, "ellipse").tobytes()
+    assert np.array_equal(a.prim_id, b.prim_id)
 
 
 @pytest.mark.parametrize("kwargs", [

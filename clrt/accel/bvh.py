@@ -24,7 +24,7 @@ from typing import Callable, List, Optional, Tuple
 
 import numpy as np
 
-from clrt.device.layouts import BVH_NODE
+from clrt.device.layouts import BVH_NODE, BVH_PAIR_NODE
 
 # Cost model of Bvh.stats()["sah_cost"] and of the SAH builder (sah.py): one unit
 # per node visited (its children's volume tests) and one unit per ray/triangle
@@ -90,7 +90,7 @@ class Bvh:
 
     def stats(self) -> dict:
         """Summary numbers: nodes, leaves, depth, leaf sizes, SAH cost, build time,
-        device bytes.
+        device bytes (of the uploaded pair-node rows, ids and triangles).
 
         ``sah_cost`` is the expected cost of a random ray of the *box* topology:
         sum over inner nodes of ``C_TRAVERSAL * A(n)`` plus sum over leaves of
@@ -110,8 +110,10 @@ class Bvh:
             "mean_leaf_size": float(count[leaf].mean()),
             "sah_cost": float(sah),
             "build_ms": float(self.build_ms),
-            "device_bytes": int(self.nodes.nbytes + self.prim_id.nbytes
-                                + TRIANGLE_BYTES * len(self.prim_id)),
+            # what the device holds: one BVH_PAIR_NODE row per inner node (a lone
+            # leaf takes one), the triangle ids and the triangles
+            "device_bytes": int(BVH_PAIR_NODE.itemsize * max(int((~leaf).sum()), 1)
+                                + self.prim_id.nbytes + TRIANGLE_BYTES * len(self.prim_id)),
         }
 
 
