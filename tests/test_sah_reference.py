@@ -136,12 +136,27 @@ def test_reference_on_cases_worked_by_hand():
     assert_valid_leaves(reference_leaves(root), 6, 2)
 
 
+def test_a_split_that_costs_what_a_leaf_costs_is_not_made():
+    """Two flat triangles, each filling the box of its own unit square, side by
+    side: splitting costs 1 + (1 * 1 + 1 * 1) / 2 = 2, exactly the leaf's 2
+    (areas are exact in float32 too).  Only a strictly cheaper split is made."""
+    pair = np.array([[[0, 0, 0], [1, 0, 0], [0, 1, 0]], [[1, 0, 0], [2, 0, 0], [2, 1, 0]]], np.float32)
+    lo, hi = pair.min(axis=1).astype(np.float64), pair.max(axis=1).astype(np.float64)
+    assert ref.best_plane([0, 1], lo, hi, (lo + hi) / 2)[0] == 2.0
+    assert ref.build(pair, 2).is_leaf
+    assert len(build_bvh(pair, builder="sah", leaf_size=2).nodes) == 1
+    # a unit gap between them makes the split strictly cheaper: 1 + 2 / 3 < 2
+    apart = pair + np.array([[0, 0, 0], [1, 0, 0]], np.float32)[:, None]
+    assert not ref.build(apart, 2).is_leaf
+    assert len(build_bvh(apart, builder="sah", leaf_size=2).nodes) == 3
+
+
 # --------------------------------------------------------------------------- fast against reference
 
-SMALL_CASES = [("box", None), ("crossing", None), ("soup 11", (11, 60)), ("soup 12", (12, 200)),
-               ("soup 13", (13, 256))]
+SMALL_CASES = [("box", None), ("crossing", None), ("soup-11", (11, 60)), ("soup-12", (12, 200)),
+               ("soup-13", (13, 256))]
 BINNED_CASES = [("icosphere", None), ("torus", None), ("heightfield", None), ("clusters", None),
-                ("soup 21", (21, 300)), ("soup 22", (22, 400)), ("soup 23", (23, 600))]
+                ("soup-21", (21, 300)), ("soup-22", (22, 400)), ("soup-23", (23, 600))]
 
 
 def _triangles(name, soup):
