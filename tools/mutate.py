@@ -172,6 +172,8 @@ def main(argv=None) -> int:
     parser.add_argument("--timeout", type=float, default=1200, help="seconds per mutant's tests")
     parser.add_argument("--no-baseline", action="store_true",
                         help="skip the check that the unmutated copy passes the tests")
+    parser.add_argument("--skip-equivalent", action="store_true",
+                        help="leave out the mutants marked equivalent (they run every test: slow)")
     parser.add_argument("--keep", action="store_true", help="keep the temporary copies")
     args = parser.parse_args(argv)
 
@@ -182,6 +184,8 @@ def main(argv=None) -> int:
         if unknown:
             parser.error(f"unknown mutant(s) {', '.join(unknown)}; see --list")
         chosen = [m for m in MUTANTS if m.name in args.only]
+    if args.skip_equivalent:
+        chosen = [m for m in chosen if not m.equivalent]
     if args.list:
         for m in chosen:
             note = "  [equivalent]" if m.equivalent else ""
@@ -215,7 +219,8 @@ def main(argv=None) -> int:
     print("| mutant | file | change | result | seconds |")
     print("|---|---|---|---|---|")
     for m, failed, seconds in results:
-        change = f"`{m.old.strip().splitlines()[-1].strip()}` -> `{m.new.strip().splitlines()[-1].strip()}`"
+        old_line, new_line = next((a, b) for a, b in zip(m.old.splitlines(), m.new.splitlines()) if a != b)
+        change = f"`{old_line.strip()}` -> `{new_line.strip()}`"
         change = change.replace("|", "\\|")                 # a table cell
         result = f"killed by `{failed}`" if failed else ("survived (equivalent)" if m.equivalent else "**SURVIVED**")
         print(f"| {m.name} | {Path(m.path).name} | {change} | {result} | {seconds:.0f} |")
