@@ -2,6 +2,7 @@
 
 import argparse
 import csv
+import io
 
 import numpy as np
 import pytest
@@ -176,6 +177,19 @@ def test_unknown_names_are_input_errors(tmp_path):
 
 
 def test_chart_draws_without_data_and_with_one_point():
-    for series in ([], [("basic", "#000000", False, [(80, 1.5)])]):
-        png = paper.loglog_chart(series, "t", "ms")
-        assert png.startswith(b"\x89PNG")
+    empty = np.asarray(Image.open(io.BytesIO(paper.loglog_chart([], "t", "ms"))).convert("RGB"))
+    assert empty.shape == (640, 1000, 3)
+    ink = (empty < 128).all(axis=2)                   # black text on white
+    assert ink[320:335, 90:160].any(), "'no data' is written at mid-height"
+    assert (empty.max(axis=2) - empty.min(axis=2)).max() == 0, "only greys without a series"
+    colour = (31, 119, 180)                           # #1f77b4
+    png = paper.loglog_chart([("basic", "#1f77b4", False, [(80, 1.5)])], "t", "ms")
+    chart = np.asarray(Image.open(io.BytesIO(png)).convert("RGB"))
+    # axes: faces 10..100 over x pixels 90..750, ms 1..10 over y pixels 570..50 (log)
+    x = 90 + (np.log10(80) - 1) * (750 - 90)
+    y = 570 - np.log10(1.5) * (570 - 50)
+    is_colour = (chart == colour).all(axis=2)
+    rows, cols = np.nonzero(is_colour[:, :760])        # the plot, legend left out
+    assert len(rows) > 10
+    assert abs(cols.mean() - x) < 1.5 and abs(rows.mean() - y) < 1.5, "the point sits at (80, 1.5)"
+    assert is_colour[50:70, 760:800].any(), "the legend shows the series"

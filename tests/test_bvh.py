@@ -203,6 +203,48 @@ def check_structure(bvh, n_tri: int, leaf_size: int):
     assert np.isfinite(stats["sah_cost"]) and stats["sah_cost"] >= 1.0
 
 
+def check_pair_rows(bvh):
+    """The rows the kernels walk (one per inner node, both children's volumes and
+    references, layouts.py) against the depth-first tree: walked from row 0 as
+    accel_bvh.cl walks them, they hold each child's volume bit for bit and reach
+    every leaf slot exactly once."""
+    nodes = bvh.nodes
+    rows = bvh.acc.rows
+    refs = child_refs(rows)
+    assert len(rows) == max(int((nodes["count"] == 0).sum()), 1)
+    reached = np.zeros(len(bvh.prim_id), np.int64)
+
+    def volume(row, side):
+        a, b = rows[f"{side}_a"][row], rows[f"{side}_b"][row]
+        if bvh.volume == "sphere":
+            return np.r_[a[:3], b[0]]                  # radius kept in b.x
+        return np.r_[a[:3], b[:3]]
+
+    def expected(node):
+        a, b = nodes["bound_a"][node], nodes["bound_b"][node]
+        return np.r_[a[:3], a[3]] if bvh.volume == "sphere" else np.r_[a[:3], b[:3]]
+
+    if nodes["count"][0] > 0:                          # one leaf: hung on the left of row 0
+        assert tuple(refs[0]) == (0, nodes["count"][0], -1, -1)
+        assert np.array_equal(volume(0, "left"), expected(0))
+        reached[:nodes["count"][0]] += 1
+    else:
+        todo = [(0, 0)]                                # (row, its node)
+        while todo:
+            row, node = todo.pop()
+            for k, (side, child) in enumerate((("left", nodes["left_first"][node]),
+                                               ("right", nodes["right"][node]))):
+                ref, count = refs[row, 2 * k], refs[row, 2 * k + 1]
+                assert count == nodes["count"][child]
+                assert np.array_equal(volume(row, side), expected(child)), (row, side)
+                if count > 0:
+                    assert ref == nodes["left_first"][child]
+                    reached[ref:ref + count] += 1
+                else:
+                    todo.append((ref, child))
+    assert (reached == 1).all(), "every slot in exactly one leaf row"
+
+
 def check_conservative(bvh, tri: np.ndarray):
     """Every corner of every subtree's triangles passes the node's float32 test."""
     nodes = bvh.nodes
@@ -259,6 +301,7 @@ def test_structure_and_conservative_volumes(mesh, builder, volume, leaf_size):
     bvh = built(mesh, builder, volume, leaf_size)
     assert (bvh.volume, bvh.builder, bvh.leaf_size) == (volume, builder, leaf_size)
     check_structure(bvh, len(tri), leaf_size)
+    check_pair_rows(bvh)
     check_conservative(bvh, tri)
     check_tight(bvh)
 
@@ -409,7 +452,8 @@ def test_builds_are_deterministic(builder, volume):
     tri = triangles("soup")
     a = build_bvh(tri, volume=volume, builder=builder, leaf_size=4)
     b = build_bvh(tri.copy(), volume=volume, builder=builder, leaf_size=4)
-    assert a.nodes.tobytes() == b.nodes.tobytes()
+    # the uploaded rows and slot order, byte for byte
+    assert a.acc.rows.tobytes() == b.acc.rows.tobytes()
     assert np.array_equal(a.prim_id, b.prim_id)
     assert a.depth == b.depth
 
@@ -423,7 +467,7 @@ def test_threads_do_not_change_the_tree(builder, monkeypatch):
     monkeypatch.setattr(bvh_module, "BUILD_THREADS", 3)
     monkeypatch.setattr(bvh_module, "THREADED_MIN", 0)
     threaded = build_bvh(tri, builder=builder, leaf_size=4)
-    assert threaded.nodes.tobytes() == serial.nodes.tobytes()
+    assert threaded.acc.rows.tobytes() == serial.acc.rows.tobytes()
     assert np.array_equal(threaded.prim_id, serial.prim_id)
 
 

@@ -401,7 +401,7 @@ def test_intersector_matches_trimesh_numpy(name, device):
     assert (first == ref_first).mean() >= 0.99
     anyhit = ours.intersects_any(o, d)
     assert anyhit.dtype == bool and (anyhit == ref.intersects_any(o, d)).mean() >= 0.99
-    tri, ray = ours.intersects_id(o, d)
+    tri, ray = ours.intersects_id(o, d, every_triangle=True)     # as the numpy engine lists them
     ref_tri, ref_ray = ref.intersects_id(o, d)
     assert tri.dtype == np.int64 and ray.dtype == np.int64
     mine, theirs = _per_ray_sets(ray, tri), _per_ray_sets(ref_ray, ref_tri)
@@ -571,9 +571,23 @@ def test_cli_writes_aov_files(tmp_path, device, capsys):
     assert depth.shape == (30, 40) and depth.dtype == np.float32 and normal.shape == (30, 40, 3)
     assert np.array_equal(hit, prim >= 0) and hit.any() and (~hit).any()
     assert np.isinf(depth[~hit]).all() and np.isfinite(depth[hit]).all()
+    # the pictures show the arrays: decoded, pixel for pixel
     from PIL import Image
-    for name in ("depth", "normal", "prim", "hit"):
-        assert Image.open(tmp_path / f"ball.{name}.png").size == (40, 30)
+    pictures = {name: np.asarray(Image.open(tmp_path / f"ball.{name}.png")) for name in ("depth", "normal",
+                                                                                       "prim", "hit")}
+    assert np.array_equal(pictures["hit"], np.where(hit, 255, 0))
+    near, far = depth[hit].min(), depth[hit].max()
+    grey = np.where(hit, np.round(255 - 215 * (depth - near) / (far - near)), 0)   # near bright, misses black
+    assert np.abs(pictures["depth"].astype(int) - grey).max() <= 1 and pictures["depth"][hit].max() == 255
+    colours = np.where(hit[..., None], np.round((normal + 1) * 127.5), 0)
+    assert pictures["normal"].shape == (30, 40, 3)
+    assert np.abs(pictures["normal"].astype(int) - colours).max() <= 1
+    rgb = pictures["prim"].reshape(-1, 3)
+    assert (rgb[~hit.ravel()] == 0).all() and (rgb[hit.ravel()] > 0).any(axis=1).all()
+    flat = prim.ravel()
+    for p in np.unique(flat[flat >= 0])[:20]:                   # one colour per triangle
+        assert len(np.unique(rgb[flat == p], axis=0)) == 1
+    assert len(np.unique(rgb[hit.ravel()], axis=0)) > 0.8 * len(np.unique(flat[flat >= 0]))
     hidden = [p.name for p in tmp_path.glob(".*") if not p.name.endswith(".clrt")]   # .clrt: records of .npy
     assert not hidden, f"no temporary files left behind: {hidden}"
     code = main(["render", str(obj), "-o", str(tmp_path / "bad.png"), "--aov", "depth,albedo", *dev])

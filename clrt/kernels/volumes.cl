@@ -36,7 +36,9 @@ inline VolumeRay volume_ray(float3 origin, float3 dir)
 #if defined(VOLUME_BOX)
 // Slab test (Kay & Kajiya).  fmin/fmax drop the NaN of 0 * inf, which only
 // arises for a ray lying exactly in a padded face plane -- outside all content.
-// The exit distance is widened as in Ize's "Robust BVH ray traversal".
+// The exit distance is widened as in Ize's "Robust BVH ray traversal".  The
+// slack moves each bound outwards by its magnitude: a negative tmin finds hits
+// behind the origin, where scaling by (1 + VOLUME_SLACK) would move them inwards.
 inline bool volume_hit(const VolumeRay* r, float4 bound_a, float4 bound_b, float tmin, float tmax,
                        float* t_enter)
 {
@@ -44,8 +46,9 @@ inline bool volume_hit(const VolumeRay* r, float4 bound_a, float4 bound_b, float
     const float3 t1 = (bound_b.xyz - r->origin) * r->inv_dir;
     const float3 lo = fmin(t0, t1), hi = fmax(t0, t1);
     const float enter = fmax(fmax(lo.x, lo.y), fmax(lo.z, tmin));
-    const float exit = fmin(fmin(hi.x, hi.y), fmin(hi.z, tmax * (1.0f + VOLUME_SLACK))) * (1.0f + VOLUME_SLACK);
-    *t_enter = enter - VOLUME_SLACK * enter;   // a lower bound: callers compare it with tmax
+    const float far = fmin(fmin(hi.x, hi.y), fmin(hi.z, tmax + VOLUME_SLACK * fabs(tmax)));
+    const float exit = far + VOLUME_SLACK * fabs(far);
+    *t_enter = enter - VOLUME_SLACK * fabs(enter);   // a lower bound: callers compare it with tmax
     return enter <= exit;
 }
 #elif defined(VOLUME_SPHERE)
