@@ -13,8 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from clrt.config import (ACCELS, BUILDERS, DEFAULT_ACCEL, DEFAULT_BUILDER, DEFAULT_FOV, DEFAULT_HEIGHT,
-                         DEFAULT_LEAF_SIZE, DEFAULT_WIDTH)
+from clrt.config import ACCELS, BUILDERS, DEFAULT_ACCEL, DEFAULT_BUILDER, DEFAULT_LEAF_SIZE
 from clrt.errors import ClrtError, DeviceError, InputError, OutputError
 from clrt.output import check_replace, write_image
 
@@ -139,48 +138,14 @@ def _output_path(args) -> Path:
 
 def _render(args) -> int:
     from clrt.renderer import Renderer, check_host_memory
-    from clrt.scene.default import default_scene
-    from clrt.scene.scene import Camera, Light, Material, default_light, scene_from_mesh
+    from clrt.scene.render_setup import (CAMERA_OPTIONS, SCENE_OPTIONS, render_camera, render_lights,
+                                         render_scene)
 
     out = _output_path(args)
-    if args.mesh and args.mesh.lower().endswith(".toml"):
-        from clrt.scene.scene_file import load_scene
-        scene = load_scene(args.mesh)
-    elif args.mesh:
-        from clrt.scene.load import load_mesh
-        base = Material()
-        overrides = {k: getattr(args, k) for k in ("ambient", "diffuse", "specular", "shininess")
-                     if getattr(args, k) is not None}
-        material = Material(color=args.color or base.color, smooth=not args.flat, **overrides)
-        scene = scene_from_mesh(load_mesh(args.mesh), material)
-        scene.lights = []   # default light placed below, from the final camera
-    else:
-        scene = default_scene()
-    if args.background:
-        scene.background = args.background
-    if args.samples is not None:
-        scene.samples = args.samples
-    if args.max_depth is not None:
-        scene.max_depth = args.max_depth
-
-    # Options override the scene's camera; what neither gives is framed from the bounds.
-    bounds, base = scene.bounds, scene.camera
-    width = args.width if args.width is not None else (base.width if base else DEFAULT_WIDTH)
-    height = args.height if args.height is not None else (base.height if base else DEFAULT_HEIGHT)
-    fov = args.fov if args.fov is not None else (base.fov if base else DEFAULT_FOV)
-    up = args.up or (base.up if base else (0.0, 1.0, 0.0))
-    placed = base if base is not None and not scene.camera_framed else None   # by the user
-    if args.eye is None and args.target is None and placed is not None:
-        eye, target = placed.eye, placed.target
-    else:   # frame for the final size, fov and up
-        framed = Camera.framing(bounds, width, height, fov, up=up)
-        target = args.target or (placed.target if placed else framed.target)
-        eye = args.eye or (placed.eye if placed else tuple(np.add(target, np.subtract(framed.eye, framed.target))))
-    camera = Camera(eye, target, up, fov, width, height)
-    if args.light:
-        scene.lights = [Light(p) for p in args.light]
-    elif not scene.lights:
-        scene.lights = [default_light(bounds, camera)]
+    # Shared with `clrt batch render`, so both make the same frame of the same camera.
+    scene = render_scene(args.mesh, **{k: getattr(args, k) for k in SCENE_OPTIONS})
+    camera = render_camera(scene, **{k: getattr(args, k) for k in CAMERA_OPTIONS})
+    scene.lights = render_lights(scene.bounds, camera, scene.lights, args.light)
 
     # Checked before the (possibly long) render; the writers check again.
     check_replace(out, args.force)

@@ -32,7 +32,7 @@ from clrt.errors import DeviceMemoryError, TooLargeError
 from clrt.layouts import HIT, RAY
 from clrt.renderer.pool import PinnedImagePool
 from clrt.renderer.tiles import TileLimits, error_name, is_out_of_memory, run_tiles
-from clrt.scene.arrays import flatten_scene
+from clrt.scene.arrays import flatten_scene, light_records
 from clrt.scene.scene import Camera, Scene, as_scene, check_int, ray_epsilon
 
 
@@ -153,6 +153,17 @@ class Renderer:
                         np.float32(ray_epsilon(self.arrays.bounds, camera.eye)))
         return _Job(camera, samples, max_depth, seed, linear, (*self.geometry.args, *shading_args),
                     image, pinned, prim, t, timings)
+
+    def set_lights(self, lights) -> None:
+        """Replace the scene's lights; the geometry stays uploaded (a turntable of
+        ``clrt batch render`` moves the default light with the camera)."""
+        self.scene.lights = list(lights)
+        self.arrays.lights = light_records(self.scene.lights)
+        old = self.buffers["lights"]
+        self.buffers["lights"] = cl.Buffer(self.context, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR,
+                                           hostbuf=self.arrays.lights)
+        self.queue.finish()   # no launch may still read the old buffer
+        old.release()
 
     # ----------------------------------------------------------------------- memory
 
