@@ -89,6 +89,9 @@ def _parser(bench: bool = False) -> argparse.ArgumentParser:
     i.add_argument("--device", help="device to mark as selected (same forms as render --device)")
     _accel_options(i)
 
+    sub.add_parser("batch", help="render many sources and views on a Dask cluster (docs/distributed.md)",
+                   add_help=False)   # its options: clrt/batch/cli.py
+
     if bench:
         from clrt.bench.paper import add_bench_parser
         add_bench_parser(sub)
@@ -222,6 +225,9 @@ def _glue_vector_values(argv: list[str]) -> list[str]:
 def main(argv=None) -> int:
     try:
         argv = list(sys.argv[1:] if argv is None else argv)
+        if argv[:1] == ["batch"]:
+            from clrt.batch.cli import main as batch_main
+            return batch_main(argv[1:])
         bench = argv[:1] == ["bench"]
         args = _parser(bench).parse_args(_glue_vector_values(argv))
         if bench:

@@ -116,6 +116,13 @@ def _replace_atomically(path: Path, write) -> None:
         raise
 
 
+def write_text(text: str, path: Path) -> None:
+    """Write a text file (UTF-8) through a temporary file and a rename, replacing
+    any file there (as :func:`write_image`, but without the mark check)."""
+    data = text.encode("utf-8")
+    _replace_atomically(Path(path), lambda f: f.write(data))
+
+
 def write_array(values: np.ndarray, path: Path, marked_by: Path, force: bool = False) -> None:
     """Write ``values`` as .npy.  A .npy file carries no mark, so an existing one is
     replaced only if the image ``marked_by`` beside it was written by clrt, or

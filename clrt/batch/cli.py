@@ -1,0 +1,147 @@
+"""``clrt batch render SOURCE... -o DIR``: many sources and views on a Dask cluster.
+
+``clrt/cli.py`` hands ``clrt batch ...`` over to :func:`main`.  The render
+options are those of ``clrt render`` (tests/test_batch.py checks that every
+one of them is here), parsed the same way.
+
+Exit codes: 0 every job done, 2 bad input (some sources bad, the rest done),
+3 device trouble, 130 interrupted (what finished is kept; run again to resume).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+import numpy as np
+
+from clrt.config import ACCELS, BUILDERS, DEFAULT_ACCEL, DEFAULT_BUILDER, DEFAULT_LEAF_SIZE, DEVICE_ENV
+from clrt.errors import InputError
+
+#: Options of ``clrt render`` that ``clrt batch render`` does not take, and why.
+NOT_TAKEN = {"--output": "-o names a folder", "--aov": "images only"}
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message):
+        raise InputError(f"{self.prog}: {message} (see --help)")
+
+
+def _vector(text: str) -> tuple:
+    try:
+        values = tuple(float(x) for x in text.split(","))
+    except ValueError:
+        values = ()
+    if len(values) != 3 or not all(np.isfinite(values)):
+        raise argparse.ArgumentTypeError(f"expected three numbers x,y,z, got {text!r}")
+    return values
+
+
+_VECTOR_OPTIONS = {"--eye", "--target", "--up", "--light", "--color", "--background"}
+
+
+def _glue_vector_values(argv: list) -> list:
+    """``--eye -1,2,3`` -> ``--eye=-1,2,3`` (as clrt render does)."""
+    out, i = [], 0
+    while i < len(argv):
+        if argv[i] in _VECTOR_OPTIONS and i + 1 < len(argv):
+            out.append(f"{argv[i]}={argv[i + 1]}")
+            i += 2
+        else:
+            out.append(argv[i])
+            i += 1
+    return out
+
+
+def parser() -> argparse.ArgumentParser:
+    p = _Parser(prog="clrt batch", description="Batch jobs on a Dask cluster (docs/distributed.md).")
+    sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
+    r = sub.add_parser(
+        "render", help="render many sources and views into a folder",
+        description="Render every SOURCE (mesh or scene file, folder of them, or glob pattern) into "
+                    "DIR/<source-stem>/view-NNNN.png, with a manifest DIR/manifest.jsonl. Finished images "
+                    "are skipped when the command is run again. Without --scheduler a local cluster of "
+                    "worker processes (loopback only) runs the jobs.")
+    r.add_argument("sources", nargs="+", metavar="SOURCE", help="mesh or scene file, folder, or glob pattern")
+    r.add_argument("-o", "--output", required=True, metavar="DIR", help="output folder (created if missing)")
+    r.add_argument("--views", type=int, default=1,
+                   help="views per source on a turntable around the target: view i at azimuth 360*i/N "
+                        "degrees, same distance, elevation and framing as the default camera (default 1)")
+    where = r.add_mutually_exclusive_group()
+    where.add_argument("--workers", type=int, metavar="K",
+                       help="local worker processes (default: one per GPU, else one per two CPU cores)")
+    where.add_argument("--scheduler", metavar="ADDRESS",
+                       help="use the workers of an existing Dask cluster, tcp://HOST:PORT or tls://HOST:PORT "
+                            "(certificates from Dask's configuration, see docs/distributed.md)")
+    r.add_argument("--device", help=f"'gpu', 'cpu' or P:D; 'gpu' gives worker i the i-th GPU (default: the "
+                                    f"worker's {DEVICE_ENV}, else GPUs, else the CPU)")
+    r.add_argument("-f", "--force", action="store_true",
+                   help="replace images in DIR even if clrt did not write them")
+    # The options of clrt render, with the same meaning.
+    r.add_argument("--width", type=int, help="image width in pixels (default: the scene file's, else 640)")
+    r.add_argument("--height", type=int, help="image height in pixels (default: the scene file's, else 480)")
+    r.add_argument("--eye", type=_vector, help="camera position of view 0 (default: framed from the bounds)")
+    r.add_argument("--target", type=_vector, help="point looked at, the turntable's centre (default: centre "
+                                                  "of the bounds)")
+    r.add_argument("--up", type=_vector, help="up vector, the turntable's axis (default 0,1,0)")
+    r.add_argument("--fov", type=float, help="vertical field of view in degrees (default 45)")
+    r.add_argument("--light", type=_vector, action="append", metavar="X,Y,Z",
+                   help="point light position; repeat for more (default: one above each view's eye)")
+    r.add_argument("--color", type=_vector, help="material colour r,g,b, linear 0..1 (default .8,.8,.8)")
+    r.add_argument("--ambient", type=float, help="ambient coefficient (default 0.1)")
+    r.add_argument("--diffuse", type=float, help="diffuse coefficient (default 0.7)")
+    r.add_argument("--specular", type=float, help="specular coefficient (default 0.3)")
+    r.add_argument("--shininess", type=float, help="Phong exponent (default 32)")
+    r.add_argument("--flat", action="store_true", help="flat shading (no vertex-normal interpolation)")
+    r.add_argument("--background", type=_vector, help="background colour r,g,b, linear 0..1")
+    r.add_argument("--samples", type=int, help="anti-aliasing: N x N rays per pixel")
+    r.add_argument("--max-depth", type=int, help="reflection/refraction bounces (default: the scene's, 5)")
+    r.add_argument("--accel", default=DEFAULT_ACCEL, choices=ACCELS,
+                   help=f"BVH bounding-volume shape, or none for brute force (default {DEFAULT_ACCEL})")
+    r.add_argument("--builder", default=DEFAULT_BUILDER, choices=BUILDERS,
+                   help=f"BVH builder (default {DEFAULT_BUILDER})")
+    r.add_argument("--leaf-size", type=int, default=DEFAULT_LEAF_SIZE,
+                   help=f"most triangles per BVH leaf (default {DEFAULT_LEAF_SIZE})")
+    r.add_argument("-q", "--quiet", action="store_true", help="no progress bar; print only the summary line")
+    return p
+
+
+def main(argv: list) -> int:
+    """Run ``clrt batch ...``; errors are raised as ClrtError for clrt.cli to print."""
+    args = parser().parse_args(_glue_vector_values(list(argv)))
+    from clrt.batch.cluster import connect, require_dask
+    from clrt.batch.engine import run
+    from clrt.scene.render_setup import CAMERA_OPTIONS, SCENE_OPTIONS
+
+    require_dask()
+    options = {k: getattr(args, k) for k in SCENE_OPTIONS + CAMERA_OPTIONS}
+    client = connect(args.scheduler) if args.scheduler else None
+
+    def log(line):
+        if not args.quiet:
+            print(line, file=sys.stderr)
+
+    try:
+        summary = run(args.sources, args.output, args.views, client=client, workers=args.workers,
+                      device=args.device, accel=args.accel, builder=args.builder, leaf_size=args.leaf_size,
+                      lights=args.light, force=args.force, progress=not args.quiet, log=log, **options)
+    finally:
+        if client is not None:
+            client.close()
+    _print_summary(summary, args.output, args.quiet)
+    return summary.exit_code()
+
+
+def _print_summary(summary, folder: str, quiet: bool) -> None:
+    """The bad sources one line each (stderr), then the totals (stdout)."""
+    for line in summary.bad_sources():
+        print(f"clrt: {line}", file=sys.stderr)
+    rendered, skipped = summary.rendered, summary.count("skipped")
+    failed = sum(summary.count(s) for s in ("bad", "device", "failed"))
+    bad = len(summary.bad_sources())
+    print(f"{rendered} frame(s) rendered, {skipped} already done, {failed} not rendered "
+          f"({bad} bad source(s) or error(s)); {summary.seconds:.1f} s, {summary.frames_per_second:.2f} frames/s, "
+          f"{summary.workers} worker(s) -> {folder}")
+    if not quiet:
+        for worker, count in summary.per_worker().items():
+            print(f"  {worker}: {count} frame(s)")
