@@ -15,16 +15,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from clrt.batch.worker import trace_chunk
+from clrt.batch.worker import HITS, trace_chunk
 from clrt.config import BATCH_RAY_CHUNK, DEFAULT_ACCEL, DEFAULT_BUILDER, DEFAULT_LEAF_SIZE
 from clrt.errors import InputError
 from clrt.query.results import Hits
 from clrt.scene.scene import as_mesh
-
-#: One chunk's closest hits, as one array (fields of clrt.Hits).
-HITS = np.dtype([("t", np.float32), ("prim", np.int32), ("u", np.float32), ("v", np.float32),
-                 ("normal", np.float32, (3,)), ("front", np.bool_), ("hit", np.bool_)])
-
 
 def trace(mesh, origins, directions, *, tmin=0.0, tmax=np.inf, cull: str = "none",
           accel: str = DEFAULT_ACCEL, builder: str = DEFAULT_BUILDER, leaf_size: int = DEFAULT_LEAF_SIZE,
@@ -93,9 +88,11 @@ def _query(query, mesh, origins, directions, tmin, tmax, cull, accel, builder, l
         shipped = dask.delayed(mesh, pure=True, traverse=False)
     dtype = np.dtype(bool) if query == "occluded" else HITS
     limits = [a for x in (tmin, tmax) for a in ((x, "i") if isinstance(x, da.Array) else (x, None))]
+    name = f"clrt-{query}-{tokenize(origins, directions, tmin, tmax, token, options, device, cull)}"
+    # One task per chunk of rays ("i"), each with whole rows of both arrays ("ij" -> "i").
     return da.blockwise(trace_chunk, "i", origins, "ij", directions, "ij", *limits, concatenate=True,
                         mesh=shipped, mesh_token=token, options=options, device=device, cull=cull, query=query,
-                        dtype=dtype, meta=np.empty((0,), dtype), name=f"clrt-{query}-{tokenize(origins, directions, tmin, tmax, token, options, device, cull)}")
+                        dtype=dtype, meta=np.empty((0,), dtype), name=name)
 
 
 def _rays(values, name: str):

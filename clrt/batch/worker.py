@@ -262,6 +262,10 @@ def _camera_record(camera) -> dict:
 
 # --------------------------------------------------------------------------- ray chunks
 
+#: One chunk's closest hits, as one array (the fields of clrt.Hits).
+HITS = np.dtype([("t", np.float32), ("prim", np.int32), ("u", np.float32), ("v", np.float32),
+                 ("normal", np.float32, (3,)), ("front", np.bool_), ("hit", np.bool_)])
+
 def _accel(mesh, token: str, options: dict, device: str | None):
     device = device if device is not None else _STATE.device
     key = (token, tuple(sorted(options.items())), device)
@@ -276,7 +280,6 @@ def _accel(mesh, token: str, options: dict, device: str | None):
 def trace_chunk(origins, directions, tmin, tmax, *, mesh, mesh_token, options, device, cull, query):
     """One chunk of rays against ``mesh`` on this worker's device: a structured
     array (clrt.batch.rays.HITS) for "trace", an (n,) bool array for "occluded"."""
-    from clrt.batch.rays import HITS
     with device_lock():
         accel = _accel(mesh, mesh_token, options, device)
         if query == "occluded":
