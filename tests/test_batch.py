@@ -118,12 +118,33 @@ def test_batch_takes_every_render_option():
     (["--scheduler", "tcp://127.0.0.1:1"], "cannot reach the Dask scheduler"),
     (["--scheduler", "tls://127.0.0.1:1"], "needs certificates"),
 ])
-def test_bad_options_are_one_line_errors(args, fragment, meshes, tmp_path, capsys):
+def test_bad_options_are_one_line_errors(args, fragment, meshes, tmp_path, capsys, monkeypatch):
+    monkeypatch.setattr("clrt.batch.cluster.BATCH_CONNECT_TIMEOUT", 1.0)   # nobody listens there
     code = main(["batch", "render", str(meshes[0]), "-o", str(tmp_path / "out"), *args])
     out, err = capsys.readouterr()
     assert code == 2
     assert fragment in err and err.startswith("clrt: ") and len(err.strip().splitlines()) == 1, err
     assert not list((tmp_path / "out").rglob("*.png"))
+
+
+def test_each_worker_gets_its_own_device(monkeypatch):
+    from clrt.batch import worker
+    from clrt.device.context import DeviceInfo
+
+    def info(p, d, kind):
+        return DeviceInfo(p, d, "platform", f"dev{p}{d}", kind, 1, 1, 1, 1, "OpenCL 3.0", "1")
+
+    devices = [info(0, 0, "CPU"), info(1, 0, "GPU"), info(1, 1, "GPU"), info(1, 2, "GPU")]
+    monkeypatch.setattr("clrt.device.context.list_devices", lambda: devices)
+    monkeypatch.delenv("CLRT_DEVICE", raising=False)
+    assert [worker.choose_device(None, i) for i in range(4)] == ["1:0", "1:1", "1:2", "1:0"]
+    assert [worker.choose_device("gpu", i) for i in (0, 2)] == ["1:0", "1:2"]
+    assert worker.choose_device("cpu", 1) == "0:0"
+    assert worker.choose_device("1:1", 0) == "1:1"
+    monkeypatch.setenv("CLRT_DEVICE", "1:2")
+    assert worker.choose_device(None, 0) == "1:2" and worker.choose_device("gpu", 0) == "1:2"
+    assert worker.choose_device("0:0", 0) == "0:0", "a P:D given to the batch wins"
+    assert [worker.worker_index(n) for n in (3, "gpu-2", "tcp://h:1234-1", "x")] == [3, 2, 1, None]
 
 
 # --------------------------------------------------------------------------- clusters
@@ -189,6 +210,15 @@ def test_bad_sources_are_reported_while_the_others_finish(meshes, tmp_path, devi
                         ("corrupt.obj", 0): "bad", ("corrupt.obj", 1): "bad",
                         ("empty.off", 0): "bad", ("empty.off", 1): "bad"}
     assert "2 frame(s) rendered" in out
+
+
+def test_device_trouble_exits_3(meshes, tmp_path, capsys):
+    code = main(["batch", "render", str(meshes[0]), "-o", str(tmp_path / "out"), "--width", "20",
+                 "--height", "14", "--device", "9:9", "-q"])
+    out, err = capsys.readouterr()
+    assert code == 3
+    assert err.count("\n") == 1 and "9" in err and "does not exist" in err, err
+    assert not list((tmp_path / "out").rglob("*.png"))
 
 
 class KillOnce(WorkerPlugin):

@@ -125,6 +125,10 @@ def main(argv: list) -> int:
         summary = run(args.sources, args.output, args.views, client=client, workers=args.workers,
                       device=args.device, accel=args.accel, builder=args.builder, leaf_size=args.leaf_size,
                       lights=args.light, force=args.force, progress=not args.quiet, log=log, **options)
+    except KeyboardInterrupt:
+        print("clrt: interrupted; finished images are kept: run the same command again to resume",
+              file=sys.stderr)
+        return 130
     finally:
         if client is not None:
             client.close()

@@ -11,6 +11,8 @@ from __future__ import annotations
 import importlib.util
 import logging
 import os
+import signal
+import threading
 
 from clrt.config import BATCH_CONNECT_TIMEOUT
 from clrt.errors import ClrtError, InputError
@@ -60,9 +62,19 @@ def start_local_cluster(workers: int, device: str | None = None):
     # The scheduler's HTTP server (the dashboard when bokeh is installed, else health
     # and metrics pages) on a free loopback port: never Dask's default :8787.
     dashboard = f"{LOOPBACK}:0"
-    return LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, host=LOOPBACK,
-                        scheduler_port=0, dashboard_address=dashboard, worker_dashboard_address=None,
-                        silence_logs=logging.ERROR, env=env)
+    # Ctrl-C reaches every process of the terminal's group; it is the client's to
+    # handle (it stops the cluster).  Worker processes started while SIGINT is
+    # ignored keep ignoring it; restarted ones are told by DevicePlugin.
+    previous = None
+    if threading.current_thread() is threading.main_thread():
+        previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        return LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, host=LOOPBACK,
+                            scheduler_port=0, dashboard_address=dashboard, worker_dashboard_address=None,
+                            silence_logs=logging.ERROR, env=env)
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGINT, previous)
 
 
 def connect(address: str):

@@ -146,7 +146,7 @@ def run(sources, out_dir, views: int = 1, *, client=None, workers: int | None = 
             n_workers = len(client.scheduler_info().get("workers", {}))
             jobs = _jobs(pending, folder, views, settings, force, n_workers)
             sent = time.perf_counter()
-            outputs += _execute(client, jobs, folder, manifest, device, progress)
+            outputs += _execute(client, jobs, folder, manifest, device, progress, local=cluster is not None)
             render_seconds = time.perf_counter() - sent
         finally:
             manifest.write()
@@ -252,12 +252,13 @@ def _jobs(pending: list, folder: Path, views: int, settings: dict, force: bool, 
     return jobs
 
 
-def _execute(client, jobs: list, folder: Path, manifest: Manifest, device, progress: bool) -> list[Output]:
+def _execute(client, jobs: list, folder: Path, manifest: Manifest, device, progress: bool,
+             local: bool = False) -> list[Output]:
     """Run the jobs, record each finished one; Ctrl-C cancels what is left."""
     from distributed import as_completed
 
     from clrt.batch.worker import DevicePlugin, render_task
-    client.register_plugin(DevicePlugin(device, BATCH_CACHE_SCENES))
+    client.register_plugin(DevicePlugin(device, BATCH_CACHE_SCENES, ignore_interrupts=local))
     futures = {}
     for job in jobs:
         future = client.submit(render_task, job, pure=False, retries=BATCH_TASK_RETRIES,

@@ -27,6 +27,7 @@ from __future__ import annotations
 import fcntl
 import os
 import re
+import signal
 import tempfile
 import threading
 import time
@@ -120,10 +121,14 @@ class DevicePlugin(WorkerPlugin):
 
     name = "clrt-device"
 
-    def __init__(self, device: str | None = None, cache_size: int = BATCH_CACHE_SCENES):
+    def __init__(self, device: str | None = None, cache_size: int = BATCH_CACHE_SCENES,
+                 ignore_interrupts: bool = False):
         self.device, self.cache_size = device, cache_size
+        self.ignore_interrupts = ignore_interrupts   # a local cluster: Ctrl-C is the client's
 
     def setup(self, worker):
+        if self.ignore_interrupts and threading.current_thread() is threading.main_thread():
+            signal.signal(signal.SIGINT, signal.SIG_IGN)
         configure(choose_device(self.device, worker_index(worker.name)), self.cache_size)
 
 
