@@ -62,6 +62,8 @@ def start_local_cluster(workers: int, device: str | None = None):
     # The scheduler's HTTP server (the dashboard when bokeh is installed, else health
     # and metrics pages) on a free loopback port: never Dask's default :8787.
     dashboard = f"{LOOPBACK}:0"
+    # No memory limit: Dask would pause or restart a worker holding a large mesh
+    # (clrt checks host memory itself).
     # Ctrl-C reaches every process of the terminal's group; it is the client's to
     # handle (it stops the cluster).  Worker processes started while SIGINT is
     # ignored keep ignoring it; restarted ones are told by DevicePlugin.
@@ -71,7 +73,7 @@ def start_local_cluster(workers: int, device: str | None = None):
     try:
         return LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, host=LOOPBACK,
                             scheduler_port=0, dashboard_address=dashboard, worker_dashboard_address=None,
-                            silence_logs=logging.ERROR, env=env)
+                            silence_logs=logging.ERROR, env=env, memory_limit=0)
     finally:
         if previous is not None:
             signal.signal(signal.SIGINT, previous)
