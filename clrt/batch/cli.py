@@ -16,7 +16,7 @@ import sys
 import numpy as np
 
 from clrt.config import ACCELS, BUILDERS, DEFAULT_ACCEL, DEFAULT_BUILDER, DEFAULT_LEAF_SIZE, DEVICE_ENV
-from clrt.errors import InputError
+from clrt.errors import DeviceError, InputError
 
 #: Options of ``clrt render`` that ``clrt batch render`` does not take, and why.
 NOT_TAKEN = {"--output": "-o names a folder", "--aov": "images only"}
@@ -129,6 +129,10 @@ def main(argv: list) -> int:
         print("clrt: interrupted; finished images are kept: run the same command again to resume",
               file=sys.stderr)
         return 130
+    except OSError as exc:   # distributed's CommClosedError and friends: the cluster went away
+        reason = (str(exc).splitlines() or [""])[0] or type(exc).__name__
+        raise DeviceError(f"lost the Dask cluster: {reason}; finished images are kept: "
+                          "run the same command again to resume") from None
     finally:
         if client is not None:
             client.close()

@@ -144,6 +144,8 @@ def run(sources, out_dir, views: int = 1, *, client=None, workers: int | None = 
             if link and log:
                 log(f"dashboard: {link}")
             n_workers = len(client.scheduler_info().get("workers", {}))
+            if not n_workers and log:
+                log("the scheduler has no workers yet: the jobs wait for them")
             jobs = _jobs(pending, folder, views, settings, force, n_workers)
             sent = time.perf_counter()
             outputs += _execute(client, jobs, folder, manifest, device, progress, local=cluster is not None)
