@@ -131,15 +131,13 @@ def run(sources, out_dir, views: int = 1, *, client=None, workers: int | None = 
         if not pending:
             return Summary(outputs, time.perf_counter() - started, 0)
         require_dask()
-        cluster = None
+        cluster = own_client = None
         try:
             if client is None:
                 count = workers or default_workers(device)
                 cluster = start_local_cluster(count, device)
                 from distributed import Client
                 client = own_client = Client(cluster)
-            else:
-                own_client = None
             link = dashboard_link(client)
             if link and log:
                 log(f"dashboard: {link}")
@@ -152,8 +150,9 @@ def run(sources, out_dir, views: int = 1, *, client=None, workers: int | None = 
             render_seconds = time.perf_counter() - sent
         finally:
             manifest.write()
-            if cluster is not None:
+            if own_client is not None:
                 own_client.close()
+            if cluster is not None:
                 cluster.close()
     return Summary(outputs, time.perf_counter() - started, n_workers, render_seconds)
 
