@@ -159,7 +159,8 @@ def test_local_cluster_listens_on_loopback_only(device):
         assert all(a.startswith("tcp://127.0.0.1:") for a in addresses), addresses
         assert cluster.dashboard_link.startswith("http://127.0.0.1:")
         processes = [psutil.Process()] + psutil.Process().children(recursive=True)
-        listening = [c.laddr for p in processes for c in p.net_connections(kind="inet") if c.status == "LISTEN"]
+        sockets = [getattr(p, "net_connections", None) or p.connections for p in processes]   # psutil < 6
+        listening = [c.laddr for each in sockets for c in each(kind="inet") if c.status == "LISTEN"]
         assert len(listening) >= 6   # scheduler, its HTTP server, 2 workers, 2 nannies
         assert all(addr.ip == "127.0.0.1" for addr in listening), listening
 
