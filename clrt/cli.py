@@ -12,7 +12,7 @@ import signal
 import sys
 from pathlib import Path
 
-from clrt import checks, config
+from clrt import config, options
 from clrt.errors import ClrtError, DeviceError, InputError, OutputError
 
 DEFAULT_OUTPUT = "clrt-default.png"
@@ -24,51 +24,6 @@ class _Parser(argparse.ArgumentParser):
 
     def error(self, message):
         raise InputError(f"{message} (see {self.prog} --help)")
-
-
-# Option types.  Each parses the text and checks the value with clrt.checks under
-# the option's name, so the CLI says what the Python API and scene files say:
-# "--width must be an integer in 1..65536, got 0".
-
-def _number_text(text: str):
-    """'3' -> 3, '2.5' -> 2.5, anything else stays text (the check then names it)."""
-    for kind in (int, float):
-        try:
-            return kind(text)
-        except ValueError:
-            pass
-    return text
-
-
-def _vector_text(text: str):
-    values = [_number_text(x.strip()) for x in text.split(",")]
-    return tuple(values) if all(checks.is_number(v) for v in values) else text
-
-
-def _typed(check, parse=_number_text):
-    """argparse type: ``check(parse(text))``; the check raises InputError itself."""
-    def convert(text: str):
-        return check(parse(text))
-    return convert
-
-
-def _integer(name: str, lo: int, hi: int | None = None):
-    return _typed(lambda v: checks.integer(name, v, lo, hi))
-
-
-def _number(name: str, **limits):
-    return _typed(lambda v: checks.number(name, v, **limits))
-
-
-def _vector(name: str, check=checks.position):
-    return _typed(lambda v: check(name, v), _vector_text)
-
-
-def _device(text: str) -> str:
-    return checks.device(text, "--device")
-
-
-_MATERIAL_OPTIONS = ("color", "ambient", "diffuse", "specular", "shininess", "crease")
 
 
 def _parser(bench: bool = False) -> argparse.ArgumentParser:
@@ -93,46 +48,10 @@ def _parser(bench: bool = False) -> argparse.ArgumentParser:
     r.add_argument("-f", "--force", action="store_true",
                    help="replace the output even if clrt did not write it (by default an existing "
                         "file is replaced only if clrt wrote it, such as the previous render)")
-    side = f"1..{config.MAX_IMAGE_SIDE}"
-    r.add_argument("--width", type=_integer("--width", 1, config.MAX_IMAGE_SIDE),
-                   help=f"image width in pixels, {side} (default: the scene's, else {config.DEFAULT_WIDTH})")
-    r.add_argument("--height", type=_integer("--height", 1, config.MAX_IMAGE_SIDE),
-                   help=f"image height in pixels, {side} (default: the scene's, else {config.DEFAULT_HEIGHT})")
-    r.add_argument("--eye", type=_vector("--eye"), help="camera position x,y,z (default: the file's camera, "
-                                                       "else framed from the bounds)")
-    r.add_argument("--target", type=_vector("--target"), help="point looked at (default: centre of the bounds)")
-    r.add_argument("--up", type=_vector("--up"), help="up vector (default 0,1,0)")
-    r.add_argument("--fov", type=_typed(lambda v: checks.fov(v, "--fov")),
-                   help=f"vertical field of view in degrees, > 0 and < 180 (default {config.DEFAULT_FOV:g})")
-    r.add_argument("--light", type=_vector("--light"), action="append", metavar="X,Y,Z",
-                   help="point light position; repeat for more lights (default: the scene's, else one "
-                        "above the eye)")
-    r.add_argument("--color", type=_vector("--color", checks.color),
-                   help="material colour r,g,b, linear 0..1 (default .8,.8,.8); like every material "
-                        "option it replaces that field of every object's material")
-    r.add_argument("--ambient", type=_number("--ambient", ge=0),
-                   help=f"ambient coefficient (default {config.DEFAULT_AMBIENT:g})")
-    r.add_argument("--diffuse", type=_number("--diffuse", ge=0),
-                   help=f"diffuse coefficient (default {config.DEFAULT_DIFFUSE:g})")
-    r.add_argument("--specular", type=_number("--specular", ge=0),
-                   help=f"specular coefficient (default {config.DEFAULT_SPECULAR:g})")
-    r.add_argument("--shininess", type=_number("--shininess", ge=0),
-                   help=f"Phong exponent (default {config.DEFAULT_SHININESS:g})")
-    r.add_argument("--flat", action="store_true", help="flat shading (no vertex-normal interpolation)")
-    r.add_argument("--crease", type=_typed(lambda v: checks.crease(v, "--crease")), metavar="DEG",
-                   help="smooth shading keeps edges whose faces meet at more than DEG degrees sharp "
-                        f"(0..180; default {config.DEFAULT_CREASE_ANGLE:g}; 180 smooths every edge)")
-    r.add_argument("--background", type=_vector("--background", checks.intensity),
-                   help="background colour r,g,b, linear, >= 0 (default: the scene's, else black)")
-    r.add_argument("--samples", type=_typed(lambda v: checks.samples(v, "--samples")),
-                   help=f"anti-aliasing: N x N rays per pixel, 1..{config.MAX_SAMPLES} (default: the "
-                        "scene's; 1 for a mesh, 2 for the built-in scene)")
-    r.add_argument("--max-depth", type=_typed(lambda v: checks.max_depth(v, "--max-depth")),
-                   help=f"reflection/refraction bounces, 0..{config.MAX_BOUNCES} (default: the scene's, "
-                        f"{config.DEFAULT_MAX_DEPTH})")
-    r.add_argument("--device", type=_device, help="'gpu', 'cpu' or P:D platform/device indices (default: "
+    options.add_render_options(r)
+    r.add_argument("--device", type=options.device, help="'gpu', 'cpu' or P:D platform/device indices (default: "
                                                   "PYOPENCL_CTX, else the first GPU, else the first CPU)")
-    _accel_options(r)
+    options.add_accel_options(r)
     r.add_argument("--aov", type=_aov_list, metavar="NAMES",
                    help="also write per-pixel images, comma-separated: depth (along the view axis), "
                         "distance (along the ray), normal, prim (triangle index), hit, front; each as "
@@ -145,8 +64,11 @@ def _parser(bench: bool = False) -> argparse.ArgumentParser:
                                    "clrt would use. With MESH: statistics of the acceleration build "
                                    "for the device clrt would use (or --device).")
     i.add_argument("mesh", nargs="?", help="mesh file to build a BVH for")
-    i.add_argument("--device", type=_device, help="device to use (same forms as render --device)")
-    _accel_options(i)
+    i.add_argument("--device", type=options.device, help="device to use (same forms as render --device)")
+    options.add_accel_options(i)
+
+    sub.add_parser("batch", help="render many sources and views on a Dask cluster (docs/distributed.md)",
+                   add_help=False)   # its options: clrt/batch/cli.py
 
     if bench:
         from clrt.bench.paper import add_bench_parser
@@ -160,20 +82,6 @@ def _parser(bench: bool = False) -> argparse.ArgumentParser:
 def _aov_list(text: str) -> tuple:
     from clrt.query.aov import parse_aovs
     return parse_aovs(text)
-
-
-def _accel_options(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--accel", default=config.DEFAULT_ACCEL, type=_typed(
-        lambda v: checks.choice("--accel", v, config.ACCELS), str),
-        help=f"BVH bounding-volume shape ({', '.join(config.VOLUMES)}), or none for brute force "
-             f"(default {config.DEFAULT_ACCEL})")
-    p.add_argument("--builder", default=config.DEFAULT_BUILDER, type=_typed(
-        lambda v: checks.choice("--builder", v, config.BUILDERS), str),
-        help=f"BVH builder: paper (the paper's median split), sah (binned SAH; default "
-             f"{config.DEFAULT_BUILDER}) or device (PLOC on the OpenCL device)")
-    p.add_argument("--leaf-size", default=config.DEFAULT_LEAF_SIZE,
-                   type=_integer("--leaf-size", 1, config.MAX_LEAF_SIZE),
-                   help=f"most triangles per BVH leaf, 1..{config.MAX_LEAF_SIZE} (default {config.DEFAULT_LEAF_SIZE})")
 
 
 def _output_path(args) -> Path:
@@ -205,45 +113,16 @@ def _output_path(args) -> Path:
 def _render(args) -> int:
     from clrt.output import check_replace, write_image
     from clrt.renderer import Renderer, check_host_memory
-    from clrt.scene.sources import as_scene
-    from clrt.scene.default import default_scene
-    from clrt.scene.scene import Camera, Light, default_light
+    from clrt.scene.render_setup import (CAMERA_OPTIONS, SCENE_OPTIONS, render_camera, render_lights,
+                                         render_scene)
 
     out = _output_path(args)
-    scene = as_scene(args.mesh) if args.mesh else default_scene()
-    from_file = bool(args.mesh) and not scene.camera_framed   # a scene file's or a glTF camera
-    if not (args.mesh or "").lower().endswith(".toml") and args.mesh:
-        scene.lights = []   # a mesh: the default light is placed below, from the final camera
-    # Material options replace that field of every object's material (documented in README).
-    scene.override_materials(smooth=False if args.flat else None,
-                             **{k: getattr(args, k) for k in _MATERIAL_OPTIONS})
-    if args.background is not None:
-        scene.background = args.background
-    if args.samples is not None:
-        scene.samples = args.samples
-    if args.max_depth is not None:
-        scene.max_depth = args.max_depth
-
-    # Options override the scene's camera; what neither gives is framed from the bounds.
-    bounds, base = scene.bounds, scene.camera
-    width = args.width if args.width is not None else (base.width if base else config.DEFAULT_WIDTH)
-    height = args.height if args.height is not None else (base.height if base else config.DEFAULT_HEIGHT)
-    fov = args.fov if args.fov is not None else (base.fov if base else config.DEFAULT_FOV)
-    up = args.up or (base.up if base else config.DEFAULT_UP)
-    placed = base if base is not None and not scene.camera_framed else None   # by the user or the file
-    if args.eye is None and args.target is None and placed is not None:
-        eye, target = placed.eye, placed.target
-    else:   # frame for the final size, fov and up
-        from_file = False
-        framed = Camera.framing(bounds, width, height, fov, up=up)
-        target = args.target or (placed.target if placed else framed.target)
-        eye = args.eye or (placed.eye if placed else tuple(
-            t + e - f for t, e, f in zip(target, framed.eye, framed.target)))
-    camera = Camera(eye, target, up, fov, width, height)
-    if args.light:
-        scene.lights = [Light(p) for p in args.light]
-    elif not scene.lights:
-        scene.lights = [default_light(bounds, camera)]
+    # Shared with `clrt batch render`, so both make the same frame of the same camera.
+    scene = render_scene(args.mesh, **{k: getattr(args, k) for k in SCENE_OPTIONS})
+    # A scene file's or a glTF file's camera, unless an option places the camera.
+    from_file = bool(args.mesh) and not scene.camera_framed and args.eye is None and args.target is None
+    camera = render_camera(scene, **{k: getattr(args, k) for k in CAMERA_OPTIONS})
+    scene.lights = render_lights(scene.bounds, camera, scene.lights, args.light)
 
     # Checked before the (possibly long) render; the writers check again.
     check_replace(out, args.force)
@@ -305,25 +184,12 @@ def _info_mesh(args) -> int:
     return 0
 
 
-_VECTOR_OPTIONS = {"--eye", "--target", "--up", "--light", "--color", "--background"}
-
-
-def _glue_vector_values(argv: list[str]) -> list[str]:
-    """``--eye -1,2,3`` -> ``--eye=-1,2,3``: argparse would take ``-1,2,3`` for an option."""
-    out, i = [], 0
-    while i < len(argv):
-        if argv[i] in _VECTOR_OPTIONS and i + 1 < len(argv):
-            out.append(f"{argv[i]}={argv[i + 1]}")
-            i += 2
-        else:
-            out.append(argv[i])
-            i += 1
-    return out
-
-
 def main(argv=None) -> int:
     try:
         argv = list(sys.argv[1:] if argv is None else argv)
+        if argv[:1] == ["batch"]:
+            from clrt.batch.cli import main as batch_main
+            return batch_main(argv[1:])
         # The heavy imports first, still under the start-up handler that
         # clrt/__init__.py installs for the clrt command (Ctrl-C there exits at
         # once: a KeyboardInterrupt inside a C extension's import can abort the
@@ -335,7 +201,7 @@ def main(argv=None) -> int:
         signal.signal(signal.SIGINT, signal.default_int_handler)
         bench = argv[:1] == ["bench"]
         try:
-            args = _parser(bench).parse_args(_glue_vector_values(argv))
+            args = _parser(bench).parse_args(options.glue_vector_values(argv))
         except SystemExit as exc:   # --help, --version: argparse printed them
             return exc.code if isinstance(exc.code, int) else 0
         if bench:

@@ -97,6 +97,27 @@ IMAGE_FORMATS = {".png": "PNG", ".jpg": "JPEG", ".jpeg": "JPEG", ".tif": "TIFF",
 #: largest allocation of at least a quarter of the device memory.
 MAX_PARTS = 4
 
+# --------------------------------------------------------------------------- batch jobs (clrt.batch)
+
+#: The environment variable that gives a Dask worker process its OpenCL device ('gpu', 'cpu', 'P:D').
+DEVICE_ENV = "CLRT_DEVICE"
+#: Scenes (and their uploaded acceleration structures) each worker keeps for later jobs.
+BATCH_CACHE_SCENES = 4
+#: Most views of one source rendered by one task (a task reports, and is retried, as a whole).
+BATCH_VIEWS_PER_TASK = 8
+#: Most views per source (--views).
+MAX_VIEWS = 100_000
+#: The manifest (JSON lines) in the output folder, and how often it is rewritten while jobs finish.
+BATCH_MANIFEST = "manifest.jsonl"
+BATCH_MANIFEST_SECONDS = 1.0
+#: Retries of a task that raised an unexpected error; a task whose worker died is
+#: retried elsewhere by Dask (distributed.scheduler.allowed-failures, default 3).
+BATCH_TASK_RETRIES = 1
+#: Seconds to wait for an existing Dask scheduler (--scheduler).
+BATCH_CONNECT_TIMEOUT = 10.0
+#: Rays per chunk when clrt.batch.trace is given numpy arrays.
+BATCH_RAY_CHUNK = 1 << 20
+
 
 def kernel_defines() -> dict:
     """The limits above that the kernels use, as ``-D`` defines of every program."""

@@ -177,6 +177,13 @@ def _replace_atomically(path: Path, write, record: bool = False) -> None:
         raise
 
 
+def write_text(text: str, path: Path) -> None:
+    """Write a text file (UTF-8) through a temporary file and a rename, replacing
+    any file there (as :func:`write_image`, but without the mark check)."""
+    data = text.encode("utf-8")
+    _replace_atomically(Path(path), lambda f: f.write(data))
+
+
 def _write_record(path: Path, digest: str) -> None:
     target = record_path(path)
     fd, tmp = tempfile.mkstemp(prefix=f"{target.name}.", dir=path.parent)

@@ -33,7 +33,7 @@ from clrt.device.program import build_program
 from clrt.errors import DeviceMemoryError, TooLargeError
 from clrt.layouts import HIT, RAY
 from clrt.renderer.tiles import TileLimits, error_name, is_out_of_memory, run_tiles
-from clrt.scene.arrays import flatten_scene
+from clrt.scene.arrays import flatten_scene, light_records
 from clrt.scene.scene import Camera, Scene, default_light, ray_epsilon
 from clrt.scene.sources import as_scene
 
@@ -159,6 +159,17 @@ class Renderer:
                         np.float32(ray_epsilon(self.arrays.bounds, camera.eye)))
         return _Job(camera, samples, max_depth, seed, linear, (*self.geometry.args, *shading_args),
                     image, pinned, prim, t, timings)
+
+    def set_lights(self, lights) -> None:
+        """Replace the scene's lights; the geometry stays uploaded (a turntable of
+        ``clrt batch render`` moves the default light with the camera)."""
+        self.scene.lights = list(lights)
+        self.arrays.lights = light_records(self.scene.lights)
+        old = self.buffers["lights"]
+        self.buffers["lights"] = cl.Buffer(self.context, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR,
+                                           hostbuf=self.arrays.lights)
+        self.queue.finish()   # no launch may still read the old buffer
+        old.release()
 
     # ----------------------------------------------------------------------- memory
 

@@ -67,8 +67,14 @@ def flatten_scene(scene: Scene) -> SceneArrays:
             materials[i][name] = getattr(mat, name)
         materials[i]["flags"] = MATERIAL_SMOOTH if mat.smooth else 0
 
-    lights = np.zeros(max(len(scene.lights), 1), LIGHT)
-    for i, light in enumerate(scene.lights):
-        lights[i]["position"][:3] = light.position
-        lights[i]["color"][:3] = light.color
-    return SceneArrays(triangle_corners(mesh), tri_info, normals, materials, lights, scene.bounds)
+    return SceneArrays(triangle_corners(mesh), tri_info, normals, materials, light_records(scene.lights),
+                       scene.bounds)
+
+
+def light_records(lights) -> np.ndarray:
+    """(L,) LIGHT records of a list of Lights, at least one (OpenCL buffers cannot be empty)."""
+    records = np.zeros(max(len(lights), 1), LIGHT)
+    for i, light in enumerate(lights):
+        records[i]["position"][:3] = light.position
+        records[i]["color"][:3] = light.color
+    return records

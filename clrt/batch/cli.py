@@ -1,0 +1,107 @@
+"""``clrt batch render SOURCE... -o DIR``: many sources and views on a Dask cluster.
+
+``clrt/cli.py`` hands ``clrt batch ...`` over to :func:`main`.  The render
+options are those of ``clrt render``, from the same definitions
+(clrt/options.py).
+
+Exit codes: 0 every job done, 2 bad input (some sources bad, the rest done),
+3 device trouble, 130 interrupted (what finished is kept; run again to resume).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from clrt import options
+from clrt.config import DEVICE_ENV
+from clrt.errors import DeviceError, InputError
+
+#: Options of ``clrt render`` that ``clrt batch render`` does not take, and why.
+NOT_TAKEN = {"--output": "-o names a folder", "--aov": "images only"}
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message):
+        raise InputError(f"{message} (see {self.prog} --help)")
+
+
+def parser() -> argparse.ArgumentParser:
+    p = _Parser(prog="clrt batch", description="Batch jobs on a Dask cluster (docs/distributed.md).")
+    sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
+    r = sub.add_parser(
+        "render", help="render many sources and views into a folder",
+        description="Render every SOURCE (mesh or scene file, folder of them, or glob pattern) into "
+                    "DIR/<source-stem>/view-NNNN.png, with a manifest DIR/manifest.jsonl. Finished images "
+                    "are skipped when the command is run again. Without --scheduler a local cluster of "
+                    "worker processes (loopback only) runs the jobs.")
+    r.add_argument("sources", nargs="+", metavar="SOURCE", help="mesh or scene file, folder, or glob pattern")
+    r.add_argument("-o", "--output", required=True, metavar="DIR", help="output folder (created if missing)")
+    r.add_argument("--views", type=int, default=1,
+                   help="views per source on a turntable around the target: view i at azimuth 360*i/N "
+                        "degrees, same distance, elevation and framing as the default camera (default 1)")
+    where = r.add_mutually_exclusive_group()
+    where.add_argument("--workers", type=int, metavar="K",
+                       help="local worker processes (default: one per GPU, else one per two CPU cores)")
+    where.add_argument("--scheduler", metavar="ADDRESS",
+                       help="use the workers of an existing Dask cluster, tcp://HOST:PORT or tls://HOST:PORT "
+                            "(certificates from Dask's configuration, see docs/distributed.md)")
+    r.add_argument("--device", type=options.device,
+                   help=f"'gpu', 'cpu' or P:D; 'gpu' gives worker i the i-th GPU (default: the "
+                                    f"worker's {DEVICE_ENV}, else GPUs, else the CPU)")
+    r.add_argument("-f", "--force", action="store_true",
+                   help="replace images in DIR even if clrt did not write them")
+    # The options of clrt render, with the same meaning.
+    options.add_render_options(r)
+    options.add_accel_options(r)
+    r.add_argument("-q", "--quiet", action="store_true", help="no progress bar; print only the summary line")
+    return p
+
+
+def main(argv: list) -> int:
+    """Run ``clrt batch ...``; errors are raised as ClrtError for clrt.cli to print."""
+    args = parser().parse_args(options.glue_vector_values(list(argv)))
+    from clrt.batch.cluster import connect, require_dask
+    from clrt.batch.engine import run
+    from clrt.scene.render_setup import CAMERA_OPTIONS, SCENE_OPTIONS
+
+    require_dask()
+    render_options = {k: getattr(args, k) for k in SCENE_OPTIONS + CAMERA_OPTIONS}
+    client = connect(args.scheduler) if args.scheduler else None
+
+    def log(line):
+        if not args.quiet:
+            print(line, file=sys.stderr)
+
+    try:
+        summary = run(args.sources, args.output, args.views, client=client, workers=args.workers,
+                      device=args.device, accel=args.accel, builder=args.builder, leaf_size=args.leaf_size,
+                      lights=args.light, force=args.force, progress=not args.quiet, log=log, **render_options)
+    except KeyboardInterrupt:
+        print("clrt: interrupted; finished images are kept: run the same command again to resume",
+              file=sys.stderr)
+        return 130
+    except OSError as exc:   # distributed's CommClosedError and friends: the cluster went away
+        reason = (str(exc).splitlines() or [""])[0] or type(exc).__name__
+        raise DeviceError(f"lost the Dask cluster: {reason}; finished images are kept: "
+                          "run the same command again to resume") from None
+    finally:
+        if client is not None:
+            client.close()
+    _print_summary(summary, args.output, args.quiet)
+    return summary.exit_code()
+
+
+def _print_summary(summary, folder: str, quiet: bool) -> None:
+    """The bad sources one line each (stderr), then the totals (stdout)."""
+    for line in summary.bad_sources():
+        print(f"clrt: {line}", file=sys.stderr)
+    rendered, skipped = summary.rendered, summary.count("skipped")
+    failed = sum(summary.count(s) for s in ("bad", "device", "failed"))
+    bad = len(summary.bad_sources())
+    print(f"{rendered} frame(s) rendered, {skipped} already done, {failed} not rendered "
+          f"({bad} bad source(s) or error(s)); {summary.seconds:.1f} s, {summary.frames_per_second:.2f} frames/s, "
+          f"{summary.workers} worker(s) -> {folder}")
+    if not quiet:
+        for worker, count in summary.per_worker().items():
+            print(f"  {worker}: {count} frame(s)")

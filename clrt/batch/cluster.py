@@ -1,0 +1,114 @@
+"""Where batch jobs run: a local cluster of worker processes that lives as long as
+the command, or the workers of an existing Dask cluster (``--scheduler``).
+
+The local cluster listens on the loopback interface only -- scheduler, workers,
+nannies and dashboard -- so nothing is reachable from the network.  Workers are
+processes (OpenCL contexts are per process) with one thread each.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import logging
+import os
+import signal
+import threading
+
+from clrt.config import BATCH_CONNECT_TIMEOUT
+from clrt.errors import ClrtError, InputError
+
+LOOPBACK = "127.0.0.1"
+
+
+def require_dask() -> None:
+    """ClrtError naming the install command when Dask distributed is missing."""
+    if importlib.util.find_spec("distributed") is None or importlib.util.find_spec("dask") is None:
+        raise ClrtError("batch jobs need Dask: pip install 'clrt[distributed]'")
+
+
+def cpu_cores() -> int:
+    try:
+        return len(os.sched_getaffinity(0))
+    except (AttributeError, OSError):
+        return os.cpu_count() or 1
+
+
+def default_workers(device: str | None) -> int:
+    """One worker per GPU found, else one per two CPU cores (one for a 'P:D' device)."""
+    kind = (device or "").strip().lower()
+    if kind and kind not in ("gpu", "cpu"):
+        return 1
+    if kind != "cpu":
+        from clrt.device.context import list_devices
+        gpus = sum(d.type == "GPU" for d in list_devices())
+        if gpus:
+            return gpus
+    return max(1, cpu_cores() // 2)
+
+
+def start_local_cluster(workers: int, device: str | None = None):
+    """A distributed.LocalCluster of ``workers`` processes on the loopback interface.
+
+    On CPU devices each worker's PoCL gets its share of the cores (unless the
+    environment already says), so workers do not fight over them."""
+    require_dask()
+    from distributed import LocalCluster
+
+    env = {}
+    share = str(max(1, cpu_cores() // workers))
+    for var in ("POCL_MAX_PTHREAD_COUNT", "POCL_CPU_MAX_CU_COUNT"):
+        if var not in os.environ and (device or "").strip().lower() != "gpu":
+            env[var] = share
+    # The scheduler's HTTP server (the dashboard when bokeh is installed, else health
+    # and metrics pages) on a free loopback port: never Dask's default :8787.
+    dashboard = f"{LOOPBACK}:0"
+    # No memory limit: Dask would pause or restart a worker holding a large mesh
+    # (clrt checks host memory itself).
+    # Ctrl-C reaches every process of the terminal's group; it is the client's to
+    # handle (it stops the cluster).  Worker processes started while SIGINT is
+    # ignored keep ignoring it; restarted ones are told by DevicePlugin.
+    previous = None
+    if threading.current_thread() is threading.main_thread():
+        previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        return LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, host=LOOPBACK,
+                            scheduler_port=0, dashboard_address=dashboard, worker_dashboard_address=None,
+                            silence_logs=logging.ERROR, env=env, memory_limit=0)
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGINT, previous)
+
+
+def connect(address: str):
+    """A Client of the Dask scheduler at ``address`` (tcp:// or tls://); for tls://
+    the certificates come from Dask's configuration (docs/distributed.md)."""
+    require_dask()
+    import dask
+    from distributed import Client
+    from distributed.security import Security
+
+    if "://" not in address:
+        address = f"tcp://{address}"
+    security = None
+    if address.startswith("tls://"):
+        security = Security()
+        if not (security.tls_ca_file and security.tls_client_cert):
+            raise InputError(f"--scheduler {address}: tls:// needs certificates in Dask's configuration: "
+                             "distributed.comm.tls.ca-file, .client.cert and .client.key (docs/distributed.md)")
+    try:
+        with dask.config.set({"distributed.comm.timeouts.connect": f"{BATCH_CONNECT_TIMEOUT}s"}):
+            return Client(address, security=security, timeout=BATCH_CONNECT_TIMEOUT)
+    except (OSError, TimeoutError, ValueError) as exc:
+        reason = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        raise InputError(f"cannot reach the Dask scheduler at {address}: {reason}") from None
+
+
+def dashboard_link(client) -> str | None:
+    """The dashboard's address when the scheduler runs one (it needs bokeh)."""
+    if importlib.util.find_spec("bokeh") is None and client.cluster is not None:
+        return None   # our local cluster: only health and metrics pages without bokeh
+    try:
+        port = client.scheduler_info().get("services", {}).get("dashboard")
+    except Exception:  # noqa: BLE001 -- only informative
+        return None
+    return client.dashboard_link if port else None

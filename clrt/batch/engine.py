@@ -1,0 +1,317 @@
+"""Many frames of many sources on the workers of a Dask cluster.
+
+    >>> outputs = clrt.batch.render(["meshes/"], "out", views=36, width=640, height=480)
+    >>> [o.path for o in outputs if o.status == "done"]
+
+Every image is written atomically under a name that depends only on its source
+and view (``OUT/<source-stem>/view-0007.png``) and recorded in the folder's
+manifest (clrt.batch.manifest).  Running the same batch again renders only what
+is missing or was made with other settings, so a batch stopped by Ctrl-C, a
+crash or a lost worker is finished by running it again; a task whose worker
+dies is retried on another by Dask.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+import uuid
+from collections import Counter
+from dataclasses import dataclass
+from pathlib import Path
+
+from clrt import checks
+from clrt.batch.cluster import dashboard_link, default_workers, require_dask, start_local_cluster
+from clrt.batch.jobs import Source, expand_sources, output_path, plan_tasks, settings_key
+from clrt.batch.manifest import FolderLock, Manifest
+from clrt.config import (BATCH_CACHE_SCENES, BATCH_TASK_RETRIES, DEFAULT_ACCEL, DEFAULT_BUILDER,
+                         DEFAULT_LEAF_SIZE, MAX_IMAGE_SIDE, MAX_VIEWS)
+from clrt.errors import InputError, OutputError
+from clrt.scene.render_setup import CAMERA_OPTIONS, MATERIAL_OPTIONS, SCENE_OPTIONS
+
+#: Status of an output: rendered now or before ("done", "skipped"), or why not.
+STATUSES = ("done", "skipped", "bad", "device", "failed")
+
+
+@dataclass(frozen=True)
+class Output:
+    """One row of a batch's table: an image (or a source that gave none)."""
+
+    path: str | None        # absolute path of the image; None for a bad source
+    source: str
+    view: int | None
+    seconds: float          # render and write time on the worker (0 when skipped)
+    worker: str | None      # address of the worker that made it
+    status: str = "done"    # see STATUSES
+    error: str = ""
+
+
+@dataclass
+class Summary:
+    """What a batch did: rows, wall time, frames rendered per worker."""
+
+    outputs: list
+    seconds: float          # wall time of the whole batch, cluster start included
+    workers: int
+    render_seconds: float = 0.0   # from the first job sent to the last result
+
+    @property
+    def frames_per_second(self) -> float:
+        return self.rendered / self.render_seconds if self.render_seconds > 0 else 0.0
+
+    def count(self, status: str) -> int:
+        return sum(o.status == status for o in self.outputs)
+
+    @property
+    def rendered(self) -> int:
+        return sum(o.status == "done" and o.seconds > 0 for o in self.outputs)
+
+    def per_worker(self) -> dict:
+        return dict(sorted(Counter(o.worker for o in self.outputs if o.status == "done" and o.seconds > 0).items()))
+
+    def bad_sources(self) -> list[str]:
+        """One line per source that gave no image, or an error, first error first."""
+        lines, seen = [], set()
+        for o in self.outputs:
+            if o.status in ("bad", "device", "failed") and (o.source, o.error) not in seen:
+                seen.add((o.source, o.error))
+                lines.append(o.error if o.error.startswith(o.source) else f"{o.source}: {o.error}")
+        return lines
+
+    def exit_code(self) -> int:
+        """0 all done; 3 device trouble; 2 bad sources (the rest done); 1 other failures."""
+        statuses = {o.status for o in self.outputs}
+        if "device" in statuses:
+            return 3
+        if "failed" in statuses:
+            return 1
+        if "bad" in statuses:
+            return 2
+        return 0
+
+
+def render(sources, out_dir, views: int = 1, *, client=None, workers: int | None = None,
+           device: str | None = None, accel: str = DEFAULT_ACCEL, builder: str = DEFAULT_BUILDER,
+           leaf_size: int = DEFAULT_LEAF_SIZE, lights=None, force: bool = False, progress: bool = False,
+           log=None, **options) -> list[Output]:
+    """Render ``views`` turntable views of every source into ``out_dir``.
+
+    ``sources``: mesh and scene files, folders, glob patterns (one job per file).
+    ``options``: the scene and camera options of ``clrt render`` (width, height,
+    eye, target, up, fov, color, ambient, diffuse, specular, shininess, flat,
+    background, samples, max_depth); ``lights``: light positions.  ``client``: a
+    ``distributed.Client``; without one, a local cluster of ``workers``
+    processes (default: one per GPU, else one per two CPU cores) runs the batch.
+    ``progress``: a progress bar on stderr; ``log``: called with informational
+    lines (the dashboard link).  Returns one :class:`Output` per image and per
+    bad source; :func:`run` also returns the summary.
+    """
+    return run(sources, out_dir, views, client=client, workers=workers, device=device, accel=accel,
+               builder=builder, leaf_size=leaf_size, lights=lights, force=force, progress=progress,
+               log=log, **options).outputs
+
+
+def run(sources, out_dir, views: int = 1, *, client=None, workers: int | None = None, device=None,
+        accel=DEFAULT_ACCEL, builder=DEFAULT_BUILDER, leaf_size=DEFAULT_LEAF_SIZE, lights=None,
+        force=False, progress=False, log=None, **options) -> Summary:
+    """:func:`render`, returning the :class:`Summary` (outputs, time, per-worker counts)."""
+    settings = _check_options(views, accel, builder, leaf_size, lights, options)
+    if workers is not None:
+        checks.integer("workers", workers, 1, 4096)
+    if isinstance(sources, (str, Path)):
+        sources = [sources]
+    found = expand_sources(sources)
+    folder = _output_folder(out_dir)
+    started = time.perf_counter()
+    with FolderLock(folder):
+        manifest = Manifest(folder)
+        outputs, pending = _plan(found, folder, manifest, views, settings)
+        manifest.write()
+        if not pending:
+            return Summary(outputs, time.perf_counter() - started, 0)
+        require_dask()
+        cluster = own_client = None
+        try:
+            if client is None:
+                count = workers or default_workers(device)
+                cluster = start_local_cluster(count, device)
+                from distributed import Client
+                client = own_client = Client(cluster)
+            link = dashboard_link(client)
+            if link and log:
+                log(f"dashboard: {link}")
+            n_workers = len(client.scheduler_info().get("workers", {}))
+            if not n_workers and log:
+                log("the scheduler has no workers yet: the jobs wait for them")
+            jobs = _jobs(pending, folder, views, settings, force, n_workers)
+            sent = time.perf_counter()
+            outputs += _execute(client, jobs, folder, manifest, device, progress, local=cluster is not None)
+            render_seconds = time.perf_counter() - sent
+        finally:
+            manifest.write()
+            if own_client is not None:
+                own_client.close()
+            if cluster is not None:
+                cluster.close()
+    return Summary(outputs, time.perf_counter() - started, n_workers, render_seconds)
+
+
+def _check_options(views, accel, builder, leaf_size, lights, options) -> dict:
+    """Every option checked before any worker starts; the settings that decide an image."""
+    from clrt.scene.scene import Light, Material
+    checks.integer("views", views, 1, MAX_VIEWS)
+    checks.accel_options(accel, builder, leaf_size)
+    unknown = set(options) - set(SCENE_OPTIONS) - set(CAMERA_OPTIONS)
+    if unknown:
+        raise InputError(f"unknown render option(s): {', '.join(sorted(unknown))}")
+    # Checked here once, by the rules of clrt render (clrt.checks), rather than
+    # failing every source the same way on the workers.
+    Material().with_overrides(**{k: options[k] for k in MATERIAL_OPTIONS if options.get(k) is not None})
+    for p in lights or ():
+        Light(p)
+    for name, check in (("samples", checks.samples), ("max_depth", checks.max_depth), ("fov", checks.fov)):
+        if options.get(name) is not None:
+            check(options[name], name)
+    for name in ("width", "height"):
+        if options.get(name) is not None:
+            checks.integer(name, options[name], 1, MAX_IMAGE_SIDE)
+    for name in ("eye", "target", "up"):
+        if options.get(name) is not None:
+            checks.position(name, options[name])
+    if options.get("background") is not None:
+        checks.intensity("background", options["background"])
+    scene = {k: _plain(options.get(k)) for k in SCENE_OPTIONS}
+    scene["flat"] = bool(scene["flat"])
+    camera = {k: _plain(options.get(k)) for k in CAMERA_OPTIONS}
+    return {"scene": scene, "camera": camera, "lights": _plain(lights) or None, "accel": accel,
+            "builder": builder, "leaf_size": int(leaf_size), "views": int(views)}
+
+
+def _plain(value):
+    """Tuples of floats and plain numbers, as they travel in tasks and JSON."""
+    if value is None or isinstance(value, (bool, int, float, str)):
+        return value
+    return [_plain(v) for v in value] if not hasattr(value, "item") else value.item()
+
+
+def _output_folder(out_dir) -> Path:
+    folder = Path(out_dir)
+    if folder.exists() and not folder.is_dir():
+        raise OutputError(f"cannot write into {folder}: it is not a folder")
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise OutputError(f"cannot create {folder}: {exc.strerror or exc}") from None
+    return folder.resolve()
+
+
+def _plan(found: list[Source], folder: Path, manifest: Manifest, views: int, settings: dict):
+    """Rows for bad arguments and finished images, and per source the views to render."""
+    from clrt.output import written_by_clrt
+    outputs, pending = [], []
+    for source in found:
+        if source.error:
+            manifest.add({"path": None, "source": source.path, "view": None, "status": "bad",
+                          "error": source.error})
+            outputs.append(Output(None, source.path, None, 0.0, None, "bad", source.error))
+            continue
+        manifest.drop_bad(source.path)
+        key = settings_key(source.path, settings)
+        todo, replace = [], set()
+        for view in range(views):
+            rel = output_path(source.name, view)
+            path = folder / rel
+            record = manifest.get(rel)
+            if path.is_file():
+                if record is not None and record.get("status") == "done" and record.get("key") == key:
+                    outputs.append(Output(str(path), source.path, view, 0.0, record.get("worker"), "skipped"))
+                    continue
+                if record is None and written_by_clrt(path):   # made before the manifest was written
+                    manifest.add({"path": rel, "source": source.path, "view": view, "views": views,
+                                  "status": "done", "key": key, "note": "found"})
+                    outputs.append(Output(str(path), source.path, view, 0.0, None, "skipped"))
+                    continue
+                replace.add(view)
+            todo.append(view)
+        if todo:
+            pending.append((source, key, todo, replace))
+    return outputs, pending
+
+
+def _jobs(pending: list, folder: Path, views: int, settings: dict, force: bool, workers: int) -> list[dict]:
+    """The tasks' arguments: plain data (paths, options), never device state."""
+    jobs = []
+    for source, key, todo, replace in pending:
+        for task in plan_tasks(source, todo, replace, workers, len(pending)):
+            jobs.append({
+                "source": source.path, "name": source.name, "views": task.views, "replace": task.replace,
+                "paths": {v: output_path(source.name, v) for v in task.views}, "count": views,
+                "folder": str(folder), "scene": settings["scene"], "camera": settings["camera"],
+                "lights": settings["lights"], "accel": settings["accel"], "builder": settings["builder"],
+                "leaf_size": settings["leaf_size"], "force": force, "key": key})
+    return jobs
+
+
+def _execute(client, jobs: list, folder: Path, manifest: Manifest, device, progress: bool,
+             local: bool = False) -> list[Output]:
+    """Run the jobs, record each finished one; Ctrl-C cancels what is left."""
+    from distributed import as_completed
+
+    from clrt.batch.worker import DevicePlugin, render_task
+    client.register_plugin(DevicePlugin(device, BATCH_CACHE_SCENES, ignore_interrupts=local))
+    futures = {}
+    for job in jobs:
+        future = client.submit(render_task, job, pure=False, retries=BATCH_TASK_RETRIES,
+                               key=f"clrt-render-{job['name']}-{job['views'][0]:04d}-{uuid.uuid4().hex[:12]}")
+        futures[future] = job
+    total = sum(len(job["views"]) for job in jobs)
+    bar = _progress_bar(total, progress)
+    outputs = []
+    try:
+        for future in as_completed(futures):
+            job = futures[future]
+            if future.status == "finished":
+                records = future.result()
+            else:
+                records = _failed_records(job, future)
+            for record in records:
+                manifest.add(record)
+                status = record["status"]
+                seconds = record.get("seconds") or 0.0
+                path = str(folder / record["path"]) if status == "done" else None
+                outputs.append(Output(path, record["source"], record["view"], seconds, record.get("worker"),
+                                      status, record.get("error", "")))
+            bar.update(len(records))
+            manifest.write(force=False)
+    finally:
+        bar.close()
+        pending = [f for f in futures if not f.done()]
+        if pending:
+            client.cancel(pending)
+    return outputs
+
+
+def _failed_records(job: dict, future) -> list[dict]:
+    """Records of a task that raised, or whose workers kept dying (KilledWorker)."""
+    exc = future.exception()
+    name = type(exc).__name__
+    status = "device" if name == "KilledWorker" else "failed"
+    message = (str(exc).splitlines() or [""])[0]
+    error = f"{job['source']}: {name}: {message}" if message else f"{job['source']}: {name}"
+    return [{"path": job["paths"][v], "source": job["source"], "view": v, "views": job["count"],
+             "status": status, "key": job["key"], "error": error, "worker": None} for v in job["views"]]
+
+
+class _NoBar:
+    def update(self, n):
+        pass
+
+    def close(self):
+        pass
+
+
+def _progress_bar(total: int, shown: bool):
+    if not shown:
+        return _NoBar()
+    from tqdm import tqdm
+    return tqdm(total=total, unit="frame", file=sys.stderr, dynamic_ncols=True, mininterval=0.5)

@@ -1,0 +1,96 @@
+"""The manifest of an output folder: one JSON line per output (and per bad
+source), rewritten through a temporary file and a rename, so a reader never sees
+half of it.  The images are the truth: an image is written atomically before it
+is recorded, and one found without a record (the client stopped before it wrote
+the manifest) is taken as done if clrt wrote it.
+
+Fields of a line: ``path`` (relative to the folder; null for a bad source),
+``source``, ``view``, ``views``, ``status`` ("done", "bad", "device", "failed"),
+``key`` (the settings it was made with, clrt.batch.jobs.settings_key),
+``seconds``, ``worker``, ``device``, ``camera`` (eye, target, up, fov, width,
+height) and ``error`` (one line).
+"""
+
+from __future__ import annotations
+
+import fcntl
+import json
+import os
+import time
+from pathlib import Path
+
+from clrt.config import BATCH_MANIFEST, BATCH_MANIFEST_SECONDS
+from clrt.errors import OutputError
+from clrt.output import write_text
+
+
+class Manifest:
+    """The records of one output folder, keyed by output path (bad sources: by source)."""
+
+    def __init__(self, folder: Path):
+        self.path = Path(folder) / BATCH_MANIFEST
+        self.records: dict[str, dict] = {}
+        self._written = 0.0
+        self._dirty = False
+        if self.path.is_file():
+            with open(self.path, encoding="utf-8", errors="replace") as fh:
+                for line in fh:
+                    try:
+                        record = json.loads(line)
+                    except ValueError:
+                        continue   # not ours, or damaged by hand: the images decide
+                    if isinstance(record, dict):
+                        self.records[_record_key(record)] = record
+
+    def get(self, path: str) -> dict | None:
+        return self.records.get(path)
+
+    def add(self, record: dict) -> None:
+        self.records[_record_key(record)] = record
+        self._dirty = True
+
+    def drop_bad(self, source: str) -> None:
+        """Forget an earlier failure of ``source`` (it is being tried again)."""
+        if self.records.pop(f"source:{source}", None) is not None:
+            self._dirty = True
+
+    def write(self, force: bool = True) -> None:
+        """Rewrite the file if anything changed -- at most every
+        BATCH_MANIFEST_SECONDS unless ``force``."""
+        if not self._dirty or (not force and time.monotonic() - self._written < BATCH_MANIFEST_SECONDS):
+            return
+        lines = (json.dumps(r, sort_keys=True) for r in sorted(self.records.values(), key=_order))
+        write_text("".join(line + "\n" for line in lines), self.path)
+        self._written, self._dirty = time.monotonic(), False
+
+
+def _record_key(record: dict) -> str:
+    return record.get("path") or f"source:{record.get('source')}"
+
+
+def _order(record: dict):
+    return (record.get("path") is None, record.get("path") or "", str(record.get("source")))
+
+
+class FolderLock:
+    """An exclusive lock on an output folder, so two batches never write one manifest."""
+
+    def __init__(self, folder: Path):
+        self.path = Path(folder) / ".clrt-batch.lock"
+        self._fd = None
+
+    def __enter__(self):
+        try:
+            self._fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o666)
+        except OSError as exc:
+            raise OutputError(f"cannot write {self.path.parent}: {exc.strerror or exc}") from None
+        try:
+            fcntl.flock(self._fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            os.close(self._fd)
+            raise OutputError(f"another clrt batch is writing {self.path.parent}; wait for it "
+                              "or choose another -o") from None
+        return self
+
+    def __exit__(self, *exc):
+        os.close(self._fd)   # releases the lock; the file stays (removing it would race)

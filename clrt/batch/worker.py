@@ -1,0 +1,301 @@
+"""What runs inside a Dask worker process: its OpenCL device, the scenes and
+meshes it keeps uploaded, and the tasks.
+
+OpenCL contexts belong to one process, so nothing here is ever shipped between
+processes: tasks receive paths, options and meshes, and each worker builds its
+own device state, once per scene (``BATCH_CACHE_SCENES`` kept, least recently
+used dropped).
+
+**One device per worker.**  :class:`DevicePlugin` (registered by clrt.batch on
+every worker, also on workers that join or restart later) picks the device:
+
+1. a ``P:D`` device given to the batch (``--device 0:1``): that device;
+2. else the worker's ``CLRT_DEVICE`` environment variable (``gpu``, ``cpu``,
+   ``P:D``), for clusters started by hand, one worker per GPU;
+3. else worker number i (its name in a LocalCluster) takes the i-th GPU -- or the
+   i-th CPU device, with no GPU or with ``--device cpu`` -- cyclically.
+
+Device work of one process is serialised by a lock, and on a GPU also by a lock
+file shared by every process of the host (``$TMPDIR/clrt-device-P-D.lock``), so
+a device is never driven by two jobs at once, even when a cluster has more
+workers than GPUs.  CPU devices (PoCL) are shared; a local cluster divides the
+cores among its workers instead (clrt.batch.cluster).
+"""
+
+from __future__ import annotations
+
+import fcntl
+import os
+import re
+import signal
+import tempfile
+import threading
+import time
+from collections import OrderedDict
+from contextlib import contextmanager
+from pathlib import Path
+
+import numpy as np
+
+from clrt.config import BATCH_CACHE_SCENES, DEVICE_ENV
+from clrt.errors import ClrtError, DeviceError, InputError
+
+try:   # plugins need Dask's base class; the rest of this module runs without Dask
+    from distributed.diagnostics.plugin import WorkerPlugin
+except ImportError:   # pragma: no cover - clrt.batch checks for Dask before using this
+    WorkerPlugin = object
+
+_SPEC_RE = re.compile(r"\d+(:\d+)?")
+
+
+class _State:
+    """This process's device choice and caches."""
+
+    def __init__(self):
+        self.device: str | None = None          # spec given to create_context
+        self.lock_file: str | None = None       # host-wide lock of a GPU
+        self.cache_size = BATCH_CACHE_SCENES
+        self.scenes: OrderedDict = OrderedDict()
+        self.accels: OrderedDict = OrderedDict()
+        self.lock = threading.RLock()
+
+
+_STATE = _State()
+
+
+def choose_device(requested: str | None, index: int | None) -> str | None:
+    """The device spec of worker number ``index`` (see the module's docstring)."""
+    if requested and _SPEC_RE.fullmatch(requested.strip()):
+        return requested.strip()
+    env = os.environ.get(DEVICE_ENV, "").strip()
+    if env:
+        return env
+    from clrt.device.context import list_devices
+    devices = list_devices()
+    kind = (requested or "").strip().upper() or None
+    if kind is None:
+        kind = "GPU" if any(d.type == "GPU" for d in devices) else "CPU"
+    matching = [d for d in devices if d.type == kind]
+    if not matching:
+        return requested   # create_context says what exists
+    return matching[(index or 0) % len(matching)].index
+
+
+def worker_index(name) -> int | None:
+    """A worker's number: its name in a LocalCluster (0, 1, ...), or the number
+    a name such as 'gpu-3' ends with; None for other names."""
+    if isinstance(name, int):
+        return name
+    match = re.search(r"(\d+)$", str(name or ""))
+    return int(match.group(1)) if match else None
+
+
+def configure(device: str | None, cache_size: int = BATCH_CACHE_SCENES) -> None:
+    """Use ``device`` for this process's jobs (dropping what another device holds)."""
+    with _STATE.lock:
+        if device != _STATE.device:
+            _STATE.scenes.clear()
+            _STATE.accels.clear()
+        _STATE.device, _STATE.cache_size = device, max(int(cache_size), 1)
+        _STATE.lock_file = None
+        try:
+            import pyopencl as cl
+
+            from clrt.device.context import list_devices, select_device
+            chosen = select_device(device)
+            if chosen.type & cl.device_type.GPU:
+                for info in list_devices():
+                    if info.type == "GPU" and select_device(info.index) == chosen:
+                        _STATE.lock_file = os.path.join(
+                            tempfile.gettempdir(), f"clrt-device-{info.platform_index}-{info.device_index}.lock")
+        except Exception:   # noqa: BLE001 -- no usable device: the jobs report it
+            pass
+
+
+def current_device() -> str | None:
+    return _STATE.device
+
+
+class DevicePlugin(WorkerPlugin):
+    """Gives each Dask worker its OpenCL device when it starts (see the module's docstring)."""
+
+    name = "clrt-device"
+
+    def __init__(self, device: str | None = None, cache_size: int = BATCH_CACHE_SCENES,
+                 ignore_interrupts: bool = False):
+        self.device, self.cache_size = device, cache_size
+        self.ignore_interrupts = ignore_interrupts   # a local cluster: Ctrl-C is the client's
+
+    def setup(self, worker):
+        if self.ignore_interrupts and threading.current_thread() is threading.main_thread():
+            signal.signal(signal.SIGINT, signal.SIG_IGN)
+        configure(choose_device(self.device, worker_index(worker.name)), self.cache_size)
+
+
+@contextmanager
+def device_lock():
+    """Hold this worker's device: one job at a time per process, and per GPU per host."""
+    with _STATE.lock:
+        if _STATE.lock_file is None:
+            yield
+            return
+        fd = os.open(_STATE.lock_file, os.O_RDWR | os.O_CREAT, 0o666)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX)
+            yield
+        finally:
+            os.close(fd)
+
+
+def _cached(cache: OrderedDict, key, make):
+    if key in cache:
+        cache.move_to_end(key)
+        return cache[key]
+    value = make()
+    cache[key] = value
+    while len(cache) > _STATE.cache_size:
+        cache.popitem(last=False)
+    return value
+
+
+def _worker_address() -> str:
+    try:
+        from distributed import get_worker
+        return get_worker().address
+    except (ImportError, ValueError):
+        return f"pid {os.getpid()}"
+
+
+# --------------------------------------------------------------------------- render tasks
+
+def _scene_entry(source: str, scene_options: dict, accel: str, builder: str, leaf_size: int):
+    """(Renderer, the scene's own lights) of a source, built once per process."""
+    st = os.stat(source)
+    key = (source, st.st_size, st.st_mtime_ns, tuple(sorted(scene_options.items())), accel, builder,
+           leaf_size, _STATE.device)
+
+    def make():
+        from clrt.renderer import Renderer
+        from clrt.scene.render_setup import render_scene
+        scene = render_scene(source, **scene_options)
+        own = list(scene.lights)   # each view's lights are set before it is rendered
+        return Renderer(scene, _STATE.device, accel, builder, leaf_size), own
+
+    return _cached(_STATE.scenes, key, make)
+
+
+def render_task(job: dict) -> list[dict]:
+    """Render views of one source into the output folder; one record per view.
+
+    ``job``: source, name, views, replace, count (views of the turntable), folder,
+    scene and camera options, lights, accel, builder, leaf_size, force, key.
+    Views whose image exists are skipped unless listed in ``replace`` (a retry
+    after a lost worker redoes only what is missing).  Errors of the source or
+    the device become records, never exceptions: "bad" (the source or an
+    option), "device" (OpenCL); anything else is raised and retried by Dask.
+    """
+    from clrt.output import write_image
+    from clrt.scene.render_setup import render_camera, render_lights, turntable
+
+    worker = _worker_address()
+    folder = Path(job["folder"])
+    base = {"source": job["source"], "views": job["count"], "key": job["key"], "worker": worker,
+            "device": None}
+    records = []
+
+    def fail(views, exc, started):
+        status = "bad" if isinstance(exc, InputError) else "device" if isinstance(exc, DeviceError) else "failed"
+        message = f"{exc}".splitlines()[0] if str(exc) else type(exc).__name__
+        for view in views:
+            records.append({**base, "path": job["paths"][view], "view": view, "status": status,
+                            "error": message, "seconds": time.perf_counter() - started})
+
+    started = time.perf_counter()
+    try:
+        with device_lock():
+            renderer, own = _scene_entry(job["source"], job["scene"], job["accel"], job["builder"],
+                                         job["leaf_size"])
+        base["device"] = renderer.device
+        camera = render_camera(renderer.scene, **job["camera"])
+    except ClrtError as exc:
+        fail(job["views"], exc, started)
+        return records
+    except Exception as exc:   # noqa: BLE001
+        if _is_device_error(exc):
+            fail(job["views"], DeviceError(f"OpenCL error: {exc}"), started)
+            return records
+        raise
+
+    for i, view in enumerate(job["views"]):
+        out = folder / job["paths"][view]
+        if out.exists() and view not in job["replace"]:
+            records.append({**base, "path": job["paths"][view], "view": view, "status": "done",
+                            "seconds": 0.0, "camera": None, "note": "found"})
+            continue
+        started = time.perf_counter()
+        try:
+            cam = turntable(camera, view, job["count"])
+            out.parent.mkdir(parents=True, exist_ok=True)
+            with device_lock():
+                renderer.set_lights(render_lights(renderer.scene.bounds, cam, own, job["lights"]))
+                frame = renderer.render(cam)
+            write_image(frame.image, out, force=job["force"])
+        except ClrtError as exc:
+            fail([view], exc, started)
+            continue
+        except Exception as exc:   # noqa: BLE001
+            if _is_device_error(exc):
+                fail(job["views"][i:], DeviceError(f"OpenCL error: {exc}"), started)
+                return records
+            raise
+        records.append({**base, "path": job["paths"][view], "view": view, "status": "done",
+                        "seconds": time.perf_counter() - started, "camera": _camera_record(cam)})
+    return records
+
+
+def _is_device_error(exc: BaseException) -> bool:
+    import pyopencl as cl
+    return isinstance(exc, (cl.Error, MemoryError))
+
+
+def _camera_record(camera) -> dict:
+    """The camera as JSON: exact floats, so ``clrt render --eye ... --target ...`` repeats it."""
+    return {"eye": [float(x) for x in camera.eye], "target": [float(x) for x in camera.target],
+            "up": [float(x) for x in camera.up], "fov": float(camera.fov),
+            "width": int(camera.width), "height": int(camera.height)}
+
+
+# --------------------------------------------------------------------------- ray chunks
+
+#: One chunk's closest hits, as one array (the fields of clrt.Hits).
+HITS = np.dtype([("t", np.float32), ("prim", np.int32), ("u", np.float32), ("v", np.float32),
+                 ("normal", np.float32, (3,)), ("front", np.bool_), ("hit", np.bool_)])
+
+def _accel(mesh, token: str, options: dict, device: str | None):
+    device = device if device is not None else _STATE.device
+    key = (token, tuple(sorted(options.items())), device)
+
+    def make():
+        from clrt.query import Accel
+        return Accel(mesh, device=device, **options)
+
+    return _cached(_STATE.accels, key, make)
+
+
+def trace_chunk(origins, directions, tmin, tmax, *, mesh, mesh_token, options, device, cull, query):
+    """One chunk of rays against ``mesh`` on this worker's device: a structured
+    array (clrt.batch.rays.HITS) for "trace", an (n,) bool array for "occluded"."""
+    with device_lock():
+        accel = _accel(mesh, mesh_token, options, device)
+        if query == "occluded":
+            return accel.any_hit(origins, directions, tmin=_row(tmin), tmax=_row(tmax), cull=cull)
+        hits = accel.trace(origins, directions, tmin=_row(tmin), tmax=_row(tmax), cull=cull)
+    out = np.empty(len(hits.t), HITS)
+    for name in HITS.names:
+        out[name] = getattr(hits, name)
+    return out
+
+
+def _row(value):
+    """A chunk of per-ray limits, or the scalar limit as given."""
+    return value if np.ndim(value) == 0 else np.asarray(value)

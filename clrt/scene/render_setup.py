@@ -1,0 +1,104 @@
+"""From a source and the render options to a scene, a camera and its lights.
+
+``clrt render`` and ``clrt batch render`` both call these, so a frame of the
+batch engine is the frame ``clrt render`` makes for the same camera:
+
+    >>> scene = render_scene("bunny.off", color=(0.9, 0.2, 0.1))
+    >>> camera = render_camera(scene, width=320, height=240)
+    >>> scene.lights = render_lights(scene.bounds, camera, own=scene.lights)
+
+Options left at ``None`` fall back to the scene file's values, then to the
+defaults of clrt.config; the camera is framed from the bounds unless the
+options (or the scene file) place it.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from clrt import config
+from clrt.errors import InputError
+from clrt.scene.scene import Camera, Light, Scene, default_light
+
+#: The keyword options of render_scene and render_camera (the CLI's option names).
+MATERIAL_OPTIONS = ("color", "ambient", "diffuse", "specular", "shininess", "crease")
+SCENE_OPTIONS = MATERIAL_OPTIONS + ("flat", "background", "samples", "max_depth")
+CAMERA_OPTIONS = ("width", "height", "eye", "target", "up", "fov")
+
+
+def render_scene(source, *, color=None, ambient=None, diffuse=None, specular=None, shininess=None,
+                 crease=None, flat: bool = False, background=None, samples=None, max_depth=None) -> Scene:
+    """The scene of ``source``: None (the built-in scene), a ``.toml`` scene file or
+    a mesh file (clrt.scene.sources.as_scene).  The material options replace that
+    field of every object's material; a mesh's scene has no lights yet
+    (:func:`render_lights` places the default one from the final camera)."""
+    from clrt.scene.sources import as_scene
+    if source:
+        scene = as_scene(source)
+        if not str(source).lower().endswith(".toml"):
+            scene.lights = []   # a mesh: the default light is placed from the final camera
+    else:
+        from clrt.scene.default import default_scene
+        scene = default_scene()
+    scene.override_materials(smooth=False if flat else None, color=color, ambient=ambient, diffuse=diffuse,
+                             specular=specular, shininess=shininess, crease=crease)
+    if background is not None:
+        scene.background = background
+    if samples is not None:
+        scene.samples = samples
+    if max_depth is not None:
+        scene.max_depth = max_depth
+    return scene
+
+
+def render_camera(scene: Scene, *, width=None, height=None, eye=None, target=None, up=None,
+                  fov=None) -> Camera:
+    """The camera: options override the scene's camera (a scene file's or a glTF
+    file's); what neither gives is framed from the bounds (for the final size,
+    fov and up)."""
+    bounds, base = scene.bounds, scene.camera
+    width = width if width is not None else (base.width if base else config.DEFAULT_WIDTH)
+    height = height if height is not None else (base.height if base else config.DEFAULT_HEIGHT)
+    fov = fov if fov is not None else (base.fov if base else config.DEFAULT_FOV)
+    up = up or (base.up if base else config.DEFAULT_UP)
+    placed = base if base is not None and not scene.camera_framed else None   # by the user or the file
+    if eye is None and target is None and placed is not None:
+        eye, target = placed.eye, placed.target
+    else:   # frame for the final size, fov and up
+        framed = Camera.framing(bounds, width, height, fov, up=up)
+        target = target or (placed.target if placed else framed.target)
+        eye = eye or (placed.eye if placed else tuple(t + e - f for t, e, f in zip(target, framed.eye,
+                                                                                   framed.target)))
+    return Camera(eye, target, up, fov, width, height)
+
+
+def render_lights(bounds, camera: Camera, own=(), positions=None) -> list:
+    """The lights of a frame: ``positions`` (the --light options), else the scene's
+    ``own`` lights, else one default light placed from ``camera``."""
+    if positions:
+        return [Light(p) for p in positions]
+    if own:
+        return list(own)
+    return [default_light(bounds, camera)]
+
+
+def turntable(camera: Camera, view: int, views: int) -> Camera:
+    """View ``view`` of ``views`` around the camera's target: the eye turned by
+    360 * view / views degrees about the up axis through the target, so distance,
+    elevation and framing stay those of ``camera`` (view 0 is ``camera`` itself)."""
+    if not (isinstance(views, int) and views >= 1 and isinstance(view, int) and 0 <= view < views):
+        raise InputError(f"view must be in 0..{views - 1}, got {view!r}")
+    if view == 0:
+        return camera
+    angle = 2.0 * math.pi * view / views
+    k = np.asarray(camera.up, dtype=np.float64)
+    k = k / np.linalg.norm(k)
+    target = np.asarray(camera.target, dtype=np.float64)
+    v = np.asarray(camera.eye, dtype=np.float64) - target
+    # Rodrigues' rotation of the eye's offset about the unit up axis k.
+    rotated = (v * math.cos(angle) + np.cross(k, v) * math.sin(angle)
+               + k * float(np.dot(k, v)) * (1.0 - math.cos(angle)))
+    eye = tuple(float(x) for x in target + rotated)
+    return Camera(eye, camera.target, camera.up, camera.fov, camera.width, camera.height)

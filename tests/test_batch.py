@@ -1,0 +1,324 @@
+"""Batch jobs on Dask distributed (clrt.batch, ``clrt batch render``): the same
+images as ``clrt render`` with 1 or 2 workers, nothing lost when a worker dies,
+resume, bad sources, ray queries on dask arrays, and a loopback-only cluster.
+
+Clusters are LocalClusters of at most 2 worker processes on PoCL; images are
+tiny and meshes generated."""
+
+import json
+import math
+import os
+
+import numpy as np
+import pytest
+from PIL import Image
+
+pytest.importorskip("distributed")
+
+import dask  # noqa: E402
+import dask.array as da  # noqa: E402
+from distributed import Client  # noqa: E402
+from distributed.diagnostics.plugin import WorkerPlugin  # noqa: E402
+
+import clrt  # noqa: E402
+import clrt.batch  # noqa: E402
+from clrt.batch.cluster import start_local_cluster  # noqa: E402
+from clrt.batch.jobs import Source, expand_sources, plan_tasks  # noqa: E402
+from clrt.cli import main  # noqa: E402
+from clrt.config import BATCH_MANIFEST  # noqa: E402
+from clrt.scene import primitives  # noqa: E402
+from clrt.scene.render_setup import turntable  # noqa: E402
+from clrt.scene.scene import Camera  # noqa: E402
+
+SIZE = {"width": 20, "height": 14}
+
+
+def _write_obj(path, mesh):
+    lines = [f"v {x!r} {y!r} {z!r}" for x, y, z in mesh.vertices.tolist()]
+    lines += [f"f {a + 1} {b + 1} {c + 1}" for a, b, c in mesh.faces.tolist()]
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+@pytest.fixture(scope="module")
+def meshes(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("meshes")
+    return [_write_obj(folder / "ball.obj", primitives.icosphere(1)),
+            _write_obj(folder / "block.obj", primitives.box((1.0, 0.6, 1.4)))]
+
+
+@pytest.fixture(scope="module")
+def client(device):
+    """One cluster of 2 worker processes for the module's Python-API tests."""
+    with start_local_cluster(2, device) as cluster, Client(cluster) as c:
+        yield c
+
+
+def _manifest(folder):
+    return [json.loads(line) for line in (folder / BATCH_MANIFEST).read_text().splitlines()]
+
+
+def _images(folder):
+    return {p.relative_to(folder).as_posix(): np.asarray(Image.open(p)) for p in sorted(folder.rglob("*.png"))}
+
+
+# --------------------------------------------------------------------------- without a cluster
+
+def test_turntable_keeps_distance_elevation_and_framing():
+    camera = Camera((1.0, 2.0, 5.0), (0.5, 0.25, -1.0), fov=40.0, width=30, height=20)
+    target = np.array(camera.target)
+    for i in range(8):
+        view = turntable(camera, i, 8)
+        offset, base = np.array(view.eye) - target, np.array(camera.eye) - target
+        assert np.isclose(np.linalg.norm(offset), np.linalg.norm(base))
+        assert np.isclose(offset[1], base[1])                     # same height above the target
+        azimuth = math.degrees(math.atan2(offset[0], offset[2]) - math.atan2(base[0], base[2])) % 360
+        assert np.isclose(azimuth, 45.0 * i) or np.isclose(azimuth - 360.0, 45.0 * i)
+        assert (view.target, view.up, view.fov, view.width, view.height) == \
+               (camera.target, camera.up, camera.fov, camera.width, camera.height)
+    assert turntable(camera, 0, 8) is camera
+
+
+def test_sources_names_and_tasks(tmp_path, meshes):
+    other = tmp_path / "other"
+    other.mkdir()
+    twin = _write_obj(other / "ball.obj", primitives.icosphere(1))
+    (other / "notes.txt").write_text("not a mesh")
+    found = expand_sources([str(meshes[0]), str(other), str(meshes[0].parent / "*.obj"), "nope.obj",
+                            str(tmp_path / "*.stl")])
+    paths = [s.path for s in found if not s.error]
+    assert paths == [str(meshes[0]), str(twin), str(meshes[1])], "each file once, in argument order"
+    names = [s.name for s in found if not s.error]
+    assert len(set(names)) == 3 and names[2] == "block"
+    assert names[0].startswith("ball-") and names[1].startswith("ball-"), "colliding stems get a path hash"
+    assert [s.error.split(":")[-1].strip() for s in found if s.error] == ["no such file",
+                                                                          "no file matches this pattern"]
+    source = Source("x", "x")
+    assert [t.views for t in plan_tasks(source, list(range(4)), set(), 2, 1)] == [[0, 1], [2, 3]]
+    assert [len(t.views) for t in plan_tasks(source, list(range(20)), {3}, 2, 5)] == [7, 7, 6]
+    assert plan_tasks(source, list(range(20)), {3}, 2, 5)[0].replace == [3]
+
+
+def test_batch_takes_every_render_option():
+    from clrt.batch.cli import NOT_TAKEN, parser
+    from clrt.cli import _parser
+
+    def options(p, command):
+        sub = next(a for a in p._actions if a.dest == "command").choices[command]
+        return {s for a in sub._actions for s in a.option_strings if s.startswith("--")}
+
+    missing = options(_parser(), "render") - options(parser(), "render") - set(NOT_TAKEN) - {"--help"}
+    assert not missing, f"clrt batch render lacks {missing}"
+
+
+@pytest.mark.parametrize("args, fragment", [
+    (["--views", "0"], "views must be"),
+    (["--width", "0"], "width must be"),
+    (["--workers", "2", "--scheduler", "tcp://127.0.0.1:1"], "not allowed with"),
+    (["--scheduler", "tcp://127.0.0.1:1"], "cannot reach the Dask scheduler"),
+    (["--scheduler", "tls://127.0.0.1:1"], "needs certificates"),
+])
+def test_bad_options_are_one_line_errors(args, fragment, meshes, tmp_path, capsys, monkeypatch):
+    monkeypatch.setattr("clrt.batch.cluster.BATCH_CONNECT_TIMEOUT", 1.0)   # nobody listens there
+    code = main(["batch", "render", str(meshes[0]), "-o", str(tmp_path / "out"), *args])
+    out, err = capsys.readouterr()
+    assert code == 2
+    assert fragment in err and err.startswith("clrt: ") and len(err.strip().splitlines()) == 1, err
+    assert not list((tmp_path / "out").rglob("*.png"))
+
+
+def test_each_worker_gets_its_own_device(monkeypatch):
+    from clrt.batch import worker
+    from clrt.device.context import DeviceInfo
+
+    def info(p, d, kind):
+        return DeviceInfo(p, d, "platform", f"dev{p}{d}", kind, 1, 1, 1, 1, "OpenCL 3.0", "1")
+
+    devices = [info(0, 0, "CPU"), info(1, 0, "GPU"), info(1, 1, "GPU"), info(1, 2, "GPU")]
+    monkeypatch.setattr("clrt.device.context.list_devices", lambda: devices)
+    monkeypatch.delenv("CLRT_DEVICE", raising=False)
+    assert [worker.choose_device(None, i) for i in range(4)] == ["1:0", "1:1", "1:2", "1:0"]
+    assert [worker.choose_device("gpu", i) for i in (0, 2)] == ["1:0", "1:2"]
+    assert worker.choose_device("cpu", 1) == "0:0"
+    assert worker.choose_device("1:1", 0) == "1:1"
+    monkeypatch.setenv("CLRT_DEVICE", "1:2")
+    assert worker.choose_device(None, 0) == "1:2" and worker.choose_device("gpu", 0) == "1:2"
+    assert worker.choose_device("0:0", 0) == "0:0", "a P:D given to the batch wins"
+    assert [worker.worker_index(n) for n in (3, "gpu-2", "tcp://h:1234-1", "x")] == [3, 2, 1, None]
+
+
+# --------------------------------------------------------------------------- clusters
+
+def test_local_cluster_listens_on_loopback_only(device):
+    import psutil
+    with start_local_cluster(2, device) as cluster:
+        info = cluster.scheduler_info
+        addresses = [cluster.scheduler_address, *info["workers"],
+                     *(w["nanny"] for w in info["workers"].values())]
+        assert len(addresses) == 5
+        assert all(a.startswith("tcp://127.0.0.1:") for a in addresses), addresses
+        assert cluster.dashboard_link.startswith("http://127.0.0.1:")
+        processes = [psutil.Process()] + psutil.Process().children(recursive=True)
+        sockets = [getattr(p, "net_connections", None) or p.connections for p in processes]   # psutil < 6
+        listening = [c.laddr for each in sockets for c in each(kind="inet") if c.status == "LISTEN"]
+        assert len(listening) >= 6   # scheduler, its HTTP server, 2 workers, 2 nannies
+        assert all(addr.ip == "127.0.0.1" for addr in listening), listening
+
+
+def test_one_and_two_workers_make_the_images_of_clrt_render(meshes, tmp_path, device, capsys):
+    dev = ["--device", device] if device else []
+    args = [str(m) for m in meshes] + ["--views", "3", "--width", "20", "--height", "14", "-q", *dev]
+    assert main(["batch", "render", *args, "-o", str(tmp_path / "one"), "--workers", "1"]) == 0
+    assert main(["batch", "render", *args, "-o", str(tmp_path / "two"), "--workers", "2"]) == 0
+    capsys.readouterr()
+    one, two = _images(tmp_path / "one"), _images(tmp_path / "two")
+    assert sorted(one) == [f"{s}/view-{v:04d}.png" for s in ("ball", "block") for v in range(3)]
+    for name in one:
+        assert np.array_equal(one[name], two[name]), name
+    assert not np.array_equal(one["ball/view-0000.png"], one["block/view-0000.png"])
+    assert not np.array_equal(one["block/view-0000.png"], one["block/view-0001.png"]), "views differ"
+    records = {r["path"]: r for r in _manifest(tmp_path / "two")}
+    assert {r["status"] for r in records.values()} == {"done"} and len(records) == 6
+    assert len({r["worker"] for r in records.values()}) == 2, "both workers rendered"
+
+    # The same cameras through clrt render: view 0 is its default camera, the others its --eye/--target.
+    for name in ("block/view-0000.png", "block/view-0002.png"):
+        cam = records[name]["camera"]
+        out = tmp_path / f"single-{name.replace('/', '-')}"
+        place = [] if name.endswith("0000.png") else \
+            ["--eye", ",".join(map(repr, cam["eye"])), "--target", ",".join(map(repr, cam["target"]))]
+        assert main(["render", str(meshes[1]), "-o", str(out), "--width", "20", "--height", "14", "-q",
+                     *place, *dev]) == 0
+        assert np.array_equal(np.asarray(Image.open(out)), one[name]), name
+
+
+def test_bad_sources_are_reported_while_the_others_finish(meshes, tmp_path, device, capsys):
+    (tmp_path / "corrupt.obj").write_text("v 1 2\nf 1 2 3\n")
+    (tmp_path / "empty.off").write_text("")
+    dev = ["--device", device] if device else []
+    code = main(["batch", "render", str(meshes[0]), str(tmp_path / "missing.obj"), str(tmp_path / "corrupt.obj"),
+                 str(tmp_path / "empty.off"), "-o", str(tmp_path / "out"), "--views", "2",
+                 "--width", "20", "--height", "14", "--workers", "2", "-q", *dev])
+    out, err = capsys.readouterr()
+    assert code == 2
+    lines = err.strip().splitlines()
+    assert len(lines) == 3 and all(line.startswith("clrt: ") for line in lines), err
+    assert "missing.obj: no such file" in err and "corrupt.obj" in err and "empty.off" in err
+    assert "Traceback" not in err
+    assert sorted(_images(tmp_path / "out")) == ["ball/view-0000.png", "ball/view-0001.png"]
+    statuses = {(r["source"].rsplit("/", 1)[-1], r["view"]): r["status"] for r in _manifest(tmp_path / "out")}
+    assert statuses == {("ball.obj", 0): "done", ("ball.obj", 1): "done", ("missing.obj", None): "bad",
+                        ("corrupt.obj", 0): "bad", ("corrupt.obj", 1): "bad",
+                        ("empty.off", 0): "bad", ("empty.off", 1): "bad"}
+    assert "2 frame(s) rendered" in out
+
+
+def test_device_trouble_exits_3(meshes, tmp_path, capsys):
+    code = main(["batch", "render", str(meshes[0]), "-o", str(tmp_path / "out"), "--width", "20",
+                 "--height", "14", "--device", "9:9", "-q"])
+    out, err = capsys.readouterr()
+    assert code == 3
+    assert err.count("\n") == 1 and "9" in err and "does not exist" in err, err
+    assert not list((tmp_path / "out").rglob("*.png"))
+
+
+class KillOnce(WorkerPlugin):
+    """Kills its worker process when the worker starts its first render task,
+    once per batch (a marker file remembers)."""
+
+    name = "test-kill-once"
+
+    def __init__(self, marker):
+        self.marker = str(marker)
+
+    def setup(self, worker):
+        self.worker = worker
+
+    def transition(self, key, start, finish, **kwargs):
+        if finish == "executing" and str(key).startswith("clrt-render") and not os.path.exists(self.marker):
+            with open(self.marker, "w") as fh:
+                fh.write(str(os.getpid()))
+            os._exit(1)
+
+
+def test_a_killed_workers_tasks_are_done_elsewhere(client, meshes, tmp_path, device):
+    marker = tmp_path / "killed"
+    client.register_plugin(KillOnce(marker))
+    try:
+        outputs = clrt.batch.render(meshes, tmp_path / "out", views=4, client=client, device=device, **SIZE)
+    finally:
+        client.unregister_worker_plugin(KillOnce.name)
+    assert marker.exists(), "a worker was killed"
+    assert sorted(o.status for o in outputs) == ["done"] * 8
+    images = _images(tmp_path / "out")
+    assert len(images) == 8
+    records = _manifest(tmp_path / "out")
+    assert sorted(r["path"] for r in records) == sorted(images), "each output recorded once"
+    assert not [p for p in (tmp_path / "out").rglob(".*.png*")], "no temporary file left"
+    assert int(marker.read_text()) not in [p["pid"] for p in client.run(lambda: {"pid": os.getpid()}).values()]
+
+
+def test_resume_renders_only_what_is_missing(client, meshes, tmp_path, device):
+    out = tmp_path / "out"
+    first = clrt.batch.render(meshes, out, views=3, client=client, device=device, **SIZE)
+    assert sorted(o.status for o in first) == ["done"] * 6
+    before = {p: os.stat(out / p).st_mtime_ns for p in _images(out)}
+    (out / "block/view-0001.png").unlink()                       # lost ...
+    lines = (out / BATCH_MANIFEST).read_text().splitlines()     # ... and one never recorded (client killed)
+    (out / BATCH_MANIFEST).write_text("\n".join(line for line in lines if "ball/view-0002" not in line) + "\n")
+
+    again = clrt.batch.render(meshes, out, views=3, client=client, device=device, **SIZE)
+    redone = [o for o in again if o.seconds > 0]
+    assert [(o.source, o.view) for o in redone] == [(str(meshes[1]), 1)]
+    assert sorted(o.status for o in again) == ["done"] + ["skipped"] * 5
+    for p, stamp in before.items():
+        if p != "block/view-0001.png":
+            assert os.stat(out / p).st_mtime_ns == stamp, f"{p} was rendered again"
+    assert len(_manifest(out)) == 6
+
+    # Other settings make other images: all are rendered again.
+    changed = clrt.batch.render(meshes, out, views=3, client=client, device=device, width=22, height=14)
+    assert sorted(o.status for o in changed) == ["done"] * 6 and all(o.seconds > 0 for o in changed)
+    assert all(img.shape == (14, 22, 3) for img in _images(out).values())
+
+
+def test_ctrl_c_keeps_what_finished_and_exits_130(meshes, tmp_path, device, capsys, monkeypatch):
+    import distributed
+    original = distributed.as_completed
+
+    def interrupted(futures, *args, **kwargs):   # Ctrl-C once the first task finished
+        for future in original(futures, *args, **kwargs):
+            yield future
+            raise KeyboardInterrupt
+
+    monkeypatch.setattr(distributed, "as_completed", interrupted)
+    dev = ["--device", device] if device else []
+    args = ["batch", "render", str(meshes[0]), "-o", str(tmp_path / "out"), "--views", "4", "--width", "20",
+            "--height", "14", "--workers", "2", "-q", *dev]
+    assert main(args) == 130
+    done = _manifest(tmp_path / "out")
+    assert 1 <= len(done) < 4 and {r["status"] for r in done} == {"done"}
+    monkeypatch.undo()
+    assert main(args) == 0
+    assert len(_manifest(tmp_path / "out")) == 4 and len(_images(tmp_path / "out")) == 4
+
+
+def test_trace_and_occluded_on_dask_arrays_equal_clrt(client, device):
+    mesh = primitives.torus(1.0, 0.35, 16, 8)
+    rng = np.random.default_rng(7)
+    origins = rng.normal(size=(3000, 3)) * 3.0
+    directions = -origins + rng.normal(size=(3000, 3))
+    tmax = rng.uniform(0.0, 6.0, 3000)
+    o = da.from_array(origins, chunks=(700, 3))
+    d = da.from_array(directions, chunks=(1000, 3))
+    hits = clrt.batch.trace(mesh, o, d, tmax=da.from_array(tmax, chunks=500), client=client, device=device)
+    assert all(isinstance(x, da.Array) for x in hits)
+    got = dask.compute(*hits)
+    want = clrt.trace(mesh, origins, directions, tmax=tmax, device=device)
+    assert 0 < want.hit.sum() < len(origins), "the rays hit and miss"
+    for name, a, b in zip(want._fields, got, want):
+        assert a.shape == b.shape and a.dtype == b.dtype, name
+        assert np.array_equal(a, b), name
+    blocked = clrt.batch.occluded(mesh, o, d, tmax=3.0, client=client, device=device)
+    assert isinstance(blocked, da.Array)
+    assert np.array_equal(blocked.compute(), clrt.occluded(mesh, origins, directions, tmax=3.0, device=device))
