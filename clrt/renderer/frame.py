@@ -106,6 +106,13 @@ class Renderer:
         self._max_group = min(   # work-items a launch's group may have, see _launch_shape
             k.get_work_group_info(cl.kernel_work_group_info.WORK_GROUP_SIZE, self.queue.device)
             for name, k in self.kernels.items() if name != "encode_srgb8")
+        # The scene's buffers are arguments of every shade_pixels launch: set once
+        # here (setting a kernel argument costs microseconds of Python each); a
+        # frame sets only what may change (see _set_frame_args).
+        static = (*self.geometry.args, *self.geometry.buffers["tri_info"],
+                  *self.geometry.buffers["vertex_normals"], self.buffers["materials"])
+        _set_from(self.kernels["shade_pixels"], SHADE_FIRST_SCENE_ARG, static)
+        self._shade_frame_arg = SHADE_FIRST_SCENE_ARG + len(static)
 
     # ----------------------------------------------------------------------- a frame
 
@@ -121,6 +128,7 @@ class Renderer:
         ``Frame.t``, of the first sample; otherwise None).
         """
         job = self._job(camera, linear, hits, samples, max_depth, seed)
+        self._set_frame_args(job.camera)
         capacity = self.tile_capacity(job.camera.width * job.camera.height)
         try:
             tiles = run_tiles(job.camera.width, job.camera.height, capacity, self.limits,
@@ -153,12 +161,15 @@ class Renderer:
             image = (image if pinned else np.empty(3 * w * h, np.uint8)).reshape(h, w, 3)
         prim = np.empty((h, w), np.int32) if hits else None
         t = np.empty((h, w), np.float32) if hits else None
-        shading_args = (*self.geometry.buffers["tri_info"], *self.geometry.buffers["vertex_normals"],
-                        self.buffers["materials"], self.buffers["lights"], np.uint32(len(self.scene.lights)),
-                        vec4(self.scene.ambient_light), vec4(self.scene.background),
-                        np.float32(ray_epsilon(self.arrays.bounds, camera.eye)))
-        return _Job(camera, samples, max_depth, seed, linear, (*self.geometry.args, *shading_args),
-                    image, pinned, prim, t, timings)
+        return _Job(camera, samples, max_depth, seed, linear, image, pinned, prim, t, timings)
+
+    def _set_frame_args(self, camera: Camera) -> None:
+        """The kernel arguments that hold for a whole frame: the camera, and the
+        scene values a caller may change between frames (lights, colours)."""
+        _set_from(self.kernels["generate_rays"], 1, camera_args(camera))
+        _set_from(self.kernels["shade_pixels"], self._shade_frame_arg, (
+            self.buffers["lights"], np.uint32(len(self.scene.lights)), vec4(self.scene.ambient_light),
+            vec4(self.scene.background), np.float32(ray_epsilon(self.arrays.bounds, camera.eye))))
 
     def set_lights(self, lights) -> None:
         """Replace the scene's lights; the geometry stays uploaded (a turntable of
@@ -223,8 +234,10 @@ class Renderer:
     # ----------------------------------------------------------------------- launches
 
     def _launch(self, name: str, global_size, local_size, *args) -> cl.Event:
+        """Enqueue ``name`` with its first arguments ``args`` (the others are set:
+        see __init__ and _set_frame_args)."""
         kernel = self.kernels[name]
-        kernel.set_args(*args)
+        _set_from(kernel, 0, args)
         return cl.enqueue_nd_range_kernel(self.queue, kernel, global_size, local_size)
 
     def _render_tile(self, job: "_Job", x: int, y: int, w: int, h: int, capacity: int) -> float:
@@ -240,11 +253,12 @@ class Renderer:
         n = job.samples * job.samples
         launches = []
         for sample in range(n):
-            gen = self._launch("generate_rays", size, local, buf["rays"], *camera_args(job.camera),
-                               np.uint32(sample), np.uint32(job.samples), np.uint32(job.seed), *tile)
+            _set_from(self.kernels["generate_rays"], GENERATE_FIRST_SAMPLE_ARG,
+                      (np.uint32(sample), np.uint32(job.samples), np.uint32(job.seed), *tile))
+            gen = self._launch("generate_rays", size, local, buf["rays"])
             shade = self._launch("shade_pixels", size, local, buf["rays"], buf["linear"], buf["hits"],
                                  np.uint32(w), np.uint32(h), np.uint32(job.max_depth), np.float32(1.0 / n),
-                                 np.uint32(sample == 0), *job.kernel_args)
+                                 np.uint32(sample == 0))
             launches.append((gen, shade))
             if sample < n - 1:
                 wait_for(shade)
@@ -292,6 +306,20 @@ class Renderer:
         return (-(-w // bw) * bw, -(-h // bh) * bh), (bw, bh)
 
 
+# Where argument groups start in the kernels' parameter lists (render.cl):
+# generate_rays(rays, CAMERA_PARAMS (8), sample, samples_per_axis, seed, TILE_PARAMS)
+# shade_pixels(rays, image, hits, tile_w, tile_h, max_depth, sample_weight,
+#              first_sample, GEOMETRY_PARAMS, SHADING_PARAMS).
+GENERATE_FIRST_SAMPLE_ARG = 9
+SHADE_FIRST_SCENE_ARG = 8
+
+
+def _set_from(kernel: cl.Kernel, first: int, args) -> None:
+    """Set arguments first, first + 1, ... of ``kernel``."""
+    for k, value in enumerate(args):
+        kernel.set_arg(first + k, value)
+
+
 # Device bytes per pixel of a tile: its ray, hit record, linear and sRGB colour.
 FRAME_BYTES_PER_PIXEL = RAY.itemsize + HIT.itemsize + 16 + 3
 MIN_FRAME_BYTES = 256 * FRAME_BYTES_PER_PIXEL
@@ -309,7 +337,6 @@ class _Job:
     max_depth: int
     seed: int
     linear: bool
-    kernel_args: tuple           # GEOMETRY_PARAMS and SHADING_PARAMS of shade_pixels
     image: np.ndarray            # (H, W, 3), filled tile by tile
     pinned: bool                 # image is page-locked memory of the image pool
     prim: np.ndarray | None      # (H, W)

@@ -135,10 +135,11 @@ class Camera:
             raise InputError("up must not be zero or parallel to the viewing direction")
 
     def basis(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(forward, right, up) unit vectors, float64: r = f x up, u = r x f."""
-        f = _vec3(self.target, "target") - _vec3(self.eye, "eye")
+        """(forward, right, up) unit vectors, float64: r = f x up, u = r x f.
+        (The vectors were checked when the camera was made.)"""
+        f = np.asarray(self.target, dtype=np.float64) - np.asarray(self.eye, dtype=np.float64)
         f /= np.linalg.norm(f)
-        r = np.cross(f, _vec3(self.up, "up"))
+        r = np.cross(f, np.asarray(self.up, dtype=np.float64))
         r /= np.linalg.norm(r)
         return f, r, np.cross(r, f)
 
