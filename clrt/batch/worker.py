@@ -253,6 +253,19 @@ def render_task(job: dict) -> list[dict]:
     return records
 
 
+def device_info() -> dict:
+    """This worker's OpenCL device, for reports: its label and, where the driver
+    tells (NVIDIA's cl_nv_device_attribute_query), its PCI bus id."""
+    from clrt.device.context import create_context, device_label
+    _, queue = create_context(_STATE.device)
+    device = queue.device
+    try:
+        bus = f"{device.pci_domain_id_nv:04x}:{device.pci_bus_id_nv:02x}:{device.pci_slot_id_nv:02x}"
+    except Exception:   # noqa: BLE001 -- not NVIDIA, or an older driver
+        bus = "-"
+    return {"device": device_label(device), "pci": bus, "spec": _STATE.device}
+
+
 def _is_device_error(exc: BaseException) -> bool:
     import pyopencl as cl
     return isinstance(exc, (cl.Error, MemoryError))

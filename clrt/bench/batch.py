@@ -8,6 +8,15 @@ result (cluster start and the workers' first program builds excluded by a
 warm-up batch of one view per source on the same cluster).  Every count's
 images are compared with the first count's: ``same images`` must say yes.
 Without SOURCE, two generated meshes (a torus and a subdivided icosphere).
+Each worker's device is printed (name and PCI bus id), so one can see that
+every worker drives its own GPU.
+
+``--breakdown`` adds where a frame's time goes, measured in this process on
+the first source: scene set-up (load, BVH build, upload), kernels, read back,
+PNG encoding, and the rest of a worker's time per frame (Python, Dask, waiting
+for the device lock) as the difference to the batch's own figure.
+``--rays N`` adds clrt.batch.trace of N random rays (dask arrays generated on
+the workers, chunks of ``--ray-chunk``): wall time and Mrays/s per worker count.
 """
 
 from __future__ import annotations
@@ -20,7 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
-from clrt.bench.common import exit_code, parse_size
+from clrt.bench.common import exit_code, parse_count, parse_size
 
 
 def _generated(folder: Path) -> list[str]:
@@ -35,12 +44,16 @@ def _generated(folder: Path) -> list[str]:
     return paths
 
 
-def run(sources, counts, views, size, device=None, samples=None, out=sys.stdout):
+def run(sources, counts, views, size, device=None, samples=None, breakdown=False, rays=0, ray_chunk=1 << 22,
+        out=sys.stdout):
     from distributed import Client
     from PIL import Image
 
     from clrt.batch import run as batch_run
     from clrt.batch.cluster import cpu_cores, start_local_cluster
+    from clrt.batch.worker import device_info
+
+    devices, ray_rates, per_frame = {}, {}, {}
 
     with tempfile.TemporaryDirectory(prefix="clrt-bench-batch-") as tmp:
         tmp = Path(tmp)
@@ -56,6 +69,9 @@ def run(sources, counts, views, size, device=None, samples=None, out=sys.stdout)
                 options = {"width": w, "height": h, "samples": samples, "client": client, "device": device}
                 batch_run(sources, tmp / f"warm-{count}", 1, **options)
                 summary = batch_run(sources, tmp / f"run-{count}", views, **options)
+                devices[count] = client.run(device_info)
+                if rays:
+                    ray_rates[count] = _trace_rays(client, sources[0], rays, ray_chunk)
             folder = tmp / f"run-{count}"
             images = {p.relative_to(folder): np.asarray(Image.open(p)) for p in sorted(folder.rglob("*.png"))}
             same = "-" if first is None else \
@@ -67,6 +83,81 @@ def run(sources, counts, views, size, device=None, samples=None, out=sys.stdout)
             split = "/".join(str(n) for n in summary.per_worker().values())
             print(f"| {count} | {summary.rendered} | {summary.render_seconds:.2f} | {rate:.2f} | "
                   f"{rate / base:.2f} | {split} | {same} |", file=out)
+            per_frame[count] = count * summary.render_seconds / max(summary.rendered, 1)
+        print("\nworkers and their devices:", file=out)
+        for count, info in devices.items():
+            for address, d in sorted(info.items()):
+                print(f"  {count} worker(s): {address} -> {d['device']}, PCI {d['pci']} (spec {d['spec']})", file=out)
+        if breakdown:
+            _breakdown(sources[0], views, size, samples, device, per_frame, out)
+        if ray_rates:
+            print("\n| workers | rays | seconds | Mrays/s | speed-up | rays hit |", file=out)
+            print("|---|---|---|---|---|---|", file=out)
+            first_rate = None
+            for count, (seconds, hit) in ray_rates.items():
+                mrays = rays / seconds / 1e6
+                first_rate = first_rate or mrays
+                print(f"| {count} | {rays:,} | {seconds:.2f} | {mrays:,.1f} | {mrays / first_rate:.2f} | {hit:,} |",
+                      file=out, flush=True)
+
+
+def _trace_rays(client, source, n: int, chunk: int) -> tuple[float, int]:
+    """Wall seconds and hit count of clrt.batch.trace of n random rays (origins in
+    the mesh's box, directions on the sphere), generated chunk by chunk on the
+    workers; only the count comes back."""
+    import dask.array as da
+
+    from clrt.batch import trace
+    from clrt.scene.sources import as_mesh
+    mesh = as_mesh(source)
+    lo, hi = mesh.bounds
+    rng = da.random.default_rng(0)
+    origins = (lo + rng.random((n, 3), chunks=(chunk, 3), dtype=np.float32) * (hi - lo)).astype(np.float32)
+    directions = rng.standard_normal((n, 3), chunks=(chunk, 3), dtype=np.float32)
+    start = time.perf_counter()
+    hits = trace(mesh, origins, directions, client=client)
+    hit = int(client.compute((hits.prim >= 0).sum()).result())
+    return time.perf_counter() - start, hit
+
+
+def _breakdown(source, views, size, samples, device, per_frame, out):
+    """Where the time of a frame goes, measured here (one process) on ``source``."""
+    import statistics
+    import tempfile
+
+    from clrt.output import write_image
+    from clrt.renderer import Renderer
+    from clrt.scene.render_setup import render_camera, render_lights, render_scene, turntable
+
+    w, h = size
+    start = time.perf_counter()
+    scene = render_scene(source, samples=samples)
+    camera = render_camera(scene, width=w, height=h)
+    scene.lights = render_lights(scene.bounds, camera, scene.lights)
+    renderer = Renderer(scene, device)
+    setup = 1e3 * (time.perf_counter() - start)
+    rows = []
+    with tempfile.TemporaryDirectory() as folder:
+        for view in range(min(views, 12)):
+            cam = turntable(camera, view, views)
+            begin = time.perf_counter()
+            frame = renderer.render(cam)
+            rendered = time.perf_counter()
+            write_image(frame.image, Path(folder) / f"{view}.png", force=True)
+            done = time.perf_counter()
+            t = frame.timings
+            rows.append((t["ray generation"] + t["pixel colour"], t["read back"], 1e3 * (rendered - begin),
+                         1e3 * (done - rendered)))
+    kernels, readback, frame_ms, png = (statistics.median(r[k] for r in rows) for k in range(4))
+    print(f"\nwhere a frame's time goes ({Path(str(source)).name}, {w}x{h}, one process, medians of "
+          f"{len(rows)} views): scene set-up (load, build, upload, program) {setup:.0f} ms once per source "
+          f"and worker; per frame: kernels {kernels:.2f} ms, read back {readback:.2f} ms, the rest of "
+          f"Renderer.render {frame_ms - kernels - readback:.2f} ms, PNG encoding {png:.1f} ms", file=out)
+    alone = frame_ms + png
+    for count, worker_ms in per_frame.items():
+        print(f"  {count} worker(s): {1e3 * worker_ms:.1f} ms of worker time per frame, "
+              f"{1e3 * worker_ms - alone:.1f} ms more than one process's frame + PNG (Dask, Python, device lock, "
+              f"set-up)", file=out)
 
 
 def main(argv=None) -> int:
@@ -77,10 +168,14 @@ def main(argv=None) -> int:
     p.add_argument("--size", type=parse_size, default=(320, 240), help="image size WxH (default 320x240)")
     p.add_argument("--samples", type=int, help="anti-aliasing samples per side")
     p.add_argument("--device", help="'gpu', 'cpu' or P:D")
+    p.add_argument("--breakdown", action="store_true", help="also where a frame's time goes")
+    p.add_argument("--rays", type=parse_count, default=0, help="also trace this many random rays, e.g. 1G")
+    p.add_argument("--ray-chunk", type=parse_count, default=1 << 22, help="rays per dask chunk (default 4M)")
     args = p.parse_args(argv)
     counts = [int(x) for x in args.workers.split(",")]
     started = time.perf_counter()
-    code = exit_code(run, args.sources, counts, args.views, args.size, args.device, args.samples)
+    code = exit_code(run, args.sources, counts, args.views, args.size, args.device, args.samples, args.breakdown,
+                     args.rays, args.ray_chunk)
     print(f"\n({time.perf_counter() - started:.0f} s in all)")
     return code
 
