@@ -3,8 +3,12 @@
 from __future__ import annotations
 
 import numpy as np
+from pyopencl import cltypes
 
 from clrt.scene.scene import Camera
+
+#: The types of CAMERA_PARAMS (camera.cl), as clrt.device.program.typed_kernel takes them.
+CAMERA_ARG_TYPES = [cltypes.float4] * 4 + [np.float32] * 2 + [np.uint32] * 2
 
 
 def vec4(v) -> np.ndarray:

@@ -79,6 +79,16 @@ class DeviceGeometry:
         self.nbytes = sum(a.nbytes for a in arrays.values())
 
     @property
+    def arg_types(self) -> list:
+        """The types of GEOMETRY_PARAMS (clrt.device.program.typed_kernel)."""
+        parts = [None] * len(self.buffers["tris"])
+        return [*parts, np.uint32, *parts, *parts]
+
+    def extra_arg_types(self, name: str) -> list:
+        """The types of an extra buffer's parameters: one buffer, or its parts."""
+        return [None] * len(self.buffers[name])
+
+    @property
     def args(self) -> tuple:
         """Kernel arguments matching GEOMETRY_PARAMS in geometry.cl."""
         b = self.buffers

@@ -36,12 +36,12 @@ import pyopencl as cl
 
 from clrt import checks
 from clrt.config import DEFAULT_ACCEL, DEFAULT_BUILDER, DEFAULT_LEAF_SIZE
-from clrt.device.args import camera_args
+from clrt.device.args import CAMERA_ARG_TYPES, camera_args
 from clrt.device.build import build_acceleration
 from clrt.device.context import create_context, device_label
 from clrt.device.geometry import DeviceGeometry, check_fits
 from clrt.device.pinned import PinnedPool
-from clrt.device.program import build_program
+from clrt.device.program import build_program, typed_kernel
 from clrt.errors import InputError
 from clrt.config import RAY_CHECKS
 from clrt.query.rays import CameraRays, PinholeRays, RayBatch, cull_code, is_device_array
@@ -131,9 +131,18 @@ class Accel:
         self.max_alloc = int(queue.device.max_mem_alloc_size)   # bytes of the largest buffer
         self.all_hits_capacity = ALL_HITS_CAPACITY
         program = build_program(context, "trace.cl", geometry.defines)
-        self.kernels = {name: cl.Kernel(program, name) for name in
-                        ("query_closest", "query_any", "query_count", "query_all", "camera_rays",
-                         "trace_camera", "occlude_camera")}
+        # The kernels with their argument types (trace.cl's and rays.cl's parameter lists).
+        u32, geom = np.uint32, geometry.arg_types
+        ray_input = [None, u32, None, u32, None, u32, None, u32, u32, u32, u32, None]
+        self.kernels = {name: typed_kernel(program, name, types) for name, types in {
+            "query_closest": [*ray_input, *[None] * len(CLOSEST_FIELDS), u32, u32, np.int32, *geom],
+            "query_any": [*ray_input, None, u32, u32, np.int32, *geom],
+            "query_count": [*ray_input, None, u32, u32, np.int32, *geom],
+            "query_all": [*ray_input, None, None, None, None, u32, u32, np.int32, *geom],
+            "camera_rays": [None, *CAMERA_ARG_TYPES, np.uint64, u32],
+            "trace_camera": [None, *CAMERA_ARG_TYPES, *geom],
+            "occlude_camera": [None, *CAMERA_ARG_TYPES, *geom],
+        }.items()}
         self._buffers: dict[str, cl.Buffer] = {}
         self._hits_per_ray = float(ALL_HITS_PER_RAY)
         self.launches: list[cl.Event] = []   # query launches, see kernel_ms

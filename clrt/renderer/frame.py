@@ -20,16 +20,17 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import pyopencl as cl
+from pyopencl import cltypes
 
 from clrt import checks, config
 from clrt.config import DEFAULT_ACCEL, DEFAULT_BUILDER, DEFAULT_LEAF_SIZE
-from clrt.device.args import camera_args, vec4
+from clrt.device.args import CAMERA_ARG_TYPES, camera_args, vec4
 from clrt.device.build import build_acceleration
 from clrt.device.context import create_context, device_label
 from clrt.device.context import format_bytes as _size
 from clrt.device.geometry import DeviceGeometry, check_fits
 from clrt.device.pinned import PinnedPool
-from clrt.device.program import build_program
+from clrt.device.program import build_program, typed_kernel
 from clrt.errors import DeviceMemoryError, TooLargeError
 from clrt.layouts import HIT, RAY
 from clrt.renderer.tiles import TileLimits, error_name, is_out_of_memory, run_tiles
@@ -96,9 +97,17 @@ class Renderer:
                     raise
                 raise self._memory_error(exc, 0) from None
             program = build_program(self.context, "render.cl", self.geometry.defines)
-            # Kernel objects are made once: each attribute lookup on a Program makes a new one.
-            self.kernels = {name: cl.Kernel(program, name)
-                            for name in ("generate_rays", "shade_pixels", "encode_srgb8")}
+            # Kernel objects are made once (each attribute lookup on a Program makes
+            # a new one), with their argument types (render.cl's parameter lists).
+            g = self.geometry
+            u32, f32 = np.uint32, np.float32
+            self.kernels = {name: typed_kernel(program, name, types) for name, types in {
+                "generate_rays": [None, *CAMERA_ARG_TYPES, u32, u32, u32, u32, u32, u32, u32],
+                "shade_pixels": [None, None, None, u32, u32, u32, f32, u32, *g.arg_types,
+                                 *g.extra_arg_types("tri_info"), *g.extra_arg_types("vertex_normals"),
+                                 None, None, u32, cltypes.float4, cltypes.float4, f32],
+                "encode_srgb8": [None, None, u32],
+            }.items()}
         self._frame_buffers: dict[str, cl.Buffer] = {}
         self._frame_pixels = -1
         self._staging = None
@@ -106,13 +115,9 @@ class Renderer:
         self._max_group = min(   # work-items a launch's group may have, see _launch_shape
             k.get_work_group_info(cl.kernel_work_group_info.WORK_GROUP_SIZE, self.queue.device)
             for name, k in self.kernels.items() if name != "encode_srgb8")
-        # The scene's buffers are arguments of every shade_pixels launch: set once
-        # here (setting a kernel argument costs microseconds of Python each); a
-        # frame sets only what may change (see _set_frame_args).
-        static = (*self.geometry.args, *self.geometry.buffers["tri_info"],
-                  *self.geometry.buffers["vertex_normals"], self.buffers["materials"])
-        _set_from(self.kernels["shade_pixels"], SHADE_FIRST_SCENE_ARG, static)
-        self._shade_frame_arg = SHADE_FIRST_SCENE_ARG + len(static)
+        # The scene's buffers, the same for every shade_pixels launch.
+        self._scene_args = (*self.geometry.args, *self.geometry.buffers["tri_info"],
+                            *self.geometry.buffers["vertex_normals"], self.buffers["materials"])
 
     # ----------------------------------------------------------------------- a frame
 
@@ -128,7 +133,7 @@ class Renderer:
         ``Frame.t``, of the first sample; otherwise None).
         """
         job = self._job(camera, linear, hits, samples, max_depth, seed)
-        self._set_frame_args(job.camera)
+        job.camera_args, job.scene_args = self._frame_args(job.camera)
         capacity = self.tile_capacity(job.camera.width * job.camera.height)
         try:
             tiles = run_tiles(job.camera.width, job.camera.height, capacity, self.limits,
@@ -163,13 +168,13 @@ class Renderer:
         t = np.empty((h, w), np.float32) if hits else None
         return _Job(camera, samples, max_depth, seed, linear, image, pinned, prim, t, timings)
 
-    def _set_frame_args(self, camera: Camera) -> None:
-        """The kernel arguments that hold for a whole frame: the camera, and the
-        scene values a caller may change between frames (lights, colours)."""
-        _set_from(self.kernels["generate_rays"], 1, camera_args(camera))
-        _set_from(self.kernels["shade_pixels"], self._shade_frame_arg, (
-            self.buffers["lights"], np.uint32(len(self.scene.lights)), vec4(self.scene.ambient_light),
-            vec4(self.scene.background), np.float32(ray_epsilon(self.arrays.bounds, camera.eye))))
+    def _frame_args(self, camera: Camera) -> tuple[tuple, tuple]:
+        """The arguments that hold for a whole frame: the camera's (generate_rays),
+        and the scene's with the values a caller may change between frames
+        (lights, colours) and the camera's ray epsilon (shade_pixels)."""
+        return camera_args(camera), (
+            *self._scene_args, self.buffers["lights"], len(self.scene.lights), vec4(self.scene.ambient_light),
+            vec4(self.scene.background), ray_epsilon(self.arrays.bounds, camera.eye))
 
     def set_lights(self, lights) -> None:
         """Replace the scene's lights; the geometry stays uploaded (a turntable of
@@ -234,10 +239,8 @@ class Renderer:
     # ----------------------------------------------------------------------- launches
 
     def _launch(self, name: str, global_size, local_size, *args) -> cl.Event:
-        """Enqueue ``name`` with its first arguments ``args`` (the others are set:
-        see __init__ and _set_frame_args)."""
         kernel = self.kernels[name]
-        _set_from(kernel, 0, args)
+        kernel.set_args(*args)
         return cl.enqueue_nd_range_kernel(self.queue, kernel, global_size, local_size)
 
     def _render_tile(self, job: "_Job", x: int, y: int, w: int, h: int, capacity: int) -> float:
@@ -248,17 +251,15 @@ class Renderer:
         stops within one launch."""
         buf = self._buffers_for(capacity)
         count = w * h
-        tile = (np.uint32(x), np.uint32(y), np.uint32(w), np.uint32(h))
+        tile = (x, y, w, h)
         size, local = self._launch_shape(w, h)
         n = job.samples * job.samples
         launches = []
         for sample in range(n):
-            _set_from(self.kernels["generate_rays"], GENERATE_FIRST_SAMPLE_ARG,
-                      (np.uint32(sample), np.uint32(job.samples), np.uint32(job.seed), *tile))
-            gen = self._launch("generate_rays", size, local, buf["rays"])
-            shade = self._launch("shade_pixels", size, local, buf["rays"], buf["linear"], buf["hits"],
-                                 np.uint32(w), np.uint32(h), np.uint32(job.max_depth), np.float32(1.0 / n),
-                                 np.uint32(sample == 0))
+            gen = self._launch("generate_rays", size, local, buf["rays"], *job.camera_args, sample, job.samples,
+                               job.seed, *tile)
+            shade = self._launch("shade_pixels", size, local, buf["rays"], buf["linear"], buf["hits"], w, h,
+                                 job.max_depth, 1.0 / n, sample == 0, *job.scene_args)
             launches.append((gen, shade))
             if sample < n - 1:
                 wait_for(shade)
@@ -272,7 +273,7 @@ class Renderer:
             out = np.empty((count, 4), np.float32)
             copies = [cl.enqueue_copy(q, out, buf["linear"], is_blocking=False)]
         else:
-            copies = [self._launch("encode_srgb8", (count,), None, buf["linear"], buf["srgb8"], np.uint32(count))]
+            copies = [self._launch("encode_srgb8", (count,), None, buf["linear"], buf["srgb8"], count)]
             out = image.reshape(count * 3) if direct else self._staging[:count]
             copies.append(cl.enqueue_copy(q, out, buf["srgb8"], is_blocking=False))
         if job.prim is not None:
@@ -306,20 +307,6 @@ class Renderer:
         return (-(-w // bw) * bw, -(-h // bh) * bh), (bw, bh)
 
 
-# Where argument groups start in the kernels' parameter lists (render.cl):
-# generate_rays(rays, CAMERA_PARAMS (8), sample, samples_per_axis, seed, TILE_PARAMS)
-# shade_pixels(rays, image, hits, tile_w, tile_h, max_depth, sample_weight,
-#              first_sample, GEOMETRY_PARAMS, SHADING_PARAMS).
-GENERATE_FIRST_SAMPLE_ARG = 9
-SHADE_FIRST_SCENE_ARG = 8
-
-
-def _set_from(kernel: cl.Kernel, first: int, args) -> None:
-    """Set arguments first, first + 1, ... of ``kernel``."""
-    for k, value in enumerate(args):
-        kernel.set_arg(first + k, value)
-
-
 # Device bytes per pixel of a tile: its ray, hit record, linear and sRGB colour.
 FRAME_BYTES_PER_PIXEL = RAY.itemsize + HIT.itemsize + 16 + 3
 MIN_FRAME_BYTES = 256 * FRAME_BYTES_PER_PIXEL
@@ -342,6 +329,8 @@ class _Job:
     prim: np.ndarray | None      # (H, W)
     t: np.ndarray | None         # (H, W)
     timings: dict
+    camera_args: tuple = ()      # of generate_rays, and of shade_pixels after its per-launch ones:
+    scene_args: tuple = ()       # set once per frame (Renderer._frame_args)
 
 
 def wait_for(event: cl.Event) -> None:

@@ -1,0 +1,45 @@
+"""The argument types declared for every kernel (clrt.device.program.typed_kernel)
+match the kernels' own parameter lists, as the OpenCL compiler reports them:
+a scalar declared with the wrong type would reach the kernel as garbage."""
+
+import numpy as np
+import pyopencl as cl
+import pytest
+from pyopencl import cltypes
+
+from clrt.device.program import build_options, expand_source
+from clrt.query import Accel
+from clrt.renderer import Renderer
+from clrt.scene import primitives
+from clrt.scene.scene import scene_from_mesh
+
+# numpy dtype of a declared scalar -> the OpenCL type name clGetKernelArgInfo reports
+TYPE_NAMES = {np.dtype(np.uint32): "uint", np.dtype(np.int32): "int", np.dtype(np.float32): "float",
+              np.dtype(np.uint64): "ulong", np.dtype(cltypes.float4): "float4"}
+
+
+def _check(context, entry, defines, kernels):
+    source = expand_source(entry)
+    options = build_options(context, defines) + ["-cl-kernel-arg-info"]
+    program = cl.Program(context, source).build(options=options)
+    for name, kernel in kernels.items():
+        reference = cl.Kernel(program, name)
+        declared = kernel.arg_types
+        assert reference.num_args == len(declared), f"{name}: {len(declared)} types for {reference.num_args} args"
+        for i, dtype in enumerate(declared):
+            actual = reference.get_arg_info(i, cl.kernel_arg_info.TYPE_NAME).strip()
+            if dtype is None:
+                assert actual.endswith("*"), f"{name} argument {i}: declared a buffer, the kernel has {actual}"
+            else:
+                assert TYPE_NAMES[np.dtype(dtype)] == actual, f"{name} argument {i}: declared {dtype}, is {actual}"
+
+
+@pytest.mark.parametrize("max_buffer_bytes", [None, 32768], ids=["whole", "split"])
+def test_declared_argument_types_match_the_kernels(device, max_buffer_bytes):
+    mesh = primitives.icosphere(3)
+    renderer = Renderer(scene_from_mesh(mesh), device, max_buffer_bytes=max_buffer_bytes)
+    assert (renderer.geometry.parts() > 1) == (max_buffer_bytes is not None)
+    _check(renderer.context, "render.cl", renderer.geometry.defines, renderer.kernels)
+    for accel in ("box", "none"):
+        queries = Accel(mesh, accel, device=device, max_buffer_bytes=max_buffer_bytes)
+        _check(queries.context, "trace.cl", queries.geometry.defines, queries.kernels)
