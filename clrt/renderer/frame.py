@@ -75,27 +75,35 @@ class Renderer:
             self.arrays = flatten_scene(self.scene)
         with _stage(self.timings, "acceleration build"):
             self.acceleration = build_acceleration(self.arrays.corners, accel, builder, leaf_size, device)
-            tri_info = self.arrays.tri_info[self.acceleration.prim_ids]   # shading data in slot order
+            slots = self.acceleration.prim_ids   # shading data in slot order
+            a = self.arrays
+            # Per-slot and per-vertex arrays (split with the geometry when large), then whole small buffers.
+            split = {"tri_info": a.tri_info[slots], "vertex_normals": a.vertex_normals}
+            whole = {"materials": a.materials, "lights": a.lights}
+            if a.detail is not None:   # textures or colours: the -DSURFACE_DETAIL program (texture.cl)
+                split.update(tri_detail=a.detail.tri_detail[slots], texels=a.detail.texels)
+                whole.update(textures=a.detail.textures, srgb_table=a.detail.srgb_table)
         with _stage(self.timings, "copy to device"):
             self.context, self.queue = create_context(device)
             self.device = device_label(self.queue.device)
-            a = self.arrays
-            self.device_bytes = (self.acceleration.device_bytes() + tri_info.nbytes + a.vertex_normals.nbytes
-                                 + a.materials.nbytes + a.lights.nbytes)
+            self.device_bytes = (self.acceleration.device_bytes()
+                                 + sum(x.nbytes for x in (*split.values(), *whole.values())))
             check_fits(self.queue.device, self.device, self.device_bytes, MIN_FRAME_BYTES)
             try:
                 # Buffers larger than one allocation are uploaded in parts (split.cl).
-                self.geometry = DeviceGeometry(self.context, a.corners, self.acceleration,
-                                               {"tri_info": tri_info, "vertex_normals": a.vertex_normals},
+                self.geometry = DeviceGeometry(self.context, a.corners, self.acceleration, split,
                                                max_buffer_bytes)
                 mf = cl.mem_flags
-                self.buffers = {name: cl.Buffer(self.context, mf.READ_ONLY | mf.COPY_HOST_PTR,
-                                                hostbuf=getattr(a, name)) for name in ("materials", "lights")}
+                self.buffers = {name: cl.Buffer(self.context, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=x)
+                                for name, x in whole.items()}
             except (cl.Error, MemoryError) as exc:
                 if not is_out_of_memory(exc):
                     raise
                 raise self._memory_error(exc, 0) from None
-            program = build_program(self.context, "render.cl", self.geometry.defines)
+            defines = dict(self.geometry.defines)
+            if a.detail is not None:
+                defines["SURFACE_DETAIL"] = None
+            program = build_program(self.context, "render.cl", defines)
             # Kernel objects are made once: each attribute lookup on a Program makes a new one.
             self.kernels = {name: cl.Kernel(program, name)
                             for name in ("generate_rays", "shade_pixels", "encode_srgb8")}
@@ -157,6 +165,9 @@ class Renderer:
                         self.buffers["materials"], self.buffers["lights"], np.uint32(len(self.scene.lights)),
                         vec4(self.scene.ambient_light), vec4(self.scene.background),
                         np.float32(ray_epsilon(self.arrays.bounds, camera.eye)))
+        if self.arrays.detail is not None:   # DETAIL_PARAMS in shading.cl, TEXTURE_PARAMS in texture.cl
+            b = self.geometry.buffers
+            shading_args += (*b["tri_detail"], self.buffers["textures"], *b["texels"], self.buffers["srgb_table"])
         return _Job(camera, samples, max_depth, seed, linear, (*self.geometry.args, *shading_args),
                     image, pinned, prim, t, timings)
 

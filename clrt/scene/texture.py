@@ -1,0 +1,61 @@
+"""Textures: images that colour a surface, as materials reference them.
+
+A :class:`Texture` holds an image as the file stores it -- 8-bit sRGB, rows from
+the top -- and how coordinates outside 0..1 wrap (clrt.config.TEXTURE_WRAPS).
+Texture coordinates follow OBJ's (and trimesh's) convention: (0, 0) is the
+image's bottom-left corner, (1, 1) its top-right one.  The kernels and the
+reference tracer decode sRGB and filter bilinearly, each its own way.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+
+import numpy as np
+
+from clrt import checks, config
+from clrt.errors import InputError
+
+
+@dataclass(frozen=True, eq=False)
+class Texture:
+    """An 8-bit sRGB image (``pixels``: (H, W, 3) uint8, row 0 at the top) and its
+    wrap modes along u (``wrap_s``) and v (``wrap_t``): "repeat", "clamp" or
+    "mirror".  Compared by identity (two loads of one file are two textures)."""
+
+    pixels: np.ndarray
+    wrap_s: str = "repeat"
+    wrap_t: str = "repeat"
+    name: str = ""
+
+    def __post_init__(self):
+        p = np.asarray(self.pixels)
+        if p.ndim != 3 or p.shape[2] != 3 or p.dtype != np.uint8 or p.shape[0] < 1 or p.shape[1] < 1:
+            raise InputError(f"texture pixels must be a (H, W, 3) uint8 array, got {p.dtype} {p.shape}")
+        if max(p.shape[:2]) > config.MAX_IMAGE_SIDE:
+            raise InputError(f"texture sides must be at most {config.MAX_IMAGE_SIDE} pixels, got "
+                             f"{p.shape[1]}x{p.shape[0]}")
+        object.__setattr__(self, "pixels", np.ascontiguousarray(p))
+        for key in ("wrap_s", "wrap_t"):
+            checks.choice(f"texture {key}", getattr(self, key), config.TEXTURE_WRAPS)
+
+    @classmethod
+    def from_image(cls, image, wrap_s: str = "repeat", wrap_t: str = "repeat", name: str = "") -> "Texture":
+        """A Texture from a PIL image (any mode; alpha is dropped: Whitted shading has no coverage)."""
+        return cls(np.asarray(image.convert("RGB"), dtype=np.uint8), wrap_s, wrap_t, name)
+
+    @classmethod
+    def read(cls, path, wrap_s: str = "repeat", wrap_t: str = "repeat") -> "Texture":
+        """A Texture from an image file (PNG, JPEG, ... whatever Pillow reads);
+        InputError naming the file if it cannot be read."""
+        from PIL import Image, UnidentifiedImageError
+        path = os.fspath(path)
+        try:
+            with Image.open(path) as image:
+                image.load()
+                return cls.from_image(image, wrap_s, wrap_t, os.path.basename(path))
+        except FileNotFoundError:
+            raise InputError(f"no such texture file: {path}") from None
+        except (OSError, UnidentifiedImageError, ValueError, Image.DecompressionBombError) as exc:
+            raise InputError(f"{path}: cannot read the texture image ({type(exc).__name__})") from None
