@@ -19,6 +19,7 @@ from clrt.errors import TooLargeError
 from clrt.layouts import LIGHT, MATERIAL, TEXEL, TEXTURE, TRIANGLE_DETAIL, TRIANGLE_INFO, TRIANGLE_VERTS
 from clrt.scene.mesh import Mesh
 from clrt.scene.scene import Scene
+from clrt.scene.texture import srgb_decode
 
 
 @dataclass
@@ -45,9 +46,8 @@ class SurfaceDetail:
 
 
 def srgb_table() -> np.ndarray:
-    """The 256 linear values of 8-bit sRGB codes (IEC 61966-2-1), float32."""
-    c = np.arange(256) / 255.0
-    return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4).astype(np.float32)
+    """The 256 linear values of 8-bit sRGB codes, float32."""
+    return srgb_decode(np.arange(256) / 255.0).astype(np.float32)
 
 
 def triangle_corners(mesh: Mesh) -> np.ndarray:

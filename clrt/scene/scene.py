@@ -198,6 +198,8 @@ class SceneObject:
         materials = tuple(Material.of(m) for m in self.materials)
         mesh = as_mesh(self.mesh)
         ids = mesh.face_material
+        if ids is not None and not materials:   # the file's materials were not wanted
+            mesh, ids = replace(mesh, face_material=None), None
         if ids is not None and len(ids) and ids.max() >= len(materials):
             raise InputError(f"{mesh.name or 'mesh'}: face material id {int(ids.max())} but only "
                              f"{len(materials)} materials")
@@ -307,18 +309,21 @@ def scene_from_mesh(mesh, material=None, lights=None, background=config.DEFAULT_
     """The paper's scene: one mesh, one material, point lights (default: one above the eye).
 
     ``mesh``: a Mesh, a mesh file path, a trimesh object or ``(vertices, faces)``;
-    ``material``: a :class:`Material` or a dict of its fields; ``lights``: a list
-    of :class:`Light` or of positions ``(x, y, z)``.  Bad values raise InputError here.
+    ``material``: a :class:`Material` or a dict of its fields -- given, it is
+    every face's material; else a file's own materials apply (faces without
+    one get the defaults).  ``lights``: a list of :class:`Light` or of
+    positions ``(x, y, z)``.  Bad values raise InputError here.
     The camera is the file's own where a glTF/GLB file has a camera node,
     else framed from the bounds (``scene.camera_framed``).
     """
     import os
-    view = None
+    view, file_materials = None, ()
     if isinstance(mesh, (str, os.PathLike)):
-        from clrt.scene.load import file_camera, load_mesh
+        from clrt.scene.load import file_camera, load_asset
         view = file_camera(mesh)
-        mesh = load_mesh(mesh)
-    scene = Scene([SceneObject(mesh, Material.of(material))], [] if lights is None else lights, background)
+        mesh, file_materials = load_asset(mesh)
+    scene = Scene([SceneObject(mesh, Material.of(material), file_materials if material is None else ())],
+                  [] if lights is None else lights, background)
     scene.camera, scene.camera_framed = Camera.framing(scene.bounds), True
     if view is not None:
         scene.camera, scene.camera_framed = file_view(view, scene.bounds, mesh.name), False

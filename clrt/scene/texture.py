@@ -10,12 +10,18 @@ reference tracer decode sRGB and filter bilinearly, each its own way.
 from __future__ import annotations
 
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from clrt import checks, config
 from clrt.errors import InputError
+
+
+def srgb_decode(values) -> np.ndarray:
+    """Linear values (float64) of sRGB-encoded ones in 0..1 (IEC 61966-2-1)."""
+    c = np.asarray(values, dtype=np.float64)
+    return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
 
 
 @dataclass(frozen=True, eq=False)
@@ -24,7 +30,7 @@ class Texture:
     wrap modes along u (``wrap_s``) and v (``wrap_t``): "repeat", "clamp" or
     "mirror".  Compared by identity (two loads of one file are two textures)."""
 
-    pixels: np.ndarray
+    pixels: np.ndarray = field(repr=False)
     wrap_s: str = "repeat"
     wrap_t: str = "repeat"
     name: str = ""
@@ -39,6 +45,10 @@ class Texture:
         object.__setattr__(self, "pixels", np.ascontiguousarray(p))
         for key in ("wrap_s", "wrap_t"):
             checks.choice(f"texture {key}", getattr(self, key), config.TEXTURE_WRAPS)
+
+    def __repr__(self) -> str:
+        h, w = self.pixels.shape[:2]
+        return f"Texture({self.name!r}, {w}x{h}, wrap_s={self.wrap_s!r}, wrap_t={self.wrap_t!r})"
 
     @classmethod
     def from_image(cls, image, wrap_s: str = "repeat", wrap_t: str = "repeat", name: str = "") -> "Texture":
