@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
+from typing import Callable
 
 import numpy as np
 import pyopencl as cl
@@ -49,6 +50,22 @@ class Frame:
     device: str = ""
     triangles: int = 0
     tiles: int = 1               # tiles the frame was rendered in (each: one launch per sample)
+
+    def to_pil(self):
+        """The image as a PIL image (a linear image is clamped and sRGB-encoded first)."""
+        from PIL import Image
+        image = self.image
+        if image.dtype != np.uint8:
+            c = np.clip(image, 0.0, 1.0)
+            image = np.rint(255.0 * np.where(c <= 0.0031308, 12.92 * c, 1.055 * c ** (1 / 2.4) - 0.055))
+        return Image.fromarray(image.astype(np.uint8))
+
+    def _repr_png_(self) -> bytes:
+        """PNG bytes: Jupyter shows a Frame as its picture."""
+        import io
+        buffer = io.BytesIO()
+        self.to_pil().save(buffer, format="PNG")
+        return buffer.getvalue()
 
 
 class Renderer:
@@ -118,7 +135,8 @@ class Renderer:
     # ----------------------------------------------------------------------- a frame
 
     def render(self, camera: Camera | None = None, linear: bool = False, hits: bool = False,
-               samples: int | None = None, max_depth: int | None = None, seed: int = 0) -> Frame:
+               samples: int | None = None, max_depth: int | None = None, seed: int = 0,
+               progress: Callable[[int], None] | None = None) -> Frame:
         """Render one frame.
 
         ``samples``: anti-aliasing with samples x samples stratified, jittered rays
@@ -126,9 +144,12 @@ class Renderer:
         are reproducible; 1 = one ray through each pixel centre).  ``max_depth``:
         reflection/refraction bounces.  Both default to the scene's.
         ``hits=True`` also reads back the camera rays' hits (``Frame.prim`` and
-        ``Frame.t``, of the first sample; otherwise None).
+        ``Frame.t``, of the first sample; otherwise None).  ``progress(n)`` is
+        called each time n more pixel samples are done (width x height x
+        samples**2 in all; a tile retried after running out of memory counts again).
         """
         job = self._job(camera, linear, hits, samples, max_depth, seed)
+        job.progress = progress or (lambda n: None)
         capacity = self.tile_capacity(job.camera.width * job.camera.height)
         try:
             tiles = run_tiles(job.camera.width, job.camera.height, capacity, self.limits,
@@ -259,6 +280,7 @@ class Renderer:
             launches.append((gen, shade))
             if sample < n - 1:
                 wait_for(shade)
+                job.progress(count)
 
         image = job.image[y:y + h, x:x + w]
         # Straight into the image where the tile is one run of page-locked memory
@@ -276,6 +298,7 @@ class Renderer:
             records = np.empty(count, HIT)
             copies.append(cl.enqueue_copy(q, records, buf["hits"], is_blocking=False))
         wait_for(copies[-1])
+        job.progress(count)
         host_start = time.perf_counter()
         if job.linear:
             image[...] = out[:, :3].reshape(h, w, 3)
@@ -326,6 +349,7 @@ class _Job:
     prim: np.ndarray | None      # (H, W)
     t: np.ndarray | None         # (H, W)
     timings: dict
+    progress: Callable[[int], None] | None = None   # see Renderer.render
 
 
 def wait_for(event: cl.Event) -> None:
