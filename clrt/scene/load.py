@@ -223,12 +223,13 @@ def _parse_off(data: bytes, label: str):
         table = _table(vertex_lines, np.float64)
         if table is not None and table.shape[1] >= 6:
             part.vertex_colors = table[:, 3:6]
-    if len(face_lines[0].split()) >= 4 + counts[0]:   # the first face has a colour: parse them all
-        table = _table(face_lines, np.float64)
-        if table is not None and (table.shape[1] - 1 - counts >= 3).all():
-            rows = np.arange(len(table))
-            part.face_colors = np.stack([table[rows, 1 + counts + k] for k in range(3)], axis=1)
-            part.polygon_sizes = counts
+    if len(face_lines[0].split()) >= 4 + counts[0]:   # the first face has a colour: look for all
+        colors = [line.split()[1 + n:4 + n] for line, n in zip(face_lines, counts.tolist())]
+        if all(len(c) == 3 for c in colors):
+            try:
+                part.face_colors, part.polygon_sizes = np.array(colors, dtype=np.float64), counts
+            except ValueError:
+                raise _fail(label, "malformed face colour") from None
     return part
 
 
