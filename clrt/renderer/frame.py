@@ -37,6 +37,7 @@ from clrt.renderer.tiles import TileLimits, error_name, is_out_of_memory, run_ti
 from clrt.scene.arrays import flatten_scene, light_records
 from clrt.scene.scene import Camera, Scene, default_light, ray_epsilon
 from clrt.scene.sources import as_scene
+from clrt.scene.texture import srgb_encode8
 
 
 @dataclass
@@ -54,11 +55,7 @@ class Frame:
     def to_pil(self):
         """The image as a PIL image (a linear image is clamped and sRGB-encoded first)."""
         from PIL import Image
-        image = self.image
-        if image.dtype != np.uint8:
-            c = np.clip(image, 0.0, 1.0)
-            image = np.rint(255.0 * np.where(c <= 0.0031308, 12.92 * c, 1.055 * c ** (1 / 2.4) - 0.055))
-        return Image.fromarray(image.astype(np.uint8))
+        return Image.fromarray(self.image if self.image.dtype == np.uint8 else srgb_encode8(self.image))
 
     def _repr_png_(self) -> bytes:
         """PNG bytes: Jupyter shows a Frame as its picture."""

@@ -265,9 +265,12 @@ def _parse_obj(data: bytes, label: str, folder: str | None = None) -> "_Part":
     if (flat == 0).any():
         raise _fail(label, "face index 0 (OBJ indices start at 1)")
     # The statements whose order matters: relative indices count back over them,
-    # and a face has the material of the last usemtl before it.
-    ordered = [line for line in lines if line[:2] in ("v ", "f ", "vt", "vn", "us")]
-    statements = [line.split(" ", 1)[0] for line in ordered]
+    # and a face has the material of the last usemtl before it.  Listed only
+    # when needed: most files have neither.
+    ordered = statements = None
+    if (flat < 0).any() or "/" in face_text or any(line.startswith("usemtl ") for line in lines):
+        ordered = [line for line in lines if line[:2] in ("v ", "f ", "vt", "vn", "us")]
+        statements = [line.split(" ", 1)[0] for line in ordered]
     flat = _obj_absolute(flat, counts, statements, "v", label) - 1
     # Triangle corners as positions in the flat corner list, so that every
     # per-corner field triangulates exactly as the vertex indices do.
@@ -691,7 +694,9 @@ def _gltf_renamed_materials(data: bytes, doc: dict, file_type: str) -> bytes:
     """The file with material i named _GLTF_MATERIAL + i (a GLB's JSON chunk rewritten)."""
     import json
     import struct
-    for i, material in enumerate(doc.get("materials", [])):
+    if not doc.get("materials"):
+        return data
+    for i, material in enumerate(doc["materials"]):
         material["name"] = f"{_GLTF_MATERIAL}{i}"
     text = json.dumps(doc).encode("utf-8")
     if file_type == "gltf":

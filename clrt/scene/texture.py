@@ -24,6 +24,12 @@ def srgb_decode(values) -> np.ndarray:
     return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
 
 
+def srgb_encode8(linear) -> np.ndarray:
+    """8-bit sRGB codes (uint8) of linear values, clamped to 0..1 (what the kernels' encode_srgb8 does)."""
+    c = np.clip(np.asarray(linear, dtype=np.float64), 0.0, 1.0)
+    return np.rint(255.0 * np.where(c <= 0.0031308, 12.92 * c, 1.055 * c ** (1 / 2.4) - 0.055)).astype(np.uint8)
+
+
 @dataclass(frozen=True, eq=False)
 class Texture:
     """An 8-bit sRGB image (``pixels``: (H, W, 3) uint8, row 0 at the top) and its
