@@ -113,6 +113,7 @@ def _output_path(args) -> Path:
 def _render(args) -> int:
     from clrt.output import check_replace, write_image
     from clrt.renderer import Renderer, check_host_memory
+    from clrt.renderer.tiles import TileLimits
     from clrt.scene.render_setup import (CAMERA_OPTIONS, SCENE_OPTIONS, render_camera, render_lights,
                                          render_scene)
 
@@ -132,8 +133,15 @@ def _render(args) -> int:
             check_replace(path, args.force)
     # The image, its sRGB staging and PIL's copy (4 bytes a pixel) live on the host together.
     check_host_memory(camera.width * camera.height * 10, f"a {camera.width}x{camera.height} image")
-    renderer = Renderer(scene, args.device, args.accel, args.builder, args.leaf_size)
-    frame = renderer.render(camera)
+    progress = None if args.quiet else _progress_bar(camera.width * camera.height * scene.samples ** 2)
+    # With a progress bar the first tile is small, so that the bar moves from the start.
+    limits = TileLimits(first_launch_pixels=config.PROGRESS_FIRST_TILE) if progress else None
+    renderer = Renderer(scene, args.device, args.accel, args.builder, args.leaf_size, limits=limits)
+    try:
+        frame = renderer.render(camera, progress=progress and progress.update)
+    finally:
+        if progress:
+            progress.close()
     write_image(frame.image, out, force=args.force)
     if args.aov:
         from clrt.query.aov import write_aovs
@@ -149,6 +157,17 @@ def _render(args) -> int:
             print("  AOVs: " + " ".join(str(p.resolve()) for p in aov_files))
     print(out.resolve())
     return 0
+
+
+def _progress_bar(total: int):
+    """A tqdm bar on stderr that shows only once a render has run PROGRESS_DELAY
+    seconds and disappears when it ends; None without tqdm (the 'distributed' extra)."""
+    try:
+        from tqdm import tqdm
+    except ImportError:
+        return None
+    return tqdm(total=total, unit="px", unit_scale=True, delay=config.PROGRESS_DELAY, leave=False,
+                desc="rendering", file=sys.stderr)
 
 
 def _info(args) -> int:

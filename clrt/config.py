@@ -68,9 +68,22 @@ DEFAULT_AMBIENT_LIGHT = (1.0, 1.0, 1.0)
 DEFAULT_LIGHT_COLOR = (1.0, 1.0, 1.0)
 DEFAULT_UP = (0.0, 1.0, 0.0)
 DEFAULT_SAMPLES = 1
+#: ``clrt render``'s progress bar (tqdm, when installed): it shows once a frame has
+#: run this many seconds (faster frames print nothing), and the first tile of a
+#: frame then has at most this many pixels, so that the bar moves from the start.
+PROGRESS_DELAY = 1.0
+PROGRESS_FIRST_TILE = 1 << 16
 
 #: Material flag bits (``Material.flags`` in layouts.py).
 MATERIAL_SMOOTH = 1
+#: How a texture coordinate outside 0..1 is mapped back into the image (glTF's
+#: sampler modes REPEAT, CLAMP_TO_EDGE, MIRRORED_REPEAT): name -> the code the
+#: kernels compare with (``Texture.wrap_s``/``wrap_t`` in layouts.py).
+TEXTURE_WRAPS = {"repeat": 0, "clamp": 1, "mirror": 2}
+#: Texture coordinates are clamped to +-this many texels before they become
+#: integers (float32 holds every integer up to 2**24 exactly, int32 far more),
+#: so absurd or infinite coordinates from a file stay defined.
+TEXEL_LIMIT = 1 << 23
 
 # --------------------------------------------------------------------------- ray queries
 
@@ -126,6 +139,8 @@ def kernel_defines() -> dict:
         "MATERIAL_SMOOTH": f"{MATERIAL_SMOOTH}u",
         "MAX_PARTS": MAX_PARTS,
         **{f"CULL_{name.upper()}": code for name, code in CULL_MODES.items()},
+        **{f"WRAP_{name.upper()}": f"{code}u" for name, code in TEXTURE_WRAPS.items()},
+        "TEXEL_LIMIT": f"{float(TEXEL_LIMIT)!r}f",
         **{f"BAD_{name.upper()}": slot for slot, name in enumerate(RAY_CHECKS)},
     }
 

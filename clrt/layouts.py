@@ -27,7 +27,8 @@ Byte layout (offset: field):
    12: material int    row of the material buffer
 
 ``Material`` (48 B)
-    0: color     float4  linear RGB albedo, a unused
+    0: color     float4  linear RGB albedo; a: as_int, row of the Texture table
+                         multiplying it, -1 for none (read only in -DSURFACE_DETAIL builds)
    16: ambient   float   coefficients of the Phong model
    20: diffuse   float
    24: specular  float
@@ -36,6 +37,29 @@ Byte layout (offset: field):
    36: reflectivity float weight of the mirror ray (0..1)
    40: transparency float weight of the refracted ray (0..1)
    44: ior          float index of refraction (>= 1)
+
+The next three exist only in scenes with textures or colours, whose programs
+are built with -DSURFACE_DETAIL; plain scenes upload and read none of them.
+
+``TriangleDetail`` (64 B) -- per slot (split like the geometry): what each corner
+adds to the material, interpolated with the hit's barycentrics
+    0: corner    float4[3]  corner k: xyz = linear RGB colour (1, 1, 1 without
+                            colours), w = texture coordinate u
+   48: v         float4     xyz = texture coordinate v of corners 0, 1, 2; w unused (0)
+
+``Texture`` (20 B) -- one row per texture of the scene
+    0: first   uint  texel of the image's top-left pixel in the texel buffer
+    4: width   int   pixels
+    8: height  int
+   12: wrap_s  uint  along u: WRAP_REPEAT, WRAP_CLAMP or WRAP_MIRROR (clrt.config.TEXTURE_WRAPS)
+   16: wrap_t  uint  along v
+
+Texels (``TEXEL``, 4 B each): uchar4, xyz = 8-bit sRGB, w unused (0), every
+texture's rows top to bottom, one after another, in one buffer (split like the
+geometry when it is larger than one allocation).  The kernels decode sRGB
+through a 256-entry float table (``SRGB_TABLE``, 1 KiB), so an image costs 4 B
+a texel on the device -- a quarter of float4 texels -- and the decoded values
+are exact float32 constants, the same on every device and in the reference.
 
 ``Light`` (32 B) -- point light
     0: position float4  xyz, w unused
@@ -92,6 +116,11 @@ MATERIAL = np.dtype([("color", float4), ("ambient", np.float32), ("diffuse", np.
                      ("specular", np.float32), ("shininess", np.float32),
                      ("flags", np.uint32), ("reflectivity", np.float32), ("transparency", np.float32),
                      ("ior", np.float32)])
+TRIANGLE_DETAIL = np.dtype([("corner", float4, 3), ("v", float4)])
+TEXTURE = np.dtype([("first", np.uint32), ("width", np.int32), ("height", np.int32),
+                    ("wrap_s", np.uint32), ("wrap_t", np.uint32)])
+TEXEL = np.dtype((np.uint8, 4))
+SRGB_TABLE = np.dtype((np.float32, 256))
 LIGHT = np.dtype([("position", float4), ("color", float4)])
 BVH_PAIR_NODE = np.dtype([("left_a", float4), ("left_b", float4), ("right_a", float4), ("right_b", float4)])
 BUILD_NODE = np.dtype([("lo", float4), ("hi", float4), ("parent", np.int32), ("count", np.int32),
@@ -105,6 +134,8 @@ STRUCTS = {
     "TriangleVerts": TRIANGLE_VERTS,
     "TriangleInfo": TRIANGLE_INFO,
     "Material": MATERIAL,
+    "TriangleDetail": TRIANGLE_DETAIL,
+    "Texture": TEXTURE,
     "Light": LIGHT,
     "BvhPairNode": BVH_PAIR_NODE,
     "BuildNode": BUILD_NODE,

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from clrt.config import TEXEL_LIMIT
 from clrt.scene.scene import Camera, Scene, ray_epsilon
 
 f32 = np.float32
@@ -21,29 +22,98 @@ f32 = np.float32
 class SceneData:
     """The scene as plain arrays, read here independently of the device's
     layouts: corners (F, 3, 3) float32, each triangle's global vertex indices
-    and object, per-object vertex normals, and per-object material fields."""
+    and material, per-object vertex normals, the material fields, and each
+    triangle's corner colours and texture coordinates (float32; NaN and 0
+    where the mesh has none) with each material's texture (None where it has
+    none or its mesh has no texture coordinates)."""
 
     FIELDS = ("ambient", "diffuse", "specular", "shininess", "reflectivity", "transparency", "ior")
 
     def __init__(self, scene: Scene):
-        corners, vertex, material, normals = [], [], [], []
+        corners, vertex, material, normals, colors, uv = [], [], [], [], [], []
+        mats, textured = [], []   # every material; its texture, where its mesh has texture coordinates
         offset = 0
-        for k, o in enumerate(scene.objects):
+        for o in scene.objects:
             m = o.mesh
             corners.append(m.vertices[m.faces].astype(f32))
             vertex.append(m.faces.astype(np.int64) + offset)
-            material.append(np.full(len(m.faces), k))
+            own = np.zeros(len(m.faces), np.int64) if m.face_material is None else m.face_material + 1
+            material.append(len(mats) + own)   # 0: the object's material, 1 + i: materials[i]
+            for mat in (o.material, *o.materials):
+                mats.append(mat)
+                textured.append(mat.texture if m.uv is not None else None)
             normals.append(m.vertex_normals().astype(f32))   # per object: normals never blend across objects
+            colors.append(np.full((len(m.faces), 3, 3), np.nan, f32) if m.colors is None else m.colors.astype(f32))
+            uv.append(np.zeros((len(m.faces), 3, 2), f32) if m.uv is None else m.uv.astype(f32))
             offset += len(m.vertices)
         self.corners = np.concatenate(corners)
         self.vertex = np.concatenate(vertex)
         self.material = np.concatenate(material)
         self.vertex_normals = np.concatenate(normals).astype(np.float64)
-        mats = [o.material for o in scene.objects]
-        self.color = np.array([m.color for m in mats], f32).astype(np.float64)
+        self.corner_colors = np.concatenate(colors)
+        self.corner_uv = np.concatenate(uv)
+        self.color = np.array([m.color for m in mats], f32)
         self.smooth = np.array([m.smooth for m in mats])
         for name in self.FIELDS:
             setattr(self, name, np.array([getattr(m, name) for m in mats], f32))
+        self.textures = textured
+
+
+def decode_srgb8(pixels: np.ndarray) -> np.ndarray:
+    """8-bit sRGB codes to linear float32 (IEC 61966-2-1), computed in float64 and rounded once."""
+    c = np.asarray(pixels, np.float64) / 255.0
+    return np.where(c <= 0.04045, c / 12.92, np.power((c + 0.055) / 1.055, 2.4)).astype(f32)
+
+
+def _wrap(i: np.ndarray, n: int, mode: str) -> np.ndarray:
+    """Texel indices wrapped into 0..n-1 (numpy's % is already non-negative)."""
+    if mode == "clamp":
+        return np.clip(i, 0, n - 1)
+    if mode == "mirror":
+        m = i % (2 * n)
+        return np.where(m < n, m, 2 * n - 1 - m)
+    return i % n
+
+
+def sample_texture(texture, uv: np.ndarray) -> np.ndarray:
+    """(N, 3) float32 linear colour of ``texture`` (a clrt Texture) at (N, 2)
+    float32 coordinates: bilinear over sRGB-decoded texels, texel centres at
+    half-integers, (0, 0) the bottom-left corner, each axis wrapped by its mode."""
+    image = decode_srgb8(texture.pixels)
+    h, w = image.shape[:2]
+    limit = f32(TEXEL_LIMIT)
+    uv = np.asarray(uv, f32)
+    x = np.fmin(np.fmax(uv[:, 0] * f32(w) - f32(0.5), -limit), limit)
+    y = np.fmin(np.fmax((f32(1) - uv[:, 1]) * f32(h) - f32(0.5), -limit), limit)
+    x_left, y_top = np.floor(x), np.floor(y)
+    fx, fy = (x - x_left)[:, None], (y - y_top)[:, None]
+    x0, y0 = x_left.astype(np.int64), y_top.astype(np.int64)
+    xs = [_wrap(x0 + k, w, texture.wrap_s) for k in (0, 1)]
+    ys = [_wrap(y0 + k, h, texture.wrap_t) for k in (0, 1)]
+    top = image[ys[0], xs[0]] + fx * (image[ys[0], xs[1]] - image[ys[0], xs[0]])
+    bottom = image[ys[1], xs[0]] + fx * (image[ys[1], xs[1]] - image[ys[1], xs[0]])
+    return top + fy * (bottom - top)
+
+
+def albedo(data: SceneData, prim, u, v) -> np.ndarray:
+    """(N, 3) float64: material colour x interpolated corner colour x texture, each
+    step in float32 in the kernels' order (w0 * a0 + u * a1 + v * a2)."""
+    u, v = np.asarray(u, f32)[:, None], np.asarray(v, f32)[:, None]
+    w0 = f32(1) - u - v
+
+    def blend(corner, rows=slice(None)):   # (N, 3, k) -> (N, k)
+        return w0[rows] * corner[:, 0] + u[rows] * corner[:, 1] + v[rows] * corner[:, 2]
+
+    k = data.material[prim]
+    out = data.color[k]
+    colored = ~np.isnan(data.corner_colors[prim, 0, 0])
+    out[colored] *= blend(data.corner_colors[prim[colored]], colored)
+    uv = blend(data.corner_uv[prim])
+    for index, texture in enumerate(data.textures):
+        rows = np.nonzero(k == index)[0]
+        if texture is not None and len(rows):
+            out[rows] *= sample_texture(texture, uv[rows])
+    return out.astype(np.float64)
 
 
 def camera_rays(camera: Camera, ox=0.5, oy=0.5) -> tuple[np.ndarray, np.ndarray]:
@@ -143,7 +213,8 @@ def surface(data: SceneData, origins, dirs, t, prim, u, v) -> dict:
     front = np.einsum("ij,ij->i", wound, d) < 0
     ng = np.where(front[:, None], wound, -wound)
     k = data.material[prim]
-    mat = {name: getattr(data, name)[k] for name in SceneData.FIELDS + ("color", "smooth")}
+    mat = {name: getattr(data, name)[k] for name in SceneData.FIELDS + ("smooth",)}
+    mat["color"] = albedo(data, prim, u, v)
     smooth = mat["smooth"]
     vn = data.vertex_normals
     corner = data.vertex[prim]

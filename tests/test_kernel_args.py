@@ -11,7 +11,8 @@ from clrt.device.program import build_options, expand_source
 from clrt.query import Accel
 from clrt.renderer import Renderer
 from clrt.scene import primitives
-from clrt.scene.scene import scene_from_mesh
+from clrt.scene.scene import Light, Material, Scene, SceneObject, scene_from_mesh
+from clrt.scene.texture import Texture
 
 # numpy dtype of a declared scalar -> the OpenCL type name clGetKernelArgInfo reports
 TYPE_NAMES = {np.dtype(np.uint32): "uint", np.dtype(np.int32): "int", np.dtype(np.float32): "float",
@@ -40,6 +41,12 @@ def test_declared_argument_types_match_the_kernels(device, max_buffer_bytes):
     renderer = Renderer(scene_from_mesh(mesh), device, max_buffer_bytes=max_buffer_bytes)
     assert (renderer.geometry.parts() > 1) == (max_buffer_bytes is not None)
     _check(renderer.context, "render.cl", renderer.geometry.defines, renderer.kernels)
+    # A scene with corner colours and a texture: the -DSURFACE_DETAIL parameters too.
+    colours = np.random.default_rng(1).random((len(mesh.faces), 3, 3))
+    texture = Texture(np.zeros((4, 4, 3), np.uint8), "repeat", "repeat")
+    detail = Scene([SceneObject(mesh.with_detail(colors=colours), Material(texture=texture))], [Light((2, 3, 4))])
+    textured = Renderer(detail, device, max_buffer_bytes=max_buffer_bytes)
+    _check(textured.context, "render.cl", {**textured.geometry.defines, "SURFACE_DETAIL": None}, textured.kernels)
     for accel in ("box", "none"):
         queries = Accel(mesh, accel, device=device, max_buffer_bytes=max_buffer_bytes)
         _check(queries.context, "trace.cl", queries.geometry.defines, queries.kernels)

@@ -31,13 +31,25 @@ typedef struct {
 } TriangleInfo;
 
 typedef struct {
-    float4 color;
+    float4 color;         // w: as_int, row of the Texture table, -1 for none
     float ambient, diffuse, specular, shininess;
     uint flags;
     float reflectivity;   // weight of the mirror ray
     float transparency;   // weight of the refracted ray
     float ior;            // index of refraction
 } Material;
+
+// Only in -DSURFACE_DETAIL builds (textures or colours in the scene).
+typedef struct {
+    float4 corner[3];     // xyz: linear RGB colour of corner k, w: its texture u
+    float4 v;             // xyz: texture v of corners 0, 1, 2
+} TriangleDetail;
+
+typedef struct {
+    uint first;           // texel of the top-left pixel
+    int width, height;
+    uint wrap_s, wrap_t;  // WRAP_REPEAT, WRAP_CLAMP, WRAP_MIRROR
+} Texture;
 
 typedef struct {
     float4 position;

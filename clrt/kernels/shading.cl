@@ -7,6 +7,7 @@
 #include "split.cl"
 #include "geometry.cl"
 #include "accel.cl"
+#include "texture.cl"
 
 // What shading reads beyond the geometry, gathered once per work-item from the
 // kernel's SHADING_PARAMS by make_shading(SHADING_ARGS), as geometry.cl does.
@@ -14,6 +15,9 @@
 //   vertex_normals  per vertex (split too)
 //   materials, lights, num_lights, ambient_light, background
 //   ray_epsilon     how far secondary rays start off the surface
+// and with -DSURFACE_DETAIL (texture.cl):
+//   tri_detail      per slot: corner colours and texture coordinates (split too)
+//   textures        the texture table, texels and sRGB decoding table
 typedef struct {
     SPLIT_FIELD(TriangleInfo, tri_info);
     SPLIT_FIELD(float4, vertex_normals);
@@ -22,19 +26,25 @@ typedef struct {
     uint num_lights;
     float4 ambient_light, background;
     float ray_epsilon;
+#ifdef SURFACE_DETAIL
+    SPLIT_FIELD(TriangleDetail, tri_detail);
+    TextureSet textures;
+#endif
 } Shading;
+
+#ifdef SURFACE_DETAIL
+#define DETAIL_PARAMS , SPLIT_PARAMS(TriangleDetail, tri_detail), TEXTURE_PARAMS
+#define DETAIL_ARGS , SPLIT_ARGS(tri_detail), TEXTURE_ARGS
+#else
+#define DETAIL_PARAMS
+#define DETAIL_ARGS
+#endif
 
 #define SHADING_PARAMS SPLIT_PARAMS(TriangleInfo, tri_info), SPLIT_PARAMS(float4, vertex_normals), \
     __global const Material* materials, __global const Light* lights, const uint num_lights, \
-    const float4 ambient_light, const float4 background, const float ray_epsilon
-#ifdef SPLIT_BUFFERS
-#define SHADING_ARGS tri_info0, tri_info1, tri_info2, tri_info3, \
-    vertex_normals0, vertex_normals1, vertex_normals2, vertex_normals3, \
-    materials, lights, num_lights, ambient_light, background, ray_epsilon
-#else
-#define SHADING_ARGS tri_info, vertex_normals, materials, lights, num_lights, ambient_light, background, \
-    ray_epsilon
-#endif
+    const float4 ambient_light, const float4 background, const float ray_epsilon DETAIL_PARAMS
+#define SHADING_ARGS SPLIT_ARGS(tri_info), SPLIT_ARGS(vertex_normals), materials, lights, num_lights, \
+    ambient_light, background, ray_epsilon DETAIL_ARGS
 
 inline Shading make_shading(SHADING_PARAMS)
 {
@@ -47,6 +57,10 @@ inline Shading make_shading(SHADING_PARAMS)
     sh.ambient_light = ambient_light;
     sh.background = background;
     sh.ray_epsilon = ray_epsilon;
+#ifdef SURFACE_DETAIL
+    SPLIT_STORE(sh, tri_detail);
+    sh.textures = make_texture_set(TEXTURE_ARGS);
+#endif
     return sh;
 }
 
@@ -84,6 +98,9 @@ inline SurfacePoint surface_point(const Geometry* g, const Shading* sh, float3 o
     __global const TriangleVerts* tri = SPLIT_AT(g, tris, hit->prim);
     SurfacePoint s;
     s.m = sh->materials[info->material];
+#ifdef SURFACE_DETAIL
+    s.m.color.xyz = surface_albedo(&sh->textures, SPLIT_AT(sh, tri_detail, hit->prim), s.m.color, hit->u, hit->v);
+#endif
     const float3 wound = normalize(cross(tri->v1.xyz - tri->v0.xyz, tri->v2.xyz - tri->v0.xyz));
     s.front = dot(wound, dir) < 0.0f;
     s.ng = s.front ? wound : -wound;

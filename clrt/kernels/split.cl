@@ -10,7 +10,8 @@
 //
 // A kernel takes a buffer as SPLIT_PARAMS(type, name) and stores it once in a
 // struct field declared SPLIT_FIELD(type, name) (SPLIT_STORE); helpers then
-// name an element as SPLIT_AT(struct_pointer, name, i), a pointer.  Without the
+// name an element as SPLIT_AT(struct_pointer, name, i), a pointer; SPLIT_ARGS(name)
+// passes the parameters on.  Without the
 // define these are one plain pointer and indexing, so scenes that fit pay
 // nothing.  The parts are picked by a chain of selects rather than an array
 // of pointers: an indexed private array would live in (slow) stack memory.
@@ -27,6 +28,7 @@
 #define SPLIT_FIELD(type, name) __global const type *name##0, *name##1, *name##2, *name##3
 #define SPLIT_STORE(s, name) ((s).name##0 = name##0, (s).name##1 = name##1, \
     (s).name##2 = name##2, (s).name##3 = name##3)
+#define SPLIT_ARGS(name) name##0, name##1, name##2, name##3
 #define SPLIT_PART_OF(name, i) ((uint)(i) >> name##_PART_SHIFT)
 #define SPLIT_AT(s, name, i) \
     ((SPLIT_PART_OF(name, i) == 0u ? (s)->name##0 : SPLIT_PART_OF(name, i) == 1u ? (s)->name##1 \
@@ -38,6 +40,7 @@
 #define SPLIT_PARAMS(type, name) __global const type* name
 #define SPLIT_FIELD(type, name) __global const type* name
 #define SPLIT_STORE(s, name) ((s).name = name)
+#define SPLIT_ARGS(name) name
 #define SPLIT_AT(s, name, i) ((s)->name + (i))
 
 #endif

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
+from typing import Callable
 
 import numpy as np
 import pyopencl as cl
@@ -37,6 +38,7 @@ from clrt.renderer.tiles import TileLimits, error_name, is_out_of_memory, run_ti
 from clrt.scene.arrays import flatten_scene, light_records
 from clrt.scene.scene import Camera, Scene, default_light, ray_epsilon
 from clrt.scene.sources import as_scene
+from clrt.scene.texture import srgb_encode8
 
 
 @dataclass
@@ -50,6 +52,18 @@ class Frame:
     device: str = ""
     triangles: int = 0
     tiles: int = 1               # tiles the frame was rendered in (each: one launch per sample)
+
+    def to_pil(self):
+        """The image as a PIL image (a linear image is clamped and sRGB-encoded first)."""
+        from PIL import Image
+        return Image.fromarray(self.image if self.image.dtype == np.uint8 else srgb_encode8(self.image))
+
+    def _repr_png_(self) -> bytes:
+        """PNG bytes: Jupyter shows a Frame as its picture."""
+        import io
+        buffer = io.BytesIO()
+        self.to_pil().save(buffer, format="PNG")
+        return buffer.getvalue()
 
 
 class Renderer:
@@ -76,36 +90,46 @@ class Renderer:
             self.arrays = flatten_scene(self.scene)
         with _stage(self.timings, "acceleration build"):
             self.acceleration = build_acceleration(self.arrays.corners, accel, builder, leaf_size, device)
-            tri_info = self.arrays.tri_info[self.acceleration.prim_ids]   # shading data in slot order
+            slots = self.acceleration.prim_ids   # shading data in slot order
+            a = self.arrays
+            # Per-slot and per-vertex arrays (split with the geometry when large), then whole small buffers.
+            split = {"tri_info": a.tri_info[slots], "vertex_normals": a.vertex_normals}
+            whole = {"materials": a.materials, "lights": a.lights}
+            if a.detail is not None:   # textures or colours: the -DSURFACE_DETAIL program (texture.cl)
+                split.update(tri_detail=a.detail.tri_detail[slots], texels=a.detail.texels)
+                whole.update(textures=a.detail.textures, srgb_table=a.detail.srgb_table)
         with _stage(self.timings, "copy to device"):
             self.context, self.queue = create_context(device)
             self.device = device_label(self.queue.device)
-            a = self.arrays
-            self.device_bytes = (self.acceleration.device_bytes() + tri_info.nbytes + a.vertex_normals.nbytes
-                                 + a.materials.nbytes + a.lights.nbytes)
+            self.device_bytes = (self.acceleration.device_bytes()
+                                 + sum(x.nbytes for x in (*split.values(), *whole.values())))
             check_fits(self.queue.device, self.device, self.device_bytes, MIN_FRAME_BYTES)
             try:
                 # Buffers larger than one allocation are uploaded in parts (split.cl).
-                self.geometry = DeviceGeometry(self.context, a.corners, self.acceleration,
-                                               {"tri_info": tri_info, "vertex_normals": a.vertex_normals},
+                self.geometry = DeviceGeometry(self.context, a.corners, self.acceleration, split,
                                                max_buffer_bytes)
                 mf = cl.mem_flags
-                self.buffers = {name: cl.Buffer(self.context, mf.READ_ONLY | mf.COPY_HOST_PTR,
-                                                hostbuf=getattr(a, name)) for name in ("materials", "lights")}
+                self.buffers = {name: cl.Buffer(self.context, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=x)
+                                for name, x in whole.items()}
             except (cl.Error, MemoryError) as exc:
                 if not is_out_of_memory(exc):
                     raise
                 raise self._memory_error(exc, 0) from None
-            program = build_program(self.context, "render.cl", self.geometry.defines)
+            defines = dict(self.geometry.defines)
+            if a.detail is not None:
+                defines["SURFACE_DETAIL"] = None
+            program = build_program(self.context, "render.cl", defines)
             # Kernel objects are made once (each attribute lookup on a Program makes
             # a new one), with their argument types (render.cl's parameter lists).
             g = self.geometry
             u32, f32 = np.uint32, np.float32
+            detail = [] if a.detail is None else [   # DETAIL_PARAMS (shading.cl), TEXTURE_PARAMS (texture.cl)
+                *g.extra_arg_types("tri_detail"), None, *g.extra_arg_types("texels"), None]
             self.kernels = {name: typed_kernel(program, name, types) for name, types in {
                 "generate_rays": [None, *CAMERA_ARG_TYPES, u32, u32, u32, u32, u32, u32, u32],
                 "shade_pixels": [None, None, None, u32, u32, u32, f32, u32, *g.arg_types,
                                  *g.extra_arg_types("tri_info"), *g.extra_arg_types("vertex_normals"),
-                                 None, None, u32, cltypes.float4, cltypes.float4, f32],
+                                 None, None, u32, cltypes.float4, cltypes.float4, f32, *detail],
                 "encode_srgb8": [None, None, u32],
             }.items()}
         self._frame_buffers: dict[str, cl.Buffer] = {}
@@ -122,7 +146,8 @@ class Renderer:
     # ----------------------------------------------------------------------- a frame
 
     def render(self, camera: Camera | None = None, linear: bool = False, hits: bool = False,
-               samples: int | None = None, max_depth: int | None = None, seed: int = 0) -> Frame:
+               samples: int | None = None, max_depth: int | None = None, seed: int = 0,
+               progress: Callable[[int], None] | None = None) -> Frame:
         """Render one frame.
 
         ``samples``: anti-aliasing with samples x samples stratified, jittered rays
@@ -130,10 +155,13 @@ class Renderer:
         are reproducible; 1 = one ray through each pixel centre).  ``max_depth``:
         reflection/refraction bounces.  Both default to the scene's.
         ``hits=True`` also reads back the camera rays' hits (``Frame.prim`` and
-        ``Frame.t``, of the first sample; otherwise None).
+        ``Frame.t``, of the first sample; otherwise None).  ``progress(n)`` is
+        called each time n more pixel samples are done (width x height x
+        samples**2 in all; a tile retried after running out of memory counts again).
         """
         job = self._job(camera, linear, hits, samples, max_depth, seed)
         job.camera_args, job.scene_args = self._frame_args(job.camera)
+        job.progress = progress or (lambda n: None)
         capacity = self.tile_capacity(job.camera.width * job.camera.height)
         try:
             tiles = run_tiles(job.camera.width, job.camera.height, capacity, self.limits,
@@ -172,9 +200,13 @@ class Renderer:
         """The arguments that hold for a whole frame: the camera's (generate_rays),
         and the scene's with the values a caller may change between frames
         (lights, colours) and the camera's ray epsilon (shade_pixels)."""
+        detail = ()
+        if self.arrays.detail is not None:   # DETAIL_PARAMS in shading.cl, TEXTURE_PARAMS in texture.cl
+            b = self.geometry.buffers
+            detail = (*b["tri_detail"], self.buffers["textures"], *b["texels"], self.buffers["srgb_table"])
         return camera_args(camera), (
             *self._scene_args, self.buffers["lights"], len(self.scene.lights), vec4(self.scene.ambient_light),
-            vec4(self.scene.background), ray_epsilon(self.arrays.bounds, camera.eye))
+            vec4(self.scene.background), ray_epsilon(self.arrays.bounds, camera.eye), *detail)
 
     def set_lights(self, lights) -> None:
         """Replace the scene's lights; the geometry stays uploaded (a turntable of
@@ -263,6 +295,7 @@ class Renderer:
             launches.append((gen, shade))
             if sample < n - 1:
                 wait_for(shade)
+                job.progress(count)
 
         image = job.image[y:y + h, x:x + w]
         # Straight into the image where the tile is one run of page-locked memory
@@ -280,6 +313,7 @@ class Renderer:
             records = np.empty(count, HIT)
             copies.append(cl.enqueue_copy(q, records, buf["hits"], is_blocking=False))
         wait_for(copies[-1])
+        job.progress(count)
         host_start = time.perf_counter()
         if job.linear:
             image[...] = out[:, :3].reshape(h, w, 3)
@@ -331,6 +365,7 @@ class _Job:
     timings: dict
     camera_args: tuple = ()      # of generate_rays, and of shade_pixels after its per-launch ones:
     scene_args: tuple = ()       # set once per frame (Renderer._frame_args)
+    progress: Callable[[int], None] | None = None   # see Renderer.render
 
 
 def wait_for(event: cl.Event) -> None:

@@ -29,11 +29,15 @@ import re
 import stat
 import warnings
 
+from dataclasses import dataclass, field, replace
+
 import numpy as np
 
-from clrt.errors import MeshLoadError
+from clrt.config import DEFAULT_DIFFUSE
+from clrt.errors import InputError, MeshLoadError
 from clrt.scene import load_3ds
 from clrt.scene.mesh import Mesh
+from clrt.scene.texture import Texture, srgb_decode
 
 SUPPORTED_EXTENSIONS = (".3ds", ".glb", ".gltf", ".obj", ".off", ".ply", ".stl")
 
@@ -176,7 +180,7 @@ def _fan_triangulate(counts: np.ndarray, flat: np.ndarray) -> np.ndarray:
 
 
 def _parse_off(data: bytes, label: str):
-    """``(vertices (V, 3) float64, faces (F, 3) int64)`` of an ASCII OFF file."""
+    """Geometry and colours (vertex colours of COFF, face colours) of an ASCII OFF file."""
     lines = _nonblank_lines(_decode(data))
     if not lines:
         raise _fail(label, "file contains only comments or blank lines")
@@ -208,20 +212,38 @@ def _parse_off(data: bytes, label: str):
                            f"faces but only {available} data lines follow")
     if n_faces == 0:
         raise _fail(label, "contains no triangles (0 faces)")
-    vertices = _xyz(lines[body:body + n_vertices], label)
+    vertex_lines = lines[body:body + n_vertices]
+    vertices = _xyz(vertex_lines, label)
     face_lines = lines[body + n_vertices:body + n_vertices + n_faces]
-    return vertices, _fan_triangulate(*_polygons(face_lines, label, counted=True))
+    counts, flat = _polygons(face_lines, label, counted=True)
+    part = _Part(vertices, _fan_triangulate(counts, flat))
+    # Colours: r g b [a] after a vertex's xyz (COFF) or after a face's corners,
+    # used only when every row has them.
+    if "C" in head[0]:
+        table = _table(vertex_lines, np.float64)
+        if table is not None and table.shape[1] >= 6:
+            part.vertex_colors = table[:, 3:6]
+    if len(face_lines[0].split()) >= 4 + counts[0]:   # the first face has a colour: look for all
+        colors = [line.split()[1 + n:4 + n] for line, n in zip(face_lines, counts.tolist())]
+        if all(len(c) == 3 for c in colors):
+            try:
+                part.face_colors, part.polygon_sizes = np.array(colors, dtype=np.float64), counts
+            except ValueError:
+                raise _fail(label, "malformed face colour") from None
+    return part
 
 
 # ---------------------------------------------------------------------------
 # OBJ
 
 
-def _parse_obj(data: bytes, label: str):
-    """``(vertices (V, 3) float64, faces (F, 3) int64)`` of a Wavefront OBJ file.
+def _parse_obj(data: bytes, label: str, folder: str | None = None) -> "_Part":
+    """Geometry and surface detail of a Wavefront OBJ file.
 
-    Only ``v`` and ``f`` statements are read; texture coordinates, normals,
-    materials, lines and points are ignored, and no other file is opened.
+    ``v``, ``vt``, ``vn``, ``f``, ``usemtl`` and ``mtllib`` are read; lines and
+    points are ignored.  Texture coordinates and normals are used when every
+    face corner names one.  Material libraries (``mtllib``, :func:`_parse_mtl`)
+    are read from ``folder`` (the OBJ's own), when they are there.
     """
     text = _decode(data)
     # A trailing backslash continues a statement on the next line.
@@ -237,24 +259,140 @@ def _parse_obj(data: bytes, label: str):
         what = f"only {len(vertex_lines)} vertices" if vertex_lines else "no geometry"
         raise _fail(label, f"contains no triangles ({what})")
     vertices = _xyz(vertex_lines, label)
-    # A corner is "v", "v/vt", "v//vn" or "v/vt/vn": keep the vertex index.
+    # A corner is "v", "v/vt", "v//vn" or "v/vt/vn": field 0 is the vertex index.
     face_text = "\n".join(face_lines)
-    if "/" in face_text:
-        face_text = re.sub(r"/\S*", "", face_text)
-    counts, flat = _polygons(face_text.split("\n"), label, counted=False)
+    counts, flat = _polygons(_obj_field(face_text, 0).split("\n"), label, counted=False)
     if (flat == 0).any():
         raise _fail(label, "face index 0 (OBJ indices start at 1)")
-    if (flat < 0).any():
-        # Negative indices count back from the vertices defined so far.
-        defined, base = 0, []
-        for line in lines:
-            if line.startswith("v "):
-                defined += 1
-            elif line.startswith("f "):
-                base.append(defined)
-        flat = np.where(flat > 0, flat, np.repeat(np.asarray(base, dtype=np.int64), counts)
-                        + flat + 1)
-    return vertices, _fan_triangulate(counts, flat - 1)
+    # The statements whose order matters: relative indices count back over them,
+    # and a face has the material of the last usemtl before it.  Listed only
+    # when needed: most files have neither.
+    ordered = statements = None
+    if (flat < 0).any() or "/" in face_text or any(line.startswith("usemtl ") for line in lines):
+        ordered = [line for line in lines if line[:2] in ("v ", "f ", "vt", "vn", "us")]
+        statements = [line.split(" ", 1)[0] for line in ordered]
+    flat = _obj_absolute(flat, counts, statements, "v", label) - 1
+    # Triangle corners as positions in the flat corner list, so that every
+    # per-corner field triangulates exactly as the vertex indices do.
+    corners = _fan_triangulate(counts, np.arange(len(flat)))
+    part = _Part(vertices, flat[corners])
+    if "/" in face_text:
+        for field, keyword in ((1, "vt"), (2, "vn")):
+            rows = [line.split()[1:] for line in lines if line.startswith(keyword + " ")]
+            indices = _obj_field(face_text, field, missing="0").split()
+            if not rows or len(indices) != len(flat) or "0" in indices:
+                continue   # some corner lacks one: ignore them all
+            try:
+                table = np.array([row[:3] + ["0"] * (3 - len(row[:3])) for row in rows], dtype=np.float64)
+                index = _obj_absolute(np.array(indices, dtype=np.int64), counts, statements, keyword, label)
+            except ValueError as exc:
+                raise _fail(label, f"malformed {keyword} data ({_short(exc)})") from None
+            if index.max() > len(table):
+                raise _fail(label, f"{keyword} index {index.max()} out of range ({len(table)} defined)")
+            if keyword == "vt":
+                part.uv = table[index - 1][corners][..., :2]
+            else:   # a vertex with several normals becomes one vertex per normal
+                pairs, inverse = np.unique(np.stack([flat, index - 1], axis=1), axis=0, return_inverse=True)
+                part.vertices, part.normals = vertices[pairs[:, 0]], table[pairs[:, 1]]
+                part.faces = inverse.reshape(-1)[corners]
+    used = [line.split(None, 1)[1].strip() for line in lines if line.startswith("usemtl ") and " " in line]
+    libraries = [line.split(None, 1)[1].strip() for line in lines
+                 if line.startswith("mtllib ") and len(line.split()) > 1]
+    if used and folder is not None:
+        materials = {}
+        for name in libraries:
+            materials.update(_parse_mtl(os.path.join(folder, name), label))
+        if materials:
+            names = list(materials)
+            current, polygon_material = -1, []
+            for statement, line in zip(statements, ordered):
+                if statement == "usemtl":
+                    name = line.split(None, 1)[1].strip() if " " in line else ""
+                    current = names.index(name) if name in materials else -1
+                elif statement == "f":
+                    polygon_material.append(current)
+            part.face_material = np.repeat(np.asarray(polygon_material, np.int64), counts - 2)
+            part.materials = [materials[n] for n in names]
+    return part
+
+
+def _obj_field(face_text: str, field: int, missing: str = "") -> str:
+    """The face lines with each corner "v/vt/vn" replaced by one of its fields
+    (``missing`` where the corner has none)."""
+    if "/" not in face_text:
+        return face_text if field == 0 else re.sub(r"\S+", missing, face_text)
+    if field == 0:
+        return re.sub(r"/\S*", "", face_text)
+    return re.sub(r"\S+", lambda m: (m.group(0).split("/") + [""] * 2)[field] or missing, face_text)
+
+
+def _obj_absolute(index: np.ndarray, counts: np.ndarray, statements: list, keyword: str, label: str) -> np.ndarray:
+    """1-based indices of ``keyword`` rows, negative ones (counting back from
+    the rows defined so far) made absolute."""
+    if not (index < 0).any():
+        return index
+    defined, base = 0, []
+    for statement in statements:
+        if statement == keyword:
+            defined += 1
+        elif statement == "f":
+            base.append(defined)
+    return np.where(index > 0, index, np.repeat(np.asarray(base, dtype=np.int64), counts) + index + 1)
+
+
+def _parse_mtl(path: str, label: str) -> dict:
+    """``{name: material fields}`` of an MTL file (docs/scene-files.md has the
+    table: Kd, Ks, Ns, d/Tr, Ni, illum, map_Kd); {} when the file is missing,
+    as it often is beside downloaded OBJ files."""
+    if not os.path.isfile(path):
+        return {}
+    text = _decode(_read_any(path, label))
+    folder = os.path.dirname(path)
+    materials, current = {}, None
+    for raw in _nonblank_lines(text):
+        words = raw.split()
+        key, args = words[0], words[1:]
+        if key == "newmtl":
+            current = materials.setdefault(" ".join(args), {})
+            continue
+        if current is None or not args:
+            continue
+        try:
+            if key == "map_Kd":
+                # Options ("-clamp on", "-s 1 1 1", ...) come before the file name.
+                clamp = "-clamp" in args and args[args.index("-clamp") + 1:][:1] == ["on"]
+                wrap = "clamp" if clamp else "repeat"
+                image = os.path.join(folder, args[-1])
+                if os.path.isfile(image):
+                    current["texture"] = _texture(image, wrap, wrap, label)
+            elif key in ("Kd", "Ks"):
+                current[key] = [float(x) for x in (args * 3)[:3]]
+            elif key in ("Ns", "d", "Tr", "Ni", "illum"):
+                current[key] = float(args[0])
+        except ValueError:
+            raise _fail(label, f"{os.path.basename(path)}: malformed {key} line") from None
+    return {name: _whitted_from_mtl(m) for name, m in materials.items()}
+
+
+def _whitted_from_mtl(m: dict) -> dict:
+    """Material fields (clrt.Material) of an MTL material's statements."""
+    fields = {}
+    if "Kd" in m:
+        fields["color"] = tuple(min(max(c, 0.0), 1.0) for c in m["Kd"])
+    if "Ks" in m:
+        fields["specular"] = max(sum(m["Ks"]) / 3, 0.0)
+        if m.get("illum") in (3.0, 5.0, 7.0):   # "reflection on": mirror by Ks
+            fields["reflectivity"] = min(fields["specular"], 1.0)
+    if "Ns" in m:
+        fields["shininess"] = max(m["Ns"], 0.0)
+    opacity = m["d"] if "d" in m else 1.0 - m["Tr"] if "Tr" in m else 1.0
+    if opacity < 1.0:
+        fields["transparency"] = min(max(1.0 - opacity, 0.0), 1.0)
+    if m.get("Ni", 0.0) >= 1.0:
+        fields["ior"] = m["Ni"]
+    if "texture" in m:
+        fields["texture"] = m["texture"]
+    return fields
 
 
 # ---------------------------------------------------------------------------
@@ -294,8 +432,8 @@ def _ply_header(data: bytes, label: str):
     return fmt, elements, marker.end()
 
 
-def _ply_vertices(lines: "list[str]", props, label: str) -> np.ndarray:
-    """(n, 3) float64 x, y, z columns of ASCII PLY vertex rows."""
+def _ply_vertices(lines: "list[str]", props, label: str) -> dict:
+    """``{property: (n,) float64 column}`` of ASCII PLY vertex rows (x, y, z at least)."""
     names = [name for name, _ in props]
     if any(is_list for _, is_list in props) or not {"x", "y", "z"} <= set(names):
         raise _fail(label, "PLY vertex element needs scalar x, y, z properties")
@@ -306,21 +444,23 @@ def _ply_vertices(lines: "list[str]", props, label: str) -> np.ndarray:
                 raise _fail(label, f"vertex {number} has {len(line.split())} values, "
                                    f"expected {len(props)}")
         raise _fail(label, "malformed number in vertex data")
-    return table[:, [names.index(axis) for axis in "xyz"]]
+    return dict(zip(names, table.T))
 
 
-def _ply_faces(lines: "list[str]", props, label: str) -> np.ndarray:
-    """(F, 3) int64 fan triangles of ASCII PLY face rows, in row order."""
+def _ply_faces(lines: "list[str]", props, label: str):
+    """``(counts (P,) int64, flat corner indices, {scalar property: (P,) column})``
+    of ASCII PLY face rows, in row order."""
     lists = [name for name, is_list in props if is_list]
     target = next((p for p in ("vertex_indices", "vertex_index") if p in lists),
                   lists[0] if lists else None)
     if target is None:
         raise _fail(label, "PLY face element has no vertex index list")
     if len(props) == 1:
-        return _fan_triangulate(*_polygons(lines, label, counted=True, exact=True))
+        return (*_polygons(lines, label, counted=True, exact=True), {})
     # Other properties around the index list (colours, texture coordinate
     # lists): walk each row.
     flat, counts = [], []
+    scalars = {name: [] for name, is_list in props if not is_list}
     try:
         for number, line in enumerate(lines, 1):
             tokens, pos = line.split(), 0
@@ -331,13 +471,35 @@ def _ply_faces(lines: "list[str]", props, label: str) -> np.ndarray:
                         raise _fail(label, f"face {number} has {n} corners (needs at least 3)")
                     flat.extend(tokens[pos + 1:pos + 1 + n])
                     counts.append(n)
+                elif not is_list:
+                    scalars[name].append(float(tokens[pos]))
                 pos += 1 + n
             if pos != len(tokens):
                 raise _fail(label, f"face {number} has {len(tokens)} values, expected {pos}")
         indices = np.array(flat, dtype=np.int64)
     except (ValueError, IndexError, OverflowError) as exc:
         raise _fail(label, f"malformed face data ({_short(exc)})") from None
-    return _fan_triangulate(np.asarray(counts, dtype=np.int64), indices)
+    return np.asarray(counts, dtype=np.int64), indices, {k: np.asarray(v) for k, v in scalars.items()}
+
+
+def _ply_part(vertex: dict, counts: np.ndarray, flat: np.ndarray, face: dict, normals=None) -> "_Part":
+    """A part from PLY vertex and face property columns: normals (nx, ny, nz),
+    colours (red, green, blue, of vertices or else of faces) and texture
+    coordinates (texture_u/v, u/v or s/t, per vertex)."""
+    part = _Part(np.stack([vertex[a] for a in "xyz"], axis=1), _fan_triangulate(counts, flat))
+    if normals is None and {"nx", "ny", "nz"} <= set(vertex):
+        normals = np.stack([vertex[a] for a in ("nx", "ny", "nz")], axis=1)
+    part.normals = normals
+    rgb = ("red", "green", "blue")
+    if set(rgb) <= set(vertex):
+        part.vertex_colors = np.stack([vertex[c] for c in rgb], axis=1)
+    elif set(rgb) <= set(face):
+        part.face_colors, part.polygon_sizes = np.stack([face[c] for c in rgb], axis=1), counts
+    for u, v in (("texture_u", "texture_v"), ("u", "v"), ("s", "t")):
+        if u in vertex and v in vertex:
+            part.uv = np.stack([vertex[u], vertex[v]], axis=1)[part.faces]
+            break
+    return part
 
 
 def _parse_ply_ascii(data: bytes, elements, body: int, label: str):
@@ -352,18 +514,18 @@ def _parse_ply_ascii(data: bytes, elements, body: int, label: str):
     if declared > len(lines):
         raise _fail(label, f"truncated: header declares {declared} rows, "
                            f"only {len(lines)} follow")
-    vertices = faces = None
+    vertex = faces = None
     row = 0
     for name, count, props in elements:
         rows = lines[row:row + count]
         row += count
         if name == "vertex":
-            vertices = _ply_vertices(rows, props, label)
+            vertex = _ply_vertices(rows, props, label)
         elif name == "face" and count:
             faces = _ply_faces(rows, props, label)
-    if vertices is None or faces is None or len(faces) == 0:
+    if vertex is None or faces is None or len(faces[0]) == 0:
         raise _fail(label, "contains no triangles")
-    return vertices, faces
+    return _ply_part(vertex, *faces)
 
 
 def _load_ply(data: bytes, label: str):
@@ -394,7 +556,16 @@ def _load_ply(data: bytes, label: str):
             raise _fail(label, f"unexpected face array of shape {faces.shape}")
         counts = np.full(len(faces), faces.shape[1], dtype=np.int64)
         flat = faces.astype(np.int64).reshape(-1)
-        return np.asarray(vertices, dtype=np.float64), _fan_triangulate(counts, flat)
+        vertices = np.asarray(vertices, dtype=np.float64)
+        vertex = dict(zip("xyz", vertices.T))
+        face = {}
+        for colors, columns in ((kwargs.get("vertex_colors"), vertex), (kwargs.get("face_colors"), face)):
+            if colors is not None:
+                columns.update(zip(("red", "green", "blue"), np.asarray(colors).T[:3]))
+        uv = getattr(kwargs.get("visual"), "uv", None)
+        if uv is not None and len(uv) == len(vertices):
+            vertex.update(u=uv[:, 0], v=uv[:, 1])
+        return _ply_part(vertex, counts, flat, face, kwargs.get("vertex_normals"))
     except MeshLoadError:
         raise
     except Exception as exc:  # trimesh raises anything from KeyError to struct.error
@@ -421,24 +592,38 @@ def _BufferFileResolver(path: str):
     return Resolver(path)
 
 
-def _load_trimesh(data: bytes, file_type: str, path: str):
-    """``[(vertices, faces), ...]`` of every triangle mesh in an STL or glTF file.
+def _load_trimesh(data: bytes, file_type: str, path: str) -> "list[_Part]":
+    """Every triangle mesh in an STL or glTF file, with a glTF file's normals,
+    texture coordinates, vertex colours and materials.
 
     Scenes are flattened in graph order with each node's transform applied to
     its geometry's vertices (an instanced geometry appears once per node).
     trimesh is imported here, when a file needs it (it takes seconds on some
-    machines), and learns our 3DS reader then.
+    machines), and learns our 3DS reader then.  trimesh reads the images and
+    base-colour factors of glTF materials but neither samplers nor the
+    KHR_materials_* extensions, so those are read from the JSON
+    (:func:`_gltf_materials`), matched to trimesh's materials by a name clrt
+    gives each material before trimesh parses the file.
     """
     import trimesh
     load_3ds.register_with_trimesh()
 
-    kwargs = {"process": False, "validate": False, "skip_materials": True}
+    gltf = file_type in ("gltf", "glb")
+    doc = None
+    if gltf:
+        try:
+            doc = _gltf_json(data, "." + file_type)
+            data = _gltf_renamed_materials(data, doc, file_type)
+        except Exception:  # noqa: BLE001 -- not valid glTF: trimesh reports it below
+            doc = None
+    kwargs = {"process": False, "validate": False, "skip_materials": doc is None}
     if file_type == "gltf":
-        # A .gltf names its buffers as files beside it.
+        # A .gltf names its buffers (and images) as files beside it.
         kwargs["resolver"] = _BufferFileResolver(os.path.abspath(path))
     try:
         with np.errstate(all="ignore"):  # bad numbers are reported by Mesh.from_arrays
             scene = trimesh.load(io.BytesIO(data), file_type=file_type, force="scene", **kwargs)
+        materials = _gltf_materials(doc, scene, path) if doc is not None else []
         parts = []
         for node in scene.graph.nodes_geometry:
             transform, geometry_name = scene.graph[node]
@@ -446,11 +631,19 @@ def _load_trimesh(data: bytes, file_type: str, path: str):
             # Point clouds and paths have no faces; they are not rendered.
             if not isinstance(geometry, trimesh.Trimesh) or len(geometry.faces) == 0:
                 continue
-            vertices = np.asarray(geometry.vertices, dtype=np.float64)
+            part = _trimesh_part(geometry, linear_colors=gltf)
             matrix = np.asarray(transform, dtype=np.float64)
             if not np.array_equal(matrix, np.eye(4)):
-                vertices = vertices @ matrix[:3, :3].T + matrix[:3, 3]
-            parts.append((vertices, np.asarray(geometry.faces)))
+                part.vertices = part.vertices @ matrix[:3, :3].T + matrix[:3, 3]
+                if part.normals is not None:
+                    part.normals = part.normals @ np.linalg.inv(matrix[:3, :3])
+            name = getattr(getattr(geometry.visual, "material", None), "name", None)
+            if materials and isinstance(name, str) and name.startswith(_GLTF_MATERIAL):
+                part.face_material = np.full(len(part.faces), int(name[len(_GLTF_MATERIAL):]))
+            part.materials = materials
+            parts.append(part)
+    except MeshLoadError:
+        raise
     except Exception as exc:  # trimesh raises anything from KeyError to struct.error
         reason = f"corrupt or unsupported {file_type.upper()} file ({_short(exc)})"
         raise _fail(path, reason) from exc
@@ -459,12 +652,132 @@ def _load_trimesh(data: bytes, file_type: str, path: str):
     return parts
 
 
+def _trimesh_part(geometry, linear_colors: bool) -> "_Part":
+    """Vertices, faces, and what a trimesh.Trimesh's visual holds: texture
+    coordinates, vertex or face colours (sRGB unless ``linear_colors``, as glTF's
+    COLOR_0 is), and normals when they came from the file (trimesh keeps loaded
+    normals in its cache; it only computes them when asked)."""
+    part = _Part(np.asarray(geometry.vertices, dtype=np.float64), np.asarray(geometry.faces, dtype=np.int64))
+    part.srgb_colors = not linear_colors
+    if "vertex_normals" in geometry._cache.cache:
+        part.normals = np.asarray(geometry.vertex_normals, dtype=np.float64)
+    visual = geometry.visual
+    n_vertices = len(part.vertices)
+    kind = getattr(visual, "kind", None)
+    if kind == "texture":
+        uv = getattr(visual, "uv", None)
+        if uv is not None and len(uv) == n_vertices:
+            part.uv = np.asarray(uv, dtype=np.float64)[part.faces]
+        colors = getattr(visual, "vertex_attributes", {}).get("color")
+        if colors is not None and len(colors) == n_vertices:
+            part.vertex_colors = _unit_colors(colors)
+    elif kind == "vertex":
+        part.vertex_colors = _unit_colors(visual.vertex_colors)
+    elif kind == "face":
+        part.face_colors = _unit_colors(visual.face_colors)
+    return part
+
+
+def _unit_colors(colors) -> np.ndarray:
+    """(n, 3) float64 in 0..1 of RGB(A) colours stored as floats or as normalised integers."""
+    c = np.asarray(colors)
+    scale = np.iinfo(c.dtype).max if np.issubdtype(c.dtype, np.integer) else 1.0
+    return c[:, :3].astype(np.float64) / scale
+
+
+# The name each glTF material gets before trimesh reads the file: its index follows.
+_GLTF_MATERIAL = "clrt material "
+_GLTF_WRAPS = {10497: "repeat", 33071: "clamp", 33648: "mirror"}
+
+
+def _gltf_renamed_materials(data: bytes, doc: dict, file_type: str) -> bytes:
+    """The file with material i named _GLTF_MATERIAL + i (a GLB's JSON chunk rewritten)."""
+    import json
+    import struct
+    if not doc.get("materials"):
+        return data
+    for i, material in enumerate(doc["materials"]):
+        material["name"] = f"{_GLTF_MATERIAL}{i}"
+    text = json.dumps(doc).encode("utf-8")
+    if file_type == "gltf":
+        return text
+    text += b" " * (-len(text) % 4)   # chunks are 4-byte aligned, JSON padded with spaces
+    length = struct.unpack_from("<I", data, 12)[0]
+    rest = data[20 + length:]
+    return (struct.pack("<4sII", b"glTF", 2, 20 + len(text) + len(rest)) + struct.pack("<I", len(text))
+            + b"JSON" + text + rest)
+
+
+def _gltf_materials(doc: dict, scene, path: str) -> list:
+    """Material fields of each glTF material (the table in docs/scene-files.md):
+    base colour (factor and texture, with the sampler's wrap modes),
+    metallic/roughness to specular, shininess and reflectivity,
+    KHR_materials_transmission and KHR_materials_ior to transparency and ior."""
+    images = {}   # material index -> trimesh's PIL image of its base-colour texture
+    for geometry in scene.geometry.values():
+        material = getattr(getattr(geometry, "visual", None), "material", None)
+        name = getattr(material, "name", None)
+        if isinstance(name, str) and name.startswith(_GLTF_MATERIAL):
+            images[int(name[len(_GLTF_MATERIAL):])] = getattr(material, "baseColorTexture", None)
+    textures, out = {}, []
+    for i, m in enumerate(doc.get("materials", [])):
+        pbr = m.get("pbrMetallicRoughness", {})
+        extensions = m.get("extensions", {})
+        base = [float(c) for c in pbr.get("baseColorFactor", [1.0] * 4)][:3]
+        metallic = min(max(float(pbr.get("metallicFactor", 1.0)), 0.0), 1.0)
+        roughness = min(max(float(pbr.get("roughnessFactor", 1.0)), 0.0), 1.0)
+        reflectivity = metallic * (1.0 - roughness)
+        fields = {"color": tuple(min(max(c, 0.0), 1.0) for c in base),
+                  "diffuse": DEFAULT_DIFFUSE * (1.0 - reflectivity),
+                  "specular": 1.0 - roughness,
+                  # Blinn-Phong exponent of the same highlight width: 2 / alpha^2 - 2, alpha = roughness^2
+                  "shininess": min(max(2.0 / max(roughness ** 4, 1e-6) - 2.0, 1.0), 1000.0),
+                  "reflectivity": reflectivity}
+        transmission = extensions.get("KHR_materials_transmission", {}).get("transmissionFactor", 0.0)
+        if transmission:
+            fields["transparency"] = min(max(float(transmission), 0.0), 1.0)
+        if "KHR_materials_ior" in extensions:
+            fields["ior"] = max(float(extensions["KHR_materials_ior"].get("ior", 1.5)), 1.0)
+        image = images.get(i)
+        info = pbr.get("baseColorTexture")
+        if image is not None and isinstance(info, dict):
+            sampler = doc.get("textures", [])[info["index"]].get("sampler")
+            sampler = doc.get("samplers", [])[sampler] if sampler is not None else {}
+            wraps = tuple(_GLTF_WRAPS.get(sampler.get(k, 10497), "repeat") for k in ("wrapS", "wrapT"))
+            key = (id(image), wraps)   # one texture (one copy of its texels) per image and sampler
+            if key not in textures:
+                try:
+                    textures[key] = Texture.from_image(image, *wraps, name=f"{os.path.basename(path)} image")
+                except InputError as exc:
+                    raise _fail(path, str(exc)) from None
+            fields["texture"] = textures[key]
+        out.append(fields)
+    return out
+
+
 # ---------------------------------------------------------------------------
 # Entry point
 
 
-def _read_bytes(path: str) -> bytes:
-    """The file's contents; MeshLoadError for anything but a readable regular file."""
+def _read_any(path: str, label: str) -> bytes:
+    """A file a mesh file names (an MTL library): MeshLoadError naming the mesh file if unreadable."""
+    try:
+        return _read_bytes(path, side_file=True)
+    except MeshLoadError as exc:
+        raise _fail(label, str(exc)) from None
+
+
+def _texture(path: str, wrap_s: str, wrap_t: str, label: str) -> Texture:
+    """The texture image a mesh file names; MeshLoadError naming the mesh file if it cannot be read."""
+    try:
+        return Texture.read(path, wrap_s, wrap_t)
+    except InputError as exc:
+        raise _fail(label, str(exc)) from None
+
+
+def _read_bytes(path: str, side_file: bool = False) -> bytes:
+    """The file's contents; MeshLoadError for anything but a readable regular file
+    (a mesh file, unless ``side_file``: one that a mesh file names)."""
     try:
         info = os.stat(path)
     except FileNotFoundError:
@@ -477,10 +790,10 @@ def _read_bytes(path: str) -> bytes:
     if not stat.S_ISREG(info.st_mode):
         raise _fail(path, "not a regular file")
     ext = os.path.splitext(path)[1].lower()
-    if ext == ".toml":
+    if ext == ".toml" and not side_file:
         raise _fail(path, "is a scene file, not a mesh (render it with clrt render or clrt.render, "
                           "or read it with clrt.load_scene)")
-    if ext not in SUPPORTED_EXTENSIONS:
+    if ext not in SUPPORTED_EXTENSIONS and not side_file:
         shown = f"'{ext}'" if ext else "no extension"
         raise _fail(path, f"unknown mesh format ({shown}); supported: "
                           + ", ".join(SUPPORTED_EXTENSIONS))
@@ -491,41 +804,91 @@ def _read_bytes(path: str) -> bytes:
         raise _fail(path, "permission denied") from None
     except OSError as exc:
         raise _fail(path, f"cannot read file ({exc.strerror or _short(exc)})") from None
-    if not data.strip():
+    if not data.strip() and not side_file:
         raise _fail(path, "file is empty")
     return data
 
 
-def _build(parts, label: str, name: str) -> Mesh:
-    """Validate ``[(vertices, faces), ...]`` and concatenate them into one Mesh."""
+@dataclass
+class _Part:
+    """One mesh of a file as its parser found it, before checks.
+
+    vertices (V, 3), faces (F, 3) triangles; normals (V, 3); uv (F, 3, 2) per
+    corner; colours in 0..1 of vertices (V, 3) or of polygons (P, 3), sRGB unless
+    ``srgb_colors`` is False, with ``polygon_sizes`` (P,) when polygons were
+    fan-triangulated (each polygon's colour goes to its triangles);
+    face_material (F,) indexing ``materials`` (dicts of Material fields, shared
+    by all parts of a file), -1 for none.
+    """
+
+    vertices: np.ndarray
+    faces: np.ndarray
+    normals: np.ndarray | None = None
+    uv: np.ndarray | None = None
+    vertex_colors: np.ndarray | None = None
+    face_colors: np.ndarray | None = None
+    polygon_sizes: np.ndarray | None = None
+    srgb_colors: bool = True
+    face_material: np.ndarray | None = None
+    materials: list = field(default_factory=list)
+
+    def corner_colors(self) -> np.ndarray | None:
+        """(F, 3, 3) linear colours of the triangles' corners, or None."""
+        if self.vertex_colors is not None:
+            colors = np.asarray(self.vertex_colors, np.float64)[self.faces]
+        elif self.face_colors is not None:
+            per_face = np.asarray(self.face_colors, np.float64)
+            if self.polygon_sizes is not None:
+                per_face = np.repeat(per_face, self.polygon_sizes - 2, axis=0)
+            colors = np.repeat(per_face[:, None], 3, axis=1)
+        else:
+            return None
+        if colors.size and np.nanmax(colors) > 1.0:   # 8-bit values (0..255) in a text file
+            colors = colors / 255.0
+        return srgb_decode(colors) if self.srgb_colors else colors
+
+
+def _build(parts: "list[_Part]", label: str, name: str) -> "tuple[Mesh, list]":
+    """Validate the parts and concatenate them into one Mesh; with the file's materials."""
     meshes = []
-    for vertices, faces in parts:
+    for part in parts:
         try:
-            meshes.append(Mesh.from_arrays(vertices, faces))
+            mesh = Mesh.from_arrays(part.vertices, part.faces)
+            meshes.append(mesh.with_detail(normals=part.normals, uv=part.uv, colors=part.corner_colors(),
+                                           face_material=part.face_material))
         except MeshLoadError as exc:
             raise _fail(label, str(exc)) from None
-    if len(meshes) == 1:
-        return Mesh(meshes[0].vertices, meshes[0].faces, name)
-    return Mesh.concatenate(meshes, name=name)
+    mesh = meshes[0] if len(meshes) == 1 else Mesh.concatenate(meshes)
+    return replace(mesh, name=name), parts[0].materials
 
 
 def load_mesh(path) -> Mesh:
-    """Load the mesh file at ``path`` into one :class:`Mesh` named after the file.
+    """Load the mesh file at ``path`` into one :class:`Mesh` named after the file,
+    with the surface detail the file has (normals, texture coordinates, colours,
+    face material ids: :func:`load_asset` also returns the materials).
 
     The format is chosen by the extension (case-insensitive), one of
     :data:`SUPPORTED_EXTENSIONS`.  Raises :class:`MeshLoadError` on any problem.
     """
+    return load_asset(path)[0]
+
+
+def load_asset(path) -> "tuple[Mesh, list[dict]]":
+    """The mesh of a file and its materials, as dicts of :class:`clrt.Material`
+    fields (``mesh.face_material`` indexes them; [] for a file without any).
+    OBJ reads its ``mtllib`` files and their ``map_Kd`` images from the OBJ's
+    folder (a missing one is skipped: the faces keep the default material)."""
     path = os.fspath(path)
     data = _read_bytes(path)
     ext = os.path.splitext(path)[1].lower()
     name = os.path.splitext(os.path.basename(path))[0]
     try:
         if ext == ".3ds":
-            return load_3ds.parse_3ds(data, label=path, name=name)
+            return load_3ds.parse_3ds(data, label=path, name=name), []
         if ext == ".off":
             parts = [_parse_off(data, path)]
         elif ext == ".obj":
-            parts = [_parse_obj(data, path)]
+            parts = [_parse_obj(data, path, os.path.dirname(os.path.abspath(path)))]
         elif ext == ".ply":
             parts = [_load_ply(data, path)]
         else:
@@ -624,7 +987,11 @@ def as_mesh(source) -> Mesh:
     if isinstance(source, (str, os.PathLike)):
         return load_mesh(source)
     if hasattr(source, "vertices") and hasattr(source, "faces"):
-        return Mesh.from_arrays(source.vertices, source.faces)
+        mesh = Mesh.from_arrays(source.vertices, source.faces)
+        if hasattr(source, "visual"):   # a trimesh.Trimesh: its UVs and (sRGB) colours
+            part = _trimesh_part(source, linear_colors=False)
+            mesh = mesh.with_detail(uv=part.uv, colors=part.corner_colors())
+        return mesh
     if isinstance(source, tuple) and len(source) == 2:
         return Mesh.from_arrays(*source)
     raise InputError(f"expected a mesh (a clrt.Mesh, a file path, a trimesh object or (vertices, faces)), "

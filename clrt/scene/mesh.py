@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import math
 
@@ -20,11 +20,29 @@ class Mesh:
     Triangles keep their input order, so a primitive id reported by a query
     is the row of ``faces``.  Zero-area triangles are kept (they are never hit)
     so that ids stay aligned with the input file.
+
+    What a file may say about the surface besides its shape (None when it says
+    nothing; set through :meth:`with_detail`, which checks it):
+
+    normals: (V, 3) float32 authored vertex normals (smooth shading uses them
+        instead of computed ones; the crease split keeps them).
+    uv: (F, 3, 2) float32 texture coordinates of each face's corners.
+    colors: (F, 3, 3) float32 linear RGB of each face's corners (vertex or face
+        colours), multiplied into the material's colour.
+    face_material: (F,) int32 index into the object's ``materials``
+        (:class:`clrt.scene.scene.SceneObject`), -1 for the object's own material.
+
+    UVs and colours are stored per corner, not per vertex, so that seams need no
+    duplicated vertices and re-indexing vertices (the crease split) leaves them be.
     """
 
     vertices: np.ndarray
     faces: np.ndarray
     name: str = ""
+    normals: np.ndarray | None = None
+    uv: np.ndarray | None = None
+    colors: np.ndarray | None = None
+    face_material: np.ndarray | None = None
 
     @classmethod
     def from_arrays(cls, vertices, faces, name: str = "") -> "Mesh":
@@ -58,6 +76,42 @@ class Mesh:
         return cls(np.ascontiguousarray(v, dtype=np.float32),
                    np.ascontiguousarray(f, dtype=np.int32), name)
 
+    DETAIL = ("normals", "uv", "colors", "face_material")
+
+    def with_detail(self, normals=None, uv=None, colors=None, face_material=None) -> "Mesh":
+        """A copy with the surface detail given (not None) checked and set;
+        :class:`MeshLoadError` on bad shapes or values."""
+        label = f"{self.name}: " if self.name else ""
+        n_faces, n_vertices = len(self.faces), len(self.vertices)
+        shapes = {"normals": (n_vertices, 3), "uv": (n_faces, 3, 2), "colors": (n_faces, 3, 3),
+                  "face_material": (n_faces,)}
+        given = {"normals": normals, "uv": uv, "colors": colors, "face_material": face_material}
+        checked = {}
+        for key, value in given.items():
+            if value is None:
+                continue
+            dtype = np.int32 if key == "face_material" else np.float32
+            try:
+                a = np.asarray(value, dtype=np.float64)
+            except (TypeError, ValueError):
+                raise MeshLoadError(f"{label}{key} are not numeric") from None
+            if a.shape != shapes[key]:
+                raise MeshLoadError(f"{label}{key} must have shape {shapes[key]}, got {a.shape}")
+            if not np.isfinite(a).all():
+                raise MeshLoadError(f"{label}{key} contain NaN or infinite values")
+            if key == "colors":
+                a = np.clip(a, 0.0, 1.0)   # colours are albedos: a file's 1.0000001 is 1
+            if key == "uv" and np.abs(a).max(initial=0) > config.MAX_COORDINATE:
+                raise MeshLoadError(f"{label}texture coordinates must lie within +-{config.MAX_COORDINATE:.0e}")
+            if key == "face_material" and ((a != np.round(a)).any() or a.min() < -1):
+                raise MeshLoadError(f"{label}face material ids must be integers >= -1")
+            checked[key] = np.ascontiguousarray(a, dtype=dtype)
+        return replace(self, **checked)
+
+    def _keep_detail(self, vertices, faces, name, normals=None) -> "Mesh":
+        """A Mesh of new vertices and faces (the same faces in the same order) with this one's per-face detail."""
+        return Mesh(vertices, faces, name, normals, self.uv, self.colors, self.face_material)
+
     @property
     def bounds(self) -> np.ndarray:
         """(2, 3) float64: min and max corner of the vertices used by faces."""
@@ -72,7 +126,12 @@ class Mesh:
         return np.divide(n, length, out=np.zeros_like(n), where=length > 0)
 
     def vertex_normals(self) -> np.ndarray:
-        """(V, 3) float32 area-weighted vertex normals for smooth shading."""
+        """(V, 3) float32 vertex normals for smooth shading: the file's own (unit
+        length), else area-weighted ones."""
+        if self.normals is not None:
+            n = self.normals.astype(np.float64)
+            length = np.linalg.norm(n, axis=1, keepdims=True)
+            return np.divide(n, length, out=np.zeros_like(n), where=length > 0).astype(np.float32)
         tri = self.vertices[self.faces].astype(np.float64)
         area_n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
         acc = np.zeros((len(self.vertices), 3))
@@ -96,7 +155,12 @@ class Mesh:
         edge's faces have at each end of the edge are joined (union-find by
         label propagation), so a vertex's faces fall into the fans between
         its creases.
+
+        A mesh with authored normals is returned as it is: the file already
+        says where its edges are hard (by giving a vertex one normal per side).
         """
+        if self.normals is not None:
+            return self
         faces = self.faces
         n_faces = len(faces)
         # Merge bitwise-equal positions (-0.0 and 0.0 stay apart, so positions never change).
@@ -136,18 +200,32 @@ class Mesh:
         is_root = label == np.arange(3 * n_faces)
         corner_vertex = (np.cumsum(is_root) - 1)[label]
         vertices = self.vertices[faces.reshape(-1)[is_root]]
-        return Mesh(vertices, corner_vertex.reshape(n_faces, 3).astype(np.int32), self.name)
+        return self._keep_detail(vertices, corner_vertex.reshape(n_faces, 3).astype(np.int32), self.name)
 
     def transformed(self, matrix: np.ndarray) -> "Mesh":
-        """A copy with a 4x4 affine transform applied to the vertices."""
+        """A copy with a 4x4 affine transform applied to the vertices (and to
+        authored normals, by the inverse transpose, so they stay perpendicular)."""
         m = np.asarray(matrix, dtype=np.float64)
         v = self.vertices.astype(np.float64) @ m[:3, :3].T + m[:3, 3]
-        return Mesh(v.astype(np.float32), self.faces, self.name)
+        normals = self.normals
+        if normals is not None:
+            normals = (normals.astype(np.float64) @ np.linalg.inv(m[:3, :3])).astype(np.float32)
+        return self._keep_detail(v.astype(np.float32), self.faces, self.name, normals)
 
     @staticmethod
     def concatenate(meshes: "list[Mesh]", name: str = "") -> "Mesh":
-        """One mesh holding all triangles, in order."""
+        """One mesh holding all triangles, in order.  Detail that some meshes lack is
+        filled in: UV (0, 0), colour white, the object's own material; normals
+        are kept only when every mesh has them (else all are computed)."""
         offsets = np.cumsum([0] + [len(m.vertices) for m in meshes[:-1]])
         v = np.concatenate([m.vertices for m in meshes])
         f = np.concatenate([m.faces + o for m, o in zip(meshes, offsets)])
-        return Mesh(v.astype(np.float32), f.astype(np.int32), name)
+        fill = {"uv": lambda m: np.zeros((len(m.faces), 3, 2), np.float32),
+                "colors": lambda m: np.ones((len(m.faces), 3, 3), np.float32),
+                "face_material": lambda m: np.full(len(m.faces), -1, np.int32)}
+        detail = {key: np.concatenate([getattr(m, key) if getattr(m, key) is not None else make(m)
+                                       for m in meshes])
+                  for key, make in fill.items() if any(getattr(m, key) is not None for m in meshes)}
+        if all(m.normals is not None for m in meshes):
+            detail["normals"] = np.concatenate([m.normals for m in meshes])
+        return Mesh(v.astype(np.float32), f.astype(np.int32), name, **detail)

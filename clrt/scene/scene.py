@@ -10,6 +10,7 @@ import numpy as np
 from clrt import checks, config
 from clrt.errors import InputError
 from clrt.scene.mesh import Mesh
+from clrt.scene.texture import Texture
 
 
 def _vec3(value, what: str) -> np.ndarray:
@@ -30,6 +31,9 @@ class Material:
     ``reflectivity`` (0..1) is the weight of the mirror reflection;
     ``transparency`` (0..1) the weight of the refracted ray, with index of
     refraction ``ior`` (Fresnel-weighted, total internal reflection included).
+    ``texture`` (a :class:`~clrt.scene.texture.Texture`, or None) multiplies
+    ``color`` where the mesh has texture coordinates (``Mesh.uv``), as a
+    file's base-colour texture does.
     """
 
     color: tuple = config.DEFAULT_COLOR
@@ -42,9 +46,12 @@ class Material:
     transparency: float = 0.0
     ior: float = config.DEFAULT_IOR
     crease: float = config.DEFAULT_CREASE_ANGLE
+    texture: Texture | None = None
 
     def __post_init__(self):
         object.__setattr__(self, "color", checks.color("material color", self.color))
+        if self.texture is not None and not isinstance(self.texture, Texture):
+            raise checks.fail("material texture", "a clrt Texture or None", self.texture)
         for name, limits in _MATERIAL_NUMBERS.items():
             object.__setattr__(self, name, checks.number(f"material {name}", getattr(self, name), **limits))
         checks.boolean("material smooth", self.smooth)
@@ -67,8 +74,9 @@ class Material:
         raise InputError(f"material must be a clrt.Material or a dict of its fields, got {type(value).__name__}")
 
     def with_overrides(self, **overrides) -> "Material":
-        """A copy with the fields given (not None) replaced."""
-        return replace(self, **{k: v for k, v in overrides.items() if v is not None})
+        """A copy with the fields given replaced (None leaves a field as it is,
+        except ``texture``, which None removes)."""
+        return replace(self, **{k: v for k, v in overrides.items() if v is not None or k == "texture"})
 
 
 def unknown_name(what: str, name, known) -> str:
@@ -166,27 +174,53 @@ class Camera:
 
 @dataclass(frozen=True)
 class SceneObject:
-    """A mesh and its material.
+    """A mesh and its materials.
 
     ``mesh`` may be anything :func:`clrt.scene.load.as_mesh` takes (a Mesh, a
     file path, a trimesh object, ``(vertices, faces)``), ``material`` a
-    Material or a dict of its fields.  For a smooth material ``mesh`` becomes
-    the mesh prepared for smooth shading (:meth:`Mesh.split_at_creases` with
-    the material's crease angle): the same triangles in the same order at the
-    same positions, with vertices shared where normals blend.
+    Material or a dict of its fields.  ``materials``: the materials a file
+    gives its faces -- face ``f`` has ``materials[mesh.face_material[f]]``;
+    faces without one (id -1, or a mesh without ``face_material``) have
+    ``material``.  For a smooth material ``mesh`` becomes the mesh prepared for
+    smooth shading (:meth:`Mesh.split_at_creases` with ``material``'s crease
+    angle): the same triangles in the same order at the same positions, with
+    vertices shared where normals blend.
     """
 
     mesh: Mesh
     material: Material = field(default_factory=Material)
+    materials: tuple = ()
 
     def __post_init__(self):
         from clrt.scene.load import as_mesh
         material = Material.of(self.material)
+        if isinstance(self.materials, (str, bytes, dict)) or not hasattr(self.materials, "__iter__"):
+            raise checks.fail("materials", "a list of clrt.Material", self.materials)
+        materials = tuple(Material.of(m) for m in self.materials)
         mesh = as_mesh(self.mesh)
-        if material.smooth:
+        ids = mesh.face_material
+        if ids is not None and not materials:   # the file's materials were not wanted
+            mesh, ids = replace(mesh, face_material=None), None
+        if ids is not None and len(ids) and ids.max() >= len(materials):
+            raise InputError(f"{mesh.name or 'mesh'}: face material id {int(ids.max())} but only "
+                             f"{len(materials)} materials")
+        if any(m.smooth for m in (material, *materials)):
             mesh = mesh.split_at_creases(material.crease)
         object.__setattr__(self, "material", material)
+        object.__setattr__(self, "materials", materials)
         object.__setattr__(self, "mesh", mesh)
+
+    def with_overrides(self, **fields) -> "SceneObject":
+        """The object with the material fields given (not None) replaced in all its
+        materials.  A new ``color`` also drops textures and the mesh's vertex
+        colours: ``--color 1,0,0`` makes an object red, whatever its file says."""
+        fields = {k: v for k, v in fields.items() if v is not None}
+        mesh = self.mesh
+        if "color" in fields:
+            fields["texture"] = None
+            mesh = replace(mesh, colors=None)
+        return SceneObject(mesh, self.material.with_overrides(**fields),
+                           tuple(m.with_overrides(**fields) for m in self.materials))
 
 
 def _objects(value) -> list:
@@ -260,7 +294,7 @@ class Scene:
         or the built-in scene."""
         fields = {k: v for k, v in fields.items() if v is not None}
         if fields:
-            self.objects = [SceneObject(o.mesh, o.material.with_overrides(**fields)) for o in self.objects]
+            self.objects = [o.with_overrides(**fields) for o in self.objects]
 
 
 def default_light(bounds, camera: Camera) -> Light:
@@ -276,18 +310,21 @@ def scene_from_mesh(mesh, material=None, lights=None, background=config.DEFAULT_
     """The paper's scene: one mesh, one material, point lights (default: one above the eye).
 
     ``mesh``: a Mesh, a mesh file path, a trimesh object or ``(vertices, faces)``;
-    ``material``: a :class:`Material` or a dict of its fields; ``lights``: a list
-    of :class:`Light` or of positions ``(x, y, z)``.  Bad values raise InputError here.
+    ``material``: a :class:`Material` or a dict of its fields -- given, it is
+    every face's material; else a file's own materials apply (faces without
+    one get the defaults).  ``lights``: a list of :class:`Light` or of
+    positions ``(x, y, z)``.  Bad values raise InputError here.
     The camera is the file's own where a glTF/GLB file has a camera node,
     else framed from the bounds (``scene.camera_framed``).
     """
     import os
-    view = None
+    view, file_materials = None, ()
     if isinstance(mesh, (str, os.PathLike)):
-        from clrt.scene.load import file_camera, load_mesh
+        from clrt.scene.load import file_camera, load_asset
         view = file_camera(mesh)
-        mesh = load_mesh(mesh)
-    scene = Scene([SceneObject(mesh, Material.of(material))], [] if lights is None else lights, background)
+        mesh, file_materials = load_asset(mesh)
+    scene = Scene([SceneObject(mesh, Material.of(material), file_materials if material is None else ())],
+                  [] if lights is None else lights, background)
     scene.camera, scene.camera_framed = Camera.framing(scene.bounds), True
     if view is not None:
         scene.camera, scene.camera_framed = file_view(view, scene.bounds, mesh.name), False

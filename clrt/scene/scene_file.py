@@ -21,13 +21,14 @@ import math
 import os
 import re
 import tomllib
+from dataclasses import replace
 
 import numpy as np
 
 from clrt import checks, config
 from clrt.errors import InputError, MeshLoadError
 from clrt.scene import primitives
-from clrt.scene.load import load_mesh
+from clrt.scene.load import load_asset
 from clrt.scene.mesh import Mesh
 from clrt.scene.scene import Camera, Light, Material, Scene, SceneObject, default_light, unknown_name
 
@@ -283,13 +284,14 @@ class _Loader:
             return self.material(value, path)
         raise self.doc.error(path, f"expected a material name or an inline table, got {_show(value)}")
 
-    def mesh_file(self, name: str, path: str) -> Mesh:
+    def mesh_file(self, name: str, path: str) -> "tuple[Mesh, list]":
+        """The mesh file's mesh and its own materials (clrt.scene.load.load_asset)."""
         # Relative to the scene file, so a scene renders the same from any directory.
         full = os.path.normpath(os.path.join(self.folder, os.path.expanduser(name)))
         if not os.path.isfile(full):
             raise self.doc.error(path, f"mesh file not found: {full}", MeshLoadError)
         try:
-            return load_mesh(full)
+            return load_asset(full)
         except MeshLoadError as exc:
             raise self.doc.error(path, exc, MeshLoadError) from None
 
@@ -312,8 +314,12 @@ class _Loader:
                                          f"(its own keys: {', '.join(OBJECT_TYPES[kind])})")
             o = self.doc.table(value, path, schema)
             material = self.material_ref(o["material"], _join(path, "material"), Material())
+            file_materials = ()
             if kind == "mesh":
-                meshes = [self.mesh_file(o["path"], _join(path, "path"))]
+                mesh, file_materials = self.mesh_file(o["path"], _join(path, "path"))
+                meshes = [mesh]
+                if o["material"] is not None:   # the scene's material replaces the file's
+                    file_materials = ()
             elif kind == "sphere":
                 meshes = [primitives.icosphere(o["subdivisions"], o["radius"], o["centre"])]
             elif kind == "box":
@@ -331,8 +337,8 @@ class _Loader:
             name = o["name"] or f"{path} ({kind})"
             for k, (mesh, mat) in enumerate(zip(meshes, materials)):
                 suffix = f" tiles {k}" if len(meshes) > 1 else ""
-                mesh = Mesh(mesh.transformed(matrix).vertices, mesh.faces, name + suffix)
-                out.append(SceneObject(mesh, mat))
+                mesh = replace(mesh.transformed(matrix), name=name + suffix)
+                out.append(SceneObject(mesh, mat, file_materials))
         return out
 
     def load(self) -> Scene:
