@@ -50,3 +50,13 @@ def test_declared_argument_types_match_the_kernels(device, max_buffer_bytes):
     for accel in ("box", "none"):
         queries = Accel(mesh, accel, device=device, max_buffer_bytes=max_buffer_bytes)
         _check(queries.context, "trace.cl", queries.geometry.defines, queries.kernels)
+
+
+def test_the_device_builders_declared_types_match(device):
+    from types import SimpleNamespace
+
+    from clrt.device.build import _PLOC_ARG_TYPES, build_defines
+    from clrt.device.context import create_context
+    context, _ = create_context(device)
+    declared = {name: SimpleNamespace(arg_types=types) for name, types in _PLOC_ARG_TYPES.items()}
+    _check(context, "build_bvh.cl", build_defines("box"), declared)

@@ -51,7 +51,7 @@ from clrt.accel import build as build_on_host
 from clrt.accel.rows import child_refs
 from clrt.accel.topdown import C_INTERSECT, C_TRAVERSAL, surface_area
 from clrt.config import VOLUME_DEFINES, VOLUMES
-from clrt.device.program import build_program
+from clrt.device.program import build_program, typed_kernel
 from clrt.errors import DeviceError, InputError
 
 BUILD_GROUP = 256        # work-items per work-group of every build kernel
@@ -215,10 +215,17 @@ _workspaces: dict[int, _Workspace] = {}
 _kernel_sets: dict[int, dict] = {}
 
 
+# The PLOC loop's kernels are launched some fifty times a build: their argument
+# types are declared, so that setting their arguments costs no Python time to speak of.
+_PLOC_ARG_TYPES = {"ploc_merge": [None] * 5 + [np.int32, np.uint32], "ploc_count_kept": [None, None, np.int32],
+                   "ploc_compact": [None] * 4 + [np.int32]}
+
+
 def _kernels(program: cl.Program) -> dict:
     key = program.int_ptr
     if key not in _kernel_sets:
-        _kernel_sets[key] = {name: cl.Kernel(program, name) for name in _KERNELS}
+        _kernel_sets[key] = {name: typed_kernel(program, name, _PLOC_ARG_TYPES[name]) if name in _PLOC_ARG_TYPES
+                             else cl.Kernel(program, name) for name in _KERNELS}
     return _kernel_sets[key]
 
 
@@ -353,17 +360,15 @@ def _ploc(queue, k, launch, F, clusters, merged, tile_kept, nodes, state, leaf_s
     known = F                         # clusters before iteration `seen`
     seen = 0
     pending: deque = deque()          # (iteration, event, host int32[1]) of reads in flight
-    k["ploc_merge"].set_args(clusters, merged, tile_kept, nodes, state, np.int32(0), np.uint32(leaf_size))
-    k["ploc_count_kept"].set_args(tile_kept, state, np.int32(0))
-    k["ploc_compact"].set_args(merged, clusters, tile_kept, state, np.int32(0))
     iteration = 0
     while known > 1:
         groups = _groups(known)
-        for name in ("ploc_merge", "ploc_count_kept", "ploc_compact"):
-            kernel = k[name]
-            kernel.set_arg(5 if name == "ploc_merge" else 2 if name == "ploc_count_kept" else 4,
-                           np.int32(iteration))
-            launch("ploc", kernel, 1 if name == "ploc_count_kept" else groups)
+        k["ploc_merge"].set_args(clusters, merged, tile_kept, nodes, state, iteration, leaf_size)
+        launch("ploc", k["ploc_merge"], groups)
+        k["ploc_count_kept"].set_args(tile_kept, state, iteration)
+        launch("ploc", k["ploc_count_kept"], 1)
+        k["ploc_compact"].set_args(merged, clusters, tile_kept, state, iteration)
+        launch("ploc", k["ploc_compact"], groups)
         count = np.empty(1, np.int32)
         offset = 4 * (STATE["STATE_COUNTS"] + (iteration + 1) % ring)
         pending.append((iteration + 1, cl.enqueue_copy(queue, count, state, src_offset=offset,
