@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 import clrt
+from clrt.config import HOST_BUILDERS, VOLUMES
 from clrt.reference import intersect
 from clrt.renderer import Renderer
 from clrt.scene.default import default_scene
@@ -20,7 +21,7 @@ from clrt.scene.scene import Camera, scene_from_mesh
 
 from conftest import SHARED_MESHES, TEST_MESHES
 
-VARIANTS = [(v, b, leaf) for v, b in itertools.product(("box", "sphere", "ellipse"), ("paper", "sah"))
+VARIANTS = [(v, b, leaf) for v, b in itertools.product(VOLUMES, HOST_BUILDERS)
             for leaf in (1, 4)]
 
 

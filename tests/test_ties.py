@@ -31,8 +31,8 @@ from clrt.renderer import Renderer
 from clrt.scene.mesh import Mesh
 from clrt.scene.scene import Camera, scene_from_mesh
 
-VARIANTS = [(v, b, leaf) for v, b in itertools.product(("box", "sphere", "ellipse"), ("paper", "sah"))
-            for leaf in (1, 4)]
+from test_accel import VARIANTS, _frames_identical   # every volume x host builder x leaf size 1, 4
+
 
 
 def _quad(x0, y0, z, size=1.0) -> np.ndarray:
@@ -170,9 +170,4 @@ def test_every_bvh_renders_ties_as_brute_force(name, device):
                     fov=60.0, width=40, height=30)
     reference = Renderer(scene, device, accel="none").render(camera, hits=True)
     assert (reference.prim >= 0).mean() > 0.2
-    for volume, builder, leaf in VARIANTS:
-        frame = Renderer(scene, device, volume, builder, leaf).render(camera, hits=True)
-        label = f"{volume}/{builder}/leaf {leaf}"
-        assert np.array_equal(frame.prim, reference.prim), label
-        assert np.array_equal(frame.t, reference.t), label
-        assert np.array_equal(frame.image, reference.image), label
+    _frames_identical(scene, camera, device)
