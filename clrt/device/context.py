@@ -13,7 +13,6 @@ import os
 import re
 import shutil
 import subprocess
-import threading
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Iterable, Sequence
@@ -324,29 +323,10 @@ def select_device(spec: str | None = None):
 # --------------------------------------------------------------------------- context cache
 
 _CONTEXTS: dict[tuple[int, int], tuple[cl.Context, cl.CommandQueue]] = {}
-_CONTEXT_LOCK = threading.Lock()   # one creation at a time (see prepare_context)
 
 
 def create_context(spec: str | None = None) -> tuple[cl.Context, cl.CommandQueue]:
     """Context and profiling-enabled queue for the selected device, created once per device."""
-    with _CONTEXT_LOCK:
-        return _create_context(spec)
-
-
-def prepare_context(spec: str | None = None) -> None:
-    """Start creating the context of ``spec`` in a background thread, so that a
-    caller's host work (loading a mesh, building a BVH) overlaps it: a GPU
-    driver takes a third of a second to start.  Any error is left for the
-    caller's own create_context to raise."""
-    def create():
-        try:
-            create_context(spec)
-        except Exception:   # noqa: BLE001 -- reported by the caller's create_context
-            pass
-    threading.Thread(target=create, name="clrt-context", daemon=True).start()
-
-
-def _create_context(spec: str | None) -> tuple[cl.Context, cl.CommandQueue]:
     info, device, _ = _resolve(spec, _platforms())
     key = (info.platform_index, info.device_index)
     if key not in _CONTEXTS:

@@ -38,7 +38,7 @@ from clrt import checks
 from clrt.config import DEFAULT_ACCEL, DEFAULT_BUILDER, DEFAULT_LEAF_SIZE
 from clrt.device.args import CAMERA_ARG_TYPES, camera_args
 from clrt.device.build import build_acceleration
-from clrt.device.context import create_context, device_label, prepare_context
+from clrt.device.context import create_context, device_label
 from clrt.device.geometry import DeviceGeometry, check_fits
 from clrt.device.pinned import PinnedPool
 from clrt.device.program import build_program, typed_kernel
@@ -104,7 +104,6 @@ class Accel:
         _check_chunk_rays(chunk_rays)
         device = checks.device(device)
         accel, builder, leaf_size = checks.accel_options(accel, builder, leaf_size)
-        prepare_context(device)   # the driver starts while the mesh is read and the BVH built
         self.mesh = as_mesh(mesh)
         corners = triangle_corners(self.mesh)
         built = build_acceleration(corners, accel, builder, leaf_size, device)

@@ -27,7 +27,7 @@ from clrt import checks, config
 from clrt.config import DEFAULT_ACCEL, DEFAULT_BUILDER, DEFAULT_LEAF_SIZE
 from clrt.device.args import CAMERA_ARG_TYPES, camera_args, vec4
 from clrt.device.build import build_acceleration
-from clrt.device.context import create_context, device_label, prepare_context
+from clrt.device.context import create_context, device_label
 from clrt.device.context import format_bytes as _size
 from clrt.device.geometry import DeviceGeometry, check_fits
 from clrt.device.pinned import PinnedPool
@@ -83,7 +83,6 @@ class Renderer:
                  limits: TileLimits | None = None, max_buffer_bytes: int | None = None):
         device = checks.device(device)
         accel, builder, leaf_size = checks.accel_options(accel, builder, leaf_size)
-        prepare_context(device)   # the driver starts while the scene is flattened and the BVH built
         self.limits = limits or TileLimits()
         self.timings: dict[str, float] = {}
         with _stage(self.timings, "initialisation"):
