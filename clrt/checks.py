@@ -165,7 +165,7 @@ def crease(value, name: str = "crease") -> float:
 
 def accel_options(accel, builder, leaf_size, names=("accel", "builder", "leaf_size")) -> tuple:
     """The acceleration choices of Renderer, Accel and the CLI, from config's tables."""
-    return (choice(names[0], accel, config.ACCELS), choice(names[1], builder, config.BUILDERS),
+    return (choice(names[0], accel, config.ACCELS), choice(names[1], builder, config.BUILDER_CHOICES),
             integer(names[2], leaf_size, 1, config.MAX_LEAF_SIZE))
 
 

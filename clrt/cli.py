@@ -147,7 +147,8 @@ def _render(args) -> int:
         from clrt.query.aov import write_aovs
         aov_files = write_aovs(renderer, camera, args.aov, out, force=args.force)
     if not args.quiet:
-        accel = "brute force" if args.accel == "none" else f"{args.builder} BVH of {_ACCEL_WORDS[args.accel]}"
+        builder = renderer.acceleration.builder   # what "auto" chose
+        accel = "brute force" if args.accel == "none" else f"{builder} BVH of {_ACCEL_WORDS[args.accel]}"
         view = f", camera from {args.mesh}" if from_file else ""
         print(f"{camera.width}x{camera.height} pixels, {frame.triangles:,} triangles, "
               f"{len(scene.lights)} light(s), {accel}{view}, device: {frame.device}")
@@ -195,7 +196,7 @@ def _info_mesh(args) -> int:
     if not built.is_bvh:
         print(f"accel none: brute force, {built.device_bytes():,} bytes on the device")
         return 0
-    print(f"accel {args.accel}, builder {args.builder}, leaf size {args.leaf_size}:")
+    print(f"accel {args.accel}, builder {built.builder}, leaf size {args.leaf_size}:")
     stats = built.stats()
     for key, value in stats.items():
         text = f"{value:,.3f}" if isinstance(value, float) else f"{value:,}"

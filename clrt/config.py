@@ -24,9 +24,17 @@ ACCELS = ("none",) + VOLUMES
 #: (clrt.accel), PLOC on the OpenCL device (clrt.device.build).
 HOST_BUILDERS = ("paper", "sah")
 BUILDERS = HOST_BUILDERS + ("device",)
+#: What ``builder=`` takes: a builder, or "auto" -- the device builder where the
+#: device computes in float64 (it fits volumes in float64), else "sah".
+BUILDER_CHOICES = BUILDERS + ("auto",)
 
 DEFAULT_ACCEL = "box"
-DEFAULT_BUILDER = "sah"
+#: "auto": measured on the H200 (docs/benchmarks.md), the device builder takes
+#: 6.7 ms for a 75k-triangle mesh where the host SAH build takes 304 ms, and its
+#: trees trace about 8 % slower -- a render or a batch of rays wins unless it
+#: traces some ten thousand frames.
+DEFAULT_BUILDER = "auto"
+HOST_DEFAULT_BUILDER = "sah"   # the host front end's (clrt.accel.build)
 DEFAULT_LEAF_SIZE = 4
 MAX_LEAF_SIZE = 255
 

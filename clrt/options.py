@@ -99,9 +99,10 @@ def add_accel_options(p: argparse.ArgumentParser) -> None:
         help=f"BVH bounding-volume shape ({', '.join(config.VOLUMES)}), or none for brute force "
              f"(default {config.DEFAULT_ACCEL})")
     p.add_argument("--builder", default=config.DEFAULT_BUILDER, type=typed(
-        lambda v: checks.choice("--builder", v, config.BUILDERS), str),
-        help=f"BVH builder: paper (the paper's median split), sah (binned SAH; default "
-             f"{config.DEFAULT_BUILDER}) or device (PLOC on the OpenCL device)")
+        lambda v: checks.choice("--builder", v, config.BUILDER_CHOICES), str),
+        help="BVH builder: paper (the paper's median split) or sah (binned SAH) on the host, device "
+             "(PLOC on the OpenCL device), or auto (default: device where the device computes in "
+             "float64, else sah)")
     p.add_argument("--leaf-size", default=config.DEFAULT_LEAF_SIZE,
                    type=integer("--leaf-size", 1, config.MAX_LEAF_SIZE),
                    help=f"most triangles per BVH leaf, 1..{config.MAX_LEAF_SIZE} (default {config.DEFAULT_LEAF_SIZE})")

@@ -26,12 +26,12 @@ from clrt.accel.bvh import Acceleration
 from clrt.accel.rows import pair_rows
 from clrt.accel.topdown import linearise, node_boxes, triangle_centroids
 from clrt.accel.volumes import fit
-from clrt.config import (ACCELS, BUILDERS, DEFAULT_ACCEL, DEFAULT_BUILDER, DEFAULT_LEAF_SIZE, HOST_BUILDERS,
-                         MAX_LEAF_SIZE)
+from clrt.config import (ACCELS, BUILDERS, DEFAULT_ACCEL, DEFAULT_LEAF_SIZE, HOST_BUILDERS,
+                         HOST_DEFAULT_BUILDER, MAX_LEAF_SIZE)
 from clrt.errors import InputError
 
 
-def build(triangles, accel: str = DEFAULT_ACCEL, builder: str = DEFAULT_BUILDER,
+def build(triangles, accel: str = DEFAULT_ACCEL, builder: str = HOST_DEFAULT_BUILDER,
           leaf_size: int = DEFAULT_LEAF_SIZE) -> Acceleration:
     """Build the acceleration structure over triangles.
 

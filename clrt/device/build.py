@@ -50,9 +50,10 @@ from clrt.accel import Acceleration, as_triangles, check_options, volumes
 from clrt.accel import build as build_on_host
 from clrt.accel.rows import child_refs
 from clrt.accel.topdown import C_INTERSECT, C_TRAVERSAL, surface_area
-from clrt.config import VOLUME_DEFINES, VOLUMES
+from clrt.config import HOST_BUILDERS, HOST_DEFAULT_BUILDER, VOLUME_DEFINES, VOLUMES
+from clrt.device.context import format_bytes, is_out_of_memory
 from clrt.device.program import build_program, typed_kernel
-from clrt.errors import DeviceError, InputError
+from clrt.errors import DeviceError, DeviceMemoryError, InputError
 
 BUILD_GROUP = 256        # work-items per work-group of every build kernel
 RADIX_BITS = 4           # digit of one radix-sort pass: 16 bins, 8 passes for 30-bit codes
@@ -389,23 +390,41 @@ def _ploc(queue, k, launch, F, clusters, merged, tile_kept, nodes, state, leaf_s
     return seen if F > 1 else 0
 
 
+# Device scratch of a build, per triangle: nodes, clusters, keys, sort buffers,
+# pair tables (measured from the workspace's buffers; docs/benchmarks.md).
+SCRATCH_BYTES_PER_TRIANGLE = 290
+
+
 def build_acceleration(corners: np.ndarray, accel: str, builder: str, leaf_size: int,
                        device: str | None = None) -> Acceleration:
     """The acceleration structure over ``corners`` (F, 3, 3): clrt.accel.build for
     the host builders, for ``builder="device"`` a build on ``device`` (clrt's
-    device choice, as the renderer and queries use it).
+    device choice, as the renderer and queries use it), and for "auto" the
+    device builder where the device has float64, else the host SAH builder
+    (clrt.config.DEFAULT_BUILDER says why).
 
     The device build is read back into an :class:`Acceleration` for now, and
     uploaded again by DeviceGeometry like a host build (a second copy while the
     build's buffers live); the traversal could take DeviceBvh's buffers as
     they are.
     """
-    if builder != "device" or accel == "none":
-        return build_on_host(corners, accel, "sah" if builder == "device" else builder, leaf_size)
     from clrt.device.context import create_context
+    if builder == "auto" and accel != "none":
+        builder = "device" if "cl_khr_fp64" in create_context(device)[1].device.extensions else HOST_DEFAULT_BUILDER
+    if builder not in ("device", "auto") or accel == "none":
+        return build_on_host(corners, accel, builder if builder in HOST_BUILDERS else HOST_DEFAULT_BUILDER,
+                             leaf_size)
     start = time.perf_counter()
     context, queue = create_context(device)
-    bvh = build_on_device(context, queue, corners, volume=accel, leaf_size=leaf_size, keep_boxes=True)
+    try:
+        bvh = build_on_device(context, queue, corners, volume=accel, leaf_size=leaf_size, keep_boxes=True)
+    except (cl.Error, MemoryError) as exc:
+        if not is_out_of_memory(exc):
+            raise
+        raise DeviceMemoryError(
+            f"out of device memory building the BVH of {len(corners):,} triangles on "
+            f"{queue.device.name.strip()}: it needs about {format_bytes(SCRATCH_BYTES_PER_TRIANGLE * len(corners))} "
+            "of scratch memory; use --builder sah (built on the host)") from None
     rows, prim_ids = bvh.read_back()
     summary = bvh.stats()
     bvh.release()

@@ -340,6 +340,27 @@ def create_context(spec: str | None = None) -> tuple[cl.Context, cl.CommandQueue
     return _CONTEXTS[key]
 
 
+# OpenCL status codes that mean "not enough memory" (on the device or the host).
+_OUT_OF_MEMORY_CODES = {cl.status_code.MEM_OBJECT_ALLOCATION_FAILURE, cl.status_code.OUT_OF_RESOURCES,
+                        cl.status_code.OUT_OF_HOST_MEMORY, cl.status_code.INVALID_BUFFER_SIZE}
+
+
+def is_out_of_memory(exc: BaseException) -> bool:
+    if isinstance(exc, MemoryError):
+        return True
+    try:
+        return isinstance(exc, cl.Error) and exc.code in _OUT_OF_MEMORY_CODES
+    except Exception:   # noqa: BLE001 -- an Error made without a status code
+        return False
+
+
+def error_name(exc: BaseException) -> str:
+    try:
+        return cl.status_code.to_string(exc.code)
+    except Exception:   # noqa: BLE001
+        return type(exc).__name__
+
+
 # --------------------------------------------------------------------------- reporting
 
 def _short_version(version: str) -> str:

@@ -27,14 +27,14 @@ from clrt import checks, config
 from clrt.config import DEFAULT_ACCEL, DEFAULT_BUILDER, DEFAULT_LEAF_SIZE
 from clrt.device.args import CAMERA_ARG_TYPES, camera_args, vec4
 from clrt.device.build import build_acceleration
-from clrt.device.context import create_context, device_label
+from clrt.device.context import create_context, device_label, error_name, is_out_of_memory
 from clrt.device.context import format_bytes as _size
 from clrt.device.geometry import DeviceGeometry, check_fits
 from clrt.device.pinned import PinnedPool
 from clrt.device.program import build_program, typed_kernel
 from clrt.errors import DeviceMemoryError, TooLargeError
 from clrt.layouts import HIT, RAY
-from clrt.renderer.tiles import TileLimits, error_name, is_out_of_memory, run_tiles
+from clrt.renderer.tiles import TileLimits, run_tiles
 from clrt.scene.arrays import flatten_scene, light_records
 from clrt.scene.scene import Camera, Scene, default_light, ray_epsilon
 from clrt.scene.sources import as_scene

@@ -15,6 +15,8 @@ from typing import Callable
 
 import pyopencl as cl
 
+from clrt.device.context import is_out_of_memory
+
 
 @dataclass(frozen=True)
 class TileLimits:
@@ -25,27 +27,6 @@ class TileLimits:
     max_tile_pixels: int | None = None       # cap on the pixels of a tile (None: from device memory)
     min_tile_pixels: int = 256               # a failed allocation below this is reported, not retried
     block: tuple[int, int] | None = (16, 8)  # pixels of a work-group (None: the driver's choice)
-
-
-# OpenCL status codes that mean "not enough memory" (on the device or the host).
-_OUT_OF_MEMORY_CODES = {cl.status_code.MEM_OBJECT_ALLOCATION_FAILURE, cl.status_code.OUT_OF_RESOURCES,
-                        cl.status_code.OUT_OF_HOST_MEMORY, cl.status_code.INVALID_BUFFER_SIZE}
-
-
-def is_out_of_memory(exc: BaseException) -> bool:
-    if isinstance(exc, MemoryError):
-        return True
-    try:
-        return isinstance(exc, cl.Error) and exc.code in _OUT_OF_MEMORY_CODES
-    except Exception:   # noqa: BLE001 -- an Error made without a status code
-        return False
-
-
-def error_name(exc: BaseException) -> str:
-    try:
-        return cl.status_code.to_string(exc.code)
-    except Exception:   # noqa: BLE001
-        return type(exc).__name__
 
 
 def tile_shape(x: int, y: int, width: int, height: int, budget: int, block_rows: int) -> tuple[int, int]:
