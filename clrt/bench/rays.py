@@ -209,6 +209,34 @@ def throughput(mesh_path, sizes, device=None, repeat: int = 5, seed: int = 0, ou
                 hits = f"{int((prim >= 0).sum()):,}" + ("" if np.array_equal(prim, expected) else " DIFFERENT")
             print(f"| {n:,} | {label} | {wall:.2f} | {kernel:.3f} | {100 * (1 - kernel / wall):.0f} % "
                   f"| {n / wall / 1e3:,.0f} | {hits} |", file=out, flush=True)
+        _embree_row(mesh, o, d, expected, repeat, out)
+
+
+def _embree_row(mesh, o, d, prim, repeat: int, out) -> None:
+    """The same rays through Embree on the CPU (trimesh's embreex intersector),
+    first hit and any hit, when embreex is installed; agreement with clrt's hits."""
+    try:
+        import trimesh
+        from trimesh.ray.ray_pyembree import RayMeshIntersector
+    except ImportError:
+        print("| - | Embree (embreex) | not run: `pip install embreex` | | | | |", file=out)
+        return
+    tm = trimesh.Trimesh(mesh.vertices.astype(np.float64), mesh.faces, process=False)
+    embree = RayMeshIntersector(tm)
+    n = len(o)
+    for label, call in (("Embree first hit, numpy", lambda: embree.intersects_first(o, d)),
+                        ("Embree any hit, numpy", lambda: embree.intersects_any(o, d))):
+        call()
+        walls = []
+        for _ in range(repeat):
+            start = time.perf_counter()
+            result = call()
+            walls.append(1e3 * (time.perf_counter() - start))
+        wall = statistics.median(walls)
+        hit = np.asarray(result) >= 0 if result.dtype != bool else np.asarray(result)
+        same = float(np.mean(hit == (prim >= 0))) if prim is not None else float("nan")
+        print(f"| {n:,} | {label} | {wall:.2f} | - | CPU | {n / wall / 1e3:,.0f} "
+              f"| {int(hit.sum()):,} ({100 * same:.2f} % of rays agree on hit or miss) |", file=out, flush=True)
 
 
 def main(argv=None) -> int:
