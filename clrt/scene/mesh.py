@@ -2,9 +2,9 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
-
 import math
+from dataclasses import dataclass, replace
+from functools import cached_property
 
 import numpy as np
 
@@ -115,8 +115,16 @@ class Mesh:
     @property
     def bounds(self) -> np.ndarray:
         """(2, 3) float64: min and max corner of the vertices used by faces."""
-        used = self.vertices[self.faces.reshape(-1)].astype(np.float64)
-        return np.stack([used.min(axis=0), used.max(axis=0)])
+        return self._bounds.copy()
+
+    @cached_property
+    def _bounds(self) -> np.ndarray:
+        # Computed once: scenes, cameras and lights ask for the bounds again and
+        # again (a mesh is not changed after it is made).
+        used = np.zeros(len(self.vertices), bool)
+        used[self.faces.reshape(-1)] = True
+        v = self.vertices[used].astype(np.float64)
+        return np.stack([v.min(axis=0), v.max(axis=0)])
 
     def face_normals(self) -> np.ndarray:
         """(F, 3) float64 unit geometric normals (zero for zero-area triangles)."""
