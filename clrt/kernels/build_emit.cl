@@ -1,7 +1,7 @@
 // The last steps of the device builder: from the PLOC tree (BuildNode, with
 // the SAH's leaf decisions) to the layout the traversal walks -- BvhPairNode
 // rows in depth-first order, the root at row 0, left subtree before right
-// (as geometry.pair_nodes makes them from host trees) -- and the triangles in
+// (as clrt/accel/rows.py makes them from host trees) -- and the triangles in
 // leaf-slot order.
 //
 // A node's row and first slot are sums along its path from the root: going

@@ -40,7 +40,7 @@
 #error "build with -DPLOC_RADIUS=<clusters searched on each side>"
 #endif
 #if !defined(C_TRAVERSAL) || !defined(C_INTERSECT)
-#error "build with the SAH constants C_TRAVERSAL and C_INTERSECT of clrt/accel/bvh.py"
+#error "build with the SAH constants C_TRAVERSAL and C_INTERSECT of clrt/accel/topdown.py"
 #endif
 
 #define TILE_SPAN (BUILD_GROUP + 4 * PLOC_RADIUS)     // clusters a tile loads
