@@ -6,7 +6,7 @@ Every open node evaluates, on each axis, the surface area heuristic
     cost(split) = C_TRAVERSAL + C_INTERSECT * (A(L) N(L) + A(R) N(R)) / A(node)
     cost(leaf)  = C_INTERSECT * N
 
-(boxes, whatever the final volume shape; constants in ``bvh.py``) at candidate
+(boxes, whatever the final volume shape; constants in ``topdown.py``) at candidate
 planes between the triangles' *box centres* (the centre of each triangle's
 bounding box, as in Wald's paper: it places planes better than the mean of the
 corners, and comes free with the boxes):

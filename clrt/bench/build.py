@@ -14,7 +14,7 @@ on the OpenCL device, clrt.device.build), one table row:
   host builders the build, the pair rows, the triangle gather and the upload;
 * ``device ms``: the device builder's kernels and copies (profiling events),
   and its phases;
-* the tree: SAH cost (bvh.py's formula), depth, bytes on the device;
+* the tree: SAH cost (Acceleration.stats' formula), depth, bytes on the device;
 * ``trace ms``: median kernel time of one closest-hit primary ray per pixel
   at 1920x1080 (``trace_camera``, timed with clrt.bench.speed.time_launches),
   on the fixed cameras of clrt.bench.speed for its meshes, and a framing

@@ -79,7 +79,7 @@ _KERNELS = ("init_build_state", "centroid_bounds", "morton_codes", "radix_histog
 
 def build_defines(volume: str) -> dict:
     """Program defines: the shape, the work-group and state layout, and the
-    constants of bvh.py and volumes.py (one source of truth: repr() of a float
+    constants of topdown.py and volumes.py (one source of truth: repr() of a float
     is a C double literal of the same value)."""
     return {
         VOLUME_DEFINES[volume]: None, "BUILD_GROUP": BUILD_GROUP, "RADIX_BITS": RADIX_BITS,
@@ -172,7 +172,7 @@ def tree_stats(exact_rows: np.ndarray, depth: int) -> dict:
     """Bvh.stats()'s tree numbers from BVH_PAIR_NODE rows that hold exact boxes
     (box layout): nodes, leaves, depth, leaf sizes and the SAH cost -- inner
     nodes' areas plus leaves' areas times their counts, over the root's area
-    (constants of bvh.py)."""
+    (constants of topdown.py)."""
     refs = child_refs(exact_rows)
     counts = refs[:, [1, 3]].reshape(-1)
     present = counts >= 0

@@ -3,7 +3,7 @@
 // BvhPairNode rows, slot-ordered triangles and slot -> triangle ids.  The
 // host driver, and the order of the launches, is clrt/device/build.py.
 // Build-time choices arrive as -D defines: BUILD_GROUP, RADIX_BITS,
-// PLOC_RADIUS, the state offsets, the SAH constants of clrt/accel/bvh.py, the
+// PLOC_RADIUS, the state offsets, the SAH constants of clrt/accel/topdown.py, the
 // padding constants of clrt/accel/volumes.py and the volume shape (VOLUME_*).
 #include "layouts.h"
 #include "build_state.cl"

@@ -47,7 +47,7 @@
 #define SEARCHED (BUILD_GROUP + 2 * PLOC_RADIUS)      // clusters whose neighbour it finds
 #define PAIR_ROWS (BUILD_GROUP + 3 * PLOC_RADIUS)     // first places of the pairs those need
 
-// Half the surface area of a box, as bvh.py's surface_area (only ratios matter).
+// Half the surface area of a box, as topdown.py's surface_area (only ratios matter).
 inline float half_area(float3 lo, float3 hi)
 {
     const float3 d = hi - lo;
