@@ -319,6 +319,11 @@ def test_trace_and_occluded_on_dask_arrays_equal_clrt(client, device):
     for name, a, b in zip(want._fields, got, want):
         assert a.shape == b.shape and a.dtype == b.dtype, name
         assert np.array_equal(a, b), name
+    some = clrt.batch.trace(mesh, o, d, tmax=3.0, client=client, device=device, fields=("prim", "t"))
+    assert some.u is None and some.normal is None and some.hit is None
+    t, prim = dask.compute(some.t, some.prim)
+    want = clrt.trace(mesh, origins, directions, tmax=3.0, device=device)
+    assert np.array_equal(t, want.t) and np.array_equal(prim, want.prim)
     blocked = clrt.batch.occluded(mesh, o, d, tmax=3.0, client=client, device=device)
     assert isinstance(blocked, da.Array)
     assert np.array_equal(blocked.compute(), clrt.occluded(mesh, origins, directions, tmax=3.0, device=device))

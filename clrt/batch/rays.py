@@ -15,17 +15,19 @@ from __future__ import annotations
 
 import numpy as np
 
-from clrt.batch.worker import HITS, trace_chunk
+from clrt.batch.worker import hit_records, trace_chunk
 from clrt.config import BATCH_RAY_CHUNK, DEFAULT_ACCEL, DEFAULT_BUILDER, DEFAULT_LEAF_SIZE
 from clrt.errors import InputError
+from clrt.query.accel import check_fields
 from clrt.query.results import Hits
 from clrt.scene.sources import as_mesh
 
 def trace(mesh, origins, directions, *, tmin=0.0, tmax=np.inf, cull: str = "none",
           accel: str = DEFAULT_ACCEL, builder: str = DEFAULT_BUILDER, leaf_size: int = DEFAULT_LEAF_SIZE,
-          device: str | None = None, chunk_rays: int | None = None, client=None) -> Hits:
+          device: str | None = None, chunk_rays: int | None = None, client=None, fields=None) -> Hits:
     """Closest hits of dask (or numpy) arrays of rays: a :class:`clrt.Hits` whose
-    fields are dask arrays chunked as ``origins``.
+    fields are dask arrays chunked as ``origins`` -- only ``fields`` (e.g.
+    ``("t", "prim")``) when given, the others None: less to compute, pack and move.
 
     ``origins``, ``directions``: (N, 3); ``tmin``, ``tmax``: scalars or (N,)
     arrays.  ``client``: a ``distributed.Client`` to send the mesh to every
@@ -33,17 +35,18 @@ def trace(mesh, origins, directions, *, tmin=0.0, tmax=np.inf, cull: str = "none
     each worker's own device (clrt.batch.worker).  Nothing runs until computed;
     compute the fields together (``dask.compute(*hits)``) to trace once.
     """
+    dtype = hit_records(None if fields is None else check_fields(fields))
     records = _query("trace", mesh, origins, directions, tmin, tmax, cull, accel, builder, leaf_size,
-                     device, chunk_rays, client)
-    fields = {}
-    for name in HITS.names:
-        shape = HITS.fields[name][0].shape
+                     device, chunk_rays, client, dtype.names if fields is not None else None)
+    arrays = {}
+    for name in dtype.names:
+        shape = dtype.fields[name][0].shape
         if shape:
-            fields[name] = records.map_blocks(_field, name, dtype=HITS.fields[name][0].base, new_axis=1,
+            arrays[name] = records.map_blocks(_field, name, dtype=dtype.fields[name][0].base, new_axis=1,
                                               chunks=(records.chunks[0], shape))
         else:
-            fields[name] = records.map_blocks(_field, name, dtype=HITS.fields[name][0])
-    return Hits(**fields)
+            arrays[name] = records.map_blocks(_field, name, dtype=dtype.fields[name][0])
+    return Hits(**{name: arrays.get(name) for name in Hits._fields})
 
 
 def occluded(mesh, origins, directions, *, tmin=0.0, tmax=np.inf, cull: str = "none",
@@ -59,7 +62,7 @@ def _field(records, name):
 
 
 def _query(query, mesh, origins, directions, tmin, tmax, cull, accel, builder, leaf_size, device,
-           chunk_rays, client):
+           chunk_rays, client, fields=None):
     import dask
     import dask.array as da
     from dask.base import tokenize
@@ -86,12 +89,13 @@ def _query(query, mesh, origins, directions, tmin, tmax, cull, accel, builder, l
         shipped = client.scatter(mesh, broadcast=True, hash=False)
     else:
         shipped = dask.delayed(mesh, pure=True, traverse=False)
-    dtype = np.dtype(bool) if query == "occluded" else HITS
+    dtype = np.dtype(bool) if query == "occluded" else hit_records(fields)
     limits = [a for x in (tmin, tmax) for a in ((x, "i") if isinstance(x, da.Array) else (x, None))]
-    name = f"clrt-{query}-{tokenize(origins, directions, tmin, tmax, token, options, device, cull)}"
+    name = f"clrt-{query}-{tokenize(origins, directions, tmin, tmax, token, options, device, cull, fields)}"
     # One task per chunk of rays ("i"), each with whole rows of both arrays ("ij" -> "i").
     return da.blockwise(trace_chunk, "i", origins, "ij", directions, "ij", *limits, concatenate=True,
                         mesh=shipped, mesh_token=token, options=options, device=device, cull=cull, query=query,
+                        fields=fields,
                         dtype=dtype, meta=np.empty((0,), dtype), name=name)
 
 

@@ -295,16 +295,24 @@ def _accel(mesh, token: str, options: dict, device: str | None):
     return _cached(_STATE.accels, key, make)
 
 
-def trace_chunk(origins, directions, tmin, tmax, *, mesh, mesh_token, options, device, cull, query):
+def hit_records(fields) -> np.dtype:
+    """The record dtype of a chunk's closest hits: HITS with only ``fields``."""
+    return HITS if fields is None else np.dtype([(name, HITS.fields[name][0]) for name in HITS.names
+                                                 if name in fields])
+
+
+def trace_chunk(origins, directions, tmin, tmax, *, mesh, mesh_token, options, device, cull, query,
+                fields=None):
     """One chunk of rays against ``mesh`` on this worker's device: a structured
-    array (clrt.batch.rays.HITS) for "trace", an (n,) bool array for "occluded"."""
+    array (``hit_records(fields)``) for "trace", an (n,) bool array for "occluded"."""
     with device_lock():
         accel = _accel(mesh, mesh_token, options, device)
         if query == "occluded":
             return accel.any_hit(origins, directions, tmin=_row(tmin), tmax=_row(tmax), cull=cull)
-        hits = accel.trace(origins, directions, tmin=_row(tmin), tmax=_row(tmax), cull=cull)
-    out = np.empty(len(hits.t), HITS)
-    for name in HITS.names:
+        hits = accel.trace(origins, directions, tmin=_row(tmin), tmax=_row(tmax), cull=cull, fields=fields)
+    dtype = hit_records(fields)
+    out = np.empty(len(origins), dtype)
+    for name in dtype.names:
         out[name] = getattr(hits, name)
     return out
 

@@ -112,10 +112,11 @@ def _trace_rays(client, source, n: int, chunk: int) -> tuple[float, int]:
     mesh = as_mesh(source)
     lo, hi = mesh.bounds
     rng = da.random.default_rng(0)
-    origins = (lo + rng.random((n, 3), chunks=(chunk, 3), dtype=np.float32) * (hi - lo)).astype(np.float32)
+    origins = lo.astype(np.float32) + rng.random((n, 3), chunks=(chunk, 3), dtype=np.float32) * (hi - lo).astype(
+        np.float32)
     directions = rng.standard_normal((n, 3), chunks=(chunk, 3), dtype=np.float32)
     start = time.perf_counter()
-    hits = trace(mesh, origins, directions, client=client)
+    hits = trace(mesh, origins, directions, client=client, fields=("prim",))
     hit = int(client.compute((hits.prim >= 0).sum()).result())
     return time.perf_counter() - start, hit
 

@@ -69,7 +69,7 @@ _ZERO = np.zeros(1, np.float32)
 _INFINITY = np.full(1, np.inf, np.float32)
 
 
-def _check_fields(fields) -> list:
+def check_fields(fields) -> list:
     """The closest-hit fields asked for (default: all), in kernel order."""
     if fields is None:
         return list(CLOSEST_FIELDS)
@@ -307,7 +307,7 @@ class Accel:
     def _closest(self, source, cull: str, fields=None) -> Hits:
         """Closest hits of every ray of ``source``, the ``fields`` asked for (all by
         default; the others None)."""
-        fields = _check_fields(fields)
+        fields = check_fields(fields)
         code = cull_code(cull)
         n = len(source)
         on_device = getattr(source, "on_device", False)
