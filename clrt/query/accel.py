@@ -200,7 +200,8 @@ class Accel:
     def _lane(self, k: int) -> cl.CommandQueue:
         """Queue ``k`` (0 or 1) of the pipeline: successive chunks of a batch go to
         alternate queues, so that one chunk's upload overlaps the other's kernel
-        and read back.  Each lane has its own chunk buffers (names end in k)."""
+        and read back.  Each lane has its own chunk buffers (lane 1's names end
+        in "_")."""
         while len(self._queues) <= k:
             self._queues.append(cl.CommandQueue(self.context, self.queue.device,
                                                 properties=cl.command_queue_properties.PROFILING_ENABLE))
