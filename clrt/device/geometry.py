@@ -12,9 +12,10 @@ import numpy as np
 import pyopencl as cl
 
 from clrt.accel import Acceleration
+from clrt.accel.rows import child_refs
 from clrt.config import MAX_PARTS, VOLUME_DEFINES, stack_size
 from clrt.device.context import format_bytes
-from clrt.errors import DeviceMemoryError
+from clrt.errors import DeviceMemoryError, InputError
 from clrt.scene.arrays import triangle_verts
 
 
@@ -77,6 +78,7 @@ class DeviceGeometry:
             self.buffers[name] = tuple(parts + parts[-1:] * (MAX_PARTS - len(parts)))
         self.num_tris = np.uint32(len(prim_ids))
         self.nbytes = sum(a.nbytes for a in arrays.values())
+        self._refit = None   # made by the first refit
 
     @property
     def arg_types(self) -> list:
@@ -93,6 +95,39 @@ class DeviceGeometry:
         """Kernel arguments matching GEOMETRY_PARAMS in geometry.cl."""
         b = self.buffers
         return (*b["tris"], self.num_tris, *b["nodes"], *b["prim_ids"])
+
+    def refit(self, queue: cl.CommandQueue, corners: np.ndarray) -> None:
+        """Move the triangles to ``corners`` (F, 3, 3) float32, input order, the same
+        triangles as before, and refit the BVH to them on the device: the tree
+        and the slots stay, every volume is fitted anew to its subtree's exact
+        box as a build fits it (refit.cl).  The host copy of the rows follows;
+        the statistics keep describing the tree as it was built."""
+        acceleration = self.acceleration
+        if self.shifts is not None:
+            raise InputError("refit of a scene whose buffers are split into parts is not supported: "
+                             "build it anew")
+        if len(corners) != len(acceleration.prim_ids):
+            raise InputError(f"refit needs the same {len(acceleration.prim_ids):,} triangles, got {len(corners):,}")
+        cl.enqueue_copy(queue, self.buffers["tris"][0], triangle_verts(corners[acceleration.prim_ids]))
+        if not acceleration.is_bvh:
+            return
+        if self._refit is None:
+            self._refit = _RefitPlan(queue.context, acceleration)
+        self._refit.run(queue, self.buffers["nodes"][0], self.buffers["tris"][0])
+        cl.enqueue_copy(queue, acceleration.rows, self.buffers["nodes"][0])
+
+    def replace(self, queue: cl.CommandQueue, name: str, array: np.ndarray) -> None:
+        """Upload ``array`` as the extra buffer ``name`` anew (a scene not split into
+        parts): in place when its size is unchanged, else in a new buffer."""
+        array = np.ascontiguousarray(array)
+        (old,) = self.buffers[name]
+        if old.size == max(array.nbytes, 1):
+            cl.enqueue_copy(queue, old, array)
+            return
+        queue.finish()   # no launch may still read the old buffer
+        self.buffers[name] = (cl.Buffer(queue.context, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR,
+                                        hostbuf=array),)
+        old.release()
 
     def parts(self) -> int:
         """Buffers of the largest split array (1: nothing split)."""
@@ -120,3 +155,43 @@ def part_shifts(arrays: dict, limit: int) -> dict | None:
                 f"most {format_bytes(limit)} (the device's largest allocation) can hold")
         shifts[name] = shift
     return shifts
+
+
+class _RefitPlan:
+    """What a refit of one tree needs, made once: the program, the rows of every
+    tree level (the order of refit_level's launches), scratch buffers."""
+
+    def __init__(self, context: cl.Context, acceleration: Acceleration):
+        from clrt.device.build import build_defines   # the fit's constants, as the device builder's
+        from clrt.device.program import build_program, typed_kernel
+        program = build_program(context, "refit.cl", build_defines(acceleration.accel))
+        u32 = np.uint32
+        self.kernels = {name: typed_kernel(program, name, types) for name, types in {
+            "refit_leaves": [None, u32, None, None, None], "refit_level": [None, None, u32, None, None],
+            "refit_fit": [None, u32, None, None]}.items()}
+        refs = child_refs(acceleration.rows)
+        self.levels, current = [], np.zeros(1, np.int32)
+        while len(current):   # a row's inner children are one level deeper
+            self.levels.append(cl.Buffer(context, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR,
+                                         hostbuf=np.ascontiguousarray(current, np.int32)))
+            r = refs[current]
+            current = np.concatenate([r[r[:, 1] == 0, 0], r[r[:, 3] == 0, 2]]).astype(np.int32)
+        self.level_sizes = [b.size // 4 for b in self.levels]
+        self.num_rows = len(acceleration.rows)
+        mf = cl.mem_flags
+        self.rows = cl.Buffer(context, mf.READ_WRITE, acceleration.rows.nbytes)
+        self.box_lo = cl.Buffer(context, mf.READ_WRITE, 2 * 16 * self.num_rows)
+        self.box_hi = cl.Buffer(context, mf.READ_WRITE, 2 * 16 * self.num_rows)
+
+    def run(self, queue: cl.CommandQueue, rows: cl.Buffer, tris: cl.Buffer) -> None:
+        """Refit ``rows`` (the uploaded BVH) to ``tris`` (the uploaded, moved triangles)."""
+        k, n = self.kernels, self.num_rows
+        cl.enqueue_copy(queue, self.rows, rows)   # the uploaded rows are read-only to kernels
+        k["refit_leaves"].set_args(self.rows, n, tris, self.box_lo, self.box_hi)
+        cl.enqueue_nd_range_kernel(queue, k["refit_leaves"], (n,), None)
+        for level, size in zip(reversed(self.levels), reversed(self.level_sizes)):
+            k["refit_level"].set_args(self.rows, level, size, self.box_lo, self.box_hi)
+            cl.enqueue_nd_range_kernel(queue, k["refit_level"], (size,), None)
+        k["refit_fit"].set_args(self.rows, n, self.box_lo, self.box_hi)
+        cl.enqueue_nd_range_kernel(queue, k["refit_fit"], (n,), None)
+        cl.enqueue_copy(queue, rows, self.rows)

@@ -46,7 +46,9 @@ from clrt.errors import InputError
 from clrt.config import RAY_CHECKS
 from clrt.query.rays import CameraRays, PinholeRays, RayBatch, cull_code, is_device_array
 from clrt.query.results import AllHits, CameraImages, Hits
+from clrt.accel import as_triangles
 from clrt.scene.arrays import triangle_corners
+from clrt.scene.mesh import Mesh
 from clrt.scene.sources import as_mesh
 
 DEFAULT_CHUNK_RAYS = 1 << 20        # rays per launch: ~50 MB of device buffers
@@ -110,7 +112,28 @@ class Accel:
         context, queue = create_context(device)
         check_fits(queue.device, device_label(queue.device), built.device_bytes())   # before any upload
         geometry = DeviceGeometry(context, corners, built, max_buffer_bytes=max_buffer_bytes)
+        self._options = dict(accel=accel, builder=builder, leaf_size=leaf_size, device=device,
+                             chunk_rays=chunk_rays, max_buffer_bytes=max_buffer_bytes)
         self._setup(self.mesh, context, queue, geometry, chunk_rays)
+
+    def refit(self, vertices, *, rebuild: bool = False) -> None:
+        """Move the mesh's vertices to ``vertices`` ((V, 3), the same count; the faces
+        stay) and refit the BVH to them on the device: the tree is kept and
+        every volume fitted anew, so queries stay exact (a refitted tree finds
+        the hits of brute force) and only get slower as the motion tangles the
+        tree -- ``rebuild=True`` builds a new one instead."""
+        faces = self.mesh.faces
+        vertices = np.asarray(vertices)
+        if vertices.shape != self.mesh.vertices.shape:
+            raise InputError(f"refit needs vertices of shape {self.mesh.vertices.shape}, got {vertices.shape}")
+        if self._options is None:
+            raise InputError("these queries share a Renderer's scene: use Renderer.refit")
+        mesh = Mesh.from_arrays(vertices, faces, self.mesh.name)
+        if rebuild or self.geometry.shifts is not None:
+            self.__dict__.update(Accel(mesh, **self._options).__dict__)
+            return
+        self.geometry.refit(self.queue, as_triangles(triangle_corners(mesh)))
+        self.mesh = mesh
 
     @classmethod
     def from_renderer(cls, renderer, chunk_rays: int | None = None) -> "Accel":
@@ -119,6 +142,7 @@ class Accel:
         (as ``Frame.prim``)."""
         self = cls.__new__(cls)
         self.mesh = as_mesh(renderer.scene)
+        self._options = None   # the renderer's scene: refit the renderer instead
         self._setup(self.mesh, renderer.context, renderer.queue, renderer.geometry, chunk_rays)
         return self
 

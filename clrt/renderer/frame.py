@@ -32,7 +32,7 @@ from clrt.device.context import format_bytes as _size
 from clrt.device.geometry import DeviceGeometry, check_fits
 from clrt.device.pinned import PinnedPool
 from clrt.device.program import build_program, typed_kernel
-from clrt.errors import DeviceMemoryError, TooLargeError
+from clrt.errors import DeviceMemoryError, InputError, TooLargeError
 from clrt.layouts import HIT, RAY
 from clrt.renderer.tiles import TileLimits, run_tiles
 from clrt.scene.arrays import flatten_scene, light_records
@@ -84,6 +84,8 @@ class Renderer:
         device = checks.device(device)
         accel, builder, leaf_size = checks.accel_options(accel, builder, leaf_size)
         self.limits = limits or TileLimits()
+        self._options = dict(device=device, accel=accel, builder=builder, leaf_size=leaf_size,
+                             max_buffer_bytes=max_buffer_bytes)   # for a rebuild (refit)
         self.timings: dict[str, float] = {}
         with _stage(self.timings, "initialisation"):
             self.scene = as_scene(scene)   # or a mesh, a mesh or scene file: what clrt.render takes
@@ -207,6 +209,37 @@ class Renderer:
         return camera_args(camera), (
             *self._scene_args, self.buffers["lights"], len(self.scene.lights), vec4(self.scene.ambient_light),
             vec4(self.scene.background), ray_epsilon(self.arrays.bounds, camera.eye), *detail)
+
+    def refit(self, scene, *, rebuild: bool = False) -> None:
+        """Show ``scene``: the same objects with the same triangles as this renderer's
+        scene, their vertices moved (animation, deformation).  The BVH is refitted
+        on the device (the tree kept, every volume fitted anew: the image stays
+        exact) and the triangles and vertex normals uploaded again; materials,
+        lights and settings come from ``scene``'s objects as uploaded before.
+        ``rebuild=True`` builds a new BVH instead (a tree refitted through large
+        motions traces slower)."""
+        scene = as_scene(scene)
+        arrays = flatten_scene(scene)
+        # The same triangles of the same objects; their vertex normals may be
+        # split differently (the crease angle looks at the moved faces).
+        same = (arrays.corners.shape == self.arrays.corners.shape
+                and np.array_equal(arrays.tri_info["material"], self.arrays.tri_info["material"])
+                and len(arrays.materials) == len(self.arrays.materials))
+        if not same:
+            raise InputError("refit needs the scene's objects with the same triangles (only their vertices "
+                             "may move): make a new Renderer")
+        if rebuild or self.geometry.shifts is not None:
+            fresh = Renderer(scene, self._options["device"], self._options["accel"], self._options["builder"],
+                             self._options["leaf_size"], limits=self.limits,
+                             max_buffer_bytes=self._options["max_buffer_bytes"])
+            self.__dict__.update(fresh.__dict__)
+            return
+        self.geometry.refit(self.queue, arrays.corners)
+        self.geometry.replace(self.queue, "tri_info", arrays.tri_info[self.acceleration.prim_ids])
+        self.geometry.replace(self.queue, "vertex_normals", arrays.vertex_normals)
+        self._scene_args = (*self.geometry.args, *self.geometry.buffers["tri_info"],
+                            *self.geometry.buffers["vertex_normals"], self.buffers["materials"])
+        self.scene, self.arrays = scene, arrays
 
     def set_lights(self, lights) -> None:
         """Replace the scene's lights; the geometry stays uploaded (a turntable of
