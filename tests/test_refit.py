@@ -71,8 +71,7 @@ def test_renderer_refit_draws_the_moved_scene(builder, device):
     moved = Mesh.from_arrays(_deformed(mesh, 1.2), mesh.faces)
     renderer = Renderer(scene_from_mesh(mesh), device, builder=builder)
     camera = Camera.framing(moved.bounds, 48, 36)
-    scene = scene_from_mesh(moved)
-    scene.lights = renderer.scene.lights
+    scene = scene_from_mesh(moved, {"color": (0.9, 0.2, 0.1)})   # new material values and lights come too
     renderer.refit(scene)
     frame = renderer.render(camera, hits=True)
     reference = Renderer(scene, device, accel="none").render(camera, hits=True)

@@ -214,8 +214,8 @@ class Renderer:
         """Show ``scene``: the same objects with the same triangles as this renderer's
         scene, their vertices moved (animation, deformation).  The BVH is refitted
         on the device (the tree kept, every volume fitted anew: the image stays
-        exact) and the triangles and vertex normals uploaded again; materials,
-        lights and settings come from ``scene``'s objects as uploaded before.
+        exact) and the triangles, vertex normals, materials and lights uploaded
+        again; the camera and settings are ``scene``'s too.
         ``rebuild=True`` builds a new BVH instead (a tree refitted through large
         motions traces slower)."""
         scene = as_scene(scene)
@@ -237,9 +237,11 @@ class Renderer:
         self.geometry.refit(self.queue, arrays.corners)
         self.geometry.replace(self.queue, "tri_info", arrays.tri_info[self.acceleration.prim_ids])
         self.geometry.replace(self.queue, "vertex_normals", arrays.vertex_normals)
+        cl.enqueue_copy(self.queue, self.buffers["materials"], arrays.materials)   # as many as before
         self._scene_args = (*self.geometry.args, *self.geometry.buffers["tri_info"],
                             *self.geometry.buffers["vertex_normals"], self.buffers["materials"])
         self.scene, self.arrays = scene, arrays
+        self.set_lights(scene.lights)
 
     def set_lights(self, lights) -> None:
         """Replace the scene's lights; the geometry stays uploaded (a turntable of
