@@ -15,6 +15,8 @@ on the OpenCL device, clrt.device.build), one table row:
 * ``device ms``: the device builder's kernels and copies (profiling events),
   and its phases;
 * the tree: SAH cost (Acceleration.stats' formula), depth, bytes on the device;
+* ``refit ms``: warm wall time of ``Accel.refit`` to the vertices moved by 1 %
+  (the triangles uploaded, the volumes refitted on the device);
 * ``trace ms``: median kernel time of one closest-hit primary ray per pixel
   at 1920x1080 (``trace_camera``, timed with clrt.bench.speed.time_launches),
   on the fixed cameras of clrt.bench.speed for its meshes, and a framing
@@ -88,14 +90,22 @@ def time_builds(context, queue, corners, volume, builder, leaf_size, repeat):
     return walls[0], statistics.median(walls[1:]) if repeat else walls[0], stats, timings
 
 
-def _trace_ms(mesh, camera, volume, builder, leaf_size, device) -> float:
+def _trace_ms(mesh, camera, volume, builder, leaf_size, device) -> tuple[float, float]:
+    """(primary-ray kernel ms, warm wall ms of Accel.refit to vertices moved by 1 %)."""
     from clrt import layouts
     from clrt.query import Accel
     accel = Accel(mesh, volume, builder, leaf_size, device)
     hits = cl.Buffer(accel.context, cl.mem_flags.READ_WRITE, camera.width * camera.height * layouts.HIT.itemsize)
     kernel_ms, _ = time_launches(accel.queue, lambda: accel.launch_camera(camera, hits), 10, 2)
     hits.release()
-    return kernel_ms
+    moved = mesh.vertices * np.float32(1.01)
+    walls = []
+    for _ in range(6):
+        start = time.perf_counter()
+        accel.refit(moved)
+        accel.queue.finish()
+        walls.append(1e3 * (time.perf_counter() - start))
+    return kernel_ms, statistics.median(walls[1:])
 
 
 def scenes(mesh_dir: Path, meshes, counts):
@@ -120,24 +130,26 @@ def run(mesh_dir, meshes, counts, builders, volume="box", leaf_size=4, device=No
     print(f"device: {device_label(queue.device)}; volume {volume}, leaf size {leaf_size}; build: first, "
           f"then median of {repeat}; trace: {SIZE[0]}x{SIZE[1]} primary rays, kernel ms\n", file=out)
     print("| scene | triangles | builder | build first ms | build warm ms | device ms | phases (device ms) "
-          "| SAH cost | SAH / sah | depth | device MiB | trace ms | Mrays/s |", file=out)
-    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|", file=out)
+          "| SAH cost | SAH / sah | depth | device MiB | trace ms | Mrays/s | refit ms |", file=out)
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|", file=out)
     for name, mesh, camera in scenes(mesh_dir, meshes, counts):
         corners = _corners(mesh)
         results = {}
         for builder in builders:
             first, warm, stats, timings = time_builds(context, queue, corners, volume, builder, leaf_size, repeat)
-            trace_ms = _trace_ms(mesh, camera, volume, builder, leaf_size, device) if trace else float("nan")
-            results[builder] = (first, warm, stats, timings, trace_ms)
+            trace_ms, refit_ms = (_trace_ms(mesh, camera, volume, builder, leaf_size, device) if trace
+                                  else (float("nan"), float("nan")))
+            results[builder] = (first, warm, stats, timings, trace_ms, refit_ms)
         sah_cost = results["sah"][2]["sah_cost"] if "sah" in results else None
-        for builder, (first, warm, stats, timings, trace_ms) in results.items():
+        for builder, (first, warm, stats, timings, trace_ms, refit_ms) in results.items():
             device_ms = "-" if timings is None else f"{timings['device']:.2f}"
             phases = "-" if timings is None else " / ".join(
                 f"{k} {v:.1f}" for k, v in timings.items() if k not in ("device", "wall"))
             ratio = f"{stats['sah_cost'] / sah_cost:.3f}" if sah_cost else "-"
             print(f"| {name} | {len(corners):,} | {builder} | {first:,.1f} | {warm:,.1f} | {device_ms} | {phases} "
                   f"| {stats['sah_cost']:.2f} | {ratio} | {stats['depth']} | {stats['device_bytes'] / 2**20:,.1f} "
-                  f"| {trace_ms:.3f} | {SIZE[0] * SIZE[1] / trace_ms / 1e3:,.0f} |", file=out, flush=True)
+                  f"| {trace_ms:.3f} | {SIZE[0] * SIZE[1] / trace_ms / 1e3:,.0f} | {refit_ms:.2f} |", file=out,
+                  flush=True)
 
 
 def main(argv=None) -> int:
