@@ -1,0 +1,325 @@
+"""Incoherent ray sets, seeded and shareable: ``python -m clrt.bench.raysets [MESH]``.
+
+Four sets of rays, each made reproducibly from a seed:
+
+* ``random`` -- the peers' incoherent benchmark: origins uniform in the mesh's
+  bounding box enlarged by 10 % (5 % each side), directions uniform on the sphere;
+* ``camera`` -- the pixel-centre rays of the reference camera (the speed cases'
+  camera for their meshes, else one framing the mesh), 1920x1080 by default;
+* ``diffuse`` -- cosine-weighted bounces from primary hits of that camera: hit
+  pixels drawn at random, kept in pixel order (as a wavefront renderer holds
+  them), leaving on the side the camera saw;
+* ``ao`` -- ambient-occlusion rays: 16 cosine-weighted rays per drawn hit point,
+  each at most ``AO_REACH`` (10 %) of the mesh's bounding-box diagonal long.
+
+Secondary rays start at the hit point (from the barycentrics, in float64) moved
+1e-5 of the diagonal off the surface, so they do not meet their own triangle.
+
+``--write DIR`` saves each set as ``<set>.f32``: plain little-endian float32,
+N rows of 6 (origin, unit direction), no header -- what other tracers can read
+to run exactly the same rays; ``--read FILE`` runs such files (``--tmax`` caps
+their rays, as the AO set's reach does).
+
+Per set and variant (``--accel`` x ``--builder``), the rays are put on the device
+once, then closest-hit and any-hit queries run from device arrays: ``kernel`` is
+the median of the launches' profiling times after a warm-up, ``wall`` the host
+clock around the call and its finish.  Hits and the sum of hit distances identify
+the result: the same file gives the same figures on every device and variant.
+``--embree`` adds Embree's figures for the same rays on the host CPU (wall
+clock, rays on the host): the yardstick for clrt on PoCL.
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from clrt.bench.common import exit_code, parse_count, parse_size
+from clrt.config import ACCELS, BUILDERS
+from clrt.errors import InputError
+
+RAY_SETS = ("random", "camera", "diffuse", "ao")
+AO_RAYS_PER_POINT = 16
+AO_REACH = 0.1          # of the bounding-box diagonal
+OFFSET = 1e-5           # of the diagonal: how far secondary rays start off the surface
+ROW = 6                 # float32 per ray in a ray file: ox oy oz dx dy dz
+
+
+def _diagonal(mesh) -> float:
+    lo, hi = np.asarray(mesh.bounds, np.float64)
+    return float(np.linalg.norm(hi - lo))
+
+
+def reference_camera(mesh, name: str | None = None, size=(1920, 1080)):
+    """The speed benchmark's camera for its meshes (matched by file stem), else a
+    camera framing the mesh; vertical fov 45 degrees, up +y."""
+    from clrt.bench.speed import CASES
+    from clrt.scene.scene import Camera
+    w, h = size
+    for file, eye, target in CASES.values():
+        if name is not None and Path(name).stem == Path(file).stem:
+            return Camera(eye, target, (0.0, 1.0, 0.0), 45.0, w, h)
+    return Camera.framing(mesh.bounds, w, h, 45.0, up=(0.0, 1.0, 0.0))
+
+
+def random_rays(mesh, count: int, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """Origins uniform in the bounding box enlarged by 10 %, directions uniform
+    on the sphere; (count, 3) float32 each."""
+    rng = np.random.default_rng(seed)
+    lo, hi = np.asarray(mesh.bounds, np.float64)
+    margin = 0.05 * (hi - lo)
+    o = (lo - margin) + rng.random((count, 3)) * (hi - lo + 2 * margin)
+    d = rng.normal(size=(count, 3))
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    return o.astype(np.float32), d.astype(np.float32)
+
+
+def _cosine_hemisphere(normals: np.ndarray, rng) -> np.ndarray:
+    """One cosine-weighted unit direction about each unit normal (float64)."""
+    n = len(normals)
+    r, phi = np.sqrt(rng.random(n)), 2 * np.pi * rng.random(n)
+    local = np.stack([r * np.cos(phi), r * np.sin(phi), np.sqrt(np.maximum(0.0, 1 - r * r))], axis=1)
+    # an orthonormal basis about each normal (Duff et al.'s branchless construction)
+    z = normals
+    sign = np.where(z[:, 2] >= 0, 1.0, -1.0)
+    a = -1.0 / (sign + z[:, 2])
+    b = z[:, 0] * z[:, 1] * a
+    x = np.stack([1 + sign * z[:, 0] ** 2 * a, sign * b, -sign * z[:, 0]], axis=1)
+    y = np.stack([b, sign + z[:, 1] ** 2 * a, -z[:, 1]], axis=1)
+    d = local[:, :1] * x + local[:, 1:2] * y + local[:, 2:] * z
+    return d / np.linalg.norm(d, axis=1, keepdims=True)
+
+
+def _primary_hits(accel, mesh, camera):
+    """Hit points (float64, from barycentrics) and the unit normals facing the
+    camera, of the camera's pixel-centre rays that hit; in pixel order."""
+    from clrt.reference import camera_rays
+    o, d = camera_rays(camera)
+    hits = accel.trace(o, d)
+    keep = np.nonzero(hits.hit)[0]
+    if len(keep) == 0:
+        raise InputError("the reference camera sees nothing of the mesh: no secondary rays to make")
+    v = np.asarray(mesh.vertices, np.float64)[np.asarray(mesh.faces)[hits.prim[keep]]]
+    u_, v_ = hits.u[keep, None].astype(np.float64), hits.v[keep, None].astype(np.float64)
+    points = v[:, 0] * (1 - u_ - v_) + v[:, 1] * u_ + v[:, 2] * v_
+    normal = np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0])
+    normal /= np.linalg.norm(normal, axis=1, keepdims=True)
+    facing = np.where((np.einsum("ij,ij->i", normal, d[keep]) > 0)[:, None], -normal, normal)
+    return points, facing
+
+
+def make_ray_set(kind: str, mesh, count: int, seed: int = 0, accel=None, camera=None):
+    """(origins, unit directions, tmax) of one set; ``accel`` (a clrt.Accel of
+    ``mesh``) finds the primary hits of the secondary sets."""
+    if kind == "random":
+        return (*random_rays(mesh, count, seed), np.inf)
+    if kind == "camera":
+        from clrt.reference import camera_rays
+        return (*camera_rays(camera), np.inf)
+    if kind not in ("diffuse", "ao"):
+        raise InputError(f"unknown ray set {kind!r} (use one of {', '.join(RAY_SETS)})")
+    rng = np.random.default_rng(seed)
+    points, facing = _primary_hits(accel, mesh, camera)
+    per_point = AO_RAYS_PER_POINT if kind == "ao" else 1
+    chosen = np.sort(rng.integers(0, len(points), -(-count // per_point)))
+    chosen = np.repeat(chosen, per_point)[:count]
+    normals = facing[chosen]
+    d = _cosine_hemisphere(normals, rng)
+    o = points[chosen] + OFFSET * _diagonal(mesh) * normals
+    tmax = AO_REACH * _diagonal(mesh) if kind == "ao" else np.inf
+    return o.astype(np.float32), d.astype(np.float32), tmax
+
+
+def write_rays(path, origins, directions) -> None:
+    """Save rays as plain little-endian float32, N x 6, through a temporary file
+    and a rename (never half written)."""
+    from clrt.bench.paper_meshes import atomic_write
+    rows = np.concatenate([np.asarray(origins, np.float32), np.asarray(directions, np.float32)], axis=1)
+    try:
+        atomic_write(path, rows.astype("<f4").tobytes())
+    except OSError as exc:
+        raise InputError(f"cannot write {path}: {exc.strerror or exc}") from None
+
+
+def read_rays(path) -> tuple[np.ndarray, np.ndarray]:
+    """Load a ray file (see :func:`write_rays`); (N, 3) float32 origins and unit
+    directions.  A file that is not one gets a one-line error."""
+    path = Path(path)
+    try:
+        data = np.fromfile(path, dtype="<f4")
+    except OSError as exc:
+        raise InputError(f"cannot read ray file {path}: {exc.strerror or exc}") from None
+    size = path.stat().st_size
+    if size == 0 or size % (4 * ROW):
+        raise InputError(f"{path}: not a ray file ({size} bytes; expected N rows of {ROW} float32, "
+                         f"a multiple of {4 * ROW} bytes)")
+    rows = data.reshape(-1, ROW).astype(np.float32)
+    bad = ~np.isfinite(rows).all(axis=1)
+    if bad.any():
+        raise InputError(f"{path}: ray {int(np.argmax(bad))} has a value that is not finite")
+    length = np.linalg.norm(rows[:, 3:].astype(np.float64), axis=1)
+    off = np.abs(length - 1) > 1e-3
+    if off.any():
+        i = int(np.argmax(off))
+        raise InputError(f"{path}: ray {i} has a direction of length {length[i]:.6g} (directions must be unit)")
+    return np.ascontiguousarray(rows[:, :3]), np.ascontiguousarray(rows[:, 3:])
+
+
+def _timed(accel, call, repeat: int, warmup: int):
+    """Median kernel ms and wall ms of ``call()`` and its last result."""
+    kernel, wall, result = [], [], None
+    for i in range(warmup + repeat):
+        accel.kernel_ms()
+        start = time.perf_counter()
+        result = call()
+        accel.queue.finish()
+        if i >= warmup:
+            wall.append(1e3 * (time.perf_counter() - start))
+            kernel.append(accel.kernel_ms())
+    return statistics.median(kernel), statistics.median(wall), result
+
+
+def measure(accel, origins, directions, tmax=np.inf, repeat: int = 5, warmup: int = 2) -> dict:
+    """Closest-hit and any-hit times of one ray set on ``accel``, rays and results
+    on the device; hits, the sum of hit distances, and whether the two agree."""
+    import pyopencl.array as cla
+    o_dev, d_dev = cla.to_device(accel.queue, origins), cla.to_device(accel.queue, directions)
+    closest = _timed(accel, lambda: accel.trace(o_dev, d_dev, tmax=tmax, fields=("t", "prim")), repeat, warmup)
+    anyhit = _timed(accel, lambda: accel.any_hit(o_dev, d_dev, tmax=tmax), repeat, warmup)
+    prim, t = (np.asarray(a.get() if isinstance(a, cla.Array) else a) for a in (closest[2].prim, closest[2].t))
+    occluded = anyhit[2].get() if isinstance(anyhit[2], cla.Array) else np.asarray(anyhit[2])
+    hit = prim >= 0
+    return {"closest_kernel_ms": closest[0], "closest_wall_ms": closest[1],
+            "any_kernel_ms": anyhit[0], "any_wall_ms": anyhit[1],
+            "hits": int(hit.sum()), "sum_t": float(t[hit].astype(np.float64).sum()),
+            "any_agrees": bool(np.array_equal(hit, occluded.astype(bool))), "prim": prim, "t": t}
+
+
+def embree_measure(mesh, origins, directions, tmax=np.inf, repeat: int = 5, warmup: int = 2) -> dict:
+    """The same rays through Embree on the host CPU (embreex, all cores): wall ms
+    of closest-hit and occlusion queries, hits and the sum of hit distances."""
+    from embreex import mesh_construction, rtcore_scene
+    scene = rtcore_scene.EmbreeScene()
+    mesh_construction.TriangleMesh(scene, np.asarray(mesh.vertices, np.float32), np.asarray(mesh.faces, np.int32))
+    limit = np.full(len(origins), min(tmax, 3e38), np.float32)
+
+    def timed(call):
+        times, result = [], None
+        for i in range(warmup + repeat):
+            start = time.perf_counter()
+            result = call()
+            if i >= warmup:
+                times.append(1e3 * (time.perf_counter() - start))
+        return statistics.median(times), result
+
+    closest_ms, closest = timed(lambda: scene.run(origins, directions, dists=limit.copy(), output=1))
+    any_ms, occluded = timed(lambda: scene.run(origins, directions, dists=limit.copy(), query="OCCLUDED"))
+    prim = np.asarray(closest["primID"])
+    hit = prim >= 0
+    return {"closest_wall_ms": closest_ms, "any_wall_ms": any_ms, "hits": int(hit.sum()),
+            "sum_t": float(np.asarray(closest["tfar"])[hit].astype(np.float64).sum()),
+            "any_agrees": bool(np.array_equal(hit, np.asarray(occluded) >= 0)), "prim": prim}
+
+
+def run(mesh_path=None, sets=RAY_SETS, count: int = 1_000_000, seed: int = 0, variants=(("box", "sah"),),
+        device=None, size=(1920, 1080), write_dir=None, read_files=(), tmax=np.inf, repeat: int = 5,
+        warmup: int = 2, embree: bool = False, out=None) -> list[dict]:
+    from clrt.query import Accel
+    from clrt.scene import primitives
+    from clrt.scene.load import load_mesh
+
+    out = out or sys.stdout
+    mesh = load_mesh(mesh_path) if mesh_path else primitives.torus_knot(segments=512, sides=32)
+    name = Path(mesh_path).name if mesh_path else "torus knot (generated)"
+    first = Accel(mesh, *variants[0], device=device)
+    camera = reference_camera(mesh, mesh_path, size)
+    ray_sets = []
+    if read_files:
+        for path in read_files:
+            ray_sets.append((Path(path).name, *read_rays(path), tmax))
+    else:
+        for kind in sets:
+            o, d, reach = make_ray_set(kind, mesh, count, seed, first, camera)
+            ray_sets.append((kind, o, d, reach))
+            if write_dir is not None:
+                write_rays(Path(write_dir) / f"{kind}.f32", o, d)
+    print(f"mesh: {name}, {len(mesh.faces):,} triangles; device: {first.device}; seed {seed}; "
+          f"ao reach {AO_REACH * _diagonal(mesh):.6g}; median of {repeat} after {warmup} warm-up; "
+          f"rays and results on the device", file=out)
+    print("\n| rays | count | accel | builder | closest: kernel ms | Mrays/s | wall ms | Mrays/s | hits | sum of t "
+          "| any-hit: kernel ms | Mrays/s | any agrees |", file=out)
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|", file=out)
+    rows = []
+    for accel_name, builder in variants:
+        accel = first if (accel_name, builder) == tuple(variants[0]) else Accel(mesh, accel_name, builder,
+                                                                               device=device)
+        for label, o, d, reach in ray_sets:
+            m = measure(accel, o, d, reach, repeat, warmup)
+            n = len(o)
+            rate = lambda ms: n / ms / 1e3 if ms > 0 else float("inf")   # noqa: E731
+            print(f"| {label} | {n:,} | {accel_name} | {builder if accel_name != 'none' else '-'} "
+                  f"| {m['closest_kernel_ms']:.3f} | {rate(m['closest_kernel_ms']):,.1f} "
+                  f"| {m['closest_wall_ms']:.3f} | {rate(m['closest_wall_ms']):,.1f} | {m['hits']:,} "
+                  f"| {m['sum_t']:.6f} | {m['any_kernel_ms']:.3f} | {rate(m['any_kernel_ms']):,.1f} "
+                  f"| {'yes' if m['any_agrees'] else 'NO'} |", file=out, flush=True)
+            rows.append({"rays": label, "accel": accel_name, "builder": builder, **m})
+    if embree:
+        for label, o, d, reach in ray_sets:
+            m = embree_measure(mesh, o, d, reach, repeat, warmup)
+            ours = next(r["prim"] for r in rows if r["rays"] == label)
+            same = 100 * float(np.mean((m["prim"] >= 0) == (ours >= 0)))
+            n = len(o)
+            print(f"| {label} | {n:,} | Embree (embreex, host CPU) | - | - | - | {m['closest_wall_ms']:.3f} "
+                  f"| {n / m['closest_wall_ms'] / 1e3:,.1f} | {m['hits']:,} ({same:.3f} % agree on hit or miss) "
+                  f"| {m['sum_t']:.6f} | {m['any_wall_ms']:.3f} (wall) | {n / m['any_wall_ms'] / 1e3:,.1f} "
+                  f"| {'yes' if m['any_agrees'] else 'NO'} |", file=out, flush=True)
+            rows.append({"rays": label, "accel": "embree", "builder": "-", **m})
+    return rows
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(prog="python -m clrt.bench.raysets", description=__doc__.split("\n")[0])
+    p.add_argument("mesh", nargs="?", help="mesh file (default: a generated torus knot, 32,768 triangles)")
+    p.add_argument("--set", action="append", choices=RAY_SETS, help="repeatable (default: all)")
+    p.add_argument("--rays", type=parse_count, default=1_000_000, help="rays per generated set (default 1M; "
+                   "the camera set has one per pixel)")
+    p.add_argument("--size", type=parse_size, default=(1920, 1080), help="reference camera image (default 1920x1080)")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--write", type=Path, metavar="DIR", help="also save each generated set as DIR/<set>.f32")
+    p.add_argument("--read", type=Path, action="append", metavar="FILE",
+                   help="run the rays of these files instead of generating sets (repeatable)")
+    p.add_argument("--tmax", type=float, default=np.inf, help="longest hit distance of --read rays (default inf)")
+    p.add_argument("--accel", action="append", choices=ACCELS)
+    p.add_argument("--builder", action="append", choices=BUILDERS)
+    p.add_argument("--device", help="'gpu', 'cpu' or P:D (default: clrt's choice, the first GPU if any)")
+    p.add_argument("--repeat", type=int, default=5)
+    p.add_argument("--warmup", type=int, default=2)
+    p.add_argument("--embree", action="store_true",
+                   help="also run the rays through Embree on the host CPU (needs embreex: the raybench extra)")
+    args = p.parse_args(argv)
+    if args.repeat < 1 or args.warmup < 0:
+        p.error("--repeat must be positive and --warmup not negative")
+    if not args.tmax > 0:
+        p.error("--tmax must be positive")
+    if args.write is not None and not args.write.is_dir():
+        p.error(f"--write: {args.write} is not a folder")
+    if args.read and (args.set or args.write):
+        p.error("--read runs files; it does not go with --set or --write")
+    if args.embree:
+        try:
+            import embreex  # noqa: F401
+        except ImportError:
+            p.error("--embree needs embreex: pip install -e '.[raybench]'")
+    variants = [(a, b) for a in (args.accel or ["box"]) for b in (args.builder or ["sah"])]
+    return exit_code(run, args.mesh, tuple(args.set or RAY_SETS), args.rays, args.seed, variants, args.device,
+                     args.size, args.write, tuple(args.read or ()), args.tmax, args.repeat, args.warmup,
+                     args.embree)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

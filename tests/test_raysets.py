@@ -1,0 +1,152 @@
+"""The incoherent ray sets of ``clrt.bench.raysets``: seeded, shareable as files,
+and traced alike by every traversal variant and by the brute-force reference."""
+
+import numpy as np
+import pytest
+
+import clrt
+from clrt.bench import raysets
+from clrt.config import BUILDERS, VOLUMES
+from clrt.errors import InputError
+from clrt.reference import intersect
+from clrt.scene.scene import Camera
+
+from conftest import TEST_MESHES
+
+
+@pytest.fixture(scope="module")
+def torus():
+    return TEST_MESHES["torus"]()
+
+
+@pytest.fixture(scope="module")
+def sets(torus, device):
+    accel = clrt.Accel(torus, device=device)
+    camera = Camera.framing(torus.bounds, 48, 32, 45.0)
+    return {kind: raysets.make_ray_set(kind, torus, 600, 11, accel, camera) for kind in raysets.RAY_SETS}
+
+
+def test_sets_are_seeded_unit_and_placed(torus, sets, device):
+    accel = clrt.Accel(torus, device=device)
+    camera = Camera.framing(torus.bounds, 48, 32, 45.0)
+    for kind in ("random", "diffuse", "ao"):
+        o, d, _ = raysets.make_ray_set(kind, torus, 600, 11, accel, camera)
+        assert np.array_equal(o, sets[kind][0]) and np.array_equal(d, sets[kind][1]), kind
+        other = raysets.make_ray_set(kind, torus, 600, 12, accel, camera)
+        assert not np.array_equal(other[1], d), kind
+        assert o.dtype == d.dtype == np.float32 and o.shape == d.shape == (600, 3)
+        assert np.allclose(np.linalg.norm(d, axis=1), 1, atol=1e-6)
+    lo, hi = np.asarray(torus.bounds)
+    o = sets["random"][0]
+    margin = 0.05 * (hi - lo)
+    assert (o >= lo - margin - 1e-6).all() and (o <= hi + margin + 1e-6).all()
+    assert (o < lo).any() and (o > hi).any(), "the box is enlarged"
+    assert len(sets["camera"][0]) == 48 * 32
+    assert sets["ao"][2] == pytest.approx(raysets.AO_REACH * np.linalg.norm(hi - lo))
+    # AO rays come in groups from one point; diffuse rays leave the surface outwards
+    ao_o = sets["ao"][0][:raysets.AO_RAYS_PER_POINT * 10].reshape(10, raysets.AO_RAYS_PER_POINT, 3)
+    assert (ao_o == ao_o[:, :1]).all()
+    hits = accel.trace(sets["diffuse"][0], -sets["diffuse"][1])   # backwards: into the surface just left
+    assert hits.hit.mean() > 0.95
+
+
+def test_cosine_hemisphere_is_cosine_weighted():
+    rng = np.random.default_rng(1)
+    normals = rng.normal(size=(100_000, 3))
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    normals[:3] = [[0, 0, 1], [0, 0, -1], [1, 0, 0]]   # the basis's special cases
+    d = raysets._cosine_hemisphere(normals, rng)
+    cos = np.einsum("ij,ij->i", d, normals)
+    assert (cos >= -1e-12).all() and np.allclose(np.linalg.norm(d, axis=1), 1)
+    assert cos.mean() == pytest.approx(2 / 3, abs=0.005)           # E[cos] of p = cos / pi
+    assert (cos ** 2).mean() == pytest.approx(1 / 2, abs=0.005)
+
+
+def test_every_variant_traces_the_sets_as_brute_force(torus, sets, device):
+    corners = torus.vertices[torus.faces].astype(np.float32)
+    variants = [("none", "sah")] + [(v, b) for v in VOLUMES for b in BUILDERS]
+    for kind, (o, d, reach) in sets.items():
+        t_ref, prim_ref, _, _ = intersect(o, d, corners, np.zeros(len(o), np.float32),
+                                          np.full(len(o), reach, np.float32))
+        assert (prim_ref >= 0).any(), kind
+        base = None
+        for volume, builder in variants:
+            m = raysets.measure(clrt.Accel(torus, volume, builder, device=device), o, d, reach,
+                                repeat=1, warmup=0)
+            label = f"{kind} {volume}/{builder}"
+            assert m["any_agrees"], label
+            if base is None:
+                base = m
+                hit = prim_ref >= 0
+                assert np.array_equal(m["prim"] >= 0, hit), label
+                assert (m["prim"] == prim_ref).mean() >= 0.998, label
+                assert np.allclose(m["t"][hit], t_ref[hit], rtol=1e-5, atol=1e-6), label
+            else:   # every BVH gives bit for bit what the loop over all triangles gives
+                assert np.array_equal(m["prim"], base["prim"]), label
+                assert np.array_equal(m["t"], base["t"]), label
+                assert (m["hits"], m["sum_t"]) == (base["hits"], base["sum_t"]), label
+
+
+def test_ray_files_round_trip_and_run_the_same(torus, sets, tmp_path, device):
+    o, d, reach = sets["ao"]
+    path = tmp_path / "ao.f32"
+    raysets.write_rays(path, o, d)
+    assert path.stat().st_size == len(o) * 24
+    back_o, back_d = raysets.read_rays(path)
+    assert np.array_equal(back_o, o) and np.array_equal(back_d, d)
+    assert np.array_equal(np.fromfile(path, "<f4").reshape(-1, 6), np.concatenate([o, d], 1))
+    accel = clrt.Accel(torus, device=device)
+    a = raysets.measure(accel, o, d, reach, repeat=1, warmup=0)
+    b = raysets.measure(accel, back_o, back_d, reach, repeat=1, warmup=0)
+    assert (a["hits"], a["sum_t"]) == (b["hits"], b["sum_t"])
+
+
+def test_embree_traces_the_sets_alike(torus, sets, device):
+    pytest.importorskip("embreex", reason="Embree comparison needs the raybench extra (the test extra has it)")
+    accel = clrt.Accel(torus, device=device)
+    for kind, (o, d, reach) in sets.items():
+        ours = raysets.measure(accel, o, d, reach, repeat=1, warmup=0)
+        theirs = raysets.embree_measure(torus, o, d, reach, repeat=1, warmup=0)
+        assert theirs["any_agrees"], kind
+        assert ((ours["prim"] >= 0) == (theirs["prim"] >= 0)).mean() >= 0.995, kind
+        assert theirs["sum_t"] == pytest.approx(ours["sum_t"], rel=1e-3), kind
+
+
+@pytest.mark.parametrize("content, message", [
+    (b"", "not a ray file"),
+    (b"\0" * 25, "not a ray file"),
+    (np.array([[0, 0, 0, np.nan, 0, 1]], "<f4").tobytes(), "not finite"),
+    (np.array([[0, 0, 0, 0, 0, 2]], "<f4").tobytes(), "must be unit"),
+])
+def test_bad_ray_files_are_refused(tmp_path, content, message):
+    path = tmp_path / "bad.f32"
+    path.write_bytes(content)
+    with pytest.raises(InputError, match=message):
+        raysets.read_rays(path)
+
+
+def test_command_writes_reads_and_refuses(tmp_path, capsys, device):
+    mesh = tmp_path / "torus.off"
+    mesh.write_text(_off())
+    common = ["--repeat", "1", "--warmup", "0", "--size", "24x16"] + (["--device", device] if device else [])
+    assert raysets.main([str(mesh), "--rays", "300", "--set", "random", "--set", "ao",
+                         "--write", str(tmp_path)] + common) == 0
+    first = capsys.readouterr().out
+    assert (tmp_path / "random.f32").stat().st_size == 300 * 24
+    assert raysets.main([str(mesh), "--read", str(tmp_path / "random.f32")] + common) == 0
+    again = capsys.readouterr().out
+    row = lambda text, name: next(line for line in text.splitlines() if line.startswith(f"| {name} "))  # noqa: E731
+    # same hits and sum of distances from the file as when generated
+    assert row(first, "random").split("|")[9:11] == row(again, "random.f32").split("|")[9:11]
+    (tmp_path / "bad.f32").write_bytes(b"\0" * 10)
+    assert raysets.main([str(mesh), "--read", str(tmp_path / "bad.f32")] + common) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("clrt: ") and "not a ray file" in err and err.count("\n") == 1
+
+
+def _off() -> str:
+    m = TEST_MESHES["torus"]()
+    lines = ["OFF", f"{len(m.vertices)} {len(m.faces)} 0"]
+    lines += [" ".join(f"{x:.9g}" for x in v) for v in m.vertices]
+    lines += ["3 " + " ".join(str(i) for i in f) for f in m.faces]
+    return "\n".join(lines) + "\n"
