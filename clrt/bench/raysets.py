@@ -234,15 +234,13 @@ def run(mesh_path=None, sets=RAY_SETS, count: int = 1_000_000, seed: int = 0, va
     from clrt.scene.load import load_mesh
 
     out = out or sys.stdout
+    # files first: a bad one fails before the mesh is loaded and the BVH built
+    ray_sets = [(Path(path).name, *read_rays(path), tmax) for path in read_files]
     mesh = load_mesh(mesh_path) if mesh_path else primitives.torus_knot(segments=512, sides=32)
     name = Path(mesh_path).name if mesh_path else "torus knot (generated)"
     first = Accel(mesh, *variants[0], device=device)
     camera = reference_camera(mesh, mesh_path, size)
-    ray_sets = []
-    if read_files:
-        for path in read_files:
-            ray_sets.append((Path(path).name, *read_rays(path), tmax))
-    else:
+    if not read_files:
         for kind in sets:
             o, d, reach = make_ray_set(kind, mesh, count, seed, first, camera)
             ray_sets.append((kind, o, d, reach))
