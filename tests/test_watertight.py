@@ -22,11 +22,12 @@ import numpy as np
 import pytest
 
 import clrt
+from clrt.config import BUILDERS, VOLUMES
 from clrt.scene import primitives
 
 from conftest import SHARED_MESHES
 
-CONFIGS = [("none", "sah")] + [(v, b) for v in ("box", "sphere", "ellipse") for b in ("paper", "sah")]
+CONFIGS = [("none", "sah")] + [(v, b) for v in VOLUMES for b in BUILDERS]   # every traversal, every builder
 MIN_COS = 0.1
 
 
