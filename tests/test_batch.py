@@ -327,3 +327,23 @@ def test_trace_and_occluded_on_dask_arrays_equal_clrt(client, device):
     blocked = clrt.batch.occluded(mesh, o, d, tmax=3.0, client=client, device=device)
     assert isinstance(blocked, da.Array)
     assert np.array_equal(blocked.compute(), clrt.occluded(mesh, origins, directions, tmax=3.0, device=device))
+
+
+def test_ray_benchmark_counts_the_hits_of_its_own_rays(client, meshes, device):
+    """clrt.bench.batch --rays: the hit count it prints is that of the random
+    rays it makes (traced here in one process), and the generation-only time
+    is measured apart."""
+    from clrt.bench.batch import _trace_rays
+    from clrt.scene.sources import as_mesh
+    n, chunk = 30_000, 7_000
+    seconds, hit, generate = _trace_rays(client, meshes[0], n, chunk)
+    assert seconds > 0 and generate > 0
+    mesh = as_mesh(meshes[0])
+    lo, hi = mesh.bounds
+    rng = da.random.default_rng(0)
+    origins = lo.astype(np.float32) + rng.random((n, 3), chunks=(chunk, 3), dtype=np.float32) * (hi - lo).astype(
+        np.float32)
+    directions = rng.standard_normal((n, 3), chunks=(chunk, 3), dtype=np.float32)
+    o, d = dask.compute(origins, directions, scheduler="sync")
+    expected = int(clrt.Accel(mesh, device=device).trace(o, d).hit.sum())
+    assert 0 < hit == expected < n
