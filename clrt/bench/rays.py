@@ -152,21 +152,11 @@ def run(mesh_path, rays: int = 1_000_000, reference_rays: int = 2_000, device=No
         row(system, "all", n, sec, _agree_sets(n, len(faces), (ray, tri), (mine.ray_id[keep], mine.prim[keep])))
 
 
-def random_rays(mesh, count: int, seed: int = 0, dtype=np.float32) -> tuple[np.ndarray, np.ndarray]:
-    """The incoherent rays of the throughput issue: origins uniform in the mesh's
-    bounding box, directions uniform on the sphere."""
-    rng = np.random.default_rng(seed)
-    lo, hi = mesh.bounds
-    o = (lo + rng.random((count, 3)) * (hi - lo)).astype(dtype)
-    d = rng.normal(size=(count, 3))
-    d /= np.linalg.norm(d, axis=1, keepdims=True)
-    return o, d.astype(dtype)
-
-
 def throughput(mesh_path, sizes, device=None, repeat: int = 5, seed: int = 0, out=sys.stdout):
     """Per query and size: wall ms of the whole call from numpy (or device) arrays
     to results, kernel ms (profiling events), and the host's share."""
     import pyopencl.array as cla
+    from clrt.bench.raysets import random_rays
     from clrt.query import Accel
     from clrt.scene import primitives
     from clrt.scene.load import load_mesh
@@ -179,7 +169,7 @@ def throughput(mesh_path, sizes, device=None, repeat: int = 5, seed: int = 0, ou
     print("\n| rays | call | wall ms | kernel ms | host share | Mrays/s (wall) | hits |", file=out)
     print("|---|---|---|---|---|---|---|", file=out)
     for n in sizes:
-        o, d = random_rays(mesh, n, seed)
+        o, d = random_rays(mesh, n, seed, margin=0.0)
         o_dev, d_dev = cla.to_device(acc.queue, o), cla.to_device(acc.queue, d)
         o64, d64 = o.astype(np.float64), d.astype(np.float64)
         calls = {

@@ -67,12 +67,13 @@ def reference_camera(mesh, name: str | None = None, size=(1920, 1080)):
     return Camera.framing(mesh.bounds, w, h, 45.0, up=(0.0, 1.0, 0.0))
 
 
-def random_rays(mesh, count: int, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
-    """Origins uniform in the bounding box enlarged by 10 %, directions uniform
-    on the sphere; (count, 3) float32 each."""
+def random_rays(mesh, count: int, seed: int = 0, margin: float = 0.05) -> tuple[np.ndarray, np.ndarray]:
+    """Origins uniform in the bounding box enlarged by ``margin`` of its size on
+    each side (10 % in all by default), directions uniform on the sphere;
+    (count, 3) float32 each."""
     rng = np.random.default_rng(seed)
     lo, hi = np.asarray(mesh.bounds, np.float64)
-    margin = 0.05 * (hi - lo)
+    margin = margin * (hi - lo)
     o = (lo - margin) + rng.random((count, 3)) * (hi - lo + 2 * margin)
     d = rng.normal(size=(count, 3))
     d /= np.linalg.norm(d, axis=1, keepdims=True)
