@@ -21,6 +21,7 @@ import time
 
 import numpy as np
 
+from clrt import checks
 from clrt.accel import paper, sah
 from clrt.accel.bvh import Acceleration
 from clrt.accel.rows import pair_rows
@@ -68,14 +69,10 @@ def build(triangles, accel: str = DEFAULT_ACCEL, builder: str = HOST_DEFAULT_BUI
 
 
 def check_options(accel, builder, leaf_size) -> None:
-    """InputError naming the first bad choice."""
-    if accel not in ACCELS:
-        raise InputError(f"unknown accel {accel!r}: choose one of {', '.join(ACCELS)}")
-    if builder not in BUILDERS:
-        raise InputError(f"unknown BVH builder {builder!r}: choose one of {', '.join(BUILDERS)}")
-    if (isinstance(leaf_size, bool) or not isinstance(leaf_size, (int, np.integer))
-            or not 1 <= leaf_size <= MAX_LEAF_SIZE):
-        raise InputError(f"leaf size must be an integer from 1 to {MAX_LEAF_SIZE}, got {leaf_size!r}")
+    """InputError naming the first bad choice (a built builder: not "auto")."""
+    checks.choice("accel", accel, ACCELS)
+    checks.choice("builder", builder, BUILDERS)
+    checks.integer("leaf_size", leaf_size, 1, MAX_LEAF_SIZE)
 
 
 def as_triangles(triangles) -> np.ndarray:
