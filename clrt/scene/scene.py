@@ -219,8 +219,16 @@ class SceneObject:
         if "color" in fields:
             fields["texture"] = None
             mesh = replace(mesh, colors=None)
-        return SceneObject(mesh, self.material.with_overrides(**fields),
-                           tuple(m.with_overrides(**fields) for m in self.materials))
+        material = self.material.with_overrides(**fields)
+        materials = tuple(m.with_overrides(**fields) for m in self.materials)
+        if "smooth" in fields or "crease" in fields:   # the mesh may need splitting anew
+            return SceneObject(mesh, material, materials)
+        # Same shading, so the mesh is already split for it: do not split it again
+        # (a second crease split of a large mesh costs as much as the first).
+        obj = object.__new__(SceneObject)
+        for name, value in (("mesh", mesh), ("material", material), ("materials", materials)):
+            object.__setattr__(obj, name, value)
+        return obj
 
 
 def _objects(value) -> list:
