@@ -41,12 +41,9 @@ from clrt.bench.common import exit_code, parse_count
 from clrt.bench.scale import instanced
 from clrt.bench.speed import CASES, time_launches
 from clrt.config import BUILDERS
+from clrt.scene.arrays import triangle_corners
 
 SIZE = (1920, 1080)
-
-
-def _corners(mesh) -> np.ndarray:
-    return np.ascontiguousarray(mesh.vertices[mesh.faces], dtype=np.float32)
 
 
 def _host_build(context, queue, corners, volume, builder, leaf_size) -> tuple[dict, list]:
@@ -133,7 +130,7 @@ def run(mesh_dir, meshes, counts, builders, volume="box", leaf_size=4, device=No
           "| SAH cost | SAH / sah | depth | device MiB | trace ms | Mrays/s | refit ms |", file=out)
     print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|", file=out)
     for name, mesh, camera in scenes(mesh_dir, meshes, counts):
-        corners = _corners(mesh)
+        corners = triangle_corners(mesh)
         results = {}
         for builder in builders:
             first, warm, stats, timings = time_builds(context, queue, corners, volume, builder, leaf_size, repeat)

@@ -21,6 +21,11 @@ def parse_size(text: str) -> tuple[int, int]:
     return w, h
 
 
+def parse_work_group(text: str) -> tuple[int, int]:
+    """argparse type for a work-group as 'WxH' pixels, or '0x0' for the driver's choice."""
+    return (0, 0) if text.strip().lower() == "0x0" else parse_size(text)
+
+
 def parse_count(text: str) -> int:
     """argparse type for a positive count such as 500K, 10M or 1G."""
     text = text.strip().upper()
@@ -32,6 +37,20 @@ def parse_count(text: str) -> int:
     if value < 1:
         raise argparse.ArgumentTypeError(f"expected a count such as 500K or 10M, got {text!r}")
     return value
+
+
+def median_wall_ms(call, repeat: int, warmup: int = 1):
+    """Median wall-clock ms of ``call()`` over ``repeat`` calls after ``warmup``,
+    and its last result."""
+    import statistics
+    import time
+    times, result = [], None
+    for i in range(warmup + repeat):
+        start = time.perf_counter()
+        result = call()
+        if i >= warmup:
+            times.append(1e3 * (time.perf_counter() - start))
+    return statistics.median(times), result
 
 
 def exit_code(run, *args, **kwargs) -> int:

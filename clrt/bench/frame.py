@@ -22,7 +22,7 @@ import time
 import numpy as np
 
 from clrt.config import ACCELS, BUILDERS
-from clrt.bench.common import parse_size, exit_code
+from clrt.bench.common import exit_code, parse_size, parse_work_group
 
 FRAME_STAGES = ("ray generation", "pixel colour", "read back")
 
@@ -90,7 +90,7 @@ def main(argv=None) -> int:
     p.add_argument("--device", help="'gpu', 'cpu' or P:D")
     p.add_argument("--repeat", type=int, default=5)
     p.add_argument("--warmup", type=int, default=1)
-    p.add_argument("--block", type=parse_size, help="work-group as WxH pixels (default 16x8; 0x0: the driver's choice)")
+    p.add_argument("--block", type=parse_work_group, help="work-group as WxH pixels (default 16x8; 0x0: the driver's choice)")
     args = p.parse_args(argv)
     accels, builders = args.accel or ["box"], args.builder or ["sah"]
     variants = [("none", "-")] if "none" in accels else []

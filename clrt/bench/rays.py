@@ -32,7 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from clrt.config import ACCELS, BUILDERS
-from clrt.bench.common import exit_code, parse_count
+from clrt.bench.common import exit_code, median_wall_ms, parse_count
 
 QUERIES = ("first", "any", "all")
 
@@ -156,7 +156,7 @@ def throughput(mesh_path, sizes, device=None, repeat: int = 5, seed: int = 0, ou
     """Per query and size: wall ms of the whole call from numpy (or device) arrays
     to results, kernel ms (profiling events), and the host's share."""
     import pyopencl.array as cla
-    from clrt.bench.raysets import random_rays
+    from clrt.bench.raysets import random_rays, time_queries
     from clrt.query import Accel
     from clrt.scene import primitives
     from clrt.scene.load import load_mesh
@@ -182,16 +182,7 @@ def throughput(mesh_path, sizes, device=None, repeat: int = 5, seed: int = 0, ou
         }
         expected = None
         for label, call in calls.items():
-            call()
-            acc.kernel_ms()
-            walls, kernels = [], []
-            for _ in range(repeat):
-                start = time.perf_counter()
-                result = call()
-                acc.queue.finish()
-                walls.append(1e3 * (time.perf_counter() - start))
-                kernels.append(acc.kernel_ms())
-            wall, kernel = statistics.median(walls), statistics.median(kernels)
+            kernel, wall, result = time_queries(acc, call, repeat, 1)
             hits = "-"
             if label.startswith("trace"):
                 prim = result.prim.get() if isinstance(result.prim, cla.Array) else result.prim
@@ -216,13 +207,7 @@ def _embree_row(mesh, o, d, prim, repeat: int, out) -> None:
     n = len(o)
     for label, call in (("Embree first hit, numpy", lambda: embree.intersects_first(o, d)),
                         ("Embree any hit, numpy", lambda: embree.intersects_any(o, d))):
-        call()
-        walls = []
-        for _ in range(repeat):
-            start = time.perf_counter()
-            result = call()
-            walls.append(1e3 * (time.perf_counter() - start))
-        wall = statistics.median(walls)
+        wall, result = median_wall_ms(call, repeat)
         hit = np.asarray(result) >= 0 if result.dtype != bool else np.asarray(result)
         same = float(np.mean(hit == (prim >= 0))) if prim is not None else float("nan")
         print(f"| {n:,} | {label} | {wall:.2f} | - | CPU | {n / wall / 1e3:,.0f} "

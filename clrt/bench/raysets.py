@@ -39,7 +39,7 @@ from pathlib import Path
 
 import numpy as np
 
-from clrt.bench.common import exit_code, parse_count, parse_size
+from clrt.bench.common import exit_code, median_wall_ms, parse_count, parse_size
 from clrt.config import ACCELS, BUILDERS
 from clrt.errors import InputError
 
@@ -171,7 +171,7 @@ def read_rays(path) -> tuple[np.ndarray, np.ndarray]:
     return np.ascontiguousarray(rows[:, :3]), np.ascontiguousarray(rows[:, 3:])
 
 
-def _timed(accel, call, repeat: int, warmup: int):
+def time_queries(accel, call, repeat: int, warmup: int):
     """Median kernel ms and wall ms of ``call()`` and its last result."""
     kernel, wall, result = [], [], None
     for i in range(warmup + repeat):
@@ -190,8 +190,9 @@ def measure(accel, origins, directions, tmax=np.inf, repeat: int = 5, warmup: in
     on the device; hits, the sum of hit distances, and whether the two agree."""
     import pyopencl.array as cla
     o_dev, d_dev = cla.to_device(accel.queue, origins), cla.to_device(accel.queue, directions)
-    closest = _timed(accel, lambda: accel.trace(o_dev, d_dev, tmax=tmax, fields=("t", "prim")), repeat, warmup)
-    anyhit = _timed(accel, lambda: accel.any_hit(o_dev, d_dev, tmax=tmax), repeat, warmup)
+    closest = time_queries(accel, lambda: accel.trace(o_dev, d_dev, tmax=tmax, fields=("t", "prim")),
+                           repeat, warmup)
+    anyhit = time_queries(accel, lambda: accel.any_hit(o_dev, d_dev, tmax=tmax), repeat, warmup)
     prim, t = (np.asarray(a.get() if isinstance(a, cla.Array) else a) for a in (closest[2].prim, closest[2].t))
     occluded = anyhit[2].get() if isinstance(anyhit[2], cla.Array) else np.asarray(anyhit[2])
     hit = prim >= 0
@@ -208,18 +209,10 @@ def embree_measure(mesh, origins, directions, tmax=np.inf, repeat: int = 5, warm
     scene = rtcore_scene.EmbreeScene()
     mesh_construction.TriangleMesh(scene, np.asarray(mesh.vertices, np.float32), np.asarray(mesh.faces, np.int32))
     limit = np.full(len(origins), min(tmax, 3e38), np.float32)
-
-    def timed(call):
-        times, result = [], None
-        for i in range(warmup + repeat):
-            start = time.perf_counter()
-            result = call()
-            if i >= warmup:
-                times.append(1e3 * (time.perf_counter() - start))
-        return statistics.median(times), result
-
-    closest_ms, closest = timed(lambda: scene.run(origins, directions, dists=limit.copy(), output=1))
-    any_ms, occluded = timed(lambda: scene.run(origins, directions, dists=limit.copy(), query="OCCLUDED"))
+    closest_ms, closest = median_wall_ms(lambda: scene.run(origins, directions, dists=limit.copy(), output=1),
+                                         repeat, warmup)
+    any_ms, occluded = median_wall_ms(lambda: scene.run(origins, directions, dists=limit.copy(),
+                                                        query="OCCLUDED"), repeat, warmup)
     prim = np.asarray(closest["primID"])
     hit = prim >= 0
     return {"closest_wall_ms": closest_ms, "any_wall_ms": any_ms, "hits": int(hit.sum()),

@@ -27,7 +27,7 @@ import pyopencl as cl
 
 from clrt import layouts
 from clrt.config import ACCELS, BUILDERS
-from clrt.bench.common import exit_code, parse_size
+from clrt.bench.common import exit_code, parse_work_group
 from clrt.errors import ClrtError
 
 # mesh file, eye, target (from the speed issue)
@@ -100,7 +100,7 @@ def main(argv=None) -> int:
     p.add_argument("--accel", action="append", choices=ACCELS)
     p.add_argument("--builder", action="append", choices=BUILDERS)
     p.add_argument("--leaf-size", type=int, default=4)
-    p.add_argument("--tile", type=parse_size,
+    p.add_argument("--tile", type=parse_work_group,
                    help="work-group as a WxH block of pixels (default 8x8; 0x0: the driver's choice)")
     p.add_argument("--device", help="'gpu', 'cpu' or P:D (default: clrt's choice, the first GPU if any)")
     p.add_argument("--repeat", type=int, default=20)
