@@ -201,10 +201,10 @@ def _write_record(path: Path, digest: str) -> None:
         raise
 
 
-def write_array(values: np.ndarray, path: Path, marked_by: Path | None = None, force: bool = False) -> None:
+def write_array(values: np.ndarray, path: Path, force: bool = False) -> None:
     """Write ``values`` as .npy, with its record beside it (a .npy file has no room
     for a mark): an existing file is replaced only if it is what clrt wrote there,
-    or with ``force``.  (``marked_by`` is no longer used.)"""
+    or with ``force``."""
     path = Path(path)
     check_replace(path, force)
     _replace_atomically(path, lambda f: np.save(f, values), record=True)

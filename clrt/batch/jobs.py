@@ -13,9 +13,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from clrt.config import BATCH_VIEWS_PER_TASK
+from clrt.scene.load import SUPPORTED_EXTENSIONS
 
 #: Files a folder argument contributes (any file named explicitly is tried).
-SOURCE_SUFFIXES = (".3ds", ".glb", ".gltf", ".obj", ".off", ".ply", ".stl", ".toml")
+SOURCE_SUFFIXES = SUPPORTED_EXTENSIONS + (".toml",)   # meshes and scene files
 _GLOB_CHARS = "*?["
 
 

@@ -73,7 +73,7 @@ def write_aovs(source, camera, names, image_path, force: bool = False) -> list[P
     for name in names:
         values, picture = aov_arrays(images, name)
         npy, png = aov_paths(image_path, [name])
-        write_array(values, npy, marked_by=png, force=force)
+        write_array(values, npy, force=force)
         write_image(picture, png, force=force)
         written += [npy, png]
     return written
