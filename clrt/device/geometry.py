@@ -36,6 +36,19 @@ def check_fits(device, label: str, nbytes: int, reserve: int = 0) -> None:
                                 f"has {format_bytes(device.global_mem_size)}")
 
 
+def replace_buffer(queue: cl.CommandQueue, old: cl.Buffer, array: np.ndarray) -> cl.Buffer:
+    """A read-only buffer holding ``array`` in place of ``old``: ``old`` itself,
+    overwritten, when the size is unchanged; else a new buffer, ``old`` released."""
+    array = np.ascontiguousarray(array)
+    if old.size == max(array.nbytes, 1):
+        cl.enqueue_copy(queue, old, array)
+        return old
+    queue.finish()   # no launch may still read the old buffer
+    new = cl.Buffer(queue.context, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR, hostbuf=array)
+    old.release()
+    return new
+
+
 class DeviceGeometry:
     """Uploaded slot-ordered triangles, BVH rows and slot -> triangle ids, and
     any further per-slot or per-vertex ``extra`` arrays the kernels index (the
@@ -119,15 +132,8 @@ class DeviceGeometry:
     def replace(self, queue: cl.CommandQueue, name: str, array: np.ndarray) -> None:
         """Upload ``array`` as the extra buffer ``name`` anew (a scene not split into
         parts): in place when its size is unchanged, else in a new buffer."""
-        array = np.ascontiguousarray(array)
         (old,) = self.buffers[name]
-        if old.size == max(array.nbytes, 1):
-            cl.enqueue_copy(queue, old, array)
-            return
-        queue.finish()   # no launch may still read the old buffer
-        self.buffers[name] = (cl.Buffer(queue.context, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR,
-                                        hostbuf=array),)
-        old.release()
+        self.buffers[name] = (replace_buffer(queue, old, array),)
 
     def parts(self) -> int:
         """Buffers of the largest split array (1: nothing split)."""

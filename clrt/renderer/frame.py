@@ -29,7 +29,7 @@ from clrt.device.args import CAMERA_ARG_TYPES, camera_args, vec4
 from clrt.device.build import build_acceleration
 from clrt.device.context import create_context, device_label, error_name, is_out_of_memory
 from clrt.device.context import format_bytes as _size
-from clrt.device.geometry import DeviceGeometry, check_fits
+from clrt.device.geometry import DeviceGeometry, check_fits, replace_buffer
 from clrt.device.pinned import PinnedPool
 from clrt.device.program import build_program, typed_kernel
 from clrt.errors import DeviceMemoryError, InputError, TooLargeError
@@ -141,9 +141,6 @@ class Renderer:
         self._max_group = min(   # work-items a launch's group may have, see _launch_shape
             k.get_work_group_info(cl.kernel_work_group_info.WORK_GROUP_SIZE, self.queue.device)
             for name, k in self.kernels.items() if name != "encode_srgb8")
-        # The scene's buffers, the same for every shade_pixels launch.
-        self._scene_args = (*self.geometry.args, *self.geometry.buffers["tri_info"],
-                            *self.geometry.buffers["vertex_normals"], self.buffers["materials"])
 
     # ----------------------------------------------------------------------- a frame
 
@@ -202,12 +199,13 @@ class Renderer:
         """The arguments that hold for a whole frame: the camera's (generate_rays),
         and the scene's with the values a caller may change between frames
         (lights, colours) and the camera's ray epsilon (shade_pixels)."""
+        b = self.geometry.buffers   # read per frame: a refit may have replaced some
+        scene = (*self.geometry.args, *b["tri_info"], *b["vertex_normals"], self.buffers["materials"])
         detail = ()
         if self.arrays.detail is not None:   # DETAIL_PARAMS in shading.cl, TEXTURE_PARAMS in texture.cl
-            b = self.geometry.buffers
             detail = (*b["tri_detail"], self.buffers["textures"], *b["texels"], self.buffers["srgb_table"])
         return camera_args(camera), (
-            *self._scene_args, self.buffers["lights"], len(self.scene.lights), vec4(self.scene.ambient_light),
+            *scene, self.buffers["lights"], len(self.scene.lights), vec4(self.scene.ambient_light),
             vec4(self.scene.background), ray_epsilon(self.arrays.bounds, camera.eye), *detail)
 
     def refit(self, scene, *, rebuild: bool = False) -> None:
@@ -238,8 +236,6 @@ class Renderer:
         self.geometry.replace(self.queue, "tri_info", arrays.tri_info[self.acceleration.prim_ids])
         self.geometry.replace(self.queue, "vertex_normals", arrays.vertex_normals)
         cl.enqueue_copy(self.queue, self.buffers["materials"], arrays.materials)   # as many as before
-        self._scene_args = (*self.geometry.args, *self.geometry.buffers["tri_info"],
-                            *self.geometry.buffers["vertex_normals"], self.buffers["materials"])
         self.scene, self.arrays = scene, arrays
         self.set_lights(scene.lights)
 
@@ -248,11 +244,7 @@ class Renderer:
         ``clrt batch render`` moves the default light with the camera)."""
         self.scene.lights = list(lights)
         self.arrays.lights = light_records(self.scene.lights)
-        old = self.buffers["lights"]
-        self.buffers["lights"] = cl.Buffer(self.context, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR,
-                                           hostbuf=self.arrays.lights)
-        self.queue.finish()   # no launch may still read the old buffer
-        old.release()
+        self.buffers["lights"] = replace_buffer(self.queue, self.buffers["lights"], self.arrays.lights)
 
     # ----------------------------------------------------------------------- memory
 
