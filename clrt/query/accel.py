@@ -84,9 +84,8 @@ def check_fields(fields) -> list:
 
 
 def _check_chunk_rays(chunk_rays) -> None:
-    if chunk_rays is not None and (isinstance(chunk_rays, bool) or not isinstance(chunk_rays, (int, np.integer))
-                                   or chunk_rays < 1):
-        raise InputError(f"chunk_rays must be a positive integer, got {chunk_rays!r}")
+    if chunk_rays is not None:
+        checks.integer("chunk_rays", chunk_rays, 1)
 
 
 class Accel:

@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from clrt.config import DEFAULT_ACCEL, DEFAULT_LEAF_SIZE, HOST_DEFAULT_BUILDER
 from clrt.query.accel import Accel
 from clrt.query.rays import RayBatch
 from clrt.scene.sources import as_mesh
@@ -55,13 +56,15 @@ class RayMeshIntersector:
     on the next query), a :class:`clrt.Mesh`, a path or (vertices, faces).
     ``every_triangle``: with ``multiple_hits``, list every triangle a ray meets
     (trimesh's numpy engine) rather than one hit per surface crossing (its
-    Embree engine, the default).  The other arguments are those of :class:`clrt.Accel`.
+    Embree engine, the default).  The other arguments are those of :class:`clrt.Accel`,
+    except that the builder defaults to the host SAH builder.
     """
 
     # Left out of pickles and copies: rebuilt on first use (see ``accel``).
     _DEVICE_STATE = ("_accel", "_key", "_corner0", "_normals", "_scale", "_size", "_corners")
 
-    def __init__(self, mesh, accel: str = "box", builder: str = "sah", leaf_size: int = 4,
+    def __init__(self, mesh, accel: str = DEFAULT_ACCEL, builder: str = HOST_DEFAULT_BUILDER,
+                 leaf_size: int = DEFAULT_LEAF_SIZE,
                  device: str | None = None, chunk_rays: int | None = None, every_triangle: bool = False):
         import trimesh
         from clrt.scene.load_3ds import register_with_trimesh

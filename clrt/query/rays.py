@@ -12,17 +12,15 @@ from __future__ import annotations
 
 import numpy as np
 
-from clrt.config import CULL_MODES, MAX_IMAGE_SIDE
+from clrt import checks
+from clrt.config import CULL_MODES
 from clrt.device.args import camera_args
 from clrt.errors import InputError
-from clrt.scene.scene import check_int
 
 
 def cull_code(cull: str) -> np.int32:
     """The kernels' code of a culling mode name (clrt.config.CULL_MODES)."""
-    if not isinstance(cull, str) or cull not in CULL_MODES:
-        raise InputError(f"cull must be one of {', '.join(map(repr, CULL_MODES))}, got {cull!r}")
-    return np.int32(CULL_MODES[cull])
+    return np.int32(CULL_MODES[checks.choice("cull", cull, CULL_MODES)])
 
 
 def _real_array(value, what: str) -> np.ndarray:
@@ -171,8 +169,7 @@ class PinholeRays:
     normalise = False   # made unit length here
 
     def __init__(self, K, pose, width: int, height: int, pixel_center: float = 0.0):
-        check_int("width", width, 1, MAX_IMAGE_SIDE)
-        check_int("height", height, 1, MAX_IMAGE_SIDE)
+        checks.image_size(width, height)
         K = _real_array(K, "K").astype(np.float64)
         if K.shape != (3, 3) or not np.isfinite(K).all():
             raise InputError(f"K must be a finite 3x3 matrix, got shape {K.shape}")

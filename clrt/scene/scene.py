@@ -108,11 +108,6 @@ class Light:
         return value if isinstance(value, cls) else cls(value)
 
 
-def check_int(name: str, value, lo: int, hi: int) -> None:
-    """InputError unless ``value`` is an integer (not a bool) in lo..hi (see :func:`clrt.checks.integer`)."""
-    checks.integer(name, value, lo, hi)
-
-
 def _check_image(width, height, fov) -> None:
     checks.image_size(width, height)
     checks.fov(fov)
