@@ -179,6 +179,40 @@ def test_bad_input_raises_input_error(queue):
             build_on_device(*queue, ok, **kwargs)
 
 
+def test_bad_corner_is_found_on_the_device(queue):
+    """The device checks the corners (not the host): the message names the first bad triangle."""
+    corners = _random_triangles(2000)
+    corners[1717, 2, 0] = np.inf
+    corners[1900, 0, 1] = np.nan
+    with pytest.raises(InputError, match="first: triangle 1717"):
+        build_on_device(*queue, corners)
+    huge = _random_triangles(50).astype(np.float64)
+    huge[3, 1, 2] = 1e300                               # finite in float64, infinite in float32
+    with pytest.raises(InputError, match="first: triangle 3"):
+        build_on_device(*queue, huge)
+
+
+@pytest.mark.parametrize("name", ["random", "torus", "degenerate"])
+def test_tree_does_not_depend_on_the_tail_handover(name, queue, monkeypatch):
+    """ploc_tail makes the choices of the three-kernel iterations: handing over
+    at any count, and with a larger tail work-group (the GPU's), gives the
+    same rows bit for bit."""
+    from clrt.device import build
+    corners = CORNERS[name]()
+    baseline = build_on_device(*queue, corners, leaf_size=4, tail_threshold=1)   # no tail work
+    assert baseline.iterations > 10
+    expected = baseline.read_back()
+    variants = [(threshold, None) for threshold in (64, 700, 10 ** 9)] + [(300, 1024), (10 ** 9, 1024)]
+    for threshold, tail_group in variants:
+        if tail_group:
+            monkeypatch.setitem(build.TAIL_GROUP, build.device_kind(queue[1].device), tail_group)
+        bvh = build_on_device(*queue, corners, leaf_size=4, tail_threshold=threshold)
+        got = bvh.read_back()
+        assert bvh.iterations == baseline.iterations, (threshold, tail_group)
+        assert all(np.array_equal(a.view(np.uint8), b.view(np.uint8)) for a, b in zip(got, expected)), \
+            (threshold, tail_group)
+
+
 @pytest.mark.parametrize("name", sorted(TEST_MESHES))
 def test_queries_and_renders_equal_brute_force(name, device):
     mesh = TEST_MESHES[name]()

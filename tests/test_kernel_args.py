@@ -55,8 +55,9 @@ def test_declared_argument_types_match_the_kernels(device, max_buffer_bytes):
 def test_the_device_builders_declared_types_match(device):
     from types import SimpleNamespace
 
-    from clrt.device.build import _PLOC_ARG_TYPES, build_defines
+    from clrt.device.build import _ARG_TYPES, _KERNELS, build_defines, device_kind
     from clrt.device.context import create_context
-    context, _ = create_context(device)
-    declared = {name: SimpleNamespace(arg_types=types) for name, types in _PLOC_ARG_TYPES.items()}
-    _check(context, "build_bvh.cl", build_defines("box"), declared)
+    context, queue = create_context(device)
+    assert sorted(_ARG_TYPES) == sorted(_KERNELS)
+    declared = {name: SimpleNamespace(arg_types=types) for name, types in _ARG_TYPES.items()}
+    _check(context, "build_bvh.cl", build_defines("box", device_kind(queue.device)), declared)

@@ -75,8 +75,10 @@ def check_options(accel, builder, leaf_size) -> None:
     checks.integer("leaf_size", leaf_size, 1, MAX_LEAF_SIZE)
 
 
-def as_triangles(triangles) -> np.ndarray:
-    """Validate to a C-contiguous (F, 3, 3) float32 array with finite values."""
+def as_triangles(triangles, check_finite: bool = True) -> np.ndarray:
+    """Validate to a C-contiguous (F, 3, 3) float32 array with finite values
+    (``check_finite=False``: the caller checks them, as the device builder
+    does on the device)."""
     try:
         with np.errstate(over="ignore", invalid="ignore"):
             tri = np.ascontiguousarray(triangles, dtype=np.float32)
@@ -88,7 +90,7 @@ def as_triangles(triangles) -> np.ndarray:
         raise InputError("cannot build an acceleration structure over zero triangles")
     if len(tri) >= 2 ** 31 - 1:
         raise InputError(f"too many triangles for int32 ids ({len(tri)})")
-    if not np.isfinite(tri).all():
+    if check_finite and not np.isfinite(tri).all():
         raise InputError("triangle corners contain NaN or infinite (or beyond float32) values")
     return tri
 

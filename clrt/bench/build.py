@@ -40,7 +40,7 @@ import pyopencl as cl
 from clrt.bench.common import exit_code, parse_count
 from clrt.bench.scale import instanced
 from clrt.bench.speed import CASES, time_launches
-from clrt.config import BUILDERS
+from clrt.config import HOST_BUILDERS
 from clrt.scene.arrays import triangle_corners
 
 SIZE = (1920, 1080)
@@ -59,25 +59,36 @@ def _host_build(context, queue, corners, volume, builder, leaf_size) -> tuple[di
     return built.stats(), buffers
 
 
-def _device_build(context, queue, corners, volume, leaf_size) -> tuple[dict, object]:
-    from clrt.device.build import build_on_device
-    bvh = build_on_device(context, queue, corners, volume=volume, leaf_size=leaf_size, keep_boxes=True)
-    return bvh, bvh
+# Variants of the device builder, side by side with it (``--builders``):
+# without ploc_tail (every PLOC iteration three launches, as before it), and
+# with the triangles uploaded from pageable memory (no page-locked staging).
+DEVICE_VARIANTS = {"device": {}, "device/no-tail": {"tail_threshold": 1},
+                   "device/plain-upload": {"staged_upload": False}}
 
 
 def time_builds(context, queue, corners, volume, builder, leaf_size, repeat):
-    """(first ms, warm median ms, stats, device timings or None)."""
+    """(first ms, warm median ms, stats, device timings or None).  Device
+    builds are timed without keeping the exact boxes; one more build keeps
+    them for the statistics."""
+    from clrt.device.build import build_on_device
     walls, last = [], None
     for _ in range(1 + repeat):
+        if last is not None and builder in DEVICE_VARIANTS:
+            last.release()
         start = time.perf_counter()
-        if builder == "device":
-            last, _ = _device_build(context, queue, corners, volume, leaf_size)
+        if builder in DEVICE_VARIANTS:
+            last = build_on_device(context, queue, corners, volume=volume, leaf_size=leaf_size,
+                                   **DEVICE_VARIANTS[builder])
+            queue.finish()
         else:
             last = _host_build(context, queue, corners, volume, builder, leaf_size)
         walls.append(1e3 * (time.perf_counter() - start))
-    if builder == "device":
-        stats = last.stats()
+    if builder in DEVICE_VARIANTS:
         timings = last.timings
+        last.release()
+        last = build_on_device(context, queue, corners, volume=volume, leaf_size=leaf_size, keep_boxes=True,
+                               **DEVICE_VARIANTS[builder])
+        stats = last.stats()
         last.release()
     else:
         stats, buffers = last
@@ -134,7 +145,8 @@ def run(mesh_dir, meshes, counts, builders, volume="box", leaf_size=4, device=No
         results = {}
         for builder in builders:
             first, warm, stats, timings = time_builds(context, queue, corners, volume, builder, leaf_size, repeat)
-            trace_ms, refit_ms = (_trace_ms(mesh, camera, volume, builder, leaf_size, device) if trace
+            trace_ms, refit_ms = (_trace_ms(mesh, camera, volume, builder, leaf_size, device)
+                                  if trace and (builder not in DEVICE_VARIANTS or builder == "device")
                                   else (float("nan"), float("nan")))
             results[builder] = (first, warm, stats, timings, trace_ms, refit_ms)
         sah_cost = results["sah"][2]["sah_cost"] if "sah" in results else None
@@ -157,8 +169,9 @@ def main(argv=None) -> int:
                    help=f"comma-separated, of {', '.join(sorted(CASES))} (default all; '' for none)")
     p.add_argument("--triangles", type=lambda s: [parse_count(x) for x in s.split(",")], default=[],
                    help="also grids of bunny copies of about these many triangles, e.g. 1M,10M")
-    p.add_argument("--builders", type=lambda s: s.split(","), default=list(BUILDERS),
-                   help="comma-separated, of paper, sah, device (default all)")
+    p.add_argument("--builders", type=lambda s: s.split(","), default=list(HOST_BUILDERS) + ["device"],
+                   help=f"comma-separated, of {', '.join(list(HOST_BUILDERS) + list(DEVICE_VARIANTS))} "
+                        "(default: paper, sah, device)")
     p.add_argument("--volume", default="box", choices=("box", "sphere", "ellipse"))
     p.add_argument("--leaf-size", type=int, default=4)
     p.add_argument("--repeat", type=int, default=5, help="warm builds timed after the first (default 5)")
@@ -166,7 +179,7 @@ def main(argv=None) -> int:
     p.add_argument("--device", help="'gpu', 'cpu' or P:D (default: clrt's choice)")
     args = p.parse_args(argv)
     for b in args.builders:
-        if b not in BUILDERS:
+        if b not in HOST_BUILDERS and b not in DEVICE_VARIANTS:
             p.error(f"unknown builder {b!r}")
     for m in args.meshes:
         if m not in CASES:

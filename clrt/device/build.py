@@ -14,7 +14,10 @@ The algorithm (kernels in ``clrt/kernels/build_*.cl``, entry ``build_bvh.cl``):
    al. 2022): clusters start as the sorted triangles; in each iteration every
    cluster finds the cluster within ``PLOC_RADIUS`` places on either side whose
    merged box has the least area, and mutual nearest neighbours merge; three
-   launches an iteration, until one cluster is left.  Every new node decides
+   launches an iteration, until at most ``tail_threshold`` clusters are left;
+   then one work-group runs the remaining iterations in one launch
+   (``ploc_tail``, the same choices in a loop: the tree does not depend on
+   where the host hands over).  Every new node decides
    by the SAH whether its subtree (at most ``leaf_size`` triangles) is emitted
    as one leaf;
 4. rows and slots as sums along each node's path from the root (pointer
@@ -26,8 +29,11 @@ The algorithm (kernels in ``clrt/kernels/build_*.cl``, entry ``build_bvh.cl``):
 The host only queues launches: the cluster count lives in a device buffer
 that the PLOC kernels read, so iterations are queued ahead and the host reads
 the count of each iteration back without waiting for it (``AHEAD``); once it
-sees one cluster, it stops queueing.  Besides those, a build reads back two
-ints: the root's row count (to size the row buffer) and the depth.
+sees at most ``tail_threshold`` clusters, it queues the tail and stops.  Besides
+those, a build reads back the state twice: after PLOC (the iteration count,
+which bounds the pointer jumps, and the root's row count, which sizes the row
+buffer) and at the end (the depth, and the first triangle with a NaN or
+infinite corner: the input is checked on the device).
 
 Builds on one context share scratch buffers and kernel objects: they are not
 thread-safe (as clrt.query.Accel is not).
@@ -51,6 +57,7 @@ from clrt.accel import build as build_on_host
 from clrt.accel.rows import child_refs
 from clrt.accel.topdown import C_INTERSECT, C_TRAVERSAL, surface_area
 from clrt.config import HOST_BUILDERS, HOST_DEFAULT_BUILDER, VOLUME_DEFINES, VOLUMES
+from clrt.device import pinned
 from clrt.device.context import format_bytes, is_out_of_memory
 from clrt.device.program import build_program, typed_kernel
 from clrt.errors import DeviceError, DeviceMemoryError, InputError
@@ -64,26 +71,36 @@ MORTON_BITS = 30
 # with the radius, and at 32 the pair table no longer fits 48 KiB of local
 # memory.  ``python -m clrt.bench.build`` prints the ratio.
 PLOC_RADIUS = 16
+# Clusters at which the host hands over to ploc_tail, per device type: a GPU
+# runs a few thousand clusters' iteration in one work-group faster than three
+# launches; a CPU runs a work-group on one core, so it hands over later.
+TAIL_THRESHOLD = {"gpu": 16384, "cpu": 2048}
+TAIL_GROUP = {"gpu": 1024, "cpu": BUILD_GROUP}
 AHEAD = 4                # PLOC iterations queued before the host waits for a count
 MAX_REDUCE_GROUPS = 256  # work-groups of the bounds reduction (grid-stride beyond)
 
 # The state buffer (build_state.cl): int offsets, and the ring of cluster counts.
-STATE = {"STATE_NEXT_NODE": 0, "STATE_DEPTH": 1, "STATE_ERROR": 2, "STATE_BOUNDS": 4, "STATE_COUNTS": 16,
-         "COUNT_RING": 64}
+STATE = {"STATE_NEXT_NODE": 0, "STATE_DEPTH": 1, "STATE_ERROR": 2, "STATE_BAD_TRIANGLE": 3, "STATE_BOUNDS": 4,
+         "STATE_ITERATIONS": 10, "STATE_COUNTS": 16, "COUNT_RING": 64}
 STATE_INTS = STATE["STATE_COUNTS"] + STATE["COUNT_RING"]
 
 _KERNELS = ("init_build_state", "centroid_bounds", "morton_codes", "radix_histogram", "scan_counts",
-            "radix_scatter", "init_leaves", "ploc_merge", "ploc_count_kept", "ploc_compact",
+            "radix_scatter", "init_leaves", "ploc_merge", "ploc_count_kept", "ploc_compact", "ploc_tail",
             "init_root_paths", "jump_root_paths", "emit_tree")
 
 
-def build_defines(volume: str) -> dict:
+def device_kind(device: cl.Device) -> str:
+    """"gpu" or "cpu": which TAIL_THRESHOLD and TAIL_GROUP apply."""
+    return "cpu" if device.type & cl.device_type.CPU else "gpu"
+
+
+def build_defines(volume: str, kind: str = "gpu") -> dict:
     """Program defines: the shape, the work-group and state layout, and the
     constants of topdown.py and volumes.py (one source of truth: repr() of a float
     is a C double literal of the same value)."""
     return {
         VOLUME_DEFINES[volume]: None, "BUILD_GROUP": BUILD_GROUP, "RADIX_BITS": RADIX_BITS,
-        "PLOC_RADIUS": PLOC_RADIUS, **STATE,
+        "PLOC_RADIUS": PLOC_RADIUS, "TAIL_GROUP": TAIL_GROUP[kind], **STATE,
         "C_TRAVERSAL": f"((float){C_TRAVERSAL!r})", "C_INTERSECT": f"((float){C_INTERSECT!r})",
         "REL_PAD": repr(float(volumes.REL_PAD)), "ULP_PAD": int(volumes.ULP_PAD),
         "PAD_FLOOR": repr(float(volumes.PAD_FLOOR)), "EVAL_SLACK": repr(float(volumes.EVAL_SLACK)),
@@ -216,17 +233,24 @@ _workspaces: dict[int, _Workspace] = {}
 _kernel_sets: dict[int, dict] = {}
 
 
-# The PLOC loop's kernels are launched some fifty times a build: their argument
-# types are declared, so that setting their arguments costs no Python time to speak of.
-_PLOC_ARG_TYPES = {"ploc_merge": [None] * 5 + [np.int32, np.uint32], "ploc_count_kept": [None, None, np.int32],
-                   "ploc_compact": [None] * 4 + [np.int32]}
+# Every build kernel's argument types are declared (None: a buffer), so that
+# setting the arguments of a build's 40-odd launches costs no Python time to
+# speak of (clrt.device.program.typed_kernel).
+_U, _I = np.uint32, np.int32
+_ARG_TYPES = {
+    "init_build_state": [None, _U], "centroid_bounds": [None, _U, None], "morton_codes": [None, _U, None, None, None],
+    "radix_histogram": [None, _U, _U, None], "scan_counts": [None, _U],
+    "radix_scatter": [None, None, _U, _U, None, None, None], "init_leaves": [None, None, _U, None, None],
+    "ploc_merge": [None] * 5 + [_I, _U], "ploc_count_kept": [None, None, _I], "ploc_compact": [None] * 4 + [_I],
+    "ploc_tail": [None] * 5 + [_I, _U], "init_root_paths": [None, _U, None, None],
+    "jump_root_paths": [None, None, _U, None, None], "emit_tree": [None, _U, _I] + [None] * 9,
+}
 
 
 def _kernels(program: cl.Program) -> dict:
     key = program.int_ptr
     if key not in _kernel_sets:
-        _kernel_sets[key] = {name: typed_kernel(program, name, _PLOC_ARG_TYPES[name]) if name in _PLOC_ARG_TYPES
-                             else cl.Kernel(program, name) for name in _KERNELS}
+        _kernel_sets[key] = {name: typed_kernel(program, name, _ARG_TYPES[name]) for name in _KERNELS}
     return _kernel_sets[key]
 
 
@@ -253,13 +277,18 @@ class _Phases:
 
 
 def build_on_device(context: cl.Context, queue: cl.CommandQueue, corners, volume: str = "box",
-                    leaf_size: int = 4, keep_boxes: bool = False) -> DeviceBvh:
+                    leaf_size: int = 4, keep_boxes: bool = False,
+                    tail_threshold: int | None = None, staged_upload: bool | None = None) -> DeviceBvh:
     """Build a BVH over ``corners`` on the queue's device.
 
     corners: (F, 3, 3) triangle corners (converted to float32, checked as
         clrt.accel.build checks them); row order is the triangle id.
     volume: one of ``VOLUMES``; leaf_size: 1..255, the most triangles per leaf.
     keep_boxes: also keep the exact child boxes (``DeviceBvh.stats``).
+    tail_threshold: clusters at which PLOC hands over to one work-group
+        (default: TAIL_THRESHOLD of the device type; for benchmarks).
+    staged_upload: the triangles through page-locked staging or not
+        (default: clrt.device.pinned.upload's choice; for benchmarks).
     ``queue`` must have profiling enabled (clrt.device.context.create_context's does).
     Raises InputError on bad input, DeviceError when the device lacks float64.
     """
@@ -268,11 +297,13 @@ def build_on_device(context: cl.Context, queue: cl.CommandQueue, corners, volume
         raise InputError(f"unknown bounding volume {volume!r} (choose from {', '.join(VOLUMES)})")
     check_options(volume, "device", leaf_size)
     leaf_size = int(leaf_size)
-    tri = as_triangles(corners)
+    tri = as_triangles(corners, check_finite=False)     # checked on the device
     device = queue.device
     if "cl_khr_fp64" not in device.extensions:
         raise DeviceError(f"the device BVH builder fits volumes in float64, which {device.name.strip()} lacks")
-    program = build_program(context, "build_bvh.cl", build_defines(volume))
+    kind = device_kind(device)
+    tail_threshold = TAIL_THRESHOLD[kind] if tail_threshold is None else int(tail_threshold)
+    program = build_program(context, "build_bvh.cl", build_defines(volume, kind))
     k = _kernels(program)
     ws = _workspaces.setdefault(context.int_ptr, _Workspace(context))
     F = len(tri)
@@ -280,15 +311,14 @@ def build_on_device(context: cl.Context, queue: cl.CommandQueue, corners, volume
     root = 2 * F - 2 if F > 1 else 0        # the last merge makes the root
     phases = _Phases()
 
-    def launch(phase: str, kernel: cl.Kernel, groups: int, *args) -> cl.Event:
+    def launch(phase: str, kernel: cl.Kernel, groups: int, *args, group: int = BUILD_GROUP) -> cl.Event:
         if args:
             kernel.set_args(*args)
-        return phases.add(phase, cl.enqueue_nd_range_kernel(queue, kernel, (groups * BUILD_GROUP,),
-                                                            (BUILD_GROUP,)))
+        return phases.add(phase, cl.enqueue_nd_range_kernel(queue, kernel, (groups * group,), (group,)))
 
     state = ws.get("state", 4 * STATE_INTS)
     corners_buf = ws.get("corners", tri.nbytes)
-    phases.add("upload", cl.enqueue_copy(queue, corners_buf, tri, is_blocking=False))
+    phases.add("upload", pinned.upload(context, queue, corners_buf, tri, staged_upload))
     keys = [ws.get("keys0", 4 * F), ws.get("keys1", 4 * F)]
     ids = [ws.get("ids0", 4 * F), ws.get("ids1", 4 * F)]
 
@@ -315,9 +345,19 @@ def build_on_device(context: cl.Context, queue: cl.CommandQueue, corners, volume
     nodes = ws.get("nodes", layouts.BUILD_NODE.itemsize * num_nodes)
     clusters = ws.get("clusters", layouts.BUILD_CLUSTER.itemsize * F)
     merged = ws.get("merged", layouts.BUILD_CLUSTER.itemsize * F)
-    tile_kept = ws.get("tile_kept", 4 * _groups(F))
+    tile_kept = ws.get("tile_kept", 4 * max(_groups(F), F))    # also ploc_tail's nearest neighbours
     launch("ploc", k["init_leaves"], _groups(F), corners_buf, sorted_ids, np.uint32(F), nodes, clusters)
-    iterations = _ploc(queue, k, launch, F, clusters, merged, tile_kept, nodes, state, leaf_size)
+    queued, in_flight = _ploc(queue, k, launch, F, clusters, merged, tile_kept, nodes, state, leaf_size, tail_threshold)
+    # ploc_tail starts from the clusters the last compaction wrote (`clusters`).
+    launch("ploc", k["ploc_tail"], 1, clusters, merged, tile_kept, nodes, state, queued, leaf_size,
+           group=TAIL_GROUP[kind])
+    head = np.empty(STATE["STATE_COUNTS"], np.int32)
+    root_rows = np.empty(1, np.int32)
+    offset = root * layouts.BUILD_NODE.itemsize + layouts.BUILD_NODE.fields["rows"][1]
+    cl.enqueue_copy(queue, head, state, is_blocking=False)
+    cl.enqueue_copy(queue, root_rows, nodes, src_offset=offset, is_blocking=True)
+    del in_flight                       # complete: the blocking read came after them
+    iterations = int(head[STATE["STATE_ITERATIONS"]])
 
     # 4. Path sums, then the rows.
     ancestor = [ws.get("ancestor0", 4 * num_nodes), ws.get("ancestor1", 4 * num_nodes)]
@@ -327,9 +367,6 @@ def build_on_device(context: cl.Context, queue: cl.CommandQueue, corners, volume
     for j in range(jumps):
         launch("emit", k["jump_root_paths"], _groups(num_nodes), ancestor[j % 2], path[j % 2],
                np.uint32(num_nodes), ancestor[1 - j % 2], path[1 - j % 2])
-    root_rows = np.empty(1, np.int32)
-    offset = root * layouts.BUILD_NODE.itemsize + layouts.BUILD_NODE.fields["rows"][1]
-    cl.enqueue_copy(queue, root_rows, nodes, src_offset=offset, is_blocking=True)
     num_rows = max(int(root_rows[0]), 1)
     mf = cl.mem_flags
     rows = cl.Buffer(context, mf.READ_WRITE, num_rows * layouts.BVH_PAIR_NODE.itemsize)
@@ -338,8 +375,13 @@ def build_on_device(context: cl.Context, queue: cl.CommandQueue, corners, volume
     prim_ids = cl.Buffer(context, mf.READ_WRITE, F * 4)
     launch("emit", k["emit_tree"], _groups(num_nodes), nodes, np.uint32(num_nodes), np.int32(root), corners_buf,
            sorted_ids, ancestor[jumps % 2], path[jumps % 2], rows, exact_rows, tri_verts, prim_ids, state)
-    head = np.empty(4, np.int32)
     cl.enqueue_copy(queue, head, state, is_blocking=True)
+    if head[STATE["STATE_BAD_TRIANGLE"]] >= 0:
+        for buffer in (rows, exact_rows, tri_verts, prim_ids):
+            if buffer is not None:
+                buffer.release()
+        raise InputError(f"triangle corners contain NaN or infinite (or beyond float32) values "
+                         f"(first: triangle {int(head[STATE['STATE_BAD_TRIANGLE']])})")
     if head[STATE["STATE_ERROR"]]:
         raise RuntimeError("device BVH build: a node did not reach the root (too few pointer jumps)")
     timings = phases.ms()
@@ -349,8 +391,10 @@ def build_on_device(context: cl.Context, queue: cl.CommandQueue, corners, volume
                      iterations=iterations, timings=timings, queue=queue, exact_rows=exact_rows)
 
 
-def _ploc(queue, k, launch, F, clusters, merged, tile_kept, nodes, state, leaf_size) -> int:
-    """Queue PLOC iterations until one cluster is left; returns how many it took.
+def _ploc(queue, k, launch, F, clusters, merged, tile_kept, nodes, state, leaf_size, tail_threshold) -> int:
+    """Queue PLOC iterations until at most ``tail_threshold`` clusters are
+    left (ploc_tail does the rest); returns how many were queued, and the
+    count reads still in flight.
 
     Iteration i's kernels read its cluster count from the state ring, and a
     non-blocking read brings the next count back.  The host queues with the
@@ -362,7 +406,7 @@ def _ploc(queue, k, launch, F, clusters, merged, tile_kept, nodes, state, leaf_s
     seen = 0
     pending: deque = deque()          # (iteration, event, host int32[1]) of reads in flight
     iteration = 0
-    while known > 1:
+    while known > max(tail_threshold, 1):
         groups = _groups(known)
         k["ploc_merge"].set_args(clusters, merged, tile_kept, nodes, state, iteration, leaf_size)
         launch("ploc", k["ploc_merge"], groups)
@@ -383,11 +427,11 @@ def _ploc(queue, k, launch, F, clusters, merged, tile_kept, nodes, state, leaf_s
             seen, event, count = pending.popleft()
             event.wait()
             known = int(count[0])
-            if known <= 1:
+            if known <= tail_threshold:
                 break
-    for _, event, _ in pending:       # iterations queued past the end: no-ops
-        event.wait()
-    return seen if F > 1 else 0
+    # The reads still in flight keep their host arrays: the caller holds
+    # them until its next blocking read (waiting here would idle the device).
+    return iteration, pending
 
 
 # Device scratch of a build, per triangle: nodes, clusters, keys, sort buffers,

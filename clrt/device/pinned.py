@@ -61,3 +61,73 @@ class PinnedPool:
     def buffers(self) -> int:
         """Page-locked buffers made so far and still pooled or lent."""
         return self._count
+
+
+# ----------------------------------------------------------------------------- staged upload
+
+STAGE_BYTES = 64 << 20       # one page-locked staging block; two are kept per context
+STAGED_MIN_BYTES = 16 << 20  # smaller arrays go straight to the driver
+_stages: dict[int, list] = {}
+_copier = None               # thread pool for the host copies into the staging blocks
+
+
+def _copy_threads() -> int:
+    import os
+    return max(1, min(8, (os.cpu_count() or 1) // 2))
+
+
+def _parallel_copy(dst: np.ndarray, src: np.ndarray, threads: int | None = None) -> None:
+    """dst[:] = src in slices on a few threads (numpy releases the GIL while copying)."""
+    global _copier
+    threads = threads or _copy_threads()
+    if threads == 1 or len(src) < (4 << 20):
+        dst[:] = src
+        return
+    if _copier is None:
+        from concurrent.futures import ThreadPoolExecutor
+        _copier = ThreadPoolExecutor(8, thread_name_prefix="clrt-stage")
+    step = -(-len(src) // threads)
+    jobs = [_copier.submit(np.copyto, dst[k:k + step], src[k:k + step]) for k in range(0, len(src), step)]
+    for job in jobs:
+        job.result()
+
+
+def upload(context: cl.Context, queue: cl.CommandQueue, buffer: cl.Buffer, array: np.ndarray,
+           staged: bool | None = None) -> cl.Event:
+    """Copy a C-contiguous host array into ``buffer`` (from offset 0); returns
+    the event of the last copy.
+
+    A GPU reads ordinary (pageable) memory through the driver's own staging,
+    one thread copying into it: about 8 GB/s on the H200's host, so two thirds
+    of a 10M-triangle device build.  Large arrays go through two page-locked
+    blocks instead, filled by several threads while the device reads the
+    other block.  CPU devices and small arrays take the plain copy (``staged``
+    None); True or False choose (tests, benchmarks).
+    """
+    flat = array.reshape(-1).view(np.uint8)
+    if staged is None:
+        staged = len(flat) >= STAGED_MIN_BYTES and not queue.device.type & cl.device_type.CPU
+    if not staged:
+        return cl.enqueue_copy(queue, buffer, array, is_blocking=False)
+    stages = _stages.get(context.int_ptr)
+    if stages is None:
+        try:
+            stages = []
+            for _ in range(2):
+                block = cl.Buffer(context, cl.mem_flags.READ_WRITE | cl.mem_flags.ALLOC_HOST_PTR, STAGE_BYTES)
+                mapped, _ = cl.enqueue_map_buffer(queue, block, cl.map_flags.READ | cl.map_flags.WRITE,
+                                                  0, (STAGE_BYTES,), np.uint8)
+                stages.append([block, mapped, None])
+        except (cl.Error, MemoryError):          # page-locked memory is scarce: the plain copy
+            return cl.enqueue_copy(queue, buffer, array, is_blocking=False)
+        _stages[context.int_ptr] = stages
+    event = None
+    for k, start in enumerate(range(0, len(flat), STAGE_BYTES)):
+        stage = stages[k % 2]
+        if stage[2] is not None:
+            stage[2].wait()                       # the device has read this block's last chunk
+        chunk = flat[start:start + STAGE_BYTES]
+        _parallel_copy(stage[1][:len(chunk)], chunk)
+        event = stage[2] = cl.enqueue_copy(queue, buffer, stage[1][:len(chunk)], dst_offset=start,
+                                           is_blocking=False)
+    return event

@@ -39,6 +39,7 @@ def kernel_text(name: str) -> str:
     return resources.files("clrt.kernels").joinpath(name).read_text(encoding="utf-8")
 
 
+@lru_cache(maxsize=None)       # as kernel_text: the files do not change while the process runs
 def expand_source(entry: str) -> str:
     """The entry file with every include expanded once (include guards not needed).
 

@@ -53,6 +53,10 @@ void centroid_bounds(const global float* corners, const uint num_tris, global ui
     for (uint tri = get_global_id(0); tri < num_tris; tri += get_global_size(0)) {
         float3 box_lo, box_hi;
         triangle_box(corners, tri, &box_lo, &box_hi);
+        // The corners, not the box: fmin and fmax drop a NaN.
+        if (!all(isfinite(corner(corners, tri, 0))) || !all(isfinite(corner(corners, tri, 1)))
+            || !all(isfinite(corner(corners, tri, 2))))
+            atomic_min(state + STATE_BAD_TRIANGLE, tri);
         const float3 c = box_centre(box_lo, box_hi);
         my_lo = fmin(my_lo, c);
         my_hi = fmax(my_hi, c);

@@ -13,21 +13,23 @@
 #define SCAN_ITEMS 8
 
 // Exclusive prefix sum of one value per work-item over the work-group
-// (Hillis-Steele in local memory: log2(BUILD_GROUP) steps); *total gets the
-// sum of all.  Every work-item of the group must call it.
+// (Hillis-Steele in local memory: log2(work-group size) steps; any power of
+// two, as ploc_tail's group is larger than BUILD_GROUP); *total gets the sum
+// of all.  Every work-item of the group must call it; scratch holds one uint
+// per work-item.
 inline uint group_exclusive_scan(uint x, local uint* scratch, uint* total)
 {
-    const uint lid = get_local_id(0);
+    const uint lid = get_local_id(0), size = get_local_size(0);
     scratch[lid] = x;
     barrier(CLK_LOCAL_MEM_FENCE);
-    for (uint offset = 1; offset < BUILD_GROUP; offset <<= 1) {
+    for (uint offset = 1; offset < size; offset <<= 1) {
         const uint add = lid >= offset ? scratch[lid - offset] : 0u;
         barrier(CLK_LOCAL_MEM_FENCE);
         scratch[lid] += add;
         barrier(CLK_LOCAL_MEM_FENCE);
     }
     const uint inclusive = scratch[lid];
-    *total = scratch[BUILD_GROUP - 1];
+    *total = scratch[size - 1];
     barrier(CLK_LOCAL_MEM_FENCE);       // the caller may reuse scratch at once
     return inclusive - x;
 }

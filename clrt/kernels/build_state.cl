@@ -3,6 +3,10 @@
 //   STATE_NEXT_NODE      next free BuildNode index (atomic allocation)
 //   STATE_DEPTH          tree depth: nodes on the longest root-to-leaf path
 //   STATE_ERROR          non-zero: a kernel found the tree inconsistent
+//   STATE_BAD_TRIANGLE   least index of a triangle with a NaN or infinite
+//                        corner (the input is checked here, not on the host:
+//                        a host pass over 10M triangles costs more than the build)
+//   STATE_ITERATIONS     PLOC iterations that merged (ploc_count_kept or ploc_tail)
 //   STATE_BOUNDS + 0..5  centre bounds min xyz, max xyz (order-preserving bits)
 //   STATE_COUNTS + k     clusters before PLOC iteration j, j % COUNT_RING == k
 // Offsets are -D defines from clrt/device/build.py, which reads the same values.
@@ -10,6 +14,7 @@
 #define CLRT_BUILD_STATE_CL
 
 #if !defined(STATE_NEXT_NODE) || !defined(STATE_DEPTH) || !defined(STATE_ERROR) \
+    || !defined(STATE_BAD_TRIANGLE) || !defined(STATE_ITERATIONS) \
     || !defined(STATE_BOUNDS) || !defined(STATE_COUNTS) || !defined(COUNT_RING)
 #error "build with the STATE_* and COUNT_RING defines of clrt/device/build.py"
 #endif
@@ -22,6 +27,7 @@ __kernel void init_build_state(global uint* state, const uint num_tris)
     for (uint k = 0; k < STATE_COUNTS + COUNT_RING; ++k)
         state[k] = 0u;
     state[STATE_NEXT_NODE] = num_tris;
+    state[STATE_BAD_TRIANGLE] = 0xffffffffu;       // none (atomic_min from the largest)
     for (uint k = 0; k < 3; ++k) {
         state[STATE_BOUNDS + k] = 0xffffffffu;     // min: atomic_min from the largest
         state[STATE_BOUNDS + 3 + k] = 0u;          // max: atomic_max from the smallest
