@@ -27,10 +27,13 @@ The algorithm (kernels in ``clrt/kernels/build_*.cl``, entry ``build_bvh.cl``):
    slot order and the slot -> triangle ids.
 
 The host only queues launches: the cluster count lives in a device buffer
-that the PLOC kernels read, so iterations are queued ahead and the host reads
-the count of each iteration back without waiting for it (``AHEAD``); once it
-sees at most ``tail_threshold`` clusters, it queues the tail and stops.  Besides
-those, a build reads back the state twice: after PLOC (the iteration count,
+that the PLOC kernels read, so the host queues iterations in batches, as
+many as should bring the count below ``tail_threshold`` (``MIN_SHRINK``),
+and reads the count once after each batch; then it queues the tail.
+(Reading each iteration's count without blocking was the first version:
+NVIDIA's driver completes a read into ordinary memory before it returns, so
+every iteration waited for the device, about 80 us each.)  Besides the
+counts, a build reads back the state twice: after PLOC (the iteration count,
 which bounds the pointer jumps, and the root's row count, which sizes the row
 buffer) and at the end (the depth, and the first triangle with a NaN or
 infinite corner: the input is checked on the device).
@@ -44,8 +47,8 @@ call: clrt.accel.build for the host builders, this one for ``builder="device"``.
 
 from __future__ import annotations
 
+import math
 import time
-from collections import deque
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -74,9 +77,13 @@ PLOC_RADIUS = 16
 # Clusters at which the host hands over to ploc_tail, per device type: a GPU
 # runs a few thousand clusters' iteration in one work-group faster than three
 # launches; a CPU runs a work-group on one core, so it hands over later.
-TAIL_THRESHOLD = {"gpu": 16384, "cpu": 2048}
+TAIL_THRESHOLD = {"gpu": 4096, "cpu": 2048}
 TAIL_GROUP = {"gpu": 1024, "cpu": BUILD_GROUP}
-AHEAD = 4                # PLOC iterations queued before the host waits for a count
+# Clusters an iteration keeps, at most (a fifth to a quarter merge away on
+# meshes): the host queues log(count / tail_threshold) / log(1 / MIN_SHRINK)
+# iterations before it reads the count again.  Iterations queued past the
+# last merge do nothing; too few leave more work to the tail.
+MIN_SHRINK = 0.8
 MAX_REDUCE_GROUPS = 256  # work-groups of the bounds reduction (grid-stride beyond)
 
 # The state buffer (build_state.cl): int offsets, and the ring of cluster counts.
@@ -347,7 +354,7 @@ def build_on_device(context: cl.Context, queue: cl.CommandQueue, corners, volume
     merged = ws.get("merged", layouts.BUILD_CLUSTER.itemsize * F)
     tile_kept = ws.get("tile_kept", 4 * max(_groups(F), F))    # also ploc_tail's nearest neighbours
     launch("ploc", k["init_leaves"], _groups(F), corners_buf, sorted_ids, np.uint32(F), nodes, clusters)
-    queued, in_flight = _ploc(queue, k, launch, F, clusters, merged, tile_kept, nodes, state, leaf_size, tail_threshold)
+    queued = _ploc(queue, k, launch, F, clusters, merged, tile_kept, nodes, state, leaf_size, tail_threshold)
     # ploc_tail starts from the clusters the last compaction wrote (`clusters`).
     launch("ploc", k["ploc_tail"], 1, clusters, merged, tile_kept, nodes, state, queued, leaf_size,
            group=TAIL_GROUP[kind])
@@ -356,7 +363,6 @@ def build_on_device(context: cl.Context, queue: cl.CommandQueue, corners, volume
     offset = root * layouts.BUILD_NODE.itemsize + layouts.BUILD_NODE.fields["rows"][1]
     cl.enqueue_copy(queue, head, state, is_blocking=False)
     cl.enqueue_copy(queue, root_rows, nodes, src_offset=offset, is_blocking=True)
-    del in_flight                       # complete: the blocking read came after them
     iterations = int(head[STATE["STATE_ITERATIONS"]])
 
     # 4. Path sums, then the rows.
@@ -393,45 +399,34 @@ def build_on_device(context: cl.Context, queue: cl.CommandQueue, corners, volume
 
 def _ploc(queue, k, launch, F, clusters, merged, tile_kept, nodes, state, leaf_size, tail_threshold) -> int:
     """Queue PLOC iterations until at most ``tail_threshold`` clusters are
-    left (ploc_tail does the rest); returns how many were queued, and the
-    count reads still in flight.
+    left (ploc_tail does the rest); returns how many were queued.
 
-    Iteration i's kernels read its cluster count from the state ring, and a
-    non-blocking read brings the next count back.  The host queues with the
-    last count it has seen (an upper bound: counts only fall), at most AHEAD
-    iterations beyond it; iterations queued after the last merge do nothing.
+    Iteration i's kernels read its cluster count from the state ring; the
+    host queues a batch of iterations sized for the last count it read (an
+    upper bound: counts only fall), then reads the count after the batch.
     """
     ring = STATE["COUNT_RING"]
-    known = F                         # clusters before iteration `seen`
-    seen = 0
-    pending: deque = deque()          # (iteration, event, host int32[1]) of reads in flight
+    known = F                         # clusters before iteration `iteration` (at most)
     iteration = 0
+    count = np.empty(1, np.int32)
     while known > max(tail_threshold, 1):
-        groups = _groups(known)
-        k["ploc_merge"].set_args(clusters, merged, tile_kept, nodes, state, iteration, leaf_size)
-        launch("ploc", k["ploc_merge"], groups)
-        k["ploc_count_kept"].set_args(tile_kept, state, iteration)
-        launch("ploc", k["ploc_count_kept"], 1)
-        k["ploc_compact"].set_args(merged, clusters, tile_kept, state, iteration)
-        launch("ploc", k["ploc_compact"], groups)
-        count = np.empty(1, np.int32)
-        offset = 4 * (STATE["STATE_COUNTS"] + (iteration + 1) % ring)
-        pending.append((iteration + 1, cl.enqueue_copy(queue, count, state, src_offset=offset,
-                                                       is_blocking=False), count))
-        iteration += 1
-        if iteration > F + AHEAD:     # every iteration merges at least one pair
+        batch = max(1, math.ceil(math.log(known / max(tail_threshold, 1)) / -math.log(MIN_SHRINK)))
+        batch = min(batch, ring - 1)  # the ring holds the counts of one batch
+        for _ in range(batch):
+            groups = _groups(known)
+            k["ploc_merge"].set_args(clusters, merged, tile_kept, nodes, state, iteration, leaf_size)
+            launch("ploc", k["ploc_merge"], groups)
+            k["ploc_count_kept"].set_args(tile_kept, state, iteration)
+            launch("ploc", k["ploc_count_kept"], 1)
+            k["ploc_compact"].set_args(merged, clusters, tile_kept, state, iteration)
+            launch("ploc", k["ploc_compact"], groups)
+            iteration += 1
+        cl.enqueue_copy(queue, count, state, src_offset=4 * (STATE["STATE_COUNTS"] + iteration % ring),
+                        is_blocking=True)
+        if int(count[0]) >= known:    # every iteration merges at least one pair
             raise RuntimeError("device BVH build: PLOC did not converge")
-        # Take every count that has arrived; wait only when AHEAD iterations are in flight.
-        while pending and (len(pending) > AHEAD
-                           or pending[0][1].command_execution_status == cl.command_execution_status.COMPLETE):
-            seen, event, count = pending.popleft()
-            event.wait()
-            known = int(count[0])
-            if known <= tail_threshold:
-                break
-    # The reads still in flight keep their host arrays: the caller holds
-    # them until its next blocking read (waiting here would idle the device).
-    return iteration, pending
+        known = int(count[0])
+    return iteration
 
 
 # Device scratch of a build, per triangle: nodes, clusters, keys, sort buffers,
