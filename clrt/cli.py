@@ -204,6 +204,16 @@ def _info_mesh(args) -> int:
     return 0
 
 
+def _device_option(argv: list) -> str | None:
+    """The value of --device in a command line, before argparse has run."""
+    for k, arg in enumerate(argv):
+        if arg == "--device" and k + 1 < len(argv):
+            return argv[k + 1]
+        if arg.startswith("--device="):
+            return arg.split("=", 1)[1]
+    return None
+
+
 def main(argv=None) -> int:
     try:
         argv = list(sys.argv[1:] if argv is None else argv)
@@ -215,6 +225,9 @@ def main(argv=None) -> int:
         # once: a KeyboardInterrupt inside a C extension's import can abort the
         # interpreter).  Ctrl-C from then on is KeyboardInterrupt, caught below;
         # the handler is set inside the try, so a signal already pending lands here.
+        if argv[:1] == ["render"]:
+            from clrt.device import warmup    # the driver starts while numpy and pyopencl load
+            warmup.start(_device_option(argv))
         if argv[:1] in (["render"], ["info"]):
             import pyopencl  # noqa: F401
             import clrt.renderer  # noqa: F401

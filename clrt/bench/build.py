@@ -170,8 +170,8 @@ def main(argv=None) -> int:
     p.add_argument("--triangles", type=lambda s: [parse_count(x) for x in s.split(",")], default=[],
                    help="also grids of bunny copies of about these many triangles, e.g. 1M,10M")
     p.add_argument("--builders", type=lambda s: s.split(","), default=list(HOST_BUILDERS) + ["device"],
-                   help=f"comma-separated, of {', '.join(list(HOST_BUILDERS) + list(DEVICE_VARIANTS))} "
-                        "(default: paper, sah, device)")
+                   help=f"comma-separated, of {', '.join(list(HOST_BUILDERS) + list(DEVICE_VARIANTS))}, "
+                        "device/tail=N (default: paper, sah, device)")
     p.add_argument("--volume", default="box", choices=("box", "sphere", "ellipse"))
     p.add_argument("--leaf-size", type=int, default=4)
     p.add_argument("--repeat", type=int, default=5, help="warm builds timed after the first (default 5)")
@@ -179,6 +179,8 @@ def main(argv=None) -> int:
     p.add_argument("--device", help="'gpu', 'cpu' or P:D (default: clrt's choice)")
     args = p.parse_args(argv)
     for b in args.builders:
+        if b.startswith("device/tail="):          # the hand-over to ploc_tail at another count
+            DEVICE_VARIANTS[b] = {"tail_threshold": parse_count(b.split("=", 1)[1])}
         if b not in HOST_BUILDERS and b not in DEVICE_VARIANTS:
             p.error(f"unknown builder {b!r}")
     for m in args.meshes:

@@ -19,6 +19,7 @@ from typing import Iterable, Sequence
 
 import pyopencl as cl
 
+from clrt.device import warmup
 from clrt.errors import DeviceError
 
 NVIDIA_LIB = "libnvidia-opencl.so.1"
@@ -74,6 +75,7 @@ class DeviceInfo:
 
 def _platforms() -> list:
     """All platforms; none when the ICD loader finds no driver (pyopencl raises then)."""
+    warmup.wait()        # the loader's first query, if a warm-up thread is making it
     try:
         return cl.get_platforms()
     except (cl.Error, RuntimeError):
@@ -331,7 +333,8 @@ def create_context(spec: str | None = None) -> tuple[cl.Context, cl.CommandQueue
     key = (info.platform_index, info.device_index)
     if key not in _CONTEXTS:
         try:
-            ctx = cl.Context([device])
+            warm = warmup.take_context(device.int_ptr)
+            ctx = cl.Context.from_int_ptr(warm, retain=False) if warm else cl.Context([device])
             queue = cl.CommandQueue(
                 ctx, properties=cl.command_queue_properties.PROFILING_ENABLE)
         except cl.Error as exc:
