@@ -222,7 +222,7 @@ def embree_measure(mesh, origins, directions, tmax=np.inf, repeat: int = 5, warm
 
 def run(mesh_path=None, sets=RAY_SETS, count: int = 1_000_000, seed: int = 0, variants=(("box", "sah"),),
         device=None, size=(1920, 1080), write_dir=None, read_files=(), tmax=np.inf, repeat: int = 5,
-        warmup: int = 2, embree: bool = False, out=None) -> list[dict]:
+        warmup: int = 2, embree: bool = False, groups=(None,), out=None) -> list[dict]:
     from clrt.query import Accel
     from clrt.scene import primitives
     from clrt.scene.load import load_mesh
@@ -243,30 +243,36 @@ def run(mesh_path=None, sets=RAY_SETS, count: int = 1_000_000, seed: int = 0, va
     print(f"mesh: {name}, {len(mesh.faces):,} triangles; device: {first.device}; seed {seed}; "
           f"ao reach {AO_REACH * _diagonal(mesh):.6g}; median of {repeat} after {warmup} warm-up; "
           f"rays and results on the device", file=out)
-    print("\n| rays | count | accel | builder | closest: kernel ms | Mrays/s | wall ms | Mrays/s | hits | sum of t "
-          "| any-hit: kernel ms | Mrays/s | any agrees |", file=out)
-    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|", file=out)
+    print("\n| rays | count | accel | builder | group | closest: kernel ms | Mrays/s | wall ms | Mrays/s | hits "
+          "| sum of t | any-hit: kernel ms | Mrays/s | any agrees |", file=out)
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|", file=out)
     rows = []
+    from clrt.query import accel as query_accel
     for accel_name, builder in variants:
         accel = first if (accel_name, builder) == tuple(variants[0]) else Accel(mesh, accel_name, builder,
                                                                                device=device)
-        for label, o, d, reach in ray_sets:
-            m = measure(accel, o, d, reach, repeat, warmup)
+        for (label, o, d, reach), group in ((s, g) for s in ray_sets for g in groups):
+            query_accel.QUERY_GROUP = group
+            try:
+                m = measure(accel, o, d, reach, repeat, warmup)
+            finally:
+                query_accel.QUERY_GROUP = None
             n = len(o)
             rate = lambda ms: n / ms / 1e3 if ms > 0 else float("inf")   # noqa: E731
             print(f"| {label} | {n:,} | {accel_name} | {builder if accel_name != 'none' else '-'} "
+                  f"| {group or 'driver'} "
                   f"| {m['closest_kernel_ms']:.3f} | {rate(m['closest_kernel_ms']):,.1f} "
                   f"| {m['closest_wall_ms']:.3f} | {rate(m['closest_wall_ms']):,.1f} | {m['hits']:,} "
                   f"| {m['sum_t']:.6f} | {m['any_kernel_ms']:.3f} | {rate(m['any_kernel_ms']):,.1f} "
                   f"| {'yes' if m['any_agrees'] else 'NO'} |", file=out, flush=True)
-            rows.append({"rays": label, "accel": accel_name, "builder": builder, **m})
+            rows.append({"rays": label, "accel": accel_name, "builder": builder, "group": group, **m})
     if embree:
         for label, o, d, reach in ray_sets:
             m = embree_measure(mesh, o, d, reach, repeat, warmup)
             ours = next(r["prim"] for r in rows if r["rays"] == label)
             same = 100 * float(np.mean((m["prim"] >= 0) == (ours >= 0)))
             n = len(o)
-            print(f"| {label} | {n:,} | Embree (embreex, host CPU) | - | - | - | {m['closest_wall_ms']:.3f} "
+            print(f"| {label} | {n:,} | Embree (embreex, host CPU) | - | - | - | - | {m['closest_wall_ms']:.3f} "
                   f"| {n / m['closest_wall_ms'] / 1e3:,.1f} | {m['hits']:,} ({same:.3f} % agree on hit or miss) "
                   f"| {m['sum_t']:.6f} | {m['any_wall_ms']:.3f} (wall) | {n / m['any_wall_ms'] / 1e3:,.1f} "
                   f"| {'yes' if m['any_agrees'] else 'NO'} |", file=out, flush=True)
@@ -291,6 +297,9 @@ def main(argv=None) -> int:
     p.add_argument("--device", help="'gpu', 'cpu' or P:D (default: clrt's choice, the first GPU if any)")
     p.add_argument("--repeat", type=int, default=5)
     p.add_argument("--warmup", type=int, default=2)
+    p.add_argument("--group", type=lambda s: [None if x == "driver" else int(x) for x in s.split(",")],
+                   default=[None], help="work-group sizes of the query kernels to compare, e.g. driver,64,128 "
+                                        "(default: the driver's choice)")
     p.add_argument("--embree", action="store_true",
                    help="also run the rays through Embree on the host CPU (needs embreex: the raybench extra)")
     args = p.parse_args(argv)
@@ -310,7 +319,7 @@ def main(argv=None) -> int:
     variants = [(a, b) for a in (args.accel or ["box"]) for b in (args.builder or ["sah"])]
     return exit_code(run, args.mesh, tuple(args.set or RAY_SETS), args.rays, args.seed, variants, args.device,
                      args.size, args.write, tuple(args.read or ()), args.tmax, args.repeat, args.warmup,
-                     args.embree)
+                     args.embree, tuple(args.group))
 
 
 if __name__ == "__main__":

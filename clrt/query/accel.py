@@ -65,6 +65,10 @@ RESULT_DTYPES = {"t": np.float32, "prim": np.int32, "u": np.float32, "v": np.flo
                  "count": np.int32, "front": np.uint8, "hit": np.uint8}
 PIPELINE_CHUNKS = 4                 # a host batch goes in at least this many chunks, on two queues
 MIN_PIPELINE_RAYS = 1 << 16         # ... of at least this many rays
+# Work-items per work-group of the query kernels; None lets the driver choose.
+# (clrt.bench.raysets --group compares sizes side by side; the kernels skip
+# the work-items past the last ray.)
+QUERY_GROUP: int | None = None
 RESULT_POOL_SIZE = 3                # page-locked result blocks per Accel (clrt/device/pinned.py)
 RESULT_POOL_MAX_BYTES = 1 << 30     # larger results go to ordinary memory
 _ZERO = np.zeros(1, np.float32)
@@ -288,7 +292,9 @@ class Accel:
     def _run(self, name: str, m: int, *args, lane: int = 0) -> None:
         kernel = self.kernels[name]
         kernel.set_args(*args, *self.geometry.args)
-        self.launches.append(cl.enqueue_nd_range_kernel(self._lane(lane), kernel, (m,), None))
+        group = QUERY_GROUP
+        size, local = ((m,), None) if group is None else ((-(-m // group) * group,), (group,))
+        self.launches.append(cl.enqueue_nd_range_kernel(self._lane(lane), kernel, size, local))
 
     def _pipeline(self, n: int, on_host: bool):
         """(start, stop, lane) of the chunks of a batch: host batches in at least
