@@ -354,19 +354,34 @@ def test_new_output_gets_normal_permissions_and_keeps_replaced_ones(tmp_path):
         os.umask(umask)
 
 
-def test_failed_write_leaves_the_old_file_and_no_temporary(tmp_path, monkeypatch):
-    path = tmp_path / "a.png"
+@pytest.mark.parametrize("name", ["a.png", "a.tif"])   # clrt's own PNG writer, Pillow's TIFF writer
+def test_failed_write_leaves_the_old_file_and_no_temporary(tmp_path, monkeypatch, name):
+    path = tmp_path / name
     output.write_image(np.zeros((2, 2, 3), np.uint8), path)
     before = path.read_bytes()
+    fdopen = os.fdopen
 
-    def full_disk(self, fp, *args, **kwargs):
-        fp.write(b"partial")
-        raise OSError(28, "No space left on device")
-    monkeypatch.setattr(Image.Image, "save", full_disk)
+    class FullDisk:   # the temporary file fills the disk after a few bytes
+        def __init__(self, *args, **kwargs):
+            self.file = fdopen(*args, **kwargs)
+
+        def __enter__(self):
+            return self
+
+        def __exit__(self, *exc):
+            self.file.close()
+
+        def write(self, data):
+            self.file.write(bytes(data)[:7])
+            raise OSError(28, "No space left on device")
+
+        def __getattr__(self, name):
+            return getattr(self.file, name)
+    monkeypatch.setattr(os, "fdopen", FullDisk)
     with pytest.raises(OutputError, match="No space left"):
         output.write_image(np.ones((2, 2, 3), np.uint8), path)
     assert path.read_bytes() == before
-    assert [p.name for p in tmp_path.iterdir()] == ["a.png"]
+    assert [p.name for p in tmp_path.iterdir()] == [name]
 
 
 def test_failed_render_leaves_existing_output_untouched(tmp_path, device, capsys, monkeypatch):

@@ -1,0 +1,65 @@
+"""clrt's own PNG writer (clrt.output.png_bytes) against Pillow: the same pixels
+and mode, a file Pillow verifies, clrt's mark inside; other arrays go to Pillow."""
+
+import io
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from clrt import output
+
+
+def decoded(data: bytes) -> Image.Image:
+    Image.open(io.BytesIO(data)).verify()   # chunk CRCs and structure
+    image = Image.open(io.BytesIO(data))
+    image.load()
+    return image
+
+
+def pillow_png(array: np.ndarray) -> Image.Image:
+    buffer = io.BytesIO()
+    Image.fromarray(array).save(buffer, format="PNG")
+    return decoded(buffer.getvalue())
+
+
+def images():
+    rng = np.random.default_rng(7)
+    for shape in [(1, 1, 3), (1, 9, 3), (9, 1, 3), (31, 17, 3), (8, 5), (6, 7, 4), (1, 1)]:
+        yield f"random {shape}", rng.integers(0, 256, size=shape, dtype=np.uint8)
+    flat = np.zeros((40, 60, 3), np.uint8)
+    flat[10:30, 20:50] = (200, 30, 255)
+    yield "flat with a box", flat
+    yield "a column slice (not contiguous)", rng.integers(0, 256, size=(12, 20, 3), dtype=np.uint8)[:, ::2]
+    yield "transposed", rng.integers(0, 256, size=(5, 11, 3), dtype=np.uint8).transpose(1, 0, 2)
+
+
+@pytest.mark.parametrize("name, array", list(images()), ids=[name for name, _ in images()])
+def test_same_pixels_and_mode_as_pillow(name, array):
+    ours, theirs = decoded(output.png_bytes(array)), pillow_png(array)
+    assert ours.mode == theirs.mode and ours.size == theirs.size
+    np.testing.assert_array_equal(np.asarray(ours), array)
+    assert ours.info["Software"].startswith(output.SOFTWARE_MARK)
+
+
+def test_write_image_marks_its_png(tmp_path):
+    path = tmp_path / "a.png"
+    image = np.arange(2 * 3 * 3, dtype=np.uint8).reshape(2, 3, 3)
+    output.write_image(image, path)
+    assert output.written_by_clrt(path) and not output.record_path(path).exists()
+    np.testing.assert_array_equal(np.asarray(Image.open(path)), image)
+
+
+@pytest.mark.parametrize("array", [np.zeros((4, 4, 3), np.float32), np.zeros((4, 4, 2), np.uint8),
+                                   np.zeros((4, 4, 1), np.uint8), np.zeros((4, 4), np.uint16),
+                                   np.zeros((2, 2, 2, 3), np.uint8), np.zeros((0, 4, 3), np.uint8)],
+                         ids=["float", "two channels", "one channel", "uint16", "4-d", "empty"])
+def test_other_arrays_are_left_to_pillow(array):
+    assert output.png_bytes(array) is None
+
+
+def test_gray_and_alpha_through_pillow_still_written(tmp_path):
+    path = tmp_path / "la.png"
+    array = np.full((3, 4, 2), 77, np.uint8)   # LA: Pillow's writer
+    output.write_image(array, path)
+    assert Image.open(path).mode == "LA" and output.written_by_clrt(path)
