@@ -126,16 +126,19 @@ class Mesh:
         v = self.vertices[used].astype(np.float64)
         return np.stack([v.min(axis=0), v.max(axis=0)])
 
+    @cached_property
     def _area_normals(self) -> np.ndarray:
         """(F, 3) float64 cross products of each triangle's two edges from corner 0:
-        normal times twice the area."""
+        normal times twice the area.  Computed once (read only, never handed out):
+        the crease split needs them, and then the split mesh's vertex normals,
+        which are the same numbers (its triangles are bitwise the same)."""
         v = self.vertices.astype(np.float64)
         first = v[self.faces[:, 0]]
         return np.cross(v[self.faces[:, 1]] - first, v[self.faces[:, 2]] - first)
 
     def face_normals(self) -> np.ndarray:
         """(F, 3) float64 unit geometric normals (zero for zero-area triangles)."""
-        n = self._area_normals()
+        n = self._area_normals
         length = np.linalg.norm(n, axis=1, keepdims=True)
         return np.divide(n, length, out=np.zeros_like(n), where=length > 0)
 
@@ -146,7 +149,7 @@ class Mesh:
             n = self.normals.astype(np.float64)
             length = np.linalg.norm(n, axis=1, keepdims=True)
             return np.divide(n, length, out=np.zeros_like(n), where=length > 0).astype(np.float32)
-        area_n = self._area_normals()
+        area_n = self._area_normals
         # Sums in a fixed order -- every face's corner 0, then corner 1, then corner 2,
         # faces in order -- with np.bincount, which adds its weights in index order
         # (as three np.add.at calls would, at a few times their speed).
@@ -220,7 +223,9 @@ class Mesh:
         is_root = label == np.arange(3 * n_faces)
         corner_vertex = (np.cumsum(is_root) - 1)[label]
         vertices = self.vertices[faces.reshape(-1)[is_root]]
-        return self._keep_detail(vertices, corner_vertex.reshape(n_faces, 3).astype(np.int32), self.name)
+        split = self._keep_detail(vertices, corner_vertex.reshape(n_faces, 3).astype(np.int32), self.name)
+        object.__setattr__(split, "_area_normals", self._area_normals)   # the same triangles, bit for bit
+        return split
 
     def transformed(self, matrix: np.ndarray) -> "Mesh":
         """A copy with a 4x4 affine transform applied to the vertices (and to
