@@ -52,7 +52,8 @@ def srgb_table() -> np.ndarray:
 
 def triangle_corners(mesh: Mesh) -> np.ndarray:
     """(F, 3, 3) float32 corners of a mesh's triangles (row = face index)."""
-    return np.ascontiguousarray(mesh.vertices[mesh.faces], dtype=np.float32)
+    # np.take: the same gather as mesh.vertices[mesh.faces], several times faster (numpy 2.4).
+    return np.ascontiguousarray(np.take(mesh.vertices, mesh.faces, axis=0), dtype=np.float32)
 
 
 def triangle_verts(corners: np.ndarray) -> np.ndarray:

@@ -133,8 +133,9 @@ class Mesh:
         the crease split needs them, and then the split mesh's vertex normals,
         which are the same numbers (its triangles are bitwise the same)."""
         v = self.vertices.astype(np.float64)
-        first = v[self.faces[:, 0]]
-        return np.cross(v[self.faces[:, 1]] - first, v[self.faces[:, 2]] - first)
+        # np.take gathers rows several times faster than v[index] (numpy 2.4).
+        first, second, third = (np.take(v, self.faces[:, k], axis=0) for k in range(3))
+        return np.cross(second - first, third - first)
 
     def face_normals(self) -> np.ndarray:
         """(F, 3) float64 unit geometric normals (zero for zero-area triangles)."""
@@ -195,7 +196,8 @@ class Mesh:
         h1, h2 = order[same], order[same + 1]                           # half-edges of one edge
         f1, f2 = h1 // 3, h2 // 3
         cos_limit = math.cos(math.radians(float(crease))) - 1e-6         # float32 positions: ~1e-7
-        smooth = (f1 != f2) & (np.einsum("ij,ij->i", normals[f1], normals[f2]) >= cos_limit)
+        cosine = np.einsum("ij,ij->i", np.take(normals, f1, axis=0), np.take(normals, f2, axis=0))
+        smooth = (f1 != f2) & (cosine >= cos_limit)
         h1, h2, f1, f2 = h1[smooth], h2[smooth], f1[smooth], f2[smooth]
         n1 = 3 * f1 + (h1 + 1) % 3                                      # corner at the half-edge's end
         n2 = 3 * f2 + (h2 + 1) % 3
@@ -222,7 +224,7 @@ class Mesh:
             left, right, low, high = left[apart], right[apart], low[apart], high[apart]
         is_root = label == np.arange(3 * n_faces)
         corner_vertex = (np.cumsum(is_root) - 1)[label]
-        vertices = self.vertices[faces.reshape(-1)[is_root]]
+        vertices = np.take(self.vertices, faces.reshape(-1)[is_root], axis=0)
         split = self._keep_detail(vertices, corner_vertex.reshape(n_faces, 3).astype(np.int32), self.name)
         object.__setattr__(split, "_area_normals", self._area_normals)   # the same triangles, bit for bit
         return split
