@@ -254,7 +254,7 @@ def test_sah_cost_near_the_host_sah_builder(name, queue):
         device_cost = build_on_device(*queue, corners, leaf_size=leaf_size, keep_boxes=True).stats()["sah_cost"]
         host_cost = accel.build(corners, "box", "sah", leaf_size).stats()["sah_cost"]
         print(f"{name} leaf {leaf_size}: device / host SAH cost = {device_cost / host_cost:.3f}")
-        assert device_cost <= 1.15 * host_cost, (name, leaf_size, device_cost / host_cost)
+        assert device_cost <= 1.10 * host_cost, (name, leaf_size, device_cost / host_cost)
 
 
 def test_info_mesh_with_the_device_builder(tmp_path, device, capsys):
@@ -267,3 +267,25 @@ def test_info_mesh_with_the_device_builder(tmp_path, device, capsys):
     assert main(args) == 0
     out = capsys.readouterr().out
     assert "builder device" in out and "sah_cost" in out
+
+
+@pytest.mark.parametrize("name", ["random", "torus", "degenerate", "soup"])
+def test_treelet_restructuring_keeps_the_tree_valid_and_lowers_its_cost(name, queue):
+    """Rounds of treelet restructuring: valid trees with conservative volumes,
+    and an SAH cost that never rises (a treelet is rebuilt only when cheaper)."""
+    corners = CORNERS[name]()
+    F = len(corners)
+    costs = []
+    for rounds in (0, 1, 3):
+        bvh = build_on_device(*queue, corners, leaf_size=4, keep_boxes=True, treelet_rounds=rounds)
+        rows, prim_ids = bvh.read_back()
+        assert np.array_equal(np.sort(prim_ids), np.arange(F))
+        depth, ranges = tree_ranges(rows, F, 4)
+        assert bvh.depth == depth
+        tris = bvh.read_triangles()
+        slotted = np.stack([tris[k][:, :3] for k in ("v0", "v1", "v2")], axis=1)
+        check_volumes(rows, bvh.read_exact_rows(), ranges, slotted, "box")
+        costs.append(bvh.stats()["sah_cost"])
+    assert costs[1] <= costs[0] * (1 + 1e-6) and costs[2] <= costs[1] * (1 + 1e-6), costs
+    if name in ("random", "torus"):
+        assert costs[2] < costs[0] * 0.995, costs     # and on real shapes it does something

@@ -101,8 +101,16 @@ def time_builds(context, queue, corners, volume, builder, leaf_size, repeat):
 def _trace_ms(mesh, camera, volume, builder, leaf_size, device) -> tuple[float, float]:
     """(primary-ray kernel ms, warm wall ms of Accel.refit to vertices moved by 1 %)."""
     from clrt import layouts
+    from clrt.device import build
     from clrt.query import Accel
-    accel = Accel(mesh, volume, builder, leaf_size, device)
+    rounds = DEVICE_VARIANTS.get(builder, {}).get("treelet_rounds")
+    saved = dict(build.TREELET_ROUNDS)
+    if rounds is not None:                   # the variant's rounds for this one build
+        build.TREELET_ROUNDS.update({kind: rounds for kind in saved})
+    try:
+        accel = Accel(mesh, volume, "device" if builder in DEVICE_VARIANTS else builder, leaf_size, device)
+    finally:
+        build.TREELET_ROUNDS.update(saved)
     hits = cl.Buffer(accel.context, cl.mem_flags.READ_WRITE, camera.width * camera.height * layouts.HIT.itemsize)
     kernel_ms, _ = time_launches(accel.queue, lambda: accel.launch_camera(camera, hits), 10, 2)
     hits.release()
@@ -146,7 +154,8 @@ def run(mesh_dir, meshes, counts, builders, volume="box", leaf_size=4, device=No
         for builder in builders:
             first, warm, stats, timings = time_builds(context, queue, corners, volume, builder, leaf_size, repeat)
             trace_ms, refit_ms = (_trace_ms(mesh, camera, volume, builder, leaf_size, device)
-                                  if trace and (builder not in DEVICE_VARIANTS or builder == "device")
+                                  if trace and (builder not in DEVICE_VARIANTS or builder == "device"
+                                                or builder.startswith("device/treelets="))
                                   else (float("nan"), float("nan")))
             results[builder] = (first, warm, stats, timings, trace_ms, refit_ms)
         sah_cost = results["sah"][2]["sah_cost"] if "sah" in results else None
@@ -171,7 +180,7 @@ def main(argv=None) -> int:
                    help="also grids of bunny copies of about these many triangles, e.g. 1M,10M")
     p.add_argument("--builders", type=lambda s: s.split(","), default=list(HOST_BUILDERS) + ["device"],
                    help=f"comma-separated, of {', '.join(list(HOST_BUILDERS) + list(DEVICE_VARIANTS))}, "
-                        "device/tail=N (default: paper, sah, device)")
+                        "device/tail=N, device/treelets=N (default: paper, sah, device)")
     p.add_argument("--volume", default="box", choices=("box", "sphere", "ellipse"))
     p.add_argument("--leaf-size", type=int, default=4)
     p.add_argument("--repeat", type=int, default=5, help="warm builds timed after the first (default 5)")
@@ -181,6 +190,8 @@ def main(argv=None) -> int:
     for b in args.builders:
         if b.startswith("device/tail="):          # the hand-over to ploc_tail at another count
             DEVICE_VARIANTS[b] = {"tail_threshold": parse_count(b.split("=", 1)[1])}
+        if b.startswith("device/treelets="):      # rounds of treelet restructuring
+            DEVICE_VARIANTS[b] = {"treelet_rounds": int(b.split("=", 1)[1])}
         if b not in HOST_BUILDERS and b not in DEVICE_VARIANTS:
             p.error(f"unknown builder {b!r}")
     for m in args.meshes:

@@ -79,6 +79,10 @@ PLOC_RADIUS = 16
 # launches; a CPU runs a work-group on one core, so it hands over later.
 TAIL_THRESHOLD = {"gpu": 4096, "cpu": 2048}
 TAIL_GROUP = {"gpu": 1024, "cpu": BUILD_GROUP}
+# Treelet restructuring after PLOC (build_treelet.cl): leaves per treelet, and
+# bottom-up rounds over the tree per device type.
+TREELET_LEAVES = 7
+TREELET_ROUNDS = {"gpu": 1, "cpu": 1}
 # Clusters an iteration keeps, at most (a fifth to a quarter merge away on
 # meshes): the host queues log(count / tail_threshold) / log(1 / MIN_SHRINK)
 # iterations before it reads the count again.  Iterations queued past the
@@ -88,12 +92,12 @@ MAX_REDUCE_GROUPS = 256  # work-groups of the bounds reduction (grid-stride beyo
 
 # The state buffer (build_state.cl): int offsets, and the ring of cluster counts.
 STATE = {"STATE_NEXT_NODE": 0, "STATE_DEPTH": 1, "STATE_ERROR": 2, "STATE_BAD_TRIANGLE": 3, "STATE_BOUNDS": 4,
-         "STATE_ITERATIONS": 10, "STATE_COUNTS": 16, "COUNT_RING": 64}
+         "STATE_ITERATIONS": 10, "STATE_HEIGHT": 11, "STATE_COUNTS": 16, "COUNT_RING": 64}
 STATE_INTS = STATE["STATE_COUNTS"] + STATE["COUNT_RING"]
 
 _KERNELS = ("init_build_state", "centroid_bounds", "morton_codes", "radix_histogram", "scan_counts",
             "radix_scatter", "init_leaves", "ploc_merge", "ploc_count_kept", "ploc_compact", "ploc_tail",
-            "init_root_paths", "jump_root_paths", "emit_tree")
+            "treelet_restructure", "init_root_paths", "jump_root_paths", "emit_tree")
 
 
 def device_kind(device: cl.Device) -> str:
@@ -107,7 +111,7 @@ def build_defines(volume: str, kind: str = "gpu") -> dict:
     is a C double literal of the same value)."""
     return {
         VOLUME_DEFINES[volume]: None, "BUILD_GROUP": BUILD_GROUP, "RADIX_BITS": RADIX_BITS,
-        "PLOC_RADIUS": PLOC_RADIUS, "TAIL_GROUP": TAIL_GROUP[kind], **STATE,
+        "PLOC_RADIUS": PLOC_RADIUS, "TAIL_GROUP": TAIL_GROUP[kind], "TREELET_LEAVES": TREELET_LEAVES, **STATE,
         "C_TRAVERSAL": f"((float){C_TRAVERSAL!r})", "C_INTERSECT": f"((float){C_INTERSECT!r})",
         "REL_PAD": repr(float(volumes.REL_PAD)), "ULP_PAD": int(volumes.ULP_PAD),
         "PAD_FLOOR": repr(float(volumes.PAD_FLOOR)), "EVAL_SLACK": repr(float(volumes.EVAL_SLACK)),
@@ -249,7 +253,8 @@ _ARG_TYPES = {
     "radix_histogram": [None, _U, _U, None], "scan_counts": [None, _U],
     "radix_scatter": [None, None, _U, _U, None, None, None], "init_leaves": [None, None, _U, None, None],
     "ploc_merge": [None] * 5 + [_I, _U], "ploc_count_kept": [None, None, _I], "ploc_compact": [None] * 4 + [_I],
-    "ploc_tail": [None] * 5 + [_I, _U], "init_root_paths": [None, _U, None, None],
+    "ploc_tail": [None] * 5 + [_I, _U], "treelet_restructure": [None, None, None, _U, _U, None],
+    "init_root_paths": [None, _U, None, None],
     "jump_root_paths": [None, None, _U, None, None], "emit_tree": [None, _U, _I] + [None] * 9,
 }
 
@@ -285,7 +290,8 @@ class _Phases:
 
 def build_on_device(context: cl.Context, queue: cl.CommandQueue, corners, volume: str = "box",
                     leaf_size: int = 4, keep_boxes: bool = False,
-                    tail_threshold: int | None = None, staged_upload: bool | None = None) -> DeviceBvh:
+                    tail_threshold: int | None = None, staged_upload: bool | None = None,
+                    treelet_rounds: int | None = None) -> DeviceBvh:
     """Build a BVH over ``corners`` on the queue's device.
 
     corners: (F, 3, 3) triangle corners (converted to float32, checked as
@@ -296,6 +302,8 @@ def build_on_device(context: cl.Context, queue: cl.CommandQueue, corners, volume
         (default: TAIL_THRESHOLD of the device type; for benchmarks).
     staged_upload: the triangles through page-locked staging or not
         (default: clrt.device.pinned.upload's choice; for benchmarks).
+    treelet_rounds: bottom-up passes of treelet restructuring (0: the PLOC
+        tree; default: TREELET_ROUNDS of the device type).
     ``queue`` must have profiling enabled (clrt.device.context.create_context's does).
     Raises InputError on bad input, DeviceError when the device lacks float64.
     """
@@ -310,6 +318,7 @@ def build_on_device(context: cl.Context, queue: cl.CommandQueue, corners, volume
         raise DeviceError(f"the device BVH builder fits volumes in float64, which {device.name.strip()} lacks")
     kind = device_kind(device)
     tail_threshold = TAIL_THRESHOLD[kind] if tail_threshold is None else int(tail_threshold)
+    treelet_rounds = TREELET_ROUNDS[kind] if treelet_rounds is None else int(treelet_rounds)
     program = build_program(context, "build_bvh.cl", build_defines(volume, kind))
     k = _kernels(program)
     ws = _workspaces.setdefault(context.int_ptr, _Workspace(context))
@@ -358,18 +367,26 @@ def build_on_device(context: cl.Context, queue: cl.CommandQueue, corners, volume
     # ploc_tail starts from the clusters the last compaction wrote (`clusters`).
     launch("ploc", k["ploc_tail"], 1, clusters, merged, tile_kept, nodes, state, queued, leaf_size,
            group=TAIL_GROUP[kind])
+    if F > 1 and treelet_rounds > 0:
+        visits = ws.get("visits", 4 * (F - 1))
+        heights = ws.get("heights", 4 * (F - 1))
+        for _ in range(treelet_rounds):
+            phases.add("treelet", cl.enqueue_fill_buffer(queue, visits, np.int32(0), 0, 4 * (F - 1)))
+            launch("treelet", k["treelet_restructure"], _groups(F), nodes, visits, heights, np.uint32(F),
+                   np.uint32(leaf_size), state)
     head = np.empty(STATE["STATE_COUNTS"], np.int32)
     root_rows = np.empty(1, np.int32)
     offset = root * layouts.BUILD_NODE.itemsize + layouts.BUILD_NODE.fields["rows"][1]
     cl.enqueue_copy(queue, head, state, is_blocking=False)
     cl.enqueue_copy(queue, root_rows, nodes, src_offset=offset, is_blocking=True)
     iterations = int(head[STATE["STATE_ITERATIONS"]])
+    height = int(head[STATE["STATE_HEIGHT"]])           # after restructuring (0 without)
 
     # 4. Path sums, then the rows.
     ancestor = [ws.get("ancestor0", 4 * num_nodes), ws.get("ancestor1", 4 * num_nodes)]
     path = [ws.get("path0", 16 * num_nodes), ws.get("path1", 16 * num_nodes)]
     launch("emit", k["init_root_paths"], _groups(num_nodes), nodes, np.uint32(num_nodes), ancestor[0], path[0])
-    jumps = iterations.bit_length()          # 2**jumps > the longest path's edges (<= iterations)
+    jumps = max(iterations, height).bit_length()   # 2**jumps > the longest path's edges
     for j in range(jumps):
         launch("emit", k["jump_root_paths"], _groups(num_nodes), ancestor[j % 2], path[j % 2],
                np.uint32(num_nodes), ancestor[1 - j % 2], path[1 - j % 2])

@@ -1,5 +1,6 @@
 // The device BVH builder (issue #17), one program: triangles -> Morton codes
-// -> radix sort -> PLOC merging with SAH leaf collapse -> depth-first
+// -> radix sort -> PLOC merging with SAH leaf collapse -> treelet
+// restructuring -> depth-first
 // BvhPairNode rows, slot-ordered triangles and slot -> triangle ids.  The
 // host driver, and the order of the launches, is clrt/device/build.py.
 // Build-time choices arrive as -D defines: BUILD_GROUP, RADIX_BITS,
@@ -11,4 +12,5 @@
 #include "build_morton.cl"
 #include "build_sort.cl"
 #include "build_ploc.cl"
+#include "build_treelet.cl"
 #include "build_emit.cl"
