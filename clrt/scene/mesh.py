@@ -129,13 +129,15 @@ class Mesh:
     @cached_property
     def _area_normals(self) -> np.ndarray:
         """(F, 3) float64 cross products of each triangle's two edges from corner 0:
-        normal times twice the area.  Computed once (read only, never handed out):
-        the crease split needs them, and then the split mesh's vertex normals,
-        which are the same numbers (its triangles are bitwise the same)."""
+        normal times twice the area.  Computed once, read only: the crease split
+        needs them, and then the split mesh's vertex normals, which are the same
+        numbers (its triangles are bitwise the same)."""
         v = self.vertices.astype(np.float64)
         # np.take gathers rows several times faster than v[index] (numpy 2.4).
         first, second, third = (np.take(v, self.faces[:, k], axis=0) for k in range(3))
-        return np.cross(second - first, third - first)
+        n = np.cross(second - first, third - first)
+        n.flags.writeable = False
+        return n
 
     def face_normals(self) -> np.ndarray:
         """(F, 3) float64 unit geometric normals (zero for zero-area triangles)."""
