@@ -85,7 +85,7 @@ def stages(mesh: str, size, device, builder, out, started: float, serial: bool) 
     if not serial:
         warmup.wait()
     cl.get_platforms()
-    row("cl.get_platforms()" if serial else "cl.get_platforms() (after the warm-up thread)")
+    row("cl.get_platforms()" if serial else "cl.get_platforms() (after any warm-up thread)")
     select_device(device)
     row("device list (clrt select_device)")
     context, queue = create_context(device)
