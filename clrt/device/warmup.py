@@ -37,9 +37,11 @@ def _loader_path() -> str:
     """The ICD loader pyopencl uses: the wheel's own copy, else the system's."""
     spec = importlib.util.find_spec("pyopencl")
     for folder in (spec.submodule_search_locations or []) if spec else []:
-        libs = sorted(glob.glob(os.path.join(os.path.dirname(folder), "pyopencl.libs", "libOpenCL*.so*")))
-        if libs:
-            return libs[0]
+        # auditwheel puts the copy in pyopencl/.libs (newer) or pyopencl.libs beside it.
+        for libs_folder in (os.path.join(folder, ".libs"), folder.rstrip(os.sep) + ".libs"):
+            libs = sorted(glob.glob(os.path.join(libs_folder, "libOpenCL*.so*")))
+            if libs:
+                return libs[0]
     return "libOpenCL.so.1"
 
 
