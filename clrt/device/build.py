@@ -83,6 +83,7 @@ TAIL_GROUP = {"gpu": 1024, "cpu": BUILD_GROUP}
 # bottom-up rounds over the tree per device type.
 TREELET_LEAVES = 7
 TREELET_ROUNDS = {"gpu": 1, "cpu": 1}
+TREELET_MIN_COUNT = 0    # only treelets whose root has at least this many triangles
 # Clusters an iteration keeps, at most (a fifth to a quarter merge away on
 # meshes): the host queues log(count / tail_threshold) / log(1 / MIN_SHRINK)
 # iterations before it reads the count again.  Iterations queued past the
@@ -92,7 +93,7 @@ MAX_REDUCE_GROUPS = 256  # work-groups of the bounds reduction (grid-stride beyo
 
 # The state buffer (build_state.cl): int offsets, and the ring of cluster counts.
 STATE = {"STATE_NEXT_NODE": 0, "STATE_DEPTH": 1, "STATE_ERROR": 2, "STATE_BAD_TRIANGLE": 3, "STATE_BOUNDS": 4,
-         "STATE_ITERATIONS": 10, "STATE_HEIGHT": 11, "STATE_COUNTS": 16, "COUNT_RING": 64}
+         "STATE_ITERATIONS": 10, "STATE_COUNTS": 16, "COUNT_RING": 64}
 STATE_INTS = STATE["STATE_COUNTS"] + STATE["COUNT_RING"]
 
 _KERNELS = ("init_build_state", "centroid_bounds", "morton_codes", "radix_histogram", "scan_counts",
@@ -252,8 +253,8 @@ _ARG_TYPES = {
     "init_build_state": [None, _U], "centroid_bounds": [None, _U, None], "morton_codes": [None, _U, None, None, None],
     "radix_histogram": [None, _U, _U, None], "scan_counts": [None, _U],
     "radix_scatter": [None, None, _U, _U, None, None, None], "init_leaves": [None, None, _U, None, None],
-    "ploc_merge": [None] * 5 + [_I, _U], "ploc_count_kept": [None, None, _I], "ploc_compact": [None] * 4 + [_I],
-    "ploc_tail": [None] * 5 + [_I, _U], "treelet_restructure": [None, None, None, _U, _U, None],
+    "ploc_merge": [None] * 5 + [_I, None, _I, _U], "ploc_count_kept": [None, None, _I], "ploc_compact": [None] * 4 + [_I],
+    "ploc_tail": [None] * 5 + [_I, None, _I, _U], "treelet_restructure": [None, None, None, _I, _I, _U, _I],
     "init_root_paths": [None, _U, None, None],
     "jump_root_paths": [None, None, _U, None, None], "emit_tree": [None, _U, _I] + [None] * 9,
 }
@@ -362,31 +363,38 @@ def build_on_device(context: cl.Context, queue: cl.CommandQueue, corners, volume
     clusters = ws.get("clusters", layouts.BUILD_CLUSTER.itemsize * F)
     merged = ws.get("merged", layouts.BUILD_CLUSTER.itemsize * F)
     tile_kept = ws.get("tile_kept", 4 * max(_groups(F), F))    # also ploc_tail's nearest neighbours
+    heights = ws.get("heights", 4 * max(F - 1, 1))             # of the inner nodes, index - F
     launch("ploc", k["init_leaves"], _groups(F), corners_buf, sorted_ids, np.uint32(F), nodes, clusters)
-    queued = _ploc(queue, k, launch, F, clusters, merged, tile_kept, nodes, state, leaf_size, tail_threshold)
+    queued = _ploc(queue, k, launch, F, clusters, merged, tile_kept, nodes, heights, state, leaf_size,
+                   tail_threshold)
     # ploc_tail starts from the clusters the last compaction wrote (`clusters`).
-    launch("ploc", k["ploc_tail"], 1, clusters, merged, tile_kept, nodes, state, queued, leaf_size,
+    launch("ploc", k["ploc_tail"], 1, clusters, merged, tile_kept, nodes, heights, F, state, queued, leaf_size,
            group=TAIL_GROUP[kind])
-    if F > 1 and treelet_rounds > 0:
-        visits = ws.get("visits", 4 * (F - 1))
-        heights = ws.get("heights", 4 * (F - 1))
-        for _ in range(treelet_rounds):
-            phases.add("treelet", cl.enqueue_fill_buffer(queue, visits, np.int32(0), 0, 4 * (F - 1)))
-            launch("treelet", k["treelet_restructure"], _groups(F), nodes, visits, heights, np.uint32(F),
-                   np.uint32(leaf_size), state)
     head = np.empty(STATE["STATE_COUNTS"], np.int32)
+    cl.enqueue_copy(queue, head, state, is_blocking=False)
+    height = _root_height(queue, heights, F)
+
+    # 3b. Treelet restructuring, one launch per height from the lowest inner nodes up.
+    if F > 2 and treelet_rounds > 0:
+        order = ws.get("order", 4 * (F - 1))
+        for round_ in range(treelet_rounds):
+            if round_:
+                height = _root_height(queue, heights, F)
+            phases.add("treelet", cl.enqueue_copy(queue, order, heights))
+            for h in range(2, height + 1):
+                launch("treelet", k["treelet_restructure"], _groups(F - 1), nodes, order, heights, F, h,
+                       leaf_size, TREELET_MIN_COUNT)
+        height = _root_height(queue, heights, F)
     root_rows = np.empty(1, np.int32)
     offset = root * layouts.BUILD_NODE.itemsize + layouts.BUILD_NODE.fields["rows"][1]
-    cl.enqueue_copy(queue, head, state, is_blocking=False)
     cl.enqueue_copy(queue, root_rows, nodes, src_offset=offset, is_blocking=True)
     iterations = int(head[STATE["STATE_ITERATIONS"]])
-    height = int(head[STATE["STATE_HEIGHT"]])           # after restructuring (0 without)
 
     # 4. Path sums, then the rows.
     ancestor = [ws.get("ancestor0", 4 * num_nodes), ws.get("ancestor1", 4 * num_nodes)]
     path = [ws.get("path0", 16 * num_nodes), ws.get("path1", 16 * num_nodes)]
     launch("emit", k["init_root_paths"], _groups(num_nodes), nodes, np.uint32(num_nodes), ancestor[0], path[0])
-    jumps = max(iterations, height).bit_length()   # 2**jumps > the longest path's edges
+    jumps = height.bit_length()        # 2**jumps > height - 1, the longest path's edges
     for j in range(jumps):
         launch("emit", k["jump_root_paths"], _groups(num_nodes), ancestor[j % 2], path[j % 2],
                np.uint32(num_nodes), ancestor[1 - j % 2], path[1 - j % 2])
@@ -414,7 +422,17 @@ def build_on_device(context: cl.Context, queue: cl.CommandQueue, corners, volume
                      iterations=iterations, timings=timings, queue=queue, exact_rows=exact_rows)
 
 
-def _ploc(queue, k, launch, F, clusters, merged, tile_kept, nodes, state, leaf_size, tail_threshold) -> int:
+def _root_height(queue, heights: cl.Buffer, F: int) -> int:
+    """Nodes on the longest root-to-leaf path (blocking read of the root's height)."""
+    if F == 1:
+        return 1
+    value = np.empty(1, np.int32)
+    cl.enqueue_copy(queue, value, heights, src_offset=4 * (F - 2), is_blocking=True)   # root 2F - 2
+    return int(value[0])
+
+
+def _ploc(queue, k, launch, F, clusters, merged, tile_kept, nodes, heights, state, leaf_size,
+          tail_threshold) -> int:
     """Queue PLOC iterations until at most ``tail_threshold`` clusters are
     left (ploc_tail does the rest); returns how many were queued.
 
@@ -431,7 +449,7 @@ def _ploc(queue, k, launch, F, clusters, merged, tile_kept, nodes, state, leaf_s
         batch = min(batch, ring - 1)  # the ring holds the counts of one batch
         for _ in range(batch):
             groups = _groups(known)
-            k["ploc_merge"].set_args(clusters, merged, tile_kept, nodes, state, iteration, leaf_size)
+            k["ploc_merge"].set_args(clusters, merged, tile_kept, nodes, heights, F, state, iteration, leaf_size)
             launch("ploc", k["ploc_merge"], groups)
             k["ploc_count_kept"].set_args(tile_kept, state, iteration)
             launch("ploc", k["ploc_count_kept"], 1)

@@ -114,8 +114,10 @@ void init_leaves(const global float* corners, const global uint* sorted_ids, con
 // keeping the node (C_TRAVERSAL * area plus the children's best costs) --
 // the same rule as the host's SAH builder (sah.py: split only when strictly
 // cheaper).  Returns the new cluster.
-inline BuildCluster make_node(global BuildNode* nodes, int index, BuildCluster a, BuildCluster b,
-                              uint leaf_size)
+// heights[index - num_tris] gets the new node's height (nodes on its longest
+// path down; a triangle has height 1): the order of treelet restructuring.
+inline BuildCluster make_node(global BuildNode* nodes, global int* heights, int num_tris, int index,
+                              BuildCluster a, BuildCluster b, uint leaf_size)
 {
     const int left = as_int(a.lo.w), right = as_int(b.lo.w);
     const float3 lo = fmin(a.lo.xyz, b.lo.xyz), hi = fmax(a.hi.xyz, b.hi.xyz);
@@ -136,6 +138,8 @@ inline BuildCluster make_node(global BuildNode* nodes, int index, BuildCluster a
     nodes[index] = node;
     nodes[left].parent = index;
     nodes[right].parent = index;
+    heights[index - num_tris] = 1 + max(left < num_tris ? 1 : heights[left - num_tris],
+                                        right < num_tris ? 1 : heights[right - num_tris]);
     BuildCluster merged;
     merged.lo = node.lo;
     merged.lo.w = as_float(index);
@@ -145,7 +149,8 @@ inline BuildCluster make_node(global BuildNode* nodes, int index, BuildCluster a
 
 __kernel __attribute__((reqd_work_group_size(BUILD_GROUP, 1, 1)))
 void ploc_merge(const global BuildCluster* clusters, global BuildCluster* merged, global uint* tile_kept,
-                global BuildNode* nodes, global int* state, const int iteration, const uint leaf_size)
+                global BuildNode* nodes, global int* heights, const int num_tris, global int* state,
+                const int iteration, const uint leaf_size)
 {
     local float4 box_lo[TILE_SPAN], box_hi[TILE_SPAN];    // w: node of the cluster
     local float pair_area[PAIR_ROWS * PLOC_RADIUS];
@@ -244,7 +249,7 @@ void ploc_merge(const global BuildCluster* clusters, global BuildCluster* merged
             BuildCluster b;
             b.lo = box_lo[partner - loaded];
             b.hi = box_hi[partner - loaded];
-            out = make_node(nodes, node_base + (int)my_merge, out, b, leaf_size);
+            out = make_node(nodes, heights, num_tris, node_base + (int)my_merge, out, b, leaf_size);
         }
         out.hi.w = as_float(kept ? (int)rank : -1);
         merged[i] = out;
@@ -317,7 +322,8 @@ inline int tail_nearest(const global BuildCluster* clusters, int count, int p)
 // clusters and new nodes are ranked by one prefix sum over the group.
 __kernel __attribute__((reqd_work_group_size(TAIL_GROUP, 1, 1)))
 void ploc_tail(global BuildCluster* clusters, global BuildCluster* spare, global int* nearest,
-               global BuildNode* nodes, global int* state, const int first_iteration, const uint leaf_size)
+               global BuildNode* nodes, global int* heights, const int num_tris, global int* state,
+               const int first_iteration, const uint leaf_size)
 {
     local uint scratch[TAIL_GROUP];
     const int lid = get_local_id(0);
@@ -349,7 +355,7 @@ void ploc_tail(global BuildCluster* clusters, global BuildCluster* spare, global
             if (!mutual)
                 to[place++] = from[p];
             else if (p < j)
-                to[place++] = make_node(nodes, (int)node++, from[p], from[j], leaf_size);
+                to[place++] = make_node(nodes, heights, num_tris, (int)node++, from[p], from[j], leaf_size);
         }
         next_node += (int)merges_total;
         count = (int)kept_total;

@@ -7,8 +7,6 @@
 //                        corner (the input is checked here, not on the host:
 //                        a host pass over 10M triangles costs more than the build)
 //   STATE_ITERATIONS     PLOC iterations that merged (ploc_count_kept or ploc_tail)
-//   STATE_HEIGHT         nodes on the longest root-to-leaf path after treelet
-//                        restructuring (build_treelet.cl; 0 when not run)
 //   STATE_BOUNDS + 0..5  centre bounds min xyz, max xyz (order-preserving bits)
 //   STATE_COUNTS + k     clusters before PLOC iteration j, j % COUNT_RING == k
 // Offsets are -D defines from clrt/device/build.py, which reads the same values.
@@ -16,7 +14,7 @@
 #define CLRT_BUILD_STATE_CL
 
 #if !defined(STATE_NEXT_NODE) || !defined(STATE_DEPTH) || !defined(STATE_ERROR) \
-    || !defined(STATE_BAD_TRIANGLE) || !defined(STATE_ITERATIONS) || !defined(STATE_HEIGHT) \
+    || !defined(STATE_BAD_TRIANGLE) || !defined(STATE_ITERATIONS) \
     || !defined(STATE_BOUNDS) || !defined(STATE_COUNTS) || !defined(COUNT_RING)
 #error "build with the STATE_* and COUNT_RING defines of clrt/device/build.py"
 #endif

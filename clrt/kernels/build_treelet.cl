@@ -13,17 +13,15 @@
 // split into two subsets; or, with at most leaf_size triangles, one leaf --
 // the rule make_node applies), and the treelet is rebuilt if that is cheaper.
 //
-// Bottom-up, so that a treelet's leaves are final: one work-item per
-// triangle climbs towards the root; at each node the first of its two
-// children's work-items to arrive stops, the second goes on (an atomic
-// counter per node), so every node is processed once, after its whole
-// subtree.  Nodes written by another work-item are read through volatile
-// pointers (not from a cache that may hold an older copy), after the fence
-// that comes with the counter.
-//
-// Each node's height (nodes on its longest path down) is kept beside it, and
-// the root's goes to STATE_HEIGHT: restructuring can deepen the tree, and the
-// emit pass's pointer jumping needs a bound.
+// Bottom-up, so that a treelet's leaves are final: one launch per height
+// (nodes on the longest path down, as PLOC recorded them), every node of that
+// height at once.  Nodes of one height have disjoint subtrees, so the
+// work-items of a launch never touch the same node, and a launch sees all
+// that the launches before it wrote.  (A first version climbed from every
+// triangle with a counter per node, one launch in all: the climbing left one
+// or two busy work-items per SIMD group, and a round took 7 ms for bunny00
+// on the H200.)  Restructuring changes heights: `heights` follows the tree
+// as it is rebuilt, `order` keeps the heights the round started with.
 #ifndef CLRT_BUILD_TREELET_CL
 #define CLRT_BUILD_TREELET_CL
 
@@ -36,60 +34,47 @@
 #endif
 #define TREELET_SUBSETS (1 << TREELET_LEAVES)
 
-typedef volatile global BuildNode* shared_nodes;
-
-inline float3 node_lo(shared_nodes nodes, int n)
-{
-    return (float3)(nodes[n].lo.x, nodes[n].lo.y, nodes[n].lo.z);
-}
-
-inline float3 node_hi(shared_nodes nodes, int n)
-{
-    return (float3)(nodes[n].hi.x, nodes[n].hi.y, nodes[n].hi.z);
-}
-
-inline int left_of(shared_nodes nodes, int n)
+inline int left_of(const global BuildNode* nodes, int n)
 {
     return as_int(nodes[n].lo.w);
 }
 
-inline int right_of(shared_nodes nodes, int n)
+inline int right_of(const global BuildNode* nodes, int n)
 {
     return as_int(nodes[n].hi.w);
 }
 
+inline int height_of(const global int* heights, int n, int num_tris)
+{
+    return n < num_tris ? 1 : heights[n - num_tris];
+}
+
 // Box, count, cost, rows and height of inner node n from its children (the
 // SAH leaf rule of make_node).
-inline void refresh_node(shared_nodes nodes, global int* heights, int n, uint num_tris, uint leaf_size)
+inline void refresh_node(global BuildNode* nodes, global int* heights, int n, int num_tris, uint leaf_size)
 {
     const int l = left_of(nodes, n), r = right_of(nodes, n);
-    const float3 lo = fmin(node_lo(nodes, l), node_lo(nodes, r));
-    const float3 hi = fmax(node_hi(nodes, l), node_hi(nodes, r));
+    const BuildNode a = nodes[l], b = nodes[r];
+    const float3 lo = fmin(a.lo.xyz, b.lo.xyz), hi = fmax(a.hi.xyz, b.hi.xyz);
     const float area = half_area(lo, hi);
-    const int count = nodes[l].count + nodes[r].count;
-    float cost = C_TRAVERSAL * area + nodes[l].cost + nodes[r].cost;
-    int rows = 1 + nodes[l].rows + nodes[r].rows;
+    const int count = a.count + b.count;
+    float cost = C_TRAVERSAL * area + a.cost + b.cost;
+    int rows = 1 + a.rows + b.rows;
     const float leaf_cost = C_INTERSECT * (float)count * area;
     if (count <= (int)leaf_size && leaf_cost <= cost) {
         cost = leaf_cost;
         rows = 0;
     }
-    nodes[n].lo.x = lo.x;
-    nodes[n].lo.y = lo.y;
-    nodes[n].lo.z = lo.z;
-    nodes[n].hi.x = hi.x;
-    nodes[n].hi.y = hi.y;
-    nodes[n].hi.z = hi.z;
+    nodes[n].lo.xyz = lo;
+    nodes[n].hi.xyz = hi;
     nodes[n].count = count;
     nodes[n].cost = cost;
     nodes[n].rows = rows;
-    const int hl = l < (int)num_tris ? 1 : heights[l - num_tris];
-    const int hr = r < (int)num_tris ? 1 : heights[r - num_tris];
-    heights[n - num_tris] = 1 + max(hl, hr);
+    heights[n - num_tris] = 1 + max(height_of(heights, l, num_tris), height_of(heights, r, num_tris));
 }
 
 // Restructure the treelet rooted at inner node `root` if a cheaper one exists.
-inline void restructure(shared_nodes nodes, global int* heights, int root, uint num_tris, uint leaf_size)
+inline void restructure(global BuildNode* nodes, global int* heights, int root, int num_tris, uint leaf_size)
 {
     int leaf[TREELET_LEAVES];
     int inner[TREELET_LEAVES - 1];       // inner[0] = root
@@ -101,9 +86,9 @@ inline void restructure(shared_nodes nodes, global int* heights, int root, uint 
         int pick = -1;
         float largest = -1.0f;
         for (int k = 0; k < leaves; ++k) {
-            if (leaf[k] < (int)num_tris)
+            if (leaf[k] < num_tris)
                 continue;                    // a triangle: nothing to open
-            const float a = half_area(node_lo(nodes, leaf[k]), node_hi(nodes, leaf[k]));
+            const float a = half_area(nodes[leaf[k]].lo.xyz, nodes[leaf[k]].hi.xyz);
             if (a > largest) {
                 largest = a;
                 pick = k;
@@ -125,8 +110,8 @@ inline void restructure(shared_nodes nodes, global int* heights, int root, uint 
     float3 leaf_lo[TREELET_LEAVES], leaf_hi[TREELET_LEAVES];
     int leaf_count[TREELET_LEAVES];
     for (int k = 0; k < leaves; ++k) {
-        leaf_lo[k] = node_lo(nodes, leaf[k]);
-        leaf_hi[k] = node_hi(nodes, leaf[k]);
+        leaf_lo[k] = nodes[leaf[k]].lo.xyz;
+        leaf_hi[k] = nodes[leaf[k]].hi.xyz;
         leaf_count[k] = nodes[leaf[k]].count;
     }
     float area[TREELET_SUBSETS], best[TREELET_SUBSETS];
@@ -155,15 +140,18 @@ inline void restructure(shared_nodes nodes, global int* heights, int root, uint 
         }
         float cheapest = INFINITY;
         int cut = low;
-        // Parts p holding the lowest leaf, p != s: each split counted once.
-        for (int p = (s - 1) & s; p > 0; p = (p - 1) & s) {
-            if (!(p & low))
-                continue;
+        // Parts p holding the lowest leaf, p != s: each split counted once
+        // (p = low plus every proper part q of the rest, q = 0 included).
+        const int rest = s ^ low;
+        for (int q = (rest - 1) & rest; ; q = (q - 1) & rest) {
+            const int p = low | q;
             const float c = best[p] + best[s ^ p];
             if (c < cheapest) {
                 cheapest = c;
                 cut = p;
             }
+            if (q == 0)
+                break;
         }
         float cost = C_TRAVERSAL * area[s] + cheapest;
         const float leaf_cost = C_INTERSECT * (float)count[s] * area[s];
@@ -177,7 +165,7 @@ inline void restructure(shared_nodes nodes, global int* heights, int root, uint 
         return;
 
     // Pre-order: subset -> node, taking the treelet's inner nodes in turn.
-    int order_subset[TREELET_LEAVES - 1], order_node[TREELET_LEAVES - 1];
+    int order_node[TREELET_LEAVES - 1];
     int stack_subset[TREELET_LEAVES], stack_node[TREELET_LEAVES];
     int sp = 0, used = 0, made = 0;
     stack_subset[sp] = full;
@@ -185,12 +173,10 @@ inline void restructure(shared_nodes nodes, global int* heights, int root, uint 
     while (sp > 0) {
         --sp;
         const int s = stack_subset[sp], n = stack_node[sp];
-        order_subset[made] = s;
         order_node[made++] = n;
-        const int parts[2] = {split[s], s ^ split[s]};
         int child[2];
         for (int side = 0; side < 2; ++side) {
-            const int p = parts[side];
+            const int p = side == 0 ? split[s] : s ^ split[s];
             if (p == (p & -p)) {
                 child[side] = leaf[31 - clz(p)];
             } else {
@@ -208,28 +194,20 @@ inline void restructure(shared_nodes nodes, global int* heights, int root, uint 
         refresh_node(nodes, heights, order_node[k], num_tris, leaf_size);
 }
 
-// One work-item per triangle; visits: one zeroed int per inner node.
+// One work-item per inner node; those whose height (in `order`) is `height`
+// are treelet roots in this launch.  min_count: smaller subtrees are only
+// refreshed (their boxes and costs may have changed below them).
 __kernel __attribute__((reqd_work_group_size(BUILD_GROUP, 1, 1)))
-void treelet_restructure(global BuildNode* build_nodes, global int* visits, global int* heights,
-                         const uint num_tris, const uint leaf_size, global int* state)
+void treelet_restructure(global BuildNode* nodes, const global int* order, global int* heights,
+                         const int num_tris, const int height, const uint leaf_size, const int min_count)
 {
-    const uint i = get_global_id(0);
-    if (i >= num_tris)
+    const int i = get_global_id(0);
+    if (i >= num_tris - 1 || order[i] != height)
         return;
-    shared_nodes nodes = build_nodes;
-    int n = nodes[i].parent;
-    while (n >= 0) {
-        mem_fence(CLK_GLOBAL_MEM_FENCE);     // this subtree's writes before the counter
-        if (atomic_inc(visits + (n - (int)num_tris)) == 0)
-            return;                          // the other child's work-item goes on
-        mem_fence(CLK_GLOBAL_MEM_FENCE);
+    const int n = num_tris + i;
+    if (nodes[n].count >= min_count)
         restructure(nodes, heights, n, num_tris, leaf_size);
-        refresh_node(nodes, heights, n, num_tris, leaf_size);
-        const int parent = nodes[n].parent;
-        if (parent < 0)
-            state[STATE_HEIGHT] = heights[n - num_tris];
-        n = parent;
-    }
+    refresh_node(nodes, heights, n, num_tris, leaf_size);
 }
 
 #endif
