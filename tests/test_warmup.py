@@ -41,3 +41,25 @@ def test_start_ignores_other_devices(monkeypatch):
     warmup.start("cpu")
     warmup.start("1:0")
     assert warmup._thread is None
+
+
+def test_render_in_a_fresh_process_with_the_warm_up(tmp_path):
+    """The warm-up runs before pyopencl is imported: in a fresh process, with
+    no --device (so it starts), the render must succeed.  (pyopencl's own ICD
+    loader crashed there until PYOPENCL_HOME was set for it.)"""
+    import os
+    import subprocess
+    import sys
+
+    from clrt.scene import primitives
+    mesh = primitives.icosphere(1)
+    path = tmp_path / "ball.off"
+    path.write_text(f"OFF\n{len(mesh.vertices)} {len(mesh.faces)} 0\n"
+                    + "".join(f"{x} {y} {z}\n" for x, y, z in mesh.vertices)
+                    + "".join(f"3 {a} {b} {c}\n" for a, b, c in mesh.faces))
+    env = {k: v for k, v in os.environ.items() if k not in ("PYOPENCL_HOME", "CLRT_WARMUP", "PYOPENCL_CTX")}
+    done = subprocess.run([sys.executable, "-X", "faulthandler", "-m", "clrt", "render", str(path), "--width", "16",
+                           "--height", "12", "-o", str(tmp_path / "ball.png")],
+                          env=env, capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert (tmp_path / "ball.png").stat().st_size > 0

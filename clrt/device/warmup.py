@@ -34,15 +34,31 @@ _lock = threading.Lock()
 
 
 def _loader_path() -> str:
-    """The ICD loader pyopencl uses: the wheel's own copy, else the system's."""
+    """The ICD loader pyopencl uses: the wheel's own copy, else the system's.
+
+    The wheel's copy reads PYOPENCL_HOME, which ``import pyopencl`` sets (to
+    its package folder), and crashes without it: it is set here the same way
+    first."""
     spec = importlib.util.find_spec("pyopencl")
     for folder in (spec.submodule_search_locations or []) if spec else []:
+        os.environ.setdefault("PYOPENCL_HOME", os.path.abspath(folder))
         # auditwheel puts the copy in pyopencl/.libs (newer) or pyopencl.libs beside it.
         for libs_folder in (os.path.join(folder, ".libs"), folder.rstrip(os.sep) + ".libs"):
             libs = sorted(glob.glob(os.path.join(libs_folder, "libOpenCL*.so*")))
             if libs:
                 return libs[0]
     return "libOpenCL.so.1"
+
+
+def _declare(lib) -> None:
+    """Argument types of the calls made here (undeclared, ctypes would pass
+    every Python int as a C int)."""
+    P, U = ctypes.c_void_p, ctypes.c_uint
+    lib.clGetPlatformIDs.argtypes = [U, ctypes.POINTER(P), ctypes.POINTER(U)]
+    lib.clGetDeviceIDs.argtypes = [P, ctypes.c_uint64, U, ctypes.POINTER(P), ctypes.POINTER(U)]
+    lib.clCreateContext.argtypes = [P, U, ctypes.POINTER(P), P, P, ctypes.POINTER(ctypes.c_int)]
+    lib.clCreateContext.restype = P
+    lib.clReleaseContext.argtypes = [P]
 
 
 def _ids(query, *args) -> list:
@@ -58,11 +74,11 @@ def _ids(query, *args) -> list:
 def _warm(make_context: bool) -> None:
     try:
         lib = ctypes.CDLL(_loader_path())
+        _declare(lib)
         for platform in _ids(lib.clGetPlatformIDs):
             gpus = _ids(lib.clGetDeviceIDs, ctypes.c_void_p(platform), ctypes.c_uint64(CL_DEVICE_TYPE_GPU))
             if not gpus or not make_context:
                 continue
-            lib.clCreateContext.restype = ctypes.c_void_p
             error = ctypes.c_int(0)
             device = ctypes.c_void_p(gpus[0])
             context = lib.clCreateContext(None, 1, ctypes.byref(device), None, None, ctypes.byref(error))
@@ -79,11 +95,18 @@ def start(spec: str | None) -> None:
     PYOPENCL_CTX then may name another device: the driver is only started)."""
     global _thread
     spec = (spec or "").strip().lower()
-    if spec not in ("", "gpu") or _thread is not None:
+    mode = os.environ.get("CLRT_WARMUP", "context").strip().lower()   # context | driver | off
+    if spec not in ("", "gpu") or _thread is not None or mode in ("off", "0", "no"):
         return
-    make_context = spec == "gpu" or not os.environ.get("PYOPENCL_CTX", "").strip()
-    _thread = threading.Thread(target=_warm, args=(make_context,), name="clrt-warmup", daemon=True)
-    _thread.start()
+    make_context = mode != "driver" and (spec == "gpu" or not os.environ.get("PYOPENCL_CTX", "").strip())
+    # Drivers start up with deep call chains: the thread gets a main thread's
+    # stack, not the smaller default of new threads.
+    previous = threading.stack_size(64 << 20)
+    try:
+        _thread = threading.Thread(target=_warm, args=(make_context,), name="clrt-warmup", daemon=True)
+        _thread.start()
+    finally:
+        threading.stack_size(previous)
 
 
 def wait() -> None:

@@ -104,9 +104,9 @@ inline void restructure(global BuildNode* nodes, global int* heights, int root, 
     if (leaves < 3)
         return;                              // one shape only
 
-    // Subset tables: area of each subset's box, its triangles, best cost.
-    // (Boxes are rebuilt from the leaves per subset, not stored: private
-    // arrays spill to memory, and 7 unions cost less than a spilled table.)
+    // The best cost of each subset of leaves, and its split.  Areas and
+    // counts are recomputed where needed rather than tabled: private arrays
+    // live in memory, and a few unions cost less than loads from there.
     float3 leaf_lo[TREELET_LEAVES], leaf_hi[TREELET_LEAVES];
     int leaf_count[TREELET_LEAVES];
     for (int k = 0; k < leaves; ++k) {
@@ -114,22 +114,9 @@ inline void restructure(global BuildNode* nodes, global int* heights, int root, 
         leaf_hi[k] = nodes[leaf[k]].hi.xyz;
         leaf_count[k] = nodes[leaf[k]].count;
     }
-    float area[TREELET_SUBSETS], best[TREELET_SUBSETS];
-    int count[TREELET_SUBSETS];
+    float best[TREELET_SUBSETS];
     uchar split[TREELET_SUBSETS];            // the part holding the subset's lowest leaf
     const int full = (1 << leaves) - 1;
-    for (int s = 1; s <= full; ++s) {
-        float3 lo = (float3)(INFINITY), hi = (float3)(-INFINITY);
-        int n = 0;
-        for (int k = 0; k < leaves; ++k)
-            if (s & (1 << k)) {
-                lo = fmin(lo, leaf_lo[k]);
-                hi = fmax(hi, leaf_hi[k]);
-                n += leaf_count[k];
-            }
-        area[s] = half_area(lo, hi);
-        count[s] = n;
-    }
     // Subsets in increasing order: every proper part of s is smaller than s.
     for (int s = 1; s <= full; ++s) {
         const int low = s & -s;
@@ -153,9 +140,18 @@ inline void restructure(global BuildNode* nodes, global int* heights, int root, 
             if (q == 0)
                 break;
         }
-        float cost = C_TRAVERSAL * area[s] + cheapest;
-        const float leaf_cost = C_INTERSECT * (float)count[s] * area[s];
-        if (count[s] <= (int)leaf_size && leaf_cost <= cost)
+        float3 lo = (float3)(INFINITY), hi = (float3)(-INFINITY);
+        int count = 0;
+        for (int k = 0; k < leaves; ++k)
+            if (s & (1 << k)) {
+                lo = fmin(lo, leaf_lo[k]);
+                hi = fmax(hi, leaf_hi[k]);
+                count += leaf_count[k];
+            }
+        const float area = half_area(lo, hi);
+        float cost = C_TRAVERSAL * area + cheapest;
+        const float leaf_cost = C_INTERSECT * (float)count * area;
+        if (count <= (int)leaf_size && leaf_cost <= cost)
             cost = leaf_cost;                // its node will be emitted as a leaf, however split
         best[s] = cost;
         split[s] = (uchar)cut;
