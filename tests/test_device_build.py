@@ -271,13 +271,14 @@ def test_info_mesh_with_the_device_builder(tmp_path, device, capsys):
 
 @pytest.mark.parametrize("name", ["random", "torus", "degenerate", "soup"])
 def test_treelet_restructuring_keeps_the_tree_valid_and_lowers_its_cost(name, queue):
-    """Rounds of treelet restructuring: valid trees with conservative volumes,
-    and an SAH cost that never rises (a treelet is rebuilt only when cheaper)."""
+    """Treelet restructuring, none / 4 / 7 leaves: valid trees with conservative
+    volumes, and an SAH cost that falls (a treelet is rebuilt only when cheaper,
+    and a larger treelet has every shape a smaller one has and more)."""
     corners = CORNERS[name]()
     F = len(corners)
     costs = []
-    for rounds in (0, 1, 3):
-        bvh = build_on_device(*queue, corners, leaf_size=4, keep_boxes=True, treelet_rounds=rounds)
+    for leaves in (0, 4, 7):
+        bvh = build_on_device(*queue, corners, leaf_size=4, keep_boxes=True, treelet_leaves=leaves)
         rows, prim_ids = bvh.read_back()
         assert np.array_equal(np.sort(prim_ids), np.arange(F))
         depth, ranges = tree_ranges(rows, F, 4)
@@ -289,3 +290,18 @@ def test_treelet_restructuring_keeps_the_tree_valid_and_lowers_its_cost(name, qu
     assert costs[1] <= costs[0] * (1 + 1e-6) and costs[2] <= costs[1] * (1 + 1e-6), costs
     if name in ("random", "torus"):
         assert costs[2] < costs[0] * 0.995, costs     # and on real shapes it does something
+
+
+@pytest.mark.parametrize("volume", VOLUMES)
+def test_restructured_trees_give_brute_force_hits(volume, device, monkeypatch):
+    """The no-detail-loss invariant for trees with treelets restructured (the
+    GPU default; the CPU default builds without), grazing rays included."""
+    from clrt.device import build
+    monkeypatch.setattr(build, "TREELET_LEAVES", {"gpu": 7, "cpu": 7})
+    for name in ("torus", "icosphere"):
+        mesh = TEST_MESHES[name]()
+        o, d = _hard_rays(mesh, np.random.default_rng(11))
+        base = clrt.trace(mesh, o, d, accel="none", device=device)
+        hits = clrt.Accel(mesh, volume, "device", 4, device=device).trace(o, d)
+        for field in ("t", "prim", "u", "v"):
+            assert np.array_equal(getattr(hits, field), getattr(base, field)), (name, volume, field)

@@ -103,14 +103,14 @@ def _trace_ms(mesh, camera, volume, builder, leaf_size, device) -> tuple[float, 
     from clrt import layouts
     from clrt.device import build
     from clrt.query import Accel
-    rounds = DEVICE_VARIANTS.get(builder, {}).get("treelet_rounds")
-    saved = dict(build.TREELET_ROUNDS)
-    if rounds is not None:                   # the variant's rounds for this one build
-        build.TREELET_ROUNDS.update({kind: rounds for kind in saved})
+    leaves = DEVICE_VARIANTS.get(builder, {}).get("treelet_leaves")
+    saved = dict(build.TREELET_LEAVES)
+    if leaves is not None:                   # the variant's treelets for this one build
+        build.TREELET_LEAVES.update({kind: leaves for kind in saved})
     try:
         accel = Accel(mesh, volume, "device" if builder in DEVICE_VARIANTS else builder, leaf_size, device)
     finally:
-        build.TREELET_ROUNDS.update(saved)
+        build.TREELET_LEAVES.update(saved)
     hits = cl.Buffer(accel.context, cl.mem_flags.READ_WRITE, camera.width * camera.height * layouts.HIT.itemsize)
     kernel_ms, _ = time_launches(accel.queue, lambda: accel.launch_camera(camera, hits), 10, 2)
     hits.release()
@@ -190,8 +190,8 @@ def main(argv=None) -> int:
     for b in args.builders:
         if b.startswith("device/tail="):          # the hand-over to ploc_tail at another count
             DEVICE_VARIANTS[b] = {"tail_threshold": parse_count(b.split("=", 1)[1])}
-        if b.startswith("device/treelets="):      # rounds of treelet restructuring
-            DEVICE_VARIANTS[b] = {"treelet_rounds": int(b.split("=", 1)[1])}
+        if b.startswith("device/treelets="):      # leaves per restructured treelet (0: none)
+            DEVICE_VARIANTS[b] = {"treelet_leaves": int(b.split("=", 1)[1])}
         if b not in HOST_BUILDERS and b not in DEVICE_VARIANTS:
             p.error(f"unknown builder {b!r}")
     for m in args.meshes:

@@ -19,7 +19,10 @@ The algorithm (kernels in ``clrt/kernels/build_*.cl``, entry ``build_bvh.cl``):
    (``ploc_tail``, the same choices in a loop: the tree does not depend on
    where the host hands over).  Every new node decides
    by the SAH whether its subtree (at most ``leaf_size`` triangles) is emitted
-   as one leaf;
+   as one leaf, and records its height;
+3b. treelet restructuring (Karras & Aila 2013, ``TREELET_LEAVES``; GPUs only
+   by default): one launch per PLOC iteration, over the nodes it made, each
+   replacing the 7-leaf treelet below it by the cheapest by the SAH;
 4. rows and slots as sums along each node's path from the root (pointer
    jumping, ceil(log2(depth)) launches), then one launch writes the
    ``BVH_PAIR_NODE`` rows, fitting each child's volume exactly as
@@ -33,10 +36,11 @@ and reads the count once after each batch; then it queues the tail.
 (Reading each iteration's count without blocking was the first version:
 NVIDIA's driver completes a read into ordinary memory before it returns, so
 every iteration waited for the device, about 80 us each.)  Besides the
-counts, a build reads back the state twice: after PLOC (the iteration count,
-which bounds the pointer jumps, and the root's row count, which sizes the row
-buffer) and at the end (the depth, and the first triangle with a NaN or
-infinite corner: the input is checked on the device).
+counts, a build reads back the state after PLOC (every iteration's count:
+the node ranges of the treelet launches), then the root's row count (which
+sizes the row buffer) and height (which bounds the pointer jumps), and at
+the end the depth and the first triangle with a NaN or infinite corner (the
+input is checked on the device).
 
 Builds on one context share scratch buffers and kernel objects: they are not
 thread-safe (as clrt.query.Accel is not).
@@ -79,13 +83,14 @@ PLOC_RADIUS = 16
 # launches; a CPU runs a work-group on one core, so it hands over later.
 TAIL_THRESHOLD = {"gpu": 4096, "cpu": 2048}
 TAIL_GROUP = {"gpu": 1024, "cpu": BUILD_GROUP}
-# Treelet restructuring after PLOC (build_treelet.cl): leaves per treelet, and
-# bottom-up rounds over the tree per device type.
-TREELET_LEAVES = 7
-TREELET_ROUNDS = {"gpu": 1, "cpu": 1}
-# Only treelets over more than leaf_size triangles: a smaller subtree is one
-# leaf or a few, however it is shaped (SAH cost unchanged on camel and
-# bunny00; a third less restructuring time).
+# Treelet restructuring after PLOC (build_treelet.cl): leaves per treelet
+# (7, as Karras & Aila; on PoCL 8 lowered the SAH cost by 0.4 % more at 7x
+# the time, 5 by 1.3 % less), per device type; 0: none.  On the H200 it costs
+# 3-4 ms for bunny00 and camel and brings their primary rays within 4 % of the
+# host SAH trees (8-12 % without).  On a CPU it would add a third to the build
+# (bunny00 on 2 cores: 114 -> 156 ms), where the build is what a user waits
+# for: off there.
+TREELET_LEAVES = {"gpu": 7, "cpu": 0}
 # Clusters an iteration keeps, at most (a fifth to a quarter merge away on
 # meshes): the host queues log(count / tail_threshold) / log(1 / MIN_SHRINK)
 # iterations before it reads the count again.  Iterations queued past the
@@ -95,7 +100,7 @@ MAX_REDUCE_GROUPS = 256  # work-groups of the bounds reduction (grid-stride beyo
 
 # The state buffer (build_state.cl): int offsets, and the ring of cluster counts.
 STATE = {"STATE_NEXT_NODE": 0, "STATE_DEPTH": 1, "STATE_ERROR": 2, "STATE_BAD_TRIANGLE": 3, "STATE_BOUNDS": 4,
-         "STATE_ITERATIONS": 10, "STATE_COUNTS": 16, "COUNT_RING": 64}
+         "STATE_ITERATIONS": 10, "STATE_COUNTS": 16, "COUNT_RING": 256}
 STATE_INTS = STATE["STATE_COUNTS"] + STATE["COUNT_RING"]
 
 _KERNELS = ("init_build_state", "centroid_bounds", "morton_codes", "radix_histogram", "scan_counts",
@@ -108,13 +113,14 @@ def device_kind(device: cl.Device) -> str:
     return "cpu" if device.type & cl.device_type.CPU else "gpu"
 
 
-def build_defines(volume: str, kind: str = "gpu") -> dict:
+def build_defines(volume: str, kind: str = "gpu", treelet_leaves: int | None = None) -> dict:
     """Program defines: the shape, the work-group and state layout, and the
     constants of topdown.py and volumes.py (one source of truth: repr() of a float
     is a C double literal of the same value)."""
     return {
         VOLUME_DEFINES[volume]: None, "BUILD_GROUP": BUILD_GROUP, "RADIX_BITS": RADIX_BITS,
-        "PLOC_RADIUS": PLOC_RADIUS, "TAIL_GROUP": TAIL_GROUP[kind], "TREELET_LEAVES": TREELET_LEAVES, **STATE,
+        "PLOC_RADIUS": PLOC_RADIUS, "TAIL_GROUP": TAIL_GROUP[kind],
+        "TREELET_LEAVES": TREELET_LEAVES[kind] if treelet_leaves is None else int(treelet_leaves), **STATE,
         "C_TRAVERSAL": f"((float){C_TRAVERSAL!r})", "C_INTERSECT": f"((float){C_INTERSECT!r})",
         "REL_PAD": repr(float(volumes.REL_PAD)), "ULP_PAD": int(volumes.ULP_PAD),
         "PAD_FLOOR": repr(float(volumes.PAD_FLOOR)), "EVAL_SLACK": repr(float(volumes.EVAL_SLACK)),
@@ -256,7 +262,7 @@ _ARG_TYPES = {
     "radix_histogram": [None, _U, _U, None], "scan_counts": [None, _U],
     "radix_scatter": [None, None, _U, _U, None, None, None], "init_leaves": [None, None, _U, None, None],
     "ploc_merge": [None] * 5 + [_I, None, _I, _U], "ploc_count_kept": [None, None, _I], "ploc_compact": [None] * 4 + [_I],
-    "ploc_tail": [None] * 5 + [_I, None, _I, _U], "treelet_restructure": [None, None, None, _I, _I, _U, _I],
+    "ploc_tail": [None] * 5 + [_I, None, _I, _U], "treelet_restructure": [None, None, _I, _I, _I, _U], 
     "init_root_paths": [None, _U, None, None],
     "jump_root_paths": [None, None, _U, None, None], "emit_tree": [None, _U, _I] + [None] * 9,
 }
@@ -294,7 +300,7 @@ class _Phases:
 def build_on_device(context: cl.Context, queue: cl.CommandQueue, corners, volume: str = "box",
                     leaf_size: int = 4, keep_boxes: bool = False,
                     tail_threshold: int | None = None, staged_upload: bool | None = None,
-                    treelet_rounds: int | None = None) -> DeviceBvh:
+                    treelet_leaves: int | None = None) -> DeviceBvh:
     """Build a BVH over ``corners`` on the queue's device.
 
     corners: (F, 3, 3) triangle corners (converted to float32, checked as
@@ -305,8 +311,8 @@ def build_on_device(context: cl.Context, queue: cl.CommandQueue, corners, volume
         (default: TAIL_THRESHOLD of the device type; for benchmarks).
     staged_upload: the triangles through page-locked staging or not
         (default: clrt.device.pinned.upload's choice; for benchmarks).
-    treelet_rounds: bottom-up passes of treelet restructuring (0: the PLOC
-        tree; default: TREELET_ROUNDS of the device type).
+    treelet_leaves: leaves of the treelets restructured as nodes are made
+        (0: the plain PLOC tree; default: TREELET_LEAVES of the device type).
     ``queue`` must have profiling enabled (clrt.device.context.create_context's does).
     Raises InputError on bad input, DeviceError when the device lacks float64.
     """
@@ -321,8 +327,7 @@ def build_on_device(context: cl.Context, queue: cl.CommandQueue, corners, volume
         raise DeviceError(f"the device BVH builder fits volumes in float64, which {device.name.strip()} lacks")
     kind = device_kind(device)
     tail_threshold = TAIL_THRESHOLD[kind] if tail_threshold is None else int(tail_threshold)
-    treelet_rounds = TREELET_ROUNDS[kind] if treelet_rounds is None else int(treelet_rounds)
-    program = build_program(context, "build_bvh.cl", build_defines(volume, kind))
+    program = build_program(context, "build_bvh.cl", build_defines(volume, kind, treelet_leaves))
     k = _kernels(program)
     ws = _workspaces.setdefault(context.int_ptr, _Workspace(context))
     F = len(tri)
@@ -372,25 +377,24 @@ def build_on_device(context: cl.Context, queue: cl.CommandQueue, corners, volume
     # ploc_tail starts from the clusters the last compaction wrote (`clusters`).
     launch("ploc", k["ploc_tail"], 1, clusters, merged, tile_kept, nodes, heights, F, state, queued, leaf_size,
            group=TAIL_GROUP[kind])
-    head = np.empty(STATE["STATE_COUNTS"], np.int32)
-    cl.enqueue_copy(queue, head, state, is_blocking=False)
-    height = _root_height(queue, heights, F)
+    head = np.empty(STATE_INTS, np.int32)
+    cl.enqueue_copy(queue, head, state, is_blocking=True)      # with every iteration's cluster count
+    iterations = int(head[STATE["STATE_ITERATIONS"]])
 
-    # 3b. Treelet restructuring, one launch per height from the lowest inner nodes up.
-    if F > 2 and treelet_rounds > 0:
-        order = ws.get("order", 4 * (F - 1))
-        for round_ in range(treelet_rounds):
-            if round_:
-                height = _root_height(queue, heights, F)
-            phases.add("treelet", cl.enqueue_copy(queue, order, heights))
-            for h in range(2, height + 1):
-                launch("treelet", k["treelet_restructure"], _groups(F - 1), nodes, order, heights, F, h,
-                       leaf_size, leaf_size + 1)
-        height = _root_height(queue, heights, F)
+    # 3b. Treelet restructuring: one launch per PLOC iteration, over the nodes it made.
+    treelets = TREELET_LEAVES[kind] if treelet_leaves is None else int(treelet_leaves)
+    if treelets and F > 2 and iterations < STATE["COUNT_RING"]:
+        counts = head[STATE["STATE_COUNTS"]:][:iterations + 1]  # clusters before each iteration
+        first = F
+        for made in (counts[:-1] - counts[1:]).tolist():
+            if made > 0:
+                launch("treelet", k["treelet_restructure"], _groups(made), nodes, heights, F, first, made,
+                       leaf_size)
+            first += made
     root_rows = np.empty(1, np.int32)
     offset = root * layouts.BUILD_NODE.itemsize + layouts.BUILD_NODE.fields["rows"][1]
-    cl.enqueue_copy(queue, root_rows, nodes, src_offset=offset, is_blocking=True)
-    iterations = int(head[STATE["STATE_ITERATIONS"]])
+    cl.enqueue_copy(queue, root_rows, nodes, src_offset=offset, is_blocking=False)
+    height = _root_height(queue, heights, F)
 
     # 4. Path sums, then the rows.
     ancestor = [ws.get("ancestor0", 4 * num_nodes), ws.get("ancestor1", 4 * num_nodes)]

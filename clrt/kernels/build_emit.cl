@@ -11,8 +11,8 @@
 // list ranking, applied to the paths to the root): every node holds the sum
 // up to an ancestor and then adds that ancestor's sum and jumps to its
 // ancestor, so ceil(log2(path length)) launches reach the root from every
-// node at once, O(nodes) work each.  The host knows a bound: a node made in
-// PLOC iteration k has at most k levels below it.
+// node at once, O(nodes) work each.  The host knows the bound: the root's
+// height, kept up to date by PLOC and the treelet restructuring.
 //
 // Path sums, int4: x row, y first slot, z level (the root is level 1),
 // w > 0 when a proper ancestor is emitted as a leaf (the node is inside it).

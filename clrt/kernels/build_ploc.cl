@@ -38,7 +38,8 @@
 // but from 1.082 to 1.089 on bunny00, and 1.101 at radius 64.)
 //
 // Each new node also decides, bottom-up as it is made, whether its subtree
-// is cheaper as a leaf by the surface area heuristic (see make_node).
+// is cheaper as a leaf by the surface area heuristic (see make_node); the
+// treelets below each node are reshaped afterwards (build_treelet.cl).
 #ifndef CLRT_BUILD_PLOC_CL
 #define CLRT_BUILD_PLOC_CL
 
@@ -46,6 +47,7 @@
 #include "build_state.cl"
 #include "build_scan.cl"
 #include "build_morton.cl"
+#include "build_treelet.cl"
 
 #ifndef PLOC_RADIUS
 #error "build with -DPLOC_RADIUS=<clusters searched on each side>"
@@ -61,14 +63,6 @@
 #define TILE_SPAN (BUILD_GROUP + 4 * PLOC_RADIUS)     // clusters a tile loads
 #define SEARCHED (BUILD_GROUP + 2 * PLOC_RADIUS)      // clusters whose neighbour it finds
 #define PAIR_ROWS (BUILD_GROUP + 3 * PLOC_RADIUS)     // first places of the pairs those need
-
-// Half the surface area of a box, as topdown.py's surface_area (only ratios matter).
-inline float half_area(float3 lo, float3 hi)
-{
-    const float3 d = hi - lo;
-    const float a = d.x * d.y + d.y * d.z + d.z * d.x;
-    return isnan(a) ? INFINITY : a;           // inf * 0 of huge, flat boxes
-}
 
 // Tie-break between neighbours at the same distance, a hash of the pair (its
 // two places, lower first).  Any order of pairs that both members agree on
@@ -140,6 +134,7 @@ inline BuildCluster make_node(global BuildNode* nodes, global int* heights, int 
     nodes[right].parent = index;
     heights[index - num_tris] = 1 + max(left < num_tris ? 1 : heights[left - num_tris],
                                         right < num_tris ? 1 : heights[right - num_tris]);
+
     BuildCluster merged;
     merged.lo = node.lo;
     merged.lo.w = as_float(index);
@@ -360,6 +355,8 @@ void ploc_tail(global BuildCluster* clusters, global BuildCluster* spare, global
         next_node += (int)merges_total;
         count = (int)kept_total;
         ++iteration;
+        if (lid == 0)
+            state[CLUSTERS_BEFORE(iteration)] = count;   // the treelet pass reads every iteration's count
         barrier(CLK_GLOBAL_MEM_FENCE);     // `to` and the nodes complete before the next search
         global BuildCluster* t = from;
         from = to;

@@ -13,25 +13,37 @@
 // split into two subsets; or, with at most leaf_size triangles, one leaf --
 // the rule make_node applies), and the treelet is rebuilt if that is cheaper.
 //
-// Bottom-up, so that a treelet's leaves are final: one launch per height
-// (nodes on the longest path down, as PLOC recorded them), every node of that
-// height at once.  Nodes of one height have disjoint subtrees, so the
-// work-items of a launch never touch the same node, and a launch sees all
-// that the launches before it wrote.  (A first version climbed from every
-// triangle with a counter per node, one launch in all: the climbing left one
-// or two busy work-items per SIMD group, and a round took 7 ms for bunny00
-// on the H200.)  Restructuring changes heights: `heights` follows the tree
-// as it is rebuilt, `order` keeps the heights the round started with.
+// Bottom-up, so that a treelet's leaves are final: one launch per PLOC
+// iteration, over the nodes that iteration made.  Those are consecutive
+// (nodes are numbered as they are made), their subtrees are disjoint, and
+// every node below them was made -- and restructured -- by an earlier
+// launch.  (Tried first: climbing from every triangle with a counter per
+// node, in one launch; one launch per tree height; restructuring inside
+// make_node.  The first two left most work-items of a SIMD group idle, since
+// the nodes of one height are scattered; the third put thousands of treelets
+// on ploc_tail's single work-group.  On the H200 they cost 7, 2 and 7 ms for
+// bunny00.)
 #ifndef CLRT_BUILD_TREELET_CL
 #define CLRT_BUILD_TREELET_CL
 
 #include "layouts.h"
-#include "build_state.cl"
-#include "build_ploc.cl"
 
 #ifndef TREELET_LEAVES
-#error "build with -DTREELET_LEAVES=<leaves of a treelet, 3..8>"
+#error "build with -DTREELET_LEAVES=<leaves of a treelet, 3..8; 0: no restructuring>"
 #endif
+#if !defined(C_TRAVERSAL) || !defined(C_INTERSECT)
+#error "build with the SAH constants C_TRAVERSAL and C_INTERSECT of clrt/accel/topdown.py"
+#endif
+
+// Half the surface area of a box, as topdown.py's surface_area (only ratios matter).
+inline float half_area(float3 lo, float3 hi)
+{
+    const float3 d = hi - lo;
+    const float a = d.x * d.y + d.y * d.z + d.z * d.x;
+    return isnan(a) ? INFINITY : a;           // inf * 0 of huge, flat boxes
+}
+
+#if TREELET_LEAVES > 0
 #define TREELET_SUBSETS (1 << TREELET_LEAVES)
 
 inline int left_of(const global BuildNode* nodes, int n)
@@ -190,20 +202,26 @@ inline void restructure(global BuildNode* nodes, global int* heights, int root, 
         refresh_node(nodes, heights, order_node[k], num_tris, leaf_size);
 }
 
-// One work-item per inner node; those whose height (in `order`) is `height`
-// are treelet roots in this launch.  min_count: smaller subtrees are only
-// refreshed (their boxes and costs may have changed below them).
+#endif
+
+// One work-item per node made in one PLOC iteration: nodes first .. first +
+// count - 1.  The node is refreshed first (its children's treelets may have
+// become cheaper), then its own treelet is restructured; subtrees of at most
+// leaf_size triangles are left as they are (one leaf or a few, however shaped).
+// (With TREELET_LEAVES 0 the host does not launch it.)
 __kernel __attribute__((reqd_work_group_size(BUILD_GROUP, 1, 1)))
-void treelet_restructure(global BuildNode* nodes, const global int* order, global int* heights,
-                         const int num_tris, const int height, const uint leaf_size, const int min_count)
+void treelet_restructure(global BuildNode* nodes, global int* heights, const int num_tris, const int first,
+                         const int count, const uint leaf_size)
 {
+#if TREELET_LEAVES > 0
     const int i = get_global_id(0);
-    if (i >= num_tris - 1 || order[i] != height)
+    if (i >= count)
         return;
-    const int n = num_tris + i;
-    if (nodes[n].count >= min_count)
-        restructure(nodes, heights, n, num_tris, leaf_size);
+    const int n = first + i;
     refresh_node(nodes, heights, n, num_tris, leaf_size);
+    if (nodes[n].count > (int)leaf_size)
+        restructure(nodes, heights, n, num_tris, leaf_size);
+#endif
 }
 
 #endif
