@@ -251,10 +251,14 @@ def test_sah_cost_near_the_host_sah_builder(name, queue):
     else:
         corners = CORNERS[name]()
     for leaf_size in (1, 4):
-        device_cost = build_on_device(*queue, corners, leaf_size=leaf_size, keep_boxes=True).stats()["sah_cost"]
         host_cost = accel.build(corners, "box", "sah", leaf_size).stats()["sah_cost"]
-        print(f"{name} leaf {leaf_size}: device / host SAH cost = {device_cost / host_cost:.3f}")
-        assert device_cost <= 1.10 * host_cost, (name, leaf_size, device_cost / host_cost)
+        # PLOC alone within 15 %, with treelets restructured within 10 %
+        for treelets, bound in ((0, 1.15), (7, 1.10)):
+            device_cost = build_on_device(*queue, corners, leaf_size=leaf_size, keep_boxes=True,
+                                          treelet_leaves=treelets).stats()["sah_cost"]
+            print(f"{name} leaf {leaf_size} treelets {treelets}: device / host SAH cost = "
+                  f"{device_cost / host_cost:.3f}")
+            assert device_cost <= bound * host_cost, (name, leaf_size, treelets, device_cost / host_cost)
 
 
 def test_info_mesh_with_the_device_builder(tmp_path, device, capsys):
