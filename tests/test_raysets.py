@@ -161,7 +161,7 @@ def test_a_fixed_query_work_group_gives_the_same_hits(device, monkeypatch):
     o, d = raysets.random_rays(mesh, 1001, seed=4)
     accel = Accel(mesh, device=device)
     base = accel.trace(o, d)
-    monkeypatch.setattr(query_accel, "QUERY_GROUP", 64)
+    monkeypatch.setattr(query_accel, "QUERY_GROUP", {"gpu": 64, "cpu": 64})
     grouped = accel.trace(o, d)
     assert np.array_equal(grouped.prim, base.prim) and np.array_equal(grouped.t, base.t)
     assert np.array_equal(accel.occluded(o, d), base.prim >= 0)

@@ -222,7 +222,7 @@ def embree_measure(mesh, origins, directions, tmax=np.inf, repeat: int = 5, warm
 
 def run(mesh_path=None, sets=RAY_SETS, count: int = 1_000_000, seed: int = 0, variants=(("box", "sah"),),
         device=None, size=(1920, 1080), write_dir=None, read_files=(), tmax=np.inf, repeat: int = 5,
-        warmup: int = 2, embree: bool = False, groups=(None,), out=None) -> list[dict]:
+        warmup: int = 2, embree: bool = False, groups=("default",), out=None) -> list[dict]:
     from clrt.query import Accel
     from clrt.scene import primitives
     from clrt.scene.load import load_mesh
@@ -252,15 +252,18 @@ def run(mesh_path=None, sets=RAY_SETS, count: int = 1_000_000, seed: int = 0, va
         accel = first if (accel_name, builder) == tuple(variants[0]) else Accel(mesh, accel_name, builder,
                                                                                device=device)
         for (label, o, d, reach), group in ((s, g) for s in ray_sets for g in groups):
-            query_accel.QUERY_GROUP = group
+            saved = dict(query_accel.QUERY_GROUP)
+            if group != "default":
+                size = None if group == "driver" else group
+                query_accel.QUERY_GROUP.update(gpu=size, cpu=size)
             try:
                 m = measure(accel, o, d, reach, repeat, warmup)
             finally:
-                query_accel.QUERY_GROUP = None
+                query_accel.QUERY_GROUP.update(saved)
             n = len(o)
             rate = lambda ms: n / ms / 1e3 if ms > 0 else float("inf")   # noqa: E731
             print(f"| {label} | {n:,} | {accel_name} | {builder if accel_name != 'none' else '-'} "
-                  f"| {group or 'driver'} "
+                  f"| {group} "
                   f"| {m['closest_kernel_ms']:.3f} | {rate(m['closest_kernel_ms']):,.1f} "
                   f"| {m['closest_wall_ms']:.3f} | {rate(m['closest_wall_ms']):,.1f} | {m['hits']:,} "
                   f"| {m['sum_t']:.6f} | {m['any_kernel_ms']:.3f} | {rate(m['any_kernel_ms']):,.1f} "
@@ -297,9 +300,9 @@ def main(argv=None) -> int:
     p.add_argument("--device", help="'gpu', 'cpu' or P:D (default: clrt's choice, the first GPU if any)")
     p.add_argument("--repeat", type=int, default=5)
     p.add_argument("--warmup", type=int, default=2)
-    p.add_argument("--group", type=lambda s: [None if x == "driver" else int(x) for x in s.split(",")],
-                   default=[None], help="work-group sizes of the query kernels to compare, e.g. driver,64,128 "
-                                        "(default: the driver's choice)")
+    p.add_argument("--group", type=lambda s: [x if x in ("driver", "default") else int(x) for x in s.split(",")],
+                   default=["default"], help="work-group sizes of the query kernels to compare, e.g. "
+                                             "driver,64,128 (default: clrt's, clrt.query.accel.QUERY_GROUP)")
     p.add_argument("--embree", action="store_true",
                    help="also run the rays through Embree on the host CPU (needs embreex: the raybench extra)")
     args = p.parse_args(argv)

@@ -66,9 +66,12 @@ RESULT_DTYPES = {"t": np.float32, "prim": np.int32, "u": np.float32, "v": np.flo
 PIPELINE_CHUNKS = 4                 # a host batch goes in at least this many chunks, on two queues
 MIN_PIPELINE_RAYS = 1 << 16         # ... of at least this many rays
 # Work-items per work-group of the query kernels; None lets the driver choose.
-# (clrt.bench.raysets --group compares sizes side by side; the kernels skip
-# the work-items past the last ray.)
-QUERY_GROUP: int | None = None
+# Measured on the H200 (clrt.bench.raysets --group, docs/benchmarks.md): 128
+# takes 5-7 % off incoherent sets (random, diffuse, AO) against the driver's
+# choice, and 1-2 % off camera rays; 64 is as good on incoherent rays but
+# slower on camera rays.  A CPU device (PoCL) keeps its own choice.  The
+# kernels skip the work-items past the last ray.
+QUERY_GROUP: dict = {"gpu": 128, "cpu": None}
 RESULT_POOL_SIZE = 3                # page-locked result blocks per Accel (clrt/device/pinned.py)
 RESULT_POOL_MAX_BYTES = 1 << 30     # larger results go to ordinary memory
 _ZERO = np.zeros(1, np.float32)
@@ -292,7 +295,7 @@ class Accel:
     def _run(self, name: str, m: int, *args, lane: int = 0) -> None:
         kernel = self.kernels[name]
         kernel.set_args(*args, *self.geometry.args)
-        group = QUERY_GROUP
+        group = QUERY_GROUP["cpu" if self.queue.device.type & cl.device_type.CPU else "gpu"]
         size, local = ((m,), None) if group is None else ((-(-m // group) * group,), (group,))
         self.launches.append(cl.enqueue_nd_range_kernel(self._lane(lane), kernel, size, local))
 
