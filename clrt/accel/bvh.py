@@ -6,6 +6,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from clrt.accel.rows import tree_stats
 from clrt.accel.topdown import C_INTERSECT, C_TRAVERSAL, surface_area
 from clrt.layouts import BVH_PAIR_NODE, TRIANGLE_VERTS
 
@@ -28,8 +29,10 @@ class Acceleration:
                (statistics; None without a BVH).
     boxes:     (N, 2, 3) float32 exact (unpadded) box of each depth-first node
                (statistics; None without a BVH).
-    summary:   the tree numbers of :meth:`stats`, from a builder that keeps no
-               ``counts`` and ``boxes`` on the host (the device builder).
+    exact_rows: the rows with the exact (unpadded) boxes in box layout, from a
+               builder that keeps no ``counts`` and ``boxes`` on the host (the
+               device builder): :meth:`stats` computes its numbers from them
+               when first asked (a first image does not wait for them).
     """
 
     accel: str
@@ -41,7 +44,8 @@ class Acceleration:
     leaf_size: int = 0
     counts: np.ndarray | None = field(repr=False, default=None)
     boxes: np.ndarray | None = field(repr=False, default=None)
-    summary: dict | None = field(repr=False, default=None)
+    exact_rows: np.ndarray | None = field(repr=False, default=None)
+    _summary: dict | None = field(repr=False, default=None)
 
     @classmethod
     def brute_force(cls, num_triangles: int) -> "Acceleration":
@@ -67,8 +71,10 @@ class Acceleration:
         """
         if not self.is_bvh:
             return {"build_ms": float(self.build_ms), "device_bytes": self.device_bytes()}
-        if self.summary is not None:
-            return {**self.summary, "build_ms": float(self.build_ms), "device_bytes": self.device_bytes()}
+        if self.exact_rows is not None:
+            if self._summary is None:
+                self._summary = tree_stats(self.exact_rows, self.depth)
+            return {**self._summary, "build_ms": float(self.build_ms), "device_bytes": self.device_bytes()}
         count = self.counts
         leaf = count > 0
         area = surface_area(self.boxes[:, 0].astype(np.float64), self.boxes[:, 1].astype(np.float64))

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from clrt.accel.topdown import C_INTERSECT, C_TRAVERSAL, surface_area
 from clrt.layouts import BVH_PAIR_NODE
 
 
@@ -48,3 +49,28 @@ def _set_child(rows, side: str, bound_a, bound_b, ref, count, volume: str) -> No
     k = 0 if side == "left" else 2
     refs[:, k] = ref
     refs[:, k + 1] = count
+
+
+def tree_stats(exact_rows: np.ndarray, depth: int) -> dict:
+    """Bvh.stats()'s tree numbers from BVH_PAIR_NODE rows that hold exact boxes
+    (box layout): nodes, leaves, depth, leaf sizes and the SAH cost -- inner
+    nodes' areas plus leaves' areas times their counts, over the root's area
+    (constants of topdown.py)."""
+    refs = child_refs(exact_rows)
+    counts = refs[:, [1, 3]].reshape(-1)
+    present = counts >= 0
+    lo = np.stack([exact_rows["left_a"][:, :3], exact_rows["right_a"][:, :3]], 1).reshape(-1, 3)
+    hi = np.stack([exact_rows["left_b"][:, :3], exact_rows["right_b"][:, :3]], 1).reshape(-1, 3)
+    area = surface_area(lo.astype(np.float64), hi.astype(np.float64))
+    root_lo = lo[present].min(axis=0).astype(np.float64)
+    root_hi = hi[present].max(axis=0).astype(np.float64)
+    root_area = float(surface_area(root_lo, root_hi))
+    ratio = area / root_area if root_area > 0 else np.ones_like(area)
+    leaf = counts > 0
+    inner = counts == 0
+    one_leaf = not inner.any() and leaf.sum() == 1          # a root row holding the whole tree
+    sah = (0.0 if one_leaf else C_TRAVERSAL) + C_TRAVERSAL * ratio[inner].sum() \
+        + C_INTERSECT * (ratio[leaf] * counts[leaf]).sum()
+    return {"nodes": int(leaf.sum() + inner.sum() + (0 if one_leaf else 1)), "leaves": int(leaf.sum()),
+            "depth": int(depth), "max_leaf_size": int(counts.max()),
+            "mean_leaf_size": float(counts[leaf].mean()), "sah_cost": float(sah)}

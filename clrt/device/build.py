@@ -61,8 +61,8 @@ import pyopencl as cl
 from clrt import layouts
 from clrt.accel import Acceleration, as_triangles, check_options, volumes
 from clrt.accel import build as build_on_host
-from clrt.accel.rows import child_refs
-from clrt.accel.topdown import C_INTERSECT, C_TRAVERSAL, surface_area
+from clrt.accel.rows import tree_stats
+from clrt.accel.topdown import C_INTERSECT, C_TRAVERSAL
 from clrt.config import HOST_BUILDERS, HOST_DEFAULT_BUILDER, VOLUME_DEFINES, VOLUMES
 from clrt.device import pinned
 from clrt.device.context import format_bytes, is_out_of_memory
@@ -203,31 +203,6 @@ class DeviceBvh:
             if buffer is not None:
                 buffer.release()
         self.rows = self.tri_verts = self.prim_ids = self.exact_rows = None
-
-
-def tree_stats(exact_rows: np.ndarray, depth: int) -> dict:
-    """Bvh.stats()'s tree numbers from BVH_PAIR_NODE rows that hold exact boxes
-    (box layout): nodes, leaves, depth, leaf sizes and the SAH cost -- inner
-    nodes' areas plus leaves' areas times their counts, over the root's area
-    (constants of topdown.py)."""
-    refs = child_refs(exact_rows)
-    counts = refs[:, [1, 3]].reshape(-1)
-    present = counts >= 0
-    lo = np.stack([exact_rows["left_a"][:, :3], exact_rows["right_a"][:, :3]], 1).reshape(-1, 3)
-    hi = np.stack([exact_rows["left_b"][:, :3], exact_rows["right_b"][:, :3]], 1).reshape(-1, 3)
-    area = surface_area(lo.astype(np.float64), hi.astype(np.float64))
-    root_lo = lo[present].min(axis=0).astype(np.float64)
-    root_hi = hi[present].max(axis=0).astype(np.float64)
-    root_area = float(surface_area(root_lo, root_hi))
-    ratio = area / root_area if root_area > 0 else np.ones_like(area)
-    leaf = counts > 0
-    inner = counts == 0
-    one_leaf = not inner.any() and leaf.sum() == 1          # a root row holding the whole tree
-    sah = (0.0 if one_leaf else C_TRAVERSAL) + C_TRAVERSAL * ratio[inner].sum() \
-        + C_INTERSECT * (ratio[leaf] * counts[leaf]).sum()
-    return {"nodes": int(leaf.sum() + inner.sum() + (0 if one_leaf else 1)), "leaves": int(leaf.sum()),
-            "depth": int(depth), "max_leaf_size": int(counts.max()),
-            "mean_leaf_size": float(counts[leaf].mean()), "sah_cost": float(sah)}
 
 
 class _Workspace:
@@ -506,8 +481,8 @@ def build_acceleration(corners: np.ndarray, accel: str, builder: str, leaf_size:
             f"{queue.device.name.strip()}: it needs about {format_bytes(SCRATCH_BYTES_PER_TRIANGLE * len(corners))} "
             "of scratch memory; use --builder sah (built on the host)") from None
     rows, prim_ids = bvh.read_back()
-    summary = bvh.stats()
+    exact_rows = bvh.read_exact_rows()      # the statistics are computed when asked for
     bvh.release()
     return Acceleration(accel, "device", rows, prim_ids, depth=int(bvh.depth),
                         build_ms=1e3 * (time.perf_counter() - start), leaf_size=int(leaf_size),
-                        summary={k: v for k, v in summary.items() if k not in ("build_ms", "device_bytes")})
+                        exact_rows=exact_rows)
