@@ -91,6 +91,7 @@ TAIL_GROUP = {"gpu": 1024, "cpu": BUILD_GROUP}
 # (bunny00 on 2 cores: 114 -> 156 ms), where the build is what a user waits
 # for: off there.
 TREELET_LEAVES = {"gpu": 7, "cpu": 0}
+TREELET_GROUP = 32       # work-items that solve one treelet together
 # Clusters an iteration keeps, at most (a fifth to a quarter merge away on
 # meshes): the host queues log(count / tail_threshold) / log(1 / MIN_SHRINK)
 # iterations before it reads the count again.  Iterations queued past the
@@ -120,7 +121,8 @@ def build_defines(volume: str, kind: str = "gpu", treelet_leaves: int | None = N
     return {
         VOLUME_DEFINES[volume]: None, "BUILD_GROUP": BUILD_GROUP, "RADIX_BITS": RADIX_BITS,
         "PLOC_RADIUS": PLOC_RADIUS, "TAIL_GROUP": TAIL_GROUP[kind],
-        "TREELET_LEAVES": TREELET_LEAVES[kind] if treelet_leaves is None else int(treelet_leaves), **STATE,
+        "TREELET_LEAVES": TREELET_LEAVES[kind] if treelet_leaves is None else int(treelet_leaves),
+        "TREELET_GROUP": TREELET_GROUP, **STATE,
         "C_TRAVERSAL": f"((float){C_TRAVERSAL!r})", "C_INTERSECT": f"((float){C_INTERSECT!r})",
         "REL_PAD": repr(float(volumes.REL_PAD)), "ULP_PAD": int(volumes.ULP_PAD),
         "PAD_FLOOR": repr(float(volumes.PAD_FLOOR)), "EVAL_SLACK": repr(float(volumes.EVAL_SLACK)),
@@ -237,7 +239,7 @@ _ARG_TYPES = {
     "radix_histogram": [None, _U, _U, None], "scan_counts": [None, _U],
     "radix_scatter": [None, None, _U, _U, None, None, None], "init_leaves": [None, None, _U, None, None],
     "ploc_merge": [None] * 5 + [_I, None, _I, _U], "ploc_count_kept": [None, None, _I], "ploc_compact": [None] * 4 + [_I],
-    "ploc_tail": [None] * 5 + [_I, None, _I, _U], "treelet_restructure": [None, None, _I, _I, _I, _U], 
+    "ploc_tail": [None] * 5 + [_I, None, _I, _U], "treelet_restructure": [None, None, _I, _I, _U], 
     "init_root_paths": [None, _U, None, None],
     "jump_root_paths": [None, None, _U, None, None], "emit_tree": [None, _U, _I] + [None] * 9,
 }
@@ -363,8 +365,8 @@ def build_on_device(context: cl.Context, queue: cl.CommandQueue, corners, volume
         first = F
         for made in (counts[:-1] - counts[1:]).tolist():
             if made > 0:
-                launch("treelet", k["treelet_restructure"], _groups(made), nodes, heights, F, first, made,
-                       leaf_size)
+                launch("treelet", k["treelet_restructure"], made, nodes, heights, F, first, leaf_size,
+                       group=TREELET_GROUP)
             first += made
     root_rows = np.empty(1, np.int32)
     offset = root * layouts.BUILD_NODE.itemsize + layouts.BUILD_NODE.fields["rows"][1]
