@@ -309,3 +309,37 @@ def test_restructured_trees_give_brute_force_hits(volume, device, monkeypatch):
         hits = clrt.Accel(mesh, volume, "device", 4, device=device).trace(o, d)
         for field in ("t", "prim", "u", "v"):
             assert np.array_equal(getattr(hits, field), getattr(base, field)), (name, volume, field)
+
+
+def test_the_geometry_takes_over_the_built_buffers(device):
+    """A device build's buffers are used in place by the first geometry on the
+    same context (no second upload), exactly once; a pickled Acceleration
+    leaves them behind."""
+    import pickle
+
+    from clrt.device.build import build_acceleration
+    from clrt.device.context import create_context
+    from clrt.device.geometry import DeviceGeometry
+    mesh = TEST_MESHES["torus"]()
+    corners = mesh.vertices[mesh.faces].astype(np.float32)
+    built = build_acceleration(corners, "box", "device", 4, device)
+    bvh = built.device_buffers
+    assert bvh is not None
+    again = pickle.loads(pickle.dumps(built))
+    assert again.device_buffers is None and np.array_equal(again.rows, built.rows)
+    context, _ = create_context(device)
+    first = DeviceGeometry(context, corners, built)
+    assert first.buffers["tris"][0] is bvh.tri_verts and first.buffers["nodes"][0] is bvh.rows
+    assert built.device_buffers is None
+    second = DeviceGeometry(context, corners, built)             # uploads its own copies
+    assert second.buffers["tris"][0] is not bvh.tri_verts
+    import pyopencl as cl
+
+    from clrt import layouts
+    queue = create_context(device)[1]
+    for name, dtype in (("tris", layouts.TRIANGLE_VERTS), ("nodes", layouts.BVH_PAIR_NODE), ("prim_ids", np.int32)):
+        n = first.buffers[name][0].size // np.dtype(dtype).itemsize
+        got, want = np.empty(n, dtype), np.empty(n, dtype)
+        cl.enqueue_copy(queue, got, first.buffers[name][0], is_blocking=True)
+        cl.enqueue_copy(queue, want, second.buffers[name][0], is_blocking=True)
+        assert np.array_equal(got.view(np.uint8), want.view(np.uint8)), name     # the same bytes either way

@@ -29,6 +29,8 @@ class Acceleration:
                (statistics; None without a BVH).
     boxes:     (N, 2, 3) float32 exact (unpadded) box of each depth-first node
                (statistics; None without a BVH).
+    device_buffers: the device builder's buffers, for the first geometry on
+               their context to take over (:meth:`take_device_buffers`).
     exact_rows: the rows with the exact (unpadded) boxes in box layout, from a
                builder that keeps no ``counts`` and ``boxes`` on the host (the
                device builder): :meth:`stats` computes its numbers from them
@@ -45,7 +47,23 @@ class Acceleration:
     counts: np.ndarray | None = field(repr=False, default=None)
     boxes: np.ndarray | None = field(repr=False, default=None)
     exact_rows: np.ndarray | None = field(repr=False, default=None)
+    device_buffers: object = field(repr=False, default=None, compare=False)
     _summary: dict | None = field(repr=False, default=None)
+
+    def take_device_buffers(self, context):
+        """The device builder's buffers (rows, tri_verts, prim_ids: clrt.device.build.
+        DeviceBvh) if they live on ``context``; handed out once, to the first
+        geometry made on that context (a refit writes into them)."""
+        built = self.device_buffers
+        if built is None or built.rows is None or built.queue.context.int_ptr != context.int_ptr:
+            return None
+        self.device_buffers = None
+        return built
+
+    def __getstate__(self):
+        state = dict(self.__dict__)
+        state["device_buffers"] = None        # device memory does not travel
+        return state
 
     @classmethod
     def brute_force(cls, num_triangles: int) -> "Acceleration":

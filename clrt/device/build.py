@@ -86,8 +86,8 @@ TAIL_GROUP = {"gpu": 1024, "cpu": BUILD_GROUP}
 # Treelet restructuring after PLOC (build_treelet.cl): leaves per treelet
 # (7, as Karras & Aila; on PoCL 8 lowered the SAH cost by 0.4 % more at 7x
 # the time, 5 by 1.3 % less), per device type; 0: none.  On the H200 it costs
-# 3-4 ms for bunny00 and camel and brings their primary rays within 4 % of the
-# host SAH trees (8-12 % without).  On a CPU it would add a third to the build
+# 1.1-1.2 ms for bunny00 and camel and brings their primary rays within 4 % of
+# the host SAH trees (9-13 % without).  On a CPU it would add a third to the build
 # (bunny00 on 2 cores: 114 -> 156 ms), where the build is what a user waits
 # for: off there.
 TREELET_LEAVES = {"gpu": 7, "cpu": 0}
@@ -460,10 +460,9 @@ def build_acceleration(corners: np.ndarray, accel: str, builder: str, leaf_size:
     device builder where the device has float64, else the host SAH builder
     (clrt.config.DEFAULT_BUILDER says why).
 
-    The device build is read back into an :class:`Acceleration` for now, and
-    uploaded again by DeviceGeometry like a host build (a second copy while the
-    build's buffers live); the traversal could take DeviceBvh's buffers as
-    they are.
+    A device build keeps its buffers on the device for the first
+    DeviceGeometry on that context (clrt.accel.Acceleration.take_device_buffers);
+    the rows and ids are also read back (refit, statistics, per-slot data).
     """
     from clrt.device.context import create_context
     if builder == "auto" and accel != "none":
@@ -484,7 +483,8 @@ def build_acceleration(corners: np.ndarray, accel: str, builder: str, leaf_size:
             "of scratch memory; use --builder sah (built on the host)") from None
     rows, prim_ids = bvh.read_back()
     exact_rows = bvh.read_exact_rows()      # the statistics are computed when asked for
-    bvh.release()
+    bvh.exact_rows.release()
+    bvh.exact_rows = None
     return Acceleration(accel, "device", rows, prim_ids, depth=int(bvh.depth),
                         build_ms=1e3 * (time.perf_counter() - start), leaf_size=int(leaf_size),
-                        exact_rows=exact_rows)
+                        exact_rows=exact_rows, device_buffers=bvh)

@@ -16,6 +16,7 @@ from clrt.accel.rows import child_refs
 from clrt.config import MAX_PARTS, VOLUME_DEFINES, stack_size
 from clrt.device.context import format_bytes
 from clrt.errors import DeviceMemoryError, InputError
+from clrt.layouts import TRIANGLE_VERTS
 from clrt.scene.arrays import triangle_verts
 
 
@@ -65,13 +66,21 @@ class DeviceGeometry:
                  extra: dict | None = None, max_buffer_bytes: int | None = None):
         self.acceleration = acceleration
         prim_ids = acceleration.prim_ids
-        arrays = {"tris": triangle_verts(corners[prim_ids]), "nodes": acceleration.rows,
-                  "prim_ids": prim_ids, **(extra or {})}
-        arrays = {name: np.ascontiguousarray(a) for name, a in arrays.items()}
+        # A tree built on this context's device is on it already, with its
+        # triangles in slot order: taken over (once), not uploaded again.
+        # The triangles' host array is then only a stand-in of the right size.
+        built = acceleration.take_device_buffers(context)
+        slotted = (np.broadcast_to(np.zeros(1, TRIANGLE_VERTS), (len(prim_ids),)) if built is not None
+                   else triangle_verts(corners[prim_ids]))
+        arrays = {"tris": slotted, "nodes": acceleration.rows, "prim_ids": prim_ids, **(extra or {})}
+        arrays = {name: a if a is slotted else np.ascontiguousarray(a) for name, a in arrays.items()}
         limit = min(d.max_mem_alloc_size for d in context.devices)
         if max_buffer_bytes is not None:
             limit = min(limit, int(max_buffer_bytes))
         self.shifts = part_shifts(arrays, limit)
+        if built is not None and self.shifts is not None:    # split into parts: uploaded as always
+            built = None
+            arrays["tris"] = triangle_verts(corners[prim_ids])
         self.defines = dict(accel_defines(acceleration))
         if self.shifts is not None:
             self.defines["SPLIT_BUFFERS"] = None
@@ -82,7 +91,11 @@ class DeviceGeometry:
             return cl.Buffer(context, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=array)
 
         self.buffers: dict[str, tuple] = {}
+        if built is not None:
+            self.buffers.update(tris=(built.tri_verts,), nodes=(built.rows,), prim_ids=(built.prim_ids,))
         for name, array in arrays.items():
+            if name in self.buffers:
+                continue
             if self.shifts is None:
                 self.buffers[name] = (upload(array),)
                 continue
