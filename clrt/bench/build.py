@@ -124,11 +124,38 @@ def _trace_ms(mesh, camera, volume, builder, leaf_size, device) -> tuple[float, 
     return kernel_ms, statistics.median(walls[1:])
 
 
+# A generated scene of the issue's size for the CPU comparison ("a 50k-triangle
+# scan"; the held-out scan is not shipped): a torus knot of 2 x 782 x 32 triangles.
+GENERATED = {"knot50k": dict(segments=782, sides=32)}
+
+
+def embree_build_ms(mesh, repeat: int) -> tuple[float, float]:
+    """(first, warm median) wall ms of an Embree build (embreex, all host
+    cores): the scene made, the mesh added, committed by its first ray."""
+    from embreex import mesh_construction, rtcore_scene
+    vertices, faces = np.asarray(mesh.vertices, np.float32), np.asarray(mesh.faces, np.int32)
+    origin, direction = np.zeros((1, 3), np.float32), np.array([[0.0, 0.0, 1.0]], np.float32)
+    walls = []
+    for _ in range(1 + repeat):
+        start = time.perf_counter()
+        scene = rtcore_scene.EmbreeScene()
+        mesh_construction.TriangleMesh(scene, vertices, faces)
+        scene.run(origin, direction)
+        walls.append(1e3 * (time.perf_counter() - start))
+    return walls[0], statistics.median(walls[1:]) if repeat else walls[0]
+
+
 def scenes(mesh_dir: Path, meshes, counts):
     """(name, mesh, camera) of each scene."""
+    from clrt.scene import primitives
     from clrt.scene.load import load_mesh
     from clrt.scene.scene import Camera
     for name in meshes:
+        if name in GENERATED:
+            mesh = primitives.torus_knot(**GENERATED[name], name=name)
+            lo, hi = mesh.bounds
+            yield name, mesh, Camera.framing(np.array([lo, hi]), *SIZE)
+            continue
         file, eye, target = CASES[name]
         yield name, load_mesh(mesh_dir / file), Camera(eye, target, (0.0, 1.0, 0.0), 45.0, *SIZE)
     if counts:
@@ -140,8 +167,9 @@ def scenes(mesh_dir: Path, meshes, counts):
 
 
 def run(mesh_dir, meshes, counts, builders, volume="box", leaf_size=4, device=None, repeat=5, trace=True,
-        out=sys.stdout):
+        out=None, embree=False):
     from clrt.device.context import create_context, device_label
+    out = out or sys.stdout
     context, queue = create_context(device)
     print(f"device: {device_label(queue.device)}; volume {volume}, leaf size {leaf_size}; build: first, "
           f"then median of {repeat}; trace: {SIZE[0]}x{SIZE[1]} primary rays, kernel ms\n", file=out)
@@ -168,6 +196,10 @@ def run(mesh_dir, meshes, counts, builders, volume="box", leaf_size=4, device=No
                   f"| {stats['sah_cost']:.2f} | {ratio} | {stats['depth']} | {stats['device_bytes'] / 2**20:,.1f} "
                   f"| {trace_ms:.3f} | {SIZE[0] * SIZE[1] / trace_ms / 1e3:,.0f} | {refit_ms:.2f} |", file=out,
                   flush=True)
+        if embree:
+            first, warm = embree_build_ms(mesh, repeat)
+            print(f"| {name} | {len(corners):,} | Embree (embreex, host CPU) | {first:,.1f} | {warm:,.1f} | - | - "
+                  "| - | - | - | - | - | - | - |", file=out, flush=True)
 
 
 def main(argv=None) -> int:
@@ -186,6 +218,8 @@ def main(argv=None) -> int:
     p.add_argument("--repeat", type=int, default=5, help="warm builds timed after the first (default 5)")
     p.add_argument("--no-trace", action="store_true", help="skip the primary-ray timing")
     p.add_argument("--device", help="'gpu', 'cpu' or P:D (default: clrt's choice)")
+    p.add_argument("--embree", action="store_true", help="also time Embree's build of each scene on the host CPU "
+                                                         "(needs embreex: the raybench extra)")
     args = p.parse_args(argv)
     for b in args.builders:
         if b.startswith("device/tail="):          # the hand-over to ploc_tail at another count
@@ -195,10 +229,15 @@ def main(argv=None) -> int:
         if b not in HOST_BUILDERS and b not in DEVICE_VARIANTS:
             p.error(f"unknown builder {b!r}")
     for m in args.meshes:
-        if m not in CASES:
-            p.error(f"unknown mesh {m!r} (choose from {', '.join(sorted(CASES))})")
+        if m not in CASES and m not in GENERATED:
+            p.error(f"unknown mesh {m!r} (choose from {', '.join(sorted(CASES) + sorted(GENERATED))})")
+    if args.embree:
+        try:
+            import embreex  # noqa: F401
+        except ImportError:
+            p.error("--embree needs embreex: pip install -e '.[raybench]'")
     return exit_code(run, args.mesh_dir, args.meshes, args.triangles, args.builders, args.volume,
-                     args.leaf_size, args.device, args.repeat, not args.no_trace)
+                     args.leaf_size, args.device, args.repeat, not args.no_trace, embree=args.embree)
 
 
 if __name__ == "__main__":

@@ -1,0 +1,22 @@
+"""clrt.bench.build runs its variants side by side (here on the test device,
+on the generated 50k-triangle scene) and, with --embree, Embree's build."""
+
+import pytest
+
+from clrt.bench import build
+
+
+def test_build_bench_prints_every_variant(device, capsys, monkeypatch):
+    pytest.importorskip("embreex")            # the raybench extra, which the test command installs
+    monkeypatch.setattr(build, "DEVICE_VARIANTS", dict(build.DEVICE_VARIANTS))
+    code = build.main(["--device", device or "cpu", "--meshes", "knot50k", "--builders",
+                       "device,device/treelets=7,device/tail=64", "--repeat", "1", "--no-trace", "--embree"])
+    assert code == 0
+    rows = [line.split("|") for line in capsys.readouterr().out.splitlines() if line.startswith("| knot50k ")]
+    assert [r[3].strip() for r in rows] == ["device", "device/treelets=7", "device/tail=64",
+                                            "Embree (embreex, host CPU)"]
+    assert all(r[2].strip() == "50,048" for r in rows)
+    sah = {r[3].strip(): float(r[8]) for r in rows[:3]}
+    assert sah["device/tail=64"] == sah["device"]          # the hand-over does not change the tree
+    assert sah["device/treelets=7"] <= sah["device"]        # restructured (the GPU default) or better
+    assert all(float(r[5].replace(",", "")) > 0 for r in rows)            # warm build ms
