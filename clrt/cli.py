@@ -10,6 +10,7 @@ import argparse
 import os
 import signal
 import sys
+import time
 from pathlib import Path
 
 from clrt import config, options
@@ -160,15 +161,36 @@ def _render(args) -> int:
     return 0
 
 
-def _progress_bar(total: int):
-    """A tqdm bar on stderr that shows only once a render has run PROGRESS_DELAY
-    seconds and disappears when it ends; None without tqdm (the 'distributed' extra)."""
-    try:
-        from tqdm import tqdm
-    except ImportError:
-        return None
-    return tqdm(total=total, unit="px", unit_scale=True, delay=config.PROGRESS_DELAY, leave=False,
-                desc="rendering", file=sys.stderr)
+class _LazyProgress:
+    """A tqdm bar on stderr that appears only once a render has run
+    PROGRESS_DELAY seconds and disappears when it ends.  tqdm itself is
+    imported only then: a fast frame (most GPU frames) never pays for the
+    import (20-30 ms of a first image)."""
+
+    def __init__(self, total: int):
+        self.total, self.done, self.bar = total, 0, None
+        self.start = time.perf_counter()
+
+    def update(self, n: int) -> None:
+        self.done += n
+        if self.bar is None and time.perf_counter() - self.start >= config.PROGRESS_DELAY:
+            try:
+                from tqdm import tqdm
+            except ImportError:          # tqdm comes with the 'distributed' extra
+                self.start = float("inf")
+                return
+            self.bar = tqdm(total=self.total, initial=self.done, unit="px", unit_scale=True, leave=False,
+                            desc="rendering", file=sys.stderr)
+        elif self.bar is not None:
+            self.bar.update(n)
+
+    def close(self) -> None:
+        if self.bar is not None:
+            self.bar.close()
+
+
+def _progress_bar(total: int) -> _LazyProgress:
+    return _LazyProgress(total)
 
 
 def _info(args) -> int:

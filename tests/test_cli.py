@@ -109,3 +109,21 @@ def test_python_dash_m_missing_mesh(tmp_path):
     assert result.returncode == 2
     assert result.stderr.strip().count("\n") == 0 and "missing.obj" in result.stderr
     assert list(tmp_path.iterdir()) == []
+
+
+def test_progress_bar_appears_only_after_the_delay(monkeypatch, capsys):
+    """tqdm is imported and the bar made only once a render has run
+    PROGRESS_DELAY seconds; it then starts from the samples already done."""
+    pytest.importorskip("tqdm")
+    from clrt import cli, config
+    clock = [100.0]
+    monkeypatch.setattr(cli.time, "perf_counter", lambda: clock[0])
+    bar = cli._progress_bar(1000)
+    bar.update(100)
+    assert bar.bar is None
+    clock[0] += config.PROGRESS_DELAY + 0.01
+    bar.update(200)
+    assert bar.bar is not None and bar.bar.n == 300 and bar.bar.total == 1000
+    bar.update(50)
+    assert bar.bar.n == 350
+    bar.close()
