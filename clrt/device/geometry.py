@@ -87,8 +87,8 @@ class DeviceGeometry:
             self.defines.update({f"{name}_PART_SHIFT": shift for name, shift in self.shifts.items()})
         mf = cl.mem_flags
 
-        def upload(array):
-            return cl.Buffer(context, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=array)
+        def upload(array, flags=mf.READ_ONLY):
+            return cl.Buffer(context, flags | mf.COPY_HOST_PTR, hostbuf=array)
 
         self.buffers: dict[str, tuple] = {}
         if built is not None:
@@ -97,7 +97,8 @@ class DeviceGeometry:
             if name in self.buffers:
                 continue
             if self.shifts is None:
-                self.buffers[name] = (upload(array),)
+                # The rows are refitted in place (refit.cl writes them).
+                self.buffers[name] = (upload(array, mf.READ_WRITE if name == "nodes" else mf.READ_ONLY),)
                 continue
             step = 1 << self.shifts[name]
             parts = [upload(array[k:k + step]) for k in range(0, max(len(array), 1), step)]
@@ -178,7 +179,7 @@ def part_shifts(arrays: dict, limit: int) -> dict | None:
 
 class _RefitPlan:
     """What a refit of one tree needs, made once: the program, the rows of every
-    tree level (the order of refit_level's launches), scratch buffers."""
+    tree level (the order of refit_level's launches), the boxes' scratch."""
 
     def __init__(self, context: cl.Context, acceleration: Acceleration):
         from clrt.device.build import build_defines   # the fit's constants, as the device builder's
@@ -198,19 +199,17 @@ class _RefitPlan:
         self.level_sizes = [b.size // 4 for b in self.levels]
         self.num_rows = len(acceleration.rows)
         mf = cl.mem_flags
-        self.rows = cl.Buffer(context, mf.READ_WRITE, acceleration.rows.nbytes)
         self.box_lo = cl.Buffer(context, mf.READ_WRITE, 2 * 16 * self.num_rows)
         self.box_hi = cl.Buffer(context, mf.READ_WRITE, 2 * 16 * self.num_rows)
 
     def run(self, queue: cl.CommandQueue, rows: cl.Buffer, tris: cl.Buffer) -> None:
-        """Refit ``rows`` (the uploaded BVH) to ``tris`` (the uploaded, moved triangles)."""
+        """Refit ``rows`` (the uploaded BVH, in place) to ``tris`` (the uploaded,
+        moved triangles)."""
         k, n = self.kernels, self.num_rows
-        cl.enqueue_copy(queue, self.rows, rows)   # the uploaded rows are read-only to kernels
-        k["refit_leaves"].set_args(self.rows, n, tris, self.box_lo, self.box_hi)
+        k["refit_leaves"].set_args(rows, n, tris, self.box_lo, self.box_hi)
         cl.enqueue_nd_range_kernel(queue, k["refit_leaves"], (n,), None)
         for level, size in zip(reversed(self.levels), reversed(self.level_sizes)):
-            k["refit_level"].set_args(self.rows, level, size, self.box_lo, self.box_hi)
+            k["refit_level"].set_args(rows, level, size, self.box_lo, self.box_hi)
             cl.enqueue_nd_range_kernel(queue, k["refit_level"], (size,), None)
-        k["refit_fit"].set_args(self.rows, n, self.box_lo, self.box_hi)
+        k["refit_fit"].set_args(rows, n, self.box_lo, self.box_hi)
         cl.enqueue_nd_range_kernel(queue, k["refit_fit"], (n,), None)
-        cl.enqueue_copy(queue, rows, self.rows)
