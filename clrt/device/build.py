@@ -363,8 +363,11 @@ def build_on_device(context: cl.Context, queue: cl.CommandQueue, corners, volume
     if treelets and F > 2 and iterations < STATE["COUNT_RING"]:
         counts = head[STATE["STATE_COUNTS"]:][:iterations + 1]  # clusters before each iteration
         first = F
-        for made in (counts[:-1] - counts[1:]).tolist():
-            if made > 0:
+        for iteration, made in enumerate((counts[:-1] - counts[1:]).tolist()):
+            # Iteration k merges clusters of at most 2**k triangles: while
+            # 2**(k + 1) <= leaf_size its nodes are left alone (nothing below
+            # them changes either), so the launch is skipped.
+            if made > 0 and 2 ** (iteration + 1) > leaf_size:
                 launch("treelet", k["treelet_restructure"], made, nodes, heights, F, first, leaf_size,
                        group=TREELET_GROUP)
             first += made
