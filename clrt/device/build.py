@@ -238,9 +238,9 @@ _ARG_TYPES = {
     "init_build_state": [None, _U], "centroid_bounds": [None, _U, None], "morton_codes": [None, _U, None, None, None],
     "radix_histogram": [None, _U, _U, None], "scan_counts": [None, _U],
     "radix_scatter": [None, None, _U, _U, None, None, None], "init_leaves": [None, None, _U, None, None],
-    "ploc_merge": [None] * 5 + [_I, None, _I, _U], "ploc_count_kept": [None, None, _I], "ploc_compact": [None] * 4 + [_I],
-    "ploc_tail": [None] * 5 + [_I, None, _I, _U], "treelet_restructure": [None, None, _I, _I, _U], 
-    "init_root_paths": [None, _U, None, None],
+    "ploc_merge": [None] * 5 + [_I, None, _I, _U], "ploc_count_kept": [None, None, _I],
+    "ploc_compact": [None] * 4 + [_I], "ploc_tail": [None] * 5 + [_I, None, _I, _U],
+    "treelet_restructure": [None, None, _I, _I, _U], "init_root_paths": [None, _U, None, None],
     "jump_root_paths": [None, None, _U, None, None], "emit_tree": [None, _U, _I] + [None] * 9,
 }
 
@@ -288,8 +288,8 @@ def build_on_device(context: cl.Context, queue: cl.CommandQueue, corners, volume
         (default: TAIL_THRESHOLD of the device type; for benchmarks).
     staged_upload: the triangles through page-locked staging or not
         (default: clrt.device.pinned.upload's choice; for benchmarks).
-    treelet_leaves: leaves of the treelets restructured as nodes are made
-        (0: the plain PLOC tree; default: TREELET_LEAVES of the device type).
+    treelet_leaves: leaves of the treelets restructured after PLOC (0: the
+        plain PLOC tree; default: TREELET_LEAVES of the device type).
     ``queue`` must have profiling enabled (clrt.device.context.create_context's does).
     Raises InputError on bad input, DeviceError when the device lacks float64.
     """
@@ -360,6 +360,8 @@ def build_on_device(context: cl.Context, queue: cl.CommandQueue, corners, volume
 
     # 3b. Treelet restructuring: one launch per PLOC iteration, over the nodes it made.
     treelets = TREELET_LEAVES[kind] if treelet_leaves is None else int(treelet_leaves)
+    # (The ring holds the counts of COUNT_RING iterations; PLOC takes about 50
+    # for 75k triangles and 70 for 50M, so a longer run only goes without.)
     if treelets and F > 2 and iterations < STATE["COUNT_RING"]:
         counts = head[STATE["STATE_COUNTS"]:][:iterations + 1]  # clusters before each iteration
         first = F
