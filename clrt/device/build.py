@@ -361,7 +361,7 @@ def build_on_device(context: cl.Context, queue: cl.CommandQueue, corners, volume
     # 3b. Treelet restructuring: one launch per PLOC iteration, over the nodes it made.
     treelets = TREELET_LEAVES[kind] if treelet_leaves is None else int(treelet_leaves)
     # (The ring holds the counts of COUNT_RING iterations; PLOC takes about 50
-    # for 75k triangles and 70 for 50M, so a longer run only goes without.)
+    # for 75k triangles, about 80 at that rate for 50M: a longer run only goes without.)
     if treelets and F > 2 and iterations < STATE["COUNT_RING"]:
         counts = head[STATE["STATE_COUNTS"]:][:iterations + 1]  # clusters before each iteration
         first = F
