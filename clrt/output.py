@@ -95,7 +95,42 @@ def written_by_clrt(path: Path) -> bool:
     return _has_mark(path)
 
 
+def _png_mark(path: Path) -> bool | None:
+    """Does a PNG carry clrt's mark in a ``Software`` tEXt chunk before its image
+    data (where clrt and Pillow write it)?  Read here without Pillow, whose
+    import costs a re-render over its own output some 20 ms; None where unsure
+    (not a PNG, compressed or international text chunks, a short file): then
+    Pillow decides."""
+    try:
+        with open(path, "rb") as f:
+            if f.read(8) != b"\x89PNG\r\n\x1a\n":
+                return None
+            while True:
+                head = f.read(8)
+                if len(head) < 8:
+                    return None
+                length, kind = struct.unpack(">I4s", head)
+                if kind in (b"IDAT", b"IEND"):
+                    return False
+                if kind in (b"zTXt", b"iTXt"):
+                    return None
+                if kind == b"tEXt":
+                    body = f.read(length)
+                    keyword, _, text = body.partition(b"\0")
+                    if keyword == b"Software" and text.decode("latin-1").startswith(SOFTWARE_MARK):
+                        return True
+                    f.seek(4, os.SEEK_CUR)           # its CRC
+                else:
+                    f.seek(length + 4, os.SEEK_CUR)
+    except OSError:
+        return None
+
+
 def _has_mark(path: Path) -> bool:
+    if config.IMAGE_FORMATS.get(Path(path).suffix.lower()) == "PNG":
+        marked = _png_mark(path)
+        if marked is not None:
+            return marked
     import warnings
 
     from PIL import Image

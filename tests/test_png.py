@@ -63,3 +63,40 @@ def test_gray_and_alpha_through_pillow_still_written(tmp_path):
     array = np.full((3, 4, 2), 77, np.uint8)   # LA: Pillow's writer
     output.write_image(array, path)
     assert Image.open(path).mode == "LA" and output.written_by_clrt(path)
+
+
+def test_mark_read_without_pillow_agrees_with_pillow(tmp_path):
+    """clrt's own reading of a PNG's mark (no Pillow import) says what Pillow
+    says, and leaves the cases it cannot read to Pillow."""
+    from PIL import Image, PngImagePlugin
+
+    from clrt.output import _has_mark, _png_mark, png_bytes
+    image = np.random.default_rng(2).integers(0, 256, (20, 30, 3), dtype=np.uint8)
+    ours = tmp_path / "ours.png"
+    ours.write_bytes(png_bytes(image))
+    plain = tmp_path / "plain.png"
+    Image.fromarray(image).save(plain)
+    other = tmp_path / "other.png"
+    info = PngImagePlugin.PngInfo()
+    info.add_text("Comment", "clrt")                     # the word, but not as Software
+    info.add_text("Software", "GIMP")
+    Image.fromarray(image).save(other, pnginfo=info)
+    marked_by_pillow = tmp_path / "pillow_marked.png"
+    info = PngImagePlugin.PngInfo()
+    info.add_text("Software", "clrt 0.0")
+    Image.fromarray(image).save(marked_by_pillow, pnginfo=info)
+    compressed = tmp_path / "ztxt.png"
+    info = PngImagePlugin.PngInfo()
+    info.add_text("Software", "clrt 0.0", zip=True)
+    Image.fromarray(image).save(compressed, pnginfo=info)
+    truncated = tmp_path / "cut.png"
+    truncated.write_bytes(png_bytes(image)[:20])
+    expected = {ours: True, plain: False, other: False, marked_by_pillow: True}
+    for path, marked in expected.items():
+        assert _png_mark(path) is marked, path.name
+        assert _has_mark(path) is marked, path.name
+    assert _png_mark(compressed) is None and _has_mark(compressed) is True     # Pillow decides
+    assert _png_mark(truncated) is None and _has_mark(truncated) is False
+    not_png = tmp_path / "fake.png"
+    not_png.write_text("hello")
+    assert _png_mark(not_png) is None and _has_mark(not_png) is False
