@@ -192,3 +192,20 @@ def test_ctrl_c_while_starting_is_one_line_and_130(tmp_path):
     assert proc.returncode == 130, err
     assert err == "clrt: interrupted\n"
     assert list(tmp_path.iterdir()) == []
+
+
+def test_a_glb_camera_is_read_from_the_json_chunk_alone(tmp_path):
+    """The camera comes from the JSON chunk: the binary chunk (the buffers,
+    read once already with the mesh) is not read again -- here it is cut
+    short, which the mesh loader would refuse."""
+    from clrt.scene.load import file_camera
+    mesh = primitives.torus(1.0, 0.35, 24, 12)
+    glb = tmp_path / "t.glb"
+    _glb_with_camera(mesh, glb, eye=(0.3, 0.2, 4.0), yfov=np.radians(40.0), aspect=1.5)
+    whole = file_camera(glb)
+    data = glb.read_bytes()
+    (length,) = struct.unpack_from("<I", data, 12)
+    glb.write_bytes(data[:20 + length + 12])             # the binary chunk's header and a few bytes
+    cut = file_camera(glb)
+    assert cut is not None and np.allclose(cut["eye"], (0.3, 0.2, 4.0)) and cut["aspect"] == 1.5
+    assert all(np.array_equal(np.asarray(cut[k]), np.asarray(whole[k])) for k in whole)

@@ -834,9 +834,10 @@ def _texture(path: str, wrap_s: str, wrap_t: str, label: str) -> Texture:
         raise _fail(label, str(exc)) from None
 
 
-def _read_bytes(path: str, side_file: bool = False) -> bytes:
-    """The file's contents; MeshLoadError for anything but a readable regular file
-    (a mesh file, unless ``side_file``: one that a mesh file names)."""
+def _read_bytes(path: str, side_file: bool = False, prefix: int | None = None) -> bytes:
+    """The file's contents (its first ``prefix`` bytes only, if given);
+    MeshLoadError for anything but a readable regular file (a mesh file, unless
+    ``side_file``: one that a mesh file names)."""
     try:
         info = os.stat(path)
     except FileNotFoundError:
@@ -858,7 +859,7 @@ def _read_bytes(path: str, side_file: bool = False) -> bytes:
                           + ", ".join(SUPPORTED_EXTENSIONS))
     try:
         with open(path, "rb") as fh:
-            data = fh.read()
+            data = fh.read() if prefix is None else fh.read(prefix)
     except PermissionError:
         raise _fail(path, "permission denied") from None
     except OSError as exc:
@@ -977,6 +978,16 @@ def _gltf_json(data: bytes, ext: str) -> dict:
     return json.loads(data.decode("utf-8"))
 
 
+def _glb_json_bytes(path: str) -> bytes:
+    """A GLB file's header and JSON chunk, without its binary chunk: the
+    camera is read after the mesh, and the buffers need not be read twice."""
+    import struct
+    head = _read_bytes(path, prefix=20)
+    if len(head) < 20 or head[:4] != b"glTF":
+        return head                          # _gltf_json says what is wrong
+    return _read_bytes(path, prefix=20 + struct.unpack_from("<I", head, 12)[0])
+
+
 def _node_matrix(node: dict) -> np.ndarray:
     """A glTF node's local transform: ``matrix``, else T * R * S."""
     if "matrix" in node:
@@ -1005,7 +1016,7 @@ def file_camera(path) -> dict | None:
     if ext not in (".glb", ".gltf"):
         return None
     try:
-        doc = _gltf_json(_read_bytes(path), ext)
+        doc = _gltf_json(_glb_json_bytes(path) if ext == ".glb" else _read_bytes(path), ext)
         nodes, cameras = doc.get("nodes", []), doc.get("cameras", [])
         scenes = doc.get("scenes", [])
         roots = scenes[doc.get("scene", 0)].get("nodes", []) if scenes else range(len(nodes))
