@@ -594,3 +594,23 @@ def test_cli_writes_aov_files(tmp_path, device, capsys):
     err = capsys.readouterr().err
     assert code == 2 and "albedo" in err and len(err.strip().splitlines()) == 1
     assert not (tmp_path / "bad.png").exists()
+
+
+def test_camera_images_of_a_clrt_camera_in_chunks(device):
+    """camera_images(camera) keeps the directions the device made as it traces
+    them: cut into many chunks the images are the same bit for bit, and the
+    depth is the distance along the ray times the ray's cosine to the camera's
+    forward axis."""
+    from clrt.scene import primitives
+    mesh = primitives.torus(n_major=24, n_minor=12)
+    camera = clrt.Camera((0.4, 2.5, 3.0), (0.0, 0.0, 0.0), fov=45.0, width=37, height=23)
+    whole = clrt.Accel(mesh, device=device).camera_images(camera)
+    cut = clrt.Accel(mesh, device=device, chunk_rays=97).camera_images(camera)
+    for name in ("depth", "t", "normal", "prim", "hit"):
+        assert np.array_equal(getattr(whole, name), getattr(cut, name)), name
+    assert whole.hit.any() and not whole.hit.all()
+    assert np.array_equal(clrt.Accel(mesh, device=device).trace_camera(camera).t, whole.t)
+    cosine = whole.depth[whole.hit] / whole.t[whole.hit]
+    corner = np.cos(np.arctan(np.tan(np.radians(22.5)) * np.hypot(1.0, 37 / 23)))   # the widest ray
+    assert np.all(cosine <= 1 + 1e-6) and np.all(cosine >= corner - 1e-6)
+    assert np.all(np.isinf(whole.depth[~whole.hit]))

@@ -337,9 +337,10 @@ class Accel:
             offset += sizes[name]
         return out
 
-    def _closest(self, source, cull: str, fields=None) -> Hits:
+    def _closest(self, source, cull: str, fields=None, directions_out: np.ndarray | None = None) -> Hits:
         """Closest hits of every ray of ``source``, the ``fields`` asked for (all by
-        default; the others None)."""
+        default; the others None).  ``directions_out`` (N, 3) float32, for
+        camera rays: also the directions the device made and traced."""
         fields = check_fields(fields)
         code = cull_code(cull)
         n = len(source)
@@ -357,6 +358,9 @@ class Accel:
                 first = 0
             self._run("query_closest", m, *self._ray_args(source, start, stop, lane), *targets,
                       np.uint32(first), np.uint32(m), code, lane=lane)
+            if directions_out is not None:     # before the next chunk's rays replace them
+                cl.enqueue_copy(self._lane(lane), directions_out[start:stop], self._buffer("in_1", 12 * m),
+                                is_blocking=False)
             if not on_device:
                 for name, buf in zip(CLOSEST_FIELDS, targets):
                     if buf is not None:
@@ -490,24 +494,19 @@ class Accel:
                 raise InputError("camera_images needs a camera, or K with width and height")
             source = PinholeRays(K, pose, width, height, pixel_center)
             axis, shape = source.R[:, 2], (source.height, source.width)
-        hits = self._closest(source, cull)
-        cosine = self._directions(source) @ np.asarray(axis, np.float64)
+        if isinstance(source, CameraRays):   # the directions the device made, kept as it traces them
+            directions = np.empty((len(source), 3), np.float32)
+            hits = self._closest(source, cull, directions_out=directions)
+        else:
+            hits = self._closest(source, cull)
+            directions = source.directions(0, len(source))
+        cosine = directions.astype(np.float64) @ np.asarray(axis, np.float64)
         with np.errstate(invalid="ignore", over="ignore"):
             depth = np.where(hits.hit, hits.t * cosine, np.inf).astype(np.float32)
         h, w = shape
         return CameraImages(depth.reshape(h, w), hits.t.reshape(h, w), hits.normal.reshape(h, w, 3),
                             hits.prim.reshape(h, w), hits.hit.reshape(h, w), hits.front.reshape(h, w),
                             hits.u.reshape(h, w), hits.v.reshape(h, w))
-
-    def _directions(self, source) -> np.ndarray:
-        """(N, 3) float64 of the float32 directions a camera's rays were traced with."""
-        if isinstance(source, PinholeRays):
-            return source.directions(0, len(source)).astype(np.float64)
-        dirs = np.empty((len(source), 3), np.float32)
-        for start, stop in self._chunks(len(source)):
-            self._ray_args(source, start, stop)
-            cl.enqueue_copy(self.queue, dirs[start:stop], self._buffer("in_1", 12 * (stop - start)))
-        return dirs.astype(np.float64)
 
     def trace_camera(self, camera) -> Hits:
         """Closest hits of the camera's pixel-centre rays, as (H, W) arrays."""
