@@ -343,3 +343,17 @@ def test_the_geometry_takes_over_the_built_buffers(device):
         cl.enqueue_copy(queue, got, first.buffers[name][0], is_blocking=True)
         cl.enqueue_copy(queue, want, second.buffers[name][0], is_blocking=True)
         assert np.array_equal(got.view(np.uint8), want.view(np.uint8)), name     # the same bytes either way
+
+
+@pytest.mark.parametrize("name", ["random", "torus", "degenerate", "F=3"])
+def test_cpu_and_gpu_ploc_kernels_make_the_same_tree(name, queue, monkeypatch):
+    """A CPU device merges with ploc_nearest_tiles / ploc_merge_tiles, a GPU
+    with ploc_merge: on the same device, both give the same rows bit for bit."""
+    from clrt.device import build
+    corners = CORNERS[name]()
+    results = []
+    for kind in ("cpu", "gpu"):
+        monkeypatch.setattr(build, "device_kind", lambda device, kind=kind: kind)
+        bvh = build_on_device(*queue, corners, leaf_size=4, treelet_leaves=0, tail_threshold=16)
+        results.append(bvh.read_back())
+    assert all(np.array_equal(a.view(np.uint8), b.view(np.uint8)) for a, b in zip(*results))

@@ -106,6 +106,7 @@ STATE_INTS = STATE["STATE_COUNTS"] + STATE["COUNT_RING"]
 
 _KERNELS = ("init_build_state", "centroid_bounds", "morton_codes", "radix_histogram", "scan_counts",
             "radix_scatter", "init_leaves", "ploc_merge", "ploc_count_kept", "ploc_compact", "ploc_tail",
+            "ploc_nearest_tiles", "ploc_merge_tiles",
             "treelet_restructure", "init_root_paths", "jump_root_paths", "emit_tree")
 
 
@@ -240,6 +241,7 @@ _ARG_TYPES = {
     "radix_scatter": [None, None, _U, _U, None, None, None], "init_leaves": [None, None, _U, None, None],
     "ploc_merge": [None] * 5 + [_I, None, _I, _U], "ploc_count_kept": [None, None, _I],
     "ploc_compact": [None] * 4 + [_I], "ploc_tail": [None] * 5 + [_I, None, _I, _U],
+    "ploc_nearest_tiles": [None, None, None, _I], "ploc_merge_tiles": [None] * 6 + [_I, None, _I, _U],
     "treelet_restructure": [None, None, _I, _I, _U], "init_root_paths": [None, _U, None, None],
     "jump_root_paths": [None, None, _U, None, None], "emit_tree": [None, _U, _I] + [None] * 9,
 }
@@ -349,8 +351,9 @@ def build_on_device(context: cl.Context, queue: cl.CommandQueue, corners, volume
     tile_kept = ws.get("tile_kept", 4 * max(_groups(F), F))    # also ploc_tail's nearest neighbours
     heights = ws.get("heights", 4 * max(F - 1, 1))             # of the inner nodes, index - F
     launch("ploc", k["init_leaves"], _groups(F), corners_buf, sorted_ids, np.uint32(F), nodes, clusters)
+    nearest = ws.get("nearest", 4 * F) if kind == "cpu" else None     # the CPU kernels' neighbours
     queued = _ploc(queue, k, launch, F, clusters, merged, tile_kept, nodes, heights, state, leaf_size,
-                   tail_threshold)
+                   tail_threshold, nearest)
     # ploc_tail starts from the clusters the last compaction wrote (`clusters`).
     launch("ploc", k["ploc_tail"], 1, clusters, merged, tile_kept, nodes, heights, F, state, queued, leaf_size,
            group=TAIL_GROUP[kind])
@@ -420,13 +423,15 @@ def _root_height(queue, heights: cl.Buffer, F: int) -> int:
 
 
 def _ploc(queue, k, launch, F, clusters, merged, tile_kept, nodes, heights, state, leaf_size,
-          tail_threshold) -> int:
+          tail_threshold, nearest=None) -> int:
     """Queue PLOC iterations until at most ``tail_threshold`` clusters are
     left (ploc_tail does the rest); returns how many were queued.
 
     Iteration i's kernels read its cluster count from the state ring; the
     host queues a batch of iterations sized for the last count it read (an
     upper bound: counts only fall), then reads the count after the batch.
+    With ``nearest`` (a CPU device), ploc_merge's work is done by
+    ploc_nearest_tiles and ploc_merge_tiles instead (build_ploc.cl says why).
     """
     ring = STATE["COUNT_RING"]
     known = F                         # clusters before iteration `iteration` (at most)
@@ -437,8 +442,14 @@ def _ploc(queue, k, launch, F, clusters, merged, tile_kept, nodes, heights, stat
         batch = min(batch, ring - 1)  # the ring holds the counts of one batch
         for _ in range(batch):
             groups = _groups(known)
-            k["ploc_merge"].set_args(clusters, merged, tile_kept, nodes, heights, F, state, iteration, leaf_size)
-            launch("ploc", k["ploc_merge"], groups)
+            if nearest is None:
+                k["ploc_merge"].set_args(clusters, merged, tile_kept, nodes, heights, F, state, iteration,
+                                         leaf_size)
+                launch("ploc", k["ploc_merge"], groups)
+            else:                     # one work-item per tile
+                launch("ploc", k["ploc_nearest_tiles"], groups, clusters, nearest, state, iteration, group=1)
+                launch("ploc", k["ploc_merge_tiles"], groups, clusters, merged, tile_kept, nearest, nodes,
+                       heights, F, state, iteration, leaf_size, group=1)
             k["ploc_count_kept"].set_args(tile_kept, state, iteration)
             launch("ploc", k["ploc_count_kept"], 1)
             k["ploc_compact"].set_args(merged, clusters, tile_kept, state, iteration)

@@ -288,24 +288,43 @@ void ploc_compact(const global BuildCluster* merged, global BuildCluster* cluste
 // each side, read from global memory: ploc_merge's choice (least area, then
 // least pair hash; the area of a pair is the same from either end, since
 // fmin and fmax commute).
+// One candidate q of place p, taken in increasing q: the least area wins,
+// a tie goes to the lower pair hash (computed only for ties), a tie of both
+// to the earlier candidate -- ploc_merge's order.
+typedef struct {
+    int best;
+    float area;
+    uint hash;
+    bool hashed;
+} Nearest;
+
+inline void consider(Nearest* n, int p, int q, float area)
+{
+    if (n->best < 0 || area < n->area) {
+        n->best = q;
+        n->area = area;
+        n->hashed = false;
+    } else if (area == n->area) {
+        if (!n->hashed) {
+            n->hash = pair_hash(min(p, n->best), max(p, n->best));
+            n->hashed = true;
+        }
+        const uint hash = pair_hash(min(p, q), max(p, q));
+        if (hash < n->hash) {
+            n->best = q;
+            n->hash = hash;
+        }
+    }
+}
+
 inline int tail_nearest(const global BuildCluster* clusters, int count, int p)
 {
     const float3 lo = clusters[p].lo.xyz, hi = clusters[p].hi.xyz;
-    int best = -1;
-    float best_area = INFINITY;
-    uint best_hash = 0;
-    for (int q = max(p - PLOC_RADIUS, 0); q <= min(p + PLOC_RADIUS, count - 1); ++q) {
-        if (q == p)
-            continue;
-        const float area = half_area(fmin(lo, clusters[q].lo.xyz), fmax(hi, clusters[q].hi.xyz));
-        const uint hash = pair_hash(min(p, q), max(p, q));
-        if (best < 0 || area < best_area || (area == best_area && hash < best_hash)) {
-            best = q;
-            best_area = area;
-            best_hash = hash;
-        }
-    }
-    return best;
+    Nearest n = {-1, INFINITY, 0u, false};
+    for (int q = max(p - PLOC_RADIUS, 0); q <= min(p + PLOC_RADIUS, count - 1); ++q)
+        if (q != p)
+            consider(&n, p, q, half_area(fmin(lo, clusters[q].lo.xyz), fmax(hi, clusters[q].hi.xyz)));
+    return n.best;
 }
 
 // One work-group: every PLOC iteration from first_iteration until one
@@ -367,6 +386,74 @@ void ploc_tail(global BuildCluster* clusters, global BuildCluster* spare, global
         state[STATE_ITERATIONS] = iteration;
         state[CLUSTERS_BEFORE(iteration)] = count;
     }
+}
+
+// ploc_merge for CPU devices.  A CPU runs a work-group as a loop over its
+// work-items, one stretch between barriers at a time, and there ploc_merge's
+// barriers and local tables cost far more than its arithmetic (6 ms a launch
+// for bunny00's first iterations on 2 cores, 125 of a 130 ms build).  The same
+// choices in two plain passes, one work-item per tile of BUILD_GROUP places,
+// leave tile_kept and the ranks as ploc_merge does, for ploc_count_kept and
+// ploc_compact:
+//   ploc_nearest_tiles  every place's nearest neighbour (the choice
+//                       ploc_merge makes), into `nearest`
+//   ploc_merge_tiles    mutual pairs merge, in place order; new nodes from
+//                       one atomic per tile, consecutive within the iteration.
+__kernel void ploc_nearest_tiles(const global BuildCluster* clusters, global int* nearest,
+                                 const global int* state, const int iteration)
+{
+    const int count = state[CLUSTERS_BEFORE(iteration)];
+    const int start = get_global_id(0) * BUILD_GROUP;
+    if (count <= 1 || start >= count)
+        return;
+    // Each pair's area once, as ploc_merge's table does: row p % (PLOC_RADIUS
+    // + 1) holds the areas of (p, p + o), o = 1..PLOC_RADIUS, and serves p's
+    // places ahead now and theirs behind later (the rows of the PLOC_RADIUS
+    // places before p are still there).  The area of a pair is the same from
+    // either end (fmin and fmax commute).
+    float ahead[(PLOC_RADIUS + 1) * PLOC_RADIUS];
+    const int end = min(start + BUILD_GROUP, count);
+    for (int p = max(start - PLOC_RADIUS, 0); p < end; ++p) {
+        const float3 lo = clusters[p].lo.xyz, hi = clusters[p].hi.xyz;
+        float* row = ahead + (p % (PLOC_RADIUS + 1)) * PLOC_RADIUS;
+        for (int o = 1; o <= PLOC_RADIUS && p + o < count; ++o)
+            row[o - 1] = half_area(fmin(lo, clusters[p + o].lo.xyz), fmax(hi, clusters[p + o].hi.xyz));
+        if (p < start)
+            continue;
+        Nearest n = {-1, INFINITY, 0u, false};
+        for (int q = max(p - PLOC_RADIUS, 0); q < p; ++q)
+            consider(&n, p, q, ahead[(q % (PLOC_RADIUS + 1)) * PLOC_RADIUS + (p - q - 1)]);
+        for (int q = p + 1; q <= min(p + PLOC_RADIUS, count - 1); ++q)
+            consider(&n, p, q, row[q - p - 1]);
+        nearest[p] = n.best;
+    }
+}
+
+__kernel void ploc_merge_tiles(const global BuildCluster* clusters, global BuildCluster* merged,
+                               global uint* tile_kept, const global int* nearest, global BuildNode* nodes,
+                               global int* heights, const int num_tris, global int* state, const int iteration,
+                               const uint leaf_size)
+{
+    const int count = state[CLUSTERS_BEFORE(iteration)];
+    const int tile = get_global_id(0), start = tile * BUILD_GROUP;
+    if (count <= 1 || start >= count)
+        return;
+    const int end = min(start + BUILD_GROUP, count);
+    int merges = 0;
+    for (int p = start; p < end; ++p)
+        merges += nearest[nearest[p]] == p && p < nearest[p];
+    int node = merges > 0 ? atomic_add(state + STATE_NEXT_NODE, merges) : 0;
+    int rank = 0;
+    for (int p = start; p < end; ++p) {
+        const int j = nearest[p];
+        const bool mutual = nearest[j] == p;
+        BuildCluster out = clusters[p];
+        if (mutual && p < j)
+            out = make_node(nodes, heights, num_tris, node++, out, clusters[j], leaf_size);
+        out.hi.w = as_float(!mutual || p < j ? rank++ : -1);
+        merged[p] = out;
+    }
+    tile_kept[tile] = (uint)rank;
 }
 
 #endif
