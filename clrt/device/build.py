@@ -97,6 +97,7 @@ TREELET_GROUP = 32       # work-items that solve one treelet together
 # iterations before it reads the count again.  Iterations queued past the
 # last merge do nothing; too few leave more work to the tail.
 MIN_SHRINK = 0.8
+CPU_TILE_WORKERS = 4     # work-items per core of the CPU merge passes (build_ploc.cl)
 MAX_REDUCE_GROUPS = 256  # work-groups of the bounds reduction (grid-stride beyond)
 
 # The state buffer (build_state.cl): int offsets, and the ring of cluster counts.
@@ -446,9 +447,10 @@ def _ploc(queue, k, launch, F, clusters, merged, tile_kept, nodes, heights, stat
                 k["ploc_merge"].set_args(clusters, merged, tile_kept, nodes, heights, F, state, iteration,
                                          leaf_size)
                 launch("ploc", k["ploc_merge"], groups)
-            else:                     # one work-item per tile
-                launch("ploc", k["ploc_nearest_tiles"], groups, clusters, nearest, state, iteration, group=1)
-                launch("ploc", k["ploc_merge_tiles"], groups, clusters, merged, tile_kept, nearest, nodes,
+            else:                     # a few work-items a core, striding over the tiles
+                workers = min(groups, CPU_TILE_WORKERS * queue.device.max_compute_units)
+                launch("ploc", k["ploc_nearest_tiles"], workers, clusters, nearest, state, iteration, group=1)
+                launch("ploc", k["ploc_merge_tiles"], workers, clusters, merged, tile_kept, nearest, nodes,
                        heights, F, state, iteration, leaf_size, group=1)
             k["ploc_count_kept"].set_args(tile_kept, state, iteration)
             launch("ploc", k["ploc_count_kept"], 1)

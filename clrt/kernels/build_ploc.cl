@@ -392,9 +392,12 @@ void ploc_tail(global BuildCluster* clusters, global BuildCluster* spare, global
 // work-items, one stretch between barriers at a time, and there ploc_merge's
 // barriers and local tables cost far more than its arithmetic (6 ms a launch
 // for bunny00's first iterations on 2 cores, 125 of a 130 ms build).  The same
-// choices in two plain passes, one work-item per tile of BUILD_GROUP places,
-// leave tile_kept and the ranks as ploc_merge does, for ploc_count_kept and
-// ploc_compact:
+// choices in two plain passes over tiles of BUILD_GROUP places leave
+// tile_kept and the ranks as ploc_merge does, for ploc_count_kept and
+// ploc_compact.  Work-item w takes tiles w, w + size, ... of the clusters
+// there are now: the host sizes a batch's launches for the count before it,
+// and a CPU hands each core a contiguous run of work-items, so one per tile
+// left one core idle as the count fell.
 //   ploc_nearest_tiles  every place's nearest neighbour (the choice
 //                       ploc_merge makes), into `nearest`
 //   ploc_merge_tiles    mutual pairs merge, in place order; new nodes from
@@ -403,8 +406,7 @@ __kernel void ploc_nearest_tiles(const global BuildCluster* clusters, global int
                                  const global int* state, const int iteration)
 {
     const int count = state[CLUSTERS_BEFORE(iteration)];
-    const int start = get_global_id(0) * BUILD_GROUP;
-    if (count <= 1 || start >= count)
+    if (count <= 1)
         return;
     // Each pair's area once, as ploc_merge's table does: row p % (PLOC_RADIUS
     // + 1) holds the areas of (p, p + o), o = 1..PLOC_RADIUS, and serves p's
@@ -412,20 +414,22 @@ __kernel void ploc_nearest_tiles(const global BuildCluster* clusters, global int
     // places before p are still there).  The area of a pair is the same from
     // either end (fmin and fmax commute).
     float ahead[(PLOC_RADIUS + 1) * PLOC_RADIUS];
-    const int end = min(start + BUILD_GROUP, count);
-    for (int p = max(start - PLOC_RADIUS, 0); p < end; ++p) {
-        const float3 lo = clusters[p].lo.xyz, hi = clusters[p].hi.xyz;
-        float* row = ahead + (p % (PLOC_RADIUS + 1)) * PLOC_RADIUS;
-        for (int o = 1; o <= PLOC_RADIUS && p + o < count; ++o)
-            row[o - 1] = half_area(fmin(lo, clusters[p + o].lo.xyz), fmax(hi, clusters[p + o].hi.xyz));
-        if (p < start)
-            continue;
-        Nearest n = {-1, INFINITY, 0u, false};
-        for (int q = max(p - PLOC_RADIUS, 0); q < p; ++q)
-            consider(&n, p, q, ahead[(q % (PLOC_RADIUS + 1)) * PLOC_RADIUS + (p - q - 1)]);
-        for (int q = p + 1; q <= min(p + PLOC_RADIUS, count - 1); ++q)
-            consider(&n, p, q, row[q - p - 1]);
-        nearest[p] = n.best;
+    for (int start = get_global_id(0) * BUILD_GROUP; start < count; start += get_global_size(0) * BUILD_GROUP) {
+        const int end = min(start + BUILD_GROUP, count);
+        for (int p = max(start - PLOC_RADIUS, 0); p < end; ++p) {
+            const float3 lo = clusters[p].lo.xyz, hi = clusters[p].hi.xyz;
+            float* row = ahead + (p % (PLOC_RADIUS + 1)) * PLOC_RADIUS;
+            for (int o = 1; o <= PLOC_RADIUS && p + o < count; ++o)
+                row[o - 1] = half_area(fmin(lo, clusters[p + o].lo.xyz), fmax(hi, clusters[p + o].hi.xyz));
+            if (p < start)
+                continue;
+            Nearest n = {-1, INFINITY, 0u, false};
+            for (int q = max(p - PLOC_RADIUS, 0); q < p; ++q)
+                consider(&n, p, q, ahead[(q % (PLOC_RADIUS + 1)) * PLOC_RADIUS + (p - q - 1)]);
+            for (int q = p + 1; q <= min(p + PLOC_RADIUS, count - 1); ++q)
+                consider(&n, p, q, row[q - p - 1]);
+            nearest[p] = n.best;
+        }
     }
 }
 
@@ -435,25 +439,26 @@ __kernel void ploc_merge_tiles(const global BuildCluster* clusters, global Build
                                const uint leaf_size)
 {
     const int count = state[CLUSTERS_BEFORE(iteration)];
-    const int tile = get_global_id(0), start = tile * BUILD_GROUP;
-    if (count <= 1 || start >= count)
+    if (count <= 1)
         return;
-    const int end = min(start + BUILD_GROUP, count);
-    int merges = 0;
-    for (int p = start; p < end; ++p)
-        merges += nearest[nearest[p]] == p && p < nearest[p];
-    int node = merges > 0 ? atomic_add(state + STATE_NEXT_NODE, merges) : 0;
-    int rank = 0;
-    for (int p = start; p < end; ++p) {
-        const int j = nearest[p];
-        const bool mutual = nearest[j] == p;
-        BuildCluster out = clusters[p];
-        if (mutual && p < j)
-            out = make_node(nodes, heights, num_tris, node++, out, clusters[j], leaf_size);
-        out.hi.w = as_float(!mutual || p < j ? rank++ : -1);
-        merged[p] = out;
+    for (int tile = get_global_id(0); tile * BUILD_GROUP < count; tile += get_global_size(0)) {
+        const int start = tile * BUILD_GROUP, end = min(start + BUILD_GROUP, count);
+        int merges = 0;
+        for (int p = start; p < end; ++p)
+            merges += nearest[nearest[p]] == p && p < nearest[p];
+        int node = merges > 0 ? atomic_add(state + STATE_NEXT_NODE, merges) : 0;
+        int rank = 0;
+        for (int p = start; p < end; ++p) {
+            const int j = nearest[p];
+            const bool mutual = nearest[j] == p;
+            BuildCluster out = clusters[p];
+            if (mutual && p < j)
+                out = make_node(nodes, heights, num_tris, node++, out, clusters[j], leaf_size);
+            out.hi.w = as_float(!mutual || p < j ? rank++ : -1);
+            merged[p] = out;
+        }
+        tile_kept[tile] = (uint)rank;
     }
-    tile_kept[tile] = (uint)rank;
 }
 
 #endif
