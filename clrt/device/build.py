@@ -14,7 +14,8 @@ The algorithm (kernels in ``clrt/kernels/build_*.cl``, entry ``build_bvh.cl``):
    al. 2022): clusters start as the sorted triangles; in each iteration every
    cluster finds the cluster within ``PLOC_RADIUS`` places on either side whose
    merged box has the least area, and mutual nearest neighbours merge; three
-   launches an iteration, until at most ``tail_threshold`` clusters are left;
+   launches an iteration (four on CPU devices, whose merge is two plain
+   passes), until at most ``tail_threshold`` clusters are left;
    then one work-group runs the remaining iterations in one launch
    (``ploc_tail``, the same choices in a loop: the tree does not depend on
    where the host hands over).  Every new node decides
