@@ -357,3 +357,21 @@ def test_cpu_and_gpu_ploc_kernels_make_the_same_tree(name, queue, monkeypatch):
         bvh = build_on_device(*queue, corners, leaf_size=4, treelet_leaves=0, tail_threshold=16)
         results.append(bvh.read_back())
     assert all(np.array_equal(a.view(np.uint8), b.view(np.uint8)) for a, b in zip(*results))
+
+
+def test_scratch_estimate_matches_the_workspace(device):
+    """The out-of-memory message's estimate (SCRATCH_BYTES_PER_TRIANGLE) is
+    what a build's scratch buffers take, within 5 %, on a fresh context."""
+    import pyopencl as cl
+
+    from clrt.device import build
+    from clrt.device.context import create_context
+    shared_context, shared_queue = create_context(device)
+    context = cl.Context(shared_context.devices)
+    queue = cl.CommandQueue(context, properties=cl.command_queue_properties.PROFILING_ENABLE)
+    corners = _random_triangles(20_000, 3)
+    build_on_device(context, queue, corners, leaf_size=4).release()
+    used = sum(buffer.size for buffer in build._workspaces.pop(context.int_ptr).buffers.values())
+    per_triangle = used / len(corners)
+    assert abs(per_triangle - build.SCRATCH_BYTES_PER_TRIANGLE) <= 0.05 * build.SCRATCH_BYTES_PER_TRIANGLE, \
+        per_triangle

@@ -466,9 +466,11 @@ def _ploc(queue, k, launch, F, clusters, merged, tile_kept, nodes, heights, stat
     return iteration
 
 
-# Device scratch of a build, per triangle: nodes, clusters, keys, sort buffers,
-# pair tables (measured from the workspace's buffers; docs/benchmarks.md).
-SCRATCH_BYTES_PER_TRIANGLE = 290
+# Device scratch of a build, per triangle: the corners (36 bytes), sort keys and
+# ids (16), build nodes (96), clusters twice (64), heights and per-place ints
+# (8, 12 on CPUs), path sums and ancestors (80); tests/test_device_build.py
+# checks it against the workspace's buffers.
+SCRATCH_BYTES_PER_TRIANGLE = 300
 
 
 def build_acceleration(corners: np.ndarray, accel: str, builder: str, leaf_size: int,
