@@ -38,7 +38,7 @@
 // but from 1.082 to 1.089 on bunny00, and 1.101 at radius 64.)
 //
 // Each new node also decides, bottom-up as it is made, whether its subtree
-// is cheaper as a leaf by the surface area heuristic (see make_node); the
+// is cheaper as a leaf by the surface area heuristic (refresh_node); the
 // treelets below each node are reshaped afterwards (build_treelet.cl).
 #ifndef CLRT_BUILD_PLOC_CL
 #define CLRT_BUILD_PLOC_CL
@@ -80,6 +80,35 @@ inline uint pair_hash(uint lower, uint upper)
     return h;
 }
 
+// One candidate q of place p, taken in increasing q: the least area wins,
+// a tie goes to the lower pair hash (computed only for ties), a tie of both
+// to the earlier candidate -- ploc_merge's order.
+typedef struct {
+    int best;
+    float area;
+    uint hash;
+    bool hashed;
+} Nearest;
+
+inline void consider(Nearest* n, int p, int q, float area)
+{
+    if (n->best < 0 || area < n->area) {
+        n->best = q;
+        n->area = area;
+        n->hashed = false;
+    } else if (area == n->area) {
+        if (!n->hashed) {
+            n->hash = pair_hash(min(p, n->best), max(p, n->best));
+            n->hashed = true;
+        }
+        const uint hash = pair_hash(min(p, q), max(p, q));
+        if (hash < n->hash) {
+            n->best = q;
+            n->hash = hash;
+        }
+    }
+}
+
 // Leaf nodes and the first clusters: node i is the triangle ids[i], the i-th in Morton order.
 __kernel __attribute__((reqd_work_group_size(BUILD_GROUP, 1, 1)))
 void init_leaves(const global float* corners, const global uint* sorted_ids, const uint num_tris,
@@ -102,43 +131,21 @@ void init_leaves(const global float* corners, const global uint* sorted_ids, con
     clusters[i].hi = (float4)(hi, 0.0f);
 }
 
-// The node that merges clusters a (left) and b (right).  The SAH decides
-// whether the new subtree is emitted as one leaf: with at most leaf_size
-// triangles and a leaf cost (C_INTERSECT * count * area) no higher than
-// keeping the node (C_TRAVERSAL * area plus the children's best costs) --
-// the same rule as the host's SAH builder (sah.py: split only when strictly
-// cheaper).  Returns the new cluster.
-// heights[index - num_tris] gets the new node's height (nodes on its longest
-// path down; a triangle has height 1): the order of treelet restructuring.
+// The node that merges clusters a (left) and b (right), its numbers and leaf
+// decision made by refresh_node (build_treelet.cl).  Returns the new cluster.
 inline BuildCluster make_node(global BuildNode* nodes, global int* heights, int num_tris, int index,
                               BuildCluster a, BuildCluster b, uint leaf_size)
 {
     const int left = as_int(a.lo.w), right = as_int(b.lo.w);
-    const float3 lo = fmin(a.lo.xyz, b.lo.xyz), hi = fmax(a.hi.xyz, b.hi.xyz);
-    const BuildNode l = nodes[left], r = nodes[right];
-    const float area = half_area(lo, hi);
-    BuildNode node;
-    node.lo = (float4)(lo, as_float(left));
-    node.hi = (float4)(hi, as_float(right));
-    node.parent = -1;
-    node.count = l.count + r.count;
-    node.cost = C_TRAVERSAL * area + l.cost + r.cost;
-    node.rows = 1 + l.rows + r.rows;
-    const float leaf_cost = C_INTERSECT * (float)node.count * area;
-    if (node.count <= (int)leaf_size && leaf_cost <= node.cost) {
-        node.cost = leaf_cost;
-        node.rows = 0;
-    }
-    nodes[index] = node;
+    nodes[index].lo.w = as_float(left);
+    nodes[index].hi.w = as_float(right);
+    nodes[index].parent = -1;
     nodes[left].parent = index;
     nodes[right].parent = index;
-    heights[index - num_tris] = 1 + max(left < num_tris ? 1 : heights[left - num_tris],
-                                        right < num_tris ? 1 : heights[right - num_tris]);
-
+    refresh_node(nodes, heights, index, num_tris, leaf_size);
     BuildCluster merged;
-    merged.lo = node.lo;
-    merged.lo.w = as_float(index);
-    merged.hi = (float4)(hi, 0.0f);
+    merged.lo = (float4)(fmin(a.lo.xyz, b.lo.xyz), as_float(index));
+    merged.hi = (float4)(fmax(a.hi.xyz, b.hi.xyz), 0.0f);
     return merged;
 }
 
@@ -189,31 +196,18 @@ void ploc_merge(const global BuildCluster* clusters, global BuildCluster* merged
     // here or, for huge boxes, ties with it and loses nothing.
     for (int k = lid; k < SEARCHED; k += BUILD_GROUP) {
         const int p = start - PLOC_RADIUS + k;
-        int best = -1;
+        Nearest n = {-1, INFINITY, 0u, false};
         if (p >= 0 && p < count) {
-            float best_area = INFINITY;
-            uint best_hash = 0;
             const int row = p - loaded;
             for (int o = -PLOC_RADIUS; o <= PLOC_RADIUS; ++o) {
                 const int q = p + o;
                 if (o == 0 || q < 0 || q >= count)
                     continue;
-                const float area = o < 0 ? pair_area[(row + o) * PLOC_RADIUS - o - 1]
-                                         : pair_area[row * PLOC_RADIUS + o - 1];
-                if (best < 0 || area < best_area) {
-                    best = q;
-                    best_area = area;
-                    best_hash = pair_hash(min(p, q), max(p, q));
-                } else if (area == best_area) {
-                    const uint hash = pair_hash(min(p, q), max(p, q));
-                    if (hash < best_hash) {
-                        best = q;
-                        best_hash = hash;
-                    }
-                }
+                consider(&n, p, q, o < 0 ? pair_area[(row + o) * PLOC_RADIUS - o - 1]
+                                         : pair_area[row * PLOC_RADIUS + o - 1]);
             }
         }
-        nearest[k] = best;
+        nearest[k] = n.best;
     }
     barrier(CLK_LOCAL_MEM_FENCE);
 
@@ -288,35 +282,6 @@ void ploc_compact(const global BuildCluster* merged, global BuildCluster* cluste
 // each side, read from global memory: ploc_merge's choice (least area, then
 // least pair hash; the area of a pair is the same from either end, since
 // fmin and fmax commute).
-// One candidate q of place p, taken in increasing q: the least area wins,
-// a tie goes to the lower pair hash (computed only for ties), a tie of both
-// to the earlier candidate -- ploc_merge's order.
-typedef struct {
-    int best;
-    float area;
-    uint hash;
-    bool hashed;
-} Nearest;
-
-inline void consider(Nearest* n, int p, int q, float area)
-{
-    if (n->best < 0 || area < n->area) {
-        n->best = q;
-        n->area = area;
-        n->hashed = false;
-    } else if (area == n->area) {
-        if (!n->hashed) {
-            n->hash = pair_hash(min(p, n->best), max(p, n->best));
-            n->hashed = true;
-        }
-        const uint hash = pair_hash(min(p, q), max(p, q));
-        if (hash < n->hash) {
-            n->best = q;
-            n->hash = hash;
-        }
-    }
-}
-
 inline int tail_nearest(const global BuildCluster* clusters, int count, int p)
 {
     const float3 lo = clusters[p].lo.xyz, hi = clusters[p].hi.xyz;

@@ -11,7 +11,7 @@
 // cheapest by the SAH is found by dynamic programming over the 2^n subsets
 // of leaves (cost of a subset: its node's area times C_TRAVERSAL plus the best
 // split into two subsets; or, with at most leaf_size triangles, one leaf --
-// the rule make_node applies), and the treelet is rebuilt if that is cheaper.
+// the rule refresh_node applies), and the treelet is rebuilt if that is cheaper.
 //
 // Bottom-up, so that a treelet's leaves are final: one launch per PLOC
 // iteration, over the nodes that iteration made.  Those are consecutive
@@ -43,9 +43,6 @@ inline float half_area(float3 lo, float3 hi)
     return isnan(a) ? INFINITY : a;           // inf * 0 of huge, flat boxes
 }
 
-#if TREELET_LEAVES > 0
-#define TREELET_SUBSETS (1 << TREELET_LEAVES)
-
 inline int left_of(const global BuildNode* nodes, int n)
 {
     return as_int(nodes[n].lo.w);
@@ -61,8 +58,14 @@ inline int height_of(const global int* heights, int n, int num_tris)
     return n < num_tris ? 1 : heights[n - num_tris];
 }
 
-// Box, count, cost, rows and height of inner node n from its children (the
-// SAH leaf rule of make_node).
+// Box, count, cost, rows and height of inner node n from its children, whose
+// references it holds.  The SAH decides whether the subtree is emitted as one
+// leaf: with at most leaf_size triangles and a leaf cost (C_INTERSECT * count
+// * area) no higher than keeping the node (C_TRAVERSAL * area plus the
+// children's best costs) -- the rule of the host's SAH builder (sah.py: split
+// only when strictly cheaper).  The height (nodes on the longest path down; a
+// triangle has 1) bounds the emit pass's pointer jumps.  PLOC's make_node and
+// the treelet restructuring both make nodes through it.
 inline void refresh_node(global BuildNode* nodes, global int* heights, int n, int num_tris, uint leaf_size)
 {
     const int l = left_of(nodes, n), r = right_of(nodes, n);
@@ -84,6 +87,9 @@ inline void refresh_node(global BuildNode* nodes, global int* heights, int n, in
     nodes[n].rows = rows;
     heights[n - num_tris] = 1 + max(height_of(heights, l, num_tris), height_of(heights, r, num_tris));
 }
+
+#if TREELET_LEAVES > 0
+#define TREELET_SUBSETS (1 << TREELET_LEAVES)
 
 // The treelet below inner node `root`: its leaves (leaf[0 .. return value))
 // and inner nodes (inner[0] = root, then the opened ones, one fewer than
