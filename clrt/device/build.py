@@ -66,7 +66,7 @@ from clrt.accel.rows import tree_stats
 from clrt.accel.topdown import C_INTERSECT, C_TRAVERSAL
 from clrt.config import HOST_BUILDERS, HOST_DEFAULT_BUILDER, VOLUME_DEFINES, VOLUMES
 from clrt.device import pinned
-from clrt.device.context import format_bytes, is_out_of_memory
+from clrt.device.context import device_kind, format_bytes, is_out_of_memory
 from clrt.device.program import build_program, typed_kernel
 from clrt.errors import DeviceError, DeviceMemoryError, InputError
 
@@ -110,11 +110,6 @@ _KERNELS = ("init_build_state", "centroid_bounds", "morton_codes", "radix_histog
             "radix_scatter", "init_leaves", "ploc_merge", "ploc_count_kept", "ploc_compact", "ploc_tail",
             "ploc_nearest_tiles", "ploc_merge_tiles",
             "treelet_restructure", "init_root_paths", "jump_root_paths", "emit_tree")
-
-
-def device_kind(device: cl.Device) -> str:
-    """"gpu" or "cpu": which TAIL_THRESHOLD and TAIL_GROUP apply."""
-    return "cpu" if device.type & cl.device_type.CPU else "gpu"
 
 
 def build_defines(volume: str, kind: str = "gpu", treelet_leaves: int | None = None) -> dict:

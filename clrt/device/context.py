@@ -90,6 +90,12 @@ def _devices(platform) -> list:
         return []
 
 
+def device_kind(device: cl.Device) -> str:
+    """"cpu" for a CPU device, else "gpu": the tuning tables that differ
+    between the two (work-group sizes, build kernels, staging) are keyed by it."""
+    return "cpu" if device.type & cl.device_type.CPU else "gpu"
+
+
 def _type_name(device_type: int) -> str:
     # The type is a bit field (PoCL reports CPU|DEFAULT); the most specific bit wins.
     for bit, name in ((cl.device_type.GPU, "GPU"), (cl.device_type.ACCELERATOR, "ACCELERATOR"),

@@ -14,6 +14,18 @@ from __future__ import annotations
 import numpy as np
 import pyopencl as cl
 
+from clrt.device.context import device_kind
+
+
+def mapped_block(context: cl.Context, queue: cl.CommandQueue, nbytes: int) -> np.ndarray:
+    """(nbytes,) uint8 over a page-locked buffer (ALLOC_HOST_PTR, mapped for
+    the host); the array keeps the mapping, which keeps the buffer.  Raises
+    cl.Error or MemoryError when the system has none to give."""
+    buffer = cl.Buffer(context, cl.mem_flags.READ_WRITE | cl.mem_flags.ALLOC_HOST_PTR, nbytes)
+    mapped, _ = cl.enqueue_map_buffer(queue, buffer, cl.map_flags.READ | cl.map_flags.WRITE, 0, (nbytes,),
+                                      np.uint8)
+    return mapped
+
 
 class _Lease:
     """One pooled buffer lent out; ``__array_interface__`` makes numpy arrays
@@ -50,9 +62,7 @@ class PinnedPool:
         if self._count >= self.size or nbytes > self.max_bytes:
             return None
         try:
-            buffer = cl.Buffer(self.context, cl.mem_flags.READ_WRITE | cl.mem_flags.ALLOC_HOST_PTR, nbytes)
-            mapped, _ = cl.enqueue_map_buffer(self.queue, buffer, cl.map_flags.READ | cl.map_flags.WRITE,
-                                              0, (nbytes,), np.uint8)
+            mapped = mapped_block(self.context, self.queue, nbytes)
         except (cl.Error, MemoryError):
             return None
         self._count += 1
@@ -106,28 +116,24 @@ def upload(context: cl.Context, queue: cl.CommandQueue, buffer: cl.Buffer, array
     """
     flat = array.reshape(-1).view(np.uint8)
     if staged is None:
-        staged = len(flat) >= STAGED_MIN_BYTES and not queue.device.type & cl.device_type.CPU
+        staged = len(flat) >= STAGED_MIN_BYTES and device_kind(queue.device) == "gpu"
     if not staged:
         return cl.enqueue_copy(queue, buffer, array, is_blocking=False)
     stages = _stages.get(context.int_ptr)
     if stages is None:
         try:
-            stages = []
-            for _ in range(2):
-                block = cl.Buffer(context, cl.mem_flags.READ_WRITE | cl.mem_flags.ALLOC_HOST_PTR, STAGE_BYTES)
-                mapped, _ = cl.enqueue_map_buffer(queue, block, cl.map_flags.READ | cl.map_flags.WRITE,
-                                                  0, (STAGE_BYTES,), np.uint8)
-                stages.append([block, mapped, None])
+            stages = [[mapped_block(context, queue, STAGE_BYTES), None] for _ in range(2)]
         except (cl.Error, MemoryError):          # page-locked memory is scarce: the plain copy
             return cl.enqueue_copy(queue, buffer, array, is_blocking=False)
         _stages[context.int_ptr] = stages
     event = None
     for k, start in enumerate(range(0, len(flat), STAGE_BYTES)):
         stage = stages[k % 2]
-        if stage[2] is not None:
-            stage[2].wait()                       # the device has read this block's last chunk
+        block, last_copy = stage
+        if last_copy is not None:
+            last_copy.wait()                      # the device has read this block's last chunk
         chunk = flat[start:start + STAGE_BYTES]
-        _parallel_copy(stage[1][:len(chunk)], chunk)
-        event = stage[2] = cl.enqueue_copy(queue, buffer, stage[1][:len(chunk)], dst_offset=start,
+        _parallel_copy(block[:len(chunk)], chunk)
+        event = stage[1] = cl.enqueue_copy(queue, buffer, block[:len(chunk)], dst_offset=start,
                                            is_blocking=False)
     return event

@@ -38,7 +38,7 @@ from clrt import checks
 from clrt.config import DEFAULT_ACCEL, DEFAULT_BUILDER, DEFAULT_LEAF_SIZE
 from clrt.device.args import CAMERA_ARG_TYPES, camera_args
 from clrt.device.build import build_acceleration
-from clrt.device.context import create_context, device_label
+from clrt.device.context import create_context, device_kind, device_label
 from clrt.device.geometry import DeviceGeometry, check_fits
 from clrt.device.pinned import PinnedPool
 from clrt.device.program import build_program, typed_kernel
@@ -155,6 +155,7 @@ class Accel:
     def _setup(self, mesh, context, queue, geometry: DeviceGeometry, chunk_rays):
         _check_chunk_rays(chunk_rays)
         self.context, self.queue, self.geometry = context, queue, geometry
+        self._kind = device_kind(queue.device)     # which QUERY_GROUP applies
         self.acceleration = geometry.acceleration
         self.device = device_label(queue.device)
         self.chunk_rays = chunk_rays
@@ -295,7 +296,7 @@ class Accel:
     def _run(self, name: str, m: int, *args, lane: int = 0) -> None:
         kernel = self.kernels[name]
         kernel.set_args(*args, *self.geometry.args)
-        group = QUERY_GROUP["cpu" if self.queue.device.type & cl.device_type.CPU else "gpu"]
+        group = QUERY_GROUP[self._kind]
         size, local = ((m,), None) if group is None else ((-(-m // group) * group,), (group,))
         self.launches.append(cl.enqueue_nd_range_kernel(self._lane(lane), kernel, size, local))
 
