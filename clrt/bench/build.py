@@ -104,13 +104,17 @@ def _trace_ms(mesh, camera, volume, builder, leaf_size, device) -> tuple[float, 
     from clrt.device import build
     from clrt.query import Accel
     leaves = DEVICE_VARIANTS.get(builder, {}).get("treelet_leaves")
-    saved = dict(build.TREELET_LEAVES)
+    minimum = DEVICE_VARIANTS.get(builder, {}).get("treelet_min")
+    saved, saved_min = dict(build.TREELET_LEAVES), build.TREELET_MIN_TRIANGLES
     if leaves is not None:                   # the variant's treelets for this one build
         build.TREELET_LEAVES.update({kind: leaves for kind in saved})
+    if minimum is not None:
+        build.TREELET_MIN_TRIANGLES = minimum
     try:
         accel = Accel(mesh, volume, "device" if builder in DEVICE_VARIANTS else builder, leaf_size, device)
     finally:
         build.TREELET_LEAVES.update(saved)
+        build.TREELET_MIN_TRIANGLES = saved_min
     hits = cl.Buffer(accel.context, cl.mem_flags.READ_WRITE, camera.width * camera.height * layouts.HIT.itemsize)
     kernel_ms, _ = time_launches(accel.queue, lambda: accel.launch_camera(camera, hits), 10, 2)
     hits.release()
@@ -183,7 +187,7 @@ def run(mesh_dir, meshes, counts, builders, volume="box", leaf_size=4, device=No
             first, warm, stats, timings = time_builds(context, queue, corners, volume, builder, leaf_size, repeat)
             trace_ms, refit_ms = (_trace_ms(mesh, camera, volume, builder, leaf_size, device)
                                   if trace and (builder not in DEVICE_VARIANTS or builder == "device"
-                                                or builder.startswith("device/treelets="))
+                                                or builder.startswith(("device/treelets=", "device/treelet-min=")))
                                   else (float("nan"), float("nan")))
             results[builder] = (first, warm, stats, timings, trace_ms, refit_ms)
         sah_cost = results["sah"][2]["sah_cost"] if "sah" in results else None
@@ -212,7 +216,7 @@ def main(argv=None) -> int:
                    help="also grids of bunny copies of about these many triangles, e.g. 1M,10M")
     p.add_argument("--builders", type=lambda s: s.split(","), default=list(HOST_BUILDERS) + ["device"],
                    help=f"comma-separated, of {', '.join(list(HOST_BUILDERS) + list(DEVICE_VARIANTS))}, "
-                        "device/tail=N, device/treelets=N (default: paper, sah, device)")
+                        "device/tail=N, device/treelets=N, device/treelet-min=N (default: paper, sah, device)")
     p.add_argument("--volume", default="box", choices=("box", "sphere", "ellipse"))
     p.add_argument("--leaf-size", type=int, default=4)
     p.add_argument("--repeat", type=int, default=5, help="warm builds timed after the first (default 5)")
@@ -226,6 +230,8 @@ def main(argv=None) -> int:
             DEVICE_VARIANTS[b] = {"tail_threshold": parse_count(b.split("=", 1)[1])}
         if b.startswith("device/treelets="):      # leaves per restructured treelet (0: none)
             DEVICE_VARIANTS[b] = {"treelet_leaves": int(b.split("=", 1)[1])}
+        if b.startswith("device/treelet-min="):   # triangles a node needs for its treelet
+            DEVICE_VARIANTS[b] = {"treelet_min": int(b.split("=", 1)[1])}
         if b not in HOST_BUILDERS and b not in DEVICE_VARIANTS:
             p.error(f"unknown builder {b!r}")
     for m in args.meshes:

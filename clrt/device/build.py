@@ -13,16 +13,19 @@ The algorithm (kernels in ``clrt/kernels/build_*.cl``, entry ``build_bvh.cl``):
 3. PLOC (Meister & Bittner 2018; the one-block search of PLOC++, Benthin et
    al. 2022): clusters start as the sorted triangles; in each iteration every
    cluster finds the cluster within ``PLOC_RADIUS`` places on either side whose
-   merged box has the least area, and mutual nearest neighbours merge; three
-   launches an iteration (four on CPU devices, whose merge is two plain
-   passes), until at most ``tail_threshold`` clusters are left;
+   merged box has the least area, and mutual nearest neighbours merge; one
+   launch an iteration on GPUs (the kept clusters placed by a decoupled
+   look-back across the work-groups), four on CPU devices (two plain merge
+   passes, a prefix sum, a compaction), until at most ``tail_threshold``
+   clusters are left;
    then one work-group runs the remaining iterations in one launch
    (``ploc_tail``, the same choices in a loop: the tree does not depend on
    where the host hands over).  Every new node decides
    by the SAH whether its subtree (at most ``leaf_size`` triangles) is emitted
    as one leaf, and records its height;
 3b. treelet restructuring (Karras & Aila 2013, ``TREELET_LEAVES``; GPUs only
-   by default): one launch per PLOC iteration, over the nodes it made, each
+   by default): one launch, a work-group per node of at least
+   ``TREELET_MIN_TRIANGLES``, lowest first, each waiting for its children and
    replacing the 7-leaf treelet below it by the cheapest by the SAH;
 4. rows and slots as sums along each node's path from the root (pointer
    jumping, ceil(log2(depth)) launches), then one launch writes the
@@ -37,8 +40,8 @@ and reads the count once after each batch; then it queues the tail.
 (Reading each iteration's count without blocking was the first version:
 NVIDIA's driver completes a read into ordinary memory before it returns, so
 every iteration waited for the device, about 80 us each.)  Besides the
-counts, a build reads back the state after PLOC (every iteration's count:
-the node ranges of the treelet launches), then the root's row count (which
+counts, a build reads back the state after PLOC (the iterations, and how
+many nodes of each height the treelet launches take), then the root's row count (which
 sizes the row buffer) and height (which bounds the pointer jumps), and at
 the end the depth and the first triangle with a NaN or infinite corner (the
 input is checked on the device).
@@ -83,6 +86,7 @@ PLOC_RADIUS = 16
 # runs a few thousand clusters' iteration in one work-group faster than three
 # launches; a CPU runs a work-group on one core, so it hands over later.
 TAIL_THRESHOLD = {"gpu": 4096, "cpu": 2048}
+TAIL_MAX = 32768         # ploc_tail counts its clusters in 16 bits
 TAIL_GROUP = {"gpu": 1024, "cpu": BUILD_GROUP}
 # Treelet restructuring after PLOC (build_treelet.cl): leaves per treelet
 # (7, as Karras & Aila; on PoCL 8 lowered the SAH cost by 0.4 % more at 7x
@@ -93,23 +97,37 @@ TAIL_GROUP = {"gpu": 1024, "cpu": BUILD_GROUP}
 # for: off there.
 TREELET_LEAVES = {"gpu": 7, "cpu": 0}
 TREELET_GROUP = 32       # work-items that solve one treelet together
-# Clusters an iteration keeps, at most (a fifth to a quarter merge away on
-# meshes): the host queues log(count / tail_threshold) / log(1 / MIN_SHRINK)
-# iterations before it reads the count again.  Iterations queued past the
-# last merge do nothing; too few leave more work to the tail.
-MIN_SHRINK = 0.8
+# Nodes with fewer triangles keep PLOC's shape (and always those of at most
+# leaf_size).  Measured on the H200 (bench.build, device/treelet-min=N), from
+# leaf_size + 1 to 16: SAH cost +0.4 % (bunny00 1.061 -> 1.065 of the host SAH
+# tree's, camel 1.072 -> 1.076), primary rays within 1 %, builds 1M 10.7 ->
+# 8.9 ms, 10M 65 -> 50 ms, 50M 324 -> 231 ms.
+TREELET_MIN_TRIANGLES = 16
+# Heights the treelet launches go by (one launch per height): a taller tree
+# (PLOC's are about 30 high at 1M triangles, 40 at 50M) keeps PLOC's shape.
+TREELET_LEVELS = 64
+# Clusters an iteration keeps, about (bunny00: 0.76 in the first iteration,
+# then 0.80-0.83; camel 0.64, then 0.77-0.85): the host queues
+# log(count / tail_threshold) / log(1 / MIN_SHRINK) iterations before it
+# reads the count again.  Too few cost another round trip to the device
+# (about 50 us on the H200); one too many only does the tail's work in a
+# launch, about 15 us more.
+MIN_SHRINK = 0.83
 CPU_TILE_WORKERS = 4     # work-items per core of the CPU merge passes (build_ploc.cl)
 MAX_REDUCE_GROUPS = 256  # work-groups of the bounds reduction (grid-stride beyond)
+EARLY_ROWS_BYTES = 64 << 20   # row buffers made before the row count is known, up to this size
 
 # The state buffer (build_state.cl): int offsets, and the ring of cluster counts.
 STATE = {"STATE_NEXT_NODE": 0, "STATE_DEPTH": 1, "STATE_ERROR": 2, "STATE_BAD_TRIANGLE": 3, "STATE_BOUNDS": 4,
-         "STATE_ITERATIONS": 10, "STATE_COUNTS": 16, "COUNT_RING": 256}
-STATE_INTS = STATE["STATE_COUNTS"] + STATE["COUNT_RING"]
+         "STATE_ITERATIONS": 10, "STATE_TICKETS": 11, "STATE_TREELET_TICKET": 13, "STATE_COUNTS": 16, "COUNT_RING": 256}
+STATE["STATE_LEVELS"] = STATE["STATE_COUNTS"] + STATE["COUNT_RING"]
+STATE["STATE_LEVEL_CURSORS"] = STATE["STATE_LEVELS"] + TREELET_LEVELS
+STATE_INTS = STATE["STATE_LEVEL_CURSORS"] + TREELET_LEVELS
 
 _KERNELS = ("init_build_state", "centroid_bounds", "morton_codes", "radix_histogram", "scan_counts",
             "radix_scatter", "init_leaves", "ploc_merge", "ploc_count_kept", "ploc_compact", "ploc_tail",
             "ploc_nearest_tiles", "ploc_merge_tiles",
-            "treelet_restructure", "init_root_paths", "jump_root_paths", "emit_tree")
+            "treelet_levels", "treelet_order", "treelet_restructure", "init_root_paths", "jump_root_paths", "emit_tree")
 
 
 def build_defines(volume: str, kind: str = "gpu", treelet_leaves: int | None = None) -> dict:
@@ -120,7 +138,7 @@ def build_defines(volume: str, kind: str = "gpu", treelet_leaves: int | None = N
         VOLUME_DEFINES[volume]: None, "BUILD_GROUP": BUILD_GROUP, "RADIX_BITS": RADIX_BITS,
         "PLOC_RADIUS": PLOC_RADIUS, "TAIL_GROUP": TAIL_GROUP[kind],
         "TREELET_LEAVES": TREELET_LEAVES[kind] if treelet_leaves is None else int(treelet_leaves),
-        "TREELET_GROUP": TREELET_GROUP, **STATE,
+        "TREELET_GROUP": TREELET_GROUP, "TREELET_LEVELS": TREELET_LEVELS, **STATE,
         "C_TRAVERSAL": f"((float){C_TRAVERSAL!r})", "C_INTERSECT": f"((float){C_INTERSECT!r})",
         "REL_PAD": repr(float(volumes.REL_PAD)), "ULP_PAD": int(volumes.ULP_PAD),
         "PAD_FLOOR": repr(float(volumes.PAD_FLOOR)), "EVAL_SLACK": repr(float(volumes.EVAL_SLACK)),
@@ -235,11 +253,12 @@ _U, _I = np.uint32, np.int32
 _ARG_TYPES = {
     "init_build_state": [None, _U], "centroid_bounds": [None, _U, None], "morton_codes": [None, _U, None, None, None],
     "radix_histogram": [None, _U, _U, None], "scan_counts": [None, _U],
-    "radix_scatter": [None, None, _U, _U, None, None, None], "init_leaves": [None, None, _U, None, None],
+    "radix_scatter": [None, None, _U, _U, None, None, None], "init_leaves": [None, None, _U, None, None, None, None],
     "ploc_merge": [None] * 5 + [_I, None, _I, _U], "ploc_count_kept": [None, None, _I],
     "ploc_compact": [None] * 4 + [_I], "ploc_tail": [None] * 5 + [_I, None, _I, _U],
     "ploc_nearest_tiles": [None, None, None, _I], "ploc_merge_tiles": [None] * 6 + [_I, None, _I, _U],
-    "treelet_restructure": [None, None, _I, _I, _U], "init_root_paths": [None, _U, None, None],
+    "treelet_levels": [None, None, _I, _U, None], "treelet_order": [None, None, _I, _U, None, None],
+    "treelet_restructure": [None] * 5 + [_I, _U, _U], "init_root_paths": [None, _U, None, None],
     "jump_root_paths": [None, None, _U, None, None], "emit_tree": [None, _U, _I] + [None] * 9,
 }
 
@@ -276,7 +295,7 @@ class _Phases:
 def build_on_device(context: cl.Context, queue: cl.CommandQueue, corners, volume: str = "box",
                     leaf_size: int = 4, keep_boxes: bool = False,
                     tail_threshold: int | None = None, staged_upload: bool | None = None,
-                    treelet_leaves: int | None = None) -> DeviceBvh:
+                    treelet_leaves: int | None = None, treelet_min: int | None = None) -> DeviceBvh:
     """Build a BVH over ``corners`` on the queue's device.
 
     corners: (F, 3, 3) triangle corners (converted to float32, checked as
@@ -289,6 +308,8 @@ def build_on_device(context: cl.Context, queue: cl.CommandQueue, corners, volume
         (default: clrt.device.pinned.upload's choice; for benchmarks).
     treelet_leaves: leaves of the treelets restructured after PLOC (0: the
         plain PLOC tree; default: TREELET_LEAVES of the device type).
+    treelet_min: triangles a node needs to be restructured (default:
+        TREELET_MIN_TRIANGLES; always more than leaf_size).
     ``queue`` must have profiling enabled (clrt.device.context.create_context's does).
     Raises InputError on bad input, DeviceError when the device lacks float64.
     """
@@ -302,7 +323,7 @@ def build_on_device(context: cl.Context, queue: cl.CommandQueue, corners, volume
     if "cl_khr_fp64" not in device.extensions:
         raise DeviceError(f"the device BVH builder fits volumes in float64, which {device.name.strip()} lacks")
     kind = device_kind(device)
-    tail_threshold = TAIL_THRESHOLD[kind] if tail_threshold is None else int(tail_threshold)
+    tail_threshold = min(TAIL_THRESHOLD[kind] if tail_threshold is None else int(tail_threshold), TAIL_MAX)
     program = build_program(context, "build_bvh.cl", build_defines(volume, kind, treelet_leaves))
     k = _kernels(program)
     ws = _workspaces.setdefault(context.int_ptr, _Workspace(context))
@@ -319,6 +340,17 @@ def build_on_device(context: cl.Context, queue: cl.CommandQueue, corners, volume
     state = ws.get("state", 4 * STATE_INTS)
     corners_buf = ws.get("corners", tri.nbytes)
     phases.add("upload", pinned.upload(context, queue, corners_buf, tri, staged_upload))
+    # The outputs are made while the device works: making them between the
+    # last launches cost 0.2 ms (bunny00) to 0.4 ms (1M) on the H200.  The
+    # rows' count is known at the end; up to EARLY_ROWS_BYTES they are made
+    # now for the most a tree can have (F - 1).
+    tri_verts = cl.Buffer(context, cl.mem_flags.READ_WRITE, F * layouts.TRIANGLE_VERTS.itemsize)
+    prim_ids = cl.Buffer(context, cl.mem_flags.READ_WRITE, F * 4)
+    rows = exact_rows = None
+    if max(F - 1, 1) * layouts.BVH_PAIR_NODE.itemsize <= EARLY_ROWS_BYTES:
+        rows, exact_rows = _row_buffers(context, max(F - 1, 1), keep_boxes)
+    made = [buffer for buffer in (tri_verts, prim_ids, rows, exact_rows) if buffer is not None]
+    cl.enqueue_migrate_mem_objects(queue, made, cl.mem_migration_flags.CONTENT_UNDEFINED)
     keys = [ws.get("keys0", 4 * F), ws.get("keys1", 4 * F)]
     ids = [ws.get("ids0", 4 * F), ws.get("ids1", 4 * F)]
 
@@ -346,33 +378,37 @@ def build_on_device(context: cl.Context, queue: cl.CommandQueue, corners, volume
     clusters = ws.get("clusters", layouts.BUILD_CLUSTER.itemsize * F)
     merged = ws.get("merged", layouts.BUILD_CLUSTER.itemsize * F)
     tile_kept = ws.get("tile_kept", 4 * max(_groups(F), F))    # also ploc_tail's nearest neighbours
+    tile_status = ws.get("tile_status", 8 * _groups(F))         # ploc_merge's look-back, two halves
     heights = ws.get("heights", 4 * max(F - 1, 1))             # of the inner nodes, index - F
-    launch("ploc", k["init_leaves"], _groups(F), corners_buf, sorted_ids, np.uint32(F), nodes, clusters)
+    treelet_done = keys[1]             # the sort keys are spent: F ints each
+    launch("ploc", k["init_leaves"], _groups(F), corners_buf, sorted_ids, np.uint32(F), nodes, clusters,
+           tile_status, treelet_done)
     nearest = ws.get("nearest", 4 * F) if kind == "cpu" else None     # the CPU kernels' neighbours
-    queued = _ploc(queue, k, launch, F, clusters, merged, tile_kept, nodes, heights, state, leaf_size,
-                   tail_threshold, nearest)
-    # ploc_tail starts from the clusters the last compaction wrote (`clusters`).
-    launch("ploc", k["ploc_tail"], 1, clusters, merged, tile_kept, nodes, heights, F, state, queued, leaf_size,
+    queued = _ploc(queue, k, launch, F, clusters, merged, tile_kept, tile_status, nodes, heights, state,
+                   leaf_size, tail_threshold, nearest)
+    # ploc_tail starts from the clusters of the last iteration: on the CPU
+    # passes always `clusters` (compacted back into it), from ploc_merge the
+    # two buffers in turn.
+    last, spare = (merged, clusters) if nearest is None and queued % 2 else (clusters, merged)
+    launch("ploc", k["ploc_tail"], 1, last, spare, tile_kept, nodes, heights, F, state, queued, leaf_size,
            group=TAIL_GROUP[kind])
+    treelets = TREELET_LEAVES[kind] if treelet_leaves is None else int(treelet_leaves)
+    treelets = treelets if F > 2 else 0
+    if treelets:           # the nodes with a treelet, counted per height
+        min_count = max(leaf_size + 1, TREELET_MIN_TRIANGLES if treelet_min is None else int(treelet_min))
+        launch("treelet", k["treelet_levels"], _groups(F - 1), nodes, heights, F, min_count, state)
     head = np.empty(STATE_INTS, np.int32)
-    cl.enqueue_copy(queue, head, state, is_blocking=True)      # with every iteration's cluster count
+    cl.enqueue_copy(queue, head, state, is_blocking=True)      # the PLOC iterations, the heights' counts
     iterations = int(head[STATE["STATE_ITERATIONS"]])
 
-    # 3b. Treelet restructuring: one launch per PLOC iteration, over the nodes it made.
-    treelets = TREELET_LEAVES[kind] if treelet_leaves is None else int(treelet_leaves)
-    # (The ring holds the counts of COUNT_RING iterations; PLOC takes about 50
-    # for 75k triangles, about 80 at that rate for 50M: a longer run only goes without.)
-    if treelets and F > 2 and iterations < STATE["COUNT_RING"]:
-        counts = head[STATE["STATE_COUNTS"]:][:iterations + 1]  # clusters before each iteration
-        first = F
-        for iteration, made in enumerate((counts[:-1] - counts[1:]).tolist()):
-            # Iteration k merges clusters of at most 2**k triangles: while
-            # 2**(k + 1) <= leaf_size its nodes are left alone (nothing below
-            # them changes either), so the launch is skipped.
-            if made > 0 and 2 ** (iteration + 1) > leaf_size:
-                launch("treelet", k["treelet_restructure"], made, nodes, heights, F, first, leaf_size,
-                       group=TREELET_GROUP)
-            first += made
+    # 3b. Treelet restructuring: the nodes listed by height, then one launch
+    # (build_treelet.cl); a tree taller than TREELET_LEVELS keeps PLOC's shape.
+    levels = head[STATE["STATE_LEVELS"]:][:TREELET_LEVELS]
+    if treelets and levels[-1] == 0 and levels.sum() > 0:
+        order = keys[0]
+        launch("treelet", k["treelet_order"], _groups(F - 1), nodes, heights, F, min_count, state, order)
+        launch("treelet", k["treelet_restructure"], int(levels.sum()), nodes, heights, order, treelet_done, state,
+               F, min_count, leaf_size, group=TREELET_GROUP)
     root_rows = np.empty(1, np.int32)
     offset = root * layouts.BUILD_NODE.itemsize + layouts.BUILD_NODE.fields["rows"][1]
     cl.enqueue_copy(queue, root_rows, nodes, src_offset=offset, is_blocking=False)
@@ -387,11 +423,8 @@ def build_on_device(context: cl.Context, queue: cl.CommandQueue, corners, volume
         launch("emit", k["jump_root_paths"], _groups(num_nodes), ancestor[j % 2], path[j % 2],
                np.uint32(num_nodes), ancestor[1 - j % 2], path[1 - j % 2])
     num_rows = max(int(root_rows[0]), 1)
-    mf = cl.mem_flags
-    rows = cl.Buffer(context, mf.READ_WRITE, num_rows * layouts.BVH_PAIR_NODE.itemsize)
-    exact_rows = cl.Buffer(context, mf.READ_WRITE, num_rows * layouts.BVH_PAIR_NODE.itemsize) if keep_boxes else None
-    tri_verts = cl.Buffer(context, mf.READ_WRITE, F * layouts.TRIANGLE_VERTS.itemsize)
-    prim_ids = cl.Buffer(context, mf.READ_WRITE, F * 4)
+    if rows is None:
+        rows, exact_rows = _row_buffers(context, num_rows, keep_boxes)
     launch("emit", k["emit_tree"], _groups(num_nodes), nodes, np.uint32(num_nodes), np.int32(root), corners_buf,
            sorted_ids, ancestor[jumps % 2], path[jumps % 2], rows, exact_rows, tri_verts, prim_ids, state)
     cl.enqueue_copy(queue, head, state, is_blocking=True)
@@ -410,6 +443,13 @@ def build_on_device(context: cl.Context, queue: cl.CommandQueue, corners, volume
                      iterations=iterations, timings=timings, queue=queue, exact_rows=exact_rows)
 
 
+def _row_buffers(context: cl.Context, num_rows: int, keep_boxes: bool):
+    """The row buffer, and the exact rows' when asked for, for ``num_rows`` rows."""
+    nbytes = num_rows * layouts.BVH_PAIR_NODE.itemsize
+    rows = cl.Buffer(context, cl.mem_flags.READ_WRITE, nbytes)
+    return rows, cl.Buffer(context, cl.mem_flags.READ_WRITE, nbytes) if keep_boxes else None
+
+
 def _root_height(queue, heights: cl.Buffer, F: int) -> int:
     """Nodes on the longest root-to-leaf path (blocking read of the root's height)."""
     if F == 1:
@@ -419,7 +459,7 @@ def _root_height(queue, heights: cl.Buffer, F: int) -> int:
     return int(value[0])
 
 
-def _ploc(queue, k, launch, F, clusters, merged, tile_kept, nodes, heights, state, leaf_size,
+def _ploc(queue, k, launch, F, clusters, merged, tile_kept, tile_status, nodes, heights, state, leaf_size,
           tail_threshold, nearest=None) -> int:
     """Queue PLOC iterations until at most ``tail_threshold`` clusters are
     left (ploc_tail does the rest); returns how many were queued.
@@ -427,27 +467,33 @@ def _ploc(queue, k, launch, F, clusters, merged, tile_kept, nodes, heights, stat
     Iteration i's kernels read its cluster count from the state ring; the
     host queues a batch of iterations sized for the last count it read (an
     upper bound: counts only fall), then reads the count after the batch.
-    With ``nearest`` (a CPU device), ploc_merge's work is done by
-    ploc_nearest_tiles and ploc_merge_tiles instead (build_ploc.cl says why).
+    On a GPU one launch of ploc_merge makes an iteration, from one cluster
+    buffer into the other.  With ``nearest`` (a CPU device),
+    ploc_nearest_tiles and ploc_merge_tiles write every place's cluster into
+    ``merged``, ploc_count_kept sums the tiles' kept counts, and ploc_compact
+    moves the kept ones back into ``clusters`` (build_ploc.cl says why).
     """
     ring = STATE["COUNT_RING"]
     known = F                         # clusters before iteration `iteration` (at most)
     iteration = 0
     count = np.empty(1, np.int32)
+    buffers = (clusters, merged)
     while known > max(tail_threshold, 1):
         batch = max(1, math.ceil(math.log(known / max(tail_threshold, 1)) / -math.log(MIN_SHRINK)))
         batch = min(batch, ring - 1)  # the ring holds the counts of one batch
         for _ in range(batch):
             groups = _groups(known)
             if nearest is None:
-                k["ploc_merge"].set_args(clusters, merged, tile_kept, nodes, heights, F, state, iteration,
-                                         leaf_size)
+                k["ploc_merge"].set_args(buffers[iteration % 2], buffers[1 - iteration % 2], tile_status, nodes,
+                                         heights, F, state, iteration, leaf_size)
                 launch("ploc", k["ploc_merge"], groups)
-            else:                     # a few work-items a core, striding over the tiles
-                workers = min(groups, CPU_TILE_WORKERS * queue.device.max_compute_units)
-                launch("ploc", k["ploc_nearest_tiles"], workers, clusters, nearest, state, iteration, group=1)
-                launch("ploc", k["ploc_merge_tiles"], workers, clusters, merged, tile_kept, nearest, nodes,
-                       heights, F, state, iteration, leaf_size, group=1)
+                iteration += 1
+                continue
+            # a few work-items a core, striding over the tiles
+            workers = min(groups, CPU_TILE_WORKERS * queue.device.max_compute_units)
+            launch("ploc", k["ploc_nearest_tiles"], workers, clusters, nearest, state, iteration, group=1)
+            launch("ploc", k["ploc_merge_tiles"], workers, clusters, merged, tile_kept, nearest, nodes,
+                   heights, F, state, iteration, leaf_size, group=1)
             k["ploc_count_kept"].set_args(tile_kept, state, iteration)
             launch("ploc", k["ploc_count_kept"], 1)
             k["ploc_compact"].set_args(merged, clusters, tile_kept, state, iteration)

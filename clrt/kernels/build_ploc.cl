@@ -7,35 +7,35 @@
 // sweep with one simple step repeated -- every cluster finds the cluster
 // whose merged box has the least surface area among the PLOC_RADIUS clusters
 // on each side of it in the Morton order, and mutual nearest neighbours
-// merge -- three launches per iteration; each iteration removes a fifth to
-// a quarter of the clusters (about 50 iterations for 75k triangles, most of
-// them on a few hundred clusters).
+// merge; each iteration removes a fifth to a quarter of the clusters (about
+// 50 iterations for 75k triangles, most of them on a few hundred clusters).
 //
-// The clusters start as the triangles in Morton order (init_leaves).  An iteration:
-//   ploc_merge       per tile of BUILD_GROUP clusters: loads the tile and
-//                    2 * PLOC_RADIUS clusters on each side into local memory,
-//                    finds the nearest neighbour of the tile's clusters and of
-//                    PLOC_RADIUS on each side (enough to know whether a
-//                    neighbour's choice is mutual), merges mutual pairs into
-//                    new nodes (the merged cluster takes the lower place, the
-//                    higher one drops out), and counts the kept clusters
-//   ploc_count_kept  prefix sum of the tiles' kept counts (one work-group); the
-//                    total is the next iteration's cluster count
-//   ploc_compact     moves the kept clusters together, in order.
+// The clusters start as the triangles in Morton order (init_leaves).  On a
+// GPU an iteration is one launch, ploc_merge: per tile of BUILD_GROUP
+// clusters it loads the tile and 2 * PLOC_RADIUS clusters on each side into
+// local memory, finds the nearest neighbour of the tile's clusters and of
+// PLOC_RADIUS on each side (enough to know whether a neighbour's choice is
+// mutual), merges mutual pairs into new nodes (the merged cluster takes the
+// lower place, the higher one drops out), learns where its kept clusters go
+// from the tiles before it (decoupled look-back, build_scan.cl) and writes
+// them there, in order, into the other cluster buffer.  On a CPU an iteration
+// is four plain passes (ploc_nearest_tiles, ploc_merge_tiles, then
+// ploc_count_kept: a prefix sum of the tiles' kept counts in one work-group,
+// and ploc_compact, which moves the kept clusters together; below says why).
 // Each kernel reads the cluster count from the state buffer, so the host can
 // queue iterations without waiting for one; once one cluster is left the
 // kernels do nothing.
 //
-// Those three launches pay off while there are many clusters.  Each
-// iteration removes only a fifth to a quarter of them, so most iterations
-// (about 40 of 50 for 75k triangles) run on a few thousand clusters, where
-// a launch costs more than its work.  Below a threshold the host queues
-// ploc_tail instead: one work-group that runs all remaining iterations in a
-// loop, with barriers in place of launches.  It makes the same choices as
-// the three kernels, so the tree does not depend on where the host hands
-// over.  (A wider search in the tail, where it is cheap, was tried: SAH cost
-// over the host SAH builder's went from 1.110 to 1.064 on camel at radius 32,
-// but from 1.082 to 1.089 on bunny00, and 1.101 at radius 64.)
+// Launches pay off while there are many clusters.  Each iteration removes
+// only a fifth to a quarter of them, so most iterations (about 40 of 50 for
+// 75k triangles) run on a few thousand clusters, where a launch costs more
+// than its work.  Below a threshold the host queues ploc_tail instead: one
+// work-group that runs all remaining iterations in a loop, with barriers in
+// place of launches.  It makes the same choices as the other kernels, so the
+// tree does not depend on where the host hands over.  (A wider search in the
+// tail, where it is cheap, was tried: SAH cost over the host SAH builder's
+// went from 1.110 to 1.064 on camel at radius 32, but from 1.082 to 1.089 on
+// bunny00, and 1.101 at radius 64.)
 //
 // Each new node also decides, bottom-up as it is made, whether its subtree
 // is cheaper as a leaf by the surface area heuristic (refresh_node); the
@@ -109,12 +109,19 @@ inline void consider(Nearest* n, int p, int q, float area)
     }
 }
 
-// Leaf nodes and the first clusters: node i is the triangle ids[i], the i-th in Morton order.
+// Leaf nodes and the first clusters: node i is the triangle ids[i], the i-th
+// in Morton order; the look-back entries of ploc_merge's first iteration and
+// the inner nodes' flags of treelet_restructure, cleared.
 __kernel __attribute__((reqd_work_group_size(BUILD_GROUP, 1, 1)))
 void init_leaves(const global float* corners, const global uint* sorted_ids, const uint num_tris,
-                 global BuildNode* nodes, global BuildCluster* clusters)
+                 global BuildNode* nodes, global BuildCluster* clusters, global uint* tile_status,
+                 global uint* treelet_done)
 {
     const uint i = get_global_id(0);
+    if (i < (num_tris + BUILD_GROUP - 1) / BUILD_GROUP)
+        tile_status[i] = 0u;
+    if (i + 1 < num_tris)
+        treelet_done[i] = 0u;
     if (i >= num_tris)
         return;
     float3 lo, hi;
@@ -149,8 +156,17 @@ inline BuildCluster make_node(global BuildNode* nodes, global int* heights, int 
     return merged;
 }
 
+// One PLOC iteration on a GPU, one launch: clusters (count of them, from the
+// state) -> next (the kept and merged clusters, compacted in order), and the
+// next iteration's count in the state.  Tiles are numbered by tickets in the
+// order their work-groups start, and find where their kept clusters go by
+// decoupled look-back (tile_exclusive_prefix) over tile_status[iteration % 2]
+// (two halves of as many uints as iteration 0 has tiles; the half of iteration 0 zeroed by init_leaves, each
+// iteration zeroes the other half for the next).  (The first version took
+// three launches an iteration -- merge, a prefix sum of the tiles' counts in
+// one work-group, compaction -- as the CPU passes still do.)
 __kernel __attribute__((reqd_work_group_size(BUILD_GROUP, 1, 1)))
-void ploc_merge(const global BuildCluster* clusters, global BuildCluster* merged, global uint* tile_kept,
+void ploc_merge(const global BuildCluster* clusters, global BuildCluster* next, global uint* tile_status,
                 global BuildNode* nodes, global int* heights, const int num_tris, global int* state,
                 const int iteration, const uint leaf_size)
 {
@@ -158,12 +174,31 @@ void ploc_merge(const global BuildCluster* clusters, global BuildCluster* merged
     local float pair_area[PAIR_ROWS * PLOC_RADIUS];
     local int nearest[SEARCHED];
     local uint scratch[BUILD_GROUP];
-    local int node_base;
+    local int node_base, ticket;
+    local uint tile_offset;
     const int count = state[CLUSTERS_BEFORE(iteration)];
-    const int start = get_group_id(0) * BUILD_GROUP;
-    if (count <= 1 || start >= count)
-        return;                                   // the same for the whole work-group
+    if (count <= 1) {                             // the same for every work-group
+        if (get_global_id(0) == 0)
+            state[CLUSTERS_BEFORE(iteration + 1)] = count;
+        return;
+    }
     const int lid = get_local_id(0);
+    const int tiles = (count + BUILD_GROUP - 1) / BUILD_GROUP;
+    const uint status_half = (num_tris + BUILD_GROUP - 1) / BUILD_GROUP;   // tiles of the first iteration
+    if (lid == 0)
+        ticket = atomic_inc(state + STATE_TICKETS + iteration % 2);
+    barrier(CLK_LOCAL_MEM_FENCE);
+    const int tile = ticket;
+    if (tile >= tiles)
+        return;
+    global uint* status = tile_status + (iteration % 2) * status_half;
+    global uint* status_next = tile_status + ((iteration + 1) % 2) * status_half;
+    if (lid == 0) {
+        status_next[tile] = 0u;       // for the next iteration, which has no more tiles
+        if (tile == 0)
+            state[STATE_TICKETS + (iteration + 1) % 2] = 0;
+    }
+    const int start = tile * BUILD_GROUP;
     const int loaded = start - 2 * PLOC_RADIUS;   // place of box_lo[0]
     for (int k = lid; k < TILE_SPAN; k += BUILD_GROUP) {
         const int p = loaded + k;
@@ -228,9 +263,19 @@ void ploc_merge(const global BuildCluster* clusters, global BuildCluster* merged
         node_base = merges > 0 ? atomic_add(state + STATE_NEXT_NODE, (int)merges) : 0;
     uint kept_in_tile;
     const uint rank = group_exclusive_scan(kept ? 1u : 0u, scratch, &kept_in_tile);   // its barriers publish node_base
+    if (lid == 0) {
+        tile_offset = tile_exclusive_prefix(status, tile, kept_in_tile);
+        if (tile == tiles - 1) {      // the last tile knows the total
+            const int left = (int)(tile_offset + kept_in_tile);
+            state[CLUSTERS_BEFORE(iteration + 1)] = left;
+            if (left <= 1)
+                state[STATE_ITERATIONS] = iteration + 1;    // the last one that merged
+        }
+    }
+    barrier(CLK_LOCAL_MEM_FENCE);
     // (An if, not a return: PoCL 3.1 ran the writes of returned work-items when
     // the return followed the barriers.)
-    if (i < count) {
+    if (i < count && kept) {
         BuildCluster out;
         out.lo = box_lo[i - loaded];
         out.hi = box_hi[i - loaded];
@@ -240,11 +285,8 @@ void ploc_merge(const global BuildCluster* clusters, global BuildCluster* merged
             b.hi = box_hi[partner - loaded];
             out = make_node(nodes, heights, num_tris, node_base + (int)my_merge, out, b, leaf_size);
         }
-        out.hi.w = as_float(kept ? (int)rank : -1);
-        merged[i] = out;
+        next[tile_offset + rank] = out;
     }
-    if (lid == 0)
-        tile_kept[get_group_id(0)] = kept_in_tile;
 }
 
 // One work-group: exclusive prefix sum of the tiles' kept counts (where each
@@ -296,7 +338,8 @@ inline int tail_nearest(const global BuildCluster* clusters, int count, int p)
 // cluster is left, between `clusters` (holding the clusters at the start)
 // and `spare`; nearest: scratch of at least the starting count of ints.
 // Writes the node counter, the iteration total and the last count to the
-// state (when one cluster is left already, ploc_count_kept wrote the total).
+// state (when one cluster is left already, ploc_merge or ploc_count_kept
+// wrote the total).
 // Each work-item keeps a contiguous block of places, so that its kept
 // clusters and new nodes are ranked by one prefix sum over the group.
 __kernel __attribute__((reqd_work_group_size(TAIL_GROUP, 1, 1)))
@@ -325,9 +368,13 @@ void ploc_tail(global BuildCluster* clusters, global BuildCluster* spare, global
             kept += !mutual || p < j;
             merges += mutual && p < j;
         }
-        uint kept_total, merges_total;
-        uint place = group_exclusive_scan(kept, scratch, &kept_total);
-        uint node = (uint)next_node + group_exclusive_scan(merges, scratch, &merges_total);
+        // Both counts in one prefix sum, merges in the high half (the host
+        // keeps the tail's clusters below 2^16).
+        uint totals;
+        const uint ranks = group_exclusive_scan(kept | merges << 16, scratch, &totals);
+        const uint kept_total = totals & 0xffffu, merges_total = totals >> 16;
+        uint place = ranks & 0xffffu;
+        uint node = (uint)next_node + (ranks >> 16);
         for (int p = first; p < last; ++p) {
             const int j = nearest[p];
             const bool mutual = nearest[j] == p;
@@ -339,8 +386,6 @@ void ploc_tail(global BuildCluster* clusters, global BuildCluster* spare, global
         next_node += (int)merges_total;
         count = (int)kept_total;
         ++iteration;
-        if (lid == 0)
-            state[CLUSTERS_BEFORE(iteration)] = count;   // the treelet pass reads every iteration's count
         barrier(CLK_GLOBAL_MEM_FENCE);     // `to` and the nodes complete before the next search
         global BuildCluster* t = from;
         from = to;

@@ -60,4 +60,40 @@ inline uint scan_in_one_group(global uint* data, uint n, local uint* scratch)
     return carry;
 }
 
+// Exclusive prefix sum across the work-groups of one launch, in the launch
+// itself: decoupled look-back (Merrill & Garland 2016, "Single-pass Parallel
+// Prefix Scan with Decoupled Look-back").  Called by one work-item per group
+// with the group's `tile` -- a ticket taken in the order the groups start, so
+// that a group only ever waits for groups already running -- and the group's
+// value.  Each tile publishes its value (AGGREGATE), walks back over its
+// predecessors' entries until one holds its inclusive prefix (PREFIX), then
+// publishes its own.  Flag and value share one word, written and read by
+// atomics, so that a reader never sees one without the other.  status[0 ..
+// tiles) must be 0 when the launch starts.  Values up to 2^30 - 1.
+#define TILE_AGGREGATE 0x40000000u
+#define TILE_PREFIX 0x80000000u
+#define TILE_VALUE 0x3fffffffu
+
+inline uint tile_exclusive_prefix(volatile global uint* status, uint tile, uint value)
+{
+    uint prefix = 0;
+    if (tile > 0) {
+        atomic_xchg(&status[tile], TILE_AGGREGATE | value);
+        uint j = tile - 1;
+        for (;;) {
+            const uint entry = atomic_or(&status[j], 0u);
+            if (entry & TILE_PREFIX) {
+                prefix += entry & TILE_VALUE;
+                break;
+            }
+            if (entry & TILE_AGGREGATE) {
+                prefix += entry & TILE_VALUE;
+                --j;                      // tile 0 always publishes its PREFIX
+            }                             // else: not published yet, read again
+        }
+    }
+    atomic_xchg(&status[tile], TILE_PREFIX | (prefix + value));
+    return prefix;
+}
+
 #endif

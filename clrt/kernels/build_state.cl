@@ -6,17 +6,24 @@
 //   STATE_BAD_TRIANGLE   least index of a triangle with a NaN or infinite
 //                        corner (the input is checked here, not on the host:
 //                        a host pass over 10M triangles costs more than the build)
-//   STATE_ITERATIONS     PLOC iterations that merged (ploc_count_kept or ploc_tail)
+//   STATE_ITERATIONS     PLOC iterations that merged (ploc_merge, ploc_count_kept or ploc_tail)
+//   STATE_TICKETS + 0, 1 ploc_merge's tile tickets of even and odd iterations
+//   STATE_TREELET_TICKET treelet_restructure's tickets
 //   STATE_BOUNDS + 0..5  centre bounds min xyz, max xyz (order-preserving bits)
 //   STATE_COUNTS + k     clusters before PLOC iteration j, j % COUNT_RING == k
+//   STATE_LEVELS + h     nodes of height h (h < TREELET_LEVELS - 1; the last
+//                        entry counts every taller node) whose treelets are
+//                        restructured (treelet_levels)
+//   STATE_LEVEL_CURSORS + h  nodes of height h placed so far (treelet_order)
 // Offsets are -D defines from clrt/device/build.py, which reads the same values.
 #ifndef CLRT_BUILD_STATE_CL
 #define CLRT_BUILD_STATE_CL
 
 #if !defined(STATE_NEXT_NODE) || !defined(STATE_DEPTH) || !defined(STATE_ERROR) \
-    || !defined(STATE_BAD_TRIANGLE) || !defined(STATE_ITERATIONS) \
-    || !defined(STATE_BOUNDS) || !defined(STATE_COUNTS) || !defined(COUNT_RING)
-#error "build with the STATE_* and COUNT_RING defines of clrt/device/build.py"
+    || !defined(STATE_BAD_TRIANGLE) || !defined(STATE_ITERATIONS) || !defined(STATE_TICKETS) || !defined(STATE_TREELET_TICKET) \
+    || !defined(STATE_BOUNDS) || !defined(STATE_COUNTS) || !defined(COUNT_RING) \
+    || !defined(STATE_LEVELS) || !defined(STATE_LEVEL_CURSORS) || !defined(TREELET_LEVELS)
+#error "build with the STATE_*, COUNT_RING and TREELET_LEVELS defines of clrt/device/build.py"
 #endif
 
 #define CLUSTERS_BEFORE(iteration) (STATE_COUNTS + (iteration) % COUNT_RING)
@@ -24,7 +31,7 @@
 // One work-item: the state before a build of num_tris triangles.
 __kernel void init_build_state(global uint* state, const uint num_tris)
 {
-    for (uint k = 0; k < STATE_COUNTS + COUNT_RING; ++k)
+    for (uint k = 0; k < STATE_LEVEL_CURSORS + TREELET_LEVELS; ++k)
         state[k] = 0u;
     state[STATE_NEXT_NODE] = num_tris;
     state[STATE_BAD_TRIANGLE] = 0xffffffffu;       // none (atomic_min from the largest)

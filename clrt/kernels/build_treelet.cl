@@ -13,23 +13,30 @@
 // split into two subsets; or, with at most leaf_size triangles, one leaf --
 // the rule refresh_node applies), and the treelet is rebuilt if that is cheaper.
 //
-// Bottom-up, so that a treelet's leaves are final: one launch per PLOC
-// iteration, over the nodes that iteration made.  Those are consecutive
-// (nodes are numbered as they are made), their subtrees are disjoint, and
-// every node below them was made -- and restructured -- by an earlier
-// launch.  (Tried first: climbing from every triangle with a counter per
-// node, in one launch; one launch per tree height; restructuring inside
-// make_node.  The first two left most work-items of a SIMD group idle, since
-// the nodes of one height are scattered; the third put thousands of treelets
-// on ploc_tail's single work-group.  On the H200 they cost 7, 2 and 7 ms for
-// bunny00.)
+// Bottom-up, so that a treelet's leaves are final, in one launch: one
+// work-group per node with a treelet, the nodes listed by height (as PLOC
+// left them, lowest first) and taken by tickets in the order the groups
+// start.  A group first waits until its node's children are done (a flag
+// per node, set after a fence once the node's treelet is rebuilt): they are
+// lower, so their groups took earlier tickets and are running or finished,
+// and the lowest unfinished node never waits -- the launch cannot stall.
+// Every inner node below is then done too, and restructuring a subtree moves
+// no node out of it: each node's treelet depends only on its own finished
+// subtree, and the tree is the same whatever the order the groups run in.
+// treelet_levels counts the nodes of each height, the host reads the counts
+// (the launch's size) and treelet_order lists the nodes by height.
+// (Tried first, on the H200 for bunny00: climbing from every triangle with a
+// counter per node, one work-item per treelet, 9 ms; restructuring inside
+// make_node, on ploc_tail's single work-group, 7 ms; one launch per PLOC
+// iteration, 1.2 ms, and one per height, 0.6 ms, nearly all of it the latency
+// of the launches, one after another.)
 #ifndef CLRT_BUILD_TREELET_CL
 #define CLRT_BUILD_TREELET_CL
 
 #include "layouts.h"
 
-#if !defined(TREELET_LEAVES) || !defined(TREELET_GROUP)
-#error "build with -DTREELET_LEAVES=<leaves of a treelet, 3..8; 0: none> and -DTREELET_GROUP=<work-items per treelet>"
+#if !defined(TREELET_LEAVES) || !defined(TREELET_GROUP) || !defined(TREELET_LEVELS)
+#error "build with -DTREELET_LEAVES=<leaves of a treelet, 3..8; 0: none>, -DTREELET_GROUP=<work-items per treelet> and -DTREELET_LEVELS"
 #endif
 #if !defined(C_TRAVERSAL) || !defined(C_INTERSECT)
 #error "build with the SAH constants C_TRAVERSAL and C_INTERSECT of clrt/accel/topdown.py"
@@ -43,19 +50,39 @@ inline float half_area(float3 lo, float3 hi)
     return isnan(a) ? INFINITY : a;           // inf * 0 of huge, flat boxes
 }
 
-inline int left_of(const global BuildNode* nodes, int n)
+// Nodes and heights are read through volatile pointers: in the one-launch
+// restructuring (below) a work-group reads what other work-groups wrote
+// during the launch, which must come from memory, not from a cache that may
+// hold an older copy.  (Elsewhere a launch boundary separates writes and
+// reads; the loads only lose their first-level cache there.)
+typedef volatile global BuildNode* shared_nodes;
+typedef volatile global int* shared_ints;
+
+inline int left_of(shared_nodes nodes, int n)
 {
     return as_int(nodes[n].lo.w);
 }
 
-inline int right_of(const global BuildNode* nodes, int n)
+inline int right_of(shared_nodes nodes, int n)
 {
     return as_int(nodes[n].hi.w);
 }
 
-inline int height_of(const global int* heights, int n, int num_tris)
+inline int height_of(shared_ints heights, int n, int num_tris)
 {
     return n < num_tris ? 1 : heights[n - num_tris];
+}
+
+inline BuildNode load_node(shared_nodes nodes, int n)
+{
+    BuildNode b;
+    b.lo = nodes[n].lo;
+    b.hi = nodes[n].hi;
+    b.parent = nodes[n].parent;
+    b.count = nodes[n].count;
+    b.rows = nodes[n].rows;
+    b.cost = nodes[n].cost;
+    return b;
 }
 
 // Box, count, cost, rows and height of inner node n from its children, whose
@@ -66,10 +93,10 @@ inline int height_of(const global int* heights, int n, int num_tris)
 // only when strictly cheaper).  The height (nodes on the longest path down; a
 // triangle has 1) bounds the emit pass's pointer jumps.  PLOC's make_node and
 // the treelet restructuring both make nodes through it.
-inline void refresh_node(global BuildNode* nodes, global int* heights, int n, int num_tris, uint leaf_size)
+inline void refresh_node(shared_nodes nodes, shared_ints heights, int n, int num_tris, uint leaf_size)
 {
     const int l = left_of(nodes, n), r = right_of(nodes, n);
-    const BuildNode a = nodes[l], b = nodes[r];
+    const BuildNode a = load_node(nodes, l), b = load_node(nodes, r);
     const float3 lo = fmin(a.lo.xyz, b.lo.xyz), hi = fmax(a.hi.xyz, b.hi.xyz);
     const float area = half_area(lo, hi);
     const int count = a.count + b.count;
@@ -91,101 +118,209 @@ inline void refresh_node(global BuildNode* nodes, global int* heights, int n, in
 #if TREELET_LEAVES > 0
 #define TREELET_SUBSETS (1 << TREELET_LEAVES)
 
-// The treelet below inner node `root`: its leaves (leaf[0 .. return value))
-// and inner nodes (inner[0] = root, then the opened ones, one fewer than
-// leaves).  Opens the leaf of largest area until TREELET_LEAVES.
-inline int form_treelet(const global BuildNode* nodes, int root, int num_tris, local int* leaf, local int* inner)
+// A treelet in local memory: its leaves (subtrees kept as they are) with the
+// numbers refresh_node reads of them, and its inner nodes, whose places the
+// rebuilt shape reuses.  Solving and rebuilding read only this copy: each
+// leaf is read from global memory once, when the treelet is formed.
+typedef struct {
+    int node[TREELET_LEAVES];             // leaf k's BuildNode
+    float4 lo[TREELET_LEAVES];            // its box, w: its children (as the BuildNode's)
+    float4 hi[TREELET_LEAVES];
+    float area[TREELET_LEAVES];           // half area; -1 for a triangle (nothing to open)
+    float cost[TREELET_LEAVES];
+    int count[TREELET_LEAVES], rows[TREELET_LEAVES], height[TREELET_LEAVES];
+    int inner[TREELET_LEAVES - 1];        // inner[0] is the treelet's root
+    int leaves;
+} Treelet;
+
+inline void load_treelet_leaf(local Treelet* t, int k, shared_nodes nodes, shared_ints heights, int n, int num_tris)
+{
+    const BuildNode b = load_node(nodes, n);
+    t->node[k] = n;
+    t->lo[k] = b.lo;
+    t->hi[k] = b.hi;
+    t->area[k] = n < num_tris ? -1.0f : half_area(b.lo.xyz, b.hi.xyz);
+    t->cost[k] = b.cost;
+    t->count[k] = b.count;
+    t->rows[k] = b.rows;
+    t->height[k] = height_of(heights, n, num_tris);
+}
+
+// The treelet below inner node `root`: starting from its two children, opens
+// the leaf of largest area until TREELET_LEAVES (or only triangles are left).
+inline void form_treelet(local Treelet* t, shared_nodes nodes, shared_ints heights, int root, int num_tris)
 {
     int leaves = 2, inners = 1;
-    leaf[0] = left_of(nodes, root);
-    leaf[1] = right_of(nodes, root);
-    inner[0] = root;
+    t->inner[0] = root;
+    load_treelet_leaf(t, 0, nodes, heights, left_of(nodes, root), num_tris);
+    load_treelet_leaf(t, 1, nodes, heights, right_of(nodes, root), num_tris);
     while (leaves < TREELET_LEAVES) {
         int pick = -1;
         float largest = -1.0f;
-        for (int k = 0; k < leaves; ++k) {
-            if (leaf[k] < num_tris)
-                continue;                    // a triangle: nothing to open
-            const float a = half_area(nodes[leaf[k]].lo.xyz, nodes[leaf[k]].hi.xyz);
-            if (a > largest) {
-                largest = a;
+        for (int k = 0; k < leaves; ++k)
+            if (t->area[k] > largest) {
+                largest = t->area[k];
                 pick = k;
             }
-        }
         if (pick < 0)
             break;
-        const int opened = leaf[pick];
-        inner[inners++] = opened;
-        leaf[pick] = left_of(nodes, opened);
-        leaf[leaves++] = right_of(nodes, opened);
+        t->inner[inners++] = t->node[pick];
+        const int left = as_int(t->lo[pick].w), right = as_int(t->hi[pick].w);
+        load_treelet_leaf(t, pick, nodes, heights, left, num_tris);
+        load_treelet_leaf(t, leaves++, nodes, heights, right, num_tris);
     }
-    return leaves;
+    t->leaves = leaves;
 }
 
 // Give the treelet the shape `split` describes (for each subset of leaves,
-// the part holding its lowest leaf), reusing its inner nodes in pre-order,
-// then refresh them children first.
-inline void rebuild_treelet(global BuildNode* nodes, global int* heights, int full, const local uchar* split,
-                            const local int* leaf, const local int* inner, int num_tris, uint leaf_size)
+// the part holding its lowest leaf), reusing its inner nodes in pre-order.
+// The new inner nodes' numbers come from the local copy, children first, by
+// refresh_node's arithmetic (the same values, bit for bit, as refreshing
+// them in global memory would give).
+inline void rebuild_treelet(local const Treelet* t, global BuildNode* nodes, global int* heights, int full,
+                            const local uchar* split, int num_tris, uint leaf_size)
 {
-    int order_node[TREELET_LEAVES - 1];
-    int stack_subset[TREELET_LEAVES], stack_node[TREELET_LEAVES];
-    int sp = 0, used = 0, made = 0;
+    // Slots: leaf k is slot k, the u-th inner node (in the order its place
+    // is taken) slot TREELET_LEAVES + u; a node's children have higher u.
+    float3 lo[2 * TREELET_LEAVES - 1], hi[2 * TREELET_LEAVES - 1];
+    float cost[2 * TREELET_LEAVES - 1];
+    int count[2 * TREELET_LEAVES - 1], rows[2 * TREELET_LEAVES - 1], height[2 * TREELET_LEAVES - 1];
+    int child_slot[TREELET_LEAVES - 1][2];
+    for (int k = 0; k < t->leaves; ++k) {
+        lo[k] = t->lo[k].xyz;
+        hi[k] = t->hi[k].xyz;
+        cost[k] = t->cost[k];
+        count[k] = t->count[k];
+        rows[k] = t->rows[k];
+        height[k] = t->height[k];
+    }
+    int stack_subset[TREELET_LEAVES], stack_slot[TREELET_LEAVES];
+    int sp = 0, used = 0;
     stack_subset[sp] = full;
-    stack_node[sp++] = inner[used++];
+    stack_slot[sp++] = used++;
     while (sp > 0) {
         --sp;
-        const int s = stack_subset[sp], n = stack_node[sp];
-        order_node[made++] = n;
-        int child[2];
+        const int s = stack_subset[sp], u = stack_slot[sp];
         for (int side = 0; side < 2; ++side) {
             const int p = side == 0 ? split[s] : s ^ split[s];
             if (p == (p & -p)) {
-                child[side] = leaf[31 - clz(p)];
+                child_slot[u][side] = 31 - clz(p);
             } else {
-                child[side] = inner[used++];
+                child_slot[u][side] = TREELET_LEAVES + used;
                 stack_subset[sp] = p;
-                stack_node[sp++] = child[side];
+                stack_slot[sp++] = used++;
             }
-            nodes[child[side]].parent = n;
         }
-        nodes[n].lo.w = as_float(child[0]);
-        nodes[n].hi.w = as_float(child[1]);
     }
-    for (int k = made - 1; k >= 0; --k)
-        refresh_node(nodes, heights, order_node[k], num_tris, leaf_size);
+    for (int u = used - 1; u >= 0; --u) {
+        const int a = child_slot[u][0], b = child_slot[u][1], me = TREELET_LEAVES + u;
+        const int n = t->inner[u];
+        const int left = a < TREELET_LEAVES ? t->node[a] : t->inner[a - TREELET_LEAVES];
+        const int right = b < TREELET_LEAVES ? t->node[b] : t->inner[b - TREELET_LEAVES];
+        lo[me] = fmin(lo[a], lo[b]);
+        hi[me] = fmax(hi[a], hi[b]);
+        const float area = half_area(lo[me], hi[me]);
+        count[me] = count[a] + count[b];
+        cost[me] = C_TRAVERSAL * area + cost[a] + cost[b];
+        rows[me] = 1 + rows[a] + rows[b];
+        const float leaf_cost = C_INTERSECT * (float)count[me] * area;
+        if (count[me] <= (int)leaf_size && leaf_cost <= cost[me]) {
+            cost[me] = leaf_cost;
+            rows[me] = 0;
+        }
+        height[me] = 1 + max(height[a], height[b]);
+        nodes[n].lo = (float4)(lo[me], as_float(left));
+        nodes[n].hi = (float4)(hi[me], as_float(right));
+        nodes[n].count = count[me];
+        nodes[n].cost = cost[me];
+        nodes[n].rows = rows[me];
+        heights[n - num_tris] = height[me];
+        nodes[left].parent = n;
+        nodes[right].parent = n;
+    }
 }
 
 #endif
 
-// One work-group of TREELET_GROUP work-items per node made in one PLOC
-// iteration (nodes first, first + 1, ...; one group each).  The first
-// work-item refreshes the node (its children's treelets may have become
-// cheaper) and forms its treelet; then the group solves the dynamic program
-// together: the subsets of one size at a time, in parallel -- a subset's
-// parts are all smaller -- with a barrier between sizes, so that the longest
-// chain is about 130 steps instead of one work-item's 1,100.  (One work-item
-// per treelet, the first version, took 3.6 ms for bunny00 on the H200.)
-// Subtrees of at most leaf_size triangles are left as they are: one leaf or a
-// few, however shaped.  (With TREELET_LEAVES 0 the host does not launch it.)
+// Does inner node n get its treelet restructured?  Only with at least
+// min_count triangles (more than leaf_size: smaller subtrees are one leaf or a
+// few, however shaped; clrt/device/build.py says why not all of those).
+inline bool has_treelet(const volatile global BuildNode* nodes, int n, uint min_count)
+{
+    return nodes[n].count >= (int)min_count;
+}
+
+// One work-item per inner node (index F + i): count the nodes with a treelet
+// per height, into STATE_LEVELS (the last entry takes every taller node; the
+// host then leaves the tree as it is).
+__kernel __attribute__((reqd_work_group_size(BUILD_GROUP, 1, 1)))
+void treelet_levels(const global BuildNode* nodes, const global int* heights, const int num_tris,
+                    const uint min_count, global int* state)
+{
+    const int i = get_global_id(0);
+    if (i >= num_tris - 1 || !has_treelet(nodes, num_tris + i, min_count))
+        return;
+    atomic_inc(&state[STATE_LEVELS + min(heights[i], TREELET_LEVELS - 1)]);
+}
+
+// One work-item per inner node: its place in `order`, the nodes with a
+// treelet listed by height (lowest first; any order within a height).
+__kernel __attribute__((reqd_work_group_size(BUILD_GROUP, 1, 1)))
+void treelet_order(const global BuildNode* nodes, const global int* heights, const int num_tris,
+                   const uint min_count, global int* state, global int* order)
+{
+    const int i = get_global_id(0);
+    if (i >= num_tris - 1 || !has_treelet(nodes, num_tris + i, min_count))
+        return;
+    const int height = min(heights[i], TREELET_LEVELS - 1);
+    int place = 0;
+    for (int h = 0; h < height; ++h)
+        place += state[STATE_LEVELS + h];
+    order[place + atomic_inc(&state[STATE_LEVEL_CURSORS + height])] = num_tris + i;
+}
+
+// One work-group of TREELET_GROUP work-items per node of `order` (count
+// from the host; treelet_done[i] is 0 for inner node F + i at the start).
+// The first work-item takes the ticket, waits for the children, refreshes
+// the node (its children's treelets may have become cheaper) and forms its
+// treelet; then the group solves the dynamic program together: the subsets
+// of one size at a time, in parallel -- a subset's parts are all smaller --
+// with a barrier between sizes, so that the longest chain is about 130 steps
+// instead of one work-item's 1,100.  (One work-item per treelet, the first
+// version, took 3.6 ms for bunny00 on the H200.)  (With TREELET_LEAVES 0 the
+// host does not launch it.)
 __kernel __attribute__((reqd_work_group_size(TREELET_GROUP, 1, 1)))
-void treelet_restructure(global BuildNode* nodes, global int* heights, const int num_tris, const int first,
+void treelet_restructure(global BuildNode* nodes, global int* heights, const global int* order,
+                         global uint* treelet_done, global int* state, const int num_tris, const uint min_count,
                          const uint leaf_size)
 {
 #if TREELET_LEAVES > 0
-    local int leaf[TREELET_LEAVES], inner[TREELET_LEAVES - 1];
-    local int leaves;
+    local Treelet t;
     local float area[TREELET_SUBSETS], best[TREELET_SUBSETS];
     local int count[TREELET_SUBSETS];
     local uchar split[TREELET_SUBSETS];    // the part holding the subset's lowest leaf
+    local int root;
     const int lid = get_local_id(0);
-    const int root = first + get_group_id(0);
+    if (lid == 0) {
+        root = order[atomic_inc(state + STATE_TREELET_TICKET)];
+        const int child[2] = {left_of(nodes, root), right_of(nodes, root)};
+        for (int side = 0; side < 2; ++side) {
+            const int c = child[side];
+            if (c >= num_tris && has_treelet(nodes, c, min_count))
+                while (atomic_or(treelet_done + (c - num_tris), 0u) == 0u)
+                    ;
+        }
+        mem_fence(CLK_GLOBAL_MEM_FENCE);
+    }
+    // (A barrier as well as the fences, here and before the flag: PoCL's
+    // compiler keeps no memory access on the wrong side of a barrier.)
+    barrier(CLK_GLOBAL_MEM_FENCE);
     if (lid == 0) {
         refresh_node(nodes, heights, root, num_tris, leaf_size);
-        leaves = nodes[root].count > (int)leaf_size ? form_treelet(nodes, root, num_tris, leaf, inner) : 0;
+        form_treelet(&t, nodes, heights, root, num_tris);
     }
     barrier(CLK_LOCAL_MEM_FENCE);
-    const int n = leaves;                  // the same in every work-item
+    const int n = t.leaves;                // the same in every work-item
     const int full = (1 << n) - 1;
     if (n >= 3) {                          // (fewer: one shape only)
         for (int s = lid + 1; s <= full; s += TREELET_GROUP) {
@@ -193,14 +328,14 @@ void treelet_restructure(global BuildNode* nodes, global int* heights, const int
             int c = 0;
             for (int k = 0; k < n; ++k)
                 if (s & (1 << k)) {
-                    lo = fmin(lo, nodes[leaf[k]].lo.xyz);
-                    hi = fmax(hi, nodes[leaf[k]].hi.xyz);
-                    c += nodes[leaf[k]].count;
+                    lo = fmin(lo, t.lo[k].xyz);
+                    hi = fmax(hi, t.hi[k].xyz);
+                    c += t.count[k];
                 }
             area[s] = half_area(lo, hi);
             count[s] = c;
             if (s == (s & -s)) {
-                best[s] = nodes[leaf[31 - clz(s)]].cost;
+                best[s] = t.cost[31 - clz(s)];
                 split[s] = 0;
             }
         }
@@ -235,7 +370,12 @@ void treelet_restructure(global BuildNode* nodes, global int* heights, const int
         }
         // Rebuild only when clearly cheaper (the same tree costs the same, up to rounding).
         if (lid == 0 && best[full] < nodes[root].cost * (1.0f - 1e-5f))
-            rebuild_treelet(nodes, heights, full, split, leaf, inner, num_tris, leaf_size);
+            rebuild_treelet(&t, nodes, heights, full, split, num_tris, leaf_size);
+    }
+    barrier(CLK_GLOBAL_MEM_FENCE);
+    if (lid == 0) {
+        mem_fence(CLK_GLOBAL_MEM_FENCE);       // the subtree's writes before the flag
+        atomic_xchg(treelet_done + (root - num_tris), 1u);
     }
 #endif
 }
