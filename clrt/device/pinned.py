@@ -77,6 +77,7 @@ class PinnedPool:
 
 STAGE_BYTES = 64 << 20       # one page-locked staging block; two are kept per context
 STAGED_MIN_BYTES = 16 << 20  # smaller arrays go straight to the driver
+PARALLEL_COPY_MIN_BYTES = 4 << 20   # smaller copies into a staging block take one thread
 _stages: dict[int, list] = {}
 _copier = None               # thread pool for the host copies into the staging blocks
 
@@ -90,7 +91,7 @@ def _parallel_copy(dst: np.ndarray, src: np.ndarray, threads: int | None = None)
     """dst[:] = src in slices on a few threads (numpy releases the GIL while copying)."""
     global _copier
     threads = threads or _copy_threads()
-    if threads == 1 or len(src) < (4 << 20):
+    if threads == 1 or len(src) < PARALLEL_COPY_MIN_BYTES:
         dst[:] = src
         return
     if _copier is None:
@@ -111,8 +112,8 @@ def upload(context: cl.Context, queue: cl.CommandQueue, buffer: cl.Buffer, array
     one thread copying into it: about 8 GB/s on the H200's host, so two thirds
     of a 10M-triangle device build.  Large arrays go through two page-locked
     blocks instead, filled by several threads while the device reads the
-    other block.  CPU devices and small arrays take the plain copy (``staged``
-    None); True or False choose (tests, benchmarks).
+    other block.  CPU devices and arrays below STAGED_MIN_BYTES take the plain
+    copy (``staged`` None); True or False choose (ray chunks, tests, benchmarks).
     """
     flat = array.reshape(-1).view(np.uint8)
     if staged is None:
@@ -127,8 +128,11 @@ def upload(context: cl.Context, queue: cl.CommandQueue, buffer: cl.Buffer, array
             return cl.enqueue_copy(queue, buffer, array, is_blocking=False)
         _stages[context.int_ptr] = stages
     event = None
-    for k, start in enumerate(range(0, len(flat), STAGE_BYTES)):
-        stage = stages[k % 2]
+    for start in range(0, len(flat), STAGE_BYTES):
+        # The blocks take turns across calls too: successive small uploads (a
+        # ray chunk's arrays) fill one block while the device reads the other.
+        stage = stages[0]
+        stages.append(stages.pop(0))
         block, last_copy = stage
         if last_copy is not None:
             last_copy.wait()                      # the device has read this block's last chunk
