@@ -376,3 +376,19 @@ def test_scratch_estimate_matches_the_workspace(device):
     per_triangle = used / len(corners)
     assert abs(per_triangle - build.SCRATCH_BYTES_PER_TRIANGLE) <= 0.05 * build.SCRATCH_BYTES_PER_TRIANGLE, \
         per_triangle
+
+
+@pytest.mark.parametrize("name", ["random", "torus"])
+def test_too_few_guessed_pointer_jumps_are_made_up(name, queue, monkeypatch):
+    """The host queues EMIT_JUMPS pointer jumps without reading the tree's
+    height; for a taller tree it adds the rest and emits again: the same
+    rows, triangles and depth as with enough jumps."""
+    from clrt.device import build
+    corners = CORNERS[name]()
+    want = build_on_device(*queue, corners, leaf_size=1)
+    monkeypatch.setattr(build, "EMIT_JUMPS", 1)
+    got = build_on_device(*queue, corners, leaf_size=1)
+    assert got.depth == want.depth > 2
+    for a, b in zip(got.read_back(), want.read_back()):
+        assert np.array_equal(a.view(np.uint8), b.view(np.uint8))
+    assert np.array_equal(got.read_triangles().view(np.uint8), want.read_triangles().view(np.uint8))

@@ -18,8 +18,8 @@ on the OpenCL device, clrt.device.build), one table row:
 * ``refit ms``: warm wall time of ``Accel.refit`` to the vertices moved by 1 %
   (the triangles uploaded, the volumes refitted on the device);
 * ``trace ms``: median kernel time of one closest-hit primary ray per pixel
-  at 1920x1080 (``trace_camera``, timed with clrt.bench.speed.time_launches),
-  on the fixed cameras of clrt.bench.speed for its meshes, and a framing
+  at 1920x1080 (``trace_camera``), the scene's trees launched in turn for
+  TRACE_ROUNDS rounds, on the fixed cameras of clrt.bench.speed for its meshes, and a framing
   camera for the generated scenes: ``--triangles N`` makes a grid of copies of
   the bunny (clrt.bench.scale.instanced).
 
@@ -39,7 +39,7 @@ import pyopencl as cl
 
 from clrt.bench.common import exit_code, parse_count
 from clrt.bench.scale import instanced
-from clrt.bench.speed import CASES, time_launches
+from clrt.bench.speed import CASES
 from clrt.config import HOST_BUILDERS
 from clrt.scene.arrays import triangle_corners
 
@@ -98,9 +98,9 @@ def time_builds(context, queue, corners, volume, builder, leaf_size, repeat):
     return walls[0], statistics.median(walls[1:]) if repeat else walls[0], stats, timings
 
 
-def _trace_ms(mesh, camera, volume, builder, leaf_size, device) -> tuple[float, float]:
-    """(primary-ray kernel ms, warm wall ms of Accel.refit to vertices moved by 1 %)."""
-    from clrt import layouts
+def _traced_accel(mesh, volume, builder, leaf_size, device):
+    """clrt.Accel over ``mesh`` from ``builder`` (a device variant's settings
+    applied to its one build)."""
     from clrt.device import build
     from clrt.query import Accel
     leaves = DEVICE_VARIANTS.get(builder, {}).get("treelet_leaves")
@@ -109,23 +109,48 @@ def _trace_ms(mesh, camera, volume, builder, leaf_size, device) -> tuple[float, 
     if leaves is not None:                   # the variant's treelets for this one build
         build.TREELET_LEAVES.update({kind: leaves for kind in saved})
     if minimum is not None:
-        build.TREELET_MIN_TRIANGLES = minimum
+        build.TREELET_MIN_TRIANGLES = ((0, minimum),)
     try:
-        accel = Accel(mesh, volume, "device" if builder in DEVICE_VARIANTS else builder, leaf_size, device)
+        return Accel(mesh, volume, "device" if builder in DEVICE_VARIANTS else builder, leaf_size, device)
     finally:
         build.TREELET_LEAVES.update(saved)
         build.TREELET_MIN_TRIANGLES = saved_min
-    hits = cl.Buffer(accel.context, cl.mem_flags.READ_WRITE, camera.width * camera.height * layouts.HIT.itemsize)
-    kernel_ms, _ = time_launches(accel.queue, lambda: accel.launch_camera(camera, hits), 10, 2)
-    hits.release()
+
+
+# Trace times of trees a few per cent apart are compared in one loop: every
+# round launches each tree's camera rays once, so that a change of the GPU's
+# clock falls on all of them alike (timed one tree after the other, the same
+# tree's figure moved by 2-3 % between runs).
+TRACE_ROUNDS = 15
+
+
+def trace_and_refit_ms(mesh, camera, volume, builders, leaf_size, device) -> dict:
+    """builder -> (median primary-ray kernel ms over TRACE_ROUNDS interleaved
+    rounds after two, warm wall ms of Accel.refit to vertices moved by 1 %)."""
+    from clrt import layouts
+    accels = {b: _traced_accel(mesh, volume, b, leaf_size, device) for b in builders}
+    hits = {b: cl.Buffer(a.context, cl.mem_flags.READ_WRITE, camera.width * camera.height * layouts.HIT.itemsize)
+            for b, a in accels.items()}
+    kernel = {b: [] for b in accels}
+    for round_ in range(2 + TRACE_ROUNDS):
+        for b, accel in accels.items():
+            event = accel.launch_camera(camera, hits[b])
+            accel.queue.finish()
+            if round_ >= 2:
+                kernel[b].append(1e-6 * (event.profile.end - event.profile.start))
+    for buffer in hits.values():
+        buffer.release()
     moved = mesh.vertices * np.float32(1.01)
-    walls = []
-    for _ in range(6):
-        start = time.perf_counter()
-        accel.refit(moved)
-        accel.queue.finish()
-        walls.append(1e3 * (time.perf_counter() - start))
-    return kernel_ms, statistics.median(walls[1:])
+    out = {}
+    for b, accel in accels.items():
+        walls = []
+        for _ in range(6):
+            start = time.perf_counter()
+            accel.refit(moved)
+            accel.queue.finish()
+            walls.append(1e3 * (time.perf_counter() - start))
+        out[b] = (statistics.median(kernel[b]), statistics.median(walls[1:]))
+    return out
 
 
 # A generated scene of the issue's size for the CPU comparison ("a 50k-triangle
@@ -184,12 +209,12 @@ def run(mesh_dir, meshes, counts, builders, volume="box", leaf_size=4, device=No
         corners = triangle_corners(mesh)
         results = {}
         for builder in builders:
-            first, warm, stats, timings = time_builds(context, queue, corners, volume, builder, leaf_size, repeat)
-            trace_ms, refit_ms = (_trace_ms(mesh, camera, volume, builder, leaf_size, device)
-                                  if trace and (builder not in DEVICE_VARIANTS or builder == "device"
-                                                or builder.startswith(("device/treelets=", "device/treelet-min=")))
-                                  else (float("nan"), float("nan")))
-            results[builder] = (first, warm, stats, timings, trace_ms, refit_ms)
+            results[builder] = time_builds(context, queue, corners, volume, builder, leaf_size, repeat)
+        # The trees of the host builders and of the device variants that change the tree.
+        traced = [b for b in builders if trace and (b not in DEVICE_VARIANTS or b == "device"
+                                                    or b.startswith(("device/treelets=", "device/treelet-min=")))]
+        traces = trace_and_refit_ms(mesh, camera, volume, traced, leaf_size, device) if traced else {}
+        results = {b: (*r, *traces.get(b, (float("nan"), float("nan")))) for b, r in results.items()}
         sah_cost = results["sah"][2]["sah_cost"] if "sah" in results else None
         for builder, (first, warm, stats, timings, trace_ms, refit_ms) in results.items():
             device_ms = "-" if timings is None else f"{timings['device']:.2f}"
@@ -216,7 +241,7 @@ def main(argv=None) -> int:
                    help="also grids of bunny copies of about these many triangles, e.g. 1M,10M")
     p.add_argument("--builders", type=lambda s: s.split(","), default=list(HOST_BUILDERS) + ["device"],
                    help=f"comma-separated, of {', '.join(list(HOST_BUILDERS) + list(DEVICE_VARIANTS))}, "
-                        "device/tail=N, device/treelets=N, device/treelet-min=N (default: paper, sah, device)")
+                        "device/tail=N, device/tail-group=N, device/treelets=N, device/treelet-min=N (default: paper, sah, device)")
     p.add_argument("--volume", default="box", choices=("box", "sphere", "ellipse"))
     p.add_argument("--leaf-size", type=int, default=4)
     p.add_argument("--repeat", type=int, default=5, help="warm builds timed after the first (default 5)")
@@ -232,6 +257,8 @@ def main(argv=None) -> int:
             DEVICE_VARIANTS[b] = {"treelet_leaves": int(b.split("=", 1)[1])}
         if b.startswith("device/treelet-min="):   # triangles a node needs for its treelet
             DEVICE_VARIANTS[b] = {"treelet_min": int(b.split("=", 1)[1])}
+        if b.startswith("device/tail-group="):    # work-items of ploc_tail
+            DEVICE_VARIANTS[b] = {"tail_group": int(b.split("=", 1)[1])}
         if b not in HOST_BUILDERS and b not in DEVICE_VARIANTS:
             p.error(f"unknown builder {b!r}")
     for m in args.meshes:

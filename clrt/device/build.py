@@ -24,8 +24,8 @@ The algorithm (kernels in ``clrt/kernels/build_*.cl``, entry ``build_bvh.cl``):
    by the SAH whether its subtree (at most ``leaf_size`` triangles) is emitted
    as one leaf, and records its height;
 3b. treelet restructuring (Karras & Aila 2013, ``TREELET_LEAVES``; GPUs only
-   by default): one launch, a work-group per node of at least
-   ``TREELET_MIN_TRIANGLES``, lowest first, each waiting for its children and
+   by default): one launch, a work-group per node (of at least
+   ``TREELET_MIN_TRIANGLES`` on large meshes), lowest first, each waiting for its children and
    replacing the 7-leaf treelet below it by the cheapest by the SAH;
 4. rows and slots as sums along each node's path from the root (pointer
    jumping, ceil(log2(depth)) launches), then one launch writes the
@@ -97,12 +97,20 @@ TAIL_GROUP = {"gpu": 1024, "cpu": BUILD_GROUP}
 # for: off there.
 TREELET_LEAVES = {"gpu": 7, "cpu": 0}
 TREELET_GROUP = 32       # work-items that solve one treelet together
-# Nodes with fewer triangles keep PLOC's shape (and always those of at most
-# leaf_size).  Measured on the H200 (bench.build, device/treelet-min=N), from
-# leaf_size + 1 to 16: SAH cost +0.4 % (bunny00 1.061 -> 1.065 of the host SAH
-# tree's, camel 1.072 -> 1.076), primary rays within 1 %, builds 1M 10.7 ->
-# 8.9 ms, 10M 65 -> 50 ms, 50M 324 -> 231 ms.
-TREELET_MIN_TRIANGLES = 16
+TREELET_GROUPS_PER_UNIT = 32   # treelet work-groups launched per compute unit (each takes node after node)
+# Treelets of nodes with fewer triangles are not restructured (nodes of at
+# most leaf_size never are), by mesh size: (triangles from, minimum), the
+# last entry that applies.  Measured on the H200 (bench.build,
+# device/treelet-min=N; trace: primary rays, trees launched in turn):
+#   minimum           leaf_size + 1      8           16
+#   bunny00 trace     +3.8 %             +5.4 %      +6.0 %   (over the host SAH tree)
+#   camel trace       +3.0 %             +2.0 %      +5.0 %
+#   SAH cost (bunny)  1.061              1.062       1.065
+#   build 1M / 10M / 50M ms   10.2 / 65 / 331   8.8 / 60 / 299   8.2 / 51 / 241
+# Restructuring every node keeps primary rays within 5 % of the host SAH
+# trees; from half a million triangles on, the small subtrees' treelets
+# (60 % of the restructuring's time for 0.4 % of SAH cost) are left out.
+TREELET_MIN_TRIANGLES = ((0, 0), (500_000, 16))
 # Heights the treelet launches go by (one launch per height): a taller tree
 # (PLOC's are about 30 high at 1M triangles, 40 at 50M) keeps PLOC's shape.
 TREELET_LEVELS = 64
@@ -116,6 +124,7 @@ MIN_SHRINK = 0.83
 CPU_TILE_WORKERS = 4     # work-items per core of the CPU merge passes (build_ploc.cl)
 MAX_REDUCE_GROUPS = 256  # work-groups of the bounds reduction (grid-stride beyond)
 EARLY_ROWS_BYTES = 64 << 20   # row buffers made before the row count is known, up to this size
+EMIT_JUMPS = 7           # pointer jumps queued without reading the tree's height (2**7 levels)
 
 # The state buffer (build_state.cl): int offsets, and the ring of cluster counts.
 STATE = {"STATE_NEXT_NODE": 0, "STATE_DEPTH": 1, "STATE_ERROR": 2, "STATE_BAD_TRIANGLE": 3, "STATE_BOUNDS": 4,
@@ -130,13 +139,14 @@ _KERNELS = ("init_build_state", "centroid_bounds", "morton_codes", "radix_histog
             "treelet_levels", "treelet_order", "treelet_restructure", "init_root_paths", "jump_root_paths", "emit_tree")
 
 
-def build_defines(volume: str, kind: str = "gpu", treelet_leaves: int | None = None) -> dict:
+def build_defines(volume: str, kind: str = "gpu", treelet_leaves: int | None = None,
+                  tail_group: int | None = None) -> dict:
     """Program defines: the shape, the work-group and state layout, and the
     constants of topdown.py and volumes.py (one source of truth: repr() of a float
     is a C double literal of the same value)."""
     return {
         VOLUME_DEFINES[volume]: None, "BUILD_GROUP": BUILD_GROUP, "RADIX_BITS": RADIX_BITS,
-        "PLOC_RADIUS": PLOC_RADIUS, "TAIL_GROUP": TAIL_GROUP[kind],
+        "PLOC_RADIUS": PLOC_RADIUS, "TAIL_GROUP": TAIL_GROUP[kind] if tail_group is None else int(tail_group),
         "TREELET_LEAVES": TREELET_LEAVES[kind] if treelet_leaves is None else int(treelet_leaves),
         "TREELET_GROUP": TREELET_GROUP, "TREELET_LEVELS": TREELET_LEVELS, **STATE,
         "C_TRAVERSAL": f"((float){C_TRAVERSAL!r})", "C_INTERSECT": f"((float){C_INTERSECT!r})",
@@ -295,7 +305,8 @@ class _Phases:
 def build_on_device(context: cl.Context, queue: cl.CommandQueue, corners, volume: str = "box",
                     leaf_size: int = 4, keep_boxes: bool = False,
                     tail_threshold: int | None = None, staged_upload: bool | None = None,
-                    treelet_leaves: int | None = None, treelet_min: int | None = None) -> DeviceBvh:
+                    treelet_leaves: int | None = None, treelet_min: int | None = None,
+                    tail_group: int | None = None) -> DeviceBvh:
     """Build a BVH over ``corners`` on the queue's device.
 
     corners: (F, 3, 3) triangle corners (converted to float32, checked as
@@ -308,8 +319,10 @@ def build_on_device(context: cl.Context, queue: cl.CommandQueue, corners, volume
         (default: clrt.device.pinned.upload's choice; for benchmarks).
     treelet_leaves: leaves of the treelets restructured after PLOC (0: the
         plain PLOC tree; default: TREELET_LEAVES of the device type).
-    treelet_min: triangles a node needs to be restructured (default:
+    treelet_min: triangles a node needs to be restructured (default: by
         TREELET_MIN_TRIANGLES; always more than leaf_size).
+    tail_group: work-items of ploc_tail (a power of two; default: TAIL_GROUP
+        of the device type; for benchmarks).
     ``queue`` must have profiling enabled (clrt.device.context.create_context's does).
     Raises InputError on bad input, DeviceError when the device lacks float64.
     """
@@ -324,7 +337,8 @@ def build_on_device(context: cl.Context, queue: cl.CommandQueue, corners, volume
         raise DeviceError(f"the device BVH builder fits volumes in float64, which {device.name.strip()} lacks")
     kind = device_kind(device)
     tail_threshold = min(TAIL_THRESHOLD[kind] if tail_threshold is None else int(tail_threshold), TAIL_MAX)
-    program = build_program(context, "build_bvh.cl", build_defines(volume, kind, treelet_leaves))
+    tail_group = TAIL_GROUP[kind] if tail_group is None else int(tail_group)
+    program = build_program(context, "build_bvh.cl", build_defines(volume, kind, treelet_leaves, tail_group))
     k = _kernels(program)
     ws = _workspaces.setdefault(context.int_ptr, _Workspace(context))
     F = len(tri)
@@ -391,43 +405,62 @@ def build_on_device(context: cl.Context, queue: cl.CommandQueue, corners, volume
     # two buffers in turn.
     last, spare = (merged, clusters) if nearest is None and queued % 2 else (clusters, merged)
     launch("ploc", k["ploc_tail"], 1, last, spare, tile_kept, nodes, heights, F, state, queued, leaf_size,
-           group=TAIL_GROUP[kind])
+           group=tail_group)
     treelets = TREELET_LEAVES[kind] if treelet_leaves is None else int(treelet_leaves)
     treelets = treelets if F > 2 else 0
-    if treelets:           # the nodes with a treelet, counted per height
-        min_count = max(leaf_size + 1, TREELET_MIN_TRIANGLES if treelet_min is None else int(treelet_min))
-        launch("treelet", k["treelet_levels"], _groups(F - 1), nodes, heights, F, min_count, state)
-    head = np.empty(STATE_INTS, np.int32)
-    cl.enqueue_copy(queue, head, state, is_blocking=True)      # the PLOC iterations, the heights' counts
-    iterations = int(head[STATE["STATE_ITERATIONS"]])
 
-    # 3b. Treelet restructuring: the nodes listed by height, then one launch
-    # (build_treelet.cl); a tree taller than TREELET_LEVELS keeps PLOC's shape.
-    levels = head[STATE["STATE_LEVELS"]:][:TREELET_LEVELS]
-    if treelets and levels[-1] == 0 and levels.sum() > 0:
+    # 3b. Treelet restructuring: the nodes with a treelet counted per height
+    # and listed by height, then one launch (build_treelet.cl) of as many
+    # work-groups as the device runs at once, which take the listed nodes
+    # until none are left: the host need not read their count.  A tree
+    # taller than TREELET_LEVELS keeps PLOC's shape.
+    if treelets:
+        if treelet_min is None:
+            treelet_min = [minimum for first, minimum in TREELET_MIN_TRIANGLES if F >= first][-1]
+        min_count = max(leaf_size + 1, int(treelet_min))
         order = keys[0]
+        launch("treelet", k["treelet_levels"], _groups(F - 1), nodes, heights, F, min_count, state)
         launch("treelet", k["treelet_order"], _groups(F - 1), nodes, heights, F, min_count, state, order)
-        launch("treelet", k["treelet_restructure"], int(levels.sum()), nodes, heights, order, treelet_done, state,
-               F, min_count, leaf_size, group=TREELET_GROUP)
-    root_rows = np.empty(1, np.int32)
-    offset = root * layouts.BUILD_NODE.itemsize + layouts.BUILD_NODE.fields["rows"][1]
-    cl.enqueue_copy(queue, root_rows, nodes, src_offset=offset, is_blocking=False)
-    height = _root_height(queue, heights, F)
+        groups = min(F - 1, TREELET_GROUPS_PER_UNIT * device.max_compute_units)
+        launch("treelet", k["treelet_restructure"], groups, nodes, heights, order, treelet_done, state, F,
+               min_count, leaf_size, group=TREELET_GROUP)
 
-    # 4. Path sums, then the rows.
+    # 4. Path sums, then the rows.  With the rows' buffer made already, the
+    # host does not wait for the tree either: it queues EMIT_JUMPS pointer
+    # jumps (enough for a tree of 2**EMIT_JUMPS levels) and, should the tree be
+    # taller (emit_tree reports a node whose path did not reach the root),
+    # the rest of the jumps and emit_tree again.  Otherwise it reads the
+    # root's row count and height first.
     ancestor = [ws.get("ancestor0", 4 * num_nodes), ws.get("ancestor1", 4 * num_nodes)]
     path = [ws.get("path0", 16 * num_nodes), ws.get("path1", 16 * num_nodes)]
+    root_rows = np.empty(1, np.int32)
+    offset = root * layouts.BUILD_NODE.itemsize + layouts.BUILD_NODE.fields["rows"][1]
+    guessed = rows is not None
+    if guessed:
+        jumps = EMIT_JUMPS
+    else:
+        cl.enqueue_copy(queue, root_rows, nodes, src_offset=offset, is_blocking=False)
+        jumps = _root_height(queue, heights, F).bit_length()   # 2**jumps > height - 1, the longest path's edges
+        rows, exact_rows = _row_buffers(context, max(int(root_rows[0]), 1), keep_boxes)
     launch("emit", k["init_root_paths"], _groups(num_nodes), nodes, np.uint32(num_nodes), ancestor[0], path[0])
-    jumps = height.bit_length()        # 2**jumps > height - 1, the longest path's edges
-    for j in range(jumps):
-        launch("emit", k["jump_root_paths"], _groups(num_nodes), ancestor[j % 2], path[j % 2],
-               np.uint32(num_nodes), ancestor[1 - j % 2], path[1 - j % 2])
-    num_rows = max(int(root_rows[0]), 1)
-    if rows is None:
-        rows, exact_rows = _row_buffers(context, num_rows, keep_boxes)
-    launch("emit", k["emit_tree"], _groups(num_nodes), nodes, np.uint32(num_nodes), np.int32(root), corners_buf,
-           sorted_ids, ancestor[jumps % 2], path[jumps % 2], rows, exact_rows, tri_verts, prim_ids, state)
+
+    def jump_and_emit(first_jump: int, last_jump: int) -> None:
+        for j in range(first_jump, last_jump):
+            launch("emit", k["jump_root_paths"], _groups(num_nodes), ancestor[j % 2], path[j % 2],
+                   np.uint32(num_nodes), ancestor[1 - j % 2], path[1 - j % 2])
+        launch("emit", k["emit_tree"], _groups(num_nodes), nodes, np.uint32(num_nodes), np.int32(root), corners_buf,
+               sorted_ids, ancestor[last_jump % 2], path[last_jump % 2], rows, exact_rows, tri_verts, prim_ids,
+               state)
+
+    jump_and_emit(0, jumps)
+    head = np.empty(STATE_INTS, np.int32)
+    cl.enqueue_copy(queue, root_rows, nodes, src_offset=offset, is_blocking=False)
     cl.enqueue_copy(queue, head, state, is_blocking=True)
+    if head[STATE["STATE_ERROR"]] and guessed:      # a taller tree: more jumps, emit again
+        more = _root_height(queue, heights, F).bit_length()
+        cl.enqueue_copy(queue, state, np.zeros(1, np.int32), dst_offset=4 * STATE["STATE_ERROR"])
+        jump_and_emit(jumps, more)
+        cl.enqueue_copy(queue, head, state, is_blocking=True)
     if head[STATE["STATE_BAD_TRIANGLE"]] >= 0:
         for buffer in (rows, exact_rows, tri_verts, prim_ids):
             if buffer is not None:
@@ -436,6 +469,8 @@ def build_on_device(context: cl.Context, queue: cl.CommandQueue, corners, volume
                          f"(first: triangle {int(head[STATE['STATE_BAD_TRIANGLE']])})")
     if head[STATE["STATE_ERROR"]]:
         raise RuntimeError("device BVH build: a node did not reach the root (too few pointer jumps)")
+    num_rows = max(int(root_rows[0]), 1)
+    iterations = int(head[STATE["STATE_ITERATIONS"]])
     timings = phases.ms()
     timings["wall"] = 1e3 * (time.perf_counter() - start)
     return DeviceBvh(rows=rows, tri_verts=tri_verts, prim_ids=prim_ids, num_rows=num_rows, num_triangles=F,

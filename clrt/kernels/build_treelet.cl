@@ -23,8 +23,9 @@
 // Every inner node below is then done too, and restructuring a subtree moves
 // no node out of it: each node's treelet depends only on its own finished
 // subtree, and the tree is the same whatever the order the groups run in.
-// treelet_levels counts the nodes of each height, the host reads the counts
-// (the launch's size) and treelet_order lists the nodes by height.
+// treelet_levels counts the nodes of each height and treelet_order lists
+// the nodes by height, on the device; the work-groups take nodes until none
+// are left, so the host need not know how many there are.
 // (Tried first, on the H200 for bunny00: climbing from every triangle with a
 // counter per node, one work-item per treelet, 9 ms; restructuring inside
 // make_node, on ploc_tail's single work-group, 7 ms; one launch per PLOC
@@ -279,8 +280,9 @@ void treelet_order(const global BuildNode* nodes, const global int* heights, con
     order[place + atomic_inc(&state[STATE_LEVEL_CURSORS + height])] = num_tris + i;
 }
 
-// One work-group of TREELET_GROUP work-items per node of `order` (count
-// from the host; treelet_done[i] is 0 for inner node F + i at the start).
+// Work-groups of TREELET_GROUP work-items, as many as the device runs at
+// once (the host's choice), each taking the nodes of `order` by tickets until
+// none are left; treelet_done[i] is 0 for inner node F + i at the start.
 // The first work-item takes the ticket, waits for the children, refreshes
 // the node (its children's treelets may have become cheaper) and forms its
 // treelet; then the group solves the dynamic program together: the subsets
@@ -301,81 +303,99 @@ void treelet_restructure(global BuildNode* nodes, global int* heights, const glo
     local uchar split[TREELET_SUBSETS];    // the part holding the subset's lowest leaf
     local int root;
     const int lid = get_local_id(0);
+    // The listed nodes, none when one is taller than TREELET_LEVELS - 1 (the
+    // list is then not in height order).
+    int listed = 0;
+    for (int h = 0; h < TREELET_LEVELS; ++h)
+        listed += state[STATE_LEVELS + h];
+    if (state[STATE_LEVELS + TREELET_LEVELS - 1] != 0)
+        listed = 0;
     if (lid == 0) {
-        root = order[atomic_inc(state + STATE_TREELET_TICKET)];
-        const int child[2] = {left_of(nodes, root), right_of(nodes, root)};
-        for (int side = 0; side < 2; ++side) {
-            const int c = child[side];
-            if (c >= num_tris && has_treelet(nodes, c, min_count))
-                while (atomic_or(treelet_done + (c - num_tris), 0u) == 0u)
-                    ;
-        }
-        mem_fence(CLK_GLOBAL_MEM_FENCE);
-    }
-    // (A barrier as well as the fences, here and before the flag: PoCL's
-    // compiler keeps no memory access on the wrong side of a barrier.)
-    barrier(CLK_GLOBAL_MEM_FENCE);
-    if (lid == 0) {
-        refresh_node(nodes, heights, root, num_tris, leaf_size);
-        form_treelet(&t, nodes, heights, root, num_tris);
+        const int ticket = atomic_inc(state + STATE_TREELET_TICKET);
+        root = ticket < listed ? order[ticket] : -1;
     }
     barrier(CLK_LOCAL_MEM_FENCE);
-    const int n = t.leaves;                // the same in every work-item
-    const int full = (1 << n) - 1;
-    if (n >= 3) {                          // (fewer: one shape only)
-        for (int s = lid + 1; s <= full; s += TREELET_GROUP) {
-            float3 lo = (float3)(INFINITY), hi = (float3)(-INFINITY);
-            int c = 0;
-            for (int k = 0; k < n; ++k)
-                if (s & (1 << k)) {
-                    lo = fmin(lo, t.lo[k].xyz);
-                    hi = fmax(hi, t.hi[k].xyz);
-                    c += t.count[k];
-                }
-            area[s] = half_area(lo, hi);
-            count[s] = c;
-            if (s == (s & -s)) {
-                best[s] = t.cost[31 - clz(s)];
-                split[s] = 0;
+    // (The loop tests the shared ticket at its top: the same loop left by a
+    // `break` after a barrier never ended on PoCL 3.1.)
+    while (root >= 0) {                    // a node a turn, while tickets last
+        if (lid == 0) {
+            const int child[2] = {left_of(nodes, root), right_of(nodes, root)};
+            for (int side = 0; side < 2; ++side) {
+                const int c = child[side];
+                if (c >= num_tris && has_treelet(nodes, c, min_count))
+                    while (atomic_or(treelet_done + (c - num_tris), 0u) == 0u)
+                        ;
             }
+            mem_fence(CLK_GLOBAL_MEM_FENCE);
+        }
+        // (A barrier as well as the fences, here and before the flag: PoCL's
+        // compiler keeps no memory access on the wrong side of a barrier.)
+        barrier(CLK_GLOBAL_MEM_FENCE);
+        if (lid == 0) {
+            refresh_node(nodes, heights, root, num_tris, leaf_size);
+            form_treelet(&t, nodes, heights, root, num_tris);
         }
         barrier(CLK_LOCAL_MEM_FENCE);
-        for (int size = 2; size <= n; ++size) {
+        const int n = t.leaves;                // the same in every work-item
+        const int full = (1 << n) - 1;
+        if (n >= 3) {                          // (fewer: one shape only)
             for (int s = lid + 1; s <= full; s += TREELET_GROUP) {
-                if (popcount(s) != size)
-                    continue;
-                const int low = s & -s, rest = s ^ low;
-                float cheapest = INFINITY;
-                int cut = low;
-                // Parts p holding the lowest leaf, p != s: each split counted
-                // once (p = low plus every proper part q of the rest, q = 0 included).
-                for (int q = (rest - 1) & rest; ; q = (q - 1) & rest) {
-                    const int p = low | q;
-                    const float c = best[p] + best[s ^ p];
-                    if (c < cheapest) {
-                        cheapest = c;
-                        cut = p;
+                float3 lo = (float3)(INFINITY), hi = (float3)(-INFINITY);
+                int c = 0;
+                for (int k = 0; k < n; ++k)
+                    if (s & (1 << k)) {
+                        lo = fmin(lo, t.lo[k].xyz);
+                        hi = fmax(hi, t.hi[k].xyz);
+                        c += t.count[k];
                     }
-                    if (q == 0)
-                        break;
+                area[s] = half_area(lo, hi);
+                count[s] = c;
+                if (s == (s & -s)) {
+                    best[s] = t.cost[31 - clz(s)];
+                    split[s] = 0;
                 }
-                float cost = C_TRAVERSAL * area[s] + cheapest;
-                const float leaf_cost = C_INTERSECT * (float)count[s] * area[s];
-                if (count[s] <= (int)leaf_size && leaf_cost <= cost)
-                    cost = leaf_cost;      // its node will be emitted as a leaf, however split
-                best[s] = cost;
-                split[s] = (uchar)cut;
             }
             barrier(CLK_LOCAL_MEM_FENCE);
+            for (int size = 2; size <= n; ++size) {
+                for (int s = lid + 1; s <= full; s += TREELET_GROUP) {
+                    if (popcount(s) != size)
+                        continue;
+                    const int low = s & -s, rest = s ^ low;
+                    float cheapest = INFINITY;
+                    int cut = low;
+                    // Parts p holding the lowest leaf, p != s: each split counted
+                    // once (p = low plus every proper part q of the rest, q = 0 included).
+                    for (int q = (rest - 1) & rest; ; q = (q - 1) & rest) {
+                        const int p = low | q;
+                        const float c = best[p] + best[s ^ p];
+                        if (c < cheapest) {
+                            cheapest = c;
+                            cut = p;
+                        }
+                        if (q == 0)
+                            break;
+                    }
+                    float cost = C_TRAVERSAL * area[s] + cheapest;
+                    const float leaf_cost = C_INTERSECT * (float)count[s] * area[s];
+                    if (count[s] <= (int)leaf_size && leaf_cost <= cost)
+                        cost = leaf_cost;      // its node will be emitted as a leaf, however split
+                    best[s] = cost;
+                    split[s] = (uchar)cut;
+                }
+                barrier(CLK_LOCAL_MEM_FENCE);
+            }
+            // Rebuild only when clearly cheaper (the same tree costs the same, up to rounding).
+            if (lid == 0 && best[full] < nodes[root].cost * (1.0f - 1e-5f))
+                rebuild_treelet(&t, nodes, heights, full, split, num_tris, leaf_size);
         }
-        // Rebuild only when clearly cheaper (the same tree costs the same, up to rounding).
-        if (lid == 0 && best[full] < nodes[root].cost * (1.0f - 1e-5f))
-            rebuild_treelet(&t, nodes, heights, full, split, num_tris, leaf_size);
-    }
-    barrier(CLK_GLOBAL_MEM_FENCE);
-    if (lid == 0) {
-        mem_fence(CLK_GLOBAL_MEM_FENCE);       // the subtree's writes before the flag
-        atomic_xchg(treelet_done + (root - num_tris), 1u);
+        barrier(CLK_GLOBAL_MEM_FENCE);
+        if (lid == 0) {
+            mem_fence(CLK_GLOBAL_MEM_FENCE);       // the subtree's writes before the flag
+            atomic_xchg(treelet_done + (root - num_tris), 1u);
+            const int ticket = atomic_inc(state + STATE_TREELET_TICKET);
+            root = ticket < listed ? order[ticket] : -1;
+        }
+        barrier(CLK_LOCAL_MEM_FENCE);
     }
 #endif
 }
