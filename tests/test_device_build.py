@@ -162,6 +162,34 @@ def test_tree_is_valid_and_volumes_conservative(name, volume, leaf_size, queue):
     assert np.isfinite(stats["sah_cost"])
 
 
+def _nested(n=120) -> np.ndarray:
+    """Triangles around one point, each 1.2 times the size of the last: PLOC
+    merges them one by one, a chain as deep as the mesh is large."""
+    k = np.arange(n, dtype=np.float64)[:, None, None]
+    base = np.array([[[1.0, 0.0, 0.0], [-0.5, 0.87, 0.1], [-0.5, -0.87, -0.1]]])
+    return (1.2 ** k * base).astype(np.float32)
+
+
+@pytest.mark.parametrize("leaf_size", (1, 4))
+@pytest.mark.parametrize("name", sorted(CORNERS) + ["nested"])
+def test_restructured_trees_are_valid(name, leaf_size, queue):
+    """Treelet restructuring on every device (GPUs do it by default): a valid
+    tree with conservative boxes, for every test mesh and a chain of nested
+    triangles (a node with one big and one small child at every level)."""
+    corners = _nested() if name == "nested" else CORNERS[name]()
+    F = len(corners)
+    bvh = build_on_device(*queue, corners, leaf_size=leaf_size, keep_boxes=True, treelet_leaves=7, treelet_min=0)
+    rows, prim_ids = bvh.read_back()
+    assert np.array_equal(np.sort(prim_ids), np.arange(F))
+    tris = bvh.read_triangles()
+    slotted = np.stack([tris[k][:, :3] for k in ("v0", "v1", "v2")], axis=1)
+    depth, ranges = tree_ranges(rows, F, leaf_size)
+    assert bvh.depth == depth
+    if name == "nested":
+        assert depth > F // 2
+    check_volumes(rows, bvh.read_exact_rows(), ranges, slotted, "box")
+
+
 def test_builds_are_deterministic(queue):
     corners = _random_triangles()
     first = build_on_device(*queue, corners, leaf_size=4).read_back()
