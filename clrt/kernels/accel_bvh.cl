@@ -15,7 +15,7 @@
 #include "hit.cl"
 #include "volumes.cl"
 
-#ifdef ACCEL_BVH
+#if defined(ACCEL_BVH) && !defined(BVH_WIDE)
 
 #ifndef BVH_STACK_SIZE
 #error "build with -DBVH_STACK_SIZE=<at least the tree depth>"

@@ -51,6 +51,24 @@ inline bool volume_hit(const VolumeRay* r, float4 bound_a, float4 bound_b, float
     *t_enter = enter - VOLUME_SLACK * fabs(enter);   // a lower bound: callers compare it with tmax
     return enter <= exit;
 }
+
+// The same slab test for the eight children of a BvhWideNode at once (CPU
+// devices, accel_wide.cl), lane k for child k: every lane takes exactly the
+// steps above, so each child passes or fails as in its binary row, and
+// t_enter is the same bound.  Returns -1 in the lanes whose box the ray meets.
+inline int8 box_hit_wide(const VolumeRay* r, __global const BvhWideNode* n, float tmin, float tmax,
+                         float8* t_enter)
+{
+    const float8 t0x = (n->lo_x - r->origin.x) * r->inv_dir.x, t1x = (n->hi_x - r->origin.x) * r->inv_dir.x;
+    const float8 t0y = (n->lo_y - r->origin.y) * r->inv_dir.y, t1y = (n->hi_y - r->origin.y) * r->inv_dir.y;
+    const float8 t0z = (n->lo_z - r->origin.z) * r->inv_dir.z, t1z = (n->hi_z - r->origin.z) * r->inv_dir.z;
+    const float8 enter = fmax(fmax(fmin(t0x, t1x), fmin(t0y, t1y)), fmax(fmin(t0z, t1z), (float8)(tmin)));
+    const float8 far = fmin(fmin(fmax(t0x, t1x), fmax(t0y, t1y)),
+                            fmin(fmax(t0z, t1z), (float8)(tmax + VOLUME_SLACK * fabs(tmax))));
+    const float8 exit = far + VOLUME_SLACK * fabs(far);
+    *t_enter = enter - VOLUME_SLACK * fabs(enter);
+    return enter <= exit;
+}
 #elif defined(VOLUME_SPHERE)
 inline bool volume_hit(const VolumeRay* r, float4 bound_a, float4 bound_b, float tmin, float tmax,
                        float* t_enter)
