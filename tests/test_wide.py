@@ -11,14 +11,16 @@ builder and the device builder, with leaves of one, four and eight triangles
 (two packets).
 """
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
 import clrt
-from clrt.accel import build
 from clrt.accel.rows import child_refs
 from clrt.accel.wide import MERGE, PACKET, WIDE, collapse
 from clrt.device import geometry
+from clrt.device.build import build_acceleration
 from clrt.renderer import Renderer
 from clrt.scene import primitives
 from clrt.scene.arrays import triangle_corners
@@ -29,11 +31,17 @@ from test_accel import _hard_rays
 from test_ties import SCENES, tie_rays
 from test_watertight import watertight_rays
 
-KNOT = lambda: clrt.load_mesh(__import__("pathlib").Path(__file__).resolve().parents[1]   # noqa: E731
-                              / "assets" / "meshes" / "knot.obj")
-MESHES = {"knot": KNOT, "torus": TEST_MESHES["torus"], "crossing": TEST_MESHES["crossing"],
-          "heightfield": TEST_MESHES["heightfield"], **{f"ties-{k}": (lambda f=f: f(np.random.default_rng(3)))
-                                                        for k, f in SCENES.items()}}
+KNOT_FILE = Path(__file__).resolve().parents[1] / "assets" / "meshes" / "knot.obj"
+
+
+def knot():
+    """A closed tube of 4,320 triangles shipped with clrt: a real mesh without ../shared."""
+    return clrt.load_mesh(KNOT_FILE)
+
+
+MESHES = {"knot": knot, "torus": TEST_MESHES["torus"], "crossing": TEST_MESHES["crossing"],
+          "heightfield": TEST_MESHES["heightfield"],
+          **{f"ties-{name}": (lambda make=make: make(np.random.default_rng(3))) for name, make in SCENES.items()}}
 
 
 def _walks(mesh, builder, leaf, device, monkeypatch):
@@ -99,7 +107,7 @@ def test_wide_walk_answers_as_the_binary_walk_and_brute_force(name, builder, lea
 
 
 def test_wide_walk_renders_as_the_binary_walk(device, monkeypatch):
-    scene = scene_from_mesh(KNOT())
+    scene = scene_from_mesh(knot())
     camera = Camera.framing(scene.bounds, 48, 36)
     frames = []
     for kinds in (geometry.WIDE_BVH_KINDS, ()):
@@ -114,7 +122,7 @@ def test_wide_walk_renders_as_the_binary_walk(device, monkeypatch):
 
 
 def test_refit_keeps_the_wide_walk_exact(device):
-    mesh = KNOT()
+    mesh = knot()
     accel = clrt.Accel(mesh, device=device)
     if accel.geometry.wide is None:
         pytest.skip("the device under test does not walk the wide BVH")
@@ -142,10 +150,10 @@ def test_only_cpu_devices_walk_wide_and_only_box_trees_unsplit(device, monkeypat
         assert len(wide.geometry.args) == len(wide.geometry.arg_types) == 6
 
 
-@pytest.mark.parametrize("builder, leaf", [("sah", 1), ("sah", 4), ("paper", 8)])
-def test_collapse_keeps_every_box_and_every_triangle_once(builder, leaf):
-    corners = triangle_corners(KNOT()).astype(np.float32)
-    acc = build(corners, "box", builder, leaf)
+@pytest.mark.parametrize("builder, leaf", [("sah", 1), ("sah", 4), ("paper", 8), ("device", 4)])
+def test_collapse_keeps_every_box_and_every_triangle_once(builder, leaf, device):
+    corners = triangle_corners(knot()).astype(np.float32)
+    acc = build_acceleration(corners, "box", builder, leaf, device)
     wide = collapse(acc.rows, corners[acc.prim_ids])
     nodes, packets = wide.nodes, wide.packets
     # every slot in exactly one packet lane, its corners copied exactly
