@@ -60,6 +60,7 @@ inline Hit query_hits(const Geometry* g, float3 origin, float3 dir, float tmin, 
 {
     const ShearedRay r = shear_ray(origin, dir);
     const VolumeRay vr = volume_ray(origin, dir);
+    const BoxPlanes planes = box_planes(&vr);
     Hit best = miss_hit();
     int best_id = -1;
     int2 stack[WIDE_STACK_SIZE];       // (node or first packet, packet count: 0 for a node)
@@ -74,12 +75,20 @@ inline Hit query_hits(const Geometry* g, float3 origin, float3 dir, float tmin, 
         } else {
             __global const BvhWideNode* n = g->wide_nodes + current.x;
             float8 enter;
-            uint lanes = lane_bits(box_hit_wide(&vr, n, tmin, tmax, &enter) & (n->count >= 0));
+            const int8 met = planes.oblique ? box_hit_wide_oblique(&vr, planes, n, tmin, tmax, &enter)
+                                            : box_hit_wide(&vr, n, tmin, tmax, &enter);
+            uint lanes = lane_bits(met & (n->count >= 0));
             if (lanes) {
+                __global const int* child = (__global const int*)&n->child;
+                __global const int* count = (__global const int*)&n->count;
+                int k = 31 - clz(lanes & (0u - lanes));   // the lowest lane left
+                lanes &= lanes - 1u;
+                if (!lanes) {                             // one child met, the most common case
+                    current = (int2)(child[k], count[k]);
+                    continue;
+                }
                 const int base = sp;
-                do {
-                    const int k = 31 - clz(lanes & (0u - lanes));   // the lowest lane left
-                    lanes &= lanes - 1u;
+                for (;;) {
                     const float t = enter[k];
                     int j = sp++;
                     if (query != QUERY_ALL)
@@ -87,9 +96,13 @@ inline Hit query_hits(const Geometry* g, float3 origin, float3 dir, float tmin, 
                             stack[j] = stack[j - 1];
                             stack_t[j] = stack_t[j - 1];
                         }
-                    stack[j] = (int2)(((__global const int*)&n->child)[k], ((__global const int*)&n->count)[k]);
+                    stack[j] = (int2)(child[k], count[k]);
                     stack_t[j] = t;
-                } while (lanes);
+                    if (!lanes)
+                        break;
+                    k = 31 - clz(lanes & (0u - lanes));
+                    lanes &= lanes - 1u;
+                }
                 current = stack[--sp];    // the nearest
                 continue;
             }

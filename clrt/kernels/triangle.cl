@@ -99,7 +99,8 @@ inline bool intersect_triangle_culled(const ShearedRay* r, __global const Triang
 // order and rounding (FP_CONTRACT is off, the products are Kahan's), so each
 // lane's answer is the scalar test's bit for bit; only the early exits become
 // masks.  Returns -1 in the lanes of a hit with tmin < t <= tmax (empty lanes
-// never hit), with t and the barycentric weights in *t_out, *u_out, *v_out.
+// never hit), with t and the barycentric weights in *t_out, *u_out, *v_out
+// (set only when some lane hits).
 inline int4 intersect_packet_culled(const ShearedRay* r, __global const TrianglePacket* p,
                                     float tmin, float tmax, const int cull,
                                     float4* t_out, float4* u_out, float4* v_out)
@@ -115,11 +116,13 @@ inline int4 intersect_packet_culled(const ShearedRay* r, __global const Triangle
     const float4 U = diff_of_products4(Cx, By, Cy, Bx);
     const float4 V = diff_of_products4(Ax, Cy, Ay, Cx);
     const float4 W = diff_of_products4(Bx, Ay, By, Ax);
+    int4 hit = (p->slot >= 0) & !(((U < 0.0f) | (V < 0.0f) | (W < 0.0f)) & ((U > 0.0f) | (V > 0.0f) | (W > 0.0f)));
+    if (!any(hit))      // most packets: the ray passes beside all four, no division needed
+        return hit;
     const float4 det = U + V + W;
     const float4 T = U * (r->shear.z * Az) + V * (r->shear.z * Bz) + W * (r->shear.z * Cz);
     const float4 t = T / det;
-    int4 hit = (p->slot >= 0) & !(((U < 0.0f) | (V < 0.0f) | (W < 0.0f)) & ((U > 0.0f) | (V > 0.0f) | (W > 0.0f)))
-        & (det != 0.0f) & (t > tmin) & (t <= tmax);
+    hit &= (det != 0.0f) & (t > tmin) & (t <= tmax);
     if (cull == CULL_BACK)
         hit &= det >= 0.0f;
     else if (cull == CULL_FRONT)
