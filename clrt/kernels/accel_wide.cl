@@ -18,6 +18,7 @@
 #include "hit.cl"
 #include "triangle.cl"
 #include "volumes.cl"
+#include "stack.cl"
 
 #if defined(ACCEL_BVH) && defined(BVH_WIDE)
 
@@ -107,12 +108,8 @@ inline Hit query_hits(const Geometry* g, float3 origin, float3 dir, float tmin, 
                 continue;
             }
         }
-        do {
-            if (sp == 0)
-                return best;
-            --sp;
-        } while (stack_t[sp] > tmax);
-        current = stack[sp];
+        if (!resume_postponed(stack, stack_t, &sp, tmax, &current))
+            return best;
     }
 }
 
