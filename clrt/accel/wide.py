@@ -11,11 +11,13 @@ its triangle4 leaves work the same way).  The volumes are the binary rows'
 own, bit for bit, so the wide walk is exactly as conservative as the binary
 one and finds the same hits.
 
-Collapsing: each wide node starts from one binary row's two children and
-repeatedly opens its inner child of largest surface area (the child most rays
-enter) until it holds ``WIDE`` children or only leaves; inner children left
-become wide nodes of their own.  The work is done level by level for all
-nodes of a level at once, in numpy.
+Collapsing: a subtree of at most ``MERGE`` triangles is taken as one leaf
+(its slots are consecutive).  Each wide node starts from one binary row's two
+children and repeatedly opens its inner child of largest surface area (the
+child most rays enter) until it holds ``WIDE`` children or only leaves; inner
+children left become wide nodes of their own.  The work is done level by
+level for all nodes of a level at once, in numpy.  (The SAH-optimal collapse
+of Ylitie et al. 2017 would cost about 4 % less by the SAH on camel.)
 """
 
 from __future__ import annotations

@@ -23,10 +23,11 @@ from clrt.scene.arrays import triangle_verts
 
 # Device kinds (clrt.device.context.device_kind) that walk the wide BVH of
 # clrt/accel/wide.py (accel_wide.cl) where it applies -- box volumes, buffers
-# not split -- instead of the binary rows.  On PoCL it took 40-50 % off every
-# ray set (docs/benchmarks.md); a GPU runs a work-item's walk in one lane,
-# where it would only read more bytes a node, and builds none of it.  Tests
-# empty it to compare the two walks on one device.
+# not split -- instead of the binary rows.  On PoCL it took a third to a half
+# off every ray set's kernel time (docs/benchmarks.md); a GPU runs a
+# work-item's walk in one lane, where it would only read more bytes a node,
+# and builds none of it.  Tests empty it to compare the two walks on one
+# device.
 WIDE_BVH_KINDS = ("cpu",)
 
 

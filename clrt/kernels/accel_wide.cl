@@ -84,7 +84,7 @@ inline Hit query_hits(const Geometry* g, float3 origin, float3 dir, float tmin, 
                 __global const int* count = (__global const int*)&n->count;
                 int k = 31 - clz(lanes & (0u - lanes));   // the lowest lane left
                 lanes &= lanes - 1u;
-                if (!lanes) {                             // one child met, the most common case
+                if (!lanes) {                             // one child met: no stack
                     current = (int2)(child[k], count[k]);
                     continue;
                 }
