@@ -23,15 +23,6 @@ inline float diff_of_products(float a, float b, float c, float d)
     return f + e;
 }
 
-// The same, lane by lane, for the packet test below.
-inline float4 diff_of_products4(float4 a, float4 b, float4 c, float4 d)
-{
-    const float4 w = c * d;
-    const float4 e = fma(-c, d, w);
-    const float4 f = fma(a, b, -w);
-    return f + e;
-}
-
 // Per-ray constants of the shear transform, computed once per ray.
 typedef struct {
     float4 origin;
@@ -94,6 +85,18 @@ inline bool intersect_triangle_culled(const ShearedRay* r, __global const Triang
     return true;
 }
 
+#ifdef BVH_WIDE
+// The packet test of CPU devices (accel_wide.cl); other programs never see it.
+
+// diff_of_products lane by lane, for the packet test below.
+inline float4 diff_of_products4(float4 a, float4 b, float4 c, float4 d)
+{
+    const float4 w = c * d;
+    const float4 e = fma(-c, d, w);
+    const float4 f = fma(a, b, -w);
+    return f + e;
+}
+
 // The same test for the four triangles of a TrianglePacket (layouts.h) at once,
 // lane k for triangle k: every lane takes exactly the steps above, in the same
 // order and rounding (FP_CONTRACT is off, the products are Kahan's), so each
@@ -132,5 +135,6 @@ inline int4 intersect_packet_culled(const ShearedRay* r, __global const Triangle
     *v_out = W / det;
     return hit;
 }
+#endif
 
 #endif

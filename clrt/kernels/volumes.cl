@@ -52,8 +52,9 @@ inline bool volume_hit(const VolumeRay* r, float4 bound_a, float4 bound_b, float
     return enter <= exit;
 }
 
+#ifdef BVH_WIDE
 // The same slab test for the eight children of a BvhWideNode at once (CPU
-// devices, accel_wide.cl), lane k for child k: every lane takes exactly the
+// devices, accel_wide.cl; other programs never see it), lane k for child k: every lane takes exactly the
 // steps above, so each child passes or fails as in its binary row, and
 // t_enter is the same bound.  Returns -1 in the lanes whose box the ray meets.
 inline int8 box_hit_wide(const VolumeRay* r, __global const BvhWideNode* n, float tmin, float tmax,
@@ -116,6 +117,7 @@ inline int8 box_hit_wide_oblique(const VolumeRay* r, BoxPlanes planes, __global 
     *t_enter = enter - VOLUME_SLACK * fabs(enter);
     return enter <= exit;
 }
+#endif
 #elif defined(VOLUME_SPHERE)
 inline bool volume_hit(const VolumeRay* r, float4 bound_a, float4 bound_b, float tmin, float tmax,
                        float* t_enter)
