@@ -86,6 +86,30 @@ Every volume encloses all triangles of its subtree, rounded outwards in float32
 order ("slots"); ``prim_ids`` (int32 per slot) maps a slot back to the input
 triangle index, which is what queries report.
 
+``BvhWideNode`` (256 B) -- the same BVH as CPU devices walk it (clrt/accel/wide.py;
+built only for a CPU device, box volumes, buffers not split): up to eight
+children per node, their boxes stored lane by lane, so that one float8
+operation treats all of them (lane k = child k).  Nodes level by level, the
+root at 0:
+    0: lo_x   float8  min corners of the children's boxes, x (bit for bit the
+   32: lo_y   float8  boxes of the BvhPairNode rows they come from)
+   64: lo_z   float8
+   96: hi_x   float8  max corners
+  128: hi_y   float8
+  160: hi_z   float8
+  192: child  int8    count == 0: node of the child | > 0: its leaf's first TrianglePacket
+  224: count  int8    0: inner child | > 0: a leaf of that many packets | -1: no child
+                      (its lane's box is zeros; the kernels skip it by the count)
+
+``TrianglePacket`` (160 B) -- up to four triangles of one leaf, coordinates lane by
+lane (lane k = triangle k), so that one float4 operation tests all four:
+    0: v0     float4[3]  x, y, z of the first corners
+   48: v1     float4[3]  x, y, z of the second corners
+   96: v2     float4[3]  x, y, z of the third corners
+  144: slot   int4       slot of each lane's triangle, -1: an empty lane (corners 0)
+A leaf's triangles fill its packets in slot order; the triangle buffers and
+``prim_ids`` stay as they are (results and shading read them by slot).
+
 ``BuildNode`` (48 B) -- scratch of the device builder (clrt/device/build.py), one per
 node of its binary tree: triangles are nodes 0..F-1 (in Morton order), merged
 nodes F..2F-2 in the order they are made, the root last:
@@ -123,6 +147,10 @@ TEXEL = np.dtype((np.uint8, 4))
 SRGB_TABLE = np.dtype((np.float32, 256))
 LIGHT = np.dtype([("position", float4), ("color", float4)])
 BVH_PAIR_NODE = np.dtype([("left_a", float4), ("left_b", float4), ("right_a", float4), ("right_b", float4)])
+float8, int8, int4 = np.dtype((np.float32, 8)), np.dtype((np.int32, 8)), np.dtype((np.int32, 4))
+BVH_WIDE_NODE = np.dtype([("lo_x", float8), ("lo_y", float8), ("lo_z", float8), ("hi_x", float8),
+                          ("hi_y", float8), ("hi_z", float8), ("child", int8), ("count", int8)])
+TRIANGLE_PACKET = np.dtype([("v0", float4, 3), ("v1", float4, 3), ("v2", float4, 3), ("slot", int4)])
 BUILD_NODE = np.dtype([("lo", float4), ("hi", float4), ("parent", np.int32), ("count", np.int32),
                        ("rows", np.int32), ("cost", np.float32)])
 BUILD_CLUSTER = np.dtype([("lo", float4), ("hi", float4)])
@@ -138,6 +166,8 @@ STRUCTS = {
     "Texture": TEXTURE,
     "Light": LIGHT,
     "BvhPairNode": BVH_PAIR_NODE,
+    "BvhWideNode": BVH_WIDE_NODE,
+    "TrianglePacket": TRIANGLE_PACKET,
     "BuildNode": BUILD_NODE,
     "BuildCluster": BUILD_CLUSTER,
 }

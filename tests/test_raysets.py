@@ -112,6 +112,13 @@ def test_embree_traces_the_sets_alike(torus, sets, device):
         assert theirs["sum_t"] == pytest.approx(ours["sum_t"], rel=1e-3), kind
 
 
+def test_embree_on_several_cores_times_every_share(torus, sets):
+    pytest.importorskip("embreex", reason="Embree comparison needs the raybench extra (the test extra has it)")
+    o, d, reach = sets["ao"]
+    m = raysets.embree_processes_measure(torus, o[:2000], d[:2000], reach, processes=2, repeat=1, warmup=0)
+    assert m["closest_wall_ms"] > 0 and m["any_wall_ms"] > 0
+
+
 @pytest.mark.parametrize("content, message", [
     (b"", "not a ray file"),
     (b"\0" * 25, "not a ray file"),

@@ -26,7 +26,9 @@ the median of the launches' profiling times after a warm-up, ``wall`` the host
 clock around the call and its finish.  Hits and the sum of hit distances identify
 the result: the same file gives the same figures on every device and variant.
 ``--embree`` adds Embree's figures for the same rays on the host CPU (wall
-clock, rays on the host): the yardstick for clrt on PoCL.
+clock, rays on the host): the yardstick for clrt on PoCL.  embreex holds the
+GIL while it traces, so that is Embree on one core; ``--embree-processes N``
+adds Embree on N cores (N processes, each tracing its share of the rays).
 """
 
 from __future__ import annotations
@@ -220,9 +222,56 @@ def embree_measure(mesh, origins, directions, tmax=np.inf, repeat: int = 5, warm
             "any_agrees": bool(np.array_equal(hit, np.asarray(occluded) >= 0)), "prim": prim}
 
 
+def _embree_worker(vertices, faces, origins, directions, limit, repeat, warmup, barrier, results):
+    """One process of embree_processes_measure: its share of the rays, each
+    repetition started with the others' (the barrier)."""
+    from embreex import mesh_construction, rtcore_scene
+    scene = rtcore_scene.EmbreeScene()
+    mesh_construction.TriangleMesh(scene, vertices, faces)
+    times = []
+    for i in range(warmup + repeat):
+        row = []
+        for query in ("INTERSECT", "OCCLUDED"):
+            barrier.wait()
+            start = time.perf_counter()
+            if query == "INTERSECT":
+                scene.run(origins, directions, dists=limit.copy(), output=1)
+            else:
+                scene.run(origins, directions, dists=limit.copy(), query=query)
+            row.append(time.perf_counter() - start)
+        if i >= warmup:
+            times.append(row)
+    results.put(times)
+
+
+def embree_processes_measure(mesh, origins, directions, tmax=np.inf, processes: int = 2, repeat: int = 5,
+                             warmup: int = 2) -> dict:
+    """Embree on ``processes`` cores: embreex holds the GIL while it traces, so
+    one process reaches one core; here each of ``processes`` processes traces
+    its share of the rays, all started together.  Median over the
+    repetitions of the slowest process's wall ms, closest-hit and occlusion."""
+    import multiprocessing
+    context = multiprocessing.get_context("spawn")
+    barrier, results = context.Barrier(processes), context.Queue()
+    vertices, faces = np.asarray(mesh.vertices, np.float32), np.asarray(mesh.faces, np.int32)
+    limit = np.full(len(origins), min(tmax, 3e38), np.float32)
+    bounds = np.linspace(0, len(origins), processes + 1).astype(int)
+    workers = [context.Process(target=_embree_worker, args=(vertices, faces, origins[a:b], directions[a:b],
+                                                            limit[a:b], repeat, warmup, barrier, results))
+               for a, b in zip(bounds[:-1], bounds[1:])]
+    for w in workers:
+        w.start()
+    times = np.array([results.get() for _ in workers])       # (process, repetition, query)
+    for w in workers:
+        w.join()
+    slowest = 1e3 * times.max(axis=0)
+    return {"closest_wall_ms": float(np.median(slowest[:, 0])), "any_wall_ms": float(np.median(slowest[:, 1]))}
+
+
 def run(mesh_path=None, sets=RAY_SETS, count: int = 1_000_000, seed: int = 0, variants=(("box", "sah"),),
         device=None, size=(1920, 1080), write_dir=None, read_files=(), tmax=np.inf, repeat: int = 5,
-        warmup: int = 2, embree: bool = False, groups=("default",), out=None) -> list[dict]:
+        warmup: int = 2, embree: bool = False, groups=("default",), embree_processes: int = 0,
+        out=None) -> list[dict]:
     from clrt.query import Accel
     from clrt.scene import primitives
     from clrt.scene.load import load_mesh
@@ -280,6 +329,14 @@ def run(mesh_path=None, sets=RAY_SETS, count: int = 1_000_000, seed: int = 0, va
                   f"| {m['sum_t']:.6f} | {m['any_wall_ms']:.3f} (wall) | {n / m['any_wall_ms'] / 1e3:,.1f} "
                   f"| {'yes' if m['any_agrees'] else 'NO'} |", file=out, flush=True)
             rows.append({"rays": label, "accel": "embree", "builder": "-", **m})
+    if embree_processes:
+        for label, o, d, reach in ray_sets:
+            m = embree_processes_measure(mesh, o, d, reach, embree_processes, repeat, warmup)
+            n = len(o)
+            print(f"| {label} | {n:,} | Embree, {embree_processes} processes | - | - | - | - "
+                  f"| {m['closest_wall_ms']:.3f} | {n / m['closest_wall_ms'] / 1e3:,.1f} | - | - "
+                  f"| {m['any_wall_ms']:.3f} (wall) | {n / m['any_wall_ms'] / 1e3:,.1f} | - |", file=out, flush=True)
+            rows.append({"rays": label, "accel": f"embree x{embree_processes}", "builder": "-", **m})
     return rows
 
 
@@ -304,7 +361,10 @@ def main(argv=None) -> int:
                    default=["default"], help="work-group sizes of the query kernels to compare, e.g. "
                                              "driver,64,128 (default: clrt's, clrt.query.accel.QUERY_GROUP)")
     p.add_argument("--embree", action="store_true",
-                   help="also run the rays through Embree on the host CPU (needs embreex: the raybench extra)")
+                   help="also run the rays through Embree on the host CPU (needs embreex: the raybench extra); "
+                        "embreex holds the GIL, so this is Embree on one core")
+    p.add_argument("--embree-processes", type=int, default=0, metavar="N",
+                   help="also run Embree in N processes at once, each on its share of the rays: Embree on N cores")
     args = p.parse_args(argv)
     if args.repeat < 1 or args.warmup < 0:
         p.error("--repeat must be positive and --warmup not negative")
@@ -314,7 +374,9 @@ def main(argv=None) -> int:
         p.error(f"--write: {args.write} is not a folder")
     if args.read and (args.set or args.write):
         p.error("--read runs files; it does not go with --set or --write")
-    if args.embree:
+    if args.embree_processes < 0:
+        p.error("--embree-processes must not be negative")
+    if args.embree or args.embree_processes:
         try:
             import embreex  # noqa: F401
         except ImportError:
@@ -322,7 +384,7 @@ def main(argv=None) -> int:
     variants = [(a, b) for a in (args.accel or ["box"]) for b in (args.builder or ["sah"])]
     return exit_code(run, args.mesh, tuple(args.set or RAY_SETS), args.rays, args.seed, variants, args.device,
                      args.size, args.write, tuple(args.read or ()), args.tmax, args.repeat, args.warmup,
-                     args.embree, tuple(args.group))
+                     args.embree, tuple(args.group), args.embree_processes)
 
 
 if __name__ == "__main__":

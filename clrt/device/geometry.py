@@ -13,19 +13,43 @@ import pyopencl as cl
 
 from clrt.accel import Acceleration
 from clrt.accel.rows import child_refs
+from clrt.accel.wide import WIDE, WideBvh, collapse
 from clrt.config import MAX_PARTS, VOLUME_DEFINES, stack_size
-from clrt.device.context import format_bytes
+from clrt.device.context import device_kind, format_bytes
 from clrt.errors import DeviceMemoryError, InputError
 from clrt.layouts import TRIANGLE_VERTS
 from clrt.scene.arrays import triangle_verts
 
 
-def accel_defines(acceleration: Acceleration) -> dict:
-    """Program build options that select the traversal of ``acceleration``."""
+# Device kinds (clrt.device.context.device_kind) that walk the wide BVH of
+# clrt/accel/wide.py (accel_wide.cl) where it applies -- box volumes, buffers
+# not split -- instead of the binary rows.  On PoCL it took a third to a half
+# off every ray set's kernel time (docs/benchmarks.md); a GPU runs a
+# work-item's walk in one lane, where it would only read more bytes a node,
+# and builds none of it.  Tests empty it to compare the two walks on one
+# device.
+WIDE_BVH_KINDS = ("cpu",)
+
+
+def accel_defines(acceleration: Acceleration, wide: WideBvh | None = None) -> dict:
+    """Program build options that select the traversal of ``acceleration``
+    (with ``wide``, its wide BVH: the walk of accel_wide.cl)."""
     if not acceleration.is_bvh:
         return {}
-    return {"ACCEL_BVH": None, VOLUME_DEFINES[acceleration.accel]: None,
-            "BVH_STACK_SIZE": stack_size(acceleration.depth)}
+    defines = {"ACCEL_BVH": None, VOLUME_DEFINES[acceleration.accel]: None,
+               "BVH_STACK_SIZE": stack_size(acceleration.depth)}
+    if wide is not None:
+        # Each node on the path pushes at most WIDE - 1 children and takes one;
+        # the wide tree is no deeper than the binary one, whose rounded depth
+        # keeps trees of similar depth on one program.
+        defines.update(BVH_WIDE=None, WIDE_STACK_SIZE=(WIDE - 1) * defines["BVH_STACK_SIZE"] + 1)
+    return defines
+
+
+def walks_wide(context: cl.Context, acceleration: Acceleration, split: bool) -> bool:
+    """Do queries on ``context`` walk the wide BVH of ``acceleration``?"""
+    return (acceleration.accel == "box" and not split
+            and all(device_kind(d) in WIDE_BVH_KINDS for d in context.devices))
 
 
 def check_fits(device, label: str, nbytes: int, reserve: int = 0) -> None:
@@ -81,7 +105,12 @@ class DeviceGeometry:
         if built is not None and self.shifts is not None:    # split into parts: uploaded as always
             built = None
             arrays["tris"] = triangle_verts(corners[prim_ids])
-        self.defines = dict(accel_defines(acceleration))
+        # The wide BVH only where it is walked: other devices pay nothing.
+        self.wide = (collapse(acceleration.rows, corners[prim_ids].astype(np.float32, copy=False))
+                     if walks_wide(context, acceleration, self.shifts is not None) else None)
+        if self.wide is not None:
+            arrays.update(wide_nodes=self.wide.nodes, packets=self.wide.packets)
+        self.defines = dict(accel_defines(acceleration, self.wide))
         if self.shifts is not None:
             self.defines["SPLIT_BUFFERS"] = None
             self.defines.update({f"{name}_PART_SHIFT": shift for name, shift in self.shifts.items()})
@@ -111,7 +140,7 @@ class DeviceGeometry:
     def arg_types(self) -> list:
         """The types of GEOMETRY_PARAMS (clrt.device.program.typed_kernel)."""
         parts = [None] * len(self.buffers["tris"])
-        return [*parts, np.uint32, *parts, *parts]
+        return [*parts, np.uint32, *parts, *parts] + ([None, None] if self.wide is not None else [])
 
     def extra_arg_types(self, name: str) -> list:
         """The types of an extra buffer's parameters: one buffer, or its parts."""
@@ -121,7 +150,8 @@ class DeviceGeometry:
     def args(self) -> tuple:
         """Kernel arguments matching GEOMETRY_PARAMS in geometry.cl."""
         b = self.buffers
-        return (*b["tris"], self.num_tris, *b["nodes"], *b["prim_ids"])
+        wide = (*b["wide_nodes"], *b["packets"]) if self.wide is not None else ()
+        return (*b["tris"], self.num_tris, *b["nodes"], *b["prim_ids"], *wide)
 
     def refit(self, queue: cl.CommandQueue, corners: np.ndarray) -> None:
         """Move the triangles to ``corners`` (F, 3, 3) float32, input order, the same
@@ -142,6 +172,10 @@ class DeviceGeometry:
             self._refit = _RefitPlan(queue.context, acceleration)
         self._refit.run(queue, self.buffers["nodes"][0], self.buffers["tris"][0])
         cl.enqueue_copy(queue, acceleration.rows, self.buffers["nodes"][0])
+        if self.wide is not None:   # the same wide tree, the refitted boxes and moved corners
+            self.wide.refit(acceleration.rows, corners[acceleration.prim_ids].astype(np.float32, copy=False))
+            for name, array in (("wide_nodes", self.wide.nodes), ("packets", self.wide.packets)):
+                cl.enqueue_copy(queue, self.buffers[name][0], array)
 
     def replace(self, queue: cl.CommandQueue, name: str, array: np.ndarray) -> None:
         """Upload ``array`` as the extra buffer ``name`` anew (a scene not split into

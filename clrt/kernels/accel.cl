@@ -1,6 +1,7 @@
 // The acceleration structure behind every ray query, chosen when the program
-// is built: -DACCEL_BVH (with a VOLUME_* shape and BVH_STACK_SIZE) or nothing
-// (brute force).  Both read the same Geometry (geometry.cl), so kernels and
+// is built: -DACCEL_BVH (with a VOLUME_* shape and BVH_STACK_SIZE; on CPU
+// devices also -DBVH_WIDE, the wide walk of accel_wide.cl) or nothing (brute
+// force).  Both read the same Geometry (geometry.cl), so kernels and
 // host need no variants, and both provide query_hits(), from which the
 // queries below are made.
 #ifndef CLRT_ACCEL_CL
@@ -11,6 +12,7 @@
 // Each file holds its code under its own #ifdef: the host expands includes
 // unconditionally (clrt/device/program.py), so the choice lives in the files.
 #include "accel_bvh.cl"
+#include "accel_wide.cl"
 #include "accel_none.cl"
 
 // Nearest hit in (tmin, tmax]; Hit.prim is the slot (see reported_hit).

@@ -14,8 +14,9 @@
 #include "geometry.cl"
 #include "hit.cl"
 #include "volumes.cl"
+#include "stack.cl"
 
-#ifdef ACCEL_BVH
+#if defined(ACCEL_BVH) && !defined(BVH_WIDE)
 
 #ifndef BVH_STACK_SIZE
 #error "build with -DBVH_STACK_SIZE=<at least the tree depth>"
@@ -63,12 +64,8 @@ inline Hit query_hits(const Geometry* g, float3 origin, float3 dir, float tmin, 
                 continue;
             }
         }
-        do {
-            if (sp == 0)
-                return best;
-            --sp;
-        } while (stack_t[sp] > tmax);
-        current = stack[sp];
+        if (!resume_postponed(stack, stack_t, &sp, tmax, &current))
+            return best;
     }
 }
 

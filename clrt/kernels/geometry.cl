@@ -6,6 +6,9 @@
 //   num_tris  number of slots
 //   nodes     BVH rows with both children's volumes (one unused row without a BVH)
 //   prim_ids  input triangle index of each slot (the identity without a BVH)
+// With -DBVH_WIDE (CPU devices, clrt/device/geometry.py) two more:
+//   wide_nodes  the same BVH collapsed into nodes of eight children (accel_wide.cl)
+//   packets     each leaf's triangles in packets of four
 // Each buffer may arrive in parts (split.cl): elements are reached through
 // SPLIT_AT, never by indexing a field.
 #ifndef CLRT_GEOMETRY_CL
@@ -19,11 +22,26 @@ typedef struct {
     uint num_tris;
     SPLIT_FIELD(BvhPairNode, nodes);
     SPLIT_FIELD(int, prim_ids);
+#ifdef BVH_WIDE
+    __global const BvhWideNode* wide_nodes;
+    __global const TrianglePacket* packets;
+#endif
 } Geometry;
 
+#ifdef BVH_WIDE
+#ifdef SPLIT_BUFFERS
+#error "the wide BVH is built only for scenes whose buffers are not split"
+#endif
+#define WIDE_PARAMS , __global const BvhWideNode* wide_nodes, __global const TrianglePacket* packets
+#define WIDE_ARGS , wide_nodes, packets
+#else
+#define WIDE_PARAMS
+#define WIDE_ARGS
+#endif
+
 #define GEOMETRY_PARAMS SPLIT_PARAMS(TriangleVerts, tris), const uint num_tris, \
-    SPLIT_PARAMS(BvhPairNode, nodes), SPLIT_PARAMS(int, prim_ids)
-#define GEOMETRY_ARGS tris, num_tris, nodes, prim_ids
+    SPLIT_PARAMS(BvhPairNode, nodes), SPLIT_PARAMS(int, prim_ids) WIDE_PARAMS
+#define GEOMETRY_ARGS tris, num_tris, nodes, prim_ids WIDE_ARGS
 
 #ifdef SPLIT_BUFFERS
 #undef GEOMETRY_ARGS
@@ -38,6 +56,10 @@ inline Geometry make_geometry(GEOMETRY_PARAMS)
     g.num_tris = num_tris;
     SPLIT_STORE(g, nodes);
     SPLIT_STORE(g, prim_ids);
+#ifdef BVH_WIDE
+    g.wide_nodes = wide_nodes;
+    g.packets = packets;
+#endif
     return g;
 }
 

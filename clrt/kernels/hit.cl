@@ -63,13 +63,11 @@ inline void sink_hit(HitSink* sink, int prim, float t)
     }
 }
 
-// Test the triangle in `slot` for `query`; true once the query is answered.
-inline bool visit_triangle(const Geometry* g, const ShearedRay* r, int slot, float tmin, float* tmax,
-                           const int query, Hit* best, int* best_id, HitSink* sink)
+// Take a hit (t, u, v) of the triangle in `slot` for `query`; true once the
+// query is answered.
+inline bool record_hit(const Geometry* g, int slot, float t, float u, float v, float* tmax,
+                       const int query, Hit* best, int* best_id, HitSink* sink)
 {
-    float t, u, v;
-    if (!intersect_triangle_culled(r, SPLIT_AT(g, tris, slot), tmin, *tmax, sink ? sink->cull : CULL_NONE, &t, &u, &v))
-        return false;
     if (query == QUERY_ANY) {
         *best = make_hit(t, slot, u, v);
         return true;
@@ -85,6 +83,16 @@ inline bool visit_triangle(const Geometry* g, const ShearedRay* r, int slot, flo
         *tmax = t;   // inclusive: an equal distance with a lower index is still taken
     }
     return false;
+}
+
+// Test the triangle in `slot` for `query`; true once the query is answered.
+inline bool visit_triangle(const Geometry* g, const ShearedRay* r, int slot, float tmin, float* tmax,
+                           const int query, Hit* best, int* best_id, HitSink* sink)
+{
+    float t, u, v;
+    if (!intersect_triangle_culled(r, SPLIT_AT(g, tris, slot), tmin, *tmax, sink ? sink->cull : CULL_NONE, &t, &u, &v))
+        return false;
+    return record_hit(g, slot, t, u, v, tmax, query, best, best_id, sink);
 }
 
 #endif

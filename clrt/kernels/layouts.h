@@ -66,6 +66,19 @@ typedef struct {
 #define PAIR_LEFT(n) ((int2)(as_int((n).left_a.w), as_int((n).left_b.w)))
 #define PAIR_RIGHT(n) ((int2)(as_int((n).right_a.w), as_int((n).right_b.w)))
 
+// The wide BVH of CPU devices (accel_wide.cl); fields as layouts.py says.
+typedef struct {
+    float8 lo_x, lo_y, lo_z;   // lane k: min corner of child k's box
+    float8 hi_x, hi_y, hi_z;   // lane k: max corner
+    int8 child;                // lane k: node of child k, or its leaf's first packet
+    int8 count;                // lane k: 0 inner, > 0 packets of a leaf, -1 no child
+} BvhWideNode;
+
+typedef struct {
+    float4 v0[3], v1[3], v2[3];   // [axis], lane k: that corner of triangle k
+    int4 slot;                    // lane k: slot of triangle k, -1: empty
+} TrianglePacket;
+
 // Scratch of the device builder (build_bvh.cl); fields as layouts.py says.
 typedef struct {
     float4 lo;      // xyz: exact min corner; w: as_int, left child (-1: a triangle)

@@ -85,4 +85,56 @@ inline bool intersect_triangle_culled(const ShearedRay* r, __global const Triang
     return true;
 }
 
+#ifdef BVH_WIDE
+// The packet test of CPU devices (accel_wide.cl); other programs never see it.
+
+// diff_of_products lane by lane, for the packet test below.
+inline float4 diff_of_products4(float4 a, float4 b, float4 c, float4 d)
+{
+    const float4 w = c * d;
+    const float4 e = fma(-c, d, w);
+    const float4 f = fma(a, b, -w);
+    return f + e;
+}
+
+// The same test for the four triangles of a TrianglePacket (layouts.h) at once,
+// lane k for triangle k: every lane takes exactly the steps above, in the same
+// order and rounding (FP_CONTRACT is off, the products are Kahan's), so each
+// lane's answer is the scalar test's bit for bit; only the early exits become
+// masks.  Returns -1 in the lanes of a hit with tmin < t <= tmax (empty lanes
+// never hit), with t and the barycentric weights in *t_out, *u_out, *v_out
+// (set only when some lane hits).
+inline int4 intersect_packet_culled(const ShearedRay* r, __global const TrianglePacket* p,
+                                    float tmin, float tmax, const int cull,
+                                    float4* t_out, float4* u_out, float4* v_out)
+{
+    // shuffle(v - origin, perm) lane by lane: the packet holds one float4 per axis
+    const uint kx = r->perm.x, ky = r->perm.y, kz = r->perm.z;
+    const float4 o = shuffle(r->origin, r->perm);
+    const float4 Az = p->v0[kz] - o.z, Bz = p->v1[kz] - o.z, Cz = p->v2[kz] - o.z;
+    const float4 Ax = (p->v0[kx] - o.x) - r->shear.x * Az, Ay = (p->v0[ky] - o.y) - r->shear.y * Az;
+    const float4 Bx = (p->v1[kx] - o.x) - r->shear.x * Bz, By = (p->v1[ky] - o.y) - r->shear.y * Bz;
+    const float4 Cx = (p->v2[kx] - o.x) - r->shear.x * Cz, Cy = (p->v2[ky] - o.y) - r->shear.y * Cz;
+
+    const float4 U = diff_of_products4(Cx, By, Cy, Bx);
+    const float4 V = diff_of_products4(Ax, Cy, Ay, Cx);
+    const float4 W = diff_of_products4(Bx, Ay, By, Ax);
+    int4 hit = (p->slot >= 0) & !(((U < 0.0f) | (V < 0.0f) | (W < 0.0f)) & ((U > 0.0f) | (V > 0.0f) | (W > 0.0f)));
+    if (!any(hit))      // most packets: the ray passes beside all four, no division needed
+        return hit;
+    const float4 det = U + V + W;
+    const float4 T = U * (r->shear.z * Az) + V * (r->shear.z * Bz) + W * (r->shear.z * Cz);
+    const float4 t = T / det;
+    hit &= (det != 0.0f) & (t > tmin) & (t <= tmax);
+    if (cull == CULL_BACK)
+        hit &= det >= 0.0f;
+    else if (cull == CULL_FRONT)
+        hit &= det <= 0.0f;
+    *t_out = t;
+    *u_out = V / det;
+    *v_out = W / det;
+    return hit;
+}
+#endif
+
 #endif

@@ -51,6 +51,73 @@ inline bool volume_hit(const VolumeRay* r, float4 bound_a, float4 bound_b, float
     *t_enter = enter - VOLUME_SLACK * fabs(enter);   // a lower bound: callers compare it with tmax
     return enter <= exit;
 }
+
+#ifdef BVH_WIDE
+// The same slab test for the eight children of a BvhWideNode at once (CPU
+// devices, accel_wide.cl; other programs never see it), lane k for child k: every lane takes exactly the
+// steps above, so each child passes or fails as in its binary row, and
+// t_enter is the same bound.  Returns -1 in the lanes whose box the ray meets.
+inline int8 box_hit_wide(const VolumeRay* r, __global const BvhWideNode* n, float tmin, float tmax,
+                         float8* t_enter)
+{
+    const float8 t0x = (n->lo_x - r->origin.x) * r->inv_dir.x, t1x = (n->hi_x - r->origin.x) * r->inv_dir.x;
+    const float8 t0y = (n->lo_y - r->origin.y) * r->inv_dir.y, t1y = (n->hi_y - r->origin.y) * r->inv_dir.y;
+    const float8 t0z = (n->lo_z - r->origin.z) * r->inv_dir.z, t1z = (n->hi_z - r->origin.z) * r->inv_dir.z;
+    const float8 enter = fmax(fmax(fmin(t0x, t1x), fmin(t0y, t1y)), fmax(fmin(t0z, t1z), (float8)(tmin)));
+    const float8 far = fmin(fmin(fmax(t0x, t1x), fmax(t0y, t1y)),
+                            fmin(fmax(t0z, t1z), (float8)(tmax + VOLUME_SLACK * fabs(tmax))));
+    const float8 exit = far + VOLUME_SLACK * fabs(far);
+    *t_enter = enter - VOLUME_SLACK * fabs(enter);
+    return enter <= exit;
+}
+
+// Which planes of a BvhWideNode a ray enters and leaves by, per axis: indices
+// into its six float8 planes (lo_x, lo_y, lo_z, hi_x, hi_y, hi_z).  `oblique`:
+// no component of inv_dir is infinite (no zero direction component), the
+// case of box_hit_wide_oblique.
+typedef struct {
+    int near_x, near_y, near_z;
+    bool oblique;
+} BoxPlanes;
+
+inline BoxPlanes box_planes(const VolumeRay* r)
+{
+    BoxPlanes p;
+    p.near_x = r->inv_dir.x >= 0.0f ? 0 : 3;
+    p.near_y = r->inv_dir.y >= 0.0f ? 1 : 4;
+    p.near_z = r->inv_dir.z >= 0.0f ? 2 : 5;
+    p.oblique = all(isfinite(r->inv_dir));
+    return p;
+}
+
+// max / min without NaN handling, for values known not to be NaN (OpenCL's
+// max and min leave infinities undefined).
+inline float8 max8(float8 a, float8 b) { return select(a, b, b > a); }
+inline float8 min8(float8 a, float8 b) { return select(a, b, b < a); }
+
+// box_hit_wide for a ray with `planes.oblique`, in a third of the operations:
+// with a finite inv_dir the slab distances t0 = (lo - o) * inv and t1 = (hi -
+// o) * inv are never NaN (that needs 0 * inf) and, rounding being monotone,
+// t0 <= t1 exactly when inv >= 0.  So fmin(t0, t1) is the distance to the
+// near plane, fmax the far one, and every fmin / fmax below meets no NaN:
+// the same values as box_hit_wide (up to the sign of a zero), lane by lane.
+inline int8 box_hit_wide_oblique(const VolumeRay* r, BoxPlanes planes, __global const BvhWideNode* n,
+                                 float tmin, float tmax, float8* t_enter)
+{
+    __global const float8* plane = &n->lo_x;
+    const float8 near_x = (plane[planes.near_x] - r->origin.x) * r->inv_dir.x;
+    const float8 near_y = (plane[planes.near_y] - r->origin.y) * r->inv_dir.y;
+    const float8 near_z = (plane[planes.near_z] - r->origin.z) * r->inv_dir.z;
+    const float8 far_x = (plane[3 - planes.near_x] - r->origin.x) * r->inv_dir.x;
+    const float8 far_y = (plane[5 - planes.near_y] - r->origin.y) * r->inv_dir.y;
+    const float8 far_z = (plane[7 - planes.near_z] - r->origin.z) * r->inv_dir.z;
+    const float8 enter = max8(max8(near_x, near_y), max8(near_z, (float8)(tmin)));
+    const float8 far = min8(min8(far_x, far_y), min8(far_z, (float8)(tmax + VOLUME_SLACK * fabs(tmax))));
+    const float8 exit = far + VOLUME_SLACK * fabs(far);
+    *t_enter = enter - VOLUME_SLACK * fabs(enter);
+    return enter <= exit;
+}
+#endif
 #elif defined(VOLUME_SPHERE)
 inline bool volume_hit(const VolumeRay* r, float4 bound_a, float4 bound_b, float tmin, float tmax,
                        float* t_enter)

@@ -1,0 +1,118 @@
+// BVH traversal on CPU devices (-DBVH_WIDE, box volumes): the tree of
+// accel_bvh.cl collapsed into nodes of eight children, and its leaves'
+// triangles in packets of four (clrt/accel/wide.py says how and why).  A CPU
+// runs each work-item's walk as scalar code, so the SIMD units are reached
+// only through vector types inside one work-item: one float8 slab test
+// (volumes.cl) decides all children of a node, one float4 watertight test
+// (triangle.cl) a packet of triangles, as in Embree's single-ray BVH8 walk.
+//
+// The answers are accel_bvh.cl's bit for bit: every box is its binary row's,
+// tested lane by lane with the same arithmetic; every triangle lane computes
+// the scalar test's t, u, v; every hit goes through the same leaf action
+// (record_hit, hit.cl), whose tie rule does not depend on the visiting order.
+// Only the order of the walk differs, and tmax only ever shrinks to a hit.
+#ifndef CLRT_ACCEL_WIDE_CL
+#define CLRT_ACCEL_WIDE_CL
+
+#include "geometry.cl"
+#include "hit.cl"
+#include "triangle.cl"
+#include "volumes.cl"
+#include "stack.cl"
+
+#if defined(ACCEL_BVH) && defined(BVH_WIDE)
+
+#ifndef WIDE_STACK_SIZE
+#error "build with -DWIDE_STACK_SIZE=<at least 7 x the wide tree's depth + 1>"
+#endif
+
+// Bit k set where lane k of `lanes` (0 or -1) is set.
+inline uint lane_bits(int8 lanes)
+{
+    const int8 bit = lanes & (int8)(1, 2, 4, 8, 16, 32, 64, 128);
+    const int4 pairs = bit.lo | bit.hi;
+    const int2 quads = pairs.lo | pairs.hi;
+    return (uint)(quads.x | quads.y);
+}
+
+// Test the packet `packet` for `query`, its hits in lane order; true once the
+// query is answered.
+inline bool visit_packet(const Geometry* g, const ShearedRay* r, int packet, float tmin, float* tmax,
+                         const int query, Hit* best, int* best_id, HitSink* sink)
+{
+    __global const TrianglePacket* p = g->packets + packet;
+    float4 t, u, v;
+    const int4 hit = intersect_packet_culled(r, p, tmin, *tmax, sink ? sink->cull : CULL_NONE, &t, &u, &v);
+    if (!any(hit))
+        return false;
+    for (int k = 0; k < 4; ++k)
+        if (hit[k] && record_hit(g, p->slot[k], t[k], u[k], v[k], tmax, query, best, best_id, sink))
+            return true;
+    return false;
+}
+
+// Answer `query` for one ray (see hit.cl); the returned Hit.prim is a slot.
+// As accel_bvh.cl: one current child -- a node, or a leaf's packets -- and a
+// stack of postponed children with the distance where the ray enters them.
+// A node's children that the ray meets are pushed farthest first (insertion
+// sort: rarely more than three), and the nearest is taken at once.
+inline Hit query_hits(const Geometry* g, float3 origin, float3 dir, float tmin, float tmax,
+                      const int query, HitSink* sink)
+{
+    const ShearedRay r = shear_ray(origin, dir);
+    const VolumeRay vr = volume_ray(origin, dir);
+    const BoxPlanes planes = box_planes(&vr);
+    Hit best = miss_hit();
+    int best_id = -1;
+    int2 stack[WIDE_STACK_SIZE];       // (node or first packet, packet count: 0 for a node)
+    float stack_t[WIDE_STACK_SIZE];
+    int sp = 0;
+    int2 current = (int2)(0, 0);       // the root node
+    for (;;) {
+        if (current.y > 0) {
+            for (int p = current.x; p < current.x + current.y; ++p)
+                if (visit_packet(g, &r, p, tmin, &tmax, query, &best, &best_id, sink))
+                    return best;
+        } else {
+            __global const BvhWideNode* n = g->wide_nodes + current.x;
+            float8 enter;
+            const int8 met = planes.oblique ? box_hit_wide_oblique(&vr, planes, n, tmin, tmax, &enter)
+                                            : box_hit_wide(&vr, n, tmin, tmax, &enter);
+            uint lanes = lane_bits(met & (n->count >= 0));
+            if (lanes) {
+                __global const int* child = (__global const int*)&n->child;
+                __global const int* count = (__global const int*)&n->count;
+                int k = 31 - clz(lanes & (0u - lanes));   // the lowest lane left
+                lanes &= lanes - 1u;
+                if (!lanes) {                             // one child met: no stack
+                    current = (int2)(child[k], count[k]);
+                    continue;
+                }
+                const int base = sp;
+                for (;;) {
+                    const float t = enter[k];
+                    int j = sp++;
+                    if (query != QUERY_ALL)
+                        for (; j > base && stack_t[j - 1] < t; --j) {
+                            stack[j] = stack[j - 1];
+                            stack_t[j] = stack_t[j - 1];
+                        }
+                    stack[j] = (int2)(child[k], count[k]);
+                    stack_t[j] = t;
+                    if (!lanes)
+                        break;
+                    k = 31 - clz(lanes & (0u - lanes));
+                    lanes &= lanes - 1u;
+                }
+                current = stack[--sp];    // the nearest
+                continue;
+            }
+        }
+        if (!resume_postponed(stack, stack_t, &sp, tmax, &current))
+            return best;
+    }
+}
+
+#endif
+
+#endif

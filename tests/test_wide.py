@@ -1,0 +1,188 @@
+"""The wide BVH that CPU devices walk (clrt/accel/wide.py, accel_wide.cl) answers
+every query exactly as the binary walk (accel_bvh.cl) and brute force do.
+
+On PoCL both walks run on the same device: emptying
+``clrt.device.geometry.WIDE_BVH_KINDS`` gives the binary one.  Every field of
+every query is compared bit for bit -- closest hits for every cull mode, any
+hit, counts, all hits -- on random rays, grazing rays (at vertices, along
+edges, axis-parallel, from inside), the watertight rays of
+test_watertight.py, and the tie scenes of test_ties.py, for every host
+builder and the device builder, with leaves of one, four and eight triangles
+(two packets).
+"""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import clrt
+from clrt.accel.rows import child_refs
+from clrt.accel.wide import MERGE, PACKET, WIDE, collapse
+from clrt.device import geometry
+from clrt.device.build import build_acceleration
+from clrt.renderer import Renderer
+from clrt.scene import primitives
+from clrt.scene.arrays import triangle_corners
+from clrt.scene.scene import Camera, scene_from_mesh
+
+from conftest import TEST_MESHES
+from test_accel import _hard_rays
+from test_ties import SCENES, tie_rays
+from test_watertight import watertight_rays
+
+KNOT_FILE = Path(__file__).resolve().parents[1] / "assets" / "meshes" / "knot.obj"
+
+
+def knot():
+    """A closed tube of 4,320 triangles shipped with clrt: a real mesh without ../shared."""
+    return clrt.load_mesh(KNOT_FILE)
+
+
+MESHES = {"knot": knot, "torus": TEST_MESHES["torus"], "crossing": TEST_MESHES["crossing"],
+          "heightfield": TEST_MESHES["heightfield"],
+          **{f"ties-{name}": (lambda make=make: make(np.random.default_rng(3))) for name, make in SCENES.items()}}
+
+
+def _walks(mesh, builder, leaf, device, monkeypatch):
+    """(wide, binary) Accels of the same tree on the same device."""
+    wide = clrt.Accel(mesh, "box", builder, leaf, device=device)
+    monkeypatch.setattr(geometry, "WIDE_BVH_KINDS", ())
+    binary = clrt.Accel(mesh, "box", builder, leaf, device=device)
+    monkeypatch.undo()
+    if wide.geometry.wide is None:
+        pytest.skip("the device under test does not walk the wide BVH")
+    assert binary.geometry.wide is None and "BVH_WIDE" not in binary.geometry.defines
+    assert wide.acceleration.rows.tobytes() == binary.acceleration.rows.tobytes() or builder == "device"
+    return wide, binary
+
+
+def _rays(mesh, rng):
+    """origins, directions, tmin: random, grazing, watertight and tie rays."""
+    lo, hi = mesh.bounds
+    o = [rng.uniform(lo - 0.2 * (hi - lo), hi + 0.2 * (hi - lo), (1500, 3))]
+    d = [rng.normal(size=(1500, 3))]
+    o_hard, d_hard = _hard_rays(mesh, rng, 300)
+    o.append(o_hard)
+    d.append(d_hard)
+    try:
+        o_tight, d_tight, _, _ = watertight_rays(mesh, rng, general=600, per_kind=300)
+        o.append(o_tight)
+        d.append(d_tight)
+    except (ValueError, IndexError):    # an open mesh without two-sided edges
+        pass
+    o_tie, d_tie, tmin_tie = tie_rays(mesh, rng, 60)
+    o.append(o_tie)
+    d.append(d_tie)
+    tmin = np.r_[np.zeros(sum(len(x) for x in o[:-1])), tmin_tie]
+    return np.concatenate(o).astype(np.float32), np.concatenate(d).astype(np.float32), tmin
+
+
+def _same_answers(a, b, o, d, tmin, label):
+    diag = float(np.linalg.norm(np.ptp(o, axis=0)))
+    for cull in ("none", "back", "front"):
+        x, y = a.trace(o, d, tmin=tmin, cull=cull), b.trace(o, d, tmin=tmin, cull=cull)
+        for field in x._fields:
+            assert np.array_equal(getattr(x, field), getattr(y, field)), (label, cull, field)
+        assert np.array_equal(a.count(o, d, tmin=tmin, cull=cull), b.count(o, d, tmin=tmin, cull=cull)), (label, cull)
+        for u, v in zip(a.all_hits(o, d, tmin=tmin, cull=cull), b.all_hits(o, d, tmin=tmin, cull=cull)):
+            assert np.array_equal(u, v), (label, cull, "all_hits")
+    for tmax in (np.inf, 0.05 * diag):
+        assert np.array_equal(a.any_hit(o, d, tmin=tmin, tmax=tmax), b.any_hit(o, d, tmin=tmin, tmax=tmax)), \
+            (label, "any_hit", tmax)
+
+
+@pytest.mark.parametrize("name", sorted(MESHES))
+@pytest.mark.parametrize("builder, leaf", [("sah", 1), ("sah", 4), ("paper", 8), ("device", 4)])
+def test_wide_walk_answers_as_the_binary_walk_and_brute_force(name, builder, leaf, device, monkeypatch):
+    mesh = MESHES[name]()
+    wide, binary = _walks(mesh, builder, leaf, device, monkeypatch)
+    o, d, tmin = _rays(mesh, np.random.default_rng(len(name) + leaf))
+    hits = wide.trace(o, d, tmin=tmin)
+    assert (hits.prim >= 0).mean() > 0.2 and (hits.prim < 0).any(), "the rays must hit and miss"
+    _same_answers(wide, binary, o, d, tmin, f"{name} {builder} leaf {leaf}: wide / binary")
+    if builder == "sah" and leaf == 4:
+        brute = clrt.Accel(mesh, "none", device=device)
+        _same_answers(wide, brute, o, d, tmin, f"{name}: wide / brute force")
+
+
+def test_wide_walk_renders_as_the_binary_walk(device, monkeypatch):
+    scene = scene_from_mesh(knot())
+    camera = Camera.framing(scene.bounds, 48, 36)
+    frames = []
+    for kinds in (geometry.WIDE_BVH_KINDS, ()):
+        monkeypatch.setattr(geometry, "WIDE_BVH_KINDS", kinds)
+        renderer = Renderer(scene, device)
+        frames.append((renderer.geometry.wide is not None, renderer.render(camera, hits=True)))
+    (walked_wide, wide), (_, binary) = frames
+    if not walked_wide:
+        pytest.skip("the device under test does not walk the wide BVH")
+    assert np.array_equal(wide.image, binary.image) and np.array_equal(wide.prim, binary.prim)
+    assert np.array_equal(wide.t, binary.t)
+
+
+def test_refit_keeps_the_wide_walk_exact(device):
+    mesh = knot()
+    accel = clrt.Accel(mesh, device=device)
+    if accel.geometry.wide is None:
+        pytest.skip("the device under test does not walk the wide BVH")
+    moved = mesh.vertices * np.array([1.3, 0.7, 1.0]) + 0.1 * np.sin(3 * mesh.vertices[:, [1, 2, 0]])
+    accel.refit(moved)
+    brute = clrt.Accel(clrt.Mesh.from_arrays(moved, mesh.faces), "none", device=device)
+    o, d, tmin = _rays(accel.mesh, np.random.default_rng(2))
+    _same_answers(accel, brute, o, d, tmin, "refitted wide / brute force")
+
+
+def test_only_cpu_devices_walk_wide_and_only_box_trees_unsplit(device, monkeypatch):
+    mesh = primitives.torus(1.0, 0.35, 24, 12)
+    wide = clrt.Accel(mesh, device=device)
+    cpu = wide.queue.device.type & 2    # CL_DEVICE_TYPE_CPU
+    assert (wide.geometry.wide is not None) == bool(cpu)
+    assert ("BVH_WIDE" in wide.geometry.defines) == bool(cpu)
+    for accel in ("sphere", "ellipse", "none"):
+        assert clrt.Accel(mesh, accel, device=device).geometry.wide is None, accel
+    assert clrt.Accel(mesh, device=device, max_buffer_bytes=16384).geometry.wide is None
+    monkeypatch.setattr(geometry, "WIDE_BVH_KINDS", ())    # as a GPU: nothing built, nothing passed
+    binary = clrt.Accel(mesh, device=device)
+    assert binary.geometry.wide is None and "wide_nodes" not in binary.geometry.buffers
+    assert len(binary.geometry.args) == len(binary.geometry.arg_types) == 4
+    if cpu:
+        assert len(wide.geometry.args) == len(wide.geometry.arg_types) == 6
+
+
+@pytest.mark.parametrize("builder, leaf", [("sah", 1), ("sah", 4), ("paper", 8), ("device", 4)])
+def test_collapse_keeps_every_box_and_every_triangle_once(builder, leaf, device):
+    corners = triangle_corners(knot()).astype(np.float32)
+    acc = build_acceleration(corners, "box", builder, leaf, device)
+    wide = collapse(acc.rows, corners[acc.prim_ids])
+    nodes, packets = wide.nodes, wide.packets
+    # every slot in exactly one packet lane, its corners copied exactly
+    slots = packets["slot"]
+    assert np.array_equal(np.sort(slots[slots >= 0]), np.arange(len(corners)))
+    lane = np.nonzero(slots >= 0)
+    for c, name in enumerate(("v0", "v1", "v2")):
+        assert np.array_equal(packets[name].transpose(0, 2, 1)[lane], corners[acc.prim_ids][slots[lane]][:, c])
+    # every lane's box is bit for bit the binary child it stands for; leaves' packets in range
+    rows = acc.rows
+    lo = np.stack([rows["left_a"][:, :3], rows["right_a"][:, :3]], 1).reshape(-1, 3)
+    hi = np.stack([rows["left_b"][:, :3], rows["right_b"][:, :3]], 1).reshape(-1, 3)
+    present = wide.sources >= 0
+    assert np.array_equal(present, nodes["count"] >= 0)
+    src = wide.sources[present]
+    for axis, name in enumerate("xyz"):
+        assert np.array_equal(nodes[f"lo_{name}"][present], lo[src, axis])
+        assert np.array_equal(nodes[f"hi_{name}"][present], hi[src, axis])
+    counts, child = nodes["count"], nodes["child"]
+    inner = counts == 0
+    assert np.array_equal(np.sort(child[inner]), np.arange(1, len(nodes)))   # each node has one parent
+    # the leaves' packet ranges tile the packets; a subtree merged into a leaf
+    # has at most MERGE triangles, a binary leaf at most the leaf size
+    leaves = counts > 0
+    order = np.argsort(child[leaves])
+    first, many = child[leaves][order], counts[leaves][order]
+    assert first[0] == 0 and np.array_equal(first[1:], (first + many)[:-1]) and many.sum() == len(packets)
+    tris = np.array([(slots[f:f + m] >= 0).sum() for f, m in zip(first, many)])
+    merged = (child_refs(rows)[:, 1::2].reshape(-1)[wide.sources[leaves]] == 0)[order]
+    assert (tris[merged] <= MERGE).all() and (tris[~merged] <= leaf).all()
+    assert (many == -(-tris // PACKET)).all()
+    assert (present.sum(axis=1) <= WIDE).all()
