@@ -425,8 +425,8 @@ def build_on_device(context: cl.Context, queue: cl.CommandQueue, corners, volume
         launch("treelet", k["treelet_restructure"], groups, nodes, heights, order, treelet_done, state, F,
                min_count, leaf_size, group=TREELET_GROUP)
 
-    # 4. Path sums, then the rows.  With the rows' buffer made already, the
-    # host does not wait for the tree either: it queues EMIT_JUMPS pointer
+    # 4. Path sums, then the rows.  With the rows' buffer made already, a
+    # GPU's host does not wait for the tree either: it queues EMIT_JUMPS pointer
     # jumps (enough for a tree of 2**EMIT_JUMPS levels) and, should the tree be
     # taller (emit_tree reports a node whose path did not reach the root),
     # the rest of the jumps and emit_tree again.  Otherwise it reads the
@@ -435,13 +435,14 @@ def build_on_device(context: cl.Context, queue: cl.CommandQueue, corners, volume
     path = [ws.get("path0", 16 * num_nodes), ws.get("path1", 16 * num_nodes)]
     root_rows = np.empty(1, np.int32)
     offset = root * layouts.BUILD_NODE.itemsize + layouts.BUILD_NODE.fields["rows"][1]
-    guessed = rows is not None
+    guessed = rows is not None and kind == "gpu"    # (a CPU waits for nothing, and a jump costs it more)
     if guessed:
         jumps = EMIT_JUMPS
     else:
         cl.enqueue_copy(queue, root_rows, nodes, src_offset=offset, is_blocking=False)
         jumps = _root_height(queue, heights, F).bit_length()   # 2**jumps > height - 1, the longest path's edges
-        rows, exact_rows = _row_buffers(context, max(int(root_rows[0]), 1), keep_boxes)
+        if rows is None:
+            rows, exact_rows = _row_buffers(context, max(int(root_rows[0]), 1), keep_boxes)
     launch("emit", k["init_root_paths"], _groups(num_nodes), nodes, np.uint32(num_nodes), ancestor[0], path[0])
 
     def jump_and_emit(first_jump: int, last_jump: int) -> None:
