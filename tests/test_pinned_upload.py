@@ -63,3 +63,32 @@ def test_ray_chunks_through_staging_give_the_same_answers(device, monkeypatch):
             assert np.array_equal(a, b)
     finally:
         pinned._stages.pop(staged.context.int_ptr, None)
+
+
+def test_staged_uploads_from_two_threads(device, monkeypatch):
+    """Two threads, each with its own Accel on the process's one context,
+    upload their rays through the context's staging blocks at the same time:
+    each gets the answers it gets alone."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    import clrt
+    from clrt.query import accel as query_accel
+    from clrt.scene import primitives
+    mesh = primitives.torus(1.0, 0.35, 24, 12)
+    rng = np.random.default_rng(12)
+    rays = [(rng.normal(size=(4000, 3)) * 2.0, rng.normal(size=(4000, 3))) for _ in range(2)]
+    accels = [clrt.Accel(mesh, device=device, chunk_rays=500) for _ in range(2)]
+    want = [a.trace(o, d).t.copy() for a, (o, d) in zip(accels, rays)]
+    monkeypatch.setattr(pinned, "STAGE_BYTES", 4096)
+    monkeypatch.setattr(query_accel, "RAY_STAGED_MIN_BYTES", 0)
+    monkeypatch.setattr(query_accel, "RAY_STAGING", {"gpu": True, "cpu": True})
+    pinned._stages.pop(accels[0].context.int_ptr, None)       # blocks of the patched size
+    try:
+        def run(k):
+            return [accels[k].trace(*rays[k]).t.copy() for _ in range(5)]
+        with ThreadPoolExecutor(2) as pool:
+            results = list(pool.map(run, (0, 1)))
+        for k in (0, 1):
+            assert all(np.array_equal(t, want[k]) for t in results[k]), k
+    finally:
+        pinned._stages.pop(accels[0].context.int_ptr, None)

@@ -11,6 +11,8 @@ never reused.
 
 from __future__ import annotations
 
+import threading
+
 import numpy as np
 import pyopencl as cl
 
@@ -79,6 +81,7 @@ STAGE_BYTES = 64 << 20       # one page-locked staging block; two are kept per c
 STAGED_MIN_BYTES = 16 << 20  # smaller arrays go straight to the driver
 PARALLEL_COPY_MIN_BYTES = 4 << 20   # smaller copies into a staging block take one thread
 _stages: dict[int, list] = {}
+_stage_lock = threading.Lock()
 _copier = None               # thread pool for the host copies into the staging blocks
 
 
@@ -120,24 +123,27 @@ def upload(context: cl.Context, queue: cl.CommandQueue, buffer: cl.Buffer, array
         staged = len(flat) >= STAGED_MIN_BYTES and device_kind(queue.device) == "gpu"
     if not staged:
         return cl.enqueue_copy(queue, buffer, array, is_blocking=False)
-    stages = _stages.get(context.int_ptr)
-    if stages is None:
-        try:
-            stages = [[mapped_block(context, queue, STAGE_BYTES), None] for _ in range(2)]
-        except (cl.Error, MemoryError):          # page-locked memory is scarce: the plain copy
-            return cl.enqueue_copy(queue, buffer, array, is_blocking=False)
-        _stages[context.int_ptr] = stages
-    event = None
-    for start in range(0, len(flat), STAGE_BYTES):
-        # The blocks take turns across calls too: successive small uploads (a
-        # ray chunk's arrays) fill one block while the device reads the other.
-        stage = stages[0]
-        stages.append(stages.pop(0))
-        block, last_copy = stage
-        if last_copy is not None:
-            last_copy.wait()                      # the device has read this block's last chunk
-        chunk = flat[start:start + STAGE_BYTES]
-        _parallel_copy(block[:len(chunk)], chunk)
-        event = stage[1] = cl.enqueue_copy(queue, buffer, block[:len(chunk)], dst_offset=start,
-                                           is_blocking=False)
-    return event
+    # One upload at a time per context: the blocks are the context's, and
+    # each thread may have its own Accel on the process's one context.
+    with _stage_lock:
+        stages = _stages.get(context.int_ptr)
+        if stages is None:
+            try:
+                stages = [[mapped_block(context, queue, STAGE_BYTES), None] for _ in range(2)]
+            except (cl.Error, MemoryError):          # page-locked memory is scarce: the plain copy
+                return cl.enqueue_copy(queue, buffer, array, is_blocking=False)
+            _stages[context.int_ptr] = stages
+        event = None
+        for start in range(0, len(flat), STAGE_BYTES):
+            # The blocks take turns across calls too: successive small uploads (a
+            # ray chunk's arrays) fill one block while the device reads the other.
+            stage = stages[0]
+            stages.append(stages.pop(0))
+            block, last_copy = stage
+            if last_copy is not None:
+                last_copy.wait()                      # the device has read this block's last chunk
+            chunk = flat[start:start + STAGE_BYTES]
+            _parallel_copy(block[:len(chunk)], chunk)
+            event = stage[1] = cl.enqueue_copy(queue, buffer, block[:len(chunk)], dst_offset=start,
+                                               is_blocking=False)
+        return event
