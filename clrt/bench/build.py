@@ -241,7 +241,8 @@ def main(argv=None) -> int:
                    help="also grids of bunny copies of about these many triangles, e.g. 1M,10M")
     p.add_argument("--builders", type=lambda s: s.split(","), default=list(HOST_BUILDERS) + ["device"],
                    help=f"comma-separated, of {', '.join(list(HOST_BUILDERS) + list(DEVICE_VARIANTS))}, "
-                        "device/tail=N, device/tail-group=N, device/treelets=N, device/treelet-min=N (default: paper, sah, device)")
+                        "device/tail=N, device/tail-group=N, device/treelets=N, device/treelet-min=N "
+                        "(default: paper, sah, device)")
     p.add_argument("--volume", default="box", choices=("box", "sphere", "ellipse"))
     p.add_argument("--leaf-size", type=int, default=4)
     p.add_argument("--repeat", type=int, default=5, help="warm builds timed after the first (default 5)")

@@ -25,8 +25,9 @@ The algorithm (kernels in ``clrt/kernels/build_*.cl``, entry ``build_bvh.cl``):
    as one leaf, and records its height;
 3b. treelet restructuring (Karras & Aila 2013, ``TREELET_LEAVES``; GPUs only
    by default): one launch, a work-group per node (of at least
-   ``TREELET_MIN_TRIANGLES`` on large meshes), lowest first, each waiting for its children and
-   replacing the 7-leaf treelet below it by the cheapest by the SAH;
+   ``TREELET_MIN_TRIANGLES`` on large meshes), lowest first, each waiting
+   for its children and replacing the 7-leaf treelet below it by the
+   cheapest by the SAH;
 4. rows and slots as sums along each node's path from the root (pointer
    jumping, ceil(log2(depth)) launches), then one launch writes the
    ``BVH_PAIR_NODE`` rows, fitting each child's volume exactly as
@@ -36,15 +37,16 @@ The algorithm (kernels in ``clrt/kernels/build_*.cl``, entry ``build_bvh.cl``):
 The host only queues launches: the cluster count lives in a device buffer
 that the PLOC kernels read, so the host queues iterations in batches, as
 many as should bring the count below ``tail_threshold`` (``MIN_SHRINK``),
-and reads the count once after each batch; then it queues the tail.
+and reads the count once after each batch; then it queues the tail, the
+treelet restructuring and the emit pass without waiting for the device.
 (Reading each iteration's count without blocking was the first version:
 NVIDIA's driver completes a read into ordinary memory before it returns, so
 every iteration waited for the device, about 80 us each.)  Besides the
-counts, a build reads back the state after PLOC (the iterations, and how
-many nodes of each height the treelet launches take), then the root's row count (which
-sizes the row buffer) and height (which bounds the pointer jumps), and at
-the end the depth and the first triangle with a NaN or infinite corner (the
-input is checked on the device).
+counts, a build reads the state once at the end (the row count, the depth,
+the first triangle with a NaN or infinite corner: the input is checked on
+the device); only a tree whose rows need more than ``EARLY_ROWS_BYTES``, or
+on a CPU, has the root's row count (which sizes the row buffer) and height
+(which bounds the pointer jumps) read before the rows are emitted.
 
 Builds on one context share scratch buffers and kernel objects: they are not
 thread-safe (as clrt.query.Accel is not).
@@ -111,8 +113,9 @@ TREELET_GROUPS_PER_UNIT = 32   # treelet work-groups launched per compute unit (
 # trees; from half a million triangles on, the small subtrees' treelets
 # (60 % of the restructuring's time for 0.4 % of SAH cost) are left out.
 TREELET_MIN_TRIANGLES = ((0, 0), (500_000, 16))
-# Heights the treelet launches go by (one launch per height): a taller tree
-# (PLOC's are about 30 high at 1M triangles, 40 at 50M) keeps PLOC's shape.
+# Heights by which the nodes to restructure are listed (lowest first): a
+# taller tree (PLOC's are about 30 high at 1M triangles, 40 at 50M) keeps
+# PLOC's shape.
 TREELET_LEVELS = 64
 # Clusters an iteration keeps, about (bunny00: 0.76 in the first iteration,
 # then 0.80-0.83; camel 0.64, then 0.77-0.85): the host queues

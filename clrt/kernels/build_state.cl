@@ -20,7 +20,8 @@
 #define CLRT_BUILD_STATE_CL
 
 #if !defined(STATE_NEXT_NODE) || !defined(STATE_DEPTH) || !defined(STATE_ERROR) \
-    || !defined(STATE_BAD_TRIANGLE) || !defined(STATE_ITERATIONS) || !defined(STATE_TICKETS) || !defined(STATE_TREELET_TICKET) \
+    || !defined(STATE_BAD_TRIANGLE) || !defined(STATE_ITERATIONS) || !defined(STATE_TICKETS) \
+    || !defined(STATE_TREELET_TICKET) \
     || !defined(STATE_BOUNDS) || !defined(STATE_COUNTS) || !defined(COUNT_RING) \
     || !defined(STATE_LEVELS) || !defined(STATE_LEVEL_CURSORS) || !defined(TREELET_LEVELS)
 #error "build with the STATE_*, COUNT_RING and TREELET_LEVELS defines of clrt/device/build.py"

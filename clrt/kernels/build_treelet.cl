@@ -37,7 +37,7 @@
 #include "layouts.h"
 
 #if !defined(TREELET_LEAVES) || !defined(TREELET_GROUP) || !defined(TREELET_LEVELS)
-#error "build with -DTREELET_LEAVES=<leaves of a treelet, 3..8; 0: none>, -DTREELET_GROUP=<work-items per treelet> and -DTREELET_LEVELS"
+#error "build with -DTREELET_LEAVES=<3..8; 0: none>, -DTREELET_GROUP=<work-items a treelet> and -DTREELET_LEVELS"
 #endif
 #if !defined(C_TRAVERSAL) || !defined(C_INTERSECT)
 #error "build with the SAH constants C_TRAVERSAL and C_INTERSECT of clrt/accel/topdown.py"
