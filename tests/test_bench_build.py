@@ -10,9 +10,11 @@ def test_build_bench_prints_every_variant(device, capsys, monkeypatch):
     pytest.importorskip("embreex")            # the raybench extra, which the test command installs
     monkeypatch.setattr(build, "DEVICE_VARIANTS", dict(build.DEVICE_VARIANTS))
     code = build.main(["--device", device or "cpu", "--meshes", "knot50k", "--builders",
-                       "device,device/treelets=7,device/tail=64", "--repeat", "1", "--no-trace", "--embree"])
+                       "device,device/treelets=7,device/tail=64", "--repeat", "1", "--no-trace", "--embree",
+                       "--profile"])
     assert code == 0
-    rows = [line.split("|") for line in capsys.readouterr().out.splitlines() if line.startswith("| knot50k ")]
+    out = capsys.readouterr().out
+    rows = [line.split("|") for line in out.splitlines() if line.startswith("| knot50k ")]
     assert [r[3].strip() for r in rows] == ["device", "device/treelets=7", "device/tail=64",
                                             "Embree (embreex, host CPU)"]
     assert all(r[2].strip() == "50,048" for r in rows)
@@ -20,3 +22,6 @@ def test_build_bench_prints_every_variant(device, capsys, monkeypatch):
     assert sah["device/tail=64"] == sah["device"]          # the hand-over does not change the tree
     assert sah["device/treelets=7"] <= sah["device"]        # restructured (the GPU default) or better
     assert all(float(r[5].replace(",", "")) > 0 for r in rows)            # warm build ms
+    # --profile: one launch-by-launch table per device variant, the sort's passes in it
+    assert out.count("one warm build:") == 3
+    assert "| radix_scatter | 8 |" in out and "| ploc_tail | 1 |" in out

@@ -19,11 +19,13 @@ on the OpenCL device, clrt.device.build), one table row:
   (the triangles uploaded, the volumes refitted on the device);
 * ``trace ms``: median kernel time of one closest-hit primary ray per pixel
   at 1920x1080 (``trace_camera``), the scene's trees launched in turn for
-  TRACE_ROUNDS rounds, on the fixed cameras of clrt.bench.speed for its meshes, and a framing
-  camera for the generated scenes: ``--triangles N`` makes a grid of copies of
-  the bunny (clrt.bench.scale.instanced).
+  TRACE_ROUNDS rounds, on the fixed cameras of clrt.bench.speed for its
+  meshes, and a framing camera for the generated scenes: ``--triangles N``
+  makes a grid of copies of the bunny (clrt.bench.scale.instanced).
 
-Prints a markdown table; timing is done here, never in tests.
+Prints a markdown table; timing is done here, never in tests.  ``--profile``
+adds, for each device variant, one warm build launch by launch: device ms per
+kernel and where the device sat idle between launches (waiting for the host).
 """
 
 from __future__ import annotations
@@ -196,7 +198,7 @@ def scenes(mesh_dir: Path, meshes, counts):
 
 
 def run(mesh_dir, meshes, counts, builders, volume="box", leaf_size=4, device=None, repeat=5, trace=True,
-        out=None, embree=False):
+        out=None, embree=False, profile=False):
     from clrt.device.context import create_context, device_label
     out = out or sys.stdout
     context, queue = create_context(device)
@@ -205,6 +207,7 @@ def run(mesh_dir, meshes, counts, builders, volume="box", leaf_size=4, device=No
     print("| scene | triangles | builder | build first ms | build warm ms | device ms | phases (device ms) "
           "| SAH cost | SAH / sah | depth | device MiB | trace ms | Mrays/s | refit ms |", file=out)
     print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|", file=out)
+    profiles = []
     for name, mesh, camera in scenes(mesh_dir, meshes, counts):
         corners = triangle_corners(mesh)
         results = {}
@@ -229,6 +232,44 @@ def run(mesh_dir, meshes, counts, builders, volume="box", leaf_size=4, device=No
             first, warm = embree_build_ms(mesh, repeat)
             print(f"| {name} | {len(corners):,} | Embree (embreex, host CPU) | {first:,.1f} | {warm:,.1f} | - | - "
                   "| - | - | - | - | - | - | - |", file=out, flush=True)
+        if profile:
+            profiles += [(name, b, launch_profile(context, queue, corners, volume, b, leaf_size))
+                         for b in builders if b in DEVICE_VARIANTS]
+    for name, builder, lines in profiles:
+        print(f"\n{name}, {builder}, one warm build:", *lines, sep="\n", file=out)
+
+
+# Idle time between launches worth naming in a profile (the device waiting for the host).
+PROFILE_GAP_NS = 20_000
+
+
+def launch_profile(context, queue, corners, volume, builder, leaf_size) -> list[str]:
+    """Lines describing one warm device build, launch by launch: the device
+    time per kernel and the idle gaps between launches (host-bound stretches)."""
+    from clrt.device.build import build_on_device
+    for keep in (False, True):           # the first one warms up
+        bvh = build_on_device(context, queue, corners, volume=volume, leaf_size=leaf_size, profile=keep,
+                              **DEVICE_VARIANTS[builder])
+        bvh.release()
+    launches = bvh.launches
+    per_kernel: dict[str, list] = {}
+    for kernel, start, end in launches:
+        entry = per_kernel.setdefault(kernel, [0, 0.0])
+        entry[0] += 1
+        entry[1] += 1e-6 * (end - start)
+    busy = sum(ms for _, ms in per_kernel.values())
+    span = 1e-6 * (max(end for _, _, end in launches) - min(start for _, start, _ in launches))
+    lines = [f"{len(launches)} launches, device span {span:.3f} ms, kernels busy {busy:.3f} ms, "
+             f"wall {bvh.build_ms:.3f} ms", "", "| kernel | launches | device ms |", "|---|---|---|"]
+    lines += [f"| {kernel} | {count} | {ms:.3f} |"
+              for kernel, (count, ms) in sorted(per_kernel.items(), key=lambda item: -item[1][1])]
+    gaps, finished, previous = [], launches[0][2], launches[0][0]
+    for kernel, start, end in launches[1:]:
+        if start - finished > PROFILE_GAP_NS:
+            gaps.append(f"{previous} -> {kernel} {1e-3 * (start - finished):.0f} us")
+        finished, previous = max(finished, end), kernel
+    lines.append("idle over 20 us between launches: " + (", ".join(gaps) or "none"))
+    return lines
 
 
 def main(argv=None) -> int:
@@ -247,6 +288,9 @@ def main(argv=None) -> int:
     p.add_argument("--leaf-size", type=int, default=4)
     p.add_argument("--repeat", type=int, default=5, help="warm builds timed after the first (default 5)")
     p.add_argument("--no-trace", action="store_true", help="skip the primary-ray timing")
+    p.add_argument("--profile", action="store_true",
+                   help="after the table, one warm build of each device variant launch by launch: device ms "
+                        "per kernel and the device's idle gaps")
     p.add_argument("--device", help="'gpu', 'cpu' or P:D (default: clrt's choice)")
     p.add_argument("--embree", action="store_true", help="also time Embree's build of each scene on the host CPU "
                                                          "(needs embreex: the raybench extra)")
@@ -271,7 +315,8 @@ def main(argv=None) -> int:
         except ImportError:
             p.error("--embree needs embreex: pip install -e '.[raybench]'")
     return exit_code(run, args.mesh_dir, args.meshes, args.triangles, args.builders, args.volume,
-                     args.leaf_size, args.device, args.repeat, not args.no_trace, embree=args.embree)
+                     args.leaf_size, args.device, args.repeat, not args.no_trace, embree=args.embree,
+                     profile=args.profile)
 
 
 if __name__ == "__main__":

@@ -29,8 +29,8 @@ The algorithm (kernels in ``clrt/kernels/build_*.cl``, entry ``build_bvh.cl``):
    for its children and replacing the 7-leaf treelet below it by the
    cheapest by the SAH;
 4. rows and slots as sums along each node's path from the root (pointer
-   jumping, ceil(log2(depth)) launches), then one launch writes the
-   ``BVH_PAIR_NODE`` rows, fitting each child's volume exactly as
+   jumping: ceil(log2(depth)) launches, EMIT_JUMPS on GPUs), then one launch
+   writes the ``BVH_PAIR_NODE`` rows, fitting each child's volume exactly as
    ``clrt/accel/volumes.py`` does (float64 on the device), the triangles in
    slot order and the slot -> triangle ids.
 
@@ -173,6 +173,8 @@ class DeviceBvh:
     iterations: PLOC iterations; timings: device ms per phase (profiling
                events; ``device`` is the sum), and ``wall`` (host clock, from
                the call to the rows being ready).
+    launches:  with ``profile``, (kernel name, device start ns, end ns) of
+               every launch, in order.
     """
 
     rows: cl.Buffer
@@ -188,6 +190,7 @@ class DeviceBvh:
     queue: cl.CommandQueue = field(repr=False)
     exact_rows: cl.Buffer | None = field(default=None, repr=False)
     builder: str = "device"
+    launches: list = field(default_factory=list, repr=False)
     _stats: dict | None = field(default=None, repr=False)
 
     @property
@@ -309,7 +312,7 @@ def build_on_device(context: cl.Context, queue: cl.CommandQueue, corners, volume
                     leaf_size: int = 4, keep_boxes: bool = False,
                     tail_threshold: int | None = None, staged_upload: bool | None = None,
                     treelet_leaves: int | None = None, treelet_min: int | None = None,
-                    tail_group: int | None = None) -> DeviceBvh:
+                    tail_group: int | None = None, profile: bool = False) -> DeviceBvh:
     """Build a BVH over ``corners`` on the queue's device.
 
     corners: (F, 3, 3) triangle corners (converted to float32, checked as
@@ -326,6 +329,8 @@ def build_on_device(context: cl.Context, queue: cl.CommandQueue, corners, volume
         TREELET_MIN_TRIANGLES; always more than leaf_size).
     tail_group: work-items of ploc_tail (a power of two; default: TAIL_GROUP
         of the device type; for benchmarks).
+    profile: keep every launch's kernel name and device start and end
+        (``DeviceBvh.launches``; clrt.bench.build --profile).
     ``queue`` must have profiling enabled (clrt.device.context.create_context's does).
     Raises InputError on bad input, DeviceError when the device lacks float64.
     """
@@ -349,10 +354,15 @@ def build_on_device(context: cl.Context, queue: cl.CommandQueue, corners, volume
     root = 2 * F - 2 if F > 1 else 0        # the last merge makes the root
     phases = _Phases()
 
+    launched = [] if profile else None
+
     def launch(phase: str, kernel: cl.Kernel, groups: int, *args, group: int = BUILD_GROUP) -> cl.Event:
         if args:
             kernel.set_args(*args)
-        return phases.add(phase, cl.enqueue_nd_range_kernel(queue, kernel, (groups * group,), (group,)))
+        event = cl.enqueue_nd_range_kernel(queue, kernel, (groups * group,), (group,))
+        if launched is not None:
+            launched.append((kernel.function_name, event))
+        return phases.add(phase, event)
 
     state = ws.get("state", 4 * STATE_INTS)
     corners_buf = ws.get("corners", tri.nbytes)
@@ -477,9 +487,11 @@ def build_on_device(context: cl.Context, queue: cl.CommandQueue, corners, volume
     iterations = int(head[STATE["STATE_ITERATIONS"]])
     timings = phases.ms()
     timings["wall"] = 1e3 * (time.perf_counter() - start)
+    launches = [(name, event.profile.start, event.profile.end) for name, event in launched or ()]
     return DeviceBvh(rows=rows, tri_verts=tri_verts, prim_ids=prim_ids, num_rows=num_rows, num_triangles=F,
                      depth=int(head[STATE["STATE_DEPTH"]]), volume=volume, leaf_size=leaf_size,
-                     iterations=iterations, timings=timings, queue=queue, exact_rows=exact_rows)
+                     iterations=iterations, timings=timings, queue=queue, exact_rows=exact_rows,
+                     launches=launches)
 
 
 def _row_buffers(context: cl.Context, num_rows: int, keep_boxes: bool):
