@@ -92,6 +92,20 @@ inline Hit query_hits(const Geometry* g, float3 origin, float3 dir, float tmin, 
                     current = (int2)(child[k], count[k]);
                     continue;
                 }
+                if (!(lanes & (lanes - 1u))) {            // two met: no loop
+                    // the loop's order (QUERY_ALL: the higher lane first; else
+                    // the nearer, the higher lane on a tie), by selects rather
+                    // than its compare-and-shift: 1-4 % faster, docs/benchmarks.md
+                    const int k2 = 31 - clz(lanes);
+                    const float t1 = enter[k], t2 = enter[k2];
+                    const int2 c1 = (int2)(child[k], count[k]), c2 = (int2)(child[k2], count[k2]);
+                    const bool first_near = query != QUERY_ALL && t1 < t2;
+                    current = first_near ? c1 : c2;
+                    stack[sp] = first_near ? c2 : c1;
+                    stack_t[sp] = first_near ? t2 : t1;
+                    ++sp;
+                    continue;
+                }
                 const int base = sp;
                 for (;;) {
                     const float t = enter[k];
