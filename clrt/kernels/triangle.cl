@@ -103,7 +103,8 @@ inline float4 diff_of_products4(float4 a, float4 b, float4 c, float4 d)
 // lane's answer is the scalar test's bit for bit; only the early exits become
 // masks.  Returns -1 in the lanes of a hit with tmin < t <= tmax (empty lanes
 // never hit), with t and the barycentric weights in *t_out, *u_out, *v_out
-// (set only when some lane hits).
+// (set only when some lane hits).  Inlined into the walk (accel_wide.cl says why).
+__attribute__((always_inline))
 inline int4 intersect_packet_culled(const ShearedRay* r, __global const TrianglePacket* p,
                                     float tmin, float tmax, const int cull,
                                     float4* t_out, float4* u_out, float4* v_out)
