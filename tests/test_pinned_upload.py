@@ -32,13 +32,21 @@ def test_parallel_copy_is_a_copy():
         assert np.array_equal(dst, src), threads
 
 
+def _stage_every_ray_array(monkeypatch):
+    """Ray arrays of any size through the staging blocks, on every device (as
+    large ones go on GPUs), in blocks of 4 kB so that uploads take turns."""
+    from clrt.query import accel as query_accel
+    monkeypatch.setattr(pinned, "STAGE_BYTES", 4096)
+    monkeypatch.setattr(query_accel, "RAY_STAGED_MIN_BYTES", 0)
+    monkeypatch.setattr(query_accel, "RAY_STAGING", {"gpu": True, "cpu": True})
+
+
 def test_ray_chunks_through_staging_give_the_same_answers(device, monkeypatch):
     """Ray arrays uploaded through the page-locked blocks (as on GPUs; forced
     here on every device, with blocks and chunks small enough that many
     uploads take turns in the two blocks on both pipeline queues) give the
     hits of the plain copy, every field, and the same any-hit and all-hits."""
     import clrt
-    from clrt.query import accel as query_accel
     from clrt.scene import primitives
     mesh = primitives.torus(1.0, 0.35, 24, 12)
     rng = np.random.default_rng(11)
@@ -47,10 +55,8 @@ def test_ray_chunks_through_staging_give_the_same_answers(device, monkeypatch):
     plain = clrt.Accel(mesh, device=device, chunk_rays=700)
     want = plain.trace(origins, directions)
     want_any, want_all = plain.any_hit(origins, directions), plain.all_hits(origins, directions)
-    monkeypatch.setattr(pinned, "STAGE_BYTES", 4096)
     monkeypatch.setattr(pinned, "PARALLEL_COPY_MIN_BYTES", 1024)
-    monkeypatch.setattr(query_accel, "RAY_STAGED_MIN_BYTES", 0)
-    monkeypatch.setattr(query_accel, "RAY_STAGING", {"gpu": True, "cpu": True})
+    _stage_every_ray_array(monkeypatch)
     staged = clrt.Accel(mesh, device=device, chunk_rays=700)
     pinned._stages.pop(staged.context.int_ptr, None)          # blocks of the patched size
     try:
@@ -72,16 +78,13 @@ def test_staged_uploads_from_two_threads(device, monkeypatch):
     from concurrent.futures import ThreadPoolExecutor
 
     import clrt
-    from clrt.query import accel as query_accel
     from clrt.scene import primitives
     mesh = primitives.torus(1.0, 0.35, 24, 12)
     rng = np.random.default_rng(12)
     rays = [(rng.normal(size=(4000, 3)) * 2.0, rng.normal(size=(4000, 3))) for _ in range(2)]
     accels = [clrt.Accel(mesh, device=device, chunk_rays=500) for _ in range(2)]
     want = [a.trace(o, d).t.copy() for a, (o, d) in zip(accels, rays)]
-    monkeypatch.setattr(pinned, "STAGE_BYTES", 4096)
-    monkeypatch.setattr(query_accel, "RAY_STAGED_MIN_BYTES", 0)
-    monkeypatch.setattr(query_accel, "RAY_STAGING", {"gpu": True, "cpu": True})
+    _stage_every_ray_array(monkeypatch)
     pinned._stages.pop(accels[0].context.int_ptr, None)       # blocks of the patched size
     try:
         def run(k):

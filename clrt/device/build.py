@@ -131,7 +131,8 @@ EMIT_JUMPS = 7           # pointer jumps queued without reading the tree's heigh
 
 # The state buffer (build_state.cl): int offsets, and the ring of cluster counts.
 STATE = {"STATE_NEXT_NODE": 0, "STATE_DEPTH": 1, "STATE_ERROR": 2, "STATE_BAD_TRIANGLE": 3, "STATE_BOUNDS": 4,
-         "STATE_ITERATIONS": 10, "STATE_TICKETS": 11, "STATE_TREELET_TICKET": 13, "STATE_COUNTS": 16, "COUNT_RING": 256}
+         "STATE_ITERATIONS": 10, "STATE_TICKETS": 11, "STATE_TREELET_TICKET": 13, "STATE_COUNTS": 16,
+         "COUNT_RING": 64}   # one batch of iterations (50M triangles: 51)
 STATE["STATE_LEVELS"] = STATE["STATE_COUNTS"] + STATE["COUNT_RING"]
 STATE["STATE_LEVEL_CURSORS"] = STATE["STATE_LEVELS"] + TREELET_LEVELS
 STATE_INTS = STATE["STATE_LEVEL_CURSORS"] + TREELET_LEVELS
