@@ -68,13 +68,17 @@ RESULT_DTYPES = {"t": np.float32, "prim": np.int32, "u": np.float32, "v": np.flo
 # GPU (clrt.device.pinned.upload): the driver's own copy of pageable memory
 # runs at about 8 GB/s on the H200's host, the staged one at about 30.  On
 # the H200, 10M random rays numpy -> Hits: 50.1 ms plain, 34.0 staged (1M-ray
-# chunks, 12 MB arrays); 1M rays: 5.3 ms plain, 5.9 staged (3 MB arrays, where
-# the threads' start costs more than they save).  (CPU devices read host
-# memory directly: no staging there.)
+# chunks, 12 MB arrays); smaller arrays gain nothing (the threads' start costs
+# about what they save: 250k rays, 3 MB arrays, 1.29 ms with or without).
+# (CPU devices read host memory directly: no staging there.)
 RAY_STAGED_MIN_BYTES = 8 << 20
 RAY_STAGING = {"gpu": True, "cpu": False}
-PIPELINE_CHUNKS = 4                 # a host batch goes in at least this many chunks, on two queues
-MIN_PIPELINE_RAYS = 1 << 16         # ... of at least this many rays
+# A batch goes in chunks of chunk_size() rays, one after the other on one
+# queue.  Cutting host batches smaller, on two queues, so that one chunk's
+# transfers would overlap another's kernel, was slower on the H200 at every
+# size (1M rays numpy -> Hits: 7.4 ms in four chunks, 3.8 in one;
+# docs/benchmarks.md, session 6): each transfer of pageable memory costs the
+# host more than the device time it could hide.
 # Work-items per work-group of the query kernels; None lets the driver choose.
 # Measured on the H200 (clrt.bench.raysets --group, docs/benchmarks.md): 128
 # takes 5-7 % off incoherent sets (random, diffuse, AO) against the driver's
@@ -187,7 +191,6 @@ class Accel:
         self._buffers: dict[str, cl.Buffer] = {}
         self._hits_per_ray = float(ALL_HITS_PER_RAY)
         self.launches: list[cl.Event] = []   # query launches, see kernel_ms
-        self._queues = [queue]                # the pipeline's lanes, see _lane
         self.result_pool = PinnedPool(context, queue, RESULT_POOL_SIZE, RESULT_POOL_MAX_BYTES)
 
     # ----------------------------------------------------------------------- chunks and memory
@@ -238,35 +241,22 @@ class Accel:
 
     # ----------------------------------------------------------------------- rays in
 
-    def _lane(self, k: int) -> cl.CommandQueue:
-        """Queue ``k`` (0 or 1) of the pipeline: successive chunks of a batch go to
-        alternate queues, so that one chunk's upload overlaps the other's kernel
-        and read back.  Each lane has its own chunk buffers (lane 1's names end
-        in "_")."""
-        while len(self._queues) <= k:
-            self._queues.append(cl.CommandQueue(self.context, self.queue.device,
-                                                properties=cl.command_queue_properties.PROFILING_ENABLE))
-        return self._queues[k]
-
     def _begin(self, source) -> None:
-        """Before the first chunk of a batch: no bad ray reported yet (waited for:
-        both lanes' kernels report into this buffer)."""
+        """Before the first chunk of a batch: no bad ray reported yet."""
         cl.enqueue_copy(self.queue, self._buffer("bad", 4 * len(RAY_CHECKS)),
                         np.full(len(RAY_CHECKS), np.iinfo(np.int32).max, np.int32), is_blocking=True)
 
     def _check(self, source) -> None:
         """After the last chunk: InputError for the first bad ray the kernels saw."""
-        for queue in self._queues[1:]:
-            queue.finish()
         bad = np.empty(len(RAY_CHECKS), np.int32)
-        cl.enqueue_copy(self.queue, bad, self._buffer("bad", bad.nbytes))   # waits for lane 0
+        cl.enqueue_copy(self.queue, bad, self._buffer("bad", bad.nbytes))   # waits for the whole batch
         if (bad < np.iinfo(np.int32).max).any():
             kind = int(np.argmin(bad))          # the lowest ray; on a tie, the first check
             raise InputError(source.bad_ray_message(RAY_CHECKS[kind], int(bad[kind])))
 
-    def _ray_args(self, source, start: int, stop: int, lane: int = 0) -> tuple:
+    def _ray_args(self, source, start: int, stop: int) -> tuple:
         """RAY_INPUT_PARAMS (rays.cl) for rays start..stop-1 of ``source``: host
-        arrays uploaded as they are into the lane's chunk buffers, device arrays
+        arrays uploaded as they are into the chunk buffers, device arrays
         used in place, camera rays made on the device."""
         m = stop - start
         if isinstance(source, (CameraRays, PinholeRays)):
@@ -288,42 +278,30 @@ class Accel:
                        else self._upload(f"in_{k}", a), stride) for k, (a, stride) in enumerate(source.inputs)]
             in_first = start
         else:
-            inputs = [(self._upload(f"in_{k}{'_' * lane}", source.host_chunk(k, start, stop), lane), stride)
+            inputs = [(self._upload(f"in_{k}", source.host_chunk(k, start, stop)), stride)
                       for k, (_, stride) in enumerate(source.inputs)]
             in_first = 0
         flat = [x for buf, stride in inputs for x in (buf, np.uint32(stride))]
         return (*flat, np.uint32(in_first), np.uint32(start), np.uint32(bool(source.normalise)),
                 self._buffer("bad", 4 * len(RAY_CHECKS)))
 
-    def _upload(self, name: str, array: np.ndarray, lane: int = 0) -> cl.Buffer:
-        """``array`` into the kept buffer ``name``, without waiting (the lane's queue
+    def _upload(self, name: str, array: np.ndarray) -> cl.Buffer:
+        """``array`` into the kept buffer ``name``, without waiting (the queue
         is in order: the launch that reads it comes after); on a GPU, arrays of
         RAY_STAGED_MIN_BYTES or more through page-locked staging (clrt.device.pinned;
         RAY_STAGING)."""
         buf = self._buffer(name, array.nbytes)
         if array.nbytes:
             staged = RAY_STAGING[self._kind] and array.nbytes >= RAY_STAGED_MIN_BYTES
-            pinned.upload(self.context, self._lane(lane), buf, np.ascontiguousarray(array), staged)
+            pinned.upload(self.context, self.queue, buf, np.ascontiguousarray(array), staged)
         return buf
 
-    def _run(self, name: str, m: int, *args, lane: int = 0) -> None:
+    def _run(self, name: str, m: int, *args) -> None:
         kernel = self.kernels[name]
         kernel.set_args(*args, *self.geometry.args)
         group = QUERY_GROUP[self._kind]
         size, local = ((m,), None) if group is None else ((-(-m // group) * group,), (group,))
-        self.launches.append(cl.enqueue_nd_range_kernel(self._lane(lane), kernel, size, local))
-
-    def _pipeline(self, n: int, on_host: bool):
-        """(start, stop, lane) of the chunks of a batch: host batches in at least
-        PIPELINE_CHUNKS chunks on alternate lanes (so transfers overlap), others
-        in plain chunks on lane 0."""
-        if not on_host:
-            for start, stop in self._chunks(n):
-                yield start, stop, 0
-            return
-        step = max(1, min(self.chunk_size(), max(MIN_PIPELINE_RAYS, -(-n // PIPELINE_CHUNKS))))
-        for k, start in enumerate(range(0, n, step)):
-            yield start, min(n, start + step), k % 2
+        self.launches.append(cl.enqueue_nd_range_kernel(self.queue, kernel, size, local))
 
     def kernel_ms(self) -> float:
         """Kernel time (ms, profiling events) of the query launches since the last
@@ -361,24 +339,24 @@ class Accel:
         on_device = getattr(source, "on_device", False)
         out = self._outputs(n, fields, on_device)
         self._begin(source)
-        for start, stop, lane in self._pipeline(n, isinstance(source, RayBatch) and not on_device):
+        for start, stop in self._chunks(n):
             m = stop - start
             if on_device:
                 targets = [out[name].data if name in out else None for name in CLOSEST_FIELDS]
                 first = start
             else:
-                targets = [self._buffer(f"out_{name}{'_' * lane}", m * RESULT_BYTES[name]) if name in out
+                targets = [self._buffer(f"out_{name}", m * RESULT_BYTES[name]) if name in out
                            else None for name in CLOSEST_FIELDS]
                 first = 0
-            self._run("query_closest", m, *self._ray_args(source, start, stop, lane), *targets,
-                      np.uint32(first), np.uint32(m), code, lane=lane)
+            self._run("query_closest", m, *self._ray_args(source, start, stop), *targets,
+                      np.uint32(first), np.uint32(m), code)
             if directions_out is not None:     # before the next chunk's rays replace them
-                cl.enqueue_copy(self._lane(lane), directions_out[start:stop], self._buffer("in_1", 12 * m),
+                cl.enqueue_copy(self.queue, directions_out[start:stop], self._buffer("in_1", 12 * m),
                                 is_blocking=False)
             if not on_device:
                 for name, buf in zip(CLOSEST_FIELDS, targets):
                     if buf is not None:
-                        cl.enqueue_copy(self._lane(lane), out[name][start:stop], buf, is_blocking=False)
+                        cl.enqueue_copy(self.queue, out[name][start:stop], buf, is_blocking=False)
         self._check(source)   # also waits for the copies
         if not on_device:   # device arrays keep the flags as uint8 0 / 1 (OpenCL has no bool arrays)
             for name in ("front", "hit"):
@@ -404,16 +382,16 @@ class Accel:
         n = len(batch)
         out = self._outputs(n, [field], batch.on_device)[field]
         self._begin(batch)
-        for start, stop, lane in self._pipeline(n, not batch.on_device):
+        for start, stop in self._chunks(n):
             m = stop - start
             if batch.on_device:
                 target, first = out.data, start
             else:
-                target, first = self._buffer(f"{kernel}{'_' * lane}", m * out.itemsize), 0
-            self._run(kernel, m, *self._ray_args(batch, start, stop, lane), target, np.uint32(first),
-                      np.uint32(m), code, lane=lane)
+                target, first = self._buffer(kernel, m * out.itemsize), 0
+            self._run(kernel, m, *self._ray_args(batch, start, stop), target, np.uint32(first),
+                      np.uint32(m), code)
             if not batch.on_device:
-                cl.enqueue_copy(self._lane(lane), out[start:stop], target, is_blocking=False)
+                cl.enqueue_copy(self.queue, out[start:stop], target, is_blocking=False)
         self._check(batch)
         return out
 
