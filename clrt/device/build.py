@@ -9,7 +9,9 @@ The algorithm (kernels in ``clrt/kernels/build_*.cl``, entry ``build_bvh.cl``):
 
 1. bounds of the triangles' box centres, and a 30-bit Morton code per triangle;
 2. a least-significant-digit radix sort of (code, triangle id), ``RADIX_BITS``
-   per pass, three launches a pass;
+   per pass: on GPUs one launch a pass (the tiles' offsets by decoupled
+   look-back) after one that counts the digits of every pass, on CPU devices
+   three launches a pass;
 3. PLOC (Meister & Bittner 2018; the one-block search of PLOC++, Benthin et
    al. 2022): clusters start as the sorted triangles; in each iteration every
    cluster finds the cluster within ``PLOC_RADIUS`` places on either side whose
@@ -26,8 +28,8 @@ The algorithm (kernels in ``clrt/kernels/build_*.cl``, entry ``build_bvh.cl``):
 3b. treelet restructuring (Karras & Aila 2013, ``TREELET_LEAVES``; GPUs only
    by default): one launch, a work-group per node (of at least
    ``TREELET_MIN_TRIANGLES`` on large meshes), lowest first, each waiting
-   for its children and replacing the 7-leaf treelet below it by the
-   cheapest by the SAH;
+   for its children and replacing the treelet of 7 leaves below it (6
+   below 16 triangles) by the cheapest by the SAH;
 4. rows and slots as sums along each node's path from the root (pointer
    jumping: ceil(log2(depth)) launches, EMIT_JUMPS on GPUs), then one launch
    writes the ``BVH_PAIR_NODE`` rows, fitting each child's volume exactly as
@@ -78,6 +80,7 @@ from clrt.errors import DeviceError, DeviceMemoryError, InputError
 BUILD_GROUP = 256        # work-items per work-group of every build kernel
 RADIX_BITS = 4           # digit of one radix-sort pass: 16 bins, 8 passes for 30-bit codes
 MORTON_BITS = 30
+SORT_PASSES = -(-MORTON_BITS // RADIX_BITS)
 # Clusters searched on each side (Meister & Bittner's default; PLOC++ uses 8).
 # Measured SAH cost over the host SAH builder's (leaf size 4): camel 1.13 / 1.11
 # / 1.06 and bunny 1.09 / 1.08 / - at radius 8 / 16 / 32; the search time grows
@@ -86,18 +89,28 @@ MORTON_BITS = 30
 PLOC_RADIUS = 16
 # Clusters at which the host hands over to ploc_tail, per device type: a GPU
 # runs a few thousand clusters' iteration in one work-group faster than three
-# launches; a CPU runs a work-group on one core, so it hands over later.
-TAIL_THRESHOLD = {"gpu": 4096, "cpu": 2048}
+# launches (on the H200, 2048 against 4096: bunny00 2.07 against 2.12 ms,
+# 1M triangles 7.7 against 7.9 ms, 10M the same); a CPU runs a work-group on
+# one core, so it hands over later.
+TAIL_THRESHOLD = {"gpu": 2048, "cpu": 2048}
 TAIL_MAX = 32768         # ploc_tail counts its clusters in 16 bits
 TAIL_GROUP = {"gpu": 1024, "cpu": BUILD_GROUP}
-# Treelet restructuring after PLOC (build_treelet.cl): leaves per treelet
-# (7, as Karras & Aila; on PoCL 8 lowered the SAH cost by 0.4 % more at 7x
-# the time, 5 by 1.3 % less), per device type; 0: none.  On the H200 it costs
-# 1.1-1.2 ms for bunny00 and camel and brings their primary rays within 4 % of
-# the host SAH trees (9-13 % without).  On a CPU it would add a third to the build
+# Treelet restructuring after PLOC (build_treelet.cl): leaves per treelet,
+# per device type; 0: none.  Karras & Aila use 7.  TREELET_SMALL: (leaves,
+# below triangles) -- nodes of fewer triangles take treelets of fewer leaves.
+# A group waits for its children's treelets, so the restructuring takes as
+# long as the chain of treelets up the tree's height, and a smaller treelet
+# is quicker (its dynamic program runs over 63 subsets instead of 127, and
+# one node fewer is opened); the low nodes change the tree's cost least.
+# On the H200 (docs/benchmarks.md, session 6; build ms, primary rays over
+# the host SAH tree's): bunny00 7 leaves 1.92 ms / +4.2 %, 6 leaves 1.69 /
+# +5.4 %, 7 and 6 below 16 triangles 1.87 / +4.3 %; camel 1.45 / +2.3 %,
+# 1.26 / +6.1 %, 1.41 / +3.0 %.  (On PoCL 8 lowered the SAH cost by 0.4 %
+# more than 7 at 7x the time.)  On a CPU it would add a third to the build
 # (bunny00 on 2 cores: 114 -> 156 ms), where the build is what a user waits
 # for: off there.
 TREELET_LEAVES = {"gpu": 7, "cpu": 0}
+TREELET_SMALL = {"gpu": (6, 16), "cpu": (6, 16)}
 TREELET_GROUP = 32       # work-items that solve one treelet together
 TREELET_GROUPS_PER_UNIT = 32   # treelet work-groups launched per compute unit (each takes node after node)
 # Treelets of nodes with fewer triangles are not restructured (nodes of at
@@ -135,10 +148,13 @@ STATE = {"STATE_NEXT_NODE": 0, "STATE_DEPTH": 1, "STATE_ERROR": 2, "STATE_BAD_TR
          "COUNT_RING": 64}   # one batch of iterations (50M triangles: 51)
 STATE["STATE_LEVELS"] = STATE["STATE_COUNTS"] + STATE["COUNT_RING"]
 STATE["STATE_LEVEL_CURSORS"] = STATE["STATE_LEVELS"] + TREELET_LEVELS
-STATE_INTS = STATE["STATE_LEVEL_CURSORS"] + TREELET_LEVELS
+STATE["STATE_SORT_TICKETS"] = STATE["STATE_LEVEL_CURSORS"] + TREELET_LEVELS
+STATE["STATE_SORT_DIGITS"] = STATE["STATE_SORT_TICKETS"] + SORT_PASSES
+STATE_INTS = STATE["STATE_INTS"] = STATE["STATE_SORT_DIGITS"] + SORT_PASSES * (1 << RADIX_BITS)
 
 _KERNELS = ("init_build_state", "centroid_bounds", "morton_codes", "radix_histogram", "scan_counts",
-            "radix_scatter", "init_leaves", "ploc_merge", "ploc_count_kept", "ploc_compact", "ploc_tail",
+            "radix_scatter", "radix_digit_counts", "radix_scatter_lookback", "init_leaves", "ploc_merge",
+            "ploc_count_kept", "ploc_compact", "ploc_tail",
             "ploc_nearest_tiles", "ploc_merge_tiles",
             "treelet_levels", "treelet_order", "treelet_restructure", "init_root_paths", "jump_root_paths", "emit_tree")
 
@@ -150,8 +166,12 @@ def build_defines(volume: str, kind: str = "gpu", treelet_leaves: int | None = N
     is a C double literal of the same value)."""
     return {
         VOLUME_DEFINES[volume]: None, "BUILD_GROUP": BUILD_GROUP, "RADIX_BITS": RADIX_BITS,
+        "SORT_PASSES": SORT_PASSES,
         "PLOC_RADIUS": PLOC_RADIUS, "TAIL_GROUP": TAIL_GROUP[kind] if tail_group is None else int(tail_group),
         "TREELET_LEAVES": TREELET_LEAVES[kind] if treelet_leaves is None else int(treelet_leaves),
+        "TREELET_SMALL_LEAVES": min(TREELET_SMALL[kind][0], TREELET_LEAVES[kind] if treelet_leaves is None
+                                    else int(treelet_leaves)),
+        "TREELET_FULL_MIN": TREELET_SMALL[kind][1],
         "TREELET_GROUP": TREELET_GROUP, "TREELET_LEVELS": TREELET_LEVELS, **STATE,
         "C_TRAVERSAL": f"((float){C_TRAVERSAL!r})", "C_INTERSECT": f"((float){C_INTERSECT!r})",
         "REL_PAD": repr(float(volumes.REL_PAD)), "ULP_PAD": int(volumes.ULP_PAD),
@@ -171,9 +191,10 @@ class DeviceBvh:
                box layout, only when built with ``keep_boxes``; for statistics.
     depth:     nodes on the longest root-to-leaf path (root counts 1): the
                traversal stack (BVH_STACK_SIZE) must hold it.
-    iterations: PLOC iterations; timings: device ms per phase (profiling
-               events; ``device`` is the sum), and ``wall`` (host clock, from
-               the call to the rows being ready).
+    iterations: PLOC iterations; timings: ``wall`` (host clock, from the
+               call to the rows being ready), and when built with
+               ``device_times``, device ms per phase (profiling events;
+               ``device`` is their sum).
     launches:  with ``profile``, (kernel name, device start ns, end ns) of
                every launch, in order.
     """
@@ -270,7 +291,9 @@ _U, _I = np.uint32, np.int32
 _ARG_TYPES = {
     "init_build_state": [None, _U], "centroid_bounds": [None, _U, None], "morton_codes": [None, _U, None, None, None],
     "radix_histogram": [None, _U, _U, None], "scan_counts": [None, _U],
-    "radix_scatter": [None, None, _U, _U, None, None, None], "init_leaves": [None, None, _U, None, None, None, None],
+    "radix_scatter": [None, None, _U, _U, None, None, None], "radix_digit_counts": [None, _U, None, None, _U],
+    "radix_scatter_lookback": [None, None, _U, _U, None, None, None, None],
+    "init_leaves": [None, None, _U, None, None, None, None],
     "ploc_merge": [None] * 5 + [_I, None, _I, _U], "ploc_count_kept": [None, None, _I],
     "ploc_compact": [None] * 4 + [_I], "ploc_tail": [None] * 5 + [_I, None, _I, _U],
     "ploc_nearest_tiles": [None, None, None, _I], "ploc_merge_tiles": [None] * 6 + [_I, None, _I, _U],
@@ -285,6 +308,21 @@ def _kernels(program: cl.Program) -> dict:
     if key not in _kernel_sets:
         _kernel_sets[key] = {name: typed_kernel(program, name, _ARG_TYPES[name]) for name in _KERNELS}
     return _kernel_sets[key]
+
+
+_build_queues: dict[tuple, cl.CommandQueue] = {}
+
+
+def build_queue(context: cl.Context, device: cl.Device) -> cl.CommandQueue:
+    """The queue untimed builds run on: one per context and device, without
+    profiling.  On the H200 a launch costs the host 8.5 us to queue there and
+    14 us on a profiling queue, and a small build waits on its host: bunny00
+    2.35 -> 2.13 ms (docs/benchmarks.md, session 6)."""
+    key = (context.int_ptr, device.int_ptr)
+    queue = _build_queues.get(key)
+    if queue is None:
+        queue = _build_queues[key] = cl.CommandQueue(context, device)
+    return queue
 
 
 def _groups(n: int) -> int:
@@ -313,7 +351,8 @@ def build_on_device(context: cl.Context, queue: cl.CommandQueue, corners, volume
                     leaf_size: int = 4, keep_boxes: bool = False,
                     tail_threshold: int | None = None, staged_upload: bool | None = None,
                     treelet_leaves: int | None = None, treelet_min: int | None = None,
-                    tail_group: int | None = None, profile: bool = False) -> DeviceBvh:
+                    tail_group: int | None = None, device_times: bool = False,
+                    profile: bool = False) -> DeviceBvh:
     """Build a BVH over ``corners`` on the queue's device.
 
     corners: (F, 3, 3) triangle corners (converted to float32, checked as
@@ -330,9 +369,14 @@ def build_on_device(context: cl.Context, queue: cl.CommandQueue, corners, volume
         TREELET_MIN_TRIANGLES; always more than leaf_size).
     tail_group: work-items of ploc_tail (a power of two; default: TAIL_GROUP
         of the device type; for benchmarks).
+    device_times: time the phases on the device (``DeviceBvh.timings``; for
+        benchmarks).  The build then runs on ``queue``, which must have
+        profiling enabled (clrt.device.context.create_context's does);
+        otherwise on a queue of the same device without it (build_queue).
     profile: keep every launch's kernel name and device start and end
-        (``DeviceBvh.launches``; clrt.bench.build --profile).
-    ``queue`` must have profiling enabled (clrt.device.context.create_context's does).
+        (``DeviceBvh.launches``; clrt.bench.build --profile); implies device_times.
+    Either way the build is complete when this returns, so ``queue`` and any
+    other queue of the context may use the buffers at once.
     Raises InputError on bad input, DeviceError when the device lacks float64.
     """
     start = time.perf_counter()
@@ -353,8 +397,10 @@ def build_on_device(context: cl.Context, queue: cl.CommandQueue, corners, volume
     F = len(tri)
     num_nodes = 2 * F - 1
     root = 2 * F - 2 if F > 1 else 0        # the last merge makes the root
-    phases = _Phases()
-
+    phases = _Phases() if device_times or profile else None
+    caller_queue = queue
+    if phases is None:
+        queue = build_queue(context, queue.device)
     launched = [] if profile else None
 
     def launch(phase: str, kernel: cl.Kernel, groups: int, *args, group: int = BUILD_GROUP) -> cl.Event:
@@ -363,11 +409,13 @@ def build_on_device(context: cl.Context, queue: cl.CommandQueue, corners, volume
         event = cl.enqueue_nd_range_kernel(queue, kernel, (groups * group,), (group,))
         if launched is not None:
             launched.append((kernel.function_name, event))
-        return phases.add(phase, event)
+        return event if phases is None else phases.add(phase, event)
 
     state = ws.get("state", 4 * STATE_INTS)
     corners_buf = ws.get("corners", tri.nbytes)
-    phases.add("upload", pinned.upload(context, queue, corners_buf, tri, staged_upload))
+    uploaded = pinned.upload(context, queue, corners_buf, tri, staged_upload)
+    if phases is not None:
+        phases.add("upload", uploaded)
     # The outputs are made while the device works: making them between the
     # last launches cost 0.2 ms (bunny00) to 0.4 ms (1M) on the H200.  The
     # rows' count is known at the end; up to EARLY_ROWS_BYTES they are made
@@ -387,13 +435,23 @@ def build_on_device(context: cl.Context, queue: cl.CommandQueue, corners, volume
     launch("morton", k["centroid_bounds"], min(_groups(F), MAX_REDUCE_GROUPS), corners_buf, np.uint32(F), state)
     launch("morton", k["morton_codes"], _groups(F), corners_buf, np.uint32(F), state, keys[0], ids[0])
 
-    # 2. Radix sort, ping-ponging between the two key/id buffers.
+    # 2. Radix sort, ping-ponging between the two key/id buffers (build_sort.cl):
+    # on a GPU one launch a pass (decoupled look-back), elsewhere three.
     tiles = max(-(-F // (BUILD_GROUP * 8)), 1)          # SORT_TILE = BUILD_GROUP * SORT_ITEMS
     bins = 1 << RADIX_BITS
-    tile_counts = ws.get("tile_counts", 4 * bins * tiles)
-    passes = -(-MORTON_BITS // RADIX_BITS)
+    passes = SORT_PASSES
+    if kind == "gpu":
+        sort_status = ws.get("sort_status", 4 * 2 * tiles * bins)     # two halves, see radix_scatter_lookback
+        launch("sort", k["radix_digit_counts"], min(_groups(F), MAX_REDUCE_GROUPS), keys[0], np.uint32(F), state,
+               sort_status, np.uint32(tiles * bins))
+    else:
+        tile_counts = ws.get("tile_counts", 4 * bins * tiles)
     for p in range(passes):
         src, dst = p % 2, 1 - p % 2
+        if kind == "gpu":
+            launch("sort", k["radix_scatter_lookback"], tiles, keys[src], ids[src], np.uint32(F), np.uint32(p),
+                   state, sort_status, keys[dst], ids[dst])
+            continue
         shift = np.uint32(p * RADIX_BITS)
         launch("sort", k["radix_histogram"], tiles, keys[src], np.uint32(F), shift, tile_counts)
         launch("sort", k["scan_counts"], 1, tile_counts, np.uint32(bins * tiles))
@@ -486,12 +544,12 @@ def build_on_device(context: cl.Context, queue: cl.CommandQueue, corners, volume
         raise RuntimeError("device BVH build: a node did not reach the root (too few pointer jumps)")
     num_rows = max(int(root_rows[0]), 1)
     iterations = int(head[STATE["STATE_ITERATIONS"]])
-    timings = phases.ms()
+    timings = {} if phases is None else phases.ms()
     timings["wall"] = 1e3 * (time.perf_counter() - start)
     launches = [(name, event.profile.start, event.profile.end) for name, event in launched or ()]
     return DeviceBvh(rows=rows, tri_verts=tri_verts, prim_ids=prim_ids, num_rows=num_rows, num_triangles=F,
                      depth=int(head[STATE["STATE_DEPTH"]]), volume=volume, leaf_size=leaf_size,
-                     iterations=iterations, timings=timings, queue=queue, exact_rows=exact_rows,
+                     iterations=iterations, timings=timings, queue=caller_queue, exact_rows=exact_rows,
                      launches=launches)
 
 

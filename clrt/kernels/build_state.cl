@@ -15,6 +15,8 @@
 //                        entry counts every taller node) whose treelets are
 //                        restructured (treelet_levels)
 //   STATE_LEVEL_CURSORS + h  nodes of height h placed so far (treelet_order)
+//   STATE_SORT_TICKETS + p   radix_scatter_lookback's tile tickets of pass p
+//   STATE_SORT_DIGITS + p * RADIX_BINS + d  keys whose pass-p digit is d (radix_digit_counts)
 // Offsets are -D defines from clrt/device/build.py, which reads the same values.
 #ifndef CLRT_BUILD_STATE_CL
 #define CLRT_BUILD_STATE_CL
@@ -23,7 +25,8 @@
     || !defined(STATE_BAD_TRIANGLE) || !defined(STATE_ITERATIONS) || !defined(STATE_TICKETS) \
     || !defined(STATE_TREELET_TICKET) \
     || !defined(STATE_BOUNDS) || !defined(STATE_COUNTS) || !defined(COUNT_RING) \
-    || !defined(STATE_LEVELS) || !defined(STATE_LEVEL_CURSORS) || !defined(TREELET_LEVELS)
+    || !defined(STATE_LEVELS) || !defined(STATE_LEVEL_CURSORS) || !defined(TREELET_LEVELS) \
+    || !defined(STATE_SORT_TICKETS) || !defined(STATE_SORT_DIGITS) || !defined(STATE_INTS)
 #error "build with the STATE_*, COUNT_RING and TREELET_LEVELS defines of clrt/device/build.py"
 #endif
 
@@ -32,7 +35,7 @@
 // One work-item: the state before a build of num_tris triangles.
 __kernel void init_build_state(global uint* state, const uint num_tris)
 {
-    for (uint k = 0; k < STATE_LEVEL_CURSORS + TREELET_LEVELS; ++k)
+    for (uint k = 0; k < STATE_INTS; ++k)
         state[k] = 0u;
     state[STATE_NEXT_NODE] = num_tris;
     state[STATE_BAD_TRIANGLE] = 0xffffffffu;       // none (atomic_min from the largest)

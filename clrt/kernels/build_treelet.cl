@@ -36,8 +36,9 @@
 
 #include "layouts.h"
 
-#if !defined(TREELET_LEAVES) || !defined(TREELET_GROUP) || !defined(TREELET_LEVELS)
-#error "build with -DTREELET_LEAVES=<3..8; 0: none>, -DTREELET_GROUP=<work-items a treelet> and -DTREELET_LEVELS"
+#if !defined(TREELET_LEAVES) || !defined(TREELET_GROUP) || !defined(TREELET_LEVELS) \
+    || !defined(TREELET_SMALL_LEAVES) || !defined(TREELET_FULL_MIN)
+#error "build with -DTREELET_LEAVES=<3..8; 0: none>, -DTREELET_SMALL_LEAVES, -DTREELET_FULL_MIN, -DTREELET_GROUP=<work-items a treelet> and -DTREELET_LEVELS"
 #endif
 #if !defined(C_TRAVERSAL) || !defined(C_INTERSECT)
 #error "build with the SAH constants C_TRAVERSAL and C_INTERSECT of clrt/accel/topdown.py"
@@ -148,14 +149,16 @@ inline void load_treelet_leaf(local Treelet* t, int k, shared_nodes nodes, share
 }
 
 // The treelet below inner node `root`: starting from its two children, opens
-// the leaf of largest area until TREELET_LEAVES (or only triangles are left).
-inline void form_treelet(local Treelet* t, shared_nodes nodes, shared_ints heights, int root, int num_tris)
+// the leaf of largest area until `target` leaves (at most TREELET_LEAVES; or
+// only triangles are left).
+inline void form_treelet(local Treelet* t, shared_nodes nodes, shared_ints heights, int root, int num_tris,
+                         int target)
 {
     int leaves = 2, inners = 1;
     t->inner[0] = root;
     load_treelet_leaf(t, 0, nodes, heights, left_of(nodes, root), num_tris);
     load_treelet_leaf(t, 1, nodes, heights, right_of(nodes, root), num_tris);
-    while (leaves < TREELET_LEAVES) {
+    while (leaves < target) {
         int pick = -1;
         float largest = -1.0f;
         for (int k = 0; k < leaves; ++k)
@@ -333,7 +336,11 @@ void treelet_restructure(global BuildNode* nodes, global int* heights, const glo
         barrier(CLK_GLOBAL_MEM_FENCE);
         if (lid == 0) {
             refresh_node(nodes, heights, root, num_tris, leaf_size);
-            form_treelet(&t, nodes, heights, root, num_tris);
+            // Nodes of fewer than TREELET_FULL_MIN triangles take smaller treelets:
+            // the height of the tree is the chain of treelets one waits for,
+            // and the lower ones change its cost least.
+            form_treelet(&t, nodes, heights, root, num_tris,
+                         nodes[root].count >= TREELET_FULL_MIN ? TREELET_LEAVES : TREELET_SMALL_LEAVES);
         }
         barrier(CLK_LOCAL_MEM_FENCE);
         const int n = t.leaves;                // the same in every work-item
