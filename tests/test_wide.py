@@ -106,32 +106,6 @@ def test_wide_walk_answers_as_the_binary_walk_and_brute_force(name, builder, lea
         _same_answers(wide, brute, o, d, tmin, f"{name}: wide / brute force")
 
 
-def test_two_rays_a_work_item_keep_every_ray_its_own(device, monkeypatch):
-    """Closest and any-hit queries walk two rays a work-item (query_hits_pair):
-    odd batches, chunks of odd length (each launch pairs from its own first
-    ray), and a pair of which one ray stops at once or runs long, each ray
-    answered as alone."""
-    mesh = knot()
-    wide, binary = _walks(mesh, "sah", 4, device, monkeypatch)
-    o, d, tmin = _rays(mesh, np.random.default_rng(7))
-    o, d, tmin = o[:1001], d[:1001], tmin[:1001]
-    d[::3] = d[1::3][:len(d[::3])]           # neighbours of very different lengths of walk
-    tmax = np.where(np.arange(len(o)) % 4 == 1, 0.0, np.inf)    # every fourth ray ends at once
-    for chunk in (None, 7, 2):
-        w = clrt.Accel(mesh, "box", "sah", 4, device=device, chunk_rays=chunk)
-        for n in (1, 2, 3, len(o)):
-            x = w.trace(o[:n], d[:n], tmin=tmin[:n], tmax=tmax[:n])
-            y = binary.trace(o[:n], d[:n], tmin=tmin[:n], tmax=tmax[:n])
-            for field in x._fields:
-                assert np.array_equal(getattr(x, field), getattr(y, field)), (chunk, n, field)
-            assert np.array_equal(w.any_hit(o[:n], d[:n], tmin=tmin[:n], tmax=tmax[:n]),
-                                  binary.any_hit(o[:n], d[:n], tmin=tmin[:n], tmax=tmax[:n])), (chunk, n)
-    bad = d.copy()
-    bad[10] = 0.0                             # a bad ray of a pair is reported by its own index
-    with pytest.raises(clrt.InputError, match="10"):
-        wide.trace(o, bad)
-
-
 def test_wide_walk_renders_as_the_binary_walk(device, monkeypatch):
     scene = scene_from_mesh(knot())
     camera = Camera.framing(scene.bounds, 48, 36)
