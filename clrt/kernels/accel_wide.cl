@@ -55,140 +55,80 @@ inline bool visit_packet(const Geometry* g, const ShearedRay* r, int packet, flo
     return false;
 }
 
-// One ray's walk, as accel_bvh.cl's: one current child -- a node, or a leaf's
-// packets -- and a stack of postponed children with the distance where the
-// ray enters them.  wide_step() takes one step of it, so that a work-item can
-// walk two rays in turn (query_hits_pair).
-typedef struct {
-    ShearedRay r;
-    VolumeRay vr;
-    BoxPlanes planes;
-    float tmin, tmax;
-    Hit best;
-    int best_id;
-    int sp;
-    int2 current;                      // (node or first packet, packet count: 0 for a node)
-} WideWalk;
-
-__attribute__((always_inline))
-inline void wide_start(WideWalk* w, float3 origin, float3 dir, float tmin, float tmax)
-{
-    w->r = shear_ray(origin, dir);
-    w->vr = volume_ray(origin, dir);
-    w->planes = box_planes(&w->vr);
-    w->tmin = tmin;
-    w->tmax = tmax;
-    w->best = miss_hit();
-    w->best_id = -1;
-    w->sp = 0;
-    w->current = (int2)(0, 0);         // the root node
-}
-
-// One step of the walk: the current child's test, and the choice of the next
-// child; false when the walk has ended (w->best is the answer).  A node's
-// children that the ray meets are pushed farthest first (insertion sort:
-// rarely more than three), and the nearest is taken at once.
-__attribute__((always_inline))
-inline bool wide_step(const Geometry* g, WideWalk* w, int2* stack, float* stack_t, const int query, HitSink* sink)
-{
-    if (w->current.y > 0) {
-        for (int p = w->current.x; p < w->current.x + w->current.y; ++p)
-            if (visit_packet(g, &w->r, p, w->tmin, &w->tmax, query, &w->best, &w->best_id, sink))
-                return false;
-    } else {
-        __global const BvhWideNode* n = g->wide_nodes + w->current.x;
-        float8 enter;
-        const int8 met = w->planes.oblique ? box_hit_wide_oblique(&w->vr, w->planes, n, w->tmin, w->tmax, &enter)
-                                           : box_hit_wide(&w->vr, n, w->tmin, w->tmax, &enter);
-        uint lanes = lane_bits(met & (n->count >= 0));
-        if (lanes) {
-            __global const int* child = (__global const int*)&n->child;
-            __global const int* count = (__global const int*)&n->count;
-            int k = 31 - clz(lanes & (0u - lanes));   // the lowest lane left
-            lanes &= lanes - 1u;
-            if (!lanes) {                             // one child met: no stack
-                w->current = (int2)(child[k], count[k]);
-                return true;
-            }
-            if (!(lanes & (lanes - 1u))) {            // two met: no loop
-                // the loop's order (QUERY_ALL: the higher lane first; else
-                // the nearer, the higher lane on a tie), by selects rather
-                // than its compare-and-shift: 1-4 % faster, docs/benchmarks.md
-                const int k2 = 31 - clz(lanes);
-                const float t1 = enter[k], t2 = enter[k2];
-                const int2 c1 = (int2)(child[k], count[k]), c2 = (int2)(child[k2], count[k2]);
-                const bool first_near = query != QUERY_ALL && t1 < t2;
-                w->current = first_near ? c1 : c2;
-                stack[w->sp] = first_near ? c2 : c1;
-                stack_t[w->sp] = first_near ? t2 : t1;
-                ++w->sp;
-                return true;
-            }
-            const int base = w->sp;
-            for (;;) {
-                const float t = enter[k];
-                int j = w->sp++;
-                if (query != QUERY_ALL)
-                    for (; j > base && stack_t[j - 1] < t; --j) {
-                        stack[j] = stack[j - 1];
-                        stack_t[j] = stack_t[j - 1];
-                    }
-                stack[j] = (int2)(child[k], count[k]);
-                stack_t[j] = t;
-                if (!lanes)
-                    break;
-                k = 31 - clz(lanes & (0u - lanes));
-                lanes &= lanes - 1u;
-            }
-            w->current = stack[--w->sp];    // the nearest
-            return true;
-        }
-    }
-    return resume_postponed(stack, stack_t, &w->sp, w->tmax, &w->current);
-}
-
 // Answer `query` for one ray (see hit.cl); the returned Hit.prim is a slot.
+// As accel_bvh.cl: one current child -- a node, or a leaf's packets -- and a
+// stack of postponed children with the distance where the ray enters them.
+// A node's children that the ray meets are pushed farthest first (insertion
+// sort: rarely more than three), and the nearest is taken at once.
 inline Hit query_hits(const Geometry* g, float3 origin, float3 dir, float tmin, float tmax,
                       const int query, HitSink* sink)
 {
-    WideWalk w;
-    int2 stack[WIDE_STACK_SIZE];
+    const ShearedRay r = shear_ray(origin, dir);
+    const VolumeRay vr = volume_ray(origin, dir);
+    const BoxPlanes planes = box_planes(&vr);
+    Hit best = miss_hit();
+    int best_id = -1;
+    int2 stack[WIDE_STACK_SIZE];       // (node or first packet, packet count: 0 for a node)
     float stack_t[WIDE_STACK_SIZE];
-    wide_start(&w, origin, dir, tmin, tmax);
-    while (wide_step(g, &w, stack, stack_t, query, sink))
-        ;
-    return w.best;
-}
-
-// query_hits for two rays at once (ray k: origin[k], dir[k], tmin[k],
-// tmax[k], where live[k]; the answers in hit[k], a miss where not live): their
-// steps taken in turn, so that one ray's node or packet is loaded while the
-// other's is tested -- the walk of one ray is a chain of dependent loads.
-inline void query_hits_pair(const Geometry* g, const float3* origin, const float3* dir, const float* tmin,
-                            const float* tmax, const bool* live, const int query, HitSink* sink, Hit* hit)
-{
-    WideWalk w0, w1;
-    int2 stack0[WIDE_STACK_SIZE], stack1[WIDE_STACK_SIZE];
-    float stack_t0[WIDE_STACK_SIZE], stack_t1[WIDE_STACK_SIZE];
-    bool live0 = live[0], live1 = live[1];
-    w0.best = miss_hit();
-    w1.best = miss_hit();
-    if (live0)
-        wide_start(&w0, origin[0], dir[0], tmin[0], tmax[0]);
-    if (live1)
-        wide_start(&w1, origin[1], dir[1], tmin[1], tmax[1]);
-    while (live0 & live1) {
-        live0 = wide_step(g, &w0, stack0, stack_t0, query, sink);
-        live1 = wide_step(g, &w1, stack1, stack_t1, query, sink);
+    int sp = 0;
+    int2 current = (int2)(0, 0);       // the root node
+    for (;;) {
+        if (current.y > 0) {
+            for (int p = current.x; p < current.x + current.y; ++p)
+                if (visit_packet(g, &r, p, tmin, &tmax, query, &best, &best_id, sink))
+                    return best;
+        } else {
+            __global const BvhWideNode* n = g->wide_nodes + current.x;
+            float8 enter;
+            const int8 met = planes.oblique ? box_hit_wide_oblique(&vr, planes, n, tmin, tmax, &enter)
+                                            : box_hit_wide(&vr, n, tmin, tmax, &enter);
+            uint lanes = lane_bits(met & (n->count >= 0));
+            if (lanes) {
+                __global const int* child = (__global const int*)&n->child;
+                __global const int* count = (__global const int*)&n->count;
+                int k = 31 - clz(lanes & (0u - lanes));   // the lowest lane left
+                lanes &= lanes - 1u;
+                if (!lanes) {                             // one child met: no stack
+                    current = (int2)(child[k], count[k]);
+                    continue;
+                }
+                if (!(lanes & (lanes - 1u))) {            // two met: no loop
+                    // the loop's order (QUERY_ALL: the higher lane first; else
+                    // the nearer, the higher lane on a tie), by selects rather
+                    // than its compare-and-shift: 1-4 % faster, docs/benchmarks.md
+                    const int k2 = 31 - clz(lanes);
+                    const float t1 = enter[k], t2 = enter[k2];
+                    const int2 c1 = (int2)(child[k], count[k]), c2 = (int2)(child[k2], count[k2]);
+                    const bool first_near = query != QUERY_ALL && t1 < t2;
+                    current = first_near ? c1 : c2;
+                    stack[sp] = first_near ? c2 : c1;
+                    stack_t[sp] = first_near ? t2 : t1;
+                    ++sp;
+                    continue;
+                }
+                const int base = sp;
+                for (;;) {
+                    const float t = enter[k];
+                    int j = sp++;
+                    if (query != QUERY_ALL)
+                        for (; j > base && stack_t[j - 1] < t; --j) {
+                            stack[j] = stack[j - 1];
+                            stack_t[j] = stack_t[j - 1];
+                        }
+                    stack[j] = (int2)(child[k], count[k]);
+                    stack_t[j] = t;
+                    if (!lanes)
+                        break;
+                    k = 31 - clz(lanes & (0u - lanes));
+                    lanes &= lanes - 1u;
+                }
+                current = stack[--sp];    // the nearest
+                continue;
+            }
+        }
+        if (!resume_postponed(stack, stack_t, &sp, tmax, &current))
+            return best;
     }
-    if (live0)
-        while (wide_step(g, &w0, stack0, stack_t0, query, sink))
-            ;
-    if (live1)
-        while (wide_step(g, &w1, stack1, stack_t1, query, sink))
-            ;
-    hit[0] = w0.best;
-    hit[1] = w1.best;
 }
 
 #endif

@@ -54,68 +54,14 @@ inline float3 face_normal(__global const TriangleVerts* tri)
 #endif
 }
 
-// Write ray `k`'s closest hit `hit` (a slot, from query_hits) field by field
-// into the arrays the caller gets (any output may be 0: not asked for).
-inline void store_closest(const Geometry* g, Hit hit, float3 origin, float3 dir, size_t k, __global float* t_out,
-                          __global int* prim_out, __global float* u_out, __global float* v_out,
-                          __global float* normal_out, __global uchar* front_out, __global uchar* hit_out)
-{
-    const bool found = hit.prim >= 0;
-    if (normal_out || front_out) {
-        float3 n = (float3)(0.0f);
-        uchar f = 0;
-        if (found) {
-            __global const TriangleVerts* tri = SPLIT_AT(g, tris, hit.prim);
-            const ShearedRay r = shear_ray(origin, dir);
-            f = sees_front(&r, tri) ? 1 : 0;
-            n = face_normal(tri);
-        }
-        if (normal_out)
-            vstore3(n, k, normal_out);
-        if (front_out)
-            front_out[k] = f;
-    }
-    hit = reported_hit(g, hit);
-    if (t_out)
-        t_out[k] = hit.t;
-    if (prim_out)
-        prim_out[k] = hit.prim;
-    if (u_out)
-        u_out[k] = hit.u;
-    if (v_out)
-        v_out[k] = hit.v;
-    if (hit_out)
-        hit_out[k] = found ? 1 : 0;
-}
-
 // Closest hit of each ray, written field by field into the arrays the caller
 // gets (any output may be 0: not asked for).  Index out_first + i; a miss
 // writes t = INFINITY, prim = -1, u = v = 0, normal = 0, front = hit = 0.
-// With the wide walk (CPU devices) a work-item answers rays 2i and 2i + 1
-// (query_hits_pair, accel_wide.cl; the host launches half as many).
 __kernel void query_closest(RAY_INPUT_PARAMS, __global float* t_out, __global int* prim_out,
                             __global float* u_out, __global float* v_out, __global float* normal_out,
                             __global uchar* front_out, __global uchar* hit_out, const uint out_first,
                             const uint num_rays, const int cull, GEOMETRY_PARAMS)
 {
-#ifdef BVH_WIDE
-    const uint i = 2 * get_global_id(0);
-    if (i >= num_rays)
-        return;
-    const Geometry g = make_geometry(GEOMETRY_ARGS);
-    const RayInput in = make_ray_input(RAY_INPUT_ARGS);
-    float3 origin[2], dir[2];
-    float tmin[2], tmax[2];
-    bool live[2];
-    Hit hit[2];
-    for (uint j = 0; j < 2; ++j)
-        live[j] = i + j < num_rays && load_ray(&in, i + j, origin + j, dir + j, tmin + j, tmax + j);
-    HitSink options = query_options(cull);
-    query_hits_pair(&g, origin, dir, tmin, tmax, live, QUERY_CLOSEST, &options, hit);
-    for (uint j = 0; j < 2 && i + j < num_rays; ++j)
-        store_closest(&g, hit[j], origin[j], dir[j], (size_t)out_first + i + j, t_out, prim_out, u_out, v_out,
-                      normal_out, front_out, hit_out);
-#else
     const uint i = get_global_id(0);
     if (i >= num_rays)
         return;
@@ -128,33 +74,39 @@ __kernel void query_closest(RAY_INPUT_PARAMS, __global float* t_out, __global in
         HitSink options = query_options(cull);
         hit = query_hits(&g, origin, dir, tmin, tmax, QUERY_CLOSEST, &options);
     }
-    store_closest(&g, hit, origin, dir, (size_t)out_first + i, t_out, prim_out, u_out, v_out, normal_out,
-                  front_out, hit_out);
-#endif
+    const size_t k = (size_t)out_first + i;
+    const bool found = hit.prim >= 0;
+    if (normal_out || front_out) {
+        float3 n = (float3)(0.0f);
+        uchar f = 0;
+        if (found) {
+            __global const TriangleVerts* tri = SPLIT_AT(&g, tris, hit.prim);
+            const ShearedRay r = shear_ray(origin, dir);
+            f = sees_front(&r, tri) ? 1 : 0;
+            n = face_normal(tri);
+        }
+        if (normal_out)
+            vstore3(n, k, normal_out);
+        if (front_out)
+            front_out[k] = f;
+    }
+    hit = reported_hit(&g, hit);
+    if (t_out)
+        t_out[k] = hit.t;
+    if (prim_out)
+        prim_out[k] = hit.prim;
+    if (u_out)
+        u_out[k] = hit.u;
+    if (v_out)
+        v_out[k] = hit.v;
+    if (hit_out)
+        hit_out[k] = found ? 1 : 0;
 }
 
-// Is anything hit?  Stops at the first hit found.  (Two rays a work-item with
-// the wide walk, as query_closest.)
+// Is anything hit?  Stops at the first hit found.
 __kernel void query_any(RAY_INPUT_PARAMS, __global uchar* occluded, const uint out_first, const uint num_rays,
                         const int cull, GEOMETRY_PARAMS)
 {
-#ifdef BVH_WIDE
-    const uint i = 2 * get_global_id(0);
-    if (i >= num_rays)
-        return;
-    const Geometry g = make_geometry(GEOMETRY_ARGS);
-    const RayInput in = make_ray_input(RAY_INPUT_ARGS);
-    float3 origin[2], dir[2];
-    float tmin[2], tmax[2];
-    bool live[2];
-    Hit hit[2];
-    for (uint j = 0; j < 2; ++j)
-        live[j] = i + j < num_rays && load_ray(&in, i + j, origin + j, dir + j, tmin + j, tmax + j);
-    HitSink options = query_options(cull);
-    query_hits_pair(&g, origin, dir, tmin, tmax, live, QUERY_ANY, &options, hit);
-    for (uint j = 0; j < 2 && i + j < num_rays; ++j)
-        occluded[(size_t)out_first + i + j] = hit[j].prim >= 0 ? 1 : 0;
-#else
     const uint i = get_global_id(0);
     if (i >= num_rays)
         return;
@@ -168,7 +120,6 @@ __kernel void query_any(RAY_INPUT_PARAMS, __global uchar* occluded, const uint o
         found = query_hits(&g, origin, dir, tmin, tmax, QUERY_ANY, &options).prim >= 0 ? 1 : 0;
     }
     occluded[(size_t)out_first + i] = found;
-#endif
 }
 
 // Number of triangles each ray meets in (tmin, tmax].

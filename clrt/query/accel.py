@@ -82,9 +82,6 @@ MIN_PIPELINE_RAYS = 1 << 16         # ... of at least this many rays
 # slower on camera rays.  A CPU device (PoCL) keeps its own choice.  The
 # kernels skip the work-items past the last ray.
 QUERY_GROUP: dict = {"gpu": 128, "cpu": None}
-# Kernels that answer two rays a work-item where the wide BVH is walked
-# (query_hits_pair, accel_wide.cl: one ray's loads overlap the other's tests).
-PAIRED_QUERIES = ("query_closest", "query_any")
 RESULT_POOL_SIZE = 3                # page-locked result blocks per Accel (clrt/device/pinned.py)
 RESULT_POOL_MAX_BYTES = 1 << 30     # larger results go to ordinary memory
 _ZERO = np.zeros(1, np.float32)
@@ -312,8 +309,6 @@ class Accel:
     def _run(self, name: str, m: int, *args, lane: int = 0) -> None:
         kernel = self.kernels[name]
         kernel.set_args(*args, *self.geometry.args)
-        if name in PAIRED_QUERIES and self.geometry.wide is not None:
-            m = -(-m // 2)      # two rays a work-item (trace.cl)
         group = QUERY_GROUP[self._kind]
         size, local = ((m,), None) if group is None else ((-(-m // group) * group,), (group,))
         self.launches.append(cl.enqueue_nd_range_kernel(self._lane(lane), kernel, size, local))
