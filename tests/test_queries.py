@@ -340,7 +340,7 @@ def test_chunks_respect_the_allocation_limit_and_launch_size(torus_accel, device
     assert brute.chunk_size() == min(1 << 20, (1 << 30) // len(acc.mesh.faces))
     assert torus_accel.chunk_size() == 1 << 20
     memory = torus_accel.memory()
-    assert memory["chunk"] == 2 * (1 << 20) * (32 + 30) and memory["scene"] > 0
+    assert memory["chunk"] == (1 << 20) * (32 + 30) and memory["scene"] > 0
 
 
 # --------------------------------------------------------------------------- trimesh compatibility

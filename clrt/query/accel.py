@@ -210,8 +210,8 @@ class Accel:
 
     def memory(self) -> dict:
         """Upper bounds, in bytes, of what queries keep on the device: ``scene``
-        (triangles, BVH, triangle ids), ``chunk`` (rays and results of the two
-        chunks in flight: 62 bytes a ray for the closest hit with every field,
+        (triangles, BVH, triangle ids), ``chunk`` (rays and results of the
+        chunk in flight: 62 bytes a ray for the closest hit with every field,
         the largest query)
         and ``all_hits`` (12 bytes a hit for at most ``all_hits_capacity`` hits; a
         chunk with more hits is split in halves).  Host memory beyond the
@@ -219,7 +219,7 @@ class Accel:
         are not float32 already."""
         chunk = self.chunk_size()
         per_ray = RAY_INPUT_BYTES + sum(RESULT_BYTES[name] for name in CLOSEST_FIELDS)
-        return {"scene": int(self.geometry.nbytes), "chunk_rays": chunk, "chunk": 2 * chunk * per_ray,
+        return {"scene": int(self.geometry.nbytes), "chunk_rays": chunk, "chunk": chunk * per_ray,
                 "all_hits": 12 * self._all_hits_limit()}
 
     def _all_hits_limit(self) -> int:
