@@ -190,6 +190,24 @@ def test_restructured_trees_are_valid(name, leaf_size, queue):
     check_volumes(rows, bvh.read_exact_rows(), ranges, slotted, "box")
 
 
+def test_builds_from_two_threads_on_one_context(queue):
+    """Two threads building on the process's one context at once (each an
+    Accel of its own, say) share its scratch buffers and its build queue:
+    each must still get the tree it gets alone."""
+    from concurrent.futures import ThreadPoolExecutor
+    meshes = [_random_triangles(4000, seed=21), _random_triangles(2500, seed=22)]
+    want = [build_on_device(*queue, corners, leaf_size=4).read_back() for corners in meshes]
+
+    def run(k):
+        return [build_on_device(*queue, meshes[k], leaf_size=4).read_back() for _ in range(6)]
+    with ThreadPoolExecutor(2) as pool:
+        results = list(pool.map(run, (0, 1)))
+    for k in (0, 1):
+        for rows, prim_ids in results[k]:
+            assert np.array_equal(rows.view(np.uint8), want[k][0].view(np.uint8)), k
+            assert np.array_equal(prim_ids, want[k][1]), k
+
+
 def test_builds_are_deterministic(queue):
     corners = _random_triangles()
     first = build_on_device(*queue, corners, leaf_size=4).read_back()

@@ -59,7 +59,9 @@ call: clrt.accel.build for the host builders, this one for ``builder="device"``.
 
 from __future__ import annotations
 
+import functools
 import math
+import threading
 import time
 from dataclasses import dataclass, field
 
@@ -325,6 +327,23 @@ def build_queue(context: cl.Context, device: cl.Device) -> cl.CommandQueue:
     return queue
 
 
+_build_locks: dict[int, threading.Lock] = {}
+
+
+def _one_build_per_context(build):
+    """Builds on one context take turns: they share its scratch buffers
+    (_Workspace) and its build queue, so two threads building at once (each
+    with an Accel of its own, say) would overwrite each other's keys and
+    nodes -- on PoCL the process crashed (tests/test_device_build.py).  A
+    build holds no lock the caller could be waiting on, and takes
+    milliseconds."""
+    @functools.wraps(build)
+    def one_at_a_time(context: cl.Context, *args, **kwargs):
+        with _build_locks.setdefault(context.int_ptr, threading.Lock()):
+            return build(context, *args, **kwargs)
+    return one_at_a_time
+
+
 def _groups(n: int) -> int:
     return max(-(-int(n) // BUILD_GROUP), 1)
 
@@ -347,6 +366,7 @@ class _Phases:
         return out
 
 
+@_one_build_per_context
 def build_on_device(context: cl.Context, queue: cl.CommandQueue, corners, volume: str = "box",
                     leaf_size: int = 4, keep_boxes: bool = False,
                     tail_threshold: int | None = None, staged_upload: bool | None = None,
