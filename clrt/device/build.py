@@ -264,12 +264,16 @@ class DeviceBvh:
 
 
 class _Workspace:
-    """Scratch buffers of one context, kept between builds and grown when a
-    build needs more (allocations are not free on a GPU)."""
+    """What the builds on one context share: scratch buffers, kept between
+    builds and grown when a build needs more (allocations are not free on a
+    GPU); the queues untimed builds run on (build_queue); and the lock by
+    which builds take turns (_one_build_per_context)."""
 
     def __init__(self, context: cl.Context):
         self.context = context
         self.buffers: dict[str, cl.Buffer] = {}
+        self.queues: dict[int, cl.CommandQueue] = {}     # by device
+        self.lock = threading.Lock()
 
     def get(self, name: str, nbytes: int) -> cl.Buffer:
         nbytes = max(int(nbytes), 4)
@@ -283,6 +287,13 @@ class _Workspace:
 
 
 _workspaces: dict[int, _Workspace] = {}
+
+
+def _workspace(context: cl.Context) -> _Workspace:
+    workspace = _workspaces.get(context.int_ptr)
+    return workspace if workspace is not None else _workspaces.setdefault(context.int_ptr, _Workspace(context))
+
+
 _kernel_sets: dict[int, dict] = {}
 
 
@@ -312,22 +323,16 @@ def _kernels(program: cl.Program) -> dict:
     return _kernel_sets[key]
 
 
-_build_queues: dict[tuple, cl.CommandQueue] = {}
-
-
 def build_queue(context: cl.Context, device: cl.Device) -> cl.CommandQueue:
     """The queue untimed builds run on: one per context and device, without
     profiling.  On the H200 a launch costs the host 8.5 us to queue there and
     14 us on a profiling queue, and a small build waits on its host: bunny00
     2.35 -> 2.13 ms (docs/benchmarks.md, session 6)."""
-    key = (context.int_ptr, device.int_ptr)
-    queue = _build_queues.get(key)
+    queues = _workspace(context).queues
+    queue = queues.get(device.int_ptr)
     if queue is None:
-        queue = _build_queues[key] = cl.CommandQueue(context, device)
+        queue = queues[device.int_ptr] = cl.CommandQueue(context, device)
     return queue
-
-
-_build_locks: dict[int, threading.Lock] = {}
 
 
 def _one_build_per_context(build):
@@ -339,7 +344,7 @@ def _one_build_per_context(build):
     milliseconds."""
     @functools.wraps(build)
     def one_at_a_time(context: cl.Context, *args, **kwargs):
-        with _build_locks.setdefault(context.int_ptr, threading.Lock()):
+        with _workspace(context).lock:
             return build(context, *args, **kwargs)
     return one_at_a_time
 
@@ -413,7 +418,7 @@ def build_on_device(context: cl.Context, queue: cl.CommandQueue, corners, volume
     tail_group = TAIL_GROUP[kind] if tail_group is None else int(tail_group)
     program = build_program(context, "build_bvh.cl", build_defines(volume, kind, treelet_leaves, tail_group))
     k = _kernels(program)
-    ws = _workspaces.setdefault(context.int_ptr, _Workspace(context))
+    ws = _workspace(context)
     F = len(tri)
     num_nodes = 2 * F - 1
     root = 2 * F - 2 if F > 1 else 0        # the last merge makes the root

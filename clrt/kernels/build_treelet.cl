@@ -87,14 +87,29 @@ inline BuildNode load_node(shared_nodes nodes, int n)
     return b;
 }
 
-// Box, count, cost, rows and height of inner node n from its children, whose
-// references it holds.  The SAH decides whether the subtree is emitted as one
-// leaf: with at most leaf_size triangles and a leaf cost (C_INTERSECT * count
-// * area) no higher than keeping the node (C_TRAVERSAL * area plus the
-// children's best costs) -- the rule of the host's SAH builder (sah.py: split
-// only when strictly cheaper).  The height (nodes on the longest path down; a
-// triangle has 1) bounds the emit pass's pointer jumps.  PLOC's make_node and
-// the treelet restructuring both make nodes through it.
+// The SAH's one rule for every node the builder makes (refresh_node,
+// rebuild_treelet, the treelets' dynamic program): a node of `count`
+// triangles and half area `area` whose cost kept as a node is *cost
+// (C_TRAVERSAL * area plus its children's best costs) is emitted as one leaf
+// when it has at most leaf_size triangles and a leaf cost (C_INTERSECT *
+// count * area) no higher -- the rule of the host's SAH builder (sah.py: split
+// only when strictly cheaper).  Then *cost becomes the leaf cost and it
+// returns true.
+inline bool emitted_as_leaf(float area, int count, uint leaf_size, float* cost)
+{
+    const float leaf_cost = C_INTERSECT * (float)count * area;
+    if (count <= (int)leaf_size && leaf_cost <= *cost) {
+        *cost = leaf_cost;
+        return true;
+    }
+    return false;
+}
+
+// Box, count, cost, rows (0: emitted as a leaf, emitted_as_leaf) and height
+// of inner node n from its children, whose references it holds.  The height
+// (nodes on the longest path down; a triangle has 1) bounds the emit pass's
+// pointer jumps.  PLOC's make_node and the treelet restructuring both make
+// nodes through it.
 inline void refresh_node(shared_nodes nodes, shared_ints heights, int n, int num_tris, uint leaf_size)
 {
     const int l = left_of(nodes, n), r = right_of(nodes, n);
@@ -103,12 +118,7 @@ inline void refresh_node(shared_nodes nodes, shared_ints heights, int n, int num
     const float area = half_area(lo, hi);
     const int count = a.count + b.count;
     float cost = C_TRAVERSAL * area + a.cost + b.cost;
-    int rows = 1 + a.rows + b.rows;
-    const float leaf_cost = C_INTERSECT * (float)count * area;
-    if (count <= (int)leaf_size && leaf_cost <= cost) {
-        cost = leaf_cost;
-        rows = 0;
-    }
+    const int rows = emitted_as_leaf(area, count, leaf_size, &cost) ? 0 : 1 + a.rows + b.rows;
     nodes[n].lo.xyz = lo;
     nodes[n].hi.xyz = hi;
     nodes[n].count = count;
@@ -225,13 +235,9 @@ inline void rebuild_treelet(local const Treelet* t, global BuildNode* nodes, glo
         hi[me] = fmax(hi[a], hi[b]);
         const float area = half_area(lo[me], hi[me]);
         count[me] = count[a] + count[b];
-        cost[me] = C_TRAVERSAL * area + cost[a] + cost[b];
-        rows[me] = 1 + rows[a] + rows[b];
-        const float leaf_cost = C_INTERSECT * (float)count[me] * area;
-        if (count[me] <= (int)leaf_size && leaf_cost <= cost[me]) {
-            cost[me] = leaf_cost;
-            rows[me] = 0;
-        }
+        float node_cost = C_TRAVERSAL * area + cost[a] + cost[b];
+        rows[me] = emitted_as_leaf(area, count[me], leaf_size, &node_cost) ? 0 : 1 + rows[a] + rows[b];
+        cost[me] = node_cost;
         height[me] = 1 + max(height[a], height[b]);
         nodes[n].lo = (float4)(lo[me], as_float(left));
         nodes[n].hi = (float4)(hi[me], as_float(right));
@@ -383,9 +389,7 @@ void treelet_restructure(global BuildNode* nodes, global int* heights, const glo
                             break;
                     }
                     float cost = C_TRAVERSAL * area[s] + cheapest;
-                    const float leaf_cost = C_INTERSECT * (float)count[s] * area[s];
-                    if (count[s] <= (int)leaf_size && leaf_cost <= cost)
-                        cost = leaf_cost;      // its node will be emitted as a leaf, however split
+                    emitted_as_leaf(area[s], count[s], leaf_size, &cost);   // then however split
                     best[s] = cost;
                     split[s] = (uchar)cut;
                 }
