@@ -204,13 +204,25 @@ def measure(accel, origins, directions, tmax=np.inf, repeat: int = 5, warmup: in
             "any_agrees": bool(np.array_equal(hit, occluded.astype(bool))), "prim": prim, "t": t}
 
 
-def embree_measure(mesh, origins, directions, tmax=np.inf, repeat: int = 5, warmup: int = 2) -> dict:
-    """The same rays through Embree on the host CPU (embreex, all cores): wall ms
-    of closest-hit and occlusion queries, hits and the sum of hit distances."""
+def _embree_scene(vertices, faces):
+    """An embreex scene of one triangle mesh (float32 vertices, int32 faces)."""
     from embreex import mesh_construction, rtcore_scene
     scene = rtcore_scene.EmbreeScene()
-    mesh_construction.TriangleMesh(scene, np.asarray(mesh.vertices, np.float32), np.asarray(mesh.faces, np.int32))
-    limit = np.full(len(origins), min(tmax, 3e38), np.float32)
+    mesh_construction.TriangleMesh(scene, vertices, faces)
+    return scene
+
+
+def _embree_limits(count: int, tmax) -> np.ndarray:
+    """Embree's per-ray far distances for ``tmax`` (its rays take no infinity)."""
+    return np.full(count, min(tmax, 3e38), np.float32)
+
+
+def embree_measure(mesh, origins, directions, tmax=np.inf, repeat: int = 5, warmup: int = 2) -> dict:
+    """The same rays through Embree on the host CPU (embreex, which holds the
+    GIL while it traces: one core): wall ms of closest-hit and occlusion
+    queries, hits and the sum of hit distances."""
+    scene = _embree_scene(np.asarray(mesh.vertices, np.float32), np.asarray(mesh.faces, np.int32))
+    limit = _embree_limits(len(origins), tmax)
     closest_ms, closest = median_wall_ms(lambda: scene.run(origins, directions, dists=limit.copy(), output=1),
                                          repeat, warmup)
     any_ms, occluded = median_wall_ms(lambda: scene.run(origins, directions, dists=limit.copy(),
@@ -225,9 +237,7 @@ def embree_measure(mesh, origins, directions, tmax=np.inf, repeat: int = 5, warm
 def _embree_worker(vertices, faces, origins, directions, limit, repeat, warmup, barrier, results):
     """One process of embree_processes_measure: its share of the rays, each
     repetition started with the others' (the barrier)."""
-    from embreex import mesh_construction, rtcore_scene
-    scene = rtcore_scene.EmbreeScene()
-    mesh_construction.TriangleMesh(scene, vertices, faces)
+    scene = _embree_scene(vertices, faces)
     times = []
     for i in range(warmup + repeat):
         row = []
@@ -254,7 +264,7 @@ def embree_processes_measure(mesh, origins, directions, tmax=np.inf, processes: 
     context = multiprocessing.get_context("spawn")
     barrier, results = context.Barrier(processes), context.Queue()
     vertices, faces = np.asarray(mesh.vertices, np.float32), np.asarray(mesh.faces, np.int32)
-    limit = np.full(len(origins), min(tmax, 3e38), np.float32)
+    limit = _embree_limits(len(origins), tmax)
     bounds = np.linspace(0, len(origins), processes + 1).astype(int)
     workers = [context.Process(target=_embree_worker, args=(vertices, faces, origins[a:b], directions[a:b],
                                                             limit[a:b], repeat, warmup, barrier, results))
