@@ -186,3 +186,48 @@ def test_collapse_keeps_every_box_and_every_triangle_once(builder, leaf, device)
     assert (tris[merged] <= MERGE).all() and (tris[~merged] <= leaf).all()
     assert (many == -(-tris // PACKET)).all()
     assert (present.sum(axis=1) <= WIDE).all()
+
+
+def _far_and_steep_rays(mesh, rng, count=300):
+    """Rays aimed at vertices and edge points from near and very far, many of
+    them with direction components of 1e-3 down to 1e-38 and 0: where the box
+    test's per-ray bounds (volume_ray, volumes.cl) are widest and where its
+    oblique test gives way to the exact one (a zero or subnormal component)."""
+    v = mesh.vertices.astype(np.float64)
+    diag = float(np.linalg.norm(np.ptp(v, axis=0)))
+    f = mesh.faces[rng.integers(0, len(mesh.faces), count)]
+    w = rng.random((count, 1))
+    targets = np.concatenate([v[rng.integers(0, len(v), count)], (1 - w) * v[f[:, 0]] + w * v[f[:, 1]]])
+    d = rng.normal(size=targets.shape)
+    steep = rng.random(len(d)) < 0.6
+    axes = rng.integers(0, 3, len(d))
+    d[steep, axes[steep]] *= rng.choice([1e-3, 1e-7, 1e-12, 1e-20, 1e-30, 1e-38, 0.0], steep.sum())
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    dist = diag * rng.choice([1e-3, 1.0, 1e3, 1e5], (len(d), 1))
+    o = (targets - dist * d).astype(np.float32)
+    return o, d.astype(np.float32)
+
+
+@pytest.mark.parametrize("place", ["as is", "far from the origin", "tiny"])
+def test_box_bounds_hold_far_away_and_near_axis_parallel(place, device, monkeypatch):
+    """Both walks and brute force agree on rays from far away and rays nearly
+    along an axis, on a mesh as shipped, moved 1e5 of its size from the origin
+    (box planes large beside the boxes) and shrunk a billion times."""
+    mesh = knot()
+    v = mesh.vertices.astype(np.float64)
+    if place == "far from the origin":
+        v = v + 1e5 * np.ptp(v, axis=0).max() * np.array([1.0, -0.7, 0.4])
+    elif place == "tiny":
+        v = v * 1e-9
+    mesh = clrt.Mesh(v.astype(np.float32), mesh.faces, "knot " + place)
+    o, d = _far_and_steep_rays(mesh, np.random.default_rng(11))
+    tmin = np.zeros(len(o))
+    brute = clrt.Accel(mesh, "none", device=device)
+    hits = brute.trace(o, d)
+    assert (hits.prim >= 0).mean() > 0.3 and (hits.prim < 0).any(), "the rays must hit and miss"
+    default = clrt.Accel(mesh, "box", "sah", 4, device=device)       # the wide walk on CPU devices
+    monkeypatch.setattr(geometry, "WIDE_BVH_KINDS", ())
+    binary = clrt.Accel(mesh, "box", "sah", 4, device=device)
+    monkeypatch.undo()
+    _same_answers(binary, brute, o, d, tmin, f"{place}: binary / brute force")
+    _same_answers(default, brute, o, d, tmin, f"{place}: default walk / brute force")

@@ -55,17 +55,16 @@ inline bool visit_packet(const Geometry* g, const ShearedRay* r, int packet, flo
     return false;
 }
 
-// Answer `query` for one ray (see hit.cl); the returned Hit.prim is a slot.
-// As accel_bvh.cl: one current child -- a node, or a leaf's packets -- and a
-// stack of postponed children with the distance where the ray enters them.
-// A node's children that the ray meets are pushed farthest first (insertion
-// sort: rarely more than three), and the nearest is taken at once.
-inline Hit query_hits(const Geometry* g, float3 origin, float3 dir, float tmin, float tmax,
-                      const int query, HitSink* sink)
+// The walk of query_hits for a ray whose VolumeRay has `oblique`, a constant
+// in each of its two calls (as in accel_bvh.cl).  As accel_bvh.cl: one current
+// child -- a node, or a leaf's packets -- and a stack of postponed children
+// with the distance where the ray enters them.  A node's children that the
+// ray meets are pushed farthest first (insertion sort: rarely more than
+// three), and the nearest is taken at once.
+inline Hit walk_wide_tree(const Geometry* g, const ShearedRay* r, const VolumeRay* vr, const bool oblique,
+                          float tmin, float tmax, const int query, HitSink* sink)
 {
-    const ShearedRay r = shear_ray(origin, dir);
-    const VolumeRay vr = volume_ray(origin, dir);
-    const BoxPlanes planes = box_planes(&vr);
+    const BoxPlanes planes = box_planes(vr);
     Hit best = miss_hit();
     int best_id = -1;
     int2 stack[WIDE_STACK_SIZE];       // (node or first packet, packet count: 0 for a node)
@@ -75,13 +74,13 @@ inline Hit query_hits(const Geometry* g, float3 origin, float3 dir, float tmin, 
     for (;;) {
         if (current.y > 0) {
             for (int p = current.x; p < current.x + current.y; ++p)
-                if (visit_packet(g, &r, p, tmin, &tmax, query, &best, &best_id, sink))
+                if (visit_packet(g, r, p, tmin, &tmax, query, &best, &best_id, sink))
                     return best;
         } else {
             __global const BvhWideNode* n = g->wide_nodes + current.x;
             float8 enter;
-            const int8 met = planes.oblique ? box_hit_wide_oblique(&vr, planes, n, tmin, tmax, &enter)
-                                            : box_hit_wide(&vr, n, tmin, tmax, &enter);
+            const int8 met = oblique ? box_hit_wide_oblique(vr, planes, n, tmin, tmax, &enter)
+                                     : box_hit_wide(vr, n, tmin, tmax, &enter);
             uint lanes = lane_bits(met & (n->count >= 0));
             if (lanes) {
                 __global const int* child = (__global const int*)&n->child;
@@ -129,6 +128,16 @@ inline Hit query_hits(const Geometry* g, float3 origin, float3 dir, float tmin, 
         if (!resume_postponed(stack, stack_t, &sp, tmax, &current))
             return best;
     }
+}
+
+// Answer `query` for one ray (see hit.cl); the returned Hit.prim is a slot.
+inline Hit query_hits(const Geometry* g, float3 origin, float3 dir, float tmin, float tmax,
+                      const int query, HitSink* sink)
+{
+    const ShearedRay r = shear_ray(origin, dir);
+    const VolumeRay vr = volume_ray(origin, dir, tree_reach(SPLIT_AT(g, nodes, 0)));
+    return vr.oblique ? walk_wide_tree(g, &r, &vr, true, tmin, tmax, query, sink)
+                      : walk_wide_tree(g, &r, &vr, false, tmin, tmax, query, sink);
 }
 
 #endif

@@ -19,19 +19,68 @@ typedef struct {
     float3 origin;
     float3 dir;
     float3 inv_dir;    // +-INFINITY for zero components: the slab test relies on IEEE rules
+#if defined(VOLUME_BOX)
+    // The slab test of an oblique ray (see volume_ray): a box plane b is met
+    // at no sooner than fma(b, inv_dir, lo_shift) if it is a min plane, and no
+    // later than fma(b, inv_dir, hi_shift) if a max plane -- for a ray with
+    // positive inv_dir; the other way round where it is negative.
+    float3 lo_shift, hi_shift;
+#endif
+    bool oblique;      // box volumes, every inv_dir and shift finite: those bounds hold
 } VolumeRay;
 
-inline VolumeRay volume_ray(float3 origin, float3 dir)
+// Relative slack for rounding in the tests below (a few float32 ulps).
+#define VOLUME_SLACK 1e-6f
+
+// A bound on |coordinate| of every box plane in the tree, axis by axis (for
+// volume_ray; other volumes ignore it), from its root row: three times the
+// largest of the root's boxes.  Every node's box holds its triangles, padded
+// outwards by a sliver of its size (clrt/accel/volumes.py), so none reaches
+// far past the root's boxes; the factor three leaves room for any padding and
+// for a root near the origin.  Both walks read it from the binary root row,
+// so that their box tests stay the same, lane by lane (accel_wide.cl).
+inline float3 tree_reach(__global const BvhPairNode* root)
+{
+    float3 reach = (float3)(0.0f);
+#if defined(VOLUME_BOX)
+    if (PAIR_LEFT(*root).y >= 0)
+        reach = fmax(fabs(root->left_a.xyz), fabs(root->left_b.xyz));
+    if (PAIR_RIGHT(*root).y >= 0)
+        reach = fmax(reach, fmax(fabs(root->right_a.xyz), fabs(root->right_b.xyz)));
+#endif
+    return 3.0f * reach;
+}
+
+// The ray as every volume test below takes it.  `reach` bounds |coordinate|
+// of every box plane in the tree, axis by axis (box volumes only; see below).
+// The tests take the ray's `oblique` as an argument, which each walk holds
+// constant (accel_bvh.cl says why); only the box test uses it.
+inline VolumeRay volume_ray(float3 origin, float3 dir, float3 reach)
 {
     VolumeRay r;
     r.origin = origin;
     r.dir = dir;
     r.inv_dir = (float3)(1.0f) / dir;
+#if defined(VOLUME_BOX)
+    // The exact distance to plane b is (b - o) / d.  Computed as one FMA,
+    // b * inv - o * inv, it carries three roundings -- of inv, of o * inv and
+    // of the result -- each within u = 2^-24 of a value no larger than
+    // (|b| + |o|) * |inv| <= (reach + |o|) * |inv|.  Widening every plane by
+    // 2^-21 times that bound (8 u, twice the 4 u the errors and the shift's own
+    // rounding need) makes each distance a true bound, so the test needs no
+    // per-box slack: 6 FMAs where (b - o) * inv with slack takes 18 operations.
+    const float3 scaled = origin * r.inv_dir;
+    const float3 margin = 0x1p-21f * (reach + fabs(origin)) * fabs(r.inv_dir);
+    const float3 lower = -(scaled + margin), upper = -(scaled - margin);
+    const int3 ascending = r.inv_dir >= 0.0f;     // min planes are met first
+    r.lo_shift = select(upper, lower, ascending);
+    r.hi_shift = select(lower, upper, ascending);
+    r.oblique = all(isfinite(r.lo_shift)) && all(isfinite(r.hi_shift));
+#else
+    r.oblique = false;
+#endif
     return r;
 }
-
-// Relative slack for rounding in the tests below (a few float32 ulps).
-#define VOLUME_SLACK 1e-6f
 
 #if defined(VOLUME_BOX)
 // Slab test (Kay & Kajiya).  fmin/fmax drop the NaN of 0 * inf, which only
@@ -40,8 +89,17 @@ inline VolumeRay volume_ray(float3 origin, float3 dir)
 // slack moves each bound outwards by its magnitude: a negative tmin finds hits
 // behind the origin, where scaling by (1 + VOLUME_SLACK) would move them inwards.
 inline bool volume_hit(const VolumeRay* r, float4 bound_a, float4 bound_b, float tmin, float tmax,
-                       float* t_enter)
+                       float* t_enter, const bool oblique)
 {
+    if (oblique) {
+        // Bounds (see VolumeRay), never NaN: each slab's fmin is its entry, fmax its exit.
+        const float3 t0 = fma(bound_a.xyz, r->inv_dir, r->lo_shift);
+        const float3 t1 = fma(bound_b.xyz, r->inv_dir, r->hi_shift);
+        const float3 lo = fmin(t0, t1), hi = fmax(t0, t1);
+        const float enter = fmax(fmax(lo.x, lo.y), fmax(lo.z, tmin));
+        *t_enter = enter;
+        return enter <= fmin(fmin(hi.x, hi.y), fmin(hi.z, tmax + VOLUME_SLACK * fabs(tmax)));
+    }
     const float3 t0 = (bound_a.xyz - r->origin) * r->inv_dir;
     const float3 t1 = (bound_b.xyz - r->origin) * r->inv_dir;
     const float3 lo = fmin(t0, t1), hi = fmax(t0, t1);
@@ -72,12 +130,12 @@ inline int8 box_hit_wide(const VolumeRay* r, __global const BvhWideNode* n, floa
 }
 
 // Which planes of a BvhWideNode a ray enters and leaves by, per axis: indices
-// into its six float8 planes (lo_x, lo_y, lo_z, hi_x, hi_y, hi_z).  `oblique`:
-// no component of inv_dir is infinite (no zero direction component), the
-// case of box_hit_wide_oblique.
+// into its six float8 planes (lo_x, lo_y, lo_z, hi_x, hi_y, hi_z), with the
+// shifts of their bounds (VolumeRay) -- for box_hit_wide_oblique, which only
+// an oblique ray takes.
 typedef struct {
     int near_x, near_y, near_z;
-    bool oblique;
+    float3 near_shift, far_shift;
 } BoxPlanes;
 
 inline BoxPlanes box_planes(const VolumeRay* r)
@@ -86,7 +144,9 @@ inline BoxPlanes box_planes(const VolumeRay* r)
     p.near_x = r->inv_dir.x >= 0.0f ? 0 : 3;
     p.near_y = r->inv_dir.y >= 0.0f ? 1 : 4;
     p.near_z = r->inv_dir.z >= 0.0f ? 2 : 5;
-    p.oblique = all(isfinite(r->inv_dir));
+    const int3 ascending = r->inv_dir >= 0.0f;
+    p.near_shift = select(r->hi_shift, r->lo_shift, ascending);
+    p.far_shift = select(r->lo_shift, r->hi_shift, ascending);
     return p;
 }
 
@@ -95,32 +155,30 @@ inline BoxPlanes box_planes(const VolumeRay* r)
 inline float8 max8(float8 a, float8 b) { return select(a, b, b > a); }
 inline float8 min8(float8 a, float8 b) { return select(a, b, b < a); }
 
-// box_hit_wide for a ray with `planes.oblique`, in a third of the operations:
-// with a finite inv_dir the slab distances t0 = (lo - o) * inv and t1 = (hi -
-// o) * inv are never NaN (that needs 0 * inf) and, rounding being monotone,
-// t0 <= t1 exactly when inv >= 0.  So fmin(t0, t1) is the distance to the
-// near plane, fmax the far one, and every fmin / fmax below meets no NaN:
-// the same values as box_hit_wide (up to the sign of a zero), lane by lane.
+// box_hit_wide for an oblique ray, in half its operations: the oblique test of
+// volume_hit lane by lane, each plane's distance one FMA and already a bound
+// (VolumeRay), so no per-box slack and no NaN.  Only the near and far planes
+// are computed, picked once per ray, where volume_hit takes fmin and fmax of
+// both: the same values, since each bound lies on its side of the exact one.
 inline int8 box_hit_wide_oblique(const VolumeRay* r, BoxPlanes planes, __global const BvhWideNode* n,
                                  float tmin, float tmax, float8* t_enter)
 {
     __global const float8* plane = &n->lo_x;
-    const float8 near_x = (plane[planes.near_x] - r->origin.x) * r->inv_dir.x;
-    const float8 near_y = (plane[planes.near_y] - r->origin.y) * r->inv_dir.y;
-    const float8 near_z = (plane[planes.near_z] - r->origin.z) * r->inv_dir.z;
-    const float8 far_x = (plane[3 - planes.near_x] - r->origin.x) * r->inv_dir.x;
-    const float8 far_y = (plane[5 - planes.near_y] - r->origin.y) * r->inv_dir.y;
-    const float8 far_z = (plane[7 - planes.near_z] - r->origin.z) * r->inv_dir.z;
+    const float8 near_x = fma(plane[planes.near_x], (float8)(r->inv_dir.x), (float8)(planes.near_shift.x));
+    const float8 near_y = fma(plane[planes.near_y], (float8)(r->inv_dir.y), (float8)(planes.near_shift.y));
+    const float8 near_z = fma(plane[planes.near_z], (float8)(r->inv_dir.z), (float8)(planes.near_shift.z));
+    const float8 far_x = fma(plane[3 - planes.near_x], (float8)(r->inv_dir.x), (float8)(planes.far_shift.x));
+    const float8 far_y = fma(plane[5 - planes.near_y], (float8)(r->inv_dir.y), (float8)(planes.far_shift.y));
+    const float8 far_z = fma(plane[7 - planes.near_z], (float8)(r->inv_dir.z), (float8)(planes.far_shift.z));
     const float8 enter = max8(max8(near_x, near_y), max8(near_z, (float8)(tmin)));
     const float8 far = min8(min8(far_x, far_y), min8(far_z, (float8)(tmax + VOLUME_SLACK * fabs(tmax))));
-    const float8 exit = far + VOLUME_SLACK * fabs(far);
-    *t_enter = enter - VOLUME_SLACK * fabs(enter);
-    return enter <= exit;
+    *t_enter = enter;
+    return enter <= far;
 }
 #endif
 #elif defined(VOLUME_SPHERE)
 inline bool volume_hit(const VolumeRay* r, float4 bound_a, float4 bound_b, float tmin, float tmax,
-                       float* t_enter)
+                       float* t_enter, const bool oblique)
 {
     const float3 oc = bound_a.xyz - r->origin;
     const float radius = bound_b.x;       // BvhPairNode: the w lanes hold child references
@@ -140,7 +198,7 @@ inline bool volume_hit(const VolumeRay* r, float4 bound_a, float4 bound_b, float
 // Axis-aligned ellipsoid: scale space so it becomes the unit sphere; the ray
 // direction then has length^2 = a, and t is unchanged by the scaling.
 inline bool volume_hit(const VolumeRay* r, float4 bound_a, float4 bound_b, float tmin, float tmax,
-                       float* t_enter)
+                       float* t_enter, const bool oblique)
 {
     const float3 inv_axes = bound_b.xyz;
     const float3 o = (r->origin - bound_a.xyz) * inv_axes;
