@@ -11,13 +11,16 @@ its triangle4 leaves work the same way).  The volumes are the binary rows'
 own, bit for bit, so the wide walk is exactly as conservative as the binary
 one and finds the same hits.
 
-Collapsing: a subtree of at most ``MERGE`` triangles is taken as one leaf
-(its slots are consecutive).  Each wide node starts from one binary row's two
-children and repeatedly opens its inner child of largest surface area (the
-child most rays enter) until it holds ``WIDE`` children or only leaves; inner
-children left become wide nodes of their own.  The work is done level by
-level for all nodes of a level at once, in numpy.  (The SAH-optimal collapse
-of Ylitie et al. 2017 would cost about 4 % less by the SAH on camel.)
+Collapsing (Ylitie et al. 2017, "Efficient incoherent ray traversal on GPUs
+through compressed wide BVHs", section 3): each binary child becomes a leaf
+lane, a lane holding a wide node, or is spread over its parent's lanes through
+its own two children -- whichever gives the least SAH cost, found by dynamic
+programming bottom up (_plan); a subtree of at most ``MERGE`` triangles (its
+slots are consecutive) may become one leaf, a binary leaf stays one.  Against
+the greedy collapse it replaces (open the largest inner child until the node
+is full) nodes hold 6.4 children instead of 4.3 and bunny00 takes 5,055 nodes
+instead of 7,573: about 4 % faster on PoCL (docs/benchmarks.md).  The work is
+done level by level for all rows of a level at once, in numpy.
 """
 
 from __future__ import annotations
@@ -32,7 +35,11 @@ from clrt.layouts import BVH_WIDE_NODE, TRIANGLE_PACKET
 
 WIDE = 8        # children per wide node: the lanes of the kernels' float8 box test
 PACKET = 4      # triangles per packet: the lanes of the float4 triangle test
-MERGE = PACKET  # subtrees of at most this many triangles become one leaf
+MERGE = PACKET  # subtrees of at most this many triangles may become one leaf
+# SAH costs of the collapse (_plan): a ray's test of one wide node (one float8
+# slab test) and of one packet (one float4 watertight test).
+C_NODE = 1.0
+C_PACKET = 1.0
 
 
 @dataclass
@@ -62,18 +69,23 @@ def _children(rows: np.ndarray):
     return refs[:, 0::2].reshape(-1), refs[:, 1::2].reshape(-1), lo, hi
 
 
-def _subtrees(ref: np.ndarray, count: np.ndarray):
+def _levels(ref: np.ndarray, count: np.ndarray) -> list:
+    """The binary rows level by level, top down (the root row alone first)."""
+    levels, frontier = [], np.zeros(1, np.int64)
+    while len(frontier):
+        levels.append(frontier)
+        kids = np.concatenate([2 * frontier, 2 * frontier + 1])
+        frontier = ref[kids[count[kids] == 0]]
+    return levels
+
+
+def _subtrees(ref: np.ndarray, count: np.ndarray, levels: list):
     """Per binary child: the first slot and the number of triangles of its
     subtree (a subtree's slots are consecutive: leaves take slots depth first).
     Absent children: (0, 0)."""
     inner = np.nonzero(count == 0)[0]
     entry_of_row = np.full(len(ref) // 2, -1, np.int64)
     entry_of_row[ref[inner]] = inner              # the child that is row r
-    levels, frontier = [], np.zeros(1, np.int64)
-    while len(frontier):                          # rows level by level, top down
-        levels.append(frontier)
-        kids = np.concatenate([2 * frontier, 2 * frontier + 1])
-        frontier = ref[kids[count[kids] == 0]]
     first = np.where(count > 0, ref, 0)
     tris = np.maximum(count, 0)
     for rows in reversed(levels[1:]):             # bottom up: a row's children are done
@@ -83,43 +95,120 @@ def _subtrees(ref: np.ndarray, count: np.ndarray):
     return first, tris
 
 
+# Decisions of the collapse per binary child and lane budget (_plan).
+LEAF, NODE, ABSENT = -1, -2, -3
+
+
+def _plan(ref, count, tris, area, levels):
+    """Ylitie et al. 2017, section 3: the SAH-optimal collapse of the binary
+    tree into nodes of up to WIDE children, by dynamic programming bottom up.
+    cost[e, k] is the least SAH cost of binary child e's subtree spread over at
+    most k lanes of its wide parent: as one leaf (C_PACKET a packet, for a
+    subtree of at most MERGE triangles or a binary leaf), as one lane holding a
+    wide node (C_NODE plus its own children's best spread over WIDE lanes), or
+    split into its two children's lanes (i + (k - i)).  choice[e, k] says which
+    (LEAF, NODE, or i > 0: the split).  Returns choice, per row r the left
+    child's lane budget when r is a wide node (best[r]), and the tree's cost
+    below the root node (the root's lanes and everything under them)."""
+    n = len(ref)
+    cost = np.full((n, WIDE + 1), np.inf)
+    choice = np.full((n, WIDE + 1), ABSENT, np.int8)
+    best = np.zeros(n // 2, np.int64)
+    packets = -(-tris // PACKET)
+
+    pairs = cost.reshape(-1, 2, WIDE + 1)          # a row's two children: one gather
+
+    def spread(rows):
+        """Best split of each row's two children over k = 2..WIDE lanes:
+        (len(rows), WIDE + 1) costs and left budgets (k < 2: inf).  Of equal
+        splits the one giving the left child fewest lanes.  (By the left
+        child's budget i, the splits i + (k - i) of every k > i are one slice
+        of the right child's costs: no gathers inside the loop.)"""
+        both = pairs[rows]
+        left, right = both[:, 0], both[:, 1]
+        out = np.full((len(rows), WIDE + 1), np.inf)
+        arg = np.zeros((len(rows), WIDE + 1), np.int64)
+        for i in range(1, WIDE):
+            c = left[:, i:i + 1] + right[:, 1:WIDE + 1 - i]      # k = i + 1 .. WIDE
+            better = c < out[:, i + 1:]
+            out[:, i + 1:][better] = c[better]
+            arg[:, i + 1:][better] = i
+        return out, arg
+
+    for rows in reversed(levels):                 # bottom up: a row's children are done
+        entries = np.concatenate([2 * rows, 2 * rows + 1])
+        absent = entries[count[entries] < 0]
+        cost[absent, 1:] = 0.0
+        leaves = entries[count[entries] > 0]
+        cost[leaves, 1:] = (C_PACKET * area[leaves] * packets[leaves])[:, None]
+        choice[leaves, 1:] = LEAF
+        inner = entries[count[entries] == 0]
+        if len(inner) == 0:
+            continue
+        sub, arg = spread(ref[inner])
+        best[ref[inner]] = arg[:, WIDE]
+        node = C_NODE * area[inner] + sub[:, WIDE]
+        leaf = np.where(tris[inner] <= MERGE, C_PACKET * area[inner] * packets[inner], np.inf)
+        one = np.minimum(leaf, node)
+        cost[inner, 1] = one
+        choice[inner, 1] = np.where(leaf <= node, LEAF, NODE)
+        split = sub[:, 2:] < one[:, None]
+        cost[inner, 2:] = np.where(split, sub[:, 2:], one[:, None])
+        choice[inner, 2:] = np.where(split, arg[:, 2:], choice[inner, 1][:, None])
+    sub, arg = spread(np.zeros(1, np.int64))
+    best[0] = arg[0, WIDE]
+    return choice, best, float(sub[0, WIDE])
+
+
+def _lanes(rows, ref, choice, best):
+    """The lanes of the wide nodes made from binary ``rows``: (len(rows), WIDE)
+    binary children (-1: empty), in the order of the binary tree."""
+    # items: (node, binary child, lane budget, first lane)
+    node = np.repeat(np.arange(len(rows)), 2)
+    entry = np.stack([2 * rows, 2 * rows + 1], 1).reshape(-1)
+    budget = np.stack([best[rows], WIDE - best[rows]], 1).reshape(-1)
+    pos = np.stack([np.zeros_like(rows), best[rows]], 1).reshape(-1)
+    while True:
+        c = choice[entry, budget].astype(np.int64)
+        split = c > 0
+        if not split.any():
+            break
+        keep = ~split
+        s = np.nonzero(split)[0]
+        # a split child's left child takes its lanes from pos, its right child from pos + c
+        node = np.concatenate([node[keep], node[s], node[s]])
+        entry_s = entry[s]
+        entry = np.concatenate([entry[keep], 2 * ref[entry_s], 2 * ref[entry_s] + 1])
+        budget_s, c_s = budget[s], c[s]
+        budget = np.concatenate([budget[keep], c_s, budget_s - c_s])
+        pos_s = pos[s]
+        pos = np.concatenate([pos[keep], pos_s, pos_s + c_s])
+    present = choice[entry, budget] != ABSENT
+    node, entry, pos = node[present], entry[present], pos[present]
+    order = np.lexsort((pos, node))
+    node, entry = node[order], entry[order]
+    lane = np.arange(len(node)) - np.searchsorted(node, node)   # rank within its node
+    src = np.full((len(rows), WIDE), -1, np.int64)
+    src[node, lane] = entry
+    return src
+
+
 def collapse(rows: np.ndarray, slotted: np.ndarray) -> WideBvh:
     """The wide BVH of ``rows`` (BVH_PAIR_NODE, box volumes) over ``slotted``
     ((F, 3, 3) float32 corners in slot order)."""
     ref, count, lo, hi = _children(rows)
-    # A subtree of at most MERGE triangles becomes one leaf: a packet tests
-    # four triangles in about the time of one, and each node saved is a
-    # 256-byte fetch saved.
-    first, tris = _subtrees(ref, count)
-    merged = (count == 0) & (tris <= MERGE)
-    ref, count = np.where(merged, first, ref), np.where(merged, tris, count)
+    levels = _levels(ref, count)
+    first, tris = _subtrees(ref, count, levels)
     area = surface_area(lo.astype(np.float64), hi.astype(np.float64))
+    choice, best, _ = _plan(ref, count, tris, area, levels)
 
     waves = []                          # per level: (its binary rows, (m, WIDE) lane sources)
     frontier = np.zeros(1, np.int64)
     while len(frontier):
-        m = len(frontier)
-        src = np.full((m, WIDE), -1, np.int64)
-        src[:, 0], src[:, 1] = 2 * frontier, 2 * frontier + 1
-        filled = np.full(m, 2)
-        every = np.arange(m)
-        for _ in range(WIDE - 2):
-            present = src >= 0
-            inner = present & (count[np.where(present, src, 0)] == 0)
-            score = np.where(inner, area[np.where(present, src, 0)], -np.inf)
-            j = np.argmax(score, axis=1)
-            opens = np.nonzero(inner[every, j] & (filled < WIDE))[0]
-            if len(opens) == 0:
-                break
-            row = ref[src[opens, j[opens]]]
-            # the opened child's left child takes its lane, its right child the next free one
-            src[opens, filled[opens]] = 2 * row + 1
-            src[opens, j[opens]] = 2 * row
-            filled[opens] += 1
+        src = _lanes(frontier, ref, choice, best)
         waves.append((frontier, src))
-        present = src >= 0
-        lane = src[present]
-        frontier = ref[lane[count[lane] == 0]]          # row-major: the next level in lane order
+        lane = src[src >= 0]
+        frontier = ref[lane[_is_node(lane, count, choice)]]   # row-major: the next level in lane order
 
     # Wide node numbers: level after level, each level in the order its rows were found.
     wide_of_row = np.full(len(rows), -1, np.int64)
@@ -129,24 +218,25 @@ def collapse(rows: np.ndarray, slotted: np.ndarray) -> WideBvh:
         start += len(frontier)
     sources = np.concatenate([src for _, src in waves])
     present = sources >= 0
-    lane_ref = np.where(present, ref[np.where(present, sources, 0)], 0)
-    lane_count = np.where(present, count[np.where(present, sources, 0)], -1)
+    index = np.where(present, sources, 0)
+    inner = present & _is_node(index, count, choice)
+    leaf = present & ~inner
+    lane_ref = np.where(inner, ref[index], np.where(leaf, first[index], 0))
+    lane_count = np.where(inner, 0, np.where(leaf, tris[index], -1))
 
     # Leaves: their slots in packets of PACKET lanes, leaf after leaf in slot order.
-    leaf = lane_count > 0
-    first_slot, tris = lane_ref[leaf], lane_count[leaf]
-    per_leaf = -(-tris // PACKET)
+    first_slot, leaf_tris = lane_ref[leaf], lane_count[leaf]
+    per_leaf = -(-leaf_tris // PACKET)
     order = np.argsort(first_slot, kind="stable")
     first_packet = np.empty(len(order), np.int64)
     first_packet[order] = np.cumsum(per_leaf[order]) - per_leaf[order]
     packet_leaf = np.repeat(order, per_leaf[order])                   # the leaf of each packet
     within = np.arange(len(packet_leaf)) - first_packet[packet_leaf]  # its packet number in the leaf
     k = within[:, None] * PACKET + np.arange(PACKET)                   # triangle of the leaf in each lane
-    slots = np.where(k < tris[packet_leaf, None], first_slot[packet_leaf, None] + k, -1)
+    slots = np.where(k < leaf_tris[packet_leaf, None], first_slot[packet_leaf, None] + k, -1)
 
     nodes = np.zeros(len(sources), BVH_WIDE_NODE)
     child = np.zeros_like(lane_ref)
-    inner = lane_count == 0
     child[inner] = wide_of_row[lane_ref[inner]]
     child[leaf] = first_packet
     lane_count[leaf] = per_leaf
@@ -156,6 +246,11 @@ def collapse(rows: np.ndarray, slotted: np.ndarray) -> WideBvh:
     packets["slot"] = slots
     fill_packets(packets, slotted)
     return WideBvh(nodes, packets, len(waves), sources)
+
+
+def _is_node(entries, count, choice):
+    """Which of the lanes' binary children (from _lanes) hold a wide node of their own."""
+    return (count[entries] == 0) & (choice[entries, 1] == NODE)
 
 
 def fill_boxes(nodes: np.ndarray, sources: np.ndarray, rows: np.ndarray) -> None:
