@@ -61,16 +61,18 @@ class WideBvh:
         fill_packets(self.packets, slotted)
 
 
-def _children(rows: np.ndarray):
-    """Per binary child (row * 2 + side): reference, count, box lo, box hi."""
-    refs = child_refs(rows).astype(np.int64)
-    lo = np.stack([rows["left_a"][:, :3], rows["right_a"][:, :3]], axis=1).reshape(-1, 3)
-    hi = np.stack([rows["left_b"][:, :3], rows["right_b"][:, :3]], axis=1).reshape(-1, 3)
-    return refs[:, 0::2].reshape(-1), refs[:, 1::2].reshape(-1), lo, hi
+def _entries(rows: np.ndarray):
+    """Per binary child (row * 2 + side): reference and count (int64), and its
+    8 words as float32 ((2R, 8): box lo xyz, reference, box hi xyz, count --
+    a row is its two children's words)."""
+    rows = np.ascontiguousarray(rows)
+    refs = rows.view(np.int32).reshape(-1, 8)
+    return refs[:, 3].astype(np.int64), refs[:, 7].astype(np.int64), rows.view(np.float32).reshape(-1, 8)
 
 
 def _levels(ref: np.ndarray, count: np.ndarray) -> list:
-    """The binary rows level by level, top down (the root row alone first)."""
+    """The binary rows level by level, top down (the root row alone first);
+    each level lists its rows' inner left children, then their inner right ones."""
     levels, frontier = [], np.zeros(1, np.int64)
     while len(frontier):
         levels.append(frontier)
@@ -79,153 +81,192 @@ def _levels(ref: np.ndarray, count: np.ndarray) -> list:
     return levels
 
 
-def _subtrees(ref: np.ndarray, count: np.ndarray, levels: list):
-    """Per binary child: the first slot and the number of triangles of its
-    subtree (a subtree's slots are consecutive: leaves take slots depth first).
-    Absent children: (0, 0)."""
-    inner = np.nonzero(count == 0)[0]
-    entry_of_row = np.full(len(ref) // 2, -1, np.int64)
-    entry_of_row[ref[inner]] = inner              # the child that is row r
-    first = np.where(count > 0, ref, 0)
-    tris = np.maximum(count, 0)
-    for rows in reversed(levels[1:]):             # bottom up: a row's children are done
-        entry = entry_of_row[rows]
-        tris[entry] = tris[2 * rows] + tris[2 * rows + 1]
-        first[entry] = first[2 * rows]            # the left subtree's slots come first
-    return first, tris
-
-
 # Decisions of the collapse per binary child and lane budget (_plan).
 LEAF, NODE, ABSENT = -1, -2, -3
 
 
-def _plan(ref, count, tris, area, levels):
+class _Tree:
+    """The binary tree in breadth-first order, for work level by level on
+    slices: row p is the p-th row of _levels (a level's rows are p in
+    [starts[j], starts[j + 1])), and child x = side * R + p is side 0 (left) or
+    1 (right) of row p.  Per child: ``entry`` (its binary child, row * 2 +
+    side), ``count``, ``area``, ``row`` (the row it is, for an inner child;
+    else -1); per row: ``parent`` (the child that is this row; -1 at the root)."""
+
+    def __init__(self, ref, count, area):
+        levels = _levels(ref, count)
+        order = np.concatenate(levels)
+        self.R = R = len(order)
+        self.starts = np.cumsum([0] + [len(level) for level in levels])
+        self.entry = np.concatenate([2 * order, 2 * order + 1])
+        self.count = count[self.entry]
+        self.area = area[self.entry]
+        self.ref = ref[self.entry]
+        at = np.zeros(len(ref) // 2, np.int64)
+        at[order] = np.arange(R)
+        inner = np.nonzero(self.count == 0)[0]
+        self.row = np.full(2 * R, -1, np.int64)
+        self.row[inner] = at[self.ref[inner]]
+        self.parent = np.full(R, -1, np.int64)
+        self.parent[self.row[inner]] = inner
+
+    def blocks(self):
+        """(start, stop) of the levels' rows, top down."""
+        return list(zip(self.starts[:-1], self.starts[1:]))
+
+
+def _spread(left, right):
+    """Best split of rows' two children over k = 2..WIDE lanes, from the
+    children's costs per lane budget (``left``, ``right``: (WIDE + 1, n)):
+    (WIDE + 1, n) costs and left budgets (k < 2: inf and 0).  Of equal splits
+    the one giving the left child fewest lanes.  (By the left child's budget
+    i, the splits i + (k - i) of every k > i are one slice of the right
+    child's costs: no gathers, and no masked writes.)"""
+    n = left.shape[1]
+    out = np.full((WIDE + 1, n), np.inf)
+    arg = np.zeros((WIDE + 1, n), np.int8)
+    better = np.empty((WIDE - 1, n), bool)
+    for i in range(1, WIDE):
+        c = left[i] + right[1:WIDE + 1 - i]                      # k = i + 1 .. WIDE
+        b, o, a = better[:WIDE - i], out[i + 1:], arg[i + 1:]
+        np.less(c, o, out=b)
+        np.minimum(o, c, out=o)
+        a += b * np.int8(i) - b * a                              # i where better
+    return out, arg
+
+
+def _plan(tree: _Tree):
     """Ylitie et al. 2017, section 3: the SAH-optimal collapse of the binary
     tree into nodes of up to WIDE children, by dynamic programming bottom up.
-    cost[e, k] is the least SAH cost of binary child e's subtree spread over at
-    most k lanes of its wide parent: as one leaf (C_PACKET a packet, for a
-    subtree of at most MERGE triangles or a binary leaf), as one lane holding a
-    wide node (C_NODE plus its own children's best spread over WIDE lanes), or
-    split into its two children's lanes (i + (k - i)).  choice[e, k] says which
-    (LEAF, NODE, or i > 0: the split).  Returns choice, per row r the left
-    child's lane budget when r is a wide node (best[r]), and the tree's cost
-    below the root node (the root's lanes and everything under them)."""
-    n = len(ref)
-    cost = np.full((n, WIDE + 1), np.inf)
-    choice = np.full((n, WIDE + 1), ABSENT, np.int8)
-    best = np.zeros(n // 2, np.int64)
-    packets = -(-tris // PACKET)
-
-    pairs = cost.reshape(-1, 2, WIDE + 1)          # a row's two children: one gather
-
-    def spread(rows):
-        """Best split of each row's two children over k = 2..WIDE lanes:
-        (len(rows), WIDE + 1) costs and left budgets (k < 2: inf).  Of equal
-        splits the one giving the left child fewest lanes.  (By the left
-        child's budget i, the splits i + (k - i) of every k > i are one slice
-        of the right child's costs: no gathers inside the loop.)"""
-        both = pairs[rows]
-        left, right = both[:, 0], both[:, 1]
-        out = np.full((len(rows), WIDE + 1), np.inf)
-        arg = np.zeros((len(rows), WIDE + 1), np.int64)
-        for i in range(1, WIDE):
-            c = left[:, i:i + 1] + right[:, 1:WIDE + 1 - i]      # k = i + 1 .. WIDE
-            better = c < out[:, i + 1:]
-            out[:, i + 1:][better] = c[better]
-            arg[:, i + 1:][better] = i
-        return out, arg
-
-    for rows in reversed(levels):                 # bottom up: a row's children are done
-        entries = np.concatenate([2 * rows, 2 * rows + 1])
-        absent = entries[count[entries] < 0]
-        cost[absent, 1:] = 0.0
-        leaves = entries[count[entries] > 0]
-        cost[leaves, 1:] = (C_PACKET * area[leaves] * packets[leaves])[:, None]
-        choice[leaves, 1:] = LEAF
-        inner = entries[count[entries] == 0]
-        if len(inner) == 0:
-            continue
-        sub, arg = spread(ref[inner])
-        best[ref[inner]] = arg[:, WIDE]
-        node = C_NODE * area[inner] + sub[:, WIDE]
-        leaf = np.where(tris[inner] <= MERGE, C_PACKET * area[inner] * packets[inner], np.inf)
-        one = np.minimum(leaf, node)
-        cost[inner, 1] = one
-        choice[inner, 1] = np.where(leaf <= node, LEAF, NODE)
-        split = sub[:, 2:] < one[:, None]
-        cost[inner, 2:] = np.where(split, sub[:, 2:], one[:, None])
-        choice[inner, 2:] = np.where(split, arg[:, 2:], choice[inner, 1][:, None])
-    sub, arg = spread(np.zeros(1, np.int64))
-    best[0] = arg[0, WIDE]
-    return choice, best, float(sub[0, WIDE])
-
-
-def _lanes(rows, ref, choice, best):
-    """The lanes of the wide nodes made from binary ``rows``: (len(rows), WIDE)
-    binary children (-1: empty), in the order of the binary tree."""
-    # items: (node, binary child, lane budget, first lane)
-    node = np.repeat(np.arange(len(rows)), 2)
-    entry = np.stack([2 * rows, 2 * rows + 1], 1).reshape(-1)
-    budget = np.stack([best[rows], WIDE - best[rows]], 1).reshape(-1)
-    pos = np.stack([np.zeros_like(rows), best[rows]], 1).reshape(-1)
-    while True:
-        c = choice[entry, budget].astype(np.int64)
-        split = c > 0
-        if not split.any():
+    cost[x, k] is the least SAH cost of child x's subtree spread over at most
+    k lanes of its wide parent: as one leaf (C_PACKET a packet, for a subtree
+    of at most MERGE triangles or a binary leaf), as one lane holding a wide
+    node (C_NODE plus its own children's best spread over WIDE lanes), or split
+    into its two children's lanes (i + (k - i)).  choice[x, k] says which
+    (LEAF, NODE, or i > 0: the split; ABSENT: no child, or k = 0).  Returns
+    choice, per row the left child's lane budget when it is a wide node
+    (best), per child its subtree's first slot and triangles, and the tree's
+    cost below the root node (the root's lanes and everything under them).
+    (A level's rows read their children's costs as columns, (WIDE + 1, n), and
+    write them to the children that they are as rows: both contiguous.)"""
+    R = tree.R
+    count = tree.count
+    tris = np.maximum(count, 0)
+    first = np.where(count > 0, tree.ref, 0)
+    cost = np.empty((2 * R, WIDE + 1))
+    cost[:] = np.where(count > 0, C_PACKET * tree.area * -(-tris // PACKET),
+                       np.where(count < 0, 0.0, np.inf))[:, None]
+    cost[:, 0] = np.inf
+    choice = np.empty((2 * R, WIDE + 1), np.int8)
+    choice[:] = np.where(count > 0, LEAF, ABSENT).astype(np.int8)[:, None]
+    choice[:, 0] = ABSENT
+    best = np.zeros(R, np.int8)
+    for s, e in reversed(tree.blocks()):          # bottom up: a row's children are done
+        sub, arg = _spread(np.ascontiguousarray(cost[s:e].T), np.ascontiguousarray(cost[R + s:R + e].T))
+        best[s:e] = arg[WIDE]
+        if s == 0:
             break
-        keep = ~split
-        s = np.nonzero(split)[0]
-        # a split child's left child takes its lanes from pos, its right child from pos + c
-        node = np.concatenate([node[keep], node[s], node[s]])
-        entry_s = entry[s]
-        entry = np.concatenate([entry[keep], 2 * ref[entry_s], 2 * ref[entry_s] + 1])
-        budget_s, c_s = budget[s], c[s]
-        budget = np.concatenate([budget[keep], c_s, budget_s - c_s])
-        pos_s = pos[s]
-        pos = np.concatenate([pos[keep], pos_s, pos_s + c_s])
-    present = choice[entry, budget] != ABSENT
-    node, entry, pos = node[present], entry[present], pos[present]
-    order = np.lexsort((pos, node))
-    node, entry = node[order], entry[order]
-    lane = np.arange(len(node)) - np.searchsorted(node, node)   # rank within its node
-    src = np.full((len(rows), WIDE), -1, np.int64)
-    src[node, lane] = entry
-    return src
+        x = tree.parent[s:e]                      # the children that are these rows
+        n = tris[s:e] + tris[R + s:R + e]
+        tris[x] = n
+        first[x] = first[s:e]                     # the left subtree's slots come first
+        area = tree.area[x]
+        node = C_NODE * area + sub[WIDE]
+        leaf = np.where(n <= MERGE, C_PACKET * area * -(-n // PACKET), np.inf)
+        one = np.minimum(leaf, node)
+        one_choice = np.where(leaf <= node, LEAF, NODE).astype(np.int8)
+        split = sub[2:] < one                     # else the child takes one lane
+        sub[1] = one
+        np.minimum(sub[2:], one, out=sub[2:])
+        cost[x] = sub.T
+        arg[0], arg[1] = ABSENT, one_choice
+        arg[2:] -= one_choice                     # arg where split, else one_choice
+        arg[2:] *= split
+        arg[2:] += one_choice
+        choice[x] = arg.T
+    return choice, best, first, tris, float(sub[WIDE, 0])
+
+
+def _lanes(tree: _Tree, choice, best):
+    """Top down: the lane budget, first lane and owner (its wide node's row) of
+    every child; a child that is not split over lanes (choice LEAF or NODE at
+    its budget) takes one lane.  Returns per lane (in child order): child x,
+    owner row, first lane, whether it holds a wide node; and per row its wide
+    depth (the wide nodes above it)."""
+    R = tree.R
+    budget = np.zeros(2 * R, np.int64)
+    lane = np.zeros(2 * R, np.int64)
+    chosen = np.full(2 * R, ABSENT, np.int8)
+    owner = np.zeros(R, np.int64)
+    depth = np.zeros(R, np.int64)
+    flat = choice.reshape(-1)
+    for s, e in tree.blocks():
+        if s == 0:                                  # the root row: the root node
+            budget[0], budget[R], lane[R] = best[0], WIDE - best[0], best[0]
+        else:
+            x = tree.parent[s:e]
+            c = chosen[x].astype(np.int64)
+            split, node = c > 0, c == NODE
+            b = best[s:e].astype(np.int64)
+            budget[s:e] = np.where(split, c, np.where(node, b, 0))
+            budget[R + s:R + e] = np.where(split, budget[x] - c, np.where(node, WIDE - b, 0))
+            lane[s:e] = np.where(split, lane[x], 0)
+            lane[R + s:R + e] = np.where(split, lane[x] + c, b)
+            p = x - np.where(x >= R, R, 0)          # the parent row
+            owner[s:e] = np.where(split, owner[p], np.arange(s, e))
+            depth[s:e] = depth[p] + np.where(split, 0, 1)
+        for side in (0, R):
+            chosen[side + s:side + e] = flat[np.arange(side + s, side + e) * (WIDE + 1) + budget[side + s:side + e]]
+    x = np.nonzero((budget > 0) & ((chosen == LEAF) | (chosen == NODE)))[0]
+    p = x - np.where(x >= R, R, 0)
+    return x, owner[p], lane[x], chosen[x] == NODE, depth
+
+
+def _numbers(tree: _Tree, x, owner, lane, is_node, depth):
+    """Per row its wide node's number (-1: none), and the number of wide
+    levels: nodes level after level (wide depth), each level in the order of
+    its parents' numbers and then their lanes -- breadth first, as the waves
+    of the greedy collapse numbered them.  Arguments: those of _lanes."""
+    number = np.full(tree.R, -1, np.int64)
+    number[0] = 0
+    rows, parent, at = tree.row[x[is_node]], owner[is_node], lane[is_node]
+    level = depth[parent]                         # its parent's level
+    start, levels = 1, 1
+    for d in range(int(level.max()) + 1 if len(level) else 0):
+        pick = np.nonzero(level == d)[0]
+        pick = pick[np.argsort(number[parent[pick]] * WIDE + at[pick])]
+        number[rows[pick]] = start + np.arange(len(pick))
+        start += len(pick)
+        levels += 1
+    return number, levels
 
 
 def collapse(rows: np.ndarray, slotted: np.ndarray) -> WideBvh:
     """The wide BVH of ``rows`` (BVH_PAIR_NODE, box volumes) over ``slotted``
     ((F, 3, 3) float32 corners in slot order)."""
-    ref, count, lo, hi = _children(rows)
-    levels = _levels(ref, count)
-    first, tris = _subtrees(ref, count, levels)
-    area = surface_area(lo.astype(np.float64), hi.astype(np.float64))
-    choice, best, _ = _plan(ref, count, tris, area, levels)
+    ref, count, words = _entries(rows)
+    area = surface_area(words[:, 0:3].astype(np.float64), words[:, 4:7].astype(np.float64))
+    tree = _Tree(ref, count, area)
+    choice, best, first, tris, _ = _plan(tree)
+    x, owner, lane, is_node, depth = _lanes(tree, choice, best)
 
-    waves = []                          # per level: (its binary rows, (m, WIDE) lane sources)
-    frontier = np.zeros(1, np.int64)
-    while len(frontier):
-        src = _lanes(frontier, ref, choice, best)
-        waves.append((frontier, src))
-        lane = src[src >= 0]
-        frontier = ref[lane[_is_node(lane, count, choice)]]   # row-major: the next level in lane order
+    number, levels = _numbers(tree, x, owner, lane, is_node, depth)
+    n = int(number.max()) + 1
 
-    # Wide node numbers: level after level, each level in the order its rows were found.
-    wide_of_row = np.full(len(rows), -1, np.int64)
-    start = 0
-    for frontier, _ in waves:
-        wide_of_row[frontier] = start + np.arange(len(frontier))
-        start += len(frontier)
-    sources = np.concatenate([src for _, src in waves])
-    present = sources >= 0
-    index = np.where(present, sources, 0)
-    inner = present & _is_node(index, count, choice)
-    leaf = present & ~inner
-    lane_ref = np.where(inner, ref[index], np.where(leaf, first[index], 0))
-    lane_count = np.where(inner, 0, np.where(leaf, tris[index], -1))
+    # The lanes row-major (by node, then lane): their binary children and what they hold.
+    order = np.argsort(number[owner] * WIDE + lane)
+    x, is_node, node = x[order], is_node[order], number[owner[order]]
+    rank = np.arange(len(x)) - np.searchsorted(node, node)       # lane within its node
+    sources = np.full((n, WIDE), -1, np.int64)
+    sources[node, rank] = tree.entry[x]
+    child = np.zeros((n, WIDE), np.int64)
+    lane_count = np.full((n, WIDE), -1, np.int64)
+    child[node[is_node], rank[is_node]] = number[tree.row[x[is_node]]]
+    lane_count[node[is_node], rank[is_node]] = 0
 
     # Leaves: their slots in packets of PACKET lanes, leaf after leaf in slot order.
-    first_slot, leaf_tris = lane_ref[leaf], lane_count[leaf]
+    leaf = ~is_node
+    first_slot, leaf_tris = first[x[leaf]], tris[x[leaf]]
     per_leaf = -(-leaf_tris // PACKET)
     order = np.argsort(first_slot, kind="stable")
     first_packet = np.empty(len(order), np.int64)
@@ -234,34 +275,32 @@ def collapse(rows: np.ndarray, slotted: np.ndarray) -> WideBvh:
     within = np.arange(len(packet_leaf)) - first_packet[packet_leaf]  # its packet number in the leaf
     k = within[:, None] * PACKET + np.arange(PACKET)                   # triangle of the leaf in each lane
     slots = np.where(k < leaf_tris[packet_leaf, None], first_slot[packet_leaf, None] + k, -1)
+    child[node[leaf], rank[leaf]] = first_packet
+    lane_count[node[leaf], rank[leaf]] = per_leaf
 
-    nodes = np.zeros(len(sources), BVH_WIDE_NODE)
-    child = np.zeros_like(lane_ref)
-    child[inner] = wide_of_row[lane_ref[inner]]
-    child[leaf] = first_packet
-    lane_count[leaf] = per_leaf
+    nodes = np.zeros(n, BVH_WIDE_NODE)
     nodes["child"], nodes["count"] = child, lane_count
-    fill_boxes(nodes, sources, rows)
+    _fill_boxes(nodes, sources, words)
     packets = np.zeros(len(slots), TRIANGLE_PACKET)
     packets["slot"] = slots
     fill_packets(packets, slotted)
-    return WideBvh(nodes, packets, len(waves), sources)
-
-
-def _is_node(entries, count, choice):
-    """Which of the lanes' binary children (from _lanes) hold a wide node of their own."""
-    return (count[entries] == 0) & (choice[entries, 1] == NODE)
+    return WideBvh(nodes, packets, levels, sources)
 
 
 def fill_boxes(nodes: np.ndarray, sources: np.ndarray, rows: np.ndarray) -> None:
     """Write each lane's box from the binary child it holds (``sources``) in
     ``rows``; empty lanes get zeros."""
-    _, _, lo, hi = _children(rows)
+    _fill_boxes(nodes, sources, _entries(rows)[2])
+
+
+def _fill_boxes(nodes: np.ndarray, sources: np.ndarray, words: np.ndarray) -> None:
+    """fill_boxes from the rows' words per binary child ((2R, 8) float32: lo
+    xyz, reference, hi xyz, count)."""
     present = sources >= 0
     index = np.where(present, sources, 0)
     for axis, name in enumerate("xyz"):
-        nodes[f"lo_{name}"] = np.where(present, lo[index, axis], 0.0)
-        nodes[f"hi_{name}"] = np.where(present, hi[index, axis], 0.0)
+        nodes[f"lo_{name}"] = np.where(present, words[index, axis], 0.0)
+        nodes[f"hi_{name}"] = np.where(present, words[index, 4 + axis], 0.0)
 
 
 def fill_packets(packets: np.ndarray, slotted: np.ndarray) -> None:
