@@ -295,20 +295,27 @@ def fill_boxes(nodes: np.ndarray, sources: np.ndarray, rows: np.ndarray) -> None
 
 def _fill_boxes(nodes: np.ndarray, sources: np.ndarray, words: np.ndarray) -> None:
     """fill_boxes from the rows' words per binary child ((2R, 8) float32: lo
-    xyz, reference, hi xyz, count)."""
+    xyz, reference, hi xyz, count): one gather (np.take: whole rows of words)
+    and one copy into the nodes' words, lane by lane."""
+    n = len(nodes)
     present = sources >= 0
-    index = np.where(present, sources, 0)
-    for axis, name in enumerate("xyz"):
-        nodes[f"lo_{name}"] = np.where(present, words[index, axis], 0.0)
-        nodes[f"hi_{name}"] = np.where(present, words[index, 4 + axis], 0.0)
+    lanes = np.take(words, np.where(present, sources, 0).reshape(-1), axis=0).reshape(n, WIDE, 8)
+    boxes = nodes.view(np.float32).reshape(n, -1)[:, :6 * WIDE].reshape(n, 6, WIDE)   # lo xyz, hi xyz
+    boxes[:, 0:3] = lanes[:, :, 0:3].transpose(0, 2, 1)
+    boxes[:, 3:6] = lanes[:, :, 4:7].transpose(0, 2, 1)
+    node, lane = np.nonzero(~present)
+    boxes[node, :, lane] = 0.0
 
 
 def fill_packets(packets: np.ndarray, slotted: np.ndarray) -> None:
     """Write the corners of ``slotted`` ((F, 3, 3) float32, slot order) into the
     packets' lanes, as their ``slot`` fields say (empty lanes: zeros)."""
+    n = len(packets)
     slots = packets["slot"]
     used = slots >= 0
-    corners = np.zeros(slots.shape + (3, 3), np.float32)   # (P, PACKET, corner, axis)
-    corners[used] = slotted[slots[used]]
-    for c, name in enumerate(("v0", "v1", "v2")):
-        packets[name] = corners[:, :, c, :].transpose(0, 2, 1)   # (P, axis, lane)
+    corners = np.take(np.asarray(slotted).reshape(-1, 9), np.where(used, slots, 0).reshape(-1), axis=0)
+    corners = corners.reshape(n, PACKET, 3, 3)                            # (P, lane, corner, axis)
+    words = packets.view(np.float32).reshape(n, -1)[:, :9 * PACKET].reshape(n, 3, 3, PACKET)
+    words[...] = corners.transpose(0, 2, 3, 1)                          # (P, corner, axis, lane)
+    packet, lane = np.nonzero(~used)
+    words[packet, :, :, lane] = 0.0
