@@ -91,7 +91,8 @@ class _Tree:
     [starts[j], starts[j + 1])), and child x = side * R + p is side 0 (left) or
     1 (right) of row p.  Per child: ``entry`` (its binary child, row * 2 +
     side), ``count``, ``area``, ``row`` (the row it is, for an inner child;
-    else -1); per row: ``parent`` (the child that is this row; -1 at the root)."""
+    else -1); per row: ``parent`` (the child that is this row; -1 at the root)
+    and ``parent_row`` (the row of that child)."""
 
     def __init__(self, ref, count, area):
         levels = _levels(ref, count)
@@ -109,6 +110,7 @@ class _Tree:
         self.row[inner] = at[self.ref[inner]]
         self.parent = np.full(R, -1, np.int64)
         self.parent[self.row[inner]] = inner
+        self.parent_row = self.parent - np.where(self.parent >= R, R, 0)
 
     def blocks(self):
         """(start, stop) of the levels' rows, top down."""
@@ -125,13 +127,14 @@ def _spread(left, right):
     n = left.shape[1]
     out = np.full((WIDE + 1, n), np.inf)
     arg = np.zeros((WIDE + 1, n), np.int8)
-    better = np.empty((WIDE - 1, n), bool)
+    c, better, i_better = np.empty((WIDE - 1, n)), np.empty((WIDE - 1, n), bool), np.empty((WIDE - 1, n), np.int8)
     for i in range(1, WIDE):
-        c = left[i] + right[1:WIDE + 1 - i]                      # k = i + 1 .. WIDE
-        b, o, a = better[:WIDE - i], out[i + 1:], arg[i + 1:]
-        np.less(c, o, out=b)
-        np.minimum(o, c, out=o)
-        a += b * np.int8(i) - b * a                              # i where better
+        m = WIDE - i                                              # k = i + 1 .. WIDE
+        np.add(left[i], right[1:m + 1], out=c[:m])
+        np.less(c[:m], out[i + 1:], out=better[:m])
+        np.minimum(out[i + 1:], c[:m], out=out[i + 1:])
+        # i where better: i exceeds every budget tried before
+        np.maximum(arg[i + 1:], np.multiply(better[:m].view(np.int8), np.int8(i), out=i_better[:m]), out=arg[i + 1:])
     return out, arg
 
 
@@ -194,29 +197,30 @@ def _lanes(tree: _Tree, choice, best):
     owner row, first lane, whether it holds a wide node; and per row its wide
     depth (the wide nodes above it)."""
     R = tree.R
-    budget = np.zeros(2 * R, np.int64)
-    lane = np.zeros(2 * R, np.int64)
+    budget = np.zeros(2 * R, np.int8)
+    lane = np.zeros(2 * R, np.int8)
     chosen = np.full(2 * R, ABSENT, np.int8)
     owner = np.zeros(R, np.int64)
     depth = np.zeros(R, np.int64)
     flat = choice.reshape(-1)
+    at = np.arange(0, 2 * R * (WIDE + 1), WIDE + 1)           # choice[x, 0] in flat
     for s, e in tree.blocks():
         if s == 0:                                  # the root row: the root node
             budget[0], budget[R], lane[R] = best[0], WIDE - best[0], best[0]
         else:
-            x = tree.parent[s:e]
-            c = chosen[x].astype(np.int64)
+            x, p = tree.parent[s:e], tree.parent_row[s:e]
+            c = chosen[x]
             split, node = c > 0, c == NODE
-            b = best[s:e].astype(np.int64)
-            budget[s:e] = np.where(split, c, np.where(node, b, 0))
-            budget[R + s:R + e] = np.where(split, budget[x] - c, np.where(node, WIDE - b, 0))
-            lane[s:e] = np.where(split, lane[x], 0)
+            b = best[s:e] * node                    # a new node: its own best split
+            # split: budgets c and budget - c from the child's first lane; a new node: from lane 0
+            budget[s:e] = np.where(split, c, b)
+            budget[R + s:R + e] = np.where(split, budget[x] - c, (WIDE - b) * node)
+            lane[s:e] = lane[x] * split
             lane[R + s:R + e] = np.where(split, lane[x] + c, b)
-            p = x - np.where(x >= R, R, 0)          # the parent row
             owner[s:e] = np.where(split, owner[p], np.arange(s, e))
-            depth[s:e] = depth[p] + np.where(split, 0, 1)
-        for side in (0, R):
-            chosen[side + s:side + e] = flat[np.arange(side + s, side + e) * (WIDE + 1) + budget[side + s:side + e]]
+            depth[s:e] = depth[p] + ~split
+        chosen[s:e] = flat[at[s:e] + budget[s:e]]
+        chosen[R + s:R + e] = flat[at[R + s:R + e] + budget[R + s:R + e]]
     x = np.nonzero((budget > 0) & ((chosen == LEAF) | (chosen == NODE)))[0]
     p = x - np.where(x >= R, R, 0)
     return x, owner[p], lane[x], chosen[x] == NODE, depth
@@ -253,10 +257,12 @@ def collapse(rows: np.ndarray, slotted: np.ndarray) -> WideBvh:
     number, levels = _numbers(tree, x, owner, lane, is_node, depth)
     n = int(number.max()) + 1
 
-    # The lanes row-major (by node, then lane): their binary children and what they hold.
-    order = np.argsort(number[owner] * WIDE + lane)
-    x, is_node, node = x[order], is_node[order], number[owner[order]]
-    rank = np.arange(len(x)) - np.searchsorted(node, node)       # lane within its node
+    # Each lane's place: its node, and its rank among the node's lanes in the
+    # order of the binary tree (a child spread over k lanes leaves k - 1 unused).
+    node = number[owner]
+    taken = np.zeros((n, WIDE), np.int8)
+    taken[node, lane] = 1
+    rank = (np.cumsum(taken, axis=1, dtype=np.int8) - 1)[node, lane]
     sources = np.full((n, WIDE), -1, np.int64)
     sources[node, rank] = tree.entry[x]
     child = np.zeros((n, WIDE), np.int64)
@@ -268,7 +274,9 @@ def collapse(rows: np.ndarray, slotted: np.ndarray) -> WideBvh:
     leaf = ~is_node
     first_slot, leaf_tris = first[x[leaf]], tris[x[leaf]]
     per_leaf = -(-leaf_tris // PACKET)
-    order = np.argsort(first_slot, kind="stable")
+    at_slot = np.full(int(first_slot.max()) + 1, -1)          # leaves hold distinct slots:
+    at_slot[first_slot] = np.arange(len(first_slot))
+    order = at_slot[at_slot >= 0]                              # the leaves in slot order
     first_packet = np.empty(len(order), np.int64)
     first_packet[order] = np.cumsum(per_leaf[order]) - per_leaf[order]
     packet_leaf = np.repeat(order, per_leaf[order])                   # the leaf of each packet
