@@ -125,10 +125,14 @@ def _spread(left, right):
     i, the splits i + (k - i) of every k > i are one slice of the right
     child's costs: no gathers, and no masked writes.)"""
     n = left.shape[1]
-    out = np.full((WIDE + 1, n), np.inf)
-    arg = np.zeros((WIDE + 1, n), np.int8)
+    out = np.empty((WIDE + 1, n))
+    arg = np.empty((WIDE + 1, n), np.int8)
+    out[:2], arg[:2] = np.inf, 0
     c, better, i_better = np.empty((WIDE - 1, n)), np.empty((WIDE - 1, n), bool), np.empty((WIDE - 1, n), np.int8)
-    for i in range(1, WIDE):
+    np.add(left[1], right[1:WIDE], out=out[2:])                   # i = 1: k = 2 .. WIDE
+    np.less(out[2:], np.inf, out=better)
+    arg[2:] = better.view(np.int8)
+    for i in range(2, WIDE):
         m = WIDE - i                                              # k = i + 1 .. WIDE
         np.add(left[i], right[1:m + 1], out=c[:m])
         np.less(c[:m], out[i + 1:], out=better[:m])
@@ -286,10 +290,10 @@ def collapse(rows: np.ndarray, slotted: np.ndarray) -> WideBvh:
     child[node[leaf], rank[leaf]] = first_packet
     lane_count[node[leaf], rank[leaf]] = per_leaf
 
-    nodes = np.zeros(n, BVH_WIDE_NODE)
+    nodes = np.empty(n, BVH_WIDE_NODE)             # every word written: boxes, child, count
     nodes["child"], nodes["count"] = child, lane_count
     _fill_boxes(nodes, sources, words)
-    packets = np.zeros(len(slots), TRIANGLE_PACKET)
+    packets = np.empty(len(slots), TRIANGLE_PACKET)  # every word written: corners, slot
     packets["slot"] = slots
     fill_packets(packets, slotted)
     return WideBvh(nodes, packets, levels, sources)
@@ -322,8 +326,9 @@ def fill_packets(packets: np.ndarray, slotted: np.ndarray) -> None:
     slots = packets["slot"]
     used = slots >= 0
     corners = np.take(np.asarray(slotted).reshape(-1, 9), np.where(used, slots, 0).reshape(-1), axis=0)
-    corners = corners.reshape(n, PACKET, 3, 3)                            # (P, lane, corner, axis)
-    words = packets.view(np.float32).reshape(n, -1)[:, :9 * PACKET].reshape(n, 3, 3, PACKET)
-    words[...] = corners.transpose(0, 2, 3, 1)                          # (P, corner, axis, lane)
+    corners = corners.reshape(n, PACKET, 9)                     # (P, lane, corner and axis)
+    words = packets.view(np.float32).reshape(n, -1)[:, :9 * PACKET].reshape(n, 9, PACKET)
+    for lane in range(PACKET):                                  # (P, corner and axis, lane)
+        words[:, :, lane] = corners[:, lane]
     packet, lane = np.nonzero(~used)
-    words[packet, :, :, lane] = 0.0
+    words[packet, :, lane] = 0.0
