@@ -71,14 +71,20 @@ def _entries(rows: np.ndarray):
 
 
 def _levels(ref: np.ndarray, count: np.ndarray) -> list:
-    """The binary rows level by level, top down (the root row alone first);
-    each level lists its rows' inner left children, then their inner right ones."""
-    levels, frontier = [], np.zeros(1, np.int64)
+    """The binary rows top down in blocks: level by level (the root row alone
+    first) those with an inner child, then all the others (twigs: rows whose
+    children are leaves or absent) in one block.  (Any order within a block
+    will do: the nodes are numbered from the tree alone, _numbers.)"""
+    forks = (count[0::2] == 0) | (count[1::2] == 0)          # rows with an inner child
+    blocks, twigs, frontier = [], [], np.zeros(1, np.int64)
     while len(frontier):
-        levels.append(frontier)
+        blocks.append(frontier)
         kids = np.concatenate([2 * frontier, 2 * frontier + 1])
-        frontier = ref[kids[count[kids] == 0]]
-    return levels
+        rows = ref[kids[count[kids] == 0]]
+        fork = forks[rows]
+        twigs.append(rows[~fork])
+        frontier = rows[fork]
+    return blocks + [np.concatenate(twigs)]
 
 
 # Decisions of the collapse per binary child and lane budget (_plan).
@@ -87,18 +93,17 @@ LEAF, NODE, ABSENT = -1, -2, -3
 
 class _Tree:
     """The binary tree in breadth-first order, for work level by level on
-    slices: row p is the p-th row of _levels (a level's rows are p in
-    [starts[j], starts[j + 1])), and child x = side * R + p is side 0 (left) or
-    1 (right) of row p.  Per child: ``entry`` (its binary child, row * 2 +
-    side), ``count``, ``area``, ``row`` (the row it is, for an inner child;
-    else -1); per row: ``parent`` (the child that is this row; -1 at the root)
-    and ``parent_row`` (the row of that child)."""
+    slices: row p is the p-th row of _levels, and child x = side * R + p is
+    side 0 (left) or 1 (right) of row p.  Per child: ``entry`` (its binary
+    child, row * 2 + side), ``count``, ``area``, ``row`` (the row it is, for an
+    inner child; else -1); per row: ``parent`` (the child that is this row; -1
+    at the root) and ``parent_row`` (the row of that child)."""
 
     def __init__(self, ref, count, area):
-        levels = _levels(ref, count)
-        order = np.concatenate(levels)
+        blocks = _levels(ref, count)
+        order = np.concatenate(blocks)
         self.R = R = len(order)
-        self.starts = np.cumsum([0] + [len(level) for level in levels])
+        self.starts = np.cumsum([0] + [len(block) for block in blocks])
         self.entry = np.concatenate([2 * order, 2 * order + 1])
         self.count = count[self.entry]
         self.area = area[self.entry]
@@ -113,7 +118,7 @@ class _Tree:
         self.parent_row = self.parent - np.where(self.parent >= R, R, 0)
 
     def blocks(self):
-        """(start, stop) of the levels' rows, top down."""
+        """(start, stop) of _levels's blocks of rows, top down (the twigs last)."""
         return list(zip(self.starts[:-1], self.starts[1:]))
 
 
@@ -168,15 +173,17 @@ def _plan(tree: _Tree):
     choice[:, 0] = ABSENT
     rows_of_choice = choice.view(np.dtype((np.void, WIDE + 1))).reshape(-1)   # a child's choices as one item
     best = np.zeros(R, np.int8)
-    for s, e in reversed(tree.blocks()):          # bottom up: a row's children are done
-        sub, arg = _spread(np.ascontiguousarray(cost[s:e].T), np.ascontiguousarray(cost[R + s:R + e].T))
-        best[s:e] = arg[WIDE]
-        if s == 0:
-            break
-        x = tree.parent[s:e]                      # the children that are these rows
-        n = tris[s:e] + tris[R + s:R + e]
+
+    def settle(rows, right, sub, arg):
+        """The triangles, first slots, costs and choices of the children that
+        rows ``rows`` are, from the best splits of the rows' own children
+        (``sub``, ``arg``: _spread's).  ``rows`` and ``right`` index the rows'
+        left and right children."""
+        best[rows] = arg[WIDE]
+        x = tree.parent[rows]                     # the children that are these rows
+        n = tris[rows] + tris[right]
         tris[x] = n
-        first[x] = first[s:e]                     # the left subtree's slots come first
+        first[x] = first[rows]                    # the left subtree's slots come first
         area = tree.area[x]
         node = C_NODE * area + sub[WIDE]
         leaf = np.where(n <= MERGE, C_PACKET * area * -(-n // PACKET), np.inf)
@@ -191,6 +198,24 @@ def _plan(tree: _Tree):
         arg[2:] *= split
         arg[2:] += one_choice
         rows_of_choice[x] = np.ascontiguousarray(arg.T).view(rows_of_choice.dtype).reshape(-1)
+
+    # Twigs (rows whose children are leaves or absent, 40 % of the rows) depend
+    # on no other row: all at once, first.  Their children cost the same at
+    # every budget, so every split i + (k - i) costs the same sum as 1 + (k - 1),
+    # which _spread would take.
+    *levels, (s, e) = tree.blocks()
+    pair = cost[s:e, 1] + cost[R + s:R + e, 1]
+    sub = np.empty((WIDE + 1, e - s))
+    sub[:2], sub[2:] = np.inf, pair
+    arg = np.zeros((WIDE + 1, e - s), np.int8)
+    arg[2:] = pair < np.inf
+    settle(slice(s, e), slice(R + s, R + e), sub, arg)
+    for s, e in reversed(levels):                 # bottom up: a row's children are done
+        sub, arg = _spread(np.ascontiguousarray(cost[s:e].T), np.ascontiguousarray(cost[R + s:R + e].T))
+        if s == 0:                                # the root row: its best split only
+            best[0] = arg[WIDE, 0]
+            break
+        settle(slice(s, e), slice(R + s, R + e), sub, arg)
     return choice, best, first, tris, float(sub[WIDE, 0])
 
 
