@@ -11,6 +11,7 @@ builder and the device builder, with leaves of one, four and eight triangles
 (two packets).
 """
 
+import functools
 from pathlib import Path
 
 import numpy as np
@@ -18,6 +19,8 @@ import pytest
 
 import clrt
 from clrt.accel.rows import child_refs
+from clrt.accel import wide as wide_module
+from clrt.accel.topdown import surface_area
 from clrt.accel.wide import MERGE, PACKET, WIDE, collapse
 from clrt.device import geometry
 from clrt.device.build import build_acceleration
@@ -231,3 +234,54 @@ def test_box_bounds_hold_far_away_and_near_axis_parallel(place, device, monkeypa
     monkeypatch.undo()
     _same_answers(binary, brute, o, d, tmin, f"{place}: binary / brute force")
     _same_answers(default, brute, o, d, tmin, f"{place}: default walk / brute force")
+
+
+def _sah_cost(nodes):
+    """The collapse's SAH cost of a wide tree, from its nodes: C_NODE for every
+    lane holding a node, C_PACKET for every packet of a leaf lane, each times
+    its box's surface area (float64)."""
+    lo = np.stack([nodes[f"lo_{a}"] for a in "xyz"], -1).astype(np.float64)
+    hi = np.stack([nodes[f"hi_{a}"] for a in "xyz"], -1).astype(np.float64)
+    area = surface_area(lo, hi)
+    count = nodes["count"]
+    return float((area * np.where(count == 0, wide_module.C_NODE, 0.0)).sum()
+                 + (area * np.where(count > 0, wide_module.C_PACKET * count, 0)).sum())
+
+
+def _optimal_cost(rows):
+    """The least SAH cost of any collapse of ``rows``, by plain recursion over
+    the binary tree (the reference for _plan's vectorised dynamic programme)."""
+    refs = child_refs(rows)
+    lo = np.stack([rows["left_a"][:, :3], rows["right_a"][:, :3]], 1).reshape(-1, 3).astype(np.float64)
+    hi = np.stack([rows["left_b"][:, :3], rows["right_b"][:, :3]], 1).reshape(-1, 3).astype(np.float64)
+    area = surface_area(lo, hi)
+    ref, count = refs[:, 0::2].reshape(-1), refs[:, 1::2].reshape(-1)
+
+    @functools.lru_cache(maxsize=None)
+    def tris(e):
+        return int(count[e]) if count[e] > 0 else tris(2 * ref[e]) + tris(2 * ref[e] + 1)
+
+    @functools.lru_cache(maxsize=None)
+    def best(e, k):       # binary child e spread over at most k lanes
+        if count[e] > 0:
+            return area[e] * wide_module.C_PACKET * -(-int(count[e]) // PACKET)
+        one = wide_module.C_NODE * area[e] + spread(ref[e], WIDE)
+        if tris(e) <= MERGE:
+            one = min(one, area[e] * wide_module.C_PACKET * -(-tris(e) // PACKET))
+        return min([one] + [spread(ref[e], j) for j in range(2, k + 1)])
+
+    def spread(row, k):
+        return min(best(2 * row, i) + best(2 * row + 1, k - i) for i in range(1, k))
+
+    return spread(0, WIDE)
+
+
+@pytest.mark.parametrize("builder, leaf", [("sah", 1), ("sah", 4), ("paper", 8)])
+def test_collapse_is_sah_optimal(builder, leaf, device):
+    corners = triangle_corners(knot()).astype(np.float32)
+    acc = build_acceleration(corners, "box", builder, leaf, device)
+    wide = collapse(acc.rows, corners[acc.prim_ids])
+    assert _sah_cost(wide.nodes) == pytest.approx(_optimal_cost(acc.rows), rel=1e-9)
+    # the greedy collapse it replaced left nodes half empty (4.3 lanes of 8 on bunny00, 6.4 now)
+    lanes = (wide.nodes["count"] >= 0).sum(axis=1)
+    assert lanes.mean() > 5.5
