@@ -22,10 +22,14 @@
 #error "build with -DBVH_STACK_SIZE=<at least the tree depth>"
 #endif
 
-// The walk of query_hits for a ray whose VolumeRay has `oblique`, a constant
-// in each of its two calls, so that each walk is compiled with one box test
-// and none decides per box which (3-6 % less kernel time on the H200 than one
-// walk that does, docs/benchmarks.md).
+// The walk of query_hits, `oblique` a constant in each call, so that each walk
+// is compiled with one box test and none decides per box which.  Where
+// OBLIQUE_WALK is defined (the query program, trace.cl), oblique rays take a
+// walk of their own with the FMA test: 3-8 % less kernel time than the exact
+// test on incoherent rays on the H200 (and 3-6 % less than one walk deciding
+// per box).  Other programs -- the renderer's kernels, each with a closest-hit
+// and an any-hit walk -- ran 5-8 % slower with the second walk, and walk every
+// ray with the exact test (docs/benchmarks.md).
 // The walk holds one current child -- a row to open, or a leaf to test -- and
 // a stack of postponed children with the distance where the ray enters them.
 // Children are visited near first; for the closest hit tmax shrinks to the
@@ -76,8 +80,12 @@ inline Hit query_hits(const Geometry* g, float3 origin, float3 dir, float tmin, 
 {
     const ShearedRay r = shear_ray(origin, dir);
     const VolumeRay vr = volume_ray(origin, dir, tree_reach(SPLIT_AT(g, nodes, 0)));
+#ifdef OBLIQUE_WALK
     return vr.oblique ? walk_tree(g, &r, &vr, true, tmin, tmax, query, sink)
                       : walk_tree(g, &r, &vr, false, tmin, tmax, query, sink);
+#else
+    return walk_tree(g, &r, &vr, false, tmin, tmax, query, sink);
+#endif
 }
 
 #endif

@@ -6,6 +6,10 @@
 //
 // Every query takes `cull` (CULL_NONE, CULL_BACK or CULL_FRONT, triangle.cl),
 // handed to the leaf action through a HitSink (hit.cl).
+//
+// Oblique rays walk the binary BVH with the FMA box test here (accel_bvh.cl
+// says why only here).
+#define OBLIQUE_WALK
 #include "layouts.h"
 #include "camera.cl"
 #include "geometry.cl"
