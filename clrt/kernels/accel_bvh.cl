@@ -60,7 +60,9 @@ inline Hit walk_tree(const Geometry* g, const ShearedRay* r, const VolumeRay* vr
                 // Near first finds the closest hit early, and any hit early too.
                 const bool right_first = query != QUERY_ALL && t_right < t_left;
                 stack[sp] = right_first ? left_child : right_child;
-                stack_t[sp++] = right_first ? t_left : t_right;
+                if (query == QUERY_CLOSEST)   // only it drops children by distance (stack.cl)
+                    stack_t[sp] = right_first ? t_left : t_right;
+                ++sp;
                 current = right_first ? right_child : left_child;
                 continue;
             }
@@ -69,7 +71,7 @@ inline Hit walk_tree(const Geometry* g, const ShearedRay* r, const VolumeRay* vr
                 continue;
             }
         }
-        if (!resume_postponed(stack, stack_t, &sp, tmax, &current))
+        if (!resume_postponed(stack, stack_t, &sp, tmax, &current, query == QUERY_CLOSEST))
             return best;
     }
 }

@@ -125,7 +125,7 @@ inline Hit walk_wide_tree(const Geometry* g, const ShearedRay* r, const VolumeRa
                 continue;
             }
         }
-        if (!resume_postponed(stack, stack_t, &sp, tmax, &current))
+        if (!resume_postponed(stack, stack_t, &sp, tmax, &current, query == QUERY_CLOSEST))
             return best;
     }
 }

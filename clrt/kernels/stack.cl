@@ -5,16 +5,19 @@
 #ifndef CLRT_STACK_CL
 #define CLRT_STACK_CL
 
-// Take the most recently postponed child that the ray may still reach -- its
-// volume starts at or before tmax, which only shrinks as hits are found --
-// into *current, dropping those it passes over; false when none is left.
-inline bool resume_postponed(const int2* stack, const float* stack_t, int* sp, float tmax, int2* current)
+// Take the most recently postponed child that the ray may still reach into
+// *current; false when none is left.  With `by_distance` (the closest hit,
+// whose tmax shrinks as hits are found) those whose volume starts beyond tmax
+// are dropped, and stack_t is read; other queries never shrink tmax, so every
+// child they postponed is still reachable and they need not keep stack_t.
+inline bool resume_postponed(const int2* stack, const float* stack_t, int* sp, float tmax, int2* current,
+                             const bool by_distance)
 {
     do {
         if (*sp == 0)
             return false;
         --*sp;
-    } while (stack_t[*sp] > tmax);
+    } while (by_distance && stack_t[*sp] > tmax);
     *current = stack[*sp];
     return true;
 }
