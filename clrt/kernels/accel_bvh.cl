@@ -57,7 +57,8 @@ inline Hit walk_tree(const Geometry* g, const ShearedRay* r, const VolumeRay* vr
             const bool left = left_child.y >= 0 && volume_hit(vr, n.left_a, n.left_b, tmin, tmax, &t_left, oblique);
             const bool right = right_child.y >= 0 && volume_hit(vr, n.right_a, n.right_b, tmin, tmax, &t_right, oblique);
             if (left && right) {
-                // Near first finds the closest hit early, and any hit early too.
+                // Near first finds the closest hit early, and any hit early too
+                // (child order instead: any-hit up to 6 % slower on the H200).
                 const bool right_first = query != QUERY_ALL && t_right < t_left;
                 stack[sp] = right_first ? left_child : right_child;
                 if (query == QUERY_CLOSEST)   // only it drops children by distance (stack.cl)
