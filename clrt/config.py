@@ -127,6 +127,10 @@ DEVICE_ENV = "CLRT_DEVICE"
 BATCH_CACHE_SCENES = 4
 #: Most views of one source rendered by one task (a task reports, and is retried, as a whole).
 BATCH_VIEWS_PER_TASK = 8
+#: Images a worker encodes and writes in threads while it renders the next views
+#: (PNG encoding took 17 of a worker's 36 ms per 1080p frame on an H200,
+#: docs/distributed.md); also the most finished images it holds at once.
+BATCH_IMAGE_WRITERS = 2
 #: Most views per source (--views).
 MAX_VIEWS = 100_000
 #: The manifest (JSON lines) in the output folder, and how often it is rewritten while jobs finish.

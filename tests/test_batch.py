@@ -8,6 +8,7 @@ tiny and meshes generated."""
 import json
 import math
 import os
+import time
 
 import numpy as np
 import pytest
@@ -347,3 +348,37 @@ def test_ray_benchmark_counts_the_hits_of_its_own_rays(client, meshes, device):
     o, d = dask.compute(origins, directions, scheduler="sync")
     expected = int(clrt.Accel(mesh, device=device).trace(o, d).hit.sum())
     assert 0 < hit == expected < n
+
+
+def test_images_written_in_threads_keep_their_order_and_errors(meshes, tmp_path, device, monkeypatch):
+    """A task writes its images in threads while it renders on (worker.render_task):
+    the records keep the views' order, a failed write is that view's "bad"
+    record, and the other views' files are written."""
+    import clrt.output
+    from clrt.batch import worker
+    from clrt.batch.engine import _check_options
+    from clrt.batch.jobs import output_path
+    from clrt.errors import OutputError
+
+    real_write = clrt.output.write_image
+
+    def write(image, path, force=False):
+        if path.name == output_path("ball", 2).rsplit("/", 1)[-1]:
+            raise OutputError(f"cannot write {path}: refused by the test")
+        time.sleep(0.05 * (int(path.stem[-1]) % 2))     # odd views finish later
+        real_write(image, path, force=force)
+
+    monkeypatch.setattr(clrt.output, "write_image", write)
+    monkeypatch.setenv("CLRT_DEVICE", device or "")
+    settings = _check_options(6, "box", "sah", 4, None, {"width": 24, "height": 16})
+    views = list(range(6))
+    job = {"source": str(meshes[0]), "name": "ball", "views": views, "replace": [],
+           "paths": {v: output_path("ball", v) for v in views}, "count": 6, "folder": str(tmp_path),
+           "scene": settings["scene"], "camera": settings["camera"], "lights": settings["lights"],
+           "accel": "box", "builder": "sah", "leaf_size": 4, "force": False, "key": "k"}
+    records = worker.render_task(job)
+    assert [r["view"] for r in records] == views
+    assert [r["status"] for r in records] == ["done", "done", "bad", "done", "done", "done"]
+    assert "refused by the test" in records[2]["error"]
+    assert sorted(p.name for p in (tmp_path / "ball").iterdir()) == \
+        [output_path("ball", v).rsplit("/", 1)[-1] for v in (0, 1, 3, 4, 5)]

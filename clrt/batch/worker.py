@@ -31,13 +31,14 @@ import signal
 import tempfile
 import threading
 import time
-from collections import OrderedDict
+from collections import OrderedDict, deque
+from concurrent.futures import ThreadPoolExecutor
 from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
 
-from clrt.config import BATCH_CACHE_SCENES, DEVICE_ENV
+from clrt.config import BATCH_CACHE_SCENES, BATCH_IMAGE_WRITERS, DEVICE_ENV
 from clrt.errors import ClrtError, DeviceError, InputError
 
 try:   # plugins need Dask's base class; the rest of this module runs without Dask
@@ -226,30 +227,54 @@ def render_task(job: dict) -> list[dict]:
             return records
         raise
 
-    for i, view in enumerate(job["views"]):
-        out = folder / job["paths"][view]
-        if out.exists() and view not in job["replace"]:
-            records.append({**base, "path": job["paths"][view], "view": view, "status": "done",
-                            "seconds": 0.0, "camera": None, "note": "found"})
-            continue
-        started = time.perf_counter()
+    # Each image is encoded and written in a thread while the next views render
+    # (zlib lets go of the GIL); at most BATCH_IMAGE_WRITERS wait, and records
+    # keep the views' order: a view's record goes in once its file is written.
+    pending = deque()       # (view, camera, started, future) in view order
+
+    def finish_one():
+        view, cam, started, written = pending.popleft()
         try:
-            cam = turntable(camera, view, job["count"])
-            out.parent.mkdir(parents=True, exist_ok=True)
-            with device_lock():
-                renderer.set_lights(render_lights(renderer.scene.bounds, cam, own, job["lights"]))
-                frame = renderer.render(cam)
-            write_image(frame.image, out, force=job["force"])
+            written.result()
         except ClrtError as exc:
             fail([view], exc, started)
-            continue
-        except Exception as exc:   # noqa: BLE001
-            if _is_device_error(exc):
-                fail(job["views"][i:], DeviceError(f"OpenCL error: {exc}"), started)
-                return records
-            raise
+            return
         records.append({**base, "path": job["paths"][view], "view": view, "status": "done",
                         "seconds": time.perf_counter() - started, "camera": _camera_record(cam)})
+
+    def finish_all():
+        while pending:
+            finish_one()
+
+    with ThreadPoolExecutor(BATCH_IMAGE_WRITERS, thread_name_prefix="clrt-png") as writers:
+        for i, view in enumerate(job["views"]):
+            out = folder / job["paths"][view]
+            if out.exists() and view not in job["replace"]:
+                finish_all()
+                records.append({**base, "path": job["paths"][view], "view": view, "status": "done",
+                                "seconds": 0.0, "camera": None, "note": "found"})
+                continue
+            started = time.perf_counter()
+            try:
+                cam = turntable(camera, view, job["count"])
+                out.parent.mkdir(parents=True, exist_ok=True)
+                with device_lock():
+                    renderer.set_lights(render_lights(renderer.scene.bounds, cam, own, job["lights"]))
+                    frame = renderer.render(cam)
+            except ClrtError as exc:
+                finish_all()
+                fail([view], exc, started)
+                continue
+            except Exception as exc:   # noqa: BLE001
+                finish_all()
+                if _is_device_error(exc):
+                    fail(job["views"][i:], DeviceError(f"OpenCL error: {exc}"), started)
+                    return records
+                raise
+            pending.append((view, cam, started, writers.submit(write_image, frame.image, out, force=job["force"])))
+            while len(pending) > BATCH_IMAGE_WRITERS:
+                finish_one()
+        finish_all()
     return records
 
 
