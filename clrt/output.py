@@ -16,6 +16,7 @@ import hashlib
 import os
 import struct
 import tempfile
+import threading
 import zlib
 from pathlib import Path
 
@@ -168,14 +169,33 @@ def check_replace(path: Path, force: bool) -> None:
                           "pass --force (-f; force=True in Python) to replace it, or choose another -o")
 
 
+def _umask() -> int:
+    """The process's umask, read without changing it: os.umask can only be read
+    by setting it, and another thread creating a file or folder in between (the
+    batch workers write images in threads) would get the temporary mask.  Linux
+    lists it in /proc/self/status; elsewhere the set-and-restore is kept."""
+    try:
+        with open("/proc/self/status", encoding="ascii") as status:
+            for line in status:
+                if line.startswith("Umask:"):
+                    return int(line.split()[1], 8)
+    except (OSError, ValueError):
+        pass
+    with _UMASK_LOCK:
+        umask = os.umask(0)
+        os.umask(umask)
+    return umask
+
+
+_UMASK_LOCK = threading.Lock()
+
+
 def _new_file_mode(path: Path) -> int:
     """The replaced file's permissions, else 0666 less the umask."""
     try:
         return os.stat(path).st_mode & 0o7777
     except OSError:
-        umask = os.umask(0)
-        os.umask(umask)
-        return 0o666 & ~umask
+        return 0o666 & ~_umask()
 
 
 _PNG_COLOR_TYPES = {(2, 1): 0, (3, 3): 2, (3, 4): 6}   # (ndim, channels) -> gray, RGB, RGBA

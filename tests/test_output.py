@@ -1,6 +1,8 @@
 """One rule for every file clrt writes: a re-run replaces clrt's own outputs, and
 any other file -- or one changed since clrt wrote it -- is refused without --force."""
 
+import os
+
 import numpy as np
 import pytest
 from PIL import Image
@@ -81,3 +83,21 @@ def test_marked_formats_need_no_record(tmp_path):
         path = tmp_path / f"a{suffix}"
         output.write_image(np.full((4, 4, 3), 128, np.uint8), path)
         assert output.written_by_clrt(path) and not output.record_path(path).exists()
+
+
+@pytest.mark.skipif(not os.path.exists("/proc/self/status"), reason="reads the umask from /proc/self/status")
+def test_new_images_get_the_umask_without_it_being_changed(tmp_path, monkeypatch):
+    """os.umask can only be read by setting it, and a thread creating a file
+    meanwhile (batch workers write images in threads) would get the temporary
+    mask: the umask is read from /proc instead, and files get 0666 less it."""
+    old = os.umask(0o027)
+    try:
+        def refuse(mask):
+            raise AssertionError("os.umask called while writing an image")
+        monkeypatch.setattr(os, "umask", refuse)
+        out = tmp_path / "a.png"
+        output.write_image(np.zeros((4, 5, 3), np.uint8), out)
+        assert out.stat().st_mode & 0o777 == 0o640
+    finally:
+        monkeypatch.undo()
+        os.umask(old)

@@ -234,6 +234,52 @@ def test_box_bounds_hold_far_away_and_near_axis_parallel(place, device, monkeypa
     monkeypatch.undo()
     _same_answers(binary, brute, o, d, tmin, f"{place}: binary / brute force")
     _same_answers(default, brute, o, d, tmin, f"{place}: default walk / brute force")
+    # Ranges that end at or start just before each ray's hit: where a box test
+    # without its slack would drop the hit that brute force finds.
+    hit = hits.prim >= 0
+    o, d, t = o[hit], d[hit], hits.t[hit]
+    just_before = np.nextafter(t, np.float32(-np.inf))
+    for walk, label in ((binary, "binary"), (default, "default walk")):
+        for name, kwargs in (("tmax = t", {"tmax": t}), ("tmin just before t", {"tmin": just_before})):
+            x, y = walk.trace(o, d, **kwargs), brute.trace(o, d, **kwargs)
+            for field in x._fields:
+                assert np.array_equal(getattr(x, field), getattr(y, field)), (place, label, name, field)
+            assert np.array_equal(walk.count(o, d, **kwargs), brute.count(o, d, **kwargs)), (place, label, name)
+
+
+def _grid(n: int) -> clrt.Mesh:
+    """n x n unit squares in the plane z = 0, two triangles each, the squares
+    at large y first (low indices far along +y)."""
+    xs, ys = np.meshgrid(np.arange(n + 1), np.arange(n + 1), indexing="ij")
+    v = np.stack([xs.ravel(), ys.ravel(), np.zeros(xs.size)], 1).astype(np.float32)
+    at = lambda i, j: i * (n + 1) + j   # noqa: E731
+    faces = np.array([[at(i, j), at(i + 1, j + 1), at(i, j + 1)] for i in range(n) for j in range(n)]
+                     + [[at(i, j), at(i + 1, j), at(i + 1, j + 1)] for i in range(n) for j in range(n)])
+    return clrt.Mesh(v, faces[::-1].copy(), "grid")
+
+
+def test_subnormal_ray_components_answer_as_brute_force(device, monkeypatch):
+    """A ray 2e-43 off a mesh's plane, nearly in it: with its subnormal
+    components the watertight test's t was 1e-3 off while the box tests stayed
+    exact, and both walks lost the hit brute force found (rays.cl now reads
+    subnormal components as zeros)."""
+    mesh = _grid(5)
+    o = np.array([[3.7960608, 3.9930122, -1.9758308e-43]], np.float32)
+    d = np.array([[0.30945268, 0.95091486, 2.6878306e-41]], np.float32)
+    brute = clrt.Accel(mesh, "none", device=device)
+    default = clrt.Accel(mesh, "box", "sah", 4, device=device)
+    monkeypatch.setattr(geometry, "WIDE_BVH_KINDS", ())
+    binary = clrt.Accel(mesh, "box", "sah", 4, device=device)
+    monkeypatch.undo()
+    expected = brute.trace(o, d)      # read as z = -0 and dz = +0: in the plane, a miss
+    for walk in (default, binary):
+        got = walk.trace(o, d)
+        for field in got._fields:
+            assert np.array_equal(getattr(got, field), getattr(expected, field)), field
+        for u, v in zip(walk.all_hits(o, d), brute.all_hits(o, d)):
+            assert np.array_equal(u, v)
+        assert np.array_equal(walk.count(o, d, tmax=expected.t), brute.count(o, d, tmax=expected.t))
+        assert np.array_equal(walk.count(o, d), brute.count(o, d))
 
 
 def _sah_cost(nodes):

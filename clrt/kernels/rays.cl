@@ -89,6 +89,13 @@ inline bool load_ray(const RayInput* in, uint i, float3* origin, float3* dir, fl
         atomic_min(in->bad + BAD_DIRECTION, ray);
         ok = false;
     }
+    // Subnormal components become zeros (of their sign): on them the watertight
+    // test loses nearly all its precision -- a hit's t off by 1e-3 relative was
+    // seen, for an origin 2e-43 from a mesh's plane -- while the box tests stay
+    // exact, and a BVH then prunes what brute force finds.  Every query reads its
+    // rays here, so brute force and every BVH see the same ray.
+    *origin = select(*origin, copysign((float3)(0.0f), *origin), isless(fabs(*origin), (float3)(FLT_MIN)));
+    *dir = select(*dir, copysign((float3)(0.0f), *dir), isless(fabs(*dir), (float3)(FLT_MIN)));
     *tmin = in->tmins[k * in->tmin_stride];
     *tmax = in->tmaxs[k * in->tmax_stride];
     if (isnan(*tmin)) {

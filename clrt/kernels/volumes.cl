@@ -65,12 +65,13 @@ inline VolumeRay volume_ray(float3 origin, float3 dir, float3 reach)
     // The exact distance to plane b is (b - o) / d.  Computed as one FMA,
     // b * inv - o * inv, it carries three roundings -- of inv, of o * inv and
     // of the result -- each within u = 2^-24 of a value no larger than
-    // (|b| + |o|) * |inv| <= (reach + |o|) * |inv|.  Widening every plane by
-    // 2^-21 times that bound (8 u, twice the 4 u the errors and the shift's own
-    // rounding need) makes each distance a true bound, so the test needs no
-    // per-box slack: 6 FMAs where (b - o) * inv with slack takes 18 operations.
+    // (|b| + |o|) * |inv| <= (reach + |o|) * |inv|; with the shift's own
+    // rounding, 4 u of it (inv correctly rounded, -cl-fp32-correctly-rounded-
+    // divide-sqrt; 2.5 ulp without it, 8 u in all).  Widening every plane by
+    // 2^-20 times that bound (16 u) makes each distance a true bound, so the
+    // test needs no per-box slack: 6 FMAs where (b - o) * inv with slack takes 18.
     const float3 scaled = origin * r.inv_dir;
-    const float3 margin = 0x1p-21f * (reach + fabs(origin)) * fabs(r.inv_dir);
+    const float3 margin = 0x1p-20f * (reach + fabs(origin)) * fabs(r.inv_dir);
     const float3 lower = -(scaled + margin), upper = -(scaled - margin);
     const int3 ascending = r.inv_dir >= 0.0f;     // min planes are met first
     r.lo_shift = select(upper, lower, ascending);
@@ -92,11 +93,14 @@ inline bool volume_hit(const VolumeRay* r, float4 bound_a, float4 bound_b, float
                        float* t_enter, const bool oblique)
 {
     if (oblique) {
-        // Bounds (see VolumeRay), never NaN: each slab's fmin is its entry, fmax its exit.
+        // Bounds (see VolumeRay), never NaN: each slab's fmin is its entry, fmax
+        // its exit.  tmin and tmax are widened by the slack as below (a
+        // triangle's computed t may lie a little outside the exact box),
+        // once per walk: neither changes per box, tmin not at all.
         const float3 t0 = fma(bound_a.xyz, r->inv_dir, r->lo_shift);
         const float3 t1 = fma(bound_b.xyz, r->inv_dir, r->hi_shift);
         const float3 lo = fmin(t0, t1), hi = fmax(t0, t1);
-        const float enter = fmax(fmax(lo.x, lo.y), fmax(lo.z, tmin));
+        const float enter = fmax(fmax(lo.x, lo.y), fmax(lo.z, tmin - VOLUME_SLACK * fabs(tmin)));
         *t_enter = enter;
         return enter <= fmin(fmin(hi.x, hi.y), fmin(hi.z, tmax + VOLUME_SLACK * fabs(tmax)));
     }
@@ -170,7 +174,7 @@ inline int8 box_hit_wide_oblique(const VolumeRay* r, BoxPlanes planes, __global 
     const float8 far_x = fma(plane[3 - planes.near_x], (float8)(r->inv_dir.x), (float8)(planes.far_shift.x));
     const float8 far_y = fma(plane[5 - planes.near_y], (float8)(r->inv_dir.y), (float8)(planes.far_shift.y));
     const float8 far_z = fma(plane[7 - planes.near_z], (float8)(r->inv_dir.z), (float8)(planes.far_shift.z));
-    const float8 enter = max8(max8(near_x, near_y), max8(near_z, (float8)(tmin)));
+    const float8 enter = max8(max8(near_x, near_y), max8(near_z, (float8)(tmin - VOLUME_SLACK * fabs(tmin))));
     const float8 far = min8(min8(far_x, far_y), min8(far_z, (float8)(tmax + VOLUME_SLACK * fabs(tmax))));
     *t_enter = enter;
     return enter <= far;
