@@ -18,7 +18,7 @@
 inline bool resume_postponed(const int2* stack, const float* stack_t, int* sp, float tmax, int2* current,
                              const bool by_distance)
 {
-    const float reach = tmax + VOLUME_SLACK * fabs(tmax);
+    const float reach = SLACK_LATER(tmax);
     do {
         if (*sp == 0)
             return false;

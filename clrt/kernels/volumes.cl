@@ -29,8 +29,12 @@ typedef struct {
     bool oblique;      // box volumes, every inv_dir and shift finite: those bounds hold
 } VolumeRay;
 
-// Relative slack for rounding in the tests below (a few float32 ulps).
+// Relative slack for rounding in the tests below (a few float32 ulps), and a
+// distance (float or a vector of them) moved by it, outwards by its own
+// magnitude: later, or earlier.
 #define VOLUME_SLACK 1e-6f
+#define SLACK_LATER(t) ((t) + VOLUME_SLACK * fabs(t))
+#define SLACK_EARLIER(t) ((t) - VOLUME_SLACK * fabs(t))
 
 // A bound on |coordinate| of every box plane in the tree, axis by axis (for
 // volume_ray; other volumes ignore it), from its root row: three times the
@@ -95,22 +99,22 @@ inline bool volume_hit(const VolumeRay* r, float4 bound_a, float4 bound_b, float
     if (oblique) {
         // Bounds (see VolumeRay), never NaN: each slab's fmin is its entry, fmax
         // its exit.  tmin and tmax are widened by the slack as below (a
-        // triangle's computed t may lie a little outside the exact box),
-        // once per walk: neither changes per box, tmin not at all.
+        // triangle's computed t may lie a little outside the exact box); tmin
+        // never changes in a walk, so its widening is hoisted out of the loop.
         const float3 t0 = fma(bound_a.xyz, r->inv_dir, r->lo_shift);
         const float3 t1 = fma(bound_b.xyz, r->inv_dir, r->hi_shift);
         const float3 lo = fmin(t0, t1), hi = fmax(t0, t1);
-        const float enter = fmax(fmax(lo.x, lo.y), fmax(lo.z, tmin - VOLUME_SLACK * fabs(tmin)));
+        const float enter = fmax(fmax(lo.x, lo.y), fmax(lo.z, SLACK_EARLIER(tmin)));
         *t_enter = enter;
-        return enter <= fmin(fmin(hi.x, hi.y), fmin(hi.z, tmax + VOLUME_SLACK * fabs(tmax)));
+        return enter <= fmin(fmin(hi.x, hi.y), fmin(hi.z, SLACK_LATER(tmax)));
     }
     const float3 t0 = (bound_a.xyz - r->origin) * r->inv_dir;
     const float3 t1 = (bound_b.xyz - r->origin) * r->inv_dir;
     const float3 lo = fmin(t0, t1), hi = fmax(t0, t1);
     const float enter = fmax(fmax(lo.x, lo.y), fmax(lo.z, tmin));
-    const float far = fmin(fmin(hi.x, hi.y), fmin(hi.z, tmax + VOLUME_SLACK * fabs(tmax)));
-    const float exit = far + VOLUME_SLACK * fabs(far);
-    *t_enter = enter - VOLUME_SLACK * fabs(enter);   // a lower bound: callers compare it with tmax
+    const float far = fmin(fmin(hi.x, hi.y), fmin(hi.z, SLACK_LATER(tmax)));
+    const float exit = SLACK_LATER(far);
+    *t_enter = SLACK_EARLIER(enter);   // a lower bound: callers compare it with tmax
     return enter <= exit;
 }
 
@@ -127,9 +131,9 @@ inline int8 box_hit_wide(const VolumeRay* r, __global const BvhWideNode* n, floa
     const float8 t0z = (n->lo_z - r->origin.z) * r->inv_dir.z, t1z = (n->hi_z - r->origin.z) * r->inv_dir.z;
     const float8 enter = fmax(fmax(fmin(t0x, t1x), fmin(t0y, t1y)), fmax(fmin(t0z, t1z), (float8)(tmin)));
     const float8 far = fmin(fmin(fmax(t0x, t1x), fmax(t0y, t1y)),
-                            fmin(fmax(t0z, t1z), (float8)(tmax + VOLUME_SLACK * fabs(tmax))));
-    const float8 exit = far + VOLUME_SLACK * fabs(far);
-    *t_enter = enter - VOLUME_SLACK * fabs(enter);
+                            fmin(fmax(t0z, t1z), (float8)(SLACK_LATER(tmax))));
+    const float8 exit = SLACK_LATER(far);
+    *t_enter = SLACK_EARLIER(enter);
     return enter <= exit;
 }
 
@@ -174,8 +178,8 @@ inline int8 box_hit_wide_oblique(const VolumeRay* r, BoxPlanes planes, __global 
     const float8 far_x = fma(plane[3 - planes.near_x], (float8)(r->inv_dir.x), (float8)(planes.far_shift.x));
     const float8 far_y = fma(plane[5 - planes.near_y], (float8)(r->inv_dir.y), (float8)(planes.far_shift.y));
     const float8 far_z = fma(plane[7 - planes.near_z], (float8)(r->inv_dir.z), (float8)(planes.far_shift.z));
-    const float8 enter = max8(max8(near_x, near_y), max8(near_z, (float8)(tmin - VOLUME_SLACK * fabs(tmin))));
-    const float8 far = min8(min8(far_x, far_y), min8(far_z, (float8)(tmax + VOLUME_SLACK * fabs(tmax))));
+    const float8 enter = max8(max8(near_x, near_y), max8(near_z, (float8)(SLACK_EARLIER(tmin))));
+    const float8 far = min8(min8(far_x, far_y), min8(far_z, (float8)(SLACK_LATER(tmax))));
     *t_enter = enter;
     return enter <= far;
 }
