@@ -78,6 +78,32 @@ def test_single_batched_chunked_and_any_dtype_give_the_same_answers(torus_accel,
     assert np.array_equal(ints.prim, acc.trace([[0.0, 3, 0]] * 3, [[0, -1, 0], [1, -3, 0], [0, 0, 1.0]]).prim)
 
 
+def test_directions_are_normalised_as_in_float64_also_near_unit_length(torus_accel):
+    # rays.cl skips the square root and the division for a direction whose
+    # square is within 2^-24 (1 - 2^-12) of 1, where they could not change it.
+    # Directions whose lengths straddle that bound must still give the hits of
+    # their float64 normalisation (t is measured along it): a bound too wide
+    # keeps a direction that is not unit length, and every t moves.
+    acc = torus_accel
+    o, d = _rays(acc.mesh, 400, seed=11)
+    unit = d / np.linalg.norm(d, axis=1, keepdims=True)
+    steps = np.array([0, 1, 3, 5, 7, 8, 9, 12, 16, 40, -1, -3, -5, -7, -8, -9, -12, -16, -40])
+    scaled = (unit * (1 + steps[np.arange(len(d)) % len(steps)] * 2.0**-28)[:, None]).astype(np.float32)
+    d64 = scaled.astype(np.float64)
+    square = d64[:, 0] * d64[:, 0] + d64[:, 1] * d64[:, 1] + d64[:, 2] * d64[:, 2]
+    expected = (d64 / np.sqrt(square)[:, None]).astype(np.float32)
+    bound = 2.0**-24 * (1 - 2.0**-12)
+    e64 = expected.astype(np.float64)
+    kept = np.abs((e64 * e64).sum(1) - 1) < bound       # the device takes these as they are
+    o, scaled, expected, square = o[kept], scaled[kept], expected[kept], square[kept]
+    near = np.abs(square - 1) < bound
+    assert 0.3 < near.mean() < 0.9 and (expected[~near] != scaled[~near]).any()
+    got, want = acc.trace(o, scaled), acc.trace(o, expected)
+    assert got.hit.mean() > 0.5
+    for field in want._fields:
+        assert np.array_equal(getattr(got, field), getattr(want, field)), field
+
+
 def test_tmin_tmax_per_call_and_per_ray(torus_accel):
     acc = torus_accel
     o, d = _rays(acc.mesh, 200, seed=2)
