@@ -30,25 +30,18 @@ typedef struct {
     float3 shear;      // (Sx, Sy, Sz)
 } ShearedRay;
 
-// Component k (0, 1 or 2) of v, by selects: a private array indexed at run
-// time goes through memory on CPUs.
-inline float component(float3 v, uint k)
-{
-    return k == 0u ? v.x : (k == 1u ? v.y : v.z);
-}
-
 inline ShearedRay shear_ray(float3 origin, float3 dir)
 {
     const float3 a = fabs(dir);
-    const uint kz = (a.x >= a.y) ? ((a.x >= a.z) ? 0u : 2u) : ((a.y >= a.z) ? 1u : 2u);
-    const uint after_z = kz == 2u ? 0u : kz + 1u, last = kz == 0u ? 2u : kz - 1u;
-    const float dz = component(dir, kz);
-    const bool flip = dz < 0.0f;                     // keep winding: kx and ky swap
-    const uint kx = flip ? last : after_z, ky = flip ? after_z : last;
+    uint kz = (a.x >= a.y) ? ((a.x >= a.z) ? 0u : 2u) : ((a.y >= a.z) ? 1u : 2u);
+    uint kx = (kz + 1u) % 3u;
+    uint ky = (kx + 1u) % 3u;
+    const float d[3] = {dir.x, dir.y, dir.z};
+    if (d[kz] < 0.0f) { const uint s = kx; kx = ky; ky = s; }   // keep winding
     ShearedRay s;
     s.origin = (float4)(origin, 0.0f);
     s.perm = (uint4)(kx, ky, kz, 3u);
-    s.shear = (float3)(component(dir, kx), component(dir, ky), 1.0f) / dz;
+    s.shear = (float3)(d[kx] / d[kz], d[ky] / d[kz], 1.0f / d[kz]);
     return s;
 }
 
