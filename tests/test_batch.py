@@ -350,6 +350,28 @@ def test_ray_benchmark_counts_the_hits_of_its_own_rays(client, meshes, device):
     assert 0 < hit == expected < n
 
 
+def test_ray_benchmark_can_repeat_one_chunk_per_worker(client, meshes, device):
+    """clrt.bench.batch --ray-source repeat: every chunk holds the same seeded
+    rays (the last one their first rows), made once per worker, and the hit
+    count is theirs."""
+    from clrt.bench.batch import _trace_rays
+    from clrt.bench.batch_rays import random_rays, repeated_chunk
+    from clrt.scene.sources import as_mesh
+    n, chunk = 30_000, 7_000
+    mesh = as_mesh(meshes[0])
+    seconds, hit, generate = _trace_rays(client, meshes[0], n, chunk, "repeat")
+    origins, directions = random_rays(n, chunk, *mesh.bounds, source="repeat")
+    assert origins.chunks == ((7_000,) * 4 + (2_000,), (3,))
+    o, d = dask.compute(origins, directions, scheduler="sync")
+    assert np.array_equal(o[:chunk], o[3 * chunk:4 * chunk]) and np.array_equal(d[4 * chunk:], d[:n - 4 * chunk])
+    low = mesh.bounds[0].astype(np.float32)
+    first, _ = repeated_chunk(low, (mesh.bounds[1] - mesh.bounds[0]).astype(np.float32), chunk)
+    assert np.array_equal(o[:chunk], first) and not first.flags.writeable
+    assert (o >= low).all() and len(np.unique(o[:chunk], axis=0)) == chunk
+    traced = clrt.Accel(mesh, device=device).trace(o[:chunk], d[:chunk]).hit
+    assert 0 < hit == 4 * int(traced.sum()) + int(traced[:n - 4 * chunk].sum()) < n
+
+
 def test_images_written_in_threads_keep_their_order_and_errors(meshes, tmp_path, device, monkeypatch):
     """A task writes its images in threads while it renders on (worker.render_task):
     the records keep the views' order, a failed write is that view's "bad"

@@ -18,6 +18,11 @@ for the device lock) as the difference to the batch's own figure.
 ``--rays N`` adds clrt.batch.trace of N random rays (dask arrays generated on
 the workers, chunks of ``--ray-chunk``): wall time and Mrays/s per worker count,
 and beside it the time to make the same random arrays without tracing them.
+Numpy's generators make about 10 M rays a second on a worker's one thread,
+far below what a GPU traces, so ``--ray-source repeat`` has each worker make
+one chunk of random rays once and hand it out for every chunk it traces: the
+table then shows what tracing costs (upload, kernels, results), the way rays
+coming from a fast source would be traced.
 """
 
 from __future__ import annotations
@@ -30,6 +35,7 @@ from pathlib import Path
 
 import numpy as np
 
+from clrt.bench.batch_rays import RAY_SOURCES, random_rays
 from clrt.bench.common import exit_code, parse_count, parse_size
 
 
@@ -46,7 +52,7 @@ def _generated(folder: Path) -> list[str]:
 
 
 def run(sources, counts, views, size, device=None, samples=None, breakdown=False, rays=0, ray_chunk=1 << 22,
-        out=sys.stdout):
+        ray_source="numpy", out=sys.stdout):
     from distributed import Client
     from PIL import Image
 
@@ -72,7 +78,7 @@ def run(sources, counts, views, size, device=None, samples=None, breakdown=False
                 summary = batch_run(sources, tmp / f"run-{count}", views, **options)
                 devices[count] = client.run(device_info)
                 if rays:
-                    ray_rates[count] = _trace_rays(client, sources[0], rays, ray_chunk)
+                    ray_rates[count] = _trace_rays(client, sources[0], rays, ray_chunk, ray_source)
             folder = tmp / f"run-{count}"
             images = {p.relative_to(folder): np.asarray(Image.open(p)) for p in sorted(folder.rglob("*.png"))}
             same = "-" if first is None else \
@@ -92,6 +98,8 @@ def run(sources, counts, views, size, device=None, samples=None, breakdown=False
         if breakdown:
             _breakdown(sources[0], views, size, samples, device, per_frame, out)
         if ray_rates:
+            made = "one chunk made once per worker, repeated" if ray_source == "repeat" else "numpy's generator"
+            print(f"\nrandom rays in chunks of {ray_chunk:,} ({made}):", file=out)
             print("\n| workers | rays | seconds | Mrays/s | speed-up | rays hit | generating the rays alone, s |",
                   file=out)
             print("|---|---|---|---|---|---|---|", file=out)
@@ -103,20 +111,15 @@ def run(sources, counts, views, size, device=None, samples=None, breakdown=False
                       f"| {generate:.2f} |", file=out, flush=True)
 
 
-def _trace_rays(client, source, n: int, chunk: int) -> tuple[float, int]:
+def _trace_rays(client, source, n: int, chunk: int, ray_source: str = "numpy") -> tuple[float, int, float]:
     """Wall seconds and hit count of clrt.batch.trace of n random rays (origins in
-    the mesh's box, directions on the sphere), generated chunk by chunk on the
-    workers; only the count comes back."""
-    import dask.array as da
-
+    the mesh's box, directions on the sphere), made chunk by chunk on the
+    workers (random_rays); only the count comes back."""
     from clrt.batch import trace
     from clrt.scene.sources import as_mesh
     mesh = as_mesh(source)
     lo, hi = mesh.bounds
-    rng = da.random.default_rng(0)
-    origins = lo.astype(np.float32) + rng.random((n, 3), chunks=(chunk, 3), dtype=np.float32) * (hi - lo).astype(
-        np.float32)
-    directions = rng.standard_normal((n, 3), chunks=(chunk, 3), dtype=np.float32)
+    origins, directions = random_rays(n, chunk, lo, hi, ray_source)
     # The same arrays made and reduced without tracing: how much of the batch's
     # time is numpy's random generators rather than clrt.
     start = time.perf_counter()
@@ -179,11 +182,13 @@ def main(argv=None) -> int:
     p.add_argument("--breakdown", action="store_true", help="also where a frame's time goes")
     p.add_argument("--rays", type=parse_count, default=0, help="also trace this many random rays, e.g. 1G")
     p.add_argument("--ray-chunk", type=parse_count, default=1 << 22, help="rays per dask chunk (default 4M)")
+    p.add_argument("--ray-source", choices=RAY_SOURCES, default="numpy",
+                   help="numpy: every chunk drawn anew (default); repeat: one chunk per worker, made once")
     args = p.parse_args(argv)
     counts = [int(x) for x in args.workers.split(",")]
     started = time.perf_counter()
     code = exit_code(run, args.sources, counts, args.views, args.size, args.device, args.samples, args.breakdown,
-                     args.rays, args.ray_chunk)
+                     args.rays, args.ray_chunk, args.ray_source)
     print(f"\n({time.perf_counter() - started:.0f} s in all)")
     return code
 
