@@ -152,9 +152,10 @@ inline BoxPlanes box_planes(const VolumeRay* r)
     p.near_x = r->inv_dir.x >= 0.0f ? 0 : 3;
     p.near_y = r->inv_dir.y >= 0.0f ? 1 : 4;
     p.near_z = r->inv_dir.z >= 0.0f ? 2 : 5;
-    const int3 ascending = r->inv_dir >= 0.0f;
-    p.near_shift = select(r->hi_shift, r->lo_shift, ascending);
-    p.far_shift = select(r->lo_shift, r->hi_shift, ascending);
+    // The near plane's shift is the earlier of the two whichever way the ray
+    // runs (volume_ray: the shifts differ by twice the margin, never negative).
+    p.near_shift = fmin(r->lo_shift, r->hi_shift);
+    p.far_shift = fmax(r->lo_shift, r->hi_shift);
     return p;
 }
 
