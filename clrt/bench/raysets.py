@@ -281,7 +281,7 @@ def embree_processes_measure(mesh, origins, directions, tmax=np.inf, processes: 
 def run(mesh_path=None, sets=RAY_SETS, count: int = 1_000_000, seed: int = 0, variants=(("box", "sah"),),
         device=None, size=(1920, 1080), write_dir=None, read_files=(), tmax=np.inf, repeat: int = 5,
         warmup: int = 2, embree: bool = False, groups=("default",), embree_processes: int = 0,
-        out=None) -> list[dict]:
+        out=None, walks=("default",)) -> list[dict]:
     from clrt.query import Accel
     from clrt.scene import primitives
     from clrt.scene.load import load_mesh
@@ -307,9 +307,21 @@ def run(mesh_path=None, sets=RAY_SETS, count: int = 1_000_000, seed: int = 0, va
     print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|", file=out)
     rows = []
     from clrt.query import accel as query_accel
-    for accel_name, builder in variants:
-        accel = first if (accel_name, builder) == tuple(variants[0]) else Accel(mesh, accel_name, builder,
-                                                                               device=device)
+    from clrt.device import geometry
+    for (accel_name, builder), walk in ((v, w) for v in variants for w in walks):
+        if (accel_name, builder) == tuple(variants[0]) and walk == "default":
+            accel = first
+        else:
+            # "single": the single-ray kernels where clrt would walk packets (CPU devices)
+            saved_kinds = geometry.RAY_PACKET_KINDS
+            geometry.RAY_PACKET_KINDS = () if walk == "single" else saved_kinds
+            try:
+                accel = Accel(mesh, accel_name, builder, device=device)
+            finally:
+                geometry.RAY_PACKET_KINDS = saved_kinds
+        shown_builder = builder if accel_name != "none" else "-"
+        if walk == "single":
+            shown_builder += ", single-ray walk"
         for (label, o, d, reach), group in ((s, g) for s in ray_sets for g in groups):
             saved = dict(query_accel.QUERY_GROUP)
             if group != "default":
@@ -321,13 +333,13 @@ def run(mesh_path=None, sets=RAY_SETS, count: int = 1_000_000, seed: int = 0, va
                 query_accel.QUERY_GROUP.update(saved)
             n = len(o)
             rate = lambda ms: n / ms / 1e3 if ms > 0 else float("inf")   # noqa: E731
-            print(f"| {label} | {n:,} | {accel_name} | {builder if accel_name != 'none' else '-'} "
+            print(f"| {label} | {n:,} | {accel_name} | {shown_builder} "
                   f"| {group} "
                   f"| {m['closest_kernel_ms']:.3f} | {rate(m['closest_kernel_ms']):,.1f} "
                   f"| {m['closest_wall_ms']:.3f} | {rate(m['closest_wall_ms']):,.1f} | {m['hits']:,} "
                   f"| {m['sum_t']:.6f} | {m['any_kernel_ms']:.3f} | {rate(m['any_kernel_ms']):,.1f} "
                   f"| {'yes' if m['any_agrees'] else 'NO'} |", file=out, flush=True)
-            rows.append({"rays": label, "accel": accel_name, "builder": builder, "group": group, **m})
+            rows.append({"rays": label, "accel": accel_name, "builder": builder, "walk": walk, "group": group, **m})
     if embree:
         for label, o, d, reach in ray_sets:
             m = embree_measure(mesh, o, d, reach, repeat, warmup)
@@ -370,6 +382,9 @@ def main(argv=None) -> int:
     p.add_argument("--group", type=lambda s: [x if x in ("driver", "default") else int(x) for x in s.split(",")],
                    default=["default"], help="work-group sizes of the query kernels to compare, e.g. "
                                              "driver,64,128 (default: clrt's, clrt.query.accel.QUERY_GROUP)")
+    p.add_argument("--walks", type=lambda s: s.split(","), default=["default"],
+                   help="default,single: also time the single-ray kernels where clrt walks packets of "
+                        "coherent rays (CPU devices), side by side")
     p.add_argument("--embree", action="store_true",
                    help="also run the rays through Embree on the host CPU (needs embreex: the raybench extra); "
                         "embreex holds the GIL, so this is Embree on one core")
@@ -384,6 +399,8 @@ def main(argv=None) -> int:
         p.error(f"--write: {args.write} is not a folder")
     if args.read and (args.set or args.write):
         p.error("--read runs files; it does not go with --set or --write")
+    if not set(args.walks) <= {"default", "single"}:
+        p.error("--walks takes default and single")
     if args.embree_processes < 0:
         p.error("--embree-processes must not be negative")
     if args.embree or args.embree_processes:
@@ -394,7 +411,7 @@ def main(argv=None) -> int:
     variants = [(a, b) for a in (args.accel or ["box"]) for b in (args.builder or ["sah"])]
     return exit_code(run, args.mesh, tuple(args.set or RAY_SETS), args.rays, args.seed, variants, args.device,
                      args.size, args.write, tuple(args.read or ()), args.tmax, args.repeat, args.warmup,
-                     args.embree, tuple(args.group), args.embree_processes)
+                     args.embree, tuple(args.group), args.embree_processes, None, tuple(args.walks))
 
 
 if __name__ == "__main__":

@@ -30,6 +30,15 @@ from clrt.scene.arrays import triangle_verts
 # device.
 WIDE_BVH_KINDS = ("cpu",)
 
+# Device kinds whose query kernels (query_closest, query_any in trace.cl) give
+# each work-item PACKET_RAYS consecutive rays where the wide BVH is walked:
+# rays that travel together walk it as one packet (accel_packet.cl), which
+# took about half off camera rays' kernel time on PoCL; others take the
+# single-ray walk as before (docs/benchmarks.md).  Tests empty it to compare
+# the two on one device.
+RAY_PACKET_KINDS = ("cpu",)
+PACKET_RAYS = 8      # accel_packet.cl's float8 lanes
+
 
 def accel_defines(acceleration: Acceleration, wide: WideBvh | None = None) -> dict:
     """Program build options that select the traversal of ``acceleration``
@@ -111,6 +120,11 @@ class DeviceGeometry:
         if self.wide is not None:
             arrays.update(wide_nodes=self.wide.nodes, packets=self.wide.packets)
         self.defines = dict(accel_defines(acceleration, self.wide))
+        # Rays a work-item of query_closest / query_any answers (trace.cl).
+        self.rays_per_item = 1
+        if self.wide is not None and all(device_kind(d) in RAY_PACKET_KINDS for d in context.devices):
+            self.defines["RAY_PACKETS"] = None
+            self.rays_per_item = PACKET_RAYS
         if self.shifts is not None:
             self.defines["SPLIT_BUFFERS"] = None
             self.defines.update({f"{name}_PART_SHIFT": shift for name, shift in self.shifts.items()})

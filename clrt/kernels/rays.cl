@@ -120,4 +120,71 @@ inline bool load_ray(const RayInput* in, uint i, float3* origin, float3* dir, fl
     return ok;
 }
 
+#ifdef RAY_PACKETS
+// Eight consecutive rays as lanes (float8 k: ray k), for the packet walk of
+// CPU devices (accel_packet.cl): load_ray's steps, lane by lane, with the
+// same operations, so each lane holds what load_ray gives its ray.  False
+// when not all eight are there or valid, or (without double precision) the
+// directions need normalising: then each ray goes through load_ray, which
+// also reports the bad ones.
+typedef struct {
+    float8 ox, oy, oz, dx, dy, dz, tmin, tmax;
+} RayLanes;
+
+inline float8 flush_subnormal_lanes(float8 x)
+{
+    return select(x, copysign((float8)(0.0f), x), isless(fabs(x), (float8)(FLT_MIN)));
+}
+
+inline bool load_ray_lanes(const RayInput* in, uint first, uint num_rays, RayLanes* r)
+{
+    if (first + 8 > num_rays)
+        return false;
+    float* ox = (float*)&r->ox; float* oy = (float*)&r->oy; float* oz = (float*)&r->oz;
+    float* dx = (float*)&r->dx; float* dy = (float*)&r->dy; float* dz = (float*)&r->dz;
+    float* tmin = (float*)&r->tmin; float* tmax = (float*)&r->tmax;
+    for (int k = 0; k < 8; ++k) {
+        const size_t e = (size_t)in->in_first + first + k;
+        __global const float* o = in->origins + e * in->origin_stride;
+        __global const float* d = in->dirs + e * in->dir_stride;
+        ox[k] = o[0]; oy[k] = o[1]; oz[k] = o[2];
+        dx[k] = d[0]; dy[k] = d[1]; dz[k] = d[2];
+        tmin[k] = in->tmins[e * in->tmin_stride];
+        tmax[k] = in->tmaxs[e * in->tmax_stride];
+    }
+    const int8 finite = isfinite(r->ox) & isfinite(r->oy) & isfinite(r->oz) &
+                        isfinite(r->dx) & isfinite(r->dy) & isfinite(r->dz);
+    if (!all(finite) || any(isnan(r->tmin)) || any(isnan(r->tmax)))
+        return false;
+    if (in->normalise) {
+#ifdef cl_khr_fp64
+        // unit_direction lane by lane: its bound, its double-precision division
+        const double8 x = convert_double8(r->dx), y = convert_double8(r->dy), z = convert_double8(r->dz);
+        const double8 square = x * x + y * y + z * z;
+        const long8 unit = fabs(square - 1.0) < 0x1.ffep-25;
+        if (!all(unit)) {
+            const double8 len = sqrt(square);
+            if (!all(len > 0.0))
+                return false;
+            const int8 keep = convert_int8(unit);
+            r->dx = select(convert_float8(x / len), r->dx, keep);
+            r->dy = select(convert_float8(y / len), r->dy, keep);
+            r->dz = select(convert_float8(z / len), r->dz, keep);
+        }
+#else
+        return false;
+#endif
+    } else if (any((r->dx == 0.0f) & (r->dy == 0.0f) & (r->dz == 0.0f))) {
+        return false;
+    }
+    r->ox = flush_subnormal_lanes(r->ox);
+    r->oy = flush_subnormal_lanes(r->oy);
+    r->oz = flush_subnormal_lanes(r->oz);
+    r->dx = flush_subnormal_lanes(r->dx);
+    r->dy = flush_subnormal_lanes(r->dy);
+    r->dz = flush_subnormal_lanes(r->dz);
+    return true;
+}
+#endif
+
 #endif

@@ -15,6 +15,7 @@
 #include "geometry.cl"
 #include "accel.cl"
 #include "rays.cl"
+#include "accel_packet.cl"
 
 // A sink that stores nothing: the query's options only.
 inline HitSink query_options(const int cull)
@@ -58,6 +59,61 @@ inline float3 face_normal(__global const TriangleVerts* tri)
 #endif
 }
 
+// Rays a work-item answers in query_closest and query_any: eight on CPU
+// devices that walk packets (accel_packet.cl), else one.
+#ifdef RAY_PACKETS
+#define ITEM_RAYS PACKET_RAYS
+#else
+#define ITEM_RAYS 1
+#endif
+
+// Answer `query` for the rays first .. first + ITEM_RAYS - 1 (those below
+// num_rays): hits[k] (Hit.prim a slot; a miss for a bad ray), with each ray's
+// origin and unit direction as loaded.  Eight rays that make a packet walk
+// together; any others one by one.
+inline void answer_rays(const Geometry* g, const RayInput* in, uint first, uint num_rays, const int query,
+                        const int cull, Hit* hits, float3* origins, float3* dirs)
+{
+#ifdef RAY_PACKETS
+    RayLanes lanes;
+    const bool loaded = load_ray_lanes(in, first, num_rays, &lanes);
+    RayPacket packet;
+    if (loaded && make_packet(lanes.ox, lanes.oy, lanes.oz, lanes.dx, lanes.dy, lanes.dz, lanes.tmin,
+                              tree_reach(SPLIT_AT(g, nodes, 0)), &packet)) {
+        PacketHits best;
+        best.t = (float8)(INFINITY);
+        best.u = best.v = (float8)(0.0f);
+        best.slot = best.id = (int8)(-1);
+        walk_packet(g, &packet, lanes.tmax, query, cull, &best);
+        for (int k = 0; k < PACKET_RAYS; ++k) {
+            hits[k] = best.slot[k] >= 0 ? make_hit(best.t[k], best.slot[k], best.u[k], best.v[k]) : miss_hit();
+            origins[k] = (float3)(lanes.ox[k], lanes.oy[k], lanes.oz[k]);
+            dirs[k] = (float3)(lanes.dx[k], lanes.dy[k], lanes.dz[k]);
+        }
+        return;
+    }
+#endif
+    for (int k = 0; k < ITEM_RAYS; ++k) {
+        hits[k] = miss_hit();
+        float tmin, tmax;
+        bool valid;
+#ifdef RAY_PACKETS
+        if (loaded) {      // loaded as lanes already
+            origins[k] = (float3)(lanes.ox[k], lanes.oy[k], lanes.oz[k]);
+            dirs[k] = (float3)(lanes.dx[k], lanes.dy[k], lanes.dz[k]);
+            tmin = lanes.tmin[k];
+            tmax = lanes.tmax[k];
+            valid = true;
+        } else
+#endif
+        valid = first + k < num_rays && load_ray(in, first + k, &origins[k], &dirs[k], &tmin, &tmax);
+        if (valid) {
+            HitSink options = query_options(cull);
+            hits[k] = query_hits(g, origins[k], dirs[k], tmin, tmax, query, &options);
+        }
+    }
+}
+
 // Closest hit of each ray, written field by field into the arrays the caller
 // gets (any output may be 0: not asked for).  Index out_first + i; a miss
 // writes t = INFINITY, prim = -1, u = v = 0, normal = 0, front = hit = 0.
@@ -66,64 +122,60 @@ __kernel void query_closest(RAY_INPUT_PARAMS, __global float* t_out, __global in
                             __global uchar* front_out, __global uchar* hit_out, const uint out_first,
                             const uint num_rays, const int cull, GEOMETRY_PARAMS)
 {
-    const uint i = get_global_id(0);
-    if (i >= num_rays)
+    const uint first = ITEM_RAYS * get_global_id(0);
+    if (first >= num_rays)
         return;
     const Geometry g = make_geometry(GEOMETRY_ARGS);
     const RayInput in = make_ray_input(RAY_INPUT_ARGS);
-    float3 origin, dir;
-    float tmin, tmax;
-    Hit hit = miss_hit();
-    if (load_ray(&in, i, &origin, &dir, &tmin, &tmax)) {
-        HitSink options = query_options(cull);
-        hit = query_hits(&g, origin, dir, tmin, tmax, QUERY_CLOSEST, &options);
-    }
-    const size_t k = (size_t)out_first + i;
-    const bool found = hit.prim >= 0;
-    if (normal_out || front_out) {
-        float3 n = (float3)(0.0f);
-        uchar f = 0;
-        if (found) {
-            __global const TriangleVerts* tri = SPLIT_AT(&g, tris, hit.prim);
-            const ShearedRay r = shear_ray(origin, dir);
-            f = sees_front(&r, tri) ? 1 : 0;
-            n = face_normal(tri);
+    Hit hits[ITEM_RAYS];
+    float3 ray_origins[ITEM_RAYS], ray_dirs[ITEM_RAYS];
+    answer_rays(&g, &in, first, num_rays, QUERY_CLOSEST, cull, hits, ray_origins, ray_dirs);
+    for (int j = 0; j < ITEM_RAYS && first + j < num_rays; ++j) {
+        Hit hit = hits[j];
+        const size_t k = (size_t)out_first + first + j;
+        const bool found = hit.prim >= 0;
+        if (normal_out || front_out) {
+            float3 n = (float3)(0.0f);
+            uchar f = 0;
+            if (found) {
+                __global const TriangleVerts* tri = SPLIT_AT(&g, tris, hit.prim);
+                const ShearedRay r = shear_ray(ray_origins[j], ray_dirs[j]);
+                f = sees_front(&r, tri) ? 1 : 0;
+                n = face_normal(tri);
+            }
+            if (normal_out)
+                vstore3(n, k, normal_out);
+            if (front_out)
+                front_out[k] = f;
         }
-        if (normal_out)
-            vstore3(n, k, normal_out);
-        if (front_out)
-            front_out[k] = f;
+        hit = reported_hit(&g, hit);
+        if (t_out)
+            t_out[k] = hit.t;
+        if (prim_out)
+            prim_out[k] = hit.prim;
+        if (u_out)
+            u_out[k] = hit.u;
+        if (v_out)
+            v_out[k] = hit.v;
+        if (hit_out)
+            hit_out[k] = found ? 1 : 0;
     }
-    hit = reported_hit(&g, hit);
-    if (t_out)
-        t_out[k] = hit.t;
-    if (prim_out)
-        prim_out[k] = hit.prim;
-    if (u_out)
-        u_out[k] = hit.u;
-    if (v_out)
-        v_out[k] = hit.v;
-    if (hit_out)
-        hit_out[k] = found ? 1 : 0;
 }
 
 // Is anything hit?  Stops at the first hit found.
 __kernel void query_any(RAY_INPUT_PARAMS, __global uchar* occluded, const uint out_first, const uint num_rays,
                         const int cull, GEOMETRY_PARAMS)
 {
-    const uint i = get_global_id(0);
-    if (i >= num_rays)
+    const uint first = ITEM_RAYS * get_global_id(0);
+    if (first >= num_rays)
         return;
     const Geometry g = make_geometry(GEOMETRY_ARGS);
     const RayInput in = make_ray_input(RAY_INPUT_ARGS);
-    float3 origin, dir;
-    float tmin, tmax;
-    uchar found = 0;
-    if (load_ray(&in, i, &origin, &dir, &tmin, &tmax)) {
-        HitSink options = query_options(cull);
-        found = query_hits(&g, origin, dir, tmin, tmax, QUERY_ANY, &options).prim >= 0 ? 1 : 0;
-    }
-    occluded[(size_t)out_first + i] = found;
+    Hit hits[ITEM_RAYS];
+    float3 ray_origins[ITEM_RAYS], ray_dirs[ITEM_RAYS];
+    answer_rays(&g, &in, first, num_rays, QUERY_ANY, cull, hits, ray_origins, ray_dirs);
+    for (int j = 0; j < ITEM_RAYS && first + j < num_rays; ++j)
+        occluded[(size_t)out_first + first + j] = hits[j].prim >= 0 ? 1 : 0;
 }
 
 // Number of triangles each ray meets in (tmin, tmax].

@@ -136,6 +136,98 @@ inline int4 intersect_packet_culled(const ShearedRay* r, __global const Triangle
     *v_out = W / det;
     return hit;
 }
+
+#ifdef RAY_PACKETS
+// The other way round, for the packet walk (accel_packet.cl): one triangle
+// against eight rays, lane k for ray k.  The rays share shear_ray's axis
+// order (kx, ky, kz), so one triangle's corners serve all lanes.
+typedef struct {
+    float8 origin_x, origin_y, origin_z;   // the origins' (kx, ky, kz) components
+    float8 shear_x, shear_y, shear_z;      // ShearedRay.shear
+    int kx, ky, kz;
+} ShearedLanes;
+
+inline float8 lanes_on_axis(float8 x, float8 y, float8 z, int axis)
+{
+    return axis == 0 ? x : axis == 1 ? y : z;
+}
+
+inline float8 diff_of_products8(float8 a, float8 b, float8 c, float8 d)
+{
+    const float8 w = c * d;
+    const float8 e = fma(-c, d, w);
+    const float8 f = fma(a, b, -w);
+    return f + e;
+}
+
+// shear_ray lane by lane (the same operations); false when the rays do not
+// share one axis order, i.e. the same dominant axis and its sign.
+inline bool shear_lanes(float8 ox, float8 oy, float8 oz, float8 dx, float8 dy, float8 dz, ShearedLanes* s)
+{
+    const float8 ax = fabs(dx), ay = fabs(dy), az = fabs(dz);
+    const int8 kz_lanes = select(select((int8)(2), (int8)(1), ay >= az), select((int8)(2), (int8)(0), ax >= az),
+                                 ax >= ay);
+    const int kz = kz_lanes.s0;
+    const float8 d_kz = lanes_on_axis(dx, dy, dz, kz);
+    const int8 negative = d_kz < 0.0f;
+    if (!all(kz_lanes == (int8)(kz)) || !all(negative == (int8)(negative.s0)))
+        return false;
+    int kx = (kz + 1) % 3, ky = (kx + 1) % 3;
+    if (negative.s0) { const int t = kx; kx = ky; ky = t; }   // keep winding
+    s->kx = kx;
+    s->ky = ky;
+    s->kz = kz;
+    s->origin_x = lanes_on_axis(ox, oy, oz, kx);
+    s->origin_y = lanes_on_axis(ox, oy, oz, ky);
+    s->origin_z = lanes_on_axis(ox, oy, oz, kz);
+    s->shear_x = lanes_on_axis(dx, dy, dz, kx) / d_kz;
+    s->shear_y = lanes_on_axis(dx, dy, dz, ky) / d_kz;
+    s->shear_z = (float8)(1.0f) / d_kz;
+    return true;
+}
+
+// intersect_triangle_culled for triangle k of a TrianglePacket, lane by lane:
+// every lane takes exactly its steps, so each ray's answer is the scalar
+// test's bit for bit.  Returns -1 in the lanes of a hit with
+// tmin < t <= tmax, with t and the weights in *t_out, *u_out, *v_out (set
+// only when some lane hits).
+__attribute__((always_inline))
+inline int8 intersect_lanes_culled(const ShearedLanes* s, __global const TrianglePacket* p, int k, float8 tmin,
+                                   float8 tmax, const int cull, float8* t_out, float8* u_out, float8* v_out)
+{
+    __global const float* v0 = (__global const float*)p->v0;    // corner 0 of triangle k on axis a: v0[4 a + k]
+    __global const float* v1 = (__global const float*)p->v1;
+    __global const float* v2 = (__global const float*)p->v2;
+    const float8 Az = (float8)(v0[4 * s->kz + k]) - s->origin_z;
+    const float8 Bz = (float8)(v1[4 * s->kz + k]) - s->origin_z;
+    const float8 Cz = (float8)(v2[4 * s->kz + k]) - s->origin_z;
+    const float8 Ax = ((float8)(v0[4 * s->kx + k]) - s->origin_x) - s->shear_x * Az;
+    const float8 Ay = ((float8)(v0[4 * s->ky + k]) - s->origin_y) - s->shear_y * Az;
+    const float8 Bx = ((float8)(v1[4 * s->kx + k]) - s->origin_x) - s->shear_x * Bz;
+    const float8 By = ((float8)(v1[4 * s->ky + k]) - s->origin_y) - s->shear_y * Bz;
+    const float8 Cx = ((float8)(v2[4 * s->kx + k]) - s->origin_x) - s->shear_x * Cz;
+    const float8 Cy = ((float8)(v2[4 * s->ky + k]) - s->origin_y) - s->shear_y * Cz;
+
+    const float8 U = diff_of_products8(Cx, By, Cy, Bx);
+    const float8 V = diff_of_products8(Ax, Cy, Ay, Cx);
+    const float8 W = diff_of_products8(Bx, Ay, By, Ax);
+    int8 hit = !(((U < 0.0f) | (V < 0.0f) | (W < 0.0f)) & ((U > 0.0f) | (V > 0.0f) | (W > 0.0f)));
+    if (!any(hit))      // most triangles: every ray passes beside it, no division needed
+        return hit;
+    const float8 det = U + V + W;
+    const float8 T = U * (s->shear_z * Az) + V * (s->shear_z * Bz) + W * (s->shear_z * Cz);
+    const float8 t = T / det;
+    hit &= (det != 0.0f) & (t > tmin) & (t <= tmax);
+    if (cull == CULL_BACK)
+        hit &= det >= 0.0f;
+    else if (cull == CULL_FRONT)
+        hit &= det <= 0.0f;
+    *t_out = t;
+    *u_out = V / det;
+    *v_out = W / det;
+    return hit;
+}
+#endif
 #endif
 
 #endif

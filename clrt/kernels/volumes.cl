@@ -184,6 +184,64 @@ inline int8 box_hit_wide_oblique(const VolumeRay* r, BoxPlanes planes, __global 
     *t_enter = enter;
     return enter <= far;
 }
+
+#ifdef RAY_PACKETS
+// Eight rays of one octant as lanes, for the packet walk (accel_packet.cl):
+// lane k holds what volume_ray and box_planes give ray k.  The octant makes
+// the choice of near and far planes the same for every lane.
+typedef struct {
+    float8 inv_x, inv_y, inv_z;
+    float8 near_x, near_y, near_z, far_x, far_y, far_z;   // the shifts of BoxPlanes
+    int near_plane_x, near_plane_y, near_plane_z;          // BoxPlanes' near_x, near_y, near_z
+} VolumeLanes;
+
+// volume_ray and box_planes lane by lane (the same operations, so the same
+// values as each ray's own); false unless every lane is oblique.
+inline bool volume_lanes(float8 ox, float8 oy, float8 oz, float8 dx, float8 dy, float8 dz, float3 reach,
+                         VolumeLanes* v)
+{
+    v->inv_x = (float8)(1.0f) / dx;
+    v->inv_y = (float8)(1.0f) / dy;
+    v->inv_z = (float8)(1.0f) / dz;
+#define CLRT_LANE_SHIFTS(o, inv, reach_axis, near, far)                                                    \
+    {                                                                                                     \
+        const float8 scaled = (o) * (inv);                                                                \
+        const float8 margin = 0x1p-20f * ((reach_axis) + fabs(o)) * fabs(inv);                           \
+        const float8 lower = -(scaled + margin), upper = -(scaled - margin);                              \
+        const int8 ascending = (inv) >= 0.0f;                                                             \
+        const float8 lo_shift = select(upper, lower, ascending), hi_shift = select(lower, upper, ascending); \
+        if (!all(isfinite(lo_shift) & isfinite(hi_shift)))                                                \
+            return false;                                                                                 \
+        near = fmin(lo_shift, hi_shift);                                                                  \
+        far = fmax(lo_shift, hi_shift);                                                                   \
+    }
+    CLRT_LANE_SHIFTS(ox, v->inv_x, reach.x, v->near_x, v->far_x)
+    CLRT_LANE_SHIFTS(oy, v->inv_y, reach.y, v->near_y, v->far_y)
+    CLRT_LANE_SHIFTS(oz, v->inv_z, reach.z, v->near_z, v->far_z)
+#undef CLRT_LANE_SHIFTS
+    v->near_plane_x = v->inv_x.s0 >= 0.0f ? 0 : 3;
+    v->near_plane_y = v->inv_y.s0 >= 0.0f ? 1 : 4;
+    v->near_plane_z = v->inv_z.s0 >= 0.0f ? 2 : 5;
+    return true;
+}
+
+// box_hit_wide_oblique's test of child c of a BvhWideNode, lane k for ray k.
+inline int8 box_hit_lanes(const VolumeLanes* v, __global const BvhWideNode* n, int c, float8 tmin, float8 tmax,
+                          float8* t_enter)
+{
+    __global const float* plane = (__global const float*)&n->lo_x;     // plane j of child c: plane[8 j + c]
+    const float8 near_x = fma((float8)(plane[8 * v->near_plane_x + c]), v->inv_x, v->near_x);
+    const float8 near_y = fma((float8)(plane[8 * v->near_plane_y + c]), v->inv_y, v->near_y);
+    const float8 near_z = fma((float8)(plane[8 * v->near_plane_z + c]), v->inv_z, v->near_z);
+    const float8 far_x = fma((float8)(plane[8 * (3 - v->near_plane_x) + c]), v->inv_x, v->far_x);
+    const float8 far_y = fma((float8)(plane[8 * (5 - v->near_plane_y) + c]), v->inv_y, v->far_y);
+    const float8 far_z = fma((float8)(plane[8 * (7 - v->near_plane_z) + c]), v->inv_z, v->far_z);
+    const float8 enter = max8(max8(near_x, near_y), max8(near_z, SLACK_EARLIER(tmin)));
+    const float8 far = min8(min8(far_x, far_y), min8(far_z, SLACK_LATER(tmax)));
+    *t_enter = enter;
+    return enter <= far;
+}
+#endif
 #endif
 #elif defined(VOLUME_SPHERE)
 inline bool volume_hit(const VolumeRay* r, float4 bound_a, float4 bound_b, float tmin, float tmax,

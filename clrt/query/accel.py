@@ -86,6 +86,11 @@ RAY_STAGING = {"gpu": True, "cpu": False}
 # slower on camera rays.  A CPU device (PoCL) keeps its own choice.  The
 # kernels skip the work-items past the last ray.
 QUERY_GROUP: dict = {"gpu": 128, "cpu": None}
+# Work-items a work-group where each answers several rays (packets, CPU
+# devices: clrt.device.geometry.RAY_PACKET_KINDS).  PoCL's own choice for
+# these launches made incoherent rays 4-15 % slower than the single-ray
+# kernels; 8 to 64 work-items measured level with them (docs/benchmarks.md).
+PACKET_GROUP = 16
 RESULT_POOL_SIZE = 3                # page-locked result blocks per Accel (clrt/device/pinned.py)
 RESULT_POOL_MAX_BYTES = 1 << 30     # larger results go to ordinary memory
 _ZERO = np.zeros(1, np.float32)
@@ -297,9 +302,13 @@ class Accel:
         return buf
 
     def _run(self, name: str, m: int, *args) -> None:
+        """Launch query kernel ``name`` for ``m`` rays."""
         kernel = self.kernels[name]
         kernel.set_args(*args, *self.geometry.args)
         group = QUERY_GROUP[self._kind]
+        if name in ("query_closest", "query_any") and self.geometry.rays_per_item > 1:
+            m = -(-m // self.geometry.rays_per_item)      # trace.cl's ITEM_RAYS rays a work-item
+            group = PACKET_GROUP
         size, local = ((m,), None) if group is None else ((-(-m // group) * group,), (group,))
         self.launches.append(cl.enqueue_nd_range_kernel(self.queue, kernel, size, local))
 
