@@ -157,9 +157,13 @@ __kernel void packets_only(__global const float* origins, __global const float* 
     const RayInput in = make_ray_input(origins, 3u, dirs, 3u, tmins, 1u, tmaxs, 1u, 0u, 0u, 1u, bad);
     RayLanes lanes;
     RayPacket packet;
-    made[w] = load_ray_lanes(&in, 8 * w, 8 * w + 8, &lanes) &&
-              make_packet(lanes.ox, lanes.oy, lanes.oz, lanes.dx, lanes.dy, lanes.dz, lanes.tmin,
-                          tree_reach(SPLIT_AT(&g, nodes, 0)), &packet);
+    made[w] = load_ray_lanes(&in, 8 * w, 8 * w + 8, &lanes);
+    if (!made[w])
+        return;
+    const ShearLanes shear = shear_ray_lanes(lanes.dx, lanes.dy, lanes.dz);
+    const VolumeRayLanes volume = volume_ray_lanes(lanes.ox, lanes.oy, lanes.oz, lanes.dx, lanes.dy, lanes.dz,
+                                                   tree_reach(SPLIT_AT(&g, nodes, 0)));
+    made[w] = make_packet(&lanes, &shear, &volume, &packet);
     if (!made[w])
         return;
     PacketHits best;

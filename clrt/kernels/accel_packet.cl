@@ -56,19 +56,20 @@ inline float min_lane(float8 x)
     return fmin(b.x, b.y);
 }
 
-// The rays (origins o*, unit directions d*, lane by lane) as a packet; false
-// when they do not make one: the same octant, the same shear order, every ray
-// oblique (volume_ray).  The octant lets every lane take the same near planes
-// and the same near-first order; the shear order, the same triangle corners.
-inline bool make_packet(float8 ox, float8 oy, float8 oz, float8 dx, float8 dy, float8 dz, float8 tmin,
-                        float3 reach, RayPacket* p)
+// Eight rays, set up lane by lane (shear_ray_lanes, volume_ray_lanes), as a
+// packet; false when they do not make one: the same octant, the same shear
+// order, every ray oblique (volume_ray).  The octant lets every lane take the
+// same near planes and the same near-first order; the shear order, the same
+// triangle corners.
+inline bool make_packet(const RayLanes* rays, const ShearLanes* shear, const VolumeRayLanes* volume,
+                        RayPacket* p)
 {
-    const int8 neg_x = signbit(dx), neg_y = signbit(dy), neg_z = signbit(dz);
-    if (!all(neg_x == (int8)(neg_x.s0)) || !all(neg_y == (int8)(neg_y.s0)) || !all(neg_z == (int8)(neg_z.s0)))
+    const int8 neg_x = signbit(rays->dx), neg_y = signbit(rays->dy), neg_z = signbit(rays->dz);
+    if (!all((neg_x == (int8)(neg_x.s0)) & (neg_y == (int8)(neg_y.s0)) & (neg_z == (int8)(neg_z.s0))))
         return false;
-    if (!shear_lanes(ox, oy, oz, dx, dy, dz, &p->shear) || !volume_lanes(ox, oy, oz, dx, dy, dz, reach, &p->volume))
+    if (!shear_lanes(shear, rays->ox, rays->oy, rays->oz, &p->shear) || !volume_lanes(volume, &p->volume))
         return false;
-    p->tmin = tmin;
+    p->tmin = rays->tmin;
     return true;
 }
 

@@ -135,14 +135,22 @@ inline Hit walk_wide_tree(const Geometry* g, const ShearedRay* r, const VolumeRa
     }
 }
 
+// Answer `query` for one ray set up by shear_ray and volume_ray (the query
+// kernels set up eight at a time, accel_packet.cl); Hit.prim is a slot.
+inline Hit walk_ray(const Geometry* g, const ShearedRay* r, const VolumeRay* vr, float tmin, float tmax,
+                    const int query, HitSink* sink)
+{
+    return vr->oblique ? walk_wide_tree(g, r, vr, true, tmin, tmax, query, sink)
+                       : walk_wide_tree(g, r, vr, false, tmin, tmax, query, sink);
+}
+
 // Answer `query` for one ray (see hit.cl); the returned Hit.prim is a slot.
 inline Hit query_hits(const Geometry* g, float3 origin, float3 dir, float tmin, float tmax,
                       const int query, HitSink* sink)
 {
     const ShearedRay r = shear_ray(origin, dir);
     const VolumeRay vr = volume_ray(origin, dir, tree_reach(SPLIT_AT(g, nodes, 0)));
-    return vr.oblique ? walk_wide_tree(g, &r, &vr, true, tmin, tmax, query, sink)
-                      : walk_wide_tree(g, &r, &vr, false, tmin, tmax, query, sink);
+    return walk_ray(g, &r, &vr, tmin, tmax, query, sink);
 }
 
 #endif

@@ -76,38 +76,40 @@ inline void answer_rays(const Geometry* g, const RayInput* in, uint first, uint 
 {
 #ifdef RAY_PACKETS
     RayLanes lanes;
-    const bool loaded = load_ray_lanes(in, first, num_rays, &lanes);
-    RayPacket packet;
-    if (loaded && make_packet(lanes.ox, lanes.oy, lanes.oz, lanes.dx, lanes.dy, lanes.dz, lanes.tmin,
-                              tree_reach(SPLIT_AT(g, nodes, 0)), &packet)) {
-        PacketHits best;
-        best.t = (float8)(INFINITY);
-        best.u = best.v = (float8)(0.0f);
-        best.slot = best.id = (int8)(-1);
-        walk_packet(g, &packet, lanes.tmax, query, cull, &best);
+    if (load_ray_lanes(in, first, num_rays, &lanes)) {
+        // every ray set up in lanes (the divisions eight at a time), whichever walk it takes
+        const ShearLanes shear = shear_ray_lanes(lanes.dx, lanes.dy, lanes.dz);
+        const VolumeRayLanes volume = volume_ray_lanes(lanes.ox, lanes.oy, lanes.oz, lanes.dx, lanes.dy, lanes.dz,
+                                                       tree_reach(SPLIT_AT(g, nodes, 0)));
         for (int k = 0; k < PACKET_RAYS; ++k) {
-            hits[k] = best.slot[k] >= 0 ? make_hit(best.t[k], best.slot[k], best.u[k], best.v[k]) : miss_hit();
             origins[k] = (float3)(lanes.ox[k], lanes.oy[k], lanes.oz[k]);
             dirs[k] = (float3)(lanes.dx[k], lanes.dy[k], lanes.dz[k]);
+        }
+        RayPacket packet;
+        if (make_packet(&lanes, &shear, &volume, &packet)) {
+            PacketHits best;
+            best.t = (float8)(INFINITY);
+            best.u = best.v = (float8)(0.0f);
+            best.slot = best.id = (int8)(-1);
+            walk_packet(g, &packet, lanes.tmax, query, cull, &best);
+            for (int k = 0; k < PACKET_RAYS; ++k)
+                hits[k] = best.slot[k] >= 0 ? make_hit(best.t[k], best.slot[k], best.u[k], best.v[k]) : miss_hit();
+            return;
+        }
+        for (int k = 0; k < PACKET_RAYS; ++k) {
+            const ShearedRay r = sheared_ray_lane(&shear, origins[k], k);
+            const VolumeRay vr = volume_ray_lane(&volume, origins[k], dirs[k], k);
+            HitSink options = query_options(cull);
+            hits[k] = walk_ray(g, &r, &vr, lanes.tmin[k], lanes.tmax[k], query, &options);
         }
         return;
     }
 #endif
+    // one by one: the last rays of a launch, and eight with a bad ray among them
     for (int k = 0; k < ITEM_RAYS; ++k) {
         hits[k] = miss_hit();
         float tmin, tmax;
-        bool valid;
-#ifdef RAY_PACKETS
-        if (loaded) {      // loaded as lanes already
-            origins[k] = (float3)(lanes.ox[k], lanes.oy[k], lanes.oz[k]);
-            dirs[k] = (float3)(lanes.dx[k], lanes.dy[k], lanes.dz[k]);
-            tmin = lanes.tmin[k];
-            tmax = lanes.tmax[k];
-            valid = true;
-        } else
-#endif
-        valid = first + k < num_rays && load_ray(in, first + k, &origins[k], &dirs[k], &tmin, &tmax);
-        if (valid) {
+        if (first + k < num_rays && load_ray(in, first + k, &origins[k], &dirs[k], &tmin, &tmax)) {
             HitSink options = query_options(cull);
             hits[k] = query_hits(g, origins[k], dirs[k], tmin, tmax, query, &options);
         }

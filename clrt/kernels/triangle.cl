@@ -138,6 +138,47 @@ inline int4 intersect_packet_culled(const ShearedRay* r, __global const Triangle
 }
 
 #ifdef RAY_PACKETS
+// shear_ray for eight rays at once, lane k for ray k (the same operations,
+// so the same values as each ray's own): the query kernels of CPU devices
+// set up eight rays a work-item this way (trace.cl, accel_packet.cl).
+typedef struct {
+    int8 kx, ky, kz;
+    float8 shear_x, shear_y, shear_z;
+} ShearLanes;
+
+// Lane by lane: x where axis is 0, y where 1, z where 2.
+inline float8 lanes_on_axes(float8 x, float8 y, float8 z, int8 axis)
+{
+    return select(select(z, y, axis == (int8)(1)), x, axis == (int8)(0));
+}
+
+inline ShearLanes shear_ray_lanes(float8 dx, float8 dy, float8 dz)
+{
+    ShearLanes s;
+    const float8 ax = fabs(dx), ay = fabs(dy), az = fabs(dz);
+    s.kz = select(select((int8)(2), (int8)(1), ay >= az), select((int8)(2), (int8)(0), ax >= az), ax >= ay);
+    const int8 kx = select(s.kz + 1, (int8)(0), s.kz == (int8)(2));
+    const int8 ky = select(kx + 1, (int8)(0), kx == (int8)(2));
+    const float8 d_kz = lanes_on_axes(dx, dy, dz, s.kz);
+    const int8 negative = d_kz < 0.0f;              // keep winding: swap kx and ky
+    s.kx = select(kx, ky, negative);
+    s.ky = select(ky, kx, negative);
+    s.shear_x = lanes_on_axes(dx, dy, dz, s.kx) / d_kz;
+    s.shear_y = lanes_on_axes(dx, dy, dz, s.ky) / d_kz;
+    s.shear_z = (float8)(1.0f) / d_kz;
+    return s;
+}
+
+// Lane k of `s` as shear_ray(origin, dir) would give it.
+inline ShearedRay sheared_ray_lane(const ShearLanes* s, float3 origin, int k)
+{
+    ShearedRay r;
+    r.origin = (float4)(origin, 0.0f);
+    r.perm = (uint4)((uint)s->kx[k], (uint)s->ky[k], (uint)s->kz[k], 3u);
+    r.shear = (float3)(s->shear_x[k], s->shear_y[k], s->shear_z[k]);
+    return r;
+}
+
 // The other way round, for the packet walk (accel_packet.cl): one triangle
 // against eight rays, lane k for ray k.  The rays share shear_ray's axis
 // order (kx, ky, kz), so one triangle's corners serve all lanes.
@@ -160,29 +201,22 @@ inline float8 diff_of_products8(float8 a, float8 b, float8 c, float8 d)
     return f + e;
 }
 
-// shear_ray lane by lane (the same operations); false when the rays do not
-// share one axis order, i.e. the same dominant axis and its sign.
-inline bool shear_lanes(float8 ox, float8 oy, float8 oz, float8 dx, float8 dy, float8 dz, ShearedLanes* s)
+// The lanes of `r` as one ShearedLanes; false unless they share one axis
+// order (the same dominant axis, and its sign).
+inline bool shear_lanes(const ShearLanes* r, float8 ox, float8 oy, float8 oz, ShearedLanes* s)
 {
-    const float8 ax = fabs(dx), ay = fabs(dy), az = fabs(dz);
-    const int8 kz_lanes = select(select((int8)(2), (int8)(1), ay >= az), select((int8)(2), (int8)(0), ax >= az),
-                                 ax >= ay);
-    const int kz = kz_lanes.s0;
-    const float8 d_kz = lanes_on_axis(dx, dy, dz, kz);
-    const int8 negative = d_kz < 0.0f;
-    if (!all(kz_lanes == (int8)(kz)) || !all(negative == (int8)(negative.s0)))
+    const int kx = r->kx.s0, ky = r->ky.s0, kz = r->kz.s0;
+    if (!all((r->kx == (int8)(kx)) & (r->ky == (int8)(ky)) & (r->kz == (int8)(kz))))
         return false;
-    int kx = (kz + 1) % 3, ky = (kx + 1) % 3;
-    if (negative.s0) { const int t = kx; kx = ky; ky = t; }   // keep winding
     s->kx = kx;
     s->ky = ky;
     s->kz = kz;
     s->origin_x = lanes_on_axis(ox, oy, oz, kx);
     s->origin_y = lanes_on_axis(ox, oy, oz, ky);
     s->origin_z = lanes_on_axis(ox, oy, oz, kz);
-    s->shear_x = lanes_on_axis(dx, dy, dz, kx) / d_kz;
-    s->shear_y = lanes_on_axis(dx, dy, dz, ky) / d_kz;
-    s->shear_z = (float8)(1.0f) / d_kz;
+    s->shear_x = r->shear_x;
+    s->shear_y = r->shear_y;
+    s->shear_z = r->shear_z;
     return true;
 }
 

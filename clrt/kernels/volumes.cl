@@ -186,42 +186,77 @@ inline int8 box_hit_wide_oblique(const VolumeRay* r, BoxPlanes planes, __global 
 }
 
 #ifdef RAY_PACKETS
-// Eight rays of one octant as lanes, for the packet walk (accel_packet.cl):
-// lane k holds what volume_ray and box_planes give ray k.  The octant makes
-// the choice of near and far planes the same for every lane.
+// volume_ray for eight rays at once, lane k for ray k (the same operations,
+// so the same values as each ray's own): the query kernels of CPU devices
+// set up eight rays a work-item this way (trace.cl, accel_packet.cl).
+typedef struct {
+    float8 inv_x, inv_y, inv_z;
+    float8 lo_x, lo_y, lo_z, hi_x, hi_y, hi_z;     // VolumeRay's lo_shift, hi_shift
+} VolumeRayLanes;
+
+inline VolumeRayLanes volume_ray_lanes(float8 ox, float8 oy, float8 oz, float8 dx, float8 dy, float8 dz,
+                                       float3 reach)
+{
+    VolumeRayLanes v;
+    v.inv_x = (float8)(1.0f) / dx;
+    v.inv_y = (float8)(1.0f) / dy;
+    v.inv_z = (float8)(1.0f) / dz;
+#define CLRT_LANE_SHIFTS(o, inv, reach_axis, lo_shift, hi_shift)                          \
+    {                                                                                    \
+        const float8 scaled = (o) * (inv);                                               \
+        const float8 margin = 0x1p-20f * ((reach_axis) + fabs(o)) * fabs(inv);          \
+        const float8 lower = -(scaled + margin), upper = -(scaled - margin);            \
+        const int8 ascending = (inv) >= 0.0f;                                            \
+        lo_shift = select(upper, lower, ascending);                                      \
+        hi_shift = select(lower, upper, ascending);                                      \
+    }
+    CLRT_LANE_SHIFTS(ox, v.inv_x, reach.x, v.lo_x, v.hi_x)
+    CLRT_LANE_SHIFTS(oy, v.inv_y, reach.y, v.lo_y, v.hi_y)
+    CLRT_LANE_SHIFTS(oz, v.inv_z, reach.z, v.lo_z, v.hi_z)
+#undef CLRT_LANE_SHIFTS
+    return v;
+}
+
+// Lane k of `v` as volume_ray(origin, dir, reach) would give it.
+inline VolumeRay volume_ray_lane(const VolumeRayLanes* v, float3 origin, float3 dir, int k)
+{
+    VolumeRay r;
+    r.origin = origin;
+    r.dir = dir;
+    r.inv_dir = (float3)(v->inv_x[k], v->inv_y[k], v->inv_z[k]);
+    r.lo_shift = (float3)(v->lo_x[k], v->lo_y[k], v->lo_z[k]);
+    r.hi_shift = (float3)(v->hi_x[k], v->hi_y[k], v->hi_z[k]);
+    r.oblique = all(isfinite(r.lo_shift)) && all(isfinite(r.hi_shift));
+    return r;
+}
+
+// Eight oblique rays of one octant, for the packet walk (accel_packet.cl):
+// lane k holds what box_planes gives ray k.  The octant makes the choice of
+// near and far planes the same for every lane.
 typedef struct {
     float8 inv_x, inv_y, inv_z;
     float8 near_x, near_y, near_z, far_x, far_y, far_z;   // the shifts of BoxPlanes
     int near_plane_x, near_plane_y, near_plane_z;          // BoxPlanes' near_x, near_y, near_z
 } VolumeLanes;
 
-// volume_ray and box_planes lane by lane (the same operations, so the same
-// values as each ray's own); false unless every lane is oblique.
-inline bool volume_lanes(float8 ox, float8 oy, float8 oz, float8 dx, float8 dy, float8 dz, float3 reach,
-                         VolumeLanes* v)
+// box_planes lane by lane; false unless every lane is oblique.
+inline bool volume_lanes(const VolumeRayLanes* r, VolumeLanes* v)
 {
-    v->inv_x = (float8)(1.0f) / dx;
-    v->inv_y = (float8)(1.0f) / dy;
-    v->inv_z = (float8)(1.0f) / dz;
-#define CLRT_LANE_SHIFTS(o, inv, reach_axis, near, far)                                                    \
-    {                                                                                                     \
-        const float8 scaled = (o) * (inv);                                                                \
-        const float8 margin = 0x1p-20f * ((reach_axis) + fabs(o)) * fabs(inv);                           \
-        const float8 lower = -(scaled + margin), upper = -(scaled - margin);                              \
-        const int8 ascending = (inv) >= 0.0f;                                                             \
-        const float8 lo_shift = select(upper, lower, ascending), hi_shift = select(lower, upper, ascending); \
-        if (!all(isfinite(lo_shift) & isfinite(hi_shift)))                                                \
-            return false;                                                                                 \
-        near = fmin(lo_shift, hi_shift);                                                                  \
-        far = fmax(lo_shift, hi_shift);                                                                   \
-    }
-    CLRT_LANE_SHIFTS(ox, v->inv_x, reach.x, v->near_x, v->far_x)
-    CLRT_LANE_SHIFTS(oy, v->inv_y, reach.y, v->near_y, v->far_y)
-    CLRT_LANE_SHIFTS(oz, v->inv_z, reach.z, v->near_z, v->far_z)
-#undef CLRT_LANE_SHIFTS
-    v->near_plane_x = v->inv_x.s0 >= 0.0f ? 0 : 3;
-    v->near_plane_y = v->inv_y.s0 >= 0.0f ? 1 : 4;
-    v->near_plane_z = v->inv_z.s0 >= 0.0f ? 2 : 5;
+    if (!all(isfinite(r->lo_x) & isfinite(r->lo_y) & isfinite(r->lo_z) &
+             isfinite(r->hi_x) & isfinite(r->hi_y) & isfinite(r->hi_z)))
+        return false;
+    v->inv_x = r->inv_x;
+    v->inv_y = r->inv_y;
+    v->inv_z = r->inv_z;
+    v->near_x = fmin(r->lo_x, r->hi_x);
+    v->near_y = fmin(r->lo_y, r->hi_y);
+    v->near_z = fmin(r->lo_z, r->hi_z);
+    v->far_x = fmax(r->lo_x, r->hi_x);
+    v->far_y = fmax(r->lo_y, r->hi_y);
+    v->far_z = fmax(r->lo_z, r->hi_z);
+    v->near_plane_x = r->inv_x.s0 >= 0.0f ? 0 : 3;
+    v->near_plane_y = r->inv_y.s0 >= 0.0f ? 1 : 4;
+    v->near_plane_z = r->inv_z.s0 >= 0.0f ? 2 : 5;
     return true;
 }
 
