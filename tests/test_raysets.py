@@ -160,7 +160,7 @@ def _off() -> str:
 
 
 def test_a_fixed_query_work_group_gives_the_same_hits(device, monkeypatch):
-    """QUERY_GROUP rounds the launch up: the work-items past the last ray do nothing."""
+    """QUERY_GROUP (PACKET_GROUP) rounds the launch up: the work-items past the last ray do nothing."""
     from clrt.query import Accel
     from clrt.query import accel as query_accel
     from clrt.scene import primitives
@@ -169,6 +169,7 @@ def test_a_fixed_query_work_group_gives_the_same_hits(device, monkeypatch):
     accel = Accel(mesh, device=device)
     base = accel.trace(o, d)
     monkeypatch.setattr(query_accel, "QUERY_GROUP", {"gpu": 64, "cpu": 64})
+    monkeypatch.setattr(query_accel, "PACKET_GROUP", {"gpu": 64, "cpu": 64})   # where a work-item takes 8 rays
     grouped = accel.trace(o, d)
     assert np.array_equal(grouped.prim, base.prim) and np.array_equal(grouped.t, base.t)
     assert np.array_equal(accel.occluded(o, d), base.prim >= 0)

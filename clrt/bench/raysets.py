@@ -323,14 +323,16 @@ def run(mesh_path=None, sets=RAY_SETS, count: int = 1_000_000, seed: int = 0, va
         if walk == "single":
             shown_builder += ", single-ray walk"
         for (label, o, d, reach), group in ((s, g) for s in ray_sets for g in groups):
-            saved = dict(query_accel.QUERY_GROUP)
+            saved = dict(query_accel.QUERY_GROUP), dict(query_accel.PACKET_GROUP)
             if group != "default":
                 size = None if group == "driver" else group
                 query_accel.QUERY_GROUP.update(gpu=size, cpu=size)
+                query_accel.PACKET_GROUP.update(gpu=size, cpu=size)   # work-items of packets too
             try:
                 m = measure(accel, o, d, reach, repeat, warmup)
             finally:
-                query_accel.QUERY_GROUP.update(saved)
+                query_accel.QUERY_GROUP.update(saved[0])
+                query_accel.PACKET_GROUP.update(saved[1])
             n = len(o)
             rate = lambda ms: n / ms / 1e3 if ms > 0 else float("inf")   # noqa: E731
             print(f"| {label} | {n:,} | {accel_name} | {shown_builder} "
@@ -381,7 +383,8 @@ def main(argv=None) -> int:
     p.add_argument("--warmup", type=int, default=2)
     p.add_argument("--group", type=lambda s: [x if x in ("driver", "default") else int(x) for x in s.split(",")],
                    default=["default"], help="work-group sizes of the query kernels to compare, e.g. "
-                                             "driver,64,128 (default: clrt's, clrt.query.accel.QUERY_GROUP)")
+                                             "driver,64,128 (default: clrt's, clrt.query.accel.QUERY_GROUP "
+                                             "and, for packets of rays, PACKET_GROUP)")
     p.add_argument("--walks", type=lambda s: s.split(","), default=["default"],
                    help="default,single: also time the single-ray kernels where clrt walks packets of "
                         "coherent rays (CPU devices), side by side")

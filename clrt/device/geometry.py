@@ -31,13 +31,13 @@ from clrt.scene.arrays import triangle_verts
 WIDE_BVH_KINDS = ("cpu",)
 
 # Device kinds whose query kernels (query_closest, query_any in trace.cl) give
-# each work-item PACKET_RAYS consecutive rays where the wide BVH is walked:
-# rays that travel together walk it as one packet (accel_packet.cl), which
-# took about half off camera rays' kernel time on PoCL; others take the
-# single-ray walk as before (docs/benchmarks.md).  Tests empty it to compare
-# the two on one device.
+# each work-item PACKET_RAYS consecutive rays where the wide BVH is walked
+# (-DRAY_PACKETS=PACKET_RAYS): rays that travel together walk it as one ray
+# packet (accel_packet.cl), which took about half off camera rays' kernel
+# time on PoCL; the others take the single-ray walk (docs/benchmarks.md).
+# Tests empty it to compare the two on one device.
 RAY_PACKET_KINDS = ("cpu",)
-PACKET_RAYS = 8      # accel_packet.cl's float8 lanes
+PACKET_RAYS = 8      # the float8 lanes of rays.cl and accel_packet.cl (rays.cl checks it)
 
 
 def accel_defines(acceleration: Acceleration, wide: WideBvh | None = None) -> dict:
@@ -59,6 +59,13 @@ def walks_wide(context: cl.Context, acceleration: Acceleration, split: bool) -> 
     """Do queries on ``context`` walk the wide BVH of ``acceleration``?"""
     return (acceleration.accel == "box" and not split
             and all(device_kind(d) in WIDE_BVH_KINDS for d in context.devices))
+
+
+def packet_rays(context: cl.Context, geometry: "DeviceGeometry") -> int:
+    """Rays a work-item of the query kernels query_closest / query_any answers
+    on ``context`` for ``geometry``: PACKET_RAYS where packets are walked, else 1."""
+    packets = geometry.wide is not None and all(device_kind(d) in RAY_PACKET_KINDS for d in context.devices)
+    return PACKET_RAYS if packets else 1
 
 
 def check_fits(device, label: str, nbytes: int, reserve: int = 0) -> None:
@@ -120,11 +127,6 @@ class DeviceGeometry:
         if self.wide is not None:
             arrays.update(wide_nodes=self.wide.nodes, packets=self.wide.packets)
         self.defines = dict(accel_defines(acceleration, self.wide))
-        # Rays a work-item of query_closest / query_any answers (trace.cl).
-        self.rays_per_item = 1
-        if self.wide is not None and all(device_kind(d) in RAY_PACKET_KINDS for d in context.devices):
-            self.defines["RAY_PACKETS"] = None
-            self.rays_per_item = PACKET_RAYS
         if self.shifts is not None:
             self.defines["SPLIT_BUFFERS"] = None
             self.defines.update({f"{name}_PART_SHIFT": shift for name, shift in self.shifts.items()})

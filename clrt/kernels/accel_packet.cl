@@ -1,20 +1,22 @@
-// Eight coherent rays walked together through the wide BVH (CPU devices,
-// -DRAY_PACKETS beside -DBVH_WIDE; the query kernels of trace.cl give each
-// work-item eight consecutive rays).  accel_wide.cl tests one ray against a
-// node's eight boxes, or a packet's four triangles, in a vector; here lane k
-// of every float8 is ray k instead, and the loop runs over a node's children
-// and a packet's triangles.  For rays that travel together -- a camera's
-// neighbouring pixels, shadow rays from neighbouring points to one light --
-// that visits each node once for eight rays, and fills all eight lanes of
-// the triangle test where the single-ray walk fills at most four.
-// Rays that do not travel together (random queries, diffuse bounces) never
-// come here: make_packet turns them away and each takes the single-ray walk.
+// A packet of rays: eight coherent rays walked together through the wide
+// BVH (CPU devices, -DRAY_PACKETS=8 beside -DBVH_WIDE; the query kernels of
+// trace.cl give each work-item eight consecutive rays).  accel_wide.cl tests
+// one ray against a node's eight boxes, or a triangle packet's four
+// triangles, in a vector; here lane k of every float8 is ray k instead, and
+// the loop runs over a node's children and a triangle packet's triangles.
+// For rays that travel together -- a camera's neighbouring pixels, shadow
+// rays from neighbouring points to one light -- that visits each node once
+// for eight rays, and fills all eight lanes of the triangle test where the
+// single-ray walk fills at most four.  Rays that do not travel together
+// (random queries, diffuse bounces) never come here: make_ray_packet turns
+// them away and each takes the single-ray walk.
 //
 // Answers are accel_wide.cl's bit for bit: each lane's box test is that of its
 // ray (volumes.cl, box_hit_lanes), each lane's triangle test is the scalar
 // one (triangle.cl, intersect_lanes_culled), and every hit passes the same
 // tie rule (record_hit's, hit.cl), which does not depend on the order of the
-// walk.  A lane leaves the walk only where its own ray would.
+// walk.  A lane may visit more than its own ray would (it goes where any ray
+// of the packet goes), never less.
 #ifndef CLRT_ACCEL_PACKET_CL
 #define CLRT_ACCEL_PACKET_CL
 
@@ -22,11 +24,9 @@
 
 #if defined(ACCEL_BVH) && defined(BVH_WIDE) && defined(RAY_PACKETS)
 
-#define PACKET_RAYS 8
-
 typedef struct {
-    ShearedLanes shear;     // triangle.cl
-    VolumeLanes volume;     // volumes.cl
+    PacketShear shear;      // triangle.cl
+    PacketPlanes volume;    // volumes.cl
     float8 tmin;
 } RayPacket;
 
@@ -34,10 +34,10 @@ typedef struct {
 typedef struct {
     float8 t, u, v;
     int8 slot, id;          // slot and input triangle id of the best hit (closest: the tie rule)
-} PacketHits;
+} RayPacketHits;
 
 // -1 in lane k where bit k of `bits` is set (lane_bits, accel_wide.cl, the other way).
-inline int8 bit_lanes(uint bits)
+inline int8 lane_mask(uint bits)
 {
     return ((((int8)((int)bits)) >> (int8)(0, 1, 2, 3, 4, 5, 6, 7)) & (int8)(1)) != (int8)(0);
 }
@@ -61,13 +61,13 @@ inline float min_lane(float8 x)
 // order, every ray oblique (volume_ray).  The octant lets every lane take the
 // same near planes and the same near-first order; the shear order, the same
 // triangle corners.
-inline bool make_packet(const RayLanes* rays, const ShearLanes* shear, const VolumeRayLanes* volume,
+inline bool make_ray_packet(const RayLanes* rays, const ShearRayLanes* shear, const VolumeRayLanes* volume,
                         RayPacket* p)
 {
     const int8 neg_x = signbit(rays->dx), neg_y = signbit(rays->dy), neg_z = signbit(rays->dz);
     if (!all((neg_x == (int8)(neg_x.s0)) & (neg_y == (int8)(neg_y.s0)) & (neg_z == (int8)(neg_z.s0))))
         return false;
-    if (!shear_lanes(shear, rays->ox, rays->oy, rays->oz, &p->shear) || !volume_lanes(volume, &p->volume))
+    if (!packet_shear(shear, rays->ox, rays->oy, rays->oz, &p->shear) || !packet_planes(volume, &p->volume))
         return false;
     p->tmin = rays->tmin;
     return true;
@@ -76,7 +76,7 @@ inline bool make_packet(const RayLanes* rays, const ShearLanes* shear, const Vol
 // Take the hits of the triangle in `slot` for the lanes in `hit` (any hit:
 // those rays are answered, in *done).
 inline void record_lanes(const Geometry* g, int slot, int8 hit, float8 t, float8 u, float8 v, float8* tmax,
-                         const int query, PacketHits* best, uint* done)
+                         const int query, RayPacketHits* best, uint* done)
 {
     if (query == QUERY_ANY) {
         best->slot = select(best->slot, (int8)(slot), hit);
@@ -98,9 +98,10 @@ inline void record_lanes(const Geometry* g, int slot, int8 hit, float8 t, float8
 // walk_wide_tree: one current child with the rays that met it (a bit mask),
 // and a stack of postponed children with theirs.  For the closest hit a
 // node's children are taken nearest first by the nearest lane's entry, the
-// rest pushed farthest first; any hit takes them in lane order.
-inline void walk_packet(const Geometry* g, const RayPacket* p, float8 tmax, const int query, const int cull,
-                        PacketHits* best)
+// rest pushed farthest first; any hit takes the lowest lane first, then the
+// others from the highest down.
+inline void walk_ray_packet(const Geometry* g, const RayPacket* p, float8 tmax, const int query, const int cull,
+                            RayPacketHits* best)
 {
     int2 stack[WIDE_STACK_SIZE];         // (node or first packet, packet count: 0 for a node)
     uint stack_rays[WIDE_STACK_SIZE];    // the rays that met it
@@ -111,7 +112,7 @@ inline void walk_packet(const Geometry* g, const RayPacket* p, float8 tmax, cons
     uint done = 0u;                      // any hit: the rays answered
     for (;;) {
         if (current.y > 0) {
-            const int8 lanes = bit_lanes(rays);
+            const int8 lanes = lane_mask(rays);
             for (int q = current.x; q < current.x + current.y; ++q) {
                 __global const TrianglePacket* tp = g->packets + q;
                 for (int k = 0; k < 4; ++k) {
@@ -130,7 +131,7 @@ inline void walk_packet(const Geometry* g, const RayPacket* p, float8 tmax, cons
             __global const BvhWideNode* n = g->wide_nodes + current.x;
             __global const int* child = (__global const int*)&n->child;
             __global const int* count = (__global const int*)&n->count;
-            const int8 lanes = bit_lanes(rays);
+            const int8 lanes = lane_mask(rays);
             const int base = sp;
             int2 first = (int2)(-1, 0);
             uint first_rays = 0u;
@@ -185,13 +186,27 @@ inline void walk_packet(const Geometry* g, const RayPacket* p, float8 tmax, cons
             if (!open)
                 continue;
             if (query == QUERY_CLOSEST &&
-                stack_t[sp] > SLACK_LATER(max_lane(select((float8)(-INFINITY), tmax, bit_lanes(open)))))
+                stack_t[sp] > SLACK_LATER(max_lane(select((float8)(-INFINITY), tmax, lane_mask(open)))))
                 continue;
             current = stack[sp];
             rays = open;
             break;
         }
     }
+}
+
+// Answer `query` for the packet's rays, hits[k] for ray k (Hit.prim a slot),
+// their tmax lane by lane.
+inline void answer_ray_packet(const Geometry* g, const RayPacket* p, float8 tmax, const int query, const int cull,
+                              Hit* hits)
+{
+    RayPacketHits best;
+    best.t = (float8)(INFINITY);
+    best.u = best.v = (float8)(0.0f);
+    best.slot = best.id = (int8)(-1);
+    walk_ray_packet(g, p, tmax, query, cull, &best);
+    for (int k = 0; k < RAY_PACKETS; ++k)
+        hits[k] = best.slot[k] >= 0 ? make_hit(best.t[k], best.slot[k], best.u[k], best.v[k]) : miss_hit();
 }
 
 #endif

@@ -135,8 +135,9 @@ inline Hit walk_wide_tree(const Geometry* g, const ShearedRay* r, const VolumeRa
     }
 }
 
-// Answer `query` for one ray set up by shear_ray and volume_ray (the query
-// kernels set up eight at a time, accel_packet.cl); Hit.prim is a slot.
+// Answer `query` for one ray set up by shear_ray and volume_ray (or their
+// lane forms: trace.cl's answer_rays sets up eight rays at a time); Hit.prim
+// is a slot.
 inline Hit walk_ray(const Geometry* g, const ShearedRay* r, const VolumeRay* vr, float tmin, float tmax,
                     const int query, HitSink* sink)
 {

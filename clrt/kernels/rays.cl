@@ -46,6 +46,14 @@ inline RayInput make_ray_input(RAY_INPUT_PARAMS)
     return in;
 }
 
+// How far from 1 the square of a float32 unit vector's length may be for
+// unit_direction to take it as it is (it says why).
+#define UNIT_SQUARE_SLACK 0x1.ffep-25
+
+// load_ray's subnormal components to zeros of their sign, for float3 or
+// (load_ray_lanes) float8 values.
+#define FLUSH_SUBNORMALS(real_t, x) select((x), copysign((real_t)(0.0f), (x)), isless(fabs(x), (real_t)(FLT_MIN)))
+
 // Unit direction of d, normalised in double precision where the device has it
 // (as numpy would on the host), so that every device gets the same float32
 // direction; false for a zero, infinite or NaN direction.  With `normalise`
@@ -67,7 +75,7 @@ inline bool unit_direction(float3 d, uint normalise, float3* unit)
     // direction would come back unchanged.  So the square root and the
     // division, the longest steps of a ray's set-up on CPUs, are skipped for
     // it -- for 96 % of unit vectors rounded to float32.
-    if (fabs(square - 1.0) < 0x1.ffep-25) {
+    if (fabs(square - 1.0) < UNIT_SQUARE_SLACK) {
         *unit = d;
         return true;
     }
@@ -105,8 +113,8 @@ inline bool load_ray(const RayInput* in, uint i, float3* origin, float3* dir, fl
     // seen, for an origin 2e-43 from a mesh's plane -- while the box tests stay
     // exact, and a BVH then prunes what brute force finds.  Every query reads its
     // rays here, so brute force and every BVH see the same ray.
-    *origin = select(*origin, copysign((float3)(0.0f), *origin), isless(fabs(*origin), (float3)(FLT_MIN)));
-    *dir = select(*dir, copysign((float3)(0.0f), *dir), isless(fabs(*dir), (float3)(FLT_MIN)));
+    *origin = FLUSH_SUBNORMALS(float3, *origin);
+    *dir = FLUSH_SUBNORMALS(float3, *dir);
     *tmin = in->tmins[k * in->tmin_stride];
     *tmax = in->tmaxs[k * in->tmax_stride];
     if (isnan(*tmin)) {
@@ -121,29 +129,27 @@ inline bool load_ray(const RayInput* in, uint i, float3* origin, float3* dir, fl
 }
 
 #ifdef RAY_PACKETS
-// Eight consecutive rays as lanes (float8 k: ray k), for the packet walk of
-// CPU devices (accel_packet.cl): load_ray's steps, lane by lane, with the
-// same operations, so each lane holds what load_ray gives its ray.  False
-// when not all eight are there or valid, or (without double precision) the
-// directions need normalising: then each ray goes through load_ray, which
-// also reports the bad ones.
+#if RAY_PACKETS != 8
+#error "packets of rays are float8 lanes: build with -DRAY_PACKETS=8"
+#endif
+// RAY_PACKETS consecutive rays as lanes (float8 k: ray k), for the query
+// kernels of CPU devices (trace.cl, accel_packet.cl): load_ray's steps, lane
+// by lane, with the same operations, so each lane holds what load_ray gives
+// its ray.  False when not all of them are there or valid, or (without
+// double precision) the directions need normalising: then each ray goes
+// through load_ray, which also reports the bad ones.
 typedef struct {
     float8 ox, oy, oz, dx, dy, dz, tmin, tmax;
 } RayLanes;
 
-inline float8 flush_subnormal_lanes(float8 x)
-{
-    return select(x, copysign((float8)(0.0f), x), isless(fabs(x), (float8)(FLT_MIN)));
-}
-
 inline bool load_ray_lanes(const RayInput* in, uint first, uint num_rays, RayLanes* r)
 {
-    if (first + 8 > num_rays)
+    if (first + RAY_PACKETS > num_rays)
         return false;
     float* ox = (float*)&r->ox; float* oy = (float*)&r->oy; float* oz = (float*)&r->oz;
     float* dx = (float*)&r->dx; float* dy = (float*)&r->dy; float* dz = (float*)&r->dz;
     float* tmin = (float*)&r->tmin; float* tmax = (float*)&r->tmax;
-    for (int k = 0; k < 8; ++k) {
+    for (int k = 0; k < RAY_PACKETS; ++k) {
         const size_t e = (size_t)in->in_first + first + k;
         __global const float* o = in->origins + e * in->origin_stride;
         __global const float* d = in->dirs + e * in->dir_stride;
@@ -161,7 +167,7 @@ inline bool load_ray_lanes(const RayInput* in, uint first, uint num_rays, RayLan
         // unit_direction lane by lane: its bound, its double-precision division
         const double8 x = convert_double8(r->dx), y = convert_double8(r->dy), z = convert_double8(r->dz);
         const double8 square = x * x + y * y + z * z;
-        const long8 unit = fabs(square - 1.0) < 0x1.ffep-25;
+        const long8 unit = fabs(square - 1.0) < UNIT_SQUARE_SLACK;
         if (!all(unit)) {
             const double8 len = sqrt(square);
             if (!all(len > 0.0))
@@ -177,12 +183,12 @@ inline bool load_ray_lanes(const RayInput* in, uint first, uint num_rays, RayLan
     } else if (any((r->dx == 0.0f) & (r->dy == 0.0f) & (r->dz == 0.0f))) {
         return false;
     }
-    r->ox = flush_subnormal_lanes(r->ox);
-    r->oy = flush_subnormal_lanes(r->oy);
-    r->oz = flush_subnormal_lanes(r->oz);
-    r->dx = flush_subnormal_lanes(r->dx);
-    r->dy = flush_subnormal_lanes(r->dy);
-    r->dz = flush_subnormal_lanes(r->dz);
+    r->ox = FLUSH_SUBNORMALS(float8, r->ox);
+    r->oy = FLUSH_SUBNORMALS(float8, r->oy);
+    r->oz = FLUSH_SUBNORMALS(float8, r->oz);
+    r->dx = FLUSH_SUBNORMALS(float8, r->dx);
+    r->dy = FLUSH_SUBNORMALS(float8, r->dy);
+    r->dz = FLUSH_SUBNORMALS(float8, r->dz);
     return true;
 }
 #endif

@@ -1,6 +1,7 @@
 // Entry file of the ray-query program (clrt/query/): batches of rays from
-// the host, one work-item per ray, answered by the same query_hits() as the
-// renderer's closest_hit / any_hit.  The host cuts a batch into chunks, one
+// the host, one work-item per ray (query_closest and query_any: per packet of
+// eight rays on CPU devices, see answer_rays), answered by the same walks as
+// the renderer's closest_hit / any_hit.  The host cuts a batch into chunks, one
 // launch each; rays come in through rays.cl, results go straight into the
 // caller's arrays, field by field.
 //
@@ -59,10 +60,10 @@ inline float3 face_normal(__global const TriangleVerts* tri)
 #endif
 }
 
-// Rays a work-item answers in query_closest and query_any: eight on CPU
-// devices that walk packets (accel_packet.cl), else one.
+// Rays a work-item answers in query_closest and query_any: a packet of
+// RAY_PACKETS (eight) on CPU devices that walk them (accel_packet.cl), else one.
 #ifdef RAY_PACKETS
-#define ITEM_RAYS PACKET_RAYS
+#define ITEM_RAYS RAY_PACKETS
 #else
 #define ITEM_RAYS 1
 #endif
@@ -78,25 +79,19 @@ inline void answer_rays(const Geometry* g, const RayInput* in, uint first, uint 
     RayLanes lanes;
     if (load_ray_lanes(in, first, num_rays, &lanes)) {
         // every ray set up in lanes (the divisions eight at a time), whichever walk it takes
-        const ShearLanes shear = shear_ray_lanes(lanes.dx, lanes.dy, lanes.dz);
+        const ShearRayLanes shear = shear_ray_lanes(lanes.dx, lanes.dy, lanes.dz);
         const VolumeRayLanes volume = volume_ray_lanes(lanes.ox, lanes.oy, lanes.oz, lanes.dx, lanes.dy, lanes.dz,
                                                        tree_reach(SPLIT_AT(g, nodes, 0)));
-        for (int k = 0; k < PACKET_RAYS; ++k) {
+        for (int k = 0; k < RAY_PACKETS; ++k) {
             origins[k] = (float3)(lanes.ox[k], lanes.oy[k], lanes.oz[k]);
             dirs[k] = (float3)(lanes.dx[k], lanes.dy[k], lanes.dz[k]);
         }
         RayPacket packet;
-        if (make_packet(&lanes, &shear, &volume, &packet)) {
-            PacketHits best;
-            best.t = (float8)(INFINITY);
-            best.u = best.v = (float8)(0.0f);
-            best.slot = best.id = (int8)(-1);
-            walk_packet(g, &packet, lanes.tmax, query, cull, &best);
-            for (int k = 0; k < PACKET_RAYS; ++k)
-                hits[k] = best.slot[k] >= 0 ? make_hit(best.t[k], best.slot[k], best.u[k], best.v[k]) : miss_hit();
+        if (make_ray_packet(&lanes, &shear, &volume, &packet)) {
+            answer_ray_packet(g, &packet, lanes.tmax, query, cull, hits);
             return;
         }
-        for (int k = 0; k < PACKET_RAYS; ++k) {
+        for (int k = 0; k < RAY_PACKETS; ++k) {
             const ShearedRay r = sheared_ray_lane(&shear, origins[k], k);
             const VolumeRay vr = volume_ray_lane(&volume, origins[k], dirs[k], k);
             HitSink options = query_options(cull);

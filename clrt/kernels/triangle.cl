@@ -14,13 +14,15 @@
 
 #pragma OPENCL FP_CONTRACT OFF
 
-// a*b - c*d with the sign of the exact value (Kahan; see Jeannerod et al. 2013).
+// a*b - c*d with the sign of the exact value (Kahan; see Jeannerod et al.
+// 2013): w = c*d rounded, fma(-c, d, w) = w - c*d exactly, fma(a, b, -w) =
+// a*b - w rounded once.  One macro for scalars and vectors, so that every
+// width takes the same steps.
+#define DIFF_OF_PRODUCTS(a, b, c, d) (fma((a), (b), -((c) * (d))) + fma(-(c), (d), (c) * (d)))
+
 inline float diff_of_products(float a, float b, float c, float d)
 {
-    const float w = c * d;
-    const float e = fma(-c, d, w);     // w - c*d, exactly
-    const float f = fma(a, b, -w);
-    return f + e;
+    return DIFF_OF_PRODUCTS(a, b, c, d);
 }
 
 // Per-ray constants of the shear transform, computed once per ray.
@@ -91,10 +93,7 @@ inline bool intersect_triangle_culled(const ShearedRay* r, __global const Triang
 // diff_of_products lane by lane, for the packet test below.
 inline float4 diff_of_products4(float4 a, float4 b, float4 c, float4 d)
 {
-    const float4 w = c * d;
-    const float4 e = fma(-c, d, w);
-    const float4 f = fma(a, b, -w);
-    return f + e;
+    return DIFF_OF_PRODUCTS(a, b, c, d);
 }
 
 // The same test for the four triangles of a TrianglePacket (layouts.h) at once,
@@ -144,33 +143,33 @@ inline int4 intersect_packet_culled(const ShearedRay* r, __global const Triangle
 typedef struct {
     int8 kx, ky, kz;
     float8 shear_x, shear_y, shear_z;
-} ShearLanes;
+} ShearRayLanes;
 
 // Lane by lane: x where axis is 0, y where 1, z where 2.
-inline float8 lanes_on_axes(float8 x, float8 y, float8 z, int8 axis)
+inline float8 per_lane_axis(float8 x, float8 y, float8 z, int8 axis)
 {
     return select(select(z, y, axis == (int8)(1)), x, axis == (int8)(0));
 }
 
-inline ShearLanes shear_ray_lanes(float8 dx, float8 dy, float8 dz)
+inline ShearRayLanes shear_ray_lanes(float8 dx, float8 dy, float8 dz)
 {
-    ShearLanes s;
+    ShearRayLanes s;
     const float8 ax = fabs(dx), ay = fabs(dy), az = fabs(dz);
     s.kz = select(select((int8)(2), (int8)(1), ay >= az), select((int8)(2), (int8)(0), ax >= az), ax >= ay);
     const int8 kx = select(s.kz + 1, (int8)(0), s.kz == (int8)(2));
     const int8 ky = select(kx + 1, (int8)(0), kx == (int8)(2));
-    const float8 d_kz = lanes_on_axes(dx, dy, dz, s.kz);
+    const float8 d_kz = per_lane_axis(dx, dy, dz, s.kz);
     const int8 negative = d_kz < 0.0f;              // keep winding: swap kx and ky
     s.kx = select(kx, ky, negative);
     s.ky = select(ky, kx, negative);
-    s.shear_x = lanes_on_axes(dx, dy, dz, s.kx) / d_kz;
-    s.shear_y = lanes_on_axes(dx, dy, dz, s.ky) / d_kz;
+    s.shear_x = per_lane_axis(dx, dy, dz, s.kx) / d_kz;
+    s.shear_y = per_lane_axis(dx, dy, dz, s.ky) / d_kz;
     s.shear_z = (float8)(1.0f) / d_kz;
     return s;
 }
 
 // Lane k of `s` as shear_ray(origin, dir) would give it.
-inline ShearedRay sheared_ray_lane(const ShearLanes* s, float3 origin, int k)
+inline ShearedRay sheared_ray_lane(const ShearRayLanes* s, float3 origin, int k)
 {
     ShearedRay r;
     r.origin = (float4)(origin, 0.0f);
@@ -186,24 +185,21 @@ typedef struct {
     float8 origin_x, origin_y, origin_z;   // the origins' (kx, ky, kz) components
     float8 shear_x, shear_y, shear_z;      // ShearedRay.shear
     int kx, ky, kz;
-} ShearedLanes;
+} PacketShear;
 
-inline float8 lanes_on_axis(float8 x, float8 y, float8 z, int axis)
+inline float8 axis_lanes(float8 x, float8 y, float8 z, int axis)
 {
     return axis == 0 ? x : axis == 1 ? y : z;
 }
 
 inline float8 diff_of_products8(float8 a, float8 b, float8 c, float8 d)
 {
-    const float8 w = c * d;
-    const float8 e = fma(-c, d, w);
-    const float8 f = fma(a, b, -w);
-    return f + e;
+    return DIFF_OF_PRODUCTS(a, b, c, d);
 }
 
-// The lanes of `r` as one ShearedLanes; false unless they share one axis
+// The lanes of `r` as one PacketShear; false unless they share one axis
 // order (the same dominant axis, and its sign).
-inline bool shear_lanes(const ShearLanes* r, float8 ox, float8 oy, float8 oz, ShearedLanes* s)
+inline bool packet_shear(const ShearRayLanes* r, float8 ox, float8 oy, float8 oz, PacketShear* s)
 {
     const int kx = r->kx.s0, ky = r->ky.s0, kz = r->kz.s0;
     if (!all((r->kx == (int8)(kx)) & (r->ky == (int8)(ky)) & (r->kz == (int8)(kz))))
@@ -211,9 +207,9 @@ inline bool shear_lanes(const ShearLanes* r, float8 ox, float8 oy, float8 oz, Sh
     s->kx = kx;
     s->ky = ky;
     s->kz = kz;
-    s->origin_x = lanes_on_axis(ox, oy, oz, kx);
-    s->origin_y = lanes_on_axis(ox, oy, oz, ky);
-    s->origin_z = lanes_on_axis(ox, oy, oz, kz);
+    s->origin_x = axis_lanes(ox, oy, oz, kx);
+    s->origin_y = axis_lanes(ox, oy, oz, ky);
+    s->origin_z = axis_lanes(ox, oy, oz, kz);
     s->shear_x = r->shear_x;
     s->shear_y = r->shear_y;
     s->shear_z = r->shear_z;
@@ -226,7 +222,7 @@ inline bool shear_lanes(const ShearLanes* r, float8 ox, float8 oy, float8 oz, Sh
 // tmin < t <= tmax, with t and the weights in *t_out, *u_out, *v_out (set
 // only when some lane hits).
 __attribute__((always_inline))
-inline int8 intersect_lanes_culled(const ShearedLanes* s, __global const TrianglePacket* p, int k, float8 tmin,
+inline int8 intersect_lanes_culled(const PacketShear* s, __global const TrianglePacket* p, int k, float8 tmin,
                                    float8 tmax, const int cull, float8* t_out, float8* u_out, float8* v_out)
 {
     __global const float* v0 = (__global const float*)p->v0;    // corner 0 of triangle k on axis a: v0[4 a + k]

@@ -59,6 +59,18 @@ inline float3 tree_reach(__global const BvhPairNode* root)
 // of every box plane in the tree, axis by axis (box volumes only; see below).
 // The tests take the ray's `oblique` as an argument, which each walk holds
 // constant (accel_bvh.cl says why); only the box test uses it.
+// The shifts of volume_ray below, for rays in float3 or (volume_ray_lanes)
+// in float8 lanes: one text, so that both take the same steps.
+#define VOLUME_SHIFTS(real_t, mask_t, origin, inv_dir, reach, lo_shift, hi_shift)                \
+    do {                                                                                         \
+        const real_t scaled_ = (origin) * (inv_dir);                                             \
+        const real_t margin_ = 0x1p-20f * ((reach) + fabs(origin)) * fabs(inv_dir);            \
+        const real_t lower_ = -(scaled_ + margin_), upper_ = -(scaled_ - margin_);              \
+        const mask_t ascending_ = (inv_dir) >= 0.0f;     /* min planes are met first */          \
+        (lo_shift) = select(upper_, lower_, ascending_);                                         \
+        (hi_shift) = select(lower_, upper_, ascending_);                                         \
+    } while (0)
+
 inline VolumeRay volume_ray(float3 origin, float3 dir, float3 reach)
 {
     VolumeRay r;
@@ -74,12 +86,7 @@ inline VolumeRay volume_ray(float3 origin, float3 dir, float3 reach)
     // divide-sqrt; 2.5 ulp without it, 8 u in all).  Widening every plane by
     // 2^-20 times that bound (16 u) makes each distance a true bound, so the
     // test needs no per-box slack: 6 FMAs where (b - o) * inv with slack takes 18.
-    const float3 scaled = origin * r.inv_dir;
-    const float3 margin = 0x1p-20f * (reach + fabs(origin)) * fabs(r.inv_dir);
-    const float3 lower = -(scaled + margin), upper = -(scaled - margin);
-    const int3 ascending = r.inv_dir >= 0.0f;     // min planes are met first
-    r.lo_shift = select(upper, lower, ascending);
-    r.hi_shift = select(lower, upper, ascending);
+    VOLUME_SHIFTS(float3, int3, origin, r.inv_dir, reach, r.lo_shift, r.hi_shift);
     r.oblique = all(isfinite(r.lo_shift)) && all(isfinite(r.hi_shift));
 #else
     r.oblique = false;
@@ -201,19 +208,9 @@ inline VolumeRayLanes volume_ray_lanes(float8 ox, float8 oy, float8 oz, float8 d
     v.inv_x = (float8)(1.0f) / dx;
     v.inv_y = (float8)(1.0f) / dy;
     v.inv_z = (float8)(1.0f) / dz;
-#define CLRT_LANE_SHIFTS(o, inv, reach_axis, lo_shift, hi_shift)                          \
-    {                                                                                    \
-        const float8 scaled = (o) * (inv);                                               \
-        const float8 margin = 0x1p-20f * ((reach_axis) + fabs(o)) * fabs(inv);          \
-        const float8 lower = -(scaled + margin), upper = -(scaled - margin);            \
-        const int8 ascending = (inv) >= 0.0f;                                            \
-        lo_shift = select(upper, lower, ascending);                                      \
-        hi_shift = select(lower, upper, ascending);                                      \
-    }
-    CLRT_LANE_SHIFTS(ox, v.inv_x, reach.x, v.lo_x, v.hi_x)
-    CLRT_LANE_SHIFTS(oy, v.inv_y, reach.y, v.lo_y, v.hi_y)
-    CLRT_LANE_SHIFTS(oz, v.inv_z, reach.z, v.lo_z, v.hi_z)
-#undef CLRT_LANE_SHIFTS
+    VOLUME_SHIFTS(float8, int8, ox, v.inv_x, (float8)(reach.x), v.lo_x, v.hi_x);
+    VOLUME_SHIFTS(float8, int8, oy, v.inv_y, (float8)(reach.y), v.lo_y, v.hi_y);
+    VOLUME_SHIFTS(float8, int8, oz, v.inv_z, (float8)(reach.z), v.lo_z, v.hi_z);
     return v;
 }
 
@@ -237,10 +234,10 @@ typedef struct {
     float8 inv_x, inv_y, inv_z;
     float8 near_x, near_y, near_z, far_x, far_y, far_z;   // the shifts of BoxPlanes
     int near_plane_x, near_plane_y, near_plane_z;          // BoxPlanes' near_x, near_y, near_z
-} VolumeLanes;
+} PacketPlanes;
 
 // box_planes lane by lane; false unless every lane is oblique.
-inline bool volume_lanes(const VolumeRayLanes* r, VolumeLanes* v)
+inline bool packet_planes(const VolumeRayLanes* r, PacketPlanes* v)
 {
     if (!all(isfinite(r->lo_x) & isfinite(r->lo_y) & isfinite(r->lo_z) &
              isfinite(r->hi_x) & isfinite(r->hi_y) & isfinite(r->hi_z)))
@@ -261,7 +258,7 @@ inline bool volume_lanes(const VolumeRayLanes* r, VolumeLanes* v)
 }
 
 // box_hit_wide_oblique's test of child c of a BvhWideNode, lane k for ray k.
-inline int8 box_hit_lanes(const VolumeLanes* v, __global const BvhWideNode* n, int c, float8 tmin, float8 tmax,
+inline int8 box_hit_lanes(const PacketPlanes* v, __global const BvhWideNode* n, int c, float8 tmin, float8 tmax,
                           float8* t_enter)
 {
     __global const float* plane = (__global const float*)&n->lo_x;     // plane j of child c: plane[8 j + c]

@@ -39,7 +39,7 @@ from clrt.config import DEFAULT_ACCEL, DEFAULT_BUILDER, DEFAULT_LEAF_SIZE
 from clrt.device.args import CAMERA_ARG_TYPES, camera_args
 from clrt.device.build import build_acceleration
 from clrt.device.context import create_context, device_kind, device_label
-from clrt.device.geometry import DeviceGeometry, check_fits
+from clrt.device.geometry import DeviceGeometry, check_fits, packet_rays
 from clrt.device import pinned
 from clrt.device.pinned import PinnedPool
 from clrt.device.program import build_program, typed_kernel
@@ -83,14 +83,14 @@ RAY_STAGING = {"gpu": True, "cpu": False}
 # Measured on the H200 (clrt.bench.raysets --group, docs/benchmarks.md): 128
 # takes 5-7 % off incoherent sets (random, diffuse, AO) against the driver's
 # choice, and 1-2 % off camera rays; 64 is as good on incoherent rays but
-# slower on camera rays.  A CPU device (PoCL) keeps its own choice.  The
-# kernels skip the work-items past the last ray.
+# slower on camera rays.  A CPU device (PoCL) keeps its own choice where a
+# work-item answers one ray.  The kernels skip the work-items past the last ray.
 QUERY_GROUP: dict = {"gpu": 128, "cpu": None}
-# Work-items a work-group where each answers several rays (packets, CPU
-# devices: clrt.device.geometry.RAY_PACKET_KINDS).  PoCL's own choice for
-# these launches made incoherent rays 4-15 % slower than the single-ray
-# kernels; 8 to 64 work-items measured level with them (docs/benchmarks.md).
-PACKET_GROUP = 16
+# The same where a work-item of query_closest / query_any answers a packet of
+# rays (clrt.device.geometry.RAY_PACKET_KINDS).  PoCL's own choice for these
+# launches made incoherent rays 4-15 % slower than the single-ray kernels; 8
+# to 64 work-items measured level with them (docs/benchmarks.md, session 9).
+PACKET_GROUP: dict = {"gpu": 128, "cpu": 16}
 RESULT_POOL_SIZE = 3                # page-locked result blocks per Accel (clrt/device/pinned.py)
 RESULT_POOL_MAX_BYTES = 1 << 30     # larger results go to ordinary memory
 _ZERO = np.zeros(1, np.float32)
@@ -180,7 +180,12 @@ class Accel:
         self.chunk_rays = chunk_rays
         self.max_alloc = int(queue.device.max_mem_alloc_size)   # bytes of the largest buffer
         self.all_hits_capacity = ALL_HITS_CAPACITY
-        program = build_program(context, "trace.cl", geometry.defines)
+        # Rays a work-item of query_closest / query_any answers (trace.cl's ITEM_RAYS).
+        self.rays_per_item = packet_rays(context, geometry)
+        defines = dict(geometry.defines)
+        if self.rays_per_item > 1:
+            defines["RAY_PACKETS"] = self.rays_per_item
+        program = build_program(context, "trace.cl", defines)
         # The kernels with their argument types (trace.cl's and rays.cl's parameter lists).
         u32, geom = np.uint32, geometry.arg_types
         ray_input = [None, u32, None, u32, None, u32, None, u32, u32, u32, u32, None]
@@ -211,7 +216,10 @@ class Accel:
             if not self.acceleration.is_bvh:
                 triangles = len(self.acceleration.prim_ids)
                 size = min(size, max(MIN_CHUNK_RAYS, BRUTE_FORCE_TESTS // max(triangles, 1)))
-        return max(1, min(size, self.max_alloc // 12, 2**31 - 1))
+        size = max(1, min(size, self.max_alloc // 12, 2**31 - 1))
+        # Whole packets a chunk (trace.cl's ITEM_RAYS), so that the caller's groups
+        # of eight stay together in every chunk.
+        return size - size % self.rays_per_item if size >= self.rays_per_item else size
 
     def memory(self) -> dict:
         """Upper bounds, in bytes, of what queries keep on the device: ``scene``
@@ -306,9 +314,9 @@ class Accel:
         kernel = self.kernels[name]
         kernel.set_args(*args, *self.geometry.args)
         group = QUERY_GROUP[self._kind]
-        if name in ("query_closest", "query_any") and self.geometry.rays_per_item > 1:
-            m = -(-m // self.geometry.rays_per_item)      # trace.cl's ITEM_RAYS rays a work-item
-            group = PACKET_GROUP
+        if name in ("query_closest", "query_any") and self.rays_per_item > 1:
+            m = -(-m // self.rays_per_item)      # trace.cl's ITEM_RAYS rays a work-item
+            group = PACKET_GROUP[self._kind]
         size, local = ((m,), None) if group is None else ((-(-m // group) * group,), (group,))
         self.launches.append(cl.enqueue_nd_range_kernel(self.queue, kernel, size, local))
 
