@@ -264,3 +264,24 @@ def test_packets_are_walked_as_packets_and_answer_as_brute_force(device):
                     assert np.array_equal(got, getattr(expected, name)), (cull, name)
             else:
                 assert np.array_equal(prim >= 0, expected_any), cull
+
+
+@pytest.mark.parametrize("width, height, max_depth", [(64, 48, None), (61, 37, 0)])
+def test_the_renderer_gets_the_same_frame_with_packets(width, height, max_depth, device, monkeypatch):
+    """Camera rays and their shadow rays go as packets of rays in the renderer
+    too (render.cl); frames and hit records stay those of the single-ray
+    kernels, also where a tile row ends in a partial packet (61 pixels)."""
+    from clrt.renderer import Renderer
+    from clrt.scene.default import default_scene
+    scene = default_scene(width, height, coarse=True)
+    packets = Renderer(scene, device)
+    if packets.rays_per_item == 1:
+        pytest.skip("the device under test does not walk packets")
+    monkeypatch.setattr(geometry, "RAY_PACKET_KINDS", ())
+    single = Renderer(scene, device)
+    assert single.rays_per_item == 1
+    a = packets.render(hits=True, samples=2, max_depth=max_depth)
+    b = single.render(hits=True, samples=2, max_depth=max_depth)
+    assert (a.prim >= 0).mean() > 0.3 and (a.prim < 0).any()
+    assert np.array_equal(a.image, b.image)
+    assert np.array_equal(a.prim, b.prim) and np.array_equal(a.t, b.t)

@@ -9,6 +9,8 @@
 #include "accel.cl"
 #include "shading.cl"
 #include "whitted.cl"
+#include "rays.cl"
+#include "accel_packet.cl"
 
 // The host renders an image in rectangles ("tiles") so that device memory and
 // the length of one launch stay bounded.  Both kernels below run one work-item
@@ -32,26 +34,139 @@ __kernel void generate_rays(__global Ray* rays, CAMERA_PARAMS, const uint sample
 
 // image = (first sample ? 0 : image) + sample_weight * colour.  hits receives
 // the camera ray's hit (of the first sample).  Indices are within the tile.
+// (hit_known: the camera ray's hit is `hit`; lit_known: bit i of `lit` says
+// whether light i reaches it.)
+inline void shade_pixel(const Geometry* g, const Shading* sh, const Ray ray, __global float4* image,
+                        __global Hit* hits, const uint i, const uint max_depth, const float sample_weight,
+                        const uint first_sample, Hit hit, const bool hit_known, const bool lit_known,
+                        const uint lit)
+{
+    const float3 c = trace_whitted(g, sh, max_depth, ray.origin.xyz, ray.dir.xyz, ray.origin.w, ray.dir.w,
+                                   &hit, hit_known, lit_known, lit);
+    if (first_sample) {
+        hits[i] = reported_hit(g, hit);
+        image[i] = (float4)(sample_weight * c, 1.0f);
+    } else {
+        image[i] += (float4)(sample_weight * c, 0.0f);
+    }
+}
+
+#ifdef RAY_PACKETS
+// The camera rays of RAY_PACKETS neighbouring pixels in a row, as a packet of
+// rays (accel_packet.cl): their closest hits in first[]; false when they make
+// no packet.  Camera rays are unit and valid, taken as they are (as
+// closest_hit takes them).
+inline bool camera_packet_hits(const Geometry* g, __global const Ray* rays, Hit* first)
+{
+    RayLanes lanes;
+    for (int k = 0; k < RAY_PACKETS; ++k) {
+        const Ray r = rays[k];
+        ((float*)&lanes.ox)[k] = r.origin.x;
+        ((float*)&lanes.oy)[k] = r.origin.y;
+        ((float*)&lanes.oz)[k] = r.origin.z;
+        ((float*)&lanes.tmin)[k] = r.origin.w;
+        ((float*)&lanes.dx)[k] = r.dir.x;
+        ((float*)&lanes.dy)[k] = r.dir.y;
+        ((float*)&lanes.dz)[k] = r.dir.z;
+        ((float*)&lanes.tmax)[k] = r.dir.w;
+    }
+    const ShearRayLanes shear = shear_ray_lanes(lanes.dx, lanes.dy, lanes.dz);
+    const VolumeRayLanes volume = volume_ray_lanes(lanes.ox, lanes.oy, lanes.oz, lanes.dx, lanes.dy, lanes.dz,
+                                                   tree_reach(SPLIT_AT(g, nodes, 0)));
+    RayPacket packet;
+    if (!make_ray_packet(&lanes, &shear, &volume, &packet))
+        return false;
+    answer_ray_packet(g, &packet, lanes.tmax, QUERY_CLOSEST, CULL_NONE, first);
+    return true;
+}
+
+// Which lights reach the camera rays' hits first[] (bit i of lit[k] for light
+// i, pixel k; up to 32 lights): each light's shadow rays from the eight
+// points go as one packet of rays where they make one (neighbouring points,
+// one light: they usually do), else one by one, as local_shading's.  Lanes
+// without a hit, or with the light behind their surface, carry a copy of a
+// lane that needs its ray, so that they do not break the packet.
+inline void camera_packet_lights(const Geometry* g, const Shading* sh, __global const Ray* rays, const Hit* first,
+                                 uint* lit)
+{
+    SurfacePoint s[RAY_PACKETS];
+    for (int k = 0; k < RAY_PACKETS; ++k) {
+        lit[k] = 0u;
+        if (first[k].prim >= 0)
+            s[k] = surface_point(g, sh, rays[k].origin.xyz, rays[k].dir.xyz, &first[k]);
+    }
+    const float3 reach = tree_reach(SPLIT_AT(g, nodes, 0));
+    for (uint i = 0; i < sh->num_lights; ++i) {
+        float3 origin[RAY_PACKETS], l[RAY_PACKETS];
+        float dist[RAY_PACKETS];
+        uint needed = 0u;
+        for (int k = 0; k < RAY_PACKETS; ++k)
+            if (first[k].prim >= 0 && shadow_ray(sh, &s[k], i, &origin[k], &l[k], &dist[k]))
+                needed |= 1u << k;
+        if (!needed)
+            continue;
+        const int model = 31 - clz(needed & (0u - needed));      // the lowest lane that needs its ray
+        RayLanes lanes;
+        for (int k = 0; k < RAY_PACKETS; ++k) {
+            const int j = (needed >> k) & 1u ? k : model;
+            ((float*)&lanes.ox)[k] = origin[j].x;
+            ((float*)&lanes.oy)[k] = origin[j].y;
+            ((float*)&lanes.oz)[k] = origin[j].z;
+            ((float*)&lanes.dx)[k] = l[j].x;
+            ((float*)&lanes.dy)[k] = l[j].y;
+            ((float*)&lanes.dz)[k] = l[j].z;
+            ((float*)&lanes.tmin)[k] = 0.0f;
+            ((float*)&lanes.tmax)[k] = dist[j];
+        }
+        const ShearRayLanes shear = shear_ray_lanes(lanes.dx, lanes.dy, lanes.dz);
+        const VolumeRayLanes volume = volume_ray_lanes(lanes.ox, lanes.oy, lanes.oz, lanes.dx, lanes.dy, lanes.dz,
+                                                       reach);
+        RayPacket packet;
+        Hit blocked[RAY_PACKETS];
+        const bool as_packet = make_ray_packet(&lanes, &shear, &volume, &packet);
+        if (as_packet)
+            answer_ray_packet(g, &packet, lanes.tmax, QUERY_ANY, CULL_NONE, blocked);
+        for (int k = 0; k < RAY_PACKETS; ++k) {
+            if (!((needed >> k) & 1u))
+                continue;
+            const bool dark = as_packet ? blocked[k].prim >= 0 : any_hit(g, origin[k], l[k], 0.0f, dist[k]);
+            if (!dark)
+                lit[k] |= 1u << i;
+        }
+    }
+}
+#endif
+
+// On CPU devices that walk packets of rays a work-item shades RAY_PACKETS
+// pixels of a row (gx: the row's packet), else one pixel.
 __kernel void shade_pixels(__global const Ray* rays, __global float4* image, __global Hit* hits,
                            const uint tile_w, const uint tile_h, const uint max_depth, const float sample_weight,
                            const uint first_sample, GEOMETRY_PARAMS, SHADING_PARAMS)
 {
     const uint gx = get_global_id(0), gy = get_global_id(1);
+    const Geometry g = make_geometry(GEOMETRY_ARGS);
+    const Shading sh = make_shading(SHADING_ARGS);
+#ifdef RAY_PACKETS
+    const uint x0 = RAY_PACKETS * gx;
+    if (x0 >= tile_w || gy >= tile_h)
+        return;
+    const uint i0 = gy * tile_w + x0;
+    Hit first[RAY_PACKETS];
+    uint lit[RAY_PACKETS];
+    const bool known = x0 + RAY_PACKETS <= tile_w && camera_packet_hits(&g, rays + i0, first);
+    const bool lit_known = known && sh.num_lights <= 32u;
+    if (lit_known)
+        camera_packet_lights(&g, &sh, rays + i0, first, lit);
+    for (uint k = 0; k < RAY_PACKETS && x0 + k < tile_w; ++k)
+        shade_pixel(&g, &sh, rays[i0 + k], image, hits, i0 + k, max_depth, sample_weight, first_sample,
+                    known ? first[k] : miss_hit(), known, lit_known, lit_known ? lit[k] : 0u);
+#else
     if (gx >= tile_w || gy >= tile_h)
         return;
     const uint i = gy * tile_w + gx;
-    const Geometry g = make_geometry(GEOMETRY_ARGS);
-    const Shading sh = make_shading(SHADING_ARGS);
-    const Ray ray = rays[i];
-    Hit hit;
-    const float3 c = trace_whitted(&g, &sh, max_depth, ray.origin.xyz, ray.dir.xyz,
-                                   ray.origin.w, ray.dir.w, &hit);
-    if (first_sample) {
-        hits[i] = reported_hit(&g, hit);
-        image[i] = (float4)(sample_weight * c, 1.0f);
-    } else {
-        image[i] += (float4)(sample_weight * c, 0.0f);
-    }
+    shade_pixel(&g, &sh, rays[i], image, hits, i, max_depth, sample_weight, first_sample, miss_hit(), false,
+                false, 0u);
+#endif
 }
 
 // IEC 61966-2-1 transfer function; linear values are clamped to [0, 1].

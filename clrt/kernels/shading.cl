@@ -109,23 +109,35 @@ inline SurfacePoint surface_point(const Geometry* g, const Shading* sh, float3 o
     return s;
 }
 
-// Phong ambient + diffuse + specular at a surface point, each light tested by
-// a shadow ray.  Every surface blocks light fully, transparent ones included
-// (no caustics): the same rule in the kernel and the reference tracer.
-inline float3 local_shading(const Geometry* g, const Shading* sh, const SurfacePoint* s, float3 dir)
+// The shadow ray from surface point s towards light i: origin (just off the
+// surface, on the side the ray came from), unit direction and the light's
+// distance; false when the light lies behind the surface, which then blocks it
+// itself (no ray needed).
+inline bool shadow_ray(const Shading* sh, const SurfacePoint* s, uint i, float3* origin, float3* l, float* dist)
 {
-    // Shadow rays start just off the surface, on the side the ray came from.
-    const float3 shadow_origin = s->p + sh->ray_epsilon * s->ng;
+    *origin = s->p + sh->ray_epsilon * s->ng;
+    const float3 to_light = sh->lights[i].position.xyz - *origin;
+    *dist = length(to_light);
+    *l = to_light / *dist;
+    return dot(s->ng, *l) > 0.0f && dot(s->n, *l) > 0.0f;
+}
+
+// Phong ambient + diffuse + specular at a surface point, each light tested by
+// a shadow ray -- or, with `shadows_known`, lit where bit i of `lit` is set
+// (render.cl's packets of shadow rays found them).  Every surface blocks light
+// fully, transparent ones included (no caustics): the same rule in the kernel
+// and the reference tracer.
+inline float3 local_shading(const Geometry* g, const Shading* sh, const SurfacePoint* s, float3 dir,
+                            const bool shadows_known, const uint lit)
+{
     const float3 to_eye = -dir;
     float3 color = s->m.ambient * s->m.color.xyz * sh->ambient_light.xyz;
     for (uint i = 0; i < sh->num_lights; ++i) {
-        const float3 to_light = sh->lights[i].position.xyz - shadow_origin;
-        const float dist = length(to_light);
-        const float3 l = to_light / dist;
-        // A light behind the geometric surface is blocked by the surface itself.
-        if (!(dot(s->ng, l) > 0.0f) || !(dot(s->n, l) > 0.0f))
+        float3 shadow_origin, l;
+        float dist;
+        if (!shadow_ray(sh, s, i, &shadow_origin, &l, &dist))
             continue;
-        if (any_hit(g, shadow_origin, l, 0.0f, dist))
+        if (shadows_known ? !((lit >> i) & 1u) : any_hit(g, shadow_origin, l, 0.0f, dist))
             continue;
         const float n_dot_l = dot(s->n, l);
         const float3 reflected = 2.0f * n_dot_l * s->n - l;

@@ -67,9 +67,13 @@ inline bool worth_tracing(float3 w)
     return fmax(w.x, fmax(w.y, w.z)) >= MIN_RAY_WEIGHT;
 }
 
-// Colour seen along one camera ray; *first receives the camera ray's own hit.
+// Colour seen along one camera ray; *first receives the camera ray's own hit
+// -- or, with `first_known`, holds it already, and with `lit_known` the
+// lights that reach it are known too (bit i of `lit`): render.cl's packets of
+// rays found them.
 inline float3 trace_whitted(const Geometry* g, const Shading* sh, const uint max_depth,
-                            float3 origin, float3 dir, float tmin, float tmax, Hit* first)
+                            float3 origin, float3 dir, float tmin, float tmax, Hit* first, const bool first_known,
+                            const bool lit_known, const uint lit)
 {
     PendingRay stack[MAX_BOUNCES + 1];
     int sp = 0;
@@ -78,17 +82,19 @@ inline float3 trace_whitted(const Geometry* g, const Shading* sh, const uint max
     bool camera_ray = true;
     while (sp > 0) {
         const PendingRay r = stack[--sp];
-        const Hit hit = closest_hit(g, r.origin, r.dir, camera_ray ? tmin : 0.0f,
-                                    camera_ray ? tmax : INFINITY);
+        const Hit hit = camera_ray && first_known ? *first
+                                                  : closest_hit(g, r.origin, r.dir, camera_ray ? tmin : 0.0f,
+                                                                camera_ray ? tmax : INFINITY);
         if (camera_ray)
             *first = hit;
+        const bool lights_known = camera_ray && lit_known;
         camera_ray = false;
         if (hit.prim < 0) {
             color += r.weight * sh->background.xyz;
             continue;
         }
         const SurfacePoint s = surface_point(g, sh, r.origin, r.dir, &hit);
-        color += r.weight * local_shading(g, sh, &s, r.dir);
+        color += r.weight * local_shading(g, sh, &s, r.dir, lights_known, lit);
         const float kr = s.m.reflectivity, kt = s.m.transparency;
         if (r.depth >= max_depth || (kr <= 0.0f && kt <= 0.0f))
             continue;

@@ -29,7 +29,7 @@ from clrt.device.args import CAMERA_ARG_TYPES, camera_args, vec4
 from clrt.device.build import build_acceleration
 from clrt.device.context import create_context, device_label, error_name, is_out_of_memory
 from clrt.device.context import format_bytes as _size
-from clrt.device.geometry import DeviceGeometry, check_fits, replace_buffer
+from clrt.device.geometry import DeviceGeometry, check_fits, packet_rays, replace_buffer
 from clrt.device.pinned import PinnedPool
 from clrt.device.program import build_program, typed_kernel
 from clrt.errors import DeviceMemoryError, InputError, TooLargeError
@@ -120,6 +120,11 @@ class Renderer:
             defines = dict(self.geometry.defines)
             if a.detail is not None:
                 defines["SURFACE_DETAIL"] = None
+            # Pixels a work-item of shade_pixels colours: a row's packet of camera
+            # rays where packets are walked (CPU devices, accel_packet.cl), else one.
+            self.rays_per_item = packet_rays(self.context, self.geometry)
+            if self.rays_per_item > 1:
+                defines["RAY_PACKETS"] = self.rays_per_item
             program = build_program(self.context, "render.cl", defines)
             # Kernel objects are made once (each attribute lookup on a Program makes
             # a new one), with their argument types (render.cl's parameter lists).
@@ -317,7 +322,8 @@ class Renderer:
         for sample in range(n):
             gen = self._launch("generate_rays", size, local, buf["rays"], *job.camera_args, sample, job.samples,
                                job.seed, *tile)
-            shade = self._launch("shade_pixels", size, local, buf["rays"], buf["linear"], buf["hits"], w, h,
+            shade = self._launch("shade_pixels", *self._launch_shape(w, h, self.rays_per_item), buf["rays"],
+                                 buf["linear"], buf["hits"], w, h,
                                  job.max_depth, 1.0 / n, sample == 0, *job.scene_args)
             launches.append((gen, shade))
             if sample < n - 1:
@@ -358,11 +364,14 @@ class Renderer:
             slowest = max(slowest, _event_ms(gen) + _event_ms(shade))
         return slowest
 
-    def _launch_shape(self, w: int, h: int) -> tuple:
+    def _launch_shape(self, w: int, h: int, row_pixels: int = 1) -> tuple:
         """Global and local size of a tile's launches: work-groups of ``limits.block``
         pixels (rays of neighbouring pixels run together), the driver's choice
-        where the kernels cannot run that many work-items at once."""
+        where the kernels cannot run that many work-items at once.  With
+        ``row_pixels``, each work-item takes that many pixels of a row."""
+        w = -(-w // row_pixels)
         bw, bh = self.limits.block or (0, 0)
+        bw = max(1, bw // row_pixels)
         if not 0 < bw * bh <= self._max_group:
             return (w, h), None
         return (-(-w // bw) * bw, -(-h // bh) * bh), (bw, bh)
