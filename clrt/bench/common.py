@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+from contextlib import contextmanager
 
 from clrt.errors import ClrtError
 
@@ -24,6 +25,32 @@ def parse_size(text: str) -> tuple[int, int]:
 def parse_work_group(text: str) -> tuple[int, int]:
     """argparse type for a work-group as 'WxH' pixels, or '0x0' for the driver's choice."""
     return (0, 0) if text.strip().lower() == "0x0" else parse_size(text)
+
+
+WALKS = ("default", "single")
+
+
+def parse_walks(text: str) -> list[str]:
+    """argparse type for --walks: 'default', 'single' or both, comma-separated."""
+    walks = text.split(",")
+    if not walks or not set(walks) <= set(WALKS):
+        raise argparse.ArgumentTypeError(f"expected default and/or single, got {text!r}")
+    return walks
+
+
+@contextmanager
+def walk(name: str):
+    """Renderers and Accels made inside take walk ``name``: "default", or
+    "single" -- the single-ray kernels where clrt walks packets of rays (CPU
+    devices, clrt.device.geometry.RAY_PACKET_KINDS)."""
+    from clrt.device import geometry
+    saved = geometry.RAY_PACKET_KINDS
+    if name == "single":
+        geometry.RAY_PACKET_KINDS = ()
+    try:
+        yield
+    finally:
+        geometry.RAY_PACKET_KINDS = saved
 
 
 def parse_count(text: str) -> int:

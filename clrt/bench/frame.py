@@ -22,12 +22,13 @@ import time
 import numpy as np
 
 from clrt.config import ACCELS, BUILDERS
-from clrt.bench.common import exit_code, parse_size, parse_work_group
+from clrt.bench.common import exit_code, parse_size, parse_walks, parse_work_group, walk
 
 FRAME_STAGES = ("ray generation", "pixel colour", "read back")
 
 
-def run(mesh_path, sizes, variants, device=None, repeat=5, warmup=1, leaf_size=4, block=None, out=sys.stdout):
+def run(mesh_path, sizes, variants, device=None, repeat=5, warmup=1, leaf_size=4, block=None, out=sys.stdout,
+        walks=("default",)):
     from clrt.renderer import Renderer, TileLimits
     from clrt.scene.default import default_scene
     from clrt.scene.load import load_mesh
@@ -50,9 +51,10 @@ def run(mesh_path, sizes, variants, device=None, repeat=5, warmup=1, leaf_size=4
     print("|---|---|---|---|---|---|---|---|---|---|---|", file=out)
     first_images = {}
     rows = []
-    for accel, builder in variants:
+    for (accel, builder), walk_name in itertools.product(variants, walks):
         limits = TileLimits() if block is None else TileLimits(block=None if block == (0, 0) else block)
-        renderer = Renderer(scene, device, accel, builder, leaf_size, limits=limits)
+        with walk(walk_name):
+            renderer = Renderer(scene, device, accel, builder, leaf_size, limits=limits)
         for camera in cameras:
             samples = []
             for i in range(warmup + repeat):
@@ -64,7 +66,8 @@ def run(mesh_path, sizes, variants, device=None, repeat=5, warmup=1, leaf_size=4
             med = {k: statistics.median(s[k] for s in samples) for k in samples[0]}
             key = (camera.width, camera.height)
             same = np.array_equal(first_images.setdefault(key, frame.image), frame.image)
-            row = {"accel": accel, "builder": builder if accel != "none" else "-",
+            shown_builder = (builder if accel != "none" else "-") + (", single-ray walk" if walk_name == "single" else "")
+            row = {"accel": accel, "builder": shown_builder, "walk": walk_name,
                    "resolution": f"{camera.width}x{camera.height}",
                    "build": renderer.timings["acceleration build"],
                    "copy to device": renderer.timings["copy to device"], **med,
@@ -90,13 +93,16 @@ def main(argv=None) -> int:
     p.add_argument("--device", help="'gpu', 'cpu' or P:D")
     p.add_argument("--repeat", type=int, default=5)
     p.add_argument("--warmup", type=int, default=1)
+    p.add_argument("--walks", type=parse_walks, default=["default"],
+                   help="default,single: also time the single-ray kernels where clrt walks packets of "
+                        "coherent rays (CPU devices), side by side")
     p.add_argument("--block", type=parse_work_group, help="work-group as WxH pixels (default 16x8; 0x0: the driver's choice)")
     args = p.parse_args(argv)
     accels, builders = args.accel or ["box"], args.builder or ["sah"]
     variants = [("none", "-")] if "none" in accels else []
     variants += [v for v in itertools.product([a for a in accels if a != "none"], builders)]
     return exit_code(run, args.mesh, args.size or [(200, 200), (1920, 1080)], variants, args.device,
-                     args.repeat, args.warmup, args.leaf_size, args.block)
+                     args.repeat, args.warmup, args.leaf_size, args.block, sys.stdout, tuple(args.walks))
 
 
 if __name__ == "__main__":

@@ -41,7 +41,7 @@ from pathlib import Path
 
 import numpy as np
 
-from clrt.bench.common import exit_code, median_wall_ms, parse_count, parse_size
+from clrt.bench.common import exit_code, median_wall_ms, parse_count, parse_size, parse_walks, walk
 from clrt.config import ACCELS, BUILDERS
 from clrt.errors import InputError
 
@@ -307,20 +307,14 @@ def run(mesh_path=None, sets=RAY_SETS, count: int = 1_000_000, seed: int = 0, va
     print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|", file=out)
     rows = []
     from clrt.query import accel as query_accel
-    from clrt.device import geometry
-    for (accel_name, builder), walk in ((v, w) for v in variants for w in walks):
-        if (accel_name, builder) == tuple(variants[0]) and walk == "default":
+    for (accel_name, builder), walk_name in ((v, w) for v in variants for w in walks):
+        if (accel_name, builder) == tuple(variants[0]) and walk_name == "default":
             accel = first
         else:
-            # "single": the single-ray kernels where clrt would walk packets (CPU devices)
-            saved_kinds = geometry.RAY_PACKET_KINDS
-            geometry.RAY_PACKET_KINDS = () if walk == "single" else saved_kinds
-            try:
+            with walk(walk_name):
                 accel = Accel(mesh, accel_name, builder, device=device)
-            finally:
-                geometry.RAY_PACKET_KINDS = saved_kinds
         shown_builder = builder if accel_name != "none" else "-"
-        if walk == "single":
+        if walk_name == "single":
             shown_builder += ", single-ray walk"
         for (label, o, d, reach), group in ((s, g) for s in ray_sets for g in groups):
             saved = dict(query_accel.QUERY_GROUP), dict(query_accel.PACKET_GROUP)
@@ -341,7 +335,8 @@ def run(mesh_path=None, sets=RAY_SETS, count: int = 1_000_000, seed: int = 0, va
                   f"| {m['closest_wall_ms']:.3f} | {rate(m['closest_wall_ms']):,.1f} | {m['hits']:,} "
                   f"| {m['sum_t']:.6f} | {m['any_kernel_ms']:.3f} | {rate(m['any_kernel_ms']):,.1f} "
                   f"| {'yes' if m['any_agrees'] else 'NO'} |", file=out, flush=True)
-            rows.append({"rays": label, "accel": accel_name, "builder": builder, "walk": walk, "group": group, **m})
+            rows.append({"rays": label, "accel": accel_name, "builder": builder, "walk": walk_name, "group": group,
+                         **m})
     if embree:
         for label, o, d, reach in ray_sets:
             m = embree_measure(mesh, o, d, reach, repeat, warmup)
@@ -385,7 +380,7 @@ def main(argv=None) -> int:
                    default=["default"], help="work-group sizes of the query kernels to compare, e.g. "
                                              "driver,64,128 (default: clrt's, clrt.query.accel.QUERY_GROUP "
                                              "and, for packets of rays, PACKET_GROUP)")
-    p.add_argument("--walks", type=lambda s: s.split(","), default=["default"],
+    p.add_argument("--walks", type=parse_walks, default=["default"],
                    help="default,single: also time the single-ray kernels where clrt walks packets of "
                         "coherent rays (CPU devices), side by side")
     p.add_argument("--embree", action="store_true",
@@ -402,8 +397,6 @@ def main(argv=None) -> int:
         p.error(f"--write: {args.write} is not a folder")
     if args.read and (args.set or args.write):
         p.error("--read runs files; it does not go with --set or --write")
-    if not set(args.walks) <= {"default", "single"}:
-        p.error("--walks takes default and single")
     if args.embree_processes < 0:
         p.error("--embree-processes must not be negative")
     if args.embree or args.embree_processes:
