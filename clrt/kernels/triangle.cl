@@ -88,21 +88,48 @@ inline bool intersect_triangle_culled(const ShearedRay* r, __global const Triang
 }
 
 #ifdef BVH_WIDE
-// The packet test of CPU devices (accel_wide.cl); other programs never see it.
+// The packet tests of CPU devices (accel_wide.cl, accel_packet.cl); other
+// programs never see them.
 
-// diff_of_products lane by lane, for the packet test below.
-inline float4 diff_of_products4(float4 a, float4 b, float4 c, float4 d)
-{
-    return DIFF_OF_PRODUCTS(a, b, c, d);
-}
+// intersect_triangle_culled's steps from the sheared corners on, lane by lane
+// (FP_CONTRACT is off, the products are Kahan's, so each lane's answer is the
+// scalar test's bit for bit; only the early exits become masks), for lanes of
+// width real_t / mask_t: four triangles against one ray (intersect_packet_culled)
+// or one triangle against eight rays (intersect_lanes_culled).  One text makes
+// both, so that neither can drift from the other.  Returns -1 in the lanes of
+// `candidate` that hit with tmin < t <= tmax, with t and the barycentric
+// weights in *t_out, *u_out, *v_out (set only when some lane hits).
+#define DEFINE_WATERTIGHT_LANES(name, real_t, mask_t)                                                          \
+    __attribute__((always_inline))                                                                             \
+    inline mask_t name(mask_t candidate, real_t Ax, real_t Ay, real_t Az, real_t Bx, real_t By, real_t Bz,     \
+                       real_t Cx, real_t Cy, real_t Cz, real_t shear_z, real_t tmin, real_t tmax, const int cull, \
+                       real_t* t_out, real_t* u_out, real_t* v_out)                                            \
+    {                                                                                                          \
+        const real_t U = DIFF_OF_PRODUCTS(Cx, By, Cy, Bx);                                                     \
+        const real_t V = DIFF_OF_PRODUCTS(Ax, Cy, Ay, Cx);                                                     \
+        const real_t W = DIFF_OF_PRODUCTS(Bx, Ay, By, Ax);                                                     \
+        mask_t hit = candidate & !(((U < 0.0f) | (V < 0.0f) | (W < 0.0f)) & ((U > 0.0f) | (V > 0.0f) | (W > 0.0f))); \
+        if (!any(hit))      /* most of the time: no lane passes the edge test, no division needed */          \
+            return hit;                                                                                        \
+        const real_t det = U + V + W;                                                                          \
+        const real_t T = U * (shear_z * Az) + V * (shear_z * Bz) + W * (shear_z * Cz);                         \
+        const real_t t = T / det;                                                                              \
+        hit &= (det != 0.0f) & (t > tmin) & (t <= tmax);                                                       \
+        if (cull == CULL_BACK)                                                                                 \
+            hit &= det >= 0.0f;                                                                                \
+        else if (cull == CULL_FRONT)                                                                           \
+            hit &= det <= 0.0f;                                                                                \
+        *t_out = t;                                                                                            \
+        *u_out = V / det;                                                                                      \
+        *v_out = W / det;                                                                                      \
+        return hit;                                                                                            \
+    }
+
+DEFINE_WATERTIGHT_LANES(watertight_lanes4, float4, int4)
 
 // The same test for the four triangles of a TrianglePacket (layouts.h) at once,
-// lane k for triangle k: every lane takes exactly the steps above, in the same
-// order and rounding (FP_CONTRACT is off, the products are Kahan's), so each
-// lane's answer is the scalar test's bit for bit; only the early exits become
-// masks.  Returns -1 in the lanes of a hit with tmin < t <= tmax (empty lanes
-// never hit), with t and the barycentric weights in *t_out, *u_out, *v_out
-// (set only when some lane hits).  Inlined into the walk (accel_wide.cl says why).
+// lane k for triangle k (empty lanes never hit): the corners sheared as
+// above, then watertight_lanes4.  Inlined into the walk (accel_wide.cl says why).
 __attribute__((always_inline))
 inline int4 intersect_packet_culled(const ShearedRay* r, __global const TrianglePacket* p,
                                     float tmin, float tmax, const int cull,
@@ -115,25 +142,8 @@ inline int4 intersect_packet_culled(const ShearedRay* r, __global const Triangle
     const float4 Ax = (p->v0[kx] - o.x) - r->shear.x * Az, Ay = (p->v0[ky] - o.y) - r->shear.y * Az;
     const float4 Bx = (p->v1[kx] - o.x) - r->shear.x * Bz, By = (p->v1[ky] - o.y) - r->shear.y * Bz;
     const float4 Cx = (p->v2[kx] - o.x) - r->shear.x * Cz, Cy = (p->v2[ky] - o.y) - r->shear.y * Cz;
-
-    const float4 U = diff_of_products4(Cx, By, Cy, Bx);
-    const float4 V = diff_of_products4(Ax, Cy, Ay, Cx);
-    const float4 W = diff_of_products4(Bx, Ay, By, Ax);
-    int4 hit = (p->slot >= 0) & !(((U < 0.0f) | (V < 0.0f) | (W < 0.0f)) & ((U > 0.0f) | (V > 0.0f) | (W > 0.0f)));
-    if (!any(hit))      // most packets: the ray passes beside all four, no division needed
-        return hit;
-    const float4 det = U + V + W;
-    const float4 T = U * (r->shear.z * Az) + V * (r->shear.z * Bz) + W * (r->shear.z * Cz);
-    const float4 t = T / det;
-    hit &= (det != 0.0f) & (t > tmin) & (t <= tmax);
-    if (cull == CULL_BACK)
-        hit &= det >= 0.0f;
-    else if (cull == CULL_FRONT)
-        hit &= det <= 0.0f;
-    *t_out = t;
-    *u_out = V / det;
-    *v_out = W / det;
-    return hit;
+    return watertight_lanes4(p->slot >= 0, Ax, Ay, Az, Bx, By, Bz, Cx, Cy, Cz, (float4)(r->shear.z), (float4)(tmin),
+                             (float4)(tmax), cull, t_out, u_out, v_out);
 }
 
 #ifdef RAY_PACKETS
@@ -192,10 +202,7 @@ inline float8 axis_lanes(float8 x, float8 y, float8 z, int axis)
     return axis == 0 ? x : axis == 1 ? y : z;
 }
 
-inline float8 diff_of_products8(float8 a, float8 b, float8 c, float8 d)
-{
-    return DIFF_OF_PRODUCTS(a, b, c, d);
-}
+DEFINE_WATERTIGHT_LANES(watertight_lanes8, float8, int8)
 
 // The lanes of `r` as one PacketShear; false unless they share one axis
 // order (the same dominant axis, and its sign).
@@ -216,11 +223,9 @@ inline bool packet_shear(const ShearRayLanes* r, float8 ox, float8 oy, float8 oz
     return true;
 }
 
-// intersect_triangle_culled for triangle k of a TrianglePacket, lane by lane:
-// every lane takes exactly its steps, so each ray's answer is the scalar
-// test's bit for bit.  Returns -1 in the lanes of a hit with
-// tmin < t <= tmax, with t and the weights in *t_out, *u_out, *v_out (set
-// only when some lane hits).
+// intersect_triangle_culled for triangle k of a TrianglePacket against the
+// eight rays of `s`, lane k for ray k: the corners sheared as there, then
+// watertight_lanes8.
 __attribute__((always_inline))
 inline int8 intersect_lanes_culled(const PacketShear* s, __global const TrianglePacket* p, int k, float8 tmin,
                                    float8 tmax, const int cull, float8* t_out, float8* u_out, float8* v_out)
@@ -237,25 +242,8 @@ inline int8 intersect_lanes_culled(const PacketShear* s, __global const Triangle
     const float8 By = ((float8)(v1[4 * s->ky + k]) - s->origin_y) - s->shear_y * Bz;
     const float8 Cx = ((float8)(v2[4 * s->kx + k]) - s->origin_x) - s->shear_x * Cz;
     const float8 Cy = ((float8)(v2[4 * s->ky + k]) - s->origin_y) - s->shear_y * Cz;
-
-    const float8 U = diff_of_products8(Cx, By, Cy, Bx);
-    const float8 V = diff_of_products8(Ax, Cy, Ay, Cx);
-    const float8 W = diff_of_products8(Bx, Ay, By, Ax);
-    int8 hit = !(((U < 0.0f) | (V < 0.0f) | (W < 0.0f)) & ((U > 0.0f) | (V > 0.0f) | (W > 0.0f)));
-    if (!any(hit))      // most triangles: every ray passes beside it, no division needed
-        return hit;
-    const float8 det = U + V + W;
-    const float8 T = U * (s->shear_z * Az) + V * (s->shear_z * Bz) + W * (s->shear_z * Cz);
-    const float8 t = T / det;
-    hit &= (det != 0.0f) & (t > tmin) & (t <= tmax);
-    if (cull == CULL_BACK)
-        hit &= det >= 0.0f;
-    else if (cull == CULL_FRONT)
-        hit &= det <= 0.0f;
-    *t_out = t;
-    *u_out = V / det;
-    *v_out = W / det;
-    return hit;
+    return watertight_lanes8((int8)(-1), Ax, Ay, Az, Bx, By, Bz, Cx, Cy, Cz, s->shear_z, tmin, tmax, cull,
+                             t_out, u_out, v_out);
 }
 #endif
 #endif
