@@ -21,6 +21,7 @@
 #define CLRT_ACCEL_PACKET_CL
 
 #include "accel_wide.cl"
+#include "rays.cl"
 
 #if defined(ACCEL_BVH) && defined(BVH_WIDE) && defined(RAY_PACKETS)
 
@@ -71,6 +72,16 @@ inline bool make_ray_packet(const RayLanes* rays, const ShearRayLanes* shear, co
         return false;
     p->tmin = rays->tmin;
     return true;
+}
+
+// make_ray_packet for lanes that need nothing else of their set-up (the
+// renderer's camera and shadow rays): false when they make no packet.
+inline bool ray_packet_of(const Geometry* g, const RayLanes* rays, RayPacket* p)
+{
+    const ShearRayLanes shear = shear_ray_lanes(rays->dx, rays->dy, rays->dz);
+    const VolumeRayLanes volume = volume_ray_lanes(rays->ox, rays->oy, rays->oz, rays->dx, rays->dy, rays->dz,
+                                                   tree_reach(SPLIT_AT(g, nodes, 0)));
+    return make_ray_packet(rays, &shear, &volume, p);
 }
 
 // Take the hits of the triangle in `slot` for the lanes in `hit` (any hit:

@@ -142,6 +142,19 @@ typedef struct {
     float8 ox, oy, oz, dx, dy, dz, tmin, tmax;
 } RayLanes;
 
+// Ray k of the lanes (the renderer's rays, render.cl).
+inline void set_ray_lane(RayLanes* r, int k, float3 origin, float3 dir, float tmin, float tmax)
+{
+    ((float*)&r->ox)[k] = origin.x;
+    ((float*)&r->oy)[k] = origin.y;
+    ((float*)&r->oz)[k] = origin.z;
+    ((float*)&r->dx)[k] = dir.x;
+    ((float*)&r->dy)[k] = dir.y;
+    ((float*)&r->dz)[k] = dir.z;
+    ((float*)&r->tmin)[k] = tmin;
+    ((float*)&r->tmax)[k] = tmax;
+}
+
 inline bool load_ray_lanes(const RayInput* in, uint first, uint num_rays, RayLanes* r)
 {
     if (first + RAY_PACKETS > num_rays)

@@ -61,20 +61,10 @@ inline bool camera_packet_hits(const Geometry* g, __global const Ray* rays, Hit*
     RayLanes lanes;
     for (int k = 0; k < RAY_PACKETS; ++k) {
         const Ray r = rays[k];
-        ((float*)&lanes.ox)[k] = r.origin.x;
-        ((float*)&lanes.oy)[k] = r.origin.y;
-        ((float*)&lanes.oz)[k] = r.origin.z;
-        ((float*)&lanes.tmin)[k] = r.origin.w;
-        ((float*)&lanes.dx)[k] = r.dir.x;
-        ((float*)&lanes.dy)[k] = r.dir.y;
-        ((float*)&lanes.dz)[k] = r.dir.z;
-        ((float*)&lanes.tmax)[k] = r.dir.w;
+        set_ray_lane(&lanes, k, r.origin.xyz, r.dir.xyz, r.origin.w, r.dir.w);
     }
-    const ShearRayLanes shear = shear_ray_lanes(lanes.dx, lanes.dy, lanes.dz);
-    const VolumeRayLanes volume = volume_ray_lanes(lanes.ox, lanes.oy, lanes.oz, lanes.dx, lanes.dy, lanes.dz,
-                                                   tree_reach(SPLIT_AT(g, nodes, 0)));
     RayPacket packet;
-    if (!make_ray_packet(&lanes, &shear, &volume, &packet))
+    if (!ray_packet_of(g, &lanes, &packet))
         return false;
     answer_ray_packet(g, &packet, lanes.tmax, QUERY_CLOSEST, CULL_NONE, first);
     return true;
@@ -95,7 +85,6 @@ inline void camera_packet_lights(const Geometry* g, const Shading* sh, __global 
         if (first[k].prim >= 0)
             s[k] = surface_point(g, sh, rays[k].origin.xyz, rays[k].dir.xyz, &first[k]);
     }
-    const float3 reach = tree_reach(SPLIT_AT(g, nodes, 0));
     for (uint i = 0; i < sh->num_lights; ++i) {
         float3 origin[RAY_PACKETS], l[RAY_PACKETS];
         float dist[RAY_PACKETS];
@@ -109,21 +98,11 @@ inline void camera_packet_lights(const Geometry* g, const Shading* sh, __global 
         RayLanes lanes;
         for (int k = 0; k < RAY_PACKETS; ++k) {
             const int j = (needed >> k) & 1u ? k : model;
-            ((float*)&lanes.ox)[k] = origin[j].x;
-            ((float*)&lanes.oy)[k] = origin[j].y;
-            ((float*)&lanes.oz)[k] = origin[j].z;
-            ((float*)&lanes.dx)[k] = l[j].x;
-            ((float*)&lanes.dy)[k] = l[j].y;
-            ((float*)&lanes.dz)[k] = l[j].z;
-            ((float*)&lanes.tmin)[k] = 0.0f;
-            ((float*)&lanes.tmax)[k] = dist[j];
+            set_ray_lane(&lanes, k, origin[j], l[j], 0.0f, dist[j]);
         }
-        const ShearRayLanes shear = shear_ray_lanes(lanes.dx, lanes.dy, lanes.dz);
-        const VolumeRayLanes volume = volume_ray_lanes(lanes.ox, lanes.oy, lanes.oz, lanes.dx, lanes.dy, lanes.dz,
-                                                       reach);
         RayPacket packet;
         Hit blocked[RAY_PACKETS];
-        const bool as_packet = make_ray_packet(&lanes, &shear, &volume, &packet);
+        const bool as_packet = ray_packet_of(g, &lanes, &packet);
         if (as_packet)
             answer_ray_packet(g, &packet, lanes.tmax, QUERY_ANY, CULL_NONE, blocked);
         for (int k = 0; k < RAY_PACKETS; ++k) {
