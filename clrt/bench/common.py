@@ -53,6 +53,11 @@ def walk(name: str):
         geometry.RAY_PACKET_KINDS = saved
 
 
+def builder_label(accel: str, builder: str, walk_name: str) -> str:
+    """A table's builder column: the builder ("-" without a BVH), and which walk."""
+    return (builder if accel != "none" else "-") + (", single-ray walk" if walk_name == "single" else "")
+
+
 def parse_count(text: str) -> int:
     """argparse type for a positive count such as 500K, 10M or 1G."""
     text = text.strip().upper()

@@ -22,7 +22,7 @@ import time
 import numpy as np
 
 from clrt.config import ACCELS, BUILDERS
-from clrt.bench.common import exit_code, parse_size, parse_walks, parse_work_group, walk
+from clrt.bench.common import builder_label, exit_code, parse_size, parse_walks, parse_work_group, walk
 
 FRAME_STAGES = ("ray generation", "pixel colour", "read back")
 
@@ -66,8 +66,7 @@ def run(mesh_path, sizes, variants, device=None, repeat=5, warmup=1, leaf_size=4
             med = {k: statistics.median(s[k] for s in samples) for k in samples[0]}
             key = (camera.width, camera.height)
             same = np.array_equal(first_images.setdefault(key, frame.image), frame.image)
-            shown_builder = (builder if accel != "none" else "-") + (", single-ray walk" if walk_name == "single" else "")
-            row = {"accel": accel, "builder": shown_builder, "walk": walk_name,
+            row = {"accel": accel, "builder": builder_label(accel, builder, walk_name), "walk": walk_name,
                    "resolution": f"{camera.width}x{camera.height}",
                    "build": renderer.timings["acceleration build"],
                    "copy to device": renderer.timings["copy to device"], **med,

@@ -41,7 +41,8 @@ from pathlib import Path
 
 import numpy as np
 
-from clrt.bench.common import exit_code, median_wall_ms, parse_count, parse_size, parse_walks, walk
+from clrt.bench.common import (builder_label, exit_code, median_wall_ms, parse_count, parse_size, parse_walks,
+                               walk)
 from clrt.config import ACCELS, BUILDERS
 from clrt.errors import InputError
 
@@ -313,9 +314,7 @@ def run(mesh_path=None, sets=RAY_SETS, count: int = 1_000_000, seed: int = 0, va
         else:
             with walk(walk_name):
                 accel = Accel(mesh, accel_name, builder, device=device)
-        shown_builder = builder if accel_name != "none" else "-"
-        if walk_name == "single":
-            shown_builder += ", single-ray walk"
+        shown_builder = builder_label(accel_name, builder, walk_name)
         for (label, o, d, reach), group in ((s, g) for s in ray_sets for g in groups):
             saved = dict(query_accel.QUERY_GROUP), dict(query_accel.PACKET_GROUP)
             if group != "default":
