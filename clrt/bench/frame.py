@@ -98,7 +98,9 @@ def main(argv=None) -> int:
     p.add_argument("--block", type=parse_work_group, help="work-group as WxH pixels (default 16x8; 0x0: the driver's choice)")
     args = p.parse_args(argv)
     accels, builders = args.accel or ["box"], args.builder or ["sah"]
-    variants = [("none", "-")] if "none" in accels else []
+    # No BVH, no builder: "auto" is only there to make a valid Renderer (the
+    # table's builder column says "-", builder_label).
+    variants = [("none", "auto")] if "none" in accels else []
     variants += [v for v in itertools.product([a for a in accels if a != "none"], builders)]
     return exit_code(run, args.mesh, args.size or [(200, 200), (1920, 1080)], variants, args.device,
                      args.repeat, args.warmup, args.leaf_size, args.block, sys.stdout, tuple(args.walks))
