@@ -331,3 +331,31 @@ def test_collapse_is_sah_optimal(builder, leaf, device):
     # the greedy collapse it replaced left nodes half empty (4.3 lanes of 8 on bunny00, 6.4 now)
     lanes = (wide.nodes["count"] >= 0).sum(axis=1)
     assert lanes.mean() > 5.5
+
+
+@pytest.mark.parametrize("portable", [False, True])
+def test_lane_bits_and_lane_mask_invert_each_other(portable, device):
+    """lanes.cl: every set of eight lanes gives its bits and back, in the x86 form
+    (vmovmskps, where the device's compiler defines __AVX__) and the portable one."""
+    import pyopencl as cl
+    from clrt.device.context import create_context
+    from clrt.device.program import build_options, expand_source
+
+    context, queue = create_context(device or "cpu")
+    source = expand_source("lanes.cl") + """
+    __kernel void probe(__global uint* bits, __global int8* lanes) {
+        const uint b = get_global_id(0);
+        lanes[b] = lane_mask(b);
+        bits[b] = lane_bits(lane_mask(b));
+    }"""
+    defines = {"PORTABLE_LANE_BITS": None} if portable else {}
+    program = cl.Program(context, source).build(options=build_options(context, defines))
+    bits, lanes = np.empty(256, np.uint32), np.empty((256, 8), np.int32)
+    bits_buf = cl.Buffer(context, cl.mem_flags.WRITE_ONLY, bits.nbytes)
+    lanes_buf = cl.Buffer(context, cl.mem_flags.WRITE_ONLY, lanes.nbytes)
+    cl.Kernel(program, "probe")(queue, (256,), None, bits_buf, lanes_buf)
+    cl.enqueue_copy(queue, bits, bits_buf)
+    cl.enqueue_copy(queue, lanes, lanes_buf)
+    expected = -((np.arange(256)[:, None] >> np.arange(8)) & 1)
+    assert np.array_equal(lanes, expected)
+    assert np.array_equal(bits, np.arange(256))

@@ -37,12 +37,6 @@ typedef struct {
     int8 slot, id;          // slot and input triangle id of the best hit (closest: the tie rule)
 } RayPacketHits;
 
-// -1 in lane k where bit k of `bits` is set (lane_bits, accel_wide.cl, the other way).
-inline int8 lane_mask(uint bits)
-{
-    return ((((int8)((int)bits)) >> (int8)(0, 1, 2, 3, 4, 5, 6, 7)) & (int8)(1)) != (int8)(0);
-}
-
 inline float max_lane(float8 x)
 {
     const float4 a = fmax(x.lo, x.hi);

@@ -19,21 +19,13 @@
 #include "triangle.cl"
 #include "volumes.cl"
 #include "stack.cl"
+#include "lanes.cl"
 
 #if defined(ACCEL_BVH) && defined(BVH_WIDE)
 
 #ifndef WIDE_STACK_SIZE
 #error "build with -DWIDE_STACK_SIZE=<at least 7 x the wide tree's depth + 1>"
 #endif
-
-// Bit k set where lane k of `lanes` (0 or -1) is set: the lanes as eight
-// bytes of 0 or 1 in one ulong, whose multiply by 2^56 + 2^49 + ... + 2^7
-// moves byte k's bit to bit 56 + k, and no other product reaches the top byte.
-inline uint lane_bits(int8 lanes)
-{
-    const ulong bytes = as_ulong(convert_uchar8(lanes & 1));
-    return (uint)((bytes * 0x0102040810204080UL) >> 56);
-}
 
 // Test the packet `packet` for `query`, its hits in lane order; true once the
 // query is answered.  Forced inline, with the packet test: PoCL keeps both as
