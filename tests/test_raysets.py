@@ -119,6 +119,23 @@ def test_embree_on_several_cores_times_every_share(torus, sets):
     assert m["closest_wall_ms"] > 0 and m["any_wall_ms"] > 0
 
 
+def test_clrt_and_embree_take_turns(torus, sets, device, monkeypatch):
+    """--embree-processes: clrt's queries run between Embree's, one of each per
+    repetition and query, and the speed ratios come from those pairs."""
+    pytest.importorskip("embreex", reason="Embree comparison needs the raybench extra (the test extra has it)")
+    o, d, reach = sets["random"]
+    accel = clrt.Accel(torus, device=device)
+    calls = []
+    for name in ("trace", "any_hit"):
+        method = getattr(accel, name)
+        monkeypatch.setattr(accel, name, lambda *a, _m=method, _n=name, **k: (calls.append(_n), _m(*a, **k))[1])
+    m = raysets.measure_beside_embree(accel, torus, o[:4000], d[:4000], reach, processes=2, repeat=3, warmup=1)
+    assert calls == ["trace", "any_hit"] * 4
+    for query in ("closest", "any"):
+        assert m[f"clrt_{query}_wall_ms"] > 0 and m[f"embree_{query}_wall_ms"] > 0
+        assert m[f"{query}_speed"] > 0
+
+
 @pytest.mark.parametrize("content, message", [
     (b"", "not a ray file"),
     (b"\0" * 25, "not a ray file"),

@@ -28,7 +28,10 @@ the result: the same file gives the same figures on every device and variant.
 ``--embree`` adds Embree's figures for the same rays on the host CPU (wall
 clock, rays on the host): the yardstick for clrt on PoCL.  embreex holds the
 GIL while it traces, so that is Embree on one core; ``--embree-processes N``
-adds Embree on N cores (N processes, each tracing its share of the rays).
+adds Embree on N cores (N processes, each tracing its share of the rays),
+taking turns with clrt's first variant query by query, and prints the speed
+ratio of each turn's pair: on a shared machine whose speed drifts, the
+paired ratio is the figure that holds still.
 """
 
 from __future__ import annotations
@@ -237,7 +240,8 @@ def embree_measure(mesh, origins, directions, tmax=np.inf, repeat: int = 5, warm
 
 def _embree_worker(vertices, faces, origins, directions, limit, repeat, warmup, barrier, results):
     """One process of embree_processes_measure: its share of the rays, each
-    repetition started with the others' (the barrier)."""
+    query started with the other processes' and ended before the next turn
+    (the barrier, whose other party is the measuring process)."""
     scene = _embree_scene(vertices, faces)
     times = []
     for i in range(warmup + repeat):
@@ -250,20 +254,27 @@ def _embree_worker(vertices, faces, origins, directions, limit, repeat, warmup, 
             else:
                 scene.run(origins, directions, dists=limit.copy(), query=query)
             row.append(time.perf_counter() - start)
+            barrier.wait()
         if i >= warmup:
             times.append(row)
     results.put(times)
 
 
 def embree_processes_measure(mesh, origins, directions, tmax=np.inf, processes: int = 2, repeat: int = 5,
-                             warmup: int = 2) -> dict:
+                             warmup: int = 2, turn=None) -> dict:
     """Embree on ``processes`` cores: embreex holds the GIL while it traces, so
     one process reaches one core; here each of ``processes`` processes traces
     its share of the rays, all started together.  Median over the
-    repetitions of the slowest process's wall ms, closest-hit and occlusion."""
+    repetitions of the slowest process's wall ms, closest-hit and occlusion.
+
+    With ``turn``, a callable ``turn(query, counted)`` ("closest" or "any"),
+    this process runs it before each of Embree's queries, while Embree's
+    processes wait: clrt and Embree take turns on the same cores, so that a
+    slow spell of a shared machine falls on both (measure_beside_embree).
+    The result then also holds the repetitions' times, (repetition, query)."""
     import multiprocessing
     context = multiprocessing.get_context("spawn")
-    barrier, results = context.Barrier(processes), context.Queue()
+    barrier, results = context.Barrier(processes + 1), context.Queue()
     vertices, faces = np.asarray(mesh.vertices, np.float32), np.asarray(mesh.faces, np.int32)
     limit = _embree_limits(len(origins), tmax)
     bounds = np.linspace(0, len(origins), processes + 1).astype(int)
@@ -272,11 +283,51 @@ def embree_processes_measure(mesh, origins, directions, tmax=np.inf, processes: 
                for a, b in zip(bounds[:-1], bounds[1:])]
     for w in workers:
         w.start()
-    times = np.array([results.get() for _ in workers])       # (process, repetition, query)
-    for w in workers:
-        w.join()
+    try:
+        for i in range(warmup + repeat):
+            for query in ("closest", "any"):
+                if turn is not None:
+                    turn(query, i >= warmup)
+                barrier.wait()      # Embree's processes start ...
+                barrier.wait()      # ... and are done
+        times = np.array([results.get() for _ in workers])       # (process, repetition, query)
+    finally:
+        for w in workers:
+            w.join(timeout=60)
+            if w.is_alive():
+                w.terminate()
     slowest = 1e3 * times.max(axis=0)
-    return {"closest_wall_ms": float(np.median(slowest[:, 0])), "any_wall_ms": float(np.median(slowest[:, 1]))}
+    return {"closest_wall_ms": float(np.median(slowest[:, 0])), "any_wall_ms": float(np.median(slowest[:, 1])),
+            "times": slowest}
+
+
+def measure_beside_embree(accel, mesh, origins, directions, tmax=np.inf, processes: int = 2, repeat: int = 5,
+                          warmup: int = 2) -> dict:
+    """clrt (``accel``, rays and results on the device) and Embree on
+    ``processes`` cores taking turns, query by query (embree_processes_measure):
+    each one's median wall ms, and the speed ratio -- Embree's wall time over
+    clrt's -- as the median of the repetitions' ratios, closest hit and any hit.
+    On a machine whose speed drifts by 15-20 % from run to run, the paired
+    ratio is what stays put."""
+    import pyopencl.array as cla
+    o_dev, d_dev = cla.to_device(accel.queue, origins), cla.to_device(accel.queue, directions)
+    calls = {"closest": lambda: accel.trace(o_dev, d_dev, tmax=tmax, fields=("t", "prim")),
+             "any": lambda: accel.any_hit(o_dev, d_dev, tmax=tmax)}
+    ours = {"closest": [], "any": []}
+
+    def turn(query, counted):
+        start = time.perf_counter()
+        calls[query]()
+        accel.queue.finish()
+        if counted:
+            ours[query].append(1e3 * (time.perf_counter() - start))
+
+    theirs = embree_processes_measure(mesh, origins, directions, tmax, processes, repeat, warmup, turn)
+    out = {"embree_closest_wall_ms": theirs["closest_wall_ms"], "embree_any_wall_ms": theirs["any_wall_ms"]}
+    for k, query in enumerate(("closest", "any")):
+        out[f"clrt_{query}_wall_ms"] = statistics.median(ours[query])
+        out[f"{query}_speed"] = statistics.median(float(e / c) for e, c in zip(theirs["times"][:, k], ours[query]))
+    return out
 
 
 def run(mesh_path=None, sets=RAY_SETS, count: int = 1_000_000, seed: int = 0, variants=(("box", "sah"),),
@@ -348,12 +399,18 @@ def run(mesh_path=None, sets=RAY_SETS, count: int = 1_000_000, seed: int = 0, va
                   f"| {'yes' if m['any_agrees'] else 'NO'} |", file=out, flush=True)
             rows.append({"rays": label, "accel": "embree", "builder": "-", **m})
     if embree_processes:
+        # clrt's first variant and Embree take turns, query by query: both rows
+        # come from the same stretch of time, and the speed ratio from each turn.
+        print(f"\nclrt ({variants[0][0]}, {builder_label(*variants[0], 'default')}) and Embree on {embree_processes} processes, "
+              f"taking turns (median of {repeat} after {warmup}; wall ms; speed: Embree's time over clrt's, "
+              f"the median of the turns' ratios):", file=out)
+        print("\n| rays | count | clrt closest | Embree closest | speed | clrt any | Embree any | speed |", file=out)
+        print("|---|---|---|---|---|---|---|---|", file=out)
         for label, o, d, reach in ray_sets:
-            m = embree_processes_measure(mesh, o, d, reach, embree_processes, repeat, warmup)
-            n = len(o)
-            print(f"| {label} | {n:,} | Embree, {embree_processes} processes | - | - | - | - "
-                  f"| {m['closest_wall_ms']:.3f} | {n / m['closest_wall_ms'] / 1e3:,.1f} | - | - "
-                  f"| {m['any_wall_ms']:.3f} (wall) | {n / m['any_wall_ms'] / 1e3:,.1f} | - |", file=out, flush=True)
+            m = measure_beside_embree(first, mesh, o, d, reach, embree_processes, repeat, warmup)
+            print(f"| {label} | {len(o):,} | {m['clrt_closest_wall_ms']:.3f} | {m['embree_closest_wall_ms']:.3f} "
+                  f"| {m['closest_speed']:.2f}x | {m['clrt_any_wall_ms']:.3f} | {m['embree_any_wall_ms']:.3f} "
+                  f"| {m['any_speed']:.2f}x |", file=out, flush=True)
             rows.append({"rays": label, "accel": f"embree x{embree_processes}", "builder": "-", **m})
     return rows
 
@@ -386,7 +443,8 @@ def main(argv=None) -> int:
                    help="also run the rays through Embree on the host CPU (needs embreex: the raybench extra); "
                         "embreex holds the GIL, so this is Embree on one core")
     p.add_argument("--embree-processes", type=int, default=0, metavar="N",
-                   help="also run Embree in N processes at once, each on its share of the rays: Embree on N cores")
+                   help="also run Embree in N processes at once, each on its share of the rays (Embree on N "
+                        "cores), taking turns with clrt's first variant; prints the paired speed ratios")
     args = p.parse_args(argv)
     if args.repeat < 1 or args.warmup < 0:
         p.error("--repeat must be positive and --warmup not negative")
