@@ -190,3 +190,28 @@ def test_a_fixed_query_work_group_gives_the_same_hits(device, monkeypatch):
     grouped = accel.trace(o, d)
     assert np.array_equal(grouped.prim, base.prim) and np.array_equal(grouped.t, base.t)
     assert np.array_equal(accel.occluded(o, d), base.prim >= 0)
+
+
+def test_a_failing_embree_process_ends_the_turns_with_its_reason(torus, sets):
+    """A worker that fails (here: float64 rays, which embreex refuses) stops the
+    turns at once with its error, instead of leaving the others waiting."""
+    pytest.importorskip("embreex", reason="Embree comparison needs the raybench extra (the test extra has it)")
+    o, d, reach = sets["random"]
+    turns = []
+    with pytest.raises(InputError, match="Embree failed: ValueError: Buffer dtype mismatch"):
+        raysets.embree_processes_measure(torus, o[:2000].astype(np.float64), d[:2000], reach, processes=2,
+                                         repeat=1, warmup=0, turn=lambda query, counted: turns.append(query))
+    assert turns == ["closest"]
+
+
+def test_an_embree_process_that_dies_ends_the_turn():
+    """A worker that dies without a word (a crash) is noticed while waiting for
+    its time: a one-line error with its exit code, not a hang."""
+    import multiprocessing
+    import sys
+    context = multiprocessing.get_context("spawn")
+    worker = context.Process(target=sys.exit, args=(3,))
+    worker.start()
+    worker.join()
+    with pytest.raises(InputError, match=r"an Embree process died \(exit code 3\)"):
+        raysets._turn_times([worker], context.Queue())

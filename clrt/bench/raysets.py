@@ -238,26 +238,40 @@ def embree_measure(mesh, origins, directions, tmax=np.inf, repeat: int = 5, warm
             "any_agrees": bool(np.array_equal(hit, np.asarray(occluded) >= 0)), "prim": prim}
 
 
-def _embree_worker(vertices, faces, origins, directions, limit, repeat, warmup, barrier, results):
-    """One process of embree_processes_measure: its share of the rays, each
-    query started with the other processes' and ended before the next turn
-    (the barrier, whose other party is the measuring process)."""
-    scene = _embree_scene(vertices, faces)
-    times = []
-    for i in range(warmup + repeat):
-        row = []
-        for query in ("INTERSECT", "OCCLUDED"):
-            barrier.wait()
+def _embree_worker(vertices, faces, origins, directions, limit, go, done):
+    """One process of embree_processes_measure: its share of the rays, one
+    query for each "INTERSECT" or "OCCLUDED" it takes from ``go``, its seconds
+    put in ``done`` (None: stop; an error goes there as its text)."""
+    try:
+        scene = _embree_scene(vertices, faces)
+        while (query := go.get()) is not None:
             start = time.perf_counter()
             if query == "INTERSECT":
                 scene.run(origins, directions, dists=limit.copy(), output=1)
             else:
                 scene.run(origins, directions, dists=limit.copy(), query=query)
-            row.append(time.perf_counter() - start)
-            barrier.wait()
-        if i >= warmup:
-            times.append(row)
-    results.put(times)
+            done.put(time.perf_counter() - start)
+    except Exception as exc:
+        done.put(f"{type(exc).__name__}: {exc}")
+
+
+def _turn_times(workers, done) -> list[float]:
+    """Each worker's seconds for the query just started; a worker that failed
+    or died ends the measurement with a one-line error instead of a wait."""
+    import queue
+    times = []
+    while len(times) < len(workers):
+        try:
+            got = done.get(timeout=0.5)
+        except queue.Empty:
+            dead = [w.exitcode for w in workers if not w.is_alive()]
+            if dead:
+                raise InputError(f"an Embree process died (exit code {dead[0]})") from None
+            continue
+        if isinstance(got, str):
+            raise InputError(f"Embree failed: {got}")
+        times.append(got)
+    return times
 
 
 def embree_processes_measure(mesh, origins, directions, tmax=np.inf, processes: int = 2, repeat: int = 5,
@@ -274,29 +288,35 @@ def embree_processes_measure(mesh, origins, directions, tmax=np.inf, processes: 
     The result then also holds the repetitions' times, (repetition, query)."""
     import multiprocessing
     context = multiprocessing.get_context("spawn")
-    barrier, results = context.Barrier(processes + 1), context.Queue()
     vertices, faces = np.asarray(mesh.vertices, np.float32), np.asarray(mesh.faces, np.int32)
     limit = _embree_limits(len(origins), tmax)
     bounds = np.linspace(0, len(origins), processes + 1).astype(int)
+    gos, done = [context.Queue() for _ in range(processes)], context.Queue()
     workers = [context.Process(target=_embree_worker, args=(vertices, faces, origins[a:b], directions[a:b],
-                                                            limit[a:b], repeat, warmup, barrier, results))
-               for a, b in zip(bounds[:-1], bounds[1:])]
+                                                            limit[a:b], go, done))
+               for a, b, go in zip(bounds[:-1], bounds[1:], gos)]
     for w in workers:
         w.start()
+    slowest = []
     try:
         for i in range(warmup + repeat):
-            for query in ("closest", "any"):
+            row = []
+            for query, embree_query in (("closest", "INTERSECT"), ("any", "OCCLUDED")):
                 if turn is not None:
                     turn(query, i >= warmup)
-                barrier.wait()      # Embree's processes start ...
-                barrier.wait()      # ... and are done
-        times = np.array([results.get() for _ in workers])       # (process, repetition, query)
+                for go in gos:              # Embree's processes start together ...
+                    go.put(embree_query)
+                row.append(1e3 * max(_turn_times(workers, done)))   # ... and the last one to finish counts
+            if i >= warmup:
+                slowest.append(row)
     finally:
+        for go in gos:
+            go.put(None)
         for w in workers:
-            w.join(timeout=60)
+            w.join(timeout=10)
             if w.is_alive():
                 w.terminate()
-    slowest = 1e3 * times.max(axis=0)
+    slowest = np.array(slowest)
     return {"closest_wall_ms": float(np.median(slowest[:, 0])), "any_wall_ms": float(np.median(slowest[:, 1])),
             "times": slowest}
 
