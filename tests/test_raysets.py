@@ -215,3 +215,22 @@ def test_an_embree_process_that_dies_ends_the_turn():
     worker.join()
     with pytest.raises(InputError, match=r"an Embree process died \(exit code 3\)"):
         raysets._turn_times([worker], context.Queue())
+
+
+@pytest.mark.parametrize("group", ["0", "-4", "abc", "5000", "64,"])
+def test_bad_work_group_sizes_fail_in_one_line(group, capsys):
+    with pytest.raises(SystemExit) as exit_info:
+        raysets.main(["--group", group, "--rays", "1K"])
+    assert exit_info.value.code == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err[-1].startswith("python -m clrt.bench.raysets: error: argument --group: expected work-group sizes")
+
+
+def test_a_work_group_larger_than_the_device_takes_fails_in_one_line(torus, device):
+    import pyopencl as cl
+    accel = clrt.Accel(torus, device=device)
+    limit = min(accel.kernels[name].get_work_group_info(cl.kernel_work_group_info.WORK_GROUP_SIZE, accel.queue.device)
+                for name in ("query_closest", "query_any"))
+    raysets._check_groups(accel, ["driver", 1, limit])
+    with pytest.raises(InputError, match=f"--group {limit + 1}: .* at most"):
+        raysets._check_groups(accel, [limit + 1])

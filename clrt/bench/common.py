@@ -27,6 +27,27 @@ def parse_work_group(text: str) -> tuple[int, int]:
     return (0, 0) if text.strip().lower() == "0x0" else parse_size(text)
 
 
+def parse_groups(text: str) -> list:
+    """argparse type for --group: comma-separated work-group sizes (work-items,
+    1..4096; the device's own limit is checked when it is known), 'driver' (the
+    driver's choice) or 'default' (clrt's)."""
+    groups = []
+    for item in text.split(","):
+        item = item.strip().lower()
+        if item in ("driver", "default"):
+            groups.append(item)
+            continue
+        try:
+            size = int(item)
+        except ValueError:
+            size = 0
+        if not 1 <= size <= 4096:
+            raise argparse.ArgumentTypeError(f"expected work-group sizes in 1..4096, driver or default, "
+                                             f"comma-separated; got {text!r}")
+        groups.append(size)
+    return groups
+
+
 WALKS = ("default", "single")
 
 

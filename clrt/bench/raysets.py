@@ -44,8 +44,8 @@ from pathlib import Path
 
 import numpy as np
 
-from clrt.bench.common import (builder_label, exit_code, median_wall_ms, parse_count, parse_size, parse_walks,
-                               walk)
+from clrt.bench.common import (builder_label, exit_code, median_wall_ms, parse_count, parse_groups, parse_size,
+                               parse_walks, walk)
 from clrt.config import ACCELS, BUILDERS
 from clrt.errors import InputError
 
@@ -350,6 +350,18 @@ def measure_beside_embree(accel, mesh, origins, directions, tmax=np.inf, process
     return out
 
 
+def _check_groups(accel, groups) -> None:
+    """A work-group size the device cannot launch fails here, in one line."""
+    import pyopencl as cl
+    device = accel.queue.device
+    limit = min(accel.kernels[name].get_work_group_info(cl.kernel_work_group_info.WORK_GROUP_SIZE, device)
+                for name in ("query_closest", "query_any"))
+    for group in groups:
+        if isinstance(group, int) and group > limit:
+            raise InputError(f"--group {group}: {accel.device} launches these kernels in work-groups of at most "
+                             f"{limit} work-items")
+
+
 def run(mesh_path=None, sets=RAY_SETS, count: int = 1_000_000, seed: int = 0, variants=(("box", "sah"),),
         device=None, size=(1920, 1080), write_dir=None, read_files=(), tmax=np.inf, repeat: int = 5,
         warmup: int = 2, embree: bool = False, groups=("default",), embree_processes: int = 0,
@@ -364,6 +376,7 @@ def run(mesh_path=None, sets=RAY_SETS, count: int = 1_000_000, seed: int = 0, va
     mesh = load_mesh(mesh_path) if mesh_path else primitives.torus_knot(segments=512, sides=32)
     name = Path(mesh_path).name if mesh_path else "torus knot (generated)"
     first = Accel(mesh, *variants[0], device=device)
+    _check_groups(first, groups)
     camera = reference_camera(mesh, mesh_path, size)
     if not read_files:
         for kind in sets:
@@ -452,8 +465,7 @@ def main(argv=None) -> int:
     p.add_argument("--device", help="'gpu', 'cpu' or P:D (default: clrt's choice, the first GPU if any)")
     p.add_argument("--repeat", type=int, default=5)
     p.add_argument("--warmup", type=int, default=2)
-    p.add_argument("--group", type=lambda s: [x if x in ("driver", "default") else int(x) for x in s.split(",")],
-                   default=["default"], help="work-group sizes of the query kernels to compare, e.g. "
+    p.add_argument("--group", type=parse_groups, default=["default"], help="work-group sizes of the query kernels to compare, e.g. "
                                              "driver,64,128 (default: clrt's, clrt.query.accel.QUERY_GROUP "
                                              "and, for packets of rays, PACKET_GROUP)")
     p.add_argument("--walks", type=parse_walks, default=["default"],
