@@ -39,7 +39,7 @@ from pathlib import Path
 import numpy as np
 import pyopencl as cl
 
-from clrt.bench.common import exit_code, parse_count
+from clrt.bench.common import NON_NEGATIVE, exit_code, parse_count
 from clrt.bench.scale import instanced
 from clrt.bench.speed import CASES
 from clrt.config import HOST_BUILDERS
@@ -287,7 +287,7 @@ def main(argv=None) -> int:
                         "(default: paper, sah, device)")
     p.add_argument("--volume", default="box", choices=("box", "sphere", "ellipse"))
     p.add_argument("--leaf-size", type=int, default=4)
-    p.add_argument("--repeat", type=int, default=5, help="warm builds timed after the first (default 5)")
+    p.add_argument("--repeat", type=NON_NEGATIVE, default=5, help="warm builds timed after the first (default 5)")
     p.add_argument("--no-trace", action="store_true", help="skip the primary-ray timing")
     p.add_argument("--profile", action="store_true",
                    help="after the table, one warm build of each device variant launch by launch: device ms "

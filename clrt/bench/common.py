@@ -22,6 +22,22 @@ def parse_size(text: str) -> tuple[int, int]:
     return w, h
 
 
+def int_at_least(lo: int):
+    """argparse type: an integer >= lo (--repeat: 1, --warmup: 0)."""
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            value = lo - 1
+        if value < lo:
+            raise argparse.ArgumentTypeError(f"expected an integer >= {lo}, got {text!r}")
+        return value
+    return parse
+
+
+POSITIVE, NON_NEGATIVE = int_at_least(1), int_at_least(0)
+
+
 def parse_work_group(text: str) -> tuple[int, int]:
     """argparse type for a work-group as 'WxH' pixels, or '0x0' for the driver's choice."""
     return (0, 0) if text.strip().lower() == "0x0" else parse_size(text)

@@ -22,7 +22,8 @@ import time
 import numpy as np
 
 from clrt.config import ACCELS, BUILDERS
-from clrt.bench.common import builder_label, exit_code, parse_size, parse_walks, parse_work_group, walk
+from clrt.bench.common import (NON_NEGATIVE, POSITIVE, builder_label, exit_code, parse_size, parse_walks,
+                               parse_work_group, walk)
 
 FRAME_STAGES = ("ray generation", "pixel colour", "read back")
 
@@ -90,8 +91,8 @@ def main(argv=None) -> int:
     p.add_argument("--builder", action="append", choices=BUILDERS, help="repeatable (default: sah)")
     p.add_argument("--leaf-size", type=int, default=4)
     p.add_argument("--device", help="'gpu', 'cpu' or P:D")
-    p.add_argument("--repeat", type=int, default=5)
-    p.add_argument("--warmup", type=int, default=1)
+    p.add_argument("--repeat", type=POSITIVE, default=5)
+    p.add_argument("--warmup", type=NON_NEGATIVE, default=1)
     p.add_argument("--walks", type=parse_walks, default=["default"],
                    help="default,single: also time the single-ray kernels where clrt walks packets of "
                         "coherent rays (CPU devices), side by side")

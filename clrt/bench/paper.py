@@ -57,7 +57,7 @@ from pathlib import Path
 
 import numpy as np
 
-from clrt.bench.common import parse_size
+from clrt.bench.common import NON_NEGATIVE, POSITIVE, parse_size
 from clrt.bench.paper_meshes import MeshSuite, atomic_write, write_mesh
 from clrt.config import BUILDERS, VOLUMES
 from clrt.errors import ClrtError, DeviceError, InputError
@@ -288,15 +288,15 @@ def add_bench_parser(subparsers) -> argparse.ArgumentParser:
     b.add_argument("--builder", choices=(*BUILDERS, "all"), default="all",
                    help="BVH builder: the paper's, binned SAH, PLOC on the device, or all (default all)")
     b.add_argument("--size", type=parse_size, default=(200, 200), help="WxH (default 200x200, the paper's)")
-    b.add_argument("--repeat", type=_positive, default=3, help="timed frames, median reported (default 3)")
-    b.add_argument("--warmup", type=_non_negative, default=1, help="untimed frames first (default 1)")
-    b.add_argument("--leaf-size", type=_positive, default=4, help="most triangles per BVH leaf (default 4)")
+    b.add_argument("--repeat", type=POSITIVE, default=3, help="timed frames, median reported (default 3)")
+    b.add_argument("--warmup", type=NON_NEGATIVE, default=1, help="untimed frames first (default 1)")
+    b.add_argument("--leaf-size", type=POSITIVE, default=4, help="most triangles per BVH leaf (default 4)")
     b.add_argument("--out", default="bench-results", help="output folder (default bench-results/)")
     b.add_argument("--mesh-dir", help="folder of scanned meshes (default ../shared/meshes beside the "
                                       "repository, when it exists)")
     b.add_argument("--cpu-device", default="cpu", help="device of the CPU programs (default cpu; or P:D)")
     b.add_argument("--gpu-device", default="gpu", help="device of the GPU programs (default gpu; or P:D)")
-    b.add_argument("--max-brute-faces", type=_positive,
+    b.add_argument("--max-brute-faces", type=POSITIVE,
                    help="skip basic and gpu (no BVH) above this many faces, as the paper did for ddboat")
     b.add_argument("--detail-meshes", type=_names, default=None,
                    help="two meshes for the detail-loss test (default teapot,camel)")
@@ -312,20 +312,6 @@ def _names(text: str) -> list[str]:
     return names
 
 
-def _int_at_least(lo: int):
-    """argparse type: an integer >= lo."""
-    def parse(text: str) -> int:
-        try:
-            value = int(text)
-        except ValueError:
-            value = lo - 1
-        if value < lo:
-            raise argparse.ArgumentTypeError(f"expected an integer >= {lo}, got {text!r}")
-        return value
-    return parse
-
-
-_positive, _non_negative = _int_at_least(1), _int_at_least(0)
 
 
 def _select_programs(names: list[str] | None) -> list[str]:

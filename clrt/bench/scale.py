@@ -32,7 +32,7 @@ import time
 import numpy as np
 
 from clrt.config import ACCELS, BUILDERS
-from clrt.bench.common import parse_count, parse_size
+from clrt.bench.common import POSITIVE, parse_count, parse_size
 from clrt.errors import ClrtError
 
 
@@ -139,7 +139,7 @@ def main(argv=None) -> int:
     p.add_argument("--accel", default="box", choices=ACCELS)
     p.add_argument("--leaf-size", type=int, default=4)
     p.add_argument("--size", type=parse_size, action="append", help="image size WxH, repeatable (default 640x480)")
-    p.add_argument("--repeat", type=int, default=3, help="frames timed after one warm-up (default 3)")
+    p.add_argument("--repeat", type=POSITIVE, default=3, help="frames timed after one warm-up (default 3)")
     p.add_argument("--device", help="'gpu', 'cpu' or P:D (default: clrt's choice)")
     p.add_argument("--out", help="also append the table to this file")
     p.add_argument("--mesh", help="copies of this mesh file instead of a torus")

@@ -27,7 +27,7 @@ import pyopencl as cl
 
 from clrt import layouts
 from clrt.config import ACCELS, BUILDERS
-from clrt.bench.common import exit_code, parse_work_group
+from clrt.bench.common import NON_NEGATIVE, POSITIVE, exit_code, parse_work_group
 from clrt.errors import ClrtError
 
 # mesh file, eye, target (from the speed issue)
@@ -103,8 +103,8 @@ def main(argv=None) -> int:
     p.add_argument("--tile", type=parse_work_group,
                    help="work-group as a WxH block of pixels (default 8x8; 0x0: the driver's choice)")
     p.add_argument("--device", help="'gpu', 'cpu' or P:D (default: clrt's choice, the first GPU if any)")
-    p.add_argument("--repeat", type=int, default=20)
-    p.add_argument("--warmup", type=int, default=3)
+    p.add_argument("--repeat", type=POSITIVE, default=20)
+    p.add_argument("--warmup", type=NON_NEGATIVE, default=3)
     p.add_argument("--max-buffer-mib", type=float, help="split scene buffers larger than this (default: the device's limit)")
     args = p.parse_args(argv)
     variants = [(a, b) for a in (args.accel or ["box"]) for b in (args.builder or ["sah"])]
