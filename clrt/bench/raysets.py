@@ -285,7 +285,7 @@ def embree_processes_measure(mesh, origins, directions, tmax=np.inf, processes: 
     this process runs it before each of Embree's queries, while Embree's
     processes wait: clrt and Embree take turns on the same cores, so that a
     slow spell of a shared machine falls on both (measure_beside_embree).
-    The result then also holds the repetitions' times, (repetition, query)."""
+    ``times`` holds each repetition's slowest wall ms, (repetition, query)."""
     import multiprocessing
     context = multiprocessing.get_context("spawn")
     vertices, faces = np.asarray(mesh.vertices, np.float32), np.asarray(mesh.faces, np.int32)
