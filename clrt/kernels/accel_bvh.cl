@@ -41,7 +41,6 @@ inline Hit walk_tree(const Geometry* g, const ShearedRay* r, const VolumeRay* vr
                      float tmin, float tmax, const int query, HitSink* sink)
 {
     Hit best = miss_hit();
-    int best_id = -1;
     int2 stack[BVH_STACK_SIZE];        // (row or first slot, leaf count: 0 for a row)
     float stack_t[BVH_STACK_SIZE];
     int sp = 0;
@@ -49,7 +48,7 @@ inline Hit walk_tree(const Geometry* g, const ShearedRay* r, const VolumeRay* vr
     for (;;) {
         if (current.y > 0) {
             for (int s = current.x; s < current.x + current.y; ++s)
-                if (visit_triangle(g, r, s, tmin, &tmax, query, &best, &best_id, sink))
+                if (visit_triangle(g, r, s, tmin, &tmax, query, &best, sink))
                     return best;
         } else {
             const BvhPairNode n = *SPLIT_AT(g, nodes, current.x);

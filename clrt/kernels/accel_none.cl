@@ -15,9 +15,8 @@ inline Hit query_hits(const Geometry* g, float3 origin, float3 dir, float tmin, 
 {
     const ShearedRay r = shear_ray(origin, dir);
     Hit best = miss_hit();
-    int best_id = -1;
     for (uint i = 0; i < g->num_tris; ++i)
-        if (visit_triangle(g, &r, (int)i, tmin, &tmax, query, &best, &best_id, sink))
+        if (visit_triangle(g, &r, (int)i, tmin, &tmax, query, &best, sink))
             break;
     return best;
 }

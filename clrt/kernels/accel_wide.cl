@@ -34,7 +34,7 @@
 // accesses in the walk's code, 30 inlined): 1.5-5 % faster, docs/benchmarks.md.
 __attribute__((always_inline))
 inline bool visit_packet(const Geometry* g, const ShearedRay* r, int packet, float tmin, float* tmax,
-                         const int query, Hit* best, int* best_id, HitSink* sink)
+                         const int query, Hit* best, HitSink* sink)
 {
     __global const TrianglePacket* p = g->packets + packet;
     float4 t, u, v;
@@ -42,7 +42,7 @@ inline bool visit_packet(const Geometry* g, const ShearedRay* r, int packet, flo
     if (!any(hit))
         return false;
     for (int k = 0; k < 4; ++k)
-        if (hit[k] && record_hit(g, p->slot[k], t[k], u[k], v[k], tmax, query, best, best_id, sink))
+        if (hit[k] && record_hit(g, p->slot[k], t[k], u[k], v[k], tmax, query, best, sink))
             return true;
     return false;
 }
@@ -61,7 +61,6 @@ inline Hit walk_wide_tree(const Geometry* g, const ShearedRay* r, const VolumeRa
 {
     const BoxPlanes planes = box_planes(vr);
     Hit best = miss_hit();
-    int best_id = -1;
     int2 stack[WIDE_STACK_SIZE];       // (node or first packet, packet count: 0 for a node)
     float stack_t[WIDE_STACK_SIZE];
     int sp = 0;
@@ -69,7 +68,7 @@ inline Hit walk_wide_tree(const Geometry* g, const ShearedRay* r, const VolumeRa
     for (;;) {
         if (current.y > 0) {
             for (int p = current.x; p < current.x + current.y; ++p)
-                if (visit_packet(g, r, p, tmin, &tmax, query, &best, &best_id, sink))
+                if (visit_packet(g, r, p, tmin, &tmax, query, &best, sink))
                     return best;
         } else {
             __global const BvhWideNode* n = g->wide_nodes + current.x;

@@ -64,22 +64,23 @@ inline void sink_hit(HitSink* sink, int prim, float t)
 }
 
 // Take a hit (t, u, v) of the triangle in `slot` for `query`; true once the
-// query is answered.
+// query is answered.  The closest hit reads input indices only on a tie of
+// distances (both triangles' then), which is rare, so the walks keep no index
+// of their best hit (the same kernel times on the H200, docs/benchmarks.md).
 inline bool record_hit(const Geometry* g, int slot, float t, float u, float v, float* tmax,
-                       const int query, Hit* best, int* best_id, HitSink* sink)
+                       const int query, Hit* best, HitSink* sink)
 {
     if (query == QUERY_ANY) {
         *best = make_hit(t, slot, u, v);
         return true;
     }
-    const int id = *SPLIT_AT(g, prim_ids, slot);
     if (query == QUERY_ALL) {
-        sink_hit(sink, id, t);
+        sink_hit(sink, *SPLIT_AT(g, prim_ids, slot), t);
         return false;
     }
-    if (t < best->t || (t == best->t && id < *best_id)) {
+    if (t < best->t || (t == best->t && best->prim >= 0
+                        && *SPLIT_AT(g, prim_ids, slot) < *SPLIT_AT(g, prim_ids, best->prim))) {
         *best = make_hit(t, slot, u, v);
-        *best_id = id;
         *tmax = t;   // inclusive: an equal distance with a lower index is still taken
     }
     return false;
@@ -87,12 +88,12 @@ inline bool record_hit(const Geometry* g, int slot, float t, float u, float v, f
 
 // Test the triangle in `slot` for `query`; true once the query is answered.
 inline bool visit_triangle(const Geometry* g, const ShearedRay* r, int slot, float tmin, float* tmax,
-                           const int query, Hit* best, int* best_id, HitSink* sink)
+                           const int query, Hit* best, HitSink* sink)
 {
     float t, u, v;
     if (!intersect_triangle_culled(r, SPLIT_AT(g, tris, slot), tmin, *tmax, sink ? sink->cull : CULL_NONE, &t, &u, &v))
         return false;
-    return record_hit(g, slot, t, u, v, tmax, query, best, best_id, sink);
+    return record_hit(g, slot, t, u, v, tmax, query, best, sink);
 }
 
 #endif
