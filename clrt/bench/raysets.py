@@ -191,14 +191,22 @@ def time_queries(accel, call, repeat: int, warmup: int):
     return statistics.median(kernel), statistics.median(wall), result
 
 
+def _queries(accel, origins, directions, tmax) -> dict:
+    """The two timed queries of a ray set, rays and results on the device:
+    {"closest": call, "any": call}."""
+    import pyopencl.array as cla
+    o_dev, d_dev = cla.to_device(accel.queue, origins), cla.to_device(accel.queue, directions)
+    return {"closest": lambda: accel.trace(o_dev, d_dev, tmax=tmax, fields=("t", "prim")),
+            "any": lambda: accel.any_hit(o_dev, d_dev, tmax=tmax)}
+
+
 def measure(accel, origins, directions, tmax=np.inf, repeat: int = 5, warmup: int = 2) -> dict:
     """Closest-hit and any-hit times of one ray set on ``accel``, rays and results
     on the device; hits, the sum of hit distances, and whether the two agree."""
     import pyopencl.array as cla
-    o_dev, d_dev = cla.to_device(accel.queue, origins), cla.to_device(accel.queue, directions)
-    closest = time_queries(accel, lambda: accel.trace(o_dev, d_dev, tmax=tmax, fields=("t", "prim")),
-                           repeat, warmup)
-    anyhit = time_queries(accel, lambda: accel.any_hit(o_dev, d_dev, tmax=tmax), repeat, warmup)
+    calls = _queries(accel, origins, directions, tmax)
+    closest = time_queries(accel, calls["closest"], repeat, warmup)
+    anyhit = time_queries(accel, calls["any"], repeat, warmup)
     prim, t = (np.asarray(a.get() if isinstance(a, cla.Array) else a) for a in (closest[2].prim, closest[2].t))
     occluded = anyhit[2].get() if isinstance(anyhit[2], cla.Array) else np.asarray(anyhit[2])
     hit = prim >= 0
@@ -329,10 +337,7 @@ def measure_beside_embree(accel, mesh, origins, directions, tmax=np.inf, process
     clrt's -- as the median of the repetitions' ratios, closest hit and any hit.
     On a machine whose speed drifts by 15-20 % from run to run, the paired
     ratio is what stays put."""
-    import pyopencl.array as cla
-    o_dev, d_dev = cla.to_device(accel.queue, origins), cla.to_device(accel.queue, directions)
-    calls = {"closest": lambda: accel.trace(o_dev, d_dev, tmax=tmax, fields=("t", "prim")),
-             "any": lambda: accel.any_hit(o_dev, d_dev, tmax=tmax)}
+    calls = _queries(accel, origins, directions, tmax)
     ours = {"closest": [], "any": []}
 
     def turn(query, counted):
@@ -434,9 +439,9 @@ def run(mesh_path=None, sets=RAY_SETS, count: int = 1_000_000, seed: int = 0, va
     if embree_processes:
         # clrt's first variant and Embree take turns, query by query: both rows
         # come from the same stretch of time, and the speed ratio from each turn.
-        print(f"\nclrt ({variants[0][0]}, {builder_label(*variants[0], 'default')}) and Embree on {embree_processes} processes, "
-              f"taking turns (median of {repeat} after {warmup}; wall ms; speed: Embree's time over clrt's, "
-              f"the median of the turns' ratios):", file=out)
+        print(f"\nclrt ({variants[0][0]}, {builder_label(*variants[0], 'default')}) and Embree on "
+              f"{embree_processes} processes, taking turns (median of {repeat} after {warmup}; wall ms; "
+              f"speed: Embree's time over clrt's, the median of the turns' ratios):", file=out)
         print("\n| rays | count | clrt closest | Embree closest | speed | clrt any | Embree any | speed |", file=out)
         print("|---|---|---|---|---|---|---|---|", file=out)
         for label, o, d, reach in ray_sets:
@@ -465,9 +470,9 @@ def main(argv=None) -> int:
     p.add_argument("--device", help="'gpu', 'cpu' or P:D (default: clrt's choice, the first GPU if any)")
     p.add_argument("--repeat", type=int, default=5)
     p.add_argument("--warmup", type=int, default=2)
-    p.add_argument("--group", type=parse_groups, default=["default"], help="work-group sizes of the query kernels to compare, e.g. "
-                                             "driver,64,128 (default: clrt's, clrt.query.accel.QUERY_GROUP "
-                                             "and, for packets of rays, PACKET_GROUP)")
+    p.add_argument("--group", type=parse_groups, default=["default"],
+                   help="work-group sizes of the query kernels to compare, e.g. driver,64,128 (default: "
+                        "clrt's, clrt.query.accel.QUERY_GROUP and, for packets of rays, PACKET_GROUP)")
     p.add_argument("--walks", type=parse_walks, default=["default"],
                    help="default,single: also time the single-ray kernels where clrt walks packets of "
                         "coherent rays (CPU devices), side by side")
