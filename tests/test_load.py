@@ -515,3 +515,38 @@ def test_shared_cow_3ds_matches_off():
     from_off = load_mesh(SHARED_MESHES / "cow.off")
     assert len(from_3ds.faces) == len(from_off.faces)
     np.testing.assert_allclose(from_3ds.bounds, from_off.bounds, rtol=1e-4, atol=1e-4)
+
+
+SQUARE_V = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0]], np.float64)
+
+
+@pytest.mark.parametrize("vertices, faces, message", [
+    (SQUARE_V, [[0, 1, -1]], "face index out of range (indices -1..1, 4 vertices)"),
+    (SQUARE_V, [[0, 1, 4]], "face index out of range (indices 0..4, 4 vertices)"),
+    (SQUARE_V, [[True, False, True]], "faces must be real numbers, got an array of bool"),
+    (SQUARE_V, [[0, 1, 2.5]], "face indices must be integers"),
+    (SQUARE_V, np.zeros((0, 3), int), "mesh has no triangles"),
+    (SQUARE_V.astype(complex), [[0, 1, 2]], "vertices must be real numbers, got an array of complex128"),
+    ([[np.nan, 0, 0], [1, 0, 0], [0, 1, 0]], [[0, 1, 2]], "1 vertices have NaN or infinite coordinates"),
+    (SQUARE_V * 1e31, [[0, 1, 2]], "vertex coordinates must lie within +-1e30"),
+    ([[0, 0], [1, 1]], [[0, 1, 1]], "vertices must have shape (V, 3), got (2, 2)"),
+])
+def test_mesh_constructor_checks_its_arrays(vertices, faces, message):
+    """clrt.Mesh(V, F) is checked as the loaders' meshes are: a negative index
+    would otherwise pick a vertex from the end and trace a triangle not given."""
+    with pytest.raises(MeshLoadError) as info:
+        Mesh(vertices, faces)
+    assert message in str(info.value)
+
+
+def test_mesh_detail_and_transform_are_checked():
+    mesh = Mesh(SQUARE_V, [[0, 1, 2], [1, 3, 2]], "sq")
+    assert mesh.vertices.dtype == np.float32 and mesh.faces.dtype == np.int32
+    with pytest.raises(MeshLoadError, match=r"sq: normals must have shape \(4, 3\), got \(2, 3\)"):
+        Mesh(SQUARE_V, [[0, 1, 2]], "sq", normals=np.zeros((2, 3)))
+    with pytest.raises(MeshLoadError, match="sq: face material ids must be integers >= -1"):
+        mesh.with_detail(face_material=[0, -2])
+    # a transform taking vertices past float32 is refused, not cast to inf
+    with pytest.raises(MeshLoadError, match=r"within \+-1e30"):
+        mesh.transformed(np.diag([1e31, 1.0, 1.0, 1.0]))
+    assert np.isfinite(mesh.transformed(np.diag([2.0, 2.0, 2.0, 1.0])).vertices).all()

@@ -12,6 +12,58 @@ from clrt import config
 from clrt.errors import MeshLoadError
 
 
+def _real_array(value, what: str) -> np.ndarray:
+    """``value`` as a numpy array of real numbers (integers or floats, not bools
+    or complex numbers); MeshLoadError otherwise."""
+    try:
+        a = np.asarray(value)
+    except (TypeError, ValueError) as exc:
+        raise MeshLoadError(f"{what} are not numeric arrays ({exc})") from None
+    if a.dtype == object:
+        try:
+            a = a.astype(np.float64)
+        except (TypeError, ValueError) as exc:
+            raise MeshLoadError(f"{what} are not numeric arrays ({exc})") from None
+    if not (np.issubdtype(a.dtype, np.integer) or np.issubdtype(a.dtype, np.floating)):
+        raise MeshLoadError(f"{what} must be real numbers, got an array of {a.dtype}")
+    return a
+
+
+def _checked_vertices(vertices, label: str) -> np.ndarray:
+    """(V, 3) float32 of finite coordinates within +-MAX_COORDINATE (checked in
+    the caller's own precision, before the cast could turn 1e39 into inf)."""
+    v = _real_array(vertices, f"{label}vertices")
+    if v.ndim != 2 or v.shape[1] != 3:
+        raise MeshLoadError(f"{label}vertices must have shape (V, 3), got {v.shape}")
+    if not v.size:
+        return np.zeros((0, 3), np.float32)
+    low, high = v.min(), v.max()   # NaN if any is (two passes, no temporary arrays)
+    if not (np.isfinite(low) and np.isfinite(high)):
+        bad = ~np.isfinite(v).all(axis=1)
+        raise MeshLoadError(f"{label}{int(bad.sum())} vertices have NaN or infinite coordinates")
+    if max(high, -low) > config.MAX_COORDINATE:
+        raise MeshLoadError(f"{label}vertex coordinates must lie within +-{config.MAX_COORDINATE:.0e} "
+                            "(the device computes in float32)".replace("e+", "e"))
+    return np.ascontiguousarray(v, dtype=np.float32)
+
+
+def _checked_faces(faces, n_vertices: int, label: str) -> np.ndarray:
+    """(F, 3) int32 indices into ``n_vertices`` vertices, at least one face."""
+    f = _real_array(faces, f"{label}faces")
+    if f.size == 0:
+        raise MeshLoadError(f"{label}mesh has no triangles")
+    if f.ndim != 2 or f.shape[1] != 3:
+        raise MeshLoadError(f"{label}faces must have shape (F, 3), got {f.shape}")
+    if not np.issubdtype(f.dtype, np.integer):
+        if not np.all(np.isfinite(f)) or np.any(f != np.round(f)):
+            raise MeshLoadError(f"{label}face indices must be integers")
+    low, high = f.min(), f.max()
+    if low < 0 or high >= n_vertices:
+        raise MeshLoadError(f"{label}face index out of range (indices {int(low)}..{int(high)}, "
+                            f"{n_vertices} vertices)")
+    return np.ascontiguousarray(f, dtype=np.int32)
+
+
 @dataclass(frozen=True)
 class Mesh:
     """An indexed triangle mesh.
@@ -44,69 +96,54 @@ class Mesh:
     colors: np.ndarray | None = None
     face_material: np.ndarray | None = None
 
+    def __post_init__(self):
+        # Every Mesh is checked, however it is made (``clrt.Mesh(V, F)`` as much
+        # as the loaders): a negative face index would otherwise pick a vertex
+        # from the end (numpy's indexing) and trace a triangle that is not there.
+        label = f"{self.name}: " if self.name else ""
+        object.__setattr__(self, "vertices", _checked_vertices(self.vertices, label))
+        object.__setattr__(self, "faces", _checked_faces(self.faces, len(self.vertices), label))
+        for key in self.DETAIL:
+            value = getattr(self, key)
+            if value is not None:
+                object.__setattr__(self, key, self._checked_detail(key, value, label))
+
     @classmethod
     def from_arrays(cls, vertices, faces, name: str = "") -> "Mesh":
-        """Validate and convert arrays; raise :class:`MeshLoadError` on bad data."""
-        label = f"{name}: " if name else ""
-        try:
-            v = np.asarray(vertices, dtype=np.float64)
-            f = np.asarray(faces)
-        except (TypeError, ValueError) as exc:
-            raise MeshLoadError(f"{label}vertices/faces are not numeric arrays ({exc})") from None
-        if v.ndim != 2 or v.shape[1] != 3:
-            raise MeshLoadError(f"{label}vertices must have shape (V, 3), got {v.shape}")
-        if f.size == 0:
-            raise MeshLoadError(f"{label}mesh has no triangles")
-        if f.ndim != 2 or f.shape[1] != 3:
-            raise MeshLoadError(f"{label}faces must have shape (F, 3), got {f.shape}")
-        if not np.issubdtype(f.dtype, np.integer):
-            if not np.all(np.isfinite(f)) or np.any(f != np.round(f)):
-                raise MeshLoadError(f"{label}face indices must be integers")
-        f = f.astype(np.int64)
-        if f.min() < 0 or f.max() >= len(v):
-            raise MeshLoadError(
-                f"{label}face index out of range (indices {f.min()}..{f.max()}, {len(v)} vertices)")
-        bad = ~np.isfinite(v).all(axis=1)
-        if bad.any():
-            raise MeshLoadError(
-                f"{label}{int(bad.sum())} vertices have NaN or infinite coordinates")
-        if np.abs(v).max() > config.MAX_COORDINATE:
-            raise MeshLoadError(f"{label}vertex coordinates must lie within +-{config.MAX_COORDINATE:.0e} "
-                                "(the device computes in float32)".replace("e+", "e"))
-        return cls(np.ascontiguousarray(v, dtype=np.float32),
-                   np.ascontiguousarray(f, dtype=np.int32), name)
+        """Validate and convert arrays; raise :class:`MeshLoadError` on bad data
+        (as the constructor does)."""
+        return cls(vertices, faces, name)
 
     DETAIL = ("normals", "uv", "colors", "face_material")
 
     def with_detail(self, normals=None, uv=None, colors=None, face_material=None) -> "Mesh":
         """A copy with the surface detail given (not None) checked and set;
         :class:`MeshLoadError` on bad shapes or values."""
-        label = f"{self.name}: " if self.name else ""
-        n_faces, n_vertices = len(self.faces), len(self.vertices)
-        shapes = {"normals": (n_vertices, 3), "uv": (n_faces, 3, 2), "colors": (n_faces, 3, 3),
-                  "face_material": (n_faces,)}
         given = {"normals": normals, "uv": uv, "colors": colors, "face_material": face_material}
-        checked = {}
-        for key, value in given.items():
-            if value is None:
-                continue
-            dtype = np.int32 if key == "face_material" else np.float32
-            try:
-                a = np.asarray(value, dtype=np.float64)
-            except (TypeError, ValueError):
-                raise MeshLoadError(f"{label}{key} are not numeric") from None
-            if a.shape != shapes[key]:
-                raise MeshLoadError(f"{label}{key} must have shape {shapes[key]}, got {a.shape}")
-            if not np.isfinite(a).all():
-                raise MeshLoadError(f"{label}{key} contain NaN or infinite values")
-            if key == "colors":
-                a = np.clip(a, 0.0, 1.0)   # colours are albedos: a file's 1.0000001 is 1
-            if key == "uv" and np.abs(a).max(initial=0) > config.MAX_COORDINATE:
-                raise MeshLoadError(f"{label}texture coordinates must lie within +-{config.MAX_COORDINATE:.0e}")
-            if key == "face_material" and ((a != np.round(a)).any() or a.min() < -1):
+        return replace(self, **{key: value for key, value in given.items() if value is not None})
+
+    def _checked_detail(self, key: str, value, label: str) -> np.ndarray:
+        n_faces, n_vertices = len(self.faces), len(self.vertices)
+        shape = {"normals": (n_vertices, 3), "uv": (n_faces, 3, 2), "colors": (n_faces, 3, 3),
+                 "face_material": (n_faces,)}[key]
+        dtype = np.int32 if key == "face_material" else np.float32
+        if isinstance(value, np.ndarray) and value.dtype == dtype and value.shape == shape \
+                and value.flags.c_contiguous and (key == "face_material" or np.isfinite(value).all()):
+            if key == "face_material" and value.size and value.min() < -1:
                 raise MeshLoadError(f"{label}face material ids must be integers >= -1")
-            checked[key] = np.ascontiguousarray(a, dtype=dtype)
-        return replace(self, **checked)
+            return value    # already checked: a copy made by replace() or _keep_detail
+        a = _real_array(value, f"{label}{key}")
+        if a.shape != shape:
+            raise MeshLoadError(f"{label}{key} must have shape {shape}, got {a.shape}")
+        if not np.isfinite(a).all():
+            raise MeshLoadError(f"{label}{key} contain NaN or infinite values")
+        if key == "colors":
+            a = np.clip(a, 0.0, 1.0)   # colours are albedos: a file's 1.0000001 is 1
+        if key == "uv" and np.abs(a).max(initial=0) > config.MAX_COORDINATE:
+            raise MeshLoadError(f"{label}texture coordinates must lie within +-{config.MAX_COORDINATE:.0e}")
+        if key == "face_material" and ((a != np.round(a)).any() or a.min(initial=0) < -1):
+            raise MeshLoadError(f"{label}face material ids must be integers >= -1")
+        return np.ascontiguousarray(a, dtype=dtype)
 
     def _keep_detail(self, vertices, faces, name, normals=None) -> "Mesh":
         """A Mesh of new vertices and faces (the same faces in the same order) with this one's per-face detail."""
@@ -239,7 +276,9 @@ class Mesh:
         normals = self.normals
         if normals is not None:
             normals = (normals.astype(np.float64) @ np.linalg.inv(m[:3, :3])).astype(np.float32)
-        return self._keep_detail(v.astype(np.float32), self.faces, self.name, normals)
+        # float64 into the constructor: its range check sees a transform that
+        # takes vertices past float32 before the cast would make them infinite
+        return self._keep_detail(v, self.faces, self.name, normals)
 
     @staticmethod
     def concatenate(meshes: "list[Mesh]", name: str = "") -> "Mesh":
