@@ -186,3 +186,32 @@ def device(value, name: str = "device") -> str | None:
     if spec not in config.DEVICE_KINDS and not _DEVICE_SPEC.fullmatch(spec):
         raise fail(name, rule, value)
     return spec
+
+
+# --------------------------------------------------------------------------- host memory
+
+def available_host_memory() -> int | None:
+    """Bytes of host memory available to a new allocation (Linux: MemAvailable), or None."""
+    try:
+        with open("/proc/meminfo") as fh:
+            for line in fh:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    return None
+
+
+def _gib(n: float) -> str:
+    return f"{n / (1 << 30):.1f} GiB" if n >= 1 << 30 else f"{n / (1 << 20):.1f} MiB"
+
+
+def host_memory(nbytes: int, what: str, advice: str) -> None:
+    """TooLargeError naming the size needed when ``nbytes`` exceed the host
+    memory available now: a clear line before the job, rather than numpy's
+    MemoryError (or the kernel's OOM killer) part of the way through it."""
+    from clrt.errors import TooLargeError
+    available = available_host_memory()
+    if available is not None and nbytes > available:
+        raise TooLargeError(f"{what} needs {_gib(nbytes)} of host memory, only {_gib(available)} "
+                            f"is available: {advice}")

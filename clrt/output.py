@@ -93,7 +93,8 @@ def written_by_clrt(path: Path) -> bool:
     path = Path(path)
     if config.IMAGE_FORMATS.get(path.suffix.lower()) not in MARKED_FORMATS:
         return _matches_record(path)
-    return _has_mark(path)
+    # a chart or sheet written by write_file has a record rather than a mark
+    return _has_mark(path) or _matches_record(path)
 
 
 def _png_mark(path: Path) -> bool | None:
@@ -157,16 +158,17 @@ def _has_mark(path: Path) -> bool:
     return False
 
 
-def check_replace(path: Path, force: bool) -> None:
+def check_replace(path: Path, force: bool, option: str = "-o") -> None:
     """OutputError unless ``path`` may be written: it does not exist, or clrt wrote
-    it, or ``force``.  A folder or other non-file is never replaced."""
+    it, or ``force``.  A folder or other non-file is never replaced.  ``option``:
+    the command-line option that names the output, for the message."""
     if not os.path.lexists(path):
         return
     if path.is_dir() or (path.exists() and not path.is_file()):
         raise OutputError(f"cannot write {path}: it is not a regular file")
     if not force and not written_by_clrt(path):
         raise OutputError(f"{path} exists and was not written by clrt (or was changed since); "
-                          "pass --force (-f; force=True in Python) to replace it, or choose another -o")
+                          f"pass --force (-f; force=True in Python) to replace it, or choose another {option}")
 
 
 def _umask() -> int:
@@ -283,6 +285,17 @@ def _replace_atomically(path: Path, write, record: bool = False) -> None:
             reason = exc.strerror if isinstance(exc, OSError) and exc.strerror else exc
             raise OutputError(f"cannot write {path}: {reason}") from None
         raise
+
+
+def write_file(data: bytes | str, path: Path, force: bool = False, option: str = "-o") -> None:
+    """Write any other file clrt makes (a table, a chart, a ray file, a mesh),
+    under the same rule as :func:`write_image`: atomically, with a record of its
+    SHA-256 beside it, over an existing file only if clrt wrote it or ``force``."""
+    path = Path(path)
+    check_replace(path, force, option)
+    if isinstance(data, str):
+        data = data.encode("utf-8")
+    _replace_atomically(path, lambda f: f.write(data), record=True)
 
 
 def write_text(text: str, path: Path) -> None:

@@ -26,3 +26,23 @@ def test_build_bench_prints_every_variant(device, capsys, monkeypatch):
     assert out.count("one warm build:") == 3
     # (the scatter of each pass: radix_scatter on CPU devices, radix_scatter_lookback on GPUs)
     assert ("| radix_scatter | 8 |" in out or "| radix_scatter_lookback | 8 |" in out) and "| ploc_tail | 1 |" in out
+
+
+@pytest.mark.parametrize("builder, message", [
+    ("device/treelets=abc", "error: --builders: 'device/treelets=abc' needs an integer after '='"),
+    ("device/tail=inf", "error: --builders: 'device/tail=inf' needs an integer after '='"),
+    ("device/tail-group=0", "clrt: tail_group must be an integer in 1.."),
+    ("device/tail-group=3", "clrt: tail_group must be a power of two in 1.."),
+    ("device/treelets=-3", "clrt: treelet_leaves must be an integer in 0..8, got -3"),
+    ("device/treelets=2", "clrt: treelet_leaves must be 0 (none) or an integer in 3..8, got 2"),
+])
+def test_bad_builder_settings_fail_in_one_line(builder, message, device, capsys, monkeypatch):
+    monkeypatch.setattr(build, "DEVICE_VARIANTS", dict(build.DEVICE_VARIANTS))
+    try:
+        code = build.main(["--device", device or "cpu", "--meshes", "", "--triangles", "1K", "--builders", builder,
+                           "--repeat", "0", "--no-trace"])
+    except SystemExit as exc:
+        code = exc.code
+    assert code == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert message in err[-1] and len([line for line in err if line.startswith(("clrt:", "Traceback"))]) <= 1

@@ -126,7 +126,7 @@ def test_tiny_bench_run_writes_the_tables(tmp_path, monkeypatch, device, capsys)
     out = tmp_path / "results"
     args = _parse(["--meshes", "triangle2,icosphere", "--programs", "basic,bvh-box,bvh-ellipse,gpu",
                    "--builder", "paper", "--size", "16x16", "--repeat", "1", "--warmup", "1",
-                   "--out", str(out), "--mesh-dir", str(tmp_path / "none"),
+                   "--out", str(out), "--mesh-dir", str(tmp_path),
                    "--cpu-device", device or "cpu", "--detail-meshes", "triangle2,icosphere"])
     assert paper.run_bench(args) == 0
     err = capsys.readouterr().err
@@ -157,8 +157,10 @@ def test_tiny_bench_run_writes_the_tables(tmp_path, monkeypatch, device, capsys)
     for png in ("time-vs-faces.png", "kernel-vs-faces.png", "detail-loss.png"):
         with Image.open(out / png) as im:
             assert im.format == "PNG" and im.width > 300
-    assert sorted(p.name for p in (out / "meshes").iterdir()) == ["icosphere.obj", "triangle2.obj"]
-    assert not list(out.glob(".*")), "no temporary files left behind"
+    assert sorted(p.name for p in (out / "meshes").glob("[!.]*")) == ["icosphere.obj", "triangle2.obj"]
+    # no temporary files left behind; beside each file the record that clrt wrote it
+    assert sorted(p.name for p in out.glob(".*")) == sorted(f".{p.name}.clrt" for p in out.iterdir()
+                                                            if p.is_file() and not p.name.startswith("."))
 
     with open(out / "detail-loss.csv", newline="") as fh:
         detail = list(csv.DictReader(fh))
@@ -193,3 +195,33 @@ def test_chart_draws_without_data_and_with_one_point():
     assert len(rows) > 10
     assert abs(cols.mean() - x) < 1.5 and abs(rows.mean() - y) < 1.5, "the point sits at (80, 1.5)"
     assert is_colour[50:70, 760:800].any(), "the legend shows the series"
+
+
+def test_outputs_are_checked_before_any_work(tmp_path, capsys):
+    """A user's file in --out is never replaced without --force, and nothing is
+    written when an option is bad: every check comes before the first output."""
+    from clrt.errors import DeviceError, InputError, OutputError
+    tiny = ["--meshes", "triangle", "--programs", "basic", "--size", "8x8", "--repeat", "1", "--warmup", "0",
+            "--no-detail"]
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "tables.md").write_text("precious")
+    with pytest.raises(OutputError, match="tables.md exists and was not written by clrt.*another --out"):
+        paper.run_bench(_parse([*tiny, "--out", str(out)]))
+    assert sorted(p.name for p in out.iterdir()) == ["tables.md"]
+    assert paper.run_bench(_parse([*tiny, "--out", str(out), "-f"])) == 0
+    assert (out / "tables.md").read_text() != "precious"
+    assert paper.run_bench(_parse([*tiny, "--out", str(out)])) == 0       # its own files: replaced
+    (tmp_path / "file").write_text("x")
+    with pytest.raises(OutputError, match="it is a file, not a folder"):
+        paper.run_bench(_parse([*tiny, "--out", str(tmp_path / "file")]))
+    fresh = tmp_path / "fresh"
+    with pytest.raises(InputError, match="--cpu-device must be"):
+        paper.run_bench(_parse([*tiny, "--programs", "cpu", "--out", str(fresh), "--cpu-device", "foo"]))
+    with pytest.raises(DeviceError, match="does not exist"):
+        paper.run_bench(_parse([*tiny, "--programs", "cpu", "--out", str(fresh), "--cpu-device", "9:9"]))
+    with pytest.raises(InputError, match="--mesh-dir .*: no such folder"):
+        paper.run_bench(_parse([*tiny, "--out", str(fresh), "--mesh-dir", str(tmp_path / "none")]))
+    with pytest.raises(SystemExit):
+        _parse([*tiny, "--out", str(fresh), "--leaf-size", "300"])
+    assert not fresh.exists()

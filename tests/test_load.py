@@ -332,6 +332,10 @@ def test_3ds_local_matrix_is_not_applied(tmp_path):
 
 
 def test_3ds_registered_with_trimesh(tmp_path):
+    # clrt registers its reader when it first hands trimesh a file (an STL or
+    # glTF); done here, so that the test does not depend on the tests before it
+    from clrt.scene.load_3ds import register_with_trimesh
+    assert register_with_trimesh()
     path = tmp_path / "reg.3ds"
     write_3ds(path, [tetra()])
     loaded = trimesh.load(str(path), force="mesh", process=False)

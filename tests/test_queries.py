@@ -641,3 +641,35 @@ def test_camera_images_of_a_clrt_camera_in_chunks(device):
     corner = np.cos(np.arctan(np.tan(np.radians(22.5)) * np.hypot(1.0, 37 / 23)))   # the widest ray
     assert np.all(cosine <= 1 + 1e-6) and np.all(cosine >= corner - 1e-6)
     assert np.all(np.isinf(whole.depth[~whole.hit]))
+
+
+def test_bad_query_input_is_a_clrt_error(device, monkeypatch):
+    """Every bad value gets clrt's own one-line error, not numpy's, trimesh's or an AttributeError."""
+    mesh = (np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]], float), [[0, 1, 2]])
+    pose = np.eye(4)
+    pose[0, 3] = 1e39   # an eye past float32
+    with pytest.raises(clrt.InputError, match=r"pose\[:3, 3\] must be 3 numbers within \+-1e30"):
+        clrt.camera_images(mesh, K=np.eye(3), pose=pose, width=2, height=2, device=device)
+    for center in (None, "a", float("nan")):
+        with pytest.raises(clrt.InputError, match="pixel_center must be a number"):
+            clrt.camera_images(mesh, K=np.eye(3), pose=np.eye(4), width=2, height=2, pixel_center=center,
+                               device=device)
+    for path in (None, 5):
+        with pytest.raises(clrt.MeshLoadError, match="path must be a str or os.PathLike"):
+            clrt.load_mesh(path)
+    intersector = clrt.RayMeshIntersector(trimesh.creation.box(), device=device)
+    with pytest.raises(clrt.InputError, match=r"points must have shape \(3,\) or \(N, 3\)"):
+        intersector.contains_points([1, 2])
+    with pytest.raises(clrt.InputError, match="point 0 is .*points must be finite"):
+        intersector.contains_points([[np.nan, 0, 0]])
+    for max_hits in (-1, 1.5):
+        with pytest.raises(clrt.InputError, match="max_hits must be an integer >= 1"):
+            intersector.intersects_id([[0, 0, -5]], [[0, 0, 1]], max_hits=max_hits)
+    # more rays than the host can hold: refused at once, before numpy's MemoryError
+    from clrt import checks
+    monkeypatch.setattr(checks, "available_host_memory", lambda: 1 << 30)
+    many = np.broadcast_to(np.float32([0.2, 0.2, 1]), (10**9, 3))
+    with pytest.raises(clrt.TooLargeError, match="a batch of 1,000,000,000 rays needs .* trace them in smaller"):
+        clrt.trace(mesh, many, [0, 0, -1], device=device)
+    with pytest.raises(clrt.TooLargeError, match="a batch of 4,294,967,296 rays"):
+        clrt.camera_images(mesh, K=np.eye(3), pose=np.eye(4), width=65536, height=65536, device=device)

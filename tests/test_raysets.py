@@ -234,3 +234,34 @@ def test_a_work_group_larger_than_the_device_takes_fails_in_one_line(torus, devi
     raysets._check_groups(accel, ["driver", 1, limit])
     with pytest.raises(InputError, match=f"--group {limit + 1}: .* at most"):
         raysets._check_groups(accel, [limit + 1])
+
+
+def test_write_keeps_a_users_file_and_bad_counts_fail_in_one_line(tmp_path, capsys, device):
+    """--write follows clrt's overwrite rule (a user's file needs -f; clrt's own
+    is replaced), checked before the mesh is even loaded."""
+    common = ["--set", "random", "--rays", "50", "--size", "8x8", "--repeat", "1", "--warmup", "0"]
+    common += ["--device", device] if device else []
+    (tmp_path / "random.f32").write_bytes(b"precious")
+    assert raysets.main([str(tmp_path / "missing.off"), *common, "--write", str(tmp_path)]) == 2
+    assert "random.f32 exists and was not written by clrt" in capsys.readouterr().err
+    assert (tmp_path / "random.f32").read_bytes() == b"precious"
+    mesh = tmp_path / "torus.off"
+    mesh.write_text(_off())
+    assert raysets.main([str(mesh), *common, "--write", str(tmp_path), "-f"]) == 0
+    assert (tmp_path / "random.f32").stat().st_size == 50 * 24
+    assert raysets.main([str(mesh), *common, "--write", str(tmp_path)]) == 0    # clrt's own file
+    capsys.readouterr()
+    for bad in (["--rays", "inf"], ["--seed", "-1"], ["--repeat", "0"]):
+        with pytest.raises(SystemExit) as exit_info:
+            raysets.main([str(mesh), *bad])
+        assert exit_info.value.code == 2
+        assert capsys.readouterr().err.strip().splitlines()[-1].startswith(
+            f"python -m clrt.bench.raysets: error: argument {bad[0]}: expected")
+
+
+def test_rays_beyond_host_memory_fail_before_any_work(monkeypatch, capsys):
+    from clrt import checks
+    monkeypatch.setattr(checks, "available_host_memory", lambda: 1 << 30)
+    assert raysets.main(["/nonexistent.off", "--rays", "100M", "--set", "random"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("clrt: making 100,000,000 rays needs") and "only 1.0 GiB is available" in err

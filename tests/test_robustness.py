@@ -28,7 +28,7 @@ from PIL import Image
 
 import clrt
 import clrt.device.program as program_module
-from clrt import cli, output
+from clrt import checks, cli, output
 from clrt.errors import (DeviceError, DeviceMemoryError, InputError, KernelBuildError,
                          MeshLoadError, OutputError, TooLargeError)
 from clrt.device.geometry import check_fits, part_shifts
@@ -138,7 +138,7 @@ def test_missing_unreadable_and_folder_inputs(tmp_path, device, capsys, monkeypa
 def test_bad_options(args, fragment, tmp_path, device, capsys, monkeypatch):
     monkeypatch.chdir(tmp_path)
     if "host memory" in fragment:   # the same on any machine: pretend 1 GiB is free
-        monkeypatch.setattr(render_module, "available_host_memory", lambda: 1 << 30)
+        monkeypatch.setattr(checks, "available_host_memory", lambda: 1 << 30)
     code, out, err = _cli(["render", "--width", "8", "--height", "8", *args], device, capsys)
     assert code == 2
     assert fragment in _one_line(err)

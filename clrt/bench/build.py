@@ -39,10 +39,10 @@ from pathlib import Path
 import numpy as np
 import pyopencl as cl
 
-from clrt.bench.common import NON_NEGATIVE, exit_code, parse_count
+from clrt.bench.common import NON_NEGATIVE, exit_code, int_at_least, parse_count
 from clrt.bench.scale import instanced
 from clrt.bench.speed import CASES
-from clrt.config import HOST_BUILDERS
+from clrt.config import HOST_BUILDERS, MAX_LEAF_SIZE
 from clrt.scene.arrays import triangle_corners
 
 SIZE = (1920, 1080)
@@ -286,7 +286,7 @@ def main(argv=None) -> int:
                         "device/tail=N, device/tail-group=N, device/treelets=N, device/treelet-min=N "
                         "(default: paper, sah, device)")
     p.add_argument("--volume", default="box", choices=("box", "sphere", "ellipse"))
-    p.add_argument("--leaf-size", type=int, default=4)
+    p.add_argument("--leaf-size", type=int_at_least(1, MAX_LEAF_SIZE), default=4)
     p.add_argument("--repeat", type=NON_NEGATIVE, default=5, help="warm builds timed after the first (default 5)")
     p.add_argument("--no-trace", action="store_true", help="skip the primary-ray timing")
     p.add_argument("--profile", action="store_true",
@@ -296,15 +296,18 @@ def main(argv=None) -> int:
     p.add_argument("--embree", action="store_true", help="also time Embree's build of each scene on the host CPU "
                                                          "(needs embreex: the raybench extra)")
     args = p.parse_args(argv)
+    tuning = {"device/tail=": "tail_threshold",        # the hand-over to ploc_tail at another count
+              "device/treelets=": "treelet_leaves",      # leaves per restructured treelet (0: none)
+              "device/treelet-min=": "treelet_min",      # triangles a node needs for its treelet
+              "device/tail-group=": "tail_group"}        # work-items of ploc_tail
     for b in args.builders:
-        if b.startswith("device/tail="):          # the hand-over to ploc_tail at another count
-            DEVICE_VARIANTS[b] = {"tail_threshold": parse_count(b.split("=", 1)[1])}
-        if b.startswith("device/treelets="):      # leaves per restructured treelet (0: none)
-            DEVICE_VARIANTS[b] = {"treelet_leaves": int(b.split("=", 1)[1])}
-        if b.startswith("device/treelet-min="):   # triangles a node needs for its treelet
-            DEVICE_VARIANTS[b] = {"treelet_min": int(b.split("=", 1)[1])}
-        if b.startswith("device/tail-group="):    # work-items of ploc_tail
-            DEVICE_VARIANTS[b] = {"tail_group": int(b.split("=", 1)[1])}
+        for prefix, setting in tuning.items():
+            if b.startswith(prefix):
+                try:
+                    DEVICE_VARIANTS[b] = {setting: parse_count(b[len(prefix):]) if setting == "tail_threshold"
+                                          else int(b[len(prefix):])}
+                except (ValueError, argparse.ArgumentTypeError):
+                    p.error(f"--builders: {b!r} needs an integer after '='")
         if b not in HOST_BUILDERS and b not in DEVICE_VARIANTS:
             p.error(f"unknown builder {b!r}")
     for m in args.meshes:

@@ -22,15 +22,16 @@ def parse_size(text: str) -> tuple[int, int]:
     return w, h
 
 
-def int_at_least(lo: int):
-    """argparse type: an integer >= lo (--repeat: 1, --warmup: 0)."""
+def int_at_least(lo: int, hi: int | None = None):
+    """argparse type: an integer >= lo (--repeat: 1, --warmup: 0), and <= hi if given."""
     def parse(text: str) -> int:
         try:
             value = int(text)
         except ValueError:
             value = lo - 1
-        if value < lo:
-            raise argparse.ArgumentTypeError(f"expected an integer >= {lo}, got {text!r}")
+        if value < lo or (hi is not None and value > hi):
+            rule = f"an integer in {lo}..{hi}" if hi is not None else f"an integer >= {lo}"
+            raise argparse.ArgumentTypeError(f"expected {rule}, got {text!r}")
         return value
     return parse
 
@@ -101,11 +102,18 @@ def parse_count(text: str) -> int:
     scale = {"K": 10**3, "M": 10**6, "G": 10**9}.get(text[-1:], 1)
     try:
         value = int(float(text.rstrip("KMG")) * scale)
-    except ValueError:
+    except (ValueError, OverflowError):   # OverflowError: inf
         value = 0
     if value < 1:
         raise argparse.ArgumentTypeError(f"expected a count such as 500K or 10M, got {text!r}")
     return value
+
+
+def ray_memory(count: int, bytes_per_ray: int) -> None:
+    """TooLargeError before a benchmark generates ``count`` rays that would not
+    fit in the host memory available (numpy's MemoryError otherwise, part way)."""
+    from clrt import checks
+    checks.host_memory(count * bytes_per_ray, f"making {count:,} rays", "ask for fewer rays")
 
 
 def median_wall_ms(call, repeat: int, warmup: int = 1):

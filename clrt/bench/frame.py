@@ -21,8 +21,8 @@ import time
 
 import numpy as np
 
-from clrt.config import ACCELS, BUILDERS
-from clrt.bench.common import (NON_NEGATIVE, POSITIVE, builder_label, exit_code, parse_size, parse_walks,
+from clrt.config import ACCELS, BUILDERS, MAX_LEAF_SIZE
+from clrt.bench.common import (NON_NEGATIVE, POSITIVE, int_at_least, builder_label, exit_code, parse_size, parse_walks,
                                parse_work_group, walk)
 
 FRAME_STAGES = ("ray generation", "pixel colour", "read back")
@@ -89,7 +89,7 @@ def main(argv=None) -> int:
     p.add_argument("--accel", action="append", choices=ACCELS,
                    help="repeatable (default: box)")
     p.add_argument("--builder", action="append", choices=BUILDERS, help="repeatable (default: sah)")
-    p.add_argument("--leaf-size", type=int, default=4)
+    p.add_argument("--leaf-size", type=int_at_least(1, MAX_LEAF_SIZE), default=4)
     p.add_argument("--device", help="'gpu', 'cpu' or P:D")
     p.add_argument("--repeat", type=POSITIVE, default=5)
     p.add_argument("--warmup", type=NON_NEGATIVE, default=1)
@@ -98,6 +98,9 @@ def main(argv=None) -> int:
                         "coherent rays (CPU devices), side by side")
     p.add_argument("--block", type=parse_work_group, help="work-group as WxH pixels (default 16x8; 0x0: the driver's choice)")
     args = p.parse_args(argv)
+    if args.block and args.block[0] * args.block[1] > 4096:   # no OpenCL device runs more at once
+        p.error(f"--block: {args.block[0]}x{args.block[1]} is more work-items than a work-group holds "
+                "(at most 4096; the device's own limit may be lower, and then the driver chooses)")
     accels, builders = args.accel or ["box"], args.builder or ["sah"]
     # No BVH, no builder: "auto" is only there to make a valid Renderer (the
     # table's builder column says "-", builder_label).

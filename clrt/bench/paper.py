@@ -57,10 +57,10 @@ from pathlib import Path
 
 import numpy as np
 
-from clrt.bench.common import NON_NEGATIVE, POSITIVE, parse_size
-from clrt.bench.paper_meshes import MeshSuite, atomic_write, write_mesh
-from clrt.config import BUILDERS, VOLUMES
-from clrt.errors import ClrtError, DeviceError, InputError
+from clrt.bench.common import NON_NEGATIVE, POSITIVE, int_at_least, parse_size
+from clrt.bench.paper_meshes import MeshSuite, write_mesh
+from clrt.config import BUILDERS, MAX_LEAF_SIZE, VOLUMES
+from clrt.errors import ClrtError, DeviceError, InputError, OutputError
 
 # --------------------------------------------------------------------------- the paper's numbers
 
@@ -246,7 +246,10 @@ def measure(scene, camera, device: str, accel: str, builder: str, leaf_size: int
 
 
 def _available_kinds(cpu_spec: str, gpu_spec: str) -> dict[str, bool]:
-    from clrt.device.context import list_devices
+    from clrt.device.context import list_devices, select_device
+    for spec in (cpu_spec, gpu_spec):
+        if spec.lower() not in ("cpu", "gpu"):
+            select_device(spec)   # DeviceError now, before any output, for a P:D not on this machine
     types = {d.type for d in list_devices()}
     return {"CPU": cpu_spec.lower() != "cpu" or "CPU" in types,
             "GPU": gpu_spec.lower() != "gpu" or "GPU" in types}
@@ -256,16 +259,23 @@ def _progress(text: str) -> None:
     print(text, file=sys.stderr, flush=True)
 
 
-def _load(suite: MeshSuite, name: str, mesh_out: Path):
+def _made_mesh_file(suite: MeshSuite, name: str, mesh_out: Path) -> Path | None:
+    """Where a generated or decimated suite mesh is written (None: read as it is)."""
+    entry = suite[name]
+    if entry.path is not None and entry.target is None:
+        return None
+    return mesh_out / f"{name}.{'obj' if entry.path is None else 'off'}"
+
+
+def _load(suite: MeshSuite, name: str, mesh_out: Path, force: bool = False):
     """(mesh, load ms, file): generated and decimated meshes are written to
     ``mesh_out`` first; the time is that of reading the file, as in the paper."""
     from clrt.scene.load import load_mesh
-    entry = suite[name]
-    if entry.path is not None and entry.target is None:
-        path = entry.path
+    path = _made_mesh_file(suite, name, mesh_out)
+    if path is None:
+        path = suite[name].path
     else:
-        made = entry.make()
-        path = write_mesh(made, mesh_out / f"{name}.{'obj' if entry.path is None else 'off'}")
+        write_mesh(suite[name].make(), path, force)
     start = time.perf_counter()
     mesh = load_mesh(path)
     load_ms = 1e3 * (time.perf_counter() - start)
@@ -290,8 +300,10 @@ def add_bench_parser(subparsers) -> argparse.ArgumentParser:
     b.add_argument("--size", type=parse_size, default=(200, 200), help="WxH (default 200x200, the paper's)")
     b.add_argument("--repeat", type=POSITIVE, default=3, help="timed frames, median reported (default 3)")
     b.add_argument("--warmup", type=NON_NEGATIVE, default=1, help="untimed frames first (default 1)")
-    b.add_argument("--leaf-size", type=POSITIVE, default=4, help="most triangles per BVH leaf (default 4)")
+    b.add_argument("--leaf-size", type=int_at_least(1, MAX_LEAF_SIZE), default=4, help="most triangles per BVH leaf (default 4)")
     b.add_argument("--out", default="bench-results", help="output folder (default bench-results/)")
+    b.add_argument("-f", "--force", action="store_true",
+                   help="replace files in --out that clrt did not write (tables, charts, meshes)")
     b.add_argument("--mesh-dir", help="folder of scanned meshes (default ../shared/meshes beside the "
                                       "repository, when it exists)")
     b.add_argument("--cpu-device", default="cpu", help="device of the CPU programs (default cpu; or P:D)")
@@ -353,8 +365,27 @@ def _command_line(args) -> str:
     return " ".join(parts)
 
 
+def _check_outputs(out: Path, suite: MeshSuite, meshes: list[str], force: bool) -> None:
+    """OutputError before any work for an --out that is not a folder, or a file in
+    it that the run would replace and that clrt did not write (clrt.output's rule)."""
+    from clrt.output import check_replace
+    if out.exists() and not out.is_dir():
+        raise OutputError(f"--out {out}: it is a file, not a folder")
+    files = [out / name for name in Report.FILES]
+    files += [p for p in (_made_mesh_file(suite, name, out / "meshes") for name in meshes) if p is not None]
+    for path in files:
+        if path.parent.exists() and not path.parent.is_dir():
+            raise OutputError(f"cannot write {path}: {path.parent} is not a folder")
+        check_replace(path, force, "--out")
+
+
 def run_bench(args) -> int:
     """Run ``clrt bench`` with parsed ``args``; 0 on success (errors raise ClrtError)."""
+    from clrt import checks
+    if args.mesh_dir and not Path(args.mesh_dir).is_dir():   # the default folder may be absent; a named one not
+        raise InputError(f"--mesh-dir {args.mesh_dir}: no such folder")
+    args.cpu_device = checks.device(args.cpu_device, "--cpu-device")
+    args.gpu_device = checks.device(args.gpu_device, "--gpu-device")
     suite = MeshSuite(args.mesh_dir)
     if args.list:
         for entry in suite.entries.values():
@@ -389,7 +420,11 @@ def run_bench(args) -> int:
         _progress(f"note: {note}")
 
     out = Path(args.out)
-    (out / "meshes").mkdir(parents=True, exist_ok=True)
+    _check_outputs(out, suite, meshes, args.force)
+    try:
+        (out / "meshes").mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise OutputError(f"cannot make the output folder {out}: {exc.strerror or exc}") from None
     report = Report(out, _command_line(args), width, height, builders, args, notes)
     variants = _variants(programs, builders)
     total_runs = len(meshes) * len(variants)
@@ -398,7 +433,7 @@ def run_bench(args) -> int:
               f"warm-up {args.warmup}, median of {args.repeat}; results in {out}/")
     from clrt.scene.scene import Camera
     for name in meshes:
-        mesh, load_ms, path = _load(suite, name, out / "meshes")
+        mesh, load_ms, path = _load(suite, name, out / "meshes", args.force)
         faces = len(mesh.faces)
         source = suite[name].source
         _progress(f"{name}: {faces:,} faces ({source}), read from {path} in {load_ms:.1f} ms")
@@ -561,19 +596,27 @@ class Report:
 
     # -- files
 
+    FILES = ("times.csv", "tables.md", "time-vs-faces.png", "kernel-vs-faces.png", "detail-loss.png",
+             "detail-loss.csv")
+
     def write(self) -> None:
-        atomic_write(self.out / "times.csv", self.csv())
-        atomic_write(self.out / "tables.md", self.markdown())
+        from clrt.output import write_file
+        force = self.args.force
+
+        def write(name: str, data) -> None:
+            write_file(data, self.out / name, force, "--out")
+        write("times.csv", self.csv())
+        write("tables.md", self.markdown())
         series = self.series("total_ms")
-        atomic_write(self.out / "time-vs-faces.png", loglog_chart(
+        write("time-vs-faces.png", loglog_chart(
             series, f"Total time per frame (as the paper's times), {self.width}x{self.height}",
             "total ms (read + build + upload + frame)"))
-        atomic_write(self.out / "kernel-vs-faces.png", loglog_chart(
+        write("kernel-vs-faces.png", loglog_chart(
             self.series("kernel_ms"), f"Kernel time per frame (ray generation + colour), "
                                       f"{self.width}x{self.height}", "kernel ms"))
         if self.detail:
-            atomic_write(self.out / "detail-loss.png", detail_sheet(self.detail))
-            atomic_write(self.out / "detail-loss.csv", self.detail_csv())
+            write("detail-loss.png", detail_sheet(self.detail))
+            write("detail-loss.csv", self.detail_csv())
 
     def csv(self) -> str:
         buf = io.StringIO()

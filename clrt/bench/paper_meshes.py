@@ -44,8 +44,6 @@ third-party models we do not have and do not fake.
 from __future__ import annotations
 
 import io
-import os
-import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
@@ -545,31 +543,10 @@ def mesh_text(mesh: Mesh, fmt: str) -> str:
     return buf.getvalue()
 
 
-def atomic_write(path, data: bytes | str) -> None:
-    """Write through a temporary file in the same folder and a rename: a reader
-    never sees a half-written file, and a failure leaves none behind."""
+def write_mesh(mesh: Mesh, path, force: bool = False) -> Path:
+    """Write ``mesh`` as OBJ or OFF (by the suffix of ``path``), atomically and
+    under clrt's overwrite rule (clrt.output.write_file)."""
+    from clrt.output import write_file
     path = Path(path)
-    if isinstance(data, str):
-        data = data.encode("utf-8")
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(data)
-        os.chmod(tmp, 0o666 & ~_umask())      # mkstemp makes it private; give it a new file's mode
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-
-
-def _umask() -> int:
-    mask = os.umask(0o022)
-    os.umask(mask)
-    return mask
-
-
-def write_mesh(mesh: Mesh, path) -> Path:
-    """Write ``mesh`` as OBJ or OFF (by the suffix of ``path``), atomically."""
-    path = Path(path)
-    atomic_write(path, mesh_text(mesh, path.suffix.lower().lstrip(".")))
+    write_file(mesh_text(mesh, path.suffix.lower().lstrip(".")), path, force, "--out")
     return path

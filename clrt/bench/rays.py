@@ -32,7 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from clrt.config import ACCELS, BUILDERS
-from clrt.bench.common import exit_code, median_wall_ms, parse_count
+from clrt.bench.common import NON_NEGATIVE, POSITIVE, exit_code, median_wall_ms, parse_count, ray_memory
 
 QUERIES = ("first", "any", "all")
 
@@ -89,6 +89,7 @@ def run(mesh_path, rays: int = 1_000_000, reference_rays: int = 2_000, device=No
     from clrt.scene.load import load_mesh
     from clrt.query import Accel
 
+    ray_memory(rays, 160)   # float64 rays and unit directions, float32 copies, results
     mesh = load_mesh(mesh_path) if mesh_path else primitives.torus_knot(segments=512, sides=32)
     name = Path(mesh_path).name if mesh_path else "torus knot (generated)"
     o, d = make_rays(mesh, rays, seed)
@@ -161,6 +162,7 @@ def throughput(mesh_path, sizes, device=None, repeat: int = 5, seed: int = 0, ou
     from clrt.scene import primitives
     from clrt.scene.load import load_mesh
 
+    ray_memory(max(sizes), 160)   # float32 and float64 copies of the rays, results
     mesh = load_mesh(mesh_path) if mesh_path else primitives.torus_knot(segments=512, sides=32)
     name = Path(mesh_path).name if mesh_path else "torus knot (generated)"
     acc = Accel(mesh, device=device)
@@ -217,14 +219,14 @@ def _embree_row(mesh, o, d, prim, repeat: int, out) -> None:
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(prog="python -m clrt.bench.rays", description=__doc__.split("\n")[0])
     p.add_argument("mesh", nargs="?", help="mesh file (default: a generated torus knot, 32,768 triangles)")
-    p.add_argument("--rays", type=int, default=1_000_000)
-    p.add_argument("--reference-rays", type=int, default=2_000,
+    p.add_argument("--rays", type=parse_count, default=1_000_000)
+    p.add_argument("--reference-rays", type=parse_count, default=2_000,
                    help="rays given to trimesh's numpy intersector (default 2,000)")
     p.add_argument("--device", help="OpenCL device for clrt (default: as clrt render)")
     p.add_argument("--accel", default="box", choices=ACCELS)
     p.add_argument("--builder", default="sah", choices=BUILDERS)
-    p.add_argument("--repeat", type=int, default=3)
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--repeat", type=POSITIVE, default=3)
+    p.add_argument("--seed", type=NON_NEGATIVE, default=0)
     p.add_argument("--only", action="append", choices=("clrt", "trimesh", "embree"),
                    help="systems to run besides clrt (repeatable; default all)")
     p.add_argument("--throughput", type=lambda t: [parse_count(x) for x in t.split(",")], metavar="1M,10M",
@@ -232,9 +234,7 @@ def main(argv=None) -> int:
                         "random rays of these counts")
     args = p.parse_args(argv)
     if args.throughput:
-        return exit_code(throughput, args.mesh, args.throughput, args.device, max(args.repeat, 1), args.seed)
-    if args.rays < 1 or args.reference_rays < 1 or args.repeat < 1:
-        p.error("--rays, --reference-rays and --repeat must be positive")
+        return exit_code(throughput, args.mesh, args.throughput, args.device, args.repeat, args.seed)
     return exit_code(run, args.mesh, args.rays, args.reference_rays, args.device, args.accel, args.builder,
                      args.repeat, args.seed, tuple(args.only or ("clrt", "trimesh", "embree")))
 

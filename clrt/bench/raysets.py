@@ -44,8 +44,8 @@ from pathlib import Path
 
 import numpy as np
 
-from clrt.bench.common import (builder_label, exit_code, median_wall_ms, parse_count, parse_groups, parse_size,
-                               parse_walks, walk)
+from clrt.bench.common import (NON_NEGATIVE, POSITIVE, builder_label, exit_code, median_wall_ms, parse_count,
+                               parse_groups, parse_size, parse_walks, ray_memory, walk)
 from clrt.config import ACCELS, BUILDERS
 from clrt.errors import InputError
 
@@ -142,15 +142,13 @@ def make_ray_set(kind: str, mesh, count: int, seed: int = 0, accel=None, camera=
     return o.astype(np.float32), d.astype(np.float32), tmax
 
 
-def write_rays(path, origins, directions) -> None:
+def write_rays(path, origins, directions, force: bool = False) -> None:
     """Save rays as plain little-endian float32, N x 6, through a temporary file
-    and a rename (never half written)."""
-    from clrt.bench.paper_meshes import atomic_write
+    and a rename (never half written), and as clrt writes every file: over an
+    existing one only if clrt wrote it, or with ``force`` (clrt.output)."""
+    from clrt.output import write_file
     rows = np.concatenate([np.asarray(origins, np.float32), np.asarray(directions, np.float32)], axis=1)
-    try:
-        atomic_write(path, rows.astype("<f4").tobytes())
-    except OSError as exc:
-        raise InputError(f"cannot write {path}: {exc.strerror or exc}") from None
+    write_file(rows.astype("<f4").tobytes(), Path(path), force, "--write")
 
 
 def read_rays(path) -> tuple[np.ndarray, np.ndarray]:
@@ -370,7 +368,7 @@ def _check_groups(accel, groups) -> None:
 def run(mesh_path=None, sets=RAY_SETS, count: int = 1_000_000, seed: int = 0, variants=(("box", "sah"),),
         device=None, size=(1920, 1080), write_dir=None, read_files=(), tmax=np.inf, repeat: int = 5,
         warmup: int = 2, embree: bool = False, groups=("default",), embree_processes: int = 0,
-        out=None, walks=("default",)) -> list[dict]:
+        out=None, walks=("default",), force: bool = False) -> list[dict]:
     from clrt.query import Accel
     from clrt.scene import primitives
     from clrt.scene.load import load_mesh
@@ -378,6 +376,12 @@ def run(mesh_path=None, sets=RAY_SETS, count: int = 1_000_000, seed: int = 0, va
     out = out or sys.stdout
     # files first: a bad one fails before the mesh is loaded and the BVH built
     ray_sets = [(Path(path).name, *read_rays(path), tmax) for path in read_files]
+    if write_dir is not None:   # every file checked before any work
+        from clrt.output import check_replace
+        for kind in sets:
+            check_replace(Path(write_dir) / f"{kind}.f32", force, "--write")
+    if not read_files:   # each set kept in float32, made in float64, and one set's results
+        ray_memory(count, 24 * len(sets) + 120)
     mesh = load_mesh(mesh_path) if mesh_path else primitives.torus_knot(segments=512, sides=32)
     name = Path(mesh_path).name if mesh_path else "torus knot (generated)"
     first = Accel(mesh, *variants[0], device=device)
@@ -388,7 +392,7 @@ def run(mesh_path=None, sets=RAY_SETS, count: int = 1_000_000, seed: int = 0, va
             o, d, reach = make_ray_set(kind, mesh, count, seed, first, camera)
             ray_sets.append((kind, o, d, reach))
             if write_dir is not None:
-                write_rays(Path(write_dir) / f"{kind}.f32", o, d)
+                write_rays(Path(write_dir) / f"{kind}.f32", o, d, force)
     print(f"mesh: {name}, {len(mesh.faces):,} triangles; device: {first.device}; seed {seed}; "
           f"ao reach {AO_REACH * _diagonal(mesh):.6g}; median of {repeat} after {warmup} warm-up; "
           f"rays and results on the device", file=out)
@@ -460,16 +464,18 @@ def main(argv=None) -> int:
     p.add_argument("--rays", type=parse_count, default=1_000_000, help="rays per generated set (default 1M; "
                    "the camera set has one per pixel)")
     p.add_argument("--size", type=parse_size, default=(1920, 1080), help="reference camera image (default 1920x1080)")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=NON_NEGATIVE, default=0)
     p.add_argument("--write", type=Path, metavar="DIR", help="also save each generated set as DIR/<set>.f32")
+    p.add_argument("-f", "--force", action="store_true",
+                   help="let --write replace files that clrt did not write")
     p.add_argument("--read", type=Path, action="append", metavar="FILE",
                    help="run the rays of these files instead of generating sets (repeatable)")
     p.add_argument("--tmax", type=float, default=np.inf, help="longest hit distance of --read rays (default inf)")
     p.add_argument("--accel", action="append", choices=ACCELS)
     p.add_argument("--builder", action="append", choices=BUILDERS)
     p.add_argument("--device", help="'gpu', 'cpu' or P:D (default: clrt's choice, the first GPU if any)")
-    p.add_argument("--repeat", type=int, default=5)
-    p.add_argument("--warmup", type=int, default=2)
+    p.add_argument("--repeat", type=POSITIVE, default=5)
+    p.add_argument("--warmup", type=NON_NEGATIVE, default=2)
     p.add_argument("--group", type=parse_groups, default=["default"],
                    help="work-group sizes of the query kernels to compare, e.g. driver,64,128 (default: "
                         "clrt's, clrt.query.accel.QUERY_GROUP and, for packets of rays, PACKET_GROUP)")
@@ -483,8 +489,6 @@ def main(argv=None) -> int:
                    help="also run Embree in N processes at once, each on its share of the rays (Embree on N "
                         "cores), taking turns with clrt's first variant; prints the paired speed ratios")
     args = p.parse_args(argv)
-    if args.repeat < 1 or args.warmup < 0:
-        p.error("--repeat must be positive and --warmup not negative")
     if not args.tmax > 0:
         p.error("--tmax must be positive")
     if args.write is not None and not args.write.is_dir():
@@ -501,7 +505,8 @@ def main(argv=None) -> int:
     variants = [(a, b) for a in (args.accel or ["box"]) for b in (args.builder or ["sah"])]
     return exit_code(run, args.mesh, tuple(args.set or RAY_SETS), args.rays, args.seed, variants, args.device,
                      args.size, args.write, tuple(args.read or ()), args.tmax, args.repeat, args.warmup,
-                     args.embree, tuple(args.group), args.embree_processes, None, tuple(args.walks))
+                     args.embree, tuple(args.group), args.embree_processes, None, tuple(args.walks),
+                     args.force)
 
 
 if __name__ == "__main__":

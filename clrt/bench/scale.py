@@ -31,8 +31,8 @@ import time
 
 import numpy as np
 
-from clrt.config import ACCELS, BUILDERS
-from clrt.bench.common import POSITIVE, parse_count, parse_size
+from clrt.config import ACCELS, BUILDERS, MAX_LEAF_SIZE
+from clrt.bench.common import POSITIVE, int_at_least, parse_count, parse_size
 from clrt.errors import ClrtError
 
 
@@ -137,7 +137,7 @@ def main(argv=None) -> int:
     p.add_argument("--builder", type=lambda s: s.split(","), default=["paper", "sah"],
                    help="comma-separated builders (default paper,sah)")
     p.add_argument("--accel", default="box", choices=ACCELS)
-    p.add_argument("--leaf-size", type=int, default=4)
+    p.add_argument("--leaf-size", type=int_at_least(1, MAX_LEAF_SIZE), default=4)
     p.add_argument("--size", type=parse_size, action="append", help="image size WxH, repeatable (default 640x480)")
     p.add_argument("--repeat", type=POSITIVE, default=3, help="frames timed after one warm-up (default 3)")
     p.add_argument("--device", help="'gpu', 'cpu' or P:D (default: clrt's choice)")

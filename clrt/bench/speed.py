@@ -26,8 +26,8 @@ import numpy as np
 import pyopencl as cl
 
 from clrt import layouts
-from clrt.config import ACCELS, BUILDERS
-from clrt.bench.common import NON_NEGATIVE, POSITIVE, exit_code, parse_work_group
+from clrt.config import ACCELS, BUILDERS, MAX_LEAF_SIZE
+from clrt.bench.common import NON_NEGATIVE, POSITIVE, exit_code, int_at_least, parse_work_group
 from clrt.errors import ClrtError
 
 # mesh file, eye, target (from the speed issue)
@@ -99,7 +99,7 @@ def main(argv=None) -> int:
     p.add_argument("--case", action="append", choices=sorted(CASES), help="repeatable (default: all)")
     p.add_argument("--accel", action="append", choices=ACCELS)
     p.add_argument("--builder", action="append", choices=BUILDERS)
-    p.add_argument("--leaf-size", type=int, default=4)
+    p.add_argument("--leaf-size", type=int_at_least(1, MAX_LEAF_SIZE), default=4)
     p.add_argument("--tile", type=parse_work_group,
                    help="work-group as a WxH block of pixels (default 8x8; 0x0: the driver's choice)")
     p.add_argument("--device", help="'gpu', 'cpu' or P:D (default: clrt's choice, the first GPU if any)")

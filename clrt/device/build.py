@@ -371,6 +371,23 @@ class _Phases:
         return out
 
 
+def _check_tuning(device, tail_threshold, treelet_leaves, treelet_min, tail_group) -> None:
+    """InputError for a benchmark's tuning value that the kernels cannot take
+    (rather than a failed program build or a wrong tree)."""
+    from clrt import checks
+    if tail_threshold is not None:
+        checks.integer("tail_threshold", tail_threshold, 1)
+    if treelet_leaves is not None and checks.integer("treelet_leaves", treelet_leaves, 0, 8) in (1, 2):
+        raise checks.fail("treelet_leaves", "0 (none) or an integer in 3..8", treelet_leaves)
+    if treelet_min is not None:
+        checks.integer("treelet_min", treelet_min, 0)
+    if tail_group is not None:
+        largest = int(device.max_work_group_size)
+        group = checks.integer("tail_group", tail_group, 1, largest)
+        if group & (group - 1):
+            raise checks.fail("tail_group", f"a power of two in 1..{largest}", tail_group)
+
+
 @_one_build_per_context
 def build_on_device(context: cl.Context, queue: cl.CommandQueue, corners, volume: str = "box",
                     leaf_size: int = 4, keep_boxes: bool = False,
@@ -411,6 +428,7 @@ def build_on_device(context: cl.Context, queue: cl.CommandQueue, corners, volume
     leaf_size = int(leaf_size)
     tri = as_triangles(corners, check_finite=False)     # checked on the device
     device = queue.device
+    _check_tuning(device, tail_threshold, treelet_leaves, treelet_min, tail_group)
     if "cl_khr_fp64" not in device.extensions:
         raise DeviceError(f"the device BVH builder fits volumes in float64, which {device.name.strip()} lacks")
     kind = device_kind(device)

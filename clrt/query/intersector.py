@@ -30,9 +30,11 @@ from __future__ import annotations
 
 import numpy as np
 
+from clrt import checks
 from clrt.config import DEFAULT_ACCEL, DEFAULT_LEAF_SIZE, HOST_DEFAULT_BUILDER
+from clrt.errors import InputError
 from clrt.query.accel import Accel
-from clrt.query.rays import RayBatch
+from clrt.query.rays import RayBatch, host_rows
 from clrt.scene.sources import as_mesh
 
 
@@ -119,6 +121,8 @@ class RayMeshIntersector:
         every triangle met; default: the intersector's), else only the first;
         ``max_hits``: at most that many per ray (nearest first).
         """
+        if max_hits is not None:
+            max_hits = checks.integer("max_hits", max_hits, 1)
         accel = self.accel
         batch = RayBatch(ray_origins, ray_directions)
         every = self.every_triangle if every_triangle is None else bool(every_triangle)
@@ -136,7 +140,7 @@ class RayMeshIntersector:
         if max_hits is not None and multiple_hits and len(ray):
             first = np.r_[0, np.nonzero(np.diff(ray))[0] + 1]
             rank = np.arange(len(ray)) - np.repeat(first, np.diff(np.r_[first, len(ray)]))
-            keep = rank < int(max_hits)
+            keep = rank < max_hits
             ray, tri, distance = ray[keep], tri[keep], distance[keep]
         if return_locations:
             o = batch.origins[ray].astype(np.float64)
@@ -164,7 +168,11 @@ class RayMeshIntersector:
         the parity of the places hit by rays cast both ways, retried in another
         direction where the two disagree.  Undefined on the surface."""
         from trimesh.ray.ray_util import contains_points
-        return contains_points(self, np.asarray(points, dtype=np.float64))
+        points = host_rows(points, "points")   # InputError, as every query, rather than trimesh's
+        if not np.isfinite(points).all():
+            bad = int(np.argmin(np.isfinite(points).all(axis=1)))
+            raise InputError(f"point {bad} is {points[bad].tolist()}: points must be finite")
+        return contains_points(self, points.astype(np.float64))
 
     # ------------------------------------------------------------------ helpers
 

@@ -52,13 +52,27 @@ def _device_rows(a, what: str, width: int):
     return a, shape[0]
 
 
-def _host_rows(value, what: str) -> np.ndarray:
+def host_rows(value, what: str) -> np.ndarray:
+    """A host array of points or vectors as (N, 3) (a single (3,) row as (1, 3));
+    InputError for anything else."""
     a = _real_array(value, what)
     if a.shape == (3,):
         a = a.reshape(1, 3)
     if a.ndim != 2 or a.shape[1] != 3:
         raise InputError(f"{what} must have shape (3,) or (N, 3), got {a.shape}")
     return a
+
+
+# Bytes a ray's results may take on the host: t, prim, u, v and a normal.
+RESULT_BYTES_PER_RAY = 28
+
+
+def host_memory_for_rays(n: int, copies: int = 0) -> None:
+    """TooLargeError when ``n`` rays' results (and ``copies`` bytes of converted
+    inputs) would not fit in the host memory available now."""
+    nbytes = n * RESULT_BYTES_PER_RAY + copies
+    if nbytes > 1 << 28:   # small batches skip reading /proc/meminfo
+        checks.host_memory(nbytes, f"a batch of {n:,} rays", "trace them in smaller batches")
 
 
 class RayBatch:
@@ -85,13 +99,17 @@ class RayBatch:
             if is_device_array(value):
                 rows.append(_device_rows(value, what, 3))
             else:
-                a = _host_rows(value, what)
+                a = host_rows(value, what)
                 rows.append((a, len(a)))
         (o, no), (d, nd) = rows
         if no != nd and 1 not in (no, nd):
             raise InputError(f"{no} origins but {nd} directions")
         n = max(no, nd) if min(no, nd) > 0 else 0
         self.n = n
+        if not self.on_device:   # the float32 copies and the results, before numpy's MemoryError
+            copies = sum(12 * rows for a, rows in ((o, no), (d, nd))
+                         if not (a.dtype == np.float32 and a.flags.c_contiguous) or rows != n)
+            host_memory_for_rays(n, copies)
         self.inputs = [self._points(o, no, n), self._points(d, nd, n),
                        self._numbers(tmin, n, "tmin"), self._numbers(tmax, n, "tmax")]
 
@@ -127,12 +145,12 @@ class RayBatch:
     @property
     def origins(self) -> np.ndarray:
         """(N, 3) the caller's origins as given (broadcast; host arrays only)."""
-        return np.broadcast_to(_host_rows(self.given["origin"], "origins"), (self.n, 3))
+        return np.broadcast_to(host_rows(self.given["origin"], "origins"), (self.n, 3))
 
     @property
     def directions(self) -> np.ndarray:
         """(N, 3) the caller's directions as given (broadcast; host arrays only)."""
-        return np.broadcast_to(_host_rows(self.given["direction"], "directions"), (self.n, 3))
+        return np.broadcast_to(host_rows(self.given["direction"], "directions"), (self.n, 3))
 
     def host_chunk(self, k: int, start: int, stop: int):
         """Input ``k`` of rays start..stop-1 as a host array to upload (the whole
@@ -181,8 +199,9 @@ class PinholeRays:
         R = pose[:3, :3]
         if not np.allclose(R.T @ R, np.eye(3), atol=1e-4) or np.linalg.det(R) <= 0:
             raise InputError("pose[:3, :3] must be a rotation (orthonormal, determinant +1)")
-        if not np.isfinite(pixel_center):
-            raise InputError("pixel_center must be finite")
+        pixel_center = checks.number("pixel_center", pixel_center)
+        checks.vector("pose[:3, 3]", pose[:3, 3])   # the eye: within +-1e30, as every position
+        host_memory_for_rays(int(width) * int(height))
         self.K_inv = np.linalg.inv(K)
         self.R, self.eye = R, pose[:3, 3].copy()
         self.width, self.height = int(width), int(height)

@@ -410,24 +410,9 @@ def wait_for(event: cl.Event) -> None:
     event.wait()
 
 
-def available_host_memory() -> int | None:
-    """Bytes of host memory available to a new allocation (Linux: MemAvailable), or None."""
-    try:
-        with open("/proc/meminfo") as fh:
-            for line in fh:
-                if line.startswith("MemAvailable:"):
-                    return int(line.split()[1]) * 1024
-    except (OSError, ValueError, IndexError):
-        pass
-    return None
-
-
 def check_host_memory(nbytes: int, what: str) -> None:
     """TooLargeError naming the size needed when ``nbytes`` exceed the available host memory."""
-    available = available_host_memory()
-    if available is not None and nbytes > available:
-        raise TooLargeError(f"{what} needs {_size(nbytes)} of host memory, only {_size(available)} "
-                            "is available: render a smaller image")
+    checks.host_memory(nbytes, what, "render a smaller image")
 
 
 class _stage:

@@ -938,7 +938,12 @@ def load_asset(path) -> "tuple[Mesh, list[dict]]":
     fields (``mesh.face_material`` indexes them; [] for a file without any).
     OBJ reads its ``mtllib`` files and their ``map_Kd`` images from the OBJ's
     folder (a missing one is skipped: the faces keep the default material)."""
-    path = os.fspath(path)
+    try:
+        path = os.fspath(path)
+    except TypeError:
+        raise MeshLoadError(f"a mesh file's path must be a str or os.PathLike, got {type(path).__name__}") from None
+    if isinstance(path, bytes):
+        path = os.fsdecode(path)
     data = _read_bytes(path)
     ext = os.path.splitext(path)[1].lower()
     name = os.path.splitext(os.path.basename(path))[0]
