@@ -36,6 +36,7 @@ ROOT = Path(__file__).resolve().parents[1]
 
 KERNEL_TESTS = ("tests/test_ties.py", "tests/test_watertight.py", "tests/test_queries.py",
                 "tests/test_accel.py", "tests/test_optics.py")
+BOX_TESTS = ("tests/test_wide.py",) + KERNEL_TESTS
 SAH_TESTS = ("tests/test_sah_reference.py", "tests/test_bvh.py", "tests/test_ties.py")
 
 
@@ -50,33 +51,37 @@ class Mutant:
 
 
 MUTANTS = [
-    # ---- traversal (accel_bvh.cl)
-    Mutant("tie-pop", "clrt/kernels/accel_bvh.cl",
-           "} while (stack_t[sp] > tmax);", "} while (stack_t[sp] >= tmax);", KERNEL_TESTS,
-           equivalent="a child's entry bound is strictly below every hit inside it "
-                      "(padding plus the slack of volume_hit), so it never equals tmax when "
-                      "the child holds a hit at tmax"),
+    # ---- traversal (accel_bvh.cl; the pop of both BVH walks is in stack.cl)
+    Mutant("tie-pop", "clrt/kernels/stack.cl",
+           "} while (by_distance && stack_t[*sp] > reach);",
+           "} while (by_distance && stack_t[*sp] >= reach);", KERNEL_TESTS,
+           equivalent="a child's entry bound is strictly below the exact distance of every "
+                      "triangle inside it (padding plus the volume tests' slack), and reach lies "
+                      "the relative slack beyond tmax, more than the triangle test's rounding"),
     Mutant("far-first", "clrt/kernels/accel_bvh.cl",
            "query != QUERY_ALL && t_right < t_left;", "query != QUERY_ALL && t_right > t_left;",
            KERNEL_TESTS,
            equivalent="the visiting order changes only the work done: every child that may "
                       "hold a hit within tmax is still opened, and ties go by index"),
-    Mutant("stack-bottom-lost", "clrt/kernels/accel_bvh.cl",
-           "if (sp == 0)\n                return best;", "if (sp <= 1)\n                return best;",
+    Mutant("stack-bottom-lost", "clrt/kernels/stack.cl",
+           "if (*sp == 0)\n            return false;", "if (*sp <= 1)\n            return false;",
            KERNEL_TESTS),
-    # ---- volume tests (volumes.cl)
+    # ---- volume tests (volumes.cl).  The box mutants change volume_hit, the slab
+    # test of the binary walk (GPUs); PoCL walks box trees wide (accel_wide.cl),
+    # so test_wide.py, which runs both walks on one device, comes first.
     Mutant("box-enter-slack-sign", "clrt/kernels/volumes.cl",
-           "*t_enter = enter - VOLUME_SLACK * fabs(enter);",
-           "*t_enter = enter + VOLUME_SLACK * fabs(enter);", KERNEL_TESTS),
+           "*t_enter = SLACK_EARLIER(enter);   // a lower bound",
+           "*t_enter = SLACK_LATER(enter);   // a lower bound", BOX_TESTS),
     Mutant("box-exit-slack-sign", "clrt/kernels/volumes.cl",
-           "const float exit = far + VOLUME_SLACK * fabs(far);",
-           "const float exit = far - VOLUME_SLACK * fabs(far);", KERNEL_TESTS),
+           "const float exit = SLACK_LATER(far);",
+           "const float exit = SLACK_EARLIER(far);", BOX_TESTS),
     Mutant("box-enter-exit-strict", "clrt/kernels/volumes.cl",
-           "return enter <= exit;", "return enter < exit;", KERNEL_TESTS,
+           "callers compare it with tmax\n    return enter <= exit;",
+           "callers compare it with tmax\n    return enter < exit;", BOX_TESTS,
            equivalent="enter == exit only where a ray touches a padded box in one point, and "
                       "the pad keeps every triangle strictly inside"),
     Mutant("box-tmin-ignored", "clrt/kernels/volumes.cl",
-           "fmax(lo.z, tmin));", "fmax(lo.z, 0.0f));", KERNEL_TESTS),
+           "fmax(lo.z, tmin));", "fmax(lo.z, 0.0f));", BOX_TESTS),
     Mutant("sphere-enter-is-exit", "clrt/kernels/volumes.cl",
            "const float h = sqrt(h2);\n    const float enter = along - h - slack",
            "const float h = sqrt(h2);\n    const float enter = along + h - slack", KERNEL_TESTS),
@@ -90,7 +95,8 @@ MUTANTS = [
            "if (!(t > tmin && t <= tmax))", "if (!(t > tmin && t < tmax))", KERNEL_TESTS),
     # ---- the hit rule (hit.cl)
     Mutant("tie-rule", "clrt/kernels/hit.cl",
-           "(t == best->t && id < *best_id)", "(t == best->t && id > *best_id)", KERNEL_TESTS),
+           "*SPLIT_AT(g, prim_ids, slot) < *SPLIT_AT(g, prim_ids, best->prim)",
+           "*SPLIT_AT(g, prim_ids, slot) > *SPLIT_AT(g, prim_ids, best->prim)", KERNEL_TESTS),
     Mutant("closest-not-strict", "clrt/kernels/hit.cl",
            "if (t < best->t || (t == best->t", "if (t <= best->t || (t == best->t", KERNEL_TESTS),
     # ---- SAH sweep (clrt/accel/sah.py)
