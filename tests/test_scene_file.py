@@ -154,7 +154,7 @@ def test_mesh_path_is_relative_to_scene_file(tmp_path, monkeypatch):
     (SPHERE + 'material = { color = [2, 0, 0] }\n', "objects[0].material.color",
      "must be 3 numbers in 0..1"),
     (SPHERE + 'material = { smooth = 1 }\n', "objects[0].material.smooth", "must be true or false"),
-    ('[materials.glass]\nior = 0.5\n' + SPHERE, "materials.glass.ior", "must be a number >= 1"),
+    ('[materials.glass]\nior = 0.5\n' + SPHERE, "materials.glass.ior", "must be a number in 1..100"),
     ('[materials.glass]\ntransparency = 1.5\n' + SPHERE, "materials.glass.transparency", "in 0..1"),
     ('[materials.glass]\n' + SPHERE + 'material = "glas"\n', "objects[0].material",
      "unknown material 'glas' (did you mean 'glass'?)"),

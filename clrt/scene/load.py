@@ -33,7 +33,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from clrt.config import DEFAULT_DIFFUSE
+from clrt.config import DEFAULT_DIFFUSE, MATERIAL_RANGES
 from clrt.errors import InputError, MeshLoadError
 from clrt.scene import load_3ds
 from clrt.scene.mesh import Mesh
@@ -796,7 +796,8 @@ def _gltf_materials(doc: dict, scene, path: str) -> list:
         if transmission:
             fields["transparency"] = min(max(float(transmission), 0.0), 1.0)
         if "KHR_materials_ior" in extensions:
-            fields["ior"] = max(float(extensions["KHR_materials_ior"].get("ior", 1.5)), 1.0)
+            fields["ior"] = min(max(float(extensions["KHR_materials_ior"].get("ior", 1.5)), 1.0),
+                                MATERIAL_RANGES["ior"][1])
         image = images.get(i)
         info = pbr.get("baseColorTexture")
         if image is not None and isinstance(info, dict):

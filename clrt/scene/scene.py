@@ -17,8 +17,6 @@ def _vec3(value, what: str) -> np.ndarray:
     return np.asarray(checks.position(what, value), dtype=np.float64)
 
 
-_MATERIAL_NUMBERS = {"ambient": {"ge": 0}, "diffuse": {"ge": 0}, "specular": {"ge": 0}, "shininess": {"ge": 0},
-                     "reflectivity": {"ge": 0, "le": 1}, "transparency": {"ge": 0, "le": 1}, "ior": {"ge": 1}}
 
 
 @dataclass(frozen=True)
@@ -52,8 +50,8 @@ class Material:
         object.__setattr__(self, "color", checks.color("material color", self.color))
         if self.texture is not None and not isinstance(self.texture, Texture):
             raise checks.fail("material texture", "a clrt Texture or None", self.texture)
-        for name, limits in _MATERIAL_NUMBERS.items():
-            object.__setattr__(self, name, checks.number(f"material {name}", getattr(self, name), **limits))
+        for name in config.MATERIAL_RANGES:
+            object.__setattr__(self, name, checks.material_number(f"material {name}", getattr(self, name), name))
         checks.boolean("material smooth", self.smooth)
         object.__setattr__(self, "crease", checks.crease(self.crease, "material crease"))
 

@@ -59,6 +59,11 @@ def integer(lo, hi=None):
     return lambda name, value: checks.integer(name, value, lo, hi)
 
 
+def material_number(field: str):
+    """A scalar material field within its range (clrt.config.MATERIAL_RANGES)."""
+    return lambda name, value: checks.material_number(name, value, field)
+
+
 def vector(n: int, **limits):
     """A list of ``n`` numbers, each checked like :func:`number`; a tuple of floats."""
     return lambda name, value: checks.vector(name, value, n, **limits)
@@ -95,15 +100,15 @@ def anything(name, value):
 _MATERIAL_DEFAULTS = Material()
 MATERIAL_KEYS = {
     "color": (checks.color, _MATERIAL_DEFAULTS.color),
-    "ambient": (number(ge=0), _MATERIAL_DEFAULTS.ambient),
-    "diffuse": (number(ge=0), _MATERIAL_DEFAULTS.diffuse),
-    "specular": (number(ge=0), _MATERIAL_DEFAULTS.specular),
-    "shininess": (number(ge=0), _MATERIAL_DEFAULTS.shininess),
+    "ambient": (material_number("ambient"), _MATERIAL_DEFAULTS.ambient),
+    "diffuse": (material_number("diffuse"), _MATERIAL_DEFAULTS.diffuse),
+    "specular": (material_number("specular"), _MATERIAL_DEFAULTS.specular),
+    "shininess": (material_number("shininess"), _MATERIAL_DEFAULTS.shininess),
     "smooth": (boolean, _MATERIAL_DEFAULTS.smooth),
     "crease": (lambda name, value: checks.crease(value, name), _MATERIAL_DEFAULTS.crease),
-    "reflectivity": (number(ge=0, le=1), _MATERIAL_DEFAULTS.reflectivity),
-    "transparency": (number(ge=0, le=1), _MATERIAL_DEFAULTS.transparency),
-    "ior": (number(ge=1), _MATERIAL_DEFAULTS.ior),
+    "reflectivity": (material_number("reflectivity"), _MATERIAL_DEFAULTS.reflectivity),
+    "transparency": (material_number("transparency"), _MATERIAL_DEFAULTS.transparency),
+    "ior": (material_number("ior"), _MATERIAL_DEFAULTS.ior),
 }
 
 # checkerboard's second material when the file gives none: dark tiles.
