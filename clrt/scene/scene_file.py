@@ -239,6 +239,16 @@ def _plane(size) -> Mesh:
     return Mesh.from_arrays(v, [[0, 1, 2], [0, 2, 3]], "plane")
 
 
+def _unlabelled(exc: MeshLoadError, *names: str) -> str:
+    """A Mesh's message without the mesh's own name in front ("torus: vertex ..."),
+    for a message that names the scene file's object instead."""
+    text = str(exc)
+    for name in (*names, "icosphere", "box", "plane", "floor0", "floor1", "torus"):
+        if name and text.startswith(f"{name}: "):
+            return text[len(name) + 2:]
+    return text
+
+
 def _read_toml(label: str, path: str) -> dict:
     import os
     import stat
@@ -325,16 +335,8 @@ class _Loader:
                 meshes = [mesh]
                 if o["material"] is not None:   # the scene's material replaces the file's
                     file_materials = ()
-            elif kind == "sphere":
-                meshes = [primitives.icosphere(o["subdivisions"], o["radius"], o["centre"])]
-            elif kind == "box":
-                meshes = [primitives.box(o["size"])]
-            elif kind == "plane":
-                meshes = [_plane(o["size"])]
-            elif kind == "checkerboard":
-                meshes = list(primitives.checkerboard(o["tiles"], o["size"]))
             else:
-                meshes = [primitives.torus(o["major"], o["minor"], *TORUS_SEGMENTS)]
+                meshes = self.primitive(kind, o, path)
             materials = [material]
             if kind == "checkerboard":
                 materials.append(self.material_ref(o["material2"], _join(path, "material2"), DEFAULT_MATERIAL2))
@@ -342,9 +344,45 @@ class _Loader:
             name = o["name"] or f"{path} ({kind})"
             for k, (mesh, mat) in enumerate(zip(meshes, materials)):
                 suffix = f" tiles {k}" if len(meshes) > 1 else ""
-                mesh = replace(mesh.transformed(matrix), name=name + suffix)
+                mesh = replace(self.transformed(mesh, matrix, path), name=name + suffix)
                 out.append(SceneObject(mesh, mat, file_materials))
         return out
+
+    def primitive(self, kind: str, o: dict, path: str) -> "list[Mesh]":
+        """The meshes of a built-in object type; a size past the device's range is
+        an error naming the object (not the mesh the primitive calls itself)."""
+        try:
+            if kind == "sphere":
+                return [primitives.icosphere(o["subdivisions"], o["radius"], o["centre"])]
+            if kind == "box":
+                return [primitives.box(o["size"])]
+            if kind == "plane":
+                return [_plane(o["size"])]
+            if kind == "checkerboard":
+                return list(primitives.checkerboard(o["tiles"], o["size"]))
+            return [primitives.torus(o["major"], o["minor"], *TORUS_SEGMENTS)]
+        except MeshLoadError as exc:
+            raise self.doc.error(path, _unlabelled(exc), MeshLoadError) from None
+
+    def transformed(self, mesh: Mesh, matrix: np.ndarray, path: str) -> Mesh:
+        """``mesh.transformed(matrix)``, its vertices checked first against the device's
+        range (+-MAX_COORDINATE), in float64, so that a large scale or translate is an
+        error naming the object rather than infinities that a camera or light trips over."""
+        with np.errstate(all="ignore"):
+            v = mesh.vertices.astype(np.float64) @ matrix[:3, :3].T + matrix[:3, 3]
+            largest = float(np.abs(v).max(initial=0.0))
+        if not np.isfinite(v).all() or largest > config.MAX_COORDINATE:
+            # 3 digits, unless they round to the limit (a float32 1e30 is 1.00000002e30).
+            shown = f"{largest:.3g}"
+            if not float(shown) > config.MAX_COORDINATE:
+                shown = f"{largest:.9g}"
+            raise self.doc.error(path, f"vertex coordinates must lie within +-{checks.show(config.MAX_COORDINATE)} "
+                                 f"after its transform (the device computes in float32), got up to "
+                                 f"{shown}".replace("e+", "e"), MeshLoadError)
+        try:
+            return mesh.transformed(matrix)
+        except MeshLoadError as exc:
+            raise self.doc.error(path, _unlabelled(exc, mesh.name), MeshLoadError) from None
 
     def load(self) -> Scene:
         doc = self.doc
@@ -376,7 +414,11 @@ class _Loader:
         scene.camera = self.camera(data.get("camera", {}), scene)
         scene.camera_framed = "eye" not in data.get("camera", {})
         if "lights" not in data:   # as for a single mesh: one light above the eye
-            scene.lights = [default_light(scene.bounds, scene.camera)]
+            try:
+                scene.lights = [default_light(scene.bounds, scene.camera)]
+            except InputError as exc:   # a scene too large for it
+                raise doc.error("lights", str(exc).replace("give the lights' positions", "give [[lights]] "
+                                                           "positions")) from None
         return scene
 
     def camera(self, value, scene: Scene) -> Camera:
@@ -387,7 +429,11 @@ class _Loader:
                                  "to frame the scene)")
         try:
             if c["eye"] is None:
-                return Camera.framing(scene.bounds, c["width"], c["height"], c["fov"], up=c["up"])
+                try:
+                    return Camera.framing(scene.bounds, c["width"], c["height"], c["fov"], up=c["up"])
+                except InputError as exc:   # a scene too large to frame
+                    raise InputError(str(exc).replace("place the camera (eye and target)",
+                                                      "give camera.eye and camera.target")) from None
             return Camera(c["eye"], c["target"], c["up"], c["fov"], c["width"], c["height"])
         except InputError as exc:   # eye == target, up parallel to the view
             raise self.doc.error("camera", exc) from None
