@@ -163,6 +163,10 @@ def test_mesh_path_is_relative_to_scene_file(tmp_path, monkeypatch):
     ('[[objects]]\nradius = 1\n', "objects[0].type", "missing"),
     ('[[objects]]\ntype = "mesh"\n', "objects[0].path", "missing"),
     ('[[objects]]\ntype = "mesh"\npath = "nope.obj"\n', "objects[0].path", "mesh file not found: "),
+    ('[[objects]]\ntype = "mesh"\npath = "/etc"\n', "objects[0].path", "is a folder, not a mesh file: /etc"),
+    ('[[objects]]\ntype = "mesh"\npath = "."\n', "objects[0].path", "is a folder, not a mesh file: "),
+    ('[[objects]]\ntype = "mesh"\npath = ""\n', "objects[0].path", "is empty (give the mesh file's path), got ''"),
+    ('[[objects]]\ntype = "mesh"\npath = " "\n', "objects[0].path", "is empty (give the mesh file's path), got ' '"),
     (SPHERE + '[[lights]]\nposition = [1, 2]\n', "lights[0].position", "must be 3 numbers"),
     (SPHERE + '[[lights]]\ncolor = [1, 1, 1]\n', "lights[0].position", "missing"),
     (SPHERE + '[[lights]]\nposition = [0, 5, 0]\nintensity = -1\n', "lights[0].intensity", ">= 0"),
@@ -194,6 +198,12 @@ def test_toml_syntax_error_names_the_line(tmp_path):
     path = write(tmp_path, SPHERE + "radius 2\n")
     with pytest.raises(InputError, match=r"scene\.toml: invalid TOML: .*line 4"):
         load_scene(path)
+
+
+def test_a_byte_order_mark_is_accepted(tmp_path):
+    path = tmp_path / "bom.toml"
+    path.write_bytes(b"\xef\xbb\xbf" + SPHERE.encode())
+    assert len(load_scene(path).objects) == 1
 
 
 def test_missing_and_unreadable_files(tmp_path):

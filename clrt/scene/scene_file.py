@@ -264,6 +264,8 @@ def _read_toml(label: str, path: str) -> dict:
         raise InputError(f"{label}: is a directory, not a scene file") from None
     except OSError as exc:
         raise InputError(f"{label}: cannot read scene file ({exc.strerror or exc})") from None
+    if data.startswith(b"\xef\xbb\xbf"):   # a UTF-8 byte-order mark (Windows editors write one)
+        data = data[3:]
     try:
         return tomllib.loads(data.decode("utf-8"))
     except UnicodeDecodeError as exc:
@@ -302,7 +304,11 @@ class _Loader:
     def mesh_file(self, name: str, path: str) -> "tuple[Mesh, list]":
         """The mesh file's mesh and its own materials (clrt.scene.load.load_asset)."""
         # Relative to the scene file, so a scene renders the same from any directory.
+        if not name.strip():
+            raise self.doc.error(path, f"is empty (give the mesh file's path), got {_show(name)}", MeshLoadError)
         full = os.path.normpath(os.path.join(self.folder, os.path.expanduser(name)))
+        if os.path.isdir(full):
+            raise self.doc.error(path, f"is a folder, not a mesh file: {full}", MeshLoadError)
         if not os.path.isfile(full):
             raise self.doc.error(path, f"mesh file not found: {full}", MeshLoadError)
         try:
