@@ -225,6 +225,26 @@ def test_stl_round_trip(tmp_path, file_type):
     np.testing.assert_allclose(triangles(mesh), TETRA_V[TETRA_F])
 
 
+def test_broken_binary_stl_says_what_is_wrong(tmp_path):
+    # Not trimesh's ASCII fallback's error (a missing optional package, once).
+    data = trimesh.Trimesh(TETRA_V, TETRA_F, process=False).export(file_type="stl")   # 84 + 4 * 50 bytes
+    assert_one_line_error(write(tmp_path, "t.stl", data[:200]),
+                          "truncated binary STL (header says 4 triangles, the file holds room for 2)")
+    huge = data[:80] + struct.pack("<I", 0xFFFFFFFF) + data[84:]
+    assert_one_line_error(write(tmp_path, "h.stl", huge),
+                          "truncated binary STL (header says 4294967295 triangles, the file holds room for 4)")
+    assert_one_line_error(write(tmp_path, "l.stl", data + b"xy"), "binary STL longer than its header says")
+    assert_one_line_error(write(tmp_path, "s.stl", b"\x01\x02\x03"), "not an STL file (3 bytes")
+    solid = b"solid" + data[5:]   # a binary header may start with 'solid' too
+    assert_one_line_error(write(tmp_path, "b.stl", solid[:200]), "truncated binary STL")
+
+
+def test_latin1_ascii_stl_loads(tmp_path):
+    text = trimesh.Trimesh(TETRA_V, TETRA_F, process=False).export(file_type="stl_ascii").encode()
+    mesh = load_mesh(write(tmp_path, "a.stl", text.replace(b"solid", b"solid caf\xe9", 1)))
+    np.testing.assert_allclose(triangles(mesh), TETRA_V[TETRA_F])
+
+
 def _two_object_scene() -> "tuple[trimesh.Scene, np.ndarray]":
     """A scene with two transformed instances and the (F, 3, 3) triangles expected."""
     scene = trimesh.Scene()

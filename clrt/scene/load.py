@@ -635,6 +635,35 @@ def _load_ply(data: bytes, label: str):
 # STL and glTF through trimesh
 
 
+_STL_HEADER, _STL_TRIANGLE = 84, 50   # binary STL: 80-byte header and a uint32 count; 50 bytes a triangle
+
+
+def _stl_checked(data: bytes, label: str) -> bytes:
+    """The STL file's bytes for trimesh, once its kind is clear: a binary STL must
+    be exactly as long as its header's triangle count says (else trimesh falls
+    back to its ASCII reader, whose error hides the real problem); an ASCII STL
+    starts with 'solid' and holds no NUL byte, and goes to trimesh as UTF-8
+    (its own decoding of other text needs an optional package)."""
+    import struct
+    count = struct.unpack_from("<I", data, 80)[0] if len(data) >= _STL_HEADER else None
+    if count is not None and len(data) == _STL_HEADER + _STL_TRIANGLE * count:
+        return data
+    if data.lstrip()[:5].lower() == b"solid" and b"\0" not in data:
+        try:
+            data.decode("utf-8")
+        except UnicodeDecodeError:
+            data = data.decode("latin-1").encode("utf-8")
+        return data
+    if count is None:
+        raise _fail(label, f"not an STL file ({len(data)} bytes: too short for a binary STL's "
+                           f"{_STL_HEADER}-byte header, and not ASCII STL, which starts with 'solid')")
+    room = (len(data) - _STL_HEADER) // _STL_TRIANGLE
+    if len(data) < _STL_HEADER + _STL_TRIANGLE * count:
+        raise _fail(label, f"truncated binary STL (header says {count} triangles, the file holds room for {room})")
+    raise _fail(label, f"binary STL longer than its header says (header says {count} triangles, the file "
+                       f"holds room for {room}{' and some bytes' if (len(data) - _STL_HEADER) % _STL_TRIANGLE else ''})")
+
+
 def _BufferFileResolver(path: str):
     """trimesh's resolver for the buffers a .gltf names: only regular files in the
     .gltf's folder (trimesh refuses paths leaving it; a FIFO or device there would
@@ -952,6 +981,8 @@ def load_asset(path) -> "tuple[Mesh, list[dict]]":
             parts = [_parse_obj(data, path, os.path.dirname(os.path.abspath(path)))]
         elif ext == ".ply":
             parts = [_load_ply(data, path)]
+        elif ext == ".stl":
+            parts = _load_trimesh(_stl_checked(data, path), "stl", path)
         else:
             parts = _load_trimesh(data, _TRIMESH_TYPES[ext], path)
         return _build(parts, path, name)
