@@ -471,6 +471,48 @@ def test_no_triangles(tmp_path, name, data):
     assert_one_line_error(write(tmp_path, name, data), "no triangles")
 
 
+def _glb_json_replaced(glb: bytes, edit) -> bytes:
+    """The GLB with its JSON chunk's document changed by ``edit(doc)``."""
+    import json
+    (length,) = struct.unpack_from("<I", glb, 12)
+    doc = json.loads(glb[20:20 + length])
+    edit(doc)
+    text = json.dumps(doc).encode()
+    text += b" " * (-len(text) % 4)
+    rest = glb[20 + length:]
+    return struct.pack("<4sII", b"glTF", 2, 20 + len(text) + len(rest)) + struct.pack("<I", len(text)) + b"JSON" \
+        + text + rest
+
+
+def test_broken_gltf_gets_the_mesh_readers_reason(tmp_path):
+    """Not the camera reader's error, nor an exception name of trimesh's."""
+    from clrt.scene.scene import scene_from_mesh
+    glb = trimesh.Trimesh(TETRA_V, TETRA_F, process=False).export(file_type="glb")
+    cases = {
+        "random.glb": (bytes(range(256)) * 2, "corrupt or unsupported GLB file: not a GLB file"),
+        "cut.glb": (glb[:60], "corrupt or unsupported GLB file: truncated GLB file (its JSON chunk is"),
+        "short.glb": (glb[:-8], "corrupt or unsupported GLB file: truncated GLB file (header says"),
+        "bad.gltf": (b'{"asset": {"version": "2.0"}, "meshes": [', "corrupt or unsupported GLTF file: invalid JSON ("),
+        "accessor.glb": (_glb_json_replaced(glb, lambda d: d["meshes"][0]["primitives"][0]["attributes"]
+                                            .update(POSITION=7)),
+                         "corrupt GLB file: meshes[0].primitives[0].attributes.POSITION: accessor 7 does not "
+                         "exist (the file has 2)"),
+        "indices.glb": (_glb_json_replaced(glb, lambda d: d["meshes"][0]["primitives"][0].update(indices=-1)),
+                        "meshes[0].primitives[0].indices: accessor -1 does not exist"),
+        "view.glb": (_glb_json_replaced(glb, lambda d: d["accessors"][0].update(bufferView=9)),
+                     "accessors[0].bufferView: bufferView 9 does not exist"),
+        "node.glb": (_glb_json_replaced(glb, lambda d: d["nodes"][0].update(mesh=3)),
+                     "nodes[0].mesh: mesh 3 does not exist (the file has 1)"),
+    }
+    for name, (data, expected) in cases.items():
+        path = write(tmp_path, name, data)
+        message = assert_one_line_error(path, expected)
+        assert "Error" not in message and "camera" not in message, message
+        with pytest.raises(MeshLoadError) as info:   # the path clrt render takes: camera after mesh
+            scene_from_mesh(str(path))
+        assert str(info.value) == message
+
+
 def test_glb_point_cloud_has_no_triangles(tmp_path):
     cloud = trimesh.Scene(trimesh.PointCloud(TETRA_V))
     assert_one_line_error(write(tmp_path, "cloud.glb", cloud.export(file_type="glb")),

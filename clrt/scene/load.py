@@ -27,6 +27,7 @@ import math
 import os
 import re
 import stat
+import struct
 import warnings
 
 from dataclasses import dataclass, field, replace
@@ -697,13 +698,21 @@ def _load_trimesh(data: bytes, file_type: str, path: str) -> "list[_Part]":
     load_3ds.register_with_trimesh()
 
     gltf = file_type in ("gltf", "glb")
-    doc = None
+    doc = doc_problem = None
     if gltf:
         try:
             doc = _gltf_json(data, "." + file_type)
+            if file_type == "glb" and len(data) < struct.unpack_from("<I", data, 8)[0]:
+                raise ValueError(f"truncated GLB file (header says {struct.unpack_from('<I', data, 8)[0]} "
+                                 f"bytes, the file has {len(data)})")
+            problem = _gltf_reference_problem(doc)
+            if problem:
+                raise _fail(path, f"corrupt {file_type.upper()} file: {problem}")
             data = _gltf_renamed_materials(data, doc, file_type)
-        except Exception:  # noqa: BLE001 -- not valid glTF: trimesh reports it below
-            doc = None
+        except MeshLoadError:
+            raise
+        except Exception as exc:  # noqa: BLE001 -- trimesh may still read it; if not, this is the reason
+            doc, doc_problem = None, _gltf_json_problem(exc)
     kwargs = {"process": False, "validate": False, "skip_materials": doc is None}
     if file_type == "gltf":
         # A .gltf names its buffers (and images) as files beside it.
@@ -733,7 +742,10 @@ def _load_trimesh(data: bytes, file_type: str, path: str) -> "list[_Part]":
     except MeshLoadError:
         raise
     except Exception as exc:  # trimesh raises anything from KeyError to struct.error
-        reason = f"corrupt or unsupported {file_type.upper()} file ({_short(exc)})"
+        if doc_problem:   # ours names the problem; trimesh's exception often only its own symptom
+            reason = f"corrupt or unsupported {file_type.upper()} file: {doc_problem}"
+        else:
+            reason = f"corrupt or unsupported {file_type.upper()} file ({_short(exc)})"
         raise _fail(path, reason) from exc
     if not parts:
         raise _fail(path, "contains no triangles")
@@ -1006,8 +1018,91 @@ def _gltf_json(data: bytes, ext: str) -> dict:
         length, kind = struct.unpack_from("<II", data, 12)
         if kind != 0x4E4F534A:   # "JSON"
             raise ValueError("GLB file without a JSON chunk first")
+        if len(data) < 20 + length:
+            raise ValueError(f"truncated GLB file (its JSON chunk is {length} bytes, the file holds "
+                             f"{len(data) - 20} after the header)")
         data = data[20:20 + length]
     return json.loads(data.decode("utf-8"))
+
+
+def _gltf_json_problem(exc: Exception) -> str:
+    """What :func:`_gltf_json` found wrong, in words."""
+    import json
+    if isinstance(exc, json.JSONDecodeError):
+        return f"invalid JSON ({exc})"
+    if isinstance(exc, UnicodeDecodeError):
+        return f"its JSON is not UTF-8 text (byte {exc.start})"
+    if isinstance(exc, ValueError):   # ours: "not a GLB file", "truncated GLB file ..."
+        return str(exc)
+    return _short(exc)
+
+
+# glTF objects that index others: (list, key, the list indexed).  Cameras are
+# file_camera's concern: a broken one does not stop the mesh from loading.
+_GLTF_REFERENCES = (("accessors", "bufferView", "bufferViews"), ("bufferViews", "buffer", "buffers"),
+                    ("nodes", "mesh", "meshes"))
+
+
+def _gltf_reference_problem(doc) -> str | None:
+    """The first index in a glTF document that points past its list (an accessor
+    that does not exist, ...), as ``'meshes[0].primitives[0].attributes.POSITION:
+    accessor 7 does not exist (the file has 2)'``; None when all are in range.
+    trimesh would fail on one with an internal error (UnboundLocalError, KeyError)."""
+    if not isinstance(doc, dict):
+        return f"the JSON is {type(doc).__name__}, not an object"
+
+    def check(where: str, index, kind: str):
+        items = doc.get(kind, [])
+        n = len(items) if isinstance(items, list) else 0
+        if isinstance(index, bool) or not isinstance(index, int) or not 0 <= index < n:
+            what = kind[:-1] if kind != "meshes" else "mesh"
+            return f"{where}: {what} {json_text(index)} does not exist (the file has {n})"
+        return None
+
+    def json_text(value):
+        import json
+        text = json.dumps(value)
+        return text if len(text) <= 40 else text[:37] + "..."
+
+    def listed(kind: str):
+        items = doc.get(kind, [])
+        return [(i, v) for i, v in enumerate(items) if isinstance(v, dict)] if isinstance(items, list) else []
+
+    for i, mesh in listed("meshes"):
+        primitives = mesh.get("primitives", [])
+        for j, primitive in enumerate(primitives if isinstance(primitives, list) else []):
+            if not isinstance(primitive, dict):
+                continue
+            where = f"meshes[{i}].primitives[{j}]"
+            attributes = primitive.get("attributes", {})
+            refs = [(f"{where}.attributes.{k}", v) for k, v in attributes.items()] if isinstance(attributes, dict) else []
+            if "indices" in primitive:
+                refs.append((f"{where}.indices", primitive["indices"]))
+            for path, index in refs:
+                problem = check(path, index, "accessors")
+                if problem:
+                    return problem
+    for kind, key, target in _GLTF_REFERENCES:
+        for i, item in listed(kind):
+            if key in item:
+                problem = check(f"{kind}[{i}].{key}", item[key], target)
+                if problem:
+                    return problem
+    for i, node in listed("nodes"):
+        children = node.get("children", [])
+        for k, child in enumerate(children if isinstance(children, list) else []):
+            problem = check(f"nodes[{i}].children[{k}]", child, "nodes")
+            if problem:
+                return problem
+    for i, scene in listed("scenes"):
+        roots = scene.get("nodes", [])
+        for k, node in enumerate(roots if isinstance(roots, list) else []):
+            problem = check(f"scenes[{i}].nodes[{k}]", node, "nodes")
+            if problem:
+                return problem
+    if "scene" in doc:
+        return check("scene", doc["scene"], "scenes")
+    return None
 
 
 def _glb_json_bytes(path: str) -> bytes:

@@ -336,8 +336,9 @@ def scene_from_mesh(mesh, material=None, lights=None, background=config.DEFAULT_
     view, file_materials = None, ()
     if isinstance(mesh, (str, os.PathLike)):
         from clrt.scene.load import file_camera, load_asset
-        view = file_camera(mesh)
-        mesh, file_materials = load_asset(mesh)
+        path = mesh
+        mesh, file_materials = load_asset(path)   # first: a broken file's error is the mesh reader's
+        view = file_camera(path)
     scene = Scene([SceneObject(mesh, Material.of(material), file_materials if material is None else ())],
                   [] if lights is None else lights, background)
     if view is not None:
