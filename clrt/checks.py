@@ -48,7 +48,7 @@ def _number_text(value) -> str:
         return str(int(value))
     value = float(value)
     text = f"{value:g}" if math.isfinite(value) and value == round(value, 6) else repr(value)
-    return text.replace("e+", "e")
+    return re.sub(r"e([+-]?)0(\d)", r"e\1\2", text).replace("e+", "e")   # 1e+09 -> 1e9, 1e-05 -> 1e-5
 
 
 def fail(name: str, rule: str, value) -> InputError:

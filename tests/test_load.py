@@ -513,6 +513,20 @@ def test_broken_gltf_gets_the_mesh_readers_reason(tmp_path):
         assert str(info.value) == message
 
 
+@pytest.mark.parametrize("statement, expected", [
+    ("Kd 2 nan -1", "Kd must be 3 finite numbers, got (2, nan, -1)"),
+    ("Ns inf", "Ns must be a finite number, got inf"),
+    ("Ns 1e300", "Ns 1e300 is out of range: material shininess must be a number in 0..10000, got 1e300"),
+    ("Ni 1e9", "Ni 1e9 is out of range: material ior must be a number in 1..100, got 1e9"),
+    ("Ks 5000 5000 5000", "Ks (5000, 5000, 5000) is out of range: material specular must be a number in 0..1000"),
+])
+def test_bad_mtl_values_name_the_file_and_material(tmp_path, statement, expected):
+    obj = write(tmp_path, "m.obj", "mtllib m.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nusemtl red\nf 1 2 3\n")
+    write(tmp_path, "m.mtl", f"newmtl green\nKd 0 1 0\nnewmtl red\n{statement}\n")
+    message = assert_one_line_error(obj, f"m.mtl: material 'red': {expected}")
+    assert message.startswith(f"{obj}: m.mtl: material 'red': "), message
+
+
 def test_glb_point_cloud_has_no_triangles(tmp_path):
     cloud = trimesh.Scene(trimesh.PointCloud(TETRA_V))
     assert_one_line_error(write(tmp_path, "cloud.glb", cloud.export(file_type="glb")),

@@ -431,7 +431,38 @@ def _parse_mtl(path: str, label: str) -> dict:
                 current[key] = float(args[0])
         except ValueError:
             raise _fail(label, f"{os.path.basename(path)}: malformed {key} line") from None
-    return {name: _whitted_from_mtl(m) for name, m in materials.items()}
+    return {name: _mtl_material(m, f"{os.path.basename(path)}: material {name!r}", label)
+            for name, m in materials.items()}
+
+
+# The MTL statement behind each material field, for messages.
+_MTL_KEYS = {"color": "Kd", "specular": "Ks", "reflectivity": "Ks", "shininess": "Ns", "transparency": "d",
+             "ior": "Ni", "texture": "map_Kd"}
+
+
+def _mtl_material(m: dict, where: str, label: str) -> dict:
+    """:func:`_whitted_from_mtl`, its values checked: a bad one is an error naming
+    the mesh file, the MTL file, the material and the statement, with the values
+    as the file has them (not as clamped into range)."""
+    from clrt import checks
+    from clrt.scene.scene import Material
+    for key, value in m.items():
+        values = value if isinstance(value, list) else [value] if isinstance(value, float) else []
+        if not all(math.isfinite(v) for v in values):
+            shown = checks.show(value)
+            rule = f"{len(values)} finite numbers" if isinstance(value, list) else "a finite number"
+            raise _fail(label, f"{where}: {key} must be {rule}, got {shown}")
+    fields = _whitted_from_mtl(m)
+    try:
+        Material(**fields)
+    except InputError as exc:
+        bad = next((f for f in fields if f"material {f} " in str(exc)), "")
+        key = _MTL_KEYS.get(bad, "")
+        if key == "d" and "d" not in m:
+            key = "Tr"
+        given = f"{key} {checks.show(m[key])} " if key in m else ""
+        raise _fail(label, f"{where}: {given}is out of range: {exc}") from None
+    return fields
 
 
 def _whitted_from_mtl(m: dict) -> dict:
