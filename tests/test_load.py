@@ -455,6 +455,17 @@ def test_ply_huge_header_count_fails_fast(tmp_path, encoding):
     assert time.perf_counter() - start < 1.0
 
 
+@pytest.mark.parametrize("faces, expected", [
+    ("f 1 2 3\nf 1 2 4\n", "face 2 names vertex 4, but the file defines 3 vertices (OBJ indices 1..3"),
+    ("f 1 2 3 -4\n", "face 1 names vertex -4, but the file defines 3 vertices"),
+    ("vn 0 0 1\nf 1//1 2//1 5//1\n", "face 1 names vertex 5,"),
+])
+def test_obj_face_index_out_of_range_in_the_files_numbering(tmp_path, faces, expected):
+    # 1-based, as the file counts; not the 0-based "indices 0..3" of Mesh.from_arrays.
+    message = assert_one_line_error(write(tmp_path, "range.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\n" + faces), expected)
+    assert "0.." not in message
+
+
 def test_off_face_index_out_of_range(tmp_path):
     text = "OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 3\n"
     assert_one_line_error(write(tmp_path, "range.off", text), "out of range")

@@ -331,7 +331,13 @@ def _parse_obj(data: bytes, label: str, folder: str | None = None) -> "_Part":
     if (flat < 0).any() or "/" in face_text or any(line.startswith("usemtl ") for line in lines):
         ordered = [line for line in lines if line[:2] in ("v ", "f ", "vt", "vn", "us")]
         statements = [line.split(" ", 1)[0] for line in ordered]
+    written = flat
     flat = _obj_absolute(flat, counts, statements, "v", label) - 1
+    bad = np.flatnonzero((flat < 0) | (flat >= len(vertices)))
+    if bad.size:   # said here, in the file's 1-based numbering (Mesh would say 0-based)
+        face = int(np.searchsorted(np.cumsum(counts), bad[0], side="right")) + 1
+        raise _fail(label, f"face {face} names vertex {int(written[bad[0]])}, but the file defines "
+                           f"{len(vertices)} vertices (OBJ indices 1..{len(vertices)}, or negative counting back)")
     # Triangle corners as positions in the flat corner list, so that every
     # per-corner field triangulates exactly as the vertex indices do.
     corners = _fan_triangulate(counts, np.arange(len(flat)))
