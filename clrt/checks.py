@@ -48,7 +48,7 @@ def _number_text(value) -> str:
         return str(int(value))
     value = float(value)
     text = f"{value:g}" if math.isfinite(value) and value == round(value, 6) else repr(value)
-    return text.replace("e+", "e")
+    return re.sub(r"e([+-]?)0(\d)", r"e\1\2", text).replace("e+", "e")   # 1e+09 -> 1e9, 1e-05 -> 1e-5
 
 
 def fail(name: str, rule: str, value) -> InputError:
@@ -77,6 +77,10 @@ def is_number(value) -> bool:
 def integer(name: str, value, lo: int, hi: int | None = None) -> int:
     """An integer (not a bool, not a float such as 2.0) in lo..hi."""
     rule = f"an integer in {lo}..{hi}" if hi is not None else f"an integer >= {lo}"
+    if is_number(value) and not isinstance(value, Integral):
+        # A float shows as one (2.0, not 2), so that the value does not look valid.
+        text = repr(float(value)).replace("e+", "e")
+        raise InputError(f"{name} must be {rule}, got {text}")
     if not isinstance(value, Integral) or isinstance(value, bool) or value < lo or (hi is not None and value > hi):
         raise fail(name, rule, value)
     return int(value)
@@ -144,6 +148,13 @@ def choice(name: str, value, choices) -> str:
 def image_size(width, height, names=("width", "height")) -> tuple[int, int]:
     return (integer(names[0], width, 1, config.MAX_IMAGE_SIDE),
             integer(names[1], height, 1, config.MAX_IMAGE_SIDE))
+
+
+def material_number(name: str, value, field: str) -> float:
+    """A scalar material field (ambient, diffuse, ...) within its range of
+    :data:`clrt.config.MATERIAL_RANGES`; all are finite in float32 on the device."""
+    lo, hi = config.MATERIAL_RANGES[field]
+    return number(name, value, ge=lo, le=hi)
 
 
 def fov(value, name: str = "fov") -> float:

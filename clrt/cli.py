@@ -89,7 +89,7 @@ def _output_path(args) -> Path:
     """The image to write, checked before any work: a writable file of a format clrt writes."""
     if args.output is not None:
         if not args.output.strip():
-            raise OutputError("-o must name an image file, got ''")
+            raise OutputError(f"-o must name an image file, got {args.output!r}")
         out = Path(args.output)
         if out.is_dir():
             raise OutputError(f"cannot write {args.output}: it is a folder (give a file name, e.g. "

@@ -71,6 +71,12 @@ DEFAULT_DIFFUSE = 0.7
 DEFAULT_SPECULAR = 0.3
 DEFAULT_SHININESS = 32.0
 DEFAULT_IOR = 1.5
+#: The range of each scalar material field (docs/scene-files.md lists them): the
+#: weights may exceed 1 (a bright highlight), but not so far that the shading
+#: sums overflow float32 on the device; a Phong exponent of 10000 already makes
+#: a highlight narrower than a pixel.
+MATERIAL_RANGES = {"ambient": (0, 1000), "diffuse": (0, 1000), "specular": (0, 1000),
+                   "shininess": (0, 10000), "reflectivity": (0, 1), "transparency": (0, 1), "ior": (1, 100)}
 DEFAULT_BACKGROUND = (0.0, 0.0, 0.0)
 DEFAULT_AMBIENT_LIGHT = (1.0, 1.0, 1.0)
 DEFAULT_LIGHT_COLOR = (1.0, 1.0, 1.0)

@@ -44,6 +44,16 @@ def number(name: str, **limits):
     return typed(lambda v: checks.number(name, v, **limits))
 
 
+def material(field: str):
+    """A scalar material option (--ambient, ...) within its range of config.MATERIAL_RANGES."""
+    return typed(lambda v: checks.material_number(f"--{field}", v, field))
+
+
+def _range(field: str) -> str:
+    lo, hi = config.MATERIAL_RANGES[field]
+    return f"{lo}..{hi}"
+
+
 def vector(name: str, check=checks.position):
     return typed(lambda v: check(name, v), vector_text)
 
@@ -71,14 +81,14 @@ def add_render_options(r: argparse.ArgumentParser) -> None:
     r.add_argument("--color", type=vector("--color", checks.color),
                    help="material colour r,g,b, linear 0..1 (default .8,.8,.8); like every material "
                         "option it replaces that field of every object's material")
-    r.add_argument("--ambient", type=number("--ambient", ge=0),
-                   help=f"ambient coefficient (default {config.DEFAULT_AMBIENT:g})")
-    r.add_argument("--diffuse", type=number("--diffuse", ge=0),
-                   help=f"diffuse coefficient (default {config.DEFAULT_DIFFUSE:g})")
-    r.add_argument("--specular", type=number("--specular", ge=0),
-                   help=f"specular coefficient (default {config.DEFAULT_SPECULAR:g})")
-    r.add_argument("--shininess", type=number("--shininess", ge=0),
-                   help=f"Phong exponent (default {config.DEFAULT_SHININESS:g})")
+    r.add_argument("--ambient", type=material("ambient"),
+                   help=f"ambient coefficient, {_range('ambient')} (default {config.DEFAULT_AMBIENT:g})")
+    r.add_argument("--diffuse", type=material("diffuse"),
+                   help=f"diffuse coefficient, {_range('diffuse')} (default {config.DEFAULT_DIFFUSE:g})")
+    r.add_argument("--specular", type=material("specular"),
+                   help=f"specular coefficient, {_range('specular')} (default {config.DEFAULT_SPECULAR:g})")
+    r.add_argument("--shininess", type=material("shininess"),
+                   help=f"Phong exponent, {_range('shininess')} (default {config.DEFAULT_SHININESS:g})")
     r.add_argument("--flat", action="store_true", help="flat shading (no vertex-normal interpolation)")
     r.add_argument("--crease", type=typed(lambda v: checks.crease(v, "--crease")), metavar="DEG",
                    help="smooth shading keeps edges whose faces meet at more than DEG degrees sharp "

@@ -137,6 +137,7 @@ def test_output_path_is_printed_absolute_with_and_without_q(tmp_path, device, ca
 
 @pytest.mark.parametrize("output, fragment", [
     ("", "-o must name an image file, got ''"),
+    (" ", "-o must name an image file, got ' '"),
     ("folder", "cannot write folder: it is a folder"),
     ("newfolder/", "names a folder"),
     ("x", "no image type suffix"),

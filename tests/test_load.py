@@ -225,6 +225,26 @@ def test_stl_round_trip(tmp_path, file_type):
     np.testing.assert_allclose(triangles(mesh), TETRA_V[TETRA_F])
 
 
+def test_broken_binary_stl_says_what_is_wrong(tmp_path):
+    # Not trimesh's ASCII fallback's error (a missing optional package, once).
+    data = trimesh.Trimesh(TETRA_V, TETRA_F, process=False).export(file_type="stl")   # 84 + 4 * 50 bytes
+    assert_one_line_error(write(tmp_path, "t.stl", data[:200]),
+                          "truncated binary STL (header says 4 triangles, the file holds room for 2)")
+    huge = data[:80] + struct.pack("<I", 0xFFFFFFFF) + data[84:]
+    assert_one_line_error(write(tmp_path, "h.stl", huge),
+                          "truncated binary STL (header says 4294967295 triangles, the file holds room for 4)")
+    assert_one_line_error(write(tmp_path, "l.stl", data + b"xy"), "binary STL longer than its header says")
+    assert_one_line_error(write(tmp_path, "s.stl", b"\x01\x02\x03"), "not an STL file (3 bytes")
+    solid = b"solid" + data[5:]   # a binary header may start with 'solid' too
+    assert_one_line_error(write(tmp_path, "b.stl", solid[:200]), "truncated binary STL")
+
+
+def test_latin1_ascii_stl_loads(tmp_path):
+    text = trimesh.Trimesh(TETRA_V, TETRA_F, process=False).export(file_type="stl_ascii").encode()
+    mesh = load_mesh(write(tmp_path, "a.stl", text.replace(b"solid", b"solid caf\xe9", 1)))
+    np.testing.assert_allclose(triangles(mesh), TETRA_V[TETRA_F])
+
+
 def _two_object_scene() -> "tuple[trimesh.Scene, np.ndarray]":
     """A scene with two transformed instances and the (F, 3, 3) triangles expected."""
     scene = trimesh.Scene()
@@ -439,6 +459,17 @@ def test_ply_huge_header_count_fails_fast(tmp_path, encoding):
     assert time.perf_counter() - start < 1.0
 
 
+@pytest.mark.parametrize("faces, expected", [
+    ("f 1 2 3\nf 1 2 4\n", "face 2 names vertex 4, but the file defines 3 vertices (OBJ indices 1..3"),
+    ("f 1 2 3 -4\n", "face 1 names vertex -4, but the file defines 3 vertices"),
+    ("vn 0 0 1\nf 1//1 2//1 5//1\n", "face 1 names vertex 5,"),
+])
+def test_obj_face_index_out_of_range_in_the_files_numbering(tmp_path, faces, expected):
+    # 1-based, as the file counts; not the 0-based "indices 0..3" of Mesh.from_arrays.
+    message = assert_one_line_error(write(tmp_path, "range.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\n" + faces), expected)
+    assert "0.." not in message
+
+
 def test_off_face_index_out_of_range(tmp_path):
     text = "OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 3\n"
     assert_one_line_error(write(tmp_path, "range.off", text), "out of range")
@@ -453,6 +484,62 @@ def test_off_face_index_out_of_range(tmp_path):
 ])
 def test_no_triangles(tmp_path, name, data):
     assert_one_line_error(write(tmp_path, name, data), "no triangles")
+
+
+def _glb_json_replaced(glb: bytes, edit) -> bytes:
+    """The GLB with its JSON chunk's document changed by ``edit(doc)``."""
+    import json
+    (length,) = struct.unpack_from("<I", glb, 12)
+    doc = json.loads(glb[20:20 + length])
+    edit(doc)
+    text = json.dumps(doc).encode()
+    text += b" " * (-len(text) % 4)
+    rest = glb[20 + length:]
+    return struct.pack("<4sII", b"glTF", 2, 20 + len(text) + len(rest)) + struct.pack("<I", len(text)) + b"JSON" \
+        + text + rest
+
+
+def test_broken_gltf_gets_the_mesh_readers_reason(tmp_path):
+    """Not the camera reader's error, nor an exception name of trimesh's."""
+    from clrt.scene.scene import scene_from_mesh
+    glb = trimesh.Trimesh(TETRA_V, TETRA_F, process=False).export(file_type="glb")
+    cases = {
+        "random.glb": (bytes(range(256)) * 2, "corrupt or unsupported GLB file: not a GLB file"),
+        "cut.glb": (glb[:60], "corrupt or unsupported GLB file: truncated GLB file (its JSON chunk is"),
+        "short.glb": (glb[:-8], "corrupt or unsupported GLB file: truncated GLB file (header says"),
+        "bad.gltf": (b'{"asset": {"version": "2.0"}, "meshes": [', "corrupt or unsupported GLTF file: invalid JSON ("),
+        "accessor.glb": (_glb_json_replaced(glb, lambda d: d["meshes"][0]["primitives"][0]["attributes"]
+                                            .update(POSITION=7)),
+                         "corrupt GLB file: meshes[0].primitives[0].attributes.POSITION: accessor 7 does not "
+                         "exist (the file has 2)"),
+        "indices.glb": (_glb_json_replaced(glb, lambda d: d["meshes"][0]["primitives"][0].update(indices=-1)),
+                        "meshes[0].primitives[0].indices: accessor -1 does not exist"),
+        "view.glb": (_glb_json_replaced(glb, lambda d: d["accessors"][0].update(bufferView=9)),
+                     "accessors[0].bufferView: bufferView 9 does not exist"),
+        "node.glb": (_glb_json_replaced(glb, lambda d: d["nodes"][0].update(mesh=3)),
+                     "nodes[0].mesh: mesh 3 does not exist (the file has 1)"),
+    }
+    for name, (data, expected) in cases.items():
+        path = write(tmp_path, name, data)
+        message = assert_one_line_error(path, expected)
+        assert "Error" not in message and "camera" not in message, message
+        with pytest.raises(MeshLoadError) as info:   # the path clrt render takes: camera after mesh
+            scene_from_mesh(str(path))
+        assert str(info.value) == message
+
+
+@pytest.mark.parametrize("statement, expected", [
+    ("Kd 2 nan -1", "Kd must be 3 finite numbers, got (2, nan, -1)"),
+    ("Ns inf", "Ns must be a finite number, got inf"),
+    ("Ns 1e300", "Ns 1e300 is out of range: material shininess must be a number in 0..10000, got 1e300"),
+    ("Ni 1e9", "Ni 1e9 is out of range: material ior must be a number in 1..100, got 1e9"),
+    ("Ks 5000 5000 5000", "Ks (5000, 5000, 5000) is out of range: material specular must be a number in 0..1000"),
+])
+def test_bad_mtl_values_name_the_file_and_material(tmp_path, statement, expected):
+    obj = write(tmp_path, "m.obj", "mtllib m.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nusemtl red\nf 1 2 3\n")
+    write(tmp_path, "m.mtl", f"newmtl green\nKd 0 1 0\nnewmtl red\n{statement}\n")
+    message = assert_one_line_error(obj, f"m.mtl: material 'red': {expected}")
+    assert message.startswith(f"{obj}: m.mtl: material 'red': "), message
 
 
 def test_glb_point_cloud_has_no_triangles(tmp_path):

@@ -154,7 +154,7 @@ def test_mesh_path_is_relative_to_scene_file(tmp_path, monkeypatch):
     (SPHERE + 'material = { color = [2, 0, 0] }\n', "objects[0].material.color",
      "must be 3 numbers in 0..1"),
     (SPHERE + 'material = { smooth = 1 }\n', "objects[0].material.smooth", "must be true or false"),
-    ('[materials.glass]\nior = 0.5\n' + SPHERE, "materials.glass.ior", "must be a number >= 1"),
+    ('[materials.glass]\nior = 0.5\n' + SPHERE, "materials.glass.ior", "must be a number in 1..100"),
     ('[materials.glass]\ntransparency = 1.5\n' + SPHERE, "materials.glass.transparency", "in 0..1"),
     ('[materials.glass]\n' + SPHERE + 'material = "glas"\n', "objects[0].material",
      "unknown material 'glas' (did you mean 'glass'?)"),
@@ -163,6 +163,10 @@ def test_mesh_path_is_relative_to_scene_file(tmp_path, monkeypatch):
     ('[[objects]]\nradius = 1\n', "objects[0].type", "missing"),
     ('[[objects]]\ntype = "mesh"\n', "objects[0].path", "missing"),
     ('[[objects]]\ntype = "mesh"\npath = "nope.obj"\n', "objects[0].path", "mesh file not found: "),
+    ('[[objects]]\ntype = "mesh"\npath = "/etc"\n', "objects[0].path", "is a folder, not a mesh file: /etc"),
+    ('[[objects]]\ntype = "mesh"\npath = "."\n', "objects[0].path", "is a folder, not a mesh file: "),
+    ('[[objects]]\ntype = "mesh"\npath = ""\n', "objects[0].path", "is empty (give the mesh file's path), got ''"),
+    ('[[objects]]\ntype = "mesh"\npath = " "\n', "objects[0].path", "is empty (give the mesh file's path), got ' '"),
     (SPHERE + '[[lights]]\nposition = [1, 2]\n', "lights[0].position", "must be 3 numbers"),
     (SPHERE + '[[lights]]\ncolor = [1, 1, 1]\n', "lights[0].position", "missing"),
     (SPHERE + '[[lights]]\nposition = [0, 5, 0]\nintensity = -1\n', "lights[0].intensity", ">= 0"),
@@ -196,6 +200,12 @@ def test_toml_syntax_error_names_the_line(tmp_path):
         load_scene(path)
 
 
+def test_a_byte_order_mark_is_accepted(tmp_path):
+    path = tmp_path / "bom.toml"
+    path.write_bytes(b"\xef\xbb\xbf" + SPHERE.encode())
+    assert len(load_scene(path).objects) == 1
+
+
 def test_missing_and_unreadable_files(tmp_path):
     with pytest.raises(InputError, match="scene file not found"):
         load_scene(tmp_path / "nothing.toml")
@@ -222,3 +232,58 @@ def test_docs_example_loads(tmp_path):
     (tmp_path / "scenes").mkdir()
     scene = load_scene(write(tmp_path / "scenes", example))
     assert len(scene.objects) == 6 and len(scene.lights) == 2
+
+
+@pytest.mark.parametrize("text, largest", [
+    ('[[objects]]\ntype = "sphere"\nradius = 1e20\nscale = 1e20\n', "1e40"),
+    ('[camera]\nwidth = 64\n[[objects]]\ntype = "sphere"\nradius = 1e20\nscale = 1e20\n', "1e40"),
+    ('[[objects]]\ntype = "plane"\nsize = [1e30, 1e30]\nscale = 1e10\n', "5e39"),
+    ('[[objects]]\ntype = "box"\ntranslate = [1e30, 0, 0]\nscale = 1e29\n', "1.05e30"),
+    ('[[objects]]\ntype = "torus"\nmajor = 1e30\n', "1.00000002e30"),   # 1e30 in float32
+    (SPHERE + '[[objects]]\ntype = "sphere"\nradius = 1e30\n', "1.00000002e30"),
+])
+def test_an_object_past_float32_names_the_object(tmp_path, text, largest, capsys):
+    # Not the camera or a light framed from infinite bounds, and no numpy warnings.
+    path = write(tmp_path, text)
+    index = text.count("[[objects]]") - 1
+    import warnings
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with pytest.raises(InputError) as info:
+            load_scene(path)
+    assert str(info.value) == (f"{path}: objects[{index}]: vertex coordinates must lie within +-1e30 after its "
+                               f"transform (the device computes in float32), got up to {largest}")
+    from clrt import cli
+    assert cli.main(["render", str(path), "-o", str(tmp_path / "x.png")]) == 2
+    assert capsys.readouterr().err == f"clrt: {info.value}\n"
+
+
+def test_a_primitive_past_float32_names_the_object(tmp_path):
+    path = write(tmp_path, '[[objects]]\ntype = "checkerboard"\nsize = 1e300\n')
+    with pytest.raises(InputError, match=r"^.*scene\.toml: objects\[0\]: vertex coordinates must lie within"):
+        load_scene(path)
+
+
+def test_a_scene_too_large_to_frame_says_so(tmp_path):
+    # Each vertex is in range, but the framed camera (or the default light) would not be.
+    big = '[[objects]]\ntype = "sphere"\nradius = 9e29\n'
+    with pytest.raises(InputError, match=r"scene\.toml: camera: cannot frame the scene: the camera would stand "
+                                         r"at .* past \+-1e30 .*; give camera.eye and camera.target$"):
+        load_scene(write(tmp_path, big))
+    placed = '[camera]\neye = [0, 0, 9e29]\ntarget = [0, 0, 0]\n' + big
+    with pytest.raises(InputError, match=r"scene\.toml: lights: cannot place the default light: .*; "
+                                         r"give \[\[lights\]\] positions$"):
+        load_scene(write(tmp_path, placed))
+    scene = load_scene(write(tmp_path, placed + '[[lights]]\nposition = [0, 9e29, 9e29]\n'))
+    assert scene.camera.eye == (0, 0, 9e29)
+
+
+def test_a_mesh_too_large_to_frame_renders_from_a_placed_camera(tmp_path):
+    from clrt.scene.render_setup import render_camera, render_scene
+    (tmp_path / "huge.obj").write_text("v 0 0 0\nv 9e29 0 0\nv 0 9e29 0\nf 1 2 3\n")
+    scene = render_scene(str(tmp_path / "huge.obj"))
+    assert scene.camera is None
+    with pytest.raises(InputError, match="cannot frame the scene"):
+        render_camera(scene)
+    camera = render_camera(scene, eye=(3e29, 3e29, 2e29), target=(3e29, 3e29, 0))
+    assert camera.eye == (3e29, 3e29, 2e29)

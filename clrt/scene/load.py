@@ -27,13 +27,14 @@ import math
 import os
 import re
 import stat
+import struct
 import warnings
 
 from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from clrt.config import DEFAULT_DIFFUSE
+from clrt.config import DEFAULT_DIFFUSE, MATERIAL_RANGES
 from clrt.errors import InputError, MeshLoadError
 from clrt.scene import load_3ds
 from clrt.scene.mesh import Mesh
@@ -330,7 +331,13 @@ def _parse_obj(data: bytes, label: str, folder: str | None = None) -> "_Part":
     if (flat < 0).any() or "/" in face_text or any(line.startswith("usemtl ") for line in lines):
         ordered = [line for line in lines if line[:2] in ("v ", "f ", "vt", "vn", "us")]
         statements = [line.split(" ", 1)[0] for line in ordered]
+    written = flat
     flat = _obj_absolute(flat, counts, statements, "v", label) - 1
+    bad = np.flatnonzero((flat < 0) | (flat >= len(vertices)))
+    if bad.size:   # said here, in the file's 1-based numbering (Mesh would say 0-based)
+        face = int(np.searchsorted(np.cumsum(counts), bad[0], side="right")) + 1
+        raise _fail(label, f"face {face} names vertex {int(written[bad[0]])}, but the file defines "
+                           f"{len(vertices)} vertices (OBJ indices 1..{len(vertices)}, or negative counting back)")
     # Triangle corners as positions in the flat corner list, so that every
     # per-corner field triangulates exactly as the vertex indices do.
     corners = _fan_triangulate(counts, np.arange(len(flat)))
@@ -430,7 +437,38 @@ def _parse_mtl(path: str, label: str) -> dict:
                 current[key] = float(args[0])
         except ValueError:
             raise _fail(label, f"{os.path.basename(path)}: malformed {key} line") from None
-    return {name: _whitted_from_mtl(m) for name, m in materials.items()}
+    return {name: _mtl_material(m, f"{os.path.basename(path)}: material {name!r}", label)
+            for name, m in materials.items()}
+
+
+# The MTL statement behind each material field, for messages.
+_MTL_KEYS = {"color": "Kd", "specular": "Ks", "reflectivity": "Ks", "shininess": "Ns", "transparency": "d",
+             "ior": "Ni", "texture": "map_Kd"}
+
+
+def _mtl_material(m: dict, where: str, label: str) -> dict:
+    """:func:`_whitted_from_mtl`, its values checked: a bad one is an error naming
+    the mesh file, the MTL file, the material and the statement, with the values
+    as the file has them (not as clamped into range)."""
+    from clrt import checks
+    from clrt.scene.scene import Material
+    for key, value in m.items():
+        values = value if isinstance(value, list) else [value] if isinstance(value, float) else []
+        if not all(math.isfinite(v) for v in values):
+            shown = checks.show(value)
+            rule = f"{len(values)} finite numbers" if isinstance(value, list) else "a finite number"
+            raise _fail(label, f"{where}: {key} must be {rule}, got {shown}")
+    fields = _whitted_from_mtl(m)
+    try:
+        Material(**fields)
+    except InputError as exc:
+        bad = next((f for f in fields if f"material {f} " in str(exc)), "")
+        key = _MTL_KEYS.get(bad, "")
+        if key == "d" and "d" not in m:
+            key = "Tr"
+        given = f"{key} {checks.show(m[key])} " if key in m else ""
+        raise _fail(label, f"{where}: {given}is out of range: {exc}") from None
+    return fields
 
 
 def _whitted_from_mtl(m: dict) -> dict:
@@ -635,6 +673,35 @@ def _load_ply(data: bytes, label: str):
 # STL and glTF through trimesh
 
 
+_STL_HEADER, _STL_TRIANGLE = 84, 50   # binary STL: 80-byte header and a uint32 count; 50 bytes a triangle
+
+
+def _stl_checked(data: bytes, label: str) -> bytes:
+    """The STL file's bytes for trimesh, once its kind is clear: a binary STL must
+    be exactly as long as its header's triangle count says (else trimesh falls
+    back to its ASCII reader, whose error hides the real problem); an ASCII STL
+    starts with 'solid' and holds no NUL byte, and goes to trimesh as UTF-8
+    (its own decoding of other text needs an optional package)."""
+    import struct
+    count = struct.unpack_from("<I", data, 80)[0] if len(data) >= _STL_HEADER else None
+    if count is not None and len(data) == _STL_HEADER + _STL_TRIANGLE * count:
+        return data
+    if data.lstrip()[:5].lower() == b"solid" and b"\0" not in data:
+        try:
+            data.decode("utf-8")
+        except UnicodeDecodeError:
+            data = data.decode("latin-1").encode("utf-8")
+        return data
+    if count is None:
+        raise _fail(label, f"not an STL file ({len(data)} bytes: too short for a binary STL's "
+                           f"{_STL_HEADER}-byte header, and not ASCII STL, which starts with 'solid')")
+    room = (len(data) - _STL_HEADER) // _STL_TRIANGLE
+    if len(data) < _STL_HEADER + _STL_TRIANGLE * count:
+        raise _fail(label, f"truncated binary STL (header says {count} triangles, the file holds room for {room})")
+    raise _fail(label, f"binary STL longer than its header says (header says {count} triangles, the file "
+                       f"holds room for {room}{' and some bytes' if (len(data) - _STL_HEADER) % _STL_TRIANGLE else ''})")
+
+
 def _BufferFileResolver(path: str):
     """trimesh's resolver for the buffers a .gltf names: only regular files in the
     .gltf's folder (trimesh refuses paths leaving it; a FIFO or device there would
@@ -668,13 +735,21 @@ def _load_trimesh(data: bytes, file_type: str, path: str) -> "list[_Part]":
     load_3ds.register_with_trimesh()
 
     gltf = file_type in ("gltf", "glb")
-    doc = None
+    doc = doc_problem = None
     if gltf:
         try:
             doc = _gltf_json(data, "." + file_type)
+            if file_type == "glb" and len(data) < struct.unpack_from("<I", data, 8)[0]:
+                raise ValueError(f"truncated GLB file (header says {struct.unpack_from('<I', data, 8)[0]} "
+                                 f"bytes, the file has {len(data)})")
+            problem = _gltf_reference_problem(doc)
+            if problem:
+                raise _fail(path, f"corrupt {file_type.upper()} file: {problem}")
             data = _gltf_renamed_materials(data, doc, file_type)
-        except Exception:  # noqa: BLE001 -- not valid glTF: trimesh reports it below
-            doc = None
+        except MeshLoadError:
+            raise
+        except Exception as exc:  # noqa: BLE001 -- trimesh may still read it; if not, this is the reason
+            doc, doc_problem = None, _gltf_json_problem(exc)
     kwargs = {"process": False, "validate": False, "skip_materials": doc is None}
     if file_type == "gltf":
         # A .gltf names its buffers (and images) as files beside it.
@@ -704,7 +779,10 @@ def _load_trimesh(data: bytes, file_type: str, path: str) -> "list[_Part]":
     except MeshLoadError:
         raise
     except Exception as exc:  # trimesh raises anything from KeyError to struct.error
-        reason = f"corrupt or unsupported {file_type.upper()} file ({_short(exc)})"
+        if doc_problem:   # ours names the problem; trimesh's exception often only its own symptom
+            reason = f"corrupt or unsupported {file_type.upper()} file: {doc_problem}"
+        else:
+            reason = f"corrupt or unsupported {file_type.upper()} file ({_short(exc)})"
         raise _fail(path, reason) from exc
     if not parts:
         raise _fail(path, "contains no triangles")
@@ -796,7 +874,8 @@ def _gltf_materials(doc: dict, scene, path: str) -> list:
         if transmission:
             fields["transparency"] = min(max(float(transmission), 0.0), 1.0)
         if "KHR_materials_ior" in extensions:
-            fields["ior"] = max(float(extensions["KHR_materials_ior"].get("ior", 1.5)), 1.0)
+            fields["ior"] = min(max(float(extensions["KHR_materials_ior"].get("ior", 1.5)), 1.0),
+                                MATERIAL_RANGES["ior"][1])
         image = images.get(i)
         info = pbr.get("baseColorTexture")
         if image is not None and isinstance(info, dict):
@@ -956,6 +1035,8 @@ def load_asset(path) -> "tuple[Mesh, list[dict]]":
             parts = [_parse_obj(data, path, os.path.dirname(os.path.abspath(path)))]
         elif ext == ".ply":
             parts = [_load_ply(data, path)]
+        elif ext == ".stl":
+            parts = _load_trimesh(_stl_checked(data, path), "stl", path)
         else:
             parts = _load_trimesh(data, _TRIMESH_TYPES[ext], path)
         return _build(parts, path, name)
@@ -979,8 +1060,91 @@ def _gltf_json(data: bytes, ext: str) -> dict:
         length, kind = struct.unpack_from("<II", data, 12)
         if kind != 0x4E4F534A:   # "JSON"
             raise ValueError("GLB file without a JSON chunk first")
+        if len(data) < 20 + length:
+            raise ValueError(f"truncated GLB file (its JSON chunk is {length} bytes, the file holds "
+                             f"{len(data) - 20} after the header)")
         data = data[20:20 + length]
     return json.loads(data.decode("utf-8"))
+
+
+def _gltf_json_problem(exc: Exception) -> str:
+    """What :func:`_gltf_json` found wrong, in words."""
+    import json
+    if isinstance(exc, json.JSONDecodeError):
+        return f"invalid JSON ({exc})"
+    if isinstance(exc, UnicodeDecodeError):
+        return f"its JSON is not UTF-8 text (byte {exc.start})"
+    if isinstance(exc, ValueError):   # ours: "not a GLB file", "truncated GLB file ..."
+        return str(exc)
+    return _short(exc)
+
+
+# glTF objects that index others: (list, key, the list indexed).  Cameras are
+# file_camera's concern: a broken one does not stop the mesh from loading.
+_GLTF_REFERENCES = (("accessors", "bufferView", "bufferViews"), ("bufferViews", "buffer", "buffers"),
+                    ("nodes", "mesh", "meshes"))
+
+
+def _gltf_reference_problem(doc) -> str | None:
+    """The first index in a glTF document that points past its list (an accessor
+    that does not exist, ...), as ``'meshes[0].primitives[0].attributes.POSITION:
+    accessor 7 does not exist (the file has 2)'``; None when all are in range.
+    trimesh would fail on one with an internal error (UnboundLocalError, KeyError)."""
+    if not isinstance(doc, dict):
+        return f"the JSON is {type(doc).__name__}, not an object"
+
+    def check(where: str, index, kind: str):
+        items = doc.get(kind, [])
+        n = len(items) if isinstance(items, list) else 0
+        if isinstance(index, bool) or not isinstance(index, int) or not 0 <= index < n:
+            what = kind[:-1] if kind != "meshes" else "mesh"
+            return f"{where}: {what} {json_text(index)} does not exist (the file has {n})"
+        return None
+
+    def json_text(value):
+        import json
+        text = json.dumps(value)
+        return text if len(text) <= 40 else text[:37] + "..."
+
+    def listed(kind: str):
+        items = doc.get(kind, [])
+        return [(i, v) for i, v in enumerate(items) if isinstance(v, dict)] if isinstance(items, list) else []
+
+    for i, mesh in listed("meshes"):
+        primitives = mesh.get("primitives", [])
+        for j, primitive in enumerate(primitives if isinstance(primitives, list) else []):
+            if not isinstance(primitive, dict):
+                continue
+            where = f"meshes[{i}].primitives[{j}]"
+            attributes = primitive.get("attributes", {})
+            refs = [(f"{where}.attributes.{k}", v) for k, v in attributes.items()] if isinstance(attributes, dict) else []
+            if "indices" in primitive:
+                refs.append((f"{where}.indices", primitive["indices"]))
+            for path, index in refs:
+                problem = check(path, index, "accessors")
+                if problem:
+                    return problem
+    for kind, key, target in _GLTF_REFERENCES:
+        for i, item in listed(kind):
+            if key in item:
+                problem = check(f"{kind}[{i}].{key}", item[key], target)
+                if problem:
+                    return problem
+    for i, node in listed("nodes"):
+        children = node.get("children", [])
+        for k, child in enumerate(children if isinstance(children, list) else []):
+            problem = check(f"nodes[{i}].children[{k}]", child, "nodes")
+            if problem:
+                return problem
+    for i, scene in listed("scenes"):
+        roots = scene.get("nodes", [])
+        for k, node in enumerate(roots if isinstance(roots, list) else []):
+            problem = check(f"scenes[{i}].nodes[{k}]", node, "nodes")
+            if problem:
+                return problem
+    if "scene" in doc:
+        return check("scene", doc["scene"], "scenes")
+    return None
 
 
 def _glb_json_bytes(path: str) -> bytes:

@@ -66,8 +66,9 @@ def render_camera(scene: Scene, *, width=None, height=None, eye=None, target=Non
     placed = base if base is not None and not scene.camera_framed else None   # by the user or the file
     if eye is None and target is None and placed is not None:
         eye, target = placed.eye, placed.target
-    else:   # frame for the final size, fov and up
-        framed = Camera.framing(bounds, width, height, fov, up=up)
+    elif eye is None or target is None:   # frame for the final size, fov and up
+        # (Only then: a scene too large to frame renders from a camera the options place.)
+        framed = None if placed else Camera.framing(bounds, width, height, fov, up=up)
         target = target or (placed.target if placed else framed.target)
         eye = eye or (placed.eye if placed else tuple(t + e - f for t, e, f in zip(target, framed.eye,
                                                                                    framed.target)))

@@ -17,8 +17,6 @@ def _vec3(value, what: str) -> np.ndarray:
     return np.asarray(checks.position(what, value), dtype=np.float64)
 
 
-_MATERIAL_NUMBERS = {"ambient": {"ge": 0}, "diffuse": {"ge": 0}, "specular": {"ge": 0}, "shininess": {"ge": 0},
-                     "reflectivity": {"ge": 0, "le": 1}, "transparency": {"ge": 0, "le": 1}, "ior": {"ge": 1}}
 
 
 @dataclass(frozen=True)
@@ -52,8 +50,8 @@ class Material:
         object.__setattr__(self, "color", checks.color("material color", self.color))
         if self.texture is not None and not isinstance(self.texture, Texture):
             raise checks.fail("material texture", "a clrt Texture or None", self.texture)
-        for name, limits in _MATERIAL_NUMBERS.items():
-            object.__setattr__(self, name, checks.number(f"material {name}", getattr(self, name), **limits))
+        for name in config.MATERIAL_RANGES:
+            object.__setattr__(self, name, checks.material_number(f"material {name}", getattr(self, name), name))
         checks.boolean("material smooth", self.smooth)
         object.__setattr__(self, "crease", checks.crease(self.crease, "material crease"))
 
@@ -163,7 +161,10 @@ class Camera:
         half = math.radians(fov) / 2.0
         half = min(half, math.atan(math.tan(half) * width / height))
         d = np.asarray(direction, dtype=np.float64)
-        eye = centre + d / np.linalg.norm(d) * radius / math.sin(half) * 1.05
+        with np.errstate(all="ignore"):
+            eye = centre + d / np.linalg.norm(d) * radius / math.sin(half) * 1.05
+        _within_limit(eye, "cannot frame the scene: the camera would stand at {}", "place the camera "
+                      "(eye and target)")
         return cls(tuple(eye), tuple(centre), tuple(up), fov, width, height)
 
 
@@ -305,8 +306,19 @@ def default_light(bounds, camera: Camera) -> Light:
     f, r, u = camera.basis()
     bounds = np.asarray(bounds, dtype=np.float64)
     diag = float(np.linalg.norm(bounds[1] - bounds[0]))
-    pos = np.asarray(camera.eye, dtype=np.float64) + (0.8 * u - 0.5 * r) * diag
+    with np.errstate(all="ignore"):
+        pos = np.asarray(camera.eye, dtype=np.float64) + (0.8 * u - 0.5 * r) * diag
+    _within_limit(pos, "cannot place the default light: it would stand at {}", "give the lights' positions")
     return Light(tuple(pos))
+
+
+def _within_limit(point: np.ndarray, what: str, remedy: str) -> None:
+    """InputError ``'<what>, past +-1e30 (...); <remedy>'`` for a point that the
+    scene's size put out of the device's range (a camera or light clrt places)."""
+    if not (np.isfinite(point).all() and np.abs(point).max() <= config.MAX_COORDINATE):
+        raise InputError(f"{what.format(checks.show(tuple(float(x) for x in point)))}, past "
+                         f"+-{checks.show(config.MAX_COORDINATE)} (the device computes in float32; the "
+                         f"scene is too large); {remedy}")
 
 
 def scene_from_mesh(mesh, material=None, lights=None, background=config.DEFAULT_BACKGROUND) -> Scene:
@@ -324,14 +336,19 @@ def scene_from_mesh(mesh, material=None, lights=None, background=config.DEFAULT_
     view, file_materials = None, ()
     if isinstance(mesh, (str, os.PathLike)):
         from clrt.scene.load import file_camera, load_asset
-        view = file_camera(mesh)
-        mesh, file_materials = load_asset(mesh)
+        path = mesh
+        mesh, file_materials = load_asset(path)   # first: a broken file's error is the mesh reader's
+        view = file_camera(path)
     scene = Scene([SceneObject(mesh, Material.of(material), file_materials if material is None else ())],
                   [] if lights is None else lights, background)
-    scene.camera, scene.camera_framed = Camera.framing(scene.bounds), True
     if view is not None:
         scene.camera, scene.camera_framed = file_view(view, scene.bounds, mesh.name), False
-    if not scene.lights:
+    else:
+        try:
+            scene.camera, scene.camera_framed = Camera.framing(scene.bounds), True
+        except InputError:   # too large to frame: no camera, so that a camera the caller places still works
+            scene.camera, scene.camera_framed = None, True
+    if not scene.lights and scene.camera is not None:
         scene.lights = [default_light(scene.bounds, scene.camera)]
     return scene
 

@@ -59,6 +59,11 @@ def integer(lo, hi=None):
     return lambda name, value: checks.integer(name, value, lo, hi)
 
 
+def material_number(field: str):
+    """A scalar material field within its range (clrt.config.MATERIAL_RANGES)."""
+    return lambda name, value: checks.material_number(name, value, field)
+
+
 def vector(n: int, **limits):
     """A list of ``n`` numbers, each checked like :func:`number`; a tuple of floats."""
     return lambda name, value: checks.vector(name, value, n, **limits)
@@ -95,15 +100,15 @@ def anything(name, value):
 _MATERIAL_DEFAULTS = Material()
 MATERIAL_KEYS = {
     "color": (checks.color, _MATERIAL_DEFAULTS.color),
-    "ambient": (number(ge=0), _MATERIAL_DEFAULTS.ambient),
-    "diffuse": (number(ge=0), _MATERIAL_DEFAULTS.diffuse),
-    "specular": (number(ge=0), _MATERIAL_DEFAULTS.specular),
-    "shininess": (number(ge=0), _MATERIAL_DEFAULTS.shininess),
+    "ambient": (material_number("ambient"), _MATERIAL_DEFAULTS.ambient),
+    "diffuse": (material_number("diffuse"), _MATERIAL_DEFAULTS.diffuse),
+    "specular": (material_number("specular"), _MATERIAL_DEFAULTS.specular),
+    "shininess": (material_number("shininess"), _MATERIAL_DEFAULTS.shininess),
     "smooth": (boolean, _MATERIAL_DEFAULTS.smooth),
     "crease": (lambda name, value: checks.crease(value, name), _MATERIAL_DEFAULTS.crease),
-    "reflectivity": (number(ge=0, le=1), _MATERIAL_DEFAULTS.reflectivity),
-    "transparency": (number(ge=0, le=1), _MATERIAL_DEFAULTS.transparency),
-    "ior": (number(ge=1), _MATERIAL_DEFAULTS.ior),
+    "reflectivity": (material_number("reflectivity"), _MATERIAL_DEFAULTS.reflectivity),
+    "transparency": (material_number("transparency"), _MATERIAL_DEFAULTS.transparency),
+    "ior": (material_number("ior"), _MATERIAL_DEFAULTS.ior),
 }
 
 # checkerboard's second material when the file gives none: dark tiles.
@@ -234,6 +239,16 @@ def _plane(size) -> Mesh:
     return Mesh.from_arrays(v, [[0, 1, 2], [0, 2, 3]], "plane")
 
 
+def _unlabelled(exc: MeshLoadError, *names: str) -> str:
+    """A Mesh's message without the mesh's own name in front ("torus: vertex ..."),
+    for a message that names the scene file's object instead."""
+    text = str(exc)
+    for name in (*names, "icosphere", "box", "plane", "floor0", "floor1", "torus"):
+        if name and text.startswith(f"{name}: "):
+            return text[len(name) + 2:]
+    return text
+
+
 def _read_toml(label: str, path: str) -> dict:
     import os
     import stat
@@ -249,6 +264,8 @@ def _read_toml(label: str, path: str) -> dict:
         raise InputError(f"{label}: is a directory, not a scene file") from None
     except OSError as exc:
         raise InputError(f"{label}: cannot read scene file ({exc.strerror or exc})") from None
+    if data.startswith(b"\xef\xbb\xbf"):   # a UTF-8 byte-order mark (Windows editors write one)
+        data = data[3:]
     try:
         return tomllib.loads(data.decode("utf-8"))
     except UnicodeDecodeError as exc:
@@ -287,7 +304,11 @@ class _Loader:
     def mesh_file(self, name: str, path: str) -> "tuple[Mesh, list]":
         """The mesh file's mesh and its own materials (clrt.scene.load.load_asset)."""
         # Relative to the scene file, so a scene renders the same from any directory.
+        if not name.strip():
+            raise self.doc.error(path, f"is empty (give the mesh file's path), got {_show(name)}", MeshLoadError)
         full = os.path.normpath(os.path.join(self.folder, os.path.expanduser(name)))
+        if os.path.isdir(full):
+            raise self.doc.error(path, f"is a folder, not a mesh file: {full}", MeshLoadError)
         if not os.path.isfile(full):
             raise self.doc.error(path, f"mesh file not found: {full}", MeshLoadError)
         try:
@@ -320,16 +341,8 @@ class _Loader:
                 meshes = [mesh]
                 if o["material"] is not None:   # the scene's material replaces the file's
                     file_materials = ()
-            elif kind == "sphere":
-                meshes = [primitives.icosphere(o["subdivisions"], o["radius"], o["centre"])]
-            elif kind == "box":
-                meshes = [primitives.box(o["size"])]
-            elif kind == "plane":
-                meshes = [_plane(o["size"])]
-            elif kind == "checkerboard":
-                meshes = list(primitives.checkerboard(o["tiles"], o["size"]))
             else:
-                meshes = [primitives.torus(o["major"], o["minor"], *TORUS_SEGMENTS)]
+                meshes = self.primitive(kind, o, path)
             materials = [material]
             if kind == "checkerboard":
                 materials.append(self.material_ref(o["material2"], _join(path, "material2"), DEFAULT_MATERIAL2))
@@ -337,9 +350,45 @@ class _Loader:
             name = o["name"] or f"{path} ({kind})"
             for k, (mesh, mat) in enumerate(zip(meshes, materials)):
                 suffix = f" tiles {k}" if len(meshes) > 1 else ""
-                mesh = replace(mesh.transformed(matrix), name=name + suffix)
+                mesh = replace(self.transformed(mesh, matrix, path), name=name + suffix)
                 out.append(SceneObject(mesh, mat, file_materials))
         return out
+
+    def primitive(self, kind: str, o: dict, path: str) -> "list[Mesh]":
+        """The meshes of a built-in object type; a size past the device's range is
+        an error naming the object (not the mesh the primitive calls itself)."""
+        try:
+            if kind == "sphere":
+                return [primitives.icosphere(o["subdivisions"], o["radius"], o["centre"])]
+            if kind == "box":
+                return [primitives.box(o["size"])]
+            if kind == "plane":
+                return [_plane(o["size"])]
+            if kind == "checkerboard":
+                return list(primitives.checkerboard(o["tiles"], o["size"]))
+            return [primitives.torus(o["major"], o["minor"], *TORUS_SEGMENTS)]
+        except MeshLoadError as exc:
+            raise self.doc.error(path, _unlabelled(exc), MeshLoadError) from None
+
+    def transformed(self, mesh: Mesh, matrix: np.ndarray, path: str) -> Mesh:
+        """``mesh.transformed(matrix)``, its vertices checked first against the device's
+        range (+-MAX_COORDINATE), in float64, so that a large scale or translate is an
+        error naming the object rather than infinities that a camera or light trips over."""
+        with np.errstate(all="ignore"):
+            v = mesh.vertices.astype(np.float64) @ matrix[:3, :3].T + matrix[:3, 3]
+            largest = float(np.abs(v).max(initial=0.0))
+        if not np.isfinite(v).all() or largest > config.MAX_COORDINATE:
+            # 3 digits, unless they round to the limit (a float32 1e30 is 1.00000002e30).
+            shown = f"{largest:.3g}"
+            if not float(shown) > config.MAX_COORDINATE:
+                shown = f"{largest:.9g}"
+            raise self.doc.error(path, f"vertex coordinates must lie within +-{checks.show(config.MAX_COORDINATE)} "
+                                 f"after its transform (the device computes in float32), got up to "
+                                 f"{shown}".replace("e+", "e"), MeshLoadError)
+        try:
+            return mesh.transformed(matrix)
+        except MeshLoadError as exc:
+            raise self.doc.error(path, _unlabelled(exc, mesh.name), MeshLoadError) from None
 
     def load(self) -> Scene:
         doc = self.doc
@@ -371,7 +420,11 @@ class _Loader:
         scene.camera = self.camera(data.get("camera", {}), scene)
         scene.camera_framed = "eye" not in data.get("camera", {})
         if "lights" not in data:   # as for a single mesh: one light above the eye
-            scene.lights = [default_light(scene.bounds, scene.camera)]
+            try:
+                scene.lights = [default_light(scene.bounds, scene.camera)]
+            except InputError as exc:   # a scene too large for it
+                raise doc.error("lights", str(exc).replace("give the lights' positions", "give [[lights]] "
+                                                           "positions")) from None
         return scene
 
     def camera(self, value, scene: Scene) -> Camera:
@@ -382,7 +435,11 @@ class _Loader:
                                  "to frame the scene)")
         try:
             if c["eye"] is None:
-                return Camera.framing(scene.bounds, c["width"], c["height"], c["fov"], up=c["up"])
+                try:
+                    return Camera.framing(scene.bounds, c["width"], c["height"], c["fov"], up=c["up"])
+                except InputError as exc:   # a scene too large to frame
+                    raise InputError(str(exc).replace("place the camera (eye and target)",
+                                                      "give camera.eye and camera.target")) from None
             return Camera(c["eye"], c["target"], c["up"], c["fov"], c["width"], c["height"])
         except InputError as exc:   # eye == target, up parallel to the view
             raise self.doc.error("camera", exc) from None
