@@ -387,7 +387,7 @@ class Renderer:
 # Device bytes per pixel of a tile: its ray, hit record, linear and sRGB colour.
 FRAME_BYTES_PER_PIXEL = RAY.itemsize + HIT.itemsize + 16 + 3
 MIN_FRAME_BYTES = 256 * FRAME_BYTES_PER_PIXEL
-MAX_TILE_PIXELS = 1 << 23   # 8M pixels (a 4K frame), 544 MiB of tile buffers
+MAX_TILE_PIXELS = 1 << 23   # 8M pixels (a 4K frame), 536 MiB of tile buffers
 IMAGE_POOL_SIZE = 3         # page-locked images per renderer (clrt/device/pinned.py)
 HOST_CHECK_BYTES = 1 << 28  # frames needing more host memory than this check that it is there
 
