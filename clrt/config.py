@@ -137,8 +137,9 @@ BATCH_VIEWS_PER_TASK = 8
 #: (PNG encoding took 17 of a worker's 36 ms per 1080p frame on an H200,
 #: docs/distributed.md); also the most finished images it holds at once.
 BATCH_IMAGE_WRITERS = 2
-#: Most views per source (--views).
+#: Most views per source (--views), most worker processes of a local cluster (--workers).
 MAX_VIEWS = 100_000
+MAX_WORKERS = 4096
 #: The manifest (JSON lines) in the output folder, and how often it is rewritten while jobs finish.
 BATCH_MANIFEST = "manifest.jsonl"
 BATCH_MANIFEST_SECONDS = 1.0

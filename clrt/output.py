@@ -298,11 +298,13 @@ def write_file(data: bytes | str, path: Path, force: bool = False, option: str =
     _replace_atomically(path, lambda f: f.write(data), record=True)
 
 
-def write_text(text: str, path: Path) -> None:
+def write_text(text: str, path: Path, record: bool = False) -> None:
     """Write a text file (UTF-8) through a temporary file and a rename, replacing
-    any file there (as :func:`write_image`, but without the mark check)."""
+    any file there (as :func:`write_image`, but without the mark check: the
+    caller checks, :func:`check_replace`); with ``record``, also the record of
+    its SHA-256 beside it, so that a later run knows clrt wrote it."""
     data = text.encode("utf-8")
-    _replace_atomically(Path(path), lambda f: f.write(data))
+    _replace_atomically(Path(path), lambda f: f.write(data), record=record)
 
 
 def _write_record(path: Path, digest: str) -> None:

@@ -27,6 +27,8 @@ from clrt.batch.cluster import start_local_cluster  # noqa: E402
 from clrt.batch.jobs import Source, expand_sources, plan_tasks  # noqa: E402
 from clrt.cli import main  # noqa: E402
 from clrt.config import BATCH_MANIFEST  # noqa: E402
+from clrt.errors import InputError, OutputError  # noqa: E402
+from clrt.output import write_text  # noqa: E402
 from clrt.scene import primitives  # noqa: E402
 from clrt.scene.render_setup import turntable  # noqa: E402
 from clrt.scene.scene import Camera  # noqa: E402
@@ -113,8 +115,9 @@ def test_batch_takes_every_render_option():
 
 
 @pytest.mark.parametrize("args, fragment", [
-    (["--views", "0"], "views must be"),
-    (["--width", "0"], "width must be"),
+    (["--views", "0"], "--views must be an integer in 1..100000, got 0"),
+    (["--workers", "0"], "--workers must be an integer in 1..4096, got 0"),
+    (["--width", "0"], "--width must be"),
     (["--workers", "2", "--scheduler", "tcp://127.0.0.1:1"], "not allowed with"),
     (["--scheduler", "tcp://127.0.0.1:1"], "cannot reach the Dask scheduler"),
     (["--scheduler", "tls://127.0.0.1:1"], "needs certificates"),
@@ -259,14 +262,59 @@ def test_a_killed_workers_tasks_are_done_elsewhere(client, meshes, tmp_path, dev
     assert int(marker.read_text()) not in [p["pid"] for p in client.run(lambda: {"pid": os.getpid()}).values()]
 
 
+@pytest.mark.parametrize("folder", ["", "  "])
+def test_an_empty_output_folder_is_refused(folder, meshes, tmp_path, capsys, monkeypatch):
+    monkeypatch.chdir(tmp_path)   # '' would be this folder
+    code = main(["batch", "render", str(meshes[0]), "-o", folder, "--workers", "1", "--width", "8"])
+    out, err = capsys.readouterr()
+    assert code == 2 and err == f"clrt: -o must name a folder, got {folder!r}\n", err
+    assert not out and not list(tmp_path.iterdir()), "nothing written"
+    with pytest.raises(OutputError, match="out_dir must name a folder"):
+        clrt.batch.render(meshes[0], folder, workers=1)
+    with pytest.raises(InputError, match=r"^views must be an integer in 1\.\.100000, got 0$"):
+        clrt.batch.render(meshes[0], tmp_path / "out", views=0)   # the Python name, not --views
+    assert not list(tmp_path.iterdir())
+
+
+def test_a_manifest_clrt_did_not_write_is_kept_without_force(client, meshes, tmp_path, device, capsys):
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / BATCH_MANIFEST).write_text("precious\n")
+    code = main(["batch", "render", str(meshes[0]), "-o", str(out), "--workers", "1", "--width", "8",
+                 "--height", "8"])
+    _, err = capsys.readouterr()
+    assert code == 2 and err.startswith("clrt: ") and len(err.strip().splitlines()) == 1, err
+    assert "manifest.jsonl exists and was not written by clrt" in err and "--force" in err
+    assert (out / BATCH_MANIFEST).read_text() == "precious\n" and not list(out.rglob("*.png"))
+    with pytest.raises(OutputError, match="not written by clrt"):
+        clrt.batch.render(meshes[0], out, client=client, device=device, **SIZE)
+    assert (out / BATCH_MANIFEST).read_text() == "precious\n"
+
+    # force=True replaces it (unread) with clrt's own manifest, which the next run reads and resumes from.
+    first = clrt.batch.render(meshes[0], out, client=client, device=device, force=True, **SIZE)
+    assert [o.status for o in first] == ["done"]
+    assert "note" not in _manifest(out)[0]
+    again = clrt.batch.render(meshes[0], out, client=client, device=device, **SIZE)
+    assert [o.status for o in again] == ["skipped"]
+    records = _manifest(out)
+    assert [r["path"] for r in records] == ["ball/view-0000.png"]
+    assert "note" not in records[0], "known from the manifest, not found afresh"
+
+    # A manifest changed since clrt wrote it is the user's now.
+    (out / BATCH_MANIFEST).write_text((out / BATCH_MANIFEST).read_text() + "{}\n")
+    with pytest.raises(OutputError, match="not written by clrt"):
+        clrt.batch.render(meshes[0], out, client=client, device=device, **SIZE)
+
+
 def test_resume_renders_only_what_is_missing(client, meshes, tmp_path, device):
     out = tmp_path / "out"
     first = clrt.batch.render(meshes, out, views=3, client=client, device=device, **SIZE)
     assert sorted(o.status for o in first) == ["done"] * 6
     before = {p: os.stat(out / p).st_mtime_ns for p in _images(out)}
     (out / "block/view-0001.png").unlink()                       # lost ...
-    lines = (out / BATCH_MANIFEST).read_text().splitlines()     # ... and one never recorded (client killed)
-    (out / BATCH_MANIFEST).write_text("\n".join(line for line in lines if "ball/view-0002" not in line) + "\n")
+    lines = (out / BATCH_MANIFEST).read_text().splitlines()     # ... and one never recorded (client killed):
+    write_text("\n".join(line for line in lines if "ball/view-0002" not in line) + "\n",   # as clrt wrote it
+               out / BATCH_MANIFEST, record=True)
 
     again = clrt.batch.render(meshes, out, views=3, client=client, device=device, **SIZE)
     redone = [o for o in again if o.seconds > 0]

@@ -539,6 +539,45 @@ def test_scene_larger_than_the_device_is_refused_with_sizes():
         check_fits(tiny, "a tiny GPU", sum(a.nbytes for a in arrays.values()), render_module.MIN_FRAME_BYTES)
 
 
+@pytest.mark.parametrize("builder", ["sah", "paper"])
+def test_device_bytes_are_the_bytes_uploaded_wide_bvh_included(builder, device, monkeypatch):
+    """Renderer.device_bytes, and the figure both memory checks compare with the
+    device before any upload, are the sizes of the buffers actually made -- on
+    CPU devices the wide BVH (nodes and triangle packets) among them."""
+    import clrt.query.accel as accel_module
+    from clrt.device.context import device_kind
+    checked = []
+
+    def recording(module):
+        real = module.check_fits
+
+        def check(dev, label, nbytes, *rest):
+            checked.append((module.__name__, nbytes))
+            real(dev, label, nbytes, *rest)
+        monkeypatch.setattr(module, "check_fits", check)
+
+    recording(render_module)
+    recording(accel_module)
+    mesh = primitives.icosphere(3)
+    r = Renderer(scene_from_mesh(mesh), device, builder=builder)
+    made = {b.int_ptr: b.size for parts in r.geometry.buffers.values() for b in parts}
+    made.update({b.int_ptr: b.size for b in r.buffers.values()})
+    assert r.device_bytes == sum(made.values())
+    assert checked == [("clrt.renderer.frame", r.device_bytes)], "checked with the same figure, once"
+    wide = r.geometry.wide
+    if device_kind(r.queue.device) == "cpu":   # PoCL: the wide BVH is built, uploaded and counted
+        assert wide is not None
+        assert sum(r.geometry.buffers[name][0].size for name in ("wide_nodes", "packets")) == \
+            wide.nodes.nbytes + wide.packets.nbytes > 0
+    a = clrt.Accel(mesh, builder=builder, device=device)
+    uploaded = sum({b.int_ptr: b.size for parts in a.geometry.buffers.values() for b in parts}.values())
+    assert checked[1:] == [("clrt.query.accel", uploaded)]
+    assert a.memory()["scene"] == uploaded
+    if a.geometry.wide is not None:
+        assert uploaded == (a.acceleration.device_bytes() + a.geometry.wide.nodes.nbytes
+                            + a.geometry.wide.packets.nbytes)
+
+
 def test_failed_upload_is_a_device_memory_error(device, monkeypatch):
     def refuse(*args, **kwargs):
         raise cl.MemoryError(cl._cl._ErrorRecord("clCreateBuffer", cl.status_code.OUT_OF_RESOURCES, "fake"))

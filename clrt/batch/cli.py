@@ -14,8 +14,8 @@ import argparse
 import sys
 
 from clrt import options
-from clrt.config import DEVICE_ENV
-from clrt.errors import DeviceError, InputError
+from clrt.config import DEVICE_ENV, MAX_VIEWS, MAX_WORKERS
+from clrt.errors import DeviceError, InputError, OutputError
 
 #: Options of ``clrt render`` that ``clrt batch render`` does not take, and why.
 NOT_TAKEN = {"--output": "-o names a folder", "--aov": "images only"}
@@ -37,11 +37,11 @@ def parser() -> argparse.ArgumentParser:
                     "worker processes (loopback only) runs the jobs.")
     r.add_argument("sources", nargs="+", metavar="SOURCE", help="mesh or scene file, folder, or glob pattern")
     r.add_argument("-o", "--output", required=True, metavar="DIR", help="output folder (created if missing)")
-    r.add_argument("--views", type=int, default=1,
+    r.add_argument("--views", type=options.integer("--views", 1, MAX_VIEWS), default=1,
                    help="views per source on a turntable around the target: view i at azimuth 360*i/N "
                         "degrees, same distance, elevation and framing as the default camera (default 1)")
     where = r.add_mutually_exclusive_group()
-    where.add_argument("--workers", type=int, metavar="K",
+    where.add_argument("--workers", type=options.integer("--workers", 1, MAX_WORKERS), metavar="K",
                        help="local worker processes (default: one per GPU, else one per two CPU cores)")
     where.add_argument("--scheduler", metavar="ADDRESS",
                        help="use the workers of an existing Dask cluster, tcp://HOST:PORT or tls://HOST:PORT "
@@ -50,7 +50,7 @@ def parser() -> argparse.ArgumentParser:
                    help=f"'gpu', 'cpu' or P:D; 'gpu' gives worker i the i-th GPU (default: the "
                                     f"worker's {DEVICE_ENV}, else GPUs, else the CPU)")
     r.add_argument("-f", "--force", action="store_true",
-                   help="replace images in DIR even if clrt did not write them")
+                   help="replace images and the manifest in DIR even if clrt did not write them")
     # The options of clrt render, with the same meaning.
     options.add_render_options(r)
     options.add_accel_options(r)
@@ -61,6 +61,8 @@ def parser() -> argparse.ArgumentParser:
 def main(argv: list) -> int:
     """Run ``clrt batch ...``; errors are raised as ClrtError for clrt.cli to print."""
     args = parser().parse_args(options.glue_vector_values(list(argv)))
+    if not args.output.strip():   # '' would be the current folder
+        raise OutputError(f"-o must name a folder, got {args.output!r}")
     from clrt.batch.cluster import connect, require_dask
     from clrt.batch.engine import run
     from clrt.scene.render_setup import CAMERA_OPTIONS, SCENE_OPTIONS

@@ -25,7 +25,7 @@ from clrt.batch.cluster import dashboard_link, default_workers, require_dask, st
 from clrt.batch.jobs import Source, expand_sources, output_path, plan_tasks, settings_key
 from clrt.batch.manifest import FolderLock, Manifest
 from clrt.config import (BATCH_CACHE_SCENES, BATCH_TASK_RETRIES, DEFAULT_ACCEL, DEFAULT_BUILDER,
-                         DEFAULT_LEAF_SIZE, MAX_IMAGE_SIDE, MAX_VIEWS)
+                         DEFAULT_LEAF_SIZE, MAX_IMAGE_SIDE, MAX_VIEWS, MAX_WORKERS)
 from clrt.errors import InputError, OutputError
 from clrt.scene.render_setup import CAMERA_OPTIONS, MATERIAL_OPTIONS, SCENE_OPTIONS
 
@@ -117,14 +117,14 @@ def run(sources, out_dir, views: int = 1, *, client=None, workers: int | None = 
     """:func:`render`, returning the :class:`Summary` (outputs, time, per-worker counts)."""
     settings = _check_options(views, accel, builder, leaf_size, lights, options)
     if workers is not None:
-        checks.integer("workers", workers, 1, 4096)
+        checks.integer("workers", workers, 1, MAX_WORKERS)
     if isinstance(sources, (str, Path)):
         sources = [sources]
     found = expand_sources(sources)
     folder = _output_folder(out_dir)
     started = time.perf_counter()
     with FolderLock(folder):
-        manifest = Manifest(folder)
+        manifest = Manifest(folder, force)
         outputs, pending = _plan(found, folder, manifest, views, settings)
         manifest.write()
         if not pending:
@@ -195,6 +195,8 @@ def _plain(value):
 
 
 def _output_folder(out_dir) -> Path:
+    if isinstance(out_dir, str) and not out_dir.strip():   # Path('') is the current folder
+        raise OutputError(f"out_dir must name a folder, got {out_dir!r}")
     folder = Path(out_dir)
     if folder.exists() and not folder.is_dir():
         raise OutputError(f"cannot write into {folder}: it is not a folder")

@@ -1,6 +1,8 @@
 """The manifest of an output folder: one JSON line per output (and per bad
 source), rewritten through a temporary file and a rename, so a reader never sees
-half of it.  The images are the truth: an image is written atomically before it
+half of it, with the record of its SHA-256 beside it (``.manifest.jsonl.clrt``,
+clrt.output): a manifest.jsonl that clrt did not write is never read or replaced
+without ``force``.  The images are the truth: an image is written atomically before it
 is recorded, and one found without a record (the client stopped before it wrote
 the manifest) is taken as done if clrt wrote it.
 
@@ -21,26 +23,37 @@ from pathlib import Path
 
 from clrt.config import BATCH_MANIFEST, BATCH_MANIFEST_SECONDS
 from clrt.errors import OutputError
-from clrt.output import write_text
+from clrt.output import check_replace, write_text, written_by_clrt
 
 
 class Manifest:
-    """The records of one output folder, keyed by output path (bad sources: by source)."""
+    """The records of one output folder, keyed by output path (bad sources: by source).
 
-    def __init__(self, folder: Path):
+    The manifest follows clrt's one overwrite rule (clrt.output): it is written
+    with a record of its SHA-256 beside it (``.manifest.jsonl.clrt``), and an
+    existing manifest is read and replaced only if it is the one clrt wrote --
+    a user's file of that name is refused (OutputError) unless ``force``, and
+    then replaced without being read (the images decide what is done)."""
+
+    def __init__(self, folder: Path, force: bool = False):
         self.path = Path(folder) / BATCH_MANIFEST
         self.records: dict[str, dict] = {}
         self._written = 0.0
         self._dirty = False
-        if self.path.is_file():
-            with open(self.path, encoding="utf-8", errors="replace") as fh:
-                for line in fh:
-                    try:
-                        record = json.loads(line)
-                    except ValueError:
-                        continue   # not ours, or damaged by hand: the images decide
-                    if isinstance(record, dict):
-                        self.records[_record_key(record)] = record
+        if not os.path.lexists(self.path):
+            return
+        check_replace(self.path, force)   # before anything in the folder is written
+        if not written_by_clrt(self.path):   # with force: replaced, unread
+            self._dirty = True
+            return
+        with open(self.path, encoding="utf-8", errors="replace") as fh:
+            for line in fh:
+                try:
+                    record = json.loads(line)
+                except ValueError:
+                    continue   # damaged: the images decide
+                if isinstance(record, dict):
+                    self.records[_record_key(record)] = record
 
     def get(self, path: str) -> dict | None:
         return self.records.get(path)
@@ -60,7 +73,7 @@ class Manifest:
         if not self._dirty or (not force and time.monotonic() - self._written < BATCH_MANIFEST_SECONDS):
             return
         lines = (json.dumps(r, sort_keys=True) for r in sorted(self.records.values(), key=_order))
-        write_text("".join(line + "\n" for line in lines), self.path)
+        write_text("".join(line + "\n" for line in lines), self.path, record=True)
         self._written, self._dirty = time.monotonic(), False
 
 

@@ -8,6 +8,8 @@ by ``clrt.accel``; here it is only uploaded.
 
 from __future__ import annotations
 
+from typing import Callable
+
 import numpy as np
 import pyopencl as cl
 
@@ -100,10 +102,15 @@ class DeviceGeometry:
     allocation -- or than ``max_buffer_bytes``, which tests and benchmarks lower
     to split small scenes -- is uploaded in parts (see split.cl): then every
     buffer here is, and ``defines`` says so to the program build.
+
+    ``fits``: called with ``nbytes`` -- every buffer here, the wide BVH of CPU
+    devices included (built here, so known only here) -- before the first
+    upload; :func:`check_fits` raises there when the scene cannot fit.
     """
 
     def __init__(self, context: cl.Context, corners: np.ndarray, acceleration: Acceleration,
-                 extra: dict | None = None, max_buffer_bytes: int | None = None):
+                 extra: dict | None = None, max_buffer_bytes: int | None = None,
+                 fits: Callable[[int], None] | None = None):
         self.acceleration = acceleration
         prim_ids = acceleration.prim_ids
         # A tree built on this context's device is on it already, with its
@@ -127,6 +134,10 @@ class DeviceGeometry:
         if self.wide is not None:
             arrays.update(wide_nodes=self.wide.nodes, packets=self.wide.packets)
         self.defines = dict(accel_defines(acceleration, self.wide))
+        # The bytes the buffers hold (parts of a split array add up to it).
+        self.nbytes = int(sum(a.nbytes for a in arrays.values()))
+        if fits is not None:
+            fits(self.nbytes)
         if self.shifts is not None:
             self.defines["SPLIT_BUFFERS"] = None
             self.defines.update({f"{name}_PART_SHIFT": shift for name, shift in self.shifts.items()})
@@ -149,7 +160,6 @@ class DeviceGeometry:
             parts = [upload(array[k:k + step]) for k in range(0, max(len(array), 1), step)]
             self.buffers[name] = tuple(parts + parts[-1:] * (MAX_PARTS - len(parts)))
         self.num_tris = np.uint32(len(prim_ids))
-        self.nbytes = sum(a.nbytes for a in arrays.values())
         self._refit = None   # made by the first refit
 
     @property

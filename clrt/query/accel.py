@@ -135,8 +135,9 @@ class Accel:
         corners = triangle_corners(self.mesh)
         built = build_acceleration(corners, accel, builder, leaf_size, device)
         context, queue = create_context(device)
-        check_fits(queue.device, device_label(queue.device), built.device_bytes())   # before any upload
-        geometry = DeviceGeometry(context, corners, built, max_buffer_bytes=max_buffer_bytes)
+        label = device_label(queue.device)
+        geometry = DeviceGeometry(context, corners, built, max_buffer_bytes=max_buffer_bytes,
+                                  fits=lambda nbytes: check_fits(queue.device, label, nbytes))   # before any upload
         self._options = dict(accel=accel, builder=builder, leaf_size=leaf_size, device=device,
                              chunk_rays=chunk_rays, max_buffer_bytes=max_buffer_bytes)
         self._setup(self.mesh, context, queue, geometry, chunk_rays)

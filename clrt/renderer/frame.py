@@ -103,13 +103,20 @@ class Renderer:
         with _stage(self.timings, "copy to device"):
             self.context, self.queue = create_context(device)
             self.device = device_label(self.queue.device)
-            self.device_bytes = (self.acceleration.device_bytes()
-                                 + sum(x.nbytes for x in (*split.values(), *whole.values())))
-            check_fits(self.queue.device, self.device, self.device_bytes, MIN_FRAME_BYTES)
+            whole_bytes = sum(x.nbytes for x in whole.values())
+            # Without the wide BVH of CPU devices: DeviceGeometry builds it and then
+            # gives the whole figure (below) before its first upload.
+            self.device_bytes = (self.acceleration.device_bytes() + whole_bytes
+                                 + sum(x.nbytes for x in split.values()))
+
+            def fits(geometry_bytes: int) -> None:
+                self.device_bytes = geometry_bytes + whole_bytes
+                check_fits(self.queue.device, self.device, self.device_bytes, MIN_FRAME_BYTES)
+
             try:
                 # Buffers larger than one allocation are uploaded in parts (split.cl).
                 self.geometry = DeviceGeometry(self.context, a.corners, self.acceleration, split,
-                                               max_buffer_bytes)
+                                               max_buffer_bytes, fits=fits)
                 mf = cl.mem_flags
                 self.buffers = {name: cl.Buffer(self.context, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=x)
                                 for name, x in whole.items()}
@@ -380,7 +387,7 @@ class Renderer:
 # Device bytes per pixel of a tile: its ray, hit record, linear and sRGB colour.
 FRAME_BYTES_PER_PIXEL = RAY.itemsize + HIT.itemsize + 16 + 3
 MIN_FRAME_BYTES = 256 * FRAME_BYTES_PER_PIXEL
-MAX_TILE_PIXELS = 1 << 23   # 8M pixels (a 4K frame), 544 MiB of tile buffers
+MAX_TILE_PIXELS = 1 << 23   # 8M pixels (a 4K frame), 536 MiB of tile buffers
 IMAGE_POOL_SIZE = 3         # page-locked images per renderer (clrt/device/pinned.py)
 HOST_CHECK_BYTES = 1 << 28  # frames needing more host memory than this check that it is there
 
