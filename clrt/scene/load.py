@@ -450,8 +450,7 @@ def _mtl_material(m: dict, where: str, label: str) -> dict:
     """:func:`_whitted_from_mtl`, its values checked: a bad one is an error naming
     the mesh file, the MTL file, the material and the statement, with the values
     as the file has them (not as clamped into range)."""
-    from clrt import checks
-    from clrt.scene.scene import Material
+    from clrt import checks, config
     for key, value in m.items():
         values = value if isinstance(value, list) else [value] if isinstance(value, float) else []
         if not all(math.isfinite(v) for v in values):
@@ -459,8 +458,10 @@ def _mtl_material(m: dict, where: str, label: str) -> dict:
             rule = f"{len(values)} finite numbers" if isinstance(value, list) else "a finite number"
             raise _fail(label, f"{where}: {key} must be {rule}, got {shown}")
     fields = _whitted_from_mtl(m)
-    try:
-        Material(**fields)
+    try:   # the checks clrt.Material makes of these fields (the color is clamped into range already)
+        for field in config.MATERIAL_RANGES:
+            if field in fields:
+                checks.material_number(f"material {field}", fields[field], field)
     except InputError as exc:
         bad = next((f for f in fields if f"material {f} " in str(exc)), "")
         key = _MTL_KEYS.get(bad, "")
