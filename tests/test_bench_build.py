@@ -39,7 +39,7 @@ def test_build_bench_prints_every_variant(device, capsys, monkeypatch):
 def test_bad_builder_settings_fail_in_one_line(builder, message, device, capsys, monkeypatch):
     monkeypatch.setattr(build, "DEVICE_VARIANTS", dict(build.DEVICE_VARIANTS))
     try:
-        code = build.main(["--device", device or "cpu", "--meshes", "", "--triangles", "1K", "--builders", builder,
+        code = build.main(["--device", device or "cpu", "--meshes", "knot50k", "--builders", builder,
                            "--repeat", "0", "--no-trace"])
     except SystemExit as exc:
         code = exc.code

@@ -308,6 +308,12 @@ def main(argv=None) -> int:
                                           else int(b[len(prefix):])}
                 except (ValueError, argparse.ArgumentTypeError):
                     p.error(f"--builders: {b!r} needs an integer after '='")
+        if b in DEVICE_VARIANTS:   # a bad setting fails now, before any mesh is made
+            from clrt.device.build import check_tuning
+            exit = exit_code(check_tuning, **{key: value for key, value in DEVICE_VARIANTS[b].items()
+                                              if key != "staged_upload"})
+            if exit:
+                return exit
         if b not in HOST_BUILDERS and b not in DEVICE_VARIANTS:
             p.error(f"unknown builder {b!r}")
     for m in args.meshes:

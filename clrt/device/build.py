@@ -371,9 +371,11 @@ class _Phases:
         return out
 
 
-def _check_tuning(device, tail_threshold, treelet_leaves, treelet_min, tail_group) -> None:
-    """InputError for a benchmark's tuning value that the kernels cannot take
-    (rather than a failed program build or a wrong tree)."""
+def check_tuning(tail_threshold=None, treelet_leaves=None, treelet_min=None, tail_group=None,
+                 largest_group: int = 4096) -> None:
+    """InputError for a benchmark's tuning value (build_on_device's arguments of
+    these names) that the kernels cannot take, rather than a failed program
+    build or a wrong tree; ``largest_group``: the device's work-group limit."""
     from clrt import checks
     if tail_threshold is not None:
         checks.integer("tail_threshold", tail_threshold, 1)
@@ -382,10 +384,9 @@ def _check_tuning(device, tail_threshold, treelet_leaves, treelet_min, tail_grou
     if treelet_min is not None:
         checks.integer("treelet_min", treelet_min, 0)
     if tail_group is not None:
-        largest = int(device.max_work_group_size)
-        group = checks.integer("tail_group", tail_group, 1, largest)
+        group = checks.integer("tail_group", tail_group, 1, largest_group)
         if group & (group - 1):
-            raise checks.fail("tail_group", f"a power of two in 1..{largest}", tail_group)
+            raise checks.fail("tail_group", f"a power of two in 1..{largest_group}", tail_group)
 
 
 @_one_build_per_context
@@ -428,7 +429,7 @@ def build_on_device(context: cl.Context, queue: cl.CommandQueue, corners, volume
     leaf_size = int(leaf_size)
     tri = as_triangles(corners, check_finite=False)     # checked on the device
     device = queue.device
-    _check_tuning(device, tail_threshold, treelet_leaves, treelet_min, tail_group)
+    check_tuning(tail_threshold, treelet_leaves, treelet_min, tail_group, int(device.max_work_group_size))
     if "cl_khr_fp64" not in device.extensions:
         raise DeviceError(f"the device BVH builder fits volumes in float64, which {device.name.strip()} lacks")
     kind = device_kind(device)
