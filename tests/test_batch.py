@@ -301,9 +301,17 @@ def test_a_manifest_clrt_did_not_write_is_kept_without_force(client, meshes, tmp
     assert "note" not in records[0], "known from the manifest, not found afresh"
 
     # A manifest changed since clrt wrote it is the user's now.
-    (out / BATCH_MANIFEST).write_text((out / BATCH_MANIFEST).read_text() + "{}\n")
+    ours = (out / BATCH_MANIFEST).read_text()
+    (out / BATCH_MANIFEST).write_text(ours + "{}\n")
     with pytest.raises(OutputError, match="not written by clrt"):
         clrt.batch.render(meshes[0], out, client=client, device=device, **SIZE)
+
+    # A folder from before manifests had records (clrt's lines, no record beside): resumed as before.
+    (out / BATCH_MANIFEST).write_text(ours)
+    (out / f".{BATCH_MANIFEST}.clrt").unlink()
+    resumed = clrt.batch.render(meshes[0], out, client=client, device=device, **SIZE)
+    assert [o.status for o in resumed] == ["skipped"] and "note" not in _manifest(out)[0]
+    assert (out / f".{BATCH_MANIFEST}.clrt").exists()
 
 
 def test_resume_renders_only_what_is_missing(client, meshes, tmp_path, device):

@@ -23,7 +23,7 @@ from pathlib import Path
 
 from clrt.config import BATCH_MANIFEST, BATCH_MANIFEST_SECONDS
 from clrt.errors import OutputError
-from clrt.output import check_replace, write_text, written_by_clrt
+from clrt.output import check_replace, record_path, write_text, written_by_clrt
 
 
 class Manifest:
@@ -42,10 +42,13 @@ class Manifest:
         self._dirty = False
         if not os.path.lexists(self.path):
             return
-        check_replace(self.path, force)   # before anything in the folder is written
-        if not written_by_clrt(self.path):   # with force: replaced, unread
-            self._dirty = True
-            return
+        if not written_by_clrt(self.path):
+            if _manifest_before_records(self.path):
+                self._dirty = True            # read, and rewritten with its record
+            else:
+                check_replace(self.path, force)   # before anything in the folder is written
+                self._dirty = True                # with force: replaced, unread
+                return
         with open(self.path, encoding="utf-8", errors="replace") as fh:
             for line in fh:
                 try:
@@ -75,6 +78,25 @@ class Manifest:
         lines = (json.dumps(r, sort_keys=True) for r in sorted(self.records.values(), key=_order))
         write_text("".join(line + "\n" for line in lines), self.path, record=True)
         self._written, self._dirty = time.monotonic(), False
+
+
+# Every line of a manifest clrt wrote has these fields.
+_LINE_FIELDS = {"path", "source", "status", "key"}
+
+
+def _manifest_before_records(path: Path) -> bool:
+    """Is ``path`` a manifest that clrt wrote before manifests had a record beside
+    them (2026-11-29): no record, and every line one of clrt's JSON lines?  Such
+    a folder resumes as before; a record that no longer matches still refuses."""
+    if record_path(path).exists() or not path.is_file():
+        return False
+    try:
+        with open(path, encoding="utf-8") as fh:
+            lines = [line for line in fh if line.strip()]
+        records = [json.loads(line) for line in lines]
+    except (OSError, ValueError):
+        return False
+    return bool(records) and all(isinstance(r, dict) and _LINE_FIELDS <= r.keys() for r in records)
 
 
 def _record_key(record: dict) -> str:
