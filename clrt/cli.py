@@ -153,19 +153,21 @@ def _render(args) -> int:
     finally:
         if progress:
             progress.close()
-    aov_files = []
+    aov_note = ""
     if exr:
         from clrt.output import write_exr
-        channels = None
+        channels = {}
         if args.aov:
             from clrt.query.aov import camera_images_of, exr_channels
             channels = exr_channels(camera_images_of(renderer, camera), args.aov)
         write_exr(frame.image, out, channels, force=args.force)
+        aov_note = f"channels {' '.join(channels)} of {out.name}"
     else:
         write_image(frame.image, out, force=args.force)
-    if args.aov and not exr:
-        from clrt.query.aov import write_aovs
-        aov_files = write_aovs(renderer, camera, args.aov, out, force=args.force)
+        if args.aov:
+            from clrt.query.aov import write_aovs
+            aov_note = " ".join(str(p.resolve()) for p in write_aovs(renderer, camera, args.aov, out,
+                                                                       force=args.force))
     if not args.quiet:
         builder = renderer.acceleration.builder   # what "auto" chose
         accel = "brute force" if args.accel == "none" else f"{builder} BVH of {_ACCEL_WORDS[args.accel]}"
@@ -174,10 +176,8 @@ def _render(args) -> int:
               f"{len(scene.lights)} light(s), {accel}{view}, device: {frame.device}")
         for stage, ms in frame.timings.items():
             print(f"  {stage:<20} {ms:10.2f} ms")
-        if aov_files:
-            print("  AOVs: " + " ".join(str(p.resolve()) for p in aov_files))
-        elif args.aov:
-            print("  AOVs: channels " + " ".join(channels) + " of the .exr")
+        if args.aov:
+            print(f"  AOVs: {aov_note}")
     print(out.resolve())
     return 0
 

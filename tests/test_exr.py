@@ -97,7 +97,8 @@ def test_write_exr_round_trips_a_linear_render(exr, tmp_path, device):
 def test_aov_channels_hold_the_values_of_the_npy_files(exr, mesh_obj, tmp_path, device, capsys):
     names = ",".join(AOVS)
     png, out = tmp_path / "p" / "x.png", tmp_path / "e" / "x.exr"
-    png.parent.mkdir(), out.parent.mkdir()
+    png.parent.mkdir()
+    out.parent.mkdir()
     assert _render(mesh_obj, png, device, "--aov", names) == 0, capsys.readouterr().err
     assert _render(mesh_obj, out, device, "--aov", names) == 0, capsys.readouterr().err
     assert _files(out.parent) == ["x.exr"], "AOVs go into the .exr, not beside it"
