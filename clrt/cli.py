@@ -42,10 +42,12 @@ def _parser(bench: bool = False) -> argparse.ArgumentParser:
                                    "scene's, material options replace that field of every object's "
                                    "material. Prints the output path (absolute).")
     r.add_argument("mesh", nargs="?", help="mesh file or TOML scene file; omit for the built-in scene")
-    formats = ", ".join(config.IMAGE_FORMATS)
+    formats = ", ".join(config.OUTPUT_SUFFIXES)
     r.add_argument("-o", "--output", help=f"image to write ({formats}; default: MESH name .png, or "
-                                          f"{DEFAULT_OUTPUT}); an existing file is replaced only once the "
-                                          "render succeeded, and only if clrt wrote it (see --force)")
+                                          f"{DEFAULT_OUTPUT}); .exr holds the linear, unclamped image as "
+                                          f"float32 OpenEXR (needs {config.EXR_INSTALL_HINT}); an existing "
+                                          "file is replaced only once the render succeeded, and only if clrt "
+                                          "wrote it (see --force)")
     r.add_argument("-f", "--force", action="store_true",
                    help="replace the output even if clrt did not write it (by default an existing "
                         "file is replaced only if clrt wrote it, such as the previous render)")
@@ -57,7 +59,8 @@ def _parser(bench: bool = False) -> argparse.ArgumentParser:
                    help="also write per-pixel images, comma-separated: depth (along the view axis), "
                         "distance (along the ray), normal, prim (triangle index), hit, front; each as "
                         "OUT.NAME.npy (the values; inf / -1 / 0 where nothing is hit) and OUT.NAME.png "
-                        "(a picture of them); see docs/ray-queries.md")
+                        "(a picture of them); with an .exr output, as channels of that file instead "
+                        "(Z, distance, N.X N.Y N.Z, prim, hit, front); see docs/ray-queries.md")
     r.add_argument("-q", "--quiet", action="store_true", help="print only the output path")
 
     i = sub.add_parser("info", help="list OpenCL devices; with MESH, build statistics of its BVH",
@@ -101,13 +104,16 @@ def _output_path(args) -> Path:
         out = Path(Path(args.mesh).stem + ".png")
     else:
         out = Path(DEFAULT_OUTPUT)
-    if out.suffix.lower() not in config.IMAGE_FORMATS:
+    if out.suffix.lower() not in config.OUTPUT_SUFFIXES:
         kind = f"unknown image type {out.suffix!r}" if out.suffix else "no image type suffix"
-        raise OutputError(f"cannot write {out}: {kind} (use one of {', '.join(config.IMAGE_FORMATS)})")
+        raise OutputError(f"cannot write {out}: {kind} (use one of {', '.join(config.OUTPUT_SUFFIXES)})")
     if not out.parent.is_dir():
         raise OutputError(f"cannot write {out}: folder {out.parent} does not exist")
     if not os.access(out.parent, os.W_OK):
         raise OutputError(f"cannot write {out}: no permission to create files in {out.parent}")
+    if out.suffix.lower() == config.EXR_SUFFIX:
+        from clrt.output import require_exr
+        require_exr()   # OpenEXR is optional: without it, say so before any work
     return out
 
 
@@ -128,25 +134,40 @@ def _render(args) -> int:
 
     # Checked before the (possibly long) render; the writers check again.
     check_replace(out, args.force)
-    if args.aov:
+    # An .exr holds the linear image, and the AOVs as its channels rather than files beside it.
+    exr = out.suffix.lower() == config.EXR_SUFFIX
+    if args.aov and not exr:
         from clrt.query.aov import aov_paths
         for path in aov_paths(out, args.aov):
             check_replace(path, args.force)
-    # The image, its sRGB staging and PIL's copy (4 bytes a pixel) live on the host together.
-    check_host_memory(camera.width * camera.height * 10, f"a {camera.width}x{camera.height} image")
+    # The image, its sRGB staging and PIL's copy (4 bytes a pixel) live on the host together;
+    # for an .exr, the float32 image, its channels and OpenEXR's copy of them (12 bytes a pixel each).
+    check_host_memory(camera.width * camera.height * (36 if exr else 10),
+                      f"a {camera.width}x{camera.height} image")
     progress = None if args.quiet else _progress_bar(camera.width * camera.height * scene.samples ** 2)
     # With a progress bar the first tile is small, so that the bar moves from the start.
     limits = TileLimits(first_launch_pixels=config.PROGRESS_FIRST_TILE) if progress else None
     renderer = Renderer(scene, args.device, args.accel, args.builder, args.leaf_size, limits=limits)
     try:
-        frame = renderer.render(camera, progress=progress and progress.update)
+        frame = renderer.render(camera, linear=exr, progress=progress and progress.update)
     finally:
         if progress:
             progress.close()
-    write_image(frame.image, out, force=args.force)
-    if args.aov:
-        from clrt.query.aov import write_aovs
-        aov_files = write_aovs(renderer, camera, args.aov, out, force=args.force)
+    aov_note = ""
+    if exr:
+        from clrt.output import write_exr
+        channels = {}
+        if args.aov:
+            from clrt.query.aov import camera_images_of, exr_channels
+            channels = exr_channels(camera_images_of(renderer, camera), args.aov)
+        write_exr(frame.image, out, channels, force=args.force)
+        aov_note = f"channels {' '.join(channels)} of {out.name}"
+    else:
+        write_image(frame.image, out, force=args.force)
+        if args.aov:
+            from clrt.query.aov import write_aovs
+            aov_note = " ".join(str(p.resolve()) for p in write_aovs(renderer, camera, args.aov, out,
+                                                                       force=args.force))
     if not args.quiet:
         builder = renderer.acceleration.builder   # what "auto" chose
         accel = "brute force" if args.accel == "none" else f"{builder} BVH of {_ACCEL_WORDS[args.accel]}"
@@ -156,7 +177,7 @@ def _render(args) -> int:
         for stage, ms in frame.timings.items():
             print(f"  {stage:<20} {ms:10.2f} ms")
         if args.aov:
-            print("  AOVs: " + " ".join(str(p.resolve()) for p in aov_files))
+            print(f"  AOVs: {aov_note}")
     print(out.resolve())
     return 0
 

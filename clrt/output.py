@@ -4,8 +4,8 @@ file that clrt did not write unless asked to (``force``).
 One rule for every file clrt writes: an existing file is replaced without
 ``force`` only if clrt can tell that it wrote it.  Images in formats with room
 for text carry clrt's mark inside (PNG and TIFF "Software", JPEG and GIF
-comment, WebP XMP); files without such room (.npy arrays, BMP, PPM) get a
-record beside them, the hidden file ``.NAME.clrt`` holding the SHA-256 of
+comment, WebP XMP, OpenEXR a ``software`` header attribute); files without
+such room (.npy arrays, BMP, PPM) get a record beside them, the hidden file ``.NAME.clrt`` holding the SHA-256 of
 what clrt wrote -- so a re-run replaces its own outputs, and a file a user
 made or changed since is refused.
 """
@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from clrt import config
-from clrt.errors import OutputError
+from clrt.errors import InputError, OutputError
 
 # Every image clrt writes carries this mark ("Software" in PNG and TIFF, a comment in
 # JPEG and GIF, XMP in WebP); an existing output is replaced without --force only
@@ -50,6 +50,10 @@ def _mark_options(fmt: str) -> dict:
 
 
 MARKED_FORMATS = ("PNG", "TIFF", "JPEG", "GIF", "WEBP")   # _mark_options can mark these
+# OpenEXR files carry the mark as a string attribute of their header, under this
+# name (the header's other attributes are OpenEXR's own; tools such as
+# exrheader and OpenImageIO list it).
+EXR_MARK_ATTRIBUTE = "software"
 # zlib level 1 for PNG files: for a 1920x1080 render of bunny00 (png_bytes,
 # 2-core development machine) 18 ms for 179 KB, where level 6 (zlib's and
 # Pillow's default) took 48 ms for 123 KB and level 0 10 ms for 6.2 MB.
@@ -91,6 +95,8 @@ def written_by_clrt(path: Path) -> bool:
     file carry clrt's mark (only its header is read)?  Any other file: does its
     record (:func:`record_path`) hold the file's SHA-256?"""
     path = Path(path)
+    if path.suffix.lower() == config.EXR_SUFFIX:
+        return _exr_mark(path) or _matches_record(path)
     if config.IMAGE_FORMATS.get(path.suffix.lower()) not in MARKED_FORMATS:
         return _matches_record(path)
     # a chart or sheet written by write_file has a record rather than a mark
@@ -126,6 +132,44 @@ def _png_mark(path: Path) -> bool | None:
                     f.seek(length + 4, os.SEEK_CUR)
     except OSError:
         return None
+
+
+_EXR_MAGIC = b"\x76\x2f\x31\x01"
+_EXR_HEADER_LIMIT = 1 << 20   # clrt's headers are under 1 KB; one this long is not clrt's
+
+
+def _exr_mark(path: Path) -> bool:
+    """Does an OpenEXR file carry clrt's mark -- a string attribute
+    EXR_MARK_ATTRIBUTE starting with SOFTWARE_MARK -- in its (first) header?
+    The header is read here, without OpenEXR: a re-render over its own .exr
+    needs only this, and a user's .exr is refused even where OpenEXR is not
+    installed.  Layout (openexr.com, "OpenEXR File Layout"): magic number,
+    4 version bytes, then attributes -- name NUL, type NUL, int32 size, value
+    -- until an empty name."""
+    try:
+        with open(path, "rb") as f:
+            head = f.read(_EXR_HEADER_LIMIT)
+    except OSError:
+        return False
+    if head[:4] != _EXR_MAGIC:
+        return False
+    at = 8
+    while True:
+        end = head.find(b"\0", at)
+        if end < 0 or end == at:   # cut short, or the empty name that ends the header
+            return False
+        name = head[at:end]
+        type_end = head.find(b"\0", end + 1)
+        if type_end < 0 or type_end + 5 > len(head):
+            return False
+        kind = head[end + 1:type_end]
+        (size,) = struct.unpack("<i", head[type_end + 1:type_end + 5])
+        value = head[type_end + 5:type_end + 5 + size]
+        if size < 0 or len(value) < size:
+            return False
+        if name == EXR_MARK_ATTRIBUTE.encode() and kind == b"string":
+            return value.decode("latin-1").startswith(SOFTWARE_MARK)
+        at = type_end + 5 + size
 
 
 def _has_mark(path: Path) -> bool:
@@ -247,13 +291,18 @@ def write_image(image: np.ndarray, path: Path, force: bool = False) -> None:
     """Write an image through a temporary file in the same folder and a rename, so
     that a reader never sees a half-written image and a failure leaves no file
     behind (an existing file stays as it was).  An existing file is replaced only
-    if clrt wrote it, or with ``force`` (:func:`check_replace`)."""
+    if clrt wrote it, or with ``force`` (:func:`check_replace`).  ``image``: 8-bit
+    (H, W[, C]) uint8; for an ``.exr`` path, the float linear RGB image
+    (:func:`write_exr`)."""
     path = Path(path)
+    if path.suffix.lower() == config.EXR_SUFFIX:   # linear light, as OpenEXR
+        write_exr(image, path, force=force)
+        return
     check_replace(path, force)
     fmt = config.IMAGE_FORMATS.get(path.suffix.lower())
     if fmt is None:
         raise OutputError(f"cannot write {path}: unknown image type {path.suffix!r} "
-                          f"(use one of {', '.join(config.IMAGE_FORMATS)})")
+                          f"(use one of {', '.join(config.OUTPUT_SUFFIXES)})")
     data = png_bytes(image) if fmt == "PNG" else None
     if data is not None:
         _replace_atomically(path, lambda f: f.write(data))
@@ -263,9 +312,11 @@ def write_image(image: np.ndarray, path: Path, force: bool = False) -> None:
                         record=fmt not in MARKED_FORMATS)
 
 
-def _replace_atomically(path: Path, write, record: bool = False) -> None:
+def _replace_atomically(path: Path, write, record: bool = False, by_name: bool = False) -> None:
     """Call ``write(file)`` on a temporary file beside ``path``, then rename it into
-    place; with ``record``, also (re)write the record of its SHA-256 beside it."""
+    place; with ``record``, also (re)write the record of its SHA-256 beside it.
+    ``by_name``: ``write`` gets the temporary file's path instead (for writers
+    that open files themselves)."""
     try:
         fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=path.suffix, dir=path.parent)
     except OSError as exc:
@@ -274,7 +325,7 @@ def _replace_atomically(path: Path, write, record: bool = False) -> None:
         # mkstemp makes the file private (0600); give it the mode a plain open() would.
         os.fchmod(fd, _new_file_mode(path))
         with os.fdopen(fd, "wb") as f:
-            write(f)
+            write(tmp if by_name else f)
         digest = _sha256(Path(tmp)) if record else None
         os.replace(tmp, path)
         if record:   # after the file: a crash in between leaves a stale record, which refuses (safe)
@@ -327,3 +378,94 @@ def write_array(values: np.ndarray, path: Path, force: bool = False) -> None:
     path = Path(path)
     check_replace(path, force)
     _replace_atomically(path, lambda f: np.save(f, values), record=True)
+
+
+# --------------------------------------------------------------------------- OpenEXR
+
+def require_exr():
+    """The OpenEXR module (the optional 'exr' extra), imported on first use -- only
+    where an .exr is written; OutputError naming the fix where it is missing."""
+    try:
+        import OpenEXR
+    except ImportError:
+        raise OutputError(f"writing .exr files needs the OpenEXR package: {config.EXR_INSTALL_HINT}") from None
+    return OpenEXR
+
+
+def _exr_pixels(name: str, values, shape) -> np.ndarray:
+    """One channel as OpenEXR stores it: float16 (HALF) and float32 (FLOAT) as they
+    are, float64 as float32, bool as HALF 0/1, integers as UINT (uint32; signed
+    ones by their two's complement, so -1 reads back as 0xFFFFFFFF, and
+    ``.view(np.int32)`` gives the signed values again)."""
+    values = np.asarray(values)
+    if values.shape != shape:
+        raise InputError(f"EXR channel {name!r} must have the image's shape {shape}, got {values.shape}")
+    kind = values.dtype.kind
+    if kind == "b":
+        return values.astype(np.float16)
+    if kind == "f":
+        return np.ascontiguousarray(values if values.dtype in (np.float16, np.float32) else values.astype(np.float32))
+    if kind in "iu":
+        limits = np.iinfo(np.int32 if kind == "i" else np.uint32)
+        if values.size and (values.min() < limits.min or values.max() > limits.max):
+            raise InputError(f"EXR channel {name!r}: integers must fit in {limits.dtype}")
+        if kind == "i":
+            return np.ascontiguousarray(values.astype(np.int32)).view(np.uint32)
+        return np.ascontiguousarray(values.astype(np.uint32))
+    raise InputError(f"EXR channel {name!r} must hold numbers, got {values.dtype}")
+
+
+def exr_layers(image: np.ndarray, channels: dict | None = None) -> dict:
+    """The channels of the EXR file :func:`write_exr` writes: R, G, B (and A) of
+    ``image``, then ``channels``, each a C-contiguous (H, W) array of float32,
+    float16 or uint32."""
+    image = np.asarray(image)
+    if image.ndim != 3 or image.shape[2] not in (3, 4) or image.dtype.kind != "f":
+        raise InputError(f"an EXR image must be linear RGB (or RGBA) floats of shape (H, W, 3) or (H, W, 4), "
+                         f"got {image.dtype} {image.shape}; render with linear=True")
+    if 0 in image.shape[:2]:
+        raise InputError(f"an EXR image needs at least one pixel, got shape {image.shape}")
+    # RGB as float32 (FLOAT), not half: the renderer computes in float32, and the
+    # file then holds exactly what render(linear=True) returned.  Half keeps only
+    # 11 bits (about 3 digits), turns anything above 65504 -- a bright
+    # highlight, the weights go up to 1000 -- into inf, and would round dark
+    # values that a later exposure change brings up; twice the size (ZIP
+    # compressed) is the price.  A float16 image is written as half.
+    names = "RGBA"[:image.shape[2]]
+    layers = {c: _exr_pixels(c, image[..., k], image.shape[:2]) for k, c in enumerate(names)}
+    for name, values in (channels or {}).items():
+        if not isinstance(name, str) or not name or name in layers:
+            raise InputError(f"EXR channel names must be distinct non-empty strings other than "
+                             f"{', '.join(names)}, got {name!r}")
+        layers[name] = _exr_pixels(name, values, image.shape[:2])
+    return layers
+
+
+def write_exr(image: np.ndarray, path: Path, channels: dict | None = None, force: bool = False) -> None:
+    """Write a linear image as an OpenEXR file (``.exr``), unclamped and without
+    any sRGB curve, for compositing and tone mapping: ``image`` (H, W, 3) float
+    linear RGB (``render(linear=True)``; float32 as FLOAT channels R, G, B, an
+    RGBA image gets A), ``channels`` more channels by name (e.g. ``{"Z": depth}``,
+    :func:`clrt.query.aov.exr_channels`), (H, W) arrays of float (FLOAT, or HALF
+    for float16), bool (HALF 0/1) or integers (UINT).  One part, scanlines,
+    ZIP compression (lossless), clrt's mark in the header (EXR_MARK_ATTRIBUTE).
+    Written as :func:`write_image` writes: through a temporary file and a
+    rename, over an existing file only if clrt wrote it or ``force``.  Needs
+    the OpenEXR package (``pip install 'clrt[exr]'``; OutputError without it)."""
+    path = Path(path)
+    if path.suffix.lower() != config.EXR_SUFFIX:
+        raise OutputError(f"cannot write {path}: an OpenEXR file's name must end in {config.EXR_SUFFIX}")
+    check_replace(path, force)
+    OpenEXR = require_exr()
+    layers = exr_layers(image, channels)
+    from clrt import __version__
+    header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage,
+              EXR_MARK_ATTRIBUTE: f"{SOFTWARE_MARK} {__version__}"}
+
+    def write(name: str) -> None:
+        try:
+            OpenEXR.File(header, layers).write(name)
+        except (RuntimeError, TypeError) as exc:   # OpenEXR's errors (a full disk, ...)
+            raise OutputError(f"cannot write {path}: {exc}") from None
+
+    _replace_atomically(path, write, by_name=True)

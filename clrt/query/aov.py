@@ -1,4 +1,6 @@
-"""Per-pixel images of a camera written as files (``clrt render --aov``)."""
+"""Per-pixel images of a camera written as files (``clrt render --aov``): beside
+the image as IMAGE.NAME.npy + IMAGE.NAME.png, or, when the image is an
+OpenEXR file, as extra channels of that file (:data:`EXR_CHANNELS`)."""
 
 from __future__ import annotations
 
@@ -13,6 +15,17 @@ from clrt.query.results import CameraImages
 
 
 AOVS = ("depth", "distance", "normal", "prim", "hit", "front")
+
+#: The channels each AOV becomes in an .exr output, with the values of its .npy
+#: (misses included): depth as ``Z`` (FLOAT, inf on a miss: OpenEXR's usual
+#: depth channel), distance as ``distance`` (FLOAT, inf), normal as ``N.X N.Y
+#: N.Z`` (FLOAT, world space, 0 on a miss: layer ``N``, as compositors name
+#: normals), prim as ``prim`` (UINT: the int32 index as its two's complement,
+#: so a miss, -1, is 0xFFFFFFFF and ``.view(np.int32)`` gives the .npy back;
+#: float would lose indices above 2**24), hit and front as ``hit`` and
+#: ``front`` (HALF 1.0 / 0.0, mattes for compositing).
+EXR_CHANNELS = {"depth": ("Z",), "distance": ("distance",), "normal": ("N.X", "N.Y", "N.Z"),
+                "prim": ("prim",), "hit": ("hit",), "front": ("front",)}
 
 
 def parse_aovs(text) -> tuple[str, ...]:
@@ -48,6 +61,31 @@ def aov_arrays(images: CameraImages, name: str) -> tuple[np.ndarray, np.ndarray]
     return flag, flag.astype(np.uint8) * 255
 
 
+def exr_channels(images: CameraImages, names) -> dict:
+    """The EXR channels (:data:`EXR_CHANNELS`) of the AOVs ``names``: channel name ->
+    (H, W) array, float32, float16 or uint32 as the file stores it."""
+    channels = {}
+    for name in names:
+        values, _ = aov_arrays(images, name)
+        if name == "normal":
+            parts = [np.ascontiguousarray(values[..., k], np.float32) for k in range(3)]
+        elif name == "prim":
+            parts = [np.ascontiguousarray(values, np.int32).view(np.uint32)]
+        elif name in ("hit", "front"):
+            parts = [values.astype(np.float16)]
+        else:
+            parts = [np.ascontiguousarray(values, np.float32)]
+        channels.update(zip(EXR_CHANNELS[name], parts))
+    return channels
+
+
+def camera_images_of(source, camera) -> CameraImages:
+    """The AOVs' source: ``camera``'s images from a Renderer (its uploaded scene
+    is reused) or an Accel."""
+    accel = source if isinstance(source, Accel) else Accel.from_renderer(source)
+    return accel.camera_images(camera)
+
+
 def aov_paths(image_path, names) -> list[Path]:
     """IMAGE.NAME.npy and IMAGE.NAME.png for each AOV name, beside ``image_path``."""
     image_path = Path(image_path)
@@ -66,8 +104,7 @@ def write_aovs(source, camera, names, image_path, force: bool = False) -> list[P
     Returns the paths."""
     if isinstance(names, str):
         names = parse_aovs(names)
-    accel = source if isinstance(source, Accel) else Accel.from_renderer(source)
-    images = accel.camera_images(camera)
+    images = camera_images_of(source, camera)
     image_path = Path(image_path)
     written = []
     for name in names:
