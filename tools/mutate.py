@@ -2,9 +2,10 @@
 
 Each mutant is one deliberate, one-token change (a comparison, a sign, an index)
 in the BVH traversal, the volume tests, the triangle test, the hit rule, the
-SAH sweep or the CPU walks (lane bits, wide and packet walks).  It is applied to a temporary copy of the repository (the working
-tree is never touched), and a chosen subset of the tests runs there -- fast
-files first, stopping at the first failure (``pytest -x``).  A mutant is
+SAH sweep or the CPU walks (lane bits, wide and packet walks).  It is applied
+to a temporary copy of the repository (the working tree is never touched), and
+a chosen subset of the tests runs there -- fast files first, stopping at the
+first failure (``pytest -x``).  A mutant is
 *killed* when a test fails, and *survives* when all of them pass.
 
     python tools/mutate.py                 # every mutant, table on stdout
