@@ -1,10 +1,11 @@
 """Mutation testing by hand-picked mutants: does the test suite notice a wrong kernel or builder?
 
 Each mutant is one deliberate, one-token change (a comparison, a sign, an index)
-in the BVH traversal, the volume tests, the triangle test, the hit rule or the
-SAH sweep.  It is applied to a temporary copy of the repository (the working
-tree is never touched), and a chosen subset of the tests runs there -- fast
-files first, stopping at the first failure (``pytest -x``).  A mutant is
+in the BVH traversal, the volume tests, the triangle test, the hit rule, the
+SAH sweep or the CPU walks (lane bits, wide and packet walks).  It is applied
+to a temporary copy of the repository (the working tree is never touched), and
+a chosen subset of the tests runs there -- fast files first, stopping at the
+first failure (``pytest -x``).  A mutant is
 *killed* when a test fails, and *survives* when all of them pass.
 
     python tools/mutate.py                 # every mutant, table on stdout
@@ -38,6 +39,11 @@ KERNEL_TESTS = ("tests/test_ties.py", "tests/test_watertight.py", "tests/test_qu
                 "tests/test_accel.py", "tests/test_optics.py")
 BOX_TESTS = ("tests/test_wide.py",) + KERNEL_TESTS
 SAH_TESTS = ("tests/test_sah_reference.py", "tests/test_bvh.py", "tests/test_ties.py")
+# The CPU walks (accel_wide.cl, accel_packet.cl, lanes.cl, the lane tests of
+# triangle.cl and volumes.cl): test_wide.py and test_packets.py run them beside
+# the binary walk, the single-ray walk and brute force on one device.
+WIDE_TESTS = ("tests/test_wide.py", "tests/test_packets.py", "tests/test_watertight.py")
+PACKET_TESTS = ("tests/test_packets.py", "tests/test_wide.py")
 
 
 @dataclass(frozen=True)
@@ -99,6 +105,48 @@ MUTANTS = [
            "*SPLIT_AT(g, prim_ids, slot) > *SPLIT_AT(g, prim_ids, best->prim)", KERNEL_TESTS),
     Mutant("closest-not-strict", "clrt/kernels/hit.cl",
            "if (t < best->t || (t == best->t", "if (t <= best->t || (t == best->t", KERNEL_TESTS),
+    # ---- the CPU walks (PoCL runs them for every box-tree query): the lane
+    # bits, the wide walk, the packet walk, and their triangle and slab tests
+    Mutant("lane-bits-avx-half", "clrt/kernels/lanes.cl",
+           "return (uint)__builtin_ia32_movmskps256(as_float8(lanes));",
+           "return (uint)__builtin_ia32_movmskps(as_float4(lanes.lo));", WIDE_TESTS),
+    Mutant("lane-bits-portable-shift", "clrt/kernels/lanes.cl",
+           "return (uint)((bytes * 0x0102040810204080UL) >> 56);",
+           "return (uint)((bytes * 0x0102040810204080UL) >> 57);", WIDE_TESTS),
+    Mutant("lane-mask-reversed", "clrt/kernels/lanes.cl",
+           "(int8)(0, 1, 2, 3, 4, 5, 6, 7)", "(int8)(7, 6, 5, 4, 3, 2, 1, 0)", WIDE_TESTS),
+    Mutant("lanes-edge-sign", "clrt/kernels/triangle.cl",
+           "((U < 0.0f) | (V < 0.0f) | (W < 0.0f))", "((U < 0.0f) | (V < 0.0f) | (W <= 0.0f))",
+           WIDE_TESTS),
+    Mutant("lanes-t-range-tmax", "clrt/kernels/triangle.cl",
+           "(t > tmin) & (t <= tmax);", "(t > tmin) & (t < tmax);", WIDE_TESTS),
+    Mutant("lanes-cull-back-sign", "clrt/kernels/triangle.cl",
+           "hit &= det >= 0.0f;", "hit &= det <= 0.0f;", WIDE_TESTS),
+    Mutant("wide-two-far-first", "clrt/kernels/accel_wide.cl",
+           "query == QUERY_CLOSEST && t1 < t2;", "query == QUERY_CLOSEST && t1 > t2;", WIDE_TESTS,
+           equivalent="as far-first: the order of the two children decides only how soon tmax "
+                      "shrinks; the postponed one keeps its own entry bound"),
+    Mutant("wide-two-push-current", "clrt/kernels/accel_wide.cl",
+           "stack[sp] = first_near ? c2 : c1;", "stack[sp] = first_near ? c1 : c2;", WIDE_TESTS),
+    Mutant("wide-exit-slack-dropped", "clrt/kernels/volumes.cl",
+           "const float8 exit = SLACK_LATER(far);", "const float8 exit = far;", WIDE_TESTS),
+    Mutant("wide-oblique-far-shift", "clrt/kernels/volumes.cl",
+           "p.far_shift = fmax(r->lo_shift, r->hi_shift);", "p.far_shift = fmin(r->lo_shift, r->hi_shift);",
+           WIDE_TESTS),
+    Mutant("packet-tie-rule", "clrt/kernels/accel_packet.cl",
+           "((int8)(id) < best->id)", "((int8)(id) > best->id)", PACKET_TESTS),
+    Mutant("packet-box-tmin-unwidened", "clrt/kernels/volumes.cl",
+           "max8(near_z, SLACK_EARLIER(tmin))", "max8(near_z, tmin)", PACKET_TESTS,
+           equivalent="no input found (argued, not proven): the oblique planes are true bounds "
+                      "widened by volume_ray's margin, so a box whose far bound lies within the "
+                      "slack below tmin holds no triangle whose computed t passes tmin"),
+    Mutant("packet-entry-farthest-ray", "clrt/kernels/accel_packet.cl",
+           "min_lane(select((float8)(INFINITY), enter, met))", "max_lane(select((float8)(-INFINITY), enter, met))",
+           PACKET_TESTS),
+    Mutant("packet-pop-other-rays", "clrt/kernels/accel_packet.cl",
+           "tmax, lane_mask(open))", "tmax, lane_mask(rays))", PACKET_TESTS),
+    Mutant("packet-stack-bottom-lost", "clrt/kernels/accel_packet.cl",
+           "if (sp == 0)\n                return;", "if (sp <= 1)\n                return;", PACKET_TESTS),
     # ---- SAH sweep (clrt/accel/sah.py)
     Mutant("sah-n-left-off-by-one", "clrt/accel/sah.py",
            "n_left = np.minimum(slot[1:], c)", "n_left = np.minimum(slot[:-1], c)", SAH_TESTS),
