@@ -114,6 +114,11 @@ def _check_chunk_rays(chunk_rays) -> None:
         checks.integer("chunk_rays", chunk_rays, 1)
 
 
+def _rebuilt_accel(vertices, faces, name, options) -> "Accel":
+    """An unpickled Accel: built again from its mesh and options (Accel.__reduce__)."""
+    return Accel(Mesh(vertices, faces, name), **options)
+
+
 class Accel:
     """A mesh and its acceleration structure, uploaded once to one device.
 
@@ -165,12 +170,38 @@ class Accel:
     def from_renderer(cls, renderer, chunk_rays: int | None = None) -> "Accel":
         """Ray queries on a Renderer's scene, sharing its device, BVH and buffers;
         ``prim`` is then the triangle index in the scene's objects, in order
-        (as ``Frame.prim``)."""
+        (as ``Frame.prim``).  They follow the renderer: after ``Renderer.refit``
+        (a rebuild included) they answer for the moved scene."""
         self = cls.__new__(cls)
-        self.mesh = as_mesh(renderer.scene)
         self._options = None   # the renderer's scene: refit the renderer instead
-        self._setup(self.mesh, renderer.context, renderer.queue, renderer.geometry, chunk_rays)
+        self.follow(renderer, chunk_rays)
+        renderer.add_follower(self)
         return self
+
+    def follow(self, renderer, chunk_rays: int | None = None) -> None:
+        """Take ``renderer``'s current scene, device and buffers (Renderer.refit
+        calls this on the queries made by :meth:`from_renderer`)."""
+        self.mesh = as_mesh(renderer.scene)
+        self._setup(self.mesh, renderer.context, renderer.queue, renderer.geometry, chunk_rays)
+
+    # An Accel holds device buffers that a copy would share (a refit of the copy
+    # would move the original's BVH): a copy, a deep copy or an unpickled Accel
+    # is a new one, built from the same mesh and options -- on the device named
+    # by them, which for a pickle may be another machine's.
+    def _own_options(self) -> dict:
+        if self._options is None:
+            raise InputError("queries that share a Renderer's scene cannot be copied or pickled: "
+                             "call Accel.from_renderer again")
+        return self._options
+
+    def __copy__(self) -> "Accel":
+        return Accel(self.mesh, **self._own_options())
+
+    def __deepcopy__(self, memo) -> "Accel":
+        return self.__copy__()
+
+    def __reduce__(self):
+        return _rebuilt_accel, (self.mesh.vertices, self.mesh.faces, self.mesh.name, dict(self._own_options()))
 
     def _setup(self, mesh, context, queue, geometry: DeviceGeometry, chunk_rays):
         _check_chunk_rays(chunk_rays)

@@ -15,7 +15,9 @@ Tiling and the memory fallback: tiles.py; page-locked images: clrt/device/pinned
 
 from __future__ import annotations
 
+import dataclasses
 import time
+import weakref
 from dataclasses import dataclass, field
 from typing import Callable
 
@@ -66,8 +68,19 @@ class Frame:
         return buffer.getvalue()
 
 
+def _own_copy(scene: Scene) -> Scene:
+    """A Renderer's own copy of ``scene``: what it uploaded stays what it shows.
+    Changing the caller's Scene later (its lights, background, materials) does
+    not reach the renderer -- set_lights, refit or a new Renderer do."""
+    return dataclasses.replace(scene, objects=list(scene.objects), lights=list(scene.lights))
+
+
 class Renderer:
     """A scene uploaded to one OpenCL device, ready to render frames.
+
+    The renderer keeps its own copy of the scene as it was when made (or last
+    refitted): later changes to the caller's Scene object are not shown --
+    use :meth:`set_lights`, :meth:`refit` or a new Renderer.
 
     ``accel``: "box" (default), "sphere", "ellipse" (BVH volume shape) or "none"
     (brute force); ``builder``: "sah" (default), "paper" (on the host) or
@@ -87,8 +100,9 @@ class Renderer:
         self._options = dict(device=device, accel=accel, builder=builder, leaf_size=leaf_size,
                              max_buffer_bytes=max_buffer_bytes)   # for a rebuild (refit)
         self.timings: dict[str, float] = {}
+        self._followers = weakref.WeakSet()   # Accel.from_renderer's queries, kept on this scene
         with _stage(self.timings, "initialisation"):
-            self.scene = as_scene(scene)   # or a mesh, a mesh or scene file: what clrt.render takes
+            self.scene = _own_copy(as_scene(scene))   # or a mesh, a mesh or scene file: what clrt.render takes
             self.arrays = flatten_scene(self.scene)
         with _stage(self.timings, "acceleration build"):
             self.acceleration = build_acceleration(self.arrays.corners, accel, builder, leaf_size, device)
@@ -217,7 +231,7 @@ class Renderer:
         if self.arrays.detail is not None:   # DETAIL_PARAMS in shading.cl, TEXTURE_PARAMS in texture.cl
             detail = (*b["tri_detail"], self.buffers["textures"], *b["texels"], self.buffers["srgb_table"])
         return camera_args(camera), (
-            *scene, self.buffers["lights"], len(self.scene.lights), vec4(self.scene.ambient_light),
+            *scene, self.buffers["lights"], len(self.arrays.lights), vec4(self.scene.ambient_light),
             vec4(self.scene.background), ray_epsilon(self.arrays.bounds, camera.eye), *detail)
 
     def refit(self, scene, *, rebuild: bool = False) -> None:
@@ -242,18 +256,27 @@ class Renderer:
             fresh = Renderer(scene, self._options["device"], self._options["accel"], self._options["builder"],
                              self._options["leaf_size"], limits=self.limits,
                              max_buffer_bytes=self._options["max_buffer_bytes"])
+            followers = self._followers
             self.__dict__.update(fresh.__dict__)
-            return
-        self.geometry.refit(self.queue, arrays.corners)
-        self.geometry.replace(self.queue, "tri_info", arrays.tri_info[self.acceleration.prim_ids])
-        self.geometry.replace(self.queue, "vertex_normals", arrays.vertex_normals)
-        cl.enqueue_copy(self.queue, self.buffers["materials"], arrays.materials)   # as many as before
-        self.scene, self.arrays = scene, arrays
-        self.set_lights(scene.lights)
+            self._followers = followers
+        else:
+            self.geometry.refit(self.queue, arrays.corners)
+            self.geometry.replace(self.queue, "tri_info", arrays.tri_info[self.acceleration.prim_ids])
+            self.geometry.replace(self.queue, "vertex_normals", arrays.vertex_normals)
+            cl.enqueue_copy(self.queue, self.buffers["materials"], arrays.materials)   # as many as before
+            self.scene, self.arrays = _own_copy(scene), arrays
+            self.set_lights(scene.lights)
+        for queries in list(self._followers):
+            queries.follow(self, queries.chunk_rays)
+
+    def add_follower(self, queries) -> None:
+        """Keep ``queries`` (Accel.from_renderer's) on this renderer's scene through refits."""
+        self._followers.add(queries)
 
     def set_lights(self, lights) -> None:
-        """Replace the scene's lights; the geometry stays uploaded (a turntable of
-        ``clrt batch render`` moves the default light with the camera)."""
+        """Replace the lights this renderer shows (its copy of the scene's; the
+        caller's Scene is left as it is); the geometry stays uploaded (a
+        turntable of ``clrt batch render`` moves the default light with the camera)."""
         self.scene.lights = list(lights)
         self.arrays.lights = light_records(self.scene.lights)
         self.buffers["lights"] = replace_buffer(self.queue, self.buffers["lights"], self.arrays.lights)

@@ -1,0 +1,92 @@
+"""What a Renderer and the queries made from it keep: the renderer renders its
+own copy of the scene (as it was when made or last refitted); queries from
+Accel.from_renderer follow its refits; copies of an Accel are new Accels.
+(Found by an audit: a renderer read the caller's light count against the
+lights it had uploaded -- past the end of that buffer -- and shared queries kept
+a rebuilt renderer's old BVH.)"""
+
+import copy
+import pickle
+
+import numpy as np
+import pytest
+
+import clrt
+from clrt.scene import primitives
+from clrt.scene.sources import as_mesh
+
+TORUS = primitives.torus(1.0, 0.35, 24, 12)
+
+
+def _rays(mesh, n=400, seed=7):
+    v = np.asarray(mesh.vertices, np.float64)
+    c, r = v.mean(axis=0), float(np.ptp(v, axis=0).max())
+    rng = np.random.default_rng(seed)
+    o = c + rng.normal(size=(n, 3)) * r
+    return o, c + rng.normal(size=(n, 3)) * 0.3 * r - o
+
+
+def _camera(scene, w=48, h=36):
+    cam = scene.camera
+    return clrt.Camera(cam.eye, cam.target, cam.up, cam.fov, w, h)
+
+
+def _moved(mesh, shift=(0.6, 0.0, 0.0)):
+    return clrt.Mesh(np.asarray(mesh.vertices, np.float64) + shift, mesh.faces, "moved")
+
+
+def test_the_renderer_shows_its_own_copy_of_the_scene(device):
+    base = clrt.scene_from_mesh(TORUS)
+    cam = _camera(base)
+    l1 = clrt.Light(tuple(np.asarray(cam.eye) + [1.0, 2.0, 0.0]))
+    l2 = clrt.Light((-3.0, 0.5, -2.0), (0.9, 0.2, 0.2))
+
+    def fresh(lights):
+        return clrt.Renderer(clrt.scene_from_mesh(TORUS, lights=lights), device).render(cam, linear=True).image
+
+    scene = clrt.scene_from_mesh(TORUS, lights=[l1])
+    renderer = clrt.Renderer(scene, device)
+    first = renderer.render(cam, linear=True).image
+    # the caller's Scene changed afterwards: not shown (and never read against the uploaded lights)
+    scene.lights = [l1] * 20
+    scene.background = (1.0, 0.0, 0.0)
+    scene.override_materials(color=(0.0, 1.0, 0.0))
+    assert np.array_equal(renderer.render(cam, linear=True).image, first)
+    # set_lights changes what the renderer shows, not the caller's Scene
+    renderer.set_lights([l2])
+    assert np.array_equal(renderer.render(cam, linear=True).image, fresh([l2]))
+    renderer.set_lights([l1, l2] * 10)
+    assert np.array_equal(renderer.render(cam, linear=True).image, fresh([l1, l2] * 10))
+    assert scene.lights == [l1] * 20
+
+
+@pytest.mark.parametrize("rebuild", [False, True])
+def test_queries_from_a_renderer_follow_its_refit(device, rebuild):
+    o, d = _rays(TORUS)
+    moved_scene = clrt.scene_from_mesh(_moved(TORUS))
+    expected = clrt.Accel(as_mesh(moved_scene), device=device).trace(o, d).prim
+    scene = clrt.scene_from_mesh(TORUS)
+    renderer = clrt.Renderer(scene, device)
+    queries = clrt.Accel.from_renderer(renderer)
+    assert not np.array_equal(queries.trace(o, d).prim, expected)
+    renderer.refit(moved_scene, rebuild=rebuild)
+    assert np.array_equal(queries.trace(o, d).prim, expected)
+    assert np.array_equal(queries.mesh.vertices, as_mesh(moved_scene).vertices)
+    cam = _camera(scene)
+    assert np.array_equal(renderer.render(cam, hits=True).prim, queries.camera_images(cam).prim)
+
+
+def test_copies_of_an_accel_are_accels_of_their_own(device):
+    o, d = _rays(TORUS)
+    original = clrt.Accel(TORUS, device=device)
+    before = original.trace(o, d).prim.copy()
+    for duplicate in (copy.copy(original), copy.deepcopy(original), pickle.loads(pickle.dumps(original))):
+        assert duplicate.geometry is not original.geometry
+        assert np.array_equal(duplicate.trace(o, d).prim, before)
+        duplicate.refit(_moved(TORUS).vertices)
+        assert not np.array_equal(duplicate.trace(o, d).prim, before)
+        assert np.array_equal(original.trace(o, d).prim, before)
+    shared = clrt.Accel.from_renderer(clrt.Renderer(clrt.scene_from_mesh(TORUS), device))
+    for make_copy in (copy.copy, copy.deepcopy, pickle.dumps):
+        with pytest.raises(clrt.InputError, match="share a Renderer's scene cannot be copied or pickled"):
+            make_copy(shared)
