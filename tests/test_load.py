@@ -282,6 +282,169 @@ def test_gltf_with_external_buffer(tmp_path):
                                _sorted_triangles(expected), atol=1e-5)
 
 
+TRI = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]], np.float32)
+
+
+def _gltf_file(path, meshes, nodes=None, scenes=None, materials=None, edit=None):
+    """A .gltf with an embedded buffer. meshes: list of lists of primitive dicts
+    {attribute name: array, "indices": array, "mode": int, "material": int};
+    integer attributes of two dimensions are normalized."""
+    import base64
+    import json
+    buf, views, accessors = bytearray(), [], []
+    codes = {"float32": 5126, "uint8": 5121, "uint16": 5123, "uint32": 5125}
+
+    def add(a):
+        a = np.ascontiguousarray(a)
+        buf.extend(b"\0" * (-len(buf) % 4))
+        views.append({"buffer": 0, "byteOffset": len(buf), "byteLength": a.nbytes})
+        buf.extend(a.tobytes())
+        acc = {"bufferView": len(views) - 1, "componentType": codes[a.dtype.name], "count": len(a),
+               "type": "SCALAR" if a.ndim == 1 else f"VEC{a.shape[1]}"}
+        if a.dtype != np.float32 and a.ndim == 2:
+            acc["normalized"] = True
+        if a.ndim == 2 and a.shape[1] == 3 and a.dtype == np.float32:
+            acc["min"], acc["max"] = a.min(0).tolist(), a.max(0).tolist()
+        accessors.append(acc)
+        return len(accessors) - 1
+
+    out = []
+    for prims in meshes:
+        ps = []
+        for p in prims:
+            q = {"attributes": {k: add(v) for k, v in p.items() if k.isupper()}}
+            q.update({k: (add(v) if k == "indices" else v) for k, v in p.items() if not k.isupper()})
+            ps.append(q)
+        out.append({"primitives": ps})
+    nodes = nodes if nodes is not None else [{"mesh": i} for i in range(len(out))]
+    doc = {"asset": {"version": "2.0"}, "scene": 0,
+           "scenes": scenes or [{"nodes": list(range(len(nodes)))}], "nodes": nodes,
+           "meshes": out, "accessors": accessors, "bufferViews": views}
+    if materials:
+        doc["materials"] = materials
+    if edit:
+        edit(doc, buf, views, accessors)
+    buf.extend(b"\0" * (-len(buf) % 4))
+    doc["buffers"] = [{"byteLength": len(buf),
+                       "uri": "data:application/octet-stream;base64," + base64.b64encode(bytes(buf)).decode()}]
+    path.write_text(json.dumps(doc))
+    return path
+
+
+def test_gltf_face_order_is_a_depth_first_walk_in_file_order(tmp_path):
+    # scene roots 2 then 0; node 0's children 1; so nodes 2, 0, 1: meshes 2, 0, 1
+    meshes = [[{"POSITION": TRI + np.float32(10 * i)}] for i in range(3)]
+    p = _gltf_file(tmp_path / "order.gltf", meshes, nodes=[{"mesh": 0, "children": [1]}, {"mesh": 1}, {"mesh": 2}],
+                   scenes=[{"nodes": [2, 0]}])
+    mesh = load_mesh(p)
+    assert mesh.vertices[mesh.faces][:, 0, 0].tolist() == [20, 0, 10]
+    p = _gltf_file(tmp_path / "two.gltf", [[{"POSITION": TRI}], [{"POSITION": TRI + np.float32(10)}]])
+    mesh = load_mesh(p)
+    assert mesh.vertices[mesh.faces][:, 0].tolist() == [[0, 0, 0], [10, 10, 10]]
+
+
+def test_gltf_mirroring_node_keeps_faces_facing_out(tmp_path):
+    # glTF 2.0 (3.7.4): a negative determinant reverses the winding; refraction reads winding
+    f = np.array(TETRA_F, np.uint16).reshape(-1)   # outward, counter-clockwise
+    uv = np.array([[0, 0], [1, 0], [0, 1], [1, 1]], np.float32)
+    p = _gltf_file(tmp_path / "m.gltf", [[{"POSITION": TETRA_V.astype(np.float32), "TEXCOORD_0": uv, "indices": f}]],
+                   nodes=[{"children": [1], "scale": [1, 1, -2]}, {"mesh": 0, "scale": [-1, 1, 1]},
+                          {"mesh": 0, "scale": [-1, 1, 1]}], scenes=[{"nodes": [0, 2]}])
+    mesh = load_mesh(p)
+    assert len(mesh.faces) == 8
+    for half in (slice(0, 4), slice(4, 8)):
+        faces = mesh.faces[half]
+        centre = mesh.vertices[np.unique(faces)].mean(0)
+        normals = mesh.face_normals()[half]
+        assert (np.einsum("ij,ij->i", normals, mesh.vertices[faces].mean(1) - centre) > 0).all()
+    # corners and their texture coordinates stay together
+    expected = 1 - uv[:, 1]
+    np.testing.assert_allclose(mesh.uv[4:, :, 1], expected[TETRA_F[:, [0, 2, 1]]])
+
+
+def test_gltf_sparse_accessor_is_applied(tmp_path):
+    def sparse(doc, buf, views, accessors):
+        buf.extend(b"\0" * (-len(buf) % 4))
+        views.append({"buffer": 0, "byteOffset": len(buf), "byteLength": 2})
+        buf.extend(struct.pack("<H", 1) + b"\0\0")
+        views.append({"buffer": 0, "byteOffset": len(buf), "byteLength": 12})
+        buf.extend(struct.pack("<3f", 5, 5, 5))
+        a = accessors[doc["meshes"][0]["primitives"][0]["attributes"]["POSITION"]]
+        a["sparse"] = {"count": 1, "indices": {"bufferView": len(views) - 2, "componentType": 5123},
+                       "values": {"bufferView": len(views) - 1}}
+        a["max"] = [5, 5, 5]
+    p = _gltf_file(tmp_path / "s.gltf", [[{"POSITION": TRI}]], edit=sparse)
+    mesh = load_mesh(p)
+    assert mesh.vertices[mesh.faces][0].tolist() == [[0, 0, 0], [5, 5, 5], [0, 1, 0]]
+
+
+@pytest.mark.parametrize("dtype", [np.uint8, np.uint16])
+def test_gltf_normalized_integer_texcoords(tmp_path, dtype):
+    top = np.iinfo(dtype).max
+    uv = np.array([[0, 1], [1, 1], [0, 0]], np.float64) * top
+    p = _gltf_file(tmp_path / "uv.gltf", [[{"POSITION": TRI, "TEXCOORD_0": uv.astype(dtype), "material": 0}]],
+                   materials=[{"pbrMetallicRoughness": {"baseColorFactor": [1, 1, 1, 1]}}])
+    mesh = load_mesh(p)
+    assert mesh.uv[0].tolist() == [[0, 0], [1, 0], [0, 1]]   # v' = 1 - v, as for float ones
+
+
+def test_gltf_base_colour_texture_reads_its_texcoord_set(tmp_path):
+    uv0 = np.zeros((3, 2), np.float32)
+    uv1 = np.array([[0, 1], [1, 1], [0, 0]], np.float32)
+    (tmp_path / "red.png").write_bytes(_png_bytes((255, 0, 0)))
+
+    def texture(doc, buf, views, accessors):
+        doc["textures"], doc["images"] = [{"source": 0}], [{"uri": "red.png"}]
+    p = _gltf_file(tmp_path / "uv1.gltf", [[{"POSITION": TRI, "TEXCOORD_0": uv0, "TEXCOORD_1": uv1, "material": 0}]],
+                   materials=[{"pbrMetallicRoughness": {"baseColorTexture": {"index": 0, "texCoord": 1}}}],
+                   edit=texture)
+    mesh, (material,) = load_module.load_asset(p)
+    assert mesh.uv[0].tolist() == [[0, 0], [1, 0], [0, 1]]
+    assert material["texture"].pixels.tolist() == [[[255, 0, 0]]]
+
+
+def _png_bytes(rgb) -> bytes:
+    import io
+
+    from PIL import Image
+    out = io.BytesIO()
+    Image.new("RGB", (1, 1), rgb).save(out, format="PNG")
+    return out.getvalue()
+
+
+@pytest.mark.parametrize("dtype", [np.uint16, np.float32])
+def test_gltf_colours_without_material_keep_their_precision(tmp_path, dtype):
+    c = np.array([[1, 0, 0, 1], [0, 0.5, 0, 1], [0, 0, 0.25, 1]])
+    stored = (c * 65535).round().astype(dtype) if dtype == np.uint16 else c.astype(dtype)
+    p = _gltf_file(tmp_path / "c.gltf", [[{"POSITION": TRI, "COLOR_0": stored}]])
+    mesh = load_mesh(p)
+    assert mesh.colors[0] == pytest.approx(c[:, :3], abs=1e-4)
+
+
+def test_gltf_triangle_strips_and_fans(tmp_path):
+    quad = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], np.float32)
+    strip = np.array([0, 1, 3, 2], np.uint16)
+    p = _gltf_file(tmp_path / "fan.gltf", [[{"POSITION": TRI}, {"POSITION": quad + np.float32(5), "mode": 6},
+                                            {"POSITION": quad, "indices": strip, "mode": 5}]])
+    mesh = load_mesh(p)
+    assert mesh.faces.tolist()[1:] == [[3, 4, 5], [3, 5, 6], [7, 8, 10], [8, 9, 10]]
+    assert (mesh.face_normals()[:, 2] > 0).all()
+
+
+def test_gltf_normals_kept_when_another_primitive_has_none(tmp_path):
+    n = np.array([[0, 0.6, 0.8]] * 3, np.float32)
+    p = _gltf_file(tmp_path / "n.gltf", [[{"POSITION": TRI, "NORMAL": n}, {"POSITION": TRI + np.float32(2)}]])
+    mesh = load_mesh(p)
+    np.testing.assert_allclose(mesh.vertex_normals(), [[0, 0.6, 0.8]] * 3 + [[0, 0, 1]] * 3, atol=1e-6)
+
+
+def test_gltf_compressed_primitive_is_refused(tmp_path):
+    def draco(doc, buf, views, accessors):
+        doc["meshes"][0]["primitives"][0]["extensions"] = {"KHR_draco_mesh_compression": {}}
+    p = _gltf_file(tmp_path / "d.gltf", [[{"POSITION": TRI}]], edit=draco)
+    assert_one_line_error(p, "compressed with KHR_draco_mesh_compression")
+
+
 # ---------------------------------------------------------------------------
 # 3DS
 

@@ -703,88 +703,36 @@ def _stl_checked(data: bytes, label: str) -> bytes:
                        f"holds room for {room}{' and some bytes' if (len(data) - _STL_HEADER) % _STL_TRIANGLE else ''})")
 
 
-def _BufferFileResolver(path: str):
-    """trimesh's resolver for the buffers a .gltf names: only regular files in the
-    .gltf's folder (trimesh refuses paths leaving it; a FIFO or device there would
-    block the read forever)."""
-    import trimesh
-
-    class Resolver(trimesh.resolvers.FilePathResolver):
-        def get(self, name: str):
-            full = self.absolute(name)
-            if not full.is_file():
-                raise ValueError(f"buffer '{name}' is not a regular file")
-            return super().get(name)
-
-    return Resolver(path)
-
-
 def _load_trimesh(data: bytes, file_type: str, path: str) -> "list[_Part]":
-    """Every triangle mesh in an STL or glTF file, with a glTF file's normals,
-    texture coordinates, vertex colours and materials.
+    """Every triangle mesh in an STL file (trimesh reads it) or a glTF file
+    (read here: :func:`_gltf_parts`).
 
-    Scenes are flattened in graph order with each node's transform applied to
-    its geometry's vertices (an instanced geometry appears once per node).
     trimesh is imported here, when a file needs it (it takes seconds on some
-    machines), and learns our 3DS reader then.  trimesh reads the images and
-    base-colour factors of glTF materials but neither samplers nor the
-    KHR_materials_* extensions, so those are read from the JSON
-    (:func:`_gltf_materials`), matched to trimesh's materials by a name clrt
-    gives each material before trimesh parses the file.
+    machines), and learns our 3DS reader then.
     """
+    if file_type in ("gltf", "glb"):
+        return _gltf_parts(data, file_type, path)
     import trimesh
     load_3ds.register_with_trimesh()
-
-    gltf = file_type in ("gltf", "glb")
-    doc = doc_problem = None
-    if gltf:
-        try:
-            doc = _gltf_json(data, "." + file_type)
-            if file_type == "glb" and len(data) < struct.unpack_from("<I", data, 8)[0]:
-                raise ValueError(f"truncated GLB file (header says {struct.unpack_from('<I', data, 8)[0]} "
-                                 f"bytes, the file has {len(data)})")
-            problem = _gltf_reference_problem(doc)
-            if problem:
-                raise _fail(path, f"corrupt {file_type.upper()} file: {problem}")
-            data = _gltf_renamed_materials(data, doc, file_type)
-        except MeshLoadError:
-            raise
-        except Exception as exc:  # noqa: BLE001 -- trimesh may still read it; if not, this is the reason
-            doc, doc_problem = None, _gltf_json_problem(exc)
-    kwargs = {"process": False, "validate": False, "skip_materials": doc is None}
-    if file_type == "gltf":
-        # A .gltf names its buffers (and images) as files beside it.
-        kwargs["resolver"] = _BufferFileResolver(os.path.abspath(path))
     try:
         with np.errstate(all="ignore"):  # bad numbers are reported by Mesh.from_arrays
-            scene = trimesh.load(io.BytesIO(data), file_type=file_type, force="scene", **kwargs)
-        materials = _gltf_materials(doc, scene, path) if doc is not None else []
+            scene = trimesh.load(io.BytesIO(data), file_type=file_type, force="scene", process=False,
+                                 validate=False, skip_materials=True)
         parts = []
         for node in scene.graph.nodes_geometry:
             transform, geometry_name = scene.graph[node]
             geometry = scene.geometry.get(geometry_name)
-            # Point clouds and paths have no faces; they are not rendered.
             if not isinstance(geometry, trimesh.Trimesh) or len(geometry.faces) == 0:
                 continue
-            part = _trimesh_part(geometry, linear_colors=gltf)
+            part = _trimesh_part(geometry, linear_colors=False)
             matrix = np.asarray(transform, dtype=np.float64)
             if not np.array_equal(matrix, np.eye(4)):
                 part.vertices = part.vertices @ matrix[:3, :3].T + matrix[:3, 3]
-                if part.normals is not None:
-                    part.normals = part.normals @ np.linalg.inv(matrix[:3, :3])
-            name = getattr(getattr(geometry.visual, "material", None), "name", None)
-            if materials and isinstance(name, str) and name.startswith(_GLTF_MATERIAL):
-                part.face_material = np.full(len(part.faces), int(name[len(_GLTF_MATERIAL):]))
-            part.materials = materials
             parts.append(part)
     except MeshLoadError:
         raise
     except Exception as exc:  # trimesh raises anything from KeyError to struct.error
-        if doc_problem:   # ours names the problem; trimesh's exception often only its own symptom
-            reason = f"corrupt or unsupported {file_type.upper()} file: {doc_problem}"
-        else:
-            reason = f"corrupt or unsupported {file_type.upper()} file ({_short(exc)})"
-        raise _fail(path, reason) from exc
+        raise _fail(path, f"corrupt or unsupported {file_type.upper()} file ({_short(exc)})") from exc
     if not parts:
         raise _fail(path, "contains no triangles")
     return parts
@@ -792,9 +740,9 @@ def _load_trimesh(data: bytes, file_type: str, path: str) -> "list[_Part]":
 
 def _trimesh_part(geometry, linear_colors: bool) -> "_Part":
     """Vertices, faces, and what a trimesh.Trimesh's visual holds: texture
-    coordinates, vertex or face colours (sRGB unless ``linear_colors``, as glTF's
-    COLOR_0 is), and normals when they came from the file (trimesh keeps loaded
-    normals in its cache; it only computes them when asked)."""
+    coordinates, vertex or face colours (sRGB unless ``linear_colors``), and
+    normals when they came from the file (trimesh keeps loaded normals in its
+    cache; it only computes them when asked)."""
     part = _Part(np.asarray(geometry.vertices, dtype=np.float64), np.asarray(geometry.faces, dtype=np.int64))
     part.srgb_colors = not linear_colors
     if "vertex_normals" in geometry._cache.cache:
@@ -823,40 +771,368 @@ def _unit_colors(colors) -> np.ndarray:
     return c[:, :3].astype(np.float64) / scale
 
 
-# The name each glTF material gets before trimesh reads the file: its index follows.
-_GLTF_MATERIAL = "clrt material "
+# ---------------------------------------------------------------------------
+# glTF 2.0 (.gltf, .glb): geometry, materials and images read from the JSON
+# document and its buffers.  trimesh's reader (5.2.0) drops sparse accessors
+# and TRIANGLE_FAN primitives, takes normalised-integer texture coordinates
+# as they are, quantises COLOR_0 to 8 bits, ignores a mirroring node's
+# winding and orders nodes by its graph, not by the file.
+
+_GLTF_COMPONENTS = {5120: np.int8, 5121: np.uint8, 5122: np.int16, 5123: np.uint16, 5125: np.uint32,
+                    5126: np.float32}
+_GLTF_WIDTHS = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT2": 4, "MAT3": 9, "MAT4": 16}
+_GLTF_COMPRESSION = ("KHR_draco_mesh_compression", "EXT_meshopt_compression")
 _GLTF_WRAPS = {10497: "repeat", 33071: "clamp", 33648: "mirror"}
+_GLTF_MAX_ACCESSOR = 1 << 28   # bytes of an accessor without a bufferView (all zeros, or sparse)
 
 
-def _gltf_renamed_materials(data: bytes, doc: dict, file_type: str) -> bytes:
-    """The file with material i named _GLTF_MATERIAL + i (a GLB's JSON chunk rewritten)."""
-    import json
-    import struct
-    if not doc.get("materials"):
-        return data
-    for i, material in enumerate(doc["materials"]):
-        material["name"] = f"{_GLTF_MATERIAL}{i}"
-    text = json.dumps(doc).encode("utf-8")
-    if file_type == "gltf":
-        return text
-    text += b" " * (-len(text) % 4)   # chunks are 4-byte aligned, JSON padded with spaces
-    length = struct.unpack_from("<I", data, 12)[0]
-    rest = data[20 + length:]
-    return (struct.pack("<4sII", b"glTF", 2, 20 + len(text) + len(rest)) + struct.pack("<I", len(text))
-            + b"JSON" + text + rest)
+class _GltfError(ValueError):
+    """What is wrong with a glTF file's content, in words."""
 
 
-def _gltf_materials(doc: dict, scene, path: str) -> list:
+def _gltf_int(value, what: str, low: int = 0) -> int:
+    if isinstance(value, bool) or not isinstance(value, int) or value < low:
+        raise _GltfError(f"{what} is {value!r}, not an integer >= {low}")
+    return value
+
+
+class _GltfFile:
+    """A glTF document and its buffers (read when first needed): accessors,
+    primitives and images."""
+
+    def __init__(self, doc: dict, data: bytes, file_type: str, path: str):
+        self.doc, self.path = doc, path
+        self.folder = os.path.dirname(os.path.abspath(path))
+        self.buffers: dict = {}
+        self.glb_bin = None
+        if file_type == "glb":
+            offset = 20 + struct.unpack_from("<I", data, 12)[0]
+            if len(data) >= offset + 8:
+                length, kind = struct.unpack_from("<II", data, offset)
+                if kind == 0x004E4942:   # "BIN\0"
+                    if len(data) < offset + 8 + length:
+                        raise _GltfError(f"truncated GLB file (its binary chunk is {length} bytes, the file "
+                                         f"holds {len(data) - offset - 8})")
+                    self.glb_bin = memoryview(data)[offset + 8:offset + 8 + length]
+
+    def item(self, kind: str, index, what: str) -> dict:
+        items = self.doc.get(kind)
+        n = len(items) if isinstance(items, list) else 0
+        if isinstance(index, bool) or not isinstance(index, int) or not 0 <= index < n:
+            raise _GltfError(f"{what} {index!r} does not exist (the file has {n})")
+        if not isinstance(items[index], dict):
+            raise _GltfError(f"{what} {index} is not an object")
+        return items[index]
+
+    def uri(self, uri, what: str) -> "bytes | None":
+        """The bytes a URI names: a data URI, or a regular file in the file's
+        folder (None if there is no such file)."""
+        import base64
+        import urllib.parse
+        if not isinstance(uri, str):
+            raise _GltfError(f"{what}: uri is not a string")
+        if uri.startswith("data:"):
+            head, sep, body = uri.partition(",")
+            if not sep:
+                raise _GltfError(f"{what}: malformed data URI")
+            try:
+                return base64.b64decode(body) if head.endswith(";base64") else urllib.parse.unquote_to_bytes(body)
+            except ValueError:
+                raise _GltfError(f"{what}: bad base64 in its data URI") from None
+        name = urllib.parse.unquote(uri)
+        folder = os.path.realpath(self.folder)
+        full = os.path.realpath(os.path.join(folder, name))
+        if os.path.isabs(name) or os.path.commonpath([full, folder]) != folder:
+            raise _GltfError(f"{what}: '{uri}' escapes the folder of the file")
+        if not os.path.exists(full):
+            return None
+        if not os.path.isfile(full):   # a FIFO or device could block forever
+            raise _GltfError(f"{what}: '{uri}' is not a regular file")
+        with open(full, "rb") as fh:
+            return fh.read()
+
+    def buffer(self, index) -> memoryview:
+        if index not in self.buffers:
+            b = self.item("buffers", index, "buffer")
+            if "uri" not in b:
+                if self.glb_bin is None or index != 0:
+                    raise _GltfError(f"buffer {index} has no uri and the file no binary chunk")
+                data = self.glb_bin
+            else:
+                data = self.uri(b["uri"], f"buffer {index}")
+                if data is None:
+                    raise _GltfError(f"buffer {index}: no such file '{b['uri']}'")
+            length = _gltf_int(b.get("byteLength", len(data)), f"buffer {index} byteLength")
+            if len(data) < length:
+                raise _GltfError(f"buffer {index} holds {len(data)} bytes, its byteLength says {length}")
+            self.buffers[index] = memoryview(data)[:length]
+        return self.buffers[index]
+
+    def _view_array(self, view_index, offset, dtype, width: int, count: int, what: str) -> np.ndarray:
+        """(count, width) elements of ``dtype`` (little-endian) from a bufferView."""
+        view = self.item("bufferViews", view_index, "bufferView")
+        buf = self.buffer(view.get("buffer"))
+        start = _gltf_int(view.get("byteOffset", 0), f"bufferView {view_index} byteOffset")
+        length = _gltf_int(view.get("byteLength"), f"bufferView {view_index} byteLength")
+        offset = _gltf_int(offset, f"{what} byteOffset")
+        if start + length > len(buf):
+            raise _GltfError(f"bufferView {view_index} ends past the end of its buffer")
+        dtype = np.dtype(dtype).newbyteorder("<")
+        size = dtype.itemsize * width
+        stride = _gltf_int(view.get("byteStride", 0), f"bufferView {view_index} byteStride") or size
+        if stride < size:
+            raise _GltfError(f"{what}: bufferView {view_index} byteStride {stride} is less than an element")
+        if count == 0:
+            return np.zeros((0, width), dtype.newbyteorder("="))
+        total = stride * (count - 1) + size
+        if offset + total > length:
+            raise _GltfError(f"{what} reads past the end of bufferView {view_index}")
+        raw = np.frombuffer(buf, np.uint8, count=total, offset=start + offset)
+        if stride != size:
+            padded = np.zeros(stride * count, np.uint8)
+            padded[:total] = raw
+            raw = np.ascontiguousarray(padded.reshape(count, stride)[:, :size]).reshape(-1)
+        return raw.view(dtype).reshape(count, width).astype(dtype.newbyteorder("="))
+
+    def accessor(self, index, what: str, widths=None) -> "tuple[np.ndarray, bool]":
+        """An accessor's elements (count, width), sparse values applied, in
+        their stored type; and whether they are normalised integers."""
+        a = self.item("accessors", index, "accessor")
+        where = f"{what} (accessor {index})"
+        dtype = _GLTF_COMPONENTS.get(a.get("componentType"))
+        width = _GLTF_WIDTHS.get(a.get("type"))
+        if dtype is None or width is None:
+            raise _GltfError(f"{where}: unknown componentType {a.get('componentType')!r} or type {a.get('type')!r}")
+        if widths is not None and width not in widths:
+            raise _GltfError(f"{where} has type {a.get('type')}")
+        count = _gltf_int(a.get("count"), f"{where} count")
+        if "bufferView" in a:
+            out = self._view_array(a["bufferView"], a.get("byteOffset", 0), dtype, width, count, where)
+        else:
+            if count * width * np.dtype(dtype).itemsize > _GLTF_MAX_ACCESSOR:
+                raise _GltfError(f"{where}: count {count} without a bufferView is too large")
+            out = np.zeros((count, width), dtype)
+        sparse = a.get("sparse")
+        if sparse is not None:
+            if not isinstance(sparse, dict) or not isinstance(sparse.get("indices"), dict) \
+                    or not isinstance(sparse.get("values"), dict):
+                raise _GltfError(f"{where}: malformed sparse")
+            n = _gltf_int(sparse.get("count"), f"{where} sparse count", 1)
+            ind, val = sparse["indices"], sparse["values"]
+            index_type = {5121: np.uint8, 5123: np.uint16, 5125: np.uint32}.get(ind.get("componentType"))
+            if index_type is None:
+                raise _GltfError(f"{where}: sparse indices of componentType {ind.get('componentType')!r}")
+            rows = self._view_array(ind.get("bufferView"), ind.get("byteOffset", 0), index_type, 1, n,
+                                    f"{where} sparse indices")[:, 0].astype(np.int64)
+            values = self._view_array(val.get("bufferView"), val.get("byteOffset", 0), dtype, width, n,
+                                      f"{where} sparse values")
+            if rows.max() >= count:
+                raise _GltfError(f"{where}: sparse index {rows.max()} past its {count} elements")
+            out = out.copy()
+            out[rows] = values
+        return out, bool(a.get("normalized", False))
+
+    def floats(self, index, what: str, widths) -> np.ndarray:
+        """An accessor's elements as float64, normalised integers mapped to 0..1 (-1..1 signed)."""
+        values, normalized = self.accessor(index, what, widths)
+        if normalized and np.issubdtype(values.dtype, np.integer):
+            top = float(np.iinfo(values.dtype).max)
+            return np.maximum(values / top, -1.0)
+        return values.astype(np.float64)
+
+    def primitive(self, mesh: int, k: int, prim) -> "_Part | None":
+        """One primitive's triangles in the mesh's own space (None: points,
+        lines, or no POSITION); faces in index order, strips and fans
+        triangulated as the glTF specification numbers them."""
+        where = f"meshes[{mesh}].primitives[{k}]"
+        if not isinstance(prim, dict):
+            raise _GltfError(f"{where} is not an object")
+        compressed = [e for e in _GLTF_COMPRESSION if e in (prim.get("extensions") or {})]
+        if compressed:
+            raise _GltfError(f"{where} is compressed with {compressed[0]}, which clrt does not read")
+        mode = prim.get("mode", 4)
+        if mode in (0, 1, 2, 3):
+            return None
+        if mode not in (4, 5, 6):
+            raise _GltfError(f"{where}: unknown mode {mode!r}")
+        attributes = prim.get("attributes")
+        if not isinstance(attributes, dict) or "POSITION" not in attributes:
+            return None
+        vertices = self.floats(attributes["POSITION"], f"{where}.attributes.POSITION", (3,))
+        n = len(vertices)
+        if "indices" in prim:
+            values, _ = self.accessor(prim["indices"], f"{where}.indices", (1,))
+            if not np.issubdtype(values.dtype, np.unsignedinteger):
+                raise _GltfError(f"{where}.indices are not unsigned integers")
+            index = values[:, 0].astype(np.int64)
+        else:
+            index = np.arange(n, dtype=np.int64)
+        if index.size and index.max() >= n:
+            raise _GltfError(f"{where}: vertex index {index.max()} past its {n} vertices")
+        if mode == 4:
+            if len(index) % 3:
+                raise _GltfError(f"{where}: {len(index)} triangle indices, not a multiple of 3")
+            faces = index.reshape(-1, 3)
+        else:
+            i = np.arange(max(len(index) - 2, 0))
+            if mode == 5:   # strip: (i, i + 1, i + 2), the odd ones as (i, i + 2, i + 1)
+                faces = np.stack([index[i], index[i + 1 + i % 2], index[i + 2 - i % 2]], axis=1)
+            else:           # fan: (0, i + 1, i + 2)
+                faces = np.stack([index[np.zeros_like(i)], index[i + 1], index[i + 2]], axis=1)
+        part = _Part(vertices, faces.reshape(-1, 3), srgb_colors=False)   # COLOR_0 is linear
+        if "NORMAL" in attributes:
+            part.normals = self.floats(attributes["NORMAL"], f"{where}.attributes.NORMAL", (3,))
+        texcoord = 0
+        if "material" in prim:
+            material = self.item("materials", prim["material"], f"{where}.material")
+            info = (material.get("pbrMetallicRoughness") or {}).get("baseColorTexture")
+            if isinstance(info, dict):
+                texcoord = info.get("texCoord", 0)
+            part.face_material = np.full(len(part.faces), prim["material"], dtype=np.int64)
+        key = f"TEXCOORD_{texcoord}"
+        if key in attributes:
+            uv = self.floats(attributes[key], f"{where}.attributes.{key}", (2,))
+            uv[:, 1] = 1.0 - uv[:, 1]   # glTF's v runs down the image; clrt's (OBJ's) up
+            part.uv = uv[part.faces] if len(uv) == n else None
+        if "COLOR_0" in attributes:
+            colors = self.floats(attributes["COLOR_0"], f"{where}.attributes.COLOR_0", (3, 4))
+            part.vertex_colors = np.clip(colors[:, :3], 0.0, 1.0) if len(colors) == n else None
+        for name, array in (("NORMAL", part.normals),):
+            if array is not None and len(array) != n:
+                raise _GltfError(f"{where}.attributes.{name} has {len(array)} elements, POSITION {n}")
+        return part
+
+    def image(self, texture_index):
+        """The PIL image of a texture; None for one in an extension's format
+        only, or an image file that is not there."""
+        texture = self.item("textures", texture_index, "texture")
+        source = texture.get("source")
+        if source is None:
+            return None
+        image = self.item("images", source, "image")
+        if "bufferView" in image:
+            view = self.item("bufferViews", image["bufferView"], "bufferView")
+            data = self._view_array(image["bufferView"], 0, np.uint8, 1, _gltf_int(
+                view.get("byteLength"), "bufferView byteLength"), f"image {source}").tobytes()
+        elif "uri" in image:
+            data = self.uri(image["uri"], f"image {source}")
+        else:
+            data = None
+        if data is None:
+            return None
+        from PIL import Image
+        try:
+            with Image.open(io.BytesIO(data)) as opened:
+                opened.load()
+                return opened.copy()
+        except (OSError, ValueError, Image.DecompressionBombError) as exc:
+            raise _GltfError(f"image {source}: cannot read the texture image ({type(exc).__name__})") from None
+
+
+def _gltf_walk(doc: dict):
+    """``(node index, node, world matrix)`` of each node of the file's scene
+    (``scene``, else the first; without scenes, every node that is no node's
+    child, in file order), depth first in file order: a root node, then its
+    children in their ``children`` order, each with its own children before
+    the next; a node reached twice (a cycle) is visited once."""
+    nodes = doc.get("nodes", [])
+    scenes = doc.get("scenes", [])
+    if scenes:
+        roots = scenes[doc.get("scene", 0)].get("nodes", [])
+    else:
+        children = {c for node in nodes for c in node.get("children", [])}
+        roots = [i for i in range(len(nodes)) if i not in children]
+    stack = [(int(i), np.eye(4)) for i in reversed(list(roots))]
+    seen = set()
+    while stack:
+        index, parent = stack.pop()
+        if index in seen:
+            continue
+        seen.add(index)
+        node = nodes[index]
+        world = parent @ _node_matrix(node)
+        yield index, node, world
+        stack += [(int(c), world) for c in reversed(node.get("children", []))]
+
+
+def _gltf_parts(data: bytes, file_type: str, path: str) -> "list[_Part]":
+    """Every triangle of a glTF file's scene, with its normals, texture
+    coordinates, vertex colours and materials.
+
+    Face order: nodes as :func:`_gltf_walk` visits them, in each node's mesh
+    its primitives in order, in each primitive its triangles in index order
+    (an instanced mesh appears once per node).  Each node's world transform is
+    applied; a node whose transform mirrors (negative determinant) has its
+    triangles' corners 1 and 2 swapped (and their texture coordinates), so
+    that faces still face out, as the glTF specification says.  A primitive
+    without NORMAL gets its smooth (area-weighted) normals when another
+    primitive of the file has authored ones, which are kept."""
+    kind = file_type.upper()
+    try:
+        doc = _gltf_json(data, "." + file_type)
+        if file_type == "glb" and len(data) < struct.unpack_from("<I", data, 8)[0]:
+            raise ValueError(f"truncated GLB file (header says {struct.unpack_from('<I', data, 8)[0]} "
+                             f"bytes, the file has {len(data)})")
+    except Exception as exc:  # noqa: BLE001 -- named in words
+        raise _fail(path, f"corrupt or unsupported {kind} file: {_gltf_json_problem(exc)}") from None
+    problem = _gltf_reference_problem(doc)
+    if problem:
+        raise _fail(path, f"corrupt {kind} file: {problem}")
+    try:
+        gltf = _GltfFile(doc, data, file_type, path)
+        with np.errstate(all="ignore"):  # bad numbers are reported by Mesh.from_arrays
+            materials = _gltf_materials(gltf)
+            cache, parts = {}, []
+            for _, node, world in _gltf_walk(doc):
+                if "mesh" not in node:
+                    continue
+                primitives = gltf.item("meshes", node["mesh"], "mesh").get("primitives", [])
+                for k, primitive in enumerate(primitives):
+                    key = (node["mesh"], k)
+                    if key not in cache:
+                        cache[key] = gltf.primitive(node["mesh"], k, primitive)
+                    if cache[key] is not None and len(cache[key].faces):
+                        parts.append(_gltf_placed(cache[key], world, materials))
+            if any(p.normals is not None for p in parts):
+                for part in parts:
+                    if part.normals is None:
+                        try:
+                            part.normals = Mesh.from_arrays(part.vertices, part.faces).vertex_normals()
+                        except MeshLoadError:
+                            pass   # _build reports it, naming the file
+    except MeshLoadError:
+        raise
+    except _GltfError as exc:
+        raise _fail(path, f"corrupt or unsupported {kind} file: {exc}") from None
+    except Exception as exc:  # noqa: BLE001 -- a malformed document (a string where an object belongs, ...)
+        raise _fail(path, f"corrupt or unsupported {kind} file ({_short(exc)})") from exc
+    if not parts:
+        raise _fail(path, "contains no triangles")
+    return parts
+
+
+def _gltf_placed(part: "_Part", world: np.ndarray, materials: list) -> "_Part":
+    """A primitive's part in world space (see :func:`_gltf_parts`)."""
+    placed = replace(part, materials=materials)
+    m = world[:3, :3]
+    if not np.array_equal(world, np.eye(4)):
+        placed.vertices = part.vertices @ m.T + world[:3, 3]
+        if part.normals is not None:
+            det = np.linalg.det(m)
+            placed.normals = part.normals @ (np.linalg.inv(m) if det != 0 else np.linalg.pinv(m))
+    if np.linalg.det(m) < 0:
+        placed.faces = part.faces[:, [0, 2, 1]]
+        if part.uv is not None:
+            placed.uv = part.uv[:, [0, 2, 1]]
+    return placed
+
+
+def _gltf_materials(gltf: "_GltfFile") -> list:
     """Material fields of each glTF material (the table in docs/scene-files.md):
     base colour (factor and texture, with the sampler's wrap modes),
     metallic/roughness to specular, shininess and reflectivity,
     KHR_materials_transmission and KHR_materials_ior to transparency and ior."""
-    images = {}   # material index -> trimesh's PIL image of its base-colour texture
-    for geometry in scene.geometry.values():
-        material = getattr(getattr(geometry, "visual", None), "material", None)
-        name = getattr(material, "name", None)
-        if isinstance(name, str) and name.startswith(_GLTF_MATERIAL):
-            images[int(name[len(_GLTF_MATERIAL):])] = getattr(material, "baseColorTexture", None)
+    doc, path = gltf.doc, gltf.path
     textures, out = {}, []
     for i, m in enumerate(doc.get("materials", [])):
         pbr = m.get("pbrMetallicRoughness", {})
@@ -877,19 +1153,22 @@ def _gltf_materials(doc: dict, scene, path: str) -> list:
         if "KHR_materials_ior" in extensions:
             fields["ior"] = min(max(float(extensions["KHR_materials_ior"].get("ior", 1.5)), 1.0),
                                 MATERIAL_RANGES["ior"][1])
-        image = images.get(i)
         info = pbr.get("baseColorTexture")
-        if image is not None and isinstance(info, dict):
-            sampler = doc.get("textures", [])[info["index"]].get("sampler")
-            sampler = doc.get("samplers", [])[sampler] if sampler is not None else {}
+        if isinstance(info, dict):
+            texture = gltf.item("textures", info.get("index"), f"materials[{i}] baseColorTexture")
+            sampler = texture.get("sampler")
+            sampler = gltf.item("samplers", sampler, "sampler") if sampler is not None else {}
             wraps = tuple(_GLTF_WRAPS.get(sampler.get(k, 10497), "repeat") for k in ("wrapS", "wrapT"))
-            key = (id(image), wraps)   # one texture (one copy of its texels) per image and sampler
+            key = (texture.get("source"), wraps)   # one texture (one copy of its texels) per image and sampler
             if key not in textures:
+                image = gltf.image(info.get("index"))
                 try:
-                    textures[key] = Texture.from_image(image, *wraps, name=f"{os.path.basename(path)} image")
+                    textures[key] = None if image is None else Texture.from_image(
+                        image, *wraps, name=f"{os.path.basename(path)} image")
                 except InputError as exc:
                     raise _fail(path, str(exc)) from None
-            fields["texture"] = textures[key]
+            if textures[key] is not None:
+                fields["texture"] = textures[key]
         out.append(fields)
     return out
 
@@ -1187,18 +1466,8 @@ def file_camera(path) -> dict | None:
         return None
     try:
         doc = _gltf_json(_glb_json_bytes(path) if ext == ".glb" else _read_bytes(path), ext)
-        nodes, cameras = doc.get("nodes", []), doc.get("cameras", [])
-        scenes = doc.get("scenes", [])
-        roots = scenes[doc.get("scene", 0)].get("nodes", []) if scenes else range(len(nodes))
-        stack = [(int(i), np.eye(4)) for i in reversed(list(roots))]
-        seen = set()
-        while stack:   # depth first, in file order
-            index, parent = stack.pop()
-            if index in seen:   # a cycle would never end
-                continue
-            seen.add(index)
-            node = nodes[index]
-            world = parent @ _node_matrix(node)
+        cameras = doc.get("cameras", [])
+        for _, node, world in _gltf_walk(doc):   # depth first, in file order
             if "camera" in node:
                 perspective = cameras[node["camera"]].get("perspective")
                 if perspective is not None:
@@ -1209,7 +1478,6 @@ def file_camera(path) -> dict | None:
                                 "up": up / np.linalg.norm(up), "fov": math.degrees(float(perspective["yfov"])),
                                 "aspect": float(aspect) if aspect else None,
                                 "name": cameras[node["camera"]].get("name", "")}
-            stack += [(int(c), world) for c in reversed(node.get("children", []))]
     except MeshLoadError:
         raise
     except Exception as exc:  # noqa: BLE001 -- a malformed camera is reported, not a traceback
