@@ -13,10 +13,17 @@ checked), whose readers break that contract: its OFF reader crashes on any
 face with more than four corners; its OBJ reader emits ``usemtl`` sections in
 reverse order, moves the second triangle of every quad to the end of the mesh,
 and opens the ``mtllib`` and texture files named inside the OBJ; its ASCII PLY
-reader silently drops a truncated last face.  Binary PLY, STL and glTF are
-parsed by trimesh with ``process=False`` (no vertex merging or face removal);
-scenes are flattened with each node's transform applied.  3DS has its own
-reader in :mod:`clrt.scene.load_3ds`.
+reader silently drops a truncated last face.  Binary PLY and STL are parsed
+by trimesh with ``process=False`` (no vertex merging or face removal).  glTF
+is read here from its JSON and buffers (trimesh's reader drops sparse
+accessors and triangle fans, and orders nodes its own way): its faces come in
+a depth-first walk of the scene's nodes in file order (the scene's ``nodes``
+in order, each node followed by its ``children`` in order, each child's own
+children before the next child), within a node its mesh's primitives in
+order, within a primitive its triangles in index order, strips and fans
+triangulated as the glTF specification numbers them; an instanced mesh
+appears once per node, with that node's world transform applied.  3DS has
+its own reader in :mod:`clrt.scene.load_3ds`.
 """
 
 from __future__ import annotations
