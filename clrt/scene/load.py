@@ -379,7 +379,7 @@ def _parse_obj(data: bytes, label: str, folder: str | None = None) -> "_Part":
                  if line.startswith("mtllib ") and len(line.split()) > 1]
     if used and folder is not None:
         materials = {}
-        for name in libraries:
+        for name in _mtl_libraries(libraries, folder):
             materials.update(_parse_mtl(os.path.join(folder, name), label))
         if materials:
             names = list(materials)
@@ -393,6 +393,16 @@ def _parse_obj(data: bytes, label: str, folder: str | None = None) -> "_Part":
             part.face_material = np.repeat(np.asarray(polygon_material, np.int64), counts - 2)
             part.materials = [materials[n] for n in names]
     return part
+
+
+def _mtl_libraries(arguments: "list[str]", folder: str) -> "list[str]":
+    """The file names of ``mtllib`` statements (their arguments): one statement
+    may name several libraries, separated by spaces (the OBJ specification);
+    a whole argument naming a file in ``folder`` is one name with spaces."""
+    names = []
+    for text in arguments:
+        names.extend([text] if os.path.isfile(os.path.join(folder, text)) else text.split())
+    return names
 
 
 def _obj_field(face_text: str, field: int, missing: str = "") -> str:
