@@ -262,3 +262,29 @@ def test_frame_shows_in_notebooks(device):
         shown = np.asarray(Image.open(io.BytesIO(png)))
         srgb = r.render(camera).image
         assert shown.shape == (12, 16, 3) and np.abs(shown.astype(int) - srgb).max() <= 1
+
+
+def test_obj_mtllib_naming_several_libraries(tmp_path):
+    (tmp_path / "a.mtl").write_text("newmtl a\nKd 1 0 0\n")
+    (tmp_path / "b.mtl").write_text("newmtl b\nKd 0 1 0\n")
+    (tmp_path / "c d.mtl").write_text("newmtl c\nKd 0 0 1\n")
+    body = "v 0 0 0\nv 1 0 0\nv 0 1 0\nusemtl b\nf 1 2 3\nusemtl a\nf 1 3 2\nusemtl c\nf 2 1 3\n"
+    (tmp_path / "m.obj").write_text("mtllib a.mtl  b.mtl\nmtllib c d.mtl\n" + body)
+    mesh, materials = load_asset(tmp_path / "m.obj")
+    assert [materials[i]["color"] for i in mesh.face_material] == [(0.0, 1.0, 0.0), (1.0, 0.0, 0.0),
+                                                                   (0.0, 0.0, 1.0)]
+
+
+@pytest.mark.parametrize("mode", ["I;16", "I;16B", "I"])
+def test_16_bit_greyscale_textures_are_scaled_to_8_bits(tmp_path, mode):
+    grey = np.array([[0, 0x8080], [0x0101, 65535]], np.uint16)
+    image = Image.fromarray(grey).convert(mode) if mode != "I;16" else Image.fromarray(grey)
+    if mode == "I;16B":
+        image = Image.frombytes("I;16B", (2, 2), grey.astype(">u2").tobytes())
+    expected = [[[0] * 3, [128] * 3], [[1] * 3, [255] * 3]]
+    assert Texture.from_image(image).pixels.tolist() == expected
+    Image.fromarray(grey).save(tmp_path / "g16.png")   # a 16-bit PNG file, and as map_Kd
+    assert Texture.read(tmp_path / "g16.png").pixels.tolist() == expected
+    (tmp_path / "g.mtl").write_text("newmtl g\nmap_Kd g16.png\n")
+    (tmp_path / "g.obj").write_text("mtllib g.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nusemtl g\nf 1/1 2/1 3/1\n")
+    assert load_asset(tmp_path / "g.obj")[1][0]["texture"].pixels.tolist() == expected

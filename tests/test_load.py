@@ -203,6 +203,113 @@ def test_binary_ply_quads_fan_triangulated_in_place(tmp_path):
     assert mesh.faces.tolist() == [[0, 1, 2], [0, 2, 3], [1, 2, 5], [1, 5, 4]]
 
 
+# ---------------------------------------------------------------------------
+# Colour scale from the declared types (never guessed from the values)
+
+from clrt.scene.texture import srgb_decode  # noqa: E402
+
+PLY_COLOURED = ("ply\nformat {fmt} 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
+                "property {t} red\nproperty {t} green\nproperty {t} blue\nelement face 1\n"
+                "property list uchar int vertex_indices\nend_header\n")
+
+
+def test_ply_float_colours_are_0_to_1_even_a_hair_above_one(tmp_path):
+    # a float colour of 1.0000001 is 1 (clamped), not a reason to read all as 0..255
+    text = PLY_COLOURED.format(fmt="ascii", t="float") + (
+        "0 0 0 1.0000001 0.5 0.5\n1 0 0 0.5 0.5 0.5\n0 1 0 0.5 0.5 0.5\n3 0 1 2\n")
+    mesh = load_mesh(write(tmp_path, "f.ply", text))
+    assert mesh.colors[0, 0] == pytest.approx([1.0, *srgb_decode([0.5, 0.5])], abs=1e-6)
+    assert mesh.colors[0, 1] == pytest.approx(srgb_decode([0.5, 0.5, 0.5]), abs=1e-6)
+
+
+@pytest.mark.parametrize("fmt", ["ascii", "binary_little_endian", "binary_big_endian"])
+@pytest.mark.parametrize("t, top, code", [("uchar", 255, "B"), ("int", 255, "i"), ("ushort", 65535, "H"),
+                                          ("double", 1, "d")])
+def test_ply_colour_scale_follows_the_property_type(tmp_path, fmt, t, top, code):
+    # uchar colours of only 0 and 1 are 0 and 1/255 (near black), not 0 and white
+    rows = [(0, 0, 0, 1, 1, 1), (1, 0, 0, 1, 0, 1), (0, 1, 0, 0, 1, 0)]
+    head = PLY_COLOURED.format(fmt=fmt, t=t)
+    if fmt == "ascii":
+        data = head + "".join(" ".join(map(str, r)) + "\n" for r in rows) + "3 0 1 2\n"
+    else:
+        o = "<" if "little" in fmt else ">"
+        data = head.encode() + b"".join(struct.pack(f"{o}fff{code * 3}", *r) for r in rows) \
+            + struct.pack(f"{o}Biii", 3, 0, 1, 2)
+    mesh = load_mesh(write(tmp_path, "c.ply", data))
+    assert mesh.colors[0].tolist() == pytest.approx(srgb_decode(np.array(rows)[:, 3:] / top), abs=1e-6)
+
+
+@pytest.mark.parametrize("colour, expected", [("1 1 1 255", 1 / 255), ("255 255 255 255", 1.0),
+                                              ("1.0 1.0 1.0 1.0", 1.0), ("1 1 1.0 1", 1.0),
+                                              ("0.5 0.5 0.5 1", 0.5)])
+def test_coff_integer_colours_are_0_to_255_and_float_ones_0_to_1(tmp_path, colour, expected):
+    text = "COFF\n3 1 0\n" + "".join(f"{x} {y} 0 {colour}\n" for x, y in [(0, 0), (1, 0), (0, 1)]) + "3 0 1 2\n"
+    mesh = load_mesh(write(tmp_path, "c.off", text))
+    np.testing.assert_allclose(mesh.colors[0], srgb_decode(np.full((3, 3), expected)), atol=1e-6)
+
+
+@pytest.mark.parametrize("colour, expected", [("1 0 0", 1 / 255), ("255 0 0", 1.0), ("1.0 0 0", 1.0)])
+def test_off_face_colours_by_how_they_are_written(tmp_path, colour, expected):
+    text = f"OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2 {colour}\n"
+    mesh = load_mesh(write(tmp_path, "f.off", text))
+    np.testing.assert_allclose(mesh.colors[0, 0], [srgb_decode(expected), 0, 0], atol=1e-6)
+
+
+@pytest.mark.parametrize("keyword, extra", [
+    ("COFF", "{c}"), ("CNOFF", "0 0 1  {c}"), ("STCOFF", "{c}  0.25 0.75"), ("STCNOFF", "0 0 1  {c}  0.25 0.75"),
+    ("CNOFF", "0 0 1  {c3}"), ("STCNOFF", "0 0 1  {c3}  0.25 0.75"), ("NOFF", "0 0 1"), ("STOFF", "0.25 0.75"),
+])
+def test_off_vertex_columns_in_geomviews_order(tmp_path, keyword, extra):
+    # Geomview: x y z [nx ny nz] [r g b a] [s t], in that order, by the N, C, ST prefixes
+    line = extra.format(c="255 0 0 255", c3="255 0 0")
+    text = f"{keyword}\n3 1 0\n" + "".join(f"{x} {y} 0  {line}\n" for x, y in [(0, 0), (1, 0), (0, 1)]) + "3 0 1 2\n"
+    mesh = load_mesh(write(tmp_path, "v.off", text))
+    assert mesh.vertices.tolist() == [[0, 0, 0], [1, 0, 0], [0, 1, 0]]
+    if "C" in keyword:
+        assert mesh.colors[0].tolist() == [[1.0, 0.0, 0.0]] * 3
+    else:
+        assert mesh.colors is None
+
+
+# ---------------------------------------------------------------------------
+# Binary PLY with faces of mixed sizes (trimesh's reader refuses them)
+
+MIXED_HEAD = ("ply\nformat {fmt} 1.0\nelement vertex 7\nproperty float x\nproperty float y\nproperty float z\n"
+              "element face 3\nproperty list uchar int vertex_indices\nproperty uchar red\nproperty uchar green\n"
+              "property uchar blue\nelement edge 1\nproperty int vertex1\nproperty int vertex2\nend_header\n")
+MIXED_V = [(0, 0, 0), (1, 0, 0), (1, 1, 0), (0, 1, 0), (2, 0, 0), (2, 1, 0), (3, 0.5, 0)]
+MIXED_F = [((0, 1, 2, 3), (255, 0, 0)), ((1, 4, 5), (0, 255, 0)), ((1, 4, 6, 5, 2), (0, 0, 1))]
+
+
+def _mixed_ply(fmt: str) -> bytes:
+    o = "<" if "little" in fmt else ">"
+    body = b"".join(struct.pack(f"{o}3f", *v) for v in MIXED_V)
+    body += b"".join(struct.pack(f"{o}B{len(f)}i3B", len(f), *f, *c) for f, c in MIXED_F)
+    return MIXED_HEAD.format(fmt=fmt).encode() + body + struct.pack(f"{o}2i", 0, 1)
+
+
+@pytest.mark.parametrize("fmt", ["binary_little_endian", "binary_big_endian"])
+def test_binary_ply_with_faces_of_mixed_sizes(tmp_path, fmt):
+    mesh = load_mesh(write(tmp_path, "mixed.ply", _mixed_ply(fmt)))
+    assert mesh.faces.tolist() == [[0, 1, 2], [0, 2, 3], [1, 4, 5], [1, 4, 6], [1, 6, 5], [1, 5, 2]]
+    assert mesh.vertices.tolist() == [list(v) for v in MIXED_V]
+    np.testing.assert_allclose(mesh.colors[:, 0], [[1, 0, 0]] * 2 + [[0, 1, 0]] + [[0, 0, srgb_decode(1 / 255)]] * 3,
+                               atol=1e-6)
+    # the same file in ASCII loads the same
+    ascii_text = MIXED_HEAD.format(fmt="ascii") + "".join(" ".join(map(str, v)) + "\n" for v in MIXED_V) \
+        + "".join(f"{len(f)} {' '.join(map(str, f))} {' '.join(map(str, c))}\n" for f, c in MIXED_F) + "0 1\n"
+    same = load_mesh(write(tmp_path, "mixed_ascii.ply", ascii_text))
+    assert same.faces.tolist() == mesh.faces.tolist() and np.array_equal(same.colors, mesh.colors)
+
+
+@pytest.mark.parametrize("cut, reason", [(-3, "truncated"), (-9, "truncated"), (-30, "truncated"),
+                                         (2, "longer than its header says (2 bytes after the last element)")])
+def test_binary_ply_of_mixed_sizes_cut_or_padded(tmp_path, cut, reason):
+    data = _mixed_ply("binary_little_endian")
+    data = data[:cut] if cut < 0 else data + b"\0" * cut
+    assert_one_line_error(write(tmp_path, "bad.ply", data), reason)
+
+
 def test_ascii_ply_truncated_at_every_offset(tmp_path):
     source = trimesh.Trimesh(TETRA_V, TETRA_F, process=False)
     data = source.export(file_type="ply", encoding="ascii").rstrip()

@@ -284,20 +284,33 @@ def _parse_off_lines(data: bytes, label: str) -> "_Part":
     face_lines = lines[body + n_vertices:body + n_vertices + n_faces]
     counts, flat = _polygons(face_lines, label, counted=True)
     part = _Part(vertices, _fan_triangulate(counts, flat))
-    # Colours: r g b [a] after a vertex's xyz (COFF) or after a face's corners,
-    # used only when every row has them.
+    # Colours: r g b [a] of each vertex (C prefix) or after a face's corners,
+    # used only when every row has them.  A vertex line is, in Geomview's
+    # order, x y z [nx ny nz (N)] [r g b a (C)] [s t (ST)].
     if "C" in head[0]:
         table = _table(vertex_lines, np.float64)
-        if table is not None and table.shape[1] >= 6:
-            part.vertex_colors = table[:, 3:6]
+        start = 6 if "N" in head[0] else 3
+        size = table.shape[1] - start - (2 if head[0].startswith("ST") else 0) if table is not None else 0
+        if size in (3, 4):
+            tokens = [line.split()[start:start + 3] for line in vertex_lines]
+            part.vertex_colors = _off_colors(table[:, start:start + 3], tokens)
     if len(face_lines[0].split()) >= 4 + counts[0]:   # the first face has a colour: look for all
         colors = [line.split()[1 + n:4 + n] for line, n in zip(face_lines, counts.tolist())]
         if all(len(c) == 3 for c in colors):
             try:
-                part.face_colors, part.polygon_sizes = np.array(colors, dtype=np.float64), counts
+                part.face_colors = _off_colors(np.array(colors, dtype=np.float64), colors)
+                part.polygon_sizes = counts
             except ValueError:
                 raise _fail(label, "malformed face colour") from None
     return part
+
+
+def _off_colors(values: np.ndarray, tokens: "list[list[str]]") -> np.ndarray:
+    """OFF colours in 0..1: Geomview's OFF takes "integers 0..255 or floats
+    0..1", so ``values`` are divided by 255 when every one of them is written as
+    an integer (``tokens``, their text), whatever their size."""
+    text = " ".join(" ".join(t) for t in tokens)
+    return values if re.search(r"[^0-9\s+-]", text) else values / 255.0
 
 
 # ---------------------------------------------------------------------------
@@ -373,7 +386,7 @@ def _parse_obj(data: bytes, label: str, folder: str | None = None) -> "_Part":
                  if line.startswith("mtllib ") and len(line.split()) > 1]
     if used and folder is not None:
         materials = {}
-        for name in libraries:
+        for name in _mtl_libraries(libraries, folder):
             materials.update(_parse_mtl(os.path.join(folder, name), label))
         if materials:
             names = list(materials)
@@ -387,6 +400,16 @@ def _parse_obj(data: bytes, label: str, folder: str | None = None) -> "_Part":
             part.face_material = np.repeat(np.asarray(polygon_material, np.int64), counts - 2)
             part.materials = [materials[n] for n in names]
     return part
+
+
+def _mtl_libraries(arguments: "list[str]", folder: str) -> "list[str]":
+    """The file names of ``mtllib`` statements (their arguments): one statement
+    may name several libraries, separated by spaces (the OBJ specification);
+    a whole argument naming a file in ``folder`` is one name with spaces."""
+    names = []
+    for text in arguments:
+        names.extend([text] if os.path.isfile(os.path.join(folder, text)) else text.split())
+    return names
 
 
 def _obj_field(face_text: str, field: int, missing: str = "") -> str:
@@ -508,7 +531,8 @@ def _ply_header(data: bytes, label: str):
     """``(format, elements, body_offset)`` of a PLY header.
 
     ``elements`` is a list of ``(name, count, properties)`` in file order, each
-    property a ``(name, is_list)`` pair.
+    property a ``(name, is_list, types)`` triple: ``types`` is ``(type,)`` for a
+    scalar, ``(count type, item type)`` for a list, as the header names them.
     """
     marker = re.search(rb"end_header[ \t]*\r?\n", data)
     if not data.startswith(b"ply") or marker is None:
@@ -529,7 +553,8 @@ def _ply_header(data: bytes, label: str):
                 raise _fail(label, f"negative element count in '{line.strip()}'")
             elements.append((words[1], count, []))
         elif words[0] == "property" and elements and len(words) in (3, 5):
-            elements[-1][2].append((words[-1], words[1] == "list"))
+            is_list = words[1] == "list"
+            elements[-1][2].append((words[-1], is_list, tuple(words[2:4]) if is_list else (words[1],)))
         else:
             raise _fail(label, f"malformed PLY header line '{line.strip()[:40]}'")
     if fmt not in ("ascii", "binary_little_endian", "binary_big_endian"):
@@ -539,8 +564,8 @@ def _ply_header(data: bytes, label: str):
 
 def _ply_vertices(lines: "list[str]", props, label: str) -> dict:
     """``{property: (n,) float64 column}`` of ASCII PLY vertex rows (x, y, z at least)."""
-    names = [name for name, _ in props]
-    if any(is_list for _, is_list in props) or not {"x", "y", "z"} <= set(names):
+    names = [p[0] for p in props]
+    if any(p[1] for p in props) or not {"x", "y", "z"} <= set(names):
         raise _fail(label, "PLY vertex element needs scalar x, y, z properties")
     table = _table(lines, np.float64)
     if table is None or table.shape[1] != len(props):
@@ -555,7 +580,7 @@ def _ply_vertices(lines: "list[str]", props, label: str) -> dict:
 def _ply_faces(lines: "list[str]", props, label: str):
     """``(counts (P,) int64, flat corner indices, {scalar property: (P,) column})``
     of ASCII PLY face rows, in row order."""
-    lists = [name for name, is_list in props if is_list]
+    lists = [name for name, is_list, _ in props if is_list]
     target = next((p for p in ("vertex_indices", "vertex_index") if p in lists),
                   lists[0] if lists else None)
     if target is None:
@@ -565,11 +590,11 @@ def _ply_faces(lines: "list[str]", props, label: str):
     # Other properties around the index list (colours, texture coordinate
     # lists): walk each row.
     flat, counts = [], []
-    scalars = {name: [] for name, is_list in props if not is_list}
+    scalars = {name: [] for name, is_list, _ in props if not is_list}
     try:
         for number, line in enumerate(lines, 1):
             tokens, pos = line.split(), 0
-            for name, is_list in props:
+            for name, is_list, _ in props:
                 n = int(tokens[pos]) if is_list else 0
                 if name == target:
                     if n < 3:
@@ -587,19 +612,52 @@ def _ply_faces(lines: "list[str]", props, label: str):
     return np.asarray(counts, dtype=np.int64), indices, {k: np.asarray(v) for k, v in scalars.items()}
 
 
-def _ply_part(vertex: dict, counts: np.ndarray, flat: np.ndarray, face: dict, normals=None) -> "_Part":
+# PLY property types (both spellings) and their numpy codes.
+_PLY_TYPES = {"char": "i1", "int8": "i1", "uchar": "u1", "uint8": "u1", "short": "i2", "int16": "i2",
+              "ushort": "u2", "uint16": "u2", "int": "i4", "int32": "i4", "uint": "u4", "uint32": "u4",
+              "float": "f4", "float32": "f4", "double": "f8", "float64": "f8"}
+
+
+def _ply_color_scale(type_name: str) -> float:
+    """What a PLY colour property of this type holds at full intensity: float and
+    double colours are 0..1, 16-bit unsigned ones 0..65535, every other integer
+    type (uchar above all, the common one; int in many ASCII files) 0..255."""
+    code = _PLY_TYPES.get(type_name, "f8")
+    return 1.0 if code[0] == "f" else 65535.0 if code == "u2" else 255.0
+
+
+def _ply_colors(columns: dict, types: dict) -> "np.ndarray | None":
+    """(n, 3) float64 colours in 0..1 from the red, green, blue columns, each
+    scaled by its declared type (:func:`_ply_color_scale`, never by its values);
+    None without all three."""
+    rgb = ("red", "green", "blue")
+    if not set(rgb) <= set(columns):
+        return None
+    return np.stack([np.asarray(columns[c], np.float64) / _ply_color_scale(types.get(c, "float")) for c in rgb],
+                    axis=1)
+
+
+def _ply_types(elements) -> dict:
+    """``{element name: {property name: value type}}`` of a PLY header."""
+    return {name: {p[0]: p[2][-1] for p in props} for name, _, props in elements}
+
+
+def _ply_part(vertex: dict, counts: np.ndarray, flat: np.ndarray, face: dict, types: dict,
+              normals=None) -> "_Part":
     """A part from PLY vertex and face property columns: normals (nx, ny, nz),
-    colours (red, green, blue, of vertices or else of faces) and texture
-    coordinates (texture_u/v, u/v or s/t, per vertex)."""
+    colours (red, green, blue, of vertices or else of faces, scaled to 0..1 by
+    their declared types) and texture coordinates (texture_u/v, u/v or s/t, per
+    vertex).  ``types``: :func:`_ply_types` of the header."""
     part = _Part(np.stack([vertex[a] for a in "xyz"], axis=1), _fan_triangulate(counts, flat))
     if normals is None and {"nx", "ny", "nz"} <= set(vertex):
         normals = np.stack([vertex[a] for a in ("nx", "ny", "nz")], axis=1)
     part.normals = normals
-    rgb = ("red", "green", "blue")
-    if set(rgb) <= set(vertex):
-        part.vertex_colors = np.stack([vertex[c] for c in rgb], axis=1)
-    elif set(rgb) <= set(face):
-        part.face_colors, part.polygon_sizes = np.stack([face[c] for c in rgb], axis=1), counts
+    vertex_colors = _ply_colors(vertex, types.get("vertex", {}))
+    face_colors = _ply_colors(face, types.get("face", {}))
+    if vertex_colors is not None:
+        part.vertex_colors = vertex_colors
+    elif face_colors is not None:
+        part.face_colors, part.polygon_sizes = face_colors, counts
     for u, v in (("texture_u", "texture_v"), ("u", "v"), ("s", "t")):
         if u in vertex and v in vertex:
             part.uv = np.stack([vertex[u], vertex[v]], axis=1)[part.faces]
@@ -630,7 +688,136 @@ def _parse_ply_ascii(data: bytes, elements, body: int, label: str):
             faces = _ply_faces(rows, props, label)
     if vertex is None or faces is None or len(faces[0]) == 0:
         raise _fail(label, "contains no triangles")
-    return _ply_part(vertex, *faces)
+    return _ply_part(vertex, *faces, _ply_types(elements))
+
+
+def _ply_binary_rows(data: bytes, pos: int, count: int, props, order: str, label: str):
+    """``(columns, end, target)`` of ``count`` binary PLY rows with list
+    properties from byte ``pos``, walked row by row (rows differ in length):
+    ``columns`` maps each scalar property to its (count,) column and the vertex
+    index list ``target`` (as :func:`_ply_faces` picks it) to ``(counts, flat)``;
+    other lists are skipped.  ``end``: the byte after the last row."""
+    lists = [name for name, is_list, _ in props if is_list]
+    target = next((p for p in ("vertex_indices", "vertex_index") if p in lists), lists[0])
+    layout = []
+    for name, is_list, types in props:
+        codes = [_PLY_STRUCT[_ply_dtype(t, label).str[1:]] for t in types]
+        if is_list and codes[0] in "fd":
+            raise _fail(label, f"PLY list {name!r} has a non-integer count type {types[0]!r}")
+        layout.append((name, is_list, struct.Struct(order + codes[0]), codes[-1]))
+    scalars = {name: [] for name, is_list, _ in props if not is_list}
+    counts, flat, cache = [], [], {}
+    smallest = sum(s.size for _, _, s, _ in layout)
+    if count * smallest > len(data) - pos:
+        raise _fail(label, f"truncated: header declares {count} rows of at least {smallest} bytes, "
+                           f"only {len(data) - pos} bytes follow")
+    for number in range(1, count + 1):
+        for name, is_list, head, code in layout:
+            if pos + head.size > len(data):
+                raise _fail(label, f"truncated binary PLY (row {number} of {count})")
+            value = head.unpack_from(data, pos)[0]
+            pos += head.size
+            if not is_list:
+                scalars[name].append(value)
+                continue
+            if name == target and value < 3:
+                raise _fail(label, f"face {number} has {value} corners (needs at least 3)")
+            if value < 0:
+                raise _fail(label, f"row {number} of {count} has a list of {value} items")
+            items = cache.get((value, code))
+            if items is None:
+                items = cache[value, code] = struct.Struct(f"{order}{value}{code}")
+            if pos + items.size > len(data):
+                raise _fail(label, f"truncated binary PLY (row {number} of {count}: a list of {value} items)")
+            if name == target:
+                flat.extend(items.unpack_from(data, pos))
+                counts.append(value)
+            pos += items.size
+    columns = {k: np.asarray(v, np.float64) for k, v in scalars.items()}
+    columns[target] = (np.asarray(counts, np.int64), np.asarray(flat, np.int64))
+    return columns, pos, target
+
+
+# numpy codes -> struct codes
+_PLY_STRUCT = {"i1": "b", "u1": "B", "i2": "h", "u2": "H", "i4": "i", "u4": "I", "f4": "f", "f8": "d"}
+
+
+def _ply_dtype(type_name: str, label: str) -> np.dtype:
+    """The numpy dtype (native order) of a PLY property type; MeshLoadError for an unknown one."""
+    code = _PLY_TYPES.get(type_name)
+    if code is None:
+        raise _fail(label, f"unknown PLY property type {type_name!r}")
+    return np.dtype(code)
+
+
+def _ply_faces_mixed(data: bytes, fmt: str, elements, body: int) -> bool:
+    """Whether a binary PLY file's face lists differ in length from row to row
+    (found when only list-free elements come before the faces; False when
+    unknown).  trimesh's reader takes every row's list lengths from the first
+    row: on such a file it fails on the length or, when the sizes happen to add
+    up, reads garbage."""
+    order = "<" if fmt == "binary_little_endian" else ">"
+    try:
+        pos = body
+        for name, count, props in elements:
+            if name == "face":
+                break
+            if any(p[1] for p in props):
+                return False
+            pos += count * sum(np.dtype(_PLY_TYPES[p[2][0]]).itemsize for p in props)
+        else:
+            return False
+        fields, off = [], pos
+        for i, (_, is_list, types) in enumerate(props):
+            head = np.dtype(_PLY_TYPES[types[0]]).newbyteorder(order)
+            if off + head.itemsize > len(data) or not count:
+                return False
+            fields.append((f"c{i}", head))
+            off += head.itemsize
+            if is_list:
+                n = int(np.frombuffer(data, head, 1, off - head.itemsize)[0])
+                item = np.dtype(_PLY_TYPES[types[1]]).newbyteorder(order)
+                if n < 0 or off + n * item.itemsize > len(data):
+                    return False
+                fields.append((f"v{i}", item, (n,)))
+                off += n * item.itemsize
+        row = np.dtype(fields)
+        if count * row.itemsize > len(data) - pos:
+            return False
+        table = np.frombuffer(data, row, count, pos)
+        return any((table[f"c{i}"] != table[f"c{i}"][0]).any() for i, p in enumerate(props) if p[1])
+    except (KeyError, ValueError, TypeError, OverflowError, MemoryError):
+        return False
+
+
+def _parse_ply_binary(data: bytes, fmt: str, elements, body: int, label: str) -> "_Part":
+    """A binary PLY body read here, for what trimesh's reader refuses: faces of
+    mixed sizes (it takes every face's corner count from the first face).
+    Elements without lists are read at once; the others row by row, so this is
+    the slower reader, used only when trimesh's fails on the file's length."""
+    order = "<" if fmt == "binary_little_endian" else ">"
+    pos, vertex, faces = body, None, None
+    for name, count, props in elements:
+        if name == "vertex" and (any(p[1] for p in props) or not {"x", "y", "z"} <= {p[0] for p in props}):
+            raise _fail(label, "PLY vertex element needs scalar x, y, z properties")
+        if any(p[1] for p in props):
+            columns, pos, target = _ply_binary_rows(data, pos, count, props, order, label)
+            if name == "face":
+                faces = (*columns.pop(target), columns)
+            continue
+        dtype = np.dtype([(f"p{i}", _ply_dtype(p[2][0], label).newbyteorder(order)) for i, p in enumerate(props)])
+        if count * dtype.itemsize > len(data) - pos:
+            raise _fail(label, f"truncated: header declares {count} {name} rows of {dtype.itemsize} bytes, "
+                               f"only {len(data) - pos} bytes follow")
+        table = np.frombuffer(data, dtype, count, pos)
+        pos += count * dtype.itemsize
+        if name == "vertex":
+            vertex = {p[0]: table[f"p{i}"].astype(np.float64) for i, p in enumerate(props)}
+    if pos != len(data):
+        raise _fail(label, f"binary PLY longer than its header says ({len(data) - pos} bytes after the last element)")
+    if vertex is None or faces is None or len(faces[0]) == 0:
+        raise _fail(label, "contains no triangles")
+    return _ply_part(vertex, *faces, _ply_types(elements))
 
 
 def _load_ply(data: bytes, label: str):
@@ -641,11 +828,17 @@ def _load_ply(data: bytes, label: str):
     the exact byte size; it is called directly rather than via ``trimesh.load``
     because the Trimesh constructor would split quads as ``[all first halves,
     all second halves]``.  trimesh's binary reader takes every face's corner
-    count from the first face, so binary files mixing polygon sizes fail.
+    count from the first face, so it misreads a file mixing polygon sizes or
+    refuses it as of the wrong length: such a file (:func:`_ply_faces_mixed`),
+    and any other it refuses so, is read by :func:`_parse_ply_binary`, which
+    either reads it or says what is wrong.
+    Colours are scaled to 0..1 by their declared types (:func:`_ply_color_scale`).
     """
     fmt, elements, body = _ply_header(data, label)
     if fmt == "ascii":
         return _parse_ply_ascii(data, elements, body, label)
+    if _ply_faces_mixed(data, fmt, elements, body):
+        return _parse_ply_binary(data, fmt, elements, body, label)
     from trimesh.exchange.ply import load_ply
 
     try:
@@ -670,10 +863,12 @@ def _load_ply(data: bytes, label: str):
         uv = getattr(kwargs.get("visual"), "uv", None)
         if uv is not None and len(uv) == len(vertices):
             vertex.update(u=uv[:, 0], v=uv[:, 1])
-        return _ply_part(vertex, counts, flat, face, kwargs.get("vertex_normals"))
+        return _ply_part(vertex, counts, flat, face, _ply_types(elements), kwargs.get("vertex_normals"))
     except MeshLoadError:
         raise
     except Exception as exc:  # trimesh raises anything from KeyError to struct.error
+        if "unexpected length" in str(exc):   # faces of mixed sizes, or a truncated or padded file
+            return _parse_ply_binary(data, fmt, elements, body, label)
         raise _fail(label, f"corrupt or unsupported PLY file ({_short(exc)})") from exc
 
 
@@ -1240,7 +1435,8 @@ class _Part:
     """One mesh of a file as its parser found it, before checks.
 
     vertices (V, 3), faces (F, 3) triangles; normals (V, 3); uv (F, 3, 2) per
-    corner; colours in 0..1 of vertices (V, 3) or of polygons (P, 3), sRGB unless
+    corner; colours in 0..1 (each parser scales them by the types the file
+    declares, never by their values) of vertices (V, 3) or of polygons (P, 3), sRGB unless
     ``srgb_colors`` is False, with ``polygon_sizes`` (P,) when polygons were
     fan-triangulated (each polygon's colour goes to its triangles);
     face_material (F,) indexing ``materials`` (dicts of Material fields, shared
@@ -1269,8 +1465,6 @@ class _Part:
             colors = np.repeat(per_face[:, None], 3, axis=1)
         else:
             return None
-        if colors.size and np.nanmax(colors) > 1.0:   # 8-bit values (0..255) in a text file
-            colors = colors / 255.0
         return srgb_decode(colors) if self.srgb_colors else colors
 
 

@@ -30,6 +30,11 @@ def srgb_encode8(linear) -> np.ndarray:
     return np.rint(255.0 * np.where(c <= 0.0031308, 12.92 * c, 1.055 * c ** (1 / 2.4) - 0.055)).astype(np.uint8)
 
 
+# Pillow's modes of 16-bit greyscale images (I: 32-bit integers, as which some
+# Pillow versions open a 16-bit greyscale PNG).
+_GREY_16 = ("I;16", "I;16L", "I;16B", "I;16N", "I")
+
+
 @dataclass(frozen=True, eq=False)
 class Texture:
     """An 8-bit sRGB image (``pixels``: (H, W, 3) uint8, row 0 at the top) and its
@@ -58,7 +63,16 @@ class Texture:
 
     @classmethod
     def from_image(cls, image, wrap_s: str = "repeat", wrap_t: str = "repeat", name: str = "") -> "Texture":
-        """A Texture from a PIL image (any mode; alpha is dropped: Whitted shading has no coverage)."""
+        """A Texture from a PIL image (any mode; alpha is dropped: Whitted shading has no coverage).
+
+        16-bit greyscale (modes I;16, I;16L, I;16B, I;16N, and I, as which Pillow
+        may open a 16-bit PNG) is scaled to 8 bits (v / 257, rounded):
+        Pillow's own convert("RGB") would clip it at 255, making it white.
+        Pillow opens 16-bit RGB(A) PNG files as 8-bit RGB(A) itself."""
+        if image.mode in _GREY_16:
+            grey = np.asarray(image).astype(np.float64)
+            grey = np.rint(np.clip(grey, 0.0, 65535.0) / 257.0).astype(np.uint8)
+            return cls(np.repeat(grey[:, :, None], 3, axis=2), wrap_s, wrap_t, name)
         return cls(np.asarray(image.convert("RGB"), dtype=np.uint8), wrap_s, wrap_t, name)
 
     @classmethod
