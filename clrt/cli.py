@@ -163,11 +163,22 @@ def _render(args) -> int:
         write_exr(frame.image, out, channels, force=args.force)
         aov_note = f"channels {' '.join(channels)} of {out.name}"
     else:
-        write_image(frame.image, out, force=args.force)
-        if args.aov:
-            from clrt.query.aov import write_aovs
-            aov_note = " ".join(str(p.resolve()) for p in write_aovs(renderer, camera, args.aov, out,
-                                                                       force=args.force))
+        aov_images = None
+        if args.aov:   # traced before any file is written, so that Ctrl-C there leaves nothing
+            from clrt.query.aov import camera_images_of, write_aovs
+            aov_images = camera_images_of(renderer, camera)
+        written = []
+        try:
+            write_image(frame.image, out, force=args.force)
+            written.append(out)
+            if args.aov:
+                write_aovs(renderer, camera, args.aov, out, force=args.force, images=aov_images, written=written)
+        except BaseException:
+            # an interrupted or failed render leaves nothing behind: not the image without its AOVs
+            from clrt.output import remove_written
+            remove_written(written)
+            raise
+        aov_note = " ".join(str(p.resolve()) for p in written[1:])
     if not args.quiet:
         builder = renderer.acceleration.builder   # what "auto" chose
         accel = "brute force" if args.accel == "none" else f"{builder} BVH of {_ACCEL_WORDS[args.accel]}"

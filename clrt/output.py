@@ -44,8 +44,8 @@ def _mark_options(fmt: str) -> dict:
         return {"tiffinfo": {305: text}}
     if fmt in ("JPEG", "GIF"):
         return {"comment": text}
-    if fmt == "WEBP":
-        return {"xmp": text.encode()}
+    if fmt == "WEBP":   # lossless: a render's pixels are exact (Pillow's default is lossy, quality 80)
+        return {"xmp": text.encode(), "lossless": True}
     return {}
 
 
@@ -347,6 +347,18 @@ def write_file(data: bytes | str, path: Path, force: bool = False, option: str =
     if isinstance(data, str):
         data = data.encode("utf-8")
     _replace_atomically(path, lambda f: f.write(data), record=True)
+
+
+def remove_written(paths) -> None:
+    """Remove files this run wrote (and their records), when a later step of the
+    same output failed or was interrupted: a half-finished set of outputs (an
+    image without its AOVs) is not left behind."""
+    for path in paths:
+        for p in (Path(path), record_path(Path(path))):
+            try:
+                p.unlink()
+            except OSError:
+                pass
 
 
 def write_text(text: str, path: Path, record: bool = False) -> None:

@@ -25,6 +25,7 @@ cores among its workers instead (clrt.batch.cluster).
 from __future__ import annotations
 
 import fcntl
+import json
 import os
 import re
 import signal
@@ -172,7 +173,9 @@ def _worker_address() -> str:
 def _scene_entry(source: str, scene_options: dict, accel: str, builder: str, leaf_size: int):
     """(Renderer, the scene's own lights) of a source, built once per process."""
     st = os.stat(source)
-    key = (source, st.st_size, st.st_mtime_ns, tuple(sorted(scene_options.items())), accel, builder,
+    # the options came through JSON (engine._plain): colours and the like are lists, so
+    # the key holds their JSON text, which is hashable and equal for equal options
+    key = (source, st.st_size, st.st_mtime_ns, json.dumps(scene_options, sort_keys=True), accel, builder,
            leaf_size, _STATE.device)
 
     def make():

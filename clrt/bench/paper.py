@@ -48,6 +48,7 @@ import csv
 import io
 import math
 import platform
+import shlex
 import statistics
 import sys
 import time
@@ -362,7 +363,7 @@ def _command_line(args) -> str:
     elif args.detail_meshes:
         parts += ["--detail-meshes", ",".join(args.detail_meshes)]
     parts += ["--out", str(args.out)]
-    return " ".join(parts)
+    return shlex.join(parts)   # quoted where needed: the line can be pasted back into a shell
 
 
 def _check_outputs(out: Path, suite: MeshSuite, meshes: list[str], force: bool) -> None:

@@ -96,21 +96,28 @@ def aov_paths(image_path, names) -> list[Path]:
     return paths
 
 
-def write_aovs(source, camera, names, image_path, force: bool = False) -> list[Path]:
+def write_aovs(source, camera, names, image_path, force: bool = False, images=None,
+               written: list | None = None) -> list[Path]:
     """Write each AOV of ``camera`` as IMAGE.NAME.npy (the values) and
     IMAGE.NAME.png (a picture of them), next to ``image_path``.  ``source``: a
-    Renderer (its uploaded scene is reused) or an Accel.  Existing files are
+    Renderer (its uploaded scene is reused) or an Accel; ``images``: its
+    camera_images_of(source, camera) if already traced.  Existing files are
     replaced only if clrt wrote them, or with ``force`` (clrt.output).
-    Returns the paths."""
+    Returns the paths, appended to ``written`` as each is written (so that a
+    caller can remove them when a later write fails)."""
     if isinstance(names, str):
         names = parse_aovs(names)
-    images = camera_images_of(source, camera)
+    if images is None:
+        images = camera_images_of(source, camera)
     image_path = Path(image_path)
-    written = []
+    written = [] if written is None else written
+    paths = []
     for name in names:
         values, picture = aov_arrays(images, name)
         npy, png = aov_paths(image_path, [name])
         write_array(values, npy, force=force)
+        written.append(npy)
         write_image(picture, png, force=force)
-        written += [npy, png]
-    return written
+        written.append(png)
+        paths += [npy, png]
+    return paths
