@@ -152,6 +152,12 @@ def test_glb_samplers_transmission_and_ior(tmp_path, device):
     assert m["reflectivity"] == 1.0 and m["diffuse"] == 0.0 and m["shininess"] == 1000.0
     _agree(scene_from_mesh(tmp_path / "glass.glb"), device)
 
+    def rough(doc):   # roughness 0.5: Blinn-Phong's 2 / 0.5^4 - 2 = 30, a Phong exponent of 7.5
+        doc["materials"][0]["pbrMetallicRoughness"].update(metallicFactor=0.0, roughnessFactor=0.5)
+    _glb_json(tmp_path / "glass.glb", rough)
+    _, (m,) = load_asset(tmp_path / "glass.glb")
+    assert m["shininess"] == 7.5 and m["specular"] == 0.5 and m["reflectivity"] == 0.0
+
 
 def _coloured_ply(path, encoding):
     sphere = trimesh.creation.icosphere(2)

@@ -1346,8 +1346,10 @@ def _gltf_materials(gltf: "_GltfFile") -> list:
         fields = {"color": tuple(min(max(c, 0.0), 1.0) for c in base),
                   "diffuse": DEFAULT_DIFFUSE * (1.0 - reflectivity),
                   "specular": 1.0 - roughness,
-                  # Blinn-Phong exponent of the same highlight width: 2 / alpha^2 - 2, alpha = roughness^2
-                  "shininess": min(max(2.0 / max(roughness ** 4, 1e-6) - 2.0, 1.0), 1000.0),
+                  # the highlight's width: Blinn-Phong's exponent 2 / alpha^2 - 2 (alpha = roughness^2),
+                  # divided by 4 for the Phong (R.V)^n lobe the shader uses, whose angle to the
+                  # mirror direction is about twice the half-vector's angle to the normal
+                  "shininess": min(max((2.0 / max(roughness ** 4, 1e-6) - 2.0) / 4.0, 1.0), 1000.0),
                   "reflectivity": reflectivity}
         transmission = extensions.get("KHR_materials_transmission", {}).get("transmissionFactor", 0.0)
         if transmission:
