@@ -531,12 +531,30 @@ def test_scene_larger_than_the_device_is_refused_with_sizes():
     # Larger than one allocation: split into parts, up to four of them (split.cl).
     assert part_shifts(arrays, 1 << 20) is None
     assert part_shifts(arrays, 20_000) == {"triangles": 8, "BVH nodes": 8}    # 256 rows of 48 B a part
-    with pytest.raises(DeviceMemoryError, match=r"triangles buffer needs 46.9 KiB, more than 4 buffers of "
-                                                r"at most 9.8 KiB"):
+    # 4 x 9.8 KiB would hold 46.9 KiB, but a part holds a power of two of rows:
+    # 128 rows (6 KiB) each, 512 rows in all; the message says so, and names
+    # where the limit came from.
+    with pytest.raises(DeviceMemoryError, match=r"triangles buffer needs 46.9 KiB \(1,000 elements of 48 B\), "
+                                                r"more than 4 parts can hold: each part holds a power-of-two "
+                                                r"number of elements .* at most 128 \(6.0 KiB\) in a buffer of at "
+                                                r"most 9.8 KiB \(the device's largest allocation\), so 4 parts "
+                                                r"hold 512 elements \(24.0 KiB\)"):
         part_shifts(arrays, 10_000)
+    with pytest.raises(DeviceMemoryError, match=r"9.8 KiB \(set by --max-buffer-mib 0.01\)"):
+        part_shifts(arrays, 10_000, "set by --max-buffer-mib 0.01")
     tiny = SimpleNamespace(max_mem_alloc_size=1 << 20, global_mem_size=50_000)
     with pytest.raises(DeviceMemoryError, match="has 48.8 KiB"):
         check_fits(tiny, "a tiny GPU", sum(a.nbytes for a in arrays.values()), render_module.MIN_FRAME_BYTES)
+
+
+def test_a_lowered_buffer_limit_is_named_in_the_error(device):
+    """python -m clrt.bench.speed --max-buffer-mib: a scene that four parts of
+    that size cannot hold fails naming the option, not the device's limit."""
+    from clrt.query import Accel
+    from clrt.scene import primitives
+    mesh = primitives.icosphere(4)          # 5,120 triangles, 48 B each
+    with pytest.raises(DeviceMemoryError, match=r"at most 2.0 KiB \(set by --max-buffer-mib x\)"):
+        Accel(mesh, device=device, max_buffer_bytes=2048, max_buffer_label="--max-buffer-mib x")
 
 
 @pytest.mark.parametrize("builder", ["sah", "paper"])

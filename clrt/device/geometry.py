@@ -103,6 +103,9 @@ class DeviceGeometry:
     to split small scenes -- is uploaded in parts (see split.cl): then every
     buffer here is, and ``defines`` says so to the program build.
 
+    ``max_buffer_label``: how errors name the source of ``max_buffer_bytes``
+    (an option of the caller's, say).
+
     ``fits``: called with ``nbytes`` -- every buffer here, the wide BVH of CPU
     devices included (built here, so known only here) -- before the first
     upload; :func:`check_fits` raises there when the scene cannot fit.
@@ -110,7 +113,7 @@ class DeviceGeometry:
 
     def __init__(self, context: cl.Context, corners: np.ndarray, acceleration: Acceleration,
                  extra: dict | None = None, max_buffer_bytes: int | None = None,
-                 fits: Callable[[int], None] | None = None):
+                 fits: Callable[[int], None] | None = None, max_buffer_label: str = "max_buffer_bytes"):
         self.acceleration = acceleration
         prim_ids = acceleration.prim_ids
         # A tree built on this context's device is on it already, with its
@@ -122,9 +125,10 @@ class DeviceGeometry:
         arrays = {"tris": slotted, "nodes": acceleration.rows, "prim_ids": prim_ids, **(extra or {})}
         arrays = {name: a if a is slotted else np.ascontiguousarray(a) for name, a in arrays.items()}
         limit = min(d.max_mem_alloc_size for d in context.devices)
-        if max_buffer_bytes is not None:
-            limit = min(limit, int(max_buffer_bytes))
-        self.shifts = part_shifts(arrays, limit)
+        source = "the device's largest allocation"
+        if max_buffer_bytes is not None and int(max_buffer_bytes) < limit:
+            limit, source = int(max_buffer_bytes), f"set by {max_buffer_label}"
+        self.shifts = part_shifts(arrays, limit, source)
         if built is not None and self.shifts is not None:    # split into parts: uploaded as always
             built = None
             arrays["tris"] = triangle_verts(corners[prim_ids])
@@ -214,11 +218,12 @@ class DeviceGeometry:
         return max(len(set(b)) for b in self.buffers.values())
 
 
-def part_shifts(arrays: dict, limit: int) -> dict | None:
+def part_shifts(arrays: dict, limit: int, limit_source: str = "the device's largest allocation") -> dict | None:
     """None when every array fits in one buffer of ``limit`` bytes, else per array
     log2 of the elements per part: the most whole elements, a power of two
     (the kernels find the part with a shift), that fit in ``limit``.
-    DeviceMemoryError when an array needs more than MAX_PARTS parts."""
+    DeviceMemoryError when an array needs more than MAX_PARTS parts;
+    ``limit_source`` says in it where ``limit`` came from."""
     if all(a.nbytes <= limit for a in arrays.values()):
         return None
     shifts = {}
@@ -227,12 +232,16 @@ def part_shifts(arrays: dict, limit: int) -> dict | None:
         per_part = limit // row
         if per_part < 1:
             raise DeviceMemoryError(f"one element of the {name} buffer ({row} B) exceeds the "
-                                    f"largest allocation of {format_bytes(limit)}")
+                                    f"largest buffer of {format_bytes(limit)} ({limit_source})")
         shift = min(int(per_part).bit_length() - 1, 30)
         if -(-len(a) // (1 << shift)) > MAX_PARTS:
+            held = MAX_PARTS << shift
             raise DeviceMemoryError(
-                f"the {name} buffer needs {format_bytes(a.nbytes)}, more than {MAX_PARTS} buffers of at "
-                f"most {format_bytes(limit)} (the device's largest allocation) can hold")
+                f"the {name} buffer needs {format_bytes(a.nbytes)} ({len(a):,} elements of {row} B), more "
+                f"than {MAX_PARTS} parts can hold: each part holds a power-of-two number of elements (the "
+                f"kernels find the part with a shift), at most {1 << shift:,} ({format_bytes(row << shift)}) "
+                f"in a buffer of at most {format_bytes(limit)} ({limit_source}), so {MAX_PARTS} parts hold "
+                f"{held:,} elements ({format_bytes(row * held)})")
         shifts[name] = shift
     return shifts
 

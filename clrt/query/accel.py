@@ -126,13 +126,14 @@ class Accel:
     "sah" (default), "paper" or "device" (built on ``device``); ``leaf_size``:
     most triangles per leaf.
     ``chunk_rays``: most rays per kernel launch (default: see :meth:`chunk_size`);
-    ``max_buffer_bytes``: split scene buffers above this size (split.cl).
+    ``max_buffer_bytes``: split scene buffers above this size (split.cl);
+    ``max_buffer_label``: where that size came from, for errors (an option's name).
     Not thread-safe: give each thread its own Accel.
     """
 
     def __init__(self, mesh, accel: str = DEFAULT_ACCEL, builder: str = DEFAULT_BUILDER,
                  leaf_size: int = DEFAULT_LEAF_SIZE, device: str | None = None, chunk_rays: int | None = None,
-                 *, max_buffer_bytes: int | None = None):
+                 *, max_buffer_bytes: int | None = None, max_buffer_label: str = "max_buffer_bytes"):
         _check_chunk_rays(chunk_rays)
         device = checks.device(device)
         accel, builder, leaf_size = checks.accel_options(accel, builder, leaf_size)
@@ -142,9 +143,11 @@ class Accel:
         context, queue = create_context(device)
         label = device_label(queue.device)
         geometry = DeviceGeometry(context, corners, built, max_buffer_bytes=max_buffer_bytes,
+                                  max_buffer_label=max_buffer_label,
                                   fits=lambda nbytes: check_fits(queue.device, label, nbytes))   # before any upload
         self._options = dict(accel=accel, builder=builder, leaf_size=leaf_size, device=device,
-                             chunk_rays=chunk_rays, max_buffer_bytes=max_buffer_bytes)
+                             chunk_rays=chunk_rays, max_buffer_bytes=max_buffer_bytes,
+                             max_buffer_label=max_buffer_label)
         self._setup(self.mesh, context, queue, geometry, chunk_rays)
 
     def refit(self, vertices, *, rebuild: bool = False) -> None:
