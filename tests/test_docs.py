@@ -93,3 +93,34 @@ def test_quickstart_resolves_paths_from_the_callers_directory(tmp_path, device):
     assert result.stdout.strip() == str(work / "tri.png")
     assert (work / "tri.png").is_file() and not (REPO / "tri.png").exists()
     assert np.asarray(Image.open(work / "tri.png")).shape == (12, 16, 3)
+
+
+def _doc_commands(prefix: str) -> list[str]:
+    text = (REPO / "docs" / "benchmarks.md").read_text()
+    return [m.group(0) for m in re.finditer(re.escape(prefix) + r"[^`]*", text)]
+
+
+def test_documented_clrt_bench_commands_parse():
+    """Every `clrt bench ...` command in docs/benchmarks.md parses with today's
+    options (--builder takes paper, sah, device or all)."""
+    import shlex
+    from clrt.cli import _parser
+    commands = _doc_commands("clrt bench --")
+    assert len(commands) >= 2
+    bad = []
+    for line in commands:
+        argv = shlex.split(line.split("#")[0])[1:]
+        try:
+            _parser(bench=True).parse_args(argv)
+        except (SystemExit, Exception):   # the CLI parser raises InputError
+            bad.append(line)
+    assert not bad, bad
+
+
+def test_documented_raysets_commands_take_one_mesh():
+    """python -m clrt.bench.raysets takes one mesh: the docs loop over meshes
+    rather than give a {a,b} brace expansion (two meshes to the shell)."""
+    texts = [(REPO / "README.md").read_text(), *(p.read_text() for p in (REPO / "docs").glob("*.md"))]
+    assert not [t for t in texts if "{bunny00,camel}" in t]
+    commands = _doc_commands("python -m clrt.bench.raysets")
+    assert commands and not [c for c in commands if "{" in c and "," in c]
