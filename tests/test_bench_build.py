@@ -46,3 +46,17 @@ def test_bad_builder_settings_fail_in_one_line(builder, message, device, capsys,
     assert code == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert message in err[-1] and len([line for line in err if line.startswith(("clrt:", "Traceback"))]) <= 1
+
+
+def test_help_lists_every_mesh_it_accepts(capsys):
+    """--meshes accepts the generated knot50k as well as the mesh files; --help
+    names them all (from the same list the check uses)."""
+    assert "knot50k" in build.GENERATED
+    with pytest.raises(SystemExit):
+        build.main(["--help"])
+    help_text = " ".join(capsys.readouterr().out.split())
+    for name in [*build.CASES, *build.GENERATED]:
+        assert name in help_text
+    with pytest.raises(SystemExit):
+        build.main(["--meshes", "nosuch"])
+    assert "choose from bunny00, camel, knot50k" in capsys.readouterr().err

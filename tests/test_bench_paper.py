@@ -3,6 +3,7 @@
 import argparse
 import csv
 import io
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -225,3 +226,45 @@ def test_outputs_are_checked_before_any_work(tmp_path, capsys):
     with pytest.raises(SystemExit):
         _parse([*tiny, "--out", str(fresh), "--leaf-size", "300"])
     assert not fresh.exists()
+
+
+def _run(mesh, faces, program, builder, total=10.0):
+    return paper.Run(mesh, faces, "generated", program, builder, "CPU", "cpu", 200, 200, 1, 1,
+                     1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 2.0, 1.0, total - 4.0, total, 4.0, 20.0)
+
+
+def _report(runs, builders=("paper", "sah", "device")):
+    args = argparse.Namespace(leaf_size=4, warmup=1, repeat=1, force=False)
+    r = paper.Report(Path("/nonexistent"), "clrt bench", 200, 200, list(builders), args, [])
+    r.runs = list(runs)
+    return r
+
+
+def test_chart_series_of_each_builder_look_different():
+    """time-vs-faces.png / kernel-vs-faces.png: colour per program, line style
+    and marker per builder, so the legend tells every series apart."""
+    runs = [_run("sphere", 960, "bvh-box", b) for b in ("paper", "sah", "device")]
+    runs += [_run("sphere", 960, "bvh-sphere", b) for b in ("paper", "sah", "device")]
+    series = _report(runs).series("total_ms")
+    styles = {label: (colour, style) for label, colour, style, _ in series}
+    assert len(set(styles.values())) == len(styles) == 6, styles
+    assert {s for _, s in styles.values()} == {"solid", "dashed", "dotted"}
+    png = paper.loglog_chart(series, "t", "ms")             # draws every style, legend included
+    assert Image.open(io.BytesIO(png)).size == (1000, 640)
+
+
+def test_table4_keeps_bvh_rows_when_basic_was_skipped():
+    """--max-brute-faces skips basic, as the paper did for ddboat, whose BVH
+    times the paper's Table 4 still lists: the BVH rows stay, with basic and
+    reduction blank, and the paper's BVH time is shown without its basic time."""
+    runs = [_run("diamond", 33, "basic", "-"), _run("diamond", 33, "bvh-box", "sah", total=6.0),
+            _run("sphere", 960, "bvh-box", "sah"),           # sphere: basic skipped
+            _run("ddboat", 82666, "bvh-box", "sah")]          # the paper has no basic time
+    table = "\n".join(_report(runs, ["sah"])._table2())
+    sphere = next(line for line in table.splitlines() if line.startswith("| sphere |"))
+    assert sphere.split(" | ")[2] == "-" and sphere.split(" | ")[5] == "-", sphere   # basic, reduction
+    ddboat = next(line for line in table.splitlines() if line.startswith("| ddboat |"))
+    cells = [c.strip() for c in ddboat.split("|")[1:-1]]
+    assert cells[6] == "6,796,711" and cells[7] == "-", cells      # paper BVH; no paper reduction
+    diamond = next(line for line in table.splitlines() if line.startswith("| diamond |"))
+    assert [c.strip() for c in diamond.split("|")[1:-1]][5] == "40.00%"   # 10 ms -> 6 ms

@@ -162,6 +162,9 @@ def test_command_writes_reads_and_refuses(tmp_path, capsys, device):
     row = lambda text, name: next(line for line in text.splitlines() if line.startswith(f"| {name} "))  # noqa: E731
     # same hits and sum of distances from the file as when generated
     assert row(first, "random").split("|")[10:12] == row(again, "random.f32").split("|")[10:12]
+    from clrt.bench.common import rate
+    for cell in (row(first, "random").split("|")[k].strip() for k in (7, 9, 13)):   # Mrays/s, 3 figures
+        assert float(cell.replace(",", "")) > 0 and rate(float(cell.replace(",", ""))) == cell, cell
     (tmp_path / "bad.f32").write_bytes(b"\0" * 10)
     assert raysets.main([str(mesh), "--read", str(tmp_path / "bad.f32")] + common) == 2
     err = capsys.readouterr().err
@@ -265,3 +268,12 @@ def test_rays_beyond_host_memory_fail_before_any_work(monkeypatch, capsys):
     assert raysets.main(["/nonexistent.off", "--rays", "100M", "--set", "random"]) == 2
     err = capsys.readouterr().err
     assert err.startswith("clrt: making 100,000,000 rays needs") and "only 1.0 GiB is available" in err
+
+
+def test_rates_are_printed_to_three_significant_figures():
+    """Mrays/s of brute force is well below 0.1 on a CPU: shown as 0.0123, not
+    0.0; large rates keep their thousands separators."""
+    from clrt.bench.common import rate
+    assert [rate(x) for x in (0.012345, 0.0004, 1.5, 9.996, 32.45, 873.2, 12345.6, 0.0)] == [
+        "0.0123", "0.000400", "1.50", "10.0", "32.5", "873", "12,346", "0"]
+    assert rate(float("inf")) == "inf"

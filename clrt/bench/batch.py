@@ -36,7 +36,7 @@ from pathlib import Path
 import numpy as np
 
 from clrt.bench.batch_rays import RAY_SOURCES, random_rays
-from clrt.bench.common import exit_code, parse_count, parse_size
+from clrt.bench.common import exit_code, parse_count, parse_size, rate as rate_text
 
 
 def _generated(folder: Path) -> list[str]:
@@ -107,7 +107,7 @@ def run(sources, counts, views, size, device=None, samples=None, breakdown=False
             for count, (seconds, hit, generate) in ray_rates.items():
                 mrays = rays / seconds / 1e6
                 first_rate = first_rate or mrays
-                print(f"| {count} | {rays:,} | {seconds:.2f} | {mrays:,.1f} | {mrays / first_rate:.2f} | {hit:,} "
+                print(f"| {count} | {rays:,} | {seconds:.2f} | {rate_text(mrays)} | {mrays / first_rate:.2f} | {hit:,} "
                       f"| {generate:.2f} |", file=out, flush=True)
 
 

@@ -39,7 +39,7 @@ from pathlib import Path
 import numpy as np
 import pyopencl as cl
 
-from clrt.bench.common import NON_NEGATIVE, exit_code, int_at_least, parse_count
+from clrt.bench.common import NON_NEGATIVE, exit_code, int_at_least, parse_count, rate
 from clrt.bench.scale import instanced
 from clrt.bench.speed import CASES
 from clrt.config import HOST_BUILDERS, MAX_LEAF_SIZE
@@ -227,7 +227,7 @@ def run(mesh_dir, meshes, counts, builders, volume="box", leaf_size=4, device=No
             ratio = f"{stats['sah_cost'] / sah_cost:.3f}" if sah_cost else "-"
             print(f"| {name} | {len(corners):,} | {builder} | {first:,.1f} | {warm:,.1f} | {device_ms} | {phases} "
                   f"| {stats['sah_cost']:.2f} | {ratio} | {stats['depth']} | {stats['device_bytes'] / 2**20:,.1f} "
-                  f"| {trace_ms:.3f} | {SIZE[0] * SIZE[1] / trace_ms / 1e3:,.0f} | {refit_ms:.2f} |", file=out,
+                  f"| {trace_ms:.3f} | {rate(SIZE[0] * SIZE[1] / trace_ms / 1e3)} | {refit_ms:.2f} |", file=out,
                   flush=True)
         if embree:
             first, warm = embree_build_ms(mesh, repeat)
@@ -275,10 +275,12 @@ def launch_profile(context, queue, corners, volume, builder, leaf_size) -> list[
 
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(prog="python -m clrt.bench.build", description=__doc__.split("\n")[0])
+    mesh_names = sorted(CASES) + sorted(GENERATED)     # what --meshes accepts
     default_dir = Path(__file__).resolve().parents[2].parent / "shared" / "meshes"
     p.add_argument("--mesh-dir", type=Path, default=default_dir, help=f"folder of the meshes (default {default_dir})")
     p.add_argument("--meshes", type=lambda s: [x for x in s.split(",") if x], default=sorted(CASES),
-                   help=f"comma-separated, of {', '.join(sorted(CASES))} (default all; '' for none)")
+                   help=f"comma-separated, of {', '.join(mesh_names)} (default {', '.join(sorted(CASES))}; "
+                        f"'' for none)")
     p.add_argument("--triangles", type=lambda s: [parse_count(x) for x in s.split(",")], default=[],
                    help="also grids of bunny copies of about these many triangles, e.g. 1M,10M")
     p.add_argument("--builders", type=lambda s: s.split(","), default=list(HOST_BUILDERS) + ["device"],
@@ -317,8 +319,8 @@ def main(argv=None) -> int:
         if b not in HOST_BUILDERS and b not in DEVICE_VARIANTS:
             p.error(f"unknown builder {b!r}")
     for m in args.meshes:
-        if m not in CASES and m not in GENERATED:
-            p.error(f"unknown mesh {m!r} (choose from {', '.join(sorted(CASES) + sorted(GENERATED))})")
+        if m not in mesh_names:
+            p.error(f"unknown mesh {m!r} (choose from {', '.join(mesh_names)})")
     if args.embree:
         try:
             import embreex  # noqa: F401

@@ -39,6 +39,22 @@ def int_at_least(lo: int, hi: int | None = None):
 POSITIVE, NON_NEGATIVE = int_at_least(1), int_at_least(0)
 
 
+def rate(value: float) -> str:
+    """A rate (Mrays/s, rays/s) to three significant figures, with thousands
+    separators from 1,000 up (whole numbers there) and no exponent: 0.0123,
+    1.50, 32.4, 873, 12,346; "inf" and "nan" as such."""
+    import math
+    if not math.isfinite(value):
+        return str(value)
+    if value == 0:
+        return "0"
+    if abs(value) >= 1000:
+        return f"{value:,.0f}"
+    # round first: 99.96 becomes 100, then gets no decimals
+    digits = 2 - math.floor(math.log10(abs(float(f"{value:.3g}"))))
+    return f"{value:,.{max(0, digits)}f}"
+
+
 def parse_work_group(text: str) -> tuple[int, int]:
     """argparse type for a work-group as 'WxH' pixels, or '0x0' for the driver's choice."""
     return (0, 0) if text.strip().lower() == "0x0" else parse_size(text)

@@ -22,7 +22,7 @@ import time
 import numpy as np
 
 from clrt.config import ACCELS, BUILDERS, MAX_LEAF_SIZE
-from clrt.bench.common import (NON_NEGATIVE, POSITIVE, int_at_least, builder_label, exit_code, parse_size, parse_walks,
+from clrt.bench.common import (NON_NEGATIVE, POSITIVE, rate, int_at_least, builder_label, exit_code, parse_size, parse_walks,
                                parse_work_group, walk)
 
 FRAME_STAGES = ("ray generation", "pixel colour", "read back")
@@ -76,7 +76,7 @@ def run(mesh_path, sizes, variants, device=None, repeat=5, warmup=1, leaf_size=4
             print(f"| {row['accel']} | {row['builder']} | {row['resolution']} | {row['build']:.1f} ms "
                   f"| {row['copy to device']:.1f} ms | "
                   + " | ".join(f"{med[s]:.3f} ms" for s in FRAME_STAGES)
-                  + f" | {med['frame wall']:.3f} ms | {row['mrays']:.3g} | {'yes' if same else 'NO'} |",
+                  + f" | {med['frame wall']:.3f} ms | {rate(row['mrays'])} | {'yes' if same else 'NO'} |",
                   file=out, flush=True)
     print(f"\ndevice: {renderer.device}", file=out)
     return rows

@@ -58,7 +58,7 @@ from pathlib import Path
 
 import numpy as np
 
-from clrt.bench.common import NON_NEGATIVE, POSITIVE, int_at_least, parse_size
+from clrt.bench.common import NON_NEGATIVE, POSITIVE, int_at_least, parse_size, rate
 from clrt.bench.paper_meshes import MeshSuite, write_mesh
 from clrt.config import BUILDERS, MAX_LEAF_SIZE, VOLUMES
 from clrt.errors import ClrtError, DeviceError, InputError, OutputError
@@ -641,14 +641,16 @@ class Report:
                             else getattr(d, c)) for c in cols})
         return buf.getvalue()
 
-    def series(self, metric: str) -> list[tuple[str, str, bool, list]]:
+    def series(self, metric: str) -> list[tuple[str, str, str, list]]:
+        """(label, colour, style, points) per program and builder: the colour
+        tells the program, the line style and marker (``STYLES``) the builder."""
         out = []
         for program, builder in _variants(list(PROGRAMS), BUILDERS):
             pts = [(r.faces, getattr(r, metric)) for r in self.runs
                    if r.program == program and r.builder == builder]
             if pts:
                 label = LABELS[program] + ("" if builder == "-" else f" ({builder})")
-                out.append((label, COLOURS[program], builder == "sah", sorted(pts)))
+                out.append((label, COLOURS[program], STYLES[builder], sorted(pts)))
         return out
 
     # -- Markdown
@@ -713,20 +715,23 @@ class Report:
                 first = True
                 for k, shape in enumerate(SHAPES):
                     r = self.find(mesh, f"bvh-{shape}", builder)
-                    if not (b and r):
+                    if not r:
                         continue
-                    row = PAPER.get(mesh) if paper_time(mesh, faces, "basic") else None
+                    # basic skipped (--max-brute-faces, as the paper did for
+                    # ddboat): the BVH row stays, basic and reduction blank.
+                    paper_bvh = paper_time(mesh, faces, f"bvh-{shape}")
+                    paper_basic = paper_time(mesh, faces, "basic")
                     rows.append([mesh if first else "", f"{faces:,}" if first else "",
-                                 _ms(b.total_ms) if first else "", shape,
-                                 _ms(r.total_ms), _pct(reduction(b.total_ms, r.total_ms)),
-                                 _ms(row.bvh[k]) if row else "-",
-                                 _pct(reduction(row.basic, row.bvh[k])) if row else "-", _x(r.speedup),
-                                 f"{r.mrays_wall:.3g}"])
+                                 (_ms(b.total_ms) if b else "-") if first else "", shape,
+                                 _ms(r.total_ms), _pct(reduction(b.total_ms, r.total_ms)) if b else "-",
+                                 _ms(paper_bvh),
+                                 _pct(reduction(paper_basic, paper_bvh)) if paper_basic and paper_bvh
+                                 else "-", _x(r.speedup), rate(r.mrays_wall)])
                     first = False
             head = f"## Table 4 of the paper: basic vs BVH on the CPU device, builder {builder}, total ms"
             out += [head, "", _md_table(
                 ["mesh", "faces", "basic", "BVH", "BVH ms", "reduction", "paper BVH", "paper reduction",
-                 "speed-up", "Mrays/s"], rows) if rows else "Not run: needs basic and bvh-* programs.", ""]
+                 "speed-up", "Mrays/s"], rows) if rows else "Not run: needs the bvh-* programs.", ""]
         return out[:-1]
 
     def _table3(self) -> list[str]:
@@ -744,7 +749,7 @@ class Report:
                                  _ms(c.total_ms), _ms(g.total_ms), _pct(reduction(c.total_ms, g.total_ms)),
                                  _ms(row.bvh[k]) if row else "-", _ms(row.bvh_cuda[k]) if row else "-",
                                  _pct(reduction(row.bvh[k], row.bvh_cuda[k])) if row else "-",
-                                 _x(g.speedup), f"{g.mrays_wall:.3g}"])
+                                 _x(g.speedup), rate(g.mrays_wall)])
                     first = False
             head = f"## Table 5 of the paper: BVH vs BVH + GPU, builder {builder}, total ms"
             out += [head, "", _md_table(
@@ -756,7 +761,7 @@ class Report:
     def _all(self) -> str:
         rows = [[r.mesh, f"{r.faces:,}", r.program, r.builder, r.kind, _ms(r.load_ms), _ms(r.build_ms),
                  _ms(r.upload_ms), _ms(r.cold_setup_ms), _ms(r.kernel_ms), _ms(r.frame_wall_ms),
-                 _ms(r.total_ms), f"{r.mrays_wall:.3g}", f"{r.mrays_kernel:.3g}", _ms(r.paper_ms), _x(r.speedup)]
+                 _ms(r.total_ms), rate(r.mrays_wall), rate(r.mrays_kernel), _ms(r.paper_ms), _x(r.speedup)]
                 for r in self.runs]
         return "## All measurements (ms)\n\n" + _md_table(
             ["mesh", "faces", "program", "builder", "device", "read", "BVH build", "upload", "cold setup",
@@ -805,6 +810,9 @@ class Report:
 COLOURS = {"basic": "#000000", "gpu": "#7f7f7f", "bvh-box": "#1f77b4", "bvh-sphere": "#2ca02c",
            "bvh-ellipse": "#d62728", "bvh-gpu-box": "#17becf", "bvh-gpu-sphere": "#bcbd22",
            "bvh-gpu-ellipse": "#ff7f0e"}
+# Line style (and marker) per BVH builder: solid line + filled circle, dashed +
+# hollow square, dotted + filled triangle.  "-": the programs without a BVH.
+STYLES = {"-": "solid", "paper": "solid", "sah": "dashed", "device": "dotted"}
 
 
 def _png(image) -> bytes:
@@ -819,8 +827,8 @@ def _decade_label(k: int) -> str:
 
 def loglog_chart(series, title: str, ylabel: str, xlabel: str = "faces",
                  size: tuple[int, int] = (1000, 640)) -> bytes:
-    """PNG bytes of a log-log line chart.  ``series``: (label, colour, dashed,
-    [(x, y), ...]) each; non-positive points are left out."""
+    """PNG bytes of a log-log line chart.  ``series``: (label, colour, style,
+    [(x, y), ...]) each, style "solid", "dashed" or "dotted" (or a bool: dashed); non-positive points are left out."""
     from PIL import Image, ImageDraw, ImageFont
     font = ImageFont.load_default()
     w, h = size
@@ -868,31 +876,47 @@ def loglog_chart(series, title: str, ylabel: str, xlabel: str = "faces",
     ytext = ytext.rotate(90, expand=True)
     img.paste(ytext, (8, (top + bottom) // 2 - ytext.height // 2))
 
-    for label, colour, dashed, s in series:
+    for label, colour, style, s in series:
+        style = _style(style)
         s = [(px(x), py(y)) for x, y in s if x > 0 and y > 0 and math.isfinite(y)]
         for a, b in zip(s, s[1:]):
-            _line(d, a, b, colour, dashed)
+            _line(d, a, b, colour, style)
         for x, y in s:
-            if dashed:
-                d.rectangle([x - 3, y - 3, x + 3, y + 3], outline=colour, width=2)
-            else:
-                d.ellipse([x - 3, y - 3, x + 3, y + 3], fill=colour)
+            _marker(d, x, y, colour, style)
     ly = top
-    for label, colour, dashed, _ in series:               # legend
-        _line(d, (right + 15, ly + 6), (right + 45, ly + 6), colour, dashed)
-        if dashed:
-            d.rectangle([right + 27, ly + 3, right + 33, ly + 9], outline=colour, width=2)
-        else:
-            d.ellipse([right + 27, ly + 3, right + 33, ly + 9], fill=colour)
+    for label, colour, style, _ in series:               # legend
+        style = _style(style)
+        _line(d, (right + 15, ly + 6), (right + 45, ly + 6), colour, style)
+        _marker(d, right + 30, ly + 6, colour, style)
         d.text((right + 52, ly), label, fill="black", font=font)
         ly += 18
     return _png(img)
 
 
-def _line(d, a, b, colour, dashed: bool, dash: float = 7.0) -> None:
-    if not dashed:
+def _style(style) -> str:
+    """A series' line style: "solid", "dashed" or "dotted" (a bool: dashed or not)."""
+    if isinstance(style, bool):
+        return "dashed" if style else "solid"
+    if style not in ("solid", "dashed", "dotted"):
+        raise ValueError(f"unknown line style {style!r}")
+    return style
+
+
+def _marker(d, x, y, colour, style: str) -> None:
+    if style == "dashed":
+        d.rectangle([x - 3, y - 3, x + 3, y + 3], outline=colour, width=2)
+    elif style == "dotted":
+        d.polygon([(x, y - 4), (x - 4, y + 3), (x + 4, y + 3)], fill=colour)
+    else:
+        d.ellipse([x - 3, y - 3, x + 3, y + 3], fill=colour)
+
+
+def _line(d, a, b, colour, style="solid") -> None:
+    style = _style(style)
+    if style == "solid":
         d.line([a, b], fill=colour, width=2)
         return
+    dash = 7.0 if style == "dashed" else 2.0      # dotted: short dashes, short gaps
     length = math.dist(a, b)
     steps = max(1, int(length // dash))
     for i in range(0, steps, 2):

@@ -32,7 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from clrt.config import ACCELS, BUILDERS
-from clrt.bench.common import NON_NEGATIVE, POSITIVE, exit_code, median_wall_ms, parse_count, ray_memory
+from clrt.bench.common import NON_NEGATIVE, POSITIVE, exit_code, median_wall_ms, parse_count, rate, ray_memory
 
 QUERIES = ("first", "any", "all")
 
@@ -191,7 +191,7 @@ def throughput(mesh_path, sizes, device=None, repeat: int = 5, seed: int = 0, ou
                 expected = prim if expected is None else expected
                 hits = f"{int((prim >= 0).sum()):,}" + ("" if np.array_equal(prim, expected) else " DIFFERENT")
             print(f"| {n:,} | {label} | {wall:.2f} | {kernel:.3f} | {100 * (1 - kernel / wall):.0f} % "
-                  f"| {n / wall / 1e3:,.0f} | {hits} |", file=out, flush=True)
+                  f"| {rate(n / wall / 1e3)} | {hits} |", file=out, flush=True)
         _embree_row(mesh, o, d, expected, repeat, out)
 
 
@@ -212,7 +212,7 @@ def _embree_row(mesh, o, d, prim, repeat: int, out) -> None:
         wall, result = median_wall_ms(call, repeat)
         hit = np.asarray(result) >= 0 if result.dtype != bool else np.asarray(result)
         same = float(np.mean(hit == (prim >= 0))) if prim is not None else float("nan")
-        print(f"| {n:,} | {label} | {wall:.2f} | - | CPU | {n / wall / 1e3:,.0f} "
+        print(f"| {n:,} | {label} | {wall:.2f} | - | CPU | {rate(n / wall / 1e3)} "
               f"| {int(hit.sum()):,} ({100 * same:.2f} % of rays agree on hit or miss) |", file=out, flush=True)
 
 

@@ -44,7 +44,7 @@ from pathlib import Path
 
 import numpy as np
 
-from clrt.bench.common import (NON_NEGATIVE, POSITIVE, builder_label, exit_code, median_wall_ms, parse_count,
+from clrt.bench.common import (NON_NEGATIVE, POSITIVE, builder_label, rate, exit_code, median_wall_ms, parse_count,
                                parse_groups, parse_size, parse_walks, ray_memory, walk)
 from clrt.config import ACCELS, BUILDERS
 from clrt.errors import InputError
@@ -420,12 +420,12 @@ def run(mesh_path=None, sets=RAY_SETS, count: int = 1_000_000, seed: int = 0, va
                 query_accel.QUERY_GROUP.update(saved[0])
                 query_accel.PACKET_GROUP.update(saved[1])
             n = len(o)
-            rate = lambda ms: n / ms / 1e3 if ms > 0 else float("inf")   # noqa: E731
+            mrays = lambda ms: rate(n / ms / 1e3 if ms > 0 else float("inf"))   # noqa: E731
             print(f"| {label} | {n:,} | {accel_name} | {shown_builder} "
                   f"| {group} "
-                  f"| {m['closest_kernel_ms']:.3f} | {rate(m['closest_kernel_ms']):,.1f} "
-                  f"| {m['closest_wall_ms']:.3f} | {rate(m['closest_wall_ms']):,.1f} | {m['hits']:,} "
-                  f"| {m['sum_t']:.6f} | {m['any_kernel_ms']:.3f} | {rate(m['any_kernel_ms']):,.1f} "
+                  f"| {m['closest_kernel_ms']:.3f} | {mrays(m['closest_kernel_ms'])} "
+                  f"| {m['closest_wall_ms']:.3f} | {mrays(m['closest_wall_ms'])} | {m['hits']:,} "
+                  f"| {m['sum_t']:.6f} | {m['any_kernel_ms']:.3f} | {mrays(m['any_kernel_ms'])} "
                   f"| {'yes' if m['any_agrees'] else 'NO'} |", file=out, flush=True)
             rows.append({"rays": label, "accel": accel_name, "builder": builder, "walk": walk_name, "group": group,
                          **m})
@@ -436,8 +436,8 @@ def run(mesh_path=None, sets=RAY_SETS, count: int = 1_000_000, seed: int = 0, va
             same = 100 * float(np.mean((m["prim"] >= 0) == (ours >= 0)))
             n = len(o)
             print(f"| {label} | {n:,} | Embree (embreex, host CPU) | - | - | - | - | {m['closest_wall_ms']:.3f} "
-                  f"| {n / m['closest_wall_ms'] / 1e3:,.1f} | {m['hits']:,} ({same:.3f} % agree on hit or miss) "
-                  f"| {m['sum_t']:.6f} | {m['any_wall_ms']:.3f} (wall) | {n / m['any_wall_ms'] / 1e3:,.1f} "
+                  f"| {rate(n / m['closest_wall_ms'] / 1e3)} | {m['hits']:,} ({same:.3f} % agree on hit or miss) "
+                  f"| {m['sum_t']:.6f} | {m['any_wall_ms']:.3f} (wall) | {rate(n / m['any_wall_ms'] / 1e3)} "
                   f"| {'yes' if m['any_agrees'] else 'NO'} |", file=out, flush=True)
             rows.append({"rays": label, "accel": "embree", "builder": "-", **m})
     if embree_processes:

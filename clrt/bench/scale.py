@@ -32,7 +32,7 @@ import time
 import numpy as np
 
 from clrt.config import ACCELS, BUILDERS, MAX_LEAF_SIZE
-from clrt.bench.common import POSITIVE, int_at_least, parse_count, parse_size
+from clrt.bench.common import POSITIVE, int_at_least, parse_count, parse_size, rate
 from clrt.errors import ClrtError
 
 
@@ -122,7 +122,7 @@ def run(counts, builders, sizes, accel="box", device=None, repeat=3, leaf_size=4
                        f"| {renderer.device_bytes / 2**20:,.0f} | {per_tri:.0f} | {2**30 / per_tri / 1e6:.1f}M "
                        f"| {_peak_rss_gib():.1f} | {w}x{h} | {frame.tiles} | {med['ray generation']:.2f} ms "
                        f"| {med['pixel colour']:.2f} ms | {med['read back']:.2f} ms | {med['wall']:.2f} ms "
-                       f"| {renderer.geometry.parts()} | {primary:.3f} ms | {w * h / primary / 1e3:,.0f} |")
+                       f"| {renderer.geometry.parts()} | {primary:.3f} ms | {rate(w * h / primary / 1e3)} |")
                 rows.append(row)
                 emit(row)
             del renderer, scene, mesh

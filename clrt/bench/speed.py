@@ -7,7 +7,8 @@ closest hit (``trace_camera`` in trace.cl), or only whether anything is hit
 (``occlude_camera``).  Times are medians after warm-up: ``kernel`` from OpenCL
 profiling events, ``wall`` the host clock around enqueue + finish.  After
 timing, the hits are read back and checked: their count and the sum of their
-distances identify the result.
+distances identify the result.  ``any-hit speed-up`` is closest-hit kernel
+time / any-hit kernel time: how many times faster the any-hit query runs.
 
 ``--max-buffer-mib`` lowers the largest allocation, so that the scene's buffers
 are split into parts as a scene larger than the device's largest allocation
@@ -27,7 +28,7 @@ import pyopencl as cl
 
 from clrt import layouts
 from clrt.config import ACCELS, BUILDERS, MAX_LEAF_SIZE
-from clrt.bench.common import NON_NEGATIVE, POSITIVE, exit_code, int_at_least, parse_work_group
+from clrt.bench.common import NON_NEGATIVE, POSITIVE, exit_code, int_at_least, parse_work_group, rate
 from clrt.errors import ClrtError
 
 # mesh file, eye, target (from the speed issue)
@@ -62,14 +63,15 @@ def run(mesh_dir: Path, cases, variants, device=None, size=(1920, 1080), repeat=
     w, h = size
     launch = {} if tile is None else {"tile": None if tile == (0, 0) else tile}
     print("| mesh | triangles | accel | builder | buffer parts | closest: kernel ms | Mrays/s | wall ms | Mrays/s "
-          "| hits | sum of t | any-hit: kernel ms | Mrays/s | any / closest |", file=out)
+          "| hits | sum of t | any-hit: kernel ms | Mrays/s | any-hit speed-up |", file=out)
     print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|", file=out)
     for name in cases:
         file, eye, target = CASES[name]
         mesh = load_mesh(mesh_dir / file)
         camera = Camera(eye, target, (0.0, 1.0, 0.0), 45.0, w, h)
         for accel_name, builder in variants:
-            accel = Accel(mesh, accel_name, builder, leaf_size, device, max_buffer_bytes=max_buffer_bytes)
+            accel = Accel(mesh, accel_name, builder, leaf_size, device, max_buffer_bytes=max_buffer_bytes,
+                          max_buffer_label=f"--max-buffer-mib {max_buffer_mib}")
             hit_buf = cl.Buffer(accel.context, cl.mem_flags.READ_WRITE, w * h * layouts.HIT.itemsize)
             occ_buf = cl.Buffer(accel.context, cl.mem_flags.READ_WRITE, w * h)
             closest = time_launches(accel.queue, lambda: accel.launch_camera(camera, hit_buf, **launch), repeat, warmup)
@@ -82,11 +84,11 @@ def run(mesh_dir: Path, cases, variants, device=None, size=(1920, 1080), repeat=
             hit = hits["prim"] >= 0
             if not np.array_equal(hit, occluded.astype(bool)):
                 raise ClrtError(f"{name}: any-hit and closest-hit disagree on {int((hit != occluded).sum())} rays")
-            mrays = lambda ms: w * h / ms / 1e3   # noqa: E731
+            mrays = lambda ms: rate(w * h / ms / 1e3)   # noqa: E731
             print(f"| {name} | {len(mesh.faces):,} | {accel_name} | {builder if accel_name != 'none' else '-'} "
-                  f"| {accel.geometry.parts()} | {closest[0]:.3f} | {mrays(closest[0]):,.0f} | {closest[1]:.3f} | {mrays(closest[1]):,.0f} "
+                  f"| {accel.geometry.parts()} | {closest[0]:.3f} | {mrays(closest[0])} | {closest[1]:.3f} | {mrays(closest[1])} "
                   f"| {int(hit.sum()):,} | {hits['t'][hit].astype(np.float64).sum():.3f} "
-                  f"| {anyhit[0]:.3f} | {mrays(anyhit[0]):,.0f} | {closest[0] / anyhit[0]:.2f}x |",
+                  f"| {anyhit[0]:.3f} | {mrays(anyhit[0])} | {closest[0] / anyhit[0]:.2f}x |",
                   file=out, flush=True)
     print(f"\ndevice: {accel.device}; {w}x{h}, work-group {'8x8' if tile is None else ('chosen by the driver' if tile == (0, 0) else tile)}, "
           f"warm-up {warmup}, median of {repeat}", file=out)
