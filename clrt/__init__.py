@@ -1,15 +1,29 @@
 """clrt: Whitted ray tracing of triangle meshes in OpenCL kernels.
 
     >>> import clrt
-    >>> image = clrt.render("bunny.off", width=320, height=240)   # (240, 320, 3) uint8
+    >>> image = clrt.render("assets/meshes/knot.obj", width=320, height=240)   # (240, 320, 3) uint8
 
-The pipeline, one package each: ``clrt.scene`` (meshes, materials, lights,
+Where to start:
+
+- images: ``clrt.render`` (one call), ``clrt.Renderer`` (upload once, render
+  many frames; ``Frame`` results), scenes from ``clrt.scene_from_mesh``,
+  ``clrt.load_scene`` (TOML files), ``clrt.default_scene``; ``clrt.Camera``,
+  ``clrt.Material``, ``clrt.Light``;
+- ray queries: ``clrt.trace``, ``clrt.occluded``, ``clrt.camera_images`` (one
+  call each), ``clrt.Accel`` (build once, query often), ``clrt.RayMeshIntersector``
+  (trimesh's interface);
+- meshes: ``clrt.load_mesh``, ``clrt.Mesh``;
+- devices: ``device=None`` (the first GPU, else the CPU), ``"gpu"``, ``"cpu"``
+  or ``"P:D"`` (platform and device indices, as ``clrt info`` lists them).
+
+Every error clrt raises on purpose is a ``clrt.ClrtError`` (bad input:
+``clrt.InputError``).  The pipeline, one package each: ``clrt.scene`` (meshes, materials, lights,
 camera, scene files) -> ``clrt.accel`` (BVH builders and volumes) ->
 ``clrt.device`` (OpenCL context, programs, uploads) -> ``clrt/kernels/*.cl`` ->
 ``clrt.renderer`` (frames) and ``clrt.query`` (batch ray queries); see
 docs/architecture.md.
 
-The names below are imported on first use, so ``import clrt`` stays cheap: no
+These names are imported on first use, so ``import clrt`` stays cheap: no
 OpenCL, trimesh or benchmark code is loaded until something needs it.
 """
 

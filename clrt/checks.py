@@ -39,7 +39,9 @@ def show(value) -> str:
         if items is not None and all(isinstance(v, Real) and not isinstance(v, bool) for v in items):
             text = "(" + ", ".join(_number_text(v) for v in items) + ")"
             return text if len(text) <= 60 else text[:57] + "..."
-    text = repr(value)
+    if type(value).__name__ == "ndarray":
+        return f"an array of shape {tuple(value.shape)}"
+    text = " ".join(repr(value).split())   # one line, whatever the repr
     return text if len(text) <= 60 else text[:57] + "..."
 
 

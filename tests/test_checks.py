@@ -179,7 +179,8 @@ def test_python_api_takes_what_the_cli_takes(tmp_path):
         clrt.scene_from_mesh("cow.off")
     with pytest.raises(InputError, match=r"unknown material field 'colour' \(did you mean 'color'\?\)"):
         clrt.scene_from_mesh(MESH, {"colour": (1, 0, 0)})
-    with pytest.raises(InputError, match="light position must be 3 numbers"):
+    with pytest.raises(InputError, match=r"lights must be a list .*got \(2, 4, 3\): for one light there, "
+                                         r"write \[\(2, 4, 3\)\]"):
         clrt.scene_from_mesh(MESH, lights=(2, 4, 3))   # a position, not a list of them
     with pytest.raises(InputError, match="expected a mesh"):
         clrt.Renderer(42)

@@ -114,6 +114,15 @@ def _check_chunk_rays(chunk_rays) -> None:
         checks.integer("chunk_rays", chunk_rays, 1)
 
 
+def _checked_camera(camera):
+    """``camera`` if it is a clrt.Camera; InputError otherwise (a K matrix given
+    positionally, say), rather than an AttributeError from inside."""
+    from clrt.scene.scene import Camera
+    if not isinstance(camera, Camera):
+        raise checks.fail("camera", "a clrt.Camera (or give K, width and height by keyword)", camera)
+    return camera
+
+
 def _rebuilt_accel(vertices, faces, name, options) -> "Accel":
     """An unpickled Accel: built again from its mesh and options (Accel.__reduce__)."""
     return Accel(Mesh(vertices, faces, name), **options)
@@ -123,7 +132,8 @@ class Accel:
     """A mesh and its acceleration structure, uploaded once to one device.
 
     ``accel``: "box" (default), "sphere", "ellipse" or "none"; ``builder``:
-    "sah" (default), "paper" or "device" (built on ``device``); ``leaf_size``:
+    "auto" (default: "device" where the device computes in float64, else
+    "sah"), "sah", "paper" or "device" (built on ``device``); ``leaf_size``:
     most triangles per leaf.
     ``chunk_rays``: most rays per kernel launch (default: see :meth:`chunk_size`);
     ``max_buffer_bytes``: split scene buffers above this size (split.cl);
@@ -191,6 +201,10 @@ class Accel:
     # would move the original's BVH): a copy, a deep copy or an unpickled Accel
     # is a new one, built from the same mesh and options -- on the device named
     # by them, which for a pickle may be another machine's.
+    def __repr__(self) -> str:
+        return (f"<clrt.Accel of {len(self.mesh.faces):,} triangles, {self.acceleration.accel} "
+                f"({self.acceleration.builder}) on {self.device}>")
+
     def _own_options(self) -> dict:
         if self._options is None:
             raise InputError("queries that share a Renderer's scene cannot be copied or pickled: "
@@ -531,7 +545,10 @@ class Accel:
         if camera is not None:
             if K is not None or pose is not None:
                 raise InputError("give either a camera or K and pose, not both")
-            source = CameraRays(camera)
+            if width is not None or height is not None or pixel_center:
+                raise InputError("width, height and pixel_center go with K and pose; a camera has its own "
+                                 "size (Camera(..., width=, height=))")
+            source = CameraRays(_checked_camera(camera))
             axis, shape = source.forward, (camera.height, camera.width)
         else:
             if K is None or width is None or height is None:
@@ -554,7 +571,7 @@ class Accel:
 
     def trace_camera(self, camera) -> Hits:
         """Closest hits of the camera's pixel-centre rays, as (H, W) arrays."""
-        hits = self._closest(CameraRays(camera), "none")
+        hits = self._closest(CameraRays(_checked_camera(camera)), "none")
         shape = (camera.height, camera.width)
         return Hits(*(a.reshape(shape + a.shape[1:]) for a in hits))
 

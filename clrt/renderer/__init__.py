@@ -1,6 +1,6 @@
 """Stages 4-6 of the pipeline: frames of a scene uploaded to one device.
 
-``renderer.py`` (the Renderer: upload once, render many frames), ``tiles.py``
+``frame.py`` (the Renderer: upload once, render many frames), ``tiles.py``
 (how a frame is cut into launches, the out-of-memory fallback, Ctrl-C),
 and page-locked images from ``clrt/device/pinned.py`` (never reused while a caller holds them).
 """

@@ -34,7 +34,7 @@ from clrt.device.context import format_bytes as _size
 from clrt.device.geometry import DeviceGeometry, check_fits, packet_rays, replace_buffer
 from clrt.device.pinned import PinnedPool
 from clrt.device.program import build_program, typed_kernel
-from clrt.errors import DeviceMemoryError, InputError, TooLargeError
+from clrt.errors import DeviceMemoryError, InputError
 from clrt.layouts import HIT, RAY
 from clrt.renderer.tiles import TileLimits, run_tiles
 from clrt.scene.arrays import flatten_scene, light_records
@@ -54,6 +54,13 @@ class Frame:
     device: str = ""
     triangles: int = 0
     tiles: int = 1               # tiles the frame was rendered in (each: one launch per sample)
+
+    def __repr__(self) -> str:
+        h, w = self.image.shape[:2]
+        kind = "uint8 sRGB" if self.image.dtype == np.uint8 else "float32 linear RGB"
+        total = sum(self.timings.values())
+        return (f"<clrt.Frame {w}x{h} {kind}{', with prim and t' if self.prim is not None else ''}, "
+                f"{self.triangles:,} triangles on {self.device}, {total:.1f} ms>")
 
     def to_pil(self):
         """The image as a PIL image (a linear image is clamped and sRGB-encoded first)."""
@@ -83,7 +90,8 @@ class Renderer:
     use :meth:`set_lights`, :meth:`refit` or a new Renderer.
 
     ``accel``: "box" (default), "sphere", "ellipse" (BVH volume shape) or "none"
-    (brute force); ``builder``: "sah" (default), "paper" (on the host) or
+    (brute force); ``builder``: "auto" (default: "device" where the device
+    computes in float64, else "sah"), "sah", "paper" (on the host) or
     "device" (PLOC on the device, clrt.device.build); ``leaf_size``: the
     most triangles in a BVH leaf.  Every choice renders the same image.
     ``limits``: how frames are cut into launches (:class:`TileLimits`);
@@ -268,6 +276,10 @@ class Renderer:
             self.set_lights(scene.lights)
         for queries in list(self._followers):
             queries.follow(self, queries.chunk_rays)
+
+    def __repr__(self) -> str:
+        return (f"<clrt.Renderer of {self.arrays.corners.shape[0]:,} triangles, {len(self.arrays.lights)} light(s), "
+                f"{self.acceleration.accel} ({self.acceleration.builder}) on {self.device}>")
 
     def add_follower(self, queries) -> None:
         """Keep ``queries`` (Accel.from_renderer's) on this renderer's scene through refits."""
@@ -468,10 +480,13 @@ def render(source, camera: Camera | None = None, *, width: int | None = None,
            leaf_size: int = DEFAULT_LEAF_SIZE) -> np.ndarray:
     """Render ``source`` and return an (H, W, 3) image: uint8 sRGB, or float32 linear RGB
     with ``linear=True``.  ``source``: a Scene, a TOML scene file, a mesh file or
-    anything else :func:`~clrt.scene.scene.as_scene` takes.  Without a camera the
+    anything else :func:`~clrt.scene.sources.as_scene` takes.  Without a camera the
     scene's own (or a framing of its bounds) is used; ``width``/``height``
-    override the camera's resolution.  Values are checked as the CLI checks them
-    (clrt.checks)."""
+    override the camera's resolution.  A mesh (not a Scene or a scene file) is
+    lit as ``clrt render MESH`` lights it: by the default light placed for the
+    camera used -- where ``Renderer(scene_from_mesh(mesh))`` keeps the light
+    that scene_from_mesh placed for its own framing camera.  Values are checked
+    as the CLI checks them (clrt.checks)."""
     if camera is not None and not isinstance(camera, Camera):
         raise checks.fail("camera", "a clrt.Camera or None", camera)
     if width is not None:

@@ -489,9 +489,9 @@ def _mtl_material(m: dict, where: str, label: str) -> dict:
             raise _fail(label, f"{where}: {key} must be {rule}, got {shown}")
     fields = _whitted_from_mtl(m)
     try:   # the checks clrt.Material makes of these fields (the color is clamped into range already)
-        for field in config.MATERIAL_RANGES:
-            if field in fields:
-                checks.material_number(f"material {field}", fields[field], field)
+        for name in config.MATERIAL_RANGES:
+            if name in fields:
+                checks.material_number(f"material {name}", fields[name], name)
     except InputError as exc:
         bad = next((f for f in fields if f"material {f} " in str(exc)), "")
         key = _MTL_KEYS.get(bad, "")
@@ -1703,8 +1703,11 @@ def as_mesh(source) -> Mesh:
             part = _trimesh_part(source, linear_colors=False)
             mesh = mesh.with_detail(uv=part.uv, colors=part.corner_colors())
         return mesh
-    if isinstance(source, tuple) and len(source) == 2:
+    if isinstance(source, (tuple, list)) and len(source) == 2:
         return Mesh.from_arrays(*source)
+    if type(source).__name__ == "Scene" and hasattr(source, "dump"):   # trimesh.load("x.glb") gives one
+        raise InputError("expected a mesh, got a trimesh.Scene: pass the file's path instead (clrt reads its "
+                         "nodes and materials), or scene.dump(concatenate=True)")
     raise InputError(f"expected a mesh (a clrt.Mesh, a file path, a trimesh object or (vertices, faces)), "
                      f"got {type(source).__name__}")
 

@@ -64,7 +64,7 @@ def _checked_faces(faces, n_vertices: int, label: str) -> np.ndarray:
     return np.ascontiguousarray(f, dtype=np.int32)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)   # compared and hashed by identity: == of numpy arrays is no bool
 class Mesh:
     """An indexed triangle mesh.
 
@@ -115,6 +115,11 @@ class Mesh:
         return cls(vertices, faces, name)
 
     DETAIL = ("normals", "uv", "colors", "face_material")
+
+    def __repr__(self) -> str:
+        detail = [key for key in self.DETAIL if getattr(self, key) is not None]
+        return (f"Mesh({self.name!r}, {len(self.vertices):,} vertices, {len(self.faces):,} triangles"
+                + (f", with {', '.join(detail)}" if detail else "") + ")")
 
     def with_detail(self, normals=None, uv=None, colors=None, face_material=None) -> "Mesh":
         """A copy with the surface detail given (not None) checked and set;

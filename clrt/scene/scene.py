@@ -236,6 +236,10 @@ def _objects(value) -> list:
 def _lights(value) -> list:
     if isinstance(value, Light):
         return [value]
+    if isinstance(value, (tuple, list)) and len(value) == 3 and all(checks.is_number(v) for v in value):
+        # one position where a list of them is meant: say how to write it
+        raise InputError(f"lights must be a list of Light or of positions (x, y, z), got {checks.show(value)}: "
+                         f"for one light there, write [{checks.show(value)}]")
     if value is None or isinstance(value, (str, bytes, dict)) or not hasattr(value, "__iter__"):
         raise checks.fail("lights", "a list of Light or of positions (x, y, z)", value)
     return [Light.of(light) for light in value]
@@ -281,6 +285,11 @@ class Scene:
     def __setattr__(self, name, value):
         check = _SCENE_CHECKS.get(name)
         super().__setattr__(name, value if check is None else check(value))
+
+    def __repr__(self) -> str:
+        camera = "no camera" if self.camera is None else f"camera {self.camera.width}x{self.camera.height}"
+        return (f"<clrt.Scene: {len(self.objects)} object(s), {self.num_triangles:,} triangles, "
+                f"{len(self.lights)} light(s), {camera}, samples {self.samples}, max_depth {self.max_depth}>")
 
     @property
     def bounds(self) -> np.ndarray:

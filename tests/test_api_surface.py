@@ -1,0 +1,131 @@
+"""The API as a new user meets it: docstrings that match the defaults, errors
+at the call rather than deep inside, interchangeable mesh inputs, short reprs
+(from an audit of the API surface).  Small meshes and images only."""
+
+import importlib
+import inspect
+import re
+
+import numpy as np
+import pytest
+
+import clrt
+from clrt.scene import primitives
+
+
+@pytest.fixture(scope="module")
+def sphere():
+    return primitives.icosphere(2)
+
+
+# ---------------------------------------------------------------- docs vs behaviour
+
+@pytest.mark.parametrize("cls", [clrt.Accel, clrt.Renderer])
+def test_builder_default_in_docstring_is_the_real_default(cls):
+    """The docstrings say ``"sah" (default)``; the default is "auto" (the
+    device builder where the device has float64: PoCL, the H200)."""
+    default = inspect.signature(cls).parameters["builder"].default
+    doc = inspect.getdoc(cls)
+    assert f'"{default}" (default' in doc, doc
+
+
+def test_render_docstring_cross_reference_exists():
+    """render's docstring points at clrt.scene.scene.as_scene, which does not exist
+    (as_scene lives in clrt.scene.sources)."""
+    for ref in re.findall(r":func:`~?([\w.]+)`", clrt.render.__doc__):
+        module, _, name = ref.rpartition(".")
+        assert hasattr(importlib.import_module(module), name), ref
+
+
+# ---------------------------------------------------------------- same call, same image
+
+def test_render_says_how_it_lights_a_mesh():
+    """clrt.render(mesh, cam) places the default light for ``cam`` (as the CLI
+    does); a Renderer keeps its scene's light: the docstring says so."""
+    assert "keeps the light" in " ".join(clrt.render.__doc__.split())
+
+
+# ---------------------------------------------------------------- silently ignored / deep errors
+
+def test_camera_images_does_not_ignore_width_with_a_camera(sphere, device):
+    """camera_images(mesh, camera, width=16) returns the camera's 640x480 images:
+    width/height/pixel_center are silently dropped (K and pose are rejected)."""
+    cam = clrt.Camera((0, 0, 4), (0, 0, 0))
+    try:
+        images = clrt.camera_images(sphere, cam, width=16, device=device)
+    except clrt.InputError:
+        return
+    assert images.depth.shape[1] == 16
+
+
+@pytest.mark.parametrize("bad", ["cam", np.eye(3)])
+def test_camera_images_checks_its_camera(sphere, device, bad):
+    """A K matrix passed positionally (or any non-Camera) ends in
+    AttributeError: '...' object has no attribute 'basis' (clrt/device/args.py)."""
+    with pytest.raises(clrt.InputError):
+        clrt.camera_images(sphere, bad, width=8, height=6, device=device)
+
+
+def test_trace_camera_checks_its_camera(sphere, device):
+    accel = clrt.Accel(sphere, device=device)
+    with pytest.raises(clrt.InputError):
+        accel.trace_camera(None)
+
+
+# ---------------------------------------------------------------- what "a mesh" may be
+
+def test_trimesh_scene_is_a_mesh_source_or_named_as_such():
+    """trimesh.load("x.glb") gives a trimesh.Scene; as_mesh says 'expected a mesh
+    (... a trimesh object ...), got Scene' -- it is a trimesh object, and
+    'Scene' reads as clrt.Scene."""
+    trimesh = pytest.importorskip("trimesh")
+    from clrt.scene.sources import as_mesh
+    scene = trimesh.Scene(trimesh.creation.box())
+    try:
+        mesh = as_mesh(scene)
+    except clrt.InputError as exc:
+        assert "trimesh.Scene" in str(exc) or "trimesh.scene" in str(exc), str(exc)
+    else:
+        assert len(mesh.faces) == 12
+
+
+def test_vertices_faces_as_a_list():
+    """(V, F) works, [V, F] does not: 'expected ... (vertices, faces), got list'."""
+    from clrt.scene.sources import as_mesh
+    box = primitives.box((1.0, 1.0, 1.0))
+    assert len(as_mesh([box.vertices, box.faces]).faces) == len(box.faces)
+
+
+def test_single_light_position_error_says_to_wrap_it():
+    """lights=(0, 3, 0) gives 'light position must be 3 numbers, got 0' although a
+    single Light is accepted."""
+    box = primitives.box((1.0, 1.0, 1.0))
+    try:
+        scene = clrt.scene_from_mesh(box, lights=(0, 3, 0))
+    except clrt.InputError as exc:
+        assert "list" in str(exc), str(exc)
+    else:
+        assert len(scene.lights) == 1
+
+
+# ---------------------------------------------------------------- repr / eq of the main objects
+
+def test_mesh_equality_and_hash_do_not_raise():
+    """Mesh is a frozen dataclass with eq=True over numpy arrays: m1 == m2 and
+    ``m in [..]`` raise ValueError, hash(m) TypeError (Texture uses eq=False)."""
+    box = primitives.box((1.0, 1.0, 1.0))
+    a, b = clrt.Mesh(box.vertices.copy(), box.faces.copy()), clrt.Mesh(box.vertices.copy(), box.faces.copy())
+    a == b   # noqa: B015
+    a in [b]   # noqa: B015
+    {a: 1}
+
+
+def test_reprs_are_short_and_informative(device):
+    """A 162-vertex Mesh repr is ~15,000 characters (every coordinate); the
+    built-in scene's repr 55,000 (1,800 lines); Renderer/Accel are <... object at 0x..>."""
+    sphere = primitives.icosphere(2)
+    assert len(repr(sphere)) < 400 and str(len(sphere.faces)) in repr(sphere)
+    assert len(repr(clrt.default_scene(coarse=True))) < 4000
+    renderer = clrt.Renderer(sphere, device)
+    assert "object at 0x" not in repr(renderer)
+    assert "object at 0x" not in repr(clrt.Accel(sphere, device=device))
