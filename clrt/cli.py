@@ -273,6 +273,10 @@ def main(argv=None) -> int:
         argv = list(sys.argv[1:] if argv is None else argv)
         if argv[:1] == ["batch"]:
             from clrt.batch.cli import main as batch_main
+            # Ctrl-C from here on reaches the batch as KeyboardInterrupt, so that it
+            # writes its manifest, closes its cluster and says how to resume
+            # (clrt/__init__.py's start-up handler would exit at once).
+            signal.signal(signal.SIGINT, signal.default_int_handler)
             return batch_main(argv[1:])
         # The heavy imports first, still under the start-up handler that
         # clrt/__init__.py installs for the clrt command (Ctrl-C there exits at

@@ -156,6 +156,9 @@ BATCH_MANIFEST_SECONDS = 1.0
 BATCH_TASK_RETRIES = 1
 #: Seconds to wait for an existing Dask scheduler (--scheduler).
 BATCH_CONNECT_TIMEOUT = 10.0
+#: Seconds past BATCH_CONNECT_TIMEOUT that a scheduler has to finish Dask's
+#: handshake before clrt gives up on it (clrt.batch.cluster.connect).
+BATCH_HANDSHAKE_SLACK = 5.0
 #: Rays per chunk when clrt.batch.trace is given numpy arrays.
 BATCH_RAY_CHUNK = 1 << 20
 

@@ -14,7 +14,7 @@ import os
 import signal
 import threading
 
-from clrt.config import BATCH_CONNECT_TIMEOUT
+from clrt.config import BATCH_CONNECT_TIMEOUT, BATCH_HANDSHAKE_SLACK
 from clrt.errors import ClrtError, InputError
 
 LOOPBACK = "127.0.0.1"
@@ -95,12 +95,34 @@ def connect(address: str):
         if not (security.tls_ca_file and security.tls_client_cert):
             raise InputError(f"--scheduler {address}: tls:// needs certificates in Dask's configuration: "
                              "distributed.comm.tls.ca-file, .client.cert and .client.key (docs/distributed.md)")
-    try:
-        with dask.config.set({"distributed.comm.timeouts.connect": f"{BATCH_CONNECT_TIMEOUT}s"}):
-            return Client(address, security=security, timeout=BATCH_CONNECT_TIMEOUT)
-    except (OSError, TimeoutError, ValueError) as exc:
+    # The Client is made in a thread of its own with a deadline: Dask's connect
+    # timeout covers opening the connection, not its handshake, so a server that
+    # accepts and never answers (not a Dask scheduler) would hold it for ever.
+    result: dict = {}
+
+    def make_client() -> None:
+        try:
+            with dask.config.set({"distributed.comm.timeouts.connect": f"{BATCH_CONNECT_TIMEOUT}s"}):
+                result["client"] = Client(address, security=security, timeout=BATCH_CONNECT_TIMEOUT)
+        except BaseException as exc:   # noqa: BLE001 -- handed to the caller's thread below
+            result["error"] = exc
+
+    maker = threading.Thread(target=make_client, name="clrt-connect", daemon=True)
+    maker.start()
+    maker.join(BATCH_CONNECT_TIMEOUT + BATCH_HANDSHAKE_SLACK)
+    if maker.is_alive():
+        raise InputError(f"cannot reach the Dask scheduler at {address}: no answer within "
+                         f"{BATCH_CONNECT_TIMEOUT + BATCH_HANDSHAKE_SLACK:g} s (is it a Dask scheduler?)")
+    exc = result.get("error")
+    if exc is None:
+        return result["client"]
+    if isinstance(exc, MemoryError):   # a server that is not Dask: its reply read as a frame length
+        raise InputError(f"cannot reach the Dask scheduler at {address}: the server there does not speak "
+                         "Dask's protocol") from None
+    if isinstance(exc, (OSError, TimeoutError, ValueError, TypeError)):   # TypeError: e.g. ucx:// without ucx
         reason = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
         raise InputError(f"cannot reach the Dask scheduler at {address}: {reason}") from None
+    raise exc
 
 
 def dashboard_link(client) -> str | None:
