@@ -34,6 +34,7 @@ from clrt.scene.render_setup import turntable  # noqa: E402
 from clrt.scene.scene import Camera  # noqa: E402
 
 SIZE = {"width": 20, "height": 14}
+SIZE_ARGS = ["--width", "20", "--height", "14"]
 
 
 def _write_obj(path, mesh):
@@ -459,7 +460,7 @@ def test_ray_benchmark_can_repeat_one_chunk_per_worker(client, meshes, device):
 
 def test_images_written_in_threads_keep_their_order_and_errors(meshes, tmp_path, device, monkeypatch):
     """A task writes its images in threads while it renders on (worker.render_task):
-    the records keep the views' order, a failed write is that view's "bad"
+    the records keep the views' order, a failed write is that view's "failed"
     record, and the other views' files are written."""
     import clrt.output
     from clrt.batch import worker
@@ -485,7 +486,146 @@ def test_images_written_in_threads_keep_their_order_and_errors(meshes, tmp_path,
            "accel": "box", "builder": "sah", "leaf_size": 4, "force": False, "key": "k"}
     records = worker.render_task(job)
     assert [r["view"] for r in records] == views
-    assert [r["status"] for r in records] == ["done", "done", "bad", "done", "done", "done"]
+    assert [r["status"] for r in records] == ["done", "done", "failed", "done", "done", "done"]
     assert "refused by the test" in records[2]["error"]
     assert sorted(p.name for p in (tmp_path / "ball").iterdir()) == \
         [output_path("ball", v).rsplit("/", 1)[-1] for v in (0, 1, 3, 4, 5)]
+
+
+# --------------------------------------------------------------------------- failures
+
+def _job(source, folder, views, settings, name="ball"):
+    from clrt.batch.jobs import output_path
+    return {"source": str(source), "name": name, "views": list(views), "replace": [],
+            "paths": {v: output_path(name, v) for v in views}, "count": len(views), "folder": str(folder),
+            "scene": settings["scene"], "camera": settings["camera"], "lights": settings["lights"],
+            "accel": "box", "builder": "sah", "leaf_size": 4, "force": False, "key": "k"}
+
+
+class _Future:
+    """A future of _InProcessClient: its task ran at submit, or came back ``status``."""
+
+    def __init__(self, fn, job, status):
+        self.key, self.status, self._value = job["name"], status, None
+        if status == "finished":
+            self._value = fn(job)
+
+    def done(self):
+        return True
+
+    def result(self):
+        return self._value
+
+    def exception(self):
+        return None
+
+
+class _InProcessClient:
+    """Runs the batch's tasks in this process; tasks after the first ``finished``
+    come back cancelled, as when the scheduler goes away mid-batch."""
+
+    cluster, status = None, "running"
+
+    def __init__(self, finished):
+        self.finished, self.cancelled = finished, []
+
+    def register_plugin(self, plugin):
+        pass
+
+    def scheduler_info(self):
+        return {"workers": {"tcp://127.0.0.1:1": {}}}
+
+    def submit(self, fn, job, **kwargs):
+        self.finished -= 1
+        return _Future(fn, job, "finished" if self.finished >= 0 else "cancelled")
+
+    def cancel(self, futures):
+        self.cancelled += futures
+
+    def close(self):
+        pass
+
+
+def test_losing_the_scheduler_mid_batch_is_reported_as_such(meshes, tmp_path, device, capsys, monkeypatch):
+    """Cancelled tasks (the scheduler went away) are no frame's failure: the
+    batch stops with "lost the Dask cluster" (exit 3), what finished is recorded
+    done and nothing is recorded failed."""
+    import distributed
+
+    import clrt.batch.cluster
+    monkeypatch.setattr(distributed, "as_completed", lambda futures: iter(list(futures)))
+    monkeypatch.setattr(clrt.batch.cluster, "connect", lambda address: _InProcessClient(1))
+    monkeypatch.setenv("CLRT_DEVICE", device or "")
+    with pytest.raises(clrt.batch.ClusterLost, match="cancelled"):
+        clrt.batch.run(meshes, tmp_path / "api", views=2, client=_InProcessClient(1), device=device, **SIZE)
+    code = main(["batch", "render", *map(str, meshes), "-o", str(tmp_path / "out"), "--views", "2",
+                 "--scheduler", "tcp://127.0.0.1:1", "-q", *SIZE_ARGS])
+    err = capsys.readouterr().err
+    assert code == 3 and "lost the Dask cluster" in err and "run the same command again" in err, err
+    assert "NoneType" not in err
+    for folder in (tmp_path / "api", tmp_path / "out"):
+        records = _manifest(folder)
+        assert records and {r["status"] for r in records} == {"done"}
+        assert sorted(r["path"] for r in records) == sorted(_images(folder))
+
+
+def test_unwritable_output_is_not_reported_as_a_bad_source_per_frame(meshes, tmp_path, device, capsys,
+                                                                      monkeypatch):
+    """Images that cannot be written (read-only folder, full disk) are "failed",
+    not "bad": one line for the source, exit 1, and a task stops rendering once
+    its first writes all failed."""
+    import distributed
+
+    import clrt.batch.cluster
+    import clrt.output
+    from clrt.errors import OutputError
+    tried = []
+
+    def write(image, path, force=False):
+        tried.append(path)
+        raise OutputError(f"cannot write {path}: Permission denied")
+
+    monkeypatch.setattr(clrt.output, "write_image", write)
+    monkeypatch.setattr(distributed, "as_completed", lambda futures: iter(list(futures)))
+    monkeypatch.setattr(clrt.batch.cluster, "connect", lambda address: _InProcessClient(100))
+    monkeypatch.setenv("CLRT_DEVICE", device or "")
+    code = main(["batch", "render", str(meshes[0]), "-o", str(tmp_path / "out"), "--views", "40",
+                 "--scheduler", "tcp://127.0.0.1:1", "-q", *SIZE_ARGS])
+    out, err = capsys.readouterr()
+    assert code == 1
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and "Permission denied" in lines[0] and "40 frames failed" in lines[0], err
+    assert "bad source" not in err and "0 frame(s) rendered" in out and "40 not rendered" in out
+    assert {r["status"] for r in _manifest(tmp_path / "out")} == {"failed"}
+    assert len(tried) <= 8, f"{len(tried)} images rendered and tried after every write failed"
+
+
+def test_views_found_after_a_lost_worker_are_counted_and_recorded(meshes, tmp_path, device, monkeypatch):
+    """A retried task finds the views its first attempt wrote: they count as
+    already done and are recorded with their camera, as rendered views are."""
+    import distributed
+
+    from clrt.batch import worker
+    from clrt.batch.engine import _check_options
+    monkeypatch.setenv("CLRT_DEVICE", device or "")
+    settings = _check_options(4, "box", "sah", 4, None, dict(SIZE))
+    job = _job(meshes[0], tmp_path / "first", range(4), settings)
+    rendered = worker.render_task(job)
+    out = tmp_path / "out"
+    for v in (0, 1):   # the first attempt wrote these before its worker died
+        (out / "ball").mkdir(parents=True, exist_ok=True)
+        os.replace(tmp_path / "first" / job["paths"][v], out / job["paths"][v])
+    retried = worker.render_task({**job, "folder": str(out)})
+    assert [r.get("note") for r in retried] == ["found", "found", None, None]
+    assert [r["camera"] for r in retried] == [r["camera"] for r in rendered]
+
+    # the same through a batch: the retried task's report of views 0 and 1
+    def task(job):
+        return retried
+    monkeypatch.setattr(worker, "render_task", task)
+    monkeypatch.setattr(distributed, "as_completed", lambda futures: iter(list(futures)))
+    batch = tmp_path / "batch"
+    summary = clrt.batch.run([meshes[0]], batch, views=4, client=_InProcessClient(100), device=device, **SIZE)
+    assert (summary.rendered, summary.count("skipped")) == (2, 2)
+    assert sorted(summary.per_worker().values()) == [2]
+    assert all(r["camera"] for r in _manifest(batch)) and len(_manifest(batch)) == 4

@@ -12,7 +12,7 @@ existing one), ``rays.py`` (ray queries on dask arrays), ``cli.py`` (``clrt batc
 Guide: docs/distributed.md.  ``import clrt`` never loads this package.
 """
 
-from clrt.batch.engine import Output, Summary, render, run
+from clrt.batch.engine import ClusterLost, Output, Summary, render, run
 from clrt.batch.rays import occluded, trace
 
-__all__ = ["Output", "Summary", "occluded", "render", "run", "trace"]
+__all__ = ["ClusterLost", "Output", "Summary", "occluded", "render", "run", "trace"]

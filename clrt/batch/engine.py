@@ -29,8 +29,16 @@ from clrt.config import (BATCH_CACHE_SCENES, BATCH_TASK_RETRIES, DEFAULT_ACCEL, 
 from clrt.errors import InputError, OutputError
 from clrt.scene.render_setup import CAMERA_OPTIONS, MATERIAL_OPTIONS, SCENE_OPTIONS
 
-#: Status of an output: rendered now or before ("done", "skipped"), or why not.
+#: Status of an output: rendered now ("done"), before ("skipped": also an image a
+#: retried task found written by its first attempt), or why not.
 STATUSES = ("done", "skipped", "bad", "device", "failed")
+
+
+class ClusterLost(ConnectionError):
+    """The Dask scheduler, or the connection to it, went away during a batch: its
+    tasks came back cancelled.  An OSError, as distributed's CommClosedError is:
+    ``clrt batch render`` reports both as "lost the Dask cluster" (exit 3).  What
+    finished is recorded; running the same batch again renders the rest."""
 
 
 @dataclass(frozen=True)
@@ -64,18 +72,27 @@ class Summary:
 
     @property
     def rendered(self) -> int:
-        return sum(o.status == "done" and o.seconds > 0 for o in self.outputs)
+        return self.count("done")
 
     def per_worker(self) -> dict:
-        return dict(sorted(Counter(o.worker for o in self.outputs if o.status == "done" and o.seconds > 0).items()))
+        return dict(sorted(Counter(o.worker for o in self.outputs if o.status == "done").items()))
 
     def bad_sources(self) -> list[str]:
-        """One line per source that gave no image, or an error, first error first."""
-        lines, seen = [], set()
+        """One line per source that gave no image, or an error, first error first;
+        the frames of a source that failed otherwise (images that could not be
+        written, tasks that raised) give one line: the first error and how many."""
+        lines, seen, failed = [], {}, Counter()
         for o in self.outputs:
-            if o.status in ("bad", "device", "failed") and (o.source, o.error) not in seen:
-                seen.add((o.source, o.error))
+            if o.status not in ("bad", "device", "failed"):
+                continue
+            key = (o.source, "failed") if o.status == "failed" else (o.source, o.error)
+            failed[key] += o.status == "failed"
+            if key not in seen:
+                seen[key] = len(lines)
                 lines.append(o.error if o.error.startswith(o.source) else f"{o.source}: {o.error}")
+        for key, n in failed.items():
+            if n > 1:
+                lines[seen[key]] += f" ({n} frames failed)"
         return lines
 
     def exit_code(self) -> int:
@@ -274,13 +291,17 @@ def _execute(client, jobs: list, folder: Path, manifest: Manifest, device, progr
             job = futures[future]
             if future.status == "finished":
                 records = future.result()
-            else:
+            elif future.status == "error":
                 records = _failed_records(job, future)
+            else:   # cancelled by the scheduler, or the client lost it: never the frames' fault
+                raise ClusterLost(_lost_reason(client, future))
             for record in records:
                 manifest.add(record)
                 status = record["status"]
                 seconds = record.get("seconds") or 0.0
                 path = str(folder / record["path"]) if status == "done" else None
+                if status == "done" and record.get("note") == "found":
+                    status = "skipped"   # written by an earlier attempt of a retried task
                 outputs.append(Output(path, record["source"], record["view"], seconds, record.get("worker"),
                                       status, record.get("error", "")))
             bar.update(len(records))
@@ -289,13 +310,26 @@ def _execute(client, jobs: list, folder: Path, manifest: Manifest, device, progr
         bar.close()
         pending = [f for f in futures if not f.done()]
         if pending:
-            client.cancel(pending)
+            try:
+                client.cancel(pending)
+            except Exception:   # noqa: BLE001 -- the scheduler may be gone already
+                pass
     return outputs
+
+
+def _lost_reason(client, future) -> str:
+    """Why a task came back without a result (future.status "cancelled", "lost")."""
+    status = getattr(client, "status", None)
+    if status not in (None, "running", "newly-created"):
+        return f"the connection to the scheduler is {status}; its tasks came back {future.status}"
+    return f"its tasks came back {future.status} (the scheduler stopped or restarted?)"
 
 
 def _failed_records(job: dict, future) -> list[dict]:
     """Records of a task that raised, or whose workers kept dying (KilledWorker)."""
     exc = future.exception()
+    if exc is None:   # no error after all: cancelled, the cluster is gone
+        raise ClusterLost(f"a task came back {future.status} without a result")
     name = type(exc).__name__
     status = "device" if name == "KilledWorker" else "failed"
     message = (str(exc).splitlines() or [""])[0]

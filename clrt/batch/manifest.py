@@ -7,7 +7,8 @@ is recorded, and one found without a record (the client stopped before it wrote
 the manifest) is taken as done if clrt wrote it.
 
 Fields of a line: ``path`` (relative to the folder; null for a bad source),
-``source``, ``view``, ``views``, ``status`` ("done", "bad", "device", "failed"),
+``source``, ``view``, ``views``, ``status`` ("done", "bad", "device", "failed": also an
+image that could not be written),
 ``key`` (the settings it was made with, clrt.batch.jobs.settings_key),
 ``seconds``, ``worker``, ``device``, ``camera`` (eye, target, up, fov, width,
 height) and ``error`` (one line).

@@ -40,7 +40,7 @@ from pathlib import Path
 import numpy as np
 
 from clrt.config import BATCH_CACHE_SCENES, BATCH_IMAGE_WRITERS, DEVICE_ENV
-from clrt.errors import ClrtError, DeviceError, InputError
+from clrt.errors import ClrtError, DeviceError, InputError, OutputError
 
 try:   # plugins need Dask's base class; the rest of this module runs without Dask
     from distributed.diagnostics.plugin import WorkerPlugin
@@ -48,6 +48,9 @@ except ImportError:   # pragma: no cover - clrt.batch checks for Dask before usi
     WorkerPlugin = object
 
 _SPEC_RE = re.compile(r"\d+(:\d+)?")
+
+#: A task stops rendering after this many failed image writes and none written.
+OUTPUT_GIVE_UP = 2
 
 
 class _State:
@@ -59,6 +62,7 @@ class _State:
         self.cache_size = BATCH_CACHE_SCENES
         self.scenes: OrderedDict = OrderedDict()
         self.accels: OrderedDict = OrderedDict()
+        self.unwritable: set = set()            # folders where a task gave up writing
         self.lock = threading.RLock()
 
 
@@ -196,7 +200,12 @@ def render_task(job: dict) -> list[dict]:
     Views whose image exists are skipped unless listed in ``replace`` (a retry
     after a lost worker redoes only what is missing).  Errors of the source or
     the device become records, never exceptions: "bad" (the source or an
-    option), "device" (OpenCL); anything else is raised and retried by Dask.
+    option), "device" (OpenCL), "failed" (an image that cannot be written, as
+    on a read-only or full disk: not the source's fault); anything else is raised
+    and retried by Dask.  Once OUTPUT_GIVE_UP images have failed to be written
+    and none was written, the task's remaining views are recorded "failed" with that error
+    instead of being rendered; later tasks of that folder on this worker give up
+    after one failed write.
     """
     from clrt.output import write_image
     from clrt.scene.render_setup import render_camera, render_lights, turntable
@@ -208,7 +217,8 @@ def render_task(job: dict) -> list[dict]:
     records = []
 
     def fail(views, exc, started):
-        status = "bad" if isinstance(exc, InputError) else "device" if isinstance(exc, DeviceError) else "failed"
+        status = ("failed" if isinstance(exc, OutputError) else "bad" if isinstance(exc, InputError)
+                  else "device" if isinstance(exc, DeviceError) else "failed")
         message = f"{exc}".splitlines()[0] if str(exc) else type(exc).__name__
         for view in views:
             records.append({**base, "path": job["paths"][view], "view": view, "status": status,
@@ -234,6 +244,17 @@ def render_task(job: dict) -> list[dict]:
     # (zlib lets go of the GIL); at most BATCH_IMAGE_WRITERS wait, and records
     # keep the views' order: a view's record goes in once its file is written.
     pending = deque()       # (view, camera, started, future) in view order
+    writes = {"ok": 0, "failed": 0, "error": None}   # error: why the rest is given up
+    images = str(folder / Path(job["paths"][job["views"][0]]).parent)
+    known_unwritable = images in _STATE.unwritable
+
+    def not_written(exc):
+        if isinstance(exc, OutputError):
+            writes["failed"] += 1
+            limit = 1 if known_unwritable else OUTPUT_GIVE_UP
+            if not writes["ok"] and writes["failed"] >= limit and writes["error"] is None:
+                writes["error"] = exc
+                _STATE.unwritable.add(images)
 
     def finish_one():
         view, cam, started, written = pending.popleft()
@@ -241,7 +262,10 @@ def render_task(job: dict) -> list[dict]:
             written.result()
         except ClrtError as exc:
             fail([view], exc, started)
+            not_written(exc)
             return
+        writes["ok"] += 1
+        _STATE.unwritable.discard(images)
         records.append({**base, "path": job["paths"][view], "view": view, "status": "done",
                         "seconds": time.perf_counter() - started, "camera": _camera_record(cam)})
 
@@ -251,22 +275,32 @@ def render_task(job: dict) -> list[dict]:
 
     with ThreadPoolExecutor(BATCH_IMAGE_WRITERS, thread_name_prefix="clrt-png") as writers:
         for i, view in enumerate(job["views"]):
+            if writes["error"] is not None:   # nothing of this task can be written: stop rendering
+                finish_all()
+                fail(job["views"][i:], writes["error"], time.perf_counter())
+                return records
             out = folder / job["paths"][view]
             if out.exists() and view not in job["replace"]:
                 finish_all()
+                # written by an earlier attempt of this task (its worker died): done, not rendered now
                 records.append({**base, "path": job["paths"][view], "view": view, "status": "done",
-                                "seconds": 0.0, "camera": None, "note": "found"})
+                                "seconds": 0.0, "camera": _camera_record(turntable(camera, view, job["count"])),
+                                "note": "found"})
                 continue
             started = time.perf_counter()
             try:
                 cam = turntable(camera, view, job["count"])
-                out.parent.mkdir(parents=True, exist_ok=True)
+                try:
+                    out.parent.mkdir(parents=True, exist_ok=True)
+                except OSError as exc:
+                    raise OutputError(f"cannot create {out.parent}: {exc.strerror or exc}") from None
                 with device_lock():
                     renderer.set_lights(render_lights(renderer.scene.bounds, cam, own, job["lights"]))
                     frame = renderer.render(cam)
             except ClrtError as exc:
                 finish_all()
                 fail([view], exc, started)
+                not_written(exc)
                 continue
             except Exception as exc:   # noqa: BLE001
                 finish_all()
@@ -275,7 +309,7 @@ def render_task(job: dict) -> list[dict]:
                     return records
                 raise
             pending.append((view, cam, started, writers.submit(write_image, frame.image, out, force=job["force"])))
-            while len(pending) > BATCH_IMAGE_WRITERS:
+            while len(pending) > (0 if known_unwritable and not writes["ok"] else BATCH_IMAGE_WRITERS):
                 finish_one()
         finish_all()
     return records
