@@ -361,15 +361,6 @@ def remove_written(paths) -> None:
                 pass
 
 
-def write_text(text: str, path: Path, record: bool = False) -> None:
-    """Write a text file (UTF-8) through a temporary file and a rename, replacing
-    any file there (as :func:`write_image`, but without the mark check: the
-    caller checks, :func:`check_replace`); with ``record``, also the record of
-    its SHA-256 beside it, so that a later run knows clrt wrote it."""
-    data = text.encode("utf-8")
-    _replace_atomically(Path(path), lambda f: f.write(data), record=record)
-
-
 def _write_record(path: Path, digest: str) -> None:
     target = record_path(path)
     fd, tmp = tempfile.mkstemp(prefix=f"{target.name}.", dir=path.parent)

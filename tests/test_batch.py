@@ -28,7 +28,7 @@ from clrt.batch.jobs import Source, expand_sources, plan_tasks  # noqa: E402
 from clrt.cli import main  # noqa: E402
 from clrt.config import BATCH_MANIFEST  # noqa: E402
 from clrt.errors import InputError, OutputError  # noqa: E402
-from clrt.output import write_text  # noqa: E402
+from clrt.output import write_file  # noqa: E402
 from clrt.scene import primitives  # noqa: E402
 from clrt.scene.render_setup import turntable  # noqa: E402
 from clrt.scene.scene import Camera  # noqa: E402
@@ -322,8 +322,8 @@ def test_resume_renders_only_what_is_missing(client, meshes, tmp_path, device):
     before = {p: os.stat(out / p).st_mtime_ns for p in _images(out)}
     (out / "block/view-0001.png").unlink()                       # lost ...
     lines = (out / BATCH_MANIFEST).read_text().splitlines()     # ... and one never recorded (client killed):
-    write_text("\n".join(line for line in lines if "ball/view-0002" not in line) + "\n",   # as clrt wrote it
-               out / BATCH_MANIFEST, record=True)
+    write_file("\n".join(line for line in lines if "ball/view-0002" not in line) + "\n",   # as clrt wrote it
+               out / BATCH_MANIFEST, force=True)
 
     again = clrt.batch.render(meshes, out, views=3, client=client, device=device, **SIZE)
     redone = [o for o in again if o.seconds > 0]

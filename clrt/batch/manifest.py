@@ -24,7 +24,7 @@ from pathlib import Path
 
 from clrt.config import BATCH_MANIFEST, BATCH_MANIFEST_SECONDS
 from clrt.errors import OutputError
-from clrt.output import check_replace, record_path, write_text, written_by_clrt
+from clrt.output import check_replace, record_path, write_file, written_by_clrt
 
 
 class Manifest:
@@ -77,7 +77,8 @@ class Manifest:
         if not self._dirty or (not force and time.monotonic() - self._written < BATCH_MANIFEST_SECONDS):
             return
         lines = (json.dumps(r, sort_keys=True) for r in sorted(self.records.values(), key=_order))
-        write_text("".join(line + "\n" for line in lines), self.path, record=True)
+        # force: the file there is the one read (or refused) when this Manifest was made
+        write_file("".join(line + "\n" for line in lines), self.path, force=True)
         self._written, self._dirty = time.monotonic(), False
 
 

@@ -46,7 +46,7 @@ from clrt.device.program import build_program, typed_kernel
 from clrt.errors import InputError
 from clrt.config import RAY_CHECKS
 from clrt.query.rays import CameraRays, PinholeRays, RayBatch, cull_code, is_device_array
-from clrt.query.results import AllHits, CameraImages, Hits
+from clrt.query.results import CLOSEST_FIELDS, RESULT_BYTES, RESULT_DTYPES, AllHits, CameraImages, Hits
 from clrt.accel import as_triangles
 from clrt.scene.arrays import triangle_corners
 from clrt.scene.mesh import Mesh
@@ -58,12 +58,6 @@ MIN_CHUNK_RAYS = 4096
 ALL_HITS_PER_RAY = 4                # first guess of room for all_hits, grown as hits show up
 ALL_HITS_CAPACITY = 1 << 24         # most hits of one launch kept on the device (192 MiB)
 RAY_INPUT_BYTES = 32                # origin, direction, tmin, tmax of a ray in its chunk buffers
-# The closest hit's outputs (query_closest in trace.cl), in kernel order.
-CLOSEST_FIELDS = ("t", "prim", "u", "v", "normal", "front", "hit")
-# Bytes a ray and dtype of every per-ray result (count: query_count's).
-RESULT_BYTES = {"t": 4, "prim": 4, "u": 4, "v": 4, "normal": 12, "count": 4, "front": 1, "hit": 1}
-RESULT_DTYPES = {"t": np.float32, "prim": np.int32, "u": np.float32, "v": np.float32, "normal": np.float32,
-                 "count": np.int32, "front": np.uint8, "hit": np.uint8}
 # Ray arrays (per chunk) from this size go through page-locked staging on a
 # GPU (clrt.device.pinned.upload): the driver's own copy of pageable memory
 # runs at about 8 GB/s on the H200's host, the staged one at about 30.  On

@@ -16,6 +16,7 @@ from clrt import checks
 from clrt.config import CULL_MODES
 from clrt.device.args import camera_args
 from clrt.errors import InputError
+from clrt.query.results import CLOSEST_FIELDS, RESULT_BYTES
 
 
 def cull_code(cull: str) -> np.int32:
@@ -63,8 +64,8 @@ def host_rows(value, what: str) -> np.ndarray:
     return a
 
 
-# Bytes a ray's results may take on the host: t, prim, u, v and a normal.
-RESULT_BYTES_PER_RAY = 28
+# Bytes a ray's closest-hit results take on the host, every field asked for.
+RESULT_BYTES_PER_RAY = sum(RESULT_BYTES[name] for name in CLOSEST_FIELDS)
 
 
 def host_memory_for_rays(n: int, copies: int = 0) -> None:

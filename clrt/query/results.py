@@ -8,6 +8,14 @@ from typing import NamedTuple
 import numpy as np
 
 
+# The closest hit's outputs (query_closest in trace.cl), in kernel order.
+CLOSEST_FIELDS = ("t", "prim", "u", "v", "normal", "front", "hit")
+# Bytes a ray and dtype of every per-ray result (count: query_count's).
+RESULT_BYTES = {"t": 4, "prim": 4, "u": 4, "v": 4, "normal": 12, "count": 4, "front": 1, "hit": 1}
+RESULT_DTYPES = {"t": np.float32, "prim": np.int32, "u": np.float32, "v": np.float32, "normal": np.float32,
+                 "count": np.int32, "front": np.uint8, "hit": np.uint8}
+
+
 class Hits(NamedTuple):
     """Closest hits, one entry per ray (or per pixel, as (H, W) arrays)."""
 

@@ -1613,18 +1613,13 @@ def _gltf_reference_problem(doc) -> str | None:
                 problem = check(f"{kind}[{i}].{key}", item[key], target)
                 if problem:
                     return problem
-    for i, node in listed("nodes"):
-        children = node.get("children", [])
-        for k, child in enumerate(children if isinstance(children, list) else []):
-            problem = check(f"nodes[{i}].children[{k}]", child, "nodes")
-            if problem:
-                return problem
-    for i, scene in listed("scenes"):
-        roots = scene.get("nodes", [])
-        for k, node in enumerate(roots if isinstance(roots, list) else []):
-            problem = check(f"scenes[{i}].nodes[{k}]", node, "nodes")
-            if problem:
-                return problem
+    for kind, key in (("nodes", "children"), ("scenes", "nodes")):   # lists of node indices
+        for i, item in listed(kind):
+            nodes = item.get(key, [])
+            for k, node in enumerate(nodes if isinstance(nodes, list) else []):
+                problem = check(f"{kind}[{i}].{key}[{k}]", node, "nodes")
+                if problem:
+                    return problem
     if "scene" in doc:
         return check("scene", doc["scene"], "scenes")
     return None
