@@ -175,10 +175,12 @@ def _nested(n=120) -> np.ndarray:
 def test_restructured_trees_are_valid(name, leaf_size, queue):
     """Treelet restructuring on every device (GPUs do it by default): a valid
     tree with conservative boxes, for every test mesh and a chain of nested
-    triangles (a node with one big and one small child at every level)."""
+    triangles (a node with one big and one small child at every level; PLOC
+    up to the root, since the SAH top would split the chain evenly)."""
     corners = _nested() if name == "nested" else CORNERS[name]()
     F = len(corners)
-    bvh = build_on_device(*queue, corners, leaf_size=leaf_size, keep_boxes=True, treelet_leaves=7, treelet_min=0)
+    bvh = build_on_device(*queue, corners, leaf_size=leaf_size, keep_boxes=True, treelet_leaves=7, treelet_min=0,
+                          top_clusters=1 if name == "nested" else None)
     rows, prim_ids = bvh.read_back()
     assert np.array_equal(np.sort(prim_ids), np.arange(F))
     tris = bvh.read_triangles()
@@ -307,6 +309,24 @@ def test_sah_cost_near_the_host_sah_builder(name, queue):
             assert device_cost <= bound * host_cost, (name, leaf_size, treelets, device_cost / host_cost)
 
 
+@pytest.mark.parametrize("leaf_size", (1, 4))
+@pytest.mark.parametrize("name", ("random", "soup"))
+def test_sah_top_over_few_triangles_is_the_host_sah_tree(name, leaf_size, queue):
+    """With at most SAH_TOP_CLUSTERS triangles, PLOC merges nothing and the
+    SAH top (build_top.cl) splits the triangles themselves: every split is
+    exact, as the host SAH builder's sweep of small nodes is, so on triangles
+    without ties (no equal centres or costs) both make the same tree -- the
+    same SAH cost, where PLOC's tree differs."""
+    corners = CORNERS[name]()[:120]
+    host = accel.build(corners, "box", "sah", leaf_size).stats()["sah_cost"]
+    top = build_on_device(*queue, corners, leaf_size=leaf_size, keep_boxes=True, treelet_leaves=0,
+                          top_clusters=128).stats()["sah_cost"]
+    ploc = build_on_device(*queue, corners, leaf_size=leaf_size, keep_boxes=True, treelet_leaves=0,
+                           top_clusters=1).stats()["sah_cost"]
+    assert top == pytest.approx(host, rel=1e-6)
+    assert ploc != pytest.approx(host, rel=1e-3)       # the comparison can tell trees apart
+
+
 def test_info_mesh_with_the_device_builder(tmp_path, device, capsys):
     from clrt.cli import main
     mesh = TEST_MESHES["icosphere"]()
@@ -392,18 +412,24 @@ def test_the_geometry_takes_over_the_built_buffers(device):
         assert np.array_equal(got.view(np.uint8), want.view(np.uint8)), name     # the same bytes either way
 
 
-@pytest.mark.parametrize("name", ["random", "torus", "degenerate", "F=3"])
-def test_cpu_and_gpu_ploc_kernels_make_the_same_tree(name, queue, monkeypatch):
+@pytest.mark.parametrize("top_clusters", (1, 128))
+@pytest.mark.parametrize("name", ["random", "soup", "torus", "degenerate", "F=3"])
+def test_cpu_and_gpu_ploc_kernels_make_the_same_tree(name, top_clusters, queue, monkeypatch):
     """A CPU device merges with ploc_nearest_tiles / ploc_merge_tiles, a GPU
-    with ploc_merge: on the same device, both give the same rows bit for bit."""
+    with ploc_merge: on the same device, both give the same rows bit for bit.
+    The host queues PLOC launches in batches, so some run after PLOC is done
+    (SAH_TOP_CLUSTERS left); the hand-overs below make odd and even numbers
+    of them, and ploc_tail must find the clusters either way."""
     from clrt.device import build
     corners = CORNERS[name]()
     results = []
-    for kind in ("cpu", "gpu"):
+    for kind, threshold in (("cpu", 16), ("gpu", 1), ("gpu", 16), ("gpu", 300), ("gpu", 700)):
         monkeypatch.setattr(build, "device_kind", lambda device, kind=kind: kind)
-        bvh = build_on_device(*queue, corners, leaf_size=4, treelet_leaves=0, tail_threshold=16)
+        bvh = build_on_device(*queue, corners, leaf_size=4, treelet_leaves=0, tail_threshold=threshold,
+                              top_clusters=top_clusters)
         results.append(bvh.read_back())
-    assert all(np.array_equal(a.view(np.uint8), b.view(np.uint8)) for a, b in zip(*results))
+    for other in results[1:]:
+        assert all(np.array_equal(a.view(np.uint8), b.view(np.uint8)) for a, b in zip(results[0], other))
 
 
 def test_scratch_estimate_matches_the_workspace(device):

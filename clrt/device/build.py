@@ -22,7 +22,9 @@ The algorithm (kernels in ``clrt/kernels/build_*.cl``, entry ``build_bvh.cl``):
    clusters are left;
    then one work-group runs the remaining iterations in one launch
    (``ploc_tail``, the same choices in a loop: the tree does not depend on
-   where the host hands over).  Every new node decides
+   where the host hands over) until ``SAH_TOP_CLUSTERS`` clusters are left,
+   and splits those top-down by the SAH (``build_top.cl``: exact splits over
+   the clusters, weighted by their triangles).  Every new node decides
    by the SAH whether its subtree (at most ``leaf_size`` triangles) is emitted
    as one leaf, and records its height;
 3b. treelet restructuring (Karras & Aila 2013, ``TREELET_LEAVES``; GPUs only
@@ -97,6 +99,13 @@ PLOC_RADIUS = 16
 TAIL_THRESHOLD = {"gpu": 2048, "cpu": 2048}
 TAIL_MAX = 32768         # ploc_tail counts its clusters in 16 bits
 TAIL_GROUP = {"gpu": 1024, "cpu": BUILD_GROUP}
+# PLOC stops at this many clusters, and ploc_tail splits them top-down by the
+# SAH (build_top.cl says why; 1: PLOC up to the root).  At most the tail's
+# work-group and SAH_TOP_MAX (its tables in local memory).
+# On the H200 (docs/benchmarks.md, session 12), 1M random rays: bunny00 -5 %,
+# camel -4 % (128 against none; 256: -7 % and -5 % for 0.1 ms more build).
+SAH_TOP_CLUSTERS = {"gpu": 128, "cpu": 128}
+SAH_TOP_MAX = 256
 # Treelet restructuring after PLOC (build_treelet.cl): leaves per treelet,
 # per device type; 0: none.  Karras & Aila use 7.  TREELET_SMALL: (leaves,
 # below triangles) -- nodes of fewer triangles take treelets of fewer leaves.
@@ -161,8 +170,14 @@ _KERNELS = ("init_build_state", "centroid_bounds", "morton_codes", "radix_histog
             "treelet_levels", "treelet_order", "treelet_restructure", "init_root_paths", "jump_root_paths", "emit_tree")
 
 
+def sah_top_clusters(kind: str, tail_group: int | None = None, top_clusters: int | None = None) -> int:
+    """Clusters the SAH top takes (SAH_TOP_CLUSTERS), no more than ploc_tail's work-items."""
+    group = TAIL_GROUP[kind] if tail_group is None else int(tail_group)
+    return min(SAH_TOP_CLUSTERS[kind] if top_clusters is None else int(top_clusters), group)
+
+
 def build_defines(volume: str, kind: str = "gpu", treelet_leaves: int | None = None,
-                  tail_group: int | None = None) -> dict:
+                  tail_group: int | None = None, top_clusters: int | None = None) -> dict:
     """Program defines: the shape, the work-group and state layout, and the
     constants of topdown.py and volumes.py (one source of truth: repr() of a float
     is a C double literal of the same value)."""
@@ -170,6 +185,7 @@ def build_defines(volume: str, kind: str = "gpu", treelet_leaves: int | None = N
         VOLUME_DEFINES[volume]: None, "BUILD_GROUP": BUILD_GROUP, "RADIX_BITS": RADIX_BITS,
         "SORT_PASSES": SORT_PASSES,
         "PLOC_RADIUS": PLOC_RADIUS, "TAIL_GROUP": TAIL_GROUP[kind] if tail_group is None else int(tail_group),
+        "SAH_TOP_CLUSTERS": sah_top_clusters(kind, tail_group, top_clusters),
         "TREELET_LEAVES": TREELET_LEAVES[kind] if treelet_leaves is None else int(treelet_leaves),
         "TREELET_SMALL_LEAVES": min(TREELET_SMALL[kind][0], TREELET_LEAVES[kind] if treelet_leaves is None
                                     else int(treelet_leaves)),
@@ -372,7 +388,7 @@ class _Phases:
 
 
 def check_tuning(tail_threshold=None, treelet_leaves=None, treelet_min=None, tail_group=None,
-                 largest_group: int = 4096) -> None:
+                 largest_group: int = 4096, top_clusters=None) -> None:
     """InputError for a benchmark's tuning value (build_on_device's arguments of
     these names) that the kernels cannot take, rather than a failed program
     build or a wrong tree; ``largest_group``: the device's work-group limit."""
@@ -387,6 +403,8 @@ def check_tuning(tail_threshold=None, treelet_leaves=None, treelet_min=None, tai
         group = checks.integer("tail_group", tail_group, 1, largest_group)
         if group & (group - 1):
             raise checks.fail("tail_group", f"a power of two in 1..{largest_group}", tail_group)
+    if top_clusters is not None:
+        checks.integer("top_clusters", top_clusters, 1, SAH_TOP_MAX)
 
 
 @_one_build_per_context
@@ -394,8 +412,8 @@ def build_on_device(context: cl.Context, queue: cl.CommandQueue, corners, volume
                     leaf_size: int = 4, keep_boxes: bool = False,
                     tail_threshold: int | None = None, staged_upload: bool | None = None,
                     treelet_leaves: int | None = None, treelet_min: int | None = None,
-                    tail_group: int | None = None, device_times: bool = False,
-                    profile: bool = False) -> DeviceBvh:
+                    tail_group: int | None = None, top_clusters: int | None = None,
+                    device_times: bool = False, profile: bool = False) -> DeviceBvh:
     """Build a BVH over ``corners`` on the queue's device.
 
     corners: (F, 3, 3) triangle corners (converted to float32, checked as
@@ -412,6 +430,9 @@ def build_on_device(context: cl.Context, queue: cl.CommandQueue, corners, volume
         TREELET_MIN_TRIANGLES; always more than leaf_size).
     tail_group: work-items of ploc_tail (a power of two; default: TAIL_GROUP
         of the device type; for benchmarks).
+    top_clusters: clusters the SAH top takes over from PLOC, 1..SAH_TOP_MAX
+        (1: none; default: SAH_TOP_CLUSTERS of the device type; never more
+        than the tail's work-items; for benchmarks).
     device_times: time the phases on the device (``DeviceBvh.timings``; for
         benchmarks).  The build then runs on ``queue``, which must have
         profiling enabled (clrt.device.context.create_context's does);
@@ -429,13 +450,16 @@ def build_on_device(context: cl.Context, queue: cl.CommandQueue, corners, volume
     leaf_size = int(leaf_size)
     tri = as_triangles(corners, check_finite=False)     # checked on the device
     device = queue.device
-    check_tuning(tail_threshold, treelet_leaves, treelet_min, tail_group, int(device.max_work_group_size))
+    check_tuning(tail_threshold, treelet_leaves, treelet_min, tail_group, int(device.max_work_group_size),
+                 top_clusters)
     if "cl_khr_fp64" not in device.extensions:
         raise DeviceError(f"the device BVH builder fits volumes in float64, which {device.name.strip()} lacks")
     kind = device_kind(device)
     tail_threshold = min(TAIL_THRESHOLD[kind] if tail_threshold is None else int(tail_threshold), TAIL_MAX)
     tail_group = TAIL_GROUP[kind] if tail_group is None else int(tail_group)
-    program = build_program(context, "build_bvh.cl", build_defines(volume, kind, treelet_leaves, tail_group))
+    top_clusters = sah_top_clusters(kind, tail_group, top_clusters)
+    program = build_program(context, "build_bvh.cl",
+                            build_defines(volume, kind, treelet_leaves, tail_group, top_clusters))
     k = _kernels(program)
     ws = _workspace(context)
     F = len(tri)
@@ -515,7 +539,7 @@ def build_on_device(context: cl.Context, queue: cl.CommandQueue, corners, volume
            tile_status, treelet_done)
     nearest = ws.get("nearest", 4 * F) if kind == "cpu" else None     # the CPU kernels' neighbours
     queued = _ploc(queue, k, launch, F, clusters, merged, tile_kept, tile_status, nodes, heights, state,
-                   leaf_size, tail_threshold, nearest)
+                   leaf_size, max(tail_threshold, top_clusters), nearest)
     # ploc_tail starts from the clusters of the last iteration: on the CPU
     # passes always `clusters` (compacted back into it), from ploc_merge the
     # two buffers in turn.

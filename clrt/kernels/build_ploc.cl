@@ -23,8 +23,9 @@
 // ploc_count_kept: a prefix sum of the tiles' kept counts in one work-group,
 // and ploc_compact, which moves the kept clusters together; below says why).
 // Each kernel reads the cluster count from the state buffer, so the host can
-// queue iterations without waiting for one; once one cluster is left the
-// kernels do nothing.
+// queue iterations without waiting for one; once SAH_TOP_CLUSTERS or fewer
+// are left (PLOC_DONE) the kernels do nothing, and ploc_tail makes the top of
+// the tree over those by the SAH (build_top.cl).
 //
 // Launches pay off while there are many clusters.  Each iteration removes
 // only a fifth to a quarter of them, so most iterations (about 40 of 50 for
@@ -59,6 +60,9 @@
 #ifndef TAIL_GROUP
 #error "build with -DTAIL_GROUP=<work-items of ploc_tail>"
 #endif
+
+// PLOC merges until this many clusters are left; build_top.cl says why.
+#define PLOC_DONE(count) ((count) <= SAH_TOP_CLUSTERS)
 
 #define TILE_SPAN (BUILD_GROUP + 4 * PLOC_RADIUS)     // clusters a tile loads
 #define SEARCHED (BUILD_GROUP + 2 * PLOC_RADIUS)      // clusters whose neighbour it finds
@@ -177,7 +181,13 @@ void ploc_merge(const global BuildCluster* clusters, global BuildCluster* next, 
     local int node_base, ticket;
     local uint tile_offset;
     const int count = state[CLUSTERS_BEFORE(iteration)];
-    if (count <= 1) {                             // the same for every work-group
+    if (PLOC_DONE(count)) {                       // the same for every work-group
+        // An iteration the host queued past the end: the clusters go on to
+        // the other buffer all the same, where the host (which counts the
+        // launches, not the merges) tells ploc_tail to find them.
+        if (get_group_id(0) == 0)
+            for (int k = get_local_id(0); k < count; k += BUILD_GROUP)
+                next[k] = clusters[k];
         if (get_global_id(0) == 0)
             state[CLUSTERS_BEFORE(iteration + 1)] = count;
         return;
@@ -268,7 +278,7 @@ void ploc_merge(const global BuildCluster* clusters, global BuildCluster* next, 
         if (tile == tiles - 1) {      // the last tile knows the total
             const int left = (int)(tile_offset + kept_in_tile);
             state[CLUSTERS_BEFORE(iteration + 1)] = left;
-            if (left <= 1)
+            if (PLOC_DONE(left))
                 state[STATE_ITERATIONS] = iteration + 1;    // the last one that merged
         }
     }
@@ -297,11 +307,11 @@ void ploc_count_kept(global uint* tile_kept, global int* state, const int iterat
     local uint scratch[BUILD_GROUP];
     const int count = state[CLUSTERS_BEFORE(iteration)];
     int next = count;
-    if (count > 1)
+    if (!PLOC_DONE(count))
         next = (int)scan_in_one_group(tile_kept, (count + BUILD_GROUP - 1) / BUILD_GROUP, scratch);
     if (get_local_id(0) == 0) {
         state[CLUSTERS_BEFORE(iteration + 1)] = next;
-        if (count > 1 && next <= 1)
+        if (!PLOC_DONE(count) && PLOC_DONE(next))
             state[STATE_ITERATIONS] = iteration + 1;    // the last one that merged
     }
 }
@@ -312,7 +322,7 @@ void ploc_compact(const global BuildCluster* merged, global BuildCluster* cluste
 {
     const int count = state[CLUSTERS_BEFORE(iteration)];
     const int i = get_global_id(0);
-    if (count <= 1 || i >= count)
+    if (PLOC_DONE(count) || i >= count)
         return;
     const BuildCluster c = merged[i];
     const int rank = as_int(c.hi.w);
@@ -334,12 +344,16 @@ inline int tail_nearest(const global BuildCluster* clusters, int count, int p)
     return n.best;
 }
 
-// One work-group: every PLOC iteration from first_iteration until one
-// cluster is left, between `clusters` (holding the clusters at the start)
-// and `spare`; nearest: scratch of at least the starting count of ints.
-// Writes the node counter, the iteration total and the last count to the
-// state (when one cluster is left already, ploc_merge or ploc_count_kept
-// wrote the total).
+// The SAH top (after make_node, which it calls).
+#include "build_top.cl"
+
+// One work-group: every PLOC iteration from first_iteration until
+// SAH_TOP_CLUSTERS or fewer clusters are left, between `clusters` (holding
+// the clusters at the start) and `spare`, then the SAH top over those
+// (build_top.cl; each of its levels counts as an iteration); nearest:
+// scratch of at least the starting count of ints.  Writes the node counter,
+// the iteration total and the last count to the state (when one cluster is
+// left already, ploc_merge or ploc_count_kept wrote the total).
 // Each work-item keeps a contiguous block of places, so that its kept
 // clusters and new nodes are ranked by one prefix sum over the group.
 __kernel __attribute__((reqd_work_group_size(TAIL_GROUP, 1, 1)))
@@ -348,13 +362,14 @@ void ploc_tail(global BuildCluster* clusters, global BuildCluster* spare, global
                const int first_iteration, const uint leaf_size)
 {
     local uint scratch[TAIL_GROUP];
+    local TopScratch top;
     const int lid = get_local_id(0);
     int count = state[CLUSTERS_BEFORE(first_iteration)];
     int next_node = state[STATE_NEXT_NODE];
     int iteration = first_iteration;
     global BuildCluster* from = clusters;
     global BuildCluster* to = spare;
-    while (count > 1) {                    // count is the same in every work-item
+    while (!PLOC_DONE(count)) {            // count is the same in every work-item
         for (int p = lid; p < count; p += TAIL_GROUP)
             nearest[p] = tail_nearest(from, count, p);
         barrier(CLK_GLOBAL_MEM_FENCE);
@@ -391,10 +406,18 @@ void ploc_tail(global BuildCluster* clusters, global BuildCluster* spare, global
         from = to;
         to = t;
     }
-    if (lid == 0 && iteration > first_iteration) {
-        state[STATE_NEXT_NODE] = next_node;
-        state[STATE_ITERATIONS] = iteration;
-        state[CLUSTERS_BEFORE(iteration)] = count;
+    // The iterations that merged: this loop's count, or else the total that
+    // ploc_merge or ploc_count_kept wrote (the host may have queued more
+    // launches, which merged nothing), so that the total does not depend on
+    // where the host handed over.  Read before sah_top's barriers: only
+    // work-item 0 writes it, after them.
+    const bool merged_here = iteration > first_iteration;
+    const int merged_iterations = merged_here ? iteration : state[STATE_ITERATIONS];
+    const int levels = sah_top(from, count, to, nodes, heights, num_tris, next_node, leaf_size, &top);
+    if (lid == 0 && (merged_here || levels)) {
+        state[STATE_NEXT_NODE] = next_node + (levels ? count - 1 : 0);
+        state[STATE_ITERATIONS] = merged_iterations + levels;
+        state[CLUSTERS_BEFORE(merged_iterations + levels)] = levels ? 1 : count;
     }
 }
 
@@ -416,7 +439,7 @@ __kernel void ploc_nearest_tiles(const global BuildCluster* clusters, global int
                                  const global int* state, const int iteration)
 {
     const int count = state[CLUSTERS_BEFORE(iteration)];
-    if (count <= 1)
+    if (PLOC_DONE(count))
         return;
     // Each pair's area once, as ploc_merge's table does: row p % (PLOC_RADIUS
     // + 1) holds the areas of (p, p + o), o = 1..PLOC_RADIUS, and serves p's
@@ -449,7 +472,7 @@ __kernel void ploc_merge_tiles(const global BuildCluster* clusters, global Build
                                const uint leaf_size)
 {
     const int count = state[CLUSTERS_BEFORE(iteration)];
-    if (count <= 1)
+    if (PLOC_DONE(count))
         return;
     for (int tile = get_global_id(0); tile * BUILD_GROUP < count; tile += get_global_size(0)) {
         const int start = tile * BUILD_GROUP, end = min(start + BUILD_GROUP, count);
