@@ -465,7 +465,7 @@ def main(argv=None) -> int:
                    "the camera set has one per pixel)")
     p.add_argument("--size", type=parse_size, default=(1920, 1080), help="reference camera image (default 1920x1080)")
     p.add_argument("--seed", type=NON_NEGATIVE, default=0)
-    p.add_argument("--write", type=Path, metavar="DIR", help="also save each generated set as DIR/<set>.f32")
+    p.add_argument("--write", type=Path, metavar="DIR", help="also save each generated set as DIR/<set>.f32 (DIR made if missing)")
     p.add_argument("-f", "--force", action="store_true",
                    help="let --write replace files that clrt did not write")
     p.add_argument("--read", type=Path, action="append", metavar="FILE",
@@ -491,7 +491,7 @@ def main(argv=None) -> int:
     args = p.parse_args(argv)
     if not args.tmax > 0:
         p.error("--tmax must be positive")
-    if args.write is not None and not args.write.is_dir():
+    if args.write is not None and args.write.exists() and not args.write.is_dir():
         p.error(f"--write: {args.write} is not a folder")
     if args.read and (args.set or args.write):
         p.error("--read runs files; it does not go with --set or --write")
@@ -502,6 +502,11 @@ def main(argv=None) -> int:
             import embreex  # noqa: F401
         except ImportError:
             p.error("--embree needs embreex: pip install -e '.[raybench]'")
+    if args.write is not None:
+        try:
+            args.write.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            p.error(f"--write: cannot make the folder {args.write}: {exc.strerror}")
     variants = [(a, b) for a in (args.accel or ["box"]) for b in (args.builder or ["sah"])]
     return exit_code(run, args.mesh, tuple(args.set or RAY_SETS), args.rays, args.seed, variants, args.device,
                      args.size, args.write, tuple(args.read or ()), args.tmax, args.repeat, args.warmup,
