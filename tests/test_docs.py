@@ -124,3 +124,18 @@ def test_documented_raysets_commands_take_one_mesh():
     assert not [t for t in texts if "{bunny00,camel}" in t]
     commands = _doc_commands("python -m clrt.bench.raysets")
     assert commands and not [c for c in commands if "{" in c and "," in c]
+
+
+@pytest.mark.parametrize("name", ["batch", "build", "first_image", "frame", "paper", "rays", "raysets", "scale",
+                                  "speed"])
+def test_every_benchmark_module_explains_itself(name, capsys):
+    """`python -m clrt.bench.NAME --help`: a usage naming that command, then a
+    description that ends as a sentence (not cut off before its example)."""
+    import importlib
+    module = importlib.import_module(f"clrt.bench.{name}")
+    with pytest.raises(SystemExit):
+        module.main(["--help"])
+    usage, _, rest = capsys.readouterr().out.partition("\n\n")
+    assert usage.startswith(f"usage: python -m clrt.bench.{name} [-h]")
+    description = rest.split("\n\n")[0]
+    assert description.rstrip().endswith("."), description

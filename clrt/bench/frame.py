@@ -1,4 +1,4 @@
-"""Per-stage times of whole frames, acceleration variants side by side:
+"""Per-stage times of whole frames, acceleration variants side by side.
 
     python -m clrt.bench.frame MESH --size 200x200 --size 1920x1080 --accel none --accel box
 
