@@ -465,7 +465,8 @@ def main(argv=None) -> int:
                    "the camera set has one per pixel)")
     p.add_argument("--size", type=parse_size, default=(1920, 1080), help="reference camera image (default 1920x1080)")
     p.add_argument("--seed", type=NON_NEGATIVE, default=0, help="of the generated sets (default 0)")
-    p.add_argument("--write", type=Path, metavar="DIR", help="also save each generated set as DIR/<set>.f32 (DIR made if missing)")
+    p.add_argument("--write", type=Path, metavar="DIR",
+                   help="also save each generated set as DIR/<set>.f32 (DIR made if missing)")
     p.add_argument("-f", "--force", action="store_true",
                    help="let --write replace files that clrt did not write")
     p.add_argument("--read", type=Path, action="append", metavar="FILE",
