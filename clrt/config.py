@@ -29,10 +29,11 @@ BUILDERS = HOST_BUILDERS + ("device",)
 BUILDER_CHOICES = BUILDERS + ("auto",)
 
 DEFAULT_ACCEL = "box"
-#: "auto": measured on the H200 (docs/benchmarks.md), the device builder takes
-#: 6.7 ms for a 75k-triangle mesh where the host SAH build takes 304 ms, and its
-#: trees trace about 8 % slower -- a render or a batch of rays wins unless it
-#: traces some 20,000 1080p frames of primary rays.
+#: "auto": measured on the H200 (docs/benchmarks.md, session 6), the device
+#: builder takes 1.9 ms for a 75k-triangle mesh where the host SAH build takes
+#: about 300 ms, and its trees trace primary rays 4 % slower (0.192 against
+#: 0.184 ms a 1080p frame) -- a render or a batch of rays wins unless it traces
+#: some 35,000 1080p frames of primary rays.
 DEFAULT_BUILDER = "auto"
 HOST_DEFAULT_BUILDER = "sah"   # the host front end's (clrt.accel.build)
 DEFAULT_LEAF_SIZE = 4

@@ -268,3 +268,10 @@ def test_table4_keeps_bvh_rows_when_basic_was_skipped():
     assert cells[6] == "6,796,711" and cells[7] == "-", cells      # paper BVH; no paper reduction
     diamond = next(line for line in table.splitlines() if line.startswith("| diamond |"))
     assert [c.strip() for c in diamond.split("|")[1:-1]][5] == "40.00%"   # 10 ms -> 6 ms
+
+
+def test_the_module_names_itself_as_it_is_run(capsys):
+    """``python -m clrt.bench.paper --help`` shows that command, not a 'bench' word to type after it."""
+    with pytest.raises(SystemExit):
+        paper.main(["--help"])
+    assert capsys.readouterr().out.startswith("usage: python -m clrt.bench.paper [-h]")

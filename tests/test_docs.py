@@ -124,3 +124,36 @@ def test_documented_raysets_commands_take_one_mesh():
     assert not [t for t in texts if "{bunny00,camel}" in t]
     commands = _doc_commands("python -m clrt.bench.raysets")
     assert commands and not [c for c in commands if "{" in c and "," in c]
+
+
+@pytest.mark.parametrize("name", ["batch", "build", "first_image", "frame", "paper", "rays", "raysets", "scale",
+                                  "speed"])
+def test_every_benchmark_module_explains_itself(name, capsys):
+    """`python -m clrt.bench.NAME --help`: a usage naming that command, a
+    description that ends as a sentence (not cut off before its example), and
+    a line of help for every option."""
+    import importlib
+    module = importlib.import_module(f"clrt.bench.{name}")
+    with pytest.raises(SystemExit):
+        module.main(["--help"])
+    usage, _, rest = capsys.readouterr().out.partition("\n\n")
+    assert usage.startswith(f"usage: python -m clrt.bench.{name} [-h]")
+    description = rest.split("\n\n")[0]
+    assert description.rstrip().endswith("."), description
+    import argparse
+    parsers = []
+
+    def keep(parser, *args, **kwargs):   # the module's parser, before any work
+        parsers.append(parser)
+        raise SystemExit(0)
+
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(argparse.ArgumentParser, "parse_args", keep)
+        with pytest.raises(SystemExit):
+            module.main([])
+    actions = list(parsers[0]._actions)
+    for action in actions:   # python -m clrt.bench.paper: its options are a subcommand's
+        if isinstance(action, argparse._SubParsersAction):
+            actions += [a for sub in action.choices.values() for a in sub._actions]
+    bare = [a.option_strings[0] for a in actions if a.option_strings and not a.help]
+    assert not bare, f"options without help: {bare}"

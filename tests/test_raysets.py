@@ -154,10 +154,10 @@ def test_command_writes_reads_and_refuses(tmp_path, capsys, device):
     mesh.write_text(_off())
     common = ["--repeat", "1", "--warmup", "0", "--size", "24x16"] + (["--device", device] if device else [])
     assert raysets.main([str(mesh), "--rays", "300", "--set", "random", "--set", "ao",
-                         "--write", str(tmp_path)] + common) == 0
+                         "--write", str(tmp_path / "rays")] + common) == 0   # the folder is made
     first = capsys.readouterr().out
-    assert (tmp_path / "random.f32").stat().st_size == 300 * 24
-    assert raysets.main([str(mesh), "--read", str(tmp_path / "random.f32")] + common) == 0
+    assert (tmp_path / "rays" / "random.f32").stat().st_size == 300 * 24
+    assert raysets.main([str(mesh), "--read", str(tmp_path / "rays" / "random.f32")] + common) == 0
     again = capsys.readouterr().out
     row = lambda text, name: next(line for line in text.splitlines() if line.startswith(f"| {name} "))  # noqa: E731
     # same hits and sum of distances from the file as when generated
@@ -169,6 +169,9 @@ def test_command_writes_reads_and_refuses(tmp_path, capsys, device):
     assert raysets.main([str(mesh), "--read", str(tmp_path / "bad.f32")] + common) == 2
     err = capsys.readouterr().err
     assert err.startswith("clrt: ") and "not a ray file" in err and err.count("\n") == 1
+    with pytest.raises(SystemExit):   # --write names a folder, not a file
+        raysets.main([str(mesh), "--write", str(tmp_path / "bad.f32")] + common)
+    assert "is not a folder" in capsys.readouterr().err
 
 
 def _off() -> str:

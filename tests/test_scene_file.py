@@ -287,3 +287,25 @@ def test_a_mesh_too_large_to_frame_renders_from_a_placed_camera(tmp_path):
         render_camera(scene)
     camera = render_camera(scene, eye=(3e29, 3e29, 2e29), target=(3e29, 3e29, 0))
     assert camera.eye == (3e29, 3e29, 2e29)
+
+
+def test_the_default_light_of_a_file_without_lights_follows_the_camera(tmp_path):
+    """A scene file without [[lights]] is lit as a mesh is: by the default light
+    of the camera the image is rendered from (--eye, a turntable view of clrt
+    batch render, a camera given to clrt.render), not of the file's camera."""
+    import clrt
+    from clrt.scene.render_setup import render_camera, render_lights, render_scene, turntable
+    from clrt.scene.scene import default_light
+    path = str(write(tmp_path, SPHERE))
+    scene = render_scene(path)
+    moved = render_camera(scene, width=32, height=24, eye=(0.0, 0.5, -4.0), target=(0.0, 0.0, 0.0))
+    assert render_lights(scene.bounds, moved, scene.lights) == [default_light(scene.bounds, moved)]
+    behind = turntable(render_camera(scene), 2, 4)
+    assert render_lights(scene.bounds, behind, scene.lights) == [default_light(scene.bounds, behind)]
+    # the API's one call lights it the same way: as rendered with that light set by hand
+    by_hand = load_scene(path)
+    by_hand.lights = [default_light(by_hand.bounds, moved)]
+    assert np.array_equal(clrt.render(path, moved), clrt.render(by_hand, moved))
+    # a file's own lights stay where the file puts them
+    lit = render_scene(str(write(tmp_path, SPHERE + '[[lights]]\nposition = [0, 5, 5]\n', "lit.toml")))
+    assert [light.position for light in render_lights(lit.bounds, moved, lit.lights)] == [(0, 5, 5)]

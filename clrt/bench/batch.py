@@ -1,4 +1,4 @@
-"""Scaling of batch rendering with the number of Dask workers:
+"""Scaling of batch rendering with the number of Dask workers.
 
     python -m clrt.bench.batch [SOURCE ...] --workers 1,2 --views 48 --size 320x240 [--device gpu]
 

@@ -287,8 +287,10 @@ def main(argv=None) -> int:
                    help=f"comma-separated, of {', '.join(list(HOST_BUILDERS) + list(DEVICE_VARIANTS))}, "
                         "device/tail=N, device/tail-group=N, device/treelets=N, device/treelet-min=N "
                         "(default: paper, sah, device)")
-    p.add_argument("--volume", default="box", choices=("box", "sphere", "ellipse"))
-    p.add_argument("--leaf-size", type=int_at_least(1, MAX_LEAF_SIZE), default=4)
+    p.add_argument("--volume", default="box", choices=("box", "sphere", "ellipse"),
+                   help="bounding-volume shape (default box)")
+    p.add_argument("--leaf-size", type=int_at_least(1, MAX_LEAF_SIZE), default=4,
+                   help="most triangles per leaf (default 4)")
     p.add_argument("--repeat", type=NON_NEGATIVE, default=5, help="warm builds timed after the first (default 5)")
     p.add_argument("--no-trace", action="store_true", help="skip the primary-ray timing")
     p.add_argument("--profile", action="store_true",

@@ -1,4 +1,4 @@
-"""Per-stage times of whole frames, acceleration variants side by side:
+"""Per-stage times of whole frames, acceleration variants side by side.
 
     python -m clrt.bench.frame MESH --size 200x200 --size 1920x1080 --accel none --accel box
 
@@ -89,10 +89,11 @@ def main(argv=None) -> int:
     p.add_argument("--accel", action="append", choices=ACCELS,
                    help="repeatable (default: box)")
     p.add_argument("--builder", action="append", choices=BUILDERS, help="repeatable (default: sah)")
-    p.add_argument("--leaf-size", type=int_at_least(1, MAX_LEAF_SIZE), default=4)
+    p.add_argument("--leaf-size", type=int_at_least(1, MAX_LEAF_SIZE), default=4,
+                   help="most triangles per leaf (default 4)")
     p.add_argument("--device", help="'gpu', 'cpu' or P:D")
-    p.add_argument("--repeat", type=POSITIVE, default=5)
-    p.add_argument("--warmup", type=NON_NEGATIVE, default=1)
+    p.add_argument("--repeat", type=POSITIVE, default=5, help="timed frames, median reported (default 5)")
+    p.add_argument("--warmup", type=NON_NEGATIVE, default=1, help="untimed frames first (default 1)")
     p.add_argument("--walks", type=parse_walks, default=["default"],
                    help="default,single: also time the single-ray kernels where clrt walks packets of "
                         "coherent rays (CPU devices), side by side")

@@ -285,10 +285,11 @@ def _load(suite: MeshSuite, name: str, mesh_out: Path, force: bool = False):
 
 # --------------------------------------------------------------------------- the command
 
-def add_bench_parser(subparsers) -> argparse.ArgumentParser:
-    """Add ``bench`` to the CLI's subparsers; ``run_bench`` runs it."""
+def add_bench_parser(subparsers, **kwargs) -> argparse.ArgumentParser:
+    """Add ``bench`` to the CLI's subparsers (``kwargs`` to ``add_parser``, e.g.
+    ``prog``); ``run_bench`` runs it."""
     b = subparsers.add_parser(
-        "bench", help="rerun the paper's timing and detail-loss experiments on this machine",
+        "bench", **kwargs, help="rerun the paper's timing and detail-loss experiments on this machine",
         description="Rerun the paper's comparison (basic, GPU, BVH box/sphere/ellipse on the CPU "
                     "device, BVH + GPU) on its mesh suite; write its tables (Markdown, CSV), "
                     "log-log charts and the detail-loss image to --out.")
@@ -963,7 +964,7 @@ def _vec(v) -> str:
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(prog="python -m clrt.bench.paper")
     sub = parser.add_subparsers(dest="command", required=True)
-    add_bench_parser(sub)
+    add_bench_parser(sub, prog=parser.prog)   # its usage and errors name the module, not "... bench"
     args = parser.parse_args(["bench", *(sys.argv[1:] if argv is None else argv)])
     try:
         return run_bench(args)

@@ -219,14 +219,14 @@ def _embree_row(mesh, o, d, prim, repeat: int, out) -> None:
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(prog="python -m clrt.bench.rays", description=__doc__.split("\n")[0])
     p.add_argument("mesh", nargs="?", help="mesh file (default: a generated torus knot, 32,768 triangles)")
-    p.add_argument("--rays", type=parse_count, default=1_000_000)
+    p.add_argument("--rays", type=parse_count, default=1_000_000, help="rays given to clrt and Embree (default 1M)")
     p.add_argument("--reference-rays", type=parse_count, default=2_000,
                    help="rays given to trimesh's numpy intersector (default 2,000)")
     p.add_argument("--device", help="OpenCL device for clrt (default: as clrt render)")
-    p.add_argument("--accel", default="box", choices=ACCELS)
-    p.add_argument("--builder", default="sah", choices=BUILDERS)
-    p.add_argument("--repeat", type=POSITIVE, default=3)
-    p.add_argument("--seed", type=NON_NEGATIVE, default=0)
+    p.add_argument("--accel", default="box", choices=ACCELS, help="clrt's acceleration (default box)")
+    p.add_argument("--builder", default="sah", choices=BUILDERS, help="clrt's BVH builder (default sah)")
+    p.add_argument("--repeat", type=POSITIVE, default=3, help="timed runs, median reported (default 3)")
+    p.add_argument("--seed", type=NON_NEGATIVE, default=0, help="of the random rays (default 0)")
     p.add_argument("--only", action="append", choices=("clrt", "trimesh", "embree"),
                    help="systems to run besides clrt (repeatable; default all)")
     p.add_argument("--throughput", type=lambda t: [parse_count(x) for x in t.split(",")], metavar="1M,10M",

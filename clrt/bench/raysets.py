@@ -464,18 +464,19 @@ def main(argv=None) -> int:
     p.add_argument("--rays", type=parse_count, default=1_000_000, help="rays per generated set (default 1M; "
                    "the camera set has one per pixel)")
     p.add_argument("--size", type=parse_size, default=(1920, 1080), help="reference camera image (default 1920x1080)")
-    p.add_argument("--seed", type=NON_NEGATIVE, default=0)
-    p.add_argument("--write", type=Path, metavar="DIR", help="also save each generated set as DIR/<set>.f32")
+    p.add_argument("--seed", type=NON_NEGATIVE, default=0, help="of the generated sets (default 0)")
+    p.add_argument("--write", type=Path, metavar="DIR",
+                   help="also save each generated set as DIR/<set>.f32 (DIR made if missing)")
     p.add_argument("-f", "--force", action="store_true",
                    help="let --write replace files that clrt did not write")
     p.add_argument("--read", type=Path, action="append", metavar="FILE",
                    help="run the rays of these files instead of generating sets (repeatable)")
     p.add_argument("--tmax", type=float, default=np.inf, help="longest hit distance of --read rays (default inf)")
-    p.add_argument("--accel", action="append", choices=ACCELS)
-    p.add_argument("--builder", action="append", choices=BUILDERS)
+    p.add_argument("--accel", action="append", choices=ACCELS, help="repeatable (default: box)")
+    p.add_argument("--builder", action="append", choices=BUILDERS, help="repeatable (default: sah)")
     p.add_argument("--device", help="'gpu', 'cpu' or P:D (default: clrt's choice, the first GPU if any)")
-    p.add_argument("--repeat", type=POSITIVE, default=5)
-    p.add_argument("--warmup", type=NON_NEGATIVE, default=2)
+    p.add_argument("--repeat", type=POSITIVE, default=5, help="timed queries, median reported (default 5)")
+    p.add_argument("--warmup", type=NON_NEGATIVE, default=2, help="untimed queries first (default 2)")
     p.add_argument("--group", type=parse_groups, default=["default"],
                    help="work-group sizes of the query kernels to compare, e.g. driver,64,128 (default: "
                         "clrt's, clrt.query.accel.QUERY_GROUP and, for packets of rays, PACKET_GROUP)")
@@ -491,7 +492,7 @@ def main(argv=None) -> int:
     args = p.parse_args(argv)
     if not args.tmax > 0:
         p.error("--tmax must be positive")
-    if args.write is not None and not args.write.is_dir():
+    if args.write is not None and args.write.exists() and not args.write.is_dir():
         p.error(f"--write: {args.write} is not a folder")
     if args.read and (args.set or args.write):
         p.error("--read runs files; it does not go with --set or --write")
@@ -502,6 +503,11 @@ def main(argv=None) -> int:
             import embreex  # noqa: F401
         except ImportError:
             p.error("--embree needs embreex: pip install -e '.[raybench]'")
+    if args.write is not None:
+        try:
+            args.write.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            p.error(f"--write: cannot make the folder {args.write}: {exc.strerror}")
     variants = [(a, b) for a in (args.accel or ["box"]) for b in (args.builder or ["sah"])]
     return exit_code(run, args.mesh, tuple(args.set or RAY_SETS), args.rays, args.seed, variants, args.device,
                      args.size, args.write, tuple(args.read or ()), args.tmax, args.repeat, args.warmup,

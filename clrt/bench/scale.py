@@ -136,8 +136,9 @@ def main(argv=None) -> int:
                    help="comma-separated mesh sizes, e.g. 1M,2M,10M (default 1M,2M)")
     p.add_argument("--builder", type=lambda s: s.split(","), default=["paper", "sah"],
                    help="comma-separated builders (default paper,sah)")
-    p.add_argument("--accel", default="box", choices=ACCELS)
-    p.add_argument("--leaf-size", type=int_at_least(1, MAX_LEAF_SIZE), default=4)
+    p.add_argument("--accel", default="box", choices=ACCELS, help="bounding-volume shape, or none (default box)")
+    p.add_argument("--leaf-size", type=int_at_least(1, MAX_LEAF_SIZE), default=4,
+                   help="most triangles per leaf (default 4)")
     p.add_argument("--size", type=parse_size, action="append", help="image size WxH, repeatable (default 640x480)")
     p.add_argument("--repeat", type=POSITIVE, default=3, help="frames timed after one warm-up (default 3)")
     p.add_argument("--device", help="'gpu', 'cpu' or P:D (default: clrt's choice)")

@@ -99,14 +99,15 @@ def main(argv=None) -> int:
     default_dir = Path(__file__).resolve().parents[2].parent / "shared" / "meshes"
     p.add_argument("--mesh-dir", type=Path, default=default_dir, help=f"folder of the meshes (default {default_dir})")
     p.add_argument("--case", action="append", choices=sorted(CASES), help="repeatable (default: all)")
-    p.add_argument("--accel", action="append", choices=ACCELS)
-    p.add_argument("--builder", action="append", choices=BUILDERS)
-    p.add_argument("--leaf-size", type=int_at_least(1, MAX_LEAF_SIZE), default=4)
+    p.add_argument("--accel", action="append", choices=ACCELS, help="repeatable (default: box)")
+    p.add_argument("--builder", action="append", choices=BUILDERS, help="repeatable (default: sah)")
+    p.add_argument("--leaf-size", type=int_at_least(1, MAX_LEAF_SIZE), default=4,
+                   help="most triangles per leaf (default 4)")
     p.add_argument("--tile", type=parse_work_group,
                    help="work-group as a WxH block of pixels (default 8x8; 0x0: the driver's choice)")
     p.add_argument("--device", help="'gpu', 'cpu' or P:D (default: clrt's choice, the first GPU if any)")
-    p.add_argument("--repeat", type=POSITIVE, default=20)
-    p.add_argument("--warmup", type=NON_NEGATIVE, default=3)
+    p.add_argument("--repeat", type=POSITIVE, default=20, help="timed frames, median reported (default 20)")
+    p.add_argument("--warmup", type=NON_NEGATIVE, default=3, help="untimed frames first (default 3)")
     p.add_argument("--max-buffer-mib", type=float, help="split scene buffers larger than this (default: the device's limit)")
     args = p.parse_args(argv)
     variants = [(a, b) for a in (args.accel or ["box"]) for b in (args.builder or ["sah"])]

@@ -482,10 +482,10 @@ def render(source, camera: Camera | None = None, *, width: int | None = None,
     with ``linear=True``.  ``source``: a Scene, a TOML scene file, a mesh file or
     anything else :func:`~clrt.scene.sources.as_scene` takes.  Without a camera the
     scene's own (or a framing of its bounds) is used; ``width``/``height``
-    override the camera's resolution.  A mesh (not a Scene or a scene file) is
-    lit as ``clrt render MESH`` lights it: by the default light placed for the
-    camera used -- where ``Renderer(scene_from_mesh(mesh))`` keeps the light
-    that scene_from_mesh placed for its own framing camera.  Values are checked
+    override the camera's resolution.  A mesh, or a scene file without lights, is
+    lit as ``clrt render`` lights it: by the default light placed for the
+    camera used -- where ``Renderer(scene_from_mesh(mesh))`` (or a Scene given
+    here) keeps the light placed for its own camera.  Values are checked
     as the CLI checks them (clrt.checks)."""
     if camera is not None and not isinstance(camera, Camera):
         raise checks.fail("camera", "a clrt.Camera or None", camera)
@@ -496,8 +496,8 @@ def render(source, camera: Camera | None = None, *, width: int | None = None,
     device = checks.device(device)
     checks.accel_options(accel, builder, leaf_size)
     scene = as_scene(source)
-    # A mesh (not a Scene, not a scene file) gets the default light from the final camera, as in the CLI.
-    mesh_light = not isinstance(source, Scene) and not str(source).lower().endswith(".toml")
+    # A file without lights of its own gets the default light from the final camera, as in the CLI.
+    mesh_light = not isinstance(source, Scene) and scene.default_lights
     if camera is None and (scene.camera is None or scene.camera_framed):
         base = scene.camera or Camera.framing(scene.bounds)
         camera = Camera.framing(scene.bounds, base.width if width is None else width,

@@ -32,13 +32,14 @@ def render_scene(source, *, color=None, ambient=None, diffuse=None, specular=Non
                  crease=None, flat: bool = False, background=None, samples=None, max_depth=None) -> Scene:
     """The scene of ``source``: None (the built-in scene), a ``.toml`` scene file or
     a mesh file (clrt.scene.sources.as_scene).  The material options replace that
-    field of every object's material; a mesh's scene has no lights yet
-    (:func:`render_lights` places the default one from the final camera)."""
+    field of every object's material; a mesh's scene, and a scene file's without
+    lights, has no lights yet (:func:`render_lights` places the default one from
+    the final camera)."""
     from clrt.scene.sources import as_scene
     if source:
         scene = as_scene(source)
-        if not str(source).lower().endswith(".toml"):
-            scene.lights = []   # a mesh: the default light is placed from the final camera
+        if scene.default_lights:
+            scene.lights = []   # the default light is placed from the final camera
     else:
         from clrt.scene.default import default_scene
         scene = default_scene()

@@ -260,6 +260,7 @@ _SCENE_CHECKS = {
     "ambient_light": lambda v: checks.intensity("ambient_light", v),
     "camera": _camera,
     "camera_framed": lambda v: checks.boolean("camera_framed", v),
+    "default_lights": lambda v: checks.boolean("default_lights", v),
     "max_depth": checks.max_depth,
     "samples": checks.samples,
 }
@@ -279,6 +280,7 @@ class Scene:
     ambient_light: tuple = config.DEFAULT_AMBIENT_LIGHT
     camera: Camera | None = None   # suggested view; renderers may override
     camera_framed: bool = False    # the camera was framed from the bounds, not placed by the user
+    default_lights: bool = False   # the lights are clrt's default one, placed from ``camera``, not the user's
     max_depth: int = config.DEFAULT_MAX_DEPTH   # reflection / refraction bounces after the camera ray
     samples: int = config.DEFAULT_SAMPLES       # anti-aliasing: samples x samples rays per pixel
 
@@ -357,7 +359,8 @@ def scene_from_mesh(mesh, material=None, lights=None, background=config.DEFAULT_
             scene.camera, scene.camera_framed = Camera.framing(scene.bounds), True
         except InputError:   # too large to frame: no camera, so that a camera the caller places still works
             scene.camera, scene.camera_framed = None, True
-    if not scene.lights and scene.camera is not None:
+    scene.default_lights = not scene.lights
+    if scene.default_lights and scene.camera is not None:
         scene.lights = [default_light(scene.bounds, scene.camera)]
     return scene
 

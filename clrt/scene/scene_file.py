@@ -421,7 +421,7 @@ class _Loader:
         scene.camera_framed = "eye" not in data.get("camera", {})
         if "lights" not in data:   # as for a single mesh: one light above the eye
             try:
-                scene.lights = [default_light(scene.bounds, scene.camera)]
+                scene.lights, scene.default_lights = [default_light(scene.bounds, scene.camera)], True
             except InputError as exc:   # a scene too large for it
                 raise doc.error("lights", str(exc).replace("give the lights' positions", "give [[lights]] "
                                                            "positions")) from None
