@@ -98,19 +98,31 @@ def connect(address: str):
     # The Client is made in a thread of its own with a deadline: Dask's connect
     # timeout covers opening the connection, not its handshake, so a server that
     # accepts and never answers (not a Dask scheduler) would hold it for ever.
+    # A Client that fails or hangs is closed here: left open, it stayed the
+    # process's default client and kept Dask's scheduler setting at
+    # "dask.distributed", so a later dask.compute in the process waited on it for ever.
     result: dict = {}
+    made: list = []
+
+    class ClrtClient(Client):   # its name is the scheduler's id of it
+        def start(self, **kwargs):
+            made.append(self)   # before it connects: it is there to close if that fails
+            return super().start(**kwargs)
 
     def make_client() -> None:
         try:
             with dask.config.set({"distributed.comm.timeouts.connect": f"{BATCH_CONNECT_TIMEOUT}s"}):
-                result["client"] = Client(address, security=security, timeout=BATCH_CONNECT_TIMEOUT)
+                result["client"] = ClrtClient(address, security=security, timeout=BATCH_CONNECT_TIMEOUT)
         except BaseException as exc:   # noqa: BLE001 -- handed to the caller's thread below
             result["error"] = exc
 
     maker = threading.Thread(target=make_client, name="clrt-connect", daemon=True)
     maker.start()
     maker.join(BATCH_CONNECT_TIMEOUT + BATCH_HANDSHAKE_SLACK)
-    if maker.is_alive():
+    hung = maker.is_alive()
+    if hung or "error" in result:
+        _close_quietly(made)
+    if hung:
         raise InputError(f"cannot reach the Dask scheduler at {address}: no answer within "
                          f"{BATCH_CONNECT_TIMEOUT + BATCH_HANDSHAKE_SLACK:g} s (is it a Dask scheduler?)")
     exc = result.get("error")
@@ -123,6 +135,16 @@ def connect(address: str):
         reason = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
         raise InputError(f"cannot reach the Dask scheduler at {address}: {reason}") from None
     raise exc
+
+
+def _close_quietly(clients) -> None:
+    """Close Clients that failed to connect (their own errors are not the story:
+    the caller reports why the connection failed)."""
+    for client in clients:
+        try:
+            client.close(timeout=BATCH_HANDSHAKE_SLACK)
+        except Exception:   # noqa: BLE001
+            pass
 
 
 def dashboard_link(client) -> str | None:
