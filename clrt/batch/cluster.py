@@ -4,6 +4,12 @@ the command, or the workers of an existing Dask cluster (``--scheduler``).
 The local cluster listens on the loopback interface only -- scheduler, workers,
 nannies and dashboard -- so nothing is reachable from the network.  Workers are
 processes (OpenCL contexts are per process) with one thread each.
+
+Dask's own log lines (a worker's "Compute Failed" with its traceback, the
+scheduler's and nannies' notes) are not shown -- by the processes of the local
+cluster, and by the command's own process: every failure reaches the user as
+clrt's one line per source.  Workers of a ``--scheduler`` cluster log as they
+were set up to.
 """
 
 from __future__ import annotations
@@ -13,11 +19,17 @@ import logging
 import os
 import signal
 import threading
+from contextlib import contextmanager
 
 from clrt.config import BATCH_CONNECT_TIMEOUT, BATCH_HANDSHAKE_SLACK
 from clrt.errors import ClrtError, InputError
 
 LOOPBACK = "127.0.0.1"
+
+#: Loggers that Dask's logging set-up gives a stderr handler, and the level that
+#: silences them (above CRITICAL).
+DASK_LOGGERS = ("distributed", "bokeh", "tornado")
+SILENT = logging.CRITICAL + 10
 
 
 def require_dask() -> None:
@@ -73,10 +85,28 @@ def start_local_cluster(workers: int, device: str | None = None):
     try:
         return LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, host=LOOPBACK,
                             scheduler_port=0, dashboard_address=dashboard, worker_dashboard_address=None,
-                            silence_logs=logging.ERROR, env=env, memory_limit=0)
+                            silence_logs=SILENT, env=env, memory_limit=0)
     finally:
         if previous is not None:
             signal.signal(signal.SIGINT, previous)
+
+
+@contextmanager
+def quiet_dask_logs():
+    """Silence Dask's log handlers in this process while the block runs (what
+    ``silence_logs`` does in a LocalCluster's processes), for the command's
+    client process; restored after."""
+    importlib.import_module("distributed")   # which sets up Dask's handlers
+    changed = []
+    for name in DASK_LOGGERS:
+        for handler in logging.getLogger(name).handlers:
+            changed.append((handler, handler.level))
+            handler.setLevel(SILENT)
+    try:
+        yield
+    finally:
+        for handler, level in changed:
+            handler.setLevel(level)
 
 
 def connect(address: str):

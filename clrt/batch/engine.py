@@ -336,6 +336,8 @@ def _failed_records(job: dict, future) -> list[dict]:
     name = type(exc).__name__
     status = "device" if name == "KilledWorker" else "failed"
     message = (str(exc).splitlines() or [""])[0]
+    if name == "KilledWorker":   # Dask's text sends the user to worker logs that clrt does not show
+        message = "the worker process running it died each time it was tried (a crash, or out of memory?)"
     error = f"{job['source']}: {name}: {message}" if message else f"{job['source']}: {name}"
     return [{"path": job["paths"][v], "source": job["source"], "view": v, "views": job["count"],
              "status": status, "key": job["key"], "error": error, "worker": None} for v in job["views"]]
