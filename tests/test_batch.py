@@ -503,12 +503,20 @@ def _job(source, folder, views, settings, name="ball"):
 
 
 class _Future:
-    """A future of _InProcessClient: its task ran at submit, or came back ``status``."""
+    """A future of _InProcessClient: its task ran at submit -- again while it
+    raises, up to ``tries`` times, as Dask retries it -- or came back ``status``."""
 
-    def __init__(self, fn, job, status):
-        self.key, self.status, self._value = job["name"], status, None
+    def __init__(self, fn, job, status, tries=1):
+        self.key, self.status, self._value, self._error = job["name"], status, None, None
         if status == "finished":
-            self._value = fn(job)
+            for _ in range(tries):
+                try:
+                    self._value, self._error = fn(job), None
+                    break
+                except Exception as exc:  # noqa: BLE001 -- the task's error, as Dask keeps it
+                    self._error = exc
+            else:
+                self.status = "error"
 
     def done(self):
         return True
@@ -517,7 +525,7 @@ class _Future:
         return self._value
 
     def exception(self):
-        return None
+        return self._error
 
 
 class _InProcessClient:
@@ -535,9 +543,9 @@ class _InProcessClient:
     def scheduler_info(self):
         return {"workers": {"tcp://127.0.0.1:1": {}}}
 
-    def submit(self, fn, job, **kwargs):
+    def submit(self, fn, job, retries=0, **kwargs):
         self.finished -= 1
-        return _Future(fn, job, "finished" if self.finished >= 0 else "cancelled")
+        return _Future(fn, job, "finished" if self.finished >= 0 else "cancelled", 1 + retries)
 
     def cancel(self, futures):
         self.cancelled += futures
@@ -629,3 +637,47 @@ def test_views_found_after_a_lost_worker_are_counted_and_recorded(meshes, tmp_pa
     assert (summary.rendered, summary.count("skipped")) == (2, 2)
     assert sorted(summary.per_worker().values()) == [2]
     assert all(r["camera"] for r in _manifest(batch)) and len(_manifest(batch)) == 4
+
+
+def test_a_task_that_raises_after_writing_images_leaves_no_image_recorded_failed(meshes, tmp_path, device,
+                                                                                 monkeypatch):
+    """A task that writes some of its views and then raises, and again when
+    retried, has failed: its frames are recorded failed and the images its
+    attempts wrote are removed (as clrt render removes an image whose AOVs
+    failed), so no frame recorded failed looks done; images that were there
+    before stay.  The next run renders exactly the failed frames."""
+    import distributed
+
+    from clrt.batch import worker
+    real = worker.render_task
+
+    def raises_after_two_views(job):
+        if job["name"] != "ball":
+            return real(job)
+        real({**job, "views": job["views"][:2]})   # views 0 and 1 written (found when retried)
+        raise RuntimeError("raised after writing")
+
+    monkeypatch.setattr(distributed, "as_completed", lambda futures: iter(list(futures)))
+    monkeypatch.setenv("CLRT_DEVICE", device or "")
+    out = tmp_path / "out"
+    names = [f"{stem}/view-000{v}.png" for stem in ("ball", "block") for v in range(3)]
+    # ball's view 2 from other settings, there before the batch: a task that fails leaves it as it was
+    clrt.batch.run([meshes[0]], out, views=3, client=_InProcessClient(100), device=device, width=16, height=12)
+    old = (out / names[2]).read_bytes()
+    for name in names[:2]:
+        (out / name).unlink()
+
+    monkeypatch.setattr(worker, "render_task", raises_after_two_views)
+    summary = clrt.batch.run(meshes, out, views=3, client=_InProcessClient(100), device=device, **SIZE)
+    assert summary.exit_code() == 1 and summary.count("failed") == 3
+    assert {r["path"]: r["status"] for r in _manifest(out)} == dict(zip(names, ["failed"] * 3 + ["done"] * 3))
+    assert "raised after writing" in _manifest(out)[0]["error"]
+    assert sorted(_images(out)) == names[2:], "the failed task's images are gone, the older one stays"
+    assert (out / names[2]).read_bytes() == old
+    assert not [p for p in out.rglob(".*") if p.name != ".clrt-batch.lock" and "manifest" not in p.name]
+
+    monkeypatch.setattr(worker, "render_task", real)
+    again = clrt.batch.run(meshes, out, views=3, client=_InProcessClient(100), device=device, **SIZE)
+    assert sorted(o.path for o in again.outputs if o.status == "done") == [str(out / n) for n in names[:3]]
+    assert again.count("skipped") == 3 and again.exit_code() == 0
+    assert {r["status"] for r in _manifest(out)} == {"done"} and sorted(_images(out)) == names

@@ -69,9 +69,8 @@ class _Server:
 
 
 def test_scheduler_address_of_a_server_that_answers_garbage_is_an_input_error(tmp_path):
-    # Dask reads the reply as a frame length (MemoryError): not an OpenCL error.  In
-    # a process of its own: the failed Client leaves Dask's state behind, which a
-    # later local cluster of the test process would wait on.
+    # Dask reads the reply as a frame length (MemoryError): not an OpenCL error.  The
+    # command as a user runs it: its whole stderr is the one line.
     server = _Server("reply")
     try:
         proc = subprocess.run([sys.executable, "-m", "clrt", "batch", "render", str(_obj(tmp_path / "m.obj")),
@@ -99,6 +98,47 @@ def test_scheduler_address_of_a_silent_server_fails_within_the_connect_timeout()
     finally:
         server.close()
     assert proc.returncode != 0 and "cannot reach the Dask scheduler" in proc.stderr, proc.stderr[-500:]
+
+
+def test_a_failed_connect_leaves_nothing_a_later_batch_waits_on(tmp_path):
+    """connect() to servers that are not Dask fails, and the process is as before:
+    no Client left open or made the default, Dask's scheduler setting untouched --
+    so a local cluster batch and a dask.compute after it finish (the compute used
+    to wait for ever on the failed Client).  In a process of its own, with a
+    deadline, and with the cyclic garbage collector off: it was what closed a
+    failed Client, when it happened to run."""
+    garbage, silent = _Server("reply"), _Server("silent")
+    code = f"""
+import gc
+gc.disable()
+import dask, dask.array as da, distributed
+import clrt.batch, clrt.batch.cluster as c
+from clrt.errors import InputError
+c.BATCH_CONNECT_TIMEOUT = c.BATCH_HANDSHAKE_SLACK = 1.0
+for address in ({garbage.address!r}, {silent.address!r}):
+    try:
+        c.connect(address)
+    except InputError as exc:
+        print(exc)
+    left = [o for o in gc.get_objects() if isinstance(o, distributed.Client) and o.status != "closed"]
+    assert not left, f"Clients left open: {{left}}"
+    assert dask.config.get("scheduler", None) is None, dask.config.get("scheduler")
+summary = clrt.batch.run([{str(_obj(tmp_path / "m.obj"))!r}], {str(tmp_path / "out")!r}, views=1, workers=1,
+                         width=20, height=14)
+print(summary.rendered, int(da.arange(10, chunks=5).sum().compute()))
+"""
+    try:
+        proc = subprocess.run([sys.executable, "-c", code], env=_env(), capture_output=True, text=True,
+                              timeout=90)
+    except subprocess.TimeoutExpired:
+        pytest.fail("a batch after a failed connect still running after 90 s")
+    finally:
+        garbage.close()
+        silent.close()
+    assert proc.returncode == 0, proc.stderr[-1500:]
+    lines = proc.stdout.splitlines()
+    assert len(lines) == 3 and all("cannot reach the Dask scheduler" in line for line in lines[:2]), proc.stdout
+    assert lines[2] == "1 45"
 
 
 def test_real_ctrl_c_of_the_command_is_handled_by_the_batch(tmp_path):

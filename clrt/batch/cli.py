@@ -63,11 +63,23 @@ def main(argv: list) -> int:
     args = parser().parse_args(options.glue_vector_values(list(argv)))
     if not args.output.strip():   # '' would be the current folder
         raise OutputError(f"-o must name a folder, got {args.output!r}")
-    from clrt.batch.cluster import connect, require_dask
+    from clrt.batch.cluster import quiet_dask_logs, require_dask
+
+    require_dask()
+    with quiet_dask_logs():   # failures are clrt's lines, not Dask's log (clrt/batch/cluster.py)
+        summary = _run(args)
+    if summary is None:
+        return 130
+    _print_summary(summary, args.output, args.quiet)
+    return summary.exit_code()
+
+
+def _run(args):
+    """The batch of ``args``; None when Ctrl-C stopped it."""
+    from clrt.batch.cluster import connect
     from clrt.batch.engine import run
     from clrt.scene.render_setup import CAMERA_OPTIONS, SCENE_OPTIONS
 
-    require_dask()
     render_options = {k: getattr(args, k) for k in SCENE_OPTIONS + CAMERA_OPTIONS}
     client = connect(args.scheduler) if args.scheduler else None
 
@@ -76,13 +88,13 @@ def main(argv: list) -> int:
             print(line, file=sys.stderr)
 
     try:
-        summary = run(args.sources, args.output, args.views, client=client, workers=args.workers,
-                      device=args.device, accel=args.accel, builder=args.builder, leaf_size=args.leaf_size,
-                      lights=args.light, force=args.force, progress=not args.quiet, log=log, **render_options)
+        return run(args.sources, args.output, args.views, client=client, workers=args.workers,
+                   device=args.device, accel=args.accel, builder=args.builder, leaf_size=args.leaf_size,
+                   lights=args.light, force=args.force, progress=not args.quiet, log=log, **render_options)
     except KeyboardInterrupt:
         print("clrt: interrupted; finished images are kept: run the same command again to resume",
               file=sys.stderr)
-        return 130
+        return None
     except OSError as exc:   # distributed's CommClosedError and friends: the cluster went away
         reason = (str(exc).splitlines() or [""])[0] or type(exc).__name__
         raise DeviceError(f"lost the Dask cluster: {reason}; finished images are kept: "
@@ -90,8 +102,6 @@ def main(argv: list) -> int:
     finally:
         if client is not None:
             client.close()
-    _print_summary(summary, args.output, args.quiet)
-    return summary.exit_code()
 
 
 def _print_summary(summary, folder: str, quiet: bool) -> None:

@@ -4,6 +4,12 @@ the command, or the workers of an existing Dask cluster (``--scheduler``).
 The local cluster listens on the loopback interface only -- scheduler, workers,
 nannies and dashboard -- so nothing is reachable from the network.  Workers are
 processes (OpenCL contexts are per process) with one thread each.
+
+Dask's own log lines (a worker's "Compute Failed" with its traceback, the
+scheduler's and nannies' notes) are not shown -- by the processes of the local
+cluster, and by the command's own process: every failure reaches the user as
+clrt's one line per source.  Workers of a ``--scheduler`` cluster log as they
+were set up to.
 """
 
 from __future__ import annotations
@@ -13,11 +19,17 @@ import logging
 import os
 import signal
 import threading
+from contextlib import contextmanager
 
 from clrt.config import BATCH_CONNECT_TIMEOUT, BATCH_HANDSHAKE_SLACK
 from clrt.errors import ClrtError, InputError
 
 LOOPBACK = "127.0.0.1"
+
+#: Loggers that Dask's logging set-up gives a stderr handler, and the level that
+#: silences them (above CRITICAL).
+DASK_LOGGERS = ("distributed", "bokeh", "tornado")
+SILENT = logging.CRITICAL + 10
 
 
 def require_dask() -> None:
@@ -73,10 +85,28 @@ def start_local_cluster(workers: int, device: str | None = None):
     try:
         return LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, host=LOOPBACK,
                             scheduler_port=0, dashboard_address=dashboard, worker_dashboard_address=None,
-                            silence_logs=logging.ERROR, env=env, memory_limit=0)
+                            silence_logs=SILENT, env=env, memory_limit=0)
     finally:
         if previous is not None:
             signal.signal(signal.SIGINT, previous)
+
+
+@contextmanager
+def quiet_dask_logs():
+    """Silence Dask's log handlers in this process while the block runs (what
+    ``silence_logs`` does in a LocalCluster's processes), for the command's
+    client process; restored after."""
+    importlib.import_module("distributed")   # which sets up Dask's handlers
+    changed = []
+    for name in DASK_LOGGERS:
+        for handler in logging.getLogger(name).handlers:
+            changed.append((handler, handler.level))
+            handler.setLevel(SILENT)
+    try:
+        yield
+    finally:
+        for handler, level in changed:
+            handler.setLevel(level)
 
 
 def connect(address: str):
@@ -98,19 +128,31 @@ def connect(address: str):
     # The Client is made in a thread of its own with a deadline: Dask's connect
     # timeout covers opening the connection, not its handshake, so a server that
     # accepts and never answers (not a Dask scheduler) would hold it for ever.
+    # A Client that fails or hangs is closed here: left open, it stayed the
+    # process's default client and kept Dask's scheduler setting at
+    # "dask.distributed", so a later dask.compute in the process waited on it for ever.
     result: dict = {}
+    made: list = []
+
+    class ClrtClient(Client):   # its name is the scheduler's id of it
+        def start(self, **kwargs):
+            made.append(self)   # before it connects: it is there to close if that fails
+            return super().start(**kwargs)
 
     def make_client() -> None:
         try:
             with dask.config.set({"distributed.comm.timeouts.connect": f"{BATCH_CONNECT_TIMEOUT}s"}):
-                result["client"] = Client(address, security=security, timeout=BATCH_CONNECT_TIMEOUT)
+                result["client"] = ClrtClient(address, security=security, timeout=BATCH_CONNECT_TIMEOUT)
         except BaseException as exc:   # noqa: BLE001 -- handed to the caller's thread below
             result["error"] = exc
 
     maker = threading.Thread(target=make_client, name="clrt-connect", daemon=True)
     maker.start()
     maker.join(BATCH_CONNECT_TIMEOUT + BATCH_HANDSHAKE_SLACK)
-    if maker.is_alive():
+    hung = maker.is_alive()
+    if hung or "error" in result:
+        _close_quietly(made)
+    if hung:
         raise InputError(f"cannot reach the Dask scheduler at {address}: no answer within "
                          f"{BATCH_CONNECT_TIMEOUT + BATCH_HANDSHAKE_SLACK:g} s (is it a Dask scheduler?)")
     exc = result.get("error")
@@ -123,6 +165,16 @@ def connect(address: str):
         reason = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
         raise InputError(f"cannot reach the Dask scheduler at {address}: {reason}") from None
     raise exc
+
+
+def _close_quietly(clients) -> None:
+    """Close Clients that failed to connect (their own errors are not the story:
+    the caller reports why the connection failed)."""
+    for client in clients:
+        try:
+            client.close(timeout=BATCH_HANDSHAKE_SLACK)
+        except Exception:   # noqa: BLE001
+            pass
 
 
 def dashboard_link(client) -> str | None:

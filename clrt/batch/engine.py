@@ -278,21 +278,24 @@ def _execute(client, jobs: list, folder: Path, manifest: Manifest, device, progr
 
     from clrt.batch.worker import DevicePlugin, render_task
     client.register_plugin(DevicePlugin(device, BATCH_CACHE_SCENES, ignore_interrupts=local))
+    # Each job's images as they are before any task runs (see _remove_unrecorded)
+    before = [{v: _file_id(folder / job["paths"][v]) for v in job["views"]} for job in jobs]
     futures = {}
-    for job in jobs:
+    for job, files in zip(jobs, before):
         future = client.submit(render_task, job, pure=False, retries=BATCH_TASK_RETRIES,
                                key=f"clrt-render-{job['name']}-{job['views'][0]:04d}-{uuid.uuid4().hex[:12]}")
-        futures[future] = job
+        futures[future] = job, files
     total = sum(len(job["views"]) for job in jobs)
     bar = _progress_bar(total, progress)
     outputs = []
     try:
         for future in as_completed(futures):
-            job = futures[future]
+            job, files = futures[future]
             if future.status == "finished":
                 records = future.result()
             elif future.status == "error":
                 records = _failed_records(job, future)
+                _remove_unrecorded(folder, job, files)
             else:   # cancelled by the scheduler, or the client lost it: never the frames' fault
                 raise ClusterLost(_lost_reason(client, future))
             for record in records:
@@ -333,9 +336,32 @@ def _failed_records(job: dict, future) -> list[dict]:
     name = type(exc).__name__
     status = "device" if name == "KilledWorker" else "failed"
     message = (str(exc).splitlines() or [""])[0]
+    if name == "KilledWorker":   # Dask's text sends the user to worker logs that clrt does not show
+        message = "the worker process running it died each time it was tried (a crash, or out of memory?)"
     error = f"{job['source']}: {name}: {message}" if message else f"{job['source']}: {name}"
     return [{"path": job["paths"][v], "source": job["source"], "view": v, "views": job["count"],
              "status": status, "key": job["key"], "error": error, "worker": None} for v in job["views"]]
+
+
+def _file_id(path: Path):
+    """What tells a file from the one written in its place (a rename makes a new inode); None if none."""
+    try:
+        st = path.stat()
+    except OSError:
+        return None
+    return st.st_dev, st.st_ino, st.st_mtime_ns, st.st_size
+
+
+def _remove_unrecorded(folder: Path, job: dict, files: dict) -> None:
+    """Remove the images of a task that failed for good, as clrt render removes an
+    image whose AOVs failed: its frames are recorded failed, so no image of theirs
+    may be left to look done.  A task that raised after writing some views (and
+    again when retried), or whose workers kept dying, returned no records for the
+    images its attempts wrote; an image that differs from the one there before
+    the batch ran is such an image.  Images that were there before stay."""
+    from clrt.output import remove_written
+    paths = [folder / job["paths"][v] for v in job["views"]]
+    remove_written([p for p, v in zip(paths, job["views"]) if _file_id(p) not in (None, files[v])])
 
 
 class _NoBar:
