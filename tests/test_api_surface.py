@@ -37,6 +37,58 @@ def test_render_docstring_cross_reference_exists():
         assert hasattr(importlib.import_module(module), name), ref
 
 
+@pytest.mark.parametrize("doc_of, rows", [
+    (lambda: clrt.Hits, ("N",)), (lambda: clrt.Accel.trace, ("N",)), (lambda: clrt.trace, ("N",)),
+    (lambda: clrt.Accel.trace_camera, ("H", "W")), (lambda: importlib.import_module("clrt.batch").trace, ("N",)),
+], ids=["Hits", "Accel.trace", "clrt.trace", "Accel.trace_camera", "clrt.batch.trace"])
+def test_every_hit_field_is_in_the_docstrings(doc_of, rows):
+    """The fields of Accel.trace's result, with shape, dtype and miss value,
+    were in source comments only: help() showed none of them."""
+    from clrt.query.results import CLOSEST_FIELDS
+    doc = inspect.getdoc(doc_of())
+    for name, field in CLOSEST_FIELDS.items():
+        shape = (*rows, *map(str, field.item_shape))
+        kind = f"({', '.join(shape)}{',' if len(shape) == 1 else ''}) {np.dtype(field.dtype).name}"
+        assert f"{name} : {kind}" in doc, (name, doc)
+        assert f"{field.miss} on a miss" in " ".join(doc.split()), (name, doc)
+
+
+@pytest.mark.parametrize("cls, table", [("Hits", "CLOSEST_FIELDS"), ("AllHits", "ALL_HITS_FIELDS"),
+                                        ("CameraImages", "CAMERA_FIELDS")])
+def test_result_classes_are_their_tables(cls, table):
+    """One table per result: the named tuple's fields, their order, each field's
+    help and the class docstring all come from it."""
+    from clrt.query import results
+    cls, table = getattr(clrt, cls), getattr(results, table)
+    assert cls._fields == tuple(table)
+    for name, field in table.items():
+        assert field.meaning.split()[0] in getattr(cls, name).__doc__
+        assert f"{name} : " in cls.__doc__
+
+
+def test_trace_returns_what_the_table_says(sphere, device):
+    """Dtypes, shapes and miss values of a real answer: one ray hits, one misses."""
+    from clrt.query.results import CLOSEST_FIELDS
+    hits = clrt.Accel(sphere, device=device).trace([[0, 0, 5], [0, 5, 5]], [[0, 0, -1], [0, 0, 1]])
+    for name, field in CLOSEST_FIELDS.items():
+        value = getattr(hits, name)
+        assert value.dtype == field.dtype and value.shape == (2, *field.item_shape), name
+        assert np.all(value[1] == eval(field.miss, {"inf": np.inf})), name   # the miss value as written
+    assert hits.hit[0] and hits.prim[0] >= 0
+
+
+def test_ray_queries_doc_lists_every_hit_field():
+    """docs/ray-queries.md's table of clrt.Hits: every field with its shape and dtype."""
+    from pathlib import Path
+    from clrt.query.results import CLOSEST_FIELDS
+    text = (Path(__file__).resolve().parents[1] / "docs" / "ray-queries.md").read_text()
+    rows = [line for line in text.splitlines() if line.startswith("| `")]
+    for name, field in CLOSEST_FIELDS.items():
+        shape = "(N, 3)" if field.item_shape else "(N,)"
+        assert any(f"`{name}`" in row.split("|")[1] and f"| {shape} | {np.dtype(field.dtype).name} |" in row
+                   for row in rows), name
+
+
 # ---------------------------------------------------------------- same call, same image
 
 def test_render_says_how_it_lights_a_mesh():
