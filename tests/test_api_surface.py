@@ -89,6 +89,39 @@ def test_ray_queries_doc_lists_every_hit_field():
                    for row in rows), name
 
 
+# ---------------------------------------------------------------- one calling convention
+
+SHARED_OPTIONS = ("accel", "builder", "leaf_size", "device")
+
+
+@pytest.mark.parametrize("func", [clrt.Renderer, clrt.Accel, clrt.RayMeshIntersector, clrt.Accel.from_renderer])
+def test_only_the_source_goes_by_position(func):
+    """Renderer took (scene, device, accel, builder, leaf_size) and Accel (mesh,
+    accel, builder, leaf_size, device): a call moved from one to the other meant
+    something else.  Now the scene or mesh is the only positional argument and
+    the shared options keep one order."""
+    params = inspect.signature(func).parameters.values()
+    assert [p.name for p in params if p.kind is not p.KEYWORD_ONLY] in (["scene"], ["mesh"], ["renderer"])
+    shared = [p.name for p in params if p.name in SHARED_OPTIONS]
+    assert shared == [name for name in SHARED_OPTIONS if name in shared]
+
+
+@pytest.mark.parametrize("call, spelled", [
+    (lambda m: clrt.Renderer(m, "cpu"), "Renderer(scene, device='cpu')"),
+    (lambda m: clrt.Renderer(m, None, "none"), "Renderer(scene, device=None, accel='none')"),
+    (lambda m: clrt.Accel(m, "none"), "Accel(mesh, accel='none')"),
+    (lambda m: clrt.Accel(m, "box", "sah", 2, "cpu"),
+     "Accel(mesh, accel='box', builder='sah', leaf_size=2, device='cpu')"),
+    (lambda m: clrt.RayMeshIntersector(m, True), "RayMeshIntersector(mesh, accel=True)"),
+    (lambda m: clrt.Accel.from_renderer(m, 4096), "Accel.from_renderer(renderer, chunk_rays=4096)"),
+])
+def test_a_positional_option_says_how_to_write_it(sphere, call, spelled):
+    """The former positional orders fail at the call, naming the keywords they
+    meant, instead of building something else (or a TypeError's bare count)."""
+    with pytest.raises(clrt.InputError, match=re.escape(spelled) + "$"):
+        call(sphere)
+
+
 # ---------------------------------------------------------------- same call, same image
 
 def test_render_says_how_it_lights_a_mesh():
@@ -178,6 +211,6 @@ def test_reprs_are_short_and_informative(device):
     sphere = primitives.icosphere(2)
     assert len(repr(sphere)) < 400 and str(len(sphere.faces)) in repr(sphere)
     assert len(repr(clrt.default_scene(coarse=True))) < 4000
-    renderer = clrt.Renderer(sphere, device)
+    renderer = clrt.Renderer(sphere, device=device)
     assert "object at 0x" not in repr(renderer)
     assert "object at 0x" not in repr(clrt.Accel(sphere, device=device))

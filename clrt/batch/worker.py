@@ -188,7 +188,7 @@ def _scene_entry(source: str, scene_options: dict, accel: str, builder: str, lea
         from clrt.scene.render_setup import render_scene
         scene = render_scene(source, **scene_options)
         own = list(scene.lights)   # each view's lights are set before it is rendered
-        return Renderer(scene, _STATE.device, accel, builder, leaf_size), own
+        return Renderer(scene, device=_STATE.device, accel=accel, builder=builder, leaf_size=leaf_size), own
 
     return _cached(_STATE.scenes, key, make)
 

@@ -126,19 +126,28 @@ def _rebuilt_accel(vertices, faces, name, options) -> "Accel":
 class Accel:
     """A mesh and its acceleration structure, uploaded once to one device.
 
-    ``accel``: "box" (default), "sphere", "ellipse" or "none"; ``builder``:
-    "auto" (default: "device" where the device computes in float64, else
-    "sah"), "sah", "paper" or "device" (built on ``device``); ``leaf_size``:
-    most triangles per leaf.
+    ``mesh``: a Mesh, a mesh file, a trimesh object or ``(vertices, faces)``.
+    The options go by keyword, in the same order as
+    :class:`~clrt.renderer.frame.Renderer`'s (the choices of the structure
+    first, then the device): ``accel``: "box" (default), "sphere", "ellipse"
+    or "none"; ``builder``: "auto" (default: "device" where the device
+    computes in float64, else "sah"), "sah", "paper" or "device" (built on
+    ``device``); ``leaf_size``: most triangles per leaf; ``device``: None (the
+    first GPU, else the CPU), "gpu", "cpu" or "P:D".
     ``chunk_rays``: most rays per kernel launch (default: see :meth:`chunk_size`);
     ``max_buffer_bytes``: split scene buffers above this size (split.cl);
     ``max_buffer_label``: where that size came from, for errors (an option's name).
     Not thread-safe: give each thread its own Accel.
+
+    Only the mesh goes by position, as in Renderer: ``Accel(mesh, "sphere")``
+    (the former positional order: accel, builder, leaf_size, device,
+    chunk_rays) raises InputError showing the call with keywords.
     """
 
-    def __init__(self, mesh, accel: str = DEFAULT_ACCEL, builder: str = DEFAULT_BUILDER,
+    @checks.keyword_options("accel", "builder", "leaf_size", "device", "chunk_rays")
+    def __init__(self, mesh, *, accel: str = DEFAULT_ACCEL, builder: str = DEFAULT_BUILDER,
                  leaf_size: int = DEFAULT_LEAF_SIZE, device: str | None = None, chunk_rays: int | None = None,
-                 *, max_buffer_bytes: int | None = None, max_buffer_label: str = "max_buffer_bytes"):
+                 max_buffer_bytes: int | None = None, max_buffer_label: str = "max_buffer_bytes"):
         _check_chunk_rays(chunk_rays)
         device = checks.device(device)
         accel, builder, leaf_size = checks.accel_options(accel, builder, leaf_size)
@@ -175,7 +184,8 @@ class Accel:
         self.mesh = mesh
 
     @classmethod
-    def from_renderer(cls, renderer, chunk_rays: int | None = None) -> "Accel":
+    @checks.keyword_options("chunk_rays")
+    def from_renderer(cls, renderer, *, chunk_rays: int | None = None) -> "Accel":
         """Ray queries on a Renderer's scene, sharing its device, BVH and buffers;
         ``prim`` is then the triangle index in the scene's objects, in order
         (as ``Frame.prim``).  They follow the renderer: after ``Renderer.refit``

@@ -20,7 +20,7 @@ from clrt.query.results import (ALL_HITS_FIELDS, CAMERA_FIELDS, CLOSEST_FIELDS, 
 def _accel(mesh, accel, builder, leaf_size, device, chunk_rays, cull) -> Accel:
     """The Accel of a one-call form; ``cull`` is checked before the (long) build."""
     cull_code(cull)
-    return Accel(mesh, accel, builder, leaf_size, device, chunk_rays)
+    return Accel(mesh, accel=accel, builder=builder, leaf_size=leaf_size, device=device, chunk_rays=chunk_rays)
 
 
 @with_fields(CLOSEST_FIELDS, heading="Returns", lead="Hits, a named tuple of these arrays:")
