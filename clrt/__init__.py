@@ -11,13 +11,16 @@ Where to start:
   ``clrt.Material``, ``clrt.Light``;
 - ray queries: ``clrt.trace``, ``clrt.occluded``, ``clrt.camera_images`` (one
   call each), ``clrt.Accel`` (build once, query often), ``clrt.RayMeshIntersector``
-  (trimesh's interface);
+  (trimesh's interface); results ``clrt.Hits``, ``clrt.AllHits``,
+  ``clrt.CameraImages`` (``help()`` on each lists its arrays);
 - meshes: ``clrt.load_mesh``, ``clrt.Mesh``;
 - devices: ``device=None`` (the first GPU, else the CPU), ``"gpu"``, ``"cpu"``
   or ``"P:D"`` (platform and device indices, as ``clrt info`` lists them).
 
 Every error clrt raises on purpose is a ``clrt.ClrtError`` (bad input:
-``clrt.InputError``).  The pipeline, one package each: ``clrt.scene`` (meshes, materials, lights,
+``clrt.InputError``).
+
+The pipeline, one package each: ``clrt.scene`` (meshes, materials, lights,
 camera, scene files) -> ``clrt.accel`` (BVH builders and volumes) ->
 ``clrt.device`` (OpenCL context, programs, uploads) -> ``clrt/kernels/*.cl`` ->
 ``clrt.renderer`` (frames) and ``clrt.query`` (batch ray queries); see

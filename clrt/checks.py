@@ -18,6 +18,8 @@ Ranges and names come from :mod:`clrt.config`.
 
 from __future__ import annotations
 
+import functools
+import inspect
 import math
 import re
 from numbers import Integral, Real
@@ -180,6 +182,37 @@ def accel_options(accel, builder, leaf_size, names=("accel", "builder", "leaf_si
     """The acceleration choices of Renderer, Accel and the CLI, from config's tables."""
     return (choice(names[0], accel, config.ACCELS), choice(names[1], builder, config.BUILDER_CHOICES),
             integer(names[2], leaf_size, 1, config.MAX_LEAF_SIZE))
+
+
+def keyword_options(*former):
+    """Decorator of a function whose options follow ``*`` (keyword only).  An
+    option given positionally raises InputError that spells the call with
+    keywords, reading the positional values in the ``former`` order (the order
+    those options once had), rather than Python's bare count of arguments::
+
+        Renderer(scene, "gpu") -> Renderer takes only the scene positionally:
+                                  write Renderer(scene, device='gpu')
+
+    help() and inspect.signature still show the function's own signature."""
+    def wrap(func):
+        params = list(inspect.signature(func).parameters.values())
+        positional = [p.name for p in params
+                      if p.kind in (inspect.Parameter.POSITIONAL_ONLY, inspect.Parameter.POSITIONAL_OR_KEYWORD)]
+        shown = [name for name in positional if name not in ("self", "cls")]
+        owner = func.__qualname__.removesuffix(".__init__")
+
+        @functools.wraps(func)
+        def checked(*args, **kwargs):
+            extra = args[len(positional):]
+            if extra:
+                spelled = ", ".join(f"{name}={show(value)}" for name, value in zip(former, extra))
+                if len(extra) > len(former):
+                    spelled += ", ..."
+                raise InputError(f"{owner} takes only the {' and '.join(shown)} positionally: write "
+                                 f"{owner}({', '.join(shown)}, {spelled})")
+            return func(*args, **kwargs)
+        return checked
+    return wrap
 
 
 _DEVICE_SPEC = re.compile(r"\d+(:\d+)?")

@@ -147,7 +147,8 @@ def _render(args) -> int:
     progress = None if args.quiet else _progress_bar(camera.width * camera.height * scene.samples ** 2)
     # With a progress bar the first tile is small, so that the bar moves from the start.
     limits = TileLimits(first_launch_pixels=config.PROGRESS_FIRST_TILE) if progress else None
-    renderer = Renderer(scene, args.device, args.accel, args.builder, args.leaf_size, limits=limits)
+    renderer = Renderer(scene, device=args.device, accel=args.accel, builder=args.builder, leaf_size=args.leaf_size,
+                        limits=limits)
     try:
         frame = renderer.render(camera, linear=exr, progress=progress and progress.update)
     finally:

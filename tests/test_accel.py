@@ -26,9 +26,10 @@ VARIANTS = [(v, b, leaf) for v, b in itertools.product(VOLUMES, HOST_BUILDERS)
 
 
 def _frames_identical(scene, camera, device):
-    reference = Renderer(scene, device, accel="none").render(camera, hits=True)
+    reference = Renderer(scene, device=device, accel="none").render(camera, hits=True)
     for volume, builder, leaf in VARIANTS:
-        frame = Renderer(scene, device, volume, builder, leaf).render(camera, hits=True)
+        renderer = Renderer(scene, device=device, accel=volume, builder=builder, leaf_size=leaf)
+        frame = renderer.render(camera, hits=True)
         label = f"{volume}/{builder}/leaf {leaf}"
         assert np.array_equal(frame.prim, reference.prim), label
         assert np.array_equal(frame.t, reference.t), label
@@ -83,7 +84,7 @@ def test_trace_is_identical_for_every_bvh_on_grazing_rays(name, device):
     base_blocked = clrt.occluded(mesh, o, d, tmax=1e30, accel="none", device=device)
     assert (base.prim >= 0).mean() > 0.3 and (base.prim < 0).any(), "the ray set must hit and miss"
     for volume, builder, leaf in VARIANTS:
-        accel = clrt.Accel(mesh, volume, builder, leaf, device=device)
+        accel = clrt.Accel(mesh, accel=volume, builder=builder, leaf_size=leaf, device=device)
         hits = accel.trace(o, d)
         label = f"{volume}/{builder}/leaf {leaf}"
         for field in ("t", "prim", "u", "v"):

@@ -37,6 +37,91 @@ def test_render_docstring_cross_reference_exists():
         assert hasattr(importlib.import_module(module), name), ref
 
 
+@pytest.mark.parametrize("doc_of, rows", [
+    (lambda: clrt.Hits, ("N",)), (lambda: clrt.Accel.trace, ("N",)), (lambda: clrt.trace, ("N",)),
+    (lambda: clrt.Accel.trace_camera, ("H", "W")), (lambda: importlib.import_module("clrt.batch").trace, ("N",)),
+], ids=["Hits", "Accel.trace", "clrt.trace", "Accel.trace_camera", "clrt.batch.trace"])
+def test_every_hit_field_is_in_the_docstrings(doc_of, rows):
+    """The fields of Accel.trace's result, with shape, dtype and miss value,
+    were in source comments only: help() showed none of them."""
+    from clrt.query.results import CLOSEST_FIELDS
+    doc = inspect.getdoc(doc_of())
+    for name, field in CLOSEST_FIELDS.items():
+        shape = (*rows, *map(str, field.item_shape))
+        kind = f"({', '.join(shape)}{',' if len(shape) == 1 else ''}) {np.dtype(field.dtype).name}"
+        assert f"{name} : {kind}" in doc, (name, doc)
+        assert f"{field.miss} on a miss" in " ".join(doc.split()), (name, doc)
+
+
+@pytest.mark.parametrize("cls, table", [("Hits", "CLOSEST_FIELDS"), ("AllHits", "ALL_HITS_FIELDS"),
+                                        ("CameraImages", "CAMERA_FIELDS")])
+def test_result_classes_are_their_tables(cls, table):
+    """One table per result: the named tuple's fields, their order, each field's
+    help and the class docstring all come from it."""
+    from clrt.query import results
+    cls, table = getattr(clrt, cls), getattr(results, table)
+    assert cls._fields == tuple(table)
+    for name, field in table.items():
+        assert field.meaning.split()[0] in getattr(cls, name).__doc__
+        assert f"{name} : " in cls.__doc__
+
+
+def test_trace_returns_what_the_table_says(sphere, device):
+    """Dtypes, shapes and miss values of a real answer: one ray hits, one misses."""
+    from clrt.query.results import CLOSEST_FIELDS
+    hits = clrt.Accel(sphere, device=device).trace([[0, 0, 5], [0, 5, 5]], [[0, 0, -1], [0, 0, 1]])
+    for name, field in CLOSEST_FIELDS.items():
+        value = getattr(hits, name)
+        assert value.dtype == field.dtype and value.shape == (2, *field.item_shape), name
+        assert np.all(value[1] == eval(field.miss, {"inf": np.inf})), name   # the miss value as written
+    assert hits.hit[0] and hits.prim[0] >= 0
+
+
+def test_ray_queries_doc_lists_every_hit_field():
+    """docs/ray-queries.md's table of clrt.Hits: every field with its shape and dtype."""
+    from pathlib import Path
+    from clrt.query.results import CLOSEST_FIELDS
+    text = (Path(__file__).resolve().parents[1] / "docs" / "ray-queries.md").read_text()
+    rows = [line for line in text.splitlines() if line.startswith("| `")]
+    for name, field in CLOSEST_FIELDS.items():
+        shape = "(N, 3)" if field.item_shape else "(N,)"
+        assert any(f"`{name}`" in row.split("|")[1] and f"| {shape} | {np.dtype(field.dtype).name} |" in row
+                   for row in rows), name
+
+
+# ---------------------------------------------------------------- one calling convention
+
+SHARED_OPTIONS = ("accel", "builder", "leaf_size", "device")
+
+
+@pytest.mark.parametrize("func", [clrt.Renderer, clrt.Accel, clrt.RayMeshIntersector, clrt.Accel.from_renderer])
+def test_only_the_source_goes_by_position(func):
+    """Renderer took (scene, device, accel, builder, leaf_size) and Accel (mesh,
+    accel, builder, leaf_size, device): a call moved from one to the other meant
+    something else.  Now the scene or mesh is the only positional argument and
+    the shared options keep one order."""
+    params = inspect.signature(func).parameters.values()
+    assert [p.name for p in params if p.kind is not p.KEYWORD_ONLY] in (["scene"], ["mesh"], ["renderer"])
+    shared = [p.name for p in params if p.name in SHARED_OPTIONS]
+    assert shared == [name for name in SHARED_OPTIONS if name in shared]
+
+
+@pytest.mark.parametrize("call, spelled", [
+    (lambda m: clrt.Renderer(m, "cpu"), "Renderer(scene, device='cpu')"),
+    (lambda m: clrt.Renderer(m, None, "none"), "Renderer(scene, device=None, accel='none')"),
+    (lambda m: clrt.Accel(m, "none"), "Accel(mesh, accel='none')"),
+    (lambda m: clrt.Accel(m, "box", "sah", 2, "cpu"),
+     "Accel(mesh, accel='box', builder='sah', leaf_size=2, device='cpu')"),
+    (lambda m: clrt.RayMeshIntersector(m, True), "RayMeshIntersector(mesh, accel=True)"),
+    (lambda m: clrt.Accel.from_renderer(m, 4096), "Accel.from_renderer(renderer, chunk_rays=4096)"),
+])
+def test_a_positional_option_says_how_to_write_it(sphere, call, spelled):
+    """The former positional orders fail at the call, naming the keywords they
+    meant, instead of building something else (or a TypeError's bare count)."""
+    with pytest.raises(clrt.InputError, match=re.escape(spelled) + "$"):
+        call(sphere)
+
+
 # ---------------------------------------------------------------- same call, same image
 
 def test_render_says_how_it_lights_a_mesh():
@@ -126,6 +211,6 @@ def test_reprs_are_short_and_informative(device):
     sphere = primitives.icosphere(2)
     assert len(repr(sphere)) < 400 and str(len(sphere.faces)) in repr(sphere)
     assert len(repr(clrt.default_scene(coarse=True))) < 4000
-    renderer = clrt.Renderer(sphere, device)
+    renderer = clrt.Renderer(sphere, device=device)
     assert "object at 0x" not in repr(renderer)
     assert "object at 0x" not in repr(clrt.Accel(sphere, device=device))

@@ -44,7 +44,7 @@ def _textured_cube() -> trimesh.Trimesh:
 
 def _agree(scene, device, size=(40, 30), **render):
     camera = Camera.framing(scene.bounds, *size)
-    frame = Renderer(scene, device, **render).render(camera, linear=True, hits=True)
+    frame = Renderer(scene, device=device, **render).render(camera, linear=True, hits=True)
     ref, prim, _ = render_reference(scene, camera)
     assert (frame.prim == prim).mean() >= 0.999
     close = np.abs(frame.image - ref).max(axis=2) <= 2e-3
@@ -126,7 +126,7 @@ def test_textured_cube_as_glb_and_as_obj_mtl_png(tmp_path, device):
         o = scene.objects[0]
         plain = Scene([SceneObject(o.mesh, o.material, [m.with_overrides(texture=None) for m in o.materials])],
                       scene.lights)
-        untextured = Renderer(plain, device).render(camera, linear=True).image
+        untextured = Renderer(plain, device=device).render(camera, linear=True).image
         assert (np.abs(frame.image - untextured).max(axis=2) > 0.05).mean() > 0.2, "the texture shows"
     # --color replaces the colour, the texture with it.
     scene = scene_from_mesh(tmp_path / "cube.glb")
@@ -217,7 +217,7 @@ def test_obj_normals_materials_and_the_flat_option(tmp_path, device):
     assert mesh.face_material.tolist() == [-1] * (n // 3) + [0] * (2 * n // 3 - n // 3) + [1] * (n - 2 * n // 3)
     scene = scene_from_mesh(tmp_path / "s.obj")
     frame = _agree(scene, device)
-    computed = Renderer(scene_from_mesh(sphere), device)
+    computed = Renderer(scene_from_mesh(sphere), device=device)
     camera = Camera.framing(scene.bounds, 40, 30)
     assert np.abs(computed.render(camera, linear=True).image - frame.image).max() > 0.1
     # --flat: face normals, the file's materials kept
@@ -236,8 +236,8 @@ def test_split_buffers_render_the_same_detail(device):
     big = RNG.integers(0, 256, (32, 32, 3), dtype=np.uint8)   # 4 KiB of texels: several parts
     scene = Scene([SceneObject(mesh, Material(texture=Texture(big, "mirror", "clamp")))], [Light((2, 3, 4))])
     camera = Camera.framing(scene.bounds, 32, 24)
-    whole = Renderer(scene, device).render(camera, linear=True)
-    split = Renderer(scene, device, max_buffer_bytes=1024)
+    whole = Renderer(scene, device=device).render(camera, linear=True)
+    split = Renderer(scene, device=device, max_buffer_bytes=1024)
     assert split.geometry.parts() > 1 and len(set(split.geometry.buffers["texels"])) > 1
     assert np.array_equal(split.render(camera, linear=True).image, whole.image)
 
@@ -258,7 +258,7 @@ def test_bad_texture_is_a_one_line_error(tmp_path):
 
 def test_frame_shows_in_notebooks(device):
     scene = scene_from_mesh((trimesh.creation.box().vertices, trimesh.creation.box().faces))
-    r = Renderer(scene, device)
+    r = Renderer(scene, device=device)
     camera = Camera.framing(scene.bounds, 16, 12)
     for linear in (False, True):
         frame = r.render(camera, linear=linear)

@@ -31,7 +31,8 @@ def _grid(n=24, size=6.0):
 def test_camera_rays_match_pinhole(device, w, h, eye, target, up, fov):
     v, f = _grid()
     cam = clrt.Camera(eye=eye, target=target, up=up, fov=fov, width=w, height=h)
-    frame = clrt.Renderer(clrt.Scene([clrt.SceneObject((v, f))], [(0, 0, 10)]), device).render(cam, hits=True)
+    scene = clrt.Scene([clrt.SceneObject((v, f))], [(0, 0, 10)])
+    frame = clrt.Renderer(scene, device=device).render(cam, hits=True)
     tr = Tracer(v[f], [{}] * len(f), [])
     for py in range(h):
         for px in range(w):
@@ -68,7 +69,7 @@ def test_antialiasing_is_mean_of_documented_subpixel_rays(device):
     mat = dict(color=(0.6, 0.5, 0.4), ambient=0.2, diffuse=0.7, specular=0.5, shininess=20, smooth=False)
     scene = clrt.Scene([clrt.SceneObject((v, f), mat), clrt.SceneObject((bv, bf), dict(smooth=False))],
                        [clrt.Light((1.0, 2.0, 0.5), (1.0, 0.8, 0.6))])
-    r = clrt.Renderer(scene, device)
+    r = clrt.Renderer(scene, device=device)
     a = r.render(cam, linear=True, samples=n, seed=seed).image
     assert np.array_equal(a, r.render(cam, linear=True, samples=n, seed=seed).image)
     assert not np.array_equal(a, r.render(cam, linear=True, samples=n, seed=seed + 1).image)
@@ -93,7 +94,7 @@ def test_srgb8_is_iec_curve_rounded(device):
                                                        specular=0.8, shininess=5, smooth=False))],
                        [clrt.Light((0.5, 1.0, 0.5), (3.0, 0.5, 0.05))], background=(0.001, 0.0, 2.0),
                        ambient_light=(0, 0, 0))
-    r = clrt.Renderer(scene, device)
+    r = clrt.Renderer(scene, device=device)
     linear = r.render(cam, linear=True).image
     assert (linear > 1).any() and ((linear > 0) & (linear < 0.0031308)).any()
     assert np.array_equal(r.render(cam).image, srgb8(linear.astype(np.float64)))

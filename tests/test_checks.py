@@ -192,7 +192,7 @@ def test_python_api_takes_what_the_cli_takes(tmp_path):
 
 def test_python_api_renders_and_queries_like_the_cli(tmp_path, device):
     """Renderer takes a mesh; occluded takes the documented tmin; the float32 limit is named right."""
-    frame = clrt.Renderer(MESH, device).render(clrt.Camera((0, 0, 5), (0, 0, 0), width=8, height=6))
+    frame = clrt.Renderer(MESH, device=device).render(clrt.Camera((0, 0, 5), (0, 0, 0), width=8, height=6))
     assert frame.image.shape == (6, 8, 3)
     origins, directions = [[0, 0, 5], [0, 0, 5]], [0, 0, -1]
     blocked = clrt.occluded(MESH, origins, directions, tmax=10.0, tmin=[0.5, 6.5], device=device)

@@ -269,16 +269,17 @@ def test_queries_and_renders_equal_brute_force(name, device):
     base_blocked = clrt.occluded(mesh, o, d, tmax=1e30, accel="none", device=device)
     scene = scene_from_mesh(mesh)
     camera = Camera.framing(scene.bounds, 40, 30)
-    reference = Renderer(scene, device, accel="none").render(camera, hits=True)
+    reference = Renderer(scene, device=device, accel="none").render(camera, hits=True)
     for volume in VOLUMES:
         for leaf in (1, 4):
             label = f"{volume}/leaf {leaf}"
-            accel = clrt.Accel(mesh, volume, "device", leaf, device=device)
+            accel = clrt.Accel(mesh, accel=volume, builder="device", leaf_size=leaf, device=device)
             hits = accel.trace(o, d)
             for field in ("t", "prim", "u", "v"):
                 assert np.array_equal(getattr(hits, field), getattr(base, field)), (label, field)
             assert np.array_equal(accel.occluded(o, d, tmax=1e30), base_blocked), label
-            frame = Renderer(scene, device, volume, "device", leaf).render(camera, hits=True)
+            renderer = Renderer(scene, device=device, accel=volume, builder="device", leaf_size=leaf)
+            frame = renderer.render(camera, hits=True)
             assert np.array_equal(frame.prim, reference.prim), label
             assert np.array_equal(frame.t, reference.t), label
             assert np.array_equal(frame.image, reference.image), label
@@ -372,7 +373,7 @@ def test_restructured_trees_give_brute_force_hits(volume, device, monkeypatch):
         mesh = TEST_MESHES[name]()
         o, d = _hard_rays(mesh, np.random.default_rng(11))
         base = clrt.trace(mesh, o, d, accel="none", device=device)
-        hits = clrt.Accel(mesh, volume, "device", 4, device=device).trace(o, d)
+        hits = clrt.Accel(mesh, accel=volume, builder="device", leaf_size=4, device=device).trace(o, d)
         for field in ("t", "prim", "u", "v"):
             assert np.array_equal(getattr(hits, field), getattr(base, field)), (name, volume, field)
 

@@ -55,7 +55,7 @@ def _cli_linear(mesh, device, *extra) -> np.ndarray:
     scene = render_scene(args.mesh, **{k: getattr(args, k) for k in SCENE_OPTIONS})
     camera = render_camera(scene, **{k: getattr(args, k) for k in CAMERA_OPTIONS})
     scene.lights = render_lights(scene.bounds, camera, scene.lights, args.light)
-    return clrt.Renderer(scene, device).render(camera, linear=True).image
+    return clrt.Renderer(scene, device=device).render(camera, linear=True).image
 
 
 def test_the_cli_writes_the_linear_image_bit_for_bit(exr, mesh_obj, tmp_path, device, capsys):

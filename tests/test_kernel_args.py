@@ -38,17 +38,17 @@ def _check(context, entry, defines, kernels):
 @pytest.mark.parametrize("max_buffer_bytes", [None, 32768], ids=["whole", "split"])
 def test_declared_argument_types_match_the_kernels(device, max_buffer_bytes):
     mesh = primitives.icosphere(3)
-    renderer = Renderer(scene_from_mesh(mesh), device, max_buffer_bytes=max_buffer_bytes)
+    renderer = Renderer(scene_from_mesh(mesh), device=device, max_buffer_bytes=max_buffer_bytes)
     assert (renderer.geometry.parts() > 1) == (max_buffer_bytes is not None)
     _check(renderer.context, "render.cl", renderer.geometry.defines, renderer.kernels)
     # A scene with corner colours and a texture: the -DSURFACE_DETAIL parameters too.
     colours = np.random.default_rng(1).random((len(mesh.faces), 3, 3))
     texture = Texture(np.zeros((4, 4, 3), np.uint8), "repeat", "repeat")
     detail = Scene([SceneObject(mesh.with_detail(colors=colours), Material(texture=texture))], [Light((2, 3, 4))])
-    textured = Renderer(detail, device, max_buffer_bytes=max_buffer_bytes)
+    textured = Renderer(detail, device=device, max_buffer_bytes=max_buffer_bytes)
     _check(textured.context, "render.cl", {**textured.geometry.defines, "SURFACE_DETAIL": None}, textured.kernels)
     for accel in ("box", "none"):
-        queries = Accel(mesh, accel, device=device, max_buffer_bytes=max_buffer_bytes)
+        queries = Accel(mesh, accel=accel, device=device, max_buffer_bytes=max_buffer_bytes)
         _check(queries.context, "trace.cl", queries.geometry.defines, queries.kernels)
 
 

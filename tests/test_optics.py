@@ -22,7 +22,7 @@ def _floor(size=6.0):
 
 
 def _agree(scene, camera, device, samples=1, max_depth=5, prim_share=0.999, colour_share=0.99):
-    frame = Renderer(scene, device).render(camera, linear=True, hits=True, samples=samples,
+    frame = Renderer(scene, device=device).render(camera, linear=True, hits=True, samples=samples,
                                            max_depth=max_depth)
     ref, prim, t = render_reference(scene, camera, samples=samples, max_depth=max_depth)
     assert (frame.prim == prim).mean() >= prim_share
@@ -36,7 +36,7 @@ def test_glass_sphere_over_checkerboard(device):
                   [Light((3, 5, 4))], background=(0.3, 0.4, 0.6))
     camera = Camera(eye=(0, 1.2, 4.5), target=(0, -0.2, 0), fov=40, width=48, height=36)
     frame, ref = _agree(scene, camera, device)
-    flat = Renderer(scene, device).render(camera, linear=True, max_depth=0).image
+    flat = Renderer(scene, device=device).render(camera, linear=True, max_depth=0).image
     assert np.abs(frame.image - flat).max() > 0.1, "refraction must change the image"
 
 
@@ -78,8 +78,8 @@ def test_anti_aliasing_matches_reference_and_smooths_edges(device):
                   [Light((2, 3, 4))], background=(0, 0, 0))
     camera = Camera(eye=(1.5, 1.2, 2.5), target=(0, 0, 0), fov=40, width=32, height=24)
     aa, _ = _agree(scene, camera, device, samples=3)
-    one = Renderer(scene, device).render(camera, linear=True, samples=1).image
-    again = Renderer(scene, device).render(camera, linear=True, samples=3).image
+    one = Renderer(scene, device=device).render(camera, linear=True, samples=1).image
+    again = Renderer(scene, device=device).render(camera, linear=True, samples=3).image
     assert np.array_equal(aa.image, again), "fixed seed: renders are reproducible"
     # Edge pixels get in-between values only with anti-aliasing.
     partial = lambda img: ((img.max(axis=2) > 0.02) & (img.max(axis=2) < 0.08)).sum()   # noqa: E731
@@ -92,8 +92,8 @@ def test_max_depth_zero_is_local_shading_only(device):
                                           Material(**{**MIRROR.__dict__, "reflectivity": 0.0}))],
                   [Light((3, 5, 4))])
     camera = Camera(eye=(0, 1, 4), target=(0, 0, 0), width=24, height=18)
-    a = Renderer(scene, device).render(camera, max_depth=0).image
-    b = Renderer(plain, device).render(camera).image
+    a = Renderer(scene, device=device).render(camera, max_depth=0).image
+    b = Renderer(plain, device=device).render(camera).image
     assert np.array_equal(a, b)
 
 
@@ -102,7 +102,7 @@ def test_perfect_mirror_shows_the_background(device):
     scene = Scene([SceneObject(primitives.icosphere(2), mirror)], [Light((3, 5, 4))],
                   background=(0.2, 0.4, 0.6))
     camera = Camera(eye=(0, 0, 4), target=(0, 0, 0), width=16, height=16)
-    frame = Renderer(scene, device).render(camera, linear=True, hits=True)
+    frame = Renderer(scene, device=device).render(camera, linear=True, hits=True)
     seen = frame.image[frame.prim >= 0]
     assert len(seen) > 50
     np.testing.assert_allclose(seen, np.broadcast_to([0.2, 0.4, 0.6], seen.shape), atol=1e-5)
@@ -111,6 +111,6 @@ def test_perfect_mirror_shows_the_background(device):
 @pytest.mark.parametrize("bad", [{"samples": 0}, {"samples": 17}, {"max_depth": -1}, {"max_depth": 17}])
 def test_render_settings_are_validated(bad, device):
     import clrt
-    r = Renderer(Scene([SceneObject(primitives.box())], [Light((1, 2, 3))]), device)
+    r = Renderer(Scene([SceneObject(primitives.box())], [Light((1, 2, 3))]), device=device)
     with pytest.raises(clrt.InputError):
         r.render(Camera(eye=(0, 0, 3), target=(0, 0, 0), width=4, height=4), **bad)

@@ -42,7 +42,7 @@ def _build(objs, lights, cam, **kw):
 
 
 def _worst(scene, tr, cam, device):
-    frame = clrt.Renderer(scene, device).render(cam, linear=True, hits=True)
+    frame = clrt.Renderer(scene, device=device).render(cam, linear=True, hits=True)
     worst = 0.0
     for y in range(cam.height):
         for x in range(cam.width):

@@ -110,11 +110,11 @@ def packet_groups(d) -> np.ndarray:
 
 def _walks(mesh, builder, leaf, device, monkeypatch):
     """(packets, single) Accels of the same tree on the same device."""
-    packets = clrt.Accel(mesh, "box", builder, leaf, device=device)
+    packets = clrt.Accel(mesh, accel="box", builder=builder, leaf_size=leaf, device=device)
     if packets.rays_per_item == 1:
         pytest.skip("the device under test does not walk packets")
     monkeypatch.setattr(geometry, "RAY_PACKET_KINDS", ())
-    single = clrt.Accel(mesh, "box", builder, leaf, device=device)
+    single = clrt.Accel(mesh, accel="box", builder=builder, leaf_size=leaf, device=device)
     monkeypatch.undo()
     assert single.rays_per_item == 1
     assert single.geometry.wide is not None    # the same wide walk for the rays that make no packet
@@ -143,7 +143,7 @@ def test_packets_answer_as_the_single_ray_walk_and_brute_force(name, builder, le
     _same_answers(packets, single, o, d, tmin, f"{name} {builder} leaf {leaf}: packets / single")
     _same_with_ranges(packets, single, o, d, tmin, tmax, f"{name} {builder} leaf {leaf}: packets / single")
     if builder == "sah" and leaf == 4:
-        brute = clrt.Accel(mesh, "none", device=device)
+        brute = clrt.Accel(mesh, accel="none", device=device)
         _same_answers(packets, brute, o, d, tmin, f"{name}: packets / brute force")
         _same_with_ranges(packets, brute, o, d, tmin, tmax, f"{name}: packets / brute force")
 
@@ -154,7 +154,7 @@ def test_every_ray_of_a_partial_packet_is_answered(count, device):
     o, d, tmin, tmax, _ = packet_rays(mesh, np.random.default_rng(count))
     o, d = o[:count], d[:count]
     accel = clrt.Accel(mesh, device=device)
-    brute = clrt.Accel(mesh, "none", device=device)
+    brute = clrt.Accel(mesh, accel="none", device=device)
     for field in ("t", "prim", "u", "v", "normal", "front"):
         assert np.array_equal(getattr(accel.trace(o, d), field), getattr(brute.trace(o, d), field)), field
     assert np.array_equal(accel.any_hit(o, d), brute.any_hit(o, d))
@@ -241,7 +241,7 @@ def test_packets_are_walked_as_packets_and_answer_as_brute_force(device):
         return cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=np.ascontiguousarray(a))
 
     n = len(o)
-    brute = clrt.Accel(mesh, "none", device=device)
+    brute = clrt.Accel(mesh, accel="none", device=device)
     ins = [buffer(a) for a in (o, d, tmin, tmax, np.zeros(4, np.int32))]    # alive until the launches end
     for cull in ("none", "back", "front"):
         expected = brute.trace(o, d, tmin=tmin, tmax=tmax, cull=cull)
@@ -274,11 +274,11 @@ def test_the_renderer_gets_the_same_frame_with_packets(width, height, max_depth,
     from clrt.renderer import Renderer
     from clrt.scene.default import default_scene
     scene = default_scene(width, height, coarse=True)
-    packets = Renderer(scene, device)
+    packets = Renderer(scene, device=device)
     if packets.rays_per_item == 1:
         pytest.skip("the device under test does not walk packets")
     monkeypatch.setattr(geometry, "RAY_PACKET_KINDS", ())
-    single = Renderer(scene, device)
+    single = Renderer(scene, device=device)
     assert single.rays_per_item == 1
     a = packets.render(hits=True, samples=2, max_depth=max_depth)
     b = single.render(hits=True, samples=2, max_depth=max_depth)

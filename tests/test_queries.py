@@ -309,8 +309,8 @@ def test_queries_agree_with_each_other_and_with_numpy(test_mesh, device):
 def test_every_bvh_answers_every_query_like_brute_force(volume, builder, leaf, device):
     mesh = TEST_MESHES["crossing"]()
     o, d = _rays(mesh, 300, seed=6, spread=1.5)
-    base = clrt.Accel(mesh, "none", device=device)
-    acc = clrt.Accel(mesh, volume, builder, leaf, device=device)
+    base = clrt.Accel(mesh, accel="none", device=device)
+    acc = clrt.Accel(mesh, accel=volume, builder=builder, leaf_size=leaf, device=device)
     for cull in ("none", "back", "front"):
         a, b = acc.trace(o, d, cull=cull), base.trace(o, d, cull=cull)
         for field in a._fields:
@@ -363,7 +363,7 @@ def test_chunks_respect_the_allocation_limit_and_launch_size(torus_accel, device
     acc.max_alloc = 12 * 100
     # 100 rays fit; where a work-item takes a packet of 8 (CPU devices), whole packets: 96
     assert acc.chunk_size() == (100 if acc.rays_per_item == 1 else 96)
-    brute = clrt.Accel(acc.mesh, "none", device=device)
+    brute = clrt.Accel(acc.mesh, accel="none", device=device)
     assert brute.chunk_size() == min(1 << 20, (1 << 30) // len(acc.mesh.faces))
     assert torus_accel.chunk_size() == 1 << 20
     memory = torus_accel.memory()
@@ -559,7 +559,7 @@ def test_camera_images_of_our_camera_are_the_renderers_rays(device):
     camera = Camera((0.5, 0.8, 4.0), (0.0, 0.0, 0.0), fov=40, width=32, height=24)
     acc = clrt.Accel(sphere, device=device)
     images = acc.camera_images(camera)
-    frame = clrt.Renderer(clrt.scene_from_mesh(sphere), device).render(camera, hits=True)
+    frame = clrt.Renderer(clrt.scene_from_mesh(sphere), device=device).render(camera, hits=True)
     assert np.array_equal(images.prim, frame.prim) and np.array_equal(images.t, frame.t)
     assert np.array_equal(acc.trace_camera(camera).prim, frame.prim)
     from clrt.reference import camera_rays

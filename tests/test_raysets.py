@@ -71,7 +71,7 @@ def test_every_variant_traces_the_sets_as_brute_force(torus, sets, device):
         assert (prim_ref >= 0).any(), kind
         base = None
         for volume, builder in variants:
-            m = raysets.measure(clrt.Accel(torus, volume, builder, device=device), o, d, reach,
+            m = raysets.measure(clrt.Accel(torus, accel=volume, builder=builder, device=device), o, d, reach,
                                 repeat=1, warmup=0)
             label = f"{kind} {volume}/{builder}"
             assert m["any_agrees"], label

@@ -35,11 +35,11 @@ def _rays(mesh, n=2000, seed=3):
 @pytest.mark.parametrize("builder", BUILDERS)
 def test_refit_queries_equal_brute_force(volume, builder, device):
     mesh = primitives.torus(1.0, 0.35, 24, 12)
-    accel = clrt.Accel(mesh, volume, builder, device=device)
+    accel = clrt.Accel(mesh, accel=volume, builder=builder, device=device)
     for amount in (0.8, 2.0):   # twice: a refit of a refitted tree
         moved = Mesh.from_arrays(_deformed(mesh, amount), mesh.faces)
         accel.refit(moved.vertices)
-        brute = clrt.Accel(moved, "none", device=device)
+        brute = clrt.Accel(moved, accel="none", device=device)
         o, d = _rays(moved)
         got, want = accel.trace(o, d), brute.trace(o, d)
         assert 0 < want.hit.sum() < len(o)
@@ -55,7 +55,7 @@ def test_refit_rebuild_and_bad_input(device):
     moved = _deformed(mesh, 1.5)
     accel.refit(moved, rebuild=True)
     o, d = _rays(mesh)
-    brute = clrt.Accel((moved, mesh.faces), "none", device=device)
+    brute = clrt.Accel((moved, mesh.faces), accel="none", device=device)
     assert np.array_equal(accel.trace(o, d).prim, brute.trace(o, d).prim)
     with pytest.raises(clrt.InputError, match="refit needs vertices of shape"):
         accel.refit(moved[:-1])
@@ -69,12 +69,12 @@ def test_refit_rebuild_and_bad_input(device):
 def test_renderer_refit_draws_the_moved_scene(builder, device):
     mesh = primitives.torus(1.0, 0.35, 24, 12)
     moved = Mesh.from_arrays(_deformed(mesh, 1.2), mesh.faces)
-    renderer = Renderer(scene_from_mesh(mesh), device, builder=builder)
+    renderer = Renderer(scene_from_mesh(mesh), device=device, builder=builder)
     camera = Camera.framing(moved.bounds, 48, 36)
     scene = scene_from_mesh(moved, {"color": (0.9, 0.2, 0.1)})   # new material values and lights come too
     renderer.refit(scene)
     frame = renderer.render(camera, hits=True)
-    reference = Renderer(scene, device, accel="none").render(camera, hits=True)
+    reference = Renderer(scene, device=device, accel="none").render(camera, hits=True)
     assert (reference.prim >= 0).sum() > 100, "the moved torus is in view"
     for name in ("image", "prim", "t"):
         assert np.array_equal(getattr(frame, name), getattr(reference, name)), name

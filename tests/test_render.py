@@ -12,7 +12,7 @@ from clrt.scene.scene import Camera, Light, Material, Scene, SceneObject, scene_
 
 
 def _compare(scene, camera, device):
-    frame = Renderer(scene, device).render(camera, linear=True, hits=True)
+    frame = Renderer(scene, device=device).render(camera, linear=True, hits=True)
     ref_color, ref_prim, ref_t = render_reference(scene, camera)
     return frame, ref_color, ref_prim, ref_t
 
@@ -45,7 +45,7 @@ def test_default_scene_matches_reference(device):
 
 def test_srgb_output_is_encoded_linear(device):
     scene = default_scene(40, 30, coarse=True)
-    r = Renderer(scene, device)
+    r = Renderer(scene, device=device)
     linear = r.render(linear=True).image
     encoded = r.render().image
     assert encoded.dtype == np.uint8 and encoded.shape == (30, 40, 3)
@@ -56,7 +56,7 @@ def test_coincident_triangles_resolve_to_lower_index(device):
     quad = primitives.box((1, 1, 1))
     doubled = Mesh.from_arrays(quad.vertices, np.concatenate([quad.faces, quad.faces]))
     camera = Camera.framing(doubled.bounds, 48, 48)
-    frame = Renderer(scene_from_mesh(doubled), device).render(camera, hits=True)
+    frame = Renderer(scene_from_mesh(doubled), device=device).render(camera, hits=True)
     hit = frame.prim >= 0
     assert hit.mean() > 0.2
     assert (frame.prim[hit] < len(quad.faces)).all(), "a copy with the higher index was drawn"
@@ -68,7 +68,7 @@ def test_shadow_of_a_box_on_the_floor(device):
     block = primitives.box((1, 1, 1), center=(0, 1.5, 0))
     scene = Scene([SceneObject(floor, Material(specular=0)), SceneObject(block)], [Light((3, 6, 0))])
     camera = Camera(eye=(0, 12, 0.01), target=(0, 0, 0), fov=40, width=64, height=64)
-    frame = Renderer(scene, device).render(camera, linear=True, hits=True)
+    frame = Renderer(scene, device=device).render(camera, linear=True, hits=True)
     origins, dirs = camera_rays(camera)
     x, z = (origins + frame.t.reshape(-1, 1) * dirs)[:, [0, 2]].T
     on_floor = frame.prim.ravel() < 2
@@ -85,7 +85,7 @@ def test_shadow_of_a_box_on_the_floor(device):
 def test_miss_is_background(device):
     scene = scene_from_mesh(primitives.icosphere(1), background=(0.25, 0.5, 0.75))
     camera = Camera(eye=(0, 0, 5), target=(5, 0, 5), width=8, height=8)   # looking away
-    frame = Renderer(scene, device).render(camera, linear=True, hits=True)
+    frame = Renderer(scene, device=device).render(camera, linear=True, hits=True)
     assert (frame.prim == -1).all() and np.isinf(frame.t).all()
     np.testing.assert_allclose(frame.image, np.broadcast_to([0.25, 0.5, 0.75], (8, 8, 3)), atol=1e-6)
 
@@ -96,7 +96,7 @@ def test_render_api_accepts_mesh_arrays_and_sizes(device):
     assert image.shape == (24, 32, 3) and image.dtype == np.uint8
     # the same frame as a Renderer of the mesh's default scene, framed at that size
     scene = scene_from_mesh(sphere)
-    expected = Renderer(scene, device).render(Camera.framing(scene.bounds, 32, 24))
+    expected = Renderer(scene, device=device).render(Camera.framing(scene.bounds, 32, 24))
     assert np.array_equal(image, expected.image)
     assert (image != image[0, 0]).any(axis=2).mean() > 0.1, "the sphere shows"
     linear = clrt.render(sphere, width=32, height=24, device=device, linear=True)
@@ -106,7 +106,7 @@ def test_render_api_accepts_mesh_arrays_and_sizes(device):
 
 def test_renderer_reuses_device_state_across_frames(device):
     scene = scene_from_mesh(primitives.icosphere(1))
-    r = Renderer(scene, device)
+    r = Renderer(scene, device=device)
     cam = Camera.framing(r.arrays.bounds, 24, 16)
     first = r.render(cam)
     # what the scene and a frame of this size hold on the device, as objects
@@ -122,4 +122,4 @@ def test_renderer_reuses_device_state_across_frames(device):
     small = Camera.framing(r.arrays.bounds, 12, 8)
     third = r.render(small)
     assert all(a is b for a, b in zip(now, scene_buffers))      # a new size: new frame buffers only
-    assert np.array_equal(third.image, Renderer(scene, device).render(small).image)
+    assert np.array_equal(third.image, Renderer(scene, device=device).render(small).image)

@@ -42,10 +42,11 @@ def test_the_renderer_shows_its_own_copy_of_the_scene(device):
     l2 = clrt.Light((-3.0, 0.5, -2.0), (0.9, 0.2, 0.2))
 
     def fresh(lights):
-        return clrt.Renderer(clrt.scene_from_mesh(TORUS, lights=lights), device).render(cam, linear=True).image
+        scene = clrt.scene_from_mesh(TORUS, lights=lights)
+        return clrt.Renderer(scene, device=device).render(cam, linear=True).image
 
     scene = clrt.scene_from_mesh(TORUS, lights=[l1])
-    renderer = clrt.Renderer(scene, device)
+    renderer = clrt.Renderer(scene, device=device)
     first = renderer.render(cam, linear=True).image
     # the caller's Scene changed afterwards: not shown (and never read against the uploaded lights)
     scene.lights = [l1] * 20
@@ -66,7 +67,7 @@ def test_queries_from_a_renderer_follow_its_refit(device, rebuild):
     moved_scene = clrt.scene_from_mesh(_moved(TORUS))
     expected = clrt.Accel(as_mesh(moved_scene), device=device).trace(o, d).prim
     scene = clrt.scene_from_mesh(TORUS)
-    renderer = clrt.Renderer(scene, device)
+    renderer = clrt.Renderer(scene, device=device)
     queries = clrt.Accel.from_renderer(renderer)
     assert not np.array_equal(queries.trace(o, d).prim, expected)
     renderer.refit(moved_scene, rebuild=rebuild)
@@ -86,7 +87,7 @@ def test_copies_of_an_accel_are_accels_of_their_own(device):
         duplicate.refit(_moved(TORUS).vertices)
         assert not np.array_equal(duplicate.trace(o, d).prim, before)
         assert np.array_equal(original.trace(o, d).prim, before)
-    shared = clrt.Accel.from_renderer(clrt.Renderer(clrt.scene_from_mesh(TORUS), device))
+    shared = clrt.Accel.from_renderer(clrt.Renderer(clrt.scene_from_mesh(TORUS), device=device))
     for make_copy in (copy.copy, copy.deepcopy, pickle.dumps):
         with pytest.raises(clrt.InputError, match="share a Renderer's scene cannot be copied or pickled"):
             make_copy(shared)

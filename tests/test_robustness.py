@@ -179,7 +179,7 @@ def test_api_errors_are_specific():
 
 
 def test_render_rejects_bad_samples_and_depth(device):
-    r = Renderer(scene_from_mesh(primitives.icosphere(0)), device)
+    r = Renderer(scene_from_mesh(primitives.icosphere(0)), device=device)
     for kwargs in ({"samples": 0}, {"samples": 17}, {"max_depth": -1}, {"max_depth": 99}, {"samples": 1.5}):
         with pytest.raises(InputError):
             r.render(Camera.framing(r.arrays.bounds, 8, 8), **kwargs)
@@ -208,15 +208,16 @@ def test_zero_area_triangles_are_never_hit(device):
     degenerate = [[0, 0, 1], [2, 2, 2], [n, n + 1, n + 2], [5, 6, 5]]   # repeated corners, collinear
     mesh = Mesh.from_arrays(v, np.concatenate([sphere.faces, degenerate]))
     camera = Camera.framing(mesh.bounds, 40, 30)
-    expected = Renderer(scene_from_mesh(sphere), device).render(camera, hits=True)
+    expected = Renderer(scene_from_mesh(sphere), device=device).render(camera, hits=True)
     for accel, builder in (("none", "sah"), ("box", "sah"), ("box", "paper"), ("sphere", "paper"),
                            ("sphere", "sah"), ("ellipse", "paper"), ("ellipse", "sah")):
-        frame = Renderer(scene_from_mesh(mesh), device, accel, builder).render(camera, hits=True)
+        renderer = Renderer(scene_from_mesh(mesh), device=device, accel=accel, builder=builder)
+        frame = renderer.render(camera, hits=True)
         assert frame.prim.max() < len(sphere.faces), (accel, builder)
         assert np.array_equal(frame.image, expected.image), (accel, builder)
     # A mesh of nothing but zero-area triangles renders (as background) and traces (as misses).
     flat = Mesh.from_arrays([[0, 0, 0], [1, 1, 1], [2, 2, 2], [3, 3, 3]], [[0, 1, 2], [1, 2, 3]])
-    frame = Renderer(scene_from_mesh(flat), device).render(Camera.framing(flat.bounds, 8, 8), hits=True)
+    frame = Renderer(scene_from_mesh(flat), device=device).render(Camera.framing(flat.bounds, 8, 8), hits=True)
     assert (frame.prim == -1).all()
     assert (clrt.trace(flat, [[-1, 0.5, 0.5]], [[1, 0, 0]], device=device).prim == -1).all()
 
@@ -233,7 +234,7 @@ def _inside_scene(light_inside: bool) -> tuple[Scene, Camera]:
 @pytest.mark.parametrize("light_inside", [False, True])
 def test_eye_inside_a_mesh_renders_correctly(light_inside, device):
     scene, camera = _inside_scene(light_inside)
-    frame = Renderer(scene, device).render(camera, linear=True, hits=True)
+    frame = Renderer(scene, device=device).render(camera, linear=True, hits=True)
     colour, prim, t = render_reference(scene, camera)
     assert (frame.prim >= 0).all() and (frame.prim < 320).all(), "every pixel sees the sphere from inside"
     assert (frame.prim == prim).mean() >= 0.999
@@ -252,7 +253,7 @@ def test_light_inside_a_closed_mesh_shadows_everything_outside(device):
     floor = Mesh.from_arrays([[-4, 0, -4], [4, 0, -4], [4, 0, 4], [-4, 0, 4]], [[0, 2, 1], [0, 3, 2]])
     scene = Scene([SceneObject(floor), SceneObject(box)], [Light((0, 0.5, 0))])
     camera = Camera((3, 4, 5), (0, 0, 0), width=32, height=24)
-    frame = Renderer(scene, device).render(camera, linear=True, hits=True)
+    frame = Renderer(scene, device=device).render(camera, linear=True, hits=True)
     colour, prim, t = render_reference(scene, camera)
     assert (frame.prim == prim).mean() >= 0.999
     assert (np.abs(frame.image - colour).max(axis=2) <= 2e-3).mean() >= 0.995
@@ -431,10 +432,10 @@ def test_kernel_build_failure_shows_the_compiler_log(tmp_path, device, capsys, m
 
 def test_tiny_tiles_give_the_identical_image(device):
     scene = default_scene(40, 30, coarse=True)
-    whole = Renderer(scene, device)
+    whole = Renderer(scene, device=device)
     expected = whole.render(hits=True, samples=2)
     assert expected.tiles == 1
-    tiled = Renderer(scene, device, limits=TileLimits(max_tile_pixels=37, first_launch_pixels=37))
+    tiled = Renderer(scene, device=device, limits=TileLimits(max_tile_pixels=37, first_launch_pixels=37))
     # pieces of rows: 37 + 3 pixels
     frame = tiled.render(hits=True, samples=2)
     assert frame.tiles == 2 * 30
@@ -443,7 +444,7 @@ def test_tiny_tiles_give_the_identical_image(device):
     linear = tiled.render(linear=True)
     assert np.array_equal(linear.image, whole.render(linear=True).image)
     # bands of 8 rows, read back in place
-    banded = Renderer(scene, device, limits=TileLimits(max_tile_pixels=40 * 9, first_launch_pixels=40 * 9))
+    banded = Renderer(scene, device=device, limits=TileLimits(max_tile_pixels=40 * 9, first_launch_pixels=40 * 9))
     frame = banded.render(hits=True, samples=2)
     assert frame.tiles == 4
     for name in ("image", "prim", "t"):
@@ -452,7 +453,7 @@ def test_tiny_tiles_give_the_identical_image(device):
 
 def test_frames_kept_by_the_caller_are_never_overwritten(device):
     scene = default_scene(40, 30, coarse=True)
-    r = Renderer(scene, device)
+    r = Renderer(scene, device=device)
     near = scene.camera
     far = Camera(tuple(3 * np.asarray(near.eye)), near.target, near.up, near.fov, 40, 30)
     kept = [r.render(near).image for _ in range(5)]        # more frames than the pool holds
@@ -472,9 +473,9 @@ def test_frames_kept_by_the_caller_are_never_overwritten(device):
 def test_launches_are_split_to_stay_short(device):
     scene = scene_from_mesh(primitives.torus())
     camera = Camera.framing(scene.bounds, 48, 36)
-    expected = Renderer(scene, device).render(camera)
+    expected = Renderer(scene, device=device).render(camera)
     # "a watchdog of 0.1 microseconds"
-    r = Renderer(scene, device, limits=TileLimits(launch_ms=1e-4, first_launch_pixels=64))
+    r = Renderer(scene, device=device, limits=TileLimits(launch_ms=1e-4, first_launch_pixels=64))
     frame = r.render(camera)
     assert frame.tiles > 20
     assert np.array_equal(frame.image, expected.image)
@@ -501,8 +502,8 @@ def _fake_allocation_failure(monkeypatch, above_pixels: int):
 def test_out_of_memory_shrinks_the_tiles(device, monkeypatch):
     scene = scene_from_mesh(primitives.icosphere(2))
     camera = Camera.framing(scene.bounds, 48, 36)
-    expected = Renderer(scene, device).render(camera, hits=True)
-    r = Renderer(scene, device)
+    expected = Renderer(scene, device=device).render(camera, hits=True)
+    r = Renderer(scene, device=device)
     failures = _fake_allocation_failure(monkeypatch, 500)
     frame = r.render(camera, hits=True)
     # One failure, then tiles of at most 1728 / 4 = 432 pixels: bands of 8 rows (and the last 4).
@@ -514,7 +515,7 @@ def test_out_of_memory_shrinks_the_tiles(device, monkeypatch):
 def test_out_of_memory_at_the_smallest_tile_says_what_is_needed(tmp_path, device, capsys, monkeypatch):
     monkeypatch.chdir(tmp_path)
     _fake_allocation_failure(monkeypatch, 0)
-    r = Renderer(scene_from_mesh(primitives.icosphere(1)), device, builder="sah")   # the frame's failure
+    r = Renderer(scene_from_mesh(primitives.icosphere(1)), device=device, builder="sah")   # the frame's failure
     with pytest.raises(DeviceMemoryError) as info:
         r.render(Camera.framing(r.arrays.bounds, 48, 36))
     message = str(info.value)
@@ -577,7 +578,7 @@ def test_device_bytes_are_the_bytes_uploaded_wide_bvh_included(builder, device, 
     recording(render_module)
     recording(accel_module)
     mesh = primitives.icosphere(3)
-    r = Renderer(scene_from_mesh(mesh), device, builder=builder)
+    r = Renderer(scene_from_mesh(mesh), device=device, builder=builder)
     made = {b.int_ptr: b.size for parts in r.geometry.buffers.values() for b in parts}
     made.update({b.int_ptr: b.size for b in r.buffers.values()})
     assert r.device_bytes == sum(made.values())
@@ -601,13 +602,13 @@ def test_failed_upload_is_a_device_memory_error(device, monkeypatch):
         raise cl.MemoryError(cl._cl._ErrorRecord("clCreateBuffer", cl.status_code.OUT_OF_RESOURCES, "fake"))
     monkeypatch.setattr(render_module, "DeviceGeometry", refuse)
     with pytest.raises(DeviceMemoryError, match="OUT_OF_RESOURCES"):
-        Renderer(scene_from_mesh(primitives.icosphere(1)), device)
+        Renderer(scene_from_mesh(primitives.icosphere(1)), device=device)
 
 
 def test_ctrl_c_between_launches_stops_cleanly(tmp_path, device, capsys, monkeypatch):
     monkeypatch.chdir(tmp_path)
     scene = default_scene(32, 24, coarse=True)
-    r = Renderer(scene, device)
+    r = Renderer(scene, device=device)
     expected = r.render()
     real_wait, calls = render_module.wait_for, []
 

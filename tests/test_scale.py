@@ -20,7 +20,7 @@ MAJOR, MINOR = 1.0, 0.35
 def test_two_million_triangles_build_and_render(device):
     mesh = primitives.torus(MAJOR, MINOR, 1000, 1000)
     assert len(mesh.faces) == 2_000_000
-    renderer = Renderer(scene_from_mesh(mesh), device, accel="box", builder="paper")
+    renderer = Renderer(scene_from_mesh(mesh), device=device, accel="box", builder="paper")
     camera = Camera((0.0, 2.2, 2.6), (0.0, 0.0, 0.0), width=64, height=48)
     frame = renderer.render(camera, hits=True)
     assert frame.triangles == 2_000_000

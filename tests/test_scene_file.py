@@ -265,17 +265,31 @@ def test_a_primitive_past_float32_names_the_object(tmp_path):
 
 
 def test_a_scene_too_large_to_frame_says_so(tmp_path):
-    # Each vertex is in range, but the framed camera (or the default light) would not be.
+    # Each vertex is in range, but the framed camera would not be.
     big = '[[objects]]\ntype = "sphere"\nradius = 9e29\n'
     with pytest.raises(InputError, match=r"scene\.toml: camera: cannot frame the scene: the camera would stand "
                                          r"at .* past \+-1e30 .*; give camera.eye and camera.target$"):
         load_scene(write(tmp_path, big))
+    # The file's own camera is used as it is; the default light, a scene diagonal
+    # from the eye at most, comes nearer so as to stay in range.
     placed = '[camera]\neye = [0, 0, 9e29]\ntarget = [0, 0, 0]\n' + big
-    with pytest.raises(InputError, match=r"scene\.toml: lights: cannot place the default light: .*; "
-                                         r"give \[\[lights\]\] positions$"):
-        load_scene(write(tmp_path, placed))
+    scene = load_scene(write(tmp_path, placed))
+    assert scene.camera.eye == (0, 0, 9e29) and not scene.camera_framed
+    (light,) = scene.lights
+    assert max(map(abs, light.position)) <= 1e30 and light.position[1] > 9e29   # above the eye
     scene = load_scene(write(tmp_path, placed + '[[lights]]\nposition = [0, 9e29, 9e29]\n'))
-    assert scene.camera.eye == (0, 0, 9e29)
+    assert scene.lights[0].position == (0, 9e29, 9e29)
+
+
+def test_the_default_light_stays_in_range_and_keeps_its_side():
+    """One diagonal above-left of the eye where that is in range; else as far
+    along the same way as the range allows."""
+    from clrt.scene.scene import default_light
+    near = default_light(np.array([[-1, -1, -1], [1, 1, 1]]), Camera((0, 0, 5), (0, 0, 0)))
+    np.testing.assert_allclose(near.position, (-0.5 * 12 ** 0.5, 0.8 * 12 ** 0.5, 5), rtol=1e-12)
+    far = default_light(np.array([[-9e29] * 3, [9e29] * 3]), Camera((0, 0, 9.5e29), (0, 0, 0)))
+    x, y, z = far.position
+    assert y == pytest.approx(1e30) and x == pytest.approx(-0.5 / 0.8 * 1e30) and z == 9.5e29
 
 
 def test_a_mesh_too_large_to_frame_renders_from_a_placed_camera(tmp_path):

@@ -79,7 +79,7 @@ def test_stl_and_obj_of_one_mesh_render_identically(tmp_path, device):
 def _render(mesh, material, device, size=(64, 48)):
     scene = scene_from_mesh(mesh, material)
     camera = Camera.framing(scene.bounds, *size)
-    return clrt.Renderer(scene, device).render(camera).image.astype(int)
+    return clrt.Renderer(scene, device=device).render(camera).image.astype(int)
 
 
 def test_a_box_renders_with_flat_faces_and_a_sphere_stays_smooth(device):
@@ -98,7 +98,7 @@ def test_a_box_renders_with_flat_faces_and_a_sphere_stays_smooth(device):
 def test_crease_normals_match_the_reference(device):
     scene = scene_from_mesh(_box_on_torus(), Material(crease=40))
     camera = Camera.framing(scene.bounds, 40, 30)
-    frame = clrt.Renderer(scene, device).render(camera, linear=True, hits=True)
+    frame = clrt.Renderer(scene, device=device).render(camera, linear=True, hits=True)
     color, prim, _ = render_reference(scene, camera)
     assert (frame.prim == prim).mean() >= 0.999
     same = (frame.prim == prim) & (prim >= 0)

@@ -30,10 +30,10 @@ def _limit_for_parts(triangles: int, parts: int = 4) -> int:
 def test_split_buffers_render_the_same_frame(knot, accel, device):
     scene = scene_from_mesh(knot)
     camera = Camera.framing(scene.bounds, 64, 48)
-    whole = Renderer(scene, device, accel)
+    whole = Renderer(scene, device=device, accel=accel)
     assert whole.geometry.parts() == 1 and "SPLIT_BUFFERS" not in whole.geometry.defines
     expected = whole.render(camera, hits=True)
-    split = Renderer(scene, device, accel, max_buffer_bytes=_limit_for_parts(len(knot.faces)))
+    split = Renderer(scene, device=device, accel=accel, max_buffer_bytes=_limit_for_parts(len(knot.faces)))
     assert split.geometry.parts() >= 3 and "SPLIT_BUFFERS" in split.geometry.defines
     frame = split.render(camera, hits=True)
     # The image shows triangles of every part.

@@ -131,13 +131,13 @@ def scene(request, device):
     rng = np.random.default_rng(sorted(SCENES).index(request.param) + 19)
     mesh = SCENES[request.param](rng)
     o, d, tmin = tie_rays(mesh, rng)
-    brute = clrt.Accel(mesh, "none", device=device)
+    brute = clrt.Accel(mesh, accel="none", device=device)
     return mesh, o, d, tmin, brute.trace(o, d, tmin=tmin)
 
 
 def test_brute_force_takes_the_lowest_index_of_a_tie(scene, device):
     mesh, o, d, tmin, base = scene
-    every = clrt.Accel(mesh, "none", device=device).all_hits(o, d, tmin=tmin)
+    every = clrt.Accel(mesh, accel="none", device=device).all_hits(o, d, tmin=tmin)
     t, prim, ties = nearest_of_all_hits(every, len(o))
     assert np.array_equal(base.t, t) and np.array_equal(base.prim, prim)
     tied = ties >= 2
@@ -148,7 +148,7 @@ def test_brute_force_takes_the_lowest_index_of_a_tie(scene, device):
 @pytest.mark.parametrize("volume,builder,leaf", VARIANTS, ids=[f"{v}-{b}-{n}" for v, b, n in VARIANTS])
 def test_every_bvh_breaks_ties_as_brute_force(scene, volume, builder, leaf, device):
     mesh, o, d, tmin, base = scene
-    accel = clrt.Accel(mesh, volume, builder, leaf, device=device)
+    accel = clrt.Accel(mesh, accel=volume, builder=builder, leaf_size=leaf, device=device)
     hits = accel.trace(o, d, tmin=tmin)
     for field in ("t", "prim", "u", "v"):
         wrong = np.flatnonzero(getattr(hits, field) != getattr(base, field))
@@ -168,6 +168,6 @@ def test_every_bvh_renders_ties_as_brute_force(name, device):
     # looking straight down at the quads: every pixel that hits a quad meets its copy too
     camera = Camera(eye=(centre[0], centre[1], hi[2] + 6.0), target=tuple(centre), up=(0.0, 1.0, 0.0),
                     fov=60.0, width=40, height=30)
-    reference = Renderer(scene, device, accel="none").render(camera, hits=True)
+    reference = Renderer(scene, device=device, accel="none").render(camera, hits=True)
     assert (reference.prim >= 0).mean() > 0.2
     _frames_identical(scene, camera, device)

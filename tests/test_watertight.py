@@ -147,7 +147,7 @@ def test_rays_at_vertices_and_edges_never_pass_through(name, device):
         assert (kinds == "vertex, axis").sum() >= 100 and (kinds == "edge, axis").sum() >= 500
     limit = (dist * (1 + 1e-5) + 1e-6 * np.abs(o).max()).astype(np.float32)
     for accel, builder in CONFIGS:
-        a = clrt.Accel(mesh, accel, builder, device=device)
+        a = clrt.Accel(mesh, accel=accel, builder=builder, device=device)
         hits = a.trace(o, d)
         through = ~(hits.t <= limit)
         label = f"{name}, accel {accel}/{builder}"

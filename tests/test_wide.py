@@ -49,9 +49,9 @@ MESHES = {"knot": knot, "torus": TEST_MESHES["torus"], "crossing": TEST_MESHES["
 
 def _walks(mesh, builder, leaf, device, monkeypatch):
     """(wide, binary) Accels of the same tree on the same device."""
-    wide = clrt.Accel(mesh, "box", builder, leaf, device=device)
+    wide = clrt.Accel(mesh, accel="box", builder=builder, leaf_size=leaf, device=device)
     monkeypatch.setattr(geometry, "WIDE_BVH_KINDS", ())
-    binary = clrt.Accel(mesh, "box", builder, leaf, device=device)
+    binary = clrt.Accel(mesh, accel="box", builder=builder, leaf_size=leaf, device=device)
     monkeypatch.undo()
     if wide.geometry.wide is None:
         pytest.skip("the device under test does not walk the wide BVH")
@@ -105,7 +105,7 @@ def test_wide_walk_answers_as_the_binary_walk_and_brute_force(name, builder, lea
     assert (hits.prim >= 0).mean() > 0.2 and (hits.prim < 0).any(), "the rays must hit and miss"
     _same_answers(wide, binary, o, d, tmin, f"{name} {builder} leaf {leaf}: wide / binary")
     if builder == "sah" and leaf == 4:
-        brute = clrt.Accel(mesh, "none", device=device)
+        brute = clrt.Accel(mesh, accel="none", device=device)
         _same_answers(wide, brute, o, d, tmin, f"{name}: wide / brute force")
 
 
@@ -115,7 +115,7 @@ def test_wide_walk_renders_as_the_binary_walk(device, monkeypatch):
     frames = []
     for kinds in (geometry.WIDE_BVH_KINDS, ()):
         monkeypatch.setattr(geometry, "WIDE_BVH_KINDS", kinds)
-        renderer = Renderer(scene, device)
+        renderer = Renderer(scene, device=device)
         frames.append((renderer.geometry.wide is not None, renderer.render(camera, hits=True)))
     (walked_wide, wide), (_, binary) = frames
     if not walked_wide:
@@ -131,7 +131,7 @@ def test_refit_keeps_the_wide_walk_exact(device):
         pytest.skip("the device under test does not walk the wide BVH")
     moved = mesh.vertices * np.array([1.3, 0.7, 1.0]) + 0.1 * np.sin(3 * mesh.vertices[:, [1, 2, 0]])
     accel.refit(moved)
-    brute = clrt.Accel(clrt.Mesh.from_arrays(moved, mesh.faces), "none", device=device)
+    brute = clrt.Accel(clrt.Mesh.from_arrays(moved, mesh.faces), accel="none", device=device)
     o, d, tmin = _rays(accel.mesh, np.random.default_rng(2))
     _same_answers(accel, brute, o, d, tmin, "refitted wide / brute force")
 
@@ -143,7 +143,7 @@ def test_only_cpu_devices_walk_wide_and_only_box_trees_unsplit(device, monkeypat
     assert (wide.geometry.wide is not None) == bool(cpu)
     assert ("BVH_WIDE" in wide.geometry.defines) == bool(cpu)
     for accel in ("sphere", "ellipse", "none"):
-        assert clrt.Accel(mesh, accel, device=device).geometry.wide is None, accel
+        assert clrt.Accel(mesh, accel=accel, device=device).geometry.wide is None, accel
     assert clrt.Accel(mesh, device=device, max_buffer_bytes=16384).geometry.wide is None
     monkeypatch.setattr(geometry, "WIDE_BVH_KINDS", ())    # as a GPU: nothing built, nothing passed
     binary = clrt.Accel(mesh, device=device)
@@ -225,12 +225,12 @@ def test_box_bounds_hold_far_away_and_near_axis_parallel(place, device, monkeypa
     mesh = clrt.Mesh(v.astype(np.float32), mesh.faces, "knot " + place)
     o, d = _far_and_steep_rays(mesh, np.random.default_rng(11))
     tmin = np.zeros(len(o))
-    brute = clrt.Accel(mesh, "none", device=device)
+    brute = clrt.Accel(mesh, accel="none", device=device)
     hits = brute.trace(o, d)
     assert (hits.prim >= 0).mean() > 0.3 and (hits.prim < 0).any(), "the rays must hit and miss"
-    default = clrt.Accel(mesh, "box", "sah", 4, device=device)       # the wide walk on CPU devices
+    default = clrt.Accel(mesh, accel="box", builder="sah", leaf_size=4, device=device)   # the wide walk on CPU devices
     monkeypatch.setattr(geometry, "WIDE_BVH_KINDS", ())
-    binary = clrt.Accel(mesh, "box", "sah", 4, device=device)
+    binary = clrt.Accel(mesh, accel="box", builder="sah", leaf_size=4, device=device)
     monkeypatch.undo()
     _same_answers(binary, brute, o, d, tmin, f"{place}: binary / brute force")
     _same_answers(default, brute, o, d, tmin, f"{place}: default walk / brute force")
@@ -266,10 +266,10 @@ def test_subnormal_ray_components_answer_as_brute_force(device, monkeypatch):
     mesh = _grid(5)
     o = np.array([[3.7960608, 3.9930122, -1.9758308e-43]], np.float32)
     d = np.array([[0.30945268, 0.95091486, 2.6878306e-41]], np.float32)
-    brute = clrt.Accel(mesh, "none", device=device)
-    default = clrt.Accel(mesh, "box", "sah", 4, device=device)
+    brute = clrt.Accel(mesh, accel="none", device=device)
+    default = clrt.Accel(mesh, accel="box", builder="sah", leaf_size=4, device=device)
     monkeypatch.setattr(geometry, "WIDE_BVH_KINDS", ())
-    binary = clrt.Accel(mesh, "box", "sah", 4, device=device)
+    binary = clrt.Accel(mesh, accel="box", builder="sah", leaf_size=4, device=device)
     monkeypatch.undo()
     expected = brute.trace(o, d)      # read as z = -0 and dz = +0: in the plane, a miss
     for walk in (default, binary):

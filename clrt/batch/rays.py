@@ -19,9 +19,11 @@ from clrt.batch.worker import hit_records, trace_chunk
 from clrt.config import BATCH_RAY_CHUNK, DEFAULT_ACCEL, DEFAULT_BUILDER, DEFAULT_LEAF_SIZE
 from clrt.errors import InputError
 from clrt.query.accel import check_fields
-from clrt.query.results import Hits
+from clrt.query.results import CLOSEST_FIELDS, Hits, with_fields
 from clrt.scene.sources import as_mesh
 
+
+@with_fields(CLOSEST_FIELDS, heading="Returns", lead="Hits, a named tuple of these dask arrays:")
 def trace(mesh, origins, directions, *, tmin=0.0, tmax=np.inf, cull: str = "none",
           accel: str = DEFAULT_ACCEL, builder: str = DEFAULT_BUILDER, leaf_size: int = DEFAULT_LEAF_SIZE,
           device: str | None = None, chunk_rays: int | None = None, client=None, fields=None) -> Hits:

@@ -41,6 +41,7 @@ import numpy as np
 
 from clrt.config import BATCH_CACHE_SCENES, BATCH_IMAGE_WRITERS, DEVICE_ENV
 from clrt.errors import ClrtError, DeviceError, InputError, OutputError
+from clrt.query.results import CLOSEST_FIELDS
 
 try:   # plugins need Dask's base class; the rest of this module runs without Dask
     from distributed.diagnostics.plugin import WorkerPlugin
@@ -187,7 +188,7 @@ def _scene_entry(source: str, scene_options: dict, accel: str, builder: str, lea
         from clrt.scene.render_setup import render_scene
         scene = render_scene(source, **scene_options)
         own = list(scene.lights)   # each view's lights are set before it is rendered
-        return Renderer(scene, _STATE.device, accel, builder, leaf_size), own
+        return Renderer(scene, device=_STATE.device, accel=accel, builder=builder, leaf_size=leaf_size), own
 
     return _cached(_STATE.scenes, key, make)
 
@@ -343,8 +344,7 @@ def _camera_record(camera) -> dict:
 # --------------------------------------------------------------------------- ray chunks
 
 #: One chunk's closest hits, as one array (the fields of clrt.Hits).
-HITS = np.dtype([("t", np.float32), ("prim", np.int32), ("u", np.float32), ("v", np.float32),
-                 ("normal", np.float32, (3,)), ("front", np.bool_), ("hit", np.bool_)])
+HITS = np.dtype([(name, f.dtype, f.item_shape) for name, f in CLOSEST_FIELDS.items()])
 
 def _accel(mesh, token: str, options: dict, device: str | None):
     device = device if device is not None else _STATE.device

@@ -145,7 +145,7 @@ def _breakdown(source, views, size, samples, device, per_frame, out):
     scene = render_scene(source, samples=samples)
     camera = render_camera(scene, width=w, height=h)
     scene.lights = render_lights(scene.bounds, camera, scene.lights)
-    renderer = Renderer(scene, device)
+    renderer = Renderer(scene, device=device)
     setup = 1e3 * (time.perf_counter() - start)
     rows = []
     with tempfile.TemporaryDirectory() as folder:

@@ -114,7 +114,8 @@ def _traced_accel(mesh, volume, builder, leaf_size, device):
     if minimum is not None:
         build.TREELET_MIN_TRIANGLES = ((0, minimum),)
     try:
-        return Accel(mesh, volume, "device" if builder in DEVICE_VARIANTS else builder, leaf_size, device)
+        return Accel(mesh, accel=volume, builder="device" if builder in DEVICE_VARIANTS else builder,
+                     leaf_size=leaf_size, device=device)
     finally:
         build.TREELET_LEAVES.update(saved)
         build.TREELET_MIN_TRIANGLES = saved_min

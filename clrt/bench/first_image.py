@@ -102,7 +102,7 @@ def stages(mesh: str, size, device, builder, out, started: float, serial: bool) 
     row("crease split, camera, lights")
     # The first tile of clrt render's progress bar (tqdm present), so the launches are its launches.
     limits = TileLimits(first_launch_pixels=config.PROGRESS_FIRST_TILE)
-    renderer = Renderer(scene, device, builder=builder or config.DEFAULT_BUILDER, limits=limits)
+    renderer = Renderer(scene, device=device, builder=builder or config.DEFAULT_BUILDER, limits=limits)
     row("renderer (flatten, build, upload, program)", renderer.timings.items())
     frame = renderer.render(camera)
     row("first frame", [(k, ms) for k, ms in frame.timings.items() if k not in renderer.timings])

@@ -55,7 +55,8 @@ def run(mesh_path, sizes, variants, device=None, repeat=5, warmup=1, leaf_size=4
     for (accel, builder), walk_name in itertools.product(variants, walks):
         limits = TileLimits() if block is None else TileLimits(block=None if block == (0, 0) else block)
         with walk(walk_name):
-            renderer = Renderer(scene, device, accel, builder, leaf_size, limits=limits)
+            renderer = Renderer(scene, device=device, accel=accel, builder=builder, leaf_size=leaf_size,
+                                limits=limits)
         for camera in cameras:
             samples = []
             for i in range(warmup + repeat):

@@ -222,12 +222,12 @@ def measure(scene, camera, device: str, accel: str, builder: str, leaf_size: int
     from clrt.renderer import Renderer
     cold = None
     if warmup > 0:
-        renderer = Renderer(scene, device, accel, builder, leaf_size)
+        renderer = Renderer(scene, device=device, accel=accel, builder=builder, leaf_size=leaf_size)
         cold = sum(renderer.timings.values())
         for _ in range(warmup):
             renderer.render(camera)
         del renderer
-    renderer = Renderer(scene, device, accel, builder, leaf_size)
+    renderer = Renderer(scene, device=device, accel=accel, builder=builder, leaf_size=leaf_size)
     setup = dict(renderer.timings)
     frames = []
     for _ in range(repeat):
@@ -522,7 +522,8 @@ def detail_loss(suite: MeshSuite, names: list[str], programs, builders, specs, a
         images: dict[tuple, tuple] = {}
         for program, builder in _variants(programs, builders):
             p = PROGRAMS[program]
-            r = Renderer(scene, specs[p.kind], p.accel, builder if p.accel != "none" else "sah", args.leaf_size)
+            r = Renderer(scene, device=specs[p.kind], accel=p.accel, builder=builder if p.accel != "none" else "sah",
+                         leaf_size=args.leaf_size)
             images[(program, builder)] = (r.render(framed).image, r.device, p.kind)
         basic = images.get(("basic", "-"))
         brute = {"CPU": basic, "GPU": images.get(("gpu", "-"))}

@@ -99,7 +99,7 @@ def run(mesh_path, rays: int = 1_000_000, reference_rays: int = 2_000, device=No
     tol = 1e-5 * float(np.linalg.norm(mesh.bounds[1] - mesh.bounds[0]))
 
     start = time.perf_counter()
-    acc = Accel(mesh, accel, builder, device=device)
+    acc = Accel(mesh, accel=accel, builder=builder, device=device)
     setup = time.perf_counter() - start
     print(f"mesh: {name}, {len(mesh.faces):,} triangles; {rays:,} rays (seed {seed}); "
           f"clrt: {accel}/{builder} on {acc.device}, set-up {setup:.2f} s; median of {repeat}", file=out)

@@ -384,7 +384,7 @@ def run(mesh_path=None, sets=RAY_SETS, count: int = 1_000_000, seed: int = 0, va
         ray_memory(count, 24 * len(sets) + 120)
     mesh = load_mesh(mesh_path) if mesh_path else primitives.torus_knot(segments=512, sides=32)
     name = Path(mesh_path).name if mesh_path else "torus knot (generated)"
-    first = Accel(mesh, *variants[0], device=device)
+    first = Accel(mesh, accel=variants[0][0], builder=variants[0][1], device=device)
     _check_groups(first, groups)
     camera = reference_camera(mesh, mesh_path, size)
     if not read_files:
@@ -406,7 +406,7 @@ def run(mesh_path=None, sets=RAY_SETS, count: int = 1_000_000, seed: int = 0, va
             accel = first
         else:
             with walk(walk_name):
-                accel = Accel(mesh, accel_name, builder, device=device)
+                accel = Accel(mesh, accel=accel_name, builder=builder, device=device)
         shown_builder = builder_label(accel_name, builder, walk_name)
         for (label, o, d, reach), group in ((s, g) for s in ray_sets for g in groups):
             saved = dict(query_accel.QUERY_GROUP), dict(query_accel.PACKET_GROUP)

@@ -91,7 +91,7 @@ def run(counts, builders, sizes, accel="box", device=None, repeat=3, leaf_size=4
             mesh = instanced(load_mesh(mesh_path), count) if mesh_path else primitives.torus(1.0, 0.35, n, n)
             mesh_ms = 1e3 * (time.perf_counter() - start)
             scene = scene_from_mesh(mesh)
-            renderer = Renderer(scene, device, accel, builder, leaf_size)
+            renderer = Renderer(scene, device=device, accel=accel, builder=builder, leaf_size=leaf_size)
             if not printed_device:
                 dev = renderer.queue.device
                 emit(f"device: {renderer.device}, {dev.global_mem_size / 2**30:.1f} GiB, "

@@ -70,8 +70,8 @@ def run(mesh_dir: Path, cases, variants, device=None, size=(1920, 1080), repeat=
         mesh = load_mesh(mesh_dir / file)
         camera = Camera(eye, target, (0.0, 1.0, 0.0), 45.0, w, h)
         for accel_name, builder in variants:
-            accel = Accel(mesh, accel_name, builder, leaf_size, device, max_buffer_bytes=max_buffer_bytes,
-                          max_buffer_label=f"--max-buffer-mib {max_buffer_mib}")
+            accel = Accel(mesh, accel=accel_name, builder=builder, leaf_size=leaf_size, device=device,
+                          max_buffer_bytes=max_buffer_bytes, max_buffer_label=f"--max-buffer-mib {max_buffer_mib}")
             hit_buf = cl.Buffer(accel.context, cl.mem_flags.READ_WRITE, w * h * layouts.HIT.itemsize)
             occ_buf = cl.Buffer(accel.context, cl.mem_flags.READ_WRITE, w * h)
             closest = time_launches(accel.queue, lambda: accel.launch_camera(camera, hit_buf, **launch), repeat, warmup)

@@ -46,7 +46,8 @@ from clrt.device.program import build_program, typed_kernel
 from clrt.errors import InputError
 from clrt.config import RAY_CHECKS
 from clrt.query.rays import CameraRays, PinholeRays, RayBatch, cull_code, is_device_array
-from clrt.query.results import CLOSEST_FIELDS, RESULT_BYTES, RESULT_DTYPES, AllHits, CameraImages, Hits
+from clrt.query.results import (ALL_HITS_FIELDS, CAMERA_FIELDS, CLOSEST_FIELDS, RESULT_BYTES, RESULT_DTYPES,
+                                AllHits, CameraImages, Hits, with_fields)
 from clrt.accel import as_triangles
 from clrt.scene.arrays import triangle_corners
 from clrt.scene.mesh import Mesh
@@ -125,19 +126,28 @@ def _rebuilt_accel(vertices, faces, name, options) -> "Accel":
 class Accel:
     """A mesh and its acceleration structure, uploaded once to one device.
 
-    ``accel``: "box" (default), "sphere", "ellipse" or "none"; ``builder``:
-    "auto" (default: "device" where the device computes in float64, else
-    "sah"), "sah", "paper" or "device" (built on ``device``); ``leaf_size``:
-    most triangles per leaf.
+    ``mesh``: a Mesh, a mesh file, a trimesh object or ``(vertices, faces)``.
+    The options go by keyword, in the same order as
+    :class:`~clrt.renderer.frame.Renderer`'s (the choices of the structure
+    first, then the device): ``accel``: "box" (default), "sphere", "ellipse"
+    or "none"; ``builder``: "auto" (default: "device" where the device
+    computes in float64, else "sah"), "sah", "paper" or "device" (built on
+    ``device``); ``leaf_size``: most triangles per leaf; ``device``: None (the
+    first GPU, else the CPU), "gpu", "cpu" or "P:D".
     ``chunk_rays``: most rays per kernel launch (default: see :meth:`chunk_size`);
     ``max_buffer_bytes``: split scene buffers above this size (split.cl);
     ``max_buffer_label``: where that size came from, for errors (an option's name).
     Not thread-safe: give each thread its own Accel.
+
+    Only the mesh goes by position, as in Renderer: ``Accel(mesh, "sphere")``
+    (the former positional order: accel, builder, leaf_size, device,
+    chunk_rays) raises InputError showing the call with keywords.
     """
 
-    def __init__(self, mesh, accel: str = DEFAULT_ACCEL, builder: str = DEFAULT_BUILDER,
+    @checks.keyword_options("accel", "builder", "leaf_size", "device", "chunk_rays")
+    def __init__(self, mesh, *, accel: str = DEFAULT_ACCEL, builder: str = DEFAULT_BUILDER,
                  leaf_size: int = DEFAULT_LEAF_SIZE, device: str | None = None, chunk_rays: int | None = None,
-                 *, max_buffer_bytes: int | None = None, max_buffer_label: str = "max_buffer_bytes"):
+                 max_buffer_bytes: int | None = None, max_buffer_label: str = "max_buffer_bytes"):
         _check_chunk_rays(chunk_rays)
         device = checks.device(device)
         accel, builder, leaf_size = checks.accel_options(accel, builder, leaf_size)
@@ -174,7 +184,8 @@ class Accel:
         self.mesh = mesh
 
     @classmethod
-    def from_renderer(cls, renderer, chunk_rays: int | None = None) -> "Accel":
+    @checks.keyword_options("chunk_rays")
+    def from_renderer(cls, renderer, *, chunk_rays: int | None = None) -> "Accel":
         """Ray queries on a Renderer's scene, sharing its device, BVH and buffers;
         ``prim`` is then the triangle index in the scene's objects, in order
         (as ``Frame.prim``).  They follow the renderer: after ``Renderer.refit``
@@ -384,7 +395,7 @@ class Accel:
         if block is None:
             return {name: np.empty(shapes[name], RESULT_DTYPES[name]) for name in fields}
         out, offset = {}, 0
-        for name in fields:   # 4-byte fields first (RESULT_BYTES' order), so every view is aligned
+        for name in fields:   # 4-byte fields first (CLOSEST_FIELDS' order), so every view is aligned
             out[name] = block[offset:offset + sizes[name]].view(RESULT_DTYPES[name]).reshape(shapes[name])
             offset += sizes[name]
         return out
@@ -424,10 +435,13 @@ class Accel:
                     out[name] = out[name].view(bool)
         return Hits(*(out.get(name) for name in Hits._fields))
 
+    @with_fields(CLOSEST_FIELDS, heading="Returns", lead="Hits, a named tuple of these arrays:")
     def trace(self, origins, directions, *, tmin=0.0, tmax=np.inf, cull: str = "none", fields=None) -> Hits:
         """Closest hit of each ray with tmin < t <= tmax (scalars or per-ray arrays).
 
-        ``fields``: the :class:`Hits` fields to compute and return, e.g.
+        ``origins``, ``directions``: (3,) or (N, 3), any real dtype (directions
+        are normalised); ``cull``: "none", "back" or "front".
+        ``fields``: the names of the fields below to compute and return, e.g.
         ``("t", "prim")`` (default: all); the others are None.  Rays given as
         ``pyopencl.array.Array`` give hits as device arrays, without host copies
         (``front`` and ``hit`` then as uint8 0 / 1).
@@ -468,6 +482,7 @@ class Accel:
         through a shared edge or vertex meets each triangle there)."""
         return self._flags("query_count", RayBatch(origins, directions, tmin, tmax), cull, "count")
 
+    @with_fields(ALL_HITS_FIELDS, ("K",), heading="Returns", lead="AllHits, a named tuple of these arrays:")
     def all_hits(self, origins, directions, *, tmin=0.0, tmax=np.inf, cull: str = "none") -> AllHits:
         """Every hit in (tmin, tmax] of every ray, found in one traversal per ray,
         as flat arrays sorted by ray, then t, then triangle (numpy arrays, also
@@ -524,6 +539,7 @@ class Accel:
 
     # ----------------------------------------------------------------------- cameras
 
+    @with_fields(CAMERA_FIELDS, ("H", "W"), heading="Returns", lead="CameraImages, a named tuple of these images:")
     def camera_images(self, camera=None, *, K=None, pose=None, width: int | None = None,
                       height: int | None = None, pixel_center: float = 0.0,
                       cull: str = "none") -> CameraImages:
@@ -563,6 +579,7 @@ class Accel:
                             hits.prim.reshape(h, w), hits.hit.reshape(h, w), hits.front.reshape(h, w),
                             hits.u.reshape(h, w), hits.v.reshape(h, w))
 
+    @with_fields(CLOSEST_FIELDS, ("H", "W"), heading="Returns", lead="Hits, a named tuple of these images:")
     def trace_camera(self, camera) -> Hits:
         """Closest hits of the camera's pixel-centre rays, as (H, W) arrays."""
         hits = self._closest(CameraRays(_checked_camera(camera)), "none")

@@ -13,15 +13,17 @@ import numpy as np
 from clrt.config import DEFAULT_ACCEL, DEFAULT_BUILDER, DEFAULT_LEAF_SIZE
 from clrt.query.accel import Accel
 from clrt.query.rays import cull_code
-from clrt.query.results import AllHits, CameraImages, Hits
+from clrt.query.results import (ALL_HITS_FIELDS, CAMERA_FIELDS, CLOSEST_FIELDS, AllHits, CameraImages, Hits,
+                                with_fields)
 
 
 def _accel(mesh, accel, builder, leaf_size, device, chunk_rays, cull) -> Accel:
     """The Accel of a one-call form; ``cull`` is checked before the (long) build."""
     cull_code(cull)
-    return Accel(mesh, accel, builder, leaf_size, device, chunk_rays)
+    return Accel(mesh, accel=accel, builder=builder, leaf_size=leaf_size, device=device, chunk_rays=chunk_rays)
 
 
+@with_fields(CLOSEST_FIELDS, heading="Returns", lead="Hits, a named tuple of these arrays:")
 def trace(mesh, origins, directions, *, tmin=0.0, tmax=np.inf, cull: str = "none",
           accel: str = DEFAULT_ACCEL, builder: str = DEFAULT_BUILDER, leaf_size: int = DEFAULT_LEAF_SIZE,
           device: str | None = None, chunk_rays: int | None = None) -> Hits:
@@ -49,6 +51,7 @@ def count_hits(mesh, origins, directions, *, tmin=0.0, tmax=np.inf, cull: str = 
         origins, directions, tmin=tmin, tmax=tmax, cull=cull)
 
 
+@with_fields(ALL_HITS_FIELDS, ("K",), heading="Returns", lead="AllHits, a named tuple of these arrays:")
 def all_hits(mesh, origins, directions, *, tmin=0.0, tmax=np.inf, cull: str = "none",
              accel: str = DEFAULT_ACCEL, builder: str = DEFAULT_BUILDER, leaf_size: int = DEFAULT_LEAF_SIZE,
              device: str | None = None, chunk_rays: int | None = None) -> AllHits:
@@ -57,6 +60,8 @@ def all_hits(mesh, origins, directions, *, tmin=0.0, tmax=np.inf, cull: str = "n
         origins, directions, tmin=tmin, tmax=tmax, cull=cull)
 
 
+@with_fields(CAMERA_FIELDS, ("H", "W"), heading="Returns",
+             lead="CameraImages, a named tuple of these images:")
 def camera_images(mesh, camera=None, *, K=None, pose=None, width=None, height=None,
                   pixel_center: float = 0.0, cull: str = "none",
                   accel: str = DEFAULT_ACCEL, builder: str = DEFAULT_BUILDER, leaf_size: int = DEFAULT_LEAF_SIZE,

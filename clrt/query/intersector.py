@@ -59,15 +59,18 @@ class RayMeshIntersector:
     ``every_triangle``: with ``multiple_hits``, list every triangle a ray meets
     (trimesh's numpy engine) rather than one hit per surface crossing (its
     Embree engine, the default).  The other arguments are those of :class:`clrt.Accel`,
-    except that the builder defaults to the host SAH builder.
+    by keyword as there, except that the builder defaults to the host SAH builder.
+    (trimesh's own second argument, ``scale_to_box``, has no meaning here: a
+    positional one raises InputError rather than being taken for ``accel``.)
     """
 
     # Left out of pickles and copies: rebuilt on first use (see ``accel``).
     _DEVICE_STATE = ("_accel", "_key", "_corner0", "_normals", "_scale", "_size", "_corners")
 
-    def __init__(self, mesh, accel: str = DEFAULT_ACCEL, builder: str = HOST_DEFAULT_BUILDER,
-                 leaf_size: int = DEFAULT_LEAF_SIZE,
-                 device: str | None = None, chunk_rays: int | None = None, every_triangle: bool = False):
+    @checks.keyword_options("accel", "builder", "leaf_size", "device", "chunk_rays", "every_triangle")
+    def __init__(self, mesh, *, accel: str = DEFAULT_ACCEL, builder: str = HOST_DEFAULT_BUILDER,
+                 leaf_size: int = DEFAULT_LEAF_SIZE, device: str | None = None, chunk_rays: int | None = None,
+                 every_triangle: bool = False):
         import trimesh
         from clrt.scene.load_3ds import register_with_trimesh
         register_with_trimesh()   # trimesh.load("x.3ds") works for users of the drop-in too

@@ -1,49 +1,138 @@
-"""What ray queries return: closest hits, all hits, camera images (array shapes
-and sentinels as documented in docs/ray-queries.md)."""
+"""What ray queries return: closest hits, all hits, camera images.
+
+Each result is a named tuple of arrays whose fields are described once, in the
+tables below (shape, dtype, meaning, value on a miss).  The named tuples, their
+docstrings (``help(clrt.Hits)``), the docstrings of the queries that return
+them (``help(clrt.Accel.trace)``) and the buffers the kernels write are all
+made from these tables, so none of them can list a field the others lack;
+docs/ray-queries.md repeats the closest-hit table for readers (a test compares).
+"""
 
 from __future__ import annotations
 
+import textwrap
 from typing import NamedTuple
 
 import numpy as np
 
 
-# The closest hit's outputs (query_closest in trace.cl), in kernel order.
-CLOSEST_FIELDS = ("t", "prim", "u", "v", "normal", "front", "hit")
-# Bytes a ray and dtype of every per-ray result (count: query_count's).
-RESULT_BYTES = {"t": 4, "prim": 4, "u": 4, "v": 4, "normal": 12, "count": 4, "front": 1, "hit": 1}
-RESULT_DTYPES = {"t": np.float32, "prim": np.int32, "u": np.float32, "v": np.float32, "normal": np.float32,
-                 "count": np.int32, "front": np.uint8, "hit": np.uint8}
+class Field(NamedTuple):
+    """One array of a query result."""
+
+    dtype: type          # of the numpy array the caller gets (bool flags are uint8 0 / 1 on the device)
+    item_shape: tuple    # the shape of one ray's (hit's, pixel's) value: () or (3,)
+    meaning: str
+    miss: str | None     # its value on a miss (None: results hold hits only)
 
 
-class Hits(NamedTuple):
-    """Closest hits, one entry per ray (or per pixel, as (H, W) arrays)."""
+# The closest hit's outputs (query_closest in trace.cl), in kernel order: the
+# order of the kernel's output arguments and of Hits' fields.
+CLOSEST_FIELDS = {
+    "t": Field(np.float32, (), "distance to the hit along the normalised direction", "inf"),
+    "prim": Field(np.int32, (), "triangle hit: its row in the mesh's faces (for Accel.from_renderer: "
+                  "its index in the scene's triangles, objects in order)", "-1"),
+    "u": Field(np.float32, (), "barycentric weight of the triangle's vertex 1", "0"),
+    "v": Field(np.float32, (), "barycentric weight of the triangle's vertex 2 (vertex 0 has 1 - u - v)", "0"),
+    "normal": Field(np.float32, (3,), "unit geometric normal (v1 - v0) x (v2 - v0), as wound (not "
+                    "flipped towards the ray)", "(0, 0, 0)"),
+    "front": Field(np.bool_, (), "the ray met the triangle against its normal (saw v0, v1, v2 "
+                   "counter-clockwise)", "False"),
+    "hit": Field(np.bool_, (), "the ray hit something: prim >= 0", "False"),
+}
 
-    t: np.ndarray        # (N,) float32 distance along the unit direction, inf on a miss
-    prim: np.ndarray     # (N,) int32 triangle index (row of the mesh's faces), -1 on a miss
-    u: np.ndarray        # (N,) float32 barycentric weight of the triangle's vertex 1, 0 on a miss
-    v: np.ndarray        # (N,) float32 barycentric weight of the triangle's vertex 2, 0 on a miss
-    normal: np.ndarray   # (N, 3) float32 unit geometric normal (v1-v0) x (v2-v0), zeros on a miss
-    front: np.ndarray    # (N,) bool: the ray met the triangle against its normal; False on a miss
-    hit: np.ndarray      # (N,) bool: prim >= 0
+# Every hit of every ray (query_all in trace.cl), sorted by ray, then t, then triangle.
+ALL_HITS_FIELDS = {
+    "ray_id": Field(np.int64, (), "index of the ray", None),
+    "prim": Field(np.int32, (), "triangle hit: its row in the mesh's faces", None),
+    "t": Field(np.float32, (), "distance to the hit along the ray's normalised direction", None),
+}
+
+# The images of Accel.camera_images, row 0 at the top.
+CAMERA_FIELDS = {
+    "depth": Field(np.float32, (), "distance along the optical axis (z in the camera frame)", "inf"),
+    "t": Field(np.float32, (), "distance along the pixel's ray from the eye", "inf"),
+    "normal": Field(np.float32, (3,), "world-space unit geometric normal (v1 - v0) x (v2 - v0)", "(0, 0, 0)"),
+    "prim": Field(np.int32, (), "triangle seen: its row in the mesh's faces", "-1"),
+    "hit": Field(np.bool_, (), "the pixel's ray hit something: prim >= 0", "False"),
+    "front": Field(np.bool_, (), "the front face was seen", "False"),
+    "u": Field(np.float32, (), "barycentric weight of the triangle's vertex 1", "0"),
+    "v": Field(np.float32, (), "barycentric weight of the triangle's vertex 2", "0"),
+}
 
 
-class AllHits(NamedTuple):
-    """Every hit of every ray, as flat arrays sorted by ray, then distance, then triangle."""
-
-    ray_id: np.ndarray   # (K,) int64 index of the ray
-    prim: np.ndarray     # (K,) int32 triangle index
-    t: np.ndarray        # (K,) float32 distance along the unit direction
+def _device_dtype(dtype) -> type:
+    return np.uint8 if dtype is np.bool_ else dtype   # OpenCL buffers have no bool
 
 
-class CameraImages(NamedTuple):
-    """Per-pixel results of a camera's rays, (H, W) arrays, row 0 at the top."""
+# Dtype on the device and bytes a ray of every per-ray output (count: query_count's).
+RESULT_DTYPES = {**{name: _device_dtype(f.dtype) for name, f in CLOSEST_FIELDS.items()}, "count": np.int32}
+RESULT_BYTES = {name: np.dtype(dtype).itemsize * int(np.prod(CLOSEST_FIELDS[name].item_shape, dtype=int))
+                if name in CLOSEST_FIELDS else np.dtype(dtype).itemsize for name, dtype in RESULT_DTYPES.items()}
 
-    depth: np.ndarray    # float32 distance along the optical axis (z in the camera frame), inf on a miss
-    t: np.ndarray        # float32 distance along the pixel's ray from the eye, inf on a miss
-    normal: np.ndarray   # (H, W, 3) float32 world-space unit geometric normal, zeros on a miss
-    prim: np.ndarray     # int32 triangle index, -1 on a miss
-    hit: np.ndarray      # bool
-    front: np.ndarray    # bool: the front face was seen
-    u: np.ndarray        # float32 barycentrics, 0 on a miss
-    v: np.ndarray
+
+def _kind(f: Field, rows: tuple) -> str:
+    """'(N, 3) float32': the array's shape, ``rows`` leading, and its dtype."""
+    dims = (*rows, *(str(n) for n in f.item_shape))
+    return f"({', '.join(dims)}{',' if len(dims) == 1 else ''}) {np.dtype(f.dtype).name}"
+
+
+def _meaning(f: Field) -> str:
+    return f.meaning + (f"; {f.miss} on a miss" if f.miss is not None else "")
+
+
+def describe_fields(table: dict, rows: tuple = ("N",)) -> str:
+    """The fields of ``table`` as a numpy-style docstring section: name, shape
+    (``rows`` leading, e.g. ("N",) or ("H", "W")), dtype, then the meaning and
+    the value on a miss."""
+    return "\n".join(f"{name} : {_kind(f, rows)}\n"
+                     + textwrap.fill(_meaning(f), 76, initial_indent="    ", subsequent_indent="    ",
+                                     break_on_hyphens=False)
+                     for name, f in table.items())
+
+
+def with_fields(table: dict, rows: tuple = ("N",), heading: str = "Fields", lead: str = ""):
+    """Decorator: append ``table``'s fields (:func:`describe_fields`) under
+    ``heading`` (and a ``lead`` line) to a function's or class's docstring, so
+    that ``help()`` lists them from the table itself."""
+    def append(obj):
+        body = describe_fields(table, rows)
+        section = f"{heading}\n{'-' * len(heading)}\n" + (f"{lead}\n" if lead else "") + body
+        doc = obj.__doc__ or ""
+        # Indent the section as the docstring's own lines are, so that
+        # inspect.cleandoc (help) strips both alike.
+        indent = min((len(line) - len(line.lstrip()) for line in doc.splitlines()[1:] if line.strip()),
+                     default=0)
+        section = "\n".join(" " * indent + line if line else line for line in section.splitlines())
+        obj.__doc__ = f"{doc.rstrip()}\n\n{section}\n"
+        return obj
+    return append
+
+
+def _result_class(name: str, table: dict, doc: str, rows: tuple):
+    """A named tuple with one field per row of ``table``, in its order, documented from it."""
+    cls = NamedTuple(name, [(field, np.ndarray) for field in table])
+    cls.__doc__ = doc
+    for field, f in table.items():   # help(cls) shows these beside each field
+        getattr(cls, field).__doc__ = f"{_kind(f, rows)}: {_meaning(f)}"
+    return with_fields(table, rows)(cls)
+
+
+Hits = _result_class("Hits", CLOSEST_FIELDS, """Closest hits, one row per ray.
+
+    Returned by Accel.trace and clrt.trace; Accel.trace_camera gives (H, W)
+    arrays, one per pixel, instead of (N,).  Fields left out of the query's
+    ``fields=`` are None.  Rays given as ``pyopencl.array.Array`` give device
+    arrays, with ``front`` and ``hit`` as uint8 0 / 1 (OpenCL has no bool).
+    """, ("N",))
+
+AllHits = _result_class("AllHits", ALL_HITS_FIELDS, """Every hit of every ray, as flat arrays.
+
+    Returned by Accel.all_hits and clrt.all_hits: K hits in all, sorted by
+    ray, then distance, then triangle; a ray without hits has no entry.
+    """, ("K",))
+
+CameraImages = _result_class("CameraImages", CAMERA_FIELDS, """Per-pixel results of a camera's rays.
+
+    Returned by Accel.camera_images and clrt.camera_images: (H, W) images,
+    row 0 at the top.
+    """, ("H", "W"))

@@ -89,23 +89,34 @@ class Renderer:
     refitted): later changes to the caller's Scene object are not shown --
     use :meth:`set_lights`, :meth:`refit` or a new Renderer.
 
-    ``accel``: "box" (default), "sphere", "ellipse" (BVH volume shape) or "none"
-    (brute force); ``builder``: "auto" (default: "device" where the device
-    computes in float64, else "sah"), "sah", "paper" (on the host) or
-    "device" (PLOC on the device, clrt.device.build); ``leaf_size``: the
-    most triangles in a BVH leaf.  Every choice renders the same image.
+    ``scene``: a Scene, or anything :func:`~clrt.scene.sources.as_scene` takes
+    (a mesh, a mesh or scene file).  The options go by keyword, in the same
+    order as :class:`~clrt.query.accel.Accel`'s (the choices of the structure
+    first, then the device): ``accel``: "box" (default), "sphere", "ellipse"
+    (BVH volume shape) or "none" (brute force); ``builder``: "auto" (default:
+    "device" where the device computes in float64, else "sah"), "sah",
+    "paper" (on the host) or "device" (PLOC on the device,
+    clrt.device.build); ``leaf_size``: the most triangles in a BVH leaf.
+    Every choice renders the same image.  ``device``: None (the first GPU,
+    else the CPU), "gpu", "cpu" or "P:D" (as ``clrt info`` lists them).
     ``limits``: how frames are cut into launches (:class:`TileLimits`);
     ``max_buffer_bytes``: split scene buffers above this size (as scenes larger
     than the device's largest allocation are; tests and benchmarks use it).
+
+    Only the scene goes by position: the options once did, in an order of
+    their own (device, accel, builder, leaf_size, where Accel had accel,
+    builder, leaf_size, device), so ``Renderer(scene, "gpu")`` now raises
+    InputError showing the call with keywords rather than meaning something else.
     """
 
-    def __init__(self, scene: Scene, device: str | None = None, accel: str = DEFAULT_ACCEL,
-                 builder: str = DEFAULT_BUILDER, leaf_size: int = DEFAULT_LEAF_SIZE, *,
+    @checks.keyword_options("device", "accel", "builder", "leaf_size")
+    def __init__(self, scene: Scene, *, accel: str = DEFAULT_ACCEL, builder: str = DEFAULT_BUILDER,
+                 leaf_size: int = DEFAULT_LEAF_SIZE, device: str | None = None,
                  limits: TileLimits | None = None, max_buffer_bytes: int | None = None):
         device = checks.device(device)
         accel, builder, leaf_size = checks.accel_options(accel, builder, leaf_size)
         self.limits = limits or TileLimits()
-        self._options = dict(device=device, accel=accel, builder=builder, leaf_size=leaf_size,
+        self._options = dict(accel=accel, builder=builder, leaf_size=leaf_size, device=device,
                              max_buffer_bytes=max_buffer_bytes)   # for a rebuild (refit)
         self.timings: dict[str, float] = {}
         self._followers = weakref.WeakSet()   # Accel.from_renderer's queries, kept on this scene
@@ -261,9 +272,7 @@ class Renderer:
             raise InputError("refit needs the scene's objects with the same triangles (only their vertices "
                              "may move): make a new Renderer")
         if rebuild or self.geometry.shifts is not None:
-            fresh = Renderer(scene, self._options["device"], self._options["accel"], self._options["builder"],
-                             self._options["leaf_size"], limits=self.limits,
-                             max_buffer_bytes=self._options["max_buffer_bytes"])
+            fresh = Renderer(scene, **self._options, limits=self.limits)
             followers = self._followers
             self.__dict__.update(fresh.__dict__)
             self._followers = followers
@@ -508,4 +517,5 @@ def render(source, camera: Camera | None = None, *, width: int | None = None,
                         camera.width if width is None else width, camera.height if height is None else height)
     if mesh_light:
         scene.lights = [default_light(scene.bounds, camera)]
-    return Renderer(scene, device, accel, builder, leaf_size).render(camera, linear=linear).image
+    renderer = Renderer(scene, device=device, accel=accel, builder=builder, leaf_size=leaf_size)
+    return renderer.render(camera, linear=linear).image

@@ -313,19 +313,27 @@ class Scene:
 
 
 def default_light(bounds, camera: Camera) -> Light:
-    """A white light above and to the left of the eye, so shapes read clearly."""
+    """A white light above and to the left of the eye, so shapes read clearly:
+    one scene diagonal away, or nearer (down to the eye itself) where that would
+    pass +-MAX_COORDINATE -- the camera is valid, so its default light is too."""
     f, r, u = camera.basis()
     bounds = np.asarray(bounds, dtype=np.float64)
     diag = float(np.linalg.norm(bounds[1] - bounds[0]))
-    with np.errstate(all="ignore"):
-        pos = np.asarray(camera.eye, dtype=np.float64) + (0.8 * u - 0.5 * r) * diag
-    _within_limit(pos, "cannot place the default light: it would stand at {}", "give the lights' positions")
-    return Light(tuple(pos))
+    eye = np.asarray(camera.eye, dtype=np.float64)
+    offset = (0.8 * u - 0.5 * r) * diag
+    # The largest share of the offset that keeps every coordinate in range; the eye
+    # is in range, so a share in [0, 1] always exists.  (Refusing here would make a
+    # scene too large to frame unrenderable even from a camera the user placed.)
+    room = np.where(offset > 0, config.MAX_COORDINATE - eye, -config.MAX_COORDINATE - eye)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        share = np.where(offset != 0, room / offset, np.inf)
+    pos = eye + offset * min(1.0, max(0.0, float(share.min())))
+    return Light(tuple(float(x) for x in np.clip(pos, -config.MAX_COORDINATE, config.MAX_COORDINATE)))
 
 
 def _within_limit(point: np.ndarray, what: str, remedy: str) -> None:
     """InputError ``'<what>, past +-1e30 (...); <remedy>'`` for a point that the
-    scene's size put out of the device's range (a camera or light clrt places)."""
+    scene's size put out of the device's range (a camera clrt frames)."""
     if not (np.isfinite(point).all() and np.abs(point).max() <= config.MAX_COORDINATE):
         raise InputError(f"{what.format(checks.show(tuple(float(x) for x in point)))}, past "
                          f"+-{checks.show(config.MAX_COORDINATE)} (the device computes in float32; the "

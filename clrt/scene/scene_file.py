@@ -420,11 +420,7 @@ class _Loader:
         scene.camera = self.camera(data.get("camera", {}), scene)
         scene.camera_framed = "eye" not in data.get("camera", {})
         if "lights" not in data:   # as for a single mesh: one light above the eye
-            try:
-                scene.lights, scene.default_lights = [default_light(scene.bounds, scene.camera)], True
-            except InputError as exc:   # a scene too large for it
-                raise doc.error("lights", str(exc).replace("give the lights' positions", "give [[lights]] "
-                                                           "positions")) from None
+            scene.lights, scene.default_lights = [default_light(scene.bounds, scene.camera)], True
         return scene
 
     def camera(self, value, scene: Scene) -> Camera:
