@@ -10,20 +10,22 @@ def test_build_bench_prints_every_variant(device, capsys, monkeypatch):
     pytest.importorskip("embreex")            # the raybench extra, which the test command installs
     monkeypatch.setattr(build, "DEVICE_VARIANTS", dict(build.DEVICE_VARIANTS))
     code = build.main(["--device", device or "cpu", "--meshes", "knot50k", "--builders",
-                       "device,device/treelets=7,device/tail=64", "--repeat", "1", "--no-trace", "--embree",
+                       "device,device/treelets=7,device/tail=64,device/sah-top=128", "--repeat", "1", "--no-trace",
+                       "--embree",
                        "--profile"])
     assert code == 0
     out = capsys.readouterr().out
     rows = [line.split("|") for line in out.splitlines() if line.startswith("| knot50k ")]
-    assert [r[3].strip() for r in rows] == ["device", "device/treelets=7", "device/tail=64",
+    assert [r[3].strip() for r in rows] == ["device", "device/treelets=7", "device/tail=64", "device/sah-top=128",
                                             "Embree (embreex, host CPU)"]
     assert all(r[2].strip() == "50,048" for r in rows)
-    sah = {r[3].strip(): float(r[8]) for r in rows[:3]}
+    sah = {r[3].strip(): float(r[8]) for r in rows[:4]}
     assert sah["device/tail=64"] == sah["device"]          # the hand-over does not change the tree
+    assert sah["device/sah-top=128"] == sah["device"]      # the default SAH top
     assert sah["device/treelets=7"] <= sah["device"]        # restructured (the GPU default) or better
     assert all(float(r[5].replace(",", "")) > 0 for r in rows)            # warm build ms
     # --profile: one launch-by-launch table per device variant, the sort's passes in it
-    assert out.count("one warm build:") == 3
+    assert out.count("one warm build:") == 4
     # (the scatter of each pass: radix_scatter on CPU devices, radix_scatter_lookback on GPUs)
     assert ("| radix_scatter | 8 |" in out or "| radix_scatter_lookback | 8 |" in out) and "| ploc_tail | 1 |" in out
 
@@ -33,6 +35,7 @@ def test_build_bench_prints_every_variant(device, capsys, monkeypatch):
     ("device/tail=inf", "error: --builders: 'device/tail=inf' needs an integer after '='"),
     ("device/tail-group=0", "clrt: tail_group must be an integer in 1.."),
     ("device/tail-group=3", "clrt: tail_group must be a power of two in 1.."),
+    ("device/sah-top=0", "clrt: top_clusters must be an integer in 1..256, got 0"),
     ("device/treelets=-3", "clrt: treelet_leaves must be an integer in 0..8, got -3"),
     ("device/treelets=2", "clrt: treelet_leaves must be 0 (none) or an integer in 3..8, got 2"),
 ])
