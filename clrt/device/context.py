@@ -13,6 +13,7 @@ import os
 import re
 import shutil
 import subprocess
+import threading
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Iterable, Sequence
@@ -331,22 +332,24 @@ def select_device(spec: str | None = None):
 # --------------------------------------------------------------------------- context cache
 
 _CONTEXTS: dict[tuple[int, int], tuple[cl.Context, cl.CommandQueue]] = {}
+_CONTEXTS_LOCK = threading.Lock()
 
 
 def create_context(spec: str | None = None) -> tuple[cl.Context, cl.CommandQueue]:
     """Context and profiling-enabled queue for the selected device, created once per device."""
     info, device, _ = _resolve(spec, _platforms())
     key = (info.platform_index, info.device_index)
-    if key not in _CONTEXTS:
-        try:
-            warm = warmup.take_context(device.int_ptr)
-            ctx = cl.Context.from_int_ptr(warm, retain=False) if warm else cl.Context([device])
-            queue = cl.CommandQueue(
-                ctx, properties=cl.command_queue_properties.PROFILING_ENABLE)
-        except cl.Error as exc:
-            raise DeviceError(f"cannot open OpenCL device {info.short()}: {exc}") from None
-        _CONTEXTS[key] = (ctx, queue)
-    return _CONTEXTS[key]
+    with _CONTEXTS_LOCK:   # threads making their first Accel at once share one context
+        if key not in _CONTEXTS:
+            try:
+                warm = warmup.take_context(device.int_ptr)
+                ctx = cl.Context.from_int_ptr(warm, retain=False) if warm else cl.Context([device])
+                queue = cl.CommandQueue(
+                    ctx, properties=cl.command_queue_properties.PROFILING_ENABLE)
+            except cl.Error as exc:
+                raise DeviceError(f"cannot open OpenCL device {info.short()}: {exc}") from None
+            _CONTEXTS[key] = (ctx, queue)
+        return _CONTEXTS[key]
 
 
 # OpenCL status codes that mean "not enough memory" (on the device or the host).

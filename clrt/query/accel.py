@@ -31,6 +31,8 @@ bounded by the chunk, not the batch -- see :meth:`Accel.memory`.
 
 from __future__ import annotations
 
+import threading
+
 import numpy as np
 import pyopencl as cl
 
@@ -43,6 +45,7 @@ from clrt.device.geometry import DeviceGeometry, check_fits, packet_rays
 from clrt.device import pinned
 from clrt.device.pinned import PinnedPool
 from clrt.device.program import build_program, typed_kernel
+from clrt.device.sharing import one_at_a_time
 from clrt.errors import InputError
 from clrt.config import RAY_CHECKS
 from clrt.query.rays import CameraRays, PinholeRays, RayBatch, cull_code, is_device_array
@@ -132,7 +135,10 @@ class Accel:
     ``chunk_rays``: most rays per kernel launch (default: see :meth:`chunk_size`);
     ``max_buffer_bytes``: split scene buffers above this size (split.cl);
     ``max_buffer_label``: where that size came from, for errors (an option's name).
-    Not thread-safe: give each thread its own Accel.
+
+    Threads may share an Accel: its queries, refits and launches take turns
+    (clrt.device.sharing), each call answering as it would alone.  Threads
+    with an Accel each run side by side on the host.
     """
 
     def __init__(self, mesh, accel: str = DEFAULT_ACCEL, builder: str = DEFAULT_BUILDER,
@@ -141,6 +147,7 @@ class Accel:
         _check_chunk_rays(chunk_rays)
         device = checks.device(device)
         accel, builder, leaf_size = checks.accel_options(accel, builder, leaf_size)
+        self._lock = threading.RLock()
         self.mesh = as_mesh(mesh)
         corners = triangle_corners(self.mesh)
         built = build_acceleration(corners, accel, builder, leaf_size, device)
@@ -154,6 +161,7 @@ class Accel:
                              max_buffer_label=max_buffer_label)
         self._setup(self.mesh, context, queue, geometry, chunk_rays)
 
+    @one_at_a_time
     def refit(self, vertices, *, rebuild: bool = False) -> None:
         """Move the mesh's vertices to ``vertices`` ((V, 3), the same count; the faces
         stay) and refit the BVH to them on the device: the tree is kept and
@@ -168,7 +176,9 @@ class Accel:
             raise InputError("these queries share a Renderer's scene: use Renderer.refit")
         mesh = Mesh.from_arrays(vertices, faces, self.mesh.name)
         if rebuild or self.geometry.shifts is not None:
-            self.__dict__.update(Accel(mesh, **self._options).__dict__)
+            fresh = Accel(mesh, **self._options).__dict__
+            fresh.pop("_lock")   # the threads waiting on this one's
+            self.__dict__.update(fresh)
             return
         self.geometry.refit(self.queue, as_triangles(triangle_corners(mesh)))
         self.mesh = mesh
@@ -180,11 +190,13 @@ class Accel:
         (as ``Frame.prim``).  They follow the renderer: after ``Renderer.refit``
         (a rebuild included) they answer for the moved scene."""
         self = cls.__new__(cls)
+        self._lock = renderer._lock   # one scene on the device: its refits wait for these queries
         self._options = None   # the renderer's scene: refit the renderer instead
         self.follow(renderer, chunk_rays)
         renderer.add_follower(self)
         return self
 
+    @one_at_a_time
     def follow(self, renderer, chunk_rays: int | None = None) -> None:
         """Take ``renderer``'s current scene, device and buffers (Renderer.refit
         calls this on the queries made by :meth:`from_renderer`)."""
@@ -363,6 +375,7 @@ class Accel:
         size, local = ((m,), None) if group is None else ((-(-m // group) * group,), (group,))
         self.launches.append(cl.enqueue_nd_range_kernel(self.queue, kernel, size, local))
 
+    @one_at_a_time
     def kernel_ms(self) -> float:
         """Kernel time (ms, profiling events) of the query launches since the last
         call of this method -- for benchmarks: what a query costs on the device."""
@@ -389,6 +402,7 @@ class Accel:
             offset += sizes[name]
         return out
 
+    @one_at_a_time
     def _closest(self, source, cull: str, fields=None, directions_out: np.ndarray | None = None) -> Hits:
         """Closest hits of every ray of ``source``, the ``fields`` asked for (all by
         default; the others None).  ``directions_out`` (N, 3) float32, for
@@ -436,6 +450,7 @@ class Accel:
 
     closest = trace
 
+    @one_at_a_time
     def _flags(self, kernel: str, batch: RayBatch, cull: str, field: str):
         """One value a ray (query_any: ``hit``, query_count: ``count``) for every ray."""
         code = cull_code(cull)
@@ -468,6 +483,7 @@ class Accel:
         through a shared edge or vertex meets each triangle there)."""
         return self._flags("query_count", RayBatch(origins, directions, tmin, tmax), cull, "count")
 
+    @one_at_a_time
     def all_hits(self, origins, directions, *, tmin=0.0, tmax=np.inf, cull: str = "none") -> AllHits:
         """Every hit in (tmin, tmax] of every ray, found in one traversal per ray,
         as flat arrays sorted by ray, then t, then triangle (numpy arrays, also
@@ -569,6 +585,7 @@ class Accel:
         shape = (camera.height, camera.width)
         return Hits(*(a.reshape(shape + a.shape[1:]) for a in hits))
 
+    @one_at_a_time
     def launch_camera(self, camera, out: cl.Buffer, occlusion: bool = False, tile=(8, 8)) -> cl.Event:
         """Enqueue one launch that makes and traces one ray per pixel of ``camera``
         (closest hits as HIT records, or occlusion bytes, into ``out``): the

@@ -16,6 +16,7 @@ Tiling and the memory fallback: tiles.py; page-locked images: clrt/device/pinned
 from __future__ import annotations
 
 import dataclasses
+import threading
 import time
 import weakref
 from dataclasses import dataclass, field
@@ -34,6 +35,7 @@ from clrt.device.context import format_bytes as _size
 from clrt.device.geometry import DeviceGeometry, check_fits, packet_rays, replace_buffer
 from clrt.device.pinned import PinnedPool
 from clrt.device.program import build_program, typed_kernel
+from clrt.device.sharing import one_at_a_time
 from clrt.errors import DeviceMemoryError, InputError
 from clrt.layouts import HIT, RAY
 from clrt.renderer.tiles import TileLimits, run_tiles
@@ -97,6 +99,10 @@ class Renderer:
     ``limits``: how frames are cut into launches (:class:`TileLimits`);
     ``max_buffer_bytes``: split scene buffers above this size (as scenes larger
     than the device's largest allocation are; tests and benchmarks use it).
+
+    Threads may share a Renderer: its renders, refits and light changes take
+    turns (clrt.device.sharing), so a frame shows the scene as it was when
+    the frame began.
     """
 
     def __init__(self, scene: Scene, device: str | None = None, accel: str = DEFAULT_ACCEL,
@@ -108,6 +114,7 @@ class Renderer:
         self._options = dict(device=device, accel=accel, builder=builder, leaf_size=leaf_size,
                              max_buffer_bytes=max_buffer_bytes)   # for a rebuild (refit)
         self.timings: dict[str, float] = {}
+        self._lock = threading.RLock()
         self._followers = weakref.WeakSet()   # Accel.from_renderer's queries, kept on this scene
         with _stage(self.timings, "initialisation"):
             self.scene = _own_copy(as_scene(scene))   # or a mesh, a mesh or scene file: what clrt.render takes
@@ -178,6 +185,7 @@ class Renderer:
 
     # ----------------------------------------------------------------------- a frame
 
+    @one_at_a_time
     def render(self, camera: Camera | None = None, linear: bool = False, hits: bool = False,
                samples: int | None = None, max_depth: int | None = None, seed: int = 0,
                progress: Callable[[int], None] | None = None) -> Frame:
@@ -242,6 +250,7 @@ class Renderer:
             *scene, self.buffers["lights"], len(self.arrays.lights), vec4(self.scene.ambient_light),
             vec4(self.scene.background), ray_epsilon(self.arrays.bounds, camera.eye), *detail)
 
+    @one_at_a_time
     def refit(self, scene, *, rebuild: bool = False) -> None:
         """Show ``scene``: the same objects with the same triangles as this renderer's
         scene, their vertices moved (animation, deformation).  The BVH is refitted
@@ -264,9 +273,9 @@ class Renderer:
             fresh = Renderer(scene, self._options["device"], self._options["accel"], self._options["builder"],
                              self._options["leaf_size"], limits=self.limits,
                              max_buffer_bytes=self._options["max_buffer_bytes"])
-            followers = self._followers
+            followers, lock = self._followers, self._lock   # the queries and threads on this one
             self.__dict__.update(fresh.__dict__)
-            self._followers = followers
+            self._followers, self._lock = followers, lock
         else:
             self.geometry.refit(self.queue, arrays.corners)
             self.geometry.replace(self.queue, "tri_info", arrays.tri_info[self.acceleration.prim_ids])
@@ -285,6 +294,7 @@ class Renderer:
         """Keep ``queries`` (Accel.from_renderer's) on this renderer's scene through refits."""
         self._followers.add(queries)
 
+    @one_at_a_time
     def set_lights(self, lights) -> None:
         """Replace the lights this renderer shows (its copy of the scene's; the
         caller's Scene is left as it is); the geometry stays uploaded (a
