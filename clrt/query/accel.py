@@ -90,6 +90,10 @@ QUERY_GROUP: dict = {"gpu": 128, "cpu": None}
 PACKET_GROUP: dict = {"gpu": 128, "cpu": 16}
 RESULT_POOL_SIZE = 3                # page-locked result blocks per Accel (clrt/device/pinned.py)
 RESULT_POOL_MAX_BYTES = 1 << 30     # larger results go to ordinary memory
+# Launch events kept for kernel_ms before their times are summed and the events
+# let go (each holds a few kB of driver memory: kept all, a program that queries
+# all day grew without bound, about 6 kB a query on PoCL).
+LAUNCHES_KEPT = 64
 _ZERO = np.zeros(1, np.float32)
 _INFINITY = np.full(1, np.inf, np.float32)
 
@@ -256,6 +260,7 @@ class Accel:
         self._buffers: dict[str, cl.Buffer] = {}
         self._hits_per_ray = float(ALL_HITS_PER_RAY)
         self.launches: list[cl.Event] = []   # query launches, see kernel_ms
+        self._launches_ns = 0                  # kernel time of launches let go since kernel_ms
         self.result_pool = PinnedPool(context, queue, RESULT_POOL_SIZE, RESULT_POOL_MAX_BYTES)
 
     # ----------------------------------------------------------------------- chunks and memory
@@ -311,6 +316,8 @@ class Accel:
 
     def _begin(self, source) -> None:
         """Before the first chunk of a batch: no bad ray reported yet."""
+        if len(self.launches) >= LAUNCHES_KEPT:   # all finished: the last query waited for its results
+            self._sum_launches()
         cl.enqueue_copy(self.queue, self._buffer("bad", 4 * len(RAY_CHECKS)),
                         np.full(len(RAY_CHECKS), np.iinfo(np.int32).max, np.int32), is_blocking=True)
 
@@ -379,8 +386,16 @@ class Accel:
     def kernel_ms(self) -> float:
         """Kernel time (ms, profiling events) of the query launches since the last
         call of this method -- for benchmarks: what a query costs on the device."""
+        self._sum_launches()
+        total, self._launches_ns = self._launches_ns, 0
+        return 1e-6 * total
+
+    def _sum_launches(self) -> None:
+        """The kept launches' kernel time into ``_launches_ns``, the events let go."""
         done, self.launches = self.launches, []
-        return sum(1e-6 * (e.profile.end - e.profile.start) for e in done)
+        if done:
+            cl.wait_for_events(done)
+        self._launches_ns += sum(e.profile.end - e.profile.start for e in done)
 
     # ----------------------------------------------------------------------- the queries
 
