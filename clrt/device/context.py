@@ -20,7 +20,7 @@ from typing import Iterable, Sequence
 
 import pyopencl as cl
 
-from clrt.device import warmup
+from clrt.device import sharing, warmup
 from clrt.errors import DeviceError
 
 NVIDIA_LIB = "libnvidia-opencl.so.1"
@@ -77,6 +77,7 @@ class DeviceInfo:
 def _platforms() -> list:
     """All platforms; none when the ICD loader finds no driver (pyopencl raises then)."""
     warmup.wait()        # the loader's first query, if a warm-up thread is making it
+    sharing.driver_started()   # a child forked from now on cannot use it
     try:
         return cl.get_platforms()
     except (cl.Error, RuntimeError):
@@ -336,7 +337,9 @@ _CONTEXTS_LOCK = threading.Lock()
 
 
 def create_context(spec: str | None = None) -> tuple[cl.Context, cl.CommandQueue]:
-    """Context and profiling-enabled queue for the selected device, created once per device."""
+    """Context and profiling-enabled queue for the selected device, created once per
+    device (and process: DeviceError in a child forked after the driver started)."""
+    sharing.check_process()
     info, device, _ = _resolve(spec, _platforms())
     key = (info.platform_index, info.device_index)
     with _CONTEXTS_LOCK:   # threads making their first Accel at once share one context

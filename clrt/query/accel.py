@@ -45,6 +45,7 @@ from clrt.device.geometry import DeviceGeometry, check_fits, packet_rays
 from clrt.device import pinned
 from clrt.device.pinned import PinnedPool
 from clrt.device.program import build_program, typed_kernel
+from clrt.device import sharing
 from clrt.device.sharing import one_at_a_time
 from clrt.errors import InputError
 from clrt.config import RAY_CHECKS
@@ -125,8 +126,19 @@ def _checked_camera(camera):
 
 
 def _rebuilt_accel(vertices, faces, name, options) -> "Accel":
-    """An unpickled Accel: built again from its mesh and options (Accel.__reduce__)."""
-    return Accel(Mesh(vertices, faces, name), **options)
+    """An unpickled Accel: built again from its mesh and options (Accel.__reduce__).
+
+    In a child forked after OpenCL started, no device can be used
+    (clrt.device.sharing): the Accel is then a shell whose queries raise that
+    DeviceError.  Raised here, while unpickling, it would be lost by
+    multiprocessing's pool, which drops a task whose arguments fail to load
+    and waits for its result forever."""
+    mesh = Mesh(vertices, faces, name)
+    if sharing.forked_after_start():
+        shell = Accel.__new__(Accel)
+        shell._lock, shell.mesh, shell._options = threading.RLock(), mesh, options
+        return shell
+    return Accel(mesh, **options)
 
 
 class Accel:
@@ -142,7 +154,9 @@ class Accel:
 
     Threads may share an Accel: its queries, refits and launches take turns
     (clrt.device.sharing), each call answering as it would alone.  Threads
-    with an Accel each run side by side on the host.
+    with an Accel each run side by side on the host.  Processes: an Accel
+    pickles (built again where unpickled); a child forked after OpenCL
+    started cannot use any device (DeviceError): use the "spawn" start method.
     """
 
     def __init__(self, mesh, accel: str = DEFAULT_ACCEL, builder: str = DEFAULT_BUILDER,
@@ -212,6 +226,8 @@ class Accel:
     # is a new one, built from the same mesh and options -- on the device named
     # by them, which for a pickle may be another machine's.
     def __repr__(self) -> str:
+        if "acceleration" not in self.__dict__:   # _rebuilt_accel's shell
+            return f"<clrt.Accel of {len(self.mesh.faces):,} triangles, unpickled where OpenCL cannot run>"
         return (f"<clrt.Accel of {len(self.mesh.faces):,} triangles, {self.acceleration.accel} "
                 f"({self.acceleration.builder}) on {self.device}>")
 
@@ -265,6 +281,7 @@ class Accel:
 
     # ----------------------------------------------------------------------- chunks and memory
 
+    @one_at_a_time
     def chunk_size(self) -> int:
         """Rays per launch: ``chunk_rays`` if given, else 2**20 -- and without a
         BVH at most 2**30 / triangles (so that one launch stays short), but no
@@ -281,6 +298,7 @@ class Accel:
         # of eight stay together in every chunk.
         return size - size % self.rays_per_item if size >= self.rays_per_item else size
 
+    @one_at_a_time
     def memory(self) -> dict:
         """Upper bounds, in bytes, of what queries keep on the device: ``scene``
         (triangles, BVH, triangle ids), ``chunk`` (rays and results of the
