@@ -44,7 +44,7 @@ from clrt.device.context import create_context, device_kind, device_label
 from clrt.device.geometry import DeviceGeometry, check_fits, packet_rays
 from clrt.device import pinned
 from clrt.device.pinned import PinnedPool
-from clrt.device.program import build_program, typed_kernel
+from clrt.device.program import build_program, launch_size, typed_kernel
 from clrt.device import sharing
 from clrt.device.sharing import one_at_a_time
 from clrt.errors import InputError
@@ -81,9 +81,17 @@ RAY_STAGING = {"gpu": True, "cpu": False}
 # Measured on the H200 (clrt.bench.raysets --group, docs/benchmarks.md): 128
 # takes 5-7 % off incoherent sets (random, diffuse, AO) against the driver's
 # choice, and 1-2 % off camera rays; 64 is as good on incoherent rays but
-# slower on camera rays.  A CPU device (PoCL) keeps its own choice where a
-# work-item answers one ray.  The kernels skip the work-items past the last ray.
-QUERY_GROUP: dict = {"gpu": 128, "cpu": None}
+# slower on camera rays.  On a CPU device (PoCL) the driver's choice, 8, 64 and
+# 512 measured within the noise of each other, but PoCL compiles and keeps a
+# variant of the kernel for every work-group size it runs, and its own choice
+# follows the batch size (1000 rays: 1000; 4099: 1; 2^20: 4096): a program
+# sending batches of many sizes grew by tens of kB a new size, to hundreds of
+# MB.  A fixed size keeps one variant.  The kernels skip the work-items past
+# the last ray.
+QUERY_GROUP: dict = {"gpu": 128, "cpu": 64}
+# camera_rays (the directions of a clrt.Camera's pixels): the driver's choice
+# on a GPU, the fixed size of QUERY_GROUP on a CPU device.
+CAMERA_RAYS_GROUP: dict = {"gpu": None, "cpu": 64}
 # The same where a work-item of query_closest / query_any answers a packet of
 # rays (clrt.device.geometry.RAY_PACKET_KINDS).  PoCL's own choice for these
 # launches made incoherent rays 4-15 % slower than the single-ray kernels; 8
@@ -358,7 +366,7 @@ class Accel:
             if isinstance(source, CameraRays):
                 kernel = self.kernels["camera_rays"]
                 kernel.set_args(dirs, *source.args, np.uint64(start), np.uint32(m))
-                cl.enqueue_nd_range_kernel(self.queue, kernel, (m,), None)
+                cl.enqueue_nd_range_kernel(self.queue, kernel, *launch_size(m, CAMERA_RAYS_GROUP[self._kind]))
             else:
                 cl.enqueue_copy(self.queue, dirs, source.directions(start, stop), is_blocking=False)
             inputs = [(self._upload("in_0", eye), 0), (dirs, 3), (self._upload("in_2", _ZERO), 0),
@@ -397,8 +405,7 @@ class Accel:
         if name in ("query_closest", "query_any") and self.rays_per_item > 1:
             m = -(-m // self.rays_per_item)      # trace.cl's ITEM_RAYS rays a work-item
             group = PACKET_GROUP[self._kind]
-        size, local = ((m,), None) if group is None else ((-(-m // group) * group,), (group,))
-        self.launches.append(cl.enqueue_nd_range_kernel(self.queue, kernel, size, local))
+        self.launches.append(cl.enqueue_nd_range_kernel(self.queue, kernel, *launch_size(m, group)))
 
     @one_at_a_time
     def kernel_ms(self) -> float:

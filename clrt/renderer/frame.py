@@ -30,11 +30,11 @@ from clrt import checks, config
 from clrt.config import DEFAULT_ACCEL, DEFAULT_BUILDER, DEFAULT_LEAF_SIZE
 from clrt.device.args import CAMERA_ARG_TYPES, camera_args, vec4
 from clrt.device.build import build_acceleration
-from clrt.device.context import create_context, device_label, error_name, is_out_of_memory
+from clrt.device.context import create_context, device_kind, device_label, error_name, is_out_of_memory
 from clrt.device.context import format_bytes as _size
 from clrt.device.geometry import DeviceGeometry, check_fits, packet_rays, replace_buffer
 from clrt.device.pinned import PinnedPool
-from clrt.device.program import build_program, typed_kernel
+from clrt.device.program import build_program, launch_size, typed_kernel
 from clrt.device.sharing import one_at_a_time
 from clrt.errors import DeviceMemoryError, InputError
 from clrt.layouts import HIT, RAY
@@ -132,6 +132,7 @@ class Renderer:
         with _stage(self.timings, "copy to device"):
             self.context, self.queue = create_context(device)
             self.device = device_label(self.queue.device)
+            self._kind = device_kind(self.queue.device)   # which ENCODE_GROUP applies
             whole_bytes = sum(x.nbytes for x in whole.values())
             # Without the wide BVH of CPU devices: DeviceGeometry builds it and then
             # gives the whole figure (below) before its first upload.
@@ -391,7 +392,8 @@ class Renderer:
             out = np.empty((count, 4), np.float32)
             copies = [cl.enqueue_copy(q, out, buf["linear"], is_blocking=False)]
         else:
-            copies = [self._launch("encode_srgb8", (count,), None, buf["linear"], buf["srgb8"], count)]
+            copies = [self._launch("encode_srgb8", *launch_size(count, ENCODE_GROUP[self._kind]), buf["linear"],
+                                   buf["srgb8"], count)]
             out = image.reshape(count * 3) if direct else self._staging[:count]
             copies.append(cl.enqueue_copy(q, out, buf["srgb8"], is_blocking=False))
         if job.prim is not None:
@@ -434,6 +436,11 @@ FRAME_BYTES_PER_PIXEL = RAY.itemsize + HIT.itemsize + 16 + 3
 MIN_FRAME_BYTES = 256 * FRAME_BYTES_PER_PIXEL
 MAX_TILE_PIXELS = 1 << 23   # 8M pixels (a 4K frame), 536 MiB of tile buffers
 IMAGE_POOL_SIZE = 3         # page-locked images per renderer (clrt/device/pinned.py)
+# Work-items per work-group of encode_srgb8 (one a pixel): the driver's choice
+# on a GPU; fixed on a CPU device, where PoCL keeps a compiled variant for
+# every size it runs and would choose one from each tile's pixel count
+# (clrt.device.program.launch_size).
+ENCODE_GROUP: dict = {"gpu": None, "cpu": 64}
 HOST_CHECK_BYTES = 1 << 28  # frames needing more host memory than this check that it is there
 
 
