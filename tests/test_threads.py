@@ -144,6 +144,36 @@ def test_refit_and_lights_while_other_threads_render_and_query(device):
         mover.join()
 
 
+def test_accel_refit_while_another_thread_queries(device):
+    """One thread moves an Accel's mesh back and forth (refits in place and
+    rebuilds, which replace its buffers and kernels) while another traces
+    with it: every answer is wholly the one of the old mesh or of the new."""
+    meshes = [primitives.torus(1.0, 0.35, 24, 12), primitives.torus(1.0, 0.5, 24, 12)]
+    accel = clrt.Accel(meshes[0], device=device, chunk_rays=512)
+    rays = _rays(4, 1500)
+    answers = []
+    for mesh in meshes:
+        accel.refit(mesh.vertices)
+        answers.append([np.array(a) for a in accel.trace(*rays)])
+    assert not _same(answers[0], answers[1])
+    done = threading.Event()
+
+    def move():
+        k = 0
+        while not done.is_set():
+            k += 1
+            accel.refit(meshes[k % 2].vertices, rebuild=k % 3 == 0)
+
+    mover = threading.Thread(target=move)
+    mover.start()
+    try:
+        got = [[np.array(a) for a in accel.trace(*rays)] for _ in range(ROUNDS)]
+    finally:
+        done.set()
+        mover.join()
+    assert [any(_same(g, a) for a in answers) for g in got] == [True] * ROUNDS
+
+
 def test_intersector_first_used_by_threads(device, monkeypatch):
     """Threads that use a new RayMeshIntersector at once see its Accel only
     with the host arrays made for it (before: a thread found the Accel while
