@@ -40,6 +40,17 @@ def _trace_with_given(accel):
     return accel.trace(*_rays()).t
 
 
+def _build_on_the_host(device):
+    """A new Accel with a host builder: refused before the (long) build."""
+    import clrt.query.accel as accel_module
+
+    def build(*args):
+        raise AssertionError("the BVH was built first")
+
+    accel_module.build_acceleration = build   # this child only
+    return clrt.Accel(primitives.icosphere(1), device=device, builder="sah")
+
+
 def _outcome(pool, function, *args):
     """What ``function(*args)`` gives in the pool: its value, or its error as text."""
     try:
@@ -50,14 +61,15 @@ def _outcome(pool, function, *args):
 
 def test_forked_child_refuses_device_work(device):
     """A child forked after this process used the device refuses the parent's
-    Accel, a new one and one given by pickle, with one line naming the fix."""
+    Accel, a new one (before building its BVH) and one given by pickle, with
+    one line naming the fix."""
     global _accel
     _accel = clrt.Accel(primitives.icosphere(1), device=device)
     try:
         _accel.trace(*_rays())
         with multiprocessing.get_context("fork").Pool(1) as pool:
             outcomes = [_outcome(pool, _trace_with_parents), _outcome(pool, _trace_with_new, device),
-                        _outcome(pool, _trace_with_given, _accel)]
+                        _outcome(pool, _trace_with_given, _accel), _outcome(pool, _build_on_the_host, device)]
         for outcome in outcomes:
             assert isinstance(outcome, str) and outcome.startswith("DeviceError: OpenCL was started in process")
             assert "'spawn'" in outcome and "\n" not in outcome

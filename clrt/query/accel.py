@@ -172,6 +172,7 @@ class Accel:
                  *, max_buffer_bytes: int | None = None, max_buffer_label: str = "max_buffer_bytes"):
         _check_chunk_rays(chunk_rays)
         device = checks.device(device)
+        sharing.check_process()   # before a long host build that could not be used
         accel, builder, leaf_size = checks.accel_options(accel, builder, leaf_size)
         self._lock = threading.RLock()
         self.mesh = as_mesh(mesh)

@@ -34,6 +34,7 @@ import numpy as np
 
 from clrt import checks
 from clrt.config import DEFAULT_ACCEL, DEFAULT_LEAF_SIZE, HOST_DEFAULT_BUILDER
+from clrt.device import sharing
 from clrt.errors import InputError
 from clrt.query.accel import Accel
 from clrt.query.rays import RayBatch, host_rows
@@ -95,6 +96,7 @@ class RayMeshIntersector:
     def accel(self) -> Accel:
         """The uploaded mesh (rebuilt when a trimesh mesh changed since)."""
         key = hash(self.mesh) if self._trimesh else None
+        sharing.check_process()   # a forked child: DeviceError, not a wait on a lock held in the parent
         with self._lock:   # threads see the Accel only with the arrays below made for it
             if self._accel is None or key != self._key:
                 self._upload(key)

@@ -35,7 +35,7 @@ from clrt.device.context import format_bytes as _size
 from clrt.device.geometry import DeviceGeometry, check_fits, packet_rays, replace_buffer
 from clrt.device.pinned import PinnedPool
 from clrt.device.program import build_program, launch_size, typed_kernel
-from clrt.device.sharing import one_at_a_time
+from clrt.device.sharing import check_process, one_at_a_time
 from clrt.errors import DeviceMemoryError, InputError
 from clrt.layouts import HIT, RAY
 from clrt.renderer.tiles import TileLimits, run_tiles
@@ -109,6 +109,7 @@ class Renderer:
                  builder: str = DEFAULT_BUILDER, leaf_size: int = DEFAULT_LEAF_SIZE, *,
                  limits: TileLimits | None = None, max_buffer_bytes: int | None = None):
         device = checks.device(device)
+        check_process()   # before a long host build that could not be used
         accel, builder, leaf_size = checks.accel_options(accel, builder, leaf_size)
         self.limits = limits or TileLimits()
         self._options = dict(device=device, accel=accel, builder=builder, leaf_size=leaf_size,
