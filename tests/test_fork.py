@@ -20,6 +20,7 @@ import clrt
 from clrt.scene import primitives
 
 WAIT_S = 120
+_CAMERA = clrt.Camera(eye=(0.0, 1.0, 3.0), target=(0.0, 0.0, 0.0), width=24, height=16)
 _accel = None      # the parent's, inherited by forked children
 
 
@@ -38,6 +39,10 @@ def _trace_with_new(device):
 
 def _trace_with_given(accel):
     return accel.trace(*_rays()).t
+
+
+def _render_with_given(renderer):
+    return renderer.render(_CAMERA).image
 
 
 def _build_on_the_host(device):
@@ -61,15 +66,17 @@ def _outcome(pool, function, *args):
 
 def test_forked_child_refuses_device_work(device):
     """A child forked after this process used the device refuses the parent's
-    Accel, a new one (before building its BVH) and one given by pickle, with
-    one line naming the fix."""
+    Accel, a new one (before building its BVH), an Accel and a Renderer given
+    by pickle, with one line naming the fix."""
     global _accel
     _accel = clrt.Accel(primitives.icosphere(1), device=device)
+    renderer = clrt.Renderer(clrt.scene_from_mesh(primitives.icosphere(1)), device)
     try:
         _accel.trace(*_rays())
         with multiprocessing.get_context("fork").Pool(1) as pool:
             outcomes = [_outcome(pool, _trace_with_parents), _outcome(pool, _trace_with_new, device),
-                        _outcome(pool, _trace_with_given, _accel), _outcome(pool, _build_on_the_host, device)]
+                        _outcome(pool, _trace_with_given, _accel), _outcome(pool, _render_with_given, renderer),
+                        _outcome(pool, _build_on_the_host, device)]
         for outcome in outcomes:
             assert isinstance(outcome, str) and outcome.startswith("DeviceError: OpenCL was started in process")
             assert "'spawn'" in outcome and "\n" not in outcome
@@ -78,14 +85,17 @@ def test_forked_child_refuses_device_work(device):
         _accel = None
 
 
-def test_spawned_worker_gets_a_pickled_accel(device):
-    """With the spawn start method, an Accel sent to a worker is built again
-    there and answers as the parent's does."""
+def test_spawned_worker_gets_a_pickled_accel_and_renderer(device):
+    """With the spawn start method, an Accel and a Renderer sent to a worker
+    are built again there and answer as the parent's do."""
     accel = clrt.Accel(primitives.icosphere(1), device=device, builder="sah")
-    want = accel.trace(*_rays()).t
+    renderer = clrt.Renderer(clrt.scene_from_mesh(primitives.icosphere(1)), device)
+    want, image = accel.trace(*_rays()).t, renderer.render(_CAMERA).image
     with multiprocessing.get_context("spawn").Pool(1) as pool:
         got = pool.apply_async(_trace_with_given, (accel,)).get(timeout=WAIT_S)
+        rendered = pool.apply_async(_render_with_given, (renderer,)).get(timeout=WAIT_S)
     assert np.array_equal(got, want) and np.isinf(got[2]) and np.isfinite(got[:2]).all()
+    assert np.array_equal(rendered, image) and image.any()
 
 
 @pytest.mark.skipif(not hasattr(os, "fork"), reason="POSIX fork")

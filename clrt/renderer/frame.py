@@ -35,7 +35,7 @@ from clrt.device.context import format_bytes as _size
 from clrt.device.geometry import DeviceGeometry, check_fits, packet_rays, replace_buffer
 from clrt.device.pinned import PinnedPool
 from clrt.device.program import build_program, launch_size, typed_kernel
-from clrt.device.sharing import check_process, one_at_a_time
+from clrt.device.sharing import check_process, forked_after_start, one_at_a_time
 from clrt.errors import DeviceMemoryError, InputError
 from clrt.layouts import HIT, RAY
 from clrt.renderer.tiles import TileLimits, run_tiles
@@ -77,6 +77,17 @@ class Frame:
         return buffer.getvalue()
 
 
+def _rebuilt_renderer(scene: Scene, options: dict, limits: TileLimits) -> "Renderer":
+    """An unpickled (or copied) Renderer: made again from its scene and options
+    (Renderer.__reduce__) -- in a child forked after OpenCL started, a shell
+    whose renders raise the DeviceError (as clrt.query.accel._rebuilt_accel)."""
+    if forked_after_start():
+        shell = Renderer.__new__(Renderer)
+        shell._lock, shell.scene, shell._options, shell.limits = threading.RLock(), scene, options, limits
+        return shell
+    return Renderer(scene, limits=limits, **options)
+
+
 def _own_copy(scene: Scene) -> Scene:
     """A Renderer's own copy of ``scene``: what it uploaded stays what it shows.
     Changing the caller's Scene later (its lights, background, materials) does
@@ -89,7 +100,9 @@ class Renderer:
 
     The renderer keeps its own copy of the scene as it was when made (or last
     refitted): later changes to the caller's Scene object are not shown --
-    use :meth:`set_lights`, :meth:`refit` or a new Renderer.
+    use :meth:`set_lights`, :meth:`refit` or a new Renderer.  A copy or an
+    unpickled Renderer is a new one, made from this one's scene and options
+    (a worker process started by "spawn" can be sent one).
 
     ``accel``: "box" (default), "sphere", "ellipse" (BVH volume shape) or "none"
     (brute force); ``builder``: "auto" (default: "device" where the device
@@ -288,7 +301,15 @@ class Renderer:
         for queries in list(self._followers):
             queries.follow(self, queries.chunk_rays)
 
+    # As an Accel: a copy, a deep copy or an unpickled Renderer is a new one, made
+    # from this one's scene (its lights and refits included) and options -- on the
+    # device named by them -- without the queries that follow this one.
+    def __reduce__(self):
+        return _rebuilt_renderer, (self.scene, dict(self._options), self.limits)
+
     def __repr__(self) -> str:
+        if "arrays" not in self.__dict__:   # _rebuilt_renderer's shell
+            return f"<clrt.Renderer of {self.scene.num_triangles:,} triangles, unpickled where OpenCL cannot run>"
         return (f"<clrt.Renderer of {self.arrays.corners.shape[0]:,} triangles, {len(self.arrays.lights)} light(s), "
                 f"{self.acceleration.accel} ({self.acceleration.builder}) on {self.device}>")
 
