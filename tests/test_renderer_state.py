@@ -1,6 +1,7 @@
 """What a Renderer and the queries made from it keep: the renderer renders its
 own copy of the scene (as it was when made or last refitted); queries from
-Accel.from_renderer follow its refits; copies of an Accel are new Accels.
+Accel.from_renderer follow its refits; copies of an Accel or a Renderer are new
+ones.
 (Found by an audit: a renderer read the caller's light count against the
 lights it had uploaded -- past the end of that buffer -- and shared queries kept
 a rebuilt renderer's old BVH.)"""
@@ -91,3 +92,25 @@ def test_copies_of_an_accel_are_accels_of_their_own(device):
     for make_copy in (copy.copy, copy.deepcopy, pickle.dumps):
         with pytest.raises(clrt.InputError, match="share a Renderer's scene cannot be copied or pickled"):
             make_copy(shared)
+
+
+def test_copies_of_a_renderer_are_renderers_of_their_own(device):
+    """A copy, a deep copy or an unpickled Renderer is made again from the
+    renderer's scene as it shows it (lights set and refits included): the
+    same frames, its own buffers and lock.  (Before: pickles and deep copies
+    failed with a TypeError on an OpenCL context, and copy.copy shared the
+    frame buffers.)"""
+    scene = clrt.scene_from_mesh(TORUS)
+    original = clrt.Renderer(scene, device, limits=clrt.TileLimits(max_tile_pixels=600))
+    original.refit(clrt.scene_from_mesh(_moved(TORUS)))
+    original.set_lights([clrt.Light((2.0, 3.0, 4.0), (1.0, 0.4, 0.2))])
+    cam = _camera(scene)
+    before = original.render(cam).image.copy()
+    assert not np.array_equal(before, clrt.Renderer(scene, device).render(cam).image)
+    for duplicate in (copy.copy(original), copy.deepcopy(original), pickle.loads(pickle.dumps(original))):
+        assert duplicate.geometry is not original.geometry and duplicate._lock is not original._lock
+        assert duplicate.limits == original.limits
+        frame = duplicate.render(cam)
+        assert np.array_equal(frame.image, before) and frame.tiles > 1
+        duplicate.set_lights([])
+        assert np.array_equal(original.render(cam).image, before)

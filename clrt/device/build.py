@@ -52,8 +52,9 @@ the device); only a tree whose rows need more than ``EARLY_ROWS_BYTES``, or
 on a CPU, has the root's row count (which sizes the row buffer) and height
 (which bounds the pointer jumps) read before the rows are emitted.
 
-Builds on one context share scratch buffers and kernel objects: they are not
-thread-safe (as clrt.query.Accel is not).
+Builds on one context share scratch buffers and kernel objects: they take
+turns on the context's lock (threads building Accels at once wait for each
+other's device builds).
 
 :func:`build_acceleration` is the front end the renderer and the ray queries
 call: clrt.accel.build for the host builders, this one for ``builder="device"``.

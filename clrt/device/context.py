@@ -13,13 +13,14 @@ import os
 import re
 import shutil
 import subprocess
+import threading
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Iterable, Sequence
 
 import pyopencl as cl
 
-from clrt.device import warmup
+from clrt.device import sharing, warmup
 from clrt.errors import DeviceError
 
 NVIDIA_LIB = "libnvidia-opencl.so.1"
@@ -76,6 +77,7 @@ class DeviceInfo:
 def _platforms() -> list:
     """All platforms; none when the ICD loader finds no driver (pyopencl raises then)."""
     warmup.wait()        # the loader's first query, if a warm-up thread is making it
+    sharing.driver_started()   # a child forked from now on cannot use it
     try:
         return cl.get_platforms()
     except (cl.Error, RuntimeError):
@@ -331,22 +333,26 @@ def select_device(spec: str | None = None):
 # --------------------------------------------------------------------------- context cache
 
 _CONTEXTS: dict[tuple[int, int], tuple[cl.Context, cl.CommandQueue]] = {}
+_CONTEXTS_LOCK = threading.Lock()
 
 
 def create_context(spec: str | None = None) -> tuple[cl.Context, cl.CommandQueue]:
-    """Context and profiling-enabled queue for the selected device, created once per device."""
+    """Context and profiling-enabled queue for the selected device, created once per
+    device (and process: DeviceError in a child forked after the driver started)."""
+    sharing.check_process()
     info, device, _ = _resolve(spec, _platforms())
     key = (info.platform_index, info.device_index)
-    if key not in _CONTEXTS:
-        try:
-            warm = warmup.take_context(device.int_ptr)
-            ctx = cl.Context.from_int_ptr(warm, retain=False) if warm else cl.Context([device])
-            queue = cl.CommandQueue(
-                ctx, properties=cl.command_queue_properties.PROFILING_ENABLE)
-        except cl.Error as exc:
-            raise DeviceError(f"cannot open OpenCL device {info.short()}: {exc}") from None
-        _CONTEXTS[key] = (ctx, queue)
-    return _CONTEXTS[key]
+    with _CONTEXTS_LOCK:   # threads making their first Accel at once share one context
+        if key not in _CONTEXTS:
+            try:
+                warm = warmup.take_context(device.int_ptr)
+                ctx = cl.Context.from_int_ptr(warm, retain=False) if warm else cl.Context([device])
+                queue = cl.CommandQueue(
+                    ctx, properties=cl.command_queue_properties.PROFILING_ENABLE)
+            except cl.Error as exc:
+                raise DeviceError(f"cannot open OpenCL device {info.short()}: {exc}") from None
+            _CONTEXTS[key] = (ctx, queue)
+        return _CONTEXTS[key]
 
 
 # OpenCL status codes that mean "not enough memory" (on the device or the host).

@@ -196,3 +196,12 @@ def typed_kernel(program: cl.Program, name: str, arg_types) -> cl.Kernel:
     kernel.set_scalar_arg_dtypes(list(arg_types))
     kernel.arg_types = list(arg_types)   # kept for that test
     return kernel
+
+
+def launch_size(items: int, group: int | None) -> tuple:
+    """Global and local size of a 1-D launch of ``items`` work-items in groups of
+    ``group`` (rounded up: the kernel must skip the work-items past the last),
+    or of the driver's choice for None.  (PoCL compiles a variant of a kernel
+    for each work-group size it runs, and chooses the size from the item
+    count: fixed sizes keep the variants few.)"""
+    return ((items,), None) if group is None else ((-(-items // group) * group,), (group,))

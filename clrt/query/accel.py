@@ -31,6 +31,8 @@ bounded by the chunk, not the batch -- see :meth:`Accel.memory`.
 
 from __future__ import annotations
 
+import threading
+
 import numpy as np
 import pyopencl as cl
 
@@ -42,7 +44,9 @@ from clrt.device.context import create_context, device_kind, device_label
 from clrt.device.geometry import DeviceGeometry, check_fits, packet_rays
 from clrt.device import pinned
 from clrt.device.pinned import PinnedPool
-from clrt.device.program import build_program, typed_kernel
+from clrt.device.program import build_program, launch_size, typed_kernel
+from clrt.device import sharing
+from clrt.device.sharing import one_at_a_time
 from clrt.errors import InputError
 from clrt.config import RAY_CHECKS
 from clrt.query.rays import CameraRays, PinholeRays, RayBatch, cull_code, is_device_array
@@ -78,9 +82,17 @@ RAY_STAGING = {"gpu": True, "cpu": False}
 # Measured on the H200 (clrt.bench.raysets --group, docs/benchmarks.md): 128
 # takes 5-7 % off incoherent sets (random, diffuse, AO) against the driver's
 # choice, and 1-2 % off camera rays; 64 is as good on incoherent rays but
-# slower on camera rays.  A CPU device (PoCL) keeps its own choice where a
-# work-item answers one ray.  The kernels skip the work-items past the last ray.
-QUERY_GROUP: dict = {"gpu": 128, "cpu": None}
+# slower on camera rays.  On a CPU device (PoCL) the driver's choice, 8, 64 and
+# 512 measured within the noise of each other, but PoCL compiles and keeps a
+# variant of the kernel for every work-group size it runs, and its own choice
+# follows the batch size (1000 rays: 1000; 4099: 1; 2^20: 4096): a program
+# sending batches of many sizes grew by tens of kB a new size, to hundreds of
+# MB.  A fixed size keeps one variant.  The kernels skip the work-items past
+# the last ray.
+QUERY_GROUP: dict = {"gpu": 128, "cpu": 64}
+# camera_rays (the directions of a clrt.Camera's pixels): the driver's choice
+# on a GPU, the fixed size of QUERY_GROUP on a CPU device.
+CAMERA_RAYS_GROUP: dict = {"gpu": None, "cpu": 64}
 # The same where a work-item of query_closest / query_any answers a packet of
 # rays (clrt.device.geometry.RAY_PACKET_KINDS).  PoCL's own choice for these
 # launches made incoherent rays 4-15 % slower than the single-ray kernels; 8
@@ -88,6 +100,10 @@ QUERY_GROUP: dict = {"gpu": 128, "cpu": None}
 PACKET_GROUP: dict = {"gpu": 128, "cpu": 16}
 RESULT_POOL_SIZE = 3                # page-locked result blocks per Accel (clrt/device/pinned.py)
 RESULT_POOL_MAX_BYTES = 1 << 30     # larger results go to ordinary memory
+# Launch events kept for kernel_ms before their times are summed and the events
+# let go (each holds a few kB of driver memory: kept all, a program that queries
+# all day grew without bound, about 6 kB a query on PoCL).
+LAUNCHES_KEPT = 64
 _ZERO = np.zeros(1, np.float32)
 _INFINITY = np.full(1, np.inf, np.float32)
 
@@ -119,8 +135,19 @@ def _checked_camera(camera):
 
 
 def _rebuilt_accel(vertices, faces, name, options) -> "Accel":
-    """An unpickled Accel: built again from its mesh and options (Accel.__reduce__)."""
-    return Accel(Mesh(vertices, faces, name), **options)
+    """An unpickled Accel: built again from its mesh and options (Accel.__reduce__).
+
+    In a child forked after OpenCL started, no device can be used
+    (clrt.device.sharing): the Accel is then a shell whose queries raise that
+    DeviceError.  Raised here, while unpickling, it would be lost by
+    multiprocessing's pool, which drops a task whose arguments fail to load
+    and waits for its result forever."""
+    mesh = Mesh(vertices, faces, name)
+    if sharing.forked_after_start():
+        shell = Accel.__new__(Accel)
+        shell._lock, shell.mesh, shell._options = threading.RLock(), mesh, options
+        return shell
+    return Accel(mesh, **options)
 
 
 class Accel:
@@ -137,11 +164,16 @@ class Accel:
     ``chunk_rays``: most rays per kernel launch (default: see :meth:`chunk_size`);
     ``max_buffer_bytes``: split scene buffers above this size (split.cl);
     ``max_buffer_label``: where that size came from, for errors (an option's name).
-    Not thread-safe: give each thread its own Accel.
 
     Only the mesh goes by position, as in Renderer: ``Accel(mesh, "sphere")``
     (the former positional order: accel, builder, leaf_size, device,
     chunk_rays) raises InputError showing the call with keywords.
+
+    Threads may share an Accel: its queries, refits and launches take turns
+    (clrt.device.sharing), each call answering as it would alone.  Threads
+    with an Accel each run side by side on the host.  Processes: an Accel
+    pickles (built again where unpickled); a child forked after OpenCL
+    started cannot use any device (DeviceError): use the "spawn" start method.
     """
 
     @checks.keyword_options("accel", "builder", "leaf_size", "device", "chunk_rays")
@@ -150,7 +182,9 @@ class Accel:
                  max_buffer_bytes: int | None = None, max_buffer_label: str = "max_buffer_bytes"):
         _check_chunk_rays(chunk_rays)
         device = checks.device(device)
+        sharing.check_process()   # before a long host build that could not be used
         accel, builder, leaf_size = checks.accel_options(accel, builder, leaf_size)
+        self._lock = threading.RLock()
         self.mesh = as_mesh(mesh)
         corners = triangle_corners(self.mesh)
         built = build_acceleration(corners, accel, builder, leaf_size, device)
@@ -164,6 +198,7 @@ class Accel:
                              max_buffer_label=max_buffer_label)
         self._setup(self.mesh, context, queue, geometry, chunk_rays)
 
+    @one_at_a_time
     def refit(self, vertices, *, rebuild: bool = False) -> None:
         """Move the mesh's vertices to ``vertices`` ((V, 3), the same count; the faces
         stay) and refit the BVH to them on the device: the tree is kept and
@@ -178,7 +213,9 @@ class Accel:
             raise InputError("these queries share a Renderer's scene: use Renderer.refit")
         mesh = Mesh.from_arrays(vertices, faces, self.mesh.name)
         if rebuild or self.geometry.shifts is not None:
-            self.__dict__.update(Accel(mesh, **self._options).__dict__)
+            fresh = Accel(mesh, **self._options).__dict__
+            fresh.pop("_lock")   # the threads waiting on this one's
+            self.__dict__.update(fresh)
             return
         self.geometry.refit(self.queue, as_triangles(triangle_corners(mesh)))
         self.mesh = mesh
@@ -191,11 +228,13 @@ class Accel:
         (as ``Frame.prim``).  They follow the renderer: after ``Renderer.refit``
         (a rebuild included) they answer for the moved scene."""
         self = cls.__new__(cls)
+        self._lock = renderer._lock   # one scene on the device: its refits wait for these queries
         self._options = None   # the renderer's scene: refit the renderer instead
         self.follow(renderer, chunk_rays)
         renderer.add_follower(self)
         return self
 
+    @one_at_a_time
     def follow(self, renderer, chunk_rays: int | None = None) -> None:
         """Take ``renderer``'s current scene, device and buffers (Renderer.refit
         calls this on the queries made by :meth:`from_renderer`)."""
@@ -207,6 +246,8 @@ class Accel:
     # is a new one, built from the same mesh and options -- on the device named
     # by them, which for a pickle may be another machine's.
     def __repr__(self) -> str:
+        if "acceleration" not in self.__dict__:   # _rebuilt_accel's shell
+            return f"<clrt.Accel of {len(self.mesh.faces):,} triangles, unpickled where OpenCL cannot run>"
         return (f"<clrt.Accel of {len(self.mesh.faces):,} triangles, {self.acceleration.accel} "
                 f"({self.acceleration.builder}) on {self.device}>")
 
@@ -255,10 +296,12 @@ class Accel:
         self._buffers: dict[str, cl.Buffer] = {}
         self._hits_per_ray = float(ALL_HITS_PER_RAY)
         self.launches: list[cl.Event] = []   # query launches, see kernel_ms
+        self._launches_ns = 0                  # kernel time of launches let go since kernel_ms
         self.result_pool = PinnedPool(context, queue, RESULT_POOL_SIZE, RESULT_POOL_MAX_BYTES)
 
     # ----------------------------------------------------------------------- chunks and memory
 
+    @one_at_a_time
     def chunk_size(self) -> int:
         """Rays per launch: ``chunk_rays`` if given, else 2**20 -- and without a
         BVH at most 2**30 / triangles (so that one launch stays short), but no
@@ -275,6 +318,7 @@ class Accel:
         # of eight stay together in every chunk.
         return size - size % self.rays_per_item if size >= self.rays_per_item else size
 
+    @one_at_a_time
     def memory(self) -> dict:
         """Upper bounds, in bytes, of what queries keep on the device: ``scene``
         (triangles, BVH, triangle ids), ``chunk`` (rays and results of the
@@ -310,6 +354,8 @@ class Accel:
 
     def _begin(self, source) -> None:
         """Before the first chunk of a batch: no bad ray reported yet."""
+        if len(self.launches) >= LAUNCHES_KEPT:   # all finished: the last query waited for its results
+            self._sum_launches()
         cl.enqueue_copy(self.queue, self._buffer("bad", 4 * len(RAY_CHECKS)),
                         np.full(len(RAY_CHECKS), np.iinfo(np.int32).max, np.int32), is_blocking=True)
 
@@ -332,7 +378,7 @@ class Accel:
             if isinstance(source, CameraRays):
                 kernel = self.kernels["camera_rays"]
                 kernel.set_args(dirs, *source.args, np.uint64(start), np.uint32(m))
-                cl.enqueue_nd_range_kernel(self.queue, kernel, (m,), None)
+                cl.enqueue_nd_range_kernel(self.queue, kernel, *launch_size(m, CAMERA_RAYS_GROUP[self._kind]))
             else:
                 cl.enqueue_copy(self.queue, dirs, source.directions(start, stop), is_blocking=False)
             inputs = [(self._upload("in_0", eye), 0), (dirs, 3), (self._upload("in_2", _ZERO), 0),
@@ -371,14 +417,22 @@ class Accel:
         if name in ("query_closest", "query_any") and self.rays_per_item > 1:
             m = -(-m // self.rays_per_item)      # trace.cl's ITEM_RAYS rays a work-item
             group = PACKET_GROUP[self._kind]
-        size, local = ((m,), None) if group is None else ((-(-m // group) * group,), (group,))
-        self.launches.append(cl.enqueue_nd_range_kernel(self.queue, kernel, size, local))
+        self.launches.append(cl.enqueue_nd_range_kernel(self.queue, kernel, *launch_size(m, group)))
 
+    @one_at_a_time
     def kernel_ms(self) -> float:
         """Kernel time (ms, profiling events) of the query launches since the last
         call of this method -- for benchmarks: what a query costs on the device."""
+        self._sum_launches()
+        total, self._launches_ns = self._launches_ns, 0
+        return 1e-6 * total
+
+    def _sum_launches(self) -> None:
+        """The kept launches' kernel time into ``_launches_ns``, the events let go."""
         done, self.launches = self.launches, []
-        return sum(1e-6 * (e.profile.end - e.profile.start) for e in done)
+        if done:
+            cl.wait_for_events(done)
+        self._launches_ns += sum(e.profile.end - e.profile.start for e in done)
 
     # ----------------------------------------------------------------------- the queries
 
@@ -400,6 +454,7 @@ class Accel:
             offset += sizes[name]
         return out
 
+    @one_at_a_time
     def _closest(self, source, cull: str, fields=None, directions_out: np.ndarray | None = None) -> Hits:
         """Closest hits of every ray of ``source``, the ``fields`` asked for (all by
         default; the others None).  ``directions_out`` (N, 3) float32, for
@@ -450,6 +505,7 @@ class Accel:
 
     closest = trace
 
+    @one_at_a_time
     def _flags(self, kernel: str, batch: RayBatch, cull: str, field: str):
         """One value a ray (query_any: ``hit``, query_count: ``count``) for every ray."""
         code = cull_code(cull)
@@ -482,6 +538,7 @@ class Accel:
         through a shared edge or vertex meets each triangle there)."""
         return self._flags("query_count", RayBatch(origins, directions, tmin, tmax), cull, "count")
 
+    @one_at_a_time
     @with_fields(ALL_HITS_FIELDS, ("K",), heading="Returns", lead="AllHits, a named tuple of these arrays:")
     def all_hits(self, origins, directions, *, tmin=0.0, tmax=np.inf, cull: str = "none") -> AllHits:
         """Every hit in (tmin, tmax] of every ray, found in one traversal per ray,
@@ -586,6 +643,7 @@ class Accel:
         shape = (camera.height, camera.width)
         return Hits(*(a.reshape(shape + a.shape[1:]) for a in hits))
 
+    @one_at_a_time
     def launch_camera(self, camera, out: cl.Buffer, occlusion: bool = False, tile=(8, 8)) -> cl.Event:
         """Enqueue one launch that makes and traces one ray per pixel of ``camera``
         (closest hits as HIT records, or occlusion bytes, into ``out``): the

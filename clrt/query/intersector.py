@@ -28,10 +28,13 @@ The methods, signatures and results are those of
 
 from __future__ import annotations
 
+import threading
+
 import numpy as np
 
 from clrt import checks
 from clrt.config import DEFAULT_ACCEL, DEFAULT_LEAF_SIZE, HOST_DEFAULT_BUILDER
+from clrt.device import sharing
 from clrt.errors import InputError
 from clrt.query.accel import Accel
 from clrt.query.rays import RayBatch, host_rows
@@ -65,7 +68,7 @@ class RayMeshIntersector:
     """
 
     # Left out of pickles and copies: rebuilt on first use (see ``accel``).
-    _DEVICE_STATE = ("_accel", "_key", "_corner0", "_normals", "_scale", "_size", "_corners")
+    _DEVICE_STATE = ("_lock", "_accel", "_key", "_corner0", "_normals", "_scale", "_size", "_corners")
 
     @checks.keyword_options("accel", "builder", "leaf_size", "device", "chunk_rays", "every_triangle")
     def __init__(self, mesh, *, accel: str = DEFAULT_ACCEL, builder: str = HOST_DEFAULT_BUILDER,
@@ -79,6 +82,7 @@ class RayMeshIntersector:
         self._options = dict(accel=accel, builder=builder, leaf_size=leaf_size, device=device,
                              chunk_rays=chunk_rays)
         self.every_triangle = bool(every_triangle)
+        self._lock = threading.Lock()
         self._accel = None
         self._key = None
 
@@ -87,6 +91,7 @@ class RayMeshIntersector:
 
     def __setstate__(self, state: dict) -> None:
         self.__dict__.update(state)
+        self._lock = threading.Lock()
         self._accel = None
         self._key = None
 
@@ -94,22 +99,28 @@ class RayMeshIntersector:
     def accel(self) -> Accel:
         """The uploaded mesh (rebuilt when a trimesh mesh changed since)."""
         key = hash(self.mesh) if self._trimesh else None
-        if self._accel is None or key != self._key:
-            self._accel = Accel(self.mesh, **self._options)
-            self._key = key
-            vertices = np.asarray(self.mesh.vertices, dtype=np.float64)
-            faces = np.asarray(self.mesh.faces, dtype=np.int64)
-            self._corner0 = vertices[faces[:, 0]]
-            self._normals = np.cross(vertices[faces[:, 1]] - vertices[faces[:, 0]],
-                                     vertices[faces[:, 2]] - vertices[faces[:, 0]])
-            lo, hi = vertices.min(axis=0), vertices.max(axis=0)
-            self._scale = float(np.linalg.norm(hi - lo) + np.abs(np.stack([lo, hi])).max())
-            self._size = float(np.linalg.norm(hi - lo))
-            # corners by position (float32, as the device sees them), so that
-            # triangles touch where they share a corner even without sharing an index
-            _, position = np.unique(vertices.astype(np.float32), axis=0, return_inverse=True)
-            self._corners = position.reshape(-1)[faces]
-        return self._accel
+        sharing.check_process()   # a forked child: DeviceError, not a wait on a lock held in the parent
+        with self._lock:   # threads see the Accel only with the arrays below made for it
+            if self._accel is None or key != self._key:
+                self._upload(key)
+            return self._accel
+
+    def _upload(self, key) -> None:
+        """Upload the mesh, and the host arrays that go with it (see _distances, _crossings)."""
+        self._accel = Accel(self.mesh, **self._options)
+        self._key = key
+        vertices = np.asarray(self.mesh.vertices, dtype=np.float64)
+        faces = np.asarray(self.mesh.faces, dtype=np.int64)
+        self._corner0 = vertices[faces[:, 0]]
+        self._normals = np.cross(vertices[faces[:, 1]] - vertices[faces[:, 0]],
+                                 vertices[faces[:, 2]] - vertices[faces[:, 0]])
+        lo, hi = vertices.min(axis=0), vertices.max(axis=0)
+        self._scale = float(np.linalg.norm(hi - lo) + np.abs(np.stack([lo, hi])).max())
+        self._size = float(np.linalg.norm(hi - lo))
+        # corners by position (float32, as the device sees them), so that
+        # triangles touch where they share a corner even without sharing an index
+        _, position = np.unique(vertices.astype(np.float32), axis=0, return_inverse=True)
+        self._corners = position.reshape(-1)[faces]
 
     # ------------------------------------------------------------------ trimesh's methods
 

@@ -16,6 +16,7 @@ Tiling and the memory fallback: tiles.py; page-locked images: clrt/device/pinned
 from __future__ import annotations
 
 import dataclasses
+import threading
 import time
 import weakref
 from dataclasses import dataclass, field
@@ -29,11 +30,12 @@ from clrt import checks, config
 from clrt.config import DEFAULT_ACCEL, DEFAULT_BUILDER, DEFAULT_LEAF_SIZE
 from clrt.device.args import CAMERA_ARG_TYPES, camera_args, vec4
 from clrt.device.build import build_acceleration
-from clrt.device.context import create_context, device_label, error_name, is_out_of_memory
+from clrt.device.context import create_context, device_kind, device_label, error_name, is_out_of_memory
 from clrt.device.context import format_bytes as _size
 from clrt.device.geometry import DeviceGeometry, check_fits, packet_rays, replace_buffer
 from clrt.device.pinned import PinnedPool
-from clrt.device.program import build_program, typed_kernel
+from clrt.device.program import build_program, launch_size, typed_kernel
+from clrt.device.sharing import check_process, forked_after_start, one_at_a_time
 from clrt.errors import DeviceMemoryError, InputError
 from clrt.layouts import HIT, RAY
 from clrt.renderer.tiles import TileLimits, run_tiles
@@ -75,6 +77,17 @@ class Frame:
         return buffer.getvalue()
 
 
+def _rebuilt_renderer(scene: Scene, options: dict, limits: TileLimits) -> "Renderer":
+    """An unpickled (or copied) Renderer: made again from its scene and options
+    (Renderer.__reduce__) -- in a child forked after OpenCL started, a shell
+    whose renders raise the DeviceError (as clrt.query.accel._rebuilt_accel)."""
+    if forked_after_start():
+        shell = Renderer.__new__(Renderer)
+        shell._lock, shell.scene, shell._options, shell.limits = threading.RLock(), scene, options, limits
+        return shell
+    return Renderer(scene, limits=limits, **options)
+
+
 def _own_copy(scene: Scene) -> Scene:
     """A Renderer's own copy of ``scene``: what it uploaded stays what it shows.
     Changing the caller's Scene later (its lights, background, materials) does
@@ -87,7 +100,9 @@ class Renderer:
 
     The renderer keeps its own copy of the scene as it was when made (or last
     refitted): later changes to the caller's Scene object are not shown --
-    use :meth:`set_lights`, :meth:`refit` or a new Renderer.
+    use :meth:`set_lights`, :meth:`refit` or a new Renderer.  A copy or an
+    unpickled Renderer is a new one, made from this one's scene and options
+    (a worker process started by "spawn" can be sent one).
 
     ``scene``: a Scene, or anything :func:`~clrt.scene.sources.as_scene` takes
     (a mesh, a mesh or scene file).  The options go by keyword, in the same
@@ -107,6 +122,10 @@ class Renderer:
     their own (device, accel, builder, leaf_size, where Accel had accel,
     builder, leaf_size, device), so ``Renderer(scene, "gpu")`` now raises
     InputError showing the call with keywords rather than meaning something else.
+
+    Threads may share a Renderer: its renders, refits and light changes take
+    turns (clrt.device.sharing), so a frame shows the scene as it was when
+    the frame began.
     """
 
     @checks.keyword_options("device", "accel", "builder", "leaf_size")
@@ -114,11 +133,13 @@ class Renderer:
                  leaf_size: int = DEFAULT_LEAF_SIZE, device: str | None = None,
                  limits: TileLimits | None = None, max_buffer_bytes: int | None = None):
         device = checks.device(device)
+        check_process()   # before a long host build that could not be used
         accel, builder, leaf_size = checks.accel_options(accel, builder, leaf_size)
         self.limits = limits or TileLimits()
         self._options = dict(accel=accel, builder=builder, leaf_size=leaf_size, device=device,
                              max_buffer_bytes=max_buffer_bytes)   # for a rebuild (refit)
         self.timings: dict[str, float] = {}
+        self._lock = threading.RLock()
         self._followers = weakref.WeakSet()   # Accel.from_renderer's queries, kept on this scene
         with _stage(self.timings, "initialisation"):
             self.scene = _own_copy(as_scene(scene))   # or a mesh, a mesh or scene file: what clrt.render takes
@@ -136,6 +157,7 @@ class Renderer:
         with _stage(self.timings, "copy to device"):
             self.context, self.queue = create_context(device)
             self.device = device_label(self.queue.device)
+            self._kind = device_kind(self.queue.device)   # which ENCODE_GROUP applies
             whole_bytes = sum(x.nbytes for x in whole.values())
             # Without the wide BVH of CPU devices: DeviceGeometry builds it and then
             # gives the whole figure (below) before its first upload.
@@ -189,6 +211,7 @@ class Renderer:
 
     # ----------------------------------------------------------------------- a frame
 
+    @one_at_a_time
     def render(self, camera: Camera | None = None, linear: bool = False, hits: bool = False,
                samples: int | None = None, max_depth: int | None = None, seed: int = 0,
                progress: Callable[[int], None] | None = None) -> Frame:
@@ -253,6 +276,7 @@ class Renderer:
             *scene, self.buffers["lights"], len(self.arrays.lights), vec4(self.scene.ambient_light),
             vec4(self.scene.background), ray_epsilon(self.arrays.bounds, camera.eye), *detail)
 
+    @one_at_a_time
     def refit(self, scene, *, rebuild: bool = False) -> None:
         """Show ``scene``: the same objects with the same triangles as this renderer's
         scene, their vertices moved (animation, deformation).  The BVH is refitted
@@ -273,9 +297,9 @@ class Renderer:
                              "may move): make a new Renderer")
         if rebuild or self.geometry.shifts is not None:
             fresh = Renderer(scene, **self._options, limits=self.limits)
-            followers = self._followers
+            followers, lock = self._followers, self._lock   # the queries and threads on this one
             self.__dict__.update(fresh.__dict__)
-            self._followers = followers
+            self._followers, self._lock = followers, lock
         else:
             self.geometry.refit(self.queue, arrays.corners)
             self.geometry.replace(self.queue, "tri_info", arrays.tri_info[self.acceleration.prim_ids])
@@ -286,7 +310,15 @@ class Renderer:
         for queries in list(self._followers):
             queries.follow(self, queries.chunk_rays)
 
+    # As an Accel: a copy, a deep copy or an unpickled Renderer is a new one, made
+    # from this one's scene (its lights and refits included) and options -- on the
+    # device named by them -- without the queries that follow this one.
+    def __reduce__(self):
+        return _rebuilt_renderer, (self.scene, dict(self._options), self.limits)
+
     def __repr__(self) -> str:
+        if "arrays" not in self.__dict__:   # _rebuilt_renderer's shell
+            return f"<clrt.Renderer of {self.scene.num_triangles:,} triangles, unpickled where OpenCL cannot run>"
         return (f"<clrt.Renderer of {self.arrays.corners.shape[0]:,} triangles, {len(self.arrays.lights)} light(s), "
                 f"{self.acceleration.accel} ({self.acceleration.builder}) on {self.device}>")
 
@@ -294,6 +326,7 @@ class Renderer:
         """Keep ``queries`` (Accel.from_renderer's) on this renderer's scene through refits."""
         self._followers.add(queries)
 
+    @one_at_a_time
     def set_lights(self, lights) -> None:
         """Replace the lights this renderer shows (its copy of the scene's; the
         caller's Scene is left as it is); the geometry stays uploaded (a
@@ -390,7 +423,8 @@ class Renderer:
             out = np.empty((count, 4), np.float32)
             copies = [cl.enqueue_copy(q, out, buf["linear"], is_blocking=False)]
         else:
-            copies = [self._launch("encode_srgb8", (count,), None, buf["linear"], buf["srgb8"], count)]
+            copies = [self._launch("encode_srgb8", *launch_size(count, ENCODE_GROUP[self._kind]), buf["linear"],
+                                   buf["srgb8"], count)]
             out = image.reshape(count * 3) if direct else self._staging[:count]
             copies.append(cl.enqueue_copy(q, out, buf["srgb8"], is_blocking=False))
         if job.prim is not None:
@@ -433,6 +467,11 @@ FRAME_BYTES_PER_PIXEL = RAY.itemsize + HIT.itemsize + 16 + 3
 MIN_FRAME_BYTES = 256 * FRAME_BYTES_PER_PIXEL
 MAX_TILE_PIXELS = 1 << 23   # 8M pixels (a 4K frame), 536 MiB of tile buffers
 IMAGE_POOL_SIZE = 3         # page-locked images per renderer (clrt/device/pinned.py)
+# Work-items per work-group of encode_srgb8 (one a pixel): the driver's choice
+# on a GPU; fixed on a CPU device, where PoCL keeps a compiled variant for
+# every size it runs and would choose one from each tile's pixel count
+# (clrt.device.program.launch_size).
+ENCODE_GROUP: dict = {"gpu": None, "cpu": 64}
 HOST_CHECK_BYTES = 1 << 28  # frames needing more host memory than this check that it is there
 
 
