@@ -70,7 +70,7 @@ def test_forked_child_refuses_device_work(device):
     by pickle, with one line naming the fix."""
     global _accel
     _accel = clrt.Accel(primitives.icosphere(1), device=device)
-    renderer = clrt.Renderer(clrt.scene_from_mesh(primitives.icosphere(1)), device)
+    renderer = clrt.Renderer(clrt.scene_from_mesh(primitives.icosphere(1)), device=device)
     try:
         _accel.trace(*_rays())
         with multiprocessing.get_context("fork").Pool(1) as pool:
@@ -89,7 +89,7 @@ def test_spawned_worker_gets_a_pickled_accel_and_renderer(device):
     """With the spawn start method, an Accel and a Renderer sent to a worker
     are built again there and answer as the parent's do."""
     accel = clrt.Accel(primitives.icosphere(1), device=device, builder="sah")
-    renderer = clrt.Renderer(clrt.scene_from_mesh(primitives.icosphere(1)), device)
+    renderer = clrt.Renderer(clrt.scene_from_mesh(primitives.icosphere(1)), device=device)
     want, image = accel.trace(*_rays()).t, renderer.render(_CAMERA).image
     with multiprocessing.get_context("spawn").Pool(1) as pool:
         got = pool.apply_async(_trace_with_given, (accel,)).get(timeout=WAIT_S)

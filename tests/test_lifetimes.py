@@ -68,7 +68,7 @@ def test_dropped_accels_and_renderers_free_their_device_buffers(device):
         del accel
         assert _only_here(buffers)
 
-        renderer = clrt.Renderer(scene_from_mesh(primitives.torus(1.0, 0.35, 16, 8)), device)
+        renderer = clrt.Renderer(scene_from_mesh(primitives.torus(1.0, 0.35, 16, 8)), device=device)
         renderer.render(Camera(eye=(0, 1, 3), target=(0, 0, 0), width=32, height=24))
         queries = clrt.Accel.from_renderer(renderer)
         queries.trace(origins, directions)
@@ -92,7 +92,7 @@ def test_batches_of_many_sizes_take_one_work_group_size(device, monkeypatch):
               for volume in ("box", "sphere")]     # sphere volumes: single-ray closest hits
     if device_kind(accels[0].queue.device) != "cpu":
         pytest.skip("the driver's choice stays on GPUs (QUERY_GROUP)")
-    renderer = clrt.Renderer(scene_from_mesh(primitives.torus(1.0, 0.35, 16, 8)), device)
+    renderer = clrt.Renderer(scene_from_mesh(primitives.torus(1.0, 0.35, 16, 8)), device=device)
     groups: dict[tuple, set] = {}     # (kernel, its handle): the group sizes it ran
     enqueue = cl.enqueue_nd_range_kernel
 

@@ -101,12 +101,12 @@ def test_copies_of_a_renderer_are_renderers_of_their_own(device):
     failed with a TypeError on an OpenCL context, and copy.copy shared the
     frame buffers.)"""
     scene = clrt.scene_from_mesh(TORUS)
-    original = clrt.Renderer(scene, device, limits=clrt.TileLimits(max_tile_pixels=600))
+    original = clrt.Renderer(scene, device=device, limits=clrt.TileLimits(max_tile_pixels=600))
     original.refit(clrt.scene_from_mesh(_moved(TORUS)))
     original.set_lights([clrt.Light((2.0, 3.0, 4.0), (1.0, 0.4, 0.2))])
     cam = _camera(scene)
     before = original.render(cam).image.copy()
-    assert not np.array_equal(before, clrt.Renderer(scene, device).render(cam).image)
+    assert not np.array_equal(before, clrt.Renderer(scene, device=device).render(cam).image)
     for duplicate in (copy.copy(original), copy.deepcopy(original), pickle.loads(pickle.dumps(original))):
         assert duplicate.geometry is not original.geometry and duplicate._lock is not original._lock
         assert duplicate.limits == original.limits

@@ -87,7 +87,7 @@ def _cameras(count: int) -> list:
 def test_threads_share_one_renderer(device):
     """Three threads render other views with one Renderer: each frame (image
     and hits) is the one rendered alone."""
-    renderer = clrt.Renderer(scene_from_mesh(primitives.torus(1.0, 0.35, 24, 12)), device)
+    renderer = clrt.Renderer(scene_from_mesh(primitives.torus(1.0, 0.35, 24, 12)), device=device)
     cameras = _cameras(3)
     want = [renderer.render(c, hits=True) for c in cameras]
     want = [(f.image.copy(), f.prim.copy()) for f in want]
@@ -107,7 +107,7 @@ def test_refit_and_lights_while_other_threads_render_and_query(device):
     meshes = [primitives.torus(1.0, 0.35, 24, 12), primitives.torus(1.0, 0.5, 24, 12)]   # same triangles
     lights = [[Light((0.0, 4.0, 3.0))], [Light((3.0, 4.0, 0.0), (1.0, 0.5, 0.5))]]
     scenes = [scene_from_mesh(m, lights=l) for m, l in zip(meshes, lights)]
-    renderer = clrt.Renderer(scenes[0], device)
+    renderer = clrt.Renderer(scenes[0], device=device)
     queries = clrt.Accel.from_renderer(renderer, chunk_rays=512)
     camera, rays = _cameras(1)[0], _rays(3, 1500)
     frames, answers = [], []

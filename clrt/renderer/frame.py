@@ -317,6 +317,8 @@ class Renderer:
         return _rebuilt_renderer, (self.scene, dict(self._options), self.limits)
 
     def __repr__(self) -> str:
+        if "scene" not in self.__dict__:    # its __init__ failed
+            return "<clrt.Renderer, not made>"
         if "arrays" not in self.__dict__:   # _rebuilt_renderer's shell
             return f"<clrt.Renderer of {self.scene.num_triangles:,} triangles, unpickled where OpenCL cannot run>"
         return (f"<clrt.Renderer of {self.arrays.corners.shape[0]:,} triangles, {len(self.arrays.lights)} light(s), "
