@@ -155,6 +155,11 @@ BATCH_MANIFEST_SECONDS = 1.0
 #: Retries of a task that raised an unexpected error; a task whose worker died is
 #: retried elsewhere by Dask (distributed.scheduler.allowed-failures, default 3).
 BATCH_TASK_RETRIES = 1
+#: A finished task whose result was lost with its worker (Dask's future status
+#: "lost": the worker died before the client fetched the records) is submitted
+#: again, at most this many times; its images are on disk, so the new task
+#: finds them.
+BATCH_LOST_RESUBMITS = 2
 #: Seconds to wait for an existing Dask scheduler (--scheduler).
 BATCH_CONNECT_TIMEOUT = 10.0
 #: Seconds past BATCH_CONNECT_TIMEOUT that a scheduler has to finish Dask's

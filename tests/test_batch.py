@@ -577,6 +577,53 @@ def test_losing_the_scheduler_mid_batch_is_reported_as_such(meshes, tmp_path, de
         assert sorted(r["path"] for r in records) == sorted(_images(folder))
 
 
+class _Completed:
+    """distributed.as_completed over futures that are done at submit, with add()."""
+
+    def __init__(self, futures):
+        self.queue = list(futures)
+
+    def add(self, future):
+        self.queue.append(future)
+
+    def __iter__(self):
+        while self.queue:
+            yield self.queue.pop(0)
+
+
+class _LosingClient(_InProcessClient):
+    """Each task's first result comes back lost after the task ran (its images
+    written), as when another task kills the worker that held the result."""
+
+    def __init__(self):
+        super().__init__(10 ** 6)
+        self.seen = set()
+
+    def submit(self, fn, job, retries=0, **kwargs):
+        future = super().submit(fn, job, retries, **kwargs)
+        task = (job["source"], job["views"][0])
+        if task not in self.seen:
+            self.seen.add(task)
+            future.status, future._value = "lost", None
+        return future
+
+
+def test_results_lost_with_a_worker_are_submitted_again(meshes, tmp_path, device, monkeypatch):
+    """A result lost with its worker while the cluster runs on is no reason to
+    stop the batch: the task is submitted again, finds its images, and every
+    frame is recorded done."""
+    import distributed
+    monkeypatch.setattr(distributed, "as_completed", _Completed)
+    monkeypatch.setenv("CLRT_DEVICE", device or "")
+    client = _LosingClient()
+    summary = clrt.batch.run(meshes, tmp_path / "out", views=2, client=client, device=device, **SIZE)
+    records = _manifest(tmp_path / "out")
+    assert len(client.seen) == len(meshes) and len(summary.outputs) == 2 * len(meshes)
+    assert summary.count("failed") == 0
+    assert records and {r["status"] for r in records} == {"done"}
+    assert sorted(r["path"] for r in records) == sorted(_images(tmp_path / "out"))
+
+
 def test_unwritable_output_is_not_reported_as_a_bad_source_per_frame(meshes, tmp_path, device, capsys,
                                                                       monkeypatch):
     """Images that cannot be written (read-only folder, full disk) are "failed",

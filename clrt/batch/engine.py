@@ -24,7 +24,7 @@ from clrt import checks
 from clrt.batch.cluster import dashboard_link, default_workers, require_dask, start_local_cluster
 from clrt.batch.jobs import Source, expand_sources, output_path, plan_tasks, settings_key
 from clrt.batch.manifest import FolderLock, Manifest
-from clrt.config import (BATCH_CACHE_SCENES, BATCH_TASK_RETRIES, DEFAULT_ACCEL, DEFAULT_BUILDER,
+from clrt.config import (BATCH_CACHE_SCENES, BATCH_LOST_RESUBMITS, BATCH_TASK_RETRIES, DEFAULT_ACCEL, DEFAULT_BUILDER,
                          DEFAULT_LEAF_SIZE, MAX_IMAGE_SIDE, MAX_VIEWS, MAX_WORKERS)
 from clrt.errors import InputError, OutputError
 from clrt.scene.render_setup import CAMERA_OPTIONS, MATERIAL_OPTIONS, SCENE_OPTIONS
@@ -280,23 +280,38 @@ def _execute(client, jobs: list, folder: Path, manifest: Manifest, device, progr
     client.register_plugin(DevicePlugin(device, BATCH_CACHE_SCENES, ignore_interrupts=local))
     # Each job's images as they are before any task runs (see _remove_unrecorded)
     before = [{v: _file_id(folder / job["paths"][v]) for v in job["views"]} for job in jobs]
-    futures = {}
-    for job, files in zip(jobs, before):
-        future = client.submit(render_task, job, pure=False, retries=BATCH_TASK_RETRIES,
-                               key=f"clrt-render-{job['name']}-{job['views'][0]:04d}-{uuid.uuid4().hex[:12]}")
-        futures[future] = job, files
+    def submit(job):
+        return client.submit(render_task, job, pure=False, retries=BATCH_TASK_RETRIES,
+                             key=f"clrt-render-{job['name']}-{job['views'][0]:04d}-{uuid.uuid4().hex[:12]}")
+
+    futures = {submit(job): (job, files, 0) for job, files in zip(jobs, before)}
     total = sum(len(job["views"]) for job in jobs)
     bar = _progress_bar(total, progress)
     outputs = []
     try:
-        for future in as_completed(futures):
-            job, files = futures[future]
+        done = as_completed(futures)
+        for future in done:
+            job, files, resubmits = futures[future]
             if future.status == "finished":
-                records = future.result()
+                try:
+                    records = future.result()
+                except Exception:   # noqa: BLE001 -- lost between finishing and its fetch
+                    records = None
             elif future.status == "error":
                 records = _failed_records(job, future)
                 _remove_unrecorded(folder, job, files)
-            else:   # cancelled by the scheduler, or the client lost it: never the frames' fault
+            else:
+                records = None
+            if records is None:
+                # Lost with the worker that held it (another task killed that
+                # worker) while the cluster runs on: submit it again.  Cancelled,
+                # or the client lost the scheduler: never the frames' fault.
+                if future.status in ("lost", "finished") and getattr(client, "status", None) == "running" \
+                        and resubmits < BATCH_LOST_RESUBMITS:
+                    again = submit(job)
+                    futures[again] = job, files, resubmits + 1
+                    done.add(again)
+                    continue
                 raise ClusterLost(_lost_reason(client, future))
             for record in records:
                 manifest.add(record)
