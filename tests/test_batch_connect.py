@@ -162,3 +162,41 @@ def test_real_ctrl_c_of_the_command_is_handled_by_the_batch(tmp_path):
             proc.wait()
     assert proc.returncode == 130
     assert "run the same command again to resume" in err, err[-500:]
+
+
+def test_a_dashboard_link_is_shown_only_if_its_page_answers():
+    """A scheduler started with --no-dashboard still lists an HTTP service, whose
+    /status page is missing: no link then; a page that answers keeps its link."""
+    import http.server
+    import threading
+
+    from clrt.batch.cluster import dashboard_link
+
+    class Pages(http.server.BaseHTTPRequestHandler):
+        def do_GET(self):
+            self.send_response(200 if self.path == "/status" else 404)
+            self.end_headers()
+            self.wfile.write(b"ok")
+
+        def log_message(self, *args):
+            pass
+
+    server = http.server.HTTPServer(("127.0.0.1", 0), Pages)
+    threading.Thread(target=server.serve_forever, daemon=True).start()
+    base = f"http://127.0.0.1:{server.server_address[1]}"
+
+    class RemoteClient:            # what dashboard_link reads of a distributed.Client
+        cluster = None
+
+        def __init__(self, link):
+            self.dashboard_link = link
+
+        def scheduler_info(self):
+            return {"services": {"dashboard": server.server_address[1]}}
+
+    try:
+        assert dashboard_link(RemoteClient(base + "/status")) == base + "/status"
+        assert dashboard_link(RemoteClient(base + "/missing")) is None
+    finally:
+        server.shutdown()
+        server.server_close()

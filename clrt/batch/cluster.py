@@ -177,12 +177,32 @@ def _close_quietly(clients) -> None:
             pass
 
 
+#: Seconds to wait for a scheduler's dashboard page before leaving its link out.
+DASHBOARD_PROBE_SECONDS = 1.0
+
+
 def dashboard_link(client) -> str | None:
-    """The dashboard's address when the scheduler runs one (it needs bokeh)."""
+    """The dashboard's address when the scheduler runs one (it needs bokeh).
+    A scheduler started with --no-dashboard still lists an HTTP service (its
+    health and metrics pages), so another's link is shown only if its page
+    answers."""
     if importlib.util.find_spec("bokeh") is None and client.cluster is not None:
         return None   # our local cluster: only health and metrics pages without bokeh
     try:
         port = client.scheduler_info().get("services", {}).get("dashboard")
     except Exception:  # noqa: BLE001 -- only informative
         return None
-    return client.dashboard_link if port else None
+    if not port:
+        return None
+    link = client.dashboard_link
+    return link if client.cluster is not None or page_answers(link) else None
+
+
+def page_answers(url: str) -> bool:
+    """Does an HTTP GET of ``url`` succeed (2xx after redirects) within DASHBOARD_PROBE_SECONDS?"""
+    import urllib.request
+    try:
+        with urllib.request.urlopen(url, timeout=DASHBOARD_PROBE_SECONDS) as response:   # noqa: S310 -- http only
+            return 200 <= response.status < 300
+    except (OSError, ValueError):     # refused, timed out, 404 (HTTPError), not a URL
+        return False
