@@ -114,6 +114,8 @@ def test_only_the_source_goes_by_position(func):
      "Accel(mesh, accel='box', builder='sah', leaf_size=2, device='cpu')"),
     (lambda m: clrt.RayMeshIntersector(m, True), "RayMeshIntersector(mesh, accel=True)"),
     (lambda m: clrt.Accel.from_renderer(m, 4096), "Accel.from_renderer(renderer, chunk_rays=4096)"),
+    (lambda m: clrt.Renderer(clrt.scene_from_mesh(m)).render(None, True, True),
+     "Renderer.render(camera, linear=True, hits=True)"),
 ])
 def test_a_positional_option_says_how_to_write_it(sphere, call, spelled):
     """The former positional orders fail at the call, naming the keywords they

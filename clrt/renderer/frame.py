@@ -212,7 +212,8 @@ class Renderer:
     # ----------------------------------------------------------------------- a frame
 
     @one_at_a_time
-    def render(self, camera: Camera | None = None, linear: bool = False, hits: bool = False,
+    @checks.keyword_options("linear", "hits", "samples", "max_depth", "seed", "progress")
+    def render(self, camera: Camera | None = None, *, linear: bool = False, hits: bool = False,
                samples: int | None = None, max_depth: int | None = None, seed: int = 0,
                progress: Callable[[int], None] | None = None) -> Frame:
         """Render one frame.
