@@ -119,3 +119,17 @@ def test_a_scene_too_large_for_the_triangle_test_is_refused_when_rendered(device
     err = capsys.readouterr().err.strip()
     assert code == 2 and len(err.splitlines()) == 1 and "float32 triangle test overflows" in err, err
     assert not (tmp_path / "out.png").exists()
+
+
+@pytest.mark.parametrize("scale, offset", [(1e-6, 0.0), (1e-9, 0.0), (1e-12, 0.0), (1.0, 1e5), (1e-9, 1e-3)])
+def test_automatic_framing_fills_the_frame_at_any_scale(scale, offset, device):
+    """A mesh framed by clrt covers as much of the image whether it is a metre,
+    a micron or a nanometre across, at the origin or far from it (the framing
+    once kept the camera at least 1e-6 away: a nanometre mesh was a speck)."""
+    sphere = primitives.icosphere(2)
+    unit = clrt.Renderer(sphere, device=device).render(hits=True)
+    moved = Mesh.from_arrays(sphere.vertices.astype(np.float64) * scale + offset * np.array([1.0, 0.6, -0.4]),
+                             sphere.faces)
+    frame = clrt.Renderer(moved, device=device).render(hits=True)
+    covered, expected = (frame.prim >= 0).mean(), (unit.prim >= 0).mean()
+    assert 0.1 < expected < 0.5 and abs(covered - expected) < 0.01 * expected, (covered, expected)
