@@ -88,29 +88,30 @@ def test_bad_input_is_one_line_exit_2_and_writes_nothing(args, fragment, tmp_pat
                                                           ["box.obj", "clrt-default.png"])
 
 
-def test_a_mesh_too_large_to_frame_renders_from_the_camera_given(tmp_path, device, capsys):
-    """Only the automatic framing needs the camera clrt would place to be in
-    range: with --eye and --target (or a scene file's camera) the render goes on,
-    and the default light comes nearer the eye instead of refusing."""
+def test_a_mesh_too_large_to_frame_is_refused_from_any_camera(tmp_path, device, capsys):
+    """A mesh too large for the framed camera to stay within +-1e30 is refused
+    with that reason; from a camera the user places (--eye and --target, or a
+    scene file's camera) it is refused too, in one line, because its triangles
+    are far too large for the float32 triangle test (clrt.device.reach): such a
+    render once went on and drew nothing."""
     huge = tmp_path / "huge.off"
     huge.write_text("OFF\n3 1 0\n-9e29 -9e29 0\n9e29 -9e29 0\n0 9e29 0\n3 0 1 2\n")
     size = ["--width", "8", "--height", "6"]
     code, out, err = _render([str(huge), "-o", str(tmp_path / "framed.png"), *size], device, capsys)
     assert code == 2 and len(err.strip().splitlines()) == 1 and "cannot frame the scene" in err
-    assert not (tmp_path / "framed.png").exists()
     code, out, err = _render([str(huge), "-o", str(tmp_path / "placed.png"), *size,
                               "--eye", "0,0,9.5e29", "--target", "0,0,0"], device, capsys)
-    assert code == 0, err
-    assert Image.open(tmp_path / "placed.png").size == (8, 6)
+    assert code == 2 and len(err.strip().splitlines()) == 1 and "float32 triangle test overflows" in err, err
     (tmp_path / "scene.toml").write_text('[camera]\neye = [0, 0, 9.5e29]\ntarget = [0, 0, 0]\n'
                                          'width = 8\nheight = 6\n[[objects]]\ntype = "mesh"\n'
                                          'path = "huge.off"\n')
     code, out, err = _render([str(tmp_path / "scene.toml"), "-o", str(tmp_path / "file.png")], device, capsys)
-    assert code == 0, err
+    assert code == 2 and len(err.strip().splitlines()) == 1 and "float32 triangle test overflows" in err, err
     # Only --eye: the rest of the camera is still framed, so still one line, exit 2.
     code, out, err = _render([str(huge), "-o", str(tmp_path / "half.png"), *size, "--eye", "0,0,9.5e29"],
                              device, capsys)
     assert code == 2 and len(err.strip().splitlines()) == 1 and "cannot frame the scene" in err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["huge.off", "scene.toml"], "nothing written"
 
 
 def test_info_lists_devices_and_marks_one(capsys):

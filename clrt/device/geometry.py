@@ -18,6 +18,7 @@ from clrt.accel.rows import child_refs
 from clrt.accel.wide import WIDE, WideBvh, collapse
 from clrt.config import MAX_PARTS, VOLUME_DEFINES, stack_size
 from clrt.device.context import device_kind, format_bytes
+from clrt.device.reach import Reach
 from clrt.errors import DeviceMemoryError, InputError
 from clrt.layouts import TRIANGLE_VERTS
 from clrt.scene.arrays import triangle_verts
@@ -109,12 +110,18 @@ class DeviceGeometry:
     ``fits``: called with ``nbytes`` -- every buffer here, the wide BVH of CPU
     devices included (built here, so known only here) -- before the first
     upload; :func:`check_fits` raises there when the scene cannot fit.
+
+    ``bounds``: (2, 3) min and max corner of the triangles, when the caller has
+    them (else computed); ``reach`` (:class:`clrt.device.reach.Reach`) tells the
+    queries and the renderer how far from the triangles their rays may start.
     """
 
     def __init__(self, context: cl.Context, corners: np.ndarray, acceleration: Acceleration,
                  extra: dict | None = None, max_buffer_bytes: int | None = None,
-                 fits: Callable[[int], None] | None = None, max_buffer_label: str = "max_buffer_bytes"):
+                 fits: Callable[[int], None] | None = None, max_buffer_label: str = "max_buffer_bytes",
+                 bounds=None):
         self.acceleration = acceleration
+        self.reach = Reach(corners, bounds)
         prim_ids = acceleration.prim_ids
         # A tree built on this context's device is on it already, with its
         # triangles in slot order: taken over (once), not uploaded again.
@@ -183,9 +190,10 @@ class DeviceGeometry:
         wide = (*b["wide_nodes"], *b["packets"]) if self.wide is not None else ()
         return (*b["tris"], self.num_tris, *b["nodes"], *b["prim_ids"], *wide)
 
-    def refit(self, queue: cl.CommandQueue, corners: np.ndarray) -> None:
+    def refit(self, queue: cl.CommandQueue, corners: np.ndarray, bounds=None) -> None:
         """Move the triangles to ``corners`` (F, 3, 3) float32, input order, the same
-        triangles as before, and refit the BVH to them on the device: the tree
+        triangles as before (``bounds``: their min and max corner, or None), and
+        refit the BVH to them on the device: the tree
         and the slots stay, every volume is fitted anew to its subtree's exact
         box as a build fits it (refit.cl).  The host copy of the rows follows;
         the statistics keep describing the tree as it was built."""
@@ -195,6 +203,7 @@ class DeviceGeometry:
                              "build it anew")
         if len(corners) != len(acceleration.prim_ids):
             raise InputError(f"refit needs the same {len(acceleration.prim_ids):,} triangles, got {len(corners):,}")
+        self.reach = Reach(corners, bounds)
         cl.enqueue_copy(queue, self.buffers["tris"][0], triangle_verts(corners[acceleration.prim_ids]))
         if not acceleration.is_bvh:
             return

@@ -191,7 +191,7 @@ class Accel:
         context, queue = create_context(device)
         label = device_label(queue.device)
         geometry = DeviceGeometry(context, corners, built, max_buffer_bytes=max_buffer_bytes,
-                                  max_buffer_label=max_buffer_label,
+                                  max_buffer_label=max_buffer_label, bounds=self.mesh.bounds,
                                   fits=lambda nbytes: check_fits(queue.device, label, nbytes))   # before any upload
         self._options = dict(accel=accel, builder=builder, leaf_size=leaf_size, device=device,
                              chunk_rays=chunk_rays, max_buffer_bytes=max_buffer_bytes,
@@ -217,7 +217,7 @@ class Accel:
             fresh.pop("_lock")   # the threads waiting on this one's
             self.__dict__.update(fresh)
             return
-        self.geometry.refit(self.queue, as_triangles(triangle_corners(mesh)))
+        self.geometry.refit(self.queue, as_triangles(triangle_corners(mesh)), mesh.bounds)
         self.mesh = mesh
 
     @classmethod
@@ -353,11 +353,25 @@ class Accel:
     # ----------------------------------------------------------------------- rays in
 
     def _begin(self, source) -> None:
-        """Before the first chunk of a batch: no bad ray reported yet."""
+        """Before the first chunk of a batch: origins within the range of the
+        triangle test (clrt.device.reach), no bad ray reported yet."""
+        self._check_reach(source)
         if len(self.launches) >= LAUNCHES_KEPT:   # all finished: the last query waited for its results
             self._sum_launches()
         cl.enqueue_copy(self.queue, self._buffer("bad", 4 * len(RAY_CHECKS)),
                         np.full(len(RAY_CHECKS), np.iinfo(np.int32).max, np.int32), is_blocking=True)
+
+    def _check_reach(self, source) -> None:
+        """InputError when rays of ``source`` start so far from the scene that the
+        float32 triangle test could overflow and miss hits (clrt.device.reach).
+        Host origins cost one pass (their extreme values); origins already on
+        the device are not checked."""
+        reach = self.geometry.reach
+        if isinstance(source, (CameraRays, PinholeRays)):
+            eye = np.asarray(source.camera.eye if isinstance(source, CameraRays) else source.eye, np.float32)
+            reach.check(eye, eye, "the camera's eye lies")
+        elif not is_device_array(source.inputs[0][0]):
+            reach.check_points(source.inputs[0][0], "ray origins lie up to")
 
     def _check(self, source) -> None:
         """After the last chunk: InputError for the first bad ray the kernels saw."""

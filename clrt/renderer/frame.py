@@ -171,7 +171,7 @@ class Renderer:
             try:
                 # Buffers larger than one allocation are uploaded in parts (split.cl).
                 self.geometry = DeviceGeometry(self.context, a.corners, self.acceleration, split,
-                                               max_buffer_bytes, fits=fits)
+                                               max_buffer_bytes, fits=fits, bounds=a.bounds)
                 mf = cl.mem_flags
                 self.buffers = {name: cl.Buffer(self.context, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=x)
                                 for name, x in whole.items()}
@@ -228,6 +228,8 @@ class Renderer:
         samples**2 in all; a tile retried after running out of memory counts again).
         """
         job = self._job(camera, linear, hits, samples, max_depth, seed)
+        # Rays from too far for the float32 triangle test: one error, not missed hits.
+        self.geometry.reach.check_render(job.camera.eye, ray_epsilon(self.arrays.bounds, job.camera.eye))
         job.camera_args, job.scene_args = self._frame_args(job.camera)
         job.progress = progress or (lambda n: None)
         capacity = self.tile_capacity(job.camera.width * job.camera.height)
@@ -302,7 +304,7 @@ class Renderer:
             self.__dict__.update(fresh.__dict__)
             self._followers, self._lock = followers, lock
         else:
-            self.geometry.refit(self.queue, arrays.corners)
+            self.geometry.refit(self.queue, arrays.corners, arrays.bounds)
             self.geometry.replace(self.queue, "tri_info", arrays.tri_info[self.acceleration.prim_ids])
             self.geometry.replace(self.queue, "vertex_normals", arrays.vertex_normals)
             cl.enqueue_copy(self.queue, self.buffers["materials"], arrays.materials)   # as many as before

@@ -157,7 +157,11 @@ class Camera:
         _check_image(width, height, fov)
         bounds = np.asarray(bounds, dtype=np.float64)
         centre = bounds.mean(axis=0)
-        radius = max(0.5 * float(np.linalg.norm(bounds[1] - bounds[0])), 1e-6 * (1 + np.abs(centre).max()))
+        # At least a float32 step or so of the centre, so that the eye stands apart
+        # from it on the device; relative only, so that a mesh a micron or a
+        # nanometre across fills the frame as a metre one does (a point at the
+        # origin, with no size at all, gets 1e-6).
+        radius = max(0.5 * float(np.linalg.norm(bounds[1] - bounds[0])), 1e-6 * float(np.abs(centre).max())) or 1e-6
         half = math.radians(fov) / 2.0
         half = min(half, math.atan(math.tan(half) * width / height))
         d = np.asarray(direction, dtype=np.float64)

@@ -1,0 +1,140 @@
+"""How far from a scene its rays may start: the float32 range of the triangle test.
+
+Woop's watertight test (triangle.cl) measures a triangle from the ray's
+origin and ends with ``T = U*(Sz*Az) + V*(Sz*Bz) + W*(Sz*Cz)``, ``t = T / det``.
+For a ray that meets the triangle, U, V and W share a sign and add up to
+``det``, twice the area of the triangle sheared along the ray, and each
+``Sz*z`` is a corner's depth along the ray, so ``|T| <= det * sqrt(3) * rho``
+(rho: the distance from the origin to the triangle's farthest corner;
+``|Sz| <= sqrt(3)`` for a unit direction).  The sheared triangle is the
+triangle seen along the ray, stretched by at most sqrt(3), and its corners
+carry up to ``6 u rho`` of rounding each (u = 2^-24: the origin subtracted,
+the shear applied), so
+
+    det <= 2 sqrt(3) A + 90 u L rho + 470 u^2 rho^2
+    |T| <= 6 A rho + 9.3e-6 L rho^2 + 2.9e-12 rho^3          (A: area, L: longest edge)
+
+When that stays below FLT_MAX nothing in the test overflows (its other
+products are smaller).  Past it, T becomes infinite or NaN and the hit is
+lost: silently, a triangle 1e12 across seen from 1e15 away is missed (the
+first term), and so is every oblique ray from past ~5e16 (the last one, where
+rounding alone outgrows any triangle).  The bound is conservative by a factor
+of about three against the overflows measured on PoCL (docs/limits.md,
+"Precision"), so it refuses only scenes within that factor of losing hits.
+
+:class:`Reach` holds a scene's side of the bound; the queries check each
+batch's origins against it (``Accel``) and the renderer its eye and the
+scene's own secondary rays, raising one InputError instead of missing hits.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from clrt import checks
+from clrt.errors import InputError
+
+FLT_MAX = float(np.finfo(np.float32).max)
+# The bound's terms (module docstring), rounded up; the last factor covers
+# the relative rounding of the products and sums that form T (a few u).
+_AREA, _EDGE, _ROUNDING = 6.0, 9.3e-6, 2.9e-12
+_SLACK = 1.0 + 1e-5
+# Scenes up to this diagonal bound their triangles by it (no pass over them):
+# the first term then passes FLT_MAX only where the last one has already
+# (rho > 5e16), so measuring would refuse nothing less.  Larger scenes are
+# measured once, when made (an O(F) pass; 0.15 s per million triangles on
+# the 2-core development machine).
+MEASURE_DIAGONAL = 1e9
+_BLOCK = 1 << 18                    # triangles measured at a time (bounded temporaries)
+
+
+def _farthest(lo_a, hi_a, lo_b, hi_b) -> float:
+    """The largest distance between a point of box a and a point of box b."""
+    span = np.maximum(np.asarray(hi_b, np.float64) - lo_a, np.asarray(hi_a, np.float64) - lo_b)
+    with np.errstate(over="ignore"):
+        return float(np.linalg.norm(span))
+
+
+def _largest_triangle(corners: np.ndarray) -> tuple[float, float]:
+    """(largest area, longest edge) of (F, 3, 3) float32 corners, in float64."""
+    area2 = edge2 = 0.0
+    for start in range(0, len(corners), _BLOCK):
+        c = corners[start:start + _BLOCK].astype(np.float64)
+        e1, e2, e3 = c[:, 1] - c[:, 0], c[:, 2] - c[:, 0], c[:, 2] - c[:, 1]
+        cross = np.cross(e1, e2)
+        area2 = max(area2, float(np.einsum("ij,ij->i", cross, cross).max(initial=0.0)))
+        edge2 = max(edge2, *(float(np.einsum("ij,ij->i", e, e).max(initial=0.0)) for e in (e1, e2, e3)))
+    return 0.5 * math.sqrt(area2), math.sqrt(edge2)
+
+
+class Reach:
+    """A scene's side of the float32 range of the triangle test (module docstring).
+
+    ``corners``: (F, 3, 3) float32 triangle corners (not kept); ``bounds``:
+    (2, 3) their min and max corner (computed from ``corners`` when None).
+    """
+
+    def __init__(self, corners: np.ndarray, bounds=None):
+        if bounds is None:
+            flat = corners.reshape(-1, 3)
+            bounds = [[flat[:, k].min() for k in range(3)], [flat[:, k].max() for k in range(3)]]
+        self.lo, self.hi = (np.asarray(b, np.float64) for b in bounds)
+        self.diagonal = float(np.linalg.norm(self.hi - self.lo))
+        if self.diagonal > MEASURE_DIAGONAL:
+            self.area, self.edge = _largest_triangle(corners)
+        else:
+            # Every triangle lies in the bounds: no edge is longer than the diagonal,
+            # no area larger than an equilateral triangle's of that side.
+            self.area, self.edge = math.sqrt(3.0) / 4.0 * self.diagonal ** 2, self.diagonal
+
+    def largest_t(self, rho: float) -> float:
+        """An upper bound of |T| for rays whose origins lie within ``rho`` of
+        every corner of the scene (module docstring)."""
+        with np.errstate(over="ignore"):
+            return float(_SLACK * (_AREA * self.area * rho + _EDGE * self.edge * rho ** 2 + _ROUNDING * rho ** 3))
+
+    def limit(self) -> float:
+        """The largest distance from the scene's far side at which a ray may start."""
+        lo, hi = 1e-30, 1e39
+        for _ in range(100):   # bisection, in ratios, of a bound that grows with rho
+            mid = math.sqrt(lo * hi)
+            lo, hi = (mid, hi) if self.largest_t(mid) < FLT_MAX else (lo, mid)
+        return lo
+
+    def check(self, lo, hi, what: str) -> None:
+        """InputError when rays whose origins lie in the box ``lo``..``hi`` (3
+        numbers each; equal for one point) could overflow the triangle test on
+        this scene.  ``what`` names the origins and says where they lie, e.g.
+        "ray origins lie up to".  Origins that are not finite are left to the
+        kernels' own check (rays.cl), which names the first bad ray."""
+        rho = _farthest(lo, hi, self.lo, self.hi)
+        if not math.isfinite(rho) or self.largest_t(rho) < FLT_MAX:
+            return
+        show = lambda x: checks.show(float(f"{x:.2g}"))   # noqa: E731
+        raise InputError(f"{what} {show(rho)} from the scene's far side, but the device's float32 triangle "
+                         f"test overflows and misses hits on this scene's triangles from past "
+                         f"{show(self.limit())}: start the rays nearer, or scale the scene down")
+
+    def check_points(self, points: np.ndarray, what: str) -> None:
+        """:meth:`check` for a flat float32 array of coordinates (rays' origins, as
+        uploaded).  Their box is first bounded by the extreme values over all
+        axes (one pass; per-axis reductions take about 60 times longer), and
+        taken axis by axis only when that bound fails."""
+        if points.size == 0:
+            return
+        lo, hi = float(points.min()), float(points.max())
+        rho = _farthest(np.full(3, lo), np.full(3, hi), self.lo, self.hi)
+        if math.isfinite(rho) and self.largest_t(rho) < FLT_MAX:
+            return
+        rows = points.reshape(-1, 3)
+        self.check(rows.min(axis=0).astype(np.float64), rows.max(axis=0).astype(np.float64), what)
+
+    def check_render(self, eye, epsilon: float) -> None:
+        """:meth:`check` for a frame: rays from the camera's ``eye``, and the
+        shadow, reflection and refraction rays that start on the surfaces,
+        ``epsilon`` off them."""
+        eye = np.asarray(eye, np.float64)
+        self.check(np.minimum(eye, self.lo - epsilon), np.maximum(eye, self.hi + epsilon),
+                   "the camera's rays and the rays between the scene's surfaces start up to")
