@@ -22,9 +22,12 @@ rounding alone outgrows any triangle).  The bound is conservative by a factor
 of about three against the overflows measured on PoCL (docs/limits.md,
 "Precision"), so it refuses only scenes within that factor of losing hits.
 
-:class:`Reach` holds a scene's side of the bound; the queries check each
-batch's origins against it (``Accel``) and the renderer its eye and the
-scene's own secondary rays, raising one InputError instead of missing hits.
+:class:`Reach` holds a scene's side of the bound; the queries check a
+camera's eye against it (``Accel.camera_images``, ``trace_camera``) and the
+renderer its eye and the scene's own secondary rays, raising one InputError
+instead of missing hits.  A batch's own origins are not checked: that would
+cost a pass over them on the host, which the ray path never makes (the
+kernels check rays on the device; a check of their range belongs there).
 """
 
 from __future__ import annotations
@@ -107,7 +110,7 @@ class Reach:
         """InputError when rays whose origins lie in the box ``lo``..``hi`` (3
         numbers each; equal for one point) could overflow the triangle test on
         this scene.  ``what`` names the origins and says where they lie, e.g.
-        "ray origins lie up to".  Origins that are not finite are left to the
+        "the camera's eye lies".  Origins that are not finite are left to the
         kernels' own check (rays.cl), which names the first bad ray."""
         rho = _farthest(lo, hi, self.lo, self.hi)
         if not math.isfinite(rho) or self.largest_t(rho) < FLT_MAX:
@@ -116,20 +119,6 @@ class Reach:
         raise InputError(f"{what} {show(rho)} from the scene's far side, but the device's float32 triangle "
                          f"test overflows and misses hits on this scene's triangles from past "
                          f"{show(self.limit())}: start the rays nearer, or scale the scene down")
-
-    def check_points(self, points: np.ndarray, what: str) -> None:
-        """:meth:`check` for a flat float32 array of coordinates (rays' origins, as
-        uploaded).  Their box is first bounded by the extreme values over all
-        axes (one pass; per-axis reductions take about 60 times longer), and
-        taken axis by axis only when that bound fails."""
-        if points.size == 0:
-            return
-        lo, hi = float(points.min()), float(points.max())
-        rho = _farthest(np.full(3, lo), np.full(3, hi), self.lo, self.hi)
-        if math.isfinite(rho) and self.largest_t(rho) < FLT_MAX:
-            return
-        rows = points.reshape(-1, 3)
-        self.check(rows.min(axis=0).astype(np.float64), rows.max(axis=0).astype(np.float64), what)
 
     def check_render(self, eye, epsilon: float) -> None:
         """:meth:`check` for a frame: rays from the camera's ``eye``, and the
