@@ -132,3 +132,20 @@ def test_automatic_framing_fills_the_frame_at_any_scale(scale, offset, device):
     frame = clrt.Renderer(moved, device=device).render(hits=True)
     covered, expected = (frame.prim >= 0).mean(), (unit.prim >= 0).mean()
     assert 0.1 < expected < 0.5 and abs(covered - expected) < 0.01 * expected, (covered, expected)
+
+
+@pytest.mark.parametrize("accel", ["none", "box"])
+def test_an_overflowed_triangle_test_is_no_hit_for_any_query(accel, device):
+    """Past the float32 range (a triangle 1e13 across seen from 3e15, origins
+    that a batch does not check) the test's T overflows to t = inf: the closest
+    hit never took that as a hit, and any-hit, counts and all hits now agree."""
+    size, distance = 1e13, 3e15
+    mesh, directions = _triangle_and_rays(size, distance)
+    directions /= np.linalg.norm(directions, axis=1, keepdims=True)
+    queries = clrt.Accel(mesh, accel=accel, device=device)
+    origin = np.zeros(3)
+    hits = queries.trace(origin, directions).hit
+    assert not hits.any()
+    assert np.array_equal(queries.any_hit(origin, directions), hits)
+    assert not queries.count(origin, directions).any()
+    assert len(queries.all_hits(origin, directions).t) == 0

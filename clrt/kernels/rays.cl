@@ -125,6 +125,11 @@ inline bool load_ray(const RayInput* in, uint i, float3* origin, float3* dir, fl
         atomic_min(in->bad + BAD_TMAX, ray);
         ok = false;
     }
+    // An unbounded ray ends at the largest float: a triangle test whose T
+    // overflowed gives t = inf, which `t <= tmax` would take as a hit at
+    // infinity for any-hit, counts and all hits (the closest hit never takes
+    // it); done once per ray here, not per triangle in the walks.
+    *tmax = fmin(*tmax, FLT_MAX);
     return ok;
 }
 
@@ -202,6 +207,7 @@ inline bool load_ray_lanes(const RayInput* in, uint first, uint num_rays, RayLan
     r->dx = FLUSH_SUBNORMALS(float8, r->dx);
     r->dy = FLUSH_SUBNORMALS(float8, r->dy);
     r->dz = FLUSH_SUBNORMALS(float8, r->dz);
+    r->tmax = fmin(r->tmax, (float8)(FLT_MAX));     // as load_ray: no hit at infinity
     return true;
 }
 #endif
