@@ -13,7 +13,25 @@ import pytest
 from clrt.scene import primitives
 from clrt.scene.mesh import Mesh
 
-SHARED_MESHES = Path(__file__).resolve().parents[1].parent / "shared" / "meshes"
+REPO = Path(__file__).resolve().parents[1]
+SHARED_MESHES = REPO.parent / "shared" / "meshes"
+
+
+def write_icosphere_obj(path: Path) -> Path:
+    """A small closed mesh (an icosphere) written as an OBJ file at ``path``."""
+    mesh = primitives.icosphere(1)
+    lines = [f"v {x!r} {y!r} {z!r}" for x, y, z in mesh.vertices.tolist()]
+    lines += [f"f {a + 1} {b + 1} {c + 1}" for a, b, c in mesh.faces.tolist()]
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def repo_env(*paths) -> dict:
+    """The environment with ``paths``, then this checkout, first on PYTHONPATH:
+    a subprocess runs the clrt under test."""
+    env = dict(os.environ)
+    env["PYTHONPATH"] = os.pathsep.join([*map(str, paths), str(REPO), env.get("PYTHONPATH", "")])
+    return env
 
 
 @pytest.fixture(scope="session")

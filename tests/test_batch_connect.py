@@ -2,36 +2,28 @@
 an audit of the batch's failure handling).  Small: tiny images, one local
 worker, servers on loopback ports; every process started is stopped."""
 
-import os
 import signal
 import socket
 import subprocess
 import sys
 import threading
 import time
-from pathlib import Path
 
 import pytest
 
 pytest.importorskip("distributed")
 
-from clrt.scene import primitives  # noqa: E402
-
-ROOT = Path(__file__).resolve().parents[1]
+from conftest import repo_env, write_icosphere_obj  # noqa: E402
 
 
-def _env():
-    env = dict(os.environ)
-    env["PYTHONPATH"] = str(ROOT) + os.pathsep + env.get("PYTHONPATH", "")
-    return env
-
-
-def _obj(path):
-    mesh = primitives.icosphere(1)
-    lines = [f"v {x!r} {y!r} {z!r}" for x, y, z in mesh.vertices.tolist()]
-    lines += [f"f {a + 1} {b + 1} {c + 1}" for a, b, c in mesh.faces.tolist()]
-    path.write_text("\n".join(lines) + "\n")
-    return path
+def _python(code: str, seconds: float, waiting: str):
+    """``python -c code`` with the clrt under test, its output captured; a test
+    failure (``waiting``) rather than a hang past ``seconds``."""
+    try:
+        return subprocess.run([sys.executable, "-c", code], env=repo_env(), capture_output=True, text=True,
+                              timeout=seconds)
+    except subprocess.TimeoutExpired:
+        pytest.fail(waiting)
 
 
 class _Server:
@@ -73,9 +65,10 @@ def test_scheduler_address_of_a_server_that_answers_garbage_is_an_input_error(tm
     # command as a user runs it: its whole stderr is the one line.
     server = _Server("reply")
     try:
-        proc = subprocess.run([sys.executable, "-m", "clrt", "batch", "render", str(_obj(tmp_path / "m.obj")),
+        mesh = write_icosphere_obj(tmp_path / "m.obj")
+        proc = subprocess.run([sys.executable, "-m", "clrt", "batch", "render", str(mesh),
                                "-o", str(tmp_path / "out"), "--scheduler", server.address, "-q"],
-                              env=_env(), capture_output=True, text=True, timeout=60)
+                              env=repo_env(), capture_output=True, text=True, timeout=60)
     finally:
         server.close()
     assert proc.returncode == 2, proc.stderr[-500:]
@@ -91,10 +84,7 @@ def test_scheduler_address_of_a_silent_server_fails_within_the_connect_timeout()
             "c.BATCH_CONNECT_TIMEOUT = 1.0\n"
             f"c.connect({server.address!r})\n")
     try:
-        proc = subprocess.run([sys.executable, "-c", code], env=_env(), capture_output=True, text=True,
-                              timeout=12)
-    except subprocess.TimeoutExpired:
-        pytest.fail("connect() to a silent server still waiting after 12 s (timeout 1 s)")
+        proc = _python(code, 12, "connect() to a silent server still waiting after 12 s (timeout 1 s)")
     finally:
         server.close()
     assert proc.returncode != 0 and "cannot reach the Dask scheduler" in proc.stderr, proc.stderr[-500:]
@@ -108,6 +98,7 @@ def test_a_failed_connect_leaves_nothing_a_later_batch_waits_on(tmp_path):
     deadline, and with the cyclic garbage collector off: it was what closed a
     failed Client, when it happened to run."""
     garbage, silent = _Server("reply"), _Server("silent")
+    mesh = write_icosphere_obj(tmp_path / "m.obj")
     code = f"""
 import gc
 gc.disable()
@@ -123,15 +114,12 @@ for address in ({garbage.address!r}, {silent.address!r}):
     left = [o for o in gc.get_objects() if isinstance(o, distributed.Client) and o.status != "closed"]
     assert not left, f"Clients left open: {{left}}"
     assert dask.config.get("scheduler", None) is None, dask.config.get("scheduler")
-summary = clrt.batch.run([{str(_obj(tmp_path / "m.obj"))!r}], {str(tmp_path / "out")!r}, views=1, workers=1,
+summary = clrt.batch.run([{str(mesh)!r}], {str(tmp_path / "out")!r}, views=1, workers=1,
                          width=20, height=14)
 print(summary.rendered, int(da.arange(10, chunks=5).sum().compute()))
 """
     try:
-        proc = subprocess.run([sys.executable, "-c", code], env=_env(), capture_output=True, text=True,
-                              timeout=90)
-    except subprocess.TimeoutExpired:
-        pytest.fail("a batch after a failed connect still running after 90 s")
+        proc = _python(code, 90, "a batch after a failed connect still running after 90 s")
     finally:
         garbage.close()
         silent.close()
@@ -144,11 +132,11 @@ print(summary.rendered, int(da.arange(10, chunks=5).sum().compute()))
 def test_real_ctrl_c_of_the_command_is_handled_by_the_batch(tmp_path):
     # the batch's own handler runs (final manifest, cluster closed, how to resume),
     # not clrt/__init__.py's start-up one (exit at once)
-    mesh = _obj(tmp_path / "m.obj")
+    mesh = write_icosphere_obj(tmp_path / "m.obj")
     out = tmp_path / "out"
     proc = subprocess.Popen([sys.executable, "-m", "clrt", "batch", "render", str(mesh), "-o", str(out),
                              "--views", "400", "--width", "32", "--height", "24", "--samples", "4",
-                             "--workers", "1", "-q"], env=_env(), stderr=subprocess.PIPE, text=True)
+                             "--workers", "1", "-q"], env=repo_env(), stderr=subprocess.PIPE, text=True)
     try:
         deadline = time.monotonic() + 60
         while not list(out.glob("m/view-*.png")) and time.monotonic() < deadline and proc.poll() is None:

@@ -4,20 +4,16 @@ clrt's own lines, never Dask's log lines or tracebacks (found by an audit of
 made to fail in the worker processes by a sitecustomize module on their path.
 Small: tiny images, one local worker."""
 
-import os
 import subprocess
 import sys
 import time
-from pathlib import Path
 
 import pytest
 
 pytest.importorskip("distributed")
 
 from clrt.batch.cluster import start_local_cluster  # noqa: E402
-from clrt.scene import primitives  # noqa: E402
-
-ROOT = Path(__file__).resolve().parents[1]
+from conftest import repo_env, write_icosphere_obj  # noqa: E402
 
 # Loaded by every Python process started with it on the path, the cluster's
 # workers too: rendering boom.obj raises, rendering die.obj kills the worker.
@@ -37,20 +33,6 @@ setup.render_scene = render_scene
 '''
 
 
-def _obj(path):
-    mesh = primitives.icosphere(1)
-    lines = [f"v {x!r} {y!r} {z!r}" for x, y, z in mesh.vertices.tolist()]
-    lines += [f"f {a + 1} {b + 1} {c + 1}" for a, b, c in mesh.faces.tolist()]
-    path.write_text("\n".join(lines) + "\n")
-    return path
-
-
-def _env(*paths):
-    env = dict(os.environ)
-    env["PYTHONPATH"] = os.pathsep.join([*map(str, paths), str(ROOT), env.get("PYTHONPATH", "")])
-    return env
-
-
 def _dask_lines(err):
     return [line for line in err.splitlines() if "distributed." in line or "Traceback" in line
             or " - ERROR - " in line or " - WARNING - " in line]
@@ -61,13 +43,13 @@ def test_failed_frames_are_clrt_lines_not_dask_logs(quiet, tmp_path, device):
     hook = tmp_path / "hook"
     hook.mkdir()
     (hook / "sitecustomize.py").write_text(FAULTS)
-    sources = [_obj(tmp_path / name) for name in ("ball.obj", "boom.obj", "die.obj")]
+    sources = [write_icosphere_obj(tmp_path / name) for name in ("ball.obj", "boom.obj", "die.obj")]
     (tmp_path / "corrupt.obj").write_text("v 1 2\nf 1 2 3\n")
     dev = ["--device", device] if device else []
     proc = subprocess.run([sys.executable, "-m", "clrt", "batch", "render", *map(str, sources),
                            str(tmp_path / "corrupt.obj"), "-o", str(tmp_path / "out"), "--width", "20",
                            "--height", "14", "--workers", "1", *(["-q"] if quiet else []), *dev],
-                          env=_env(hook), capture_output=True, text=True, timeout=180)
+                          env=repo_env(hook), capture_output=True, text=True, timeout=180)
     err = proc.stderr
     assert proc.returncode == 3, err[-2000:]   # device: the worker that kept dying
     assert not _dask_lines(err), err[-2000:]
@@ -81,7 +63,7 @@ def test_failed_frames_are_clrt_lines_not_dask_logs(quiet, tmp_path, device):
 
 def test_losing_the_scheduler_prints_one_line(tmp_path, device):
     # the command's own Client logs the lost connection (with tracebacks) unless told not to
-    mesh = _obj(tmp_path / "ball.obj")
+    mesh = write_icosphere_obj(tmp_path / "ball.obj")
     out = tmp_path / "out"
     dev = ["--device", device] if device else []
     cluster = start_local_cluster(1, device)
@@ -90,7 +72,7 @@ def test_losing_the_scheduler_prints_one_line(tmp_path, device):
         proc = subprocess.Popen([sys.executable, "-m", "clrt", "batch", "render", str(mesh), "-o", str(out),
                                  "--views", "5000", "--width", "32", "--height", "24", "--samples", "4",
                                  "--scheduler", cluster.scheduler_address, "-q", *dev],
-                                env=_env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                                env=repo_env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
         deadline = time.monotonic() + 60
         while not list(out.glob("ball/view-*.png")) and time.monotonic() < deadline and proc.poll() is None:
             time.sleep(0.05)

@@ -94,11 +94,7 @@ inline int sah_top(const global BuildCluster* clusters, int count, global BuildC
     if (p < count) {
         s->lo[p] = clusters[p].lo;
         s->hi[p] = clusters[p].hi;
-#ifdef SAH_TOP_UNIT_WEIGHT
-        s->weight[p] = 1.0f;
-#else
         s->weight[p] = (float)nodes[as_int(clusters[p].lo.w)].count;
-#endif
         s->first[p] = 0;
         s->end[p] = (ushort)count;
         s->parent[p] = 0;

@@ -353,8 +353,8 @@ class Accel:
     # ----------------------------------------------------------------------- rays in
 
     def _begin(self, source) -> None:
-        """Before the first chunk of a batch: origins within the range of the
-        triangle test (clrt.device.reach), no bad ray reported yet."""
+        """Before the first chunk of a batch: a camera's eye within the range of
+        the triangle test (clrt.device.reach), no bad ray reported yet."""
         self._check_reach(source)
         if len(self.launches) >= LAUNCHES_KEPT:   # all finished: the last query waited for its results
             self._sum_launches()
