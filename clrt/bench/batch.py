@@ -11,10 +11,12 @@ Without SOURCE, two generated meshes (a torus and a subdivided icosphere).
 Each worker's device is printed (name and PCI bus id), so one can see that
 every worker drives its own GPU.
 
-``--breakdown`` adds where a frame's time goes, measured in this process on
-the first source: scene set-up (load, BVH build, upload), kernels, read back,
-PNG encoding, and the rest of a worker's time per frame (Python, Dask, waiting
-for the device lock) as the difference to the batch's own figure.
+``--breakdown`` adds where the time goes, measured in this process on every
+source: the set-up a worker pays once per source (load, flatten, BVH build,
+upload, context and program build), and per frame kernels, read back, the rest
+of Renderer.render and PNG encoding; then the rest of a worker's time per frame
+(Python, Dask, waiting for the device lock, set-up) as the difference to the
+batch's own figure.
 ``--rays N`` adds clrt.batch.trace of N random rays (dask arrays generated on
 the workers, chunks of ``--ray-chunk``): wall time and Mrays/s per worker count,
 and beside it the time to make the same random arrays without tracing them.
@@ -37,6 +39,7 @@ import numpy as np
 
 from clrt.bench.batch_rays import RAY_SOURCES, random_rays
 from clrt.bench.common import exit_code, parse_count, parse_size, rate as rate_text
+from clrt.config import BATCH_IMAGE_WRITERS
 
 
 def _generated(folder: Path) -> list[str]:
@@ -96,7 +99,7 @@ def run(sources, counts, views, size, device=None, samples=None, breakdown=False
             for address, d in sorted(info.items()):
                 print(f"  {count} worker(s): {address} -> {d['device']}, PCI {d['pci']} (spec {d['spec']})", file=out)
         if breakdown:
-            _breakdown(sources[0], views, size, samples, device, per_frame, out)
+            _breakdown(sources, views, size, samples, device, per_frame, out)
         if ray_rates:
             made = "one chunk made once per worker, repeated" if ray_source == "repeat" else "numpy's generator"
             print(f"\nrandom rays in chunks of {ray_chunk:,} ({made}):", file=out)
@@ -131,8 +134,12 @@ def _trace_rays(client, source, n: int, chunk: int, ray_source: str = "numpy") -
     return time.perf_counter() - start, hit, generate
 
 
-def _breakdown(source, views, size, samples, device, per_frame, out):
-    """Where the time of a frame goes, measured here (one process) on ``source``."""
+def _breakdown(sources, views, size, samples, device, per_frame, out):
+    """Where the time of a frame goes, measured here (one process) on every source:
+    the set-up a worker pays once per source (load, flatten, BVH build, upload,
+    context and program build), then per frame (kernels, read back, the rest of
+    Renderer.render, PNG encoding); then each worker count's time per frame
+    beyond that, from the batch's own figures."""
     import statistics
     import tempfile
 
@@ -140,35 +147,60 @@ def _breakdown(source, views, size, samples, device, per_frame, out):
     from clrt.renderer import Renderer
     from clrt.scene.render_setup import render_camera, render_lights, render_scene, turntable
 
+    from clrt.device.context import create_context
+    from clrt.scene.primitives import icosphere
+
     w, h = size
+    # Once per worker: the context, and the programs every source needs (the
+    # device builder's, the renderer's), built on a small sphere.
     start = time.perf_counter()
-    scene = render_scene(source, samples=samples)
-    camera = render_camera(scene, width=w, height=h)
-    scene.lights = render_lights(scene.bounds, camera, scene.lights)
-    renderer = Renderer(scene, device=device)
-    setup = 1e3 * (time.perf_counter() - start)
-    rows = []
-    with tempfile.TemporaryDirectory() as folder:
-        for view in range(min(views, 12)):
-            cam = turntable(camera, view, views)
-            begin = time.perf_counter()
-            frame = renderer.render(cam)
-            rendered = time.perf_counter()
-            write_image(frame.image, Path(folder) / f"{view}.png", force=True)
-            done = time.perf_counter()
-            t = frame.timings
-            rows.append((t["ray generation"] + t["pixel colour"], t["read back"], 1e3 * (rendered - begin),
-                         1e3 * (done - rendered)))
-    kernels, readback, frame_ms, png = (statistics.median(r[k] for r in rows) for k in range(4))
-    print(f"\nwhere a frame's time goes ({Path(str(source)).name}, {w}x{h}, one process, medians of "
-          f"{len(rows)} views): scene set-up (load, build, upload, program) {setup:.0f} ms once per source "
-          f"and worker; per frame: kernels {kernels:.2f} ms, read back {readback:.2f} ms, the rest of "
-          f"Renderer.render {frame_ms - kernels - readback:.2f} ms, PNG encoding {png:.1f} ms", file=out)
-    alone = frame_ms + png
+    create_context(device)
+    Renderer(icosphere(1), device=device)
+    once = 1e3 * (time.perf_counter() - start)
+    print(f"\nwhere the time goes ({w}x{h}, one process): once per worker, the context and the builder's and "
+          f"renderer's programs: {once:.0f} ms; once per source and worker, ms; per frame, the medians of up to "
+          f"12 views, ms (a worker encodes its PNGs in {BATCH_IMAGE_WRITERS} threads beside its renders):\n", file=out)
+    print("| source | triangles | load | flatten | BVH build | upload | programs | kernels | read back "
+          "| rest of render | PNG encoding |", file=out)
+    print("|---|---|---|---|---|---|---|---|---|---|---|", file=out)
+    alone = []
+    for source in sources:
+        start = time.perf_counter()
+        scene = render_scene(source, samples=samples)
+        camera = render_camera(scene, width=w, height=h)
+        scene.lights = render_lights(scene.bounds, camera, scene.lights)
+        load = 1e3 * (time.perf_counter() - start)
+        renderer = Renderer(scene, device=device)
+        # A second renderer of the same scene finds the context and the program
+        # built: its copy to device is the upload alone.
+        upload = Renderer(scene, device=device).timings["copy to device"]
+        t0 = renderer.timings
+        rows = []
+        with tempfile.TemporaryDirectory() as folder:
+            for view in range(min(views, 12)):
+                cam = turntable(camera, view, views)
+                begin = time.perf_counter()
+                frame = renderer.render(cam)
+                rendered = time.perf_counter()
+                write_image(frame.image, Path(folder) / f"{view}.png", force=True)
+                done = time.perf_counter()
+                t = frame.timings
+                rows.append((t["ray generation"] + t["pixel colour"], t["read back"], 1e3 * (rendered - begin),
+                             1e3 * (done - rendered)))
+        kernels, readback, frame_ms, png = (statistics.median(r[k] for r in rows) for k in range(4))
+        alone.append((frame_ms, png))
+        print(f"| {Path(str(source)).name} | {len(renderer.arrays.corners):,} | {load:.0f} | "
+              f"{t0['initialisation']:.0f} | {t0['acceleration build']:.0f} | {upload:.0f} | "
+              f"{t0['copy to device'] - upload:.0f} | {kernels:.2f} | {readback:.2f} | "
+              f"{frame_ms - kernels - readback:.2f} | {png:.1f} |", file=out, flush=True)
+    render = sum(r for r, _ in alone) / len(alone)
+    png = sum(p for _, p in alone) / len(alone)
+    print(f"\nthe sources' mean per frame: render {render:.1f} ms, PNG encoding {png:.1f} ms; a worker's time per "
+          f"frame (workers x the batch's seconds / frames), and what it spends beyond the render (waiting for a "
+          f"PNG writer, Dask, Python, the device lock, set-up):", file=out)
     for count, worker_ms in per_frame.items():
-        print(f"  {count} worker(s): {1e3 * worker_ms:.1f} ms of worker time per frame, "
-              f"{1e3 * worker_ms - alone:.1f} ms more than one process's frame + PNG (Dask, Python, device lock, "
-              f"set-up)", file=out)
+        print(f"  {count} worker(s): {1e3 * worker_ms:.1f} ms, {1e3 * worker_ms - render:.1f} ms beyond the render",
+              file=out)
 
 
 def main(argv=None) -> int:
