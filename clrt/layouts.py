@@ -124,8 +124,23 @@ nodes F..2F-2 in the order they are made, the root last:
 
 ``BuildCluster`` (32 B) -- one cluster of the device builder's PLOC merging:
     0: lo      float4  xyz: min corner of the cluster's box; w: as_int, its BuildNode
-   16: hi      float4  xyz: max corner; w: as_int, scratch between two kernels of an
-                       iteration: rank among the kept clusters of its block (-1: merged away)
+   16: hi      float4  xyz: max corner; w: as_int, its segment (bits 0..7: only clusters
+                       of one segment merge) and, on CPU devices between two kernels of
+                       an iteration, 1 + its rank among the kept clusters of its block
+                       (bits 8..: 0 when merged away)
+
+``BuildPart`` (64 B) -- one node of the device builder's SAH partition of the
+triangles into segments (build_partition.cl), before PLOC; node 0 is all of them:
+    0: centre_lo  uint4  xyz: min corner of its triangles' box centres, as
+                         order-preserving bits (build_morton.cl's ordered_bits)
+   16: centre_hi  uint4  xyz: max corner, likewise
+   32: count      int    triangles
+   36: child      int    its first child (the second follows it), -1: not split
+   40: axis       int    the split's axis
+   44: split      int    the first of the axis's bins that go right
+   48: segment    int    a node never split: its place among those in depth-first order
+   52: open       int    1: to be split at the next level
+   56: pad        int[2]
 """
 
 import numpy as np
@@ -154,6 +169,9 @@ TRIANGLE_PACKET = np.dtype([("v0", float4, 3), ("v1", float4, 3), ("v2", float4,
 BUILD_NODE = np.dtype([("lo", float4), ("hi", float4), ("parent", np.int32), ("count", np.int32),
                        ("rows", np.int32), ("cost", np.float32)])
 BUILD_CLUSTER = np.dtype([("lo", float4), ("hi", float4)])
+BUILD_PART = np.dtype([("centre_lo", np.uint32, 4), ("centre_hi", np.uint32, 4), ("count", np.int32),
+                       ("child", np.int32), ("axis", np.int32), ("split", np.int32), ("segment", np.int32),
+                       ("open", np.int32), ("pad", np.int32, 2)])
 
 # struct name in layouts.h -> numpy dtype; the layout test walks this table.
 STRUCTS = {
@@ -170,4 +188,5 @@ STRUCTS = {
     "TrianglePacket": TRIANGLE_PACKET,
     "BuildNode": BUILD_NODE,
     "BuildCluster": BUILD_CLUSTER,
+    "BuildPart": BUILD_PART,
 }

@@ -109,14 +109,17 @@ def _traced_accel(mesh, volume, builder, leaf_size, device):
     leaves = DEVICE_VARIANTS.get(builder, {}).get("treelet_leaves")
     minimum = DEVICE_VARIANTS.get(builder, {}).get("treelet_min")
     top = DEVICE_VARIANTS.get(builder, {}).get("top_clusters")
+    partition = DEVICE_VARIANTS.get(builder, {}).get("partition")
     saved, saved_min = dict(build.TREELET_LEAVES), build.TREELET_MIN_TRIANGLES
-    saved_top = dict(build.SAH_TOP_CLUSTERS)
+    saved_top, saved_partition = dict(build.SAH_TOP_CLUSTERS), dict(build.SAH_PARTITION)
     if leaves is not None:                   # the variant's treelets for this one build
         build.TREELET_LEAVES.update({kind: leaves for kind in saved})
     if minimum is not None:
         build.TREELET_MIN_TRIANGLES = ((0, minimum),)
     if top is not None:
         build.SAH_TOP_CLUSTERS.update({kind: top for kind in saved_top})
+    if partition is not None:
+        build.SAH_PARTITION.update({kind: bool(partition) for kind in saved_partition})
     try:
         return Accel(mesh, accel=volume, builder="device" if builder in DEVICE_VARIANTS else builder,
                      leaf_size=leaf_size, device=device)
@@ -124,6 +127,7 @@ def _traced_accel(mesh, volume, builder, leaf_size, device):
         build.TREELET_LEAVES.update(saved)
         build.TREELET_MIN_TRIANGLES = saved_min
         build.SAH_TOP_CLUSTERS.update(saved_top)
+        build.SAH_PARTITION.update(saved_partition)
 
 
 # Trace times of trees a few per cent apart are compared in one loop: every
@@ -223,7 +227,7 @@ def run(mesh_dir, meshes, counts, builders, volume="box", leaf_size=4, device=No
         # The trees of the host builders and of the device variants that change the tree.
         traced = [b for b in builders if trace and (b not in DEVICE_VARIANTS or b == "device"
                                                     or b.startswith(("device/treelets=", "device/treelet-min=",
-                                                                         "device/sah-top=")))]
+                                                                         "device/sah-top=", "device/partition=")))]
         traces = trace_and_refit_ms(mesh, camera, volume, traced, leaf_size, device) if traced else {}
         results = {b: (*r, *traces.get(b, (float("nan"), float("nan")))) for b, r in results.items()}
         sah_cost = results["sah"][2]["sah_cost"] if "sah" in results else None
@@ -292,7 +296,8 @@ def main(argv=None) -> int:
                    help="also grids of bunny copies of about these many triangles, e.g. 1M,10M")
     p.add_argument("--builders", type=lambda s: s.split(","), default=list(HOST_BUILDERS) + ["device"],
                    help=f"comma-separated, of {', '.join(list(HOST_BUILDERS) + list(DEVICE_VARIANTS))}, "
-                        "device/tail=N, device/tail-group=N, device/treelets=N, device/treelet-min=N, device/sah-top=N "
+                        "device/tail=N, device/tail-group=N, device/treelets=N, device/treelet-min=N, device/sah-top=N, "
+                        "device/partition=0|1 "
                         "(default: paper, sah, device)")
     p.add_argument("--volume", default="box", choices=("box", "sphere", "ellipse"),
                    help="bounding-volume shape (default box)")
@@ -311,7 +316,8 @@ def main(argv=None) -> int:
               "device/treelets=": "treelet_leaves",      # leaves per restructured treelet (0: none)
               "device/treelet-min=": "treelet_min",      # triangles a node needs for its treelet
               "device/tail-group=": "tail_group",        # work-items of ploc_tail
-              "device/sah-top=": "top_clusters"}         # clusters the SAH top takes from PLOC (1: none)
+              "device/sah-top=": "top_clusters",         # clusters the SAH top takes from PLOC (1: none)
+              "device/partition=": "partition"}          # the SAH partition before PLOC (0: off, 1: on)
     for b in args.builders:
         for prefix, setting in tuning.items():
             if b.startswith(prefix):

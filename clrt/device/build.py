@@ -8,6 +8,13 @@
 The algorithm (kernels in ``clrt/kernels/build_*.cl``, entry ``build_bvh.cl``):
 
 1. bounds of the triangles' box centres, and a 30-bit Morton code per triangle;
+   on GPUs (``SAH_PARTITION``) first the SAH partition (``build_partition.cl``):
+   the triangles split top-down by the binned SAH, ``PART_LEVELS`` launched
+   levels, into at most ``SAH_TOP_CLUSTERS`` segments of about F / that many
+   triangles; then a key per triangle of its segment above a 24-bit Morton
+   code within the segment's bounds, and PLOC (3.) merges only clusters of
+   one segment -- the middle of the tree is the SAH's, which PLOC's merges
+   along the Morton curve did worse (docs/benchmarks.md, session 13);
 2. a least-significant-digit radix sort of (code, triangle id), ``RADIX_BITS``
    per pass: on GPUs one launch a pass (the tiles' offsets by decoupled
    look-back) after one that counts the digits of every pass, on CPU devices
@@ -107,6 +114,15 @@ TAIL_GROUP = {"gpu": 1024, "cpu": BUILD_GROUP}
 # camel -4 % (128 against none; 256: -7 % and -5 % for 0.1 ms more build).
 SAH_TOP_CLUSTERS = {"gpu": 128, "cpu": 128}
 SAH_TOP_MAX = 256
+# The SAH partition before PLOC (build_partition.cl): the triangles split
+# top-down by the binned SAH into at most as many segments as the SAH top
+# takes, of about F / that many triangles, PART_BINS bins an axis, in at most
+# PART_LEVELS levels (launched without reading the device; the levels past the
+# last split cost a few microseconds each).  PLOC merges within a segment.
+SAH_PARTITION = {"gpu": True, "cpu": False}
+PART_BINS = 16
+PART_LEVELS = 12
+PART_MAX_NODES = 2 * SAH_TOP_MAX
 # Treelet restructuring after PLOC (build_treelet.cl): leaves per treelet,
 # per device type; 0: none.  Karras & Aila use 7.  TREELET_SMALL: (leaves,
 # below triangles) -- nodes of fewer triangles take treelets of fewer leaves.
@@ -162,12 +178,17 @@ STATE["STATE_LEVELS"] = STATE["STATE_COUNTS"] + STATE["COUNT_RING"]
 STATE["STATE_LEVEL_CURSORS"] = STATE["STATE_LEVELS"] + TREELET_LEVELS
 STATE["STATE_SORT_TICKETS"] = STATE["STATE_LEVEL_CURSORS"] + TREELET_LEVELS
 STATE["STATE_SORT_DIGITS"] = STATE["STATE_SORT_TICKETS"] + SORT_PASSES
-STATE_INTS = STATE["STATE_INTS"] = STATE["STATE_SORT_DIGITS"] + SORT_PASSES * (1 << RADIX_BITS)
+STATE["STATE_PART_NODES"] = STATE["STATE_SORT_DIGITS"] + SORT_PASSES * (1 << RADIX_BITS)
+STATE["STATE_PART_SEGMENTS"] = STATE["STATE_PART_NODES"] + 1
+STATE["STATE_PART_FIRST"] = STATE["STATE_PART_NODES"] + 2
+STATE["STATE_PART_END"] = STATE["STATE_PART_NODES"] + 3
+STATE_INTS = STATE["STATE_INTS"] = STATE["STATE_PART_NODES"] + 4
 
 _KERNELS = ("init_build_state", "centroid_bounds", "morton_codes", "radix_histogram", "scan_counts",
             "radix_scatter", "radix_digit_counts", "radix_scatter_lookback", "init_leaves", "ploc_merge",
             "ploc_count_kept", "ploc_compact", "ploc_tail",
-            "ploc_nearest_tiles", "ploc_merge_tiles",
+            "ploc_nearest_tiles", "ploc_merge_tiles", "partition_clear", "partition_init", "partition_bin",
+            "partition_split", "partition_assign", "partition_order", "partition_morton_codes",
             "treelet_levels", "treelet_order", "treelet_restructure", "init_root_paths", "jump_root_paths", "emit_tree")
 
 
@@ -192,6 +213,7 @@ def build_defines(volume: str, kind: str = "gpu", treelet_leaves: int | None = N
                                     else int(treelet_leaves)),
         "TREELET_FULL_MIN": TREELET_SMALL[kind][1],
         "TREELET_GROUP": TREELET_GROUP, "TREELET_LEVELS": TREELET_LEVELS, **STATE,
+        "PART_BINS": PART_BINS, "PART_MAX_NODES": PART_MAX_NODES,
         "C_TRAVERSAL": f"((float){C_TRAVERSAL!r})", "C_INTERSECT": f"((float){C_INTERSECT!r})",
         "REL_PAD": repr(float(volumes.REL_PAD)), "ULP_PAD": int(volumes.ULP_PAD),
         "PAD_FLOOR": repr(float(volumes.PAD_FLOOR)), "EVAL_SLACK": repr(float(volumes.EVAL_SLACK)),
@@ -323,7 +345,10 @@ _ARG_TYPES = {
     "radix_histogram": [None, _U, _U, None], "scan_counts": [None, _U],
     "radix_scatter": [None, None, _U, _U, None, None, None], "radix_digit_counts": [None, _U, None, None, _U],
     "radix_scatter_lookback": [None, None, _U, _U, None, None, None, None],
-    "init_leaves": [None, None, _U, None, None, None, None],
+    "init_leaves": [None, None, None, _I, _U, None, None, None, None],
+    "partition_clear": [None, None, _U], "partition_init": [None, None, _I, _I], "partition_bin": [None, _U, None, None, None],
+    "partition_split": [None, None, None, _I, _I], "partition_assign": [None, _U, None, None],
+    "partition_order": [None, None], "partition_morton_codes": [None, _U, None, None, None, None],
     "ploc_merge": [None] * 5 + [_I, None, _I, _U], "ploc_count_kept": [None, None, _I],
     "ploc_compact": [None] * 4 + [_I], "ploc_tail": [None] * 5 + [_I, None, _I, _U],
     "ploc_nearest_tiles": [None, None, None, _I], "ploc_merge_tiles": [None] * 6 + [_I, None, _I, _U],
@@ -389,7 +414,7 @@ class _Phases:
 
 
 def check_tuning(tail_threshold=None, treelet_leaves=None, treelet_min=None, tail_group=None,
-                 largest_group: int = 4096, top_clusters=None) -> None:
+                 largest_group: int = 4096, top_clusters=None, partition=None) -> None:
     """InputError for a benchmark's tuning value (build_on_device's arguments of
     these names) that the kernels cannot take, rather than a failed program
     build or a wrong tree; ``largest_group``: the device's work-group limit."""
@@ -406,6 +431,8 @@ def check_tuning(tail_threshold=None, treelet_leaves=None, treelet_min=None, tai
             raise checks.fail("tail_group", f"a power of two in 1..{largest_group}", tail_group)
     if top_clusters is not None:
         checks.integer("top_clusters", top_clusters, 1, SAH_TOP_MAX)
+    if partition is not None:
+        checks.integer("partition", partition, 0, 1)
 
 
 @_one_build_per_context
@@ -414,6 +441,7 @@ def build_on_device(context: cl.Context, queue: cl.CommandQueue, corners, volume
                     tail_threshold: int | None = None, staged_upload: bool | None = None,
                     treelet_leaves: int | None = None, treelet_min: int | None = None,
                     tail_group: int | None = None, top_clusters: int | None = None,
+                    partition: bool | None = None,
                     device_times: bool = False, profile: bool = False) -> DeviceBvh:
     """Build a BVH over ``corners`` on the queue's device.
 
@@ -434,6 +462,8 @@ def build_on_device(context: cl.Context, queue: cl.CommandQueue, corners, volume
     top_clusters: clusters the SAH top takes over from PLOC, 1..SAH_TOP_MAX
         (1: none; default: SAH_TOP_CLUSTERS of the device type; never more
         than the tail's work-items; for benchmarks).
+    partition: the SAH partition into at most top_clusters segments before
+        PLOC (default: SAH_PARTITION of the device type; for benchmarks).
     device_times: time the phases on the device (``DeviceBvh.timings``; for
         benchmarks).  The build then runs on ``queue``, which must have
         profiling enabled (clrt.device.context.create_context's does);
@@ -502,7 +532,11 @@ def build_on_device(context: cl.Context, queue: cl.CommandQueue, corners, volume
     # 1. Morton codes.
     launch("morton", k["init_build_state"], 1, state, np.uint32(F))
     launch("morton", k["centroid_bounds"], min(_groups(F), MAX_REDUCE_GROUPS), corners_buf, np.uint32(F), state)
-    launch("morton", k["morton_codes"], _groups(F), corners_buf, np.uint32(F), state, keys[0], ids[0])
+    segmented = (SAH_PARTITION[kind] if partition is None else bool(partition)) and 1 < top_clusters < F
+    if segmented:
+        _partition(k, launch, ws, F, top_clusters, corners_buf, state, tri_part=ids[1], keys=keys[0], ids=ids[0])
+    else:
+        launch("morton", k["morton_codes"], _groups(F), corners_buf, np.uint32(F), state, keys[0], ids[0])
 
     # 2. Radix sort, ping-ponging between the two key/id buffers (build_sort.cl):
     # on a GPU one launch a pass (decoupled look-back), elsewhere three.
@@ -536,8 +570,8 @@ def build_on_device(context: cl.Context, queue: cl.CommandQueue, corners, volume
     tile_status = ws.get("tile_status", 8 * _groups(F))         # ploc_merge's look-back, two halves
     heights = ws.get("heights", 4 * max(F - 1, 1))             # of the inner nodes, index - F
     treelet_done = keys[1]             # the sort keys are spent: F ints each
-    launch("ploc", k["init_leaves"], _groups(F), corners_buf, sorted_ids, np.uint32(F), nodes, clusters,
-           tile_status, treelet_done)
+    launch("ploc", k["init_leaves"], _groups(F), corners_buf, sorted_ids, keys[passes % 2], np.int32(segmented),
+           np.uint32(F), nodes, clusters, tile_status, treelet_done)
     nearest = ws.get("nearest", 4 * F) if kind == "cpu" else None     # the CPU kernels' neighbours
     queued = _ploc(queue, k, launch, F, clusters, merged, tile_kept, tile_status, nodes, heights, state,
                    leaf_size, max(tail_threshold, top_clusters), nearest)
@@ -638,6 +672,28 @@ def _root_height(queue, heights: cl.Buffer, F: int) -> int:
     return int(value[0])
 
 
+def _partition(k, launch, ws, F: int, budget: int, corners, state, tri_part, keys, ids) -> None:
+    """Queue the SAH partition of the F triangles into at most ``budget``
+    segments (build_partition.cl), then their keys and ids for the sort:
+    the segment above a Morton code within it.  ``tri_part``: F ints of
+    scratch (each triangle's partition node), free until the sort."""
+    limit = np.int32(max(1, F // budget))       # a segment of more triangles is split
+    parts = ws.get("parts", layouts.BUILD_PART.itemsize * PART_MAX_NODES)
+    bins = ws.get("part_bins", 4 * 7 * 3 * PART_BINS * PART_MAX_NODES)
+    launch("partition", k["partition_clear"], _groups(max(PART_MAX_NODES * 3 * PART_BINS, F)), bins, tri_part,
+           np.uint32(F))
+    launch("partition", k["partition_init"], 1, parts, state, np.int32(F), limit, group=1)
+    k["partition_bin"].set_args(corners, np.uint32(F), tri_part, parts, bins)
+    k["partition_split"].set_args(parts, bins, state, limit, np.int32(budget))
+    k["partition_assign"].set_args(corners, np.uint32(F), tri_part, parts)
+    for _ in range(PART_LEVELS):
+        launch("partition", k["partition_bin"], _groups(F))
+        launch("partition", k["partition_split"], 1)
+        launch("partition", k["partition_assign"], _groups(F))
+    launch("partition", k["partition_order"], 1, parts, state, group=1)
+    launch("morton", k["partition_morton_codes"], _groups(F), corners, np.uint32(F), tri_part, parts, keys, ids)
+
+
 def _ploc(queue, k, launch, F, clusters, merged, tile_kept, tile_status, nodes, heights, state, leaf_size,
           tail_threshold, nearest=None) -> int:
     """Queue PLOC iterations until at most ``tail_threshold`` clusters are
@@ -691,6 +747,7 @@ def _ploc(queue, k, launch, F, clusters, merged, tile_kept, tile_status, nodes, 
 # (8, 12 on CPUs), path sums and ancestors (80); tests/test_device_build.py
 # checks it against the workspace's buffers.
 SCRATCH_BYTES_PER_TRIANGLE = 300
+FIXED_SCRATCH = ("parts", "part_bins")   # the SAH partition's, 0.7 MB whatever the mesh
 
 
 def build_acceleration(corners: np.ndarray, accel: str, builder: str, leaf_size: int,

@@ -1,4 +1,5 @@
-// The device BVH builder (issue #17), one program: triangles -> Morton codes
+// The device BVH builder (issue #17), one program: triangles -> SAH partition
+// into segments (GPUs) -> Morton codes
 // -> radix sort -> PLOC merging with SAH leaf collapse -> treelet
 // restructuring -> depth-first
 // BvhPairNode rows, slot-ordered triangles and slot -> triangle ids.  The
@@ -11,6 +12,7 @@
 #include "build_scan.cl"
 #include "build_morton.cl"
 #include "build_sort.cl"
+#include "build_partition.cl"
 #include "build_ploc.cl"
 #include "build_treelet.cl"
 #include "build_emit.cl"

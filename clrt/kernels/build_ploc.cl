@@ -49,6 +49,7 @@
 #include "build_scan.cl"
 #include "build_morton.cl"
 #include "build_treelet.cl"
+#include "build_partition.cl"
 
 #ifndef PLOC_RADIUS
 #error "build with -DPLOC_RADIUS=<clusters searched on each side>"
@@ -117,9 +118,9 @@ inline void consider(Nearest* n, int p, int q, float area)
 // in Morton order; the look-back entries of ploc_merge's first iteration and
 // the inner nodes' flags of treelet_restructure, cleared.
 __kernel __attribute__((reqd_work_group_size(BUILD_GROUP, 1, 1)))
-void init_leaves(const global float* corners, const global uint* sorted_ids, const uint num_tris,
-                 global BuildNode* nodes, global BuildCluster* clusters, global uint* tile_status,
-                 global uint* treelet_done)
+void init_leaves(const global float* corners, const global uint* sorted_ids, const global uint* sorted_keys,
+                 const int segmented, const uint num_tris, global BuildNode* nodes, global BuildCluster* clusters,
+                 global uint* tile_status, global uint* treelet_done)
 {
     const uint i = get_global_id(0);
     if (i < (num_tris + BUILD_GROUP - 1) / BUILD_GROUP)
@@ -139,7 +140,16 @@ void init_leaves(const global float* corners, const global uint* sorted_ids, con
     node.cost = C_INTERSECT * half_area(lo, hi);
     nodes[i] = node;
     clusters[i].lo = (float4)(lo, as_float((int)i));
-    clusters[i].hi = (float4)(hi, 0.0f);
+    // Its segment: the top bits of the key (partition_morton_codes), else 0.
+    clusters[i].hi = (float4)(hi, as_float(segmented ? (int)(sorted_keys[i] >> (32 - SEGMENT_BITS)) : 0));
+}
+
+// The segment of a cluster: only clusters of one segment merge (the SAH
+// partition's segments stay runs of places, since merges and compaction keep
+// the order).
+inline int cluster_segment(float4 hi)
+{
+    return as_int(hi.w) & SEGMENT_MASK;
 }
 
 // The node that merges clusters a (left) and b (right), its numbers and leaf
@@ -156,7 +166,7 @@ inline BuildCluster make_node(global BuildNode* nodes, global int* heights, int 
     refresh_node(nodes, heights, index, num_tris, leaf_size);
     BuildCluster merged;
     merged.lo = (float4)(fmin(a.lo.xyz, b.lo.xyz), as_float(index));
-    merged.hi = (float4)(fmax(a.hi.xyz, b.hi.xyz), 0.0f);
+    merged.hi = (float4)(fmax(a.hi.xyz, b.hi.xyz), as_float(cluster_segment(a.hi)));
     return merged;
 }
 
@@ -244,9 +254,10 @@ void ploc_merge(const global BuildCluster* clusters, global BuildCluster* next, 
         Nearest n = {-1, INFINITY, 0u, false};
         if (p >= 0 && p < count) {
             const int row = p - loaded;
+            const int segment = cluster_segment(box_hi[row]);
             for (int o = -PLOC_RADIUS; o <= PLOC_RADIUS; ++o) {
                 const int q = p + o;
-                if (o == 0 || q < 0 || q >= count)
+                if (o == 0 || q < 0 || q >= count || cluster_segment(box_hi[row + o]) != segment)
                     continue;
                 consider(&n, p, q, o < 0 ? pair_area[(row + o) * PLOC_RADIUS - o - 1]
                                          : pair_area[row * PLOC_RADIUS + o - 1]);
@@ -260,8 +271,8 @@ void ploc_merge(const global BuildCluster* clusters, global BuildCluster* next, 
     int partner = -1;            // i merges with partner (i < partner)
     bool kept = false;
     if (i < count) {
-        const int j = nearest[i - start + PLOC_RADIUS];
-        const bool mutual = nearest[j - start + PLOC_RADIUS] == i;
+        const int j = nearest[i - start + PLOC_RADIUS];     // -1: alone in its segment
+        const bool mutual = j >= 0 && nearest[j - start + PLOC_RADIUS] == i;
         kept = !mutual || i < j;
         if (mutual && i < j)
             partner = j;
@@ -325,7 +336,7 @@ void ploc_compact(const global BuildCluster* merged, global BuildCluster* cluste
     if (PLOC_DONE(count) || i >= count)
         return;
     const BuildCluster c = merged[i];
-    const int rank = as_int(c.hi.w);
+    const int rank = (as_int(c.hi.w) >> SEGMENT_BITS) - 1;
     if (rank >= 0)
         clusters[tile_offsets[get_group_id(0)] + rank] = c;
 }
@@ -337,9 +348,10 @@ void ploc_compact(const global BuildCluster* merged, global BuildCluster* cluste
 inline int tail_nearest(const global BuildCluster* clusters, int count, int p)
 {
     const float3 lo = clusters[p].lo.xyz, hi = clusters[p].hi.xyz;
+    const int segment = cluster_segment(clusters[p].hi);
     Nearest n = {-1, INFINITY, 0u, false};
     for (int q = max(p - PLOC_RADIUS, 0); q <= min(p + PLOC_RADIUS, count - 1); ++q)
-        if (q != p)
+        if (q != p && cluster_segment(clusters[q].hi) == segment)
             consider(&n, p, q, half_area(fmin(lo, clusters[q].lo.xyz), fmax(hi, clusters[q].hi.xyz)));
     return n.best;
 }
@@ -378,8 +390,8 @@ void ploc_tail(global BuildCluster* clusters, global BuildCluster* spare, global
         const int first = min(lid * block, count), last = min(first + block, count);
         uint kept = 0, merges = 0;
         for (int p = first; p < last; ++p) {
-            const int j = nearest[p];
-            const bool mutual = nearest[j] == p;
+            const int j = nearest[p];               // -1: alone in its segment
+            const bool mutual = j >= 0 && nearest[j] == p;
             kept += !mutual || p < j;
             merges += mutual && p < j;
         }
@@ -392,7 +404,7 @@ void ploc_tail(global BuildCluster* clusters, global BuildCluster* spare, global
         uint node = (uint)next_node + (ranks >> 16);
         for (int p = first; p < last; ++p) {
             const int j = nearest[p];
-            const bool mutual = nearest[j] == p;
+            const bool mutual = j >= 0 && nearest[j] == p;
             if (!mutual)
                 to[place++] = from[p];
             else if (p < j)
@@ -456,11 +468,14 @@ __kernel void ploc_nearest_tiles(const global BuildCluster* clusters, global int
                 row[o - 1] = half_area(fmin(lo, clusters[p + o].lo.xyz), fmax(hi, clusters[p + o].hi.xyz));
             if (p < start)
                 continue;
+            const int segment = cluster_segment(clusters[p].hi);
             Nearest n = {-1, INFINITY, 0u, false};
             for (int q = max(p - PLOC_RADIUS, 0); q < p; ++q)
-                consider(&n, p, q, ahead[(q % (PLOC_RADIUS + 1)) * PLOC_RADIUS + (p - q - 1)]);
+                if (cluster_segment(clusters[q].hi) == segment)
+                    consider(&n, p, q, ahead[(q % (PLOC_RADIUS + 1)) * PLOC_RADIUS + (p - q - 1)]);
             for (int q = p + 1; q <= min(p + PLOC_RADIUS, count - 1); ++q)
-                consider(&n, p, q, row[q - p - 1]);
+                if (cluster_segment(clusters[q].hi) == segment)
+                    consider(&n, p, q, row[q - p - 1]);
             nearest[p] = n.best;
         }
     }
@@ -478,16 +493,17 @@ __kernel void ploc_merge_tiles(const global BuildCluster* clusters, global Build
         const int start = tile * BUILD_GROUP, end = min(start + BUILD_GROUP, count);
         int merges = 0;
         for (int p = start; p < end; ++p)
-            merges += nearest[nearest[p]] == p && p < nearest[p];
+            merges += nearest[p] >= 0 && nearest[nearest[p]] == p && p < nearest[p];
         int node = merges > 0 ? atomic_add(state + STATE_NEXT_NODE, merges) : 0;
         int rank = 0;
         for (int p = start; p < end; ++p) {
             const int j = nearest[p];
-            const bool mutual = nearest[j] == p;
+            const bool mutual = j >= 0 && nearest[j] == p;
             BuildCluster out = clusters[p];
             if (mutual && p < j)
                 out = make_node(nodes, heights, num_tris, node++, out, clusters[j], leaf_size);
-            out.hi.w = as_float(!mutual || p < j ? rank++ : -1);
+            // 1 + its rank (0: merged away) above its segment, for ploc_compact.
+            out.hi.w = as_float(cluster_segment(out.hi) | (!mutual || p < j ? ++rank : 0) << SEGMENT_BITS);
             merged[p] = out;
         }
         tile_kept[tile] = (uint)rank;

@@ -91,7 +91,19 @@ typedef struct {
 
 typedef struct {
     float4 lo;      // xyz: min corner of the cluster's box; w: as_int, its BuildNode
-    float4 hi;      // xyz: max corner; w: as_int, rank among its block's kept clusters
+    float4 hi;      // xyz: max corner; w: as_int, segment (bits 0..7) and on CPUs 1 + rank (8..)
 } BuildCluster;
+
+typedef struct {
+    uint4 centre_lo;   // xyz: min corner of its triangles' box centres (ordered_bits)
+    uint4 centre_hi;   // xyz: max corner
+    int count;         // triangles
+    int child;         // first child, the second follows; -1: not split
+    int axis;          // split axis
+    int split;         // first bin of the right child
+    int segment;       // never split: place among those in depth-first order
+    int open;          // 1: to be split at the next level
+    int pad[2];
+} BuildPart;
 
 #endif

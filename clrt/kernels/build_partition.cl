@@ -1,0 +1,311 @@
+// The device builder's SAH partition (GPUs): before the Morton codes, the
+// triangles are split top-down by the binned SAH into at most `budget`
+// segments of about F / budget triangles each; PLOC then merges clusters of
+// one segment only, and the SAH top (build_top.cl) joins the segments.
+//
+// Why: PLOC's merges follow the Morton curve, and the tree it makes groups
+// triangles worse than a top-down SAH build does where the groups are large.
+// Emulated on the host (session 13, docs/benchmarks.md): PLOC's clusters
+// rebuilt with the SAH inside and above them stayed 3-4 % above the host
+// SAH tree's cost, while an SAH partition into 100-200 segments with PLOC
+// inside came within 1-2 %.  The middle levels are the SAH's, the bottom
+// levels PLOC's (with treelets), the top the exact SAH of build_top.cl.
+//
+// Per level (the host queues PART_LEVELS of them, without reading anything):
+//   partition_bin     every triangle of an open node adds its box to the
+//                     node's bin of its box centre, PART_BINS bins an axis
+//                     over the node's centre bounds (global atomics)
+//   partition_split   one work-group: each open node's cheapest split by the
+//                     bins (A(L) N(L) + A(R) N(R)), then, in node order, the
+//                     splits that keep the segments within the budget
+//   partition_assign  every triangle of a split node moves to the child its
+//                     bin falls in, and widens that child's centre bounds
+// then partition_order numbers the segments depth-first, the order that the
+// Morton keys (morton_codes: segment << 24 | a 24-bit code within the
+// segment's centre bounds) keep, so that each segment is one run of places.
+//
+// A node whose centres all fall into one bin on every axis cannot be split
+// and stays a segment however large; so does every node still open after the
+// last level.  Either way PLOC merges inside it as it always did.
+#ifndef CLRT_BUILD_PARTITION_CL
+#define CLRT_BUILD_PARTITION_CL
+
+#include "layouts.h"
+#include "build_morton.cl"
+#include "build_treelet.cl"
+
+#if !defined(PART_BINS) || !defined(PART_MAX_NODES) || !defined(STATE_PART_NODES) \
+    || !defined(STATE_PART_SEGMENTS) || !defined(STATE_PART_FIRST) || !defined(STATE_PART_END)
+#error "build with the PART_* and STATE_PART_* defines of clrt/device/build.py"
+#endif
+
+#define PART_VALUES 7       // a bin: count, box min xyz, box max xyz (ordered bits)
+#define SEGMENT_BITS 8      // segments in a cluster's hi.w and above a Morton key's 24 bits
+#define SEGMENT_MASK ((1 << SEGMENT_BITS) - 1)
+
+// Where a node's bin on an axis starts in the bins buffer.
+inline int bin_at(int node, int axis, int bin)
+{
+    return ((node * 3 + axis) * PART_BINS + bin) * PART_VALUES;
+}
+
+inline float3 decode_bits(uint4 bits)
+{
+    return (float3)(from_ordered_bits(bits.x), from_ordered_bits(bits.y), from_ordered_bits(bits.z));
+}
+
+// The bin of a centre coordinate c in [lo, hi] (0 for a flat axis; _sat turns
+// the NaN of a huge extent into 0).  partition_bin and partition_assign call
+// it with the same arguments, so a triangle lands on the side its bin counted.
+inline int centre_bin(float c, float lo, float hi)
+{
+    const float extent = hi - lo;
+    if (!(extent > 0.0f))
+        return 0;
+    return clamp(convert_int_sat((c - lo) * ((float)PART_BINS / extent)), 0, PART_BINS - 1);
+}
+
+inline float axis_of(float3 v, int axis)
+{
+    return axis == 0 ? v.x : (axis == 1 ? v.y : v.z);
+}
+
+// Every bin empty (the bins of a node are used at the one level it is open,
+// so one clearing serves the whole partition), every triangle in node 0.
+__kernel __attribute__((reqd_work_group_size(BUILD_GROUP, 1, 1)))
+void partition_clear(global uint* bins, global int* tri_part, const uint num_tris)
+{
+    const int i = get_global_id(0);
+    if (i < num_tris)
+        tri_part[i] = 0;
+    if (i >= PART_MAX_NODES * 3 * PART_BINS)
+        return;
+    global uint* b = bins + i * PART_VALUES;
+    b[0] = 0u;
+    for (int k = 1; k <= 3; ++k) {
+        b[k] = 0xffffffffu;       // min: atomic_min from the largest
+        b[k + 3] = 0u;            // max: atomic_max from the smallest
+    }
+}
+
+// One work-item: node 0 holds every triangle (its centre bounds are
+// centroid_bounds' result), open when it has more than `limit`.
+__kernel void partition_init(global BuildPart* parts, global int* state, const int num_tris, const int limit)
+{
+    BuildPart root;
+    root.centre_lo = (uint4)(state[STATE_BOUNDS + 0], state[STATE_BOUNDS + 1], state[STATE_BOUNDS + 2], 0u);
+    root.centre_hi = (uint4)(state[STATE_BOUNDS + 3], state[STATE_BOUNDS + 4], state[STATE_BOUNDS + 5], 0u);
+    root.count = num_tris;
+    root.child = -1;
+    root.axis = 0;
+    root.split = 0;
+    root.segment = 0;
+    root.open = num_tris > limit;
+    root.pad[0] = root.pad[1] = 0;
+    parts[0] = root;
+    state[STATE_PART_NODES] = 1;
+    state[STATE_PART_SEGMENTS] = 1;
+    state[STATE_PART_FIRST] = 0;
+    state[STATE_PART_END] = 1;
+}
+
+__kernel __attribute__((reqd_work_group_size(BUILD_GROUP, 1, 1)))
+void partition_bin(const global float* corners, const uint num_tris, const global int* tri_part,
+                   const global BuildPart* parts, global uint* bins)
+{
+    const uint tri = get_global_id(0);
+    if (tri >= num_tris)
+        return;
+    const int n = tri_part[tri];
+    if (!parts[n].open)
+        return;
+    float3 lo, hi;
+    triangle_box(corners, tri, &lo, &hi);
+    const float3 c = box_centre(lo, hi);
+    const float3 clo = decode_bits(parts[n].centre_lo), chi = decode_bits(parts[n].centre_hi);
+    for (int axis = 0; axis < 3; ++axis) {
+        global uint* b = bins + bin_at(n, axis, centre_bin(axis_of(c, axis), axis_of(clo, axis),
+                                                            axis_of(chi, axis)));
+        atomic_inc(b);
+        atomic_min(b + 1, ordered_bits(lo.x));
+        atomic_min(b + 2, ordered_bits(lo.y));
+        atomic_min(b + 3, ordered_bits(lo.z));
+        atomic_max(b + 4, ordered_bits(hi.x));
+        atomic_max(b + 5, ordered_bits(hi.y));
+        atomic_max(b + 6, ordered_bits(hi.z));
+    }
+}
+
+inline void bin_box(const global uint* b, float3* lo, float3* hi)
+{
+    *lo = (float3)(from_ordered_bits(b[1]), from_ordered_bits(b[2]), from_ordered_bits(b[3]));
+    *hi = (float3)(from_ordered_bits(b[4]), from_ordered_bits(b[5]), from_ordered_bits(b[6]));
+}
+
+// One work-group.  The nodes made by the last level (STATE_PART_FIRST ..
+// STATE_PART_END) that are open find their cheapest split, a work-item each;
+// work-item 0 then grants the splits in node order while the segments stay
+// within `budget` (so the ids and the tree do not depend on timing), makes
+// the children and closes the level.
+__kernel __attribute__((reqd_work_group_size(BUILD_GROUP, 1, 1)))
+void partition_split(global BuildPart* parts, const global uint* bins, global int* state, const int limit,
+                     const int budget)
+{
+    local int chosen_axis[PART_MAX_NODES], chosen_split[PART_MAX_NODES], chosen_left[PART_MAX_NODES];
+    const int first = state[STATE_PART_FIRST], end = state[STATE_PART_END];
+    for (int n = first + get_local_id(0); n < end; n += BUILD_GROUP) {
+        int best_axis = -1, best_split = 0, best_left = 0;
+        if (parts[n].open) {
+            float best = INFINITY;
+            for (int axis = 0; axis < 3; ++axis) {
+                // Left of bin b: bins 0..b-1, costed from the left; the right
+                // side from the right, each split's cost as it comes.
+                float left_cost[PART_BINS];
+                int left_count[PART_BINS];
+                float3 lo = (float3)(INFINITY), hi = (float3)(-INFINITY), blo, bhi;
+                int count = 0;
+                for (int b = 0; b < PART_BINS - 1; ++b) {
+                    const global uint* bin = bins + bin_at(n, axis, b);
+                    if (bin[0]) {
+                        bin_box(bin, &blo, &bhi);
+                        lo = fmin(lo, blo);
+                        hi = fmax(hi, bhi);
+                        count += (int)bin[0];
+                    }
+                    left_count[b] = count;
+                    left_cost[b] = count ? half_area(lo, hi) * (float)count : 0.0f;
+                }
+                lo = (float3)(INFINITY);
+                hi = (float3)(-INFINITY);
+                count = 0;
+                for (int b = PART_BINS - 1; b > 0; --b) {
+                    const global uint* bin = bins + bin_at(n, axis, b);
+                    if (bin[0]) {
+                        bin_box(bin, &blo, &bhi);
+                        lo = fmin(lo, blo);
+                        hi = fmax(hi, bhi);
+                        count += (int)bin[0];
+                    }
+                    if (count == 0 || left_count[b - 1] == 0)
+                        continue;
+                    const float cost = left_cost[b - 1] + half_area(lo, hi) * (float)count;
+                    if (cost < best) {
+                        best = cost;
+                        best_axis = axis;
+                        best_split = b;
+                        best_left = left_count[b - 1];
+                    }
+                }
+            }
+        }
+        chosen_axis[n - first] = best_axis;
+        chosen_split[n - first] = best_split;
+        chosen_left[n - first] = best_left;
+    }
+    barrier(CLK_LOCAL_MEM_FENCE);
+    if (get_local_id(0) != 0)
+        return;
+    int nodes = state[STATE_PART_NODES], segments = state[STATE_PART_SEGMENTS];
+    for (int n = first; n < end; ++n) {
+        const int axis = chosen_axis[n - first];
+        parts[n].open = 0;
+        if (axis < 0 || segments >= budget || nodes + 2 > PART_MAX_NODES)
+            continue;
+        parts[n].child = nodes;
+        parts[n].axis = axis;
+        parts[n].split = chosen_split[n - first];
+        const int counts[2] = {chosen_left[n - first], parts[n].count - chosen_left[n - first]};
+        for (int side = 0; side < 2; ++side) {
+            BuildPart c;
+            c.centre_lo = (uint4)(0xffffffffu);    // partition_assign's atomic_min
+            c.centre_hi = (uint4)(0u);
+            c.count = counts[side];
+            c.child = -1;
+            c.axis = 0;
+            c.split = 0;
+            c.segment = 0;
+            c.open = counts[side] > limit;
+            c.pad[0] = c.pad[1] = 0;
+            parts[nodes + side] = c;
+        }
+        nodes += 2;
+        segments += 1;
+    }
+    state[STATE_PART_FIRST] = end;
+    state[STATE_PART_END] = nodes;
+    state[STATE_PART_NODES] = nodes;
+    state[STATE_PART_SEGMENTS] = segments;
+}
+
+__kernel __attribute__((reqd_work_group_size(BUILD_GROUP, 1, 1)))
+void partition_assign(const global float* corners, const uint num_tris, global int* tri_part,
+                      global BuildPart* parts)
+{
+    const uint tri = get_global_id(0);
+    if (tri >= num_tris)
+        return;
+    const int n = tri_part[tri];
+    const int first_child = parts[n].child;
+    if (first_child < 0)
+        return;
+    float3 lo, hi;
+    triangle_box(corners, tri, &lo, &hi);
+    const float3 c = box_centre(lo, hi);
+    const int axis = parts[n].axis;
+    const float clo = axis_of(decode_bits(parts[n].centre_lo), axis);
+    const float chi = axis_of(decode_bits(parts[n].centre_hi), axis);
+    const int child = first_child + (centre_bin(axis_of(c, axis), clo, chi) >= parts[n].split);
+    tri_part[tri] = child;
+    global uint* bounds = (global uint*)&parts[child];    // centre_lo, then centre_hi
+    atomic_min(bounds + 0, ordered_bits(c.x));
+    atomic_min(bounds + 1, ordered_bits(c.y));
+    atomic_min(bounds + 2, ordered_bits(c.z));
+    atomic_max(bounds + 4, ordered_bits(c.x));
+    atomic_max(bounds + 5, ordered_bits(c.y));
+    atomic_max(bounds + 6, ordered_bits(c.z));
+}
+
+// keys[i]: triangle i's segment above a 24-bit Morton code of its box centre
+// on a 256^3 grid over the segment's centre bounds (morton_codes' 30-bit
+// code is over the whole mesh's); ids[i] = i.
+__kernel __attribute__((reqd_work_group_size(BUILD_GROUP, 1, 1)))
+void partition_morton_codes(const global float* corners, const uint num_tris, const global int* tri_part,
+                            const global BuildPart* parts, global uint* keys, global uint* ids)
+{
+    const uint tri = get_global_id(0);
+    if (tri >= num_tris)
+        return;
+    const int n = tri_part[tri];
+    const float3 lo = decode_bits(parts[n].centre_lo), hi = decode_bits(parts[n].centre_hi);
+    float3 box_lo, box_hi;
+    triangle_box(corners, tri, &box_lo, &box_hi);
+    const float3 extent = hi - lo;
+    const float3 scale = select(256.0f / extent, (float3)(0.0f), extent <= 0.0f);
+    const uint3 cell = min(convert_uint3_sat((box_centre(box_lo, box_hi) - lo) * scale), (uint3)(255u));
+    keys[tri] = ((uint)parts[n].segment << (32 - SEGMENT_BITS))
+              | (spread_bits(cell.x) << 2) | (spread_bits(cell.y) << 1) | spread_bits(cell.z);
+    ids[tri] = tri;
+}
+
+// One work-item: the segments (nodes never split) numbered depth-first, left
+// child first, into their `segment`; their count into STATE_PART_SEGMENTS.
+__kernel void partition_order(global BuildPart* parts, global int* state)
+{
+    int stack[64];           // a path's pending right children: at most one a level
+    int top = 0, next = 0, n = 0;
+    for (;;) {
+        if (parts[n].child >= 0) {
+            if (top < 64)
+                stack[top++] = parts[n].child + 1;
+            n = parts[n].child;
+            continue;
+        }
+        parts[n].segment = next++;
+        if (top == 0)
+            break;
+        n = stack[--top];
+    }
+    state[STATE_PART_SEGMENTS] = next;
+}
+
+#endif
