@@ -35,10 +35,11 @@ import threading
 
 import numpy as np
 import pyopencl as cl
+from pyopencl import cltypes
 
 from clrt import checks
 from clrt.config import DEFAULT_ACCEL, DEFAULT_BUILDER, DEFAULT_LEAF_SIZE
-from clrt.device.args import CAMERA_ARG_TYPES, camera_args
+from clrt.device.args import CAMERA_ARG_TYPES, camera_args, vec4
 from clrt.device.build import build_acceleration
 from clrt.device.context import create_context, device_kind, device_label
 from clrt.device.geometry import DeviceGeometry, check_fits, packet_rays
@@ -283,7 +284,8 @@ class Accel:
         program = build_program(context, "trace.cl", defines)
         # The kernels with their argument types (trace.cl's and rays.cl's parameter lists).
         u32, geom = np.uint32, geometry.arg_types
-        ray_input = [None, u32, None, u32, None, u32, None, u32, u32, u32, u32, None]
+        ray_input = [None, u32, None, u32, None, u32, None, u32, u32, u32, u32, None,
+                     cltypes.float4, cltypes.float4, np.float32]
         self.kernels = {name: typed_kernel(program, name, types) for name, types in {
             "query_closest": [*ray_input, *[None] * len(CLOSEST_FIELDS), u32, u32, np.int32, *geom],
             "query_any": [*ray_input, None, u32, u32, np.int32, *geom],
@@ -354,8 +356,15 @@ class Accel:
 
     def _begin(self, source) -> None:
         """Before the first chunk of a batch: a camera's eye within the range of
-        the triangle test (clrt.device.reach), no bad ray reported yet."""
+        the triangle test (clrt.device.reach), no bad ray reported yet, and the
+        range the kernels hold a batch's own origins to (rays.cl's BAD_REACH)."""
         self._check_reach(source)
+        reach = self.geometry.reach
+        # A camera's eye was checked here, as the renderer checks it: the
+        # kernels then check nothing more (one rule for one eye).
+        limit = np.inf if isinstance(source, (CameraRays, PinholeRays)) else reach.batch_limit()
+        with np.errstate(over="ignore"):
+            self._reach_args = (vec4(reach.lo), vec4(reach.hi), np.float32(limit * limit))
         if len(self.launches) >= LAUNCHES_KEPT:   # all finished: the last query waited for its results
             self._sum_launches()
         cl.enqueue_copy(self.queue, self._buffer("bad", 4 * len(RAY_CHECKS)),
@@ -364,10 +373,9 @@ class Accel:
     def _check_reach(self, source) -> None:
         """InputError when a camera's eye lies so far from the scene that the
         float32 triangle test could overflow and miss hits (clrt.device.reach).
-        A batch's own origins are not checked: that would be a pass over them
-        on the host (about 1 ms per million rays, a large share of a GPU
-        batch's host time), which the ray path otherwise never makes
-        (rays.cl checks rays on the device)."""
+        A batch's own origins are checked by the kernels (rays.cl), not here:
+        a pass over them on the host (about 1 ms per million rays, a large
+        share of a GPU batch's host time) is what the ray path never makes."""
         if isinstance(source, (CameraRays, PinholeRays)):
             eye = np.asarray(source.camera.eye if isinstance(source, CameraRays) else source.eye, np.float32)
             self.geometry.reach.check(eye, eye, "the camera's eye lies")
@@ -378,7 +386,7 @@ class Accel:
         cl.enqueue_copy(self.queue, bad, self._buffer("bad", bad.nbytes))   # waits for the whole batch
         if (bad < np.iinfo(np.int32).max).any():
             kind = int(np.argmin(bad))          # the lowest ray; on a tie, the first check
-            raise InputError(source.bad_ray_message(RAY_CHECKS[kind], int(bad[kind])))
+            raise InputError(source.bad_ray_message(RAY_CHECKS[kind], int(bad[kind]), self.geometry.reach))
 
     def _ray_args(self, source, start: int, stop: int) -> tuple:
         """RAY_INPUT_PARAMS (rays.cl) for rays start..stop-1 of ``source``: host
@@ -409,7 +417,7 @@ class Accel:
             in_first = 0
         flat = [x for buf, stride in inputs for x in (buf, np.uint32(stride))]
         return (*flat, np.uint32(in_first), np.uint32(start), np.uint32(bool(source.normalise)),
-                self._buffer("bad", 4 * len(RAY_CHECKS)))
+                self._buffer("bad", 4 * len(RAY_CHECKS)), *self._reach_args)
 
     def _upload(self, name: str, array: np.ndarray) -> cl.Buffer:
         """``array`` into the kept buffer ``name``, without waiting (the queue
