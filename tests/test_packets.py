@@ -203,7 +203,7 @@ __kernel void packets_only(__global const float* origins, __global const float* 
     const uint w = get_global_id(0);
     const Geometry g = make_geometry(GEOMETRY_ARGS);
     const RayInput in = make_ray_input(origins, 3u, dirs, 3u, tmins, 1u, tmaxs, 1u, 0u, 0u, 1u, bad,
-                                       (float4)(-INFINITY), (float4)(INFINITY), INFINITY);
+                                       (float4)(0.0f), (float4)(-INFINITY), (float4)(INFINITY), INFINITY);
     RayLanes lanes;
     RayPacket packet;
     made[w] = load_ray_lanes(&in, 8 * w, 8 * w + 8, &lanes);

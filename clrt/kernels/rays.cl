@@ -9,6 +9,12 @@
 // BAD_REACH: an origin so far from the scene that the float32 triangle test
 // could overflow and lose hits (clrt/device/reach.py): farther than `reach`
 // from the far side of the box scene_lo .. scene_hi.
+//
+// The scene lies on the device in a frame of its own, moved by -shift
+// (clrt/scene/arrays.py, device_origin, says why and why nothing changes but
+// precision and speed): each origin is moved the same way here, once, before
+// anything else reads it.  shift is 0 for scenes near the origin (o - 0 is o,
+// bit for bit).
 #ifndef CLRT_RAYS_CL
 #define CLRT_RAYS_CL
 
@@ -22,16 +28,18 @@ typedef struct {
     uint ray_first;     // index in the caller's batch of this launch's first ray
     uint normalise;     // 0: the directions are unit vectors already (clrt's own cameras)
     __global int* bad;
-    float3 scene_lo, scene_hi;   // the box of the scene's triangles
+    float3 shift;       // the device frame's origin: subtracted from every ray origin
+    float3 scene_lo, scene_hi;   // the box of the scene's triangles, device frame
     float reach2;       // the square of the farthest an origin may lie from the box's far side
 } RayInput;
 
 #define RAY_INPUT_PARAMS __global const float* origins, const uint origin_stride, \
     __global const float* dirs, const uint dir_stride, __global const float* tmins, const uint tmin_stride, \
     __global const float* tmaxs, const uint tmax_stride, const uint in_first, const uint ray_first, \
-    const uint normalise, __global int* bad, const float4 scene_lo, const float4 scene_hi, const float reach2
+    const uint normalise, __global int* bad, const float4 shift, const float4 scene_lo, const float4 scene_hi, \
+    const float reach2
 #define RAY_INPUT_ARGS origins, origin_stride, dirs, dir_stride, tmins, tmin_stride, tmaxs, tmax_stride, \
-    in_first, ray_first, normalise, bad, scene_lo, scene_hi, reach2
+    in_first, ray_first, normalise, bad, shift, scene_lo, scene_hi, reach2
 
 inline RayInput make_ray_input(RAY_INPUT_PARAMS)
 {
@@ -48,6 +56,7 @@ inline RayInput make_ray_input(RAY_INPUT_PARAMS)
     in.ray_first = ray_first;
     in.normalise = normalise;
     in.bad = bad;
+    in.shift = shift.xyz;
     in.scene_lo = scene_lo.xyz;
     in.scene_hi = scene_hi.xyz;
     in.reach2 = reach2;
@@ -127,9 +136,12 @@ inline bool load_ray(const RayInput* in, uint i, float3* origin, float3* dir, fl
     if (!all(isfinite(*origin))) {
         atomic_min(in->bad + BAD_ORIGIN, ray);
         ok = false;
-    } else if (!within_reach(in, *origin)) {
-        atomic_min(in->bad + BAD_REACH, ray);
-        ok = false;
+    } else {
+        *origin -= in->shift;       // into the device's frame
+        if (!within_reach(in, *origin)) {
+            atomic_min(in->bad + BAD_REACH, ray);
+            ok = false;
+        }
     }
     if (!unit_direction(vload3(0, in->dirs + k * in->dir_stride), in->normalise, dir)) {
         atomic_min(in->bad + BAD_DIRECTION, ray);
@@ -207,6 +219,9 @@ inline bool load_ray_lanes(const RayInput* in, uint first, uint num_rays, RayLan
                         isfinite(r->dx) & isfinite(r->dy) & isfinite(r->dz);
     if (!all(finite) || any(isnan(r->tmin)) || any(isnan(r->tmax)))
         return false;
+    r->ox -= in->shift.x;       // into the device's frame, as load_ray
+    r->oy -= in->shift.y;
+    r->oz -= in->shift.z;
     const float8 fx = FAR_SIDE(in->scene_lo.x, in->scene_hi.x, r->ox);    // within_reach, lane by lane
     const float8 fy = FAR_SIDE(in->scene_lo.y, in->scene_hi.y, r->oy);
     const float8 fz = FAR_SIDE(in->scene_lo.z, in->scene_hi.z, r->oz);
