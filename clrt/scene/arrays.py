@@ -94,10 +94,11 @@ def device_origin(bounds) -> np.ndarray:
     """(3,) float64 c, the origin of the device's frame for a scene whose box is
     ``bounds`` ((2, 3), float32 values): on each axis where the box lies
     RECENTRE_DISTANCE diagonals or more from 0, a float32 near the box's centre,
-    a multiple of the largest power of two at most a quarter of the diagonal
-    (so within 1/8 diagonal of the centre, with few significant bits), such
-    that v - c is exact for every float32 v in the box; 0 on the other axes
-    (the comment above says why)."""
+    a multiple of its grain: the largest power of two at most a quarter of the
+    diagonal (so c lies within 1/8 diagonal of the centre and has few
+    significant bits), or the float32 step at the box's far side where that is
+    larger (so c is a float32) -- such that v - c is exact for every float32 v
+    in the box; 0 on the other axes (the comment above says why)."""
     lo, hi = (np.asarray(b, np.float64) for b in bounds)
     origin = np.zeros(3)
     diagonal = float(np.linalg.norm(hi - lo))
