@@ -171,11 +171,11 @@ class RayBatch:
     def bad_ray_message(self, kind: str, i: int, reach=None) -> str:
         """The error for ray ``i`` failing check ``kind`` (clrt.config.RAY_CHECKS);
         ``reach``: the scene's :class:`clrt.device.reach.Reach` (for "reach")."""
-        given = self.given["origin" if kind == "reach" else kind]
         if kind == "reach":
             row = self._origin(i)
             shown = [float(str(x)) for x in row] if row.dtype == np.float32 else row.tolist()   # float32: shortest
             return reach.message(f"origin {i} is {shown}: it lies", reach.farthest(row.astype(np.float64)))
+        given = self.given[kind]
         if is_device_array(given):
             value = "not finite" if kind == "origin" else "invalid"
         else:
