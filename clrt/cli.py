@@ -240,12 +240,13 @@ def _info_mesh(args) -> int:
     """Build statistics of the acceleration structure over MESH, and its size on the device."""
     from clrt.device.build import build_acceleration
     from clrt.device.context import device_label, select_device
-    from clrt.scene.arrays import triangle_corners
+    from clrt.scene.arrays import device_origin, triangle_corners
     from clrt.scene.load import load_mesh
 
     mesh = load_mesh(args.mesh)
     device = select_device(args.device)   # as render would: a missing device is exit 3, not ignored
-    built = build_acceleration(triangle_corners(mesh), args.accel, args.builder, args.leaf_size, args.device)
+    corners = triangle_corners(mesh, device_origin(mesh.bounds))   # the tree render and queries build
+    built = build_acceleration(corners, args.accel, args.builder, args.leaf_size, args.device)
     print(f"{args.mesh}: {len(mesh.faces):,} triangles, {len(mesh.vertices):,} vertices; "
           f"device: {device_label(device)}")
     if not built.is_bvh:

@@ -107,7 +107,9 @@ TEXEL_LIMIT = 1 << 23
 CULL_MODES = {"none": 0, "back": 1, "front": 2}
 #: What the query kernels check of every ray (rays.cl), in the order of their
 #: report slots: the kernels see BAD_ORIGIN = 0, BAD_DIRECTION = 1, ...
-RAY_CHECKS = ("origin", "direction", "tmin", "tmax")
+#: "reach": the origin lies within the float32 range of the triangle test
+#: (clrt.device.reach).
+RAY_CHECKS = ("origin", "direction", "tmin", "tmax", "reach")
 
 # --------------------------------------------------------------------------- devices and files
 

@@ -3,10 +3,11 @@
 Woop's test multiplies a triangle's (sheared) area by the depths of its
 corners, all measured from the ray's origin, so a large triangle seen from far
 away overflows float32 and is silently missed.  clrt.device.reach bounds that
-product; the queries check each batch's origins against it and the renderer
-its eye and the scene's own rays.  These tests measure the real overflow on the
-device (with the check switched off) and hold the check to it: it admits
-nothing that loses a hit, and refuses no more than a few times too early.
+product; the queries check each batch's origins against it (on the device,
+rays.cl) and a camera's eye (on the host), the renderer its eye and the
+scene's own rays.  These tests measure the real overflow on the device (with
+the check switched off) and hold the check to it: it admits nothing that
+loses a hit, and refuses no more than a few times too early.
 """
 
 import math
@@ -16,6 +17,7 @@ import pytest
 
 import clrt
 from clrt import cli
+from conftest import write_icosphere_obj
 from clrt.device import reach as reach_module
 from clrt.scene import primitives
 from clrt.scene.mesh import Mesh
@@ -45,14 +47,20 @@ def _refused(accel) -> bool:
     return False
 
 
-def test_the_check_admits_no_lost_hit_and_refuses_only_near_the_overflow(device):
+@pytest.fixture
+def unchecked_batches(monkeypatch):
+    """The kernels' check of batch origins switched off: what the device does."""
+    monkeypatch.setattr(reach_module.Reach, "batch_limit", lambda self: math.inf)
+
+
+def test_the_check_admits_no_lost_hit_and_refuses_only_near_the_overflow(device, unchecked_batches):
     refused, worked, lost = [], {}, {}   # per size: the farthest corner's distance of rays that worked / lost hits
     for size in SIZES:
         for distance in DISTANCES:
             mesh, directions = _triangle_and_rays(size, distance)
             accel = clrt.Accel(mesh, accel="none", device=device)
             is_refused = _refused(accel)
-            # what the device does (a batch's origins are not checked)
+            # what the device does (the kernels' check of batch origins switched off)
             hit, blocked = accel.trace(np.zeros(3), directions).hit, accel.any_hit(np.zeros(3), directions)
             label = f"triangle {size:g} across at {distance:g}"
             assert is_refused or hit.all(), f"{label}: admitted, but {(~hit).sum()} of {len(hit)} hits lost"
@@ -134,9 +142,9 @@ def test_automatic_framing_fills_the_frame_at_any_scale(scale, offset, device):
 
 
 @pytest.mark.parametrize("accel", ["none", "box"])
-def test_an_overflowed_triangle_test_is_no_hit_for_any_query(accel, device):
-    """Past the float32 range (a triangle 1e13 across seen from 3e15, origins
-    that a batch does not check) the test's T overflows to t = inf: the closest
+def test_an_overflowed_triangle_test_is_no_hit_for_any_query(accel, device, unchecked_batches):
+    """Past the float32 range (a triangle 1e13 across seen from 3e15, with the
+    kernels' check of batch origins off) the test's T overflows to t = inf: the closest
     hit never took that as a hit, and any-hit, counts and all hits now agree."""
     size, distance = 1e13, 3e15
     mesh, directions = _triangle_and_rays(size, distance)
@@ -148,3 +156,103 @@ def test_an_overflowed_triangle_test_is_no_hit_for_any_query(accel, device):
     assert np.array_equal(queries.any_hit(origin, directions), hits)
     assert not queries.count(origin, directions).any()
     assert len(queries.all_hits(origin, directions).t) == 0
+
+
+# ----------------------------------------------------------------------- batch origins, checked on the device
+
+FAR_MESSAGE = (r"^origin {i} is \[{value}\]: it lies {rho} from the scene's far side, but the device's float32 "
+               r"triangle test overflows and misses hits on this scene's triangles from past 4\.9e16: "
+               r"start the rays nearer, or scale the scene down$")
+
+
+def _rays_with_far_origins(n: int = 40):
+    """``n`` rays down onto a unit icosphere, origins 29 and 33 far past the limit."""
+    rng = np.random.default_rng(8)
+    origins = np.column_stack([rng.uniform(-0.5, 0.5, (n, 2)), np.full(n, 3.0)])
+    directions = np.tile([0.0, 0.0, -1.0], (n, 1))
+    origins[29] = [1e17, 0.0, 0.0]
+    origins[33] = [0.0, -3e17, 0.0]
+    return origins, directions
+
+
+@pytest.mark.parametrize("walk", ["packets", "single rays"])
+@pytest.mark.parametrize("chunk_rays", [None, 8])
+def test_far_batch_origins_are_refused_by_every_query(walk, chunk_rays, device, monkeypatch):
+    """Every query kind, the one-call forms and the trimesh drop-in refuse a
+    batch whose origins lie past the limit, naming the lowest such ray (in any
+    chunk, in packets of eight or one by one), in one line."""
+    from clrt.device import geometry
+    if walk == "single rays":
+        monkeypatch.setattr(geometry, "RAY_PACKET_KINDS", ())
+    mesh = primitives.icosphere(2)
+    accel = clrt.Accel(mesh, device=device, chunk_rays=chunk_rays)
+    o, d = _rays_with_far_origins()
+    message = FAR_MESSAGE.format(i=29, value=r"1e\+17, 0\.0, 0\.0", rho=r"1e17")
+    queries = {"trace": lambda: accel.trace(o, d), "trace t": lambda: accel.trace(o, d, fields=("t",)),
+               "any_hit": lambda: accel.any_hit(o, d), "count": lambda: accel.count(o, d),
+               "all_hits": lambda: accel.all_hits(o, d),
+               "clrt.trace": lambda: clrt.trace(mesh, o, d, device=device),
+               "clrt.occluded": lambda: clrt.occluded(mesh, o, d, device=device),
+               "clrt.count_hits": lambda: clrt.count_hits(mesh, o, d, device=device),
+               "clrt.all_hits": lambda: clrt.all_hits(mesh, o, d, device=device)}
+    intersector = clrt.RayMeshIntersector(mesh, device=device)
+    for name in ("intersects_first", "intersects_any", "intersects_id", "intersects_location"):
+        queries[name] = lambda m=getattr(intersector, name): m(o, d)
+    for name, query in queries.items():
+        with pytest.raises(clrt.InputError, match=message) as error:
+            query()
+        assert "\n" not in str(error.value), name
+    o[29] = [0.0, 0.0, 3.0]   # then ray 33 is the first
+    with pytest.raises(clrt.InputError, match=FAR_MESSAGE.format(i=33, value=r"0\.0, -3e\+17, 0\.0", rho=r"3e17")):
+        accel.trace(o, d)
+    o[33] = [0.0, 0.0, 3.0]
+    assert accel.trace(o, d).hit.all() and accel.count(o, d).min() == 2   # all good again
+
+
+def test_the_device_refuses_exactly_the_origins_past_the_limit(device):
+    """Origins just inside the limit are traced, just outside refused, whichever
+    side of the scene they lie on; the device's distance is the host's."""
+    mesh = Mesh.from_arrays(primitives.icosphere(1).vertices.astype(np.float64) * 2 + [5.0, -3.0, 1.0],
+                            primitives.icosphere(1).faces)
+    accel = clrt.Accel(mesh, device=device)
+    reach = accel.geometry.reach
+    limit = reach.limit()
+    for k, axis in enumerate(np.vstack([np.eye(3), -np.eye(3), [[1.0, -2.0, 0.5]]])):
+        axis = axis / np.linalg.norm(axis)
+        for ratio, refused in ((1 - 1e-5, False), (1 + 1e-5, True)):
+            # the point at `ratio` times the limit from the box's far side along `axis`
+            far_corner = np.where(axis > 0, reach.lo, reach.hi)
+            origin = far_corner + axis * ratio * limit
+            assert reach.farthest(origin) == pytest.approx(ratio * limit, rel=1e-9)
+            direction = (mesh.bounds.mean(axis=0) - origin) / np.linalg.norm(mesh.bounds.mean(axis=0) - origin)
+            try:
+                accel.count(origin, direction)
+            except clrt.InputError as exc:
+                assert refused and str(exc).startswith("origin 0 is"), (k, ratio, str(exc))
+            else:
+                assert not refused, (k, ratio)
+
+
+def test_far_origins_on_the_device_are_refused_with_their_value(device):
+    cla = pytest.importorskip("pyopencl.array")
+    accel = clrt.Accel(primitives.icosphere(2), device=device)
+    o, d = _rays_with_far_origins()
+    o_dev, d_dev = (cla.to_device(accel.queue, a.astype(np.float32)) for a in (o, d))
+    with pytest.raises(clrt.InputError, match=FAR_MESSAGE.format(i=29, value=r"1e\+17, 0\.0, 0\.0", rho="1e17")):
+        accel.trace(o_dev, d_dev)
+    shared = cla.to_device(accel.queue, np.array([2e17, 0.0, 0.0], np.float32))   # one origin for all rays
+    with pytest.raises(clrt.InputError, match=FAR_MESSAGE.format(i=0, value=r"2e\+17, 0\.0, 0\.0", rho="2e17")):
+        accel.any_hit(shared, d_dev)
+
+
+def test_a_ray_file_with_far_origins_exits_2(tmp_path, capsys, device):
+    from clrt.bench import raysets
+    mesh = write_icosphere_obj(tmp_path / "sphere.obj")
+    o, d = _rays_with_far_origins()
+    rows = np.hstack([o, d]).astype("<f4")
+    (tmp_path / "far.f32").write_bytes(rows.tobytes())
+    code = raysets.main([str(mesh), "--read", str(tmp_path / "far.f32"), "--repeat", "1", "--warmup", "0",
+                         *(["--device", device] if device else [])])
+    err = capsys.readouterr().err
+    assert code == 2 and err.count("\n") == 1 and "float32 triangle test overflows" in err, err
+

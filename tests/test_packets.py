@@ -161,7 +161,7 @@ def test_every_ray_of_a_partial_packet_is_answered(count, device):
 
 
 @pytest.mark.parametrize("count", [64, 61])     # whole packets; the bad ray in the last, partial one
-@pytest.mark.parametrize("kind", ["origin", "direction", "zero direction", "tmin", "tmax"])
+@pytest.mark.parametrize("kind", ["origin", "direction", "zero direction", "tmin", "tmax", "reach"])
 def test_a_bad_ray_inside_a_packet_is_reported_by_its_index(kind, count, device):
     mesh = MESHES["knot"]()
     o, d, tmin, tmax, _ = packet_rays(mesh, np.random.default_rng(4))
@@ -173,6 +173,11 @@ def test_a_bad_ray_inside_a_packet_is_reported_by_its_index(kind, count, device)
     elif kind == "direction":
         d[bad] = np.nan
         message = f"direction {bad} is [nan, nan, nan]: directions must be finite and non-zero"
+    elif kind == "reach":    # past the float32 range of the triangle test (clrt.device.reach)
+        o[bad] = [0.0, 1e17, 0.0]
+        message = (f"origin {bad} is [0.0, 1e+17, 0.0]: it lies 1e17 from the scene's far side, but the "
+                   f"device's float32 triangle test overflows and misses hits on this scene's triangles from "
+                   f"past 4.9e16: start the rays nearer, or scale the scene down")
     elif kind == "zero direction":
         d[bad] = 0.0
         message = f"direction {bad} is [0.0, 0.0, 0.0]: directions must be finite and non-zero"
@@ -197,7 +202,8 @@ __kernel void packets_only(__global const float* origins, __global const float* 
 {
     const uint w = get_global_id(0);
     const Geometry g = make_geometry(GEOMETRY_ARGS);
-    const RayInput in = make_ray_input(origins, 3u, dirs, 3u, tmins, 1u, tmaxs, 1u, 0u, 0u, 1u, bad);
+    const RayInput in = make_ray_input(origins, 3u, dirs, 3u, tmins, 1u, tmaxs, 1u, 0u, 0u, 1u, bad,
+                                       (float4)(0.0f), (float4)(-INFINITY), (float4)(INFINITY), INFINITY);
     RayLanes lanes;
     RayPacket packet;
     made[w] = load_ray_lanes(&in, 8 * w, 8 * w + 8, &lanes);
@@ -242,7 +248,7 @@ def test_packets_are_walked_as_packets_and_answer_as_brute_force(device):
 
     n = len(o)
     brute = clrt.Accel(mesh, accel="none", device=device)
-    ins = [buffer(a) for a in (o, d, tmin, tmax, np.zeros(4, np.int32))]    # alive until the launches end
+    ins = [buffer(a) for a in (o, d, tmin, tmax, np.zeros(5, np.int32))]    # alive until the launches end
     for cull in ("none", "back", "front"):
         expected = brute.trace(o, d, tmin=tmin, tmax=tmax, cull=cull)
         expected_any = brute.any_hit(o, d, tmin=tmin, tmax=tmax, cull=cull)

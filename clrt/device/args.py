@@ -16,9 +16,12 @@ def vec4(v) -> np.ndarray:
     return np.array([*v, 0.0], np.float32)
 
 
-def camera_args(camera: Camera) -> tuple:
-    """The camera as the kernels' CAMERA_PARAMS (camera.cl)."""
+def camera_args(camera: Camera, origin=None) -> tuple:
+    """The camera as the kernels' CAMERA_PARAMS (camera.cl); its eye moved by
+    ``-origin`` (the device's frame, clrt.scene.arrays.device_origin) in float64
+    when given."""
     forward, right, up = camera.basis()
     scale_x, scale_y = camera.scales()
-    return (vec4(camera.eye), vec4(forward), vec4(right), vec4(up), np.float32(scale_x),
+    eye = np.asarray(camera.eye, np.float64) - (0.0 if origin is None else np.asarray(origin, np.float64))
+    return (vec4(eye), vec4(forward), vec4(right), vec4(up), np.float32(scale_x),
             np.float32(scale_y), np.uint32(camera.width), np.uint32(camera.height))

@@ -111,17 +111,23 @@ class DeviceGeometry:
     devices included (built here, so known only here) -- before the first
     upload; :func:`check_fits` raises there when the scene cannot fit.
 
-    ``bounds``: (2, 3) min and max corner of the triangles, when the caller has
-    them (else computed); ``reach`` (:class:`clrt.device.reach.Reach`) tells the
-    queries and the renderer how far from the triangles their rays may start.
+    ``origin``: (3,) float64, where the device's frame lies in the caller's
+    (clrt.scene.arrays.device_origin; None: the same frame): ``corners`` and the
+    tree are in the device's frame, moved by ``-origin``; the queries and the
+    renderer move their rays' origins into it (``origin`` here).
+
+    ``bounds``: (2, 3) min and max corner of the triangles in the caller's
+    frame, when the caller has them (else computed); ``reach``
+    (:class:`clrt.device.reach.Reach`, in the caller's frame) tells the queries
+    and the renderer how far from the triangles their rays may start.
     """
 
     def __init__(self, context: cl.Context, corners: np.ndarray, acceleration: Acceleration,
                  extra: dict | None = None, max_buffer_bytes: int | None = None,
                  fits: Callable[[int], None] | None = None, max_buffer_label: str = "max_buffer_bytes",
-                 bounds=None):
+                 bounds=None, origin=None):
         self.acceleration = acceleration
-        self.reach = Reach(corners, bounds)
+        self._place(corners, bounds, origin)
         prim_ids = acceleration.prim_ids
         # A tree built on this context's device is on it already, with its
         # triangles in slot order: taken over (once), not uploaded again.
@@ -173,6 +179,15 @@ class DeviceGeometry:
         self.num_tris = np.uint32(len(prim_ids))
         self._refit = None   # made by the first refit
 
+    def _place(self, corners: np.ndarray, bounds, origin) -> None:
+        """The frame (``origin``) and ``reach`` of triangles ``corners`` (device frame)."""
+        self.origin = np.zeros(3) if origin is None else np.array(origin, np.float64)
+        if bounds is None:
+            flat = corners.reshape(-1, 3)
+            bounds = np.array([[flat[:, k].min() for k in range(3)], [flat[:, k].max() for k in range(3)]],
+                              np.float64) + self.origin
+        self.reach = Reach(corners, bounds)
+
     @property
     def arg_types(self) -> list:
         """The types of GEOMETRY_PARAMS (clrt.device.program.typed_kernel)."""
@@ -190,10 +205,12 @@ class DeviceGeometry:
         wide = (*b["wide_nodes"], *b["packets"]) if self.wide is not None else ()
         return (*b["tris"], self.num_tris, *b["nodes"], *b["prim_ids"], *wide)
 
-    def refit(self, queue: cl.CommandQueue, corners: np.ndarray, bounds=None) -> None:
+    def refit(self, queue: cl.CommandQueue, corners: np.ndarray, bounds=None, origin=None) -> None:
         """Move the triangles to ``corners`` (F, 3, 3) float32, input order, the same
-        triangles as before (``bounds``: their min and max corner, or None), and
-        refit the BVH to them on the device: the tree
+        triangles as before, in the device's frame of ``origin`` (which may differ
+        from the last one: the volumes are all fitted anew; None: the caller's
+        frame) -- ``bounds``: their min and max corner in the caller's frame,
+        or None -- and refit the BVH to them on the device: the tree
         and the slots stay, every volume is fitted anew to its subtree's exact
         box as a build fits it (refit.cl).  The host copy of the rows follows;
         the statistics keep describing the tree as it was built."""
@@ -203,7 +220,7 @@ class DeviceGeometry:
                              "build it anew")
         if len(corners) != len(acceleration.prim_ids):
             raise InputError(f"refit needs the same {len(acceleration.prim_ids):,} triangles, got {len(corners):,}")
-        self.reach = Reach(corners, bounds)
+        self._place(corners, bounds, origin)
         cl.enqueue_copy(queue, self.buffers["tris"][0], triangle_verts(corners[acceleration.prim_ids]))
         if not acceleration.is_bvh:
             return

@@ -25,9 +25,10 @@ of about three against the overflows measured on PoCL (docs/limits.md,
 :class:`Reach` holds a scene's side of the bound; the queries check a
 camera's eye against it (``Accel.camera_images``, ``trace_camera``) and the
 renderer its eye and the scene's own secondary rays, raising one InputError
-instead of missing hits.  A batch's own origins are not checked: that would
-cost a pass over them on the host, which the ray path never makes (the
-kernels check rays on the device; a check of their range belongs there).
+instead of missing hits.  A batch's own origins are checked on the device,
+where the kernels check every ray anyway (rays.cl, ``BAD_REACH``): the host
+hands them the box and :meth:`Reach.batch_limit` and makes no pass over the
+rays; :meth:`Reach.message` words the error for the first ray refused.
 """
 
 from __future__ import annotations
@@ -84,6 +85,7 @@ class Reach:
             flat = corners.reshape(-1, 3)
             bounds = [[flat[:, k].min() for k in range(3)], [flat[:, k].max() for k in range(3)]]
         self.lo, self.hi = (np.asarray(b, np.float64) for b in bounds)
+        self._limit = None   # limit(), found once
         self.diagonal = float(np.linalg.norm(self.hi - self.lo))
         if self.diagonal > MEASURE_DIAGONAL:
             self.area, self.edge = _largest_triangle(corners)
@@ -100,11 +102,32 @@ class Reach:
 
     def limit(self) -> float:
         """The largest distance from the scene's far side at which a ray may start."""
-        lo, hi = 1e-30, 1e39
-        for _ in range(100):   # bisection, in ratios, of a bound that grows with rho
-            mid = math.sqrt(lo * hi)
-            lo, hi = (mid, hi) if self.largest_t(mid) < FLT_MAX else (lo, mid)
-        return lo
+        if self._limit is None:
+            lo, hi = 1e-30, 1e39
+            for _ in range(100):   # bisection, in ratios, of a bound that grows with rho
+                mid = math.sqrt(lo * hi)
+                lo, hi = (mid, hi) if self.largest_t(mid) < FLT_MAX else (lo, mid)
+            self._limit = lo
+        return self._limit
+
+    def batch_limit(self) -> float:
+        """The distance the query kernels hold each batch origin to (rays.cl's
+        ``reach2`` is its square): :meth:`limit`.  (Tests make it infinite to
+        see what the device does past the limit.)"""
+        return self.limit()
+
+    def farthest(self, lo, hi=None) -> float:
+        """The largest distance from a point of the box ``lo``..``hi`` (a point
+        when ``hi`` is None) to the scene's far side (inf past float64)."""
+        return _farthest(lo, lo if hi is None else hi, self.lo, self.hi)
+
+    def message(self, what: str, rho: float) -> str:
+        """The error for rays that start ``rho`` from the scene's far side, past
+        the limit; ``what`` names them and says where they lie (see :meth:`check`)."""
+        show = lambda x: checks.show(float(f"{x:.2g}"))   # noqa: E731
+        return (f"{what} {show(rho)} from the scene's far side, but the device's float32 triangle "
+                f"test overflows and misses hits on this scene's triangles from past "
+                f"{show(self.limit())}: start the rays nearer, or scale the scene down")
 
     def check(self, lo, hi, what: str) -> None:
         """InputError when rays whose origins lie in the box ``lo``..``hi`` (3
@@ -112,13 +135,10 @@ class Reach:
         this scene.  ``what`` names the origins and says where they lie, e.g.
         "the camera's eye lies".  Origins that are not finite are left to the
         kernels' own check (rays.cl), which names the first bad ray."""
-        rho = _farthest(lo, hi, self.lo, self.hi)
+        rho = self.farthest(lo, hi)
         if not math.isfinite(rho) or self.largest_t(rho) < FLT_MAX:
             return
-        show = lambda x: checks.show(float(f"{x:.2g}"))   # noqa: E731
-        raise InputError(f"{what} {show(rho)} from the scene's far side, but the device's float32 triangle "
-                         f"test overflows and misses hits on this scene's triangles from past "
-                         f"{show(self.limit())}: start the rays nearer, or scale the scene down")
+        raise InputError(self.message(what, rho))
 
     def check_render(self, eye, epsilon: float) -> None:
         """:meth:`check` for a frame: rays from the camera's ``eye``, and the

@@ -4,8 +4,17 @@
 // tmax] per ray or one for all (stride 0).  The rays are checked and their
 // directions normalised here, on the device, so the host makes no pass over
 // them: a bad ray is reported by its index, the lowest of each kind, through
-// atomic_min on `bad` (one int per kind, BAD_ORIGIN .. BAD_TMAX from
+// atomic_min on `bad` (one int per kind, BAD_ORIGIN .. BAD_REACH from
 // clrt.config.RAY_CHECKS, which the host sets to INT_MAX before the batch).
+// BAD_REACH: an origin so far from the scene that the float32 triangle test
+// could overflow and lose hits (clrt/device/reach.py): farther than `reach`
+// from the far side of the box scene_lo .. scene_hi.
+//
+// The scene lies on the device in a frame of its own, moved by -shift
+// (clrt/scene/arrays.py, device_origin, says why and why nothing changes but
+// precision and speed): each origin is moved the same way here, once, before
+// anything else reads it.  shift is 0 for scenes near the origin (o - 0 is o,
+// bit for bit).
 #ifndef CLRT_RAYS_CL
 #define CLRT_RAYS_CL
 
@@ -19,14 +28,18 @@ typedef struct {
     uint ray_first;     // index in the caller's batch of this launch's first ray
     uint normalise;     // 0: the directions are unit vectors already (clrt's own cameras)
     __global int* bad;
+    float3 shift;       // the device frame's origin: subtracted from every ray origin
+    float3 scene_lo, scene_hi;   // the box of the scene's triangles, device frame
+    float reach2;       // the square of the farthest an origin may lie from the box's far side
 } RayInput;
 
 #define RAY_INPUT_PARAMS __global const float* origins, const uint origin_stride, \
     __global const float* dirs, const uint dir_stride, __global const float* tmins, const uint tmin_stride, \
     __global const float* tmaxs, const uint tmax_stride, const uint in_first, const uint ray_first, \
-    const uint normalise, __global int* bad
+    const uint normalise, __global int* bad, const float4 shift, const float4 scene_lo, const float4 scene_hi, \
+    const float reach2
 #define RAY_INPUT_ARGS origins, origin_stride, dirs, dir_stride, tmins, tmin_stride, tmaxs, tmax_stride, \
-    in_first, ray_first, normalise, bad
+    in_first, ray_first, normalise, bad, shift, scene_lo, scene_hi, reach2
 
 inline RayInput make_ray_input(RAY_INPUT_PARAMS)
 {
@@ -43,6 +56,10 @@ inline RayInput make_ray_input(RAY_INPUT_PARAMS)
     in.ray_first = ray_first;
     in.normalise = normalise;
     in.bad = bad;
+    in.shift = shift.xyz;
+    in.scene_lo = scene_lo.xyz;
+    in.scene_hi = scene_hi.xyz;
+    in.reach2 = reach2;
     return in;
 }
 
@@ -53,6 +70,22 @@ inline RayInput make_ray_input(RAY_INPUT_PARAMS)
 // load_ray's subnormal components to zeros of their sign, for float3 or
 // (load_ray_lanes) float8 values.
 #define FLUSH_SUBNORMALS(real_t, x) select((x), copysign((real_t)(0.0f), (x)), isless(fabs(x), (real_t)(FLT_MIN)))
+
+// An origin's distance to the far side of the scene's box, axis by axis
+// (float3, or float8 lanes of one axis): the rho of clrt/device/reach.py.
+#define FAR_SIDE(lo, hi, x) fmax((hi) - (x), (x) - (lo))
+
+// Does a finite origin lie within reach of the scene (rays.cl's BAD_REACH)?  A
+// few flops a ray, once: the host makes no pass over the rays for it.  The
+// square is written out with fma so that load_ray_lanes rounds lane by lane
+// as this does; it overflows to inf (refused) for origins near the float32
+// limit.  Rounding moves the distance by about 1e-7 of itself, far inside
+// the bound's own margin (about three, reach.py).
+inline bool within_reach(const RayInput* in, float3 o)
+{
+    const float3 f = FAR_SIDE(in->scene_lo, in->scene_hi, o);
+    return fma(f.x, f.x, fma(f.y, f.y, f.z * f.z)) <= in->reach2;
+}
 
 // Unit direction of d, normalised in double precision where the device has it
 // (as numpy would on the host), so that every device gets the same float32
@@ -103,6 +136,12 @@ inline bool load_ray(const RayInput* in, uint i, float3* origin, float3* dir, fl
     if (!all(isfinite(*origin))) {
         atomic_min(in->bad + BAD_ORIGIN, ray);
         ok = false;
+    } else {
+        *origin -= in->shift;       // into the device's frame
+        if (!within_reach(in, *origin)) {
+            atomic_min(in->bad + BAD_REACH, ray);
+            ok = false;
+        }
     }
     if (!unit_direction(vload3(0, in->dirs + k * in->dir_stride), in->normalise, dir)) {
         atomic_min(in->bad + BAD_DIRECTION, ray);
@@ -179,6 +218,14 @@ inline bool load_ray_lanes(const RayInput* in, uint first, uint num_rays, RayLan
     const int8 finite = isfinite(r->ox) & isfinite(r->oy) & isfinite(r->oz) &
                         isfinite(r->dx) & isfinite(r->dy) & isfinite(r->dz);
     if (!all(finite) || any(isnan(r->tmin)) || any(isnan(r->tmax)))
+        return false;
+    r->ox -= in->shift.x;       // into the device's frame, as load_ray
+    r->oy -= in->shift.y;
+    r->oz -= in->shift.z;
+    const float8 fx = FAR_SIDE(in->scene_lo.x, in->scene_hi.x, r->ox);    // within_reach, lane by lane
+    const float8 fy = FAR_SIDE(in->scene_lo.y, in->scene_hi.y, r->oy);
+    const float8 fz = FAR_SIDE(in->scene_lo.z, in->scene_hi.z, r->oz);
+    if (!all(fma(fx, fx, fma(fy, fy, fz * fz)) <= (float8)(in->reach2)))
         return false;
     if (in->normalise) {
 #ifdef cl_khr_fp64

@@ -35,10 +35,11 @@ import threading
 
 import numpy as np
 import pyopencl as cl
+from pyopencl import cltypes
 
 from clrt import checks
 from clrt.config import DEFAULT_ACCEL, DEFAULT_BUILDER, DEFAULT_LEAF_SIZE
-from clrt.device.args import CAMERA_ARG_TYPES, camera_args
+from clrt.device.args import CAMERA_ARG_TYPES, camera_args, vec4
 from clrt.device.build import build_acceleration
 from clrt.device.context import create_context, device_kind, device_label
 from clrt.device.geometry import DeviceGeometry, check_fits, packet_rays
@@ -53,7 +54,7 @@ from clrt.query.rays import CameraRays, PinholeRays, RayBatch, cull_code, is_dev
 from clrt.query.results import (ALL_HITS_FIELDS, CAMERA_FIELDS, CLOSEST_FIELDS, RESULT_BYTES, RESULT_DTYPES,
                                 AllHits, CameraImages, Hits, with_fields)
 from clrt.accel import as_triangles
-from clrt.scene.arrays import triangle_corners
+from clrt.scene.arrays import device_origin, triangle_corners
 from clrt.scene.mesh import Mesh
 from clrt.scene.sources import as_mesh
 
@@ -186,12 +187,13 @@ class Accel:
         accel, builder, leaf_size = checks.accel_options(accel, builder, leaf_size)
         self._lock = threading.RLock()
         self.mesh = as_mesh(mesh)
-        corners = triangle_corners(self.mesh)
+        origin = device_origin(self.mesh.bounds)   # the device's frame (clrt.scene.arrays)
+        corners = triangle_corners(self.mesh, origin)
         built = build_acceleration(corners, accel, builder, leaf_size, device)
         context, queue = create_context(device)
         label = device_label(queue.device)
         geometry = DeviceGeometry(context, corners, built, max_buffer_bytes=max_buffer_bytes,
-                                  max_buffer_label=max_buffer_label, bounds=self.mesh.bounds,
+                                  max_buffer_label=max_buffer_label, bounds=self.mesh.bounds, origin=origin,
                                   fits=lambda nbytes: check_fits(queue.device, label, nbytes))   # before any upload
         self._options = dict(accel=accel, builder=builder, leaf_size=leaf_size, device=device,
                              chunk_rays=chunk_rays, max_buffer_bytes=max_buffer_bytes,
@@ -217,7 +219,9 @@ class Accel:
             fresh.pop("_lock")   # the threads waiting on this one's
             self.__dict__.update(fresh)
             return
-        self.geometry.refit(self.queue, as_triangles(triangle_corners(mesh)), mesh.bounds)
+        # The frame chosen for the moved mesh, as a new Accel would choose it.
+        origin = device_origin(mesh.bounds)
+        self.geometry.refit(self.queue, as_triangles(triangle_corners(mesh, origin)), mesh.bounds, origin)
         self.mesh = mesh
 
     @classmethod
@@ -283,7 +287,8 @@ class Accel:
         program = build_program(context, "trace.cl", defines)
         # The kernels with their argument types (trace.cl's and rays.cl's parameter lists).
         u32, geom = np.uint32, geometry.arg_types
-        ray_input = [None, u32, None, u32, None, u32, None, u32, u32, u32, u32, None]
+        ray_input = [None, u32, None, u32, None, u32, None, u32, u32, u32, u32, None,
+                     cltypes.float4, cltypes.float4, cltypes.float4, np.float32]
         self.kernels = {name: typed_kernel(program, name, types) for name, types in {
             "query_closest": [*ray_input, *[None] * len(CLOSEST_FIELDS), u32, u32, np.int32, *geom],
             "query_any": [*ray_input, None, u32, u32, np.int32, *geom],
@@ -354,8 +359,18 @@ class Accel:
 
     def _begin(self, source) -> None:
         """Before the first chunk of a batch: a camera's eye within the range of
-        the triangle test (clrt.device.reach), no bad ray reported yet."""
+        the triangle test (clrt.device.reach), no bad ray reported yet, and the
+        range the kernels hold a batch's own origins to (rays.cl's BAD_REACH)."""
         self._check_reach(source)
+        reach, origin = self.geometry.reach, self.geometry.origin
+        # A camera's eye was checked here, as the renderer checks it, and goes
+        # to the device in its frame already, moved in float64 as the
+        # renderer's (_ray_args): the kernels then neither check nor move it.
+        camera = isinstance(source, (CameraRays, PinholeRays))
+        limit = np.inf if camera else reach.batch_limit()
+        with np.errstate(over="ignore"):
+            self._ray_frame = (vec4(np.zeros(3) if camera else origin), vec4(reach.lo - origin),
+                               vec4(reach.hi - origin), np.float32(limit * limit))
         if len(self.launches) >= LAUNCHES_KEPT:   # all finished: the last query waited for its results
             self._sum_launches()
         cl.enqueue_copy(self.queue, self._buffer("bad", 4 * len(RAY_CHECKS)),
@@ -364,10 +379,9 @@ class Accel:
     def _check_reach(self, source) -> None:
         """InputError when a camera's eye lies so far from the scene that the
         float32 triangle test could overflow and miss hits (clrt.device.reach).
-        A batch's own origins are not checked: that would be a pass over them
-        on the host (about 1 ms per million rays, a large share of a GPU
-        batch's host time), which the ray path otherwise never makes
-        (rays.cl checks rays on the device)."""
+        A batch's own origins are checked by the kernels (rays.cl), not here:
+        a pass over them on the host (about 1 ms per million rays, a large
+        share of a GPU batch's host time) is what the ray path never makes."""
         if isinstance(source, (CameraRays, PinholeRays)):
             eye = np.asarray(source.camera.eye if isinstance(source, CameraRays) else source.eye, np.float32)
             self.geometry.reach.check(eye, eye, "the camera's eye lies")
@@ -378,7 +392,7 @@ class Accel:
         cl.enqueue_copy(self.queue, bad, self._buffer("bad", bad.nbytes))   # waits for the whole batch
         if (bad < np.iinfo(np.int32).max).any():
             kind = int(np.argmin(bad))          # the lowest ray; on a tie, the first check
-            raise InputError(source.bad_ray_message(RAY_CHECKS[kind], int(bad[kind])))
+            raise InputError(source.bad_ray_message(RAY_CHECKS[kind], int(bad[kind]), self.geometry.reach))
 
     def _ray_args(self, source, start: int, stop: int) -> tuple:
         """RAY_INPUT_PARAMS (rays.cl) for rays start..stop-1 of ``source``: host
@@ -386,7 +400,8 @@ class Accel:
         used in place, camera rays made on the device."""
         m = stop - start
         if isinstance(source, (CameraRays, PinholeRays)):
-            eye = np.asarray(source.camera.eye if isinstance(source, CameraRays) else source.eye, np.float32)
+            eye = (np.asarray(source.camera.eye if isinstance(source, CameraRays) else source.eye, np.float64)
+                   - self.geometry.origin).astype(np.float32)
             dirs = self._buffer("in_1", 12 * m)
             if isinstance(source, CameraRays):
                 kernel = self.kernels["camera_rays"]
@@ -409,7 +424,7 @@ class Accel:
             in_first = 0
         flat = [x for buf, stride in inputs for x in (buf, np.uint32(stride))]
         return (*flat, np.uint32(in_first), np.uint32(start), np.uint32(bool(source.normalise)),
-                self._buffer("bad", 4 * len(RAY_CHECKS)))
+                self._buffer("bad", 4 * len(RAY_CHECKS)), *self._ray_frame)
 
     def _upload(self, name: str, array: np.ndarray) -> cl.Buffer:
         """``array`` into the kept buffer ``name``, without waiting (the queue
@@ -665,7 +680,7 @@ class Accel:
         of a block run together and, being neighbours, walk much the same nodes:
         8 x 8 blocks made the H200 15 % faster than the driver's choice."""
         kernel = self.kernels["occlude_camera" if occlusion else "trace_camera"]
-        kernel.set_args(out, *camera_args(camera), *self.geometry.args)
+        kernel.set_args(out, *camera_args(camera, self.geometry.origin), *self.geometry.args)
         size = (camera.width, camera.height)
         if tile is not None:   # round up: the kernel skips pixels outside the image
             size = tuple(-(-n // t) * t for n, t in zip(size, tile))

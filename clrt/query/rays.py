@@ -159,8 +159,22 @@ class RayBatch:
         a, stride = self.inputs[k]
         return a if stride == 0 else a[start * stride:stop * stride]
 
-    def bad_ray_message(self, kind: str, i: int) -> str:
-        """The error for ray ``i`` failing check ``kind`` (clrt.config.RAY_CHECKS)."""
+    def _origin(self, i: int) -> np.ndarray:
+        """(3,) the origin of ray ``i`` as given (one row read back from a device array)."""
+        given = self.given["origin"]
+        if is_device_array(given):
+            rows = given.reshape(-1, 3)
+            return rows[i:i + 1].get()[0] if len(rows) > 1 else rows.get()[0]
+        rows = host_rows(given, "origins")
+        return np.asarray(rows[i if len(rows) > 1 else 0])
+
+    def bad_ray_message(self, kind: str, i: int, reach=None) -> str:
+        """The error for ray ``i`` failing check ``kind`` (clrt.config.RAY_CHECKS);
+        ``reach``: the scene's :class:`clrt.device.reach.Reach` (for "reach")."""
+        if kind == "reach":
+            row = self._origin(i)
+            shown = [float(str(x)) for x in row] if row.dtype == np.float32 else row.tolist()   # float32: shortest
+            return reach.message(f"origin {i} is {shown}: it lies", reach.farthest(row.astype(np.float64)))
         given = self.given[kind]
         if is_device_array(given):
             value = "not finite" if kind == "origin" else "invalid"

@@ -171,7 +171,7 @@ class Renderer:
             try:
                 # Buffers larger than one allocation are uploaded in parts (split.cl).
                 self.geometry = DeviceGeometry(self.context, a.corners, self.acceleration, split,
-                                               max_buffer_bytes, fits=fits, bounds=a.bounds)
+                                               max_buffer_bytes, fits=fits, bounds=a.bounds, origin=a.origin)
                 mf = cl.mem_flags
                 self.buffers = {name: cl.Buffer(self.context, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=x)
                                 for name, x in whole.items()}
@@ -229,7 +229,7 @@ class Renderer:
         """
         job = self._job(camera, linear, hits, samples, max_depth, seed)
         # Rays from too far for the float32 triangle test: one error, not missed hits.
-        self.geometry.reach.check_render(job.camera.eye, ray_epsilon(self.arrays.bounds, job.camera.eye))
+        self.geometry.reach.check_render(job.camera.eye, self._ray_epsilon(job.camera))
         job.camera_args, job.scene_args = self._frame_args(job.camera)
         job.progress = progress or (lambda n: None)
         capacity = self.tile_capacity(job.camera.width * job.camera.height)
@@ -275,9 +275,17 @@ class Renderer:
         detail = ()
         if self.arrays.detail is not None:   # DETAIL_PARAMS in shading.cl, TEXTURE_PARAMS in texture.cl
             detail = (*b["tri_detail"], self.buffers["textures"], *b["texels"], self.buffers["srgb_table"])
-        return camera_args(camera), (
+        return camera_args(camera, self.arrays.origin), (
             *scene, self.buffers["lights"], len(self.arrays.lights), vec4(self.scene.ambient_light),
-            vec4(self.scene.background), ray_epsilon(self.arrays.bounds, camera.eye), *detail)
+            vec4(self.scene.background), self._ray_epsilon(camera), *detail)
+
+    def _ray_epsilon(self, camera: Camera) -> float:
+        """The offset of secondary rays (clrt.scene.scene.ray_epsilon) for the
+        coordinates the device computes with: those of its frame
+        (clrt.scene.arrays.device_origin), where a scene far from the origin has
+        small ones -- so a scene moved away keeps its image."""
+        origin = self.arrays.origin
+        return ray_epsilon(self.arrays.bounds - origin, np.asarray(camera.eye, np.float64) - origin)
 
     @one_at_a_time
     def refit(self, scene, *, rebuild: bool = False) -> None:
@@ -304,7 +312,7 @@ class Renderer:
             self.__dict__.update(fresh.__dict__)
             self._followers, self._lock = followers, lock
         else:
-            self.geometry.refit(self.queue, arrays.corners, arrays.bounds)
+            self.geometry.refit(self.queue, arrays.corners, arrays.bounds, arrays.origin)
             self.geometry.replace(self.queue, "tri_info", arrays.tri_info[self.acceleration.prim_ids])
             self.geometry.replace(self.queue, "vertex_normals", arrays.vertex_normals)
             cl.enqueue_copy(self.queue, self.buffers["materials"], arrays.materials)   # as many as before
@@ -337,7 +345,7 @@ class Renderer:
         caller's Scene is left as it is); the geometry stays uploaded (a
         turntable of ``clrt batch render`` moves the default light with the camera)."""
         self.scene.lights = list(lights)
-        self.arrays.lights = light_records(self.scene.lights)
+        self.arrays.lights = light_records(self.scene.lights, self.arrays.origin)
         self.buffers["lights"] = replace_buffer(self.queue, self.buffers["lights"], self.arrays.lights)
 
     # ----------------------------------------------------------------------- memory

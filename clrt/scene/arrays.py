@@ -9,7 +9,8 @@ tracer (clrt/reference.py) reads scenes its own way and does not use this module
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import math
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -24,15 +25,19 @@ from clrt.scene.texture import srgb_decode
 
 @dataclass
 class SceneArrays:
-    """The scene as the kernels see it, triangles in input order."""
+    """The scene as the kernels see it, triangles in input order, positions in
+    the device's frame: the scene's own, moved by ``-origin``
+    (:func:`device_origin`; zeros for a scene near the origin)."""
 
-    corners: np.ndarray          # (F, 3, 3) float32 triangle corners
+    corners: np.ndarray          # (F, 3, 3) float32 triangle corners, device frame
     tri_info: np.ndarray         # (F,) TRIANGLE_INFO
     vertex_normals: np.ndarray   # (V, 4) float32
     materials: np.ndarray        # (M,) MATERIAL
-    lights: np.ndarray           # (L,) LIGHT, at least one record (OpenCL buffers cannot be empty)
-    bounds: np.ndarray           # (2, 3) float64
+    lights: np.ndarray           # (L,) LIGHT, at least one record (OpenCL buffers cannot be empty), device frame
+    bounds: np.ndarray           # (2, 3) float64, the scene's own frame
     detail: "SurfaceDetail | None" = None   # None: no textures or colours (a plain program)
+    origin: np.ndarray = field(default_factory=lambda: np.zeros(3))   # (3,) float64: the device frame's
+    #                                                                    origin, in the scene's frame
 
 
 @dataclass
@@ -50,10 +55,77 @@ def srgb_table() -> np.ndarray:
     return srgb_decode(np.arange(256) / 255.0).astype(np.float32)
 
 
-def triangle_corners(mesh: Mesh) -> np.ndarray:
-    """(F, 3, 3) float32 corners of a mesh's triangles (row = face index)."""
+# ----------------------------------------------------------------------- the device's frame
+#
+# The device computes in float32, and some of its precision goes with the
+# coordinates' magnitude rather than the scene's size: the box test widens
+# every box plane by about 1e-6 of |coordinate| (volume_ray in
+# kernels/volumes.cl), so far from the origin the BVH stops culling, and hit
+# points and shading steps carry float32 rounding of that magnitude.  So the
+# triangles go to the device (and to every BVH builder) in a frame of their
+# own: moved by -c, c the device origin below, with every ray origin moved
+# by -c too (camera eyes and lights on the host, in float64; batch origins
+# on the device, load_ray in kernels/rays.cl).  Answers are not changed:
+#
+# * v - c is exact in float32 for every vertex coordinate v of the axis
+#   (Sterbenz: c and v float32 of one sign, c/2 <= v <= 2c), so the device
+#   holds the user's float32 mesh, moved, with no rounding;
+# * the triangle test starts from A = v - o, and (v - c) - (o - c) rounds to
+#   exactly what v - o does whenever o - c is exact too -- for every origin
+#   within a factor two of c on each moved axis (Sterbenz again), and for
+#   every float32 origin beyond c whose step is at most c's grain (c is a
+#   multiple of it).  From there the test only sees differences and the
+#   direction: t, u, v, prim, the normal and the face flag come out bit for
+#   bit, whichever frame the BVH was built in (every walk finds the hits of
+#   brute force, ties going to the lower index).  An origin that is not
+#   exact rounds once, by half a float32 step of its distance from c: the
+#   test's own first rounding, of v - o, is of that size anyway.
+#
+# Only axes on which the scene lies far from the origin move, so scenes near
+# it keep their frame, bit for bit.  "Far": at least RECENTRE_DISTANCE
+# diagonals of the scene's box.  Below that the widening is at most about
+# 4 * 2^-20 * 16 = 6e-5 of the diagonal, which stops no culling above a few
+# million triangles (a torus of 40k triangles lost nothing at 370 diagonals,
+# docs/limits.md), and exactness (Sterbenz, above) needs only 1.25.
+RECENTRE_DISTANCE = 16.0
+
+
+def device_origin(bounds) -> np.ndarray:
+    """(3,) float64 c, the origin of the device's frame for a scene whose box is
+    ``bounds`` ((2, 3), float32 values): on each axis where the box lies
+    RECENTRE_DISTANCE diagonals or more from 0, a float32 near the box's centre,
+    a multiple of its grain: the largest power of two at most a quarter of the
+    diagonal (so c lies within 1/8 diagonal of the centre and has few
+    significant bits), or the float32 step at the box's far side where that is
+    larger (so c is a float32) -- such that v - c is exact for every float32 v
+    in the box; 0 on the other axes (the comment above says why)."""
+    lo, hi = (np.asarray(b, np.float64) for b in bounds)
+    origin = np.zeros(3)
+    diagonal = float(np.linalg.norm(hi - lo))
+    if not np.isfinite(diagonal):
+        return origin
+    for k in range(3):
+        near = min(abs(lo[k]), abs(hi[k]))            # the box's distance from 0 on this axis
+        if lo[k] * hi[k] <= 0.0 or near < RECENTRE_DISTANCE * diagonal:
+            continue
+        far = max(abs(lo[k]), abs(hi[k]))
+        grain = max(float(np.spacing(np.float32(far))),
+                    2.0 ** math.floor(math.log2(diagonal / 4.0)) if diagonal > 0.0 else 0.0)
+        c = round(0.5 * (lo[k] + hi[k]) / grain) * grain
+        # Sterbenz for every v in [lo, hi]: c a float32 of their sign, c/2 <= |v| <= 2c.
+        if float(np.float32(c)) == c and c * lo[k] > 0.0 and abs(c) <= 2.0 * near and far <= 2.0 * abs(c):
+            origin[k] = c
+    return origin
+
+
+def triangle_corners(mesh: Mesh, origin=None) -> np.ndarray:
+    """(F, 3, 3) float32 corners of a mesh's triangles (row = face index), moved
+    by ``-origin`` (:func:`device_origin`: the subtraction is exact) when given."""
     # np.take: the same gather as mesh.vertices[mesh.faces], several times faster (numpy 2.4).
-    return np.ascontiguousarray(np.take(mesh.vertices, mesh.faces, axis=0), dtype=np.float32)
+    corners = np.ascontiguousarray(np.take(mesh.vertices, mesh.faces, axis=0), dtype=np.float32)
+    if origin is not None and np.any(origin):
+        corners -= np.asarray(origin, np.float32)
+    return corners
 
 
 def triangle_verts(corners: np.ndarray) -> np.ndarray:
@@ -105,8 +177,10 @@ def flatten_scene(scene: Scene) -> SceneArrays:
     detail = None
     if textures or mesh.colors is not None:
         detail = surface_detail(mesh, [tex for _, tex in textures.values()])
-    return SceneArrays(triangle_corners(mesh), tri_info, normals, materials, light_records(scene.lights),
-                       scene.bounds, detail)
+    bounds = scene.bounds
+    origin = device_origin(bounds)
+    return SceneArrays(triangle_corners(mesh, origin), tri_info, normals, materials,
+                       light_records(scene.lights, origin), bounds, detail, origin)
 
 
 def surface_detail(mesh: Mesh, textures: list) -> SurfaceDetail:
@@ -130,10 +204,12 @@ def surface_detail(mesh: Mesh, textures: list) -> SurfaceDetail:
     return SurfaceDetail(tri_detail, table, texels, srgb_table())
 
 
-def light_records(lights) -> np.ndarray:
-    """(L,) LIGHT records of a list of Lights, at least one (OpenCL buffers cannot be empty)."""
+def light_records(lights, origin=None) -> np.ndarray:
+    """(L,) LIGHT records of a list of Lights, at least one (OpenCL buffers cannot
+    be empty); positions moved by ``-origin`` (in float64, then rounded) when given."""
     records = np.zeros(max(len(lights), 1), LIGHT)
+    shift = np.zeros(3) if origin is None else np.asarray(origin, np.float64)
     for i, light in enumerate(lights):
-        records[i]["position"][:3] = light.position
+        records[i]["position"][:3] = np.asarray(light.position, np.float64) - shift
         records[i]["color"][:3] = light.color
     return records
