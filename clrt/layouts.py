@@ -134,7 +134,7 @@ triangles into segments (build_partition.cl), before PLOC; node 0 is all of them
     0: centre_lo  uint4  xyz: min corner of its triangles' box centres, as
                          order-preserving bits (build_morton.cl's ordered_bits)
    16: centre_hi  uint4  xyz: max corner, likewise
-   32: count      int    triangles
+   32: count      int    its triangles among the samples that the partition looks at
    36: child      int    its first child (the second follows it), -1: not split
    40: axis       int    the split's axis
    44: split      int    the first of the axis's bins that go right

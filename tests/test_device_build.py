@@ -378,15 +378,20 @@ def test_restructured_trees_give_brute_force_hits(volume, device, monkeypatch):
             assert np.array_equal(getattr(hits, field), getattr(base, field)), (name, volume, field)
 
 
+@pytest.mark.parametrize("samples", (None, 300))
 @pytest.mark.parametrize("top_clusters", (16, 128))
 @pytest.mark.parametrize("leaf_size", (1, 4))
 @pytest.mark.parametrize("name", sorted(CORNERS))
-def test_partitioned_trees_are_valid(name, leaf_size, top_clusters, queue):
+def test_partitioned_trees_are_valid(name, leaf_size, top_clusters, samples, queue, monkeypatch):
     """The SAH partition before PLOC (build_partition.cl; GPUs do it by
     default, here forced on the test device): a valid tree with conservative
-    boxes for every test mesh, its triangles in at most top_clusters segments,
-    and the same bytes from a second build (the splits are granted in node
-    order, not in the order the work-items happen to run)."""
+    boxes for every test mesh, and the same bytes from a second build (the
+    splits are granted in node order, not in the order the work-items happen
+    to run) -- also when the partition decides on a sample of the triangles
+    (PART_SAMPLES, here 300) and takes the others down its splits after."""
+    from clrt.device import build
+    if samples:
+        monkeypatch.setattr(build, "PART_SAMPLES", samples)
     corners = CORNERS[name]()
     F = len(corners)
     builds = [build_on_device(*queue, corners, leaf_size=leaf_size, keep_boxes=True, partition=True,
@@ -460,6 +465,24 @@ def test_the_partition_lowers_the_sah_cost(name, queue):
         assert parted < plain and parted <= 1.05 * host, (name, treelets, plain, parted, host)
 
 
+
+def test_a_sampled_partition_lowers_the_sah_cost_too(queue, monkeypatch):
+    """Past PART_SAMPLES triangles the partition decides on an even sample
+    of them: on a 9,216-triangle torus decided on 2,048, the tree still costs
+    well below PLOC's (measured on PoCL: 33.7 and 33.5 without sampling,
+    against 34.8; the host SAH builder's 33.2)."""
+    from clrt.device import build
+    from clrt.scene import primitives
+    mesh = primitives.torus(1.0, 0.35, 96, 48)
+    corners = mesh.vertices[mesh.faces].astype(np.float32)
+    plain = build_on_device(*queue, corners, leaf_size=4, keep_boxes=True, treelet_leaves=7,
+                            partition=False).stats()["sah_cost"]
+    monkeypatch.setattr(build, "PART_SAMPLES", 2048)
+    sampled = build_on_device(*queue, corners, leaf_size=4, keep_boxes=True, treelet_leaves=7,
+                              partition=True).stats()["sah_cost"]
+    assert sampled < 0.98 * plain, (plain, sampled)
+
+
 @pytest.mark.parametrize("volume", VOLUMES)
 def test_partitioned_trees_give_brute_force_hits(volume, device, monkeypatch):
     """The no-detail-loss invariant for trees built with the SAH partition (the
@@ -467,6 +490,7 @@ def test_partitioned_trees_give_brute_force_hits(volume, device, monkeypatch):
     from clrt.device import build
     monkeypatch.setattr(build, "SAH_PARTITION", {"gpu": True, "cpu": True})
     monkeypatch.setattr(build, "SAH_TOP_CLUSTERS", {"gpu": 16, "cpu": 16})
+    monkeypatch.setattr(build, "PART_SAMPLES", 500)       # the torus and icosphere sampled
     for name in ("torus", "icosphere"):
         mesh = TEST_MESHES[name]()
         o, d = _hard_rays(mesh, np.random.default_rng(12))

@@ -118,10 +118,12 @@ SAH_TOP_MAX = 256
 # top-down by the binned SAH into at most as many segments as the SAH top
 # takes, of about F / that many triangles, PART_BINS bins an axis, in at most
 # PART_LEVELS levels (launched without reading the device; the levels past the
-# last split cost a few microseconds each).  PLOC merges within a segment.
+# last split cost a few microseconds each), decided on at most PART_SAMPLES
+# evenly spaced triangles.  PLOC merges within a segment.
 SAH_PARTITION = {"gpu": True, "cpu": False}
 PART_BINS = 16
-PART_LEVELS = 12
+PART_LEVELS = 10
+PART_SAMPLES = 1 << 17
 PART_MAX_NODES = 2 * SAH_TOP_MAX
 # Treelet restructuring after PLOC (build_treelet.cl): leaves per treelet,
 # per device type; 0: none.  Karras & Aila use 7.  TREELET_SMALL: (leaves,
@@ -346,9 +348,10 @@ _ARG_TYPES = {
     "radix_scatter": [None, None, _U, _U, None, None, None], "radix_digit_counts": [None, _U, None, None, _U],
     "radix_scatter_lookback": [None, None, _U, _U, None, None, None, None],
     "init_leaves": [None, None, None, _I, _U, None, None, None, None],
-    "partition_clear": [None, None, _U], "partition_init": [None, None, _I, _I], "partition_bin": [None, _U, None, None, None],
-    "partition_split": [None, None, None, _I, _I], "partition_assign": [None, _U, None, None],
-    "partition_order": [None, None], "partition_morton_codes": [None, _U, None, None, None, None],
+    "partition_clear": [None, None, _U], "partition_init": [None, None, _I, _I],
+    "partition_bin": [None, _U, _U, None, None, None, None], "partition_split": [None, None, None, _I, _I],
+    "partition_assign": [None, _U, _U, None, None, None], "partition_order": [None, None],
+    "partition_morton_codes": [None, _U, None, None, None],
     "ploc_merge": [None] * 5 + [_I, None, _I, _U], "ploc_count_kept": [None, None, _I],
     "ploc_compact": [None] * 4 + [_I], "ploc_tail": [None] * 5 + [_I, None, _I, _U],
     "ploc_nearest_tiles": [None, None, None, _I], "ploc_merge_tiles": [None] * 6 + [_I, None, _I, _U],
@@ -534,7 +537,8 @@ def build_on_device(context: cl.Context, queue: cl.CommandQueue, corners, volume
     launch("morton", k["centroid_bounds"], min(_groups(F), MAX_REDUCE_GROUPS), corners_buf, np.uint32(F), state)
     segmented = (SAH_PARTITION[kind] if partition is None else bool(partition)) and 1 < top_clusters < F
     if segmented:
-        _partition(k, launch, ws, F, top_clusters, corners_buf, state, tri_part=ids[1], keys=keys[0], ids=ids[0])
+        _partition(k, launch, ws, F, top_clusters, corners_buf, state, sample_part=ids[1], keys=keys[0],
+                   ids=ids[0])
     else:
         launch("morton", k["morton_codes"], _groups(F), corners_buf, np.uint32(F), state, keys[0], ids[0])
 
@@ -672,26 +676,30 @@ def _root_height(queue, heights: cl.Buffer, F: int) -> int:
     return int(value[0])
 
 
-def _partition(k, launch, ws, F: int, budget: int, corners, state, tri_part, keys, ids) -> None:
+def _partition(k, launch, ws, F: int, budget: int, corners, state, sample_part, keys, ids) -> None:
     """Queue the SAH partition of the F triangles into at most ``budget``
-    segments (build_partition.cl), then their keys and ids for the sort:
-    the segment above a Morton code within it.  ``tri_part``: F ints of
-    scratch (each triangle's partition node), free until the sort."""
-    limit = np.int32(max(1, F // budget))       # a segment of more triangles is split
+    segments (build_partition.cl), decided on every ``stride``-th triangle
+    (PART_SAMPLES of them at most), then every triangle's key and id for the
+    sort: its segment above a Morton code within it.  ``sample_part``: an int
+    per sample of scratch (its partition node), free until the sort."""
+    stride = -(-F // PART_SAMPLES)
+    samples = -(-F // stride)
+    limit = np.int32(max(1, samples // budget))     # a segment of more samples is split
     parts = ws.get("parts", layouts.BUILD_PART.itemsize * PART_MAX_NODES)
     bins = ws.get("part_bins", 4 * 7 * 3 * PART_BINS * PART_MAX_NODES)
-    launch("partition", k["partition_clear"], _groups(max(PART_MAX_NODES * 3 * PART_BINS, F)), bins, tri_part,
-           np.uint32(F))
-    launch("partition", k["partition_init"], 1, parts, state, np.int32(F), limit, group=1)
-    k["partition_bin"].set_args(corners, np.uint32(F), tri_part, parts, bins)
+    launch("partition", k["partition_clear"], _groups(max(PART_MAX_NODES * 3 * PART_BINS, samples)), bins,
+           sample_part, np.uint32(samples))
+    launch("partition", k["partition_init"], 1, parts, state, np.int32(samples), limit, group=1)
+    k["partition_bin"].set_args(corners, np.uint32(samples), np.uint32(stride), sample_part, parts, bins, state)
     k["partition_split"].set_args(parts, bins, state, limit, np.int32(budget))
-    k["partition_assign"].set_args(corners, np.uint32(F), tri_part, parts)
+    k["partition_assign"].set_args(corners, np.uint32(samples), np.uint32(stride), sample_part, parts, state)
+    groups = min(_groups(samples), MAX_REDUCE_GROUPS)    # grid-stride: each group pools its samples
     for _ in range(PART_LEVELS):
-        launch("partition", k["partition_bin"], _groups(F))
+        launch("partition", k["partition_bin"], groups)
         launch("partition", k["partition_split"], 1)
-        launch("partition", k["partition_assign"], _groups(F))
+        launch("partition", k["partition_assign"], groups)
     launch("partition", k["partition_order"], 1, parts, state, group=1)
-    launch("morton", k["partition_morton_codes"], _groups(F), corners, np.uint32(F), tri_part, parts, keys, ids)
+    launch("morton", k["partition_morton_codes"], _groups(F), corners, np.uint32(F), parts, keys, ids)
 
 
 def _ploc(queue, k, launch, F, clusters, merged, tile_kept, tile_status, nodes, heights, state, leaf_size,

@@ -11,18 +11,20 @@
 // inside came within 1-2 %.  The middle levels are the SAH's, the bottom
 // levels PLOC's (with treelets), the top the exact SAH of build_top.cl.
 //
-// Per level (the host queues PART_LEVELS of them, without reading anything):
-//   partition_bin     every triangle of an open node adds its box to the
+// Per level (the host queues PART_LEVELS of them, without reading anything),
+// on a sample of the triangles (below):
+//   partition_bin     every sample in an open node adds its box to the
 //                     node's bin of its box centre, PART_BINS bins an axis
-//                     over the node's centre bounds (global atomics)
+//                     over the node's centre bounds
 //   partition_split   one work-group: each open node's cheapest split by the
 //                     bins (A(L) N(L) + A(R) N(R)), then, in node order, the
 //                     splits that keep the segments within the budget
-//   partition_assign  every triangle of a split node moves to the child its
+//   partition_assign  every sample of a split node moves to the child its
 //                     bin falls in, and widens that child's centre bounds
-// then partition_order numbers the segments depth-first, the order that the
-// Morton keys (morton_codes: segment << 24 | a 24-bit code within the
-// segment's centre bounds) keep, so that each segment is one run of places.
+// then partition_order numbers the segments depth-first, and
+// partition_morton_codes takes every triangle down the splits to its segment
+// and keys it segment << 24 | a 24-bit Morton code within the segment's
+// centre bounds, an order in which each segment is one run of places.
 //
 // A node whose centres all fall into one bin on every axis cannot be split
 // and stays a segment however large; so does every node still open after the
@@ -71,13 +73,13 @@ inline float axis_of(float3 v, int axis)
 }
 
 // Every bin empty (the bins of a node are used at the one level it is open,
-// so one clearing serves the whole partition), every triangle in node 0.
+// so one clearing serves the whole partition), every sample in node 0.
 __kernel __attribute__((reqd_work_group_size(BUILD_GROUP, 1, 1)))
-void partition_clear(global uint* bins, global int* tri_part, const uint num_tris)
+void partition_clear(global uint* bins, global int* sample_part, const uint samples)
 {
     const int i = get_global_id(0);
-    if (i < num_tris)
-        tri_part[i] = 0;
+    if (i < samples)
+        sample_part[i] = 0;
     if (i >= PART_MAX_NODES * 3 * PART_BINS)
         return;
     global uint* b = bins + i * PART_VALUES;
@@ -88,19 +90,19 @@ void partition_clear(global uint* bins, global int* tri_part, const uint num_tri
     }
 }
 
-// One work-item: node 0 holds every triangle (its centre bounds are
+// One work-item: node 0 holds every sample (its centre bounds are
 // centroid_bounds' result), open when it has more than `limit`.
-__kernel void partition_init(global BuildPart* parts, global int* state, const int num_tris, const int limit)
+__kernel void partition_init(global BuildPart* parts, global int* state, const int samples, const int limit)
 {
     BuildPart root;
     root.centre_lo = (uint4)(state[STATE_BOUNDS + 0], state[STATE_BOUNDS + 1], state[STATE_BOUNDS + 2], 0u);
     root.centre_hi = (uint4)(state[STATE_BOUNDS + 3], state[STATE_BOUNDS + 4], state[STATE_BOUNDS + 5], 0u);
-    root.count = num_tris;
+    root.count = samples;
     root.child = -1;
     root.axis = 0;
     root.split = 0;
     root.segment = 0;
-    root.open = num_tris > limit;
+    root.open = samples > limit;
     root.pad[0] = root.pad[1] = 0;
     parts[0] = root;
     state[STATE_PART_NODES] = 1;
@@ -109,30 +111,83 @@ __kernel void partition_init(global BuildPart* parts, global int* state, const i
     state[STATE_PART_END] = 1;
 }
 
+// The levels decide on a sample of the triangles, every `stride`-th (all of
+// them up to PART_SAMPLES): binning 50M triangles at every level cost more
+// than the rest of the build, and the splits need only the shape of the
+// distribution.  partition_morton_codes then takes every triangle down the
+// finished tree.
+//
+// The first levels have a node or a few, so every triangle's atomics would
+// meet on the same few cache lines (0.5 ms a level for bunny00 on the H200):
+// there each work-group pools its samples in local memory (levels of at most
+// PART_POOL nodes) and adds the pool to the global bins once.  A work-group
+// takes samples grid-stride.
+#define PART_POOL 8
+
 __kernel __attribute__((reqd_work_group_size(BUILD_GROUP, 1, 1)))
-void partition_bin(const global float* corners, const uint num_tris, const global int* tri_part,
-                   const global BuildPart* parts, global uint* bins)
+void partition_bin(const global float* corners, const uint samples, const uint stride,
+                   const global int* sample_part, const global BuildPart* parts, global uint* bins,
+                   const global int* state)
 {
-    const uint tri = get_global_id(0);
-    if (tri >= num_tris)
+    local uint pool[PART_POOL * 3 * PART_BINS * PART_VALUES];
+    const int first = state[STATE_PART_FIRST], end = state[STATE_PART_END];
+    const bool pooled = end - first <= PART_POOL;
+    const int lid = get_local_id(0);
+    if (pooled) {
+        for (int k = lid; k < (end - first) * 3 * PART_BINS; k += BUILD_GROUP) {
+            local uint* b = pool + k * PART_VALUES;
+            b[0] = 0u;
+            for (int v = 1; v <= 3; ++v) {
+                b[v] = 0xffffffffu;
+                b[v + 3] = 0u;
+            }
+        }
+        barrier(CLK_LOCAL_MEM_FENCE);
+    }
+    for (uint i = get_global_id(0); i < samples; i += get_global_size(0)) {
+        const int n = sample_part[i];
+        if (!parts[n].open)
+            continue;
+        float3 lo, hi;
+        triangle_box(corners, i * stride, &lo, &hi);
+        const float3 c = box_centre(lo, hi);
+        const float3 clo = decode_bits(parts[n].centre_lo), chi = decode_bits(parts[n].centre_hi);
+        for (int axis = 0; axis < 3; ++axis) {
+            const int bin = centre_bin(axis_of(c, axis), axis_of(clo, axis), axis_of(chi, axis));
+            if (pooled) {
+                local uint* b = pool + bin_at(n - first, axis, bin);
+                atomic_inc(b);
+                atomic_min(b + 1, ordered_bits(lo.x));
+                atomic_min(b + 2, ordered_bits(lo.y));
+                atomic_min(b + 3, ordered_bits(lo.z));
+                atomic_max(b + 4, ordered_bits(hi.x));
+                atomic_max(b + 5, ordered_bits(hi.y));
+                atomic_max(b + 6, ordered_bits(hi.z));
+            } else {
+                global uint* b = bins + bin_at(n, axis, bin);
+                atomic_inc(b);
+                atomic_min(b + 1, ordered_bits(lo.x));
+                atomic_min(b + 2, ordered_bits(lo.y));
+                atomic_min(b + 3, ordered_bits(lo.z));
+                atomic_max(b + 4, ordered_bits(hi.x));
+                atomic_max(b + 5, ordered_bits(hi.y));
+                atomic_max(b + 6, ordered_bits(hi.z));
+            }
+        }
+    }
+    if (!pooled)
         return;
-    const int n = tri_part[tri];
-    if (!parts[n].open)
-        return;
-    float3 lo, hi;
-    triangle_box(corners, tri, &lo, &hi);
-    const float3 c = box_centre(lo, hi);
-    const float3 clo = decode_bits(parts[n].centre_lo), chi = decode_bits(parts[n].centre_hi);
-    for (int axis = 0; axis < 3; ++axis) {
-        global uint* b = bins + bin_at(n, axis, centre_bin(axis_of(c, axis), axis_of(clo, axis),
-                                                            axis_of(chi, axis)));
-        atomic_inc(b);
-        atomic_min(b + 1, ordered_bits(lo.x));
-        atomic_min(b + 2, ordered_bits(lo.y));
-        atomic_min(b + 3, ordered_bits(lo.z));
-        atomic_max(b + 4, ordered_bits(hi.x));
-        atomic_max(b + 5, ordered_bits(hi.y));
-        atomic_max(b + 6, ordered_bits(hi.z));
+    barrier(CLK_LOCAL_MEM_FENCE);
+    for (int k = lid; k < (end - first) * 3 * PART_BINS; k += BUILD_GROUP) {
+        const local uint* b = pool + k * PART_VALUES;
+        if (b[0] == 0u)
+            continue;
+        global uint* g = bins + first * 3 * PART_BINS * PART_VALUES + k * PART_VALUES;
+        atomic_add(g, b[0]);
+        for (int v = 1; v <= 3; ++v) {
+            atomic_min(g + v, b[v]);
+            atomic_max(g + v + 3, b[v + 3]);
+        }
     }
 }
 
@@ -237,51 +292,94 @@ void partition_split(global BuildPart* parts, const global uint* bins, global in
     state[STATE_PART_SEGMENTS] = segments;
 }
 
+// Every sample of a node split at this level moves to the child its bin
+// falls in and widens that child's centre bounds (pooled per work-group
+// while the level's children are few, as partition_bin's bins).
 __kernel __attribute__((reqd_work_group_size(BUILD_GROUP, 1, 1)))
-void partition_assign(const global float* corners, const uint num_tris, global int* tri_part,
-                      global BuildPart* parts)
+void partition_assign(const global float* corners, const uint samples, const uint stride,
+                      global int* sample_part, global BuildPart* parts, const global int* state)
 {
-    const uint tri = get_global_id(0);
-    if (tri >= num_tris)
+    local uint pool[2 * PART_POOL * 6];    // the children's centre min xyz, max xyz
+    const int first = state[STATE_PART_FIRST], end = state[STATE_PART_END];   // this level's children
+    const bool pooled = end - first <= 2 * PART_POOL;
+    const int lid = get_local_id(0);
+    if (pooled) {
+        for (int k = lid; k < (end - first) * 6; k += BUILD_GROUP)
+            pool[k] = k % 6 < 3 ? 0xffffffffu : 0u;
+        barrier(CLK_LOCAL_MEM_FENCE);
+    }
+    for (uint i = get_global_id(0); i < samples; i += get_global_size(0)) {
+        const int n = sample_part[i];
+        const int first_child = parts[n].child;
+        if (first_child < first)        // not split at this level (-1: not split)
+            continue;
+        float3 lo, hi;
+        triangle_box(corners, i * stride, &lo, &hi);
+        const float3 c = box_centre(lo, hi);
+        const int axis = parts[n].axis;
+        const float clo = axis_of(decode_bits(parts[n].centre_lo), axis);
+        const float chi = axis_of(decode_bits(parts[n].centre_hi), axis);
+        const int child = first_child + (centre_bin(axis_of(c, axis), clo, chi) >= parts[n].split);
+        sample_part[i] = child;
+        if (pooled) {
+            local uint* b = pool + (child - first) * 6;
+            atomic_min(b + 0, ordered_bits(c.x));
+            atomic_min(b + 1, ordered_bits(c.y));
+            atomic_min(b + 2, ordered_bits(c.z));
+            atomic_max(b + 3, ordered_bits(c.x));
+            atomic_max(b + 4, ordered_bits(c.y));
+            atomic_max(b + 5, ordered_bits(c.z));
+        } else {
+            global uint* bounds = (global uint*)&parts[child];    // centre_lo, then centre_hi
+            atomic_min(bounds + 0, ordered_bits(c.x));
+            atomic_min(bounds + 1, ordered_bits(c.y));
+            atomic_min(bounds + 2, ordered_bits(c.z));
+            atomic_max(bounds + 4, ordered_bits(c.x));
+            atomic_max(bounds + 5, ordered_bits(c.y));
+            atomic_max(bounds + 6, ordered_bits(c.z));
+        }
+    }
+    if (!pooled)
         return;
-    const int n = tri_part[tri];
-    const int first_child = parts[n].child;
-    if (first_child < 0)
-        return;
-    float3 lo, hi;
-    triangle_box(corners, tri, &lo, &hi);
-    const float3 c = box_centre(lo, hi);
-    const int axis = parts[n].axis;
-    const float clo = axis_of(decode_bits(parts[n].centre_lo), axis);
-    const float chi = axis_of(decode_bits(parts[n].centre_hi), axis);
-    const int child = first_child + (centre_bin(axis_of(c, axis), clo, chi) >= parts[n].split);
-    tri_part[tri] = child;
-    global uint* bounds = (global uint*)&parts[child];    // centre_lo, then centre_hi
-    atomic_min(bounds + 0, ordered_bits(c.x));
-    atomic_min(bounds + 1, ordered_bits(c.y));
-    atomic_min(bounds + 2, ordered_bits(c.z));
-    atomic_max(bounds + 4, ordered_bits(c.x));
-    atomic_max(bounds + 5, ordered_bits(c.y));
-    atomic_max(bounds + 6, ordered_bits(c.z));
+    barrier(CLK_LOCAL_MEM_FENCE);
+    for (int k = lid; k < (end - first) * 6; k += BUILD_GROUP) {
+        global uint* bounds = (global uint*)&parts[first + k / 6];
+        const int v = k % 6;
+        if (v < 3)
+            atomic_min(bounds + v, pool[k]);
+        else
+            atomic_max(bounds + 4 + v - 3, pool[k]);
+    }
 }
 
-// keys[i]: triangle i's segment above a 24-bit Morton code of its box centre
-// on a 256^3 grid over the segment's centre bounds (morton_codes' 30-bit
-// code is over the whole mesh's); ids[i] = i.
+// keys[i]: triangle i's segment -- found by taking it down the partition's
+// splits from the root, as partition_assign took the samples -- above a
+// 24-bit Morton code of its box centre on a 256^3 grid over the segment's
+// centre bounds (morton_codes' 30-bit code is over the whole mesh's; the
+// bounds are the samples', so a triangle outside them takes the nearest
+// cell); ids[i] = i.
 __kernel __attribute__((reqd_work_group_size(BUILD_GROUP, 1, 1)))
-void partition_morton_codes(const global float* corners, const uint num_tris, const global int* tri_part,
-                            const global BuildPart* parts, global uint* keys, global uint* ids)
+void partition_morton_codes(const global float* corners, const uint num_tris, const global BuildPart* parts,
+                            global uint* keys, global uint* ids)
 {
     const uint tri = get_global_id(0);
     if (tri >= num_tris)
         return;
-    const int n = tri_part[tri];
-    const float3 lo = decode_bits(parts[n].centre_lo), hi = decode_bits(parts[n].centre_hi);
     float3 box_lo, box_hi;
     triangle_box(corners, tri, &box_lo, &box_hi);
+    const float3 c = box_centre(box_lo, box_hi);
+    int n = 0;
+    while (parts[n].child >= 0) {
+        const int axis = parts[n].axis;
+        const float clo = axis_of(decode_bits(parts[n].centre_lo), axis);
+        const float chi = axis_of(decode_bits(parts[n].centre_hi), axis);
+        n = parts[n].child + (centre_bin(axis_of(c, axis), clo, chi) >= parts[n].split);
+    }
+    const float3 lo = decode_bits(parts[n].centre_lo), hi = decode_bits(parts[n].centre_hi);
     const float3 extent = hi - lo;
     const float3 scale = select(256.0f / extent, (float3)(0.0f), extent <= 0.0f);
-    const uint3 cell = min(convert_uint3_sat((box_centre(box_lo, box_hi) - lo) * scale), (uint3)(255u));
+    // (c - lo < 0 for a triangle below the samples' bounds: _sat makes it cell 0)
+    const uint3 cell = min(convert_uint3_sat((c - lo) * scale), (uint3)(255u));
     keys[tri] = ((uint)parts[n].segment << (32 - SEGMENT_BITS))
               | (spread_bits(cell.x) << 2) | (spread_bits(cell.y) << 1) | spread_bits(cell.z);
     ids[tri] = tri;

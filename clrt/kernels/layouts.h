@@ -97,7 +97,7 @@ typedef struct {
 typedef struct {
     uint4 centre_lo;   // xyz: min corner of its triangles' box centres (ordered_bits)
     uint4 centre_hi;   // xyz: max corner
-    int count;         // triangles
+    int count;         // its triangles among the partition's samples
     int child;         // first child, the second follows; -1: not split
     int axis;          // split axis
     int split;         // first bin of the right child
