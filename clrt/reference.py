@@ -150,23 +150,73 @@ def _shear(dirs: np.ndarray):
     return perm, shear
 
 
-def certain_t_error(ax, ay, az_raw, bx, by, bz_raw, cx, cy, cz_raw, za, zb, zc, det):
+def certain_t_error(ax, ay, az_raw, bx, by, bz_raw, cx, cy, cz_raw, za, zb, zc, shear_x, shear_y, det, t):
     """triangle.cl's certain_t_error, the same float32 operations in the same
     order: a bound of the error of a hit's t (inf where none holds)."""
     def max3(a, b, c):
         return np.maximum(a, np.maximum(b, c))
+    u2 = f32(2) * U_BOUND
     max_x = max3(np.abs(ax), np.abs(bx), np.abs(cx))
     max_y = max3(np.abs(ay), np.abs(by), np.abs(cy))
     max_az = max3(np.abs(az_raw), np.abs(bz_raw), np.abs(cz_raw))
     max_z = max3(np.abs(za), np.abs(zb), np.abs(zc))
-    spread = max3(za, zb, zc) - np.minimum(za, np.minimum(zb, zc))
-    dx = U_BOUND * (f32(2) * max_x + f32(5) * max_az)
-    dy = U_BOUND * (f32(2) * max_y + f32(5) * max_az)
-    e = f32(3) * (f32(2) * (max_x * dy + max_y * dx + dx * dy)) + f32(4) * U_BOUND * np.abs(det)
+    dx = U_BOUND * (f32(2) * max_x + f32(3) * np.abs(shear_x) * max_az)
+    dy = U_BOUND * (f32(2) * max_y + f32(3) * np.abs(shear_y) * max_az)
+    dz = u2 * max_z
+    x1, y1, z1, x2, y2, z2 = bx - ax, by - ay, zb - za, cx - ax, cy - ay, zc - za
+    nx, ny = y1 * z2 - z1 * y2, z1 * x2 - x1 * z2
+    sx, sy, sz = (np.maximum(np.abs(a), np.abs(b)) for a, b in ((x1, x2), (y1, y2), (z1, z2)))
+    ex, ey, ez = U_BOUND * sx + f32(2) * dx, U_BOUND * sy + f32(2) * dy, U_BOUND * sz + f32(2) * dz
+    err_nx = f32(4) * U_BOUND * sy * sz + f32(2) * (sy * ez + sz * ey + ey * ez)
+    err_ny = f32(4) * U_BOUND * sx * sz + f32(2) * (sx * ez + sz * ex + ex * ez)
+    e = f32(6) * (max_x * dy + max_y * dx + dx * dy) + f32(4) * U_BOUND * np.abs(det)
     room = np.abs(det) - e
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-        bound = f32(14) * U_BOUND * max_z + e / room * (spread + f32(4) * U_BOUND * max_z)
+        bound = (f32(7) * U_BOUND * max_z + f32(10) * U_BOUND * np.abs(t)
+                 + ((np.abs(nx) + err_nx) * dx + (np.abs(ny) + err_ny) * dy) / room)
     return np.where(room > 0, bound, f32(np.inf))
+
+
+def _dop(a, b, c, d):
+    """Kahan's difference of products a*b - c*d, as triangle.cl computes it;
+    float64 stands in for fma (products of float32 values are exact in it)."""
+    a, b, c, d = (x.astype(np.float64) for x in (a, b, c, d))
+    w = (c * d).astype(f32).astype(np.float64)
+    e = (w - c * d).astype(f32)
+    f = (a * b - w).astype(f32)
+    return f + e
+
+
+def watertight(origins, perm, shear, tri) -> dict:
+    """The watertight test's steps (triangle.cl) for every ray against every
+    triangle of ``tri`` (K, 3, 3) float32, rays set up by :func:`_shear`:
+    (N, K) float32 arrays of the sheared corners "ax", "ay", "az" (scaled
+    depth), "az_raw" (depth before the shear) and so on for b and c, the edge
+    functions "U", "V", "W", "det", "t" and "inside"."""
+    idx = perm[:, None, :]
+    sx, sy, sz = (shear[:, k, None] for k in range(3))
+    out = {}
+    for name, k in (("a", 0), ("b", 1), ("c", 2)):
+        p = tri[None, :, k, :] - origins[:, None, :]                   # (N, K, 3)
+        p = np.take_along_axis(p, np.broadcast_to(idx, p.shape), 2)
+        out.update({name + "x": p[..., 0] - sx * p[..., 2], name + "y": p[..., 1] - sy * p[..., 2],
+                    name + "z": sz * p[..., 2], name + "z_raw": p[..., 2]})
+    U = _dop(out["cx"], out["by"], out["cy"], out["bx"])
+    V = _dop(out["ax"], out["cy"], out["ay"], out["cx"])
+    W = _dop(out["bx"], out["ay"], out["by"], out["ax"])
+    det = U + V + W
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = (U * out["az"] + V * out["bz"] + W * out["cz"]) / det
+    inside = ~(((U < 0) | (V < 0) | (W < 0)) & ((U > 0) | (V > 0) | (W > 0)))
+    out.update(U=U, V=V, W=W, det=det, t=t, inside=inside)
+    return out
+
+
+def certain_error_of(w: dict, shear) -> np.ndarray:
+    """certain_t_error of every hit in a :func:`watertight` result."""
+    return certain_t_error(w["ax"], w["ay"], w["az_raw"], w["bx"], w["by"], w["bz_raw"], w["cx"], w["cy"],
+                           w["cz_raw"], w["az"], w["bz"], w["cz"], shear[:, 0, None], shear[:, 1, None], w["det"],
+                           w["t"])
 
 
 def intersect(origins, dirs, corners, tmin, tmax, block: int = 64, any_hit: bool = False, spawned: bool = False):
@@ -186,34 +236,12 @@ def intersect(origins, dirs, corners, tmin, tmax, block: int = 64, any_hit: bool
     limit = np.asarray(tmax, f32).copy()
     end = limit.copy()
     tmin = np.asarray(tmin, f32)
-    idx = perm[:, None, :]
-    sx, sy, sz = (shear[:, k, None] for k in range(3))
     for start in range(0, len(corners), block):
-        tri = corners[start:start + block]
-        proj = []   # sheared 2D coordinates, scaled depth and depth of the three corners
-        for k in range(3):
-            p = tri[None, :, k, :] - origins[:, None, :]                   # (N, K, 3)
-            p = np.take_along_axis(p, np.broadcast_to(idx, p.shape), 2)
-            proj.append((p[..., 0] - sx * p[..., 2], p[..., 1] - sy * p[..., 2], sz * p[..., 2], p[..., 2]))
-        (ax, ay, az, az_raw), (bx, by, bz, bz_raw), (cx, cy, cz, cz_raw) = proj
-        # Kahan's difference of products, as triangle.cl computes it; float64
-        # stands in for fma (products of float32 values are exact in it).
-        def dop(a, b, c, d):
-            a, b, c, d = (x.astype(np.float64) for x in (a, b, c, d))
-            w = (c * d).astype(f32).astype(np.float64)
-            e = (w - c * d).astype(f32)
-            f = (a * b - w).astype(f32)
-            return f + e
-        U = dop(cx, by, cy, bx)
-        V = dop(ax, cy, ay, cx)
-        W = dop(bx, ay, by, ax)
-        inside = ~(((U < 0) | (V < 0) | (W < 0)) & ((U > 0) | (V > 0) | (W > 0)))
-        det = U + V + W
-        with np.errstate(divide="ignore", invalid="ignore"):
-            t = (U * az + V * bz + W * cz) / det
-        ok = inside & (det != 0) & (t > tmin[:, None]) & (t <= limit[:, None])
+        w = watertight(origins, perm, shear, corners[start:start + block])
+        t, det = w["t"], w["det"]
+        ok = w["inside"] & (det != 0) & (t > tmin[:, None]) & (t <= limit[:, None])
         if spawned and ok.any():
-            error = certain_t_error(ax, ay, az_raw, bx, by, bz_raw, cx, cy, cz_raw, az, bz, cz, det)
+            error = certain_error_of(w, shear)
             with np.errstate(over="ignore", invalid="ignore"):
                 ok &= (t > error) & (t + error <= end[:, None])
         if any_hit:
@@ -227,8 +255,8 @@ def intersect(origins, dirs, corners, tmin, tmax, block: int = 64, any_hit: bool
         kk = k[rows]
         best_t[rows] = tk[rows]
         best_prim[rows] = start + kk
-        best_u[rows] = V[rows, kk] / det[rows, kk]
-        best_v[rows] = W[rows, kk] / det[rows, kk]
+        best_u[rows] = w["V"][rows, kk] / det[rows, kk]
+        best_v[rows] = w["W"][rows, kk] / det[rows, kk]
         limit = np.minimum(limit, best_t)
     if any_hit:
         return best_prim >= 0
