@@ -3,8 +3,9 @@
 It follows the kernels step by step -- the same camera rays and anti-aliasing
 jitter, the same watertight triangle test in float32 (Woop, Benthin and Wald
 2013), the same closest-hit rule (lower triangle index wins a tie), the same
-Phong shading, shadow rays, reflection and Fresnel-weighted refraction -- but
-shares no code with them, so agreement between the two is evidence.
+Phong shading, shadow rays, reflection and Fresnel-weighted refraction, the
+same origins of rays that leave a surface and the same rule for their hits --
+but shares no code with them, so agreement between the two is evidence.
 Vectorised over rays x a block of triangles; meant for small images.  Where
 the kernels keep pending rays on a stack, it traces them in waves.
 """
@@ -14,9 +15,11 @@ from __future__ import annotations
 import numpy as np
 
 from clrt.config import TEXEL_LIMIT
-from clrt.scene.scene import Camera, Scene, ray_epsilon
+from clrt.scene.scene import Camera, Scene
 
 f32 = np.float32
+# shading.cl's OFFSET_U and triangle.cl's T_ERROR_U: u = 2^-24 rounded up, as float32
+U_BOUND = f32(6.0e-8)
 
 
 class SceneData:
@@ -147,10 +150,81 @@ def _shear(dirs: np.ndarray):
     return perm, shear
 
 
-def intersect(origins, dirs, corners, tmin, tmax, block: int = 64, any_hit: bool = False):
+def certain_t_error(ax, ay, az_raw, bx, by, bz_raw, cx, cy, cz_raw, za, zb, zc, shear_x, shear_y, det, t):
+    """triangle.cl's certain_t_error, the same float32 operations in the same
+    order: a bound of the error of a hit's t (inf where none holds)."""
+    def max3(a, b, c):
+        return np.maximum(a, np.maximum(b, c))
+    u2 = f32(2) * U_BOUND
+    max_x = max3(np.abs(ax), np.abs(bx), np.abs(cx))
+    max_y = max3(np.abs(ay), np.abs(by), np.abs(cy))
+    max_az = max3(np.abs(az_raw), np.abs(bz_raw), np.abs(cz_raw))
+    max_z = max3(np.abs(za), np.abs(zb), np.abs(zc))
+    dx = U_BOUND * (f32(2) * max_x + f32(3) * np.abs(shear_x) * max_az)
+    dy = U_BOUND * (f32(2) * max_y + f32(3) * np.abs(shear_y) * max_az)
+    dz = u2 * max_z
+    x1, y1, z1, x2, y2, z2 = bx - ax, by - ay, zb - za, cx - ax, cy - ay, zc - za
+    nx, ny = y1 * z2 - z1 * y2, z1 * x2 - x1 * z2
+    sx, sy, sz = (np.maximum(np.abs(a), np.abs(b)) for a, b in ((x1, x2), (y1, y2), (z1, z2)))
+    ex, ey, ez = U_BOUND * sx + f32(2) * dx, U_BOUND * sy + f32(2) * dy, U_BOUND * sz + f32(2) * dz
+    err_nx = f32(4) * U_BOUND * sy * sz + f32(2) * (sy * ez + sz * ey + ey * ez)
+    err_ny = f32(4) * U_BOUND * sx * sz + f32(2) * (sx * ez + sz * ex + ex * ez)
+    e = f32(6) * (max_x * dy + max_y * dx + dx * dy) + f32(4) * U_BOUND * np.abs(det)
+    room = np.abs(det) - e
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        bound = (f32(7) * U_BOUND * max_z + f32(10) * U_BOUND * np.abs(t)
+                 + ((np.abs(nx) + err_nx) * dx + (np.abs(ny) + err_ny) * dy) / room)
+    return np.where(room > 0, bound, f32(np.inf))
+
+
+def _dop(a, b, c, d):
+    """Kahan's difference of products a*b - c*d, as triangle.cl computes it;
+    float64 stands in for fma (products of float32 values are exact in it)."""
+    a, b, c, d = (x.astype(np.float64) for x in (a, b, c, d))
+    w = (c * d).astype(f32).astype(np.float64)
+    e = (w - c * d).astype(f32)
+    f = (a * b - w).astype(f32)
+    return f + e
+
+
+def watertight(origins, perm, shear, tri) -> dict:
+    """The watertight test's steps (triangle.cl) for every ray against every
+    triangle of ``tri`` (K, 3, 3) float32, rays set up by :func:`_shear`:
+    (N, K) float32 arrays of the sheared corners "ax", "ay", "az" (scaled
+    depth), "az_raw" (depth before the shear) and so on for b and c, the edge
+    functions "U", "V", "W", "det", "t" and "inside"."""
+    idx = perm[:, None, :]
+    sx, sy, sz = (shear[:, k, None] for k in range(3))
+    out = {}
+    for name, k in (("a", 0), ("b", 1), ("c", 2)):
+        p = tri[None, :, k, :] - origins[:, None, :]                   # (N, K, 3)
+        p = np.take_along_axis(p, np.broadcast_to(idx, p.shape), 2)
+        out.update({name + "x": p[..., 0] - sx * p[..., 2], name + "y": p[..., 1] - sy * p[..., 2],
+                    name + "z": sz * p[..., 2], name + "z_raw": p[..., 2]})
+    U = _dop(out["cx"], out["by"], out["cy"], out["bx"])
+    V = _dop(out["ax"], out["cy"], out["ay"], out["cx"])
+    W = _dop(out["bx"], out["ay"], out["by"], out["ax"])
+    det = U + V + W
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = (U * out["az"] + V * out["bz"] + W * out["cz"]) / det
+    inside = ~(((U < 0) | (V < 0) | (W < 0)) & ((U > 0) | (V > 0) | (W > 0)))
+    out.update(U=U, V=V, W=W, det=det, t=t, inside=inside)
+    return out
+
+
+def certain_error_of(w: dict, shear) -> np.ndarray:
+    """certain_t_error of every hit in a :func:`watertight` result."""
+    return certain_t_error(w["ax"], w["ay"], w["az_raw"], w["bx"], w["by"], w["bz_raw"], w["cx"], w["cy"],
+                           w["cz_raw"], w["az"], w["bz"], w["cz"], shear[:, 0, None], shear[:, 1, None], w["det"],
+                           w["t"])
+
+
+def intersect(origins, dirs, corners, tmin, tmax, block: int = 64, any_hit: bool = False, spawned: bool = False):
     """Closest hit (or any hit) of every ray against every triangle.
 
     origins, dirs: (N, 3) float32; corners: (F, 3, 3) float32; tmin, tmax: (N,).
+    ``spawned``: the rays leave surfaces (from :func:`spawn_origin`) and take only
+    hits certainly in (0, tmax] (triangle.cl's certain_t_error).
     Returns t (inf on a miss), prim (-1), u, v -- or, with ``any_hit``, a bool mask.
     """
     n = len(origins)
@@ -160,33 +234,16 @@ def intersect(origins, dirs, corners, tmin, tmax, block: int = 64, any_hit: bool
     best_u = np.zeros(n, f32)
     best_v = np.zeros(n, f32)
     limit = np.asarray(tmax, f32).copy()
+    end = limit.copy()
     tmin = np.asarray(tmin, f32)
-    idx = perm[:, None, :]
-    sx, sy, sz = (shear[:, k, None] for k in range(3))
     for start in range(0, len(corners), block):
-        tri = corners[start:start + block]
-        proj = []   # sheared 2D coordinates and scaled depth of the three corners
-        for k in range(3):
-            p = tri[None, :, k, :] - origins[:, None, :]                   # (N, K, 3)
-            p = np.take_along_axis(p, np.broadcast_to(idx, p.shape), 2)
-            proj.append((p[..., 0] - sx * p[..., 2], p[..., 1] - sy * p[..., 2], sz * p[..., 2]))
-        (ax, ay, az), (bx, by, bz), (cx, cy, cz) = proj
-        # Kahan's difference of products, as triangle.cl computes it; float64
-        # stands in for fma (products of float32 values are exact in it).
-        def dop(a, b, c, d):
-            a, b, c, d = (x.astype(np.float64) for x in (a, b, c, d))
-            w = (c * d).astype(f32).astype(np.float64)
-            e = (w - c * d).astype(f32)
-            f = (a * b - w).astype(f32)
-            return f + e
-        U = dop(cx, by, cy, bx)
-        V = dop(ax, cy, ay, cx)
-        W = dop(bx, ay, by, ax)
-        inside = ~(((U < 0) | (V < 0) | (W < 0)) & ((U > 0) | (V > 0) | (W > 0)))
-        det = U + V + W
-        with np.errstate(divide="ignore", invalid="ignore"):
-            t = (U * az + V * bz + W * cz) / det
-        ok = inside & (det != 0) & (t > tmin[:, None]) & (t <= limit[:, None])
+        w = watertight(origins, perm, shear, corners[start:start + block])
+        t, det = w["t"], w["det"]
+        ok = w["inside"] & (det != 0) & (t > tmin[:, None]) & (t <= limit[:, None])
+        if spawned and ok.any():
+            error = certain_error_of(w, shear)
+            with np.errstate(over="ignore", invalid="ignore"):
+                ok &= (t > error) & (t + error <= end[:, None])
         if any_hit:
             best_prim[ok.any(axis=1)] = 0
             continue
@@ -198,8 +255,8 @@ def intersect(origins, dirs, corners, tmin, tmax, block: int = 64, any_hit: bool
         kk = k[rows]
         best_t[rows] = tk[rows]
         best_prim[rows] = start + kk
-        best_u[rows] = V[rows, kk] / det[rows, kk]
-        best_v[rows] = W[rows, kk] / det[rows, kk]
+        best_u[rows] = w["V"][rows, kk] / det[rows, kk]
+        best_v[rows] = w["W"][rows, kk] / det[rows, kk]
         limit = np.minimum(limit, best_t)
     if any_hit:
         return best_prim >= 0
@@ -207,7 +264,10 @@ def intersect(origins, dirs, corners, tmin, tmax, block: int = 64, any_hit: bool
 
 
 def surface(data: SceneData, origins, dirs, t, prim, u, v) -> dict:
-    """What shading needs at each hit (all rays must hit): point, normals, side, material."""
+    """What shading needs at each hit (all rays must hit): point, normals, side,
+    material, and how far rays leaving the point start off it (shading.cl's
+    surface_point: the point from the corners and u, v in float32, and its error
+    bound; ``origins`` and ``t`` do not enter it)."""
     v0, v1, v2 = (data.corners[prim, k].astype(np.float64) for k in range(3))
     d = dirs.astype(np.float64)
     wound = np.cross(v1 - v0, v2 - v0)
@@ -226,26 +286,55 @@ def surface(data: SceneData, origins, dirs, t, prim, u, v) -> dict:
     use = smooth & (ns_len[:, 0] > 0)
     n = np.where(use[:, None], ns / np.where(ns_len > 0, ns_len, 1), ng)
     n[np.einsum("ij,ij->i", n, ng) < 0] *= -1
-    p = origins.astype(np.float64) + t[:, None].astype(np.float64) * d
-    return {"p": p, "ng": ng, "n": n, "front": front, "mat": mat, "d": d}
+    return {**point_and_offset(data.corners[prim], u, v, ng), "n": n, "front": front, "mat": mat, "d": d}
 
 
-def local_shading(data: SceneData, scene: Scene, s: dict, eps: float) -> np.ndarray:
+def point_and_offset(corners, u, v, ng) -> dict:
+    """shading.cl's surface_point for hits (u, v) of triangles (N, 3, 3) float32
+    seen from the side of their unit normals ng (N, 3): the point from the
+    corners (float32, the kernels' operations), ``offset``, how far rays leaving
+    it start off the surface (its error bound, shading.cl says why), and ng."""
+    c0, c1, c2 = (corners[:, k] for k in range(3))
+    uu, vv = (np.asarray(x, f32)[:, None] for x in (u, v))
+    w0 = f32(1) - uu - vv
+    p = w0 * c0 + uu * c1 + vv * c2
+    error = (f32(3) * U_BOUND * (np.abs(w0 * c0) + np.abs(uu * c1) + np.abs(vv * c2))
+             + f32(2) * U_BOUND * np.abs(c0))
+    e1, e2 = (c.astype(np.float64) - c0 for c in (c1, c2))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        a = np.fmin(10 * float(U_BOUND) * np.linalg.norm(e1, axis=1) * np.linalg.norm(e2, axis=1)
+                    / np.linalg.norm(np.cross(e1, e2), axis=1) + 16 * float(U_BOUND), 0.25)
+    offset = ((np.abs(ng) * error).sum(axis=1) + 3 * a * error.sum(axis=1)) / (1 - 2 * a)
+    return {"p": p, "offset": offset, "ng": ng}
+
+
+def spawn_origin(s: dict, w: np.ndarray, rows=slice(None)) -> np.ndarray:
+    """(N, 3) float32 origins of rays that leave the points s["p"][rows] in
+    directions w (shading.cl's spawn_origin): s["offset"] off the surface on w's
+    side, each component rounded away from it."""
+    ng = s["ng"][rows]
+    away = np.where((np.einsum("ij,ij->i", w, ng) < 0)[:, None], -ng, ng).astype(f32)
+    o = s["p"][rows] + s["offset"][rows].astype(f32)[:, None] * away
+    return np.where(away != 0, np.nextafter(o, np.copysign(f32(np.inf), away)), o).astype(f32)
+
+
+def local_shading(data: SceneData, scene: Scene, s: dict) -> np.ndarray:
     """(N, 3) Phong ambient + diffuse + specular, each light behind one shadow ray
     (every surface blocks light fully, transparent ones included)."""
     mat, n_s, ng, d = s["mat"], s["n"], s["ng"], s["d"]
     albedo = mat["color"]
     out = mat["ambient"][:, None] * albedo * np.asarray(scene.ambient_light, np.float64)
-    shadow_origin = s["p"] + eps * ng
     for light in scene.lights:
-        to_light = np.asarray(light.position, np.float64) - shadow_origin
+        position = np.asarray(light.position, np.float64)
+        shadow_origin = spawn_origin(s, position - s["p"])
+        to_light = position - shadow_origin
         dist = np.linalg.norm(to_light, axis=1)
         l = to_light / dist[:, None]
         n_dot_l = np.einsum("ij,ij->i", n_s, l)
         lit = (np.einsum("ij,ij->i", ng, l) > 0) & (n_dot_l > 0)
         rows = np.nonzero(lit)[0]
-        blocked = intersect(shadow_origin[rows].astype(f32), l[rows].astype(f32), data.corners,
-                            np.zeros(len(rows), f32), dist[rows].astype(f32), any_hit=True)
+        blocked = intersect(shadow_origin[rows], l[rows].astype(f32), data.corners,
+                            np.zeros(len(rows), f32), dist[rows].astype(f32), any_hit=True, spawned=True)
         lit[rows[blocked]] = False
         reflected = 2 * n_dot_l[:, None] * n_s - l
         r_dot_v = np.maximum(np.einsum("ij,ij->i", reflected, -d), 0)
@@ -283,7 +372,7 @@ def _bounce(s: dict):
     return r, refr, f
 
 
-def trace_whitted(data: SceneData, scene: Scene, origins, dirs, max_depth: int, eps: float):
+def trace_whitted(data: SceneData, scene: Scene, origins, dirs, max_depth: int):
     """Colour along each camera ray (whitted.cl's model), traced in waves of
     secondary rays; also the camera rays' (t, prim)."""
     corners = data.corners
@@ -295,7 +384,8 @@ def trace_whitted(data: SceneData, scene: Scene, origins, dirs, max_depth: int, 
     depth = 0
     first = None
     while len(o):
-        t, prim, u, v = intersect(o, d, corners, np.zeros(len(o), f32), np.full(len(o), np.inf, f32))
+        t, prim, u, v = intersect(o, d, corners, np.zeros(len(o), f32), np.full(len(o), np.inf, f32),
+                                  spawned=depth > 0)
         if first is None:
             first = (t, prim)
         miss = prim < 0
@@ -304,7 +394,7 @@ def trace_whitted(data: SceneData, scene: Scene, origins, dirs, max_depth: int, 
         if len(hit) == 0:
             break
         s = surface(data, o[hit], d[hit], t[hit], prim[hit], u[hit], v[hit])
-        np.add.at(color, pixel[hit], weight[hit] * local_shading(data, scene, s, eps))
+        np.add.at(color, pixel[hit], weight[hit] * local_shading(data, scene, s))
         if depth >= max_depth:
             break
         kr, kt = s["mat"]["reflectivity"].astype(np.float64), s["mat"]["transparency"].astype(np.float64)
@@ -314,8 +404,7 @@ def trace_whitted(data: SceneData, scene: Scene, origins, dirs, max_depth: int, 
         w_refr = weight[hit] * (kt * (1 - f))[:, None] * s["mat"]["color"]
         go_refl = (w_refl.max(axis=1) >= MIN_RAY_WEIGHT) & ((kr > 0) | (kt > 0))
         go_refr = (kt > 0) & (f < 1) & (w_refr.max(axis=1) >= MIN_RAY_WEIGHT)
-        o = np.concatenate([s["p"][go_refl] + eps * s["ng"][go_refl],
-                            s["p"][go_refr] - eps * s["ng"][go_refr]]).astype(f32)
+        o = np.concatenate([spawn_origin(s, refl[go_refl], go_refl), spawn_origin(s, refr[go_refr], go_refr)])
         d = np.concatenate([refl[go_refl], refr[go_refr]]).astype(f32)
         weight = np.concatenate([w_refl[go_refl], w_refr[go_refr]])
         pixel = np.concatenate([pixel[hit][go_refl], pixel[hit][go_refr]])
@@ -361,13 +450,12 @@ def render_reference(scene: Scene, camera: Camera, samples: int | None = None,
     samples = scene.samples if samples is None else samples
     max_depth = scene.max_depth if max_depth is None else max_depth
     data = SceneData(scene)
-    eps = ray_epsilon(scene.bounds, camera.eye)
     shape = (camera.height, camera.width)
     image = np.zeros((camera.width * camera.height, 3))
     first = None
     for sample in range(samples * samples):
         o, d = camera_rays(camera, *sample_offsets(image.shape[0], sample, samples, seed))
-        color, hits = trace_whitted(data, scene, o, d, max_depth, eps)
+        color, hits = trace_whitted(data, scene, o, d, max_depth)
         image += color / (samples * samples)
         first = first or hits
     t, prim = first

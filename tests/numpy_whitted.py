@@ -7,6 +7,12 @@ formula comments, not from clrt/reference.py.
 import math
 import numpy as np
 
+# How far this float64 tracer starts rays that leave a surface.  clrt's rays
+# start off the surface by the float32 error of the hit point (about 1e-7 of
+# its coordinates, docs/limits.md "Precision"); in float64 a far smaller step clears
+# the surface, and moves the light's direction by nothing the tests can see.
+SPAWN_EPS = 1e-9
+
 
 def cam_basis(eye, target, up):
     eye, target, up = (np.asarray(a, float) for a in (eye, target, up))
@@ -144,11 +150,18 @@ class Tracer:
                 F = r0 + (1 - r0) * cc ** 5
                 wt = weight * kt * (1 - F) * np.asarray(m["color"], float)
                 if wt.max() >= cutoff:
-                    c = c + kt * (1 - F) * np.asarray(m["color"], float) * self.trace(p - self.eps * ng, tdir, depth + 1, info, wt, cutoff)
+                    c = c + kt * (1 - F) * np.asarray(m["color"], float) * self.trace(self.spawn(p, ng, tdir), tdir,
+                                                                                      depth + 1, info, wt, cutoff)
             rw += kt * F
         if rw > 0 and (weight * rw).max() >= max(cutoff, 1e-300):
-            c = c + rw * self.trace(p + self.eps * ng, refl, depth + 1, info, weight * rw, cutoff)
+            c = c + rw * self.trace(self.spawn(p, ng, refl), refl, depth + 1, info, weight * rw, cutoff)
         return c
+
+    def spawn(self, p, ng, d):
+        """Origin of a ray that leaves point p in direction d: eps off the surface,
+        on the side d leaves to (a refracted ray bent by an interpolated normal
+        may leave to the side the light came from)."""
+        return p + self.eps * ng if d @ ng >= 0 else p - self.eps * ng
 
 
 def srgb8(x):

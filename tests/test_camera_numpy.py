@@ -7,7 +7,7 @@ import pytest
 
 import clrt
 
-from numpy_whitted import Tracer, camera_dir, project, quad, srgb8
+from numpy_whitted import SPAWN_EPS, Tracer, camera_dir, project, quad, srgb8
 
 M = 0xFFFFFFFF
 
@@ -73,10 +73,9 @@ def test_antialiasing_is_mean_of_documented_subpixel_rays(device):
     a = r.render(cam, linear=True, samples=n, seed=seed).image
     assert np.array_equal(a, r.render(cam, linear=True, samples=n, seed=seed).image)
     assert not np.array_equal(a, r.render(cam, linear=True, samples=n, seed=seed + 1).image)
-    from clrt.scene.scene import ray_epsilon
     tris = np.concatenate([v[f], bv[bf]])
     mats = [dict(mat)] * 2 + [dict(color=(0.8, 0.8, 0.8), ambient=0.1, diffuse=0.7, specular=0.3, shininess=32)] * 2
-    tr = Tracer(tris, mats, [((1.0, 2.0, 0.5), (1.0, 0.8, 0.6))], eps=ray_epsilon(scene.bounds, cam.eye))
+    tr = Tracer(tris, mats, [((1.0, 2.0, 0.5), (1.0, 0.8, 0.6))], eps=SPAWN_EPS)
     edges = np.argwhere(np.abs(np.diff(a.sum(2), axis=1)) > 0.02)
     assert len(edges) > 10
     for py, px in edges[:: max(1, len(edges) // 30)]:

@@ -11,9 +11,7 @@ import pytest
 
 import clrt
 from clrt.scene import primitives
-from clrt.scene.scene import ray_epsilon
-
-from numpy_whitted import Tracer, camera_dir, quad
+from numpy_whitted import SPAWN_EPS, Tracer, camera_dir, quad
 
 W, H = 48, 36
 TOL = 2e-5
@@ -35,7 +33,7 @@ def _build(objs, lights, cam, **kw):
             vn.append(acc[face])
     scene = clrt.Scene(so, [clrt.Light(p, c) for p, c in lights], **kw)
     tr = Tracer(np.array(tris), mats, lights, ambient_light=kw.get("ambient_light", (1, 1, 1)),
-                background=kw.get("background", (0, 0, 0)), eps=ray_epsilon(scene.bounds, cam.eye),
+                background=kw.get("background", (0, 0, 0)), eps=SPAWN_EPS,
                 max_depth=kw.get("max_depth", 5))
     tr.vnormals = np.array(vn)
     return scene, tr

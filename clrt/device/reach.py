@@ -52,6 +52,11 @@ _SLACK = 1.0 + 1e-5
 # the 2-core development machine).
 MEASURE_DIAGONAL = 1e9
 _BLOCK = 1 << 18                    # triangles measured at a time (bounded temporaries)
+# How far from a surface, relative to the scene's largest coordinate M, rays
+# leaving it may start (shading.cl): the hit point's error is at most
+# 5 x 6e-8 M per component, the offset at most (sqrt(3) + 2.25) / 0.5 times
+# that, plus an ulp (1.2e-7 M): 2.5e-6 M, rounded up.
+SPAWN_REACH = 3e-6
 
 
 def _farthest(lo_a, hi_a, lo_b, hi_b) -> float:
@@ -140,10 +145,12 @@ class Reach:
             return
         raise InputError(self.message(what, rho))
 
-    def check_render(self, eye, epsilon: float) -> None:
+    def check_render(self, eye) -> None:
         """:meth:`check` for a frame: rays from the camera's ``eye``, and the
-        shadow, reflection and refraction rays that start on the surfaces,
-        ``epsilon`` off them."""
+        shadow, reflection and refraction rays that start on the surfaces, off
+        them by their hit points' float32 error (shading.cl's spawn_origin): under
+        3e-6 of the largest coordinate (``SPAWN_REACH``)."""
         eye = np.asarray(eye, np.float64)
-        self.check(np.minimum(eye, self.lo - epsilon), np.maximum(eye, self.hi + epsilon),
+        off = SPAWN_REACH * float(np.max(np.abs([self.lo, self.hi])))
+        self.check(np.minimum(eye, self.lo - off), np.maximum(eye, self.hi + off),
                    "the camera's rays and the rays between the scene's surfaces start up to")

@@ -16,15 +16,17 @@
 #include "accel_none.cl"
 
 // Nearest hit in (tmin, tmax]; Hit.prim is the slot (see reported_hit).
-inline Hit closest_hit(const Geometry* g, float3 origin, float3 dir, float tmin, float tmax)
+// `spawned`: the ray leaves a surface (shading.cl's spawn_origin) and takes
+// only hits certainly in (tmin, tmax] (triangle.cl's shear_ray).
+inline Hit closest_hit(const Geometry* g, float3 origin, float3 dir, float tmin, float tmax, const bool spawned)
 {
-    return query_hits(g, origin, dir, tmin, tmax, QUERY_CLOSEST, 0);
+    return query_hits(g, origin, dir, tmin, tmax, QUERY_CLOSEST, spawned, 0);
 }
 
 // Is anything hit in (tmin, tmax]?  Stops at the first hit (shadow rays).
-inline bool any_hit(const Geometry* g, float3 origin, float3 dir, float tmin, float tmax)
+inline bool any_hit(const Geometry* g, float3 origin, float3 dir, float tmin, float tmax, const bool spawned)
 {
-    return query_hits(g, origin, dir, tmin, tmax, QUERY_ANY, 0).prim >= 0;
+    return query_hits(g, origin, dir, tmin, tmax, QUERY_ANY, spawned, 0).prim >= 0;
 }
 
 // A hit as reported to the host: Hit.prim turned from slot to triangle index.

@@ -77,11 +77,12 @@ inline Hit walk_tree(const Geometry* g, const ShearedRay* r, const VolumeRay* vr
     }
 }
 
-// Answer `query` for one ray (see hit.cl); the returned Hit.prim is a slot.
+// Answer `query` for one ray (see hit.cl; `spawned`: triangle.cl's shear_ray);
+// the returned Hit.prim is a slot.
 inline Hit query_hits(const Geometry* g, float3 origin, float3 dir, float tmin, float tmax,
-                      const int query, HitSink* sink)
+                      const int query, const bool spawned, HitSink* sink)
 {
-    const ShearedRay r = shear_ray(origin, dir);
+    const ShearedRay r = shear_ray(origin, dir, spawned, tmax);
     const VolumeRay vr = volume_ray(origin, dir, tree_reach(SPLIT_AT(g, nodes, 0)));
 #ifdef OBLIQUE_WALK
     return vr.oblique ? walk_tree(g, &r, &vr, true, tmin, tmax, query, sink)

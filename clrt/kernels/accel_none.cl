@@ -9,11 +9,12 @@
 
 #ifndef ACCEL_BVH
 
-// Answer `query` for one ray (see hit.cl); the returned Hit.prim is a slot.
+// Answer `query` for one ray (see hit.cl; `spawned`: triangle.cl's shear_ray);
+// the returned Hit.prim is a slot.
 inline Hit query_hits(const Geometry* g, float3 origin, float3 dir, float tmin, float tmax,
-                      const int query, HitSink* sink)
+                      const int query, const bool spawned, HitSink* sink)
 {
-    const ShearedRay r = shear_ray(origin, dir);
+    const ShearedRay r = shear_ray(origin, dir, spawned, tmax);
     Hit best = miss_hit();
     for (uint i = 0; i < g->num_tris; ++i)
         if (visit_triangle(g, &r, (int)i, tmin, &tmax, query, &best, sink))

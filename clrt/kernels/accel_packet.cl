@@ -70,12 +70,18 @@ inline bool make_ray_packet(const RayLanes* rays, const ShearRayLanes* shear, co
 
 // make_ray_packet for lanes that need nothing else of their set-up (the
 // renderer's camera and shadow rays): false when they make no packet.
-inline bool ray_packet_of(const Geometry* g, const RayLanes* rays, RayPacket* p)
+// `spawned`: the rays leave surfaces (triangle.cl's shear_ray), each lane's
+// end its tmax.
+inline bool ray_packet_of(const Geometry* g, const RayLanes* rays, const bool spawned, RayPacket* p)
 {
     const ShearRayLanes shear = shear_ray_lanes(rays->dx, rays->dy, rays->dz);
     const VolumeRayLanes volume = volume_ray_lanes(rays->ox, rays->oy, rays->oz, rays->dx, rays->dy, rays->dz,
                                                    tree_reach(SPLIT_AT(g, nodes, 0)));
-    return make_ray_packet(rays, &shear, &volume, p);
+    if (!make_ray_packet(rays, &shear, &volume, p))
+        return false;
+    p->shear.spawned = spawned;
+    p->shear.end = rays->tmax;
+    return true;
 }
 
 // Take the hits of the triangle in `slot` for the lanes in `hit` (any hit:

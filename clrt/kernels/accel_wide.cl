@@ -136,11 +136,12 @@ inline Hit walk_ray(const Geometry* g, const ShearedRay* r, const VolumeRay* vr,
                        : walk_wide_tree(g, r, vr, false, tmin, tmax, query, sink);
 }
 
-// Answer `query` for one ray (see hit.cl); the returned Hit.prim is a slot.
+// Answer `query` for one ray (see hit.cl; `spawned`: triangle.cl's shear_ray);
+// the returned Hit.prim is a slot.
 inline Hit query_hits(const Geometry* g, float3 origin, float3 dir, float tmin, float tmax,
-                      const int query, HitSink* sink)
+                      const int query, const bool spawned, HitSink* sink)
 {
-    const ShearedRay r = shear_ray(origin, dir);
+    const ShearedRay r = shear_ray(origin, dir, spawned, tmax);
     const VolumeRay vr = volume_ray(origin, dir, tree_reach(SPLIT_AT(g, nodes, 0)));
     return walk_ray(g, &r, &vr, tmin, tmax, query, sink);
 }

@@ -64,7 +64,7 @@ inline bool camera_packet_hits(const Geometry* g, __global const Ray* rays, Hit*
         set_ray_lane(&lanes, k, r.origin.xyz, r.dir.xyz, r.origin.w, r.dir.w);
     }
     RayPacket packet;
-    if (!ray_packet_of(g, &lanes, &packet))
+    if (!ray_packet_of(g, &lanes, false, &packet))
         return false;
     answer_ray_packet(g, &packet, lanes.tmax, QUERY_CLOSEST, CULL_NONE, first);
     return true;
@@ -83,7 +83,7 @@ inline void camera_packet_lights(const Geometry* g, const Shading* sh, __global 
     for (int k = 0; k < RAY_PACKETS; ++k) {
         lit[k] = 0u;
         if (first[k].prim >= 0)
-            s[k] = surface_point(g, sh, rays[k].origin.xyz, rays[k].dir.xyz, &first[k]);
+            s[k] = surface_point(g, sh, rays[k].dir.xyz, &first[k]);
     }
     for (uint i = 0; i < sh->num_lights; ++i) {
         float3 origin[RAY_PACKETS], l[RAY_PACKETS];
@@ -102,13 +102,13 @@ inline void camera_packet_lights(const Geometry* g, const Shading* sh, __global 
         }
         RayPacket packet;
         Hit blocked[RAY_PACKETS];
-        const bool as_packet = ray_packet_of(g, &lanes, &packet);
+        const bool as_packet = ray_packet_of(g, &lanes, true, &packet);
         if (as_packet)
             answer_ray_packet(g, &packet, lanes.tmax, QUERY_ANY, CULL_NONE, blocked);
         for (int k = 0; k < RAY_PACKETS; ++k) {
             if (!((needed >> k) & 1u))
                 continue;
-            const bool dark = as_packet ? blocked[k].prim >= 0 : any_hit(g, origin[k], l[k], 0.0f, dist[k]);
+            const bool dark = as_packet ? blocked[k].prim >= 0 : any_hit(g, origin[k], l[k], 0.0f, dist[k], true);
             if (!dark)
                 lit[k] |= 1u << i;
         }

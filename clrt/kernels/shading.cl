@@ -14,7 +14,6 @@
 //   tri_info        per slot: vertex indices and material (split like the geometry)
 //   vertex_normals  per vertex (split too)
 //   materials, lights, num_lights, ambient_light, background
-//   ray_epsilon     how far secondary rays start off the surface
 // and with -DSURFACE_DETAIL (texture.cl):
 //   tri_detail      per slot: corner colours and texture coordinates (split too)
 //   textures        the texture table, texels and sRGB decoding table
@@ -25,7 +24,6 @@ typedef struct {
     __global const Light* lights;
     uint num_lights;
     float4 ambient_light, background;
-    float ray_epsilon;
 #ifdef SURFACE_DETAIL
     SPLIT_FIELD(TriangleDetail, tri_detail);
     TextureSet textures;
@@ -42,9 +40,9 @@ typedef struct {
 
 #define SHADING_PARAMS SPLIT_PARAMS(TriangleInfo, tri_info), SPLIT_PARAMS(float4, vertex_normals), \
     __global const Material* materials, __global const Light* lights, const uint num_lights, \
-    const float4 ambient_light, const float4 background, const float ray_epsilon DETAIL_PARAMS
+    const float4 ambient_light, const float4 background DETAIL_PARAMS
 #define SHADING_ARGS SPLIT_ARGS(tri_info), SPLIT_ARGS(vertex_normals), materials, lights, num_lights, \
-    ambient_light, background, ray_epsilon DETAIL_ARGS
+    ambient_light, background DETAIL_ARGS
 
 inline Shading make_shading(SHADING_PARAMS)
 {
@@ -56,7 +54,6 @@ inline Shading make_shading(SHADING_PARAMS)
     sh.num_lights = num_lights;
     sh.ambient_light = ambient_light;
     sh.background = background;
-    sh.ray_epsilon = ray_epsilon;
 #ifdef SURFACE_DETAIL
     SPLIT_STORE(sh, tri_detail);
     sh.textures = make_texture_set(TEXTURE_ARGS);
@@ -84,15 +81,37 @@ inline float3 shading_normal(const Shading* sh, __global const TriangleInfo* inf
 
 // What shading needs to know about the point a ray hit.
 typedef struct {
-    float3 p;          // hit point
+    float3 p;          // hit point, from the triangle's corners (surface_point)
     float3 ng;         // geometric normal, facing the incoming ray
     float3 n;          // shading normal, on the same side as ng
+    float offset;      // how far along ng rays leaving p start (spawn_origin)
     bool front;        // the ray hit the side the triangle's winding faces (it is entering)
     Material m;
 } SurfacePoint;
 
-inline SurfacePoint surface_point(const Geometry* g, const Shading* sh, float3 origin, float3 dir,
-                                  const Hit* hit)
+// Rays that leave a surface (shadow, reflection, refraction) start off it by
+// the float32 error of the hit point, no farther: in the spirit of PBRT-v3
+// (Pharr, Jakob, Humphreys, section 3.9).  The point is taken from the
+// triangle's corners, p = w0 v0 + u v1 + v v2 with w0 = 1 - u - v, not from
+// origin + t dir, whose error grows with t.  With u = 2^-24, per component:
+//   |p - P| <= 3u (|w0 v0| + |u v1| + |v v2|) + 2u |v0|
+// where P = (1 - u - v) v0 + u v1 + v v2 exactly, a point of the triangle's
+// plane (the sums and products round three times at most; w0 itself is
+// within 2u of 1 - u - v, which moves p by 2u |v0| off the plane).  So p lies
+// within dot(|n|, error) of the plane along its exact unit normal n.  The
+// float32 normal ng is off n by at most a = 10u |e1| |e2| / |e1 x e2| + 16u
+// (the edges' and the cross product's rounding, and normalize's), and
+//   offset = (dot(|ng|, error) + 3a (error.x + error.y + error.z)) / (1 - 2a)
+// moved along ng, with each component rounded away from the surface
+// (spawn_origin), puts the origin strictly on the side of the exact plane that
+// the ray leaves.  That is all the origin can promise; triangle.cl's
+// certain_t_error makes the triangle test keep the rest of the promise
+// (shear_ray says why it must).  u is taken as 6.0e-8 (u + 0.7 %) to cover
+// the rounding of these few operations; a is capped at 0.25 (a sliver whose
+// normal is that uncertain is not really a triangle).
+#define OFFSET_U 6.0e-8f
+
+inline SurfacePoint surface_point(const Geometry* g, const Shading* sh, float3 dir, const Hit* hit)
 {
     __global const TriangleInfo* info = SPLIT_AT(sh, tri_info, hit->prim);
     __global const TriangleVerts* tri = SPLIT_AT(g, tris, hit->prim);
@@ -101,22 +120,46 @@ inline SurfacePoint surface_point(const Geometry* g, const Shading* sh, float3 o
 #ifdef SURFACE_DETAIL
     s.m.color.xyz = surface_albedo(&sh->textures, SPLIT_AT(sh, tri_detail, hit->prim), s.m.color, hit->u, hit->v);
 #endif
-    const float3 wound = normalize(cross(tri->v1.xyz - tri->v0.xyz, tri->v2.xyz - tri->v0.xyz));
+    const float3 v0 = tri->v0.xyz, v1 = tri->v1.xyz, v2 = tri->v2.xyz;
+    const float3 e1 = v1 - v0, e2 = v2 - v0;
+    const float3 c = cross(e1, e2);
+    const float3 wound = normalize(c);
     s.front = dot(wound, dir) < 0.0f;
     s.ng = s.front ? wound : -wound;
     s.n = shading_normal(sh, info, hit, s.ng, s.m.flags);
-    s.p = origin + hit->t * dir;
+    const float w0 = 1.0f - hit->u - hit->v;
+    s.p = w0 * v0 + hit->u * v1 + hit->v * v2;
+    const float3 error = 3.0f * OFFSET_U * (fabs(w0 * v0) + fabs(hit->u * v1) + fabs(hit->v * v2))
+                       + 2.0f * OFFSET_U * fabs(v0);
+    const float a = fmin(10.0f * OFFSET_U * (length(e1) * length(e2) / length(c)) + 16.0f * OFFSET_U, 0.25f);
+    s.offset = (dot(fabs(s.ng), error) + 3.0f * a * (error.x + error.y + error.z)) / (1.0f - 2.0f * a);
     return s;
 }
 
-// The shadow ray from surface point s towards light i: origin (just off the
-// surface, on the side the ray came from), unit direction and the light's
-// distance; false when the light lies behind the surface, which then blocks it
-// itself (no ray needed).
+// The origin of a ray that leaves surface point s in direction w: s->offset
+// off the surface on w's side of it, each component rounded away from the
+// surface (so that the rounding of the sum takes back none of the offset).
+// Shadow, reflection and refraction rays all start here, and are traced as
+// spawned rays (accel.cl).
+inline float3 spawn_origin(const SurfacePoint* s, float3 w)
+{
+    const float3 away = dot(w, s->ng) < 0.0f ? -s->ng : s->ng;
+    const float3 o = s->p + s->offset * away;
+    return select(o, nextafter(o, copysign((float3)(INFINITY), away)), isnotequal(away, (float3)(0.0f)));
+}
+
+// The shadow ray from surface point s towards light i: origin (spawn_origin),
+// unit direction and the light's distance; false when the light lies behind
+// the surface, which then blocks it itself (no ray needed).  The ray ends at
+// the light: a point, on no surface, so nothing is held back from that end
+// but what the spawned ray's test cannot place before the light for certain
+// (triangle.cl's certain_t_error): a surface through the light itself does
+// not shadow it.
 inline bool shadow_ray(const Shading* sh, const SurfacePoint* s, uint i, float3* origin, float3* l, float* dist)
 {
-    *origin = s->p + sh->ray_epsilon * s->ng;
-    const float3 to_light = sh->lights[i].position.xyz - *origin;
+    const float3 light = sh->lights[i].position.xyz;
+    *origin = spawn_origin(s, light - s->p);
+    const float3 to_light = light - *origin;
     *dist = length(to_light);
     *l = to_light / *dist;
     return dot(s->ng, *l) > 0.0f && dot(s->n, *l) > 0.0f;
@@ -137,7 +180,7 @@ inline float3 local_shading(const Geometry* g, const Shading* sh, const SurfaceP
         float dist;
         if (!shadow_ray(sh, s, i, &shadow_origin, &l, &dist))
             continue;
-        if (shadows_known ? !((lit >> i) & 1u) : any_hit(g, shadow_origin, l, 0.0f, dist))
+        if (shadows_known ? !((lit >> i) & 1u) : any_hit(g, shadow_origin, l, 0.0f, dist, true))
             continue;
         const float n_dot_l = dot(s->n, l);
         const float3 reflected = 2.0f * n_dot_l * s->n - l;

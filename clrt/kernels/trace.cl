@@ -106,7 +106,7 @@ inline void answer_rays(const Geometry* g, const RayInput* in, uint first, uint 
         float tmin, tmax;
         if (first + k < num_rays && load_ray(in, first + k, &origins[k], &dirs[k], &tmin, &tmax)) {
             HitSink options = query_options(cull);
-            hits[k] = query_hits(g, origins[k], dirs[k], tmin, tmax, query, &options);
+            hits[k] = query_hits(g, origins[k], dirs[k], tmin, tmax, query, false, &options);
         }
     }
 }
@@ -136,7 +136,7 @@ __kernel void query_closest(RAY_INPUT_PARAMS, __global float* t_out, __global in
             uchar f = 0;
             if (found) {
                 __global const TriangleVerts* tri = SPLIT_AT(&g, tris, hit.prim);
-                const ShearedRay r = shear_ray(ray_origins[j], ray_dirs[j]);
+                const ShearedRay r = shear_ray(ray_origins[j], ray_dirs[j], false, INFINITY);
                 f = sees_front(&r, tri) ? 1 : 0;
                 n = face_normal(tri);
             }
@@ -188,7 +188,7 @@ __kernel void query_count(RAY_INPUT_PARAMS, __global int* counts, const uint out
     float tmin, tmax;
     HitSink sink = query_options(cull);
     if (load_ray(&in, i, &origin, &dir, &tmin, &tmax))
-        query_hits(&g, origin, dir, tmin, tmax, QUERY_ALL, &sink);
+        query_hits(&g, origin, dir, tmin, tmax, QUERY_ALL, false, &sink);
     counts[(size_t)out_first + i] = (int)sink.count;
 }
 
@@ -216,7 +216,7 @@ __kernel void query_all(RAY_INPUT_PARAMS, __global int* ray_ids, __global int* p
     sink.next = next;
     sink.capacity = capacity;
     sink.ray = (int)i;
-    query_hits(&g, origin, dir, tmin, tmax, QUERY_ALL, &sink);
+    query_hits(&g, origin, dir, tmin, tmax, QUERY_ALL, false, &sink);
 }
 
 // The directions of the camera's pixel-centre rays (packed float3) for pixels
@@ -243,7 +243,7 @@ __kernel void trace_camera(__global Hit* hits, CAMERA_PARAMS, GEOMETRY_PARAMS)
     const Camera cam = make_camera(CAMERA_ARGS);
     const Geometry g = make_geometry(GEOMETRY_ARGS);
     const Ray ray = camera_ray(&cam, px, py, 0.5f, 0.5f);
-    hits[py * width + px] = reported_hit(&g, closest_hit(&g, ray.origin.xyz, ray.dir.xyz, 0.0f, INFINITY));
+    hits[py * width + px] = reported_hit(&g, closest_hit(&g, ray.origin.xyz, ray.dir.xyz, 0.0f, INFINITY, false));
 }
 
 // The same rays as any-hit queries (occlusion), for comparing query kinds.
@@ -255,5 +255,5 @@ __kernel void occlude_camera(__global uchar* occluded, CAMERA_PARAMS, GEOMETRY_P
     const Camera cam = make_camera(CAMERA_ARGS);
     const Geometry g = make_geometry(GEOMETRY_ARGS);
     const Ray ray = camera_ray(&cam, px, py, 0.5f, 0.5f);
-    occluded[py * width + px] = any_hit(&g, ray.origin.xyz, ray.dir.xyz, 0.0f, INFINITY) ? 1 : 0;
+    occluded[py * width + px] = any_hit(&g, ray.origin.xyz, ray.dir.xyz, 0.0f, INFINITY, false) ? 1 : 0;
 }

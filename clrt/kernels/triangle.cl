@@ -30,9 +30,13 @@ typedef struct {
     float4 origin;
     uint4 perm;        // (kx, ky, kz, 3): kz = dominant axis of the direction
     float3 shear;      // (Sx, Sy, Sz)
+    float end;         // a spawned ray's tmax as it set out (only read when spawned)
+    int spawned;       // the ray leaves a surface (shading.cl's spawn_origin): see certain_t_error
 } ShearedRay;
 
-inline ShearedRay shear_ray(float3 origin, float3 dir)
+// `spawned`: the ray starts on a surface, and takes only hits certainly in
+// (0, tmax] (certain_t_error below); other rays take every hit the test finds.
+inline ShearedRay shear_ray(float3 origin, float3 dir, const bool spawned, float tmax)
 {
     const float3 a = fabs(dir);
     uint kz = (a.x >= a.y) ? ((a.x >= a.z) ? 0u : 2u) : ((a.y >= a.z) ? 1u : 2u);
@@ -44,8 +48,82 @@ inline ShearedRay shear_ray(float3 origin, float3 dir)
     s.origin = (float4)(origin, 0.0f);
     s.perm = (uint4)(kx, ky, kz, 3u);
     s.shear = (float3)(d[kx] / d[kz], d[ky] / d[kz], 1.0f / d[kz]);
+    s.end = tmax;
+    s.spawned = spawned;
     return s;
 }
+
+// Rays that leave a surface.  shading.cl's spawn_origin puts such a ray's
+// origin strictly on the side of the surface's plane that the ray leaves, so
+// in exact arithmetic it cannot meet its own triangle (nor a coplanar
+// neighbour) at t > 0.  The test below is not exact: it measures the triangle
+// from the origin, and a triangle L across around the origin carries rounding
+// of about u L (u = 2^-24) in its sheared corners and in T, so that from an
+// origin 1e-7 above a level ground 2e6 across about a quarter of the rays
+// leaving it "hit" it again at t up to 0.1 (tilted by 30 degrees: up to 60).
+// Spawned rays therefore take a hit only when its t, less a bound of its
+// error, is still > 0 (and, plus the bound, still <= the ray's end: a shadow
+// ray is not blocked by a surface that may lie beyond its light).  Small
+// triangles away from the origin have small bounds and cost spawned rays
+// nothing; what is lost is a large triangle's hits closer to the origin than
+// its own precision, where float32 cannot tell in front from behind.
+//
+// The bound.  Take the shear constants as exact (they define the direction
+// the test traces) and compare the corners as computed -- X, Y sheared, Az
+// the depth before Sz, Z = Sz Az -- with the exact ones:
+//   |dX| <= u (2 max|X| + 3 |Sx| max|Az|), |dY| likewise, |dZ| <= 2u max|Z|
+// (the origin subtracted, Sx Az, the difference; Az, Sz Az).  Let b be the
+// weights of the ray's point (0, 0) in the computed triangle (exactly: the
+// edge functions' signs are exact, so b >= 0), and Z = c + g.(X, Y) the
+// exact triangle's plane, c the exact t.  Since sum b (X, Y) = 0 over the
+// computed corners, sum b Z over the exact corners is c - g.sum b (dX, dY),
+// so the computed corners' sum b Z is within
+//   dZ + |gx| dX + |gy| dY
+// of c: an error of the corners moves t only as far as the plane's slope
+// along it (the plane's X and Y gradients, g = -(nx, ny) / nz for its normal
+// n = (B - A) x (C - A)).  T / det computes that sum with weights within 2u
+// (Kahan's difference of products) and the rounding of T (3u), det and a
+// division of up to 2.5 ulp: within 5u max|Z| + 9u |t|.  |g| is bounded
+// from the computed corners: |nx| <= |computed nx| + its error (the edges'
+// rounding and dY, dZ; below), |nz| >= |det| - e, with e = 6 (max|X| dY +
+// max|Y| dX + dX dY) + 4u |det| (each edge function's error from dX, dY and
+// its own rounding); where |det| <= e the plane may lie along the ray and no
+// hit is certain.  In all, with 2u |t| for the rounding of t + bound:
+//   |t - c| <= 7u max|Z| + 10u |t| + ((|nx| + err nx) dX + (|ny| + err ny) dY) / (|det| - e)
+// u is taken as 6.0e-8 (u + 0.7 %), which covers the second-order terms and
+// the rounding of the bound's own operations.  FMA contraction (NVIDIA's)
+// only removes roundings.  One text for the scalar and the lane tests, so
+// that they agree bit for bit; tests/test_spawned_rays.py holds the bound to
+// float64 on large, far and grazing triangles.
+#define T_ERROR_U 6.0e-8f
+#define DEFINE_CERTAIN_T_ERROR(name, real_t)                                                                   \
+    inline real_t name(real_t Ax, real_t Ay, real_t Az, real_t Bx, real_t By, real_t Bz, real_t Cx, real_t Cy,  \
+                       real_t Cz, real_t Za, real_t Zb, real_t Zc, real_t shear_x, real_t shear_y, real_t det,  \
+                       real_t t)                                                                               \
+    {                                                                                                          \
+        const real_t max_x = fmax(fabs(Ax), fmax(fabs(Bx), fabs(Cx)));                                         \
+        const real_t max_y = fmax(fabs(Ay), fmax(fabs(By), fabs(Cy)));                                         \
+        const real_t max_az = fmax(fabs(Az), fmax(fabs(Bz), fabs(Cz)));                                        \
+        const real_t max_z = fmax(fabs(Za), fmax(fabs(Zb), fabs(Zc)));                                         \
+        const real_t dx = T_ERROR_U * (2.0f * max_x + 3.0f * fabs(shear_x) * max_az);                          \
+        const real_t dy = T_ERROR_U * (2.0f * max_y + 3.0f * fabs(shear_y) * max_az);                          \
+        const real_t dz = 2.0f * T_ERROR_U * max_z;                                                            \
+        /* the plane's normal (B - A) x (C - A), its x and y, and their errors */                              \
+        const real_t x1 = Bx - Ax, y1 = By - Ay, z1 = Zb - Za, x2 = Cx - Ax, y2 = Cy - Ay, z2 = Zc - Za;       \
+        const real_t nx = y1 * z2 - z1 * y2, ny = z1 * x2 - x1 * z2;                                           \
+        const real_t sx = fmax(fabs(x1), fabs(x2)), sy = fmax(fabs(y1), fabs(y2)), sz = fmax(fabs(z1), fabs(z2)); \
+        const real_t ex = T_ERROR_U * sx + 2.0f * dx, ey = T_ERROR_U * sy + 2.0f * dy;                         \
+        const real_t ez = T_ERROR_U * sz + 2.0f * dz;                                                          \
+        const real_t err_nx = 4.0f * T_ERROR_U * sy * sz + 2.0f * (sy * ez + sz * ey + ey * ez);               \
+        const real_t err_ny = 4.0f * T_ERROR_U * sx * sz + 2.0f * (sx * ez + sz * ex + ex * ez);               \
+        const real_t e = 6.0f * (max_x * dy + max_y * dx + dx * dy) + 4.0f * T_ERROR_U * fabs(det);            \
+        const real_t room = fabs(det) - e;                                                                     \
+        const real_t bound = 7.0f * T_ERROR_U * max_z + 10.0f * T_ERROR_U * fabs(t)                            \
+                           + ((fabs(nx) + err_nx) * dx + (fabs(ny) + err_ny) * dy) / room;                     \
+        return select((real_t)(INFINITY), bound, room > 0.0f);                                                 \
+    }
+
+DEFINE_CERTAIN_T_ERROR(certain_t_error, float)
 
 // Face culling, a choice of each query.  A triangle shows its front face to a
 // ray that meets it against its normal (v1 - v0) x (v2 - v0), i.e. that sees
@@ -77,10 +155,17 @@ inline bool intersect_triangle_culled(const ShearedRay* r, __global const Triang
         return false;
     if ((cull == CULL_BACK && det < 0.0f) || (cull == CULL_FRONT && det > 0.0f))
         return false;
-    const float T = U * (r->shear.z * A.z) + V * (r->shear.z * B.z) + W * (r->shear.z * C.z);
+    const float Za = r->shear.z * A.z, Zb = r->shear.z * B.z, Zc = r->shear.z * C.z;
+    const float T = U * Za + V * Zb + W * Zc;
     const float t = T / det;
     if (!(t > tmin && t <= tmax))
         return false;
+    if (r->spawned) {
+        const float error = certain_t_error(Ax, Ay, A.z, Bx, By, B.z, Cx, Cy, C.z, Za, Zb, Zc, r->shear.x,
+                                            r->shear.y, det, t);
+        if (!(t > error && t + error <= r->end))
+            return false;
+    }
     *t_out = t;
     *u_out = V / det;
     *v_out = W / det;
@@ -97,12 +182,14 @@ inline bool intersect_triangle_culled(const ShearedRay* r, __global const Triang
 // width real_t / mask_t: four triangles against one ray (intersect_packet_culled)
 // or one triangle against eight rays (intersect_lanes_culled).  One text makes
 // both, so that neither can drift from the other.  Returns -1 in the lanes of
-// `candidate` that hit with tmin < t <= tmax, with t and the barycentric
-// weights in *t_out, *u_out, *v_out (set only when some lane hits).
-#define DEFINE_WATERTIGHT_LANES(name, real_t, mask_t)                                                          \
+// `candidate` that hit with tmin < t <= tmax (and, for `spawned` rays, certainly
+// before `end`: certain_t_error), with t and the barycentric weights in *t_out,
+// *u_out, *v_out (set only when some lane hits).
+#define DEFINE_WATERTIGHT_LANES(name, real_t, mask_t, t_error)                                                 \
     __attribute__((always_inline))                                                                             \
     inline mask_t name(mask_t candidate, real_t Ax, real_t Ay, real_t Az, real_t Bx, real_t By, real_t Bz,     \
-                       real_t Cx, real_t Cy, real_t Cz, real_t shear_z, real_t tmin, real_t tmax, const int cull, \
+                       real_t Cx, real_t Cy, real_t Cz, real_t shear_x, real_t shear_y, real_t shear_z,          \
+                       real_t tmin, real_t tmax, const int cull, const int spawned, real_t end,                \
                        real_t* t_out, real_t* u_out, real_t* v_out)                                            \
     {                                                                                                          \
         const real_t U = DIFF_OF_PRODUCTS(Cx, By, Cy, Bx);                                                     \
@@ -112,20 +199,26 @@ inline bool intersect_triangle_culled(const ShearedRay* r, __global const Triang
         if (!any(hit))      /* most of the time: no lane passes the edge test, no division needed */          \
             return hit;                                                                                        \
         const real_t det = U + V + W;                                                                          \
-        const real_t T = U * (shear_z * Az) + V * (shear_z * Bz) + W * (shear_z * Cz);                         \
+        const real_t Za = shear_z * Az, Zb = shear_z * Bz, Zc = shear_z * Cz;                                  \
+        const real_t T = U * Za + V * Zb + W * Zc;                                                             \
         const real_t t = T / det;                                                                              \
         hit &= (det != 0.0f) & (t > tmin) & (t <= tmax);                                                       \
         if (cull == CULL_BACK)                                                                                 \
             hit &= det >= 0.0f;                                                                                \
         else if (cull == CULL_FRONT)                                                                           \
             hit &= det <= 0.0f;                                                                                \
+        if (spawned && any(hit)) {                                                                             \
+            const real_t error = t_error(Ax, Ay, Az, Bx, By, Bz, Cx, Cy, Cz, Za, Zb, Zc, shear_x, shear_y, det, t); \
+            hit &= (t > error) & (t + error <= end);                                                           \
+        }                                                                                                      \
         *t_out = t;                                                                                            \
         *u_out = V / det;                                                                                      \
         *v_out = W / det;                                                                                      \
         return hit;                                                                                            \
     }
 
-DEFINE_WATERTIGHT_LANES(watertight_lanes4, float4, int4)
+DEFINE_CERTAIN_T_ERROR(certain_t_error4, float4)
+DEFINE_WATERTIGHT_LANES(watertight_lanes4, float4, int4, certain_t_error4)
 
 // The same test for the four triangles of a TrianglePacket (layouts.h) at once,
 // lane k for triangle k (empty lanes never hit): the corners sheared as
@@ -142,8 +235,9 @@ inline int4 intersect_packet_culled(const ShearedRay* r, __global const Triangle
     const float4 Ax = (p->v0[kx] - o.x) - r->shear.x * Az, Ay = (p->v0[ky] - o.y) - r->shear.y * Az;
     const float4 Bx = (p->v1[kx] - o.x) - r->shear.x * Bz, By = (p->v1[ky] - o.y) - r->shear.y * Bz;
     const float4 Cx = (p->v2[kx] - o.x) - r->shear.x * Cz, Cy = (p->v2[ky] - o.y) - r->shear.y * Cz;
-    return watertight_lanes4(p->slot >= 0, Ax, Ay, Az, Bx, By, Bz, Cx, Cy, Cz, (float4)(r->shear.z), (float4)(tmin),
-                             (float4)(tmax), cull, t_out, u_out, v_out);
+    return watertight_lanes4(p->slot >= 0, Ax, Ay, Az, Bx, By, Bz, Cx, Cy, Cz, (float4)(r->shear.x),
+                             (float4)(r->shear.y), (float4)(r->shear.z), (float4)(tmin), (float4)(tmax), cull,
+                             r->spawned, (float4)(r->end), t_out, u_out, v_out);
 }
 
 #ifdef RAY_PACKETS
@@ -178,13 +272,15 @@ inline ShearRayLanes shear_ray_lanes(float8 dx, float8 dy, float8 dz)
     return s;
 }
 
-// Lane k of `s` as shear_ray(origin, dir) would give it.
+// Lane k of `s` as shear_ray(origin, dir, false, tmax) would give it.
 inline ShearedRay sheared_ray_lane(const ShearRayLanes* s, float3 origin, int k)
 {
     ShearedRay r;
     r.origin = (float4)(origin, 0.0f);
     r.perm = (uint4)((uint)s->kx[k], (uint)s->ky[k], (uint)s->kz[k], 3u);
     r.shear = (float3)(s->shear_x[k], s->shear_y[k], s->shear_z[k]);
+    r.end = INFINITY;
+    r.spawned = 0;
     return r;
 }
 
@@ -194,7 +290,9 @@ inline ShearedRay sheared_ray_lane(const ShearRayLanes* s, float3 origin, int k)
 typedef struct {
     float8 origin_x, origin_y, origin_z;   // the origins' (kx, ky, kz) components
     float8 shear_x, shear_y, shear_z;      // ShearedRay.shear
+    float8 end;                            // ShearedRay.end
     int kx, ky, kz;
+    int spawned;                           // ShearedRay.spawned, for all eight
 } PacketShear;
 
 inline float8 axis_lanes(float8 x, float8 y, float8 z, int axis)
@@ -202,10 +300,11 @@ inline float8 axis_lanes(float8 x, float8 y, float8 z, int axis)
     return axis == 0 ? x : axis == 1 ? y : z;
 }
 
-DEFINE_WATERTIGHT_LANES(watertight_lanes8, float8, int8)
+DEFINE_CERTAIN_T_ERROR(certain_t_error8, float8)
+DEFINE_WATERTIGHT_LANES(watertight_lanes8, float8, int8, certain_t_error8)
 
-// The lanes of `r` as one PacketShear; false unless they share one axis
-// order (the same dominant axis, and its sign).
+// The lanes of `r` as one PacketShear (not spawned); false unless they share
+// one axis order (the same dominant axis, and its sign).
 inline bool packet_shear(const ShearRayLanes* r, float8 ox, float8 oy, float8 oz, PacketShear* s)
 {
     const int kx = r->kx.s0, ky = r->ky.s0, kz = r->kz.s0;
@@ -220,6 +319,8 @@ inline bool packet_shear(const ShearRayLanes* r, float8 ox, float8 oy, float8 oz
     s->shear_x = r->shear_x;
     s->shear_y = r->shear_y;
     s->shear_z = r->shear_z;
+    s->end = (float8)(INFINITY);
+    s->spawned = 0;
     return true;
 }
 
@@ -242,8 +343,8 @@ inline int8 intersect_lanes_culled(const PacketShear* s, __global const Triangle
     const float8 By = ((float8)(v1[4 * s->ky + k]) - s->origin_y) - s->shear_y * Bz;
     const float8 Cx = ((float8)(v2[4 * s->kx + k]) - s->origin_x) - s->shear_x * Cz;
     const float8 Cy = ((float8)(v2[4 * s->ky + k]) - s->origin_y) - s->shear_y * Cz;
-    return watertight_lanes8((int8)(-1), Ax, Ay, Az, Bx, By, Bz, Cx, Cy, Cz, s->shear_z, tmin, tmax, cull,
-                             t_out, u_out, v_out);
+    return watertight_lanes8((int8)(-1), Ax, Ay, Az, Bx, By, Bz, Cx, Cy, Cz, s->shear_x, s->shear_y, s->shear_z,
+                             tmin, tmax, cull, s->spawned, s->end, t_out, u_out, v_out);
 }
 #endif
 #endif

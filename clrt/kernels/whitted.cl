@@ -84,7 +84,7 @@ inline float3 trace_whitted(const Geometry* g, const Shading* sh, const uint max
         const PendingRay r = stack[--sp];
         const Hit hit = camera_ray && first_known ? *first
                                                   : closest_hit(g, r.origin, r.dir, camera_ray ? tmin : 0.0f,
-                                                                camera_ray ? tmax : INFINITY);
+                                                                camera_ray ? tmax : INFINITY, !camera_ray);
         if (camera_ray)
             *first = hit;
         const bool lights_known = camera_ray && lit_known;
@@ -93,7 +93,7 @@ inline float3 trace_whitted(const Geometry* g, const Shading* sh, const uint max
             color += r.weight * sh->background.xyz;
             continue;
         }
-        const SurfacePoint s = surface_point(g, sh, r.origin, r.dir, &hit);
+        const SurfacePoint s = surface_point(g, sh, r.dir, &hit);
         color += r.weight * local_shading(g, sh, &s, r.dir, lights_known, lit);
         const float kr = s.m.reflectivity, kt = s.m.transparency;
         if (r.depth >= max_depth || (kr <= 0.0f && kt <= 0.0f))
@@ -105,11 +105,13 @@ inline float3 trace_whitted(const Geometry* g, const Shading* sh, const uint max
             reflect_weight += kt * f;
             const float3 w = r.weight * (kt * (1.0f - f)) * s.m.color.xyz;
             if (f < 1.0f && worth_tracing(w))
-                stack[sp++] = pending_ray(s.p - sh->ray_epsilon * s.ng, refracted, w, r.depth + 1);
+                stack[sp++] = pending_ray(spawn_origin(&s, refracted), refracted, w, r.depth + 1);
         }
         const float3 w = r.weight * reflect_weight;
-        if (worth_tracing(w))
-            stack[sp++] = pending_ray(s.p + sh->ray_epsilon * s.ng, reflect_dir(r.dir, &s), w, r.depth + 1);
+        if (worth_tracing(w)) {
+            const float3 reflected = reflect_dir(r.dir, &s);
+            stack[sp++] = pending_ray(spawn_origin(&s, reflected), reflected, w, r.depth + 1);
+        }
     }
     return color;
 }

@@ -40,7 +40,7 @@ from clrt.errors import DeviceMemoryError, InputError
 from clrt.layouts import HIT, RAY
 from clrt.renderer.tiles import TileLimits, run_tiles
 from clrt.scene.arrays import flatten_scene, light_records
-from clrt.scene.scene import Camera, Scene, default_light, ray_epsilon
+from clrt.scene.scene import Camera, Scene, default_light
 from clrt.scene.sources import as_scene
 from clrt.scene.texture import srgb_encode8
 
@@ -198,7 +198,7 @@ class Renderer:
                 "generate_rays": [None, *CAMERA_ARG_TYPES, u32, u32, u32, u32, u32, u32, u32],
                 "shade_pixels": [None, None, None, u32, u32, u32, f32, u32, *g.arg_types,
                                  *g.extra_arg_types("tri_info"), *g.extra_arg_types("vertex_normals"),
-                                 None, None, u32, cltypes.float4, cltypes.float4, f32, *detail],
+                                 None, None, u32, cltypes.float4, cltypes.float4, *detail],
                 "encode_srgb8": [None, None, u32],
             }.items()}
         self._frame_buffers: dict[str, cl.Buffer] = {}
@@ -229,7 +229,7 @@ class Renderer:
         """
         job = self._job(camera, linear, hits, samples, max_depth, seed)
         # Rays from too far for the float32 triangle test: one error, not missed hits.
-        self.geometry.reach.check_render(job.camera.eye, self._ray_epsilon(job.camera))
+        self.geometry.reach.check_render(job.camera.eye)
         job.camera_args, job.scene_args = self._frame_args(job.camera)
         job.progress = progress or (lambda n: None)
         capacity = self.tile_capacity(job.camera.width * job.camera.height)
@@ -269,7 +269,7 @@ class Renderer:
     def _frame_args(self, camera: Camera) -> tuple[tuple, tuple]:
         """The arguments that hold for a whole frame: the camera's (generate_rays),
         and the scene's with the values a caller may change between frames
-        (lights, colours) and the camera's ray epsilon (shade_pixels)."""
+        (lights, colours; shade_pixels)."""
         b = self.geometry.buffers   # read per frame: a refit may have replaced some
         scene = (*self.geometry.args, *b["tri_info"], *b["vertex_normals"], self.buffers["materials"])
         detail = ()
@@ -277,15 +277,7 @@ class Renderer:
             detail = (*b["tri_detail"], self.buffers["textures"], *b["texels"], self.buffers["srgb_table"])
         return camera_args(camera, self.arrays.origin), (
             *scene, self.buffers["lights"], len(self.arrays.lights), vec4(self.scene.ambient_light),
-            vec4(self.scene.background), self._ray_epsilon(camera), *detail)
-
-    def _ray_epsilon(self, camera: Camera) -> float:
-        """The offset of secondary rays (clrt.scene.scene.ray_epsilon) for the
-        coordinates the device computes with: those of its frame
-        (clrt.scene.arrays.device_origin), where a scene far from the origin has
-        small ones -- so a scene moved away keeps its image."""
-        origin = self.arrays.origin
-        return ray_epsilon(self.arrays.bounds - origin, np.asarray(camera.eye, np.float64) - origin)
+            vec4(self.scene.background), *detail)
 
     @one_at_a_time
     def refit(self, scene, *, rebuild: bool = False) -> None:

@@ -377,15 +377,6 @@ def scene_from_mesh(mesh, material=None, lights=None, background=config.DEFAULT_
     return scene
 
 
-def ray_epsilon(bounds, eye) -> float:
-    """How far secondary rays start off the surface: well above float32 rounding of
-    hit points (relative to the coordinates' magnitude) yet small against the scene."""
-    bounds = np.asarray(bounds, dtype=np.float64)
-    diag = float(np.linalg.norm(bounds[1] - bounds[0]))
-    magnitude = max(float(np.abs(bounds).max()), float(np.abs(np.asarray(eye, dtype=np.float64)).max()))
-    return 1e-4 * diag + 1e-6 * magnitude
-
-
 def file_view(view: dict, bounds, label: str = "") -> Camera:
     """A Camera from :func:`clrt.scene.load.file_camera`'s description: the target
     on the view axis as far away as the scene's centre, 480 pixels high and as
