@@ -483,12 +483,34 @@ def test_a_sampled_partition_lowers_the_sah_cost_too(queue, monkeypatch):
     assert sampled < 0.98 * plain, (plain, sampled)
 
 
+def test_gpus_partition_large_meshes_by_default(queue, monkeypatch):
+    """The default: GPUs partition from PART_MIN_TRIANGLES triangles on (below,
+    the build stays PLOC's: faster, for a tree a few per cent dearer), CPU
+    devices never."""
+    import pyopencl as cl
+
+    from clrt.device import build
+    mesh = TEST_MESHES["torus"]()
+    corners = mesh.vertices[mesh.faces].astype(np.float32)
+    segments = {}
+    for kind, minimum in (("gpu", len(corners)), ("gpu", len(corners) + 1), ("cpu", 0)):
+        monkeypatch.setattr(build, "device_kind", lambda device, kind=kind: kind)
+        monkeypatch.setattr(build, "PART_MIN_TRIANGLES", minimum)
+        build_on_device(*queue, corners, leaf_size=4, treelet_leaves=0, top_clusters=16).release()
+        state = np.empty(build.STATE_INTS, np.int32)
+        cl.enqueue_copy(queue[1], state, build._workspaces[queue[0].int_ptr].buffers["state"], is_blocking=True)
+        segments[(kind, minimum)] = int(state[build.STATE["STATE_PART_SEGMENTS"]])
+    assert segments[("gpu", len(corners))] > 1
+    assert segments[("gpu", len(corners) + 1)] == 0 and segments[("cpu", 0)] == 0
+
+
 @pytest.mark.parametrize("volume", VOLUMES)
 def test_partitioned_trees_give_brute_force_hits(volume, device, monkeypatch):
     """The no-detail-loss invariant for trees built with the SAH partition (the
     GPU default; the CPU default builds without), grazing rays included."""
     from clrt.device import build
     monkeypatch.setattr(build, "SAH_PARTITION", {"gpu": True, "cpu": True})
+    monkeypatch.setattr(build, "PART_MIN_TRIANGLES", 0)
     monkeypatch.setattr(build, "SAH_TOP_CLUSTERS", {"gpu": 16, "cpu": 16})
     monkeypatch.setattr(build, "PART_SAMPLES", 500)       # the torus and icosphere sampled
     for name in ("torus", "icosphere"):

@@ -191,7 +191,7 @@ def _breakdown(sources, views, size, samples, device, per_frame, out):
         alone.append((frame_ms, png))
         print(f"| {Path(str(source)).name} | {len(renderer.arrays.corners):,} | {load:.0f} | "
               f"{t0['initialisation']:.0f} | {t0['acceleration build']:.0f} | {upload:.0f} | "
-              f"{t0['copy to device'] - upload:.0f} | {kernels:.2f} | {readback:.2f} | "
+              f"{max(t0['copy to device'] - upload, 0.0):.0f} | {kernels:.2f} | {readback:.2f} | "
               f"{frame_ms - kernels - readback:.2f} | {png:.1f} |", file=out, flush=True)
     render = sum(r for r, _ in alone) / len(alone)
     png = sum(p for _, p in alone) / len(alone)

@@ -118,8 +118,10 @@ def _traced_accel(mesh, volume, builder, leaf_size, device):
         build.TREELET_MIN_TRIANGLES = ((0, minimum),)
     if top is not None:
         build.SAH_TOP_CLUSTERS.update({kind: top for kind in saved_top})
+    saved_minimum = build.PART_MIN_TRIANGLES
     if partition is not None:
         build.SAH_PARTITION.update({kind: bool(partition) for kind in saved_partition})
+        build.PART_MIN_TRIANGLES = 0
     try:
         return Accel(mesh, accel=volume, builder="device" if builder in DEVICE_VARIANTS else builder,
                      leaf_size=leaf_size, device=device)
@@ -128,6 +130,7 @@ def _traced_accel(mesh, volume, builder, leaf_size, device):
         build.TREELET_MIN_TRIANGLES = saved_min
         build.SAH_TOP_CLUSTERS.update(saved_top)
         build.SAH_PARTITION.update(saved_partition)
+        build.PART_MIN_TRIANGLES = saved_minimum
 
 
 # Trace times of trees a few per cent apart are compared in one loop: every

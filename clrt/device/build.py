@@ -8,7 +8,8 @@
 The algorithm (kernels in ``clrt/kernels/build_*.cl``, entry ``build_bvh.cl``):
 
 1. bounds of the triangles' box centres, and a 30-bit Morton code per triangle;
-   on GPUs (``SAH_PARTITION``) first the SAH partition (``build_partition.cl``):
+   on GPUs from ``PART_MIN_TRIANGLES`` on (``SAH_PARTITION``) first the SAH
+   partition (``build_partition.cl``):
    the triangles split top-down by the binned SAH, ``PART_LEVELS`` launched
    levels, into at most ``SAH_TOP_CLUSTERS`` segments of about F / that many
    triangles; then a key per triangle of its segment above a 24-bit Morton
@@ -120,7 +121,15 @@ SAH_TOP_MAX = 256
 # PART_LEVELS levels (launched without reading the device; the levels past the
 # last split cost a few microseconds each), decided on at most PART_SAMPLES
 # evenly spaced triangles.  PLOC merges within a segment.
+# On the H200 (docs/benchmarks.md, session 13) it lowers the SAH cost of
+# bunny00's tree by 3 % (random, diffuse, AO and camera rays 3-6 % faster) for
+# 0.9 ms more build (2.1 -> 3.0 ms), of 1M triangles (14 bunnies) by 2 % for
+# 1 ms more, of 10M by 11 % and of 50M by 28 % for no more build time (its
+# segments' own Morton codes are finer than one code over the whole mesh).
+# So by default only from PART_MIN_TRIANGLES on, where it costs nothing;
+# below, the build stays near 2 ms (benchmarks: --builders device/partition=1).
 SAH_PARTITION = {"gpu": True, "cpu": False}
+PART_MIN_TRIANGLES = 2_000_000
 PART_BINS = 16
 PART_LEVELS = 10
 PART_SAMPLES = 1 << 17
@@ -466,7 +475,8 @@ def build_on_device(context: cl.Context, queue: cl.CommandQueue, corners, volume
         (1: none; default: SAH_TOP_CLUSTERS of the device type; never more
         than the tail's work-items; for benchmarks).
     partition: the SAH partition into at most top_clusters segments before
-        PLOC (default: SAH_PARTITION of the device type; for benchmarks).
+        PLOC (default: SAH_PARTITION of the device type, from
+        PART_MIN_TRIANGLES triangles on; for benchmarks).
     device_times: time the phases on the device (``DeviceBvh.timings``; for
         benchmarks).  The build then runs on ``queue``, which must have
         profiling enabled (clrt.device.context.create_context's does);
@@ -535,7 +545,9 @@ def build_on_device(context: cl.Context, queue: cl.CommandQueue, corners, volume
     # 1. Morton codes.
     launch("morton", k["init_build_state"], 1, state, np.uint32(F))
     launch("morton", k["centroid_bounds"], min(_groups(F), MAX_REDUCE_GROUPS), corners_buf, np.uint32(F), state)
-    segmented = (SAH_PARTITION[kind] if partition is None else bool(partition)) and 1 < top_clusters < F
+    if partition is None:
+        partition = SAH_PARTITION[kind] and F >= PART_MIN_TRIANGLES
+    segmented = bool(partition) and 1 < top_clusters < F
     if segmented:
         _partition(k, launch, ws, F, top_clusters, corners_buf, state, sample_part=ids[1], keys=keys[0],
                    ids=ids[0])
