@@ -155,6 +155,15 @@ BATCH_MANIFEST_SECONDS = 1.0
 #: Retries of a task that raised an unexpected error; a task whose worker died is
 #: retried elsewhere by Dask (distributed.scheduler.allowed-failures, default 3).
 BATCH_TASK_RETRIES = 1
+#: Dask gives up on a task (KilledWorker) once allowed-failures + 1 workers died
+#: while it was sent to them, waiting or running.  A task that was not running
+#: at each of those deaths -- it waited behind the task that crashed them -- is
+#: submitted again, as a new task, at most this many times; one that was running
+#: at each is the crash and is reported ("device").  So a task that kills its
+#: worker every time costs at most (allowed-failures + 1) x (this + 1) worker
+#: deaths, 16 with Dask's default, and usually allowed-failures + 1
+#: (clrt.batch.engine._execute).
+BATCH_KILLED_RESUBMITS = 3
 #: A finished task whose result was lost with its worker (Dask's future status
 #: "lost": the worker died before the client fetched the records) is submitted
 #: again, at most this many times; its images are on disk, so the new task

@@ -30,9 +30,9 @@ def write_icosphere_obj(path: Path) -> Path:
 # with fault_hook()'s folder on its path loads -- the command and the batch's
 # worker processes (restarted ones too).  Rendering a source named boom.obj
 # raises; die.obj kills the worker process each time; flaky.obj kills it the
-# first time only (a marker file beside the source remembers).  A killer dies
-# 0.3 s into its task, as a driver that crashes mid-render: the tasks sent to
-# its worker after it are surely there, waiting.
+# first time only (SOURCE.kills, beside the source, lists the processes killed).
+# A killer dies 0.3 s into its task, as a driver that crashes mid-render: the
+# tasks sent to its worker after it are surely there, waiting.
 FAULTS = '''
 import os
 import time
@@ -43,11 +43,9 @@ def render_scene(source, **options):
     name = os.path.basename(str(source))
     if name == "boom.obj":
         raise RuntimeError("boom from the test")
-    if name == "die.obj":
-        time.sleep(0.3)
-        os._exit(1)
-    if name == "flaky.obj" and not os.path.exists(str(source) + ".died"):
-        open(str(source) + ".died", "w").close()
+    if name == "die.obj" or name == "flaky.obj" and not os.path.exists(str(source) + ".kills"):
+        with open(str(source) + ".kills", "a") as kills:
+            kills.write(f"{os.getpid()}\\n")
         time.sleep(0.3)
         os._exit(1)
     return _render_scene(source, **options)
