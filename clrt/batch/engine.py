@@ -17,11 +17,13 @@ import sys
 import time
 import uuid
 from collections import Counter
+from contextlib import ExitStack
 from dataclasses import dataclass
 from pathlib import Path
 
 from clrt import checks
-from clrt.batch.cluster import dashboard_link, default_workers, require_dask, start_local_cluster
+from clrt.batch.cluster import (dashboard_link, default_workers, keep_lost_workers, require_dask,
+                                start_local_cluster)
 from clrt.batch.jobs import Source, expand_sources, output_path, plan_tasks, settings_key
 from clrt.batch.manifest import FolderLock, Manifest
 from clrt.config import (BATCH_CACHE_SCENES, BATCH_KILLED_RESUBMITS, BATCH_LOST_RESUBMITS, BATCH_TASK_RETRIES,
@@ -148,28 +150,30 @@ def run(sources, out_dir, views: int = 1, *, client=None, workers: int | None = 
             return Summary(outputs, time.perf_counter() - started, 0)
         require_dask()
         cluster = own_client = None
-        try:
-            if client is None:
-                count = workers or default_workers(device)
-                cluster = start_local_cluster(count, device)
-                from distributed import Client
-                client = own_client = Client(cluster)
-            link = dashboard_link(client)
-            if link and log:
-                log(f"dashboard: {link}")
-            n_workers = len(client.scheduler_info().get("workers", {}))
-            if not n_workers and log:
-                log("the scheduler has no workers yet: the jobs wait for them")
-            jobs = _jobs(pending, folder, views, settings, force, n_workers)
-            sent = time.perf_counter()
-            outputs += _execute(client, jobs, folder, manifest, device, progress, local=cluster is not None)
-            render_seconds = time.perf_counter() - sent
-        finally:
-            manifest.write()
-            if own_client is not None:
-                own_client.close()
-            if cluster is not None:
-                cluster.close()
+        with ExitStack() as kept:   # keep_lost_workers() while a local cluster lives
+            try:
+                if client is None:
+                    count = workers or default_workers(device)
+                    kept.enter_context(keep_lost_workers())
+                    cluster = start_local_cluster(count, device)
+                    from distributed import Client
+                    client = own_client = Client(cluster)
+                link = dashboard_link(client)
+                if link and log:
+                    log(f"dashboard: {link}")
+                n_workers = len(client.scheduler_info().get("workers", {}))
+                if not n_workers and log:
+                    log("the scheduler has no workers yet: the jobs wait for them")
+                jobs = _jobs(pending, folder, views, settings, force, n_workers)
+                sent = time.perf_counter()
+                outputs += _execute(client, jobs, folder, manifest, device, progress, local=cluster is not None)
+                render_seconds = time.perf_counter() - sent
+            finally:
+                manifest.write()
+                if own_client is not None:
+                    own_client.close()
+                if cluster is not None:
+                    cluster.close()
     return Summary(outputs, time.perf_counter() - started, n_workers, render_seconds)
 
 
@@ -288,7 +292,7 @@ class _Task:
     killed: int = 0
     deaths: int = 0         # of the workers it was sent to, in all its submissions
     ran: int = 0            # of those deaths, while it was running
-    crashed: bool = False   # running at each death charged to its last submission
+    crashed: bool = False   # running at allowed-failures + 1 of them: it is the crash
 
 
 def _execute(client, jobs: list, folder: Path, manifest: Manifest, device, progress: bool,
@@ -299,10 +303,12 @@ def _execute(client, jobs: list, folder: Path, manifest: Manifest, device, progr
     that worker -- the one running and those waiting in the worker's queue --
     and fails a task (KilledWorker) once allowed-failures + 1 of its workers
     died.  A healthy task queued behind one that crashes its worker each time
-    would be failed with it.  So each task notes in its run log (RUN_LOGS) when it
-    starts and ends, and a task failed so is the crash only if it was running
-    at each of those deaths; one that waited through any of them is submitted
-    again as a new task (BATCH_KILLED_RESUBMITS times at most)."""
+    would be failed with it.  So each task notes in its run log (RUN_LOGS) when
+    it starts and ends, and clrt applies Dask's rule to the deaths a task could
+    have caused, those while it was running: a task failed so is reported once
+    it was running at allowed-failures + 1 deaths, in all its submissions; until
+    then it is submitted again as a new task (BATCH_KILLED_RESUBMITS times at
+    most, which bounds the deaths it waits through)."""
     from distributed import as_completed
 
     from clrt.batch.worker import DevicePlugin, render_task
@@ -339,10 +345,12 @@ def _execute(client, jobs: list, folder: Path, manifest: Manifest, device, progr
             elif future.status == "error":
                 exc = future.exception()
                 if type(exc).__name__ == "KilledWorker":
-                    deaths, ran = getattr(exc, "allowed_failures", 0) + 1, _runs(logs, future.key)
-                    task.deaths, task.ran, task.crashed = task.deaths + deaths, task.ran + ran, ran >= deaths
+                    deaths = getattr(exc, "allowed_failures", 0) + 1
+                    task.deaths, task.ran = task.deaths + deaths, task.ran + _runs(logs, future.key)
+                    task.crashed = task.ran >= deaths
                     if not task.crashed and task.killed < BATCH_KILLED_RESUBMITS and running:
-                        # it waited behind the task that killed its worker: not its fault
+                        # some of those deaths came while it waited behind a
+                        # task that killed the worker: they are not its own
                         task.killed += 1
                         done.add(submit(task))
                         continue
