@@ -157,6 +157,17 @@ BATCH_MANIFEST_SECONDS = 1.0
 #: Retries of a task that raised an unexpected error; a task whose worker died is
 #: retried elsewhere by Dask (distributed.scheduler.allowed-failures, default 3).
 BATCH_TASK_RETRIES = 1
+#: Dask gives up on a task (KilledWorker) once allowed-failures + 1 workers died
+#: while it was sent to them, waiting or running.  clrt reports such a task only
+#: once it was running at allowed-failures + 1 deaths; until then -- it waited
+#: behind the task that crashed the workers -- it is submitted again, as a new
+#: task, at most this many times.  So a task that kills its worker every time
+#: costs allowed-failures + 1 worker deaths (4 with Dask's default), at most
+#: 2 x allowed-failures + 1 (7) when it also waited behind another crashing
+#: task, and never more than (allowed-failures + 1) x (this + 1) (16: runs that
+#: crash before the task notes its start, or an output folder where it cannot)
+#: (clrt.batch.engine._execute).
+BATCH_KILLED_RESUBMITS = 3
 #: A finished task whose result was lost with its worker (Dask's future status
 #: "lost": the worker died before the client fetched the records) is submitted
 #: again, at most this many times; its images are on disk, so the new task

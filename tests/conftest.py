@@ -26,6 +26,41 @@ def write_icosphere_obj(path: Path) -> Path:
     return path
 
 
+# Test-only faults: a sitecustomize module that every Python process started
+# with fault_hook()'s folder on its path loads -- the command and the batch's
+# worker processes (restarted ones too).  Rendering a source named boom.obj
+# raises; die.obj kills the worker process each time; flaky.obj kills it the
+# first time only (SOURCE.kills, beside the source, lists the processes killed).
+# A killer dies 0.3 s into its task, as a driver that crashes mid-render: the
+# tasks sent to its worker after it are surely there, waiting.
+FAULTS = '''
+import os
+import time
+import clrt.scene.render_setup as setup
+_render_scene = setup.render_scene
+
+def render_scene(source, **options):
+    name = os.path.basename(str(source))
+    if name == "boom.obj":
+        raise RuntimeError("boom from the test")
+    if name == "die.obj" or name == "flaky.obj" and not os.path.exists(str(source) + ".kills"):
+        with open(str(source) + ".kills", "a") as kills:
+            kills.write(f"{os.getpid()}\\n")
+        time.sleep(0.3)
+        os._exit(1)
+    return _render_scene(source, **options)
+
+setup.render_scene = render_scene
+'''
+
+
+def fault_hook(folder: Path) -> Path:
+    """A folder holding the FAULTS module: put it on a subprocess's path (repo_env)."""
+    folder.mkdir(parents=True, exist_ok=True)
+    (folder / "sitecustomize.py").write_text(FAULTS)
+    return folder
+
+
 def repo_env(*paths) -> dict:
     """The environment with ``paths``, then this checkout, first on PYTHONPATH:
     a subprocess runs the clrt under test."""

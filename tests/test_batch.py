@@ -9,6 +9,7 @@ import json
 import math
 import os
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -622,6 +623,58 @@ def test_results_lost_with_a_worker_are_submitted_again(meshes, tmp_path, device
     assert summary.count("failed") == 0
     assert records and {r["status"] for r in records} == {"done"}
     assert sorted(r["path"] for r in records) == sorted(_images(tmp_path / "out"))
+
+
+class _KillingClient(_InProcessClient):
+    """Every submission of ball.obj's task comes back KilledWorker: Dask's
+    scheduler charged it 4 worker deaths (allowed-failures 3), ``ran`` of them
+    while it was running -- noted in its run log, as the task notes its starts
+    (clrt.batch.worker.render_task) -- and the rest while it waited."""
+
+    def __init__(self, ran):
+        super().__init__(10 ** 6)
+        self.ran, self.submitted = ran, 0
+
+    def submit(self, fn, job, retries=0, **kwargs):
+        if job["name"] != "ball":
+            return super().submit(fn, job, retries, **kwargs)
+        from distributed.scheduler import KilledWorker
+        self.submitted += 1
+        (Path(job["folder"]) / job["run_log"]).write_text("s" * self.ran)
+        future = _Future(fn, job, "error")
+        worker = type("Worker", (), {"address": "tcp://127.0.0.1:1"})()
+        future.key, future._error = kwargs["key"], KilledWorker(kwargs["key"], worker, 3)
+        return future
+
+
+@pytest.mark.parametrize("ran, submissions", [(4, 1), (2, 2), (1, 4), (0, 4)])
+def test_a_killed_task_is_blamed_for_the_deaths_while_it_ran_and_resubmitted_a_bounded_number_of_times(
+        ran, submissions, meshes, tmp_path, device, monkeypatch):
+    """A task failed by its workers' deaths (KilledWorker) is reported once it
+    was running at allowed-failures + 1 of them (4), counted over its
+    submissions; until then it is submitted again, BATCH_KILLED_RESUBMITS times
+    at most, and then reported with how often it ran.  Either way its frames
+    are "device" (exit 3), the other tasks' frames done, and no run log is left."""
+    import distributed
+
+    from clrt.config import BATCH_KILLED_RESUBMITS
+    assert BATCH_KILLED_RESUBMITS == 3
+    monkeypatch.setattr(distributed, "as_completed", _Completed)
+    monkeypatch.setenv("CLRT_DEVICE", device or "")
+    client = _KillingClient(ran)
+    out = tmp_path / "out"
+    summary = clrt.batch.run(meshes, out, views=2, client=client, device=device, **SIZE)
+    assert summary.exit_code() == 3 and client.submitted == submissions
+    assert {(Path(o.source).stem, o.status) for o in summary.outputs} == {("ball", "device"), ("block", "done")}
+    error = next(o.error for o in summary.outputs if o.status == "device")
+    if ran:
+        assert error.endswith("KilledWorker: the worker process running it died each time it was tried "
+                              "(a crash, or out of memory?)"), error
+    else:
+        assert error.endswith("KilledWorker: its worker processes died 16 times in 4 submissions, 0 of them "
+                              "while it ran (other tasks crashing the workers?)"), error
+    assert {r["status"] for r in _manifest(out)} == {"device", "done"}
+    assert not (out / ".clrt-runs").exists()
 
 
 def test_unwritable_output_is_not_reported_as_a_bad_source_per_frame(meshes, tmp_path, device, capsys,

@@ -13,24 +13,7 @@ import pytest
 pytest.importorskip("distributed")
 
 from clrt.batch.cluster import start_local_cluster  # noqa: E402
-from conftest import repo_env, write_icosphere_obj  # noqa: E402
-
-# Loaded by every Python process started with it on the path, the cluster's
-# workers too: rendering boom.obj raises, rendering die.obj kills the worker.
-FAULTS = '''
-import os
-import clrt.scene.render_setup as setup
-_render_scene = setup.render_scene
-
-def render_scene(source, **options):
-    if str(source).endswith("boom.obj"):
-        raise RuntimeError("boom from the test")
-    if str(source).endswith("die.obj"):
-        os._exit(1)
-    return _render_scene(source, **options)
-
-setup.render_scene = render_scene
-'''
+from conftest import fault_hook, repo_env, write_icosphere_obj  # noqa: E402
 
 
 def _dask_lines(err):
@@ -40,9 +23,7 @@ def _dask_lines(err):
 
 @pytest.mark.parametrize("quiet", [True, False], ids=["quiet", "verbose"])
 def test_failed_frames_are_clrt_lines_not_dask_logs(quiet, tmp_path, device):
-    hook = tmp_path / "hook"
-    hook.mkdir()
-    (hook / "sitecustomize.py").write_text(FAULTS)
+    hook = fault_hook(tmp_path / "hook")
     sources = [write_icosphere_obj(tmp_path / name) for name in ("ball.obj", "boom.obj", "die.obj")]
     (tmp_path / "corrupt.obj").write_text("v 1 2\nf 1 2 3\n")
     dev = ["--device", device] if device else []
@@ -53,10 +34,10 @@ def test_failed_frames_are_clrt_lines_not_dask_logs(quiet, tmp_path, device):
     err = proc.stderr
     assert proc.returncode == 3, err[-2000:]   # device: the worker that kept dying
     assert not _dask_lines(err), err[-2000:]
-    # (boom.obj usually fails with its own error; with one worker, the worker
-    # that die.obj kills may take it down too, and then it is reported so)
-    assert "boom.obj: " in err and "die.obj: " in err and "corrupt.obj" in err
-    assert "boom.obj: RuntimeError: boom from the test" in err or "boom.obj: KilledWorker" in err
+    # boom.obj fails with its own error, also when it waited on the worker that
+    # die.obj killed (tests/test_batch_killers.py)
+    assert "boom.obj: RuntimeError: boom from the test" in err and "die.obj: KilledWorker" in err
+    assert "corrupt.obj" in err and "ball.obj" not in err
     if quiet:
         assert all(line.startswith("clrt: ") for line in err.splitlines()), err[-2000:]
 

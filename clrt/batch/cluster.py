@@ -91,6 +91,28 @@ def start_local_cluster(workers: int, device: str | None = None):
             signal.signal(signal.SIGINT, previous)
 
 
+#: What clrt sets distributed.deploy.lost-worker-timeout to while its local
+#: cluster runs (Dask's default: 15 s): never, in practice.
+KEEP_LOST_WORKERS = "3650 days"
+
+
+@contextmanager
+def keep_lost_workers():
+    """While the block runs, Dask's LocalCluster never closes the nanny of a
+    worker that died: its nanny restarts it, however often it dies.
+
+    15 s after each death of a worker (``distributed.deploy.lost-worker-timeout``)
+    a LocalCluster closes that worker's nanny for good if no worker of that name
+    is connected at that moment: meant for workers whose job went away, it hits
+    a worker that a crashing task kills again and again, when it is restarting
+    just then -- and a batch on one worker would then wait for ever.  Dask reads
+    the setting when a worker dies, in the process that holds the cluster, so it
+    is set for as long as the cluster lives."""
+    import dask
+    with dask.config.set({"distributed.deploy.lost-worker-timeout": KEEP_LOST_WORKERS}):
+        yield
+
+
 @contextmanager
 def quiet_dask_logs():
     """Silence Dask's log handlers in this process while the block runs (what

@@ -17,15 +17,17 @@ import sys
 import time
 import uuid
 from collections import Counter
+from contextlib import ExitStack
 from dataclasses import dataclass
 from pathlib import Path
 
 from clrt import checks
-from clrt.batch.cluster import dashboard_link, default_workers, require_dask, start_local_cluster
+from clrt.batch.cluster import (dashboard_link, default_workers, keep_lost_workers, require_dask,
+                                start_local_cluster)
 from clrt.batch.jobs import Source, expand_sources, output_path, plan_tasks, settings_key
 from clrt.batch.manifest import FolderLock, Manifest
-from clrt.config import (BATCH_CACHE_SCENES, BATCH_LOST_RESUBMITS, BATCH_TASK_RETRIES, DEFAULT_ACCEL, DEFAULT_BUILDER,
-                         DEFAULT_LEAF_SIZE, MAX_IMAGE_SIDE, MAX_VIEWS, MAX_WORKERS)
+from clrt.config import (BATCH_CACHE_SCENES, BATCH_KILLED_RESUBMITS, BATCH_LOST_RESUBMITS, BATCH_TASK_RETRIES,
+                         DEFAULT_ACCEL, DEFAULT_BUILDER, DEFAULT_LEAF_SIZE, MAX_IMAGE_SIDE, MAX_VIEWS, MAX_WORKERS)
 from clrt.errors import InputError, OutputError
 from clrt.scene.render_setup import CAMERA_OPTIONS, MATERIAL_OPTIONS, SCENE_OPTIONS
 
@@ -148,28 +150,30 @@ def run(sources, out_dir, views: int = 1, *, client=None, workers: int | None = 
             return Summary(outputs, time.perf_counter() - started, 0)
         require_dask()
         cluster = own_client = None
-        try:
-            if client is None:
-                count = workers or default_workers(device)
-                cluster = start_local_cluster(count, device)
-                from distributed import Client
-                client = own_client = Client(cluster)
-            link = dashboard_link(client)
-            if link and log:
-                log(f"dashboard: {link}")
-            n_workers = len(client.scheduler_info().get("workers", {}))
-            if not n_workers and log:
-                log("the scheduler has no workers yet: the jobs wait for them")
-            jobs = _jobs(pending, folder, views, settings, force, n_workers)
-            sent = time.perf_counter()
-            outputs += _execute(client, jobs, folder, manifest, device, progress, local=cluster is not None)
-            render_seconds = time.perf_counter() - sent
-        finally:
-            manifest.write()
-            if own_client is not None:
-                own_client.close()
-            if cluster is not None:
-                cluster.close()
+        with ExitStack() as kept:   # keep_lost_workers() while a local cluster lives
+            try:
+                if client is None:
+                    count = workers or default_workers(device)
+                    kept.enter_context(keep_lost_workers())
+                    cluster = start_local_cluster(count, device)
+                    from distributed import Client
+                    client = own_client = Client(cluster)
+                link = dashboard_link(client)
+                if link and log:
+                    log(f"dashboard: {link}")
+                n_workers = len(client.scheduler_info().get("workers", {}))
+                if not n_workers and log:
+                    log("the scheduler has no workers yet: the jobs wait for them")
+                jobs = _jobs(pending, folder, views, settings, force, n_workers)
+                sent = time.perf_counter()
+                outputs += _execute(client, jobs, folder, manifest, device, progress, local=cluster is not None)
+                render_seconds = time.perf_counter() - sent
+            finally:
+                manifest.write()
+                if own_client is not None:
+                    own_client.close()
+                if cluster is not None:
+                    cluster.close()
     return Summary(outputs, time.perf_counter() - started, n_workers, render_seconds)
 
 
@@ -271,46 +275,96 @@ def _jobs(pending: list, folder: Path, views: int, settings: dict, force: bool, 
     return jobs
 
 
+#: Under the output folder: one run log per task (clrt.batch.worker.render_task),
+#: while the batch runs.
+RUN_LOGS = ".clrt-runs"
+
+
+@dataclass
+class _Task:
+    """A job as submitted: its images before the batch (see _remove_unrecorded) and
+    how often it was submitted again, after its result was lost (``lost``) or
+    after its workers died while it waited (``killed``)."""
+
+    job: dict
+    files: dict
+    lost: int = 0
+    killed: int = 0
+    deaths: int = 0         # of the workers it was sent to, in all its submissions
+    ran: int = 0            # of those deaths, while it was running
+    crashed: bool = False   # running at allowed-failures + 1 of them: it is the crash
+
+
 def _execute(client, jobs: list, folder: Path, manifest: Manifest, device, progress: bool,
              local: bool = False) -> list[Output]:
-    """Run the jobs, record each finished one; Ctrl-C cancels what is left."""
+    """Run the jobs, record each finished one; Ctrl-C cancels what is left.
+
+    A worker's death: Dask's scheduler charges it to every task it had sent to
+    that worker -- the one running and those waiting in the worker's queue --
+    and fails a task (KilledWorker) once allowed-failures + 1 of its workers
+    died.  A healthy task queued behind one that crashes its worker each time
+    would be failed with it.  So each task notes in its run log (RUN_LOGS) when
+    it starts and ends, and clrt applies Dask's rule to the deaths a task could
+    have caused, those while it was running: a task failed so is reported once
+    it was running at allowed-failures + 1 deaths, in all its submissions; until
+    then it is submitted again as a new task (BATCH_KILLED_RESUBMITS times at
+    most, which bounds the deaths it waits through)."""
     from distributed import as_completed
 
     from clrt.batch.worker import DevicePlugin, render_task
     client.register_plugin(DevicePlugin(device, BATCH_CACHE_SCENES, ignore_interrupts=local))
-    # Each job's images as they are before any task runs (see _remove_unrecorded)
-    before = [{v: _file_id(folder / job["paths"][v]) for v in job["views"]} for job in jobs]
-    def submit(job):
-        return client.submit(render_task, job, pure=False, retries=BATCH_TASK_RETRIES,
-                             key=f"clrt-render-{job['name']}-{job['views'][0]:04d}-{uuid.uuid4().hex[:12]}")
+    logs = _run_logs(folder)
+    futures = {}
 
-    futures = {submit(job): (job, files, 0) for job, files in zip(jobs, before)}
+    def submit(task: _Task):
+        job = task.job
+        key = f"clrt-render-{job['name']}-{job['views'][0]:04d}-{uuid.uuid4().hex[:12]}"
+        if logs is not None:
+            job = {**job, "run_log": f"{RUN_LOGS}/{key}"}
+        future = client.submit(render_task, job, pure=False, retries=BATCH_TASK_RETRIES, key=key)
+        futures[future] = task
+        return future
+
+    # Each job's images as they are before any task runs (see _remove_unrecorded)
+    for job in jobs:
+        submit(_Task(job, {v: _file_id(folder / job["paths"][v]) for v in job["views"]}))
     total = sum(len(job["views"]) for job in jobs)
     bar = _progress_bar(total, progress)
     outputs = []
     try:
-        done = as_completed(futures)
+        done = as_completed(list(futures))
         for future in done:
-            job, files, resubmits = futures[future]
+            task = futures[future]
+            job = task.job
+            running = getattr(client, "status", None) == "running"
             if future.status == "finished":
                 try:
                     records = future.result()
                 except Exception:   # noqa: BLE001 -- lost between finishing and its fetch
                     records = None
             elif future.status == "error":
-                records = _failed_records(job, future)
-                _remove_unrecorded(folder, job, files)
+                exc = future.exception()
+                if type(exc).__name__ == "KilledWorker":
+                    deaths = getattr(exc, "allowed_failures", 0) + 1
+                    task.deaths, task.ran = task.deaths + deaths, task.ran + _runs(logs, future.key)
+                    task.crashed = task.ran >= deaths
+                    if not task.crashed and task.killed < BATCH_KILLED_RESUBMITS and running:
+                        # some of those deaths came while it waited behind a
+                        # task that killed the worker: they are not its own
+                        task.killed += 1
+                        done.add(submit(task))
+                        continue
+                records = _failed_records(job, future, task)
+                _remove_unrecorded(folder, job, task.files)
             else:
                 records = None
             if records is None:
                 # Lost with the worker that held it (another task killed that
                 # worker) while the cluster runs on: submit it again.  Cancelled,
                 # or the client lost the scheduler: never the frames' fault.
-                if future.status in ("lost", "finished") and getattr(client, "status", None) == "running" \
-                        and resubmits < BATCH_LOST_RESUBMITS:
-                    again = submit(job)
-                    futures[again] = job, files, resubmits + 1
-                    done.add(again)
+                if future.status in ("lost", "finished") and running and task.lost < BATCH_LOST_RESUBMITS:
+                    task.lost += 1
+                    done.add(submit(task))
                     continue
                 raise ClusterLost(_lost_reason(client, future))
             for record in records:
@@ -332,7 +386,43 @@ def _execute(client, jobs: list, folder: Path, manifest: Manifest, device, progr
                 client.cancel(pending)
             except Exception:   # noqa: BLE001 -- the scheduler may be gone already
                 pass
+        if logs is not None:
+            _remove_run_logs(logs)
     return outputs
+
+
+def _run_logs(folder: Path) -> Path | None:
+    """The folder of the tasks' run logs, without the logs of a batch that
+    crashed (the folder lock says no other batch uses them); None if it cannot
+    be made (the tasks then count as never running)."""
+    logs = folder / RUN_LOGS
+    _remove_run_logs(logs)
+    try:
+        logs.mkdir(exist_ok=True)
+    except OSError:
+        return None
+    return logs
+
+
+def _remove_run_logs(logs: Path) -> None:
+    """The tasks' run logs, and their folder once empty: clrt removes only what it wrote."""
+    try:
+        for log in logs.glob("clrt-render-*"):
+            log.unlink()
+        logs.rmdir()
+    except OSError:
+        pass
+
+
+def _runs(logs: Path | None, key) -> int:
+    """Runs of task ``key`` that its worker's death cut short: starts with no end."""
+    if logs is None:
+        return 0
+    try:
+        marks = (logs / str(key)).read_text(encoding="ascii", errors="replace")
+    except OSError:
+        return 0
+    return max(marks.count("s") - marks.count("e"), 0)
 
 
 def _lost_reason(client, future) -> str:
@@ -343,7 +433,7 @@ def _lost_reason(client, future) -> str:
     return f"its tasks came back {future.status} (the scheduler stopped or restarted?)"
 
 
-def _failed_records(job: dict, future) -> list[dict]:
+def _failed_records(job: dict, future, task: _Task) -> list[dict]:
     """Records of a task that raised, or whose workers kept dying (KilledWorker)."""
     exc = future.exception()
     if exc is None:   # no error after all: cancelled, the cluster is gone
@@ -351,8 +441,13 @@ def _failed_records(job: dict, future) -> list[dict]:
     name = type(exc).__name__
     status = "device" if name == "KilledWorker" else "failed"
     message = (str(exc).splitlines() or [""])[0]
-    if name == "KilledWorker":   # Dask's text sends the user to worker logs that clrt does not show
+    # Dask's text sends the user to worker logs that clrt does not show
+    if name == "KilledWorker" and task.crashed:
         message = "the worker process running it died each time it was tried (a crash, or out of memory?)"
+    elif name == "KilledWorker":
+        submitted = f" in {task.killed + 1} submissions" if task.killed else ""
+        message = (f"its worker processes died {task.deaths} times{submitted}, {task.ran} of them while it ran "
+                   "(other tasks crashing the workers?)")
     error = f"{job['source']}: {name}: {message}" if message else f"{job['source']}: {name}"
     return [{"path": job["paths"][v], "source": job["source"], "view": v, "views": job["count"],
              "status": status, "key": job["key"], "error": error, "worker": None} for v in job["views"]]

@@ -194,6 +194,33 @@ def _scene_entry(source: str, scene_options: dict, accel: str, builder: str, lea
 
 
 def render_task(job: dict) -> list[dict]:
+    """:func:`render_views`, its run noted in the task's run log (``job["run_log"]``,
+    a file under the output folder named by the batch): an ``s`` when it starts
+    and an ``e`` when it ends, returning or raising.  A run that its worker
+    process's death cut short leaves an ``s`` alone, which tells the batch that
+    this task was running -- not waiting behind another task -- when that worker
+    died (clrt.batch.engine._execute)."""
+    _note_run(job, "s")
+    try:
+        return render_views(job)
+    finally:
+        _note_run(job, "e")
+
+
+def _note_run(job: dict, mark: str) -> None:
+    """Append ``mark`` to the task's run log; a log that cannot be written is no
+    reason to fail the task (the batch then takes the task as not running)."""
+    name = job.get("run_log")
+    if not name:
+        return
+    try:
+        with open(Path(job["folder"]) / name, "a", encoding="ascii") as log:
+            log.write(mark)
+    except OSError:
+        pass
+
+
+def render_views(job: dict) -> list[dict]:
     """Render views of one source into the output folder; one record per view.
 
     ``job``: source, name, views, replace, count (views of the turntable), folder,
