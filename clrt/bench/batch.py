@@ -173,7 +173,9 @@ def _breakdown(sources, views, size, samples, device, per_frame, out):
         renderer = Renderer(scene, device=device)
         # A second renderer of the same scene finds the context and the program
         # built: its copy to device is the upload alone.
-        upload = Renderer(scene, device=device).timings["copy to device"]
+        second = Renderer(scene, device=device)
+        upload = second.timings["copy to device"]
+        del second        # (its device buffers go before the frames are timed)
         t0 = renderer.timings
         rows = []
         with tempfile.TemporaryDirectory() as folder:
@@ -193,6 +195,7 @@ def _breakdown(sources, views, size, samples, device, per_frame, out):
               f"{t0['initialisation']:.0f} | {t0['acceleration build']:.0f} | {upload:.0f} | "
               f"{max(t0['copy to device'] - upload, 0.0):.0f} | {kernels:.2f} | {readback:.2f} | "
               f"{frame_ms - kernels - readback:.2f} | {png:.1f} |", file=out, flush=True)
+        del renderer      # before the next source's
     render = sum(r for r, _ in alone) / len(alone)
     png = sum(p for _, p in alone) / len(alone)
     print(f"\nthe sources' mean per frame: render {render:.1f} ms, PNG encoding {png:.1f} ms; a worker's time per "

@@ -93,7 +93,12 @@ from clrt.errors import DeviceError, DeviceMemoryError, InputError
 BUILD_GROUP = 256        # work-items per work-group of every build kernel
 RADIX_BITS = 4           # digit of one radix-sort pass: 16 bins, 8 passes for 30-bit codes
 MORTON_BITS = 30
-SORT_PASSES = -(-MORTON_BITS // RADIX_BITS)
+# The sort covers the whole 32-bit key: the SAH partition's keys put the
+# segment in the top 8 bits.  An even number of passes leaves the sorted keys
+# in the first key buffer, which init_leaves reads while it clears the second
+# (treelet_done).
+SORT_PASSES = -(-32 // RADIX_BITS)
+assert SORT_PASSES % 2 == 0, "init_leaves reads the sorted keys from keys[0]"
 # Clusters searched on each side (Meister & Bittner's default; PLOC++ uses 8).
 # Measured SAH cost over the host SAH builder's (leaf size 4): camel 1.13 / 1.11
 # / 1.06 and bunny 1.09 / 1.08 / - at radius 8 / 16 / 32; the search time grows
@@ -224,7 +229,7 @@ def build_defines(volume: str, kind: str = "gpu", treelet_leaves: int | None = N
                                     else int(treelet_leaves)),
         "TREELET_FULL_MIN": TREELET_SMALL[kind][1],
         "TREELET_GROUP": TREELET_GROUP, "TREELET_LEVELS": TREELET_LEVELS, **STATE,
-        "PART_BINS": PART_BINS, "PART_MAX_NODES": PART_MAX_NODES,
+        "PART_BINS": PART_BINS, "PART_MAX_NODES": PART_MAX_NODES, "PART_LEVELS": PART_LEVELS,
         "C_TRAVERSAL": f"((float){C_TRAVERSAL!r})", "C_INTERSECT": f"((float){C_INTERSECT!r})",
         "REL_PAD": repr(float(volumes.REL_PAD)), "ULP_PAD": int(volumes.ULP_PAD),
         "PAD_FLOOR": repr(float(volumes.PAD_FLOOR)), "EVAL_SLACK": repr(float(volumes.EVAL_SLACK)),
@@ -586,7 +591,7 @@ def build_on_device(context: cl.Context, queue: cl.CommandQueue, corners, volume
     tile_status = ws.get("tile_status", 8 * _groups(F))         # ploc_merge's look-back, two halves
     heights = ws.get("heights", 4 * max(F - 1, 1))             # of the inner nodes, index - F
     treelet_done = keys[1]             # the sort keys are spent: F ints each
-    launch("ploc", k["init_leaves"], _groups(F), corners_buf, sorted_ids, keys[passes % 2], np.int32(segmented),
+    launch("ploc", k["init_leaves"], _groups(F), corners_buf, sorted_ids, keys[0], np.int32(segmented),
            np.uint32(F), nodes, clusters, tile_status, treelet_done)
     nearest = ws.get("nearest", 4 * F) if kind == "cpu" else None     # the CPU kernels' neighbours
     queued = _ploc(queue, k, launch, F, clusters, merged, tile_kept, tile_status, nodes, heights, state,
@@ -711,7 +716,8 @@ def _partition(k, launch, ws, F: int, budget: int, corners, state, sample_part, 
         launch("partition", k["partition_split"], 1)
         launch("partition", k["partition_assign"], groups)
     launch("partition", k["partition_order"], 1, parts, state, group=1)
-    launch("morton", k["partition_morton_codes"], _groups(F), corners, np.uint32(F), parts, keys, ids)
+    # (in the partition's phase: a phase's time spans its first launch to its last)
+    launch("partition", k["partition_morton_codes"], _groups(F), corners, np.uint32(F), parts, keys, ids)
 
 
 def _ploc(queue, k, launch, F, clusters, merged, tile_kept, tile_status, nodes, heights, state, leaf_size,
@@ -767,7 +773,9 @@ def _ploc(queue, k, launch, F, clusters, merged, tile_kept, tile_status, nodes, 
 # (8, 12 on CPUs), path sums and ancestors (80); tests/test_device_build.py
 # checks it against the workspace's buffers.
 SCRATCH_BYTES_PER_TRIANGLE = 300
-FIXED_SCRATCH = ("parts", "part_bins")   # the SAH partition's, 0.7 MB whatever the mesh
+# The SAH partition's buffers, 0.7 MB whatever the mesh: not per triangle, so
+# left out of the estimate above (and of its test).
+FIXED_SCRATCH = ("parts", "part_bins")
 
 
 def build_acceleration(corners: np.ndarray, accel: str, builder: str, leaf_size: int,

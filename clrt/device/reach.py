@@ -131,7 +131,7 @@ class Reach:
         the limit; ``what`` names them and says where they lie (see :meth:`check`)."""
         show = lambda x: checks.show(float(f"{x:.2g}"))   # noqa: E731
         return (f"{what} {show(rho)} from the scene's far side, but the device's float32 triangle "
-                f"test overflows and misses hits on this scene's triangles from past "
+                f"test overflows and misses hits on this scene's triangles from about "
                 f"{show(self.limit())}: start the rays nearer, or scale the scene down")
 
     def check(self, lo, hi, what: str) -> None:

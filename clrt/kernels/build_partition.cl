@@ -36,9 +36,13 @@
 #include "build_morton.cl"
 #include "build_treelet.cl"
 
-#if !defined(PART_BINS) || !defined(PART_MAX_NODES) || !defined(STATE_PART_NODES) \
+#if !defined(PART_BINS) || !defined(PART_MAX_NODES) || !defined(PART_LEVELS) || !defined(STATE_PART_NODES) \
     || !defined(STATE_PART_SEGMENTS) || !defined(STATE_PART_FIRST) || !defined(STATE_PART_END)
 #error "build with the PART_* and STATE_PART_* defines of clrt/device/build.py"
+#endif
+
+#if PART_LEVELS >= 64
+#error "partition_order's stack holds a path of at most 64 levels"
 #endif
 
 #define PART_VALUES 7       // a bin: count, box min xyz, box max xyz (ordered bits)
@@ -409,8 +413,7 @@ __kernel void partition_order(global BuildPart* parts, global int* state)
     int top = 0, next = 0, n = 0;
     for (;;) {
         if (parts[n].child >= 0) {
-            if (top < 64)
-                stack[top++] = parts[n].child + 1;
+            stack[top++] = parts[n].child + 1;
             n = parts[n].child;
             continue;
         }

@@ -106,7 +106,9 @@ def device_origin(bounds) -> np.ndarray:
         return origin
     for k in range(3):
         near = min(abs(lo[k]), abs(hi[k]))            # the box's distance from 0 on this axis
-        if lo[k] * hi[k] <= 0.0 or near < RECENTRE_DISTANCE * diagonal:
+        # (not >=: a box of one point with recentring off, RECENTRE_DISTANCE
+        # infinite, compares with inf * 0 = NaN, and stays where it is)
+        if lo[k] * hi[k] <= 0.0 or not near >= RECENTRE_DISTANCE * diagonal:
             continue
         far = max(abs(lo[k]), abs(hi[k]))
         grain = max(float(np.spacing(np.float32(far))),
