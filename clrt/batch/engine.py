@@ -468,15 +468,14 @@ class _Watchdog:
         if now - self.checked < 1.0:
             return
         self.checked = now
-        try:
-            ready = {msg.get("worker") for _, msg in self.client.get_events(self.topic)
-                     if isinstance(msg, dict) and msg.get("token") == self.token}
+        try:   # the scheduler's event logs are read only while no worker is known to be up
             connected = set(self.client.nthreads())
+            if connected and connected & {msg.get("worker") for _, msg in self.client.get_events(self.topic)
+                                          if isinstance(msg, dict) and msg.get("token") == self.token}:
+                self.alive()
+                return
             self.joins += self._joins()
         except Exception:   # noqa: BLE001 -- the scheduler gone: the tasks come back cancelled
-            return
-        if ready & connected:
-            self.alive()
             return
         limit = BATCH_NO_WORKER_TIMEOUT
         if now - self.up_since < limit or not (self.local or self.joins):
