@@ -457,7 +457,10 @@ class _Watchdog:
         self.up_since = self.checked = time.monotonic()
         self.joins_seen: set = set()
         self.joins = 0     # workers that joined the scheduler since one was last up
-        self._joins()      # those before the batch are not counted
+        try:
+            self._joins()  # those before the batch are not counted
+        except Exception:   # noqa: BLE001 -- the scheduler gone: the tasks come back cancelled
+            pass
 
     def alive(self) -> None:
         self.up_since = time.monotonic()
