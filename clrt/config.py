@@ -173,6 +173,20 @@ BATCH_KILLED_RESUBMITS = 3
 #: again, at most this many times; its images are on disk, so the new task
 #: finds them.
 BATCH_LOST_RESUBMITS = 2
+#: Seconds a batch with tasks left waits while no worker is up -- connected with
+#: its device set up (clrt.batch.worker.DevicePlugin) -- before it stops: its
+#: tasks are then "device", exit 3.  Every worker process dying while it starts
+#: (a driver that crashes when a context is made) would otherwise have the
+#: nanny restart it for ever, and no task is ever charged with the deaths.  A
+#: worker's start -- a new Python process importing Dask, pyopencl and clrt,
+#: then listing the devices -- took 1.9 s on the 2-core development machine
+#: (0.06 s of it the device set-up, PoCL); not measured on the GPU hosts, where
+#: the driver's start adds some, and longer when many start at once on a loaded
+#: host: 60 s leaves ample room.  Program builds are no part of it (they come
+#: with a worker's first task, while it counts as up).  A
+#: --scheduler cluster with no worker at all waits for them; it stops only when
+#: workers join and die without coming up (clrt.batch.engine._Watchdog).
+BATCH_NO_WORKER_TIMEOUT = 60.0
 #: Seconds to wait for an existing Dask scheduler (--scheduler).
 BATCH_CONNECT_TIMEOUT = 10.0
 #: Seconds past BATCH_CONNECT_TIMEOUT that a scheduler has to finish Dask's

@@ -31,6 +31,10 @@ def write_icosphere_obj(path: Path) -> Path:
 # worker processes (restarted ones too).  Rendering a source named boom.obj
 # raises; die.obj kills the worker process each time; flaky.obj kills it the
 # first time only (SOURCE.kills, beside the source, lists the processes killed).
+# With CLRT_TEST_SETUP_CRASH=all in the environment, every worker process dies
+# while its device is set up (clrt.batch.worker.configure), before any task;
+# with CLRT_TEST_SETUP_CRASH=PATH, every one but the first (which makes PATH).
+# CLRT_TEST_NO_WORKER_TIMEOUT sets the batch's BATCH_NO_WORKER_TIMEOUT.
 # A killer dies 0.3 s into its task, as a driver that crashes mid-render: the
 # tasks sent to its worker after it are surely there, waiting.
 FAULTS = '''
@@ -51,6 +55,27 @@ def render_scene(source, **options):
     return _render_scene(source, **options)
 
 setup.render_scene = render_scene
+
+if os.environ.get("CLRT_TEST_SETUP_CRASH"):
+    # worker processes die while they set up their device, as a driver that
+    # crashes when a context is made: before they run any task
+    import clrt.batch.worker as worker
+
+    def configure(device, cache_size=worker.BATCH_CACHE_SCENES, _configure=worker.configure):
+        mark = os.environ["CLRT_TEST_SETUP_CRASH"]
+        if mark != "all":   # a file: the first setup makes it and lives, every later one dies
+            try:
+                os.close(os.open(mark, os.O_CREAT | os.O_EXCL | os.O_WRONLY))
+                return _configure(device, cache_size)
+            except FileExistsError:
+                pass
+        os._exit(1)
+
+    worker.configure = configure
+
+if os.environ.get("CLRT_TEST_NO_WORKER_TIMEOUT"):   # the batch's watchdog, in the command's process
+    import clrt.batch.engine as engine
+    engine.BATCH_NO_WORKER_TIMEOUT = float(os.environ["CLRT_TEST_NO_WORKER_TIMEOUT"])
 '''
 
 

@@ -342,15 +342,15 @@ def test_resume_renders_only_what_is_missing(client, meshes, tmp_path, device):
 
 
 def test_ctrl_c_keeps_what_finished_and_exits_130(meshes, tmp_path, device, capsys, monkeypatch):
-    import distributed
-    original = distributed.as_completed
+    from clrt.batch import engine
+    original = engine._completed
 
-    def interrupted(futures, *args, **kwargs):   # Ctrl-C once the first task finished
-        for future in original(futures, *args, **kwargs):
+    def interrupted(done, watchdog):   # Ctrl-C once the first task finished
+        for future in original(done, watchdog):
             yield future
             raise KeyboardInterrupt
 
-    monkeypatch.setattr(distributed, "as_completed", interrupted)
+    monkeypatch.setattr(engine, "_completed", interrupted)
     dev = ["--device", device] if device else []
     args = ["batch", "render", str(meshes[0]), "-o", str(tmp_path / "out"), "--views", "4", "--width", "20",
             "--height", "14", "--workers", "2", "-q", *dev]
@@ -562,7 +562,7 @@ def test_losing_the_scheduler_mid_batch_is_reported_as_such(meshes, tmp_path, de
     import distributed
 
     import clrt.batch.cluster
-    monkeypatch.setattr(distributed, "as_completed", lambda futures: iter(list(futures)))
+    monkeypatch.setattr(distributed, "as_completed", _Completed)
     monkeypatch.setattr(clrt.batch.cluster, "connect", lambda address: _InProcessClient(1))
     monkeypatch.setenv("CLRT_DEVICE", device or "")
     with pytest.raises(clrt.batch.ClusterLost, match="cancelled"):
@@ -588,8 +588,18 @@ class _Completed:
         self.queue.append(future)
 
     def __iter__(self):
-        while self.queue:
-            yield self.queue.pop(0)
+        return self
+
+    def __next__(self):
+        if not self.queue:
+            raise StopIteration
+        return self.queue.pop(0)
+
+    def is_empty(self):
+        return not self.queue
+
+    def has_ready(self):   # never asks the batch's watchdog (it has no scheduler to ask)
+        return bool(self.queue)
 
 
 class _LosingClient(_InProcessClient):
@@ -694,7 +704,7 @@ def test_unwritable_output_is_not_reported_as_a_bad_source_per_frame(meshes, tmp
         raise OutputError(f"cannot write {path}: Permission denied")
 
     monkeypatch.setattr(clrt.output, "write_image", write)
-    monkeypatch.setattr(distributed, "as_completed", lambda futures: iter(list(futures)))
+    monkeypatch.setattr(distributed, "as_completed", _Completed)
     monkeypatch.setattr(clrt.batch.cluster, "connect", lambda address: _InProcessClient(100))
     monkeypatch.setenv("CLRT_DEVICE", device or "")
     code = main(["batch", "render", str(meshes[0]), "-o", str(tmp_path / "out"), "--views", "40",
@@ -731,7 +741,7 @@ def test_views_found_after_a_lost_worker_are_counted_and_recorded(meshes, tmp_pa
     def task(job):
         return retried
     monkeypatch.setattr(worker, "render_task", task)
-    monkeypatch.setattr(distributed, "as_completed", lambda futures: iter(list(futures)))
+    monkeypatch.setattr(distributed, "as_completed", _Completed)
     batch = tmp_path / "batch"
     summary = clrt.batch.run([meshes[0]], batch, views=4, client=_InProcessClient(100), device=device, **SIZE)
     assert (summary.rendered, summary.count("skipped")) == (2, 2)
@@ -757,7 +767,7 @@ def test_a_task_that_raises_after_writing_images_leaves_no_image_recorded_failed
         real({**job, "views": job["views"][:2]})   # views 0 and 1 written (found when retried)
         raise RuntimeError("raised after writing")
 
-    monkeypatch.setattr(distributed, "as_completed", lambda futures: iter(list(futures)))
+    monkeypatch.setattr(distributed, "as_completed", _Completed)
     monkeypatch.setenv("CLRT_DEVICE", device or "")
     out = tmp_path / "out"
     names = [f"{stem}/view-000{v}.png" for stem in ("ball", "block") for v in range(3)]

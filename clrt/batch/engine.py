@@ -26,8 +26,8 @@ from clrt.batch.cluster import (dashboard_link, default_workers, keep_lost_worke
                                 start_local_cluster)
 from clrt.batch.jobs import Source, expand_sources, output_path, plan_tasks, settings_key
 from clrt.batch.manifest import FolderLock, Manifest
-from clrt.config import (BATCH_CACHE_SCENES, BATCH_KILLED_RESUBMITS, BATCH_LOST_RESUBMITS, BATCH_TASK_RETRIES,
-                         DEFAULT_ACCEL, DEFAULT_BUILDER, DEFAULT_LEAF_SIZE, MAX_IMAGE_SIDE, MAX_VIEWS, MAX_WORKERS)
+from clrt.config import (BATCH_CACHE_SCENES, BATCH_KILLED_RESUBMITS, BATCH_LOST_RESUBMITS, BATCH_NO_WORKER_TIMEOUT,
+                         BATCH_TASK_RETRIES, DEFAULT_ACCEL, DEFAULT_BUILDER, DEFAULT_LEAF_SIZE, MAX_IMAGE_SIDE, MAX_VIEWS, MAX_WORKERS)
 from clrt.errors import InputError, OutputError
 from clrt.scene.render_setup import CAMERA_OPTIONS, MATERIAL_OPTIONS, SCENE_OPTIONS
 
@@ -86,6 +86,11 @@ class Summary:
         lines, seen, failed = [], {}, Counter()
         for o in self.outputs:
             if o.status not in ("bad", "device", "failed"):
+                continue
+            if o.status == "device" and o.error.startswith(NO_WORKER):   # the batch's, not the source's
+                if (None, o.error) not in seen:
+                    seen[None, o.error] = len(lines)
+                    lines.append(o.error)
                 continue
             key = (o.source, "failed") if o.status == "failed" else (o.source, o.error)
             failed[key] += o.status == "failed"
@@ -312,9 +317,18 @@ def _execute(client, jobs: list, folder: Path, manifest: Manifest, device, progr
     from distributed import as_completed
 
     from clrt.batch.worker import DevicePlugin, render_task
-    client.register_plugin(DevicePlugin(device, BATCH_CACHE_SCENES, ignore_interrupts=local))
+    token = uuid.uuid4().hex
+    try:
+        client.register_plugin(DevicePlugin(device, BATCH_CACHE_SCENES, ignore_interrupts=local, token=token))
+    except OSError:
+        # A worker died setting up its device: the scheduler keeps the plugin for
+        # the other workers and the restarted ones; the watchdog sees whether any comes up.
+        if getattr(client, "status", None) != "running":
+            raise
+    watchdog = _Watchdog(client, token, local)
     logs = _run_logs(folder)
     futures = {}
+    handled = set()   # futures whose end was dealt with (a task submitted again has several)
 
     def submit(task: _Task):
         job = task.job
@@ -333,7 +347,8 @@ def _execute(client, jobs: list, folder: Path, manifest: Manifest, device, progr
     outputs = []
     try:
         done = as_completed(list(futures))
-        for future in done:
+        for future in _completed(done, watchdog):
+            handled.add(future)
             task = futures[future]
             job = task.job
             running = getattr(client, "status", None) == "running"
@@ -378,6 +393,17 @@ def _execute(client, jobs: list, folder: Path, manifest: Manifest, device, progr
                                       status, record.get("error", "")))
             bar.update(len(records))
             manifest.write(force=False)
+    except _NoWorkers as exc:
+        for future, task in futures.items():
+            if future not in handled:
+                records = [{"path": task.job["paths"][v], "source": task.job["source"], "view": v,
+                            "views": task.job["count"], "status": "device", "key": task.job["key"],
+                            "error": str(exc), "worker": None} for v in task.job["views"]]
+                _remove_unrecorded(folder, task.job, task.files)
+                for record in records:
+                    manifest.add(record)
+                    outputs.append(Output(None, record["source"], record["view"], 0.0, None, "device",
+                                          record["error"]))
     finally:
         bar.close()
         pending = [f for f in futures if not f.done()]
@@ -389,6 +415,95 @@ def _execute(client, jobs: list, folder: Path, manifest: Manifest, device, progr
         if logs is not None:
             _remove_run_logs(logs)
     return outputs
+
+
+#: How a batch stopped by its watchdog (_Watchdog) explains its frames: the
+#: start of their error, one line for the whole batch.
+NO_WORKER = "no worker stayed up for"
+
+
+class _NoWorkers(Exception):
+    """The watchdog's verdict: tasks are left and no worker came up (its text says why)."""
+
+
+def _completed(done, watchdog):
+    """The futures of ``done`` (distributed.as_completed) as they end, with the
+    watchdog asked while none is ready; _NoWorkers from it ends the batch."""
+    while not done.is_empty():
+        if done.has_ready():
+            watchdog.alive()
+            yield next(done)
+        else:
+            watchdog.check()
+            time.sleep(0.05)
+
+
+class _Watchdog:
+    """Stops a batch whose tasks wait for workers that never come up.
+
+    A worker process that dies while it starts -- in DevicePlugin.setup, say, a
+    driver that crashes when a context is made -- is restarted by its nanny for
+    ever, and no task is charged with its deaths (it never ran one): the batch
+    would wait for ever.  A worker is up once it has set up its device (it logs
+    the batch's token under READY_TOPIC) and while it stays connected; a task
+    that ends shows one too.  With no worker up for BATCH_NO_WORKER_TIMEOUT
+    seconds, a local cluster's batch stops; a --scheduler cluster's only if
+    workers joined it in that time and none came up (with no worker at all, it
+    waits for them, as it says when it starts)."""
+
+    def __init__(self, client, token: str, local: bool):
+        from clrt.batch.worker import READY_TOPIC
+        self.client, self.token, self.local, self.topic = client, token, local, READY_TOPIC
+        self.up_since = self.checked = time.monotonic()
+        self.joins_seen: set = set()
+        self.joins = 0     # workers that joined the scheduler since one was last up
+        try:
+            self._joins()  # those before the batch are not counted
+        except Exception:   # noqa: BLE001 -- the scheduler gone: the tasks come back cancelled
+            pass
+
+    def alive(self) -> None:
+        self.up_since = time.monotonic()
+        self.joins = 0
+
+    def check(self) -> None:
+        now = time.monotonic()
+        if now - self.checked < 1.0:
+            return
+        self.checked = now
+        try:   # the scheduler's event logs are read only while no worker is known to be up
+            connected = set(self.client.nthreads())
+            if connected and connected & {msg.get("worker") for _, msg in self.client.get_events(self.topic)
+                                          if isinstance(msg, dict) and msg.get("token") == self.token}:
+                self.alive()
+                return
+            self.joins += self._joins()
+        except Exception:   # noqa: BLE001 -- the scheduler gone: the tasks come back cancelled
+            return
+        limit = BATCH_NO_WORKER_TIMEOUT
+        if now - self.up_since < limit or not (self.local or self.joins):
+            return
+        if connected:
+            why = (f"{len(connected)} worker process(es) connected but never finished setting up their device "
+                   "(a hang in the OpenCL driver?)")
+        elif self.joins:
+            why = (f"every worker process died while starting its device ({self.joins} start(s); "
+                   "a crash in the OpenCL driver?)")
+        else:
+            why = "no worker process connected to the scheduler (each died while starting?)"
+        raise _NoWorkers(f"{NO_WORKER} {limit:g} s: {why}; finished images are kept: "
+                         "run the same command again once the device works")
+
+    def _joins(self) -> int:
+        """Workers that joined the scheduler since the last call (its "all" events)."""
+        new = 0
+        for stamp, msg in self.client.get_events("all"):
+            if isinstance(msg, dict) and msg.get("action") == "add-worker":
+                mark = (stamp, msg.get("worker"))
+                if mark not in self.joins_seen:
+                    self.joins_seen.add(mark)
+                    new += 1
+        return new
 
 
 def _run_logs(folder: Path) -> Path | None:

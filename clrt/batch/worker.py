@@ -129,14 +129,22 @@ class DevicePlugin(WorkerPlugin):
     name = "clrt-device"
 
     def __init__(self, device: str | None = None, cache_size: int = BATCH_CACHE_SCENES,
-                 ignore_interrupts: bool = False):
+                 ignore_interrupts: bool = False, token: str | None = None):
         self.device, self.cache_size = device, cache_size
         self.ignore_interrupts = ignore_interrupts   # a local cluster: Ctrl-C is the client's
+        self.token = token   # the batch's: its watchdog hears which workers came up
 
     def setup(self, worker):
         if self.ignore_interrupts and threading.current_thread() is threading.main_thread():
             signal.signal(signal.SIGINT, signal.SIG_IGN)
         configure(choose_device(self.device, worker_index(worker.name)), self.cache_size)
+        if self.token is not None:
+            # the scheduler adds the worker's address (clrt.batch.engine._Watchdog)
+            worker.log_event(READY_TOPIC, {"token": self.token})
+
+
+#: The scheduler's event topic where a worker says that its device is set up.
+READY_TOPIC = "clrt-worker-ready"
 
 
 @contextmanager
