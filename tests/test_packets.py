@@ -177,7 +177,7 @@ def test_a_bad_ray_inside_a_packet_is_reported_by_its_index(kind, count, device)
         o[bad] = [0.0, 1e17, 0.0]
         message = (f"origin {bad} is [0.0, 1e+17, 0.0]: it lies 1e17 from the scene's far side, but the "
                    f"device's float32 triangle test overflows and misses hits on this scene's triangles from "
-                   f"past 4.9e16: start the rays nearer, or scale the scene down")
+                   f"about 4.9e16: start the rays nearer, or scale the scene down")
     elif kind == "zero direction":
         d[bad] = 0.0
         message = f"direction {bad} is [0.0, 0.0, 0.0]: directions must be finite and non-zero"

@@ -215,7 +215,7 @@ def sah_top_clusters(kind: str, tail_group: int | None = None, top_clusters: int
 
 
 def build_defines(volume: str, kind: str = "gpu", treelet_leaves: int | None = None,
-                  tail_group: int | None = None, top_clusters: int | None = None) -> dict:
+                  tail_group: int | None = None, top_clusters: int | None = None, segmented: bool = False) -> dict:
     """Program defines: the shape, the work-group and state layout, and the
     constants of topdown.py and volumes.py (one source of truth: repr() of a float
     is a C double literal of the same value)."""
@@ -230,6 +230,7 @@ def build_defines(volume: str, kind: str = "gpu", treelet_leaves: int | None = N
         "TREELET_FULL_MIN": TREELET_SMALL[kind][1],
         "TREELET_GROUP": TREELET_GROUP, "TREELET_LEVELS": TREELET_LEVELS, **STATE,
         "PART_BINS": PART_BINS, "PART_MAX_NODES": PART_MAX_NODES, "PART_LEVELS": PART_LEVELS,
+        **({"PLOC_SEGMENTS": None} if segmented else {}),
         "C_TRAVERSAL": f"((float){C_TRAVERSAL!r})", "C_INTERSECT": f"((float){C_INTERSECT!r})",
         "REL_PAD": repr(float(volumes.REL_PAD)), "ULP_PAD": int(volumes.ULP_PAD),
         "PAD_FLOOR": repr(float(volumes.PAD_FLOOR)), "EVAL_SLACK": repr(float(volumes.EVAL_SLACK)),
@@ -507,11 +508,14 @@ def build_on_device(context: cl.Context, queue: cl.CommandQueue, corners, volume
     tail_threshold = min(TAIL_THRESHOLD[kind] if tail_threshold is None else int(tail_threshold), TAIL_MAX)
     tail_group = TAIL_GROUP[kind] if tail_group is None else int(tail_group)
     top_clusters = sah_top_clusters(kind, tail_group, top_clusters)
+    F = len(tri)
+    if partition is None:
+        partition = SAH_PARTITION[kind] and F >= PART_MIN_TRIANGLES
+    segmented = bool(partition) and 1 < top_clusters < F
     program = build_program(context, "build_bvh.cl",
-                            build_defines(volume, kind, treelet_leaves, tail_group, top_clusters))
+                            build_defines(volume, kind, treelet_leaves, tail_group, top_clusters, segmented))
     k = _kernels(program)
     ws = _workspace(context)
-    F = len(tri)
     num_nodes = 2 * F - 1
     root = 2 * F - 2 if F > 1 else 0        # the last merge makes the root
     phases = _Phases() if device_times or profile else None
@@ -550,9 +554,6 @@ def build_on_device(context: cl.Context, queue: cl.CommandQueue, corners, volume
     # 1. Morton codes.
     launch("morton", k["init_build_state"], 1, state, np.uint32(F))
     launch("morton", k["centroid_bounds"], min(_groups(F), MAX_REDUCE_GROUPS), corners_buf, np.uint32(F), state)
-    if partition is None:
-        partition = SAH_PARTITION[kind] and F >= PART_MIN_TRIANGLES
-    segmented = bool(partition) and 1 < top_clusters < F
     if segmented:
         _partition(k, launch, ws, F, top_clusters, corners_buf, state, sample_part=ids[1], keys=keys[0],
                    ids=ids[0])
