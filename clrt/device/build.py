@@ -128,7 +128,7 @@ SAH_TOP_MAX = 256
 # evenly spaced triangles.  PLOC merges within a segment.
 # On the H200 (docs/benchmarks.md, session 13) it lowers the SAH cost of
 # bunny00's tree by 3 % (random, diffuse, AO and camera rays 3-6 % faster) for
-# 0.9 ms more build (2.1 -> 3.0 ms), of 1M triangles (14 bunnies) by 2 % for
+# 1.1 ms more build (1.9 -> 3.0 ms), of 1M triangles (14 bunnies) by 2 % for
 # 1 ms more, of 10M by 11 % and of 50M by 28 % for no more build time (its
 # segments' own Morton codes are finer than one code over the whole mesh).
 # So by default only from PART_MIN_TRIANGLES on, where it costs nothing;
