@@ -484,12 +484,14 @@ class _Watchdog:
         limit = BATCH_NO_WORKER_TIMEOUT
         if now - self.up_since < limit or not (self.local or self.joins):
             return
-        if connected:
-            why = (f"{len(connected)} worker process(es) connected but never finished setting up their device "
-                   "(a hang in the OpenCL driver?)")
-        elif self.joins:
+        # Workers that joined in the window were restarted: a crash loop, even
+        # if one of them happens to be connected (and starting) right now.
+        if self.joins:
             why = (f"every worker process died while starting its device ({self.joins} start(s); "
                    "a crash in the OpenCL driver?)")
+        elif connected:
+            why = (f"{len(connected)} worker process(es) connected but never finished setting up their device "
+                   "(a hang in the OpenCL driver?)")
         else:
             why = "no worker process connected to the scheduler (each died while starting?)"
         raise _NoWorkers(f"{NO_WORKER} {limit:g} s: {why}; finished images are kept: "
