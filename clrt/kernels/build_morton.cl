@@ -92,6 +92,18 @@ inline uint spread_bits(uint x)
     return x;
 }
 
+// The Morton code of point c on a grid of `cells` (a power of two up to 1024)
+// a side over the box lo..hi: 3 * log2(cells) bits.  A flat axis (extent 0)
+// maps to cell 0; _sat turns NaN (huge meshes: inf * 0) and points below lo
+// into 0.
+inline uint morton_code(float3 c, float3 lo, float3 hi, uint cells)
+{
+    const float3 extent = hi - lo;
+    const float3 scale = select((float)cells / extent, (float3)(0.0f), extent <= 0.0f);
+    const uint3 cell = min(convert_uint3_sat((c - lo) * scale), (uint3)(cells - 1u));
+    return (spread_bits(cell.x) << 2) | (spread_bits(cell.y) << 1) | spread_bits(cell.z);
+}
+
 // keys[i]: Morton code of triangle i's box centre on a 1024^3 grid over the
 // centre bounds; ids[i] = i, the value the sort carries along.
 __kernel __attribute__((reqd_work_group_size(BUILD_GROUP, 1, 1)))
@@ -108,11 +120,7 @@ void morton_codes(const global float* corners, const uint num_tris, const global
                                from_ordered_bits(bounds[5]));
     float3 box_lo, box_hi;
     triangle_box(corners, tri, &box_lo, &box_hi);
-    const float3 extent = hi - lo;
-    // A flat axis (extent 0) maps to cell 0; _sat turns NaN (huge meshes: inf * 0) into 0.
-    const float3 scale = select(1024.0f / extent, (float3)(0.0f), extent <= 0.0f);
-    const uint3 cell = min(convert_uint3_sat((box_centre(box_lo, box_hi) - lo) * scale), (uint3)(1023u));
-    keys[tri] = (spread_bits(cell.x) << 2) | (spread_bits(cell.y) << 1) | spread_bits(cell.z);
+    keys[tri] = morton_code(box_centre(box_lo, box_hi), lo, hi, 1024u);
     ids[tri] = tri;
 }
 

@@ -76,6 +76,61 @@ inline float axis_of(float3 v, int axis)
     return axis == 0 ? v.x : (axis == 1 ? v.y : v.z);
 }
 
+// A bin's values, b a local or a global uint* (macros: OpenCL C 1.2 has no
+// pointer to either): empty, and a triangle's box added (count, min, max).
+#define CLEAR_BIN(b) do { \
+        (b)[0] = 0u; \
+        for (int v_ = 1; v_ <= 3; ++v_) { \
+            (b)[v_] = 0xffffffffu;      /* min: atomic_min from the largest */ \
+            (b)[v_ + 3] = 0u;           /* max: atomic_max from the smallest */ \
+        } \
+    } while (0)
+#define ADD_TO_BIN(b, lo, hi) do { \
+        atomic_inc(b); \
+        atomic_min((b) + 1, ordered_bits((lo).x)); \
+        atomic_min((b) + 2, ordered_bits((lo).y)); \
+        atomic_min((b) + 3, ordered_bits((lo).z)); \
+        atomic_max((b) + 4, ordered_bits((hi).x)); \
+        atomic_max((b) + 5, ordered_bits((hi).y)); \
+        atomic_max((b) + 6, ordered_bits((hi).z)); \
+    } while (0)
+// Centre bounds (min at lo_at, max at hi_at, ordered bits) widened to c.
+#define WIDEN_BOUNDS(lo_at, hi_at, c) do { \
+        atomic_min((lo_at) + 0, ordered_bits((c).x)); \
+        atomic_min((lo_at) + 1, ordered_bits((c).y)); \
+        atomic_min((lo_at) + 2, ordered_bits((c).z)); \
+        atomic_max((hi_at) + 0, ordered_bits((c).x)); \
+        atomic_max((hi_at) + 1, ordered_bits((c).y)); \
+        atomic_max((hi_at) + 2, ordered_bits((c).z)); \
+    } while (0)
+
+// A node of `count` samples, not split, its centre bounds empty (to be
+// widened), open when it has more than `limit`.
+inline BuildPart part_node(int count, int limit)
+{
+    BuildPart p;
+    p.centre_lo = (uint4)(0xffffffffu);
+    p.centre_hi = (uint4)(0u);
+    p.count = count;
+    p.child = -1;
+    p.axis = 0;
+    p.split = 0;
+    p.segment = 0;
+    p.open = count > limit;
+    p.pad[0] = p.pad[1] = 0;
+    return p;
+}
+
+// The child of split node n on whose side centre c lies: the bin its split
+// axis puts c in, as partition_bin binned it.
+inline int child_holding(const global BuildPart* parts, int n, float3 c)
+{
+    const int axis = parts[n].axis;
+    const float lo = axis_of(decode_bits(parts[n].centre_lo), axis);
+    const float hi = axis_of(decode_bits(parts[n].centre_hi), axis);
+    return parts[n].child + (centre_bin(axis_of(c, axis), lo, hi) >= parts[n].split);
+}
+
 // Every bin empty (the bins of a node are used at the one level it is open,
 // so one clearing serves the whole partition), every sample in node 0.
 __kernel __attribute__((reqd_work_group_size(BUILD_GROUP, 1, 1)))
@@ -87,27 +142,16 @@ void partition_clear(global uint* bins, global int* sample_part, const uint samp
     if (i >= PART_MAX_NODES * 3 * PART_BINS)
         return;
     global uint* b = bins + i * PART_VALUES;
-    b[0] = 0u;
-    for (int k = 1; k <= 3; ++k) {
-        b[k] = 0xffffffffu;       // min: atomic_min from the largest
-        b[k + 3] = 0u;            // max: atomic_max from the smallest
-    }
+    CLEAR_BIN(b);
 }
 
 // One work-item: node 0 holds every sample (its centre bounds are
 // centroid_bounds' result), open when it has more than `limit`.
 __kernel void partition_init(global BuildPart* parts, global int* state, const int samples, const int limit)
 {
-    BuildPart root;
+    BuildPart root = part_node(samples, limit);
     root.centre_lo = (uint4)(state[STATE_BOUNDS + 0], state[STATE_BOUNDS + 1], state[STATE_BOUNDS + 2], 0u);
     root.centre_hi = (uint4)(state[STATE_BOUNDS + 3], state[STATE_BOUNDS + 4], state[STATE_BOUNDS + 5], 0u);
-    root.count = samples;
-    root.child = -1;
-    root.axis = 0;
-    root.split = 0;
-    root.segment = 0;
-    root.open = samples > limit;
-    root.pad[0] = root.pad[1] = 0;
     parts[0] = root;
     state[STATE_PART_NODES] = 1;
     state[STATE_PART_SEGMENTS] = 1;
@@ -140,11 +184,7 @@ void partition_bin(const global float* corners, const uint samples, const uint s
     if (pooled) {
         for (int k = lid; k < (end - first) * 3 * PART_BINS; k += BUILD_GROUP) {
             local uint* b = pool + k * PART_VALUES;
-            b[0] = 0u;
-            for (int v = 1; v <= 3; ++v) {
-                b[v] = 0xffffffffu;
-                b[v + 3] = 0u;
-            }
+            CLEAR_BIN(b);
         }
         barrier(CLK_LOCAL_MEM_FENCE);
     }
@@ -160,22 +200,10 @@ void partition_bin(const global float* corners, const uint samples, const uint s
             const int bin = centre_bin(axis_of(c, axis), axis_of(clo, axis), axis_of(chi, axis));
             if (pooled) {
                 local uint* b = pool + bin_at(n - first, axis, bin);
-                atomic_inc(b);
-                atomic_min(b + 1, ordered_bits(lo.x));
-                atomic_min(b + 2, ordered_bits(lo.y));
-                atomic_min(b + 3, ordered_bits(lo.z));
-                atomic_max(b + 4, ordered_bits(hi.x));
-                atomic_max(b + 5, ordered_bits(hi.y));
-                atomic_max(b + 6, ordered_bits(hi.z));
+                ADD_TO_BIN(b, lo, hi);
             } else {
                 global uint* b = bins + bin_at(n, axis, bin);
-                atomic_inc(b);
-                atomic_min(b + 1, ordered_bits(lo.x));
-                atomic_min(b + 2, ordered_bits(lo.y));
-                atomic_min(b + 3, ordered_bits(lo.z));
-                atomic_max(b + 4, ordered_bits(hi.x));
-                atomic_max(b + 5, ordered_bits(hi.y));
-                atomic_max(b + 6, ordered_bits(hi.z));
+                ADD_TO_BIN(b, lo, hi);
             }
         }
     }
@@ -290,19 +318,8 @@ void partition_split(global BuildPart* parts, const global uint* bins, global in
         parts[n].axis = chosen_axis[k];
         parts[n].split = chosen_split[k];
         const int counts[2] = {chosen_left[k], parts[n].count - chosen_left[k]};
-        for (int side = 0; side < 2; ++side) {
-            BuildPart c;
-            c.centre_lo = (uint4)(0xffffffffu);    // partition_assign's atomic_min
-            c.centre_hi = (uint4)(0u);
-            c.count = counts[side];
-            c.child = -1;
-            c.axis = 0;
-            c.split = 0;
-            c.segment = 0;
-            c.open = counts[side] > limit;
-            c.pad[0] = c.pad[1] = 0;
-            parts[child + side] = c;
-        }
+        for (int side = 0; side < 2; ++side)
+            parts[child + side] = part_node(counts[side], limit);    // bounds: partition_assign
     }
     if (get_local_id(0) == 0) {
         state[STATE_PART_FIRST] = end;
@@ -330,33 +347,19 @@ void partition_assign(const global float* corners, const uint samples, const uin
     }
     for (uint i = get_global_id(0); i < samples; i += get_global_size(0)) {
         const int n = sample_part[i];
-        const int first_child = parts[n].child;
-        if (first_child < first)        // not split at this level (-1: not split)
+        if (parts[n].child < first)     // not split at this level (-1: not split)
             continue;
         float3 lo, hi;
         triangle_box(corners, i * stride, &lo, &hi);
         const float3 c = box_centre(lo, hi);
-        const int axis = parts[n].axis;
-        const float clo = axis_of(decode_bits(parts[n].centre_lo), axis);
-        const float chi = axis_of(decode_bits(parts[n].centre_hi), axis);
-        const int child = first_child + (centre_bin(axis_of(c, axis), clo, chi) >= parts[n].split);
+        const int child = child_holding(parts, n, c);
         sample_part[i] = child;
         if (pooled) {
             local uint* b = pool + (child - first) * 6;
-            atomic_min(b + 0, ordered_bits(c.x));
-            atomic_min(b + 1, ordered_bits(c.y));
-            atomic_min(b + 2, ordered_bits(c.z));
-            atomic_max(b + 3, ordered_bits(c.x));
-            atomic_max(b + 4, ordered_bits(c.y));
-            atomic_max(b + 5, ordered_bits(c.z));
+            WIDEN_BOUNDS(b, b + 3, c);
         } else {
             global uint* bounds = (global uint*)&parts[child];    // centre_lo, then centre_hi
-            atomic_min(bounds + 0, ordered_bits(c.x));
-            atomic_min(bounds + 1, ordered_bits(c.y));
-            atomic_min(bounds + 2, ordered_bits(c.z));
-            atomic_max(bounds + 4, ordered_bits(c.x));
-            atomic_max(bounds + 5, ordered_bits(c.y));
-            atomic_max(bounds + 6, ordered_bits(c.z));
+            WIDEN_BOUNDS(bounds, bounds + 4, c);
         }
     }
     if (!pooled)
@@ -389,19 +392,10 @@ void partition_morton_codes(const global float* corners, const uint num_tris, co
     triangle_box(corners, tri, &box_lo, &box_hi);
     const float3 c = box_centre(box_lo, box_hi);
     int n = 0;
-    while (parts[n].child >= 0) {
-        const int axis = parts[n].axis;
-        const float clo = axis_of(decode_bits(parts[n].centre_lo), axis);
-        const float chi = axis_of(decode_bits(parts[n].centre_hi), axis);
-        n = parts[n].child + (centre_bin(axis_of(c, axis), clo, chi) >= parts[n].split);
-    }
-    const float3 lo = decode_bits(parts[n].centre_lo), hi = decode_bits(parts[n].centre_hi);
-    const float3 extent = hi - lo;
-    const float3 scale = select(256.0f / extent, (float3)(0.0f), extent <= 0.0f);
-    // (c - lo < 0 for a triangle below the samples' bounds: _sat makes it cell 0)
-    const uint3 cell = min(convert_uint3_sat((c - lo) * scale), (uint3)(255u));
+    while (parts[n].child >= 0)
+        n = child_holding(parts, n, c);
     keys[tri] = ((uint)parts[n].segment << (32 - SEGMENT_BITS))
-              | (spread_bits(cell.x) << 2) | (spread_bits(cell.y) << 1) | spread_bits(cell.z);
+              | morton_code(c, decode_bits(parts[n].centre_lo), decode_bits(parts[n].centre_hi), 256u);
     ids[tri] = tri;
 }
 
