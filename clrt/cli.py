@@ -238,7 +238,7 @@ def _info(args) -> int:
 
 def _info_mesh(args) -> int:
     """Build statistics of the acceleration structure over MESH, and its size on the device."""
-    from clrt.device.build import build_acceleration
+    from clrt.device.acceleration import build_acceleration
     from clrt.device.context import device_label, select_device
     from clrt.scene.arrays import device_origin, triangle_corners
     from clrt.scene.load import load_mesh

@@ -135,6 +135,11 @@ EXR_INSTALL_HINT = "pip install 'clrt[exr]'"
 #: largest allocation (split.cl).  Four always suffice: OpenCL promises a
 #: largest allocation of at least a quarter of the device memory.
 MAX_PARTS = 4
+#: Outputs one ray-query launch can write (QueryLaunch.field_at in layouts.h):
+#: the closest hit's seven fields, query_all's three and its hit counter.
+RESULT_SLOTS = 8
+#: QueryLaunch.field_at of an output not asked for (no byte of `results` is one).
+NO_RESULT = 2**64 - 1
 
 # --------------------------------------------------------------------------- batch jobs (clrt.batch)
 
@@ -202,6 +207,8 @@ def kernel_defines() -> dict:
         "MAX_BOUNCES": MAX_BOUNCES,
         "MATERIAL_SMOOTH": f"{MATERIAL_SMOOTH}u",
         "MAX_PARTS": MAX_PARTS,
+        "RESULT_SLOTS": RESULT_SLOTS,
+        "NO_RESULT": f"{NO_RESULT:#x}UL",
         **{f"CULL_{name.upper()}": code for name, code in CULL_MODES.items()},
         **{f"WRAP_{name.upper()}": f"{code}u" for name, code in TEXTURE_WRAPS.items()},
         "TEXEL_LIMIT": f"{float(TEXEL_LIMIT)!r}f",

@@ -65,6 +65,63 @@ are exact float32 constants, the same on every device and in the reference.
     0: position float4  xyz, w unused
    16: color    float4  linear RGB intensity, a unused
 
+Kernel arguments passed by value (OpenCL lets no pointer into them: buffers
+travel beside them, and they hold byte offsets into those buffers).  Which
+kernel takes which is declared once, in the signature tables
+(clrt/device/signature.py, clrt/query/kernels.py, clrt/renderer/kernels.py).
+
+``Camera`` (80 B) -- a pinhole camera (camera.cl), eye in the device's frame
+    0: eye      float4  xyz; w unused (0)
+   16: forward  float4  unit basis, w unused
+   32: right    float4
+   48: up       float4
+   64: scale_x  float   tan(fov/2) * W/H
+   68: scale_y  float   tan(fov/2)
+   72: width    uint    pixels
+   76: height   uint
+
+``QueryLaunch`` (160 B) -- one launch of a ray query (trace.cl, rays.cl)
+    0: shift     float4  xyz: the device frame's origin, subtracted from every ray origin
+   16: scene_lo  float4  xyz: the box of the triangles, device frame
+   32: scene_hi  float4
+   48: origin_stride, dir_stride, tmin_stride, tmax_stride  uint  floats from one
+                 ray to the next in each input array (0: one row for every ray)
+   64: in_first  uint    element of the inputs holding the launch's first ray
+   68: ray_first uint    its index in the caller's batch (bad rays are reported by it)
+   72: num_rays  uint
+   76: normalise uint    0: the directions are unit vectors already
+   80: reach2    float   square of the farthest an origin may lie from the box's far side
+   84: cull      int     CULL_NONE, CULL_BACK or CULL_FRONT
+   88: capacity  uint    query_all: the most hits the results hold
+   92: pad       uint
+   96: field_at  ulong[RESULT_SLOTS]  byte offset in the launch's results buffer of
+                 each output (query_closest: CLOSEST_FIELDS in order; query_all:
+                 ray ids, prims, ts, then the hit counter), NO_RESULT: not asked for
+
+``Tile`` (52 B) -- one launch over a tile of the image (render.cl)
+    0: x, y, w, h   uint  pixels (x, y) .. (x + w - 1, y + h - 1) of the image
+   16: rays_at      uint  byte offset in the frame buffer of the tile's Ray array
+   20: hits_at      uint  ... of its Hit array
+   24: image_at     uint  ... of its float4 linear colours
+   28: sample       uint  this launch's sample (0 .. samples_per_axis^2 - 1)
+   32: samples_per_axis uint
+   36: seed         uint  of the sample jitter
+   40: max_depth    uint  reflection / refraction bounces
+   44: sample_weight float 1 / samples
+   48: first_sample uint  1: the image starts from this sample
+
+``SceneInfo`` (64 B) -- the uploaded scene's values (geometry.cl, shading.cl)
+    0: ambient_light float4  linear RGB, w unused (renderer only, as the rest but
+                             num_tris and packets_at)
+   16: background    float4
+   32: packets_at    ulong   -DBVH_WIDE: byte offset of the first TrianglePacket in
+                             the wide buffer (BvhWideNode rows before it)
+   40: num_tris      uint    slots
+   44: num_lights    uint
+   48: materials_at, lights_at, textures_at, srgb_at  uint  byte offsets in the
+                             renderer's `tables` buffer (Material, Light, Texture
+                             rows and the SRGB_TABLE)
+
 ``BvhPairNode`` (64 B) -- the BVH as the kernels walk it: one row per inner node, holding
 both children's volumes and references (as Aila & Laine 2009 do with boxes), so
 that one fetch decides which children to enter: four float4 loads, two 32-byte
@@ -145,6 +202,8 @@ triangles into segments (build_partition.cl), before PLOC; node 0 is all of them
 
 import numpy as np
 
+from clrt.config import RESULT_SLOTS
+
 float4 = np.dtype((np.float32, 4))
 
 RAY = np.dtype([("origin", float4), ("dir", float4)])
@@ -172,6 +231,21 @@ BUILD_CLUSTER = np.dtype([("lo", float4), ("hi", float4)])
 BUILD_PART = np.dtype([("centre_lo", np.uint32, 4), ("centre_hi", np.uint32, 4), ("count", np.int32),
                        ("child", np.int32), ("axis", np.int32), ("split", np.int32), ("segment", np.int32),
                        ("open", np.int32), ("pad", np.int32, 2)])
+CAMERA = np.dtype([("eye", float4), ("forward", float4), ("right", float4), ("up", float4),
+                   ("scale_x", np.float32), ("scale_y", np.float32), ("width", np.uint32), ("height", np.uint32)])
+QUERY_LAUNCH = np.dtype([("shift", float4), ("scene_lo", float4), ("scene_hi", float4),
+                         ("origin_stride", np.uint32), ("dir_stride", np.uint32), ("tmin_stride", np.uint32),
+                         ("tmax_stride", np.uint32), ("in_first", np.uint32), ("ray_first", np.uint32),
+                         ("num_rays", np.uint32), ("normalise", np.uint32), ("reach2", np.float32),
+                         ("cull", np.int32), ("capacity", np.uint32), ("pad", np.uint32),
+                         ("field_at", np.uint64, RESULT_SLOTS)])
+TILE = np.dtype([("x", np.uint32), ("y", np.uint32), ("w", np.uint32), ("h", np.uint32),
+                 ("rays_at", np.uint32), ("hits_at", np.uint32), ("image_at", np.uint32),
+                 ("sample", np.uint32), ("samples_per_axis", np.uint32), ("seed", np.uint32),
+                 ("max_depth", np.uint32), ("sample_weight", np.float32), ("first_sample", np.uint32)])
+SCENE_INFO = np.dtype([("ambient_light", float4), ("background", float4), ("packets_at", np.uint64),
+                       ("num_tris", np.uint32), ("num_lights", np.uint32), ("materials_at", np.uint32),
+                       ("lights_at", np.uint32), ("textures_at", np.uint32), ("srgb_at", np.uint32)])
 
 # struct name in layouts.h -> numpy dtype; the layout test walks this table.
 STRUCTS = {
@@ -189,4 +263,8 @@ STRUCTS = {
     "BuildNode": BUILD_NODE,
     "BuildCluster": BUILD_CLUSTER,
     "BuildPart": BUILD_PART,
+    "Camera": CAMERA,
+    "QueryLaunch": QUERY_LAUNCH,
+    "Tile": TILE,
+    "SceneInfo": SCENE_INFO,
 }

@@ -15,9 +15,12 @@ from PIL import Image
 
 import clrt
 from clrt import cli, config
+from clrt.device.args import scene_value
 from clrt.device.context import create_context
 from clrt.device.program import build_options, expand_source
+from clrt.layouts import LIGHT, MATERIAL
 from clrt.reference import render_reference, sample_texture
+from clrt.renderer.kernels import pack_tables
 from clrt.renderer import Renderer
 from clrt.scene.arrays import flatten_scene
 from clrt.scene import primitives
@@ -81,16 +84,16 @@ def test_texture_sampling_on_the_device_is_the_reference_bit_for_bit(device):
     context, queue = create_context(device)
     source = expand_source("texture.cl") + """
     __kernel void probe(__global const float2* uv, __global float4* out, const int index,
-                        __global const Texture* textures, __global const uchar4* texels,
-                        __global const float* srgb_table) {
-        const TextureSet ts = make_texture_set(TEXTURE_ARGS);
+                        __global const uchar* tables, const SceneInfo scene, __global const uchar4* texels) {
+        const TextureSet ts = make_texture_set(tables, scene, TEXTURE_ARGS);
         const uint i = get_global_id(0);
         out[i] = (float4)(sample_texture(&ts, index, uv[i]), 0.0f);
     }"""
     program = cl.Program(context, source).build(options=build_options(context, {"SURFACE_DETAIL": None}))
     mf = cl.mem_flags
-    bufs = [cl.Buffer(context, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=a)
-            for a in (uv, detail.textures, detail.texels, detail.srgb_table)]
+    tables, offsets = pack_tables(np.zeros(0, MATERIAL), np.zeros(0, LIGHT), detail.textures, detail.srgb_table)
+    bufs = [cl.Buffer(context, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=a) for a in (uv, tables, detail.texels)]
+    bufs.insert(2, scene_value(0, **offsets))   # the SceneInfo value: where the tables lie
     out = np.empty((len(uv), 4), np.float32)
     out_buf = cl.Buffer(context, mf.WRITE_ONLY, out.nbytes)
     probe = cl.Kernel(program, "probe")

@@ -43,7 +43,8 @@ def test_the_kernels_see_the_table(device):
                 "MAX_PARTS": config.MAX_PARTS, **{f"CULL_{k.upper()}": v for k, v in config.CULL_MODES.items()},
                 **{f"BAD_{k.upper()}": i for i, k in enumerate(config.RAY_CHECKS)},
                 **{f"WRAP_{k.upper()}": v for k, v in config.TEXTURE_WRAPS.items()},
-                "TEXEL_LIMIT": config.TEXEL_LIMIT}
+                "TEXEL_LIMIT": config.TEXEL_LIMIT, "RESULT_SLOTS": config.RESULT_SLOTS,
+                "NO_RESULT": -1}   # (int) of the all-ones ulong
     assert dict(zip(names, out.tolist())) == expected
 
 

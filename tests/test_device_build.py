@@ -415,13 +415,13 @@ def test_the_partition_makes_segments_of_the_sah(queue):
     import pyopencl as cl
 
     from clrt import layouts
-    from clrt.device import build
+    from clrt.device import build, build_kernels
     rng = np.random.default_rng(4)
     blobs = [c + 0.02 * rng.standard_normal((600, 3, 3)) for c in ((0.0, 0.0, 0.0), (5.0, 0.0, 0.0))]
     corners = np.concatenate(blobs).astype(np.float32)
     budget = 16
     build_on_device(*queue, corners, leaf_size=4, partition=True, top_clusters=budget, treelet_leaves=0).release()
-    ws = build._workspaces[queue[0].int_ptr]
+    ws = build_kernels.workspaces[queue[0].int_ptr]
     F = len(corners)
     keys, ids = np.empty(F, np.uint32), np.empty(F, np.uint32)
     parts = np.empty(build.PART_MAX_NODES, layouts.BUILD_PART)
@@ -489,7 +489,7 @@ def test_gpus_partition_large_meshes_by_default(queue, monkeypatch):
     devices never."""
     import pyopencl as cl
 
-    from clrt.device import build
+    from clrt.device import build, build_kernels
     mesh = TEST_MESHES["torus"]()
     corners = mesh.vertices[mesh.faces].astype(np.float32)
     segments = {}
@@ -498,7 +498,7 @@ def test_gpus_partition_large_meshes_by_default(queue, monkeypatch):
         monkeypatch.setattr(build, "PART_MIN_TRIANGLES", minimum)
         build_on_device(*queue, corners, leaf_size=4, treelet_leaves=0, top_clusters=16).release()
         state = np.empty(build.STATE_INTS, np.int32)
-        cl.enqueue_copy(queue[1], state, build._workspaces[queue[0].int_ptr].buffers["state"], is_blocking=True)
+        cl.enqueue_copy(queue[1], state, build_kernels.workspaces[queue[0].int_ptr].buffers["state"], is_blocking=True)
         segments[(kind, minimum)] = int(state[build.STATE["STATE_PART_SEGMENTS"]])
     assert segments[("gpu", len(corners))] > 1
     assert segments[("gpu", len(corners) + 1)] == 0 and segments[("cpu", 0)] == 0
@@ -528,7 +528,7 @@ def test_the_geometry_takes_over_the_built_buffers(device):
     leaves them behind."""
     import pickle
 
-    from clrt.device.build import build_acceleration
+    from clrt.device.acceleration import build_acceleration
     from clrt.device.context import create_context
     from clrt.device.geometry import DeviceGeometry
     mesh = TEST_MESHES["torus"]()
@@ -585,17 +585,18 @@ def test_scratch_estimate_matches_the_workspace(device):
     what a build's scratch buffers take, within 5 %, on a fresh context."""
     import pyopencl as cl
 
-    from clrt.device import build
+    from clrt.device import acceleration, build_kernels
     from clrt.device.context import create_context
     shared_context, shared_queue = create_context(device)
     context = cl.Context(shared_context.devices)
     queue = cl.CommandQueue(context, properties=cl.command_queue_properties.PROFILING_ENABLE)
     corners = _random_triangles(20_000, 3)
     build_on_device(context, queue, corners, leaf_size=4).release()
-    used = sum(buffer.size for name, buffer in build._workspaces.pop(context.int_ptr).buffers.items()
-               if name not in build.FIXED_SCRATCH)      # (the partition's, whatever the mesh)
+    used = sum(buffer.size for name, buffer in build_kernels.workspaces.pop(context.int_ptr).buffers.items()
+               if name not in acceleration.FIXED_SCRATCH)      # (the partition's, whatever the mesh)
     per_triangle = used / len(corners)
-    assert abs(per_triangle - build.SCRATCH_BYTES_PER_TRIANGLE) <= 0.05 * build.SCRATCH_BYTES_PER_TRIANGLE, \
+    estimate = acceleration.SCRATCH_BYTES_PER_TRIANGLE
+    assert abs(per_triangle - estimate) <= 0.05 * estimate, \
         per_triangle
 
 

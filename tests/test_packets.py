@@ -202,8 +202,14 @@ __kernel void packets_only(__global const float* origins, __global const float* 
 {
     const uint w = get_global_id(0);
     const Geometry g = make_geometry(GEOMETRY_ARGS);
-    const RayInput in = make_ray_input(origins, 3u, dirs, 3u, tmins, 1u, tmaxs, 1u, 0u, 0u, 1u, bad,
-                                       (float4)(0.0f), (float4)(-INFINITY), (float4)(INFINITY), INFINITY);
+    QueryLaunch launch = {0};
+    launch.origin_stride = launch.dir_stride = 3u;
+    launch.tmin_stride = launch.tmax_stride = 1u;
+    launch.normalise = 1u;
+    launch.scene_lo = (float4)(-INFINITY);
+    launch.scene_hi = (float4)(INFINITY);
+    launch.reach2 = INFINITY;
+    const RayInput in = make_ray_input(origins, dirs, tmins, tmaxs, bad, launch);
     RayLanes lanes;
     RayPacket packet;
     made[w] = load_ray_lanes(&in, 8 * w, 8 * w + 8, &lanes);
@@ -259,7 +265,7 @@ def test_packets_are_walked_as_packets_and_answer_as_brute_force(device):
                              np.empty(n, np.float32))
             outs = [cl.Buffer(ctx, mf.READ_WRITE, x.nbytes) for x in (made, t, prim, u, v)]
             packets_only.set_args(*ins, *outs, np.int32(code), np.int32(CULL_MODES[cull]),
-                                  *accel.geometry.args)
+                                  *accel.geometry.buffer_args, accel.geometry.scene_value())
             cl.enqueue_nd_range_kernel(queue, packets_only, (n // 8,), None)
             for host, dev in zip((made, t, prim, u, v), outs):
                 cl.enqueue_copy(queue, host, dev)

@@ -354,15 +354,17 @@ def test_chunks_respect_the_allocation_limit_and_launch_size(torus_accel, device
     acc = clrt.Accel(torus_accel.mesh, device=device, chunk_rays=1000)
     o, d = _rays(acc.mesh, 4500, seed=8)
     hits = acc.trace(o, d)
-    # Chunk buffers hold 1000 rays: 12 bytes of origin and of direction each.
+    # Chunk buffers hold 1000 rays: 12 bytes of origin and of direction each, 30 of results.
     assert acc._buffers["in_0"].size <= 1000 * 12 and acc._buffers["in_1"].size <= 1000 * 12
-    assert acc._buffers["out_normal"].size <= 1000 * 12
+    assert acc._buffers["results"].size <= 1000 * 30
     for field in hits._fields:
         assert np.array_equal(getattr(hits, field), getattr(torus_accel.trace(o, d), field))
     acc.chunk_rays = None
-    acc.max_alloc = 12 * 100
-    # 100 rays fit; where a work-item takes a packet of 8 (CPU devices), whole packets: 96
+    acc.max_alloc = 30 * 100
+    # 100 rays' results fit; where a work-item takes a packet of 8 (CPU devices), whole packets: 96
     assert acc.chunk_size() == (100 if acc.rays_per_item == 1 else 96)
+    small = acc.trace(o, d)   # in chunks of at most 100 rays
+    assert all(np.array_equal(getattr(small, f), getattr(hits, f)) for f in hits._fields)
     brute = clrt.Accel(acc.mesh, accel="none", device=device)
     assert brute.chunk_size() == min(1 << 20, (1 << 30) // len(acc.mesh.faces))
     assert torus_accel.chunk_size() == 1 << 20

@@ -110,12 +110,12 @@ def test_renderer_reuses_device_state_across_frames(device):
     cam = Camera.framing(r.arrays.bounds, 24, 16)
     first = r.render(cam)
     # what the scene and a frame of this size hold on the device, as objects
-    scene_buffers = [b for parts in r.geometry.buffers.values() for b in parts] + list(r.buffers.values())
+    scene_buffers = [b for parts in r.geometry.buffers.values() for b in parts] + [r.tables]
     frame_buffers = dict(r._frame_buffers)
     kernels = dict(r.kernels)
     second = r.render(cam)
     assert np.array_equal(first.image, second.image)
-    now = [b for parts in r.geometry.buffers.values() for b in parts] + list(r.buffers.values())
+    now = [b for parts in r.geometry.buffers.values() for b in parts] + [r.tables]
     assert all(a is b for a, b in zip(now, scene_buffers)) and len(now) == len(scene_buffers)
     assert all(r._frame_buffers[k] is b for k, b in frame_buffers.items()), "frame buffers not remade"
     assert all(r.kernels[k] is kernel for k, kernel in kernels.items())

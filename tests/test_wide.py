@@ -23,7 +23,7 @@ from clrt.accel import wide as wide_module
 from clrt.accel.topdown import surface_area
 from clrt.accel.wide import MERGE, PACKET, WIDE, collapse
 from clrt.device import geometry
-from clrt.device.build import build_acceleration
+from clrt.device.acceleration import build_acceleration
 from clrt.renderer import Renderer
 from clrt.scene import primitives
 from clrt.scene.arrays import triangle_corners
@@ -147,10 +147,10 @@ def test_only_cpu_devices_walk_wide_and_only_box_trees_unsplit(device, monkeypat
     assert clrt.Accel(mesh, device=device, max_buffer_bytes=16384).geometry.wide is None
     monkeypatch.setattr(geometry, "WIDE_BVH_KINDS", ())    # as a GPU: nothing built, nothing passed
     binary = clrt.Accel(mesh, device=device)
-    assert binary.geometry.wide is None and "wide_nodes" not in binary.geometry.buffers
-    assert len(binary.geometry.args) == len(binary.geometry.arg_types) == 4
+    assert binary.geometry.wide is None and "wide" not in binary.geometry.buffers
+    assert len(binary.geometry.buffer_args) == 3 and "BVH_WIDE" not in binary.geometry.defines
     if cpu:
-        assert len(wide.geometry.args) == len(wide.geometry.arg_types) == 6
+        assert len(wide.geometry.buffer_args) == 4
 
 
 @pytest.mark.parametrize("builder, leaf", [("sah", 1), ("sah", 4), ("paper", 8), ("device", 4)])

@@ -46,7 +46,7 @@ def build(triangles, accel: str = DEFAULT_ACCEL, builder: str = HOST_DEFAULT_BUI
     start = time.perf_counter()
     check_options(accel, builder, leaf_size)
     if builder not in HOST_BUILDERS:
-        raise InputError(f"builder {builder!r} runs on an OpenCL device: use clrt.device.build.build_acceleration "
+        raise InputError(f"builder {builder!r} runs on an OpenCL device: use clrt.device.acceleration.build_acceleration "
                          f"(clrt.accel builds with {', '.join(HOST_BUILDERS)})")
     tri = as_triangles(triangles)
     if accel == "none":

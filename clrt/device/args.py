@@ -1,27 +1,39 @@
-"""Scene values passed to kernels by value (not in buffers)."""
+"""Scene values passed to kernels by value: the records of the structs in
+clrt/layouts.py that the host fills (the camera, the scene's values)."""
 
 from __future__ import annotations
 
 import numpy as np
-from pyopencl import cltypes
 
+from clrt.layouts import CAMERA, SCENE_INFO
 from clrt.scene.scene import Camera
-
-#: The types of CAMERA_PARAMS (camera.cl), as clrt.device.program.typed_kernel takes them.
-CAMERA_ARG_TYPES = [cltypes.float4] * 4 + [np.float32] * 2 + [np.uint32] * 2
 
 
 def vec4(v) -> np.ndarray:
-    """Three numbers as an OpenCL float4 argument (w = 0)."""
+    """Three numbers as an OpenCL float4 (w = 0)."""
     return np.array([*v, 0.0], np.float32)
 
 
-def camera_args(camera: Camera, origin=None) -> tuple:
-    """The camera as the kernels' CAMERA_PARAMS (camera.cl); its eye moved by
+def camera_value(camera: Camera, origin=None) -> np.ndarray:
+    """The camera as the kernels' Camera struct (layouts.h); its eye moved by
     ``-origin`` (the device's frame, clrt.scene.arrays.device_origin) in float64
     when given."""
     forward, right, up = camera.basis()
     scale_x, scale_y = camera.scales()
     eye = np.asarray(camera.eye, np.float64) - (0.0 if origin is None else np.asarray(origin, np.float64))
-    return (vec4(eye), vec4(forward), vec4(right), vec4(up), np.float32(scale_x),
-            np.float32(scale_y), np.uint32(camera.width), np.uint32(camera.height))
+    record = np.zeros((), CAMERA)
+    record["eye"], record["forward"], record["right"], record["up"] = vec4(eye), vec4(forward), vec4(right), vec4(up)
+    record["scale_x"], record["scale_y"] = np.float32(scale_x), np.float32(scale_y)
+    record["width"], record["height"] = camera.width, camera.height
+    return record
+
+
+def scene_value(num_tris: int, packets_at: int = 0, **shading) -> np.ndarray:
+    """A SceneInfo struct (layouts.h): the triangle count, where the wide BVH's
+    packets start, and any of the renderer's ``shading`` fields
+    (ambient_light, background as 3 numbers; num_lights; the tables' offsets)."""
+    record = np.zeros((), SCENE_INFO)
+    record["num_tris"], record["packets_at"] = num_tris, packets_at
+    for name, v in shading.items():
+        record[name] = vec4(v) if name in ("ambient_light", "background") else v
+    return record

@@ -64,15 +64,14 @@ Builds on one context share scratch buffers and kernel objects: they take
 turns on the context's lock (threads building Accels at once wait for each
 other's device builds).
 
-:func:`build_acceleration` is the front end the renderer and the ray queries
-call: clrt.accel.build for the host builders, this one for ``builder="device"``.
+:func:`clrt.device.acceleration.build_acceleration` is the one front end the
+renderer and the ray queries call: clrt.accel.build for the host builders,
+this one for ``builder="device"``.
 """
 
 from __future__ import annotations
 
-import functools
 import math
-import threading
 import time
 from dataclasses import dataclass, field
 
@@ -80,15 +79,15 @@ import numpy as np
 import pyopencl as cl
 
 from clrt import layouts
-from clrt.accel import Acceleration, as_triangles, check_options, volumes
-from clrt.accel import build as build_on_host
+from clrt.accel import as_triangles, check_options, volumes
 from clrt.accel.rows import tree_stats
 from clrt.accel.topdown import C_INTERSECT, C_TRAVERSAL
-from clrt.config import HOST_BUILDERS, HOST_DEFAULT_BUILDER, VOLUME_DEFINES, VOLUMES
+from clrt.config import VOLUME_DEFINES, VOLUMES
 from clrt.device import pinned
-from clrt.device.context import device_kind, format_bytes, is_out_of_memory
-from clrt.device.program import build_program, typed_kernel
-from clrt.errors import DeviceError, DeviceMemoryError, InputError
+from clrt.device.context import device_kind
+from clrt.device.build_kernels import build_queue, one_build_per_context, workspace
+from clrt.device.program import build_program
+from clrt.errors import DeviceError, InputError
 
 BUILD_GROUP = 256        # work-items per work-group of every build kernel
 RADIX_BITS = 4           # digit of one radix-sort pass: 16 bins, 8 passes for 30-bit codes
@@ -199,14 +198,6 @@ STATE["STATE_PART_SEGMENTS"] = STATE["STATE_PART_NODES"] + 1
 STATE["STATE_PART_FIRST"] = STATE["STATE_PART_NODES"] + 2
 STATE["STATE_PART_END"] = STATE["STATE_PART_NODES"] + 3
 STATE_INTS = STATE["STATE_INTS"] = STATE["STATE_PART_NODES"] + 4
-
-_KERNELS = ("init_build_state", "centroid_bounds", "morton_codes", "radix_histogram", "scan_counts",
-            "radix_scatter", "radix_digit_counts", "radix_scatter_lookback", "init_leaves", "ploc_merge",
-            "ploc_count_kept", "ploc_compact", "ploc_tail",
-            "ploc_nearest_tiles", "ploc_merge_tiles", "partition_clear", "partition_init", "partition_bin",
-            "partition_split", "partition_assign", "partition_order", "partition_morton_codes",
-            "treelet_levels", "treelet_order", "treelet_restructure", "init_root_paths", "jump_root_paths", "emit_tree")
-
 
 def sah_top_clusters(kind: str, tail_group: int | None = None, top_clusters: int | None = None) -> int:
     """Clusters the SAH top takes (SAH_TOP_CLUSTERS), no more than ploc_tail's work-items."""
@@ -319,96 +310,6 @@ class DeviceBvh:
         self.rows = self.tri_verts = self.prim_ids = self.exact_rows = None
 
 
-class _Workspace:
-    """What the builds on one context share: scratch buffers, kept between
-    builds and grown when a build needs more (allocations are not free on a
-    GPU); the queues untimed builds run on (build_queue); and the lock by
-    which builds take turns (_one_build_per_context)."""
-
-    def __init__(self, context: cl.Context):
-        self.context = context
-        self.buffers: dict[str, cl.Buffer] = {}
-        self.queues: dict[int, cl.CommandQueue] = {}     # by device
-        self.lock = threading.Lock()
-
-    def get(self, name: str, nbytes: int) -> cl.Buffer:
-        nbytes = max(int(nbytes), 4)
-        buffer = self.buffers.get(name)
-        if buffer is None or buffer.size < nbytes:
-            if buffer is not None:
-                buffer.release()
-            buffer = cl.Buffer(self.context, cl.mem_flags.READ_WRITE, nbytes)
-            self.buffers[name] = buffer
-        return buffer
-
-
-_workspaces: dict[int, _Workspace] = {}
-
-
-def _workspace(context: cl.Context) -> _Workspace:
-    workspace = _workspaces.get(context.int_ptr)
-    return workspace if workspace is not None else _workspaces.setdefault(context.int_ptr, _Workspace(context))
-
-
-_kernel_sets: dict[int, dict] = {}
-
-
-# Every build kernel's argument types are declared (None: a buffer), so that
-# setting the arguments of a build's 40-odd launches costs no Python time to
-# speak of (clrt.device.program.typed_kernel).
-_U, _I = np.uint32, np.int32
-_ARG_TYPES = {
-    "init_build_state": [None, _U], "centroid_bounds": [None, _U, None], "morton_codes": [None, _U, None, None, None],
-    "radix_histogram": [None, _U, _U, None], "scan_counts": [None, _U],
-    "radix_scatter": [None, None, _U, _U, None, None, None], "radix_digit_counts": [None, _U, None, None, _U],
-    "radix_scatter_lookback": [None, None, _U, _U, None, None, None, None],
-    "init_leaves": [None, None, None, _I, _U, None, None, None, None],
-    "partition_clear": [None, None, _U], "partition_init": [None, None, _I, _I],
-    "partition_bin": [None, _U, _U, None, None, None, None], "partition_split": [None, None, None, _I, _I],
-    "partition_assign": [None, _U, _U, None, None, None], "partition_order": [None, None],
-    "partition_morton_codes": [None, _U, None, None, None],
-    "ploc_merge": [None] * 5 + [_I, None, _I, _U], "ploc_count_kept": [None, None, _I],
-    "ploc_compact": [None] * 4 + [_I], "ploc_tail": [None] * 5 + [_I, None, _I, _U],
-    "ploc_nearest_tiles": [None, None, None, _I], "ploc_merge_tiles": [None] * 6 + [_I, None, _I, _U],
-    "treelet_levels": [None, None, _I, _U, None], "treelet_order": [None, None, _I, _U, None, None],
-    "treelet_restructure": [None] * 5 + [_I, _U, _U], "init_root_paths": [None, _U, None, None],
-    "jump_root_paths": [None, None, _U, None, None], "emit_tree": [None, _U, _I] + [None] * 9,
-}
-
-
-def _kernels(program: cl.Program) -> dict:
-    key = program.int_ptr
-    if key not in _kernel_sets:
-        _kernel_sets[key] = {name: typed_kernel(program, name, _ARG_TYPES[name]) for name in _KERNELS}
-    return _kernel_sets[key]
-
-
-def build_queue(context: cl.Context, device: cl.Device) -> cl.CommandQueue:
-    """The queue untimed builds run on: one per context and device, without
-    profiling.  On the H200 a launch costs the host 8.5 us to queue there and
-    14 us on a profiling queue, and a small build waits on its host: bunny00
-    2.35 -> 2.13 ms (docs/benchmarks.md, session 6)."""
-    queues = _workspace(context).queues
-    queue = queues.get(device.int_ptr)
-    if queue is None:
-        queue = queues[device.int_ptr] = cl.CommandQueue(context, device)
-    return queue
-
-
-def _one_build_per_context(build):
-    """Builds on one context take turns: they share its scratch buffers
-    (_Workspace) and its build queue, so two threads building at once (each
-    with an Accel of its own, say) would overwrite each other's keys and
-    nodes -- on PoCL the process crashed (tests/test_device_build.py).  A
-    build holds no lock the caller could be waiting on, and takes
-    milliseconds."""
-    @functools.wraps(build)
-    def one_at_a_time(context: cl.Context, *args, **kwargs):
-        with _workspace(context).lock:
-            return build(context, *args, **kwargs)
-    return one_at_a_time
-
-
 def _groups(n: int) -> int:
     return max(-(-int(n) // BUILD_GROUP), 1)
 
@@ -453,7 +354,7 @@ def check_tuning(tail_threshold=None, treelet_leaves=None, treelet_min=None, tai
         checks.integer("partition", partition, 0, 1)
 
 
-@_one_build_per_context
+@one_build_per_context
 def build_on_device(context: cl.Context, queue: cl.CommandQueue, corners, volume: str = "box",
                     leaf_size: int = 4, keep_boxes: bool = False,
                     tail_threshold: int | None = None, staged_upload: bool | None = None,
@@ -512,10 +413,10 @@ def build_on_device(context: cl.Context, queue: cl.CommandQueue, corners, volume
     if partition is None:
         partition = SAH_PARTITION[kind] and F >= PART_MIN_TRIANGLES
     segmented = bool(partition) and 1 < top_clusters < F
-    program = build_program(context, "build_bvh.cl",
-                            build_defines(volume, kind, treelet_leaves, tail_group, top_clusters, segmented))
-    k = _kernels(program)
-    ws = _workspace(context)
+    defines = build_defines(volume, kind, treelet_leaves, tail_group, top_clusters, segmented)
+    program = build_program(context, "build_bvh.cl", defines)
+    ws = workspace(context)
+    k = ws.kernels_of(program, defines)
     num_nodes = 2 * F - 1
     root = 2 * F - 2 if F > 1 else 0        # the last merge makes the root
     phases = _Phases() if device_times or profile else None
@@ -768,50 +669,3 @@ def _ploc(queue, k, launch, F, clusters, merged, tile_kept, tile_status, nodes, 
         known = int(count[0])
     return iteration
 
-
-# Device scratch of a build, per triangle: the corners (36 bytes), sort keys and
-# ids (16), build nodes (96), clusters twice (64), heights and per-place ints
-# (8, 12 on CPUs), path sums and ancestors (80); tests/test_device_build.py
-# checks it against the workspace's buffers.
-SCRATCH_BYTES_PER_TRIANGLE = 300
-# The SAH partition's buffers, 0.7 MB whatever the mesh: not per triangle, so
-# left out of the estimate above (and of its test).
-FIXED_SCRATCH = ("parts", "part_bins")
-
-
-def build_acceleration(corners: np.ndarray, accel: str, builder: str, leaf_size: int,
-                       device: str | None = None) -> Acceleration:
-    """The acceleration structure over ``corners`` (F, 3, 3): clrt.accel.build for
-    the host builders, for ``builder="device"`` a build on ``device`` (clrt's
-    device choice, as the renderer and queries use it), and for "auto" the
-    device builder where the device has float64, else the host SAH builder
-    (clrt.config.DEFAULT_BUILDER says why).
-
-    A device build keeps its buffers on the device for the first
-    DeviceGeometry on that context (clrt.accel.Acceleration.take_device_buffers);
-    the rows and ids are also read back (refit, statistics, per-slot data).
-    """
-    from clrt.device.context import create_context
-    if builder == "auto" and accel != "none":
-        builder = "device" if "cl_khr_fp64" in create_context(device)[1].device.extensions else HOST_DEFAULT_BUILDER
-    if builder not in ("device", "auto") or accel == "none":
-        return build_on_host(corners, accel, builder if builder in HOST_BUILDERS else HOST_DEFAULT_BUILDER,
-                             leaf_size)
-    start = time.perf_counter()
-    context, queue = create_context(device)
-    try:
-        bvh = build_on_device(context, queue, corners, volume=accel, leaf_size=leaf_size, keep_boxes=True)
-    except (cl.Error, MemoryError) as exc:
-        if not is_out_of_memory(exc):
-            raise
-        raise DeviceMemoryError(
-            f"out of device memory building the BVH of {len(corners):,} triangles on "
-            f"{queue.device.name.strip()}: it needs about {format_bytes(SCRATCH_BYTES_PER_TRIANGLE * len(corners))} "
-            "of scratch memory; use --builder sah (built on the host)") from None
-    rows, prim_ids = bvh.read_back()
-    exact_rows = bvh.read_exact_rows()      # the statistics are computed when asked for
-    bvh.exact_rows.release()
-    bvh.exact_rows = None
-    return Acceleration(accel, "device", rows, prim_ids, depth=int(bvh.depth),
-                        build_ms=1e3 * (time.perf_counter() - start), leaf_size=int(leaf_size),
-                        exact_rows=exact_rows, device_buffers=bvh)

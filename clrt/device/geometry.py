@@ -1,8 +1,8 @@
 """Triangles and their acceleration structure, uploaded to one OpenCL device.
 
 This is the part of a scene that ray queries need (``Geometry`` in
-geometry.cl: ``closest_hit`` and ``any_hit`` in the kernels); the renderer and
-the batch ray queries share it.  The acceleration structure itself is built
+geometry.cl: ``closest_hit`` and ``any_hit`` in the kernels, GEOMETRY in
+clrt/device/signature.py); the renderer and the batch ray queries share it.  The acceleration structure itself is built
 by ``clrt.accel``; here it is only uploaded.
 """
 
@@ -17,8 +17,10 @@ from clrt.accel import Acceleration
 from clrt.accel.rows import child_refs
 from clrt.accel.wide import WIDE, WideBvh, collapse
 from clrt.config import MAX_PARTS, VOLUME_DEFINES, stack_size
+from clrt.device.args import scene_value
 from clrt.device.context import device_kind, format_bytes
 from clrt.device.reach import Reach
+from clrt.device.signature import buffer, typed_kernels, value
 from clrt.errors import DeviceMemoryError, InputError
 from clrt.layouts import TRIANGLE_VERTS
 from clrt.scene.arrays import triangle_verts
@@ -148,8 +150,13 @@ class DeviceGeometry:
         # The wide BVH only where it is walked: other devices pay nothing.
         self.wide = (collapse(acceleration.rows, corners[prim_ids].astype(np.float32, copy=False))
                      if walks_wide(context, acceleration, self.shifts is not None) else None)
+        # The wide BVH's nodes and packets in one buffer (geometry.cl says why),
+        # the packets from byte packets_at on (a multiple of a node's 256 B).
+        self.packets_at = 0
         if self.wide is not None:
-            arrays.update(wide_nodes=self.wide.nodes, packets=self.wide.packets)
+            self.packets_at = self.wide.nodes.nbytes
+            arrays["wide"] = np.concatenate([self.wide.nodes.view(np.uint8).ravel(),
+                                             self.wide.packets.view(np.uint8).ravel()])
         self.defines = dict(accel_defines(acceleration, self.wide))
         # The bytes the buffers hold (parts of a split array add up to it).
         self.nbytes = int(sum(a.nbytes for a in arrays.values()))
@@ -189,21 +196,15 @@ class DeviceGeometry:
         self.reach = Reach(corners, bounds)
 
     @property
-    def arg_types(self) -> list:
-        """The types of GEOMETRY_PARAMS (clrt.device.program.typed_kernel)."""
-        parts = [None] * len(self.buffers["tris"])
-        return [*parts, np.uint32, *parts, *parts] + ([None, None] if self.wide is not None else [])
-
-    def extra_arg_types(self, name: str) -> list:
-        """The types of an extra buffer's parameters: one buffer, or its parts."""
-        return [None] * len(self.buffers[name])
-
-    @property
-    def args(self) -> tuple:
-        """Kernel arguments matching GEOMETRY_PARAMS in geometry.cl."""
+    def buffer_args(self) -> tuple:
+        """The buffers of GEOMETRY_PARAMS (geometry.cl), in order: each one, or its parts."""
         b = self.buffers
-        wide = (*b["wide_nodes"], *b["packets"]) if self.wide is not None else ()
-        return (*b["tris"], self.num_tris, *b["nodes"], *b["prim_ids"], *wide)
+        return (*b["tris"], *b["nodes"], *b["prim_ids"], *(b["wide"] if self.wide is not None else ()))
+
+    def scene_value(self, **shading) -> np.ndarray:
+        """The SceneInfo value of GEOMETRY_PARAMS: this geometry's triangle count
+        and packets, with the renderer's ``shading`` fields (clrt.device.args.scene_value)."""
+        return scene_value(int(self.num_tris), self.packets_at, **shading)
 
     def refit(self, queue: cl.CommandQueue, corners: np.ndarray, bounds=None, origin=None) -> None:
         """Move the triangles to ``corners`` (F, 3, 3) float32, input order, the same
@@ -230,8 +231,9 @@ class DeviceGeometry:
         cl.enqueue_copy(queue, acceleration.rows, self.buffers["nodes"][0])
         if self.wide is not None:   # the same wide tree, the refitted boxes and moved corners
             self.wide.refit(acceleration.rows, corners[acceleration.prim_ids].astype(np.float32, copy=False))
-            for name, array in (("wide_nodes", self.wide.nodes), ("packets", self.wide.packets)):
-                cl.enqueue_copy(queue, self.buffers[name][0], array)
+            (wide,) = self.buffers["wide"]
+            cl.enqueue_copy(queue, wide, self.wide.nodes)
+            cl.enqueue_copy(queue, wide, self.wide.packets, dst_offset=self.packets_at)
 
     def replace(self, queue: cl.CommandQueue, name: str, array: np.ndarray) -> None:
         """Upload ``array`` as the extra buffer ``name`` anew (a scene not split into
@@ -272,18 +274,25 @@ def part_shifts(arrays: dict, limit: int, limit_source: str = "the device's larg
     return shifts
 
 
+# The refit program (refit.cl): its kernels' parameters (clrt.device.signature).
+REFIT_KERNELS = {
+    "refit_leaves": (buffer("rows"), value("num_rows", np.uint32), buffer("tris"), buffer("box_lo"),
+                     buffer("box_hi")),
+    "refit_level": (buffer("rows"), buffer("level_rows"), value("count", np.uint32), buffer("box_lo"),
+                    buffer("box_hi")),
+    "refit_fit": (buffer("rows"), value("num_rows", np.uint32), buffer("box_lo"), buffer("box_hi")),
+}
+
+
 class _RefitPlan:
     """What a refit of one tree needs, made once: the program, the rows of every
     tree level (the order of refit_level's launches), the boxes' scratch."""
 
     def __init__(self, context: cl.Context, acceleration: Acceleration):
         from clrt.device.build import build_defines   # the fit's constants, as the device builder's
-        from clrt.device.program import build_program, typed_kernel
-        program = build_program(context, "refit.cl", build_defines(acceleration.accel))
-        u32 = np.uint32
-        self.kernels = {name: typed_kernel(program, name, types) for name, types in {
-            "refit_leaves": [None, u32, None, None, None], "refit_level": [None, None, u32, None, None],
-            "refit_fit": [None, u32, None, None]}.items()}
+        from clrt.device.program import build_program
+        defines = build_defines(acceleration.accel)
+        self.kernels = typed_kernels(build_program(context, "refit.cl", defines), REFIT_KERNELS, defines)
         refs = child_refs(acceleration.rows)
         self.levels, current = [], np.zeros(1, np.int32)
         while len(current):   # a row's inner children are one level deeper

@@ -9,31 +9,8 @@
 
 #include "layouts.h"
 
-typedef struct {
-    float3 eye, forward, right, up;
-    float scale_x;     // tan(fov/2) * W/H
-    float scale_y;     // tan(fov/2)
-    uint width, height;
-} Camera;
-
-// The camera as kernel parameters (the host passes Renderer.camera_args).
-#define CAMERA_PARAMS const float4 eye, const float4 forward, const float4 right, const float4 up, \
-    const float scale_x, const float scale_y, const uint width, const uint height
-#define CAMERA_ARGS eye, forward, right, up, scale_x, scale_y, width, height
-
-inline Camera make_camera(CAMERA_PARAMS)
-{
-    Camera cam;
-    cam.eye = eye.xyz;
-    cam.forward = forward.xyz;
-    cam.right = right.xyz;
-    cam.up = up.xyz;
-    cam.scale_x = scale_x;
-    cam.scale_y = scale_y;
-    cam.width = width;
-    cam.height = height;
-    return cam;
-}
+// The Camera struct (layouts.h) arrives by value: the host fills it once per
+// frame (clrt.device.signature.camera_value).
 
 // Ray through the point (px + ox, py + oy) of the image, (ox, oy) in [0, 1)^2
 // ((0.5, 0.5): the pixel centre).
@@ -41,9 +18,9 @@ inline Ray camera_ray(const Camera* cam, uint px, uint py, float ox, float oy)
 {
     const float sx = (2.0f * ((float)px + ox) / (float)cam->width - 1.0f) * cam->scale_x;
     const float sy = (1.0f - 2.0f * ((float)py + oy) / (float)cam->height) * cam->scale_y;
-    const float3 d = normalize(cam->forward + sx * cam->right + sy * cam->up);
+    const float3 d = normalize(cam->forward.xyz + sx * cam->right.xyz + sy * cam->up.xyz);
     Ray r;
-    r.origin = (float4)(cam->eye, 0.0f);
+    r.origin = (float4)(cam->eye.xyz, 0.0f);
     r.dir = (float4)(d, INFINITY);
     return r;
 }

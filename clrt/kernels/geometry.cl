@@ -3,14 +3,15 @@
 // out as parameters) and gathers them once with make_geometry(GEOMETRY_ARGS);
 // every helper then takes a `const Geometry*`.
 //   tris      triangle corners in slot order (leaf order for a BVH)
-//   num_tris  number of slots
 //   nodes     BVH rows with both children's volumes (one unused row without a BVH)
 //   prim_ids  input triangle index of each slot (the identity without a BVH)
-// With -DBVH_WIDE (CPU devices, clrt/device/geometry.py) two more:
-//   wide_nodes  the same BVH collapsed into nodes of eight children (accel_wide.cl)
-//   packets     each leaf's triangles in packets of four
-// Each buffer may arrive in parts (split.cl): elements are reached through
-// SPLIT_AT, never by indexing a field.
+//   wide      with -DBVH_WIDE (CPU devices, clrt/device/geometry.py): the same
+//             BVH collapsed into nodes of eight children (accel_wide.cl), then,
+//             from byte scene.packets_at on, each leaf's triangles in packets
+//             of four -- one buffer, so that a kernel takes one parameter less
+//   scene     SceneInfo (layouts.h) by value: the triangle count among others
+// Each of the first three may arrive in parts (split.cl): elements are reached
+// through SPLIT_AT, never by indexing a field.
 #ifndef CLRT_GEOMETRY_CL
 #define CLRT_GEOMETRY_CL
 
@@ -32,33 +33,28 @@ typedef struct {
 #ifdef SPLIT_BUFFERS
 #error "the wide BVH is built only for scenes whose buffers are not split"
 #endif
-#define WIDE_PARAMS , __global const BvhWideNode* wide_nodes, __global const TrianglePacket* packets
-#define WIDE_ARGS , wide_nodes, packets
+#define WIDE_PARAMS , __global const uchar* wide
+#define WIDE_ARGS , wide
 #else
 #define WIDE_PARAMS
 #define WIDE_ARGS
 #endif
 
-#define GEOMETRY_PARAMS SPLIT_PARAMS(TriangleVerts, tris), const uint num_tris, \
-    SPLIT_PARAMS(BvhPairNode, nodes), SPLIT_PARAMS(int, prim_ids) WIDE_PARAMS
-#define GEOMETRY_ARGS tris, num_tris, nodes, prim_ids WIDE_ARGS
+#define GEOMETRY_PARAMS SPLIT_PARAMS(TriangleVerts, tris), SPLIT_PARAMS(BvhPairNode, nodes), \
+    SPLIT_PARAMS(int, prim_ids) WIDE_PARAMS, const SceneInfo scene
+#define GEOMETRY_ARGS SPLIT_ARGS(tris), SPLIT_ARGS(nodes), SPLIT_ARGS(prim_ids) WIDE_ARGS, scene
 
-#ifdef SPLIT_BUFFERS
-#undef GEOMETRY_ARGS
-#define GEOMETRY_ARGS tris0, tris1, tris2, tris3, num_tris, nodes0, nodes1, nodes2, nodes3, \
-    prim_ids0, prim_ids1, prim_ids2, prim_ids3
-#endif
-
+// (Kernels call it as make_geometry(GEOMETRY_ARGS).)
 inline Geometry make_geometry(GEOMETRY_PARAMS)
 {
     Geometry g;
     SPLIT_STORE(g, tris);
-    g.num_tris = num_tris;
+    g.num_tris = scene.num_tris;
     SPLIT_STORE(g, nodes);
     SPLIT_STORE(g, prim_ids);
 #ifdef BVH_WIDE
-    g.wide_nodes = wide_nodes;
-    g.packets = packets;
+    g.wide_nodes = (__global const BvhWideNode*)wide;
+    g.packets = (__global const TrianglePacket*)(wide + scene.packets_at);
 #endif
     return g;
 }

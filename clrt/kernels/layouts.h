@@ -56,6 +56,62 @@ typedef struct {
     float4 color;
 } Light;
 
+// ---- Kernel arguments passed by value: each kernel takes its buffers and at
+// most a few of these (clrt/device/signature.py counts them; every kernel
+// stays within 12 parameters).  OpenCL allows no pointers in them, so the
+// buffers travel beside them and the structs hold byte offsets into buffers.
+
+// A pinhole camera (camera.cl), eye in the device's frame.
+typedef struct {
+    float4 eye;                  // xyz; w unused
+    float4 forward, right, up;   // unit basis; w unused
+    float scale_x;               // tan(fov/2) * W/H
+    float scale_y;               // tan(fov/2)
+    uint width, height;          // pixels
+} Camera;
+
+// One launch of a ray query (trace.cl, rays.cl): its rays' layout in the input
+// arrays, the device frame, and where the answers go in `results`.
+typedef struct {
+    float4 shift;                // the device frame's origin: subtracted from every ray origin
+    float4 scene_lo, scene_hi;   // xyz: the box of the triangles, device frame
+    uint origin_stride, dir_stride, tmin_stride, tmax_stride;   // floats from one ray to the next (0: one for all)
+    uint in_first;               // element of the inputs holding the launch's first ray
+    uint ray_first;              // its index in the caller's batch (bad rays are reported by it)
+    uint num_rays;               // rays of the launch
+    uint normalise;              // 0: the directions are unit vectors already
+    float reach2;                // square of the farthest an origin may lie from the box's far side
+    int cull;                    // CULL_NONE, CULL_BACK or CULL_FRONT
+    uint capacity;               // query_all: the most hits `results` holds
+    uint pad;
+    ulong field_at[RESULT_SLOTS];   // byte offset in `results` of output k, NO_RESULT: not asked for
+} QueryLaunch;
+
+// One launch over a tile of the image (render.cl): which pixels, the sample,
+// and where the tile's per-pixel arrays lie in the frame buffer.
+typedef struct {
+    uint x, y, w, h;             // pixels (x, y) .. (x + w - 1, y + h - 1) of the image
+    uint rays_at, hits_at, image_at;   // byte offsets in `frame` of the Ray, Hit and float4 colour arrays
+    uint sample;                 // this launch's sample, 0 .. samples_per_axis^2 - 1
+    uint samples_per_axis;
+    uint seed;                   // of the sample jitter
+    uint max_depth;              // reflection / refraction bounces
+    float sample_weight;         // 1 / samples
+    uint first_sample;           // 1: the image starts from this sample
+} Tile;
+
+// What kernels know of the uploaded scene by value: the triangle count, where
+// the packets start in the wide BVH's buffer, and (the renderer) the light
+// and colours and where each table lies in the `tables` buffer.
+typedef struct {
+    float4 ambient_light;        // linear RGB; w unused
+    float4 background;
+    ulong packets_at;            // BVH_WIDE: byte offset of the first TrianglePacket in `wide`
+    uint num_tris;               // slots
+    uint num_lights;
+    uint materials_at, lights_at, textures_at, srgb_at;   // byte offsets in `tables`
+} SceneInfo;
+
 typedef struct {
     float4 left_a, left_b;     // left child: volume in the xyz lanes; w: as_int -> left, left_count
     float4 right_a, right_b;   // right child: likewise -> right, right_count

@@ -18,28 +18,26 @@
 #ifndef CLRT_RAYS_CL
 #define CLRT_RAYS_CL
 
+// A launch's rays: the four input arrays and the bad-ray slots, and the
+// QueryLaunch (layouts.h) that says how to read them.
 typedef struct {
     __global const float* origins;
     __global const float* dirs;
     __global const float* tmins;
     __global const float* tmaxs;
+    __global int* bad;
     uint origin_stride, dir_stride, tmin_stride, tmax_stride;   // floats from one ray to the next
     uint in_first;      // element of the input arrays that holds this launch's first ray
     uint ray_first;     // index in the caller's batch of this launch's first ray
     uint normalise;     // 0: the directions are unit vectors already (clrt's own cameras)
-    __global int* bad;
     float3 shift;       // the device frame's origin: subtracted from every ray origin
     float3 scene_lo, scene_hi;   // the box of the scene's triangles, device frame
     float reach2;       // the square of the farthest an origin may lie from the box's far side
 } RayInput;
 
-#define RAY_INPUT_PARAMS __global const float* origins, const uint origin_stride, \
-    __global const float* dirs, const uint dir_stride, __global const float* tmins, const uint tmin_stride, \
-    __global const float* tmaxs, const uint tmax_stride, const uint in_first, const uint ray_first, \
-    const uint normalise, __global int* bad, const float4 shift, const float4 scene_lo, const float4 scene_hi, \
-    const float reach2
-#define RAY_INPUT_ARGS origins, origin_stride, dirs, dir_stride, tmins, tmin_stride, tmaxs, tmax_stride, \
-    in_first, ray_first, normalise, bad, shift, scene_lo, scene_hi, reach2
+#define RAY_INPUT_PARAMS __global const float* origins, __global const float* dirs, \
+    __global const float* tmins, __global const float* tmaxs, __global int* bad, const QueryLaunch launch
+#define RAY_INPUT_ARGS origins, dirs, tmins, tmaxs, bad, launch
 
 inline RayInput make_ray_input(RAY_INPUT_PARAMS)
 {
@@ -48,18 +46,18 @@ inline RayInput make_ray_input(RAY_INPUT_PARAMS)
     in.dirs = dirs;
     in.tmins = tmins;
     in.tmaxs = tmaxs;
-    in.origin_stride = origin_stride;
-    in.dir_stride = dir_stride;
-    in.tmin_stride = tmin_stride;
-    in.tmax_stride = tmax_stride;
-    in.in_first = in_first;
-    in.ray_first = ray_first;
-    in.normalise = normalise;
     in.bad = bad;
-    in.shift = shift.xyz;
-    in.scene_lo = scene_lo.xyz;
-    in.scene_hi = scene_hi.xyz;
-    in.reach2 = reach2;
+    in.origin_stride = launch.origin_stride;
+    in.dir_stride = launch.dir_stride;
+    in.tmin_stride = launch.tmin_stride;
+    in.tmax_stride = launch.tmax_stride;
+    in.in_first = launch.in_first;
+    in.ray_first = launch.ray_first;
+    in.normalise = launch.normalise;
+    in.shift = launch.shift.xyz;
+    in.scene_lo = launch.scene_lo.xyz;
+    in.scene_hi = launch.scene_hi.xyz;
+    in.reach2 = launch.reach2;
     return in;
 }
 

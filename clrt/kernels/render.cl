@@ -14,22 +14,24 @@
 
 // The host renders an image in rectangles ("tiles") so that device memory and
 // the length of one launch stay bounded.  Both kernels below run one work-item
-// per pixel of the tile (tile_x + gx, tile_y + gy) in a 2-D launch, whose
+// per pixel of the tile (tile.x + gx, tile.y + gy) in a 2-D launch, whose
 // work-groups are blocks of neighbouring pixels: their rays walk much the same
-// BVH nodes.  Per-pixel buffers are the tile's pixels in row-major order.
-#define TILE_PARAMS const uint tile_x, const uint tile_y, const uint tile_w, const uint tile_h
+// BVH nodes.  The tile's per-pixel arrays (rays, hits, linear colours) lie in
+// one buffer, `frame`, at the byte offsets the Tile gives (layouts.h), each
+// holding the tile's pixels in row-major order.
+#define TILE_RAYS(frame, tile) ((__global Ray*)((frame) + (tile).rays_at))
+#define TILE_HITS(frame, tile) ((__global Hit*)((frame) + (tile).hits_at))
+#define TILE_IMAGE(frame, tile) ((__global float4*)((frame) + (tile).image_at))
 
-// Rays of the tile's pixels, into rays[0 .. tile_w * tile_h - 1].
-__kernel void generate_rays(__global Ray* rays, CAMERA_PARAMS, const uint sample, const uint samples_per_axis,
-                            const uint seed, TILE_PARAMS)
+// Rays of the tile's pixels, into its ray array.
+__kernel void generate_rays(__global uchar* frame, const Camera cam, const Tile tile)
 {
     const uint gx = get_global_id(0), gy = get_global_id(1);
-    if (gx >= tile_w || gy >= tile_h)
+    if (gx >= tile.w || gy >= tile.h)
         return;
-    const Camera cam = make_camera(CAMERA_ARGS);
-    const uint px = tile_x + gx, py = tile_y + gy;
-    const float2 o = sample_offset(py * width + px, sample, samples_per_axis, seed);
-    rays[gy * tile_w + gx] = camera_ray(&cam, px, py, o.x, o.y);
+    const uint px = tile.x + gx, py = tile.y + gy;
+    const float2 o = sample_offset(py * cam.width + px, tile.sample, tile.samples_per_axis, tile.seed);
+    TILE_RAYS(frame, tile)[gy * tile.w + gx] = camera_ray(&cam, px, py, o.x, o.y);
 }
 
 // image = (first sample ? 0 : image) + sample_weight * colour.  hits receives
@@ -118,13 +120,16 @@ inline void camera_packet_lights(const Geometry* g, const Shading* sh, __global 
 
 // On CPU devices that walk packets of rays a work-item shades RAY_PACKETS
 // pixels of a row (gx: the row's packet), else one pixel.
-__kernel void shade_pixels(__global const Ray* rays, __global float4* image, __global Hit* hits,
-                           const uint tile_w, const uint tile_h, const uint max_depth, const float sample_weight,
-                           const uint first_sample, GEOMETRY_PARAMS, SHADING_PARAMS)
+__kernel void shade_pixels(__global uchar* frame, const Tile tile, GEOMETRY_PARAMS, SHADING_PARAMS)
 {
     const uint gx = get_global_id(0), gy = get_global_id(1);
+    const uint tile_w = tile.w, tile_h = tile.h, max_depth = tile.max_depth, first_sample = tile.first_sample;
+    const float sample_weight = tile.sample_weight;
+    __global const Ray* rays = TILE_RAYS(frame, tile);
+    __global Hit* hits = TILE_HITS(frame, tile);
+    __global float4* image = TILE_IMAGE(frame, tile);
     const Geometry g = make_geometry(GEOMETRY_ARGS);
-    const Shading sh = make_shading(SHADING_ARGS);
+    const Shading sh = make_shading(SHADING_ARGS, scene);
 #ifdef RAY_PACKETS
     const uint x0 = RAY_PACKETS * gx;
     if (x0 >= tile_w || gy >= tile_h)
@@ -155,13 +160,14 @@ inline float srgb_encode(float c)
     return c <= 0.0031308f ? 12.92f * c : 1.055f * pow(c, 1.0f / 2.4f) - 0.055f;
 }
 
-// Packed RGB, 3 bytes a pixel: the host array's own layout, so no repacking there.
-__kernel void encode_srgb8(__global const float4* image, __global uchar* out, const uint num_pixels)
+// Packed RGB, 3 bytes a pixel: the host array's own layout, so no repacking
+// there.  One work-item a pixel of the tile's linear colours.
+__kernel void encode_srgb8(__global const uchar* frame, const Tile tile, __global uchar* out)
 {
     const uint i = get_global_id(0);
-    if (i >= num_pixels)
+    if (i >= tile.w * tile.h)
         return;
-    const float4 c = image[i];
+    const float4 c = ((__global const float4*)(frame + tile.image_at))[i];
     out[3 * i] = convert_uchar_sat_rte(255.0f * srgb_encode(c.x));
     out[3 * i + 1] = convert_uchar_sat_rte(255.0f * srgb_encode(c.y));
     out[3 * i + 2] = convert_uchar_sat_rte(255.0f * srgb_encode(c.z));

@@ -10,13 +10,16 @@
 #include "texture.cl"
 
 // What shading reads beyond the geometry, gathered once per work-item from the
-// kernel's SHADING_PARAMS by make_shading(SHADING_ARGS), as geometry.cl does.
+// kernel's SHADING_PARAMS and the scene's SceneInfo (GEOMETRY_PARAMS) by
+// make_shading(SHADING_ARGS, scene), as geometry.cl does.
 //   tri_info        per slot: vertex indices and material (split like the geometry)
 //   vertex_normals  per vertex (split too)
-//   materials, lights, num_lights, ambient_light, background
+//   tables          the scene's small tables in one buffer, at the byte offsets
+//                   of SceneInfo: materials, lights (and with textures the
+//                   Texture rows and the sRGB decoding table)
 // and with -DSURFACE_DETAIL (texture.cl):
 //   tri_detail      per slot: corner colours and texture coordinates (split too)
-//   textures        the texture table, texels and sRGB decoding table
+//   texels          every texture's texels (split too)
 typedef struct {
     SPLIT_FIELD(TriangleInfo, tri_info);
     SPLIT_FIELD(float4, vertex_normals);
@@ -39,24 +42,22 @@ typedef struct {
 #endif
 
 #define SHADING_PARAMS SPLIT_PARAMS(TriangleInfo, tri_info), SPLIT_PARAMS(float4, vertex_normals), \
-    __global const Material* materials, __global const Light* lights, const uint num_lights, \
-    const float4 ambient_light, const float4 background DETAIL_PARAMS
-#define SHADING_ARGS SPLIT_ARGS(tri_info), SPLIT_ARGS(vertex_normals), materials, lights, num_lights, \
-    ambient_light, background DETAIL_ARGS
+    __global const uchar* tables DETAIL_PARAMS
+#define SHADING_ARGS SPLIT_ARGS(tri_info), SPLIT_ARGS(vertex_normals), tables DETAIL_ARGS
 
-inline Shading make_shading(SHADING_PARAMS)
+inline Shading make_shading(SHADING_PARAMS, const SceneInfo scene)
 {
     Shading sh;
     SPLIT_STORE(sh, tri_info);
     SPLIT_STORE(sh, vertex_normals);
-    sh.materials = materials;
-    sh.lights = lights;
-    sh.num_lights = num_lights;
-    sh.ambient_light = ambient_light;
-    sh.background = background;
+    sh.materials = (__global const Material*)(tables + scene.materials_at);
+    sh.lights = (__global const Light*)(tables + scene.lights_at);
+    sh.num_lights = scene.num_lights;
+    sh.ambient_light = scene.ambient_light;
+    sh.background = scene.background;
 #ifdef SURFACE_DETAIL
     SPLIT_STORE(sh, tri_detail);
-    sh.textures = make_texture_set(TEXTURE_ARGS);
+    sh.textures = make_texture_set(tables, scene, TEXTURE_ARGS);
 #endif
     return sh;
 }

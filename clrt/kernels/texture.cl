@@ -19,23 +19,23 @@
 #ifdef SURFACE_DETAIL
 
 // Every texture of the scene: the table, the texels (split like the geometry
-// when large) and the sRGB decoding table.
+// when large) and the sRGB decoding table (the first and last in the scene's
+// `tables` buffer, shading.cl).
 typedef struct {
     __global const Texture* table;
     SPLIT_FIELD(uchar4, texels);
     __global const float* srgb;
 } TextureSet;
 
-#define TEXTURE_PARAMS __global const Texture* textures, SPLIT_PARAMS(uchar4, texels), \
-    __global const float* srgb_table
-#define TEXTURE_ARGS textures, SPLIT_ARGS(texels), srgb_table
+#define TEXTURE_PARAMS SPLIT_PARAMS(uchar4, texels)
+#define TEXTURE_ARGS SPLIT_ARGS(texels)
 
-inline TextureSet make_texture_set(TEXTURE_PARAMS)
+inline TextureSet make_texture_set(__global const uchar* tables, const SceneInfo scene, TEXTURE_PARAMS)
 {
     TextureSet t;
-    t.table = textures;
+    t.table = (__global const Texture*)(tables + scene.textures_at);
     SPLIT_STORE(t, texels);
-    t.srgb = srgb_table;
+    t.srgb = (__global const float*)(tables + scene.srgb_at);
     return t;
 }
 

@@ -111,25 +111,36 @@ inline void answer_rays(const Geometry* g, const RayInput* in, uint first, uint 
     }
 }
 
-// Closest hit of each ray, written field by field into the arrays the caller
-// gets (any output may be 0: not asked for).  Index out_first + i; a miss
+// Output k of a launch: a pointer into `results` at launch.field_at[k], or 0
+// when the caller did not ask for it (NO_RESULT).
+#define RESULT_AT(type, k) (launch.field_at[k] == NO_RESULT ? (__global type*)0 \
+                            : (__global type*)(results + launch.field_at[k]))
+
+// Closest hit of each ray, written field by field into `results` (outputs
+// 0 .. 6: t, prim, u, v, normal, front, hit, as clrt.query.results'
+// CLOSEST_FIELDS; any may be absent).  Index: the ray's in the launch; a miss
 // writes t = INFINITY, prim = -1, u = v = 0, normal = 0, front = hit = 0.
-__kernel void query_closest(RAY_INPUT_PARAMS, __global float* t_out, __global int* prim_out,
-                            __global float* u_out, __global float* v_out, __global float* normal_out,
-                            __global uchar* front_out, __global uchar* hit_out, const uint out_first,
-                            const uint num_rays, const int cull, GEOMETRY_PARAMS)
+__kernel void query_closest(RAY_INPUT_PARAMS, __global uchar* results, GEOMETRY_PARAMS)
 {
+    const uint num_rays = launch.num_rays;
     const uint first = ITEM_RAYS * get_global_id(0);
     if (first >= num_rays)
         return;
+    __global float* t_out = RESULT_AT(float, 0);
+    __global int* prim_out = RESULT_AT(int, 1);
+    __global float* u_out = RESULT_AT(float, 2);
+    __global float* v_out = RESULT_AT(float, 3);
+    __global float* normal_out = RESULT_AT(float, 4);
+    __global uchar* front_out = RESULT_AT(uchar, 5);
+    __global uchar* hit_out = RESULT_AT(uchar, 6);
     const Geometry g = make_geometry(GEOMETRY_ARGS);
     const RayInput in = make_ray_input(RAY_INPUT_ARGS);
     Hit hits[ITEM_RAYS];
     float3 ray_origins[ITEM_RAYS], ray_dirs[ITEM_RAYS];
-    answer_rays(&g, &in, first, num_rays, QUERY_CLOSEST, cull, hits, ray_origins, ray_dirs);
+    answer_rays(&g, &in, first, num_rays, QUERY_CLOSEST, launch.cull, hits, ray_origins, ray_dirs);
     for (int j = 0; j < ITEM_RAYS && first + j < num_rays; ++j) {
         Hit hit = hits[j];
-        const size_t k = (size_t)out_first + first + j;
+        const size_t k = (size_t)first + j;
         const bool found = hit.prim >= 0;
         if (normal_out || front_out) {
             float3 n = (float3)(0.0f);
@@ -159,49 +170,48 @@ __kernel void query_closest(RAY_INPUT_PARAMS, __global float* t_out, __global in
     }
 }
 
-// Is anything hit?  Stops at the first hit found.
-__kernel void query_any(RAY_INPUT_PARAMS, __global uchar* occluded, const uint out_first, const uint num_rays,
-                        const int cull, GEOMETRY_PARAMS)
+// Is anything hit?  Stops at the first hit found.  Output 0: a byte a ray.
+__kernel void query_any(RAY_INPUT_PARAMS, __global uchar* results, GEOMETRY_PARAMS)
 {
+    const uint num_rays = launch.num_rays;
     const uint first = ITEM_RAYS * get_global_id(0);
     if (first >= num_rays)
         return;
+    __global uchar* occluded = RESULT_AT(uchar, 0);
     const Geometry g = make_geometry(GEOMETRY_ARGS);
     const RayInput in = make_ray_input(RAY_INPUT_ARGS);
     Hit hits[ITEM_RAYS];
     float3 ray_origins[ITEM_RAYS], ray_dirs[ITEM_RAYS];
-    answer_rays(&g, &in, first, num_rays, QUERY_ANY, cull, hits, ray_origins, ray_dirs);
+    answer_rays(&g, &in, first, num_rays, QUERY_ANY, launch.cull, hits, ray_origins, ray_dirs);
     for (int j = 0; j < ITEM_RAYS && first + j < num_rays; ++j)
-        occluded[(size_t)out_first + first + j] = hits[j].prim >= 0 ? 1 : 0;
+        occluded[(size_t)first + j] = hits[j].prim >= 0 ? 1 : 0;
 }
 
-// Number of triangles each ray meets in (tmin, tmax].
-__kernel void query_count(RAY_INPUT_PARAMS, __global int* counts, const uint out_first, const uint num_rays,
-                          const int cull, GEOMETRY_PARAMS)
+// Number of triangles each ray meets in (tmin, tmax].  Output 0: an int a ray.
+__kernel void query_count(RAY_INPUT_PARAMS, __global uchar* results, GEOMETRY_PARAMS)
 {
     const uint i = get_global_id(0);
-    if (i >= num_rays)
+    if (i >= launch.num_rays)
         return;
     const Geometry g = make_geometry(GEOMETRY_ARGS);
     const RayInput in = make_ray_input(RAY_INPUT_ARGS);
     float3 origin, dir;
     float tmin, tmax;
-    HitSink sink = query_options(cull);
+    HitSink sink = query_options(launch.cull);
     if (load_ray(&in, i, &origin, &dir, &tmin, &tmax))
         query_hits(&g, origin, dir, tmin, tmax, QUERY_ALL, false, &sink);
-    counts[(size_t)out_first + i] = (int)sink.count;
+    RESULT_AT(int, 0)[i] = (int)sink.count;
 }
 
 // Every hit of every ray in one traversal, appended in no particular order to
-// (ray_ids, prims, ts) at *next, ray ids relative to the launch's first ray.
-// *next ends as the number of hits of the whole launch, also when that exceeds
-// `capacity` (then the host runs the chunk again with room for all of them).
-__kernel void query_all(RAY_INPUT_PARAMS, __global int* ray_ids, __global int* prims,
-                        __global float* ts, __global uint* next, const uint capacity,
-                        const uint num_rays, const int cull, GEOMETRY_PARAMS)
+// outputs 0 .. 2 (ray ids, prims, ts) at the counter, output 3; ray ids
+// relative to the launch's first ray.  The counter ends as the number of hits
+// of the whole launch, also when that exceeds launch.capacity (then the host
+// runs the chunk again with room for all of them).
+__kernel void query_all(RAY_INPUT_PARAMS, __global uchar* results, GEOMETRY_PARAMS)
 {
     const uint i = get_global_id(0);
-    if (i >= num_rays)
+    if (i >= launch.num_rays)
         return;
     const Geometry g = make_geometry(GEOMETRY_ARGS);
     const RayInput in = make_ray_input(RAY_INPUT_ARGS);
@@ -209,12 +219,12 @@ __kernel void query_all(RAY_INPUT_PARAMS, __global int* ray_ids, __global int* p
     float tmin, tmax;
     if (!load_ray(&in, i, &origin, &dir, &tmin, &tmax))
         return;
-    HitSink sink = query_options(cull);
-    sink.ray_ids = ray_ids;
-    sink.prims = prims;
-    sink.ts = ts;
-    sink.next = next;
-    sink.capacity = capacity;
+    HitSink sink = query_options(launch.cull);
+    sink.ray_ids = RESULT_AT(int, 0);
+    sink.prims = RESULT_AT(int, 1);
+    sink.ts = RESULT_AT(float, 2);
+    sink.next = RESULT_AT(uint, 3);
+    sink.capacity = launch.capacity;
     sink.ray = (int)i;
     query_hits(&g, origin, dir, tmin, tmax, QUERY_ALL, false, &sink);
 }
@@ -222,37 +232,34 @@ __kernel void query_all(RAY_INPUT_PARAMS, __global int* ray_ids, __global int* p
 // The directions of the camera's pixel-centre rays (packed float3) for pixels
 // first .. first + count - 1 (row major, row 0 at the top): exactly the
 // renderer's camera rays (camera.cl); every ray starts at the eye.
-__kernel void camera_rays(__global float* dirs, CAMERA_PARAMS, const ulong first, const uint count)
+__kernel void camera_rays(__global float* dirs, const Camera cam, const ulong first, const uint count)
 {
     const uint i = get_global_id(0);
     if (i >= count)
         return;
-    const Camera cam = make_camera(CAMERA_ARGS);
     const ulong pixel = first + i;
-    vstore3(camera_ray(&cam, (uint)(pixel % width), (uint)(pixel / width), 0.5f, 0.5f).dir.xyz, i, dirs);
+    vstore3(camera_ray(&cam, (uint)(pixel % cam.width), (uint)(pixel / cam.width), 0.5f, 0.5f).dir.xyz, i, dirs);
 }
 
 // ---- one-launch kernels of the primary-ray benchmark (clrt/bench/speed.py)
 
 // Camera rays made and traced in one kernel (no ray buffer).  Ray model: camera.cl.
-__kernel void trace_camera(__global Hit* hits, CAMERA_PARAMS, GEOMETRY_PARAMS)
+__kernel void trace_camera(__global Hit* hits, const Camera cam, GEOMETRY_PARAMS)
 {
-    const uint px = get_global_id(0), py = get_global_id(1);
-    if (px >= width || py >= height)
+    const uint px = get_global_id(0), py = get_global_id(1), width = cam.width;
+    if (px >= width || py >= cam.height)
         return;
-    const Camera cam = make_camera(CAMERA_ARGS);
     const Geometry g = make_geometry(GEOMETRY_ARGS);
     const Ray ray = camera_ray(&cam, px, py, 0.5f, 0.5f);
     hits[py * width + px] = reported_hit(&g, closest_hit(&g, ray.origin.xyz, ray.dir.xyz, 0.0f, INFINITY, false));
 }
 
 // The same rays as any-hit queries (occlusion), for comparing query kinds.
-__kernel void occlude_camera(__global uchar* occluded, CAMERA_PARAMS, GEOMETRY_PARAMS)
+__kernel void occlude_camera(__global uchar* occluded, const Camera cam, GEOMETRY_PARAMS)
 {
-    const uint px = get_global_id(0), py = get_global_id(1);
-    if (px >= width || py >= height)
+    const uint px = get_global_id(0), py = get_global_id(1), width = cam.width;
+    if (px >= width || py >= cam.height)
         return;
-    const Camera cam = make_camera(CAMERA_ARGS);
     const Geometry g = make_geometry(GEOMETRY_ARGS);
     const Ray ray = camera_ray(&cam, px, py, 0.5f, 0.5f);
     occluded[py * width + px] = any_hit(&g, ray.origin.xyz, ray.dir.xyz, 0.0f, INFINITY, false) ? 1 : 0;

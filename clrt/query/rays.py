@@ -14,7 +14,7 @@ import numpy as np
 
 from clrt import checks
 from clrt.config import CULL_MODES
-from clrt.device.args import camera_args
+from clrt.device.args import camera_value
 from clrt.errors import InputError
 from clrt.query.results import CLOSEST_FIELDS, RESULT_BYTES
 
@@ -246,7 +246,7 @@ class CameraRays:
 
     def __init__(self, camera):
         self.camera = camera
-        self.args = camera_args(camera)
+        self.camera_value = camera_value(camera)   # the Camera struct of camera_rays
         self.forward = camera.basis()[0]
 
     def __len__(self) -> int:

@@ -24,20 +24,19 @@ from typing import Callable
 
 import numpy as np
 import pyopencl as cl
-from pyopencl import cltypes
 
 from clrt import checks, config
 from clrt.config import DEFAULT_ACCEL, DEFAULT_BUILDER, DEFAULT_LEAF_SIZE
-from clrt.device.args import CAMERA_ARG_TYPES, camera_args, vec4
-from clrt.device.build import build_acceleration
-from clrt.device.context import create_context, device_kind, device_label, error_name, is_out_of_memory
+from clrt.device.args import camera_value
 from clrt.device.context import format_bytes as _size
-from clrt.device.geometry import DeviceGeometry, check_fits, packet_rays, replace_buffer
+from clrt.device.geometry import replace_buffer
 from clrt.device.pinned import PinnedPool
-from clrt.device.program import build_program, launch_size, typed_kernel
+from clrt.device.program import launch_size
+from clrt.device.scene import DeviceScene, stage
 from clrt.device.sharing import check_process, forked_after_start, one_at_a_time
 from clrt.errors import DeviceMemoryError, InputError
-from clrt.layouts import HIT, RAY
+from clrt.layouts import HIT, TILE
+from clrt.renderer.kernels import FRAME_ARRAYS, RENDER_KERNELS, frame_offsets, pack_tables
 from clrt.renderer.tiles import TileLimits, run_tiles
 from clrt.scene.arrays import flatten_scene, light_records
 from clrt.scene.scene import Camera, Scene, default_light
@@ -141,66 +140,33 @@ class Renderer:
         self.timings: dict[str, float] = {}
         self._lock = threading.RLock()
         self._followers = weakref.WeakSet()   # Accel.from_renderer's queries, kept on this scene
-        with _stage(self.timings, "initialisation"):
+        with stage(self.timings, "initialisation"):
             self.scene = _own_copy(as_scene(scene))   # or a mesh, a mesh or scene file: what clrt.render takes
             self.arrays = flatten_scene(self.scene)
-        with _stage(self.timings, "acceleration build"):
-            self.acceleration = build_acceleration(self.arrays.corners, accel, builder, leaf_size, device)
-            slots = self.acceleration.prim_ids   # shading data in slot order
-            a = self.arrays
-            # Per-slot and per-vertex arrays (split with the geometry when large), then whole small buffers.
+        a = self.arrays
+
+        def shading_arrays(acceleration) -> dict:
+            """Per-slot and per-vertex arrays (split with the geometry when large)."""
+            slots = acceleration.prim_ids   # shading data in slot order
             split = {"tri_info": a.tri_info[slots], "vertex_normals": a.vertex_normals}
-            whole = {"materials": a.materials, "lights": a.lights}
             if a.detail is not None:   # textures or colours: the -DSURFACE_DETAIL program (texture.cl)
                 split.update(tri_detail=a.detail.tri_detail[slots], texels=a.detail.texels)
-                whole.update(textures=a.detail.textures, srgb_table=a.detail.srgb_table)
-        with _stage(self.timings, "copy to device"):
-            self.context, self.queue = create_context(device)
-            self.device = device_label(self.queue.device)
-            self._kind = device_kind(self.queue.device)   # which ENCODE_GROUP applies
-            whole_bytes = sum(x.nbytes for x in whole.values())
-            # Without the wide BVH of CPU devices: DeviceGeometry builds it and then
-            # gives the whole figure (below) before its first upload.
-            self.device_bytes = (self.acceleration.device_bytes() + whole_bytes
-                                 + sum(x.nbytes for x in split.values()))
+            return split
 
-            def fits(geometry_bytes: int) -> None:
-                self.device_bytes = geometry_bytes + whole_bytes
-                check_fits(self.queue.device, self.device, self.device_bytes, MIN_FRAME_BYTES)
-
-            try:
-                # Buffers larger than one allocation are uploaded in parts (split.cl).
-                self.geometry = DeviceGeometry(self.context, a.corners, self.acceleration, split,
-                                               max_buffer_bytes, fits=fits, bounds=a.bounds, origin=a.origin)
-                mf = cl.mem_flags
-                self.buffers = {name: cl.Buffer(self.context, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=x)
-                                for name, x in whole.items()}
-            except (cl.Error, MemoryError) as exc:
-                if not is_out_of_memory(exc):
-                    raise
-                raise self._memory_error(exc, 0) from None
-            defines = dict(self.geometry.defines)
-            if a.detail is not None:
-                defines["SURFACE_DETAIL"] = None
-            # Pixels a work-item of shade_pixels colours: a row's packet of camera
-            # rays where packets are walked (CPU devices, accel_packet.cl), else one.
-            self.rays_per_item = packet_rays(self.context, self.geometry)
-            if self.rays_per_item > 1:
-                defines["RAY_PACKETS"] = self.rays_per_item
-            program = build_program(self.context, "render.cl", defines)
-            # Kernel objects are made once (each attribute lookup on a Program makes
-            # a new one), with their argument types (render.cl's parameter lists).
-            g = self.geometry
-            u32, f32 = np.uint32, np.float32
-            detail = [] if a.detail is None else [   # DETAIL_PARAMS (shading.cl), TEXTURE_PARAMS (texture.cl)
-                *g.extra_arg_types("tri_detail"), None, *g.extra_arg_types("texels"), None]
-            self.kernels = {name: typed_kernel(program, name, types) for name, types in {
-                "generate_rays": [None, *CAMERA_ARG_TYPES, u32, u32, u32, u32, u32, u32, u32],
-                "shade_pixels": [None, None, None, u32, u32, u32, f32, u32, *g.arg_types,
-                                 *g.extra_arg_types("tri_info"), *g.extra_arg_types("vertex_normals"),
-                                 None, None, u32, cltypes.float4, cltypes.float4, *detail],
-                "encode_srgb8": [None, None, u32],
-            }.items()}
+        tables = self._tables()
+        self.device_scene = DeviceScene(
+            a.corners, accel=accel, builder=builder, leaf_size=leaf_size, device=device, bounds=a.bounds,
+            origin=a.origin, extra=shading_arrays, whole_bytes=tables.nbytes, reserve=MIN_FRAME_BYTES,
+            max_buffer_bytes=max_buffer_bytes, timings=self.timings)
+        scene_on_device = self.device_scene
+        self.acceleration, self.geometry = scene_on_device.acceleration, scene_on_device.geometry
+        self.context, self.queue, self.device = scene_on_device.context, scene_on_device.queue, scene_on_device.device
+        self._kind = scene_on_device.kind   # which ENCODE_GROUP applies
+        self.rays_per_item = scene_on_device.rays_per_item
+        with stage(self.timings, "copy to device"), scene_on_device.out_of_memory():
+            self.tables = cl.Buffer(self.context, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR, hostbuf=tables)
+            self.kernels = scene_on_device.kernels(
+                "render.cl", RENDER_KERNELS, {"SURFACE_DETAIL": None} if a.detail is not None else None)
         self._frame_buffers: dict[str, cl.Buffer] = {}
         self._frame_pixels = -1
         self._staging = None
@@ -208,6 +174,19 @@ class Renderer:
         self._max_group = min(   # work-items a launch's group may have, see _launch_shape
             k.get_work_group_info(cl.kernel_work_group_info.WORK_GROUP_SIZE, self.queue.device)
             for name, k in self.kernels.items() if name != "encode_srgb8")
+
+    @property
+    def device_bytes(self) -> int:
+        """Bytes of the scene on the device (geometry, shading arrays and tables)."""
+        return self.device_scene.device_bytes
+
+    def _tables(self) -> np.ndarray:
+        """The scene's small tables as the `tables` buffer holds them (pack_tables),
+        their offsets kept for the SceneInfo of every frame."""
+        a = self.arrays
+        detail = (a.detail.textures, a.detail.srgb_table) if a.detail is not None else ()
+        packed, self._table_offsets = pack_tables(a.materials, a.lights, *detail)
+        return packed
 
     # ----------------------------------------------------------------------- a frame
 
@@ -266,18 +245,16 @@ class Renderer:
         t = np.empty((h, w), np.float32) if hits else None
         return _Job(camera, samples, max_depth, seed, linear, image, pinned, prim, t, timings)
 
-    def _frame_args(self, camera: Camera) -> tuple[tuple, tuple]:
-        """The arguments that hold for a whole frame: the camera's (generate_rays),
+    def _frame_args(self, camera: Camera) -> tuple[np.ndarray, tuple]:
+        """The arguments that hold for a whole frame: the Camera (generate_rays),
         and the scene's with the values a caller may change between frames
-        (lights, colours; shade_pixels)."""
+        (lights, colours): shade_pixels' GEOMETRY_PARAMS and SHADING_PARAMS."""
         b = self.geometry.buffers   # read per frame: a refit may have replaced some
-        scene = (*self.geometry.args, *b["tri_info"], *b["vertex_normals"], self.buffers["materials"])
-        detail = ()
-        if self.arrays.detail is not None:   # DETAIL_PARAMS in shading.cl, TEXTURE_PARAMS in texture.cl
-            detail = (*b["tri_detail"], self.buffers["textures"], *b["texels"], self.buffers["srgb_table"])
-        return camera_args(camera, self.arrays.origin), (
-            *scene, self.buffers["lights"], len(self.arrays.lights), vec4(self.scene.ambient_light),
-            vec4(self.scene.background), *detail)
+        values = self.geometry.scene_value(ambient_light=self.scene.ambient_light, background=self.scene.background,
+                                           num_lights=len(self.arrays.lights), **self._table_offsets)
+        detail = (*b["tri_detail"], *b["texels"]) if self.arrays.detail is not None else ()
+        return camera_value(camera, self.arrays.origin), (
+            *self.geometry.buffer_args, values, *b["tri_info"], *b["vertex_normals"], self.tables, *detail)
 
     @one_at_a_time
     def refit(self, scene, *, rebuild: bool = False) -> None:
@@ -307,9 +284,8 @@ class Renderer:
             self.geometry.refit(self.queue, arrays.corners, arrays.bounds, arrays.origin)
             self.geometry.replace(self.queue, "tri_info", arrays.tri_info[self.acceleration.prim_ids])
             self.geometry.replace(self.queue, "vertex_normals", arrays.vertex_normals)
-            cl.enqueue_copy(self.queue, self.buffers["materials"], arrays.materials)   # as many as before
             self.scene, self.arrays = _own_copy(scene), arrays
-            self.set_lights(scene.lights)
+            self.set_lights(scene.lights)   # uploads the tables, the new materials with the lights
         for queries in list(self._followers):
             queries.follow(self, queries.chunk_rays)
 
@@ -338,7 +314,7 @@ class Renderer:
         turntable of ``clrt batch render`` moves the default light with the camera)."""
         self.scene.lights = list(lights)
         self.arrays.lights = light_records(self.scene.lights, self.arrays.origin)
-        self.buffers["lights"] = replace_buffer(self.queue, self.buffers["lights"], self.arrays.lights)
+        self.tables = replace_buffer(self.queue, self.tables, self._tables())
 
     # ----------------------------------------------------------------------- memory
 
@@ -347,7 +323,7 @@ class Renderer:
         at most half of what the scene leaves free and one buffer's size limit."""
         dev = self.queue.device
         free = max(dev.global_mem_size - self.device_bytes, 0) // 2
-        cap = min(pixels, MAX_TILE_PIXELS, dev.max_mem_alloc_size // RAY.itemsize,
+        cap = min(pixels, MAX_TILE_PIXELS, dev.max_mem_alloc_size // FRAME_ARRAY_BYTES,
                   free // FRAME_BYTES_PER_PIXEL)
         cap = max(cap, min(pixels, self.limits.min_tile_pixels))   # if even that fails, the error says so
         if self.limits.max_tile_pixels is not None:
@@ -360,9 +336,8 @@ class Renderer:
             self._release_frame_buffers()
             mf = cl.mem_flags
             self._frame_buffers = {
-                "rays": cl.Buffer(self.context, mf.READ_WRITE, pixels * RAY.itemsize),
-                "hits": cl.Buffer(self.context, mf.READ_WRITE, pixels * HIT.itemsize),
-                "linear": cl.Buffer(self.context, mf.READ_WRITE, pixels * 16),
+                # The rays, hits and linear colours of a tile (render.cl, frame_offsets).
+                "frame": cl.Buffer(self.context, mf.READ_WRITE, pixels * FRAME_ARRAY_BYTES),
                 "srgb8": cl.Buffer(self.context, mf.WRITE_ONLY, pixels * 3),
                 # Page-locked host memory for tiles that cannot be read back in place.
                 "staging": cl.Buffer(self.context, mf.READ_WRITE | mf.ALLOC_HOST_PTR, pixels * 3),
@@ -371,6 +346,7 @@ class Renderer:
                 self.queue, self._frame_buffers["staging"], cl.map_flags.READ | cl.map_flags.WRITE,
                 0, (pixels, 3), np.uint8)
             self._frame_pixels = pixels
+            self._frame_at = frame_offsets(pixels)
         return self._frame_buffers
 
     def _release_frame_buffers(self) -> None:
@@ -382,12 +358,8 @@ class Renderer:
         self._frame_buffers, self._frame_pixels = {}, -1
 
     def _memory_error(self, exc, tile: int) -> DeviceMemoryError:
-        dev = self.queue.device
         frame = f" and {_size(tile * FRAME_BYTES_PER_PIXEL)} for a tile of {tile:,} pixels" if tile else ""
-        return DeviceMemoryError(
-            f"out of device memory on {self.device} ({error_name(exc)}): the scene needs "
-            f"{_size(self.device_bytes)}{frame}; the device has {_size(dev.global_mem_size)} "
-            f"({_size(dev.max_mem_alloc_size)} at most per buffer), shared with other programs")
+        return self.device_scene.memory_error(exc, frame)
 
     # ----------------------------------------------------------------------- launches
 
@@ -403,17 +375,21 @@ class Renderer:
         sample waits only once -- so that Ctrl-C (raised by Python between calls)
         stops within one launch."""
         buf = self._buffers_for(capacity)
+        frame, at = buf["frame"], self._frame_at
         count = w * h
-        tile = (x, y, w, h)
         size, local = self._launch_shape(w, h)
         n = job.samples * job.samples
+        tile = np.zeros((), TILE)
+        tile["x"], tile["y"], tile["w"], tile["h"] = x, y, w, h
+        tile["rays_at"], tile["hits_at"], tile["image_at"] = at["rays"], at["hits"], at["image"]
+        tile["samples_per_axis"], tile["seed"], tile["max_depth"] = job.samples, job.seed, job.max_depth
+        tile["sample_weight"] = np.float32(1.0 / n)
         launches = []
-        for sample in range(n):
-            gen = self._launch("generate_rays", size, local, buf["rays"], *job.camera_args, sample, job.samples,
-                               job.seed, *tile)
-            shade = self._launch("shade_pixels", *self._launch_shape(w, h, self.rays_per_item), buf["rays"],
-                                 buf["linear"], buf["hits"], w, h,
-                                 job.max_depth, 1.0 / n, sample == 0, *job.scene_args)
+        for sample in range(n):   # (a launch takes its arguments' values when they are set)
+            tile["sample"], tile["first_sample"] = sample, sample == 0
+            gen = self._launch("generate_rays", size, local, frame, job.camera_args, tile)
+            shade = self._launch("shade_pixels", *self._launch_shape(w, h, self.rays_per_item), frame, tile,
+                                 *job.scene_args)
             launches.append((gen, shade))
             if sample < n - 1:
                 wait_for(shade)
@@ -426,15 +402,15 @@ class Renderer:
         q = self.queue
         if job.linear:
             out = np.empty((count, 4), np.float32)
-            copies = [cl.enqueue_copy(q, out, buf["linear"], is_blocking=False)]
+            copies = [cl.enqueue_copy(q, out, frame, src_offset=at["image"], is_blocking=False)]
         else:
-            copies = [self._launch("encode_srgb8", *launch_size(count, ENCODE_GROUP[self._kind]), buf["linear"],
-                                   buf["srgb8"], count)]
+            copies = [self._launch("encode_srgb8", *launch_size(count, ENCODE_GROUP[self._kind]), frame, tile,
+                                   buf["srgb8"])]
             out = image.reshape(count * 3) if direct else self._staging[:count]
             copies.append(cl.enqueue_copy(q, out, buf["srgb8"], is_blocking=False))
         if job.prim is not None:
             records = np.empty(count, HIT)
-            copies.append(cl.enqueue_copy(q, records, buf["hits"], is_blocking=False))
+            copies.append(cl.enqueue_copy(q, records, frame, src_offset=at["hits"], is_blocking=False))
         wait_for(copies[-1])
         job.progress(count)
         host_start = time.perf_counter()
@@ -467,8 +443,10 @@ class Renderer:
         return (-(-w // bw) * bw, -(-h // bh) * bh), (bw, bh)
 
 
-# Device bytes per pixel of a tile: its ray, hit record, linear and sRGB colour.
-FRAME_BYTES_PER_PIXEL = RAY.itemsize + HIT.itemsize + 16 + 3
+# Device bytes per pixel of a tile: its ray, hit record and linear colour in
+# the frame buffer (FRAME_ARRAYS), and its sRGB colour.
+FRAME_ARRAY_BYTES = sum(FRAME_ARRAYS.values())
+FRAME_BYTES_PER_PIXEL = FRAME_ARRAY_BYTES + 3
 MIN_FRAME_BYTES = 256 * FRAME_BYTES_PER_PIXEL
 MAX_TILE_PIXELS = 1 << 23   # 8M pixels (a 4K frame), 536 MiB of tile buffers
 IMAGE_POOL_SIZE = 3         # page-locked images per renderer (clrt/device/pinned.py)
@@ -494,8 +472,8 @@ class _Job:
     prim: np.ndarray | None      # (H, W)
     t: np.ndarray | None         # (H, W)
     timings: dict
-    camera_args: tuple = ()      # of generate_rays, and of shade_pixels after its per-launch ones:
-    scene_args: tuple = ()       # set once per frame (Renderer._frame_args)
+    camera_args: np.ndarray | None = None   # generate_rays' Camera, and shade_pixels' scene arguments:
+    scene_args: tuple = ()                   # set once per frame (Renderer._frame_args)
     progress: Callable[[int], None] | None = None   # see Renderer.render
 
 
@@ -508,19 +486,6 @@ def wait_for(event: cl.Event) -> None:
 def check_host_memory(nbytes: int, what: str) -> None:
     """TooLargeError naming the size needed when ``nbytes`` exceed the available host memory."""
     checks.host_memory(nbytes, what, "render a smaller image")
-
-
-class _stage:
-    """Context manager adding the wall time of a block to ``timings[name]`` in ms."""
-
-    def __init__(self, timings: dict, name: str):
-        self.timings, self.name = timings, name
-
-    def __enter__(self):
-        self.start = time.perf_counter()
-
-    def __exit__(self, *exc):
-        self.timings[self.name] = self.timings.get(self.name, 0.0) + 1e3 * (time.perf_counter() - self.start)
 
 
 def _event_ms(event: cl.Event) -> float:

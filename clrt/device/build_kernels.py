@@ -1,0 +1,130 @@
+"""The device builder's program (entry build_bvh.cl): its kernels' signatures,
+and what the builds on one context share -- scratch buffers, the queue
+untimed builds run on, and the lock by which they take turns."""
+
+from __future__ import annotations
+
+import functools
+import threading
+
+import numpy as np
+import pyopencl as cl
+
+from clrt.device.signature import buffer as B
+from clrt.device.signature import typed_kernels, value
+
+
+def U(name: str):
+    return value(name, np.uint32)
+
+
+def I(name: str):   # noqa: E743 -- the table reads as the kernels' own lists
+    return value(name, np.int32)
+
+
+# Every build kernel's parameters, as build_*.cl declare them: setting the
+# arguments of a build's 40-odd launches then costs no Python time to speak
+# of (clrt.device.program.typed_kernel); tests/test_kernel_args.py checks the table.
+BUILD_KERNELS = {
+    "init_build_state": (B("state"), U("num_tris")),
+    "centroid_bounds": (B("corners"), U("num_tris"), B("state")),
+    "morton_codes": (B("corners"), U("num_tris"), B("state"), B("keys"), B("ids")),
+    "radix_histogram": (B("keys"), U("n"), U("shift"), B("tile_counts")),
+    "scan_counts": (B("counts"), U("n")),
+    "radix_scatter": (B("keys"), B("ids"), U("n"), U("shift"), B("tile_offsets"), B("keys_out"), B("ids_out")),
+    "radix_digit_counts": (B("keys"), U("n"), B("state"), B("status"), U("status_words")),
+    "radix_scatter_lookback": (B("keys"), B("ids"), U("n"), U("pass"), B("state"), B("status"), B("keys_out"),
+        B("ids_out")),
+    "init_leaves": (B("corners"), B("sorted_ids"), B("sorted_keys"), I("segmented"), U("num_tris"), B("nodes"),
+        B("clusters"), B("tile_status"), B("treelet_done")),
+    "ploc_merge": (B("clusters"), B("next"), B("tile_status"), B("nodes"), B("heights"), I("num_tris"), B("state"),
+        I("iteration"), U("leaf_size")),
+    "ploc_count_kept": (B("tile_kept"), B("state"), I("iteration")),
+    "ploc_compact": (B("merged"), B("clusters"), B("tile_offsets"), B("state"), I("iteration")),
+    "ploc_tail": (B("clusters"), B("spare"), B("nearest"), B("nodes"), B("heights"), I("num_tris"), B("state"),
+        I("first_iteration"), U("leaf_size")),
+    "ploc_nearest_tiles": (B("clusters"), B("nearest"), B("state"), I("iteration")),
+    "ploc_merge_tiles": (B("clusters"), B("merged"), B("tile_kept"), B("nearest"), B("nodes"), B("heights"),
+        I("num_tris"), B("state"), I("iteration"), U("leaf_size")),
+    "partition_clear": (B("bins"), B("sample_part"), U("samples")),
+    "partition_init": (B("parts"), B("state"), I("samples"), I("limit")),
+    "partition_bin": (B("corners"), U("samples"), U("stride"), B("sample_part"), B("parts"), B("bins"), B("state")),
+    "partition_split": (B("parts"), B("bins"), B("state"), I("limit"), I("budget")),
+    "partition_assign": (B("corners"), U("samples"), U("stride"), B("sample_part"), B("parts"), B("state")),
+    "partition_order": (B("parts"), B("state")),
+    "partition_morton_codes": (B("corners"), U("num_tris"), B("parts"), B("keys"), B("ids")),
+    "treelet_levels": (B("nodes"), B("heights"), I("num_tris"), U("min_count"), B("state")),
+    "treelet_order": (B("nodes"), B("heights"), I("num_tris"), U("min_count"), B("state"), B("order")),
+    "treelet_restructure": (B("nodes"), B("heights"), B("order"), B("treelet_done"), B("state"), I("num_tris"),
+        U("min_count"), U("leaf_size")),
+    "init_root_paths": (B("nodes"), U("num_nodes"), B("ancestor"), B("path")),
+    "jump_root_paths": (B("ancestor"), B("path"), U("num_nodes"), B("ancestor_out"), B("path_out")),
+    "emit_tree": (B("nodes"), U("num_nodes"), I("root"), B("corners"), B("sorted_ids"), B("ancestor"), B("path"),
+        B("rows"), B("exact_rows"), B("tris"), B("prim_ids"), B("state")),
+}
+
+
+class Workspace:
+    """What the builds on one context share: scratch buffers, kept between
+    builds and grown when a build needs more (allocations are not free on a
+    GPU); the queues untimed builds run on (build_queue); and the lock by
+    which builds take turns (one_build_per_context)."""
+
+    def __init__(self, context: cl.Context):
+        self.context = context
+        self.buffers: dict[str, cl.Buffer] = {}
+        self.queues: dict[int, cl.CommandQueue] = {}     # by device
+        self.lock = threading.Lock()
+        self.kernels: dict[int, dict] = {}               # by program
+
+    def get(self, name: str, nbytes: int) -> cl.Buffer:
+        nbytes = max(int(nbytes), 4)
+        buffer = self.buffers.get(name)
+        if buffer is None or buffer.size < nbytes:
+            if buffer is not None:
+                buffer.release()
+            buffer = cl.Buffer(self.context, cl.mem_flags.READ_WRITE, nbytes)
+            self.buffers[name] = buffer
+        return buffer
+
+    def kernels_of(self, program: cl.Program, defines: dict) -> dict:
+        """The build kernels of ``program`` (built with ``defines``), made once."""
+        key = program.int_ptr
+        if key not in self.kernels:
+            self.kernels[key] = typed_kernels(program, BUILD_KERNELS, defines)
+        return self.kernels[key]
+
+
+workspaces: dict[int, Workspace] = {}
+
+
+def workspace(context: cl.Context) -> Workspace:
+    """The context's Workspace (made by the first build on it)."""
+    found = workspaces.get(context.int_ptr)
+    return found if found is not None else workspaces.setdefault(context.int_ptr, Workspace(context))
+
+
+def build_queue(context: cl.Context, device: cl.Device) -> cl.CommandQueue:
+    """The queue untimed builds run on: one per context and device, without
+    profiling.  On the H200 a launch costs the host 8.5 us to queue there and
+    14 us on a profiling queue, and a small build waits on its host: bunny00
+    2.35 -> 2.13 ms (docs/benchmark-log.md, session 6)."""
+    queues = workspace(context).queues
+    queue = queues.get(device.int_ptr)
+    if queue is None:
+        queue = queues[device.int_ptr] = cl.CommandQueue(context, device)
+    return queue
+
+
+def one_build_per_context(build):
+    """Builds on one context take turns: they share its scratch buffers
+    (Workspace) and its build queue, so two threads building at once (each
+    with an Accel of its own, say) would overwrite each other's keys and
+    nodes -- on PoCL the process crashed (tests/test_device_build.py).  A
+    build holds no lock the caller could be waiting on, and takes
+    milliseconds."""
+    @functools.wraps(build)
+    def one_at_a_time(context: cl.Context, *args, **kwargs):
+        with workspace(context).lock:
+            return build(context, *args, **kwargs)
+    return one_at_a_time

@@ -1,0 +1,128 @@
+"""A scene on one device: the set-up that Renderer and Accel share.
+
+    >>> scene = DeviceScene(corners, accel="box", builder="auto", leaf_size=4, device=None)
+    >>> kernels = scene.kernels("trace.cl", QUERY_KERNELS)
+
+In order: the acceleration structure is built (clrt.device.acceleration, on
+the host or on the device), the context made, the triangles, the tree and
+any shading arrays uploaded (DeviceGeometry, after checking that they fit),
+and each program is built with the defines the scene calls for (its
+traversal, split buffers, ray packets) and its kernels made from their
+signature table (clrt.device.signature).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import time
+from typing import Callable
+
+import numpy as np
+import pyopencl as cl
+
+from clrt.device.acceleration import build_acceleration
+from clrt.device.context import create_context, device_kind, device_label, error_name, format_bytes, is_out_of_memory
+from clrt.device.geometry import DeviceGeometry, check_fits, packet_rays
+from clrt.device.program import build_program
+from clrt.device.signature import typed_kernels
+from clrt.errors import DeviceMemoryError
+
+
+class stage:
+    """Context manager adding the wall time of a block to ``timings[name]`` in ms
+    (nothing when ``timings`` is None)."""
+
+    def __init__(self, timings: dict | None, name: str):
+        self.timings, self.name = timings, name
+
+    def __enter__(self):
+        self.start = time.perf_counter()
+
+    def __exit__(self, *exc):
+        if self.timings is not None:
+            self.timings[self.name] = self.timings.get(self.name, 0.0) + 1e3 * (time.perf_counter() - self.start)
+
+
+class DeviceScene:
+    """Triangles, their acceleration structure and any shading arrays, uploaded
+    to one device.
+
+    ``corners``: (F, 3, 3) float32 in the device's frame (moved by
+    ``-origin``; clrt.scene.arrays.device_origin), input order; ``bounds``:
+    their (2, 3) box in the caller's frame.  ``accel``, ``builder``,
+    ``leaf_size``, ``device``: checked options, as Renderer and Accel take
+    them.  ``extra``: per-slot or per-vertex arrays the kernels index beside
+    the geometry (split with it when large), by parameter name, or a function
+    of the Acceleration giving them (per-slot arrays follow its ``prim_ids``);
+    ``whole_bytes``: what else the caller uploads (counted when checking the
+    fit); ``reserve``: device bytes to leave for per-launch buffers.
+    ``timings``: where the stages' wall times go ("acceleration build",
+    "copy to device"), if given.
+
+    Attributes: ``acceleration``, ``context``, ``queue``, ``device`` (its
+    label), ``kind`` ("gpu" or "cpu"), ``geometry`` (DeviceGeometry),
+    ``device_bytes`` (the scene's bytes on the device, ``whole_bytes``
+    included) and ``rays_per_item`` (rays a work-item of the tracing kernels
+    takes: a packet on CPU devices that walk them, else 1).
+    """
+
+    def __init__(self, corners: np.ndarray, *, accel: str, builder: str, leaf_size: int, device: str | None,
+                 bounds, origin, extra: dict | Callable | None = None, whole_bytes: int = 0, reserve: int = 0,
+                 max_buffer_bytes: int | None = None, max_buffer_label: str = "max_buffer_bytes",
+                 timings: dict | None = None):
+        with stage(timings, "acceleration build"):
+            self.acceleration = build_acceleration(corners, accel, builder, leaf_size, device)
+            if callable(extra):
+                extra = extra(self.acceleration)
+        with stage(timings, "copy to device"):
+            self.context, self.queue = create_context(device)
+            self.device = device_label(self.queue.device)
+            self.kind = device_kind(self.queue.device)
+            # A first figure, before the wide BVH of CPU devices: DeviceGeometry
+            # builds that, then gives the whole one (fits) before its first upload.
+            self.device_bytes = (self.acceleration.device_bytes() + whole_bytes
+                                 + sum(x.nbytes for x in (extra or {}).values()))
+
+            def fits(geometry_bytes: int) -> None:
+                self.device_bytes = geometry_bytes + whole_bytes
+                check_fits(self.queue.device, self.device, self.device_bytes, reserve)
+
+            with self.out_of_memory():
+                self.geometry = DeviceGeometry(self.context, corners, self.acceleration, extra, max_buffer_bytes,
+                                               fits=fits, max_buffer_label=max_buffer_label, bounds=bounds,
+                                               origin=origin)
+            self.rays_per_item = packet_rays(self.context, self.geometry)
+
+    @contextlib.contextmanager
+    def out_of_memory(self):
+        """A block that uploads: the driver's out-of-memory error becomes a
+        DeviceMemoryError that says what the scene needs (memory_error)."""
+        try:
+            yield
+        except (cl.Error, MemoryError) as exc:
+            if not is_out_of_memory(exc):
+                raise
+            raise self.memory_error(exc) from None
+
+    def memory_error(self, exc, more: str = "") -> DeviceMemoryError:
+        """The DeviceMemoryError for the driver's ``exc``: what the scene needs
+        (and ``more``, as " and ... for ..."), and what the device has."""
+        dev = self.queue.device
+        return DeviceMemoryError(
+            f"out of device memory on {self.device} ({error_name(exc)}): the scene needs "
+            f"{format_bytes(self.device_bytes)}{more}; the device has {format_bytes(dev.global_mem_size)} "
+            f"({format_bytes(dev.max_mem_alloc_size)} at most per buffer), shared with other programs")
+
+    def defines(self, extra: dict | None = None) -> dict:
+        """The program defines this scene calls for (its traversal, split
+        buffers, ray packets), with ``extra``."""
+        defines = dict(self.geometry.defines)
+        if self.rays_per_item > 1:
+            defines["RAY_PACKETS"] = self.rays_per_item
+        return {**defines, **(extra or {})}
+
+    def kernels(self, entry: str, table: dict, extra_defines: dict | None = None) -> dict[str, cl.Kernel]:
+        """The kernels of ``table`` (clrt.device.signature) in the program whose
+        entry file is ``entry``, built for this scene."""
+        defines = self.defines(extra_defines)
+        return typed_kernels(build_program(self.context, entry, defines), table, defines)

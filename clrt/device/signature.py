@@ -1,0 +1,85 @@
+"""Kernel signatures, declared once for the host.
+
+Each program's kernels are listed in one table of :class:`Param` (the query
+program's in clrt/query/kernels.py, the render program's in
+clrt/renderer/kernels.py); the scene's parameters that several programs share
+(:data:`GEOMETRY`) are declared here.  From a table, :func:`typed_kernels`
+makes the kernel objects with their argument types declared (pyopencl then
+packs a launch's arguments in one step), and tests/test_kernel_args.py
+checks every table against the parameters the OpenCL compiler reports --
+names and types, for every program option that changes them.
+
+A parameter is a ``__global`` buffer, or a value: a scalar or one of the
+structs of clrt/layouts.py passed by value (OpenCL allows no pointers in
+them, so buffers travel beside them).  Every kernel stays within
+:data:`MAX_KERNEL_PARAMS` parameters in the programs clrt builds, but for
+scenes larger than one allocation: under ``-DSPLIT_BUFFERS`` each scene
+buffer arrives as MAX_PARTS parts (split.cl), one parameter each.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pyopencl as cl
+
+from clrt.config import MAX_PARTS
+from clrt.device.program import typed_kernel
+from clrt.layouts import SCENE_INFO
+
+#: The most parameters of any kernel (tests/test_kernel_args.py holds every
+#: program clrt builds to it, split scenes aside).
+MAX_KERNEL_PARAMS = 12
+
+
+@dataclass(frozen=True)
+class Param:
+    """One kernel parameter as the kernel declares it."""
+
+    name: str
+    dtype: np.dtype | None = None   # None: a __global buffer; else the value's dtype (a layouts struct or scalar)
+    when: str | None = None          # the parameter exists only in programs built with this define
+    split: bool = False              # a scene buffer: MAX_PARTS parts NAME0 .. NAME3 under -DSPLIT_BUFFERS
+
+
+def buffer(name: str, *, when: str | None = None, split: bool = False) -> Param:
+    return Param(name, None, when, split)
+
+
+def value(name: str, dtype, *, when: str | None = None) -> Param:
+    return Param(name, np.dtype(dtype), when)
+
+
+#: The scene's geometry as every tracing kernel takes it (GEOMETRY_PARAMS in
+#: geometry.cl): the triangles, the BVH rows, the slot -> triangle ids, the
+#: wide BVH of CPU devices, and the SceneInfo values.
+GEOMETRY = (buffer("tris", split=True), buffer("nodes", split=True), buffer("prim_ids", split=True),
+            buffer("wide", when="BVH_WIDE"), value("scene", SCENE_INFO))
+
+
+def parameters(signature, defines: dict) -> list[tuple[str, np.dtype | None]]:
+    """(name, dtype or None for a buffer) of each parameter of a kernel with
+    ``signature`` in a program built with ``defines``, in order."""
+    out = []
+    for p in signature:
+        if p.when is not None and p.when not in defines:
+            continue
+        if p.split and "SPLIT_BUFFERS" in defines:
+            out += [(f"{p.name}{k}", None) for k in range(MAX_PARTS)]
+        else:
+            out.append((p.name, p.dtype))
+    return out
+
+
+def typed_kernels(program: cl.Program, table: dict, defines: dict) -> dict[str, cl.Kernel]:
+    """The kernels of ``table`` (name -> signature) in ``program``, built with
+    ``defines``, with their argument types declared; each keeps its parameter
+    names as ``arg_names`` (for the check)."""
+    kernels = {}
+    for name, signature in table.items():
+        params = parameters(signature, defines)
+        kernel = typed_kernel(program, name, [dtype for _, dtype in params])
+        kernel.arg_names = [p for p, _ in params]
+        kernels[name] = kernel
+    return kernels

@@ -1,0 +1,56 @@
+"""The render program (entry render.cl): every kernel's parameters, declared
+once (clrt.device.signature; tests/test_kernel_args.py checks them against
+the compiler's view of render.cl), and the buffers only it reads: a tile's
+frame buffer and the scene's small tables.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from clrt.device.signature import GEOMETRY, buffer, value
+from clrt.layouts import CAMERA, HIT, MATERIAL, RAY, TILE
+
+#: SHADING_PARAMS (shading.cl, texture.cl).
+SHADING = (buffer("tri_info", split=True), buffer("vertex_normals", split=True), buffer("tables"),
+           buffer("tri_detail", when="SURFACE_DETAIL", split=True), buffer("texels", when="SURFACE_DETAIL", split=True))
+
+RENDER_KERNELS = {
+    "generate_rays": (buffer("frame"), value("cam", CAMERA), value("tile", TILE)),
+    "shade_pixels": (buffer("frame"), value("tile", TILE), *GEOMETRY, *SHADING),
+    "encode_srgb8": (buffer("frame"), value("tile", TILE), buffer("out")),
+}
+
+#: Bytes of a tile's per-pixel arrays in its frame buffer: its ray, its hit
+#: record and its linear colour (float4), in that order (Tile in layouts.h).
+FRAME_ARRAYS = {"rays": RAY.itemsize, "hits": HIT.itemsize, "image": 16}
+TABLE_ALIGN = 16   # every table of the `tables` buffer starts at a multiple (float4 rows)
+
+
+def frame_offsets(pixels: int) -> dict[str, int]:
+    """Byte offset of each per-pixel array in a frame buffer of ``pixels`` pixels."""
+    offsets, at = {}, 0
+    for name, size in FRAME_ARRAYS.items():
+        offsets[name] = at
+        at += pixels * size
+    return offsets
+
+
+def pack_tables(materials: np.ndarray, lights: np.ndarray, textures: np.ndarray | None = None,
+                srgb_table: np.ndarray | None = None) -> tuple[np.ndarray, dict]:
+    """The scene's small tables in one byte array (the `tables` buffer,
+    shading.cl), and the SceneInfo offsets of each (materials_at, lights_at,
+    textures_at, srgb_at; 0 for a table not there)."""
+    assert materials.dtype == MATERIAL
+    parts, offsets, at = [], {}, 0
+    for name, table in (("materials_at", materials), ("lights_at", lights), ("textures_at", textures),
+                        ("srgb_at", srgb_table)):
+        offsets[name] = at if table is not None else 0
+        if table is None:
+            continue
+        raw = np.ascontiguousarray(table).view(np.uint8).ravel()
+        pad = -len(raw) % TABLE_ALIGN
+        parts += [raw, np.zeros(pad, np.uint8)]
+        at += len(raw) + pad
+    packed = np.concatenate(parts) if at else np.zeros(TABLE_ALIGN, np.uint8)
+    return packed, offsets
