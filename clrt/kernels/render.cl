@@ -34,22 +34,23 @@ __kernel void generate_rays(__global uchar* frame, const Camera cam, const Tile 
     TILE_RAYS(frame, tile)[gy * tile.w + gx] = camera_ray(&cam, px, py, o.x, o.y);
 }
 
-// image = (first sample ? 0 : image) + sample_weight * colour.  hits receives
-// the camera ray's hit (of the first sample).  Indices are within the tile.
+// image = (first sample ? 0 : image) + sample_weight * colour, pixel i of the
+// tile; its hit record receives the camera ray's hit (of the first sample).
 // (hit_known: the camera ray's hit is `hit`; lit_known: bit i of `lit` says
-// whether light i reaches it.)
-inline void shade_pixel(const Geometry* g, const Shading* sh, const Ray ray, __global float4* image,
-                        __global Hit* hits, const uint i, const uint max_depth, const float sample_weight,
-                        const uint first_sample, Hit hit, const bool hit_known, const bool lit_known,
+// whether light i reaches it.)  The tile's output arrays are found here, after
+// the walks: made before them, their pointers would be held through them.
+inline void shade_pixel(const Geometry* g, const Shading* sh, const Ray ray, __global uchar* frame,
+                        const Tile* tile, const uint i, Hit hit, const bool hit_known, const bool lit_known,
                         const uint lit)
 {
-    const float3 c = trace_whitted(g, sh, max_depth, ray.origin.xyz, ray.dir.xyz, ray.origin.w, ray.dir.w,
+    const float3 c = trace_whitted(g, sh, tile->max_depth, ray.origin.xyz, ray.dir.xyz, ray.origin.w, ray.dir.w,
                                    &hit, hit_known, lit_known, lit);
-    if (first_sample) {
-        hits[i] = reported_hit(g, hit);
-        image[i] = (float4)(sample_weight * c, 1.0f);
+    __global float4* image = TILE_IMAGE(frame, *tile);
+    if (tile->first_sample) {
+        TILE_HITS(frame, *tile)[i] = reported_hit(g, hit);
+        image[i] = (float4)(tile->sample_weight * c, 1.0f);
     } else {
-        image[i] += (float4)(sample_weight * c, 0.0f);
+        image[i] += (float4)(tile->sample_weight * c, 0.0f);
     }
 }
 
@@ -123,11 +124,8 @@ inline void camera_packet_lights(const Geometry* g, const Shading* sh, __global 
 __kernel void shade_pixels(__global uchar* frame, const Tile tile, GEOMETRY_PARAMS, SHADING_PARAMS)
 {
     const uint gx = get_global_id(0), gy = get_global_id(1);
-    const uint tile_w = tile.w, tile_h = tile.h, max_depth = tile.max_depth, first_sample = tile.first_sample;
-    const float sample_weight = tile.sample_weight;
+    const uint tile_w = tile.w, tile_h = tile.h;
     __global const Ray* rays = TILE_RAYS(frame, tile);
-    __global Hit* hits = TILE_HITS(frame, tile);
-    __global float4* image = TILE_IMAGE(frame, tile);
     const Geometry g = make_geometry(GEOMETRY_ARGS);
     const Shading sh = make_shading(SHADING_ARGS, scene);
 #ifdef RAY_PACKETS
@@ -142,14 +140,13 @@ __kernel void shade_pixels(__global uchar* frame, const Tile tile, GEOMETRY_PARA
     if (lit_known)
         camera_packet_lights(&g, &sh, rays + i0, first, lit);
     for (uint k = 0; k < RAY_PACKETS && x0 + k < tile_w; ++k)
-        shade_pixel(&g, &sh, rays[i0 + k], image, hits, i0 + k, max_depth, sample_weight, first_sample,
-                    known ? first[k] : miss_hit(), known, lit_known, lit_known ? lit[k] : 0u);
+        shade_pixel(&g, &sh, rays[i0 + k], frame, &tile, i0 + k, known ? first[k] : miss_hit(), known, lit_known,
+                    lit_known ? lit[k] : 0u);
 #else
     if (gx >= tile_w || gy >= tile_h)
         return;
     const uint i = gy * tile_w + gx;
-    shade_pixel(&g, &sh, rays[i], image, hits, i, max_depth, sample_weight, first_sample, miss_hit(), false,
-                false, 0u);
+    shade_pixel(&g, &sh, rays[i], frame, &tile, i, miss_hit(), false, false, 0u);
 #endif
 }
 
