@@ -232,7 +232,7 @@ __kernel void camera_rays(__global float* dirs, CAMERA_PARAMS, const ulong first
     vstore3(camera_ray(&cam, (uint)(pixel % width), (uint)(pixel / width), 0.5f, 0.5f).dir.xyz, i, dirs);
 }
 
-// ---- one-launch kernels of the primary-ray benchmark (clrt/bench/speed.py)
+// ---- one-launch kernels of the primary-ray benchmark (benchmarks/speed.py)
 
 // Camera rays made and traced in one kernel (no ray buffer).  Ray model: camera.cl.
 __kernel void trace_camera(__global Hit* hits, CAMERA_PARAMS, GEOMETRY_PARAMS)
