@@ -29,7 +29,7 @@ BUILDERS = HOST_BUILDERS + ("device",)
 BUILDER_CHOICES = BUILDERS + ("auto",)
 
 DEFAULT_ACCEL = "box"
-#: "auto": measured on the H200 (docs/benchmarks.md, session 6), the device
+#: "auto": measured on the H200 (docs/benchmark-log.md, session 6), the device
 #: builder takes 1.9 ms for a 75k-triangle mesh where the host SAH build takes
 #: about 300 ms, and its trees trace primary rays 4 % slower (0.192 against
 #: 0.184 ms a 1080p frame) -- a render or a batch of rays wins unless it traces

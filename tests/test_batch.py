@@ -418,10 +418,10 @@ def test_a_chunk_of_rays_reaches_its_task_uncopied(monkeypatch, device):
 
 
 def test_ray_benchmark_counts_the_hits_of_its_own_rays(client, meshes, device):
-    """clrt.bench.batch --rays: the hit count it prints is that of the random
+    """benchmarks.batch --rays: the hit count it prints is that of the random
     rays it makes (traced here in one process), and the generation-only time
     is measured apart."""
-    from clrt.bench.batch import _trace_rays
+    from benchmarks.batch import _trace_rays
     from clrt.scene.sources import as_mesh
     n, chunk = 30_000, 7_000
     seconds, hit, generate = _trace_rays(client, meshes[0], n, chunk)
@@ -438,11 +438,11 @@ def test_ray_benchmark_counts_the_hits_of_its_own_rays(client, meshes, device):
 
 
 def test_ray_benchmark_can_repeat_one_chunk_per_worker(client, meshes, device):
-    """clrt.bench.batch --ray-source repeat: every chunk holds the same seeded
+    """benchmarks.batch --ray-source repeat: every chunk holds the same seeded
     rays (the last one their first rows), made once per worker, and the hit
     count is theirs."""
-    from clrt.bench.batch import _trace_rays
-    from clrt.bench.batch_rays import random_rays, repeated_chunk
+    from benchmarks.batch import _trace_rays
+    from benchmarks.batch_rays import random_rays, repeated_chunk
     from clrt.scene.sources import as_mesh
     n, chunk = 30_000, 7_000
     mesh = as_mesh(meshes[0])

@@ -1,4 +1,4 @@
-"""clrt.bench.batch --breakdown: where a batch's time goes, one row per source."""
+"""benchmarks.batch --breakdown: where a batch's time goes, one row per source."""
 
 import io
 
@@ -10,7 +10,7 @@ pytest.importorskip("distributed")
 
 
 def test_breakdown_has_a_row_per_source_with_its_set_up_and_frame(tmp_path, device):
-    from clrt.bench.batch import _breakdown
+    from benchmarks.batch import _breakdown
 
     sources = []
     for name, mesh in (("ball", primitives.icosphere(2)), ("ring", primitives.torus(1.0, 0.3, 24, 12))):

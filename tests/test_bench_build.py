@@ -1,9 +1,9 @@
-"""clrt.bench.build runs its variants side by side (here on the test device,
+"""benchmarks.build runs its variants side by side (here on the test device,
 on the generated 50k-triangle scene) and, with --embree, Embree's build."""
 
 import pytest
 
-from clrt.bench import build
+from benchmarks import build
 
 
 def test_build_bench_prints_every_variant(device, capsys, monkeypatch):

@@ -1,11 +1,11 @@
-"""clrt.bench.frame times whole frames of its variants side by side, no BVH
+"""benchmarks.frame times whole frames of its variants side by side, no BVH
 among them, and says whether each variant's image is the first one's."""
 
 from pathlib import Path
 
 import pytest
 
-from clrt.bench import frame
+from benchmarks import frame
 
 KNOT = str(Path(__file__).resolve().parent.parent / "assets" / "meshes" / "knot.obj")
 
@@ -31,9 +31,9 @@ def test_benchmarks_refuse_bad_counts_in_one_line(module, args, capsys):
     """A benchmark's counts are checked while parsing: one line naming the
     option, exit code 2, before any mesh is loaded or device touched."""
     import importlib
-    bench = importlib.import_module(f"clrt.bench.{module}")
+    bench = importlib.import_module(f"benchmarks.{module}")
     with pytest.raises(SystemExit) as exit_info:
         bench.main(args)
     assert exit_info.value.code == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert err[-1].startswith(f"python -m clrt.bench.{module}: error:") and args[0] in err[-1]
+    assert err[-1].startswith(f"python -m benchmarks.{module}: error:") and args[0] in err[-1]

@@ -1,4 +1,5 @@
-"""`clrt bench` (clrt.bench.paper) and its mesh suite (clrt.bench.paper_meshes)."""
+"""`clrt bench` (clrt.bench.paper), its report (clrt.bench.paper_report) and its mesh suite
+(clrt.bench.paper_meshes)."""
 
 import argparse
 import csv
@@ -9,7 +10,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from clrt.bench import paper, paper_meshes
+from clrt.bench import paper, paper_meshes, paper_report as report
 from clrt.bench.paper_meshes import GENERATED, MeshSuite, write_mesh
 from clrt.scene.load import load_mesh
 
@@ -26,7 +27,7 @@ def generated():
 def test_generated_face_counts_match_the_paper(generated):
     assert {name: len(m.faces) for name, m in generated.items()} == PAPER_FACES
     for name, g in GENERATED.items():
-        assert g.faces == PAPER_FACES[name] == paper.PAPER[name].faces
+        assert g.faces == PAPER_FACES[name] == report.PAPER[name].faces
 
 
 @pytest.mark.parametrize("name", sorted(PAPER_FACES))
@@ -71,20 +72,20 @@ def test_written_meshes_read_back_bit_for_bit(generated, tmp_path, fmt):
 
 
 def test_reduction_is_the_papers_formula_8():
-    assert paper.reduction(667, 632) == pytest.approx(5.2474, abs=1e-4)       # Table 1, triangle.obj: 5.25%
-    assert paper.reduction(7158953, 901752) == pytest.approx(87.40, abs=0.01)  # dragon.ply: 87.40%
-    assert paper.reduction(100.0, 150.0) == -50.0
-    assert paper.reduction(10.0, 0.0) == 100.0
+    assert report.reduction(667, 632) == pytest.approx(5.2474, abs=1e-4)       # Table 1, triangle.obj: 5.25%
+    assert report.reduction(7158953, 901752) == pytest.approx(87.40, abs=0.01)  # dragon.ply: 87.40%
+    assert report.reduction(100.0, 150.0) == -50.0
+    assert report.reduction(10.0, 0.0) == 100.0
 
 
 def test_paper_times_lookup():
-    assert paper.paper_time("teapot", 6320, "basic") == 1254613
-    assert paper.paper_time("teapot", 6320, "gpu") == 397596
-    assert paper.paper_time("teapot", 6320, "bvh-sphere") == 371324
-    assert paper.paper_time("teapot", 6320, "bvh-gpu-ellipse") == 18332
-    assert paper.paper_time("icosphere", 80, "bvh-gpu-box") is None    # not in the paper's Table 5
-    assert paper.paper_time("camel", 19536, "basic") is None           # not the paper's face count
-    assert paper.paper_time("cow", 5804, "basic") is None
+    assert report.paper_time("teapot", 6320, "basic") == 1254613
+    assert report.paper_time("teapot", 6320, "gpu") == 397596
+    assert report.paper_time("teapot", 6320, "bvh-sphere") == 371324
+    assert report.paper_time("teapot", 6320, "bvh-gpu-ellipse") == 18332
+    assert report.paper_time("icosphere", 80, "bvh-gpu-box") is None    # not in the paper's Table 5
+    assert report.paper_time("camel", 19536, "basic") is None           # not the paper's face count
+    assert report.paper_time("cow", 5804, "basic") is None
 
 
 def _sphere_off(path, segments, stacks):
@@ -135,7 +136,7 @@ def test_tiny_bench_run_writes_the_tables(tmp_path, monkeypatch, device, capsys)
 
     with open(out / "times.csv", newline="") as fh:
         rows = list(csv.DictReader(fh))
-    assert list(rows[0]) == paper.CSV_COLUMNS
+    assert list(rows[0]) == report.CSV_COLUMNS
     assert [(r["mesh"], r["program"], r["builder"]) for r in rows] == [
         (m, p, b) for m in ("triangle2", "icosphere")
         for p, b in (("basic", "-"), ("bvh-box", "paper"), ("bvh-ellipse", "paper"))]
@@ -144,7 +145,7 @@ def test_tiny_bench_run_writes_the_tables(tmp_path, monkeypatch, device, capsys)
         assert float(r["total_ms"]) == pytest.approx(parts, rel=1e-4)
         assert float(r["kernel_ms"]) > 0 and float(r["mrays_wall"]) > 0
         assert r["width"] == r["height"] == "16"
-        assert float(r["paper_ms"]) == paper.paper_time(r["mesh"], int(r["faces"]), r["program"])
+        assert float(r["paper_ms"]) == report.paper_time(r["mesh"], int(r["faces"]), r["program"])
 
     md = (out / "tables.md").read_text()
     assert "no GPU OpenCL device" in md and "clrt bench --meshes triangle2,icosphere" in md
@@ -180,13 +181,13 @@ def test_unknown_names_are_input_errors(tmp_path):
 
 
 def test_chart_draws_without_data_and_with_one_point():
-    empty = np.asarray(Image.open(io.BytesIO(paper.loglog_chart([], "t", "ms"))).convert("RGB"))
+    empty = np.asarray(Image.open(io.BytesIO(report.loglog_chart([], "t", "ms"))).convert("RGB"))
     assert empty.shape == (640, 1000, 3)
     ink = (empty < 128).all(axis=2)                   # black text on white
     assert ink[320:335, 90:160].any(), "'no data' is written at mid-height"
     assert (empty.max(axis=2) - empty.min(axis=2)).max() == 0, "only greys without a series"
     colour = (31, 119, 180)                           # #1f77b4
-    png = paper.loglog_chart([("basic", "#1f77b4", False, [(80, 1.5)])], "t", "ms")
+    png = report.loglog_chart([("basic", "#1f77b4", False, [(80, 1.5)])], "t", "ms")
     chart = np.asarray(Image.open(io.BytesIO(png)).convert("RGB"))
     # axes: faces 10..100 over x pixels 90..750, ms 1..10 over y pixels 570..50 (log)
     x = 90 + (np.log10(80) - 1) * (750 - 90)
@@ -229,13 +230,13 @@ def test_outputs_are_checked_before_any_work(tmp_path, capsys):
 
 
 def _run(mesh, faces, program, builder, total=10.0):
-    return paper.Run(mesh, faces, "generated", program, builder, "CPU", "cpu", 200, 200, 1, 1,
+    return report.Run(mesh, faces, "generated", program, builder, "CPU", "cpu", 200, 200, 1, 1,
                      1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 2.0, 1.0, total - 4.0, total, 4.0, 20.0)
 
 
 def _report(runs, builders=("paper", "sah", "device")):
     args = argparse.Namespace(leaf_size=4, warmup=1, repeat=1, force=False)
-    r = paper.Report(Path("/nonexistent"), "clrt bench", 200, 200, list(builders), args, [])
+    r = report.Report(Path("/nonexistent"), "clrt bench", 200, 200, list(builders), args, [])
     r.runs = list(runs)
     return r
 
@@ -249,7 +250,7 @@ def test_chart_series_of_each_builder_look_different():
     styles = {label: (colour, style) for label, colour, style, _ in series}
     assert len(set(styles.values())) == len(styles) == 6, styles
     assert {s for _, s in styles.values()} == {"solid", "dashed", "dotted"}
-    png = paper.loglog_chart(series, "t", "ms")             # draws every style, legend included
+    png = report.loglog_chart(series, "t", "ms")             # draws every style, legend included
     assert Image.open(io.BytesIO(png)).size == (1000, 640)
 
 
@@ -270,8 +271,11 @@ def test_table4_keeps_bvh_rows_when_basic_was_skipped():
     assert [c.strip() for c in diamond.split("|")[1:-1]][5] == "40.00%"   # 10 ms -> 6 ms
 
 
-def test_the_module_names_itself_as_it_is_run(capsys):
-    """``python -m clrt.bench.paper --help`` shows that command, not a 'bench' word to type after it."""
-    with pytest.raises(SystemExit):
-        paper.main(["--help"])
-    assert capsys.readouterr().out.startswith("usage: python -m clrt.bench.paper [-h]")
+def test_clrt_bench_explains_itself(capsys):
+    """``clrt bench --help``: the command's usage and a line of help for every option."""
+    from clrt import cli
+    assert cli.main(["bench", "--help"]) == 0
+    assert capsys.readouterr().out.startswith("usage: clrt bench [-h]")
+    sub = next(a for a in cli._parser(bench=True)._actions if isinstance(a, argparse._SubParsersAction))
+    bare = [a.option_strings[0] for a in sub.choices["bench"]._actions if a.option_strings and not a.help]
+    assert not bare, f"options without help: {bare}"

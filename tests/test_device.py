@@ -1,7 +1,5 @@
 """Device selection, context caching and the NVIDIA ICD diagnosis (runs on PoCL)."""
 
-import time
-
 import numpy as np
 import pyopencl as cl
 import pytest
@@ -131,10 +129,11 @@ def test_diagnose_nothing_to_fix(tmp_path):
     assert diagnose_nvidia_icd([libdir], vendors, []) is None
 
 
-def test_diagnose_default_roots_are_fast():
-    start = time.perf_counter()
-    diagnose_nvidia_icd()
-    assert time.perf_counter() - start < 1.0  # target 0.2 s; slack for loaded CI
+def test_diagnose_default_roots():
+    """The real driver folders, LD_LIBRARY_PATH and ldconfig: a fix or nothing, never an
+    error (how long it takes: python -m benchmarks.fail_fast)."""
+    diagnosis = diagnose_nvidia_icd()
+    assert diagnosis is None or "libnvidia-opencl" in diagnosis
 
 
 # --------------------------------------------------------------------------- text and contexts

@@ -287,7 +287,7 @@ def test_a_renderer_refit_moves_the_frame_with_the_scene(device):
 
 
 def test_the_offsets_benchmark_runs_and_finds_the_same_answers(device, capsys):
-    from clrt.bench import offsets
+    from benchmarks import offsets
     assert offsets.main(["--offsets", "0,1e5", "--rays", "500", "--repeat", "1",
                          *(["--device", device] if device else [])]) == 0
     out = capsys.readouterr().out

@@ -118,32 +118,27 @@ def test_documented_clrt_bench_commands_parse():
 
 
 def test_documented_raysets_commands_take_one_mesh():
-    """python -m clrt.bench.raysets takes one mesh: the docs loop over meshes
+    """python -m benchmarks.raysets takes one mesh: the docs loop over meshes
     rather than give a {a,b} brace expansion (two meshes to the shell)."""
     texts = [(REPO / "README.md").read_text(), *(p.read_text() for p in (REPO / "docs").glob("*.md"))]
     assert not [t for t in texts if "{bunny00,camel}" in t]
-    commands = _doc_commands("python -m clrt.bench.raysets")
+    commands = _doc_commands("python -m benchmarks.raysets")
     assert commands and not [c for c in commands if "{" in c and "," in c]
 
 
-@pytest.mark.parametrize("name", ["batch", "build", "first_image", "frame", "paper", "rays", "raysets", "scale",
-                                  "speed"])
-def test_every_benchmark_module_explains_itself(name, capsys):
-    """`python -m clrt.bench.NAME --help`: a usage naming that command, a
-    description that ends as a sentence (not cut off before its example), and
-    a line of help for every option."""
-    import importlib
-    module = importlib.import_module(f"clrt.bench.{name}")
-    with pytest.raises(SystemExit):
-        module.main(["--help"])
-    usage, _, rest = capsys.readouterr().out.partition("\n\n")
-    assert usage.startswith(f"usage: python -m clrt.bench.{name} [-h]")
-    description = rest.split("\n\n")[0]
-    assert description.rstrip().endswith("."), description
+BENCHMARKS = sorted(p.stem for p in (REPO / "benchmarks").glob("*.py") if "def main(" in p.read_text())
+# The history (docs/benchmark-log.md) keeps the commands as they were run, under their old names.
+CURRENT_DOCS = [p for p in DOC_FILES if p.name != "benchmark-log.md"]
+
+
+def _benchmark_parser(name: str):
+    """The argument parser of benchmarks.NAME, caught before it parses anything."""
     import argparse
+    import importlib
+    module = importlib.import_module(f"benchmarks.{name}")
     parsers = []
 
-    def keep(parser, *args, **kwargs):   # the module's parser, before any work
+    def keep(parser, *args, **kwargs):
         parsers.append(parser)
         raise SystemExit(0)
 
@@ -151,9 +146,55 @@ def test_every_benchmark_module_explains_itself(name, capsys):
         patch.setattr(argparse.ArgumentParser, "parse_args", keep)
         with pytest.raises(SystemExit):
             module.main([])
-    actions = list(parsers[0]._actions)
-    for action in actions:   # python -m clrt.bench.paper: its options are a subcommand's
-        if isinstance(action, argparse._SubParsersAction):
-            actions += [a for sub in action.choices.values() for a in sub._actions]
-    bare = [a.option_strings[0] for a in actions if a.option_strings and not a.help]
+    return parsers[0]
+
+
+def test_the_benchmarks_page_states_todays_figures_on_one_page():
+    """docs/benchmarks.md: at most 400 lines, and every `python -m benchmarks.NAME ...`
+    on it names a module of benchmarks/ and parses with that module's options."""
+    import shlex
+    text = (REPO / "docs" / "benchmarks.md").read_text()
+    assert len(text.splitlines()) <= 400
+    commands = re.findall(r"python3? -m benchmarks\.(\w+)([^`\n;#]*)", text)
+    named = {name for name, _ in commands}
+    assert named <= set(BENCHMARKS), named - set(BENCHMARKS)
+    assert {"build", "rays", "raysets", "frame", "first_image", "batch", "scale", "speed"} <= named
+    bad = []
+    for name, args in commands:
+        try:
+            _benchmark_parser(name).parse_args(shlex.split(args))
+        except SystemExit:
+            bad.append(f"python -m benchmarks.{name}{args}")
+    assert not bad, bad
+    assert (REPO / "docs" / "benchmark-log.md").is_file()
+
+
+def test_docs_name_benchmarks_and_tools_where_they_are():
+    """README.md and docs/ (but the history) run benchmarks as `python -m
+    benchmarks.NAME` and the fuzzer as `python tools/fuzz.py`; only `clrt bench`
+    stays in the package."""
+    stale = []
+    for path in CURRENT_DOCS:
+        text = path.read_text()
+        for name in re.findall(r"python3? -m benchmarks\.([a-z_]+)", text):
+            if name not in BENCHMARKS:
+                stale.append(f"{path.name}: benchmarks.{name}")
+        stale += [f"{path.name}: {m}" for m in re.findall(r"clrt[./](?:bench[./](?!paper)\w+|tools\b)", text)]
+    assert not stale, stale
+
+
+@pytest.mark.parametrize("name", BENCHMARKS)
+def test_every_benchmark_module_explains_itself(name, capsys):
+    """`python -m benchmarks.NAME --help`: a usage naming that command, a
+    description that ends as a sentence (not cut off before its example), and
+    a line of help for every option."""
+    import importlib
+    module = importlib.import_module(f"benchmarks.{name}")
+    with pytest.raises(SystemExit):
+        module.main(["--help"])
+    usage, _, rest = capsys.readouterr().out.partition("\n\n")
+    assert usage.startswith(f"usage: python -m benchmarks.{name} [-h]")
+    description = rest.split("\n\n")[0]
+    assert description.rstrip().endswith("."), description
+    bare = [a.option_strings[0] for a in _benchmark_parser(name)._actions if a.option_strings and not a.help]
     assert not bare, f"options without help: {bare}"

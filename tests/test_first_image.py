@@ -1,6 +1,6 @@
-"""clrt.bench.first_image runs on the test device and prints its wall times and stage table."""
+"""benchmarks.first_image runs on the test device and prints its wall times and stage table."""
 
-from clrt.bench import first_image
+from benchmarks import first_image
 from clrt.scene import primitives
 
 ROWS = ["python start", "import numpy", "import pyopencl", "import clrt", "cl.get_platforms()",

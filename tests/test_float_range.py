@@ -246,7 +246,7 @@ def test_far_origins_on_the_device_are_refused_with_their_value(device):
 
 
 def test_a_ray_file_with_far_origins_exits_2(tmp_path, capsys, device):
-    from clrt.bench import raysets
+    from benchmarks import raysets
     mesh = write_icosphere_obj(tmp_path / "sphere.obj")
     o, d = _rays_with_far_origins()
     rows = np.hstack([o, d]).astype("<f4")

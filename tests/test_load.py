@@ -5,7 +5,6 @@ needs ``../shared/meshes`` and skips without it.
 """
 
 import struct
-import time
 from pathlib import Path
 
 import numpy as np
@@ -711,22 +710,20 @@ def test_off_nan_vertex(tmp_path):
     assert_one_line_error(write(tmp_path, "nan.off", text), "NaN")
 
 
-def test_off_huge_header_count_fails_fast(tmp_path):
+def test_off_huge_header_count_is_refused(tmp_path):
+    """Refused from what the file holds, not after allocating what its header promises
+    (how long it takes: python -m benchmarks.fail_fast)."""
     text = "OFF\n1000000000000 1000000000000 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n"
     assert len(text) < 100
-    start = time.perf_counter()
     assert_one_line_error(write(tmp_path, "huge.off", text), "truncated")
-    assert time.perf_counter() - start < 1.0
 
 
 @pytest.mark.parametrize("encoding", ["ascii", "binary_little_endian"])
-def test_ply_huge_header_count_fails_fast(tmp_path, encoding):
+def test_ply_huge_header_count_is_refused(tmp_path, encoding):
     header = (f"ply\nformat {encoding} 1.0\nelement vertex 1000000000000\nproperty float x\n"
               "property float y\nproperty float z\nelement face 1\n"
               "property list uchar int vertex_indices\nend_header\n")
-    start = time.perf_counter()
     assert_one_line_error(write(tmp_path, "huge.ply", header + "0 0 0\n"))
-    assert time.perf_counter() - start < 1.0
 
 
 @pytest.mark.parametrize("faces, expected", [
@@ -838,7 +835,8 @@ def _samples() -> "dict[str, bytes]":
 @pytest.mark.parametrize("kind", ["3ds", "off", "obj", "ply", "ply-ascii", "stl", "stl-ascii",
                                   "glb"])
 def test_random_byte_mutations(tmp_path, kind, capfd):
-    """200 mutated copies per format: each loads or raises MeshLoadError, quickly."""
+    """200 mutated copies per format: each loads or raises MeshLoadError (how long
+    each takes: python -m benchmarks.fail_fast)."""
     data = _samples()[kind]
     ext = "." + kind.split("-")[0]
     rng = np.random.default_rng(20240521)
@@ -851,7 +849,6 @@ def test_random_byte_mutations(tmp_path, kind, capfd):
             else:  # text formats mostly break on digits, so favour plausible ones
                 mutated[position] = ord(str(rng.integers(10)))
         path = write(tmp_path, f"m{case}{ext}", bytes(mutated))
-        start = time.perf_counter()
         try:
             mesh = load_mesh(path)
         except MeshLoadError as exc:
@@ -860,7 +857,6 @@ def test_random_byte_mutations(tmp_path, kind, capfd):
             assert mesh.faces.dtype == np.int32 and len(mesh.faces) > 0
             assert mesh.faces.max() < len(mesh.vertices)
             assert np.isfinite(mesh.vertices).all()
-        assert time.perf_counter() - start < 1.0, f"case {case} of {kind} was slow"
     # trimesh's logged warnings (with tracebacks) must not reach the terminal.
     assert capfd.readouterr().err == ""
 

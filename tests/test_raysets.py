@@ -1,11 +1,11 @@
-"""The incoherent ray sets of ``clrt.bench.raysets``: seeded, shareable as files,
+"""The incoherent ray sets of ``benchmarks.raysets``: seeded, shareable as files,
 and traced alike by every traversal variant and by the brute-force reference."""
 
 import numpy as np
 import pytest
 
 import clrt
-from clrt.bench import raysets
+from benchmarks import raysets
 from clrt.config import BUILDERS, VOLUMES
 from clrt.errors import InputError
 from clrt.reference import intersect
@@ -162,7 +162,7 @@ def test_command_writes_reads_and_refuses(tmp_path, capsys, device):
     row = lambda text, name: next(line for line in text.splitlines() if line.startswith(f"| {name} "))  # noqa: E731
     # same hits and sum of distances from the file as when generated
     assert row(first, "random").split("|")[10:12] == row(again, "random.f32").split("|")[10:12]
-    from clrt.bench.common import rate
+    from benchmarks.common import rate
     for cell in (row(first, "random").split("|")[k].strip() for k in (7, 9, 13)):   # Mrays/s, 3 figures
         assert float(cell.replace(",", "")) > 0 and rate(float(cell.replace(",", ""))) == cell, cell
     (tmp_path / "bad.f32").write_bytes(b"\0" * 10)
@@ -229,7 +229,7 @@ def test_bad_work_group_sizes_fail_in_one_line(group, capsys):
         raysets.main(["--group", group, "--rays", "1K"])
     assert exit_info.value.code == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert err[-1].startswith("python -m clrt.bench.raysets: error: argument --group: expected work-group sizes")
+    assert err[-1].startswith("python -m benchmarks.raysets: error: argument --group: expected work-group sizes")
 
 
 def test_a_work_group_larger_than_the_device_takes_fails_in_one_line(torus, device):
@@ -262,7 +262,7 @@ def test_write_keeps_a_users_file_and_bad_counts_fail_in_one_line(tmp_path, caps
             raysets.main([str(mesh), *bad])
         assert exit_info.value.code == 2
         assert capsys.readouterr().err.strip().splitlines()[-1].startswith(
-            f"python -m clrt.bench.raysets: error: argument {bad[0]}: expected")
+            f"python -m benchmarks.raysets: error: argument {bad[0]}: expected")
 
 
 def test_rays_beyond_host_memory_fail_before_any_work(monkeypatch, capsys):
@@ -276,7 +276,7 @@ def test_rays_beyond_host_memory_fail_before_any_work(monkeypatch, capsys):
 def test_rates_are_printed_to_three_significant_figures():
     """Mrays/s of brute force is well below 0.1 on a CPU: shown as 0.0123, not
     0.0; large rates keep their thousands separators."""
-    from clrt.bench.common import rate
+    from benchmarks.common import rate
     assert [rate(x) for x in (0.012345, 0.0004, 1.5, 9.996, 32.45, 873.2, 12345.6, 0.0)] == [
         "0.0123", "0.000400", "1.50", "10.0", "32.5", "873", "12,346", "0"]
     assert rate(float("inf")) == "inf"

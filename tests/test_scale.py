@@ -3,7 +3,7 @@
 The mesh is a finely tessellated torus, so every hit can be checked against
 the analytic surface.  The paper builder is used: binned SAH takes about 25 s
 for this mesh on 2 cores (docs/limits.md has the figures); both give the same
-image (tests/test_accel.py).  ``python -m clrt.bench.scale`` measures larger
+image (tests/test_accel.py).  ``python -m benchmarks.scale`` measures larger
 meshes, on the GPU too.
 """
 

@@ -19,7 +19,7 @@ programming bottom up (_plan); a subtree of at most ``MERGE`` triangles (its
 slots are consecutive) may become one leaf, a binary leaf stays one.  Against
 the greedy collapse it replaces (open the largest inner child until the node
 is full) nodes hold 6.4 children instead of 4.3 and bunny00 takes 5,055 nodes
-instead of 7,573: about 4 % faster on PoCL (docs/benchmarks.md).  The work is
+instead of 7,573: about 4 % faster on PoCL (docs/benchmark-log.md).  The work is
 done level by level for all rows of a level at once, in numpy.
 """
 

@@ -1,1 +1,1 @@
-"""Benchmarks: commands that print tables (never timed tests)."""
+"""``clrt bench``: the paper's experiments, rerun (the developer benchmarks are the repository's benchmarks/)."""

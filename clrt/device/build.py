@@ -15,7 +15,7 @@ The algorithm (kernels in ``clrt/kernels/build_*.cl``, entry ``build_bvh.cl``):
    triangles; then a key per triangle of its segment above a 24-bit Morton
    code within the segment's bounds, and PLOC (3.) merges only clusters of
    one segment -- the middle of the tree is the SAH's, which PLOC's merges
-   along the Morton curve did worse (docs/benchmarks.md, session 13);
+   along the Morton curve did worse (docs/benchmark-log.md, session 13);
 2. a least-significant-digit radix sort of (code, triangle id), ``RADIX_BITS``
    per pass: on GPUs one launch a pass (the tiles' offsets by decoupled
    look-back) after one that counts the digits of every pass, on CPU devices
@@ -102,7 +102,7 @@ assert SORT_PASSES % 2 == 0, "init_leaves reads the sorted keys from keys[0]"
 # Measured SAH cost over the host SAH builder's (leaf size 4): camel 1.13 / 1.11
 # / 1.06 and bunny 1.09 / 1.08 / - at radius 8 / 16 / 32; the search time grows
 # with the radius, and at 32 the pair table no longer fits 48 KiB of local
-# memory.  ``python -m clrt.bench.build`` prints the ratio.
+# memory.  ``python -m benchmarks.build`` prints the ratio.
 PLOC_RADIUS = 16
 # Clusters at which the host hands over to ploc_tail, per device type: a GPU
 # runs a few thousand clusters' iteration in one work-group faster than three
@@ -115,7 +115,7 @@ TAIL_GROUP = {"gpu": 1024, "cpu": BUILD_GROUP}
 # PLOC stops at this many clusters, and ploc_tail splits them top-down by the
 # SAH (build_top.cl says why; 1: PLOC up to the root).  At most the tail's
 # work-group and SAH_TOP_MAX (its tables in local memory).
-# On the H200 (docs/benchmarks.md, session 12), 1M random rays: bunny00 -5 %,
+# On the H200 (docs/benchmark-log.md, session 12), 1M random rays: bunny00 -5 %,
 # camel -4 % (128 against none; 256: -7 % and -5 % for 0.1 ms more build).
 SAH_TOP_CLUSTERS = {"gpu": 128, "cpu": 128}
 SAH_TOP_MAX = 256
@@ -125,7 +125,7 @@ SAH_TOP_MAX = 256
 # PART_LEVELS levels (launched without reading the device; the levels past the
 # last split cost a few microseconds each), decided on at most PART_SAMPLES
 # evenly spaced triangles.  PLOC merges within a segment.
-# On the H200 (docs/benchmarks.md, session 13) it lowers the SAH cost of
+# On the H200 (docs/benchmark-log.md, session 13) it lowers the SAH cost of
 # bunny00's tree by 3 % (random, diffuse, AO and camera rays 3-6 % faster) for
 # 1.1 ms more build (1.9 -> 3.0 ms), of 1M triangles (14 bunnies) by 2 % for
 # 1 ms more, of 10M by 11 % and of 50M by 28 % for no more build time (its
@@ -145,7 +145,7 @@ PART_MAX_NODES = 2 * SAH_TOP_MAX
 # long as the chain of treelets up the tree's height, and a smaller treelet
 # is quicker (its dynamic program runs over 63 subsets instead of 127, and
 # one node fewer is opened); the low nodes change the tree's cost least.
-# On the H200 (docs/benchmarks.md, session 6; build ms, primary rays over
+# On the H200 (docs/benchmark-log.md, session 6; build ms, primary rays over
 # the host SAH tree's): bunny00 7 leaves 1.92 ms / +4.2 %, 6 leaves 1.69 /
 # +5.4 %, 7 and 6 below 16 triangles 1.87 / +4.3 %; camel 1.45 / +2.3 %,
 # 1.26 / +6.1 %, 1.41 / +3.0 %.  (On PoCL 8 lowered the SAH cost by 0.4 %
@@ -158,7 +158,7 @@ TREELET_GROUP = 32       # work-items that solve one treelet together
 TREELET_GROUPS_PER_UNIT = 32   # treelet work-groups launched per compute unit (each takes node after node)
 # Treelets of nodes with fewer triangles are not restructured (nodes of at
 # most leaf_size never are), by mesh size: (triangles from, minimum), the
-# last entry that applies.  Measured on the H200 (bench.build,
+# last entry that applies.  Measured on the H200 (benchmarks.build,
 # device/treelet-min=N; trace: primary rays, trees launched in turn):
 #   minimum           leaf_size + 1      8           16
 #   bunny00 trace     +3.8 %             +5.4 %      +6.0 %   (over the host SAH tree)
@@ -389,7 +389,7 @@ def build_on_device(context: cl.Context, queue: cl.CommandQueue, corners, volume
         profiling enabled (clrt.device.context.create_context's does);
         otherwise on a queue of the same device without it (build_queue).
     profile: keep every launch's kernel name and device start and end
-        (``DeviceBvh.launches``; clrt.bench.build --profile); implies device_times.
+        (``DeviceBvh.launches``; benchmarks.build --profile); implies device_times.
     Either way the build is complete when this returns, so ``queue`` and any
     other queue of the context may use the buffers at once.
     Raises InputError on bad input, DeviceError when the device lacks float64.

@@ -29,7 +29,7 @@ from clrt.scene.arrays import triangle_verts
 # Device kinds (clrt.device.context.device_kind) that walk the wide BVH of
 # clrt/accel/wide.py (accel_wide.cl) where it applies -- box volumes, buffers
 # not split -- instead of the binary rows.  On PoCL it took a third to a half
-# off every ray set's kernel time (docs/benchmarks.md); a GPU runs a
+# off every ray set's kernel time (docs/benchmark-log.md); a GPU runs a
 # work-item's walk in one lane, where it would only read more bytes a node,
 # and builds none of it.  Tests empty it to compare the two walks on one
 # device.
@@ -39,7 +39,7 @@ WIDE_BVH_KINDS = ("cpu",)
 # each work-item PACKET_RAYS consecutive rays where the wide BVH is walked
 # (-DRAY_PACKETS=PACKET_RAYS): rays that travel together walk it as one ray
 # packet (accel_packet.cl), which took about half off camera rays' kernel
-# time on PoCL; the others take the single-ray walk (docs/benchmarks.md).
+# time on PoCL; the others take the single-ray walk (docs/benchmark-log.md).
 # Tests empty it to compare the two on one device.
 RAY_PACKET_KINDS = ("cpu",)
 PACKET_RAYS = 8      # the float8 lanes of rays.cl and accel_packet.cl (rays.cl checks it)

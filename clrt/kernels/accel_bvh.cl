@@ -29,7 +29,7 @@
 // test on incoherent rays on the H200 (and 3-6 % less than one walk deciding
 // per box).  Other programs -- the renderer's kernels, each with a closest-hit
 // and an any-hit walk -- ran 5-8 % slower with the second walk, and walk every
-// ray with the exact test (docs/benchmarks.md).  (The CPU's wide walk,
+// ray with the exact test (docs/benchmark-log.md).  (The CPU's wide walk,
 // accel_wide.cl, takes the FMA test for oblique rays in every program.)
 // The walk holds one current child -- a row to open, or a leaf to test -- and
 // a stack of postponed children with the distance where the ray enters them.

@@ -31,7 +31,7 @@
 // query is answered.  Forced inline, with the packet test: PoCL keeps both as
 // calls otherwise, and around a call the walk's float8 values (the ray's
 // broadcast origin and inverse direction) go through the stack (80 stack
-// accesses in the walk's code, 30 inlined): 1.5-5 % faster, docs/benchmarks.md.
+// accesses in the walk's code, 30 inlined): 1.5-5 % faster, docs/benchmark-log.md.
 __attribute__((always_inline))
 inline bool visit_packet(const Geometry* g, const ShearedRay* r, int packet, float tmin, float* tmax,
                          const int query, Hit* best, HitSink* sink)
@@ -88,7 +88,7 @@ inline Hit walk_wide_tree(const Geometry* g, const ShearedRay* r, const VolumeRa
                 if (!(lanes & (lanes - 1u))) {            // two met: no loop
                     // the loop's order (the closest hit: the nearer, the higher
                     // lane on a tie; else the higher lane first), by selects rather
-                    // than its compare-and-shift: 1-4 % faster, docs/benchmarks.md
+                    // than its compare-and-shift: 1-4 % faster, docs/benchmark-log.md
                     const int k2 = 31 - clz(lanes);
                     const float t1 = enter[k], t2 = enter[k2];
                     const int2 c1 = (int2)(child[k], count[k]), c2 = (int2)(child[k2], count[k2]);

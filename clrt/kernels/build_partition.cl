@@ -5,7 +5,7 @@
 //
 // Why: PLOC's merges follow the Morton curve, and the tree it makes groups
 // triangles worse than a top-down SAH build does where the groups are large.
-// Emulated on the host (session 13, docs/benchmarks.md): PLOC's clusters
+// Emulated on the host (session 13, docs/benchmark-log.md): PLOC's clusters
 // rebuilt with the SAH inside and above them stayed 3-4 % above the host
 // SAH tree's cost, while an SAH partition into 100-200 segments with PLOC
 // inside came within 1-2 %.  The middle levels are the SAH's, the bottom

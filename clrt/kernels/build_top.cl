@@ -6,7 +6,7 @@
 // Why: PLOC's last merges pair clusters by the least union area, which knows
 // nothing of how many triangles each holds, and a few hundred large clusters
 // grouped that way make the levels every ray walks.  Measured on the H200
-// (docs/benchmarks.md, session 12): the host SAH builder's tree over the
+// (docs/benchmark-log.md, session 12): the host SAH builder's tree over the
 // device tree's top few hundred subtrees took 5-7 % off random and diffuse
 // rays; the same top by PLOC with every cluster searched recovered less than
 // half of that.

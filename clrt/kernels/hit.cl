@@ -66,7 +66,7 @@ inline void sink_hit(HitSink* sink, int prim, float t)
 // Take a hit (t, u, v) of the triangle in `slot` for `query`; true once the
 // query is answered.  The closest hit reads input indices only on a tie of
 // distances (both triangles' then), which is rare, so the walks keep no index
-// of their best hit (the same kernel times on the H200, docs/benchmarks.md).
+// of their best hit (the same kernel times on the H200, docs/benchmark-log.md).
 inline bool record_hit(const Geometry* g, int slot, float t, float u, float v, float* tmax,
                        const int query, Hit* best, HitSink* sink)
 {

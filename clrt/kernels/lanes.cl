@@ -8,7 +8,7 @@
 // Bit k set where lane k of `lanes` is set.  On x86 (PoCL's compiler defines
 // __AVX__ where the host has it) that is one vmovmskps of the lanes' sign
 // bits: about 5 % less kernel time on incoherent rays than the portable form
-// below, which LLVM does not see through (docs/benchmarks.md).  Elsewhere, or
+// below, which LLVM does not see through (docs/benchmark-log.md).  Elsewhere, or
 // with -DPORTABLE_LANE_BITS (tests/test_wide.py builds both): the lanes as
 // eight bytes of 0 or 1 in one ulong, whose multiply by 2^56 + 2^49 + ... +
 // 2^7 moves byte k's bit to bit 56 + k, and no other product reaches the top

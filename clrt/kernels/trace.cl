@@ -243,7 +243,7 @@ __kernel void camera_rays(__global float* dirs, const Camera cam, const ulong fi
     vstore3(camera_ray(&cam, (uint)(pixel % cam.width), (uint)(pixel / cam.width), 0.5f, 0.5f).dir.xyz, i, dirs);
 }
 
-// ---- one-launch kernels of the primary-ray benchmark (clrt/bench/speed.py)
+// ---- one-launch kernels of the primary-ray benchmark (benchmarks/speed.py)
 
 // Camera rays made and traced in one kernel (no ray buffer).  Ray model: camera.cl.
 __kernel void trace_camera(__global Hit* hits, const Camera cam, GEOMETRY_PARAMS)

@@ -78,10 +78,10 @@ RAY_STAGING = {"gpu": True, "cpu": False}
 # queue.  Cutting host batches smaller, on two queues, so that one chunk's
 # transfers would overlap another's kernel, was slower on the H200 at every
 # size (1M rays numpy -> Hits: 7.4 ms in four chunks, 3.8 in one;
-# docs/benchmarks.md, session 6): each transfer of pageable memory costs the
+# docs/benchmark-log.md, session 6): each transfer of pageable memory costs the
 # host more than the device time it could hide.
 # Work-items per work-group of the query kernels; None lets the driver choose.
-# Measured on the H200 (clrt.bench.raysets --group, docs/benchmarks.md): 128
+# Measured on the H200 (benchmarks.raysets --group, docs/benchmark-log.md): 128
 # takes 5-7 % off incoherent sets (random, diffuse, AO) against the driver's
 # choice, and 1-2 % off camera rays; 64 is as good on incoherent rays but
 # slower on camera rays.  On a CPU device (PoCL) the driver's choice, 8, 64 and
@@ -98,7 +98,7 @@ CAMERA_RAYS_GROUP: dict = {"gpu": None, "cpu": 64}
 # The same where a work-item of query_closest / query_any answers a packet of
 # rays (clrt.device.geometry.RAY_PACKET_KINDS).  PoCL's own choice for these
 # launches made incoherent rays 4-15 % slower than the single-ray kernels; 8
-# to 64 work-items measured level with them (docs/benchmarks.md, session 9).
+# to 64 work-items measured level with them (docs/benchmark-log.md, session 9).
 PACKET_GROUP: dict = {"gpu": 128, "cpu": 16}
 RESULT_POOL_SIZE = 3                # page-locked result blocks per Accel (clrt/device/pinned.py)
 RESULT_POOL_MAX_BYTES = 1 << 30     # larger results go to ordinary memory

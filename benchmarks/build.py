@@ -1,8 +1,8 @@
-"""BVH build time and tree quality per builder: ``python -m clrt.bench.build``.
+"""BVH build time and tree quality per builder: ``python -m benchmarks.build``.
 
-    python -m clrt.bench.build --device gpu
-    python -m clrt.bench.build --device gpu --triangles 1M,10M --builders sah,device
-    python -m clrt.bench.build --device cpu --meshes camel --repeat 3
+    python -m benchmarks.build --device gpu
+    python -m benchmarks.build --device gpu --triangles 1M,10M --builders sah,device
+    python -m benchmarks.build --device cpu --meshes camel --repeat 3
 
 For each scene and builder (``paper``, ``sah``: on the host; ``device``: PLOC
 on the OpenCL device, clrt.device.build), one table row:
@@ -19,9 +19,9 @@ on the OpenCL device, clrt.device.build), one table row:
   (the triangles uploaded, the volumes refitted on the device);
 * ``trace ms``: median kernel time of one closest-hit primary ray per pixel
   at 1920x1080 (``trace_camera``), the scene's trees launched in turn for
-  TRACE_ROUNDS rounds, on the fixed cameras of clrt.bench.speed for its
+  TRACE_ROUNDS rounds, on the fixed cameras of benchmarks.speed for its
   meshes, and a framing camera for the generated scenes: ``--triangles N``
-  makes a grid of copies of the bunny (clrt.bench.scale.instanced).
+  makes a grid of copies of the bunny (benchmarks.scale.instanced).
 
 Prints a markdown table; timing is done here, never in tests.  ``--profile``
 adds, for each device variant, one warm build launch by launch: device ms per
@@ -30,18 +30,23 @@ kernel and where the device sat idle between launches (waiting for the host).
 
 from __future__ import annotations
 
+import sys
+
+if not __package__:   # run as a script, python benchmarks/NAME.py: import from the repository, not this folder
+    import os.path
+    sys.path[0] = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
 import argparse
 import statistics
-import sys
 import time
 from pathlib import Path
 
 import numpy as np
 import pyopencl as cl
 
-from clrt.bench.common import NON_NEGATIVE, exit_code, int_at_least, parse_count, rate
-from clrt.bench.scale import instanced
-from clrt.bench.speed import CASES
+from benchmarks.common import NON_NEGATIVE, SHARED_MESHES, exit_code, int_at_least, parse_count, rate
+from benchmarks.scale import instanced
+from benchmarks.speed import CASES
 from clrt.config import HOST_BUILDERS, MAX_LEAF_SIZE
 from clrt.scene.arrays import triangle_corners
 
@@ -288,9 +293,9 @@ def launch_profile(context, queue, corners, volume, builder, leaf_size) -> list[
 
 
 def main(argv=None) -> int:
-    p = argparse.ArgumentParser(prog="python -m clrt.bench.build", description=__doc__.split("\n")[0])
+    p = argparse.ArgumentParser(prog="python -m benchmarks.build", description=__doc__.split("\n")[0])
     mesh_names = sorted(CASES) + sorted(GENERATED)     # what --meshes accepts
-    default_dir = Path(__file__).resolve().parents[2].parent / "shared" / "meshes"
+    default_dir = SHARED_MESHES
     p.add_argument("--mesh-dir", type=Path, default=default_dir, help=f"folder of the meshes (default {default_dir})")
     p.add_argument("--meshes", type=lambda s: [x for x in s.split(",") if x], default=sorted(CASES),
                    help=f"comma-separated, of {', '.join(mesh_names)} (default {', '.join(sorted(CASES))}; "

@@ -1,9 +1,9 @@
 """Fuzzing the mesh loaders with mutated real files, each case bounded in time and memory.
 
-    python -m clrt.tools.fuzz --seconds 600                   # every format, ten minutes
-    python -m clrt.tools.fuzz --cases 5000 --format 3ds,ply   # a fixed number of cases
-    python -m clrt.tools.fuzz --corpus ../shared/meshes --save fuzz-failures --jobs 2
-    python -m clrt.tools.fuzz --replay 0:1234                 # rerun one case here, with a traceback
+    python tools/fuzz.py --seconds 600                      # every format, ten minutes
+    python tools/fuzz.py --cases 5000 --format 3ds,ply      # a fixed number of cases
+    python tools/fuzz.py --corpus ../shared/meshes --save fuzz-failures --jobs 2
+    python tools/fuzz.py --replay 0:1234                    # rerun one case here, with a traceback
 
 The corpus is a set of valid files: small meshes written by trimesh's exporters
 and our 3DS writer in every format (always), plus the files of ``--corpus``
@@ -45,6 +45,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]   # the repository: tools/ and clrt/ beside each other
+if __name__ == "__main__":   # python tools/fuzz.py: this checkout's clrt, imported from the repository
+    sys.path[0] = str(ROOT)
 
 FORMATS = ("3ds", "glb", "gltf", "obj", "off", "ply", "stl")
 _TEXT = {"obj", "off", "gltf"}   # ASCII PLY and STL are recognised per file
@@ -411,11 +415,10 @@ class Report:
 
 class _Worker:
     def __init__(self, options: list[str], start: int, stride: int, end: int | None):
-        cmd = [sys.executable, "-m", "clrt.tools.fuzz", "--worker", "--start", str(start), "--stride", str(stride),
+        cmd = [sys.executable, str(Path(__file__).resolve()), "--worker", "--start", str(start), "--stride", str(stride),
                *options] + ([] if end is None else ["--end", str(end)])
         env = {**os.environ, "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
-        root = str(Path(__file__).resolve().parents[1])
-        env["PYTHONPATH"] = os.pathsep.join([root, env.get("PYTHONPATH", "")]).rstrip(os.pathsep)
+        env["PYTHONPATH"] = os.pathsep.join([str(ROOT), env.get("PYTHONPATH", "")]).rstrip(os.pathsep)
         self.stderr = tempfile.TemporaryFile()
         self.proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=self.stderr, env=env)
         self.stride, self.end = stride, end
@@ -564,7 +567,7 @@ def _formats(text: str) -> tuple:
 
 
 def main(argv=None) -> int:
-    p = argparse.ArgumentParser(prog="python -m clrt.tools.fuzz", description=__doc__.split("\n\n")[0],
+    p = argparse.ArgumentParser(prog="python tools/fuzz.py", description=__doc__.split("\n\n")[0],
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--seconds", type=float, help="run for this long (default: 60 unless --cases)")
     p.add_argument("--cases", type=int, help="run this many cases")
@@ -600,7 +603,7 @@ def main(argv=None) -> int:
                  log=lambda line: print(line, flush=True))
     print(report.summary())
     if report.failures:
-        print(f"replay one with: python -m clrt.tools.fuzz --replay {report.seed}:<case>"
+        print(f"replay one with: python tools/fuzz.py --replay {report.seed}:<case>"
               + "".join(f" --corpus {d}" for d in args.corpus))
     return 1 if report.failures else 0
 

@@ -1,7 +1,7 @@
-"""Time to the first image: ``python -m clrt.bench.first_image MESH``.
+"""Time to the first image: ``python -m benchmarks.first_image MESH``.
 
-    python -m clrt.bench.first_image ../shared/meshes/bunny00.off --device gpu
-    python -m clrt.bench.first_image MESH --size 1920x1080 --runs 5 --builder device
+    python -m benchmarks.first_image ../shared/meshes/bunny00.off --device gpu
+    python -m benchmarks.first_image MESH --size 1920x1080 --runs 5 --builder device
 
 1. Wall time of ``python -m clrt render MESH --width W --height H [--device D]
    [--builder B] -o TMP/N.png`` in ``--runs`` fresh processes, one after the
@@ -28,6 +28,11 @@ mesh (a glTF file's own camera is not used).
 from __future__ import annotations
 
 import sys
+
+if not __package__:   # run as a script, python benchmarks/NAME.py: import from the repository, not this folder
+    import os.path
+    sys.path[0] = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
 import time     # the stage process's "python start" ends at its first row: no other imports before
 
 STAGES_MARK = "first_image stages:"
@@ -44,13 +49,17 @@ def _render_command(mesh: str, size, device, builder, out) -> list:
 
 
 def _run(command: list) -> float:
-    """Seconds from starting ``command`` to its exit; SystemExit with its error if it fails."""
+    """Seconds from starting ``command`` to its exit; SystemExit with its error if it fails.
+    The process imports this checkout's clrt (``repo_env``), whatever the folder."""
     import subprocess
+
+    from benchmarks.common import repo_env
+    env = repo_env()
     start = time.perf_counter()
-    done = subprocess.run(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    done = subprocess.run(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
     seconds = time.perf_counter() - start
     if done.returncode != 0:
-        raise SystemExit(f"clrt.bench.first_image: {' '.join(command)} failed "
+        raise SystemExit(f"benchmarks.first_image: {' '.join(command)} failed "
                          f"(exit {done.returncode}): {done.stderr.strip()[-2000:]}")
     return seconds
 
@@ -119,9 +128,11 @@ def run(mesh: str, size, device, builder, runs: int, serial: bool) -> None:
     import subprocess
     import tempfile
     from pathlib import Path
+
+    from benchmarks.common import module_command, repo_env
     mesh = os.path.abspath(mesh)
     if not os.path.isfile(mesh):
-        raise SystemExit(f"clrt.bench.first_image: no such mesh file: {mesh}")
+        raise SystemExit(f"benchmarks.first_image: no such mesh file: {mesh}")
     with tempfile.TemporaryDirectory(prefix="clrt-first-image-") as folder:
         folder = Path(folder)
         shown = _render_command(mesh, size, device, builder, Path("OUT.png"))[1:]
@@ -130,18 +141,18 @@ def run(mesh: str, size, device, builder, runs: int, serial: bool) -> None:
         walls = [_run(_render_command(mesh, size, device, builder, folder / f"{i}.png")) for i in range(runs)]
         print(f"  wall  median {statistics.median(walls):.3f} s  min {min(walls):.3f} s  "
               f"max {max(walls):.3f} s")
-        command = [sys.executable, "-m", "clrt.bench.first_image", mesh, "--size", f"{size[0]}x{size[1]}",
-                   "--stages", str(folder / "stages.png")]
+        command = module_command("first_image") + [mesh, "--size", f"{size[0]}x{size[1]}",
+                                                   "--stages", str(folder / "stages.png")]
         command += ["--device", device] if device else []
         command += ["--builder", builder] if builder else []
         command += ["--serial"] if serial else []
         started = time.perf_counter()
         done = subprocess.run(command + ["--started", repr(started)], stdout=subprocess.PIPE,
-                              stderr=subprocess.PIPE, text=True)
+                              stderr=subprocess.PIPE, text=True, env=repo_env())
         ended = time.perf_counter()
         lines = [line for line in done.stdout.splitlines() if line.startswith(STAGES_MARK)]
         if done.returncode != 0 or not lines:
-            raise SystemExit(f"clrt.bench.first_image: the stage process failed (exit {done.returncode}): "
+            raise SystemExit(f"benchmarks.first_image: the stage process failed (exit {done.returncode}): "
                              f"{done.stderr.strip()[-2000:]}")
     print("stages of one more fresh process, each timed after the last"
           + (" (serial: no driver warm-up thread)" if serial else "") + ":")
@@ -162,8 +173,8 @@ def main(argv=None) -> int:
     import argparse
     import json
 
-    from clrt.bench.common import parse_size
-    p = argparse.ArgumentParser(prog="python -m clrt.bench.first_image", description=__doc__.split("\n")[0])
+    from benchmarks.common import parse_size
+    p = argparse.ArgumentParser(prog="python -m benchmarks.first_image", description=__doc__.split("\n")[0])
     p.add_argument("mesh", help="mesh file to render")
     p.add_argument("--device", help="'gpu', 'cpu' or P:D, passed to clrt render (default: clrt's choice)")
     p.add_argument("--size", type=parse_size, default=(1920, 1080), help="WxH (default 1920x1080)")

@@ -1,4 +1,4 @@
-"""Random rays for ``python -m clrt.bench.batch --rays``, made on the Dask
+"""Random rays for ``python -m benchmarks.batch --rays``, made on the Dask
 workers chunk by chunk.
 
 A module of its own, so that the workers import these functions by name: run

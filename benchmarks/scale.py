@@ -1,9 +1,9 @@
 """Scale limits, measured: build time, host and device memory, frame time of
 generated meshes of millions of triangles.
 
-    python -m clrt.bench.scale --triangles 1M,2M --builder paper,sah --size 640x480
-    python -m clrt.bench.scale --triangles 10M,20M --builder paper --size 1920x1080 --device gpu
-    python -m clrt.bench.scale --mesh ../shared/meshes/bunny00.off --triangles 10M --device gpu
+    python -m benchmarks.scale --triangles 1M,2M --builder paper,sah --size 640x480
+    python -m benchmarks.scale --triangles 10M,20M --builder paper --size 1920x1080 --device gpu
+    python -m benchmarks.scale --mesh ../shared/meshes/bunny00.off --triangles 10M --device gpu
 
 The mesh is a torus tessellated into about N triangles (``n x n`` quads), framed
 so that it fills most of the image, or with ``--mesh`` copies of that mesh on a
@@ -14,25 +14,30 @@ see docs/limits.md), the process's peak host memory so far, and per image size
 the median frame stages over ``--repeat`` frames after one warm-up frame, with
 the number of tiles the frame was split into, and the primary-ray rate: one
 closest-hit ray per pixel made and traced in one kernel (``trace_camera``, as in
-``clrt.bench.speed``).  ``parts``: buffers of the largest scene array (more than
+``benchmarks.speed``).  ``parts``: buffers of the largest scene array (more than
 one when it exceeds the device's largest allocation, see split.cl).  Prints a markdown table;
 ``--out FILE`` appends it to FILE as well.
 """
 
 from __future__ import annotations
 
+import sys
+
+if not __package__:   # run as a script, python benchmarks/NAME.py: import from the repository, not this folder
+    import os.path
+    sys.path[0] = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
 import argparse
 import gc
 import math
 import resource
 import statistics
-import sys
 import time
 
 import numpy as np
 
 from clrt.config import ACCELS, BUILDERS, MAX_LEAF_SIZE
-from clrt.bench.common import POSITIVE, int_at_least, parse_count, parse_size, rate
+from benchmarks.common import POSITIVE, int_at_least, parse_count, parse_size, rate
 from clrt.errors import ClrtError
 
 
@@ -58,7 +63,7 @@ def instanced(mesh, count: int):
 def _primary_rays_ms(renderer, camera, repeat: int) -> float:
     """Median kernel time of one closest-hit camera ray per pixel (trace_camera)."""
     import pyopencl as cl
-    from clrt.bench.speed import time_launches
+    from benchmarks.speed import time_launches
     from clrt import layouts
     from clrt.query import Accel
     accel = Accel.from_renderer(renderer)
@@ -131,7 +136,7 @@ def run(counts, builders, sizes, accel="box", device=None, repeat=3, leaf_size=4
 
 
 def main(argv=None) -> int:
-    p = argparse.ArgumentParser(prog="python -m clrt.bench.scale", description=__doc__.split("\n\n")[0])
+    p = argparse.ArgumentParser(prog="python -m benchmarks.scale", description=__doc__.split("\n\n")[0])
     p.add_argument("--triangles", type=lambda s: [parse_count(x) for x in s.split(",")], default=[10**6, 2 * 10**6],
                    help="comma-separated mesh sizes, e.g. 1M,2M,10M (default 1M,2M)")
     p.add_argument("--builder", type=lambda s: s.split(","), default=["paper", "sah"],

@@ -1,4 +1,4 @@
-"""Batch ray queries, clrt against trimesh: ``python -m clrt.bench.rays [MESH]``.
+"""Batch ray queries, clrt against trimesh: ``python -m benchmarks.rays [MESH]``.
 
 The same rays go to clrt (``clrt.Accel`` on the chosen OpenCL device), to
 trimesh's numpy intersector (``trimesh.ray.ray_triangle``, needs ``rtree``) and,
@@ -23,16 +23,21 @@ triangles along the ray.  The table is markdown, for docs/benchmarks.md.
 
 from __future__ import annotations
 
+import sys
+
+if not __package__:   # run as a script, python benchmarks/NAME.py: import from the repository, not this folder
+    import os.path
+    sys.path[0] = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
 import argparse
 import statistics
-import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
 from clrt.config import ACCELS, BUILDERS
-from clrt.bench.common import NON_NEGATIVE, POSITIVE, exit_code, median_wall_ms, parse_count, rate, ray_memory
+from benchmarks.common import NON_NEGATIVE, POSITIVE, exit_code, median_wall_ms, parse_count, rate, ray_memory
 
 QUERIES = ("first", "any", "all")
 
@@ -157,7 +162,7 @@ def throughput(mesh_path, sizes, device=None, repeat: int = 5, seed: int = 0, ou
     """Per query and size: wall ms of the whole call from numpy (or device) arrays
     to results, kernel ms (profiling events), and the host's share."""
     import pyopencl.array as cla
-    from clrt.bench.raysets import random_rays, time_queries
+    from benchmarks.raysets import random_rays, time_queries
     from clrt.query import Accel
     from clrt.scene import primitives
     from clrt.scene.load import load_mesh
@@ -217,7 +222,7 @@ def _embree_row(mesh, o, d, prim, repeat: int, out) -> None:
 
 
 def main(argv=None) -> int:
-    p = argparse.ArgumentParser(prog="python -m clrt.bench.rays", description=__doc__.split("\n")[0])
+    p = argparse.ArgumentParser(prog="python -m benchmarks.rays", description=__doc__.split("\n")[0])
     p.add_argument("mesh", nargs="?", help="mesh file (default: a generated torus knot, 32,768 triangles)")
     p.add_argument("--rays", type=parse_count, default=1_000_000, help="rays given to clrt and Embree (default 1M)")
     p.add_argument("--reference-rays", type=parse_count, default=2_000,

@@ -1,4 +1,4 @@
-"""Primary-ray throughput on fixed cameras: ``python -m clrt.bench.speed``.
+"""Primary-ray throughput on fixed cameras: ``python -m benchmarks.speed``.
 
 The cameras are those of the speed issue, so figures can be set beside other
 systems' on the same GPU: 1920x1080, one ray through each pixel centre, vertical
@@ -17,9 +17,14 @@ would be (split.cl): what splitting costs, measured on a small mesh.
 
 from __future__ import annotations
 
+import sys
+
+if not __package__:   # run as a script, python benchmarks/NAME.py: import from the repository, not this folder
+    import os.path
+    sys.path[0] = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
 import argparse
 import statistics
-import sys
 import time
 from pathlib import Path
 
@@ -28,7 +33,7 @@ import pyopencl as cl
 
 from clrt import layouts
 from clrt.config import ACCELS, BUILDERS, MAX_LEAF_SIZE
-from clrt.bench.common import NON_NEGATIVE, POSITIVE, exit_code, int_at_least, parse_work_group, rate
+from benchmarks.common import NON_NEGATIVE, POSITIVE, SHARED_MESHES, exit_code, int_at_least, parse_work_group, rate
 from clrt.errors import ClrtError
 
 # mesh file, eye, target (from the speed issue)
@@ -95,8 +100,8 @@ def run(mesh_dir: Path, cases, variants, device=None, size=(1920, 1080), repeat=
 
 
 def main(argv=None) -> int:
-    p = argparse.ArgumentParser(prog="python -m clrt.bench.speed", description=__doc__.split("\n")[0])
-    default_dir = Path(__file__).resolve().parents[2].parent / "shared" / "meshes"
+    p = argparse.ArgumentParser(prog="python -m benchmarks.speed", description=__doc__.split("\n")[0])
+    default_dir = SHARED_MESHES
     p.add_argument("--mesh-dir", type=Path, default=default_dir, help=f"folder of the meshes (default {default_dir})")
     p.add_argument("--case", action="append", choices=sorted(CASES), help="repeatable (default: all)")
     p.add_argument("--accel", action="append", choices=ACCELS, help="repeatable (default: box)")

@@ -1,6 +1,6 @@
 """Scaling of batch rendering with the number of Dask workers.
 
-    python -m clrt.bench.batch [SOURCE ...] --workers 1,2 --views 48 --size 320x240 [--device gpu]
+    python -m benchmarks.batch [SOURCE ...] --workers 1,2 --views 48 --size 320x240 [--device gpu]
 
 For each worker count, a local cluster renders every view of every source into
 a fresh folder; frames/s counts the time from the first job sent to the last
@@ -29,16 +29,21 @@ coming from a fast source would be traced.
 
 from __future__ import annotations
 
-import argparse
 import sys
+
+if not __package__:   # run as a script, python benchmarks/NAME.py: import from the repository, not this folder
+    import os.path
+    sys.path[0] = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
+import argparse
 import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
 
-from clrt.bench.batch_rays import RAY_SOURCES, random_rays
-from clrt.bench.common import exit_code, parse_count, parse_size, rate as rate_text
+from benchmarks.batch_rays import RAY_SOURCES, random_rays
+from benchmarks.common import exit_code, parse_count, parse_size, rate as rate_text
 from clrt.config import BATCH_IMAGE_WRITERS
 
 
@@ -207,7 +212,7 @@ def _breakdown(sources, views, size, samples, device, per_frame, out):
 
 
 def main(argv=None) -> int:
-    p = argparse.ArgumentParser(prog="python -m clrt.bench.batch", description=__doc__.split("\n\n")[0])
+    p = argparse.ArgumentParser(prog="python -m benchmarks.batch", description=__doc__.split("\n\n")[0])
     p.add_argument("sources", nargs="*", help="meshes or scene files (default: two generated meshes)")
     p.add_argument("--workers", default="1,2", help="worker counts, comma-separated (default 1,2)")
     p.add_argument("--views", type=int, default=48, help="views per source (default 48)")

@@ -1,4 +1,4 @@
-"""Incoherent ray sets, seeded and shareable: ``python -m clrt.bench.raysets [MESH]``.
+"""Incoherent ray sets, seeded and shareable: ``python -m benchmarks.raysets [MESH]``.
 
 Four sets of rays, each made reproducibly from a seed:
 
@@ -36,15 +36,20 @@ paired ratio is the figure that holds still.
 
 from __future__ import annotations
 
+import sys
+
+if not __package__:   # run as a script, python benchmarks/NAME.py: import from the repository, not this folder
+    import os.path
+    sys.path[0] = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
 import argparse
 import statistics
-import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
-from clrt.bench.common import (NON_NEGATIVE, POSITIVE, builder_label, rate, exit_code, median_wall_ms, parse_count,
+from benchmarks.common import (NON_NEGATIVE, POSITIVE, builder_label, rate, exit_code, median_wall_ms, parse_count,
                                parse_groups, parse_size, parse_walks, ray_memory, walk)
 from clrt.config import ACCELS, BUILDERS
 from clrt.errors import InputError
@@ -64,7 +69,7 @@ def _diagonal(mesh) -> float:
 def reference_camera(mesh, name: str | None = None, size=(1920, 1080)):
     """The speed benchmark's camera for its meshes (matched by file stem), else a
     camera framing the mesh; vertical fov 45 degrees, up +y."""
-    from clrt.bench.speed import CASES
+    from benchmarks.speed import CASES
     from clrt.scene.scene import Camera
     w, h = size
     for file, eye, target in CASES.values():
@@ -458,7 +463,7 @@ def run(mesh_path=None, sets=RAY_SETS, count: int = 1_000_000, seed: int = 0, va
 
 
 def main(argv=None) -> int:
-    p = argparse.ArgumentParser(prog="python -m clrt.bench.raysets", description=__doc__.split("\n")[0])
+    p = argparse.ArgumentParser(prog="python -m benchmarks.raysets", description=__doc__.split("\n")[0])
     p.add_argument("mesh", nargs="?", help="mesh file (default: a generated torus knot, 32,768 triangles)")
     p.add_argument("--set", action="append", choices=RAY_SETS, help="repeatable (default: all)")
     p.add_argument("--rays", type=parse_count, default=1_000_000, help="rays per generated set (default 1M; "

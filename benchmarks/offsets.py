@@ -1,8 +1,8 @@
 """Queries on a mesh far from the origin, with and without the device frame:
-``python -m clrt.bench.offsets``.
+``python -m benchmarks.offsets``.
 
-    python -m clrt.bench.offsets --device cpu
-    python -m clrt.bench.offsets --offsets 0,1e4,1e5,1e6 --rays 20000 --repeat 3
+    python -m benchmarks.offsets --device cpu
+    python -m benchmarks.offsets --offsets 0,1e4,1e5,1e6 --rays 20000 --repeat 3
 
 A torus 2.7 across (40,000 triangles) moved by (s, s, s) for each offset s,
 and ``--rays`` random rays at it (origins in its box grown twice, random
@@ -17,14 +17,19 @@ is done here, never in tests.
 
 from __future__ import annotations
 
+import sys
+
+if not __package__:   # run as a script, python benchmarks/NAME.py: import from the repository, not this folder
+    import os.path
+    sys.path[0] = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
 import argparse
 import math
 import statistics
-import sys
 
 import numpy as np
 
-from clrt.bench.common import POSITIVE, exit_code
+from benchmarks.common import POSITIVE, exit_code
 
 RINGS, SIDES = 200, 100          # 40,000 triangles
 SEED = 7
@@ -76,7 +81,7 @@ def measure(offsets, rays: int, repeat: int, device=None) -> list[dict]:
 
 
 def main(argv=None) -> int:
-    p = argparse.ArgumentParser(prog="python -m clrt.bench.offsets", description=__doc__.split("\n")[0])
+    p = argparse.ArgumentParser(prog="python -m benchmarks.offsets", description=__doc__.split("\n\n")[0])
     p.add_argument("--offsets", type=lambda s: [float(x) for x in s.split(",")], default=[0.0, 1e3, 1e4, 1e5, 1e6],
                    help="comma-separated (default 0,1e3,1e4,1e5,1e6)")
     p.add_argument("--rays", type=POSITIVE, default=20000, help="random rays (default 20000)")

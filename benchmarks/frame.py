@@ -1,6 +1,6 @@
 """Per-stage times of whole frames, acceleration variants side by side.
 
-    python -m clrt.bench.frame MESH --size 200x200 --size 1920x1080 --accel none --accel box
+    python -m benchmarks.frame MESH --size 200x200 --size 1920x1080 --accel none --accel box
 
 Set-up stages (initialisation, acceleration build, copy to device) are timed
 once per variant, as a user meets them (the first variant's copy includes the
@@ -13,16 +13,21 @@ first variant's: ``same image`` must say yes.
 
 from __future__ import annotations
 
+import sys
+
+if not __package__:   # run as a script, python benchmarks/NAME.py: import from the repository, not this folder
+    import os.path
+    sys.path[0] = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
 import argparse
 import itertools
 import statistics
-import sys
 import time
 
 import numpy as np
 
 from clrt.config import ACCELS, BUILDERS, MAX_LEAF_SIZE
-from clrt.bench.common import (NON_NEGATIVE, POSITIVE, rate, int_at_least, builder_label, exit_code, parse_size, parse_walks,
+from benchmarks.common import (NON_NEGATIVE, POSITIVE, rate, int_at_least, builder_label, exit_code, parse_size, parse_walks,
                                parse_work_group, walk)
 
 FRAME_STAGES = ("ray generation", "pixel colour", "read back")
@@ -84,7 +89,7 @@ def run(mesh_path, sizes, variants, device=None, repeat=5, warmup=1, leaf_size=4
 
 
 def main(argv=None) -> int:
-    p = argparse.ArgumentParser(prog="python -m clrt.bench.frame", description=__doc__.split("\n")[0])
+    p = argparse.ArgumentParser(prog="python -m benchmarks.frame", description=__doc__.split("\n")[0])
     p.add_argument("mesh", nargs="?", help="mesh file (default: the built-in scene)")
     p.add_argument("--size", type=parse_size, action="append", help="WxH, repeatable (default 200x200, 1920x1080)")
     p.add_argument("--accel", action="append", choices=ACCELS,

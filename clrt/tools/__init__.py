@@ -1,1 +1,0 @@
-"""Developer tools (the loader fuzzer); never imported by ``import clrt``."""
