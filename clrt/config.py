@@ -136,6 +136,8 @@ BATCH_VIEWS_PER_TASK = 8
 #: (PNG encoding took 17 of a worker's 36 ms per 1080p frame on an H200,
 #: docs/distributed.md); also the most finished images it holds at once.
 BATCH_IMAGE_WRITERS = 2
+#: The format of a batch's frames (--format; clrt.output.writers.WRITERS).
+BATCH_FORMAT = "png"
 #: Most views per source (--views), most worker processes of a local cluster (--workers).
 MAX_VIEWS = 100_000
 MAX_WORKERS = 4096
