@@ -233,3 +233,18 @@ def test_one_lookup_by_suffix(tmp_path):
     with pytest.raises(clrt.InputError, match="format must be one of png, jpg"):
         output.format_writer("npy")
 
+
+def test_the_readme_lists_the_table():
+    """README's table of output formats is WRITERS: a row per format, its
+    suffixes, what it holds and where its mark goes."""
+    from pathlib import Path
+    text = (Path(__file__).resolve().parents[1] / "README.md").read_text()
+    rows = {}
+    for line in text.splitlines():
+        cells = [c.strip() for c in line.strip().strip("|").split("|")]
+        if line.strip().startswith("|") and len(cells) == 4 and cells[1].startswith("`."):
+            rows[cells[1]] = cells
+    assert len(rows) == len(output.WRITERS)
+    for writer in output.WRITERS.values():
+        name, _, holds, mark = rows[" ".join(f"`{s}`" for s in writer.suffixes)]
+        assert name.split()[0] == writer.name and holds.startswith(writer.describe()) and mark == writer.mark
