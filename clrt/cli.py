@@ -13,7 +13,7 @@ import sys
 import time
 from pathlib import Path
 
-from clrt import config, options
+from clrt import config, options, output
 from clrt.errors import ClrtError, DeviceError, InputError, OutputError
 
 DEFAULT_OUTPUT = "clrt-default.png"
@@ -42,12 +42,12 @@ def _parser(bench: bool = False) -> argparse.ArgumentParser:
                                    "scene's, material options replace that field of every object's "
                                    "material. Prints the output path (absolute).")
     r.add_argument("mesh", nargs="?", help="mesh file or TOML scene file; omit for the built-in scene")
-    formats = ", ".join(config.OUTPUT_SUFFIXES)
-    r.add_argument("-o", "--output", help=f"image to write ({formats}; default: MESH name .png, or "
-                                          f"{DEFAULT_OUTPUT}); .exr holds the linear, unclamped image as "
-                                          f"float32 OpenEXR (needs {config.EXR_INSTALL_HINT}); an existing "
-                                          "file is replaced only once the render succeeded, and only if clrt "
-                                          "wrote it (see --force)")
+    formats = ", ".join(output.IMAGE_SUFFIXES)
+    r.add_argument("-o", "--output", help=f"image to write ({formats}; default: MESH name "
+                                          f"{output.WRITERS['png'].suffix}, or {DEFAULT_OUTPUT}); .exr holds the "
+                                          "linear, unclamped image as float32 OpenEXR (needs "
+                                          f"{output.EXR_INSTALL_HINT}); an existing file is replaced only once the "
+                                          "render succeeded, and only if clrt wrote it (see --force)")
     r.add_argument("-f", "--force", action="store_true",
                    help="replace the output even if clrt did not write it (by default an existing "
                         "file is replaced only if clrt wrote it, such as the previous render)")
@@ -88,43 +88,46 @@ def _aov_list(text: str) -> tuple:
     return parse_aovs(text)
 
 
-def _output_path(args) -> Path:
-    """The image to write, checked before any work: a writable file of a format clrt writes."""
+def _output_path(args) -> tuple[Path, output.Writer, str]:
+    """The image to write, its writer and depth (clrt.output.render_writer),
+    checked before any work: a writable file of a format that holds the image
+    asked for (--bit-depth), its optional package installed."""
     if args.output is not None:
         if not args.output.strip():
             raise OutputError(f"-o must name an image file, got {args.output!r}")
         out = Path(args.output)
         if out.is_dir():
             raise OutputError(f"cannot write {args.output}: it is a folder (give a file name, e.g. "
-                              f"{out / 'image.png'})")
+                              f"{out / 'image'}{output.WRITERS['png'].suffix})")
         if args.output.endswith(("/", os.sep)):
             raise OutputError(f"cannot write {args.output}: names a folder (ends with '/'), and there is "
                               "no such folder")
     elif args.mesh:
-        out = Path(Path(args.mesh).stem + ".png")
+        out = Path(Path(args.mesh).stem + output.WRITERS["png"].suffix)
     else:
         out = Path(DEFAULT_OUTPUT)
-    if out.suffix.lower() not in config.OUTPUT_SUFFIXES:
-        kind = f"unknown image type {out.suffix!r}" if out.suffix else "no image type suffix"
-        raise OutputError(f"cannot write {out}: {kind} (use one of {', '.join(config.OUTPUT_SUFFIXES)})")
+    writer, depth = output.render_writer(out, args.bit_depth)   # an optional package missing: said before any work
     if not out.parent.is_dir():
         raise OutputError(f"cannot write {out}: folder {out.parent} does not exist")
     if not os.access(out.parent, os.W_OK):
         raise OutputError(f"cannot write {out}: no permission to create files in {out.parent}")
-    if out.suffix.lower() == config.EXR_SUFFIX:
-        from clrt.output import require_exr
-        require_exr()   # OpenEXR is optional: without it, say so before any work
-    return out
+    return out, writer, depth
+
+
+#: Host bytes a pixel that writing an image of each depth needs at once: the
+#: 8-bit image, its sRGB staging and PIL's copy; for 16-bit the float32 image,
+#: the uint16 one and the PNG rows; for float (.exr) the float32 image, its
+#: channels and OpenEXR's copy of them (12 bytes a pixel each).
+_HOST_BYTES = {"8-bit": 10, "16-bit": 40, "float": 36}
 
 
 def _render(args) -> int:
-    from clrt.output import check_replace, write_image
     from clrt.renderer import Renderer, check_host_memory
     from clrt.renderer.tiles import TileLimits
     from clrt.scene.render_setup import (CAMERA_OPTIONS, SCENE_OPTIONS, render_camera, render_lights,
                                          render_scene)
 
-    out = _output_path(args)
+    out, writer, depth = _output_path(args)
     # Shared with `clrt batch render`, so both make the same frame of the same camera.
     scene = render_scene(args.mesh, **{k: getattr(args, k) for k in SCENE_OPTIONS})
     # A scene file's or a glTF file's camera, unless an option places the camera.
@@ -133,35 +136,32 @@ def _render(args) -> int:
     scene.lights = render_lights(scene.bounds, camera, scene.lights, args.light)
 
     # Checked before the (possibly long) render; the writers check again.
-    check_replace(out, args.force)
-    # An .exr holds the linear image, and the AOVs as its channels rather than files beside it.
-    exr = out.suffix.lower() == config.EXR_SUFFIX
-    if args.aov and not exr:
+    output.check_replace(out, args.force)
+    # A format that holds named channels (.exr) gets the AOVs as channels rather than files beside it.
+    aovs_inside = writer.holds(channels="named")
+    if args.aov and not aovs_inside:
         from clrt.query.aov import aov_paths
         for path in aov_paths(out, args.aov):
-            check_replace(path, args.force)
-    # The image, its sRGB staging and PIL's copy (4 bytes a pixel) live on the host together;
-    # for an .exr, the float32 image, its channels and OpenEXR's copy of them (12 bytes a pixel each).
-    check_host_memory(camera.width * camera.height * (36 if exr else 10),
-                      f"a {camera.width}x{camera.height} image")
+            output.check_replace(path, args.force)
+    check_host_memory(camera.width * camera.height * _HOST_BYTES[depth], f"a {camera.width}x{camera.height} image")
     progress = None if args.quiet else _progress_bar(camera.width * camera.height * scene.samples ** 2)
     # With a progress bar the first tile is small, so that the bar moves from the start.
     limits = TileLimits(first_launch_pixels=config.PROGRESS_FIRST_TILE) if progress else None
     renderer = Renderer(scene, device=args.device, accel=args.accel, builder=args.builder, leaf_size=args.leaf_size,
                         limits=limits)
     try:
-        frame = renderer.render(camera, linear=exr, progress=progress and progress.update)
+        # 8-bit: the kernel's own sRGB encoding; 16-bit and float: made of the linear image.
+        frame = renderer.render(camera, linear=depth != "8-bit", progress=progress and progress.update)
     finally:
         if progress:
             progress.close()
     aov_note = ""
-    if exr:
-        from clrt.output import write_exr
+    if aovs_inside:
         channels = {}
         if args.aov:
             from clrt.query.aov import camera_images_of, exr_channels
             channels = exr_channels(camera_images_of(renderer, camera), args.aov)
-        write_exr(frame.image, out, channels, force=args.force)
+        output.write_image(frame.image, out, force=args.force, bit_depth=args.bit_depth, channels=channels)
         aov_note = f"channels {' '.join(channels)} of {out.name}"
     else:
         aov_images = None
@@ -170,14 +170,13 @@ def _render(args) -> int:
             aov_images = camera_images_of(renderer, camera)
         written = []
         try:
-            write_image(frame.image, out, force=args.force)
+            output.write_image(frame.image, out, force=args.force, bit_depth=args.bit_depth)
             written.append(out)
             if args.aov:
                 write_aovs(renderer, camera, args.aov, out, force=args.force, images=aov_images, written=written)
         except BaseException:
             # an interrupted or failed render leaves nothing behind: not the image without its AOVs
-            from clrt.output import remove_written
-            remove_written(written)
+            output.remove_written(written)
             raise
         aov_note = " ".join(str(p.resolve()) for p in written[1:])
     if not args.quiet:

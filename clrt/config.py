@@ -111,23 +111,11 @@ CULL_MODES = {"none": 0, "back": 1, "front": 2}
 #: (clrt.device.reach).
 RAY_CHECKS = ("origin", "direction", "tmin", "tmax", "reach")
 
-# --------------------------------------------------------------------------- devices and files
+# --------------------------------------------------------------------------- devices
 
 #: What ``device=`` / ``--device`` takes besides "P:D" or "P" (platform and device indices).
 DEVICE_KINDS = ("gpu", "cpu")
-#: Image formats clrt writes (file extension -> PIL format).  clrt marks each file it
-#: writes -- inside the image where the format has room, else in a record beside
-#: it -- so that a re-run recognises its own outputs (clrt/output.py).
-IMAGE_FORMATS = {".png": "PNG", ".jpg": "JPEG", ".jpeg": "JPEG", ".tif": "TIFF", ".tiff": "TIFF",
-                 ".webp": "WEBP", ".gif": "GIF", ".bmp": "BMP", ".ppm": "PPM"}
-#: High-dynamic-range output: the linear image as OpenEXR (clrt.output.write_exr), with any
-#: AOVs as extra channels of the same file; needs the optional OpenEXR package (the
-#: 'exr' extra), imported only when an .exr is written.
-EXR_SUFFIX = ".exr"
-#: Every suffix ``clrt render -o`` takes: the 8-bit formats, then EXR.
-OUTPUT_SUFFIXES = (*IMAGE_FORMATS, EXR_SUFFIX)
-#: What ``clrt render -o x.exr`` says when OpenEXR is not installed.
-EXR_INSTALL_HINT = "pip install 'clrt[exr]'"
+#: The formats of output files, and what each can hold: clrt.output.writers.WRITERS.
 
 # --------------------------------------------------------------------------- device buffers
 
@@ -153,6 +141,8 @@ BATCH_VIEWS_PER_TASK = 8
 #: (PNG encoding took 17 of a worker's 36 ms per 1080p frame on an H200,
 #: docs/distributed.md); also the most finished images it holds at once.
 BATCH_IMAGE_WRITERS = 2
+#: The format of a batch's frames (--format; clrt.output.writers.WRITERS).
+BATCH_FORMAT = "png"
 #: Most views per source (--views), most worker processes of a local cluster (--workers).
 MAX_VIEWS = 100_000
 MAX_WORKERS = 4096

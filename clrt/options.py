@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import argparse
 
-from clrt import checks, config
+from clrt import checks, config, output
 
 
 def number_text(text: str):
@@ -63,7 +63,8 @@ def device(text: str) -> str:
 
 
 def add_render_options(r: argparse.ArgumentParser) -> None:
-    """The scene, camera, light, material and render options of a render command."""
+    """The scene, camera, light, material and render options of a render command,
+    and the image's bit depth."""
     side = f"1..{config.MAX_IMAGE_SIDE}"
     r.add_argument("--width", type=integer("--width", 1, config.MAX_IMAGE_SIDE),
                    help=f"image width in pixels, {side} (default: the scene's, else {config.DEFAULT_WIDTH})")
@@ -101,6 +102,11 @@ def add_render_options(r: argparse.ArgumentParser) -> None:
     r.add_argument("--max-depth", type=typed(lambda v: checks.max_depth(v, "--max-depth")),
                    help=f"reflection/refraction bounces, 0..{config.MAX_BOUNCES} (default: the scene's, "
                         f"{config.DEFAULT_MAX_DEPTH})")
+    r.add_argument("--bit-depth", type=typed(lambda v: output.check_bit_depth(v, "--bit-depth")),
+                   metavar="|".join(map(str, output.BIT_DEPTHS)),
+                   help="bits a colour sample of the image: 8 (default) or 16, for formats that hold it (.png): "
+                        "16 is rendered as linear light and encoded to sRGB on the host; .exr holds linear "
+                        "float32 instead")
 
 
 def add_accel_options(p: argparse.ArgumentParser) -> None:

@@ -123,6 +123,11 @@ def test_batch_takes_every_render_option():
     (["--workers", "2", "--scheduler", "tcp://127.0.0.1:1"], "not allowed with"),
     (["--scheduler", "tcp://127.0.0.1:1"], "cannot reach the Dask scheduler"),
     (["--scheduler", "tls://127.0.0.1:1"], "needs certificates"),
+    (["--format", "psd"], "--format must be one of png, jpg, jpeg, tif, tiff, webp, gif, bmp, ppm, exr, got 'psd'"),
+    (["--format", "jpg", "--bit-depth", "16"], "JPEG holds 8-bit sRGB gray or RGB images, not 16-bit sRGB RGB images; "
+                                               "formats that can: .png"),
+    (["--format", "exr", "--bit-depth", "8"], "OpenEXR holds linear float32"),
+    (["--bit-depth", "12"], "--bit-depth must be 8 or 16, got 12"),
 ])
 def test_bad_options_are_one_line_errors(args, fragment, meshes, tmp_path, capsys, monkeypatch):
     monkeypatch.setattr("clrt.batch.cluster.BATCH_CONNECT_TIMEOUT", 1.0)   # nobody listens there
@@ -316,6 +321,51 @@ def test_a_manifest_clrt_did_not_write_is_kept_without_force(client, meshes, tmp
     assert (out / f".{BATCH_MANIFEST}.clrt").exists()
 
 
+def test_frames_as_linear_exr_and_16_bit_png(client, meshes, tmp_path, device, capsys):
+    """format="exr" writes the linear float32 image that ``clrt render -o x.exr``
+    writes, bit for bit; bit_depth=16 a 16-bit PNG that, reduced to 8 bits, is
+    the 8-bit frame within one level.  The manifest names the files by their
+    format; the same file name at another depth is rendered again, at the same
+    depth skipped."""
+    OpenEXR = pytest.importorskip("OpenEXR", reason="EXR frames need the exr extra (the test extra has it)")
+    from png_reference import spec_decode
+    out = tmp_path / "out"
+
+    def batch(**kwargs):
+        outputs = clrt.batch.render([meshes[1]], out, views=2, client=client, device=device, **SIZE, **kwargs)
+        return sorted(o.status for o in outputs)
+
+    assert batch(format="exr") == ["done", "done"]
+    records = {r["path"]: r for r in _manifest(out)}
+    assert sorted(records) == ["block/view-0000.exr", "block/view-0001.exr"]
+    cam = records["block/view-0001.exr"]["camera"]
+    single = tmp_path / "single.exr"
+    dev = ["--device", device] if device else []
+    assert main(["render", str(meshes[1]), "-o", str(single), *SIZE_ARGS, "-q", *dev, "--eye",
+                 ",".join(map(repr, cam["eye"])), "--target", ",".join(map(repr, cam["target"]))]) == 0
+    capsys.readouterr()
+
+    def pixels(path):
+        with OpenEXR.File(str(path), separate_channels=True) as f:
+            return {name: c.pixels for name, c in f.channels().items()}
+
+    frame, expected = pixels(out / "block" / "view-0001.exr"), pixels(single)
+    assert sorted(frame) == ["B", "G", "R"] and frame["R"].dtype == np.float32
+    assert all(frame[c].tobytes() == expected[c].tobytes() for c in "RGB")
+
+    assert batch(bit_depth=16) == ["done", "done"]
+    sixteen = {v: spec_decode((out / "block" / f"view-000{v}.png").read_bytes()) for v in (0, 1)}
+    assert all(codes.dtype == np.uint16 and codes.shape == (14, 20, 3) for codes in sixteen.values())
+    assert batch(bit_depth=16) == ["skipped", "skipped"]
+    assert batch() == ["done", "done"], "8-bit frames of the same names: rendered again"
+    assert batch(bit_depth=8) == ["skipped", "skipped"], "bit_depth 8 is the default"
+    for v, codes in sixteen.items():
+        image = np.asarray(Image.open(out / "block" / f"view-000{v}.png")).astype(int)
+        assert np.abs(np.rint(codes / 257.0) - image).max() <= 1
+    assert sorted(r["path"] for r in _manifest(out)) == sorted(f"block/view-000{v}.{s}" for s in ("exr", "png")
+                                                                for v in (0, 1))
+
+
 def test_resume_renders_only_what_is_missing(client, meshes, tmp_path, device):
     out = tmp_path / "out"
     first = clrt.batch.render(meshes, out, views=3, client=client, device=device, **SIZE)
@@ -471,11 +521,11 @@ def test_images_written_in_threads_keep_their_order_and_errors(meshes, tmp_path,
 
     real_write = clrt.output.write_image
 
-    def write(image, path, force=False):
+    def write(image, path, force=False, **kwargs):
         if path.name == output_path("ball", 2).rsplit("/", 1)[-1]:
             raise OutputError(f"cannot write {path}: refused by the test")
         time.sleep(0.05 * (int(path.stem[-1]) % 2))     # odd views finish later
-        real_write(image, path, force=force)
+        real_write(image, path, force=force, **kwargs)
 
     monkeypatch.setattr(clrt.output, "write_image", write)
     monkeypatch.setenv("CLRT_DEVICE", device or "")
@@ -699,7 +749,7 @@ def test_unwritable_output_is_not_reported_as_a_bad_source_per_frame(meshes, tmp
     from clrt.errors import OutputError
     tried = []
 
-    def write(image, path, force=False):
+    def write(image, path, force=False, **kwargs):
         tried.append(path)
         raise OutputError(f"cannot write {path}: Permission denied")
 

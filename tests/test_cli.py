@@ -64,6 +64,11 @@ def test_default_scene_renders_without_arguments(tmp_path, device, capsys, monke
     (["--eye", "0,0,0", "--target", "0,0,0"], "eye and target"),
     (["--up", "0,0,0"], "up"),
     (["-o", "picture.xyz"], "unknown image type"),
+    (["-o", "picture.npy"], "NumPy holds arrays"),
+    (["-o", "picture.jpg", "--bit-depth", "16"], "JPEG holds 8-bit sRGB gray or RGB images, not 16-bit sRGB RGB "
+                                                 "images; formats that can: .png"),
+    (["-o", "picture.exr", "--bit-depth", "8"], "OpenEXR holds linear float32"),
+    (["--bit-depth", "12"], "--bit-depth must be 8 or 16, got 12"),
     (["-o", "no/such/folder/a.png"], "does not exist"),
     (["--shininess", "-1"], "shininess"),
 ])

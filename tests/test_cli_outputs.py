@@ -1,9 +1,11 @@
 """clrt batch render with vector options (colours), and Ctrl-C while a render
-writes its AOVs: found by an audit of the command line's valid use."""
+writes its AOVs: found by an audit of the command line's valid use; lossless
+formats and 16-bit PNG (--bit-depth 16)."""
 
 import numpy as np
 import pytest
 from PIL import Image
+from png_reference import spec_decode
 
 from clrt.cli import main
 from clrt.scene import primitives
@@ -64,3 +66,35 @@ def test_lossless_formats_keep_every_pixel(ball, tmp_path, device, capsys):
     capsys.readouterr()
     for suffix, image in images.items():
         assert np.array_equal(image, images[".png"]), suffix
+
+
+def test_16_bit_png_is_the_8_bit_render_finer(ball, tmp_path, device, capsys, monkeypatch):
+    """--bit-depth 16 renders linear and encodes on the host with the kernel's
+    transfer function: reduced to 8 bits it is the 8-bit render, within one
+    level; the AOV files beside it are as they are for an 8-bit image."""
+    dev = ["--device", device] if device else []
+    size = ["--width", "40", "--height", "30", "--samples", "2", "-q", *dev]
+    eight, sixteen = tmp_path / "o8.png", tmp_path / "o16.png"
+    assert main(["render", str(ball), "-o", str(eight), *size, "--aov", "depth"]) == 0
+    assert main(["render", str(ball), "-o", str(sixteen), *size, "--aov", "depth", "--bit-depth", "16"]) == 0
+    capsys.readouterr()
+    codes = spec_decode(sixteen.read_bytes())
+    assert codes.dtype == np.uint16 and codes.shape == (30, 40, 3)
+    reduced = np.rint(codes / 257.0).astype(int)
+    image = np.asarray(Image.open(eight)).astype(int)
+    assert np.abs(reduced - image).max() <= 1 and np.mean(reduced == image) > 0.99
+    assert len(np.unique(codes)) > len(np.unique(image)), "finer steps than 8 bits"
+    assert np.array_equal(np.asarray(Image.open(sixteen)), (codes >> 8).astype(np.uint8)), "Pillow reads it"
+    assert Image.open(sixteen).info["Software"].startswith("clrt")
+    for suffix in (".npy", ".png"):
+        assert (tmp_path / f"o16.depth{suffix}").read_bytes() == (tmp_path / f"o8.depth{suffix}").read_bytes()
+    assert main(["render", str(ball), "-o", str(sixteen), *size, "--bit-depth", "16"]) == 0, "its own: replaced"
+
+    def no_render(*args, **kwargs):
+        raise AssertionError("rendered before the output was checked")
+
+    monkeypatch.setattr("clrt.renderer.Renderer", no_render)
+    assert main(["render", str(ball), "-o", str(tmp_path / "o.tif"), *size, "--bit-depth", "16"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "TIFF holds 8-bit sRGB" in err and "formats that can: .png" in err
+    assert not (tmp_path / "o.tif").exists()

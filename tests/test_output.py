@@ -7,10 +7,11 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from clrt import cli, config, output
+import clrt
+from clrt import OutputError, cli, output
 from clrt.scene import primitives
 
-FORMATS = sorted(config.IMAGE_FORMATS)
+FORMATS = sorted(s for w in output.WRITERS.values() if w.holds("8-bit", "RGB") for s in w.suffixes)
 
 
 @pytest.fixture
@@ -73,7 +74,7 @@ def test_a_recorded_file_changed_since_is_refused(suffix, tmp_path):
     assert output.record_path(path).is_file() and output.written_by_clrt(path)
     path.write_bytes(path.read_bytes() + b"\0")
     assert not output.written_by_clrt(path)
-    with pytest.raises(output.OutputError, match="or was changed since"):
+    with pytest.raises(OutputError, match="or was changed since"):
         output.check_replace(path, force=False)
     output.check_replace(path, force=True)
 
@@ -101,3 +102,149 @@ def test_new_images_get_the_umask_without_it_being_changed(tmp_path, monkeypatch
     finally:
         monkeypatch.undo()
         os.umask(old)
+
+
+# --------------------------------------------------------------------------- the WRITERS table
+
+IMAGE_CHANNELS = {"gray": (5, 7), "gray+alpha": (5, 7, 2), "RGB": (5, 7, 3), "RGBA": (5, 7, 4)}
+PILLOW_MODES = {"gray": "L", "gray+alpha": "LA", "RGB": "RGB", "RGBA": "RGBA"}
+
+
+def _sample(channels, dtype):
+    rng = np.random.default_rng(5)
+    shape = IMAGE_CHANNELS[channels]
+    if np.dtype(dtype).kind == "f":
+        return (rng.random(shape) * 1.5).astype(dtype)
+    return rng.integers(0, np.iinfo(dtype).max + 1, shape, dtype=dtype)
+
+
+def _read_back(path, writer, channels, dtype):
+    if writer.holds("float"):
+        OpenEXR = pytest.importorskip("OpenEXR")
+        with OpenEXR.File(str(path), separate_channels=True) as f:
+            layers = {name: c.pixels for name, c in f.channels().items()}
+        return np.stack([layers[c] for c in "RGBA"[:IMAGE_CHANNELS[channels][2]]], axis=-1)
+    image = Image.open(path)
+    if dtype == np.uint16 and channels == "gray":   # Pillow holds 16-bit gray; colour comes as its high bytes
+        return np.asarray(image).astype(np.uint16)
+    return np.asarray(image.convert(PILLOW_MODES[channels]))   # WebP stores gray as RGB, Pillow 16-bit LA as RGBA
+
+
+@pytest.mark.parametrize("name", sorted(output.IMAGE_WRITERS))
+def test_each_writer_holds_what_the_table_says(name, tmp_path):
+    """Every depth and channel set a writer claims is written, marked or recorded,
+    and read back exactly where the format is lossless; anything else is refused
+    in one line naming the formats that hold it, and nothing is written."""
+    writer = output.WRITERS[name]
+    for dtype in (np.uint8, np.uint16, np.float32):
+        for channels in IMAGE_CHANNELS:
+            image = _sample(channels, dtype)
+            # a float image is written as it is where the format holds floats, else encoded to 8-bit sRGB
+            depth = {np.uint8: "8-bit", np.uint16: "16-bit"}.get(dtype) or \
+                ("float" if writer.holds("float") else "8-bit")
+            path = tmp_path / f"{np.dtype(dtype).name}-{channels}{writer.suffix}"
+            if not writer.holds(depth, channels):
+                with pytest.raises(clrt.InputError) as caught:
+                    output.write_image(image, path)
+                able = [s for w in output.WRITERS.values() if w.holds(depth, channels) for s in w.suffixes]
+                message = str(caught.value)
+                assert "\n" not in message and f"{writer.name} holds {writer.describe()}" in message
+                assert message.partition("formats that can: ")[2].split(";")[0].split(", ") == (able or [""])
+                assert not path.exists()
+                continue
+            if writer.require:
+                pytest.importorskip("OpenEXR")
+            output.write_image(image, path)
+            assert output.written_by_clrt(path), (name, channels)
+            assert output.record_path(path).exists() == (writer.read_mark is None)
+            if not writer.lossless:
+                continue
+            stored = output.encode_srgb(image) if dtype == np.float32 and depth == "8-bit" else image
+            expected = (stored >> 8).astype(np.uint8) if dtype == np.uint16 and channels != "gray" else stored
+            assert np.array_equal(_read_back(path, writer, channels, dtype), expected), (name, dtype, channels)
+    assert not [p.name for p in tmp_path.iterdir() if p.name.startswith(".") and not p.name.endswith(".clrt")]
+
+
+@pytest.mark.parametrize("image, fragment", [
+    (np.zeros((4, 4, 3), np.int32), "must be uint8 (8-bit sRGB), uint16 (16-bit sRGB) or floats (linear), got int32"),
+    (np.zeros((4, 4, 3), bool), "got bool"),
+    (np.zeros((4, 4, 1), np.uint8), "got shape (4, 4, 1)"),
+    (np.zeros((4, 4, 5), np.uint8), "got shape (4, 4, 5)"),
+    (np.zeros((2, 4, 4, 3), np.uint8), "got shape (2, 4, 4, 3)"),
+    (np.zeros((0, 4, 3), np.uint8), "at least one pixel"),
+    (np.zeros(4, np.uint8), "got shape (4,)"),
+])
+def test_other_dtypes_and_shapes_are_one_line_input_errors(image, fragment, tmp_path):
+    for suffix in (".png", ".bmp", ".exr"):
+        with pytest.raises(clrt.InputError) as caught:
+            output.write_image(image, tmp_path / f"a{suffix}")
+        assert fragment in str(caught.value) and "\n" not in str(caught.value)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_bit_depth_is_that_of_the_dtype_or_asked_for_a_linear_image(tmp_path):
+    linear = np.linspace(0, 1, 5 * 6 * 3, dtype=np.float32).reshape(5, 6, 3)
+    for bits, dtype in ((8, np.uint8), (16, np.uint16)):
+        with pytest.raises(clrt.InputError, match="already"):
+            output.write_image(np.zeros((2, 2, 3), dtype), tmp_path / "a.png", bit_depth=24 - bits)
+        output.write_image(linear, tmp_path / f"{bits}.png", bit_depth=bits)
+        output.write_image(output.encode_srgb(linear, bits), tmp_path / f"{bits}-encoded.png", bit_depth=bits)
+        assert (tmp_path / f"{bits}.png").read_bytes() == (tmp_path / f"{bits}-encoded.png").read_bytes()
+    for bad in (12, 8.0, True, "16"):
+        with pytest.raises(clrt.InputError, match="bit_depth must be 8 or 16"):
+            output.write_image(linear, tmp_path / "b.png", bit_depth=bad)
+    with pytest.raises(clrt.InputError, match="JPEG holds 8-bit sRGB gray or RGB images, not 16-bit"):
+        output.write_image(linear, tmp_path / "b.jpg", bit_depth=16)
+    with pytest.raises(clrt.InputError, match="formats that can: .png; render with linear=True"):
+        output.write_image(np.zeros((2, 2, 3), np.uint16), tmp_path / "b.exr")
+    assert not (tmp_path / "b.png").exists() and not (tmp_path / "b.jpg").exists()
+
+
+def test_srgb_encoding_is_the_kernels_at_8_bits_and_finer_at_16():
+    """16-bit codes are the same transfer function at 65535 levels: reduced to 8
+    bits (code 257 k is 8-bit code k) they are the 8-bit codes, within one level
+    where the two roundings straddle a half; alpha is scaled, not curved."""
+    from clrt.scene.texture import srgb_encode8
+    rng = np.random.default_rng(3)
+    linear = np.concatenate([rng.random(100_000), [0.0, 0.0031308, 1.0, 1.5, -0.2, np.inf, np.nan]])
+    image = linear.astype(np.float32).reshape(-1, 1, 1).repeat(3, axis=2)
+    eight, sixteen = output.encode_srgb(image, 8), output.encode_srgb(image, 16)
+    assert eight.dtype == np.uint8 and sixteen.dtype == np.uint16
+    assert np.array_equal(eight, srgb_encode8(image))
+    reduced = np.rint(sixteen / 257.0).astype(int)
+    assert np.abs(reduced - eight).max() <= 1 and np.mean(reduced == eight) > 0.99
+    assert sixteen[-7:, 0, 0].tolist() == [0, round(0.04045 * 65535), 65535, 65535, 0, 65535, 0]
+    order = np.argsort(linear[:100_000])
+    assert (np.diff(sixteen[:100_000, 0, 0][order].astype(int)) >= 0).all(), "monotonic"
+    rgba = np.concatenate([image[:4], np.full((4, 1, 1), 0.5, np.float32)], axis=2)
+    assert (output.encode_srgb(rgba, 16)[..., 3] == 32768).all() and (output.encode_srgb(rgba)[..., 3] == 128).all()
+
+
+def test_one_lookup_by_suffix(tmp_path):
+    assert output.writer_for("A.PNG") is output.WRITERS["png"]
+    assert output.writer_for(tmp_path / "x.Jpeg") is output.writer_for("y.jpg") is output.WRITERS["jpg"]
+    assert len(set(output.IMAGE_SUFFIXES)) == len(output.IMAGE_SUFFIXES)
+    assert output.format_writer("TIFF") is output.WRITERS["tif"] and output.format_writer("exr").suffix == ".exr"
+    for bad, fragment in (("x.psd", "unknown image type '.psd' (use one of .png, .jpg"), ("x", "no image type suffix")):
+        with pytest.raises(clrt.OutputError, match=fragment.replace("(", r"\(").replace(".", r"\.")):
+            output.writer_for(bad)
+    with pytest.raises(clrt.InputError, match="NumPy holds arrays of any dtype and shape, not 8-bit sRGB images"):
+        output.writer_for("x.npy", "8-bit")
+    with pytest.raises(clrt.InputError, match="format must be one of png, jpg"):
+        output.format_writer("npy")
+
+
+def test_the_readme_lists_the_table():
+    """README's table of output formats is WRITERS: a row per format, its
+    suffixes, what it holds and where its mark goes."""
+    from pathlib import Path
+    text = (Path(__file__).resolve().parents[1] / "README.md").read_text()
+    rows = {}
+    for line in text.splitlines():
+        cells = [c.strip() for c in line.strip().strip("|").split("|")]
+        if line.strip().startswith("|") and len(cells) == 4 and cells[1].startswith("`."):
+            rows[cells[1]] = cells
+    assert len(rows) == len(output.WRITERS)
+    for writer in output.WRITERS.values():
+        name, _, holds, mark = rows[" ".join(f"`{s}`" for s in writer.suffixes)]
+        assert name.split()[0] == writer.name and holds.startswith(writer.describe()) and mark == writer.mark

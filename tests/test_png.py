@@ -1,13 +1,16 @@
-"""clrt's own PNG writer (clrt.output.png_bytes) against Pillow: the same pixels
-and mode, a file Pillow verifies, clrt's mark inside; other arrays go to Pillow."""
+"""clrt's own PNG writer (clrt.output.png_bytes) against Pillow and against a
+decoder written from the PNG specification: the same pixels and mode, 8 and 16
+bits a sample, a file Pillow verifies, clrt's mark inside; other arrays refused."""
 
 import io
+import struct
 
 import numpy as np
 import pytest
 from PIL import Image
+from png_reference import spec_decode
 
-from clrt import output
+from clrt import InputError, output
 
 
 def decoded(data: bytes) -> Image.Image:
@@ -25,7 +28,7 @@ def pillow_png(array: np.ndarray) -> Image.Image:
 
 def images():
     rng = np.random.default_rng(7)
-    for shape in [(1, 1, 3), (1, 9, 3), (9, 1, 3), (31, 17, 3), (8, 5), (6, 7, 4), (1, 1)]:
+    for shape in [(1, 1, 3), (1, 9, 3), (9, 1, 3), (31, 17, 3), (8, 5), (6, 7, 4), (1, 1), (5, 6, 2)]:
         yield f"random {shape}", rng.integers(0, 256, size=shape, dtype=np.uint8)
     flat = np.zeros((40, 60, 3), np.uint8)
     flat[10:30, 20:50] = (200, 30, 255)
@@ -39,7 +42,27 @@ def test_same_pixels_and_mode_as_pillow(name, array):
     ours, theirs = decoded(output.png_bytes(array)), pillow_png(array)
     assert ours.mode == theirs.mode and ours.size == theirs.size
     np.testing.assert_array_equal(np.asarray(ours), array)
+    np.testing.assert_array_equal(spec_decode(output.png_bytes(array)), array)
     assert ours.info["Software"].startswith(output.SOFTWARE_MARK)
+
+
+@pytest.mark.parametrize("shape", [(1, 1), (7, 5), (6, 4, 2), (9, 11, 3), (3, 8, 4), (1, 1, 3)])
+def test_16_bit_images_keep_every_bit(shape):
+    """16 bits a sample, big-endian: the specification's decoder gets the array
+    back; Pillow (which holds no 16-bit colour mode) reads gray exactly and
+    colour as the high bytes."""
+    array = np.random.default_rng(11).integers(0, 1 << 16, size=shape, dtype=np.uint16)
+    array.flat[0] = 0x0102   # high and low byte differ: a swapped pair would show
+    data = output.png_bytes(array)
+    assert struct.unpack(">IIBB", data[16:26])[2] == 16
+    decoded_array = spec_decode(data)
+    assert decoded_array.dtype == np.uint16 and np.array_equal(decoded_array, array)
+    ours = decoded(data)
+    assert ours.info["Software"].startswith(output.SOFTWARE_MARK)
+    if len(shape) == 2:
+        assert np.array_equal(np.asarray(ours).astype(np.int64), array)
+    elif shape[2] in (3, 4):
+        assert np.array_equal(np.asarray(ours), (array >> 8).astype(np.uint8))
 
 
 def test_write_image_marks_its_png(tmp_path):
@@ -50,17 +73,18 @@ def test_write_image_marks_its_png(tmp_path):
     np.testing.assert_array_equal(np.asarray(Image.open(path)), image)
 
 
-@pytest.mark.parametrize("array", [np.zeros((4, 4, 3), np.float32), np.zeros((4, 4, 2), np.uint8),
-                                   np.zeros((4, 4, 1), np.uint8), np.zeros((4, 4), np.uint16),
+@pytest.mark.parametrize("array", [np.zeros((4, 4, 3), np.float32), np.zeros((4, 4, 5), np.uint8),
+                                   np.zeros((4, 4, 1), np.uint8), np.zeros((4, 4), np.int32),
                                    np.zeros((2, 2, 2, 3), np.uint8), np.zeros((0, 4, 3), np.uint8)],
-                         ids=["float", "two channels", "one channel", "uint16", "4-d", "empty"])
-def test_other_arrays_are_left_to_pillow(array):
-    assert output.png_bytes(array) is None
+                         ids=["float", "five channels", "one channel", "int32", "4-d", "empty"])
+def test_other_arrays_are_refused(array):
+    with pytest.raises(InputError, match="a PNG image must be"):
+        output.png_bytes(array)
 
 
-def test_gray_and_alpha_through_pillow_still_written(tmp_path):
+def test_gray_and_alpha_written(tmp_path):
     path = tmp_path / "la.png"
-    array = np.full((3, 4, 2), 77, np.uint8)   # LA: Pillow's writer
+    array = np.full((3, 4, 2), 77, np.uint8)
     output.write_image(array, path)
     assert Image.open(path).mode == "LA" and output.written_by_clrt(path)
 
@@ -70,7 +94,9 @@ def test_mark_read_without_pillow_agrees_with_pillow(tmp_path):
     says, and leaves the cases it cannot read to Pillow."""
     from PIL import Image, PngImagePlugin
 
-    from clrt.output import _has_mark, _png_mark, png_bytes
+    from clrt.output import WRITERS, png_bytes
+    from clrt.output.png import read_png_mark as _png_mark
+    _has_mark = WRITERS["png"].read_mark
     image = np.random.default_rng(2).integers(0, 256, (20, 30, 3), dtype=np.uint8)
     ours = tmp_path / "ours.png"
     ours.write_bytes(png_bytes(image))

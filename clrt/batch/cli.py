@@ -13,8 +13,8 @@ from __future__ import annotations
 import argparse
 import sys
 
-from clrt import options
-from clrt.config import DEVICE_ENV, MAX_VIEWS, MAX_WORKERS
+from clrt import options, output
+from clrt.config import BATCH_FORMAT, DEVICE_ENV, MAX_VIEWS, MAX_WORKERS
 from clrt.errors import DeviceError, InputError, OutputError
 
 #: Options of ``clrt render`` that ``clrt batch render`` does not take, and why.
@@ -32,11 +32,17 @@ def parser() -> argparse.ArgumentParser:
     r = sub.add_parser(
         "render", help="render many sources and views into a folder",
         description="Render every SOURCE (mesh or scene file, folder of them, or glob pattern) into "
-                    "DIR/<source-stem>/view-NNNN.png, with a manifest DIR/manifest.jsonl. Finished images "
+                    f"DIR/<source-stem>/view-NNNN.{BATCH_FORMAT} (or --format), with a manifest "
+                    "DIR/manifest.jsonl. Finished images "
                     "are skipped when the command is run again. Without --scheduler a local cluster of "
                     "worker processes (loopback only) runs the jobs.")
     r.add_argument("sources", nargs="+", metavar="SOURCE", help="mesh or scene file, folder, or glob pattern")
     r.add_argument("-o", "--output", required=True, metavar="DIR", help="output folder (created if missing)")
+    r.add_argument("--format", default=BATCH_FORMAT, metavar="FMT",
+                   type=options.typed(lambda v: output.format_writer(v, "--format").suffix.lstrip("."), str),
+                   help=f"format of the frames: {', '.join(output.FORMAT_NAMES)} (default {BATCH_FORMAT}); exr holds "
+                        f"the linear, unclamped image as float32 OpenEXR (needs {output.EXR_INSTALL_HINT}); "
+                        "png with --bit-depth 16: 16-bit PNG")
     r.add_argument("--views", type=options.integer("--views", 1, MAX_VIEWS), default=1,
                    help="views per source on a turntable around the target: view i at azimuth 360*i/N "
                         "degrees, same distance, elevation and framing as the default camera (default 1)")
@@ -90,7 +96,8 @@ def _run(args):
     try:
         return run(args.sources, args.output, args.views, client=client, workers=args.workers,
                    device=args.device, accel=args.accel, builder=args.builder, leaf_size=args.leaf_size,
-                   lights=args.light, force=args.force, progress=not args.quiet, log=log, **render_options)
+                   lights=args.light, force=args.force, progress=not args.quiet, log=log, format=args.format,
+                   bit_depth=args.bit_depth, **render_options)
     except KeyboardInterrupt:
         print("clrt: interrupted; finished images are kept: run the same command again to resume",
               file=sys.stderr)

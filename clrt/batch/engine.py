@@ -3,8 +3,9 @@
     >>> outputs = clrt.batch.render(["meshes/"], "out", views=36, width=640, height=480)
     >>> [o.path for o in outputs if o.status == "done"]
 
-Every image is written atomically under a name that depends only on its source
-and view (``OUT/<source-stem>/view-0007.png``) and recorded in the folder's
+Every image is written atomically under a name that depends only on its source,
+view and format (``OUT/<source-stem>/view-0007.png``; ``--format``: any image
+format of clrt.output.WRITERS, such as .exr) and recorded in the folder's
 manifest (clrt.batch.manifest).  Running the same batch again renders only what
 is missing or was made with other settings, so a batch stopped by Ctrl-C, a
 crash or a lost worker is finished by running it again; a task whose worker
@@ -26,9 +27,9 @@ from clrt.batch.cluster import (dashboard_link, default_workers, keep_lost_worke
                                 start_local_cluster)
 from clrt.batch.jobs import Source, expand_sources, output_path, plan_tasks, settings_key
 from clrt.batch.manifest import FolderLock, Manifest
-from clrt.config import (BATCH_CACHE_SCENES, BATCH_KILLED_RESUBMITS, BATCH_LOST_RESUBMITS, BATCH_NO_WORKER_TIMEOUT,
-                         BATCH_TASK_RETRIES, DEFAULT_ACCEL, DEFAULT_BUILDER, DEFAULT_LEAF_SIZE, MAX_IMAGE_SIDE,
-                         MAX_VIEWS, MAX_WORKERS)
+from clrt.config import (BATCH_CACHE_SCENES, BATCH_FORMAT, BATCH_KILLED_RESUBMITS, BATCH_LOST_RESUBMITS,
+                         BATCH_NO_WORKER_TIMEOUT, BATCH_TASK_RETRIES, DEFAULT_ACCEL, DEFAULT_BUILDER,
+                         DEFAULT_LEAF_SIZE, MAX_IMAGE_SIDE, MAX_VIEWS, MAX_WORKERS)
 from clrt.errors import InputError, OutputError
 from clrt.scene.render_setup import CAMERA_OPTIONS, MATERIAL_OPTIONS, SCENE_OPTIONS
 
@@ -118,7 +119,7 @@ class Summary:
 def render(sources, out_dir, views: int = 1, *, client=None, workers: int | None = None,
            device: str | None = None, accel: str = DEFAULT_ACCEL, builder: str = DEFAULT_BUILDER,
            leaf_size: int = DEFAULT_LEAF_SIZE, lights=None, force: bool = False, progress: bool = False,
-           log=None, **options) -> list[Output]:
+           log=None, format: str = BATCH_FORMAT, bit_depth: int | None = None, **options) -> list[Output]:
     """Render ``views`` turntable views of every source into ``out_dir``.
 
     ``sources``: mesh and scene files, folders, glob patterns (one job per file).
@@ -128,19 +129,23 @@ def render(sources, out_dir, views: int = 1, *, client=None, workers: int | None
     ``distributed.Client``; without one, a local cluster of ``workers``
     processes (default: one per GPU, else one per two CPU cores) runs the batch.
     ``progress``: a progress bar on stderr; ``log``: called with informational
-    lines (the dashboard link).  Returns one :class:`Output` per image and per
+    lines (the dashboard link).  ``format``: the frames' format, an image
+    suffix without its dot (png, exr, tif, ...: clrt.output.FORMAT_NAMES);
+    ``bit_depth``: 8 or 16 (16-bit PNG), None for the format's own (8-bit;
+    linear float32 for exr).  Returns one :class:`Output` per image and per
     bad source; :func:`run` also returns the summary.
     """
     return run(sources, out_dir, views, client=client, workers=workers, device=device, accel=accel,
                builder=builder, leaf_size=leaf_size, lights=lights, force=force, progress=progress,
-               log=log, **options).outputs
+               log=log, format=format, bit_depth=bit_depth, **options).outputs
 
 
 def run(sources, out_dir, views: int = 1, *, client=None, workers: int | None = None, device=None,
         accel=DEFAULT_ACCEL, builder=DEFAULT_BUILDER, leaf_size=DEFAULT_LEAF_SIZE, lights=None,
-        force=False, progress=False, log=None, **options) -> Summary:
+        force=False, progress=False, log=None, format=BATCH_FORMAT, bit_depth=None, **options) -> Summary:
     """:func:`render`, returning the :class:`Summary` (outputs, time, per-worker counts)."""
     settings = _check_options(views, accel, builder, leaf_size, lights, options)
+    suffix = _frame_format(format, bit_depth, settings)
     if workers is not None:
         checks.integer("workers", workers, 1, MAX_WORKERS)
     if isinstance(sources, (str, Path)):
@@ -150,7 +155,7 @@ def run(sources, out_dir, views: int = 1, *, client=None, workers: int | None = 
     started = time.perf_counter()
     with FolderLock(folder):
         manifest = Manifest(folder, force)
-        outputs, pending = _plan(found, folder, manifest, views, settings)
+        outputs, pending = _plan(found, folder, manifest, views, settings, suffix)
         manifest.write()
         if not pending:
             return Summary(outputs, time.perf_counter() - started, 0)
@@ -170,7 +175,7 @@ def run(sources, out_dir, views: int = 1, *, client=None, workers: int | None = 
                 n_workers = len(client.scheduler_info().get("workers", {}))
                 if not n_workers and log:
                     log("the scheduler has no workers yet: the jobs wait for them")
-                jobs = _jobs(pending, folder, views, settings, force, n_workers)
+                jobs = _jobs(pending, folder, views, settings, force, n_workers, suffix)
                 sent = time.perf_counter()
                 outputs += _execute(client, jobs, folder, manifest, device, progress, local=cluster is not None)
                 render_seconds = time.perf_counter() - sent
@@ -214,6 +219,19 @@ def _check_options(views, accel, builder, leaf_size, lights, options) -> dict:
             "builder": builder, "leaf_size": int(leaf_size), "views": int(views)}
 
 
+def _frame_format(format, bit_depth, settings: dict) -> str:
+    """The frames' suffix, checked with ``bit_depth`` -- and the format's optional
+    package -- before any worker starts (clrt.output.render_writer).  A 16-bit
+    depth joins the settings that decide an image: the same file name at
+    another depth is rendered again."""
+    from clrt.output import check_bit_depth, format_writer, render_writer
+    writer = format_writer(format, "format")
+    render_writer(f"view-NNNN{writer.suffix}", check_bit_depth(bit_depth, "bit_depth"))
+    if bit_depth == 16:
+        settings["bit_depth"] = 16
+    return writer.suffix
+
+
 def _plain(value):
     """Tuples of floats and plain numbers, as they travel in tasks and JSON."""
     if value is None or isinstance(value, (bool, int, float, str)):
@@ -234,7 +252,7 @@ def _output_folder(out_dir) -> Path:
     return folder.resolve()
 
 
-def _plan(found: list[Source], folder: Path, manifest: Manifest, views: int, settings: dict):
+def _plan(found: list[Source], folder: Path, manifest: Manifest, views: int, settings: dict, suffix: str):
     """Rows for bad arguments and finished images, and per source the views to render."""
     from clrt.output import written_by_clrt
     outputs, pending = [], []
@@ -248,7 +266,7 @@ def _plan(found: list[Source], folder: Path, manifest: Manifest, views: int, set
         key = settings_key(source.path, settings)
         todo, replace = [], set()
         for view in range(views):
-            rel = output_path(source.name, view)
+            rel = output_path(source.name, view, suffix)
             path = folder / rel
             record = manifest.get(rel)
             if path.is_file():
@@ -267,17 +285,19 @@ def _plan(found: list[Source], folder: Path, manifest: Manifest, views: int, set
     return outputs, pending
 
 
-def _jobs(pending: list, folder: Path, views: int, settings: dict, force: bool, workers: int) -> list[dict]:
+def _jobs(pending: list, folder: Path, views: int, settings: dict, force: bool, workers: int,
+          suffix: str) -> list[dict]:
     """The tasks' arguments: plain data (paths, options), never device state."""
     jobs = []
     for source, key, todo, replace in pending:
         for task in plan_tasks(source, todo, replace, workers, len(pending)):
             jobs.append({
                 "source": source.path, "name": source.name, "views": task.views, "replace": task.replace,
-                "paths": {v: output_path(source.name, v) for v in task.views}, "count": views,
+                "paths": {v: output_path(source.name, v, suffix) for v in task.views}, "count": views,
                 "folder": str(folder), "scene": settings["scene"], "camera": settings["camera"],
                 "lights": settings["lights"], "accel": settings["accel"], "builder": settings["builder"],
-                "leaf_size": settings["leaf_size"], "force": force, "key": key})
+                "leaf_size": settings["leaf_size"], "bit_depth": settings.get("bit_depth"), "force": force,
+                "key": key})
     return jobs
 
 

@@ -12,7 +12,8 @@ import os
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from clrt.config import BATCH_VIEWS_PER_TASK
+from clrt.config import BATCH_FORMAT, BATCH_VIEWS_PER_TASK
+from clrt.output import WRITERS
 from clrt.scene.load import SUPPORTED_EXTENSIONS
 
 #: Files a folder argument contributes (any file named explicitly is tried).
@@ -83,9 +84,10 @@ def _safe(name: str) -> str:
     return name or "source"
 
 
-def output_path(name: str, view: int) -> str:
-    """Relative path of a view's image: ``<source-stem>/view-0007.png``."""
-    return f"{name}/view-{view:04d}.png"
+def output_path(name: str, view: int, suffix: str | None = None) -> str:
+    """Relative path of a view's image: ``<source-stem>/view-0007.png``, or with
+    the ``suffix`` of another format (default: BATCH_FORMAT's)."""
+    return f"{name}/view-{view:04d}{suffix or WRITERS[BATCH_FORMAT].suffix}"
 
 
 def settings_key(source: str, settings: dict) -> str:

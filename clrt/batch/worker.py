@@ -232,7 +232,8 @@ def render_views(job: dict) -> list[dict]:
     """Render views of one source into the output folder; one record per view.
 
     ``job``: source, name, views, replace, count (views of the turntable), folder,
-    scene and camera options, lights, accel, builder, leaf_size, force, key.
+    paths (their suffix names the format), scene and camera options, lights,
+    accel, builder, leaf_size, bit_depth (None, or 16 for 16-bit PNG), force, key.
     Views whose image exists are skipped unless listed in ``replace`` (a retry
     after a lost worker redoes only what is missing).  Errors of the source or
     the device become records, never exceptions: "bad" (the source or an
@@ -243,7 +244,7 @@ def render_views(job: dict) -> list[dict]:
     instead of being rendered; later tasks of that folder on this worker give up
     after one failed write.
     """
-    from clrt.output import write_image
+    from clrt.output import render_writer, write_image
     from clrt.scene.render_setup import render_camera, render_lights, turntable
 
     worker = _worker_address()
@@ -261,7 +262,10 @@ def render_views(job: dict) -> list[dict]:
                             "error": message, "seconds": time.perf_counter() - started})
 
     started = time.perf_counter()
+    bit_depth = job.get("bit_depth")
     try:
+        # the format of the task's frames (one suffix for all), and what it needs (OpenEXR)
+        _, depth = render_writer(folder / job["paths"][job["views"][0]], bit_depth)
         with device_lock():
             renderer, own = _scene_entry(job["source"], job["scene"], job["accel"], job["builder"],
                                          job["leaf_size"])
@@ -309,7 +313,7 @@ def render_views(job: dict) -> list[dict]:
         while pending:
             finish_one()
 
-    with ThreadPoolExecutor(BATCH_IMAGE_WRITERS, thread_name_prefix="clrt-png") as writers:
+    with ThreadPoolExecutor(BATCH_IMAGE_WRITERS, thread_name_prefix="clrt-write") as writers:
         for i, view in enumerate(job["views"]):
             if writes["error"] is not None:   # nothing of this task can be written: stop rendering
                 finish_all()
@@ -332,7 +336,8 @@ def render_views(job: dict) -> list[dict]:
                     raise OutputError(f"cannot create {out.parent}: {exc.strerror or exc}") from None
                 with device_lock():
                     renderer.set_lights(render_lights(renderer.scene.bounds, cam, own, job["lights"]))
-                    frame = renderer.render(cam)
+                    # 8-bit: the kernel's own sRGB encoding; 16-bit and float: made of the linear image
+                    frame = renderer.render(cam, linear=depth != "8-bit")
             except ClrtError as exc:
                 finish_all()
                 fail([view], exc, started)
@@ -344,7 +349,8 @@ def render_views(job: dict) -> list[dict]:
                     fail(job["views"][i:], DeviceError(f"OpenCL error: {exc}"), started)
                     return records
                 raise
-            pending.append((view, cam, started, writers.submit(write_image, frame.image, out, force=job["force"])))
+            pending.append((view, cam, started, writers.submit(write_image, frame.image, out, force=job["force"],
+                                                               bit_depth=bit_depth)))
             while len(pending) > (0 if known_unwritable and not writes["ok"] else BATCH_IMAGE_WRITERS):
                 finish_one()
         finish_all()

@@ -1,6 +1,7 @@
 """Per-pixel images of a camera written as files (``clrt render --aov``): beside
-the image as IMAGE.NAME.npy + IMAGE.NAME.png, or, when the image is an
-OpenEXR file, as extra channels of that file (:data:`EXR_CHANNELS`)."""
+the image as IMAGE.NAME.npy + IMAGE.NAME.png (:data:`VALUES` and
+:data:`PICTURES`), or, when the image's format holds named channels (OpenEXR),
+as extra channels of that file (:data:`EXR_CHANNELS`)."""
 
 from __future__ import annotations
 
@@ -9,12 +10,15 @@ from pathlib import Path
 import numpy as np
 
 from clrt.errors import InputError
-from clrt.output import write_array, write_image
+from clrt.output import WRITERS, write_array, write_image
 from clrt.query.accel import Accel
 from clrt.query.results import CameraImages
 
 
 AOVS = ("depth", "distance", "normal", "prim", "hit", "front")
+#: The formats of the files beside the image: each AOV's values as they are, and
+#: a picture of them (8-bit gray or RGB).
+VALUES, PICTURES = WRITERS["npy"], WRITERS["png"]
 
 #: The channels each AOV becomes in an .exr output, with the values of its .npy
 #: (misses included): depth as ``Z`` (FLOAT, inf on a miss: OpenEXR's usual
@@ -40,7 +44,7 @@ def parse_aovs(text) -> tuple[str, ...]:
 
 
 def aov_arrays(images: CameraImages, name: str) -> tuple[np.ndarray, np.ndarray]:
-    """(values for the .npy, 8-bit picture for the .png) of one AOV."""
+    """(values, 8-bit picture of them) of one AOV."""
     hit = images.hit
     if name in ("depth", "distance"):
         values = images.depth if name == "depth" else images.t
@@ -87,12 +91,13 @@ def camera_images_of(source, camera) -> CameraImages:
 
 
 def aov_paths(image_path, names) -> list[Path]:
-    """IMAGE.NAME.npy and IMAGE.NAME.png for each AOV name, beside ``image_path``."""
+    """IMAGE.NAME.npy and IMAGE.NAME.png (the suffixes of VALUES and PICTURES) for
+    each AOV name, beside ``image_path``."""
     image_path = Path(image_path)
     paths = []
     for name in names:
         base = f"{image_path.stem}.{name}"
-        paths += [image_path.with_name(base + ".npy"), image_path.with_name(base + ".png")]
+        paths += [image_path.with_name(base + VALUES.suffix), image_path.with_name(base + PICTURES.suffix)]
     return paths
 
 
@@ -114,10 +119,10 @@ def write_aovs(source, camera, names, image_path, force: bool = False, images=No
     paths = []
     for name in names:
         values, picture = aov_arrays(images, name)
-        npy, png = aov_paths(image_path, [name])
-        write_array(values, npy, force=force)
-        written.append(npy)
-        write_image(picture, png, force=force)
-        written.append(png)
-        paths += [npy, png]
+        values_path, picture_path = aov_paths(image_path, [name])
+        write_array(values, values_path, force=force)
+        written.append(values_path)
+        write_image(picture, picture_path, force=force)
+        written.append(picture_path)
+        paths += [values_path, picture_path]
     return paths

@@ -24,10 +24,19 @@ def srgb_decode(values) -> np.ndarray:
     return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
 
 
+def srgb_encode(linear, bits: int = 8) -> np.ndarray:
+    """sRGB codes of linear values (IEC 61966-2-1), clamped to 0..1 (NaN as 0)
+    and rounded to the nearest code: uint8 for ``bits`` 8 -- what the kernels'
+    encode_srgb8 does -- or uint16 for 16 (code 257 * k is the 8-bit code k)."""
+    dtype = {8: np.uint8, 16: np.uint16}[bits]
+    c = np.clip(np.nan_to_num(np.asarray(linear, dtype=np.float64), nan=0.0), 0.0, 1.0)
+    codes = float(np.iinfo(dtype).max) * np.where(c <= 0.0031308, 12.92 * c, 1.055 * c ** (1 / 2.4) - 0.055)
+    return np.rint(codes).astype(dtype)
+
+
 def srgb_encode8(linear) -> np.ndarray:
     """8-bit sRGB codes (uint8) of linear values, clamped to 0..1 (what the kernels' encode_srgb8 does)."""
-    c = np.clip(np.asarray(linear, dtype=np.float64), 0.0, 1.0)
-    return np.rint(255.0 * np.where(c <= 0.0031308, 12.92 * c, 1.055 * c ** (1 / 2.4) - 0.055)).astype(np.uint8)
+    return srgb_encode(linear, 8)
 
 
 # Pillow's modes of 16-bit greyscale images (I: 32-bit integers, as which some
