@@ -18,13 +18,14 @@ REPO = Path(__file__).resolve().parents[1]
 FLOORS = [
     ("clrt.errors", "clrt.config"),
     ("clrt.layouts", "clrt.checks"),
-    ("clrt.options", "clrt.output", "clrt.scene"),     # input: scenes and meshes; output: files
-    ("clrt.accel", "clrt.reference"),                   # the host's trees; the brute-force reference tracer
-    ("clrt.device",),                                   # devices, uploads, programs, the device builder
+    ("clrt.scene",),                                    # meshes, files, materials, cameras, scene files
+    ("clrt.accel", "clrt.reference", "clrt.output"),    # host trees; the brute-force reference; output files
+    ("clrt.device", "clrt.options"),                    # devices, uploads, programs; the render options
     ("clrt.query", "clrt.renderer"),                    # ray queries; frames
     ("clrt.batch",),                                    # many frames or rays on Dask
     ("clrt.bench",),                                    # the paper's tables (clrt bench)
-    ("clrt.cli", "clrt.__main__", "clrt"),            # the command line; the package's front (lazy names)
+    ("clrt.cli",),
+    ("clrt.__main__", "clrt"),                          # python -m clrt; the package's front (lazy names)
 ]
 # What `import clrt` loads of the package (the rest comes on first use: clrt/__init__.py).
 IMPORT_CLRT_LOADS = ["clrt", "clrt.errors"]
