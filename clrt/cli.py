@@ -17,7 +17,6 @@ from clrt import config, options, output
 from clrt.errors import ClrtError, DeviceError, InputError, OutputError
 
 DEFAULT_OUTPUT = "clrt-default.png"
-_ACCEL_WORDS = {"box": "boxes", "sphere": "spheres", "ellipse": "ellipsoids"}
 
 
 class _Parser(argparse.ArgumentParser):
@@ -181,7 +180,7 @@ def _render(args) -> int:
         aov_note = " ".join(str(p.resolve()) for p in written[1:])
     if not args.quiet:
         builder = renderer.acceleration.builder   # what "auto" chose
-        accel = "brute force" if args.accel == "none" else f"{builder} BVH of {_ACCEL_WORDS[args.accel]}"
+        accel = "brute force" if args.accel == "none" else f"{builder} BVH of {config.VOLUME_WORDS[args.accel]}"
         view = f", camera from {args.mesh}" if from_file else ""
         print(f"{camera.width}x{camera.height} pixels, {frame.triangles:,} triangles, "
               f"{len(scene.lights)} light(s), {accel}{view}, device: {frame.device}")

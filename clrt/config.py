@@ -15,9 +15,12 @@ from __future__ import annotations
 
 #: Bounding-volume shapes of a BVH.  A shape is chosen when the program is
 #: built (``VOLUME_DEFINES``); a new shape needs a fit in ``clrt/accel/volumes.py``
-#: and a ray test in ``clrt/kernels/volumes.cl`` (docs/architecture.md).
+#: and ``clrt/kernels/build_fit.cl``, and a ray test in ``clrt/kernels/volumes.cl``
+#: (docs/architecture.md, "Where to add").
 VOLUMES = ("box", "sphere", "ellipse")
 VOLUME_DEFINES = {"box": "VOLUME_BOX", "sphere": "VOLUME_SPHERE", "ellipse": "VOLUME_ELLIPSE"}
+#: How the CLI names a BVH of each shape ("a sah BVH of spheres").
+VOLUME_WORDS = {"box": "boxes", "sphere": "spheres", "ellipse": "ellipsoids"}
 #: What ``accel=`` takes: a volume shape, or "none" (every ray against every triangle).
 ACCELS = ("none",) + VOLUMES
 #: BVH builders: the paper's median split and binned SAH on the host

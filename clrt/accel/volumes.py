@@ -34,6 +34,15 @@ SQRT3 = np.sqrt(3.0)
 FIT_CHUNK = 2 ** 16     # nodes fitted at once
 
 
+def fit_defines() -> dict:
+    """The constants above as the device's fit (build_fit.cl) takes them, ``-D``
+    defines of the device builder's and refit's programs: one source of truth
+    (repr() of a float is a C double literal of the same value)."""
+    return {"REL_PAD": repr(float(REL_PAD)), "ULP_PAD": int(ULP_PAD), "PAD_FLOOR": repr(float(PAD_FLOOR)),
+            "EVAL_SLACK": repr(float(EVAL_SLACK)), "ELLIPSE_FLOOR": repr(float(ELLIPSE_FLOOR)),
+            "SQRT3": repr(float(SQRT3))}
+
+
 def round_down32(x: np.ndarray) -> np.ndarray:
     """float64 -> the largest float32 <= x."""
     y = x.astype(np.float32)

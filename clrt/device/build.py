@@ -223,9 +223,7 @@ def build_defines(volume: str, kind: str = "gpu", treelet_leaves: int | None = N
         "PART_BINS": PART_BINS, "PART_MAX_NODES": PART_MAX_NODES, "PART_LEVELS": PART_LEVELS,
         **({"PLOC_SEGMENTS": None} if segmented else {}),
         "C_TRAVERSAL": f"((float){C_TRAVERSAL!r})", "C_INTERSECT": f"((float){C_INTERSECT!r})",
-        "REL_PAD": repr(float(volumes.REL_PAD)), "ULP_PAD": int(volumes.ULP_PAD),
-        "PAD_FLOOR": repr(float(volumes.PAD_FLOOR)), "EVAL_SLACK": repr(float(volumes.EVAL_SLACK)),
-        "ELLIPSE_FLOOR": repr(float(volumes.ELLIPSE_FLOOR)), "SQRT3": repr(float(volumes.SQRT3)),
+        **volumes.fit_defines(),
     }
 
 
