@@ -370,7 +370,17 @@ DECIMATED = {
 }
 # Suite names of scan files whose stem is not the name (full-size variant: NAME-full).
 SCAN_NAMES = {"bunny00": "bunny", "chinesedragon-10kv": "dragon"}
-SCAN_EXTENSIONS = (".off", ".obj", ".ply", ".stl", ".glb", ".gltf", ".3ds")   # preference order
+# Where one scan is in the folder in several formats, the first of these wins;
+# every other format clrt reads (clrt.scene.load.SUPPORTED_EXTENSIONS) is
+# scanned too, after them.
+PREFERRED_SCAN_EXTENSIONS = (".off", ".obj", ".ply", ".stl", ".glb", ".gltf", ".3ds")
+
+
+def _scan_rank(ext: str, supported: tuple) -> int:
+    """Preference of a scan file's extension (lower wins), -1 for a format clrt does not read."""
+    if ext in PREFERRED_SCAN_EXTENSIONS:
+        return PREFERRED_SCAN_EXTENSIONS.index(ext)
+    return len(PREFERRED_SCAN_EXTENSIONS) + supported.index(ext) if ext in supported else -1
 
 
 def default_mesh_dir() -> Path | None:
@@ -427,15 +437,15 @@ class MeshSuite:
             self.notes.append(f"mesh folder {self.mesh_dir} does not exist: generated meshes only")
 
     def _add_scans(self) -> None:
-        from clrt.scene.load import load_mesh
+        from clrt.scene.load import SUPPORTED_EXTENSIONS, load_mesh
         files: dict[str, Path] = {}
         for path in sorted(self.mesh_dir.iterdir()):
-            ext = path.suffix.lower()
-            if not path.is_file() or ext not in SCAN_EXTENSIONS:
+            rank = _scan_rank(path.suffix.lower(), SUPPORTED_EXTENSIONS)
+            if not path.is_file() or rank < 0:
                 continue
             stem = path.stem.lower()
             name = SCAN_NAMES.get(stem, stem)
-            if name in files and SCAN_EXTENSIONS.index(files[name].suffix.lower()) <= SCAN_EXTENSIONS.index(ext):
+            if name in files and _scan_rank(files[name].suffix.lower(), SUPPORTED_EXTENSIONS) <= rank:
                 continue
             files[name] = path
         can_decimate = have_decimation()
