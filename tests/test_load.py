@@ -14,8 +14,9 @@ import trimesh
 
 from clrt.errors import MeshLoadError
 from clrt.scene import load as load_module
+from clrt.scene.formats import part as part_module
 from clrt.scene.load import SUPPORTED_EXTENSIONS, load_mesh
-from clrt.scene.load_3ds import encode_3ds, parse_3ds, write_3ds
+from clrt.scene.formats.tds import encode_3ds, parse_3ds, write_3ds
 from clrt.scene.mesh import Mesh
 
 SHARED_MESHES = Path(__file__).resolve().parents[2] / "shared" / "meshes"
@@ -624,7 +625,7 @@ def test_3ds_local_matrix_is_not_applied(tmp_path):
 def test_3ds_registered_with_trimesh(tmp_path):
     # clrt registers its reader when it first hands trimesh a file (an STL or
     # glTF); done here, so that the test does not depend on the tests before it
-    from clrt.scene.load_3ds import register_with_trimesh
+    from clrt.scene.formats.tds import register_with_trimesh
     assert register_with_trimesh()
     path = tmp_path / "reg.3ds"
     write_3ds(path, [tetra()])
@@ -702,7 +703,7 @@ def test_unreadable_file(tmp_path, monkeypatch):
     def denied(*args, **kwargs):
         raise PermissionError(13, "Permission denied")
     # chmod 000 does not stop root, so simulate the refusal at open().
-    monkeypatch.setattr(load_module, "open", denied, raising=False)
+    monkeypatch.setattr(part_module, "open", denied, raising=False)
     assert_one_line_error(path, "permission denied")
 
 

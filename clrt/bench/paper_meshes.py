@@ -370,7 +370,9 @@ DECIMATED = {
 }
 # Suite names of scan files whose stem is not the name (full-size variant: NAME-full).
 SCAN_NAMES = {"bunny00": "bunny", "chinesedragon-10kv": "dragon"}
-SCAN_EXTENSIONS = (".off", ".obj", ".ply", ".stl", ".glb", ".gltf", ".3ds")   # preference order
+# Where a scan is in several formats, the first here wins; any other format clrt reads
+# (clrt.scene.load.SUPPORTED_EXTENSIONS) comes after these.
+SCAN_PREFERENCE = (".off", ".obj", ".ply", ".stl", ".glb", ".gltf", ".3ds")
 
 
 def default_mesh_dir() -> Path | None:
@@ -427,15 +429,18 @@ class MeshSuite:
             self.notes.append(f"mesh folder {self.mesh_dir} does not exist: generated meshes only")
 
     def _add_scans(self) -> None:
-        from clrt.scene.load import load_mesh
+        from clrt.scene.load import SUPPORTED_EXTENSIONS, load_mesh
+
+        def rank(ext: str) -> int:
+            return SCAN_PREFERENCE.index(ext) if ext in SCAN_PREFERENCE else len(SCAN_PREFERENCE)
         files: dict[str, Path] = {}
         for path in sorted(self.mesh_dir.iterdir()):
             ext = path.suffix.lower()
-            if not path.is_file() or ext not in SCAN_EXTENSIONS:
+            if not path.is_file() or ext not in SUPPORTED_EXTENSIONS:
                 continue
             stem = path.stem.lower()
             name = SCAN_NAMES.get(stem, stem)
-            if name in files and SCAN_EXTENSIONS.index(files[name].suffix.lower()) <= SCAN_EXTENSIONS.index(ext):
+            if name in files and rank(files[name].suffix.lower()) <= rank(ext):
                 continue
             files[name] = path
         can_decimate = have_decimation()

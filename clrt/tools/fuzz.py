@@ -46,7 +46,9 @@ from pathlib import Path
 
 import numpy as np
 
-FORMATS = ("3ds", "glb", "gltf", "obj", "off", "ply", "stl")
+from clrt.scene.load import SUPPORTED_EXTENSIONS
+
+FORMATS = tuple(ext[1:] for ext in SUPPORTED_EXTENSIONS)   # "3ds", "glb", ...: every format clrt reads
 _TEXT = {"obj", "off", "gltf"}   # ASCII PLY and STL are recognised per file
 _HUGE_TEXT = ("0", "1", "2", "-1", "65535", "65536", "2147483647", "2147483648", "4294967295",
               "4294967296", "1000000000000", "18446744073709551616", "99999999999999999999999")
@@ -70,7 +72,7 @@ def builtin_corpus() -> list[Sample]:
     import trimesh
 
     from clrt.scene import primitives
-    from clrt.scene.load_3ds import encode_3ds
+    from clrt.scene.formats.tds import encode_3ds
 
     sphere = primitives.icosphere(1)
     box = primitives.box()
