@@ -15,8 +15,8 @@ import trimesh
 from clrt.errors import MeshLoadError
 from clrt.scene import load as load_module
 from clrt.scene.formats import part as part_module
-from clrt.scene.load import SUPPORTED_EXTENSIONS, load_mesh
 from clrt.scene.formats.tds import encode_3ds, parse_3ds, write_3ds
+from clrt.scene.load import READERS, SUPPORTED_EXTENSIONS, load_asset, load_mesh
 from clrt.scene.mesh import Mesh
 
 SHARED_MESHES = Path(__file__).resolve().parents[2] / "shared" / "meshes"
@@ -912,3 +912,70 @@ def test_mesh_detail_and_transform_are_checked():
     with pytest.raises(MeshLoadError, match=r"within \+-1e30"):
         mesh.transformed(np.diag([1e31, 1.0, 1.0, 1.0]))
     assert np.isfinite(mesh.transformed(np.diag([2.0, 2.0, 2.0, 1.0])).vertices).all()
+
+
+# ---------------------------------------------------------------------------
+# The table of formats
+
+
+def _rich_gltf_scene() -> trimesh.Scene:
+    """Two objects (a textured cube, a sphere with vertex colours and normals) and a camera."""
+    from PIL import Image
+    box = trimesh.creation.box()
+    corners = box.vertices[box.faces].reshape(-1, 3)
+    material = trimesh.visual.material.PBRMaterial(baseColorTexture=Image.new("RGB", (2, 2), (9, 99, 199)))
+    cube = trimesh.Trimesh(corners, np.arange(len(corners)).reshape(-1, 3), process=False,
+                           visual=trimesh.visual.TextureVisuals(uv=corners[:, :2], material=material))
+    sphere = trimesh.creation.icosphere(1)
+    sphere = trimesh.Trimesh(sphere.vertices, sphere.faces, vertex_normals=sphere.vertices, process=False,
+                             vertex_colors=np.tile([255, 0, 0, 255], (len(sphere.vertices), 1)))
+    scene = trimesh.Scene()
+    scene.add_geometry(cube, node_name="cube")
+    scene.add_geometry(sphere, node_name="sphere", transform=trimesh.transformations.translation_matrix([3, 0, 0]))
+    scene.set_camera()
+    return scene
+
+
+def format_samples(folder: Path) -> dict:
+    """``{extension: (file, faces)}``: a file holding everything its format can say
+    besides triangles (OFF: normals too, which clrt does not read), and of two
+    objects where the format has several; ``faces`` is how many triangles it has."""
+    tri = "v 0 0 0\nv 1 0 0\nv 0 1 0\n"
+    ply = ("ply\nformat ascii 1.0\nelement vertex 3\n"
+           + "".join(f"property float {p}\n" for p in ("x", "y", "z", "nx", "ny", "nz", "red", "green", "blue", "u", "v"))
+           + "element face 1\nproperty list uchar int vertex_indices\nend_header\n"
+           + "0 0 0 0 0 1 1 0 0 0 0\n1 0 0 0 0 1 0 1 0 1 0\n0 1 0 0 0 1 0 0 1 0 1\n3 0 1 2\n")
+    solid = "solid {0}\nfacet normal 0 0 1\nouter loop\nvertex 0 0 {1}\nvertex 1 0 {1}\nvertex 0 1 {1}\nendloop\nendfacet\nendsolid {0}\n"
+    scene = _rich_gltf_scene()
+    files = {
+        ".3ds": (encode_3ds([tetra(), tetra("b", (2.0, 0.0, 0.0))]), 8),
+        ".glb": (scene.export(file_type="glb"), 92),
+        ".gltf": (trimesh.exchange.gltf.export_gltf(scene, embed_buffers=True)["model.gltf"], 92),
+        ".obj": ("mtllib m.mtl\no one\n" + tri + "vt 0 0\nvn 0 0 1\nusemtl red\nf 1/1/1 2/1/1 3/1/1\n"
+                 "o two\nv 0 0 1\nf 2/1/1 3/1/1 4/1/1\n", 2),
+        ".off": ("CNOFF\n3 1 0\n0 0 0 0 0 1 1 0 0 1\n1 0 0 0 0 1 0 1 0 1\n0 1 0 0 0 1 0 0 1 1\n3 0 1 2\n", 1),
+        ".ply": (ply, 1),
+        ".stl": (solid.format("a", 0) + solid.format("b", 1), 2),
+    }
+    (folder / "m.mtl").write_text("newmtl red\nKd 1 0 0\n")
+    return {ext: (write(folder, "sample" + ext, data), faces) for ext, (data, faces) in files.items()}
+
+
+def test_the_table_of_formats_says_what_each_one_carries(tmp_path):
+    """Each reader's entry in READERS (colours, normals, texture coordinates,
+    materials, several objects, a camera) against what a file that has them
+    all gives; a new format needs a sample here."""
+    samples = format_samples(tmp_path)
+    assert sorted(samples) == list(SUPPORTED_EXTENSIONS)
+    for reader in READERS:
+        for ext in reader.extensions:
+            path, faces = samples[ext]
+            mesh, materials = load_asset(path)
+            carried = {"colors": mesh.colors is not None, "normals": mesh.normals is not None,
+                       "uv": mesh.uv is not None, "materials": bool(materials),
+                       "camera": load_module.file_camera(path) is not None}
+            claimed = {key: bool(getattr(reader, key)) for key in carried}
+            assert carried == claimed, ext
+            assert len(mesh.faces) == faces, ext
+            if reader.objects:
+                assert faces > 1, f"{ext}: its sample should hold two objects"

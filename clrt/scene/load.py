@@ -42,7 +42,7 @@ class Reader:
     normals: bool = False         # authored vertex normals
     uv: bool = False              # texture coordinates
     materials: bool = False       # materials, with texture images
-    objects: bool = False         # several objects (each placed), concatenated in file order
+    objects: bool = False         # several objects, all read (placed where the format places them), in file order
     # path -> the file's camera, as file_camera describes it, or None
     camera: Callable[[str], "dict | None"] | None = None
 
@@ -53,7 +53,7 @@ READERS = (
            objects=True, camera=gltf.glb_camera),
     Reader("glTF", (".gltf",), gltf.read_gltf, colors=True, normals=True, uv=True, materials=True,
            objects=True, camera=gltf.gltf_camera),
-    Reader("OBJ", (".obj",), obj.read, normals=True, uv=True, materials=True),
+    Reader("OBJ", (".obj",), obj.read, normals=True, uv=True, materials=True, objects=True),
     Reader("OFF", (".off",), off.read, colors=True),
     Reader("PLY", (".ply",), ply.read, colors=True, normals=True, uv=True),
     Reader("STL", (".stl",), stl.read, objects=True),
