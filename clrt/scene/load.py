@@ -11,8 +11,9 @@ truncated content, no triangles) raises :class:`MeshLoadError` with a one-line
 message that names the file; nothing in a file is ever executed.
 
 Face order is the file's order, so a primitive id is a face's position in the
-file.  Polygons are fan-triangulated in place (polygon ``i`` of ``n`` corners
-becomes ``n - 2`` consecutive triangles).
+file.  Polygons are triangulated in place (polygon ``i`` of ``n`` corners
+becomes ``n - 2`` consecutive triangles: a fan when it is convex, else by ear
+clipping; :mod:`clrt.scene.formats.triangulate`).
 """
 
 from __future__ import annotations

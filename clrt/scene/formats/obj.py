@@ -1,6 +1,6 @@
 """Wavefront OBJ, with its MTL material libraries and their texture images.
 
-Read: ``v``, ``vt``, ``vn``, ``f`` (polygons of any size, fan-triangulated in
+Read: ``v``, ``vt``, ``vn``, ``f`` (polygons of any size, triangulated in
 place; negative indices count back), ``usemtl`` and ``mtllib``; lines,
 points, groups and smoothing groups are ignored, a trailing backslash
 continues a statement.  Texture coordinates and normals are used when every
@@ -24,7 +24,8 @@ import numpy as np
 
 from clrt.errors import InputError
 from clrt.scene.formats.part import Part, build, fail, read_side_file, short, texture
-from clrt.scene.formats.text import decode, fan_triangulate, nonblank_lines, polygons, xyz
+from clrt.scene.formats.text import decode, nonblank_lines, polygons, xyz
+from clrt.scene.formats.triangulate import triangulate
 from clrt.scene.mesh import Mesh
 
 
@@ -76,7 +77,7 @@ def _parse_obj(data: bytes, label: str, folder: str | None = None) -> Part:
                           f"{len(vertices)} vertices (OBJ indices 1..{len(vertices)}, or negative counting back)")
     # Triangle corners as positions in the flat corner list, so that every
     # per-corner field triangulates exactly as the vertex indices do.
-    corners = fan_triangulate(counts, np.arange(len(flat)))
+    corners = triangulate(counts, flat, vertices, names=np.arange(len(flat)))
     part = Part(vertices, flat[corners])
     if "/" in face_text:
         for field, keyword in ((1, "vt"), (2, "vn")):

@@ -2,7 +2,7 @@
 
 Read: the ``[ST][C][N]OFF`` header keywords (binary OFF, ``4OFF`` and ``nOFF``
 are refused by name), the counts on the keyword's line or the next, ``#``
-comments, polygons of any size (fan-triangulated in place), vertex colours
+comments, polygons of any size (triangulated in place), vertex colours
 (``C``: r g b [a] after x y z [nx ny nz]) and face colours (r g b after a
 face's corners), integers as 0..255 and floats as 0..1.  Normals and texture
 coordinates of ``N``/``ST`` files are skipped.
@@ -19,7 +19,8 @@ import re
 import numpy as np
 
 from clrt.scene.formats.part import Part, build, fail
-from clrt.scene.formats.text import decode, fan_triangulate, loadtxt, nonblank_lines, polygons, table, xyz
+from clrt.scene.formats.text import decode, loadtxt, nonblank_lines, polygons, table, xyz
+from clrt.scene.formats.triangulate import triangulate
 from clrt.scene.mesh import Mesh
 
 # OFF header keywords: [ST][C][N]OFF.  "4OFF"/"nOFF" (other dimensions) and
@@ -122,7 +123,7 @@ def _parse_off_lines(data: bytes, label: str) -> Part:
     vertices = xyz(vertex_lines, label)
     face_lines = lines[body + n_vertices:body + n_vertices + n_faces]
     counts, flat = polygons(face_lines, label, counted=True)
-    part = Part(vertices, fan_triangulate(counts, flat))
+    part = Part(vertices, triangulate(counts, flat, vertices))
     # Colours: r g b [a] of each vertex (C prefix) or after a face's corners,
     # used only when every row has them.  A vertex line is, in Geomview's
     # order, x y z [nx ny nz (N)] [r g b a (C)] [s t (ST)].

@@ -44,7 +44,7 @@ class Part:
     corner; colours in 0..1 (each parser scales them by the types the file
     declares, never by their values) of vertices (V, 3) or of polygons (P, 3), sRGB unless
     ``srgb_colors`` is False, with ``polygon_sizes`` (P,) when polygons were
-    fan-triangulated (each polygon's colour goes to its triangles);
+    triangulated (each polygon's colour goes to its triangles);
     face_material (F,) indexing ``materials`` (dicts of Material fields, shared
     by all parts of a file), -1 for none.
     """

@@ -4,7 +4,7 @@ Read: the ``vertex`` element's x, y, z and, when present, normals (nx, ny,
 nz), colours (red, green, blue, scaled to 0..1 by their declared types) and
 texture coordinates (texture_u/v, u/v or s/t); the ``face`` element's vertex
 index list (``vertex_indices`` or ``vertex_index``, else its first list;
-polygons of any size, fan-triangulated in place) and face colours.  Other
+polygons of any size, triangulated in place) and face colours.  Other
 elements and properties are skipped; a texture image named in the header is
 not opened.
 
@@ -23,7 +23,8 @@ import numpy as np
 
 from clrt.errors import MeshLoadError
 from clrt.scene.formats.part import Part, build, fail, short
-from clrt.scene.formats.text import decode, fan_triangulate, nonblank_lines, polygons, table
+from clrt.scene.formats.text import decode, nonblank_lines, polygons, table
+from clrt.scene.formats.triangulate import triangulate
 from clrt.scene.mesh import Mesh
 
 
@@ -153,7 +154,8 @@ def _ply_part(vertex: dict, counts: np.ndarray, flat: np.ndarray, face: dict, ty
     colours (red, green, blue, of vertices or else of faces, scaled to 0..1 by
     their declared types) and texture coordinates (texture_u/v, u/v or s/t, per
     vertex).  ``types``: :func:`_ply_types` of the header."""
-    part = Part(np.stack([vertex[a] for a in "xyz"], axis=1), fan_triangulate(counts, flat))
+    vertices = np.stack([vertex[a] for a in "xyz"], axis=1)
+    part = Part(vertices, triangulate(counts, flat, vertices))
     if normals is None and {"nx", "ny", "nz"} <= set(vertex):
         normals = np.stack([vertex[a] for a in ("nx", "ny", "nz")], axis=1)
     part.normals = normals

@@ -1,5 +1,5 @@
 """Parsing shared by the text formats (OFF, OBJ, ASCII PLY): lines, number
-tables, vertex rows, polygon rows and their triangulation.
+tables, vertex rows and polygon rows (:mod:`.triangulate` makes triangles of them).
 
 Each parser first tries a vectorised path (np.loadtxt over a block of lines
 with a uniform column count) and falls back to a per-line Python path, which
@@ -106,20 +106,3 @@ def polygons(lines: "list[str]", label: str, counted: bool, exact: bool = False)
             raise fail(label, f"malformed face index ({short(exc)})") from None
     return counts, flat
 
-
-def fan_triangulate(counts: np.ndarray, flat: np.ndarray) -> np.ndarray:
-    """Triangulate polygons as fans, keeping polygon order.
-
-    counts: (P,) int64 corners per polygon, all >= 3.
-    flat: (sum(counts),) int64 corner indices of all polygons, concatenated.
-    Returns (sum(counts - 2), 3) int64: polygon ``p`` with corners ``c0..ck``
-    becomes triangles ``(c0, c1, c2), (c0, c2, c3), ...`` in that order.
-    """
-    if (counts == 3).all():
-        return flat.reshape(-1, 3)
-    starts = np.cumsum(counts) - counts
-    tris = counts - 2
-    first = np.repeat(starts, tris)
-    # Index of each triangle within its own polygon: 0, 1, ..., tris[p] - 1.
-    local = np.arange(int(tris.sum())) - np.repeat(np.cumsum(tris) - tris, tris)
-    return np.stack([flat[first], flat[first + local + 1], flat[first + local + 2]], axis=1)
