@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from clrt.errors import MeshLoadError
+from clrt.errors import MeshLoadError, MeshLoadWarning
 from clrt.scene import load as load_module
 from clrt.scene.formats import part as part_module
 from clrt.scene.formats.tds import encode_3ds, parse_3ds, write_3ds
@@ -72,7 +72,8 @@ f 1//1 3//1 4//1
 usemtl a
 f 2 3 4 # trailing comment
 """
-    mesh = load_mesh(write(tmp_path, "order.obj", text))
+    with pytest.warns(MeshLoadWarning, match="/nonexistent/materials.mtl not found"):
+        mesh = load_mesh(write(tmp_path, "order.obj", text))
     assert mesh.faces.tolist() == [[0, 1, 2], [0, 2, 3], [1, 2, 3]]
     assert mesh.vertices.dtype == np.float32 and mesh.faces.dtype == np.int32
     assert mesh.name == "order"

@@ -95,7 +95,8 @@ def load_asset(path) -> "tuple[Mesh, list[dict]]":
     """The mesh of a file and its materials, as dicts of :class:`clrt.Material`
     fields (``mesh.face_material`` indexes them; [] for a file without any).
     OBJ reads its ``mtllib`` files and their ``map_Kd`` images from the OBJ's
-    folder (a missing one is skipped: the faces keep the default material)."""
+    folder (a missing one is left out, with a :class:`clrt.errors.MeshLoadWarning`:
+    the faces keep the default material, or the material its colour)."""
     try:
         path = os.fspath(path)
     except TypeError:

@@ -6,7 +6,8 @@ points, groups and smoothing groups are ignored, a trailing backslash
 continues a statement.  Texture coordinates and normals are used when every
 face corner names one.  MTL files (``mtllib``, beside the OBJ) give each
 material's Kd, Ks, Ns, d/Tr, Ni, illum and map_Kd image (the table in
-docs/scene-files.md); a missing MTL file or image is skipped.
+docs/scene-files.md); a missing MTL file or image is left out, with a
+:class:`~clrt.errors.MeshLoadWarning` naming it and the OBJ.
 
 Parsed here rather than by trimesh (5.2.0 checked), whose OBJ reader emits
 ``usemtl`` sections in reverse order, moves the second triangle of every quad
@@ -19,10 +20,11 @@ from __future__ import annotations
 import math
 import os
 import re
+import warnings
 
 import numpy as np
 
-from clrt.errors import InputError
+from clrt.errors import InputError, MeshLoadWarning
 from clrt.scene.formats.part import Part, build, fail, read_side_file, short, texture
 from clrt.scene.formats.text import decode, nonblank_lines, polygons, xyz
 from clrt.scene.formats.triangulate import triangulate
@@ -155,9 +157,13 @@ def _obj_absolute(index: np.ndarray, counts: np.ndarray, statements: list, keywo
 
 def _parse_mtl(path: str, label: str) -> dict:
     """``{name: material fields}`` of an MTL file (docs/scene-files.md has the
-    table: Kd, Ks, Ns, d/Tr, Ni, illum, map_Kd); {} when the file is missing,
-    as it often is beside downloaded OBJ files."""
+    table: Kd, Ks, Ns, d/Tr, Ni, illum, map_Kd).  A missing file, as MTL files
+    and images often are beside downloaded OBJ files, is left out with a
+    :class:`MeshLoadWarning` naming the OBJ (``label``) and the file: {} for the
+    library, no texture for its material."""
     if not os.path.isfile(path):
+        warnings.warn(f"{label}: material library {path} not found: its materials are left out",
+                      MeshLoadWarning, stacklevel=2)
         return {}
     text = decode(read_side_file(path, label))
     folder = os.path.dirname(path)
@@ -166,7 +172,8 @@ def _parse_mtl(path: str, label: str) -> dict:
         words = raw.split()
         key, args = words[0], words[1:]
         if key == "newmtl":
-            current = materials.setdefault(" ".join(args), {})
+            name = " ".join(args)
+            current = materials.setdefault(name, {})
             continue
         if current is None or not args:
             continue
@@ -178,6 +185,9 @@ def _parse_mtl(path: str, label: str) -> dict:
                 image = os.path.join(folder, args[-1])
                 if os.path.isfile(image):
                     current["texture"] = texture(image, wrap, wrap, label)
+                else:
+                    warnings.warn(f"{label}: {os.path.basename(path)}: material {name!r}: texture {image} "
+                                  f"not found: the material is untextured", MeshLoadWarning, stacklevel=2)
             elif key in ("Kd", "Ks"):
                 current[key] = [float(x) for x in (args * 3)[:3]]
             elif key in ("Ns", "d", "Tr", "Ni", "illum"):
