@@ -1091,10 +1091,11 @@ def format_samples(folder: Path) -> dict:
     objects where the format has several; ``faces`` is how many triangles it has."""
     tri = "v 0 0 0\nv 1 0 0\nv 0 1 0\n"
     ply = ("ply\nformat ascii 1.0\nelement vertex 3\n"
-           + "".join(f"property float {p}\n" for p in ("x", "y", "z", "nx", "ny", "nz", "red", "green", "blue", "u", "v"))
+           + "".join(f"property float {p}\n" for p in "x y z nx ny nz red green blue u v".split())
            + "element face 1\nproperty list uchar int vertex_indices\nend_header\n"
            + "0 0 0 0 0 1 1 0 0 0 0\n1 0 0 0 0 1 0 1 0 1 0\n0 1 0 0 0 1 0 0 1 0 1\n3 0 1 2\n")
-    solid = "solid {0}\nfacet normal 0 0 1\nouter loop\nvertex 0 0 {1}\nvertex 1 0 {1}\nvertex 0 1 {1}\nendloop\nendfacet\nendsolid {0}\n"
+    solid = ("solid {0}\nfacet normal 0 0 1\nouter loop\nvertex 0 0 {1}\nvertex 1 0 {1}\nvertex 0 1 {1}\n"
+             "endloop\nendfacet\nendsolid {0}\n")
     scene = _rich_gltf_scene()
     files = {
         ".3ds": (encode_3ds([tetra(), tetra("b", (2.0, 0.0, 0.0))]), 8),
