@@ -36,6 +36,10 @@ _FLAT = 1e-9
 # most _CHUNK corner pairs at a time.
 _ONE_BY_ONE = 32
 _CHUNK = 1 << 21
+# Fans are checked this many corners at a time: the dozens of temporary arrays
+# stay small and are reused (over a whole file of a million quads at once, the
+# fresh memory they took cost a second).
+_FOLD_CHUNK = 1 << 14
 # Ear clipping is quadratic, so a file's ear clipping stops after about a
 # second's work (of _clip_cost): the polygons past that keep their fans, and a
 # hostile file (a million-corner polygon, millions of concave ones) loads in
@@ -79,23 +83,26 @@ def triangulate(counts: np.ndarray, flat: np.ndarray, vertices: np.ndarray,
     budget = _BUDGET_NS
     in_range = flat.min() >= 0 and flat.max() < len(vertices)
     larger = counts[counts > 3]
+    columns = np.ascontiguousarray(vertices.T)   # x, y and z each contiguous, for np.take
     for n in [int(larger[0])] if (larger == larger[0]).all() else np.unique(larger).tolist():
-        # Corner k of the polygons of n corners in row k: numpy runs over contiguous rows.
-        polygons = np.flatnonzero(counts == n)
-        at = starts[polygons] + np.arange(n)[:, None]                            # (n, Pn) places in flat
-        corners = flat[at]
-        if not in_range:
-            valid = ((corners >= 0) & (corners < len(vertices))).all(axis=0)
-            polygons, at, corners = polygons[valid], at[:, valid], corners[:, valid]
-        with np.errstate(all="ignore"):   # NaN or infinite positions: reported by the mesh checks
-            folds = _fan_folds(*(np.take(vertices[:, k], corners) for k in range(3)))
-            clip = np.flatnonzero(folds)[:budget // _clip_cost(n)]
-            if len(clip):
-                budget -= len(clip) * _clip_cost(n)
-                ears = _ear_clip(vertices[corners[:, clip].T])                    # (Pc, n - 2, 3) corner numbers
-                rows = polygons[clip]
-                triangles[triangle_starts[rows, None] + np.arange(n - 2)] = np.take_along_axis(
-                    names[at[:, clip].T][:, None, :], ears, axis=2)
+        every = np.flatnonzero(counts == n)
+        step = max(1, _FOLD_CHUNK // n)
+        for polygons in (every[i:i + step] for i in range(0, len(every), step)):
+            # Corner k of the polygons in row k: numpy runs over contiguous rows.
+            at = starts[polygons] + np.arange(n)[:, None]                        # (n, Pn) places in flat
+            corners = flat[at]
+            if not in_range:
+                valid = ((corners >= 0) & (corners < len(vertices))).all(axis=0)
+                polygons, at, corners = polygons[valid], at[:, valid], corners[:, valid]
+            with np.errstate(all="ignore"):   # NaN or infinite positions: reported by the mesh checks
+                folds = _fan_folds(*(np.take(column, corners) for column in columns))
+                clip = np.flatnonzero(folds)[:budget // _clip_cost(n)]
+                if len(clip):
+                    budget -= len(clip) * _clip_cost(n)
+                    ears = _ear_clip(vertices[corners[:, clip].T])                # (Pc, n - 2, 3) corner numbers
+                    rows = polygons[clip]
+                    triangles[triangle_starts[rows, None] + np.arange(n - 2)] = np.take_along_axis(
+                        names[at[:, clip].T][:, None, :], ears, axis=2)
     return triangles
 
 
