@@ -58,8 +58,8 @@ if _started_as_command():
 
 from importlib import import_module
 
-from clrt.errors import (ClrtError, DeviceError, DeviceMemoryError, InputError, KernelBuildError,
-                         MeshLoadError, OutputError, TooLargeError)
+from clrt.errors import (ClrtError, ClrtWarning, DeviceError, DeviceMemoryError, InputError, KernelBuildError,
+                         MeshLoadError, MeshLoadWarning, OutputError, TooLargeError)
 
 __version__ = "0.1.0"
 
@@ -78,8 +78,8 @@ _LAZY = {
     "load_scene": "clrt.scene.scene_file",
 }
 
-__all__ = sorted(["ClrtError", "DeviceError", "DeviceMemoryError", "InputError", "KernelBuildError",
-                  "MeshLoadError", "OutputError", "TooLargeError", *_LAZY])
+__all__ = sorted(["ClrtError", "ClrtWarning", "DeviceError", "DeviceMemoryError", "InputError", "KernelBuildError",
+                  "MeshLoadError", "MeshLoadWarning", "OutputError", "TooLargeError", *_LAZY])
 
 
 def __getattr__(name: str):

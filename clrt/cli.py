@@ -1,7 +1,9 @@
 """Command line: ``clrt render`` and ``clrt info`` (also ``python -m clrt``).
 
 Every error a user can cause ends as one line on stderr, ``clrt: <what went
-wrong>``, and a non-zero exit: 2 for bad input, 3 for OpenCL trouble.
+wrong>``, and a non-zero exit: 2 for bad input, 3 for OpenCL trouble.  What
+clrt went on without (:class:`clrt.errors.ClrtWarning`, e.g. an OBJ's missing
+texture) is one line too: ``clrt: warning: <what>``.
 """
 
 from __future__ import annotations
@@ -11,10 +13,11 @@ import os
 import signal
 import sys
 import time
+import warnings
 from pathlib import Path
 
 from clrt import config, options, output
-from clrt.errors import ClrtError, DeviceError, InputError, OutputError
+from clrt.errors import ClrtError, ClrtWarning, DeviceError, InputError, OutputError
 
 DEFAULT_OUTPUT = "clrt-default.png"
 
@@ -269,6 +272,24 @@ def _device_option(argv: list) -> str | None:
 
 
 def main(argv=None) -> int:
+    with warnings.catch_warnings():   # restores the display of warnings for a caller in Python
+        warnings.showwarning = _warning_line(warnings.showwarning)
+        return _main(argv)
+
+
+def _warning_line(show_other):
+    """A :func:`warnings.showwarning` that prints clrt's warnings as its errors
+    are printed, on one line (not Python's two, with a source line), and passes
+    any other to ``show_other``."""
+    def show(message, category, filename, lineno, file=None, line=None):
+        if issubclass(category, ClrtWarning):
+            print(f"clrt: warning: {' '.join(str(message).split())}", file=sys.stderr)
+        else:
+            show_other(message, category, filename, lineno, file, line)
+    return show
+
+
+def _main(argv) -> int:
     try:
         argv = list(sys.argv[1:] if argv is None else argv)
         if argv[:1] == ["batch"]:

@@ -1,8 +1,10 @@
-"""The exceptions clrt raises on purpose.
+"""The exceptions clrt raises on purpose, and the warnings it gives.
 
 Every error a user can cause (a bad file, a bad option, no OpenCL driver) is a
 subclass of :class:`ClrtError`.  The CLI prints ``clrt: <message>`` on one line
-and exits with the class's ``exit_code``; anything else is a bug.
+and exits with the class's ``exit_code``; anything else is a bug.  A warning
+(:class:`ClrtWarning`, through :func:`warnings.warn`) says what clrt went on
+without; the CLI prints ``clrt: warning: <message>`` on one line.
 """
 
 
@@ -29,6 +31,15 @@ class OutputError(InputError):
 
 class TooLargeError(InputError):
     """A job needs more host memory than is available; the message gives the size needed."""
+
+
+class ClrtWarning(UserWarning):
+    """Base class of the warnings clrt gives: something was left out, and it went on."""
+
+
+class MeshLoadWarning(ClrtWarning):
+    """A mesh file names a file that is not there (an OBJ's MTL library, a
+    material's texture image): the mesh loads without it."""
 
 
 class DeviceError(ClrtError):

@@ -252,8 +252,46 @@ def test_bad_texture_is_a_one_line_error(tmp_path):
     with pytest.raises(clrt.MeshLoadError, match=r"t\.obj: .*broken\.png: cannot read the texture") as info:
         load_asset(tmp_path / "t.obj")
     assert "\n" not in str(info.value)
-    (tmp_path / "broken.png").unlink()   # a missing one is skipped: the material has no texture
-    assert "texture" not in load_asset(tmp_path / "t.obj")[1][0]
+    (tmp_path / "broken.png").unlink()   # a missing one is skipped, with a warning: the material has no texture
+    with pytest.warns(clrt.MeshLoadWarning, match=r"t\.obj: .*broken\.png") as record:
+        assert "texture" not in load_asset(tmp_path / "t.obj")[1][0]
+    assert len(record) == 1 and "\n" not in str(record[0].message)
+
+
+MISSING = "mtllib {mtl}\nv 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nusemtl a\nf 1/1 2/1 3/1\n"
+
+
+def test_missing_mtl_file_or_texture_is_a_warning_naming_both_files(tmp_path):
+    """The mesh still loads (the faces keep the default material, or the
+    material its colour), with one warning line naming the OBJ and the file it
+    names that is not there."""
+    obj = tmp_path / "t.obj"
+    obj.write_text(MISSING.format(mtl="gone.mtl"))
+    with pytest.warns(clrt.MeshLoadWarning) as record:
+        mesh, materials = load_asset(obj)
+    assert materials == [] and len(record) == 1
+    message = str(record[0].message)
+    assert str(obj) in message and str(tmp_path / "gone.mtl") in message and "\n" not in message
+    (tmp_path / "here.mtl").write_text("newmtl a\nKd 1 0 0\nmap_Kd -clamp on gone.png\n")
+    obj.write_text(MISSING.format(mtl="here.mtl"))
+    with pytest.warns(clrt.MeshLoadWarning) as record:
+        mesh, materials = load_asset(obj)
+    assert materials == [{"color": (1.0, 0.0, 0.0)}] and len(record) == 1
+    message = str(record[0].message)
+    assert str(obj) in message and str(tmp_path / "gone.png") in message and "here.mtl" in message
+
+
+def test_the_cli_prints_a_missing_texture_as_one_warning_line(tmp_path, device, capsys):
+    (tmp_path / "here.mtl").write_text("newmtl a\nKd 1 0 0\nmap_Kd gone.png\n")
+    (tmp_path / "t.obj").write_text(MISSING.format(mtl="here.mtl"))
+    code = cli.main(["render", str(tmp_path / "t.obj"), "-o", str(tmp_path / "t.png"), "--width", "16",
+                     "--height", "12", *(["--device", device] if device else [])])
+    err = capsys.readouterr().err
+    assert code == 0, err
+    warned = [line for line in err.splitlines() if "gone.png" in line]
+    assert warned == [line for line in err.splitlines() if "warning" in line.lower()]
+    assert len(warned) == 1 and warned[0].startswith("clrt: warning: ") and str(tmp_path / "t.obj") in warned[0]
+    assert "Traceback" not in err and "warnings.warn" not in err
 
 
 # ---------------------------------------------------------------------------- notebooks

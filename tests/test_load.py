@@ -11,10 +11,11 @@ import numpy as np
 import pytest
 import trimesh
 
-from clrt.errors import MeshLoadError
+from clrt.errors import MeshLoadError, MeshLoadWarning
 from clrt.scene import load as load_module
-from clrt.scene.load import SUPPORTED_EXTENSIONS, load_mesh
-from clrt.scene.load_3ds import encode_3ds, parse_3ds, write_3ds
+from clrt.scene.formats import part as part_module
+from clrt.scene.formats.tds import encode_3ds, parse_3ds, write_3ds
+from clrt.scene.load import READERS, SUPPORTED_EXTENSIONS, load_asset, load_mesh
 from clrt.scene.mesh import Mesh
 
 SHARED_MESHES = Path(__file__).resolve().parents[2] / "shared" / "meshes"
@@ -70,7 +71,8 @@ f 1//1 3//1 4//1
 usemtl a
 f 2 3 4 # trailing comment
 """
-    mesh = load_mesh(write(tmp_path, "order.obj", text))
+    with pytest.warns(MeshLoadWarning, match="/nonexistent/materials.mtl not found"):
+        mesh = load_mesh(write(tmp_path, "order.obj", text))
     assert mesh.faces.tolist() == [[0, 1, 2], [0, 2, 3], [1, 2, 3]]
     assert mesh.vertices.dtype == np.float32 and mesh.faces.dtype == np.int32
     assert mesh.name == "order"
@@ -200,6 +202,154 @@ def test_binary_ply_quads_fan_triangulated_in_place(tmp_path):
     faces = b"".join(struct.pack("<B4i", 4, *quad) for quad in [(0, 1, 2, 3), (1, 2, 5, 4)])
     mesh = load_mesh(write(tmp_path, "q.ply", header + vertices.tobytes() + faces))
     assert mesh.faces.tolist() == [[0, 1, 2], [0, 2, 3], [1, 2, 5], [1, 5, 4]]
+
+
+# ---------------------------------------------------------------------------
+# Concave polygons: ear clipping where a fan would cover the outside (issue 34)
+
+L_SHAPE = [(2, 0), (2, 1), (1, 1), (1, 2), (0, 2), (0, 0)]   # area 3; the fan from (2, 0) covers 4
+DART = [(0, 0), (2, 1), (0, 2), (0.5, 1)]                    # area 1.5; reflex at the last corner
+L_CLOCKWISE = [(0, 2), (1, 2), (1, 1), (2, 1), (2, 0), (0, 0)]   # area -3; the fan from (0, 2) covers 4
+
+
+def triangle_areas(mesh: Mesh) -> np.ndarray:
+    """(F,) signed areas of the triangles projected on the xy plane (positive: anticlockwise)."""
+    a, b, c = (mesh.vertices[mesh.faces[:, k]].astype(np.float64) for k in range(3))
+    return 0.5 * np.cross(b - a, c - a)[:, 2]
+
+
+def polygon_file(ext: str, corners) -> str:
+    """One polygon (z = 0) as an OBJ, OFF or ASCII PLY file."""
+    n = len(corners)
+    rows = "".join(f"{x} {y} 0\n" for x, y in corners)
+    if ext == ".obj":
+        return "".join(f"v {x} {y} 0\n" for x, y in corners) + "f " + " ".join(str(i + 1) for i in range(n)) + "\n"
+    face = f"{n} " + " ".join(str(i) for i in range(n)) + "\n"
+    if ext == ".off":
+        return f"OFF\n{n} 1 0\n" + rows + face
+    return (f"ply\nformat ascii 1.0\nelement vertex {n}\nproperty float x\nproperty float y\nproperty float z\n"
+            "element face 1\nproperty list uchar int vertex_indices\nend_header\n" + rows + face)
+
+
+@pytest.mark.parametrize("ext", [".obj", ".off", ".ply"])
+@pytest.mark.parametrize("corners", [L_SHAPE, DART, L_CLOCKWISE], ids=["L", "dart", "L-clockwise"])
+def test_concave_polygons_are_ear_clipped(tmp_path, ext, corners):
+    mesh = load_mesh(write(tmp_path, "concave" + ext, polygon_file(ext, corners)))
+    areas = triangle_areas(mesh)
+    xy = np.asarray(corners, np.float64)
+    shoelace = 0.5 * np.sum(xy[:, 0] * np.roll(xy[:, 1], -1) - np.roll(xy[:, 0], -1) * xy[:, 1])
+    assert len(mesh.faces) == len(corners) - 2
+    assert np.all(np.sign(areas) == np.sign(shoelace))   # every triangle wound as the polygon
+    assert areas.sum() == pytest.approx(shoelace)
+
+
+def test_concave_binary_ply_polygons_are_ear_clipped(tmp_path):
+    header = (b"ply\nformat binary_little_endian 1.0\nelement vertex 6\n"
+              b"property float x\nproperty float y\nproperty float z\nelement face 2\n"
+              b"property list uchar int vertex_indices\nend_header\n")
+    vertices = np.array([(x, y, 0) for x, y in L_SHAPE], "<f4")
+    faces = b"".join(struct.pack("<B6i", 6, *polygon) for polygon in [range(6), range(5, -1, -1)])
+    mesh = load_mesh(write(tmp_path, "l.ply", header + vertices.tobytes() + faces))
+    areas = triangle_areas(mesh)
+    assert (areas[:4] > 0).all() and (areas[4:] < 0).all()
+    assert areas[:4].sum() == pytest.approx(3) and areas[4:].sum() == pytest.approx(-3)
+
+
+def test_concave_obj_polygons_keep_their_place_texture_coordinates_and_materials(tmp_path):
+    """A concave polygon's triangles stay where its fan's were, with their corners'
+    texture coordinates and the polygon's material; convex ones stay fans."""
+    (tmp_path / "m.mtl").write_text("newmtl a\nKd 1 0 0\nnewmtl b\nKd 0 1 0\n")
+    corners = L_SHAPE + [(x + 5, y, 0) for x, y in DART] + [(9, 0), (10, 0), (10, 1), (9, 1)]
+    text = "mtllib m.mtl\n" + "".join(f"v {c[0]} {c[1]} 0\nvt {c[0] / 10} {c[1] / 10}\n" for c in corners)
+    text += "usemtl a\nf 1/1 2/2 3/3\nf " + " ".join(f"{i}/{i}" for i in range(1, 7))
+    text += "\nusemtl b\nf " + " ".join(f"{i}/{i}" for i in range(7, 11)) + "\nf 11/11 12/12 13/13 14/14\n"
+    mesh, _ = load_asset(write(tmp_path, "m.obj", text))
+    assert mesh.faces[0].tolist() == [0, 1, 2]
+    assert set(mesh.faces[1:5].ravel().tolist()) == set(range(6))
+    assert set(mesh.faces[5:7].ravel().tolist()) == set(range(6, 10))
+    assert mesh.faces[7:].tolist() == [[10, 11, 12], [10, 12, 13]]   # convex: the fan
+    assert mesh.face_material.tolist() == [0] * 5 + [1] * 4
+    np.testing.assert_allclose(mesh.uv, mesh.vertices[mesh.faces][..., :2] / 10, atol=1e-7)
+    areas = triangle_areas(mesh)
+    assert (areas > 0).all() and areas[1:5].sum() == pytest.approx(3) and areas[5:7].sum() == pytest.approx(1.5)
+
+
+def test_ear_clipping_triangulates_random_simple_polygons_in_any_plane():
+    """Star-shaped polygons of 4 to 40 corners (many reflex), rotated into random
+    planes, some wound each way: n - 2 triangles of the polygon's own corners,
+    each wound as the polygon, covering exactly its area."""
+    from clrt.scene.formats.triangulate import triangulate
+    rng = np.random.default_rng(34)
+    counts = rng.integers(4, 41, 300)
+    polygons, normals, areas = [], [], []
+    for n in counts:
+        angles = (np.arange(n) + rng.uniform(0.05, 0.95, n)) * 2 * np.pi / n   # one a sector: the centre inside
+        radii = rng.uniform(0.2, 1.0, n)
+        xy = np.stack([radii * np.cos(angles), radii * np.sin(angles)], axis=1)
+        if rng.random() < 0.5:
+            xy = xy[::-1]
+        rotation, _ = np.linalg.qr(rng.normal(size=(3, 3)))
+        polygons.append(np.column_stack([xy, np.zeros(n)]) @ rotation.T + rng.normal(size=3))
+        normals.append(rotation[:, 2])
+        areas.append(0.5 * np.sum(xy[:, 0] * np.roll(xy[:, 1], -1) - np.roll(xy[:, 0], -1) * xy[:, 1]))
+    vertices = np.concatenate(polygons)
+    flat = rng.permutation(len(vertices))   # corners named through an index, as in a file
+    vertices[flat] = vertices.copy()
+    triangles = triangulate(counts, flat, vertices)
+    assert triangles.shape == (int((counts - 2).sum()), 3)
+    first = 0
+    for n, normal, area, start in zip(counts, normals, areas, np.cumsum(counts) - counts):
+        tris = triangles[first:first + n - 2]
+        first += n - 2
+        assert set(tris.ravel().tolist()) <= set(flat[start:start + n].tolist())
+        a, b, c = (vertices[tris[:, k]] for k in range(3))
+        signed = 0.5 * np.cross(b - a, c - a) @ normal
+        assert np.all(np.sign(signed) == np.sign(area))
+        assert signed.sum() == pytest.approx(area, rel=1e-9)
+
+
+def comb(teeth: int) -> list:
+    """A comb-shaped polygon, anticlockwise: a back 1 high and ``teeth`` teeth 1
+    wide and 2 long, 1 apart; 4 corners a tooth, area 4 a tooth - 1."""
+    corners = [(0, 0), (2 * teeth - 1, 0)]
+    for k in range(teeth - 1, -1, -1):
+        corners += [(2 * k + 1, 3), (2 * k, 3)] + ([(2 * k, 1), (2 * k - 1, 1)] if k else [])
+    return corners
+
+
+def test_large_concave_polygons_are_ear_clipped_one_by_one(tmp_path):
+    corners = comb(50)   # 200 corners: past the numpy steps' sizes
+    mesh = load_mesh(write(tmp_path, "comb.off", polygon_file(".off", corners)))
+    areas = triangle_areas(mesh)
+    assert len(areas) == 198 and (areas > 0).all() and areas.sum() == pytest.approx(199)
+
+
+def test_ear_clipping_one_by_one_and_all_at_once_agree():
+    """The numpy steps for many polygons and the one-by-one loop for large ones
+    cut the same ears, on simple, degenerate and self-intersecting polygons."""
+    from clrt.scene.formats import triangulate
+    rng = np.random.default_rng(35)
+    for n in rng.integers(4, 30, 150):
+        angles = (np.arange(n) + rng.uniform(0.05, 0.95, n)) * 2 * np.pi / n
+        xy = np.stack([np.cos(angles), np.sin(angles)], axis=1) * rng.uniform(0.2, 1.0, (n, 1))
+        kind = rng.integers(3)
+        if kind == 1:
+            xy = np.round(xy * 4) / 4        # corners on straight lines, and at the same place
+        elif kind == 2:
+            xy = rng.random((n, 2))          # self-intersecting
+        np.testing.assert_array_equal(triangulate._ear_clip_all(xy[None])[0], triangulate._ear_clip_one(xy))
+
+
+def test_ear_clipping_of_a_hostile_file_is_bounded(tmp_path):
+    """A 40,000-corner concave polygon would take ear clipping a minute: past
+    the budget it keeps its fan, and the file loads in the time its size says."""
+    corners = comb(10_000)
+    path = write(tmp_path, "big.obj", polygon_file(".obj", corners))
+    start = time.perf_counter()
+    mesh = load_mesh(path)
+    assert time.perf_counter() - start < 5.0
+    n = len(corners)
+    assert mesh.faces.tolist() == [[0, k, k + 1] for k in range(1, n - 1)]
 
 
 # ---------------------------------------------------------------------------
@@ -623,7 +773,7 @@ def test_3ds_local_matrix_is_not_applied(tmp_path):
 def test_3ds_registered_with_trimesh(tmp_path):
     # clrt registers its reader when it first hands trimesh a file (an STL or
     # glTF); done here, so that the test does not depend on the tests before it
-    from clrt.scene.load_3ds import register_with_trimesh
+    from clrt.scene.formats.tds import register_with_trimesh
     assert register_with_trimesh()
     path = tmp_path / "reg.3ds"
     write_3ds(path, [tetra()])
@@ -701,7 +851,7 @@ def test_unreadable_file(tmp_path, monkeypatch):
     def denied(*args, **kwargs):
         raise PermissionError(13, "Permission denied")
     # chmod 000 does not stop root, so simulate the refusal at open().
-    monkeypatch.setattr(load_module, "open", denied, raising=False)
+    monkeypatch.setattr(part_module, "open", denied, raising=False)
     assert_one_line_error(path, "permission denied")
 
 
@@ -907,3 +1057,71 @@ def test_mesh_detail_and_transform_are_checked():
     with pytest.raises(MeshLoadError, match=r"within \+-1e30"):
         mesh.transformed(np.diag([1e31, 1.0, 1.0, 1.0]))
     assert np.isfinite(mesh.transformed(np.diag([2.0, 2.0, 2.0, 1.0])).vertices).all()
+
+
+# ---------------------------------------------------------------------------
+# The table of formats
+
+
+def _rich_gltf_scene() -> trimesh.Scene:
+    """Two objects (a textured cube, a sphere with vertex colours and normals) and a camera."""
+    from PIL import Image
+    box = trimesh.creation.box()
+    corners = box.vertices[box.faces].reshape(-1, 3)
+    material = trimesh.visual.material.PBRMaterial(baseColorTexture=Image.new("RGB", (2, 2), (9, 99, 199)))
+    cube = trimesh.Trimesh(corners, np.arange(len(corners)).reshape(-1, 3), process=False,
+                           visual=trimesh.visual.TextureVisuals(uv=corners[:, :2], material=material))
+    sphere = trimesh.creation.icosphere(1)
+    sphere = trimesh.Trimesh(sphere.vertices, sphere.faces, vertex_normals=sphere.vertices, process=False,
+                             vertex_colors=np.tile([255, 0, 0, 255], (len(sphere.vertices), 1)))
+    scene = trimesh.Scene()
+    scene.add_geometry(cube, node_name="cube")
+    scene.add_geometry(sphere, node_name="sphere", transform=trimesh.transformations.translation_matrix([3, 0, 0]))
+    scene.set_camera()
+    return scene
+
+
+def format_samples(folder: Path) -> dict:
+    """``{extension: (file, faces)}``: a file holding everything its format can say
+    besides triangles (OFF: normals too, which clrt does not read), and of two
+    objects where the format has several; ``faces`` is how many triangles it has."""
+    tri = "v 0 0 0\nv 1 0 0\nv 0 1 0\n"
+    ply = ("ply\nformat ascii 1.0\nelement vertex 3\n"
+           + "".join(f"property float {p}\n" for p in "x y z nx ny nz red green blue u v".split())
+           + "element face 1\nproperty list uchar int vertex_indices\nend_header\n"
+           + "0 0 0 0 0 1 1 0 0 0 0\n1 0 0 0 0 1 0 1 0 1 0\n0 1 0 0 0 1 0 0 1 0 1\n3 0 1 2\n")
+    solid = ("solid {0}\nfacet normal 0 0 1\nouter loop\nvertex 0 0 {1}\nvertex 1 0 {1}\nvertex 0 1 {1}\n"
+             "endloop\nendfacet\nendsolid {0}\n")
+    scene = _rich_gltf_scene()
+    files = {
+        ".3ds": (encode_3ds([tetra(), tetra("b", (2.0, 0.0, 0.0))]), 8),
+        ".glb": (scene.export(file_type="glb"), 92),
+        ".gltf": (trimesh.exchange.gltf.export_gltf(scene, embed_buffers=True)["model.gltf"], 92),
+        ".obj": ("mtllib m.mtl\no one\n" + tri + "vt 0 0\nvn 0 0 1\nusemtl red\nf 1/1/1 2/1/1 3/1/1\n"
+                 "o two\nv 0 0 1\nf 2/1/1 3/1/1 4/1/1\n", 2),
+        ".off": ("CNOFF\n3 1 0\n0 0 0 0 0 1 1 0 0 1\n1 0 0 0 0 1 0 1 0 1\n0 1 0 0 0 1 0 0 1 1\n3 0 1 2\n", 1),
+        ".ply": (ply, 1),
+        ".stl": (solid.format("a", 0) + solid.format("b", 1), 2),
+    }
+    (folder / "m.mtl").write_text("newmtl red\nKd 1 0 0\n")
+    return {ext: (write(folder, "sample" + ext, data), faces) for ext, (data, faces) in files.items()}
+
+
+def test_the_table_of_formats_says_what_each_one_carries(tmp_path):
+    """Each reader's entry in READERS (colours, normals, texture coordinates,
+    materials, several objects, a camera) against what a file that has them
+    all gives; a new format needs a sample here."""
+    samples = format_samples(tmp_path)
+    assert sorted(samples) == list(SUPPORTED_EXTENSIONS)
+    for reader in READERS:
+        for ext in reader.extensions:
+            path, faces = samples[ext]
+            mesh, materials = load_asset(path)
+            carried = {"colors": mesh.colors is not None, "normals": mesh.normals is not None,
+                       "uv": mesh.uv is not None, "materials": bool(materials),
+                       "camera": load_module.file_camera(path) is not None}
+            claimed = {key: bool(getattr(reader, key)) for key in carried}
+            assert carried == claimed, ext
+            assert len(mesh.faces) == faces, ext
+            if reader.objects:
+                assert faces > 1, f"{ext}: its sample should hold two objects"

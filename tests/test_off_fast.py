@@ -1,4 +1,4 @@
-"""The OFF reader's fast path (clrt.scene.load._off_plain) against its general path.
+"""The OFF reader's fast path (clrt.scene.formats.off._off_plain) against its general path.
 
 Every file here is read both ways: where the fast path takes a file, its arrays
 must equal the general path's bit for bit; where it declines (None), the file
@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from clrt.errors import MeshLoadError
-from clrt.scene import load
+from clrt.scene.formats import off
 from clrt.scene.load import load_mesh
 
 SHARED_MESHES = Path(__file__).resolve().parents[2] / "shared" / "meshes"
@@ -44,9 +44,9 @@ def assert_same(a, b):
 
 def both_paths(data: bytes):
     """The loader's outcome and the general path's, asserted equal; and the fast path's verdict."""
-    general = outcome(load._parse_off_lines, data)
-    assert_same(outcome(load._parse_off, data), general)
-    return load._off_plain(data) is not None, general
+    general = outcome(off._parse_off_lines, data)
+    assert_same(outcome(off._parse_off, data), general)
+    return off._off_plain(data) is not None, general
 
 
 def off_text(vertices, faces, header="OFF\n{v} {f} 0\n", vsep=" ", eol="\n") -> str:

@@ -50,7 +50,9 @@ ROOT = Path(__file__).resolve().parents[1]   # the repository: tools/ and clrt/ 
 if __name__ == "__main__":   # python tools/fuzz.py: this checkout's clrt, imported from the repository
     sys.path[0] = str(ROOT)
 
-FORMATS = ("3ds", "glb", "gltf", "obj", "off", "ply", "stl")
+from clrt.scene.load import SUPPORTED_EXTENSIONS
+
+FORMATS = tuple(ext[1:] for ext in SUPPORTED_EXTENSIONS)   # "3ds", "glb", ...: every format clrt reads
 _TEXT = {"obj", "off", "gltf"}   # ASCII PLY and STL are recognised per file
 _HUGE_TEXT = ("0", "1", "2", "-1", "65535", "65536", "2147483647", "2147483648", "4294967295",
               "4294967296", "1000000000000", "18446744073709551616", "99999999999999999999999")
@@ -74,7 +76,7 @@ def builtin_corpus() -> list[Sample]:
     import trimesh
 
     from clrt.scene import primitives
-    from clrt.scene.load_3ds import encode_3ds
+    from clrt.scene.formats.tds import encode_3ds
 
     sphere = primitives.icosphere(1)
     box = primitives.box()

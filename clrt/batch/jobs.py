@@ -14,10 +14,10 @@ from pathlib import Path
 
 from clrt.config import BATCH_FORMAT, BATCH_VIEWS_PER_TASK
 from clrt.output import WRITERS
-from clrt.scene.load import SUPPORTED_EXTENSIONS
+from clrt.scene.load import SCENE_EXTENSION, SUPPORTED_EXTENSIONS
 
 #: Files a folder argument contributes (any file named explicitly is tried).
-SOURCE_SUFFIXES = SUPPORTED_EXTENSIONS + (".toml",)   # meshes and scene files
+SOURCE_SUFFIXES = SUPPORTED_EXTENSIONS + (SCENE_EXTENSION,)   # meshes and scene files
 _GLOB_CHARS = "*?["
 
 

@@ -370,17 +370,9 @@ DECIMATED = {
 }
 # Suite names of scan files whose stem is not the name (full-size variant: NAME-full).
 SCAN_NAMES = {"bunny00": "bunny", "chinesedragon-10kv": "dragon"}
-# Where one scan is in the folder in several formats, the first of these wins;
-# every other format clrt reads (clrt.scene.load.SUPPORTED_EXTENSIONS) is
-# scanned too, after them.
-PREFERRED_SCAN_EXTENSIONS = (".off", ".obj", ".ply", ".stl", ".glb", ".gltf", ".3ds")
-
-
-def _scan_rank(ext: str, supported: tuple) -> int:
-    """Preference of a scan file's extension (lower wins), -1 for a format clrt does not read."""
-    if ext in PREFERRED_SCAN_EXTENSIONS:
-        return PREFERRED_SCAN_EXTENSIONS.index(ext)
-    return len(PREFERRED_SCAN_EXTENSIONS) + supported.index(ext) if ext in supported else -1
+# Where a scan is in several formats, the first here wins; any other format clrt reads
+# (clrt.scene.load.SUPPORTED_EXTENSIONS) comes after these.
+SCAN_PREFERENCE = (".off", ".obj", ".ply", ".stl", ".glb", ".gltf", ".3ds")
 
 
 def default_mesh_dir() -> Path | None:
@@ -438,14 +430,17 @@ class MeshSuite:
 
     def _add_scans(self) -> None:
         from clrt.scene.load import SUPPORTED_EXTENSIONS, load_mesh
+
+        def rank(ext: str) -> int:
+            return SCAN_PREFERENCE.index(ext) if ext in SCAN_PREFERENCE else len(SCAN_PREFERENCE)
         files: dict[str, Path] = {}
         for path in sorted(self.mesh_dir.iterdir()):
-            rank = _scan_rank(path.suffix.lower(), SUPPORTED_EXTENSIONS)
-            if not path.is_file() or rank < 0:
+            ext = path.suffix.lower()
+            if not path.is_file() or ext not in SUPPORTED_EXTENSIONS:
                 continue
             stem = path.stem.lower()
             name = SCAN_NAMES.get(stem, stem)
-            if name in files and _scan_rank(files[name].suffix.lower(), SUPPORTED_EXTENSIONS) <= rank:
+            if name in files and rank(files[name].suffix.lower()) <= rank(ext):
                 continue
             files[name] = path
         can_decimate = have_decimation()

@@ -75,7 +75,7 @@ class RayMeshIntersector:
                  leaf_size: int = DEFAULT_LEAF_SIZE, device: str | None = None, chunk_rays: int | None = None,
                  every_triangle: bool = False):
         import trimesh
-        from clrt.scene.load_3ds import register_with_trimesh
+        from clrt.scene.formats.tds import register_with_trimesh
         register_with_trimesh()   # trimesh.load("x.3ds") works for users of the drop-in too
         self._trimesh = isinstance(mesh, trimesh.Trimesh)
         self.mesh = mesh if self._trimesh else as_mesh(mesh)

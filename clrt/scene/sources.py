@@ -31,7 +31,8 @@ def as_scene(source) -> Scene:
     (vertices, faces)) with the default framing and light; InputError otherwise."""
     if isinstance(source, Scene):
         return source
-    if isinstance(source, (str, os.PathLike)) and os.fspath(source).lower().endswith(".toml"):
+    from clrt.scene.load import SCENE_EXTENSION
+    if isinstance(source, (str, os.PathLike)) and os.fspath(source).lower().endswith(SCENE_EXTENSION):
         from clrt.scene.scene_file import load_scene
         return load_scene(source)
     return scene_from_mesh(source)

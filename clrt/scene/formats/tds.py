@@ -1,4 +1,4 @@
-"""Reader and minimal writer for Autodesk 3D Studio ``.3ds`` files.
+"""3DS (Autodesk 3D Studio): reader and minimal writer.
 
 trimesh cannot read 3DS, so this is our own parser of the binary chunk format.
 Every chunk starts with a little-endian header ``uint16 id, uint32 length``
@@ -139,6 +139,11 @@ def _read_object(data: bytes, start: int, end: int):
             vertices, faces = _read_trimesh(data, s, e)
         # Lights (0x4600) and cameras (0x4700) hold no triangles: skipped.
     return name, vertices, faces
+
+
+def read(data: bytes, path: str, name: str) -> "tuple[Mesh, list]":
+    """The mesh of a 3DS file's bytes (its materials are not read)."""
+    return parse_3ds(data, label=path, name=name), []
 
 
 def parse_3ds(data: bytes, label: str = "", name: str = "") -> Mesh:
