@@ -7,7 +7,8 @@ Each row times, in this process, work that must end quickly rather than well.
 The NVIDIA ICD diagnosis over the default driver folders, which ``clrt info``
 and the no-device message run (target 0.2 s).  Mesh files whose headers
 promise 10^12 vertices or faces (OFF, ASCII and binary PLY): the loaders must
-refuse them before they allocate.  And ``--cases`` copies per format of a small
+refuse them before they allocate; an OBJ polygon of 40,000 concave corners,
+which the ear clipping's budget must keep to a second or so.  And ``--cases`` copies per format of a small
 valid file with one to three random bytes changed, as tests/test_load.py makes
 them: each loads or is refused with MeshLoadError.  Printed: the median and the
 slowest ms of each row, and how many mutated files loaded or were refused; a row
@@ -49,7 +50,7 @@ def samples() -> dict[str, bytes]:
     """One small valid file per format (a tetrahedron; two in the 3DS file)."""
     import trimesh
 
-    from clrt.scene.load_3ds import encode_3ds
+    from clrt.scene.formats.tds import encode_3ds
     from clrt.scene.mesh import Mesh
     v = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], np.float64)
     f = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]])
@@ -106,7 +107,15 @@ def measure(cases: int, repeat: int, seed: int = 20240521) -> list[dict]:
             path = folder / f"warm.{kind.split('-')[0]}"
             path.write_bytes(data)
             _load(path)
-        for what, (name, text) in HUGE_HEADERS.items():
+        # A 40,000-corner concave polygon: ear clipping it would take a minute;
+        # past its work budget (clrt/scene/formats/triangulate.py) it keeps its fan.
+        teeth = 10_000
+        comb = [(0, 0), (2 * teeth - 1, 0)]
+        for k in range(teeth - 1, -1, -1):
+            comb += [(2 * k + 1, 3), (2 * k, 3)] + ([(2 * k, 1), (2 * k - 1, 1)] if k else [])
+        hostile = {"OBJ, one concave polygon of 40,000 corners": (
+            "comb.obj", "".join(f"v {x} {y} 0\n" for x, y in comb) + "f " + " ".join(map(str, range(1, len(comb) + 1))))}
+        for what, (name, text) in {**HUGE_HEADERS, **hostile}.items():
             path = folder / name
             path.write_text(text)
             runs = [_timed(lambda: _load(path)) for _ in range(repeat)]

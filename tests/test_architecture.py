@@ -92,3 +92,20 @@ def test_a_recipe_names_every_file_of_its_concept(recipe):
         assert path in found, f"{path} no longer holds it ({reason}): drop it from the probe"
     missing = sorted(f for f in found - set(probe.elsewhere) if not any(fnmatch(f, p) for p in patterns))
     assert not missing, f"the {recipe} recipe in docs/architecture.md misses {missing}"
+
+
+def test_the_format_lists_name_every_reader():
+    """The lists of input formats a user reads (the render command's
+    description, README's MESH line, the scene-file path row) name every
+    extension of READERS: the parser may not import the readers to ask."""
+    from clrt import cli
+    from clrt.scene.load import SUPPORTED_EXTENSIONS
+    render = next(a for a in cli._parser()._subparsers._group_actions[0].choices.items() if a[0] == "render")[1]
+    readme = next(line for line in (REPO / "README.md").read_text().splitlines() if line.startswith("- `MESH`:"))
+    path_row = next(line for line in (REPO / "docs" / "scene-files.md").read_text().splitlines()
+                    if line.startswith("| `mesh` | `path` |"))
+    for where, text in (("clrt render's description", render.description), ("README's MESH line", readme),
+                        ("docs/scene-files.md's path row", path_row)):
+        words = set(re.findall(r"\w+", text.upper()))
+        missing = [ext for ext in SUPPORTED_EXTENSIONS if ext[1:].upper() not in words]
+        assert not missing, f"{where} does not name {missing}"

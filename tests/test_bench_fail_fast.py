@@ -12,7 +12,8 @@ def test_fail_fast_prints_a_row_per_check(capsys):
                                                     "OFF, 10^12 vertices and faces", "PLY ascii, 10^12 vertices",
                                                     "PLY binary, 10^12 vertices"]
     assert [r[4] for r in rows[1:4]] == ["refused"] * 3        # the huge headers, every call
-    mutations = rows[4:]
+    assert rows[4][0].lstrip("| ").startswith("OBJ, one concave polygon") and rows[4][4] == "loaded"
+    mutations = rows[5:]
     assert len(mutations) == 8 and all(r[1] == "5" for r in mutations)
     for r in mutations:                                          # every file loaded or was refused
         loaded, refused = (int(part.split()[0]) for part in r[4].split(", "))

@@ -342,12 +342,11 @@ def test_ear_clipping_one_by_one_and_all_at_once_agree():
 
 def test_ear_clipping_of_a_hostile_file_is_bounded(tmp_path):
     """A 40,000-corner concave polygon would take ear clipping a minute: past
-    the budget it keeps its fan, and the file loads in the time its size says."""
+    the work budget (counted in corners, not timed) it keeps its fan.
+    (How long such a file takes to load: python -m benchmarks.fail_fast.)"""
     corners = comb(10_000)
     path = write(tmp_path, "big.obj", polygon_file(".obj", corners))
-    start = time.perf_counter()
     mesh = load_mesh(path)
-    assert time.perf_counter() - start < 5.0
     n = len(corners)
     assert mesh.faces.tolist() == [[0, k, k + 1] for k in range(1, n - 1)]
 
