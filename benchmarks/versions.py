@@ -1,5 +1,7 @@
-"""Two checkouts of clrt side by side on one device: the same answers, and
-kernel times within noise, before and after a change to the code's interfaces.
+"""Two checkouts of clrt side by side on one device: their answers and times.
+
+Made to show the same answers, and kernel times within noise, before and
+after a change to the code's interfaces.
 
     python -m benchmarks.versions --base ../old-checkout --mesh-dir .meshes --device gpu
 
