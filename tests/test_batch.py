@@ -379,7 +379,7 @@ def test_resume_renders_only_what_is_missing(client, meshes, tmp_path, device):
 
     again = clrt.batch.render(meshes, out, views=3, client=client, device=device, **SIZE)
     redone = [o for o in again if o.seconds > 0]
-    assert [(o.source, o.view) for o in redone] == [(str(meshes[1]), 1)]
+    assert [(o.source, o.view, o.redone) for o in redone] == [(str(meshes[1]), 1, "missing")]
     assert sorted(o.status for o in again) == ["done"] + ["skipped"] * 5
     for p, stamp in before.items():
         if p != "block/view-0001.png":
@@ -390,6 +390,59 @@ def test_resume_renders_only_what_is_missing(client, meshes, tmp_path, device):
     changed = clrt.batch.render(meshes, out, views=3, client=client, device=device, width=22, height=14)
     assert sorted(o.status for o in changed) == ["done"] * 6 and all(o.seconds > 0 for o in changed)
     assert all(img.shape == (14, 22, 3) for img in _images(out).values())
+
+
+def test_resume_rerenders_frames_missing_cut_short_or_replaced(client, meshes, tmp_path, device, capsys):
+    """A finished batch; then one frame deleted, one cut to 100 bytes, one
+    replaced by another image (its record left as it was): running it again
+    renders those three again -- the files, not their names, say what is done
+    -- and says why; the untouched frame is kept."""
+    out = tmp_path / "out"
+    first = clrt.batch.render([meshes[0]], out, views=4, client=client, device=device, **SIZE)
+    assert [o.status for o in first] == ["done"] * 4
+    frames = {v: out / f"ball/view-000{v}.png" for v in range(4)}
+    pixels = {v: np.asarray(Image.open(path)) for v, path in frames.items()}
+    kept = os.stat(frames[3]).st_mtime_ns
+    frames[0].unlink()
+    frames[1].write_bytes(frames[1].read_bytes()[:100])
+    Image.fromarray(255 - pixels[2]).save(frames[2])
+    dev = ["--device", device] if device else []
+    code = main(["batch", "render", str(meshes[0]), "-o", str(out), "--views", "4", *SIZE_ARGS, "--workers", "1",
+                 "-q", *dev])
+    printed, err = capsys.readouterr()
+    assert code == 0 and not err, err
+    assert printed.startswith("3 frame(s) rendered (3 re-rendered: 1 missing, 2 changed since written), "
+                              "1 already done, 0 not rendered"), printed
+    assert all(np.array_equal(np.asarray(Image.open(frames[v])), pixels[v]) for v in range(4))
+    assert all(clrt.output.file_state(path) == clrt.output.OURS for path in frames.values())
+    assert os.stat(frames[3]).st_mtime_ns == kept
+    assert {r["status"] for r in _manifest(out)} == {"done"} and len(_manifest(out)) == 4
+
+
+def test_a_foreign_file_where_a_frame_goes_is_refused_before_rendering(meshes, tmp_path, device, capsys):
+    """A file that clrt did not write, where the batch would put a frame, stops
+    the batch before anything is rendered (exit 2, one line, as clrt render
+    does); -f replaces it."""
+    out = tmp_path / "out"
+    (out / "ball").mkdir(parents=True)
+    foreign = out / "ball" / "view-0001.png"
+    Image.fromarray(np.full((4, 4, 3), 9, np.uint8)).save(foreign)
+    before = foreign.read_bytes()
+    dev = ["--device", device] if device else []
+    args = ["batch", "render", str(meshes[0]), "-o", str(out), "--views", "3", *SIZE_ARGS, "--workers", "1", "-q",
+            *dev]
+    assert main(args) == 2
+    printed, err = capsys.readouterr()
+    assert err == (f"clrt: {foreign} exists and was not written by clrt; pass --force (-f; force=True in Python) "
+                   "to replace it, or choose another -o\n"), err
+    assert not printed and foreign.read_bytes() == before
+    assert sorted(p.name for p in out.rglob("*") if p.is_file()) == [".clrt-batch.lock", "view-0001.png"], \
+        "nothing rendered, no manifest"
+    with pytest.raises(OutputError, match="view-0001.png exists and was not written by clrt"):
+        clrt.batch.render([meshes[0]], out, views=3, workers=1, device=device, **SIZE)
+    assert main([*args, "-f"]) == 0
+    assert "3 frame(s) rendered, 0 already done" in capsys.readouterr().out
+    assert foreign.read_bytes() != before and clrt.output.written_by_clrt(foreign)
 
 
 def test_ctrl_c_keeps_what_finished_and_exits_130(meshes, tmp_path, device, capsys, monkeypatch):
@@ -783,7 +836,8 @@ def test_views_found_after_a_lost_worker_are_counted_and_recorded(meshes, tmp_pa
     out = tmp_path / "out"
     for v in (0, 1):   # the first attempt wrote these before its worker died
         (out / "ball").mkdir(parents=True, exist_ok=True)
-        os.replace(tmp_path / "first" / job["paths"][v], out / job["paths"][v])
+        for name in (Path(job["paths"][v]), clrt.output.record_path(Path(job["paths"][v]))):
+            os.replace(tmp_path / "first" / name, out / name)
     retried = worker.render_task({**job, "folder": str(out)})
     assert [r.get("note") for r in retried] == ["found", "found", None, None]
     assert [r["camera"] for r in retried] == [r["camera"] for r in rendered]

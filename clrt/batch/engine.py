@@ -56,6 +56,7 @@ class Output:
     worker: str | None      # address of the worker that made it
     status: str = "done"    # see STATUSES
     error: str = ""
+    redone: str = ""        # "done" again: why its earlier image was not kept (a key of REDONE)
 
 
 @dataclass
@@ -77,6 +78,12 @@ class Summary:
     @property
     def rendered(self) -> int:
         return self.count("done")
+
+    def redone(self) -> dict:
+        """Frames rendered again because their earlier image was missing or had
+        changed since written, by reason (REDONE's words)."""
+        counts = Counter(o.redone for o in self.outputs if o.status == "done" and o.redone)
+        return {REDONE[k]: counts[k] for k in REDONE if counts[k]}
 
     def per_worker(self) -> dict:
         return dict(sorted(Counter(o.worker for o in self.outputs if o.status == "done").items()))
@@ -155,7 +162,7 @@ def run(sources, out_dir, views: int = 1, *, client=None, workers: int | None = 
     started = time.perf_counter()
     with FolderLock(folder):
         manifest = Manifest(folder, force)
-        outputs, pending = _plan(found, folder, manifest, views, settings, suffix)
+        outputs, pending, redone = _plan(found, folder, manifest, views, settings, suffix, force)
         manifest.write()
         if not pending:
             return Summary(outputs, time.perf_counter() - started, 0)
@@ -177,7 +184,8 @@ def run(sources, out_dir, views: int = 1, *, client=None, workers: int | None = 
                     log("the scheduler has no workers yet: the jobs wait for them")
                 jobs = _jobs(pending, folder, views, settings, force, n_workers, suffix)
                 sent = time.perf_counter()
-                outputs += _execute(client, jobs, folder, manifest, device, progress, local=cluster is not None)
+                outputs += _execute(client, jobs, folder, manifest, device, progress, local=cluster is not None,
+                                    redone=redone)
                 render_seconds = time.perf_counter() - sent
             finally:
                 manifest.write()
@@ -252,10 +260,25 @@ def _output_folder(out_dir) -> Path:
     return folder.resolve()
 
 
-def _plan(found: list[Source], folder: Path, manifest: Manifest, views: int, settings: dict, suffix: str):
-    """Rows for bad arguments and finished images, and per source the views to render."""
-    from clrt.output import written_by_clrt
-    outputs, pending = [], []
+#: Why an existing frame is rendered again (Output.redone): its file was gone,
+#: or is no longer the one clrt wrote (cut short, edited, replaced, unreadable).
+REDONE = {"missing": "missing", "changed": "changed since written"}
+
+
+def _plan(found: list[Source], folder: Path, manifest: Manifest, views: int, settings: dict, suffix: str,
+          force: bool = False):
+    """Rows for bad arguments and finished images, per source the views to
+    render, and why a frame recorded done is rendered again (REDONE, by path).
+
+    The files decide, by their content -- clrt.output.file_state, the rule of
+    clrt render's overwrites: a frame is done when its file is exactly what
+    clrt wrote (the record beside it holds its SHA-256) with the settings of
+    this batch (the manifest's key); it is rendered again when it is missing,
+    changed since written, or made with other settings.  A file where a frame
+    goes that clrt did not write and the manifest does not know is not the
+    batch's: OutputError before anything is rendered, unless ``force``."""
+    from clrt.output import CHANGED, FOREIGN, NOT_A_FILE, OURS, file_state
+    outputs, pending, redone, foreign = [], [], {}, []
     for source in found:
         if source.error:
             manifest.add({"path": None, "source": source.path, "view": None, "status": "bad",
@@ -269,20 +292,40 @@ def _plan(found: list[Source], folder: Path, manifest: Manifest, views: int, set
             rel = output_path(source.name, view, suffix)
             path = folder / rel
             record = manifest.get(rel)
-            if path.is_file():
-                if record is not None and record.get("status") == "done" and record.get("key") == key:
+            recorded = record is not None and record.get("status") == "done"
+            state = file_state(path)
+            if state == NOT_A_FILE:
+                raise OutputError(f"cannot write {path}: it is not a regular file")
+            if state == OURS:
+                if recorded and record.get("key") == key:
                     outputs.append(Output(str(path), source.path, view, 0.0, record.get("worker"), "skipped"))
                     continue
-                if record is None and written_by_clrt(path):   # made before the manifest was written
+                if record is None:   # written, and the command died before the manifest was
                     manifest.add({"path": rel, "source": source.path, "view": view, "views": views,
                                   "status": "done", "key": key, "note": "found"})
                     outputs.append(Output(str(path), source.path, view, 0.0, None, "skipped"))
                     continue
+                replace.add(view)                # other settings, or recorded failed
+            elif state == CHANGED or (state == FOREIGN and recorded):
+                # not the bytes clrt wrote: a frame of this batch's that was cut
+                # short, edited or replaced (or whose record is gone)
                 replace.add(view)
+                redone[rel] = "changed"
+            elif state == FOREIGN:
+                if not force:
+                    foreign.append(path)
+                    continue
+                replace.add(view)
+            elif recorded:
+                redone[rel] = "missing"
             todo.append(view)
         if todo:
             pending.append((source, key, todo, replace))
-    return outputs, pending
+    if foreign:
+        others = f" (and {len(foreign) - 1} other frame file(s) of this batch)" if len(foreign) > 1 else ""
+        raise OutputError(f"{foreign[0]} exists and was not written by clrt{others}; pass --force (-f; force=True "
+                          "in Python) to replace it, or choose another -o")
+    return outputs, pending, redone
 
 
 def _jobs(pending: list, folder: Path, views: int, settings: dict, force: bool, workers: int,
@@ -322,7 +365,7 @@ class _Task:
 
 
 def _execute(client, jobs: list, folder: Path, manifest: Manifest, device, progress: bool,
-             local: bool = False) -> list[Output]:
+             local: bool = False, redone: dict | None = None) -> list[Output]:
     """Run the jobs, record each finished one; Ctrl-C cancels what is left.
 
     A worker's death: Dask's scheduler charges it to every task it had sent to
@@ -410,8 +453,9 @@ def _execute(client, jobs: list, folder: Path, manifest: Manifest, device, progr
                 path = str(folder / record["path"]) if status == "done" else None
                 if status == "done" and record.get("note") == "found":
                     status = "skipped"   # written by an earlier attempt of a retried task
+                why = (redone or {}).get(record["path"], "") if status == "done" else ""
                 outputs.append(Output(path, record["source"], record["view"], seconds, record.get("worker"),
-                                      status, record.get("error", "")))
+                                      status, record.get("error", ""), why))
             bar.update(len(records))
             manifest.write(force=False)
     except _NoWorkers as exc:

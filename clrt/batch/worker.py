@@ -234,8 +234,10 @@ def render_views(job: dict) -> list[dict]:
     ``job``: source, name, views, replace, count (views of the turntable), folder,
     paths (their suffix names the format), scene and camera options, lights,
     accel, builder, leaf_size, bit_depth (None, or 16 for 16-bit PNG), force, key.
-    Views whose image exists are skipped unless listed in ``replace`` (a retry
-    after a lost worker redoes only what is missing).  Errors of the source or
+    Views whose image is there, exactly as clrt wrote it, are skipped unless
+    listed in ``replace`` (a retry after a lost worker redoes only what is
+    missing); a view in ``replace`` is written over whatever is there (the
+    batch judged that file before it started).  Errors of the source or
     the device become records, never exceptions: "bad" (the source or an
     option), "device" (OpenCL), "failed" (an image that cannot be written, as
     on a read-only or full disk: not the source's fault); anything else is raised
@@ -244,7 +246,7 @@ def render_views(job: dict) -> list[dict]:
     instead of being rendered; later tasks of that folder on this worker give up
     after one failed write.
     """
-    from clrt.output import render_writer, write_image
+    from clrt.output import OURS, file_state, render_writer, write_image
     from clrt.scene.render_setup import render_camera, render_lights, turntable
 
     worker = _worker_address()
@@ -320,7 +322,8 @@ def render_views(job: dict) -> list[dict]:
                 fail(job["views"][i:], writes["error"], time.perf_counter())
                 return records
             out = folder / job["paths"][view]
-            if out.exists() and view not in job["replace"]:
+            replace = view in job["replace"]
+            if not replace and file_state(out) == OURS:
                 finish_all()
                 # written by an earlier attempt of this task (its worker died): done, not rendered now
                 records.append({**base, "path": job["paths"][view], "view": view, "status": "done",
@@ -349,8 +352,9 @@ def render_views(job: dict) -> list[dict]:
                     fail(job["views"][i:], DeviceError(f"OpenCL error: {exc}"), started)
                     return records
                 raise
-            pending.append((view, cam, started, writers.submit(write_image, frame.image, out, force=job["force"],
-                                                               bit_depth=bit_depth)))
+            # a replaced view's file was judged when the batch was planned (clrt.batch.engine._plan)
+            pending.append((view, cam, started, writers.submit(write_image, frame.image, out,
+                                                               force=job["force"] or replace, bit_depth=bit_depth)))
             while len(pending) > (0 if known_unwritable and not writes["ok"] else BATCH_IMAGE_WRITERS):
                 finish_one()
         finish_all()
