@@ -138,6 +138,38 @@ def test_bad_options_are_one_line_errors(args, fragment, meshes, tmp_path, capsy
     assert not list((tmp_path / "out").rglob("*.png"))
 
 
+def test_workers_are_capped_at_the_cores_and_the_tasks(monkeypatch):
+    """--workers 64 on 2 cores started 64 processes (92 s for one tiny frame):
+    a local cluster gets at most one worker per core and per task, with a note."""
+    from clrt.batch import engine
+    monkeypatch.setattr(engine, "cpu_cores", lambda: 2)
+    notes, asked_for = [], []
+
+    def jobs(n):
+        def make(count):
+            asked_for.append(count)
+            return list(range(n))
+        return make
+
+    assert engine._local_workers(64, "cpu", notes.append, jobs(5)) == (2, [0, 1, 2, 3, 4])
+    assert asked_for == [2], "the tasks are cut for the workers that can run"
+    assert engine._local_workers(64, "cpu", notes.append, jobs(1))[0] == 1
+    assert engine._local_workers(2, "cpu", notes.append, jobs(3))[0] == 2
+    assert engine._local_workers(None, "cpu", notes.append, jobs(1))[0] == 1
+    assert notes == ["2 worker(s) instead of 64: 2 CPU core(s), 5 task(s)",
+                     "1 worker(s) instead of 64: 2 CPU core(s), 1 task(s)"]
+
+
+def test_workers_asked_beyond_the_tasks_are_not_started(meshes, tmp_path, device, capsys):
+    dev = ["--device", device] if device else []
+    assert main(["batch", "render", str(meshes[0]), "-o", str(tmp_path / "out"), *SIZE_ARGS, "--workers", "64",
+                 *dev]) == 0
+    printed, err = capsys.readouterr()
+    from clrt.batch.cluster import cpu_cores
+    assert f"1 worker(s) instead of 64: {cpu_cores()} CPU core(s), 1 task(s)" in err.splitlines(), err
+    assert "1 frame(s) rendered" in printed and "1 worker(s) ->" in printed, printed
+
+
 def test_each_worker_gets_its_own_device(monkeypatch):
     from clrt.batch import worker
     from clrt.device.context import DeviceInfo

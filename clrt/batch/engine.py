@@ -23,7 +23,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from clrt import checks
-from clrt.batch.cluster import (dashboard_link, default_workers, keep_lost_workers, require_dask,
+from clrt.batch.cluster import (cpu_cores, dashboard_link, default_workers, keep_lost_workers, require_dask,
                                 start_local_cluster)
 from clrt.batch.jobs import Source, expand_sources, output_path, plan_tasks, settings_key
 from clrt.batch.manifest import FolderLock, Manifest
@@ -171,18 +171,20 @@ def run(sources, out_dir, views: int = 1, *, client=None, workers: int | None = 
         with ExitStack() as kept:   # keep_lost_workers() while a local cluster lives
             try:
                 if client is None:
-                    count = workers or default_workers(device)
+                    n_workers, jobs = _local_workers(workers, device, log, lambda count: _jobs(
+                        pending, folder, views, settings, force, count, suffix))
                     kept.enter_context(keep_lost_workers())
-                    cluster = start_local_cluster(count, device)
+                    cluster = start_local_cluster(n_workers, device)
                     from distributed import Client
                     client = own_client = Client(cluster)
+                else:
+                    n_workers = len(client.scheduler_info().get("workers", {}))
+                    if not n_workers and log:
+                        log("the scheduler has no workers yet: the jobs wait for them")
+                    jobs = _jobs(pending, folder, views, settings, force, n_workers, suffix)
                 link = dashboard_link(client)
                 if link and log:
                     log(f"dashboard: {link}")
-                n_workers = len(client.scheduler_info().get("workers", {}))
-                if not n_workers and log:
-                    log("the scheduler has no workers yet: the jobs wait for them")
-                jobs = _jobs(pending, folder, views, settings, force, n_workers, suffix)
                 sent = time.perf_counter()
                 outputs += _execute(client, jobs, folder, manifest, device, progress, local=cluster is not None,
                                     redone=redone)
@@ -194,6 +196,21 @@ def run(sources, out_dir, views: int = 1, *, client=None, workers: int | None = 
                 if cluster is not None:
                     cluster.close()
     return Summary(outputs, time.perf_counter() - started, n_workers, render_seconds)
+
+
+def _local_workers(asked: int | None, device, log, make_jobs) -> tuple[int, list]:
+    """(worker processes, jobs) of a local cluster: ``asked`` (default: one per
+    GPU, else one per two cores), but never more than the CPU cores -- a worker
+    is a process that keeps at least one core busy, and 64 of them on 2 cores
+    took 92 s for a frame that 2 render in 1.7 s -- nor than the tasks (cut for
+    that many workers first).  A note in one line when ``asked`` is cut."""
+    cores = cpu_cores()
+    count = min(asked or default_workers(device), cores)
+    jobs = make_jobs(count)
+    count = max(1, min(count, len(jobs)))
+    if asked is not None and count < asked and log:
+        log(f"{count} worker(s) instead of {asked}: {cores} CPU core(s), {len(jobs)} task(s)")
+    return count, jobs
 
 
 def _check_options(views, accel, builder, leaf_size, lights, options) -> dict:
