@@ -181,9 +181,8 @@ BATCH_LOST_RESUBMITS = 2
 #: (0.06 s of it the device set-up, PoCL); not measured on the GPU hosts, where
 #: the driver's start adds some, and longer when many start at once on a loaded
 #: host: 60 s leaves ample room.  Program builds are no part of it (they come
-#: with a worker's first task, while it counts as up).  A
-#: --scheduler cluster with no worker at all waits for them; it stops only when
-#: workers join and die without coming up (clrt.batch.engine._Watchdog).
+#: with a worker's first task, while it counts as up).  A --scheduler cluster
+#: with no worker at all stops after the same time (clrt.batch.watch.Watchdog).
 BATCH_NO_WORKER_TIMEOUT = 60.0
 #: Seconds to wait for an existing Dask scheduler (--scheduler).
 BATCH_CONNECT_TIMEOUT = 10.0

@@ -74,8 +74,8 @@ if os.environ.get("CLRT_TEST_SETUP_CRASH"):
     worker.configure = configure
 
 if os.environ.get("CLRT_TEST_NO_WORKER_TIMEOUT"):   # the batch's watchdog, in the command's process
-    import clrt.batch.engine as engine
-    engine.BATCH_NO_WORKER_TIMEOUT = float(os.environ["CLRT_TEST_NO_WORKER_TIMEOUT"])
+    import clrt.batch.watch as watch
+    watch.BATCH_NO_WORKER_TIMEOUT = float(os.environ["CLRT_TEST_NO_WORKER_TIMEOUT"])
 '''
 
 

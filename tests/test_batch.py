@@ -478,15 +478,15 @@ def test_a_foreign_file_where_a_frame_goes_is_refused_before_rendering(meshes, t
 
 
 def test_ctrl_c_keeps_what_finished_and_exits_130(meshes, tmp_path, device, capsys, monkeypatch):
-    from clrt.batch import engine
-    original = engine._completed
+    from clrt.batch import watch
+    original = watch.completed
 
-    def interrupted(done, watchdog):   # Ctrl-C once the first task finished
-        for future in original(done, watchdog):
+    def interrupted(*args):   # Ctrl-C once the first task finished
+        for future in original(*args):
             yield future
             raise KeyboardInterrupt
 
-    monkeypatch.setattr(engine, "_completed", interrupted)
+    monkeypatch.setattr(watch, "completed", interrupted)
     dev = ["--device", device] if device else []
     args = ["batch", "render", str(meshes[0]), "-o", str(tmp_path / "out"), "--views", "4", "--width", "20",
             "--height", "14", "--workers", "2", "-q", *dev]
@@ -786,7 +786,7 @@ class _KillingClient(_InProcessClient):
             return super().submit(fn, job, retries, **kwargs)
         from distributed.scheduler import KilledWorker
         self.submitted += 1
-        (Path(job["folder"]) / job["run_log"]).write_text("s" * self.ran)
+        (Path(job["folder"]) / job["run_log"]).write_text("s tcp://127.0.0.1:1\n" * self.ran)
         future = _Future(fn, job, "error")
         worker = type("Worker", (), {"address": "tcp://127.0.0.1:1"})()
         future.key, future._error = kwargs["key"], KilledWorker(kwargs["key"], worker, 3)

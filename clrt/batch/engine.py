@@ -23,13 +23,14 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from clrt import checks
+from clrt.batch import watch
 from clrt.batch.cluster import (cpu_cores, dashboard_link, default_workers, keep_lost_workers, require_dask,
                                 start_local_cluster)
 from clrt.batch.jobs import Source, expand_sources, output_path, plan_tasks, settings_key
 from clrt.batch.manifest import FolderLock, Manifest
 from clrt.config import (BATCH_CACHE_SCENES, BATCH_FORMAT, BATCH_KILLED_RESUBMITS, BATCH_LOST_RESUBMITS,
-                         BATCH_NO_WORKER_TIMEOUT, BATCH_TASK_RETRIES, DEFAULT_ACCEL, DEFAULT_BUILDER,
-                         DEFAULT_LEAF_SIZE, MAX_IMAGE_SIDE, MAX_VIEWS, MAX_WORKERS)
+                         BATCH_TASK_RETRIES, DEFAULT_ACCEL, DEFAULT_BUILDER, DEFAULT_LEAF_SIZE, MAX_IMAGE_SIDE,
+                         MAX_VIEWS, MAX_WORKERS)
 from clrt.errors import InputError, OutputError
 from clrt.scene.render_setup import CAMERA_OPTIONS, MATERIAL_OPTIONS, SCENE_OPTIONS
 
@@ -96,7 +97,7 @@ class Summary:
         for o in self.outputs:
             if o.status not in ("bad", "device", "failed"):
                 continue
-            if o.status == "device" and o.error.startswith(NO_WORKER):   # the batch's, not the source's
+            if o.status == "device" and o.error.startswith(watch.NO_WORKER):   # the batch's, not the source's
                 if (None, o.error) not in seen:
                     seen[None, o.error] = len(lines)
                     lines.append(o.error)
@@ -180,7 +181,8 @@ def run(sources, out_dir, views: int = 1, *, client=None, workers: int | None = 
                 else:
                     n_workers = len(client.scheduler_info().get("workers", {}))
                     if not n_workers and log:
-                        log("the scheduler has no workers yet: the jobs wait for them")
+                        log(f"the scheduler has no workers yet: the jobs wait {watch.BATCH_NO_WORKER_TIMEOUT:g} s "
+                            "for one")
                     jobs = _jobs(pending, folder, views, settings, force, n_workers, suffix)
                 link = dashboard_link(client)
                 if link and log:
@@ -361,11 +363,6 @@ def _jobs(pending: list, folder: Path, views: int, settings: dict, force: bool, 
     return jobs
 
 
-#: Under the output folder: one run log per task (clrt.batch.worker.render_task),
-#: while the batch runs.
-RUN_LOGS = ".clrt-runs"
-
-
 @dataclass
 class _Task:
     """A job as submitted: its images before the batch (see _remove_unrecorded) and
@@ -389,7 +386,7 @@ def _execute(client, jobs: list, folder: Path, manifest: Manifest, device, progr
     that worker -- the one running and those waiting in the worker's queue --
     and fails a task (KilledWorker) once allowed-failures + 1 of its workers
     died.  A healthy task queued behind one that crashes its worker each time
-    would be failed with it.  So each task notes in its run log (RUN_LOGS) when
+    would be failed with it.  So each task notes in its run log (clrt.batch.watch) when
     it starts and ends, and clrt applies Dask's rule to the deaths a task could
     have caused, those while it was running: a task failed so is reported once
     it was running at allowed-failures + 1 deaths, in all its submissions; until
@@ -406,8 +403,8 @@ def _execute(client, jobs: list, folder: Path, manifest: Manifest, device, progr
         # the other workers and the restarted ones; the watchdog sees whether any comes up.
         if getattr(client, "status", None) != "running":
             raise
-    watchdog = _Watchdog(client, token, local)
-    logs = _run_logs(folder)
+    watchdog = watch.Watchdog(client, token, local)
+    logs = watch.run_logs(folder)
     futures = {}
     handled = set()   # futures whose end was dealt with (a task submitted again has several)
 
@@ -415,7 +412,7 @@ def _execute(client, jobs: list, folder: Path, manifest: Manifest, device, progr
         job = task.job
         key = f"clrt-render-{job['name']}-{job['views'][0]:04d}-{uuid.uuid4().hex[:12]}"
         if logs is not None:
-            job = {**job, "run_log": f"{RUN_LOGS}/{key}"}
+            job = {**job, "run_log": f"{watch.RUN_LOGS}/{key}"}
         future = client.submit(render_task, job, pure=False, retries=BATCH_TASK_RETRIES, key=key)
         futures[future] = task
         return future
@@ -428,7 +425,7 @@ def _execute(client, jobs: list, folder: Path, manifest: Manifest, device, progr
     outputs = []
     try:
         done = as_completed(list(futures))
-        for future in _completed(done, watchdog):
+        for future in watch.completed(done, watchdog):
             handled.add(future)
             task = futures[future]
             job = task.job
@@ -442,7 +439,7 @@ def _execute(client, jobs: list, folder: Path, manifest: Manifest, device, progr
                 exc = future.exception()
                 if type(exc).__name__ == "KilledWorker":
                     deaths = getattr(exc, "allowed_failures", 0) + 1
-                    task.deaths, task.ran = task.deaths + deaths, task.ran + _runs(logs, future.key)
+                    task.deaths, task.ran = task.deaths + deaths, task.ran + watch.runs(logs, future.key)
                     task.crashed = task.ran >= deaths
                     if not task.crashed and task.killed < BATCH_KILLED_RESUBMITS and running:
                         # some of those deaths came while it waited behind a
@@ -475,7 +472,7 @@ def _execute(client, jobs: list, folder: Path, manifest: Manifest, device, progr
                                       status, record.get("error", ""), why))
             bar.update(len(records))
             manifest.write(force=False)
-    except _NoWorkers as exc:
+    except watch.NoWorkers as exc:
         for future, task in futures.items():
             if future not in handled:
                 records = [{"path": task.job["paths"][v], "source": task.job["source"], "view": v,
@@ -495,133 +492,8 @@ def _execute(client, jobs: list, folder: Path, manifest: Manifest, device, progr
             except Exception:   # noqa: BLE001 -- the scheduler may be gone already
                 pass
         if logs is not None:
-            _remove_run_logs(logs)
+            watch.remove_run_logs(logs)
     return outputs
-
-
-#: How a batch stopped by its watchdog (_Watchdog) explains its frames: the
-#: start of their error, one line for the whole batch.
-NO_WORKER = "no worker stayed up for"
-
-
-class _NoWorkers(Exception):
-    """The watchdog's verdict: tasks are left and no worker came up (its text says why)."""
-
-
-def _completed(done, watchdog):
-    """The futures of ``done`` (distributed.as_completed) as they end, with the
-    watchdog asked while none is ready; _NoWorkers from it ends the batch."""
-    while not done.is_empty():
-        if done.has_ready():
-            watchdog.alive()
-            yield next(done)
-        else:
-            watchdog.check()
-            time.sleep(0.05)
-
-
-class _Watchdog:
-    """Stops a batch whose tasks wait for workers that never come up.
-
-    A worker process that dies while it starts -- in DevicePlugin.setup, say, a
-    driver that crashes when a context is made -- is restarted by its nanny for
-    ever, and no task is charged with its deaths (it never ran one): the batch
-    would wait for ever.  A worker is up once it has set up its device (it logs
-    the batch's token under READY_TOPIC) and while it stays connected; a task
-    that ends shows one too.  With no worker up for BATCH_NO_WORKER_TIMEOUT
-    seconds, a local cluster's batch stops; a --scheduler cluster's only if
-    workers joined it in that time and none came up (with no worker at all, it
-    waits for them, as it says when it starts)."""
-
-    def __init__(self, client, token: str, local: bool):
-        from clrt.batch.worker import READY_TOPIC
-        self.client, self.token, self.local, self.topic = client, token, local, READY_TOPIC
-        self.up_since = self.checked = time.monotonic()
-        self.joins_seen: set = set()
-        self.joins = 0     # workers that joined the scheduler since one was last up
-        try:
-            self._joins()  # those before the batch are not counted
-        except Exception:   # noqa: BLE001 -- the scheduler gone: the tasks come back cancelled
-            pass
-
-    def alive(self) -> None:
-        self.up_since = time.monotonic()
-        self.joins = 0
-
-    def check(self) -> None:
-        now = time.monotonic()
-        if now - self.checked < 1.0:
-            return
-        self.checked = now
-        try:   # the scheduler's event logs are read only while no worker is known to be up
-            connected = set(self.client.nthreads())
-            if connected and connected & {msg.get("worker") for _, msg in self.client.get_events(self.topic)
-                                          if isinstance(msg, dict) and msg.get("token") == self.token}:
-                self.alive()
-                return
-            self.joins += self._joins()
-        except Exception:   # noqa: BLE001 -- the scheduler gone: the tasks come back cancelled
-            return
-        limit = BATCH_NO_WORKER_TIMEOUT
-        if now - self.up_since < limit or not (self.local or self.joins):
-            return
-        # Workers that joined in the window were restarted: a crash loop, even
-        # if one of them happens to be connected (and starting) right now.
-        if self.joins:
-            why = (f"every worker process died while starting its device ({self.joins} start(s); "
-                   "a crash in the OpenCL driver?)")
-        elif connected:
-            why = (f"{len(connected)} worker process(es) connected but never finished setting up their device "
-                   "(a hang in the OpenCL driver?)")
-        else:
-            why = "no worker process connected to the scheduler (each died while starting?)"
-        raise _NoWorkers(f"{NO_WORKER} {limit:g} s: {why}; finished images are kept: "
-                         "run the same command again once the device works")
-
-    def _joins(self) -> int:
-        """Workers that joined the scheduler since the last call (its "all" events)."""
-        new = 0
-        for stamp, msg in self.client.get_events("all"):
-            if isinstance(msg, dict) and msg.get("action") == "add-worker":
-                mark = (stamp, msg.get("worker"))
-                if mark not in self.joins_seen:
-                    self.joins_seen.add(mark)
-                    new += 1
-        return new
-
-
-def _run_logs(folder: Path) -> Path | None:
-    """The folder of the tasks' run logs, without the logs of a batch that
-    crashed (the folder lock says no other batch uses them); None if it cannot
-    be made (the tasks then count as never running)."""
-    logs = folder / RUN_LOGS
-    _remove_run_logs(logs)
-    try:
-        logs.mkdir(exist_ok=True)
-    except OSError:
-        return None
-    return logs
-
-
-def _remove_run_logs(logs: Path) -> None:
-    """The tasks' run logs, and their folder once empty: clrt removes only what it wrote."""
-    try:
-        for log in logs.glob("clrt-render-*"):
-            log.unlink()
-        logs.rmdir()
-    except OSError:
-        pass
-
-
-def _runs(logs: Path | None, key) -> int:
-    """Runs of task ``key`` that its worker's death cut short: starts with no end."""
-    if logs is None:
-        return 0
-    try:
-        marks = (logs / str(key)).read_text(encoding="ascii", errors="replace")
-    except OSError:
-        return 0
-    return max(marks.count("s") - marks.count("e"), 0)
 
 
 def _lost_reason(client, future) -> str:

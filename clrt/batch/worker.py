@@ -139,7 +139,7 @@ class DevicePlugin(WorkerPlugin):
             signal.signal(signal.SIGINT, signal.SIG_IGN)
         configure(choose_device(self.device, worker_index(worker.name)), self.cache_size)
         if self.token is not None:
-            # the scheduler adds the worker's address (clrt.batch.engine._Watchdog)
+            # the scheduler adds the worker's address (clrt.batch.watch.Watchdog)
             worker.log_event(READY_TOPIC, {"token": self.token})
 
 
@@ -203,12 +203,13 @@ def _scene_entry(source: str, scene_options: dict, accel: str, builder: str, lea
 
 def render_task(job: dict) -> list[dict]:
     """:func:`render_views`, its run noted in the task's run log (``job["run_log"]``,
-    a file under the output folder named by the batch): an ``s`` when it starts
-    and an ``e`` when it ends, returning or raising.  A run that its worker
-    process's death cut short leaves an ``s`` alone, which tells the batch that
-    this task was running -- not waiting behind another task -- when that worker
-    died (clrt.batch.engine._execute)."""
-    _note_run(job, "s")
+    a file under the output folder named by the batch): a line ``s ADDRESS``
+    (this worker's) when it starts and a line ``e`` when it ends, returning or
+    raising.  A run that its worker process's death cut short leaves an ``s``
+    alone, which tells the batch that this task was running -- not waiting
+    behind another task -- when that worker died; a run that goes on far past
+    the others, with the worker to restart (clrt.batch.watch)."""
+    _note_run(job, f"s {_worker_address()}")
     try:
         return render_views(job)
     finally:
@@ -216,14 +217,14 @@ def render_task(job: dict) -> list[dict]:
 
 
 def _note_run(job: dict, mark: str) -> None:
-    """Append ``mark`` to the task's run log; a log that cannot be written is no
+    """Append the line ``mark`` to the task's run log; a log that cannot be written is no
     reason to fail the task (the batch then takes the task as not running)."""
     name = job.get("run_log")
     if not name:
         return
     try:
-        with open(Path(job["folder"]) / name, "a", encoding="ascii") as log:
-            log.write(mark)
+        with open(Path(job["folder"]) / name, "a", encoding="utf-8") as log:
+            log.write(mark + "\n")
     except OSError:
         pass
 
