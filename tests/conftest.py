@@ -34,7 +34,9 @@ def write_icosphere_obj(path: Path) -> Path:
 # With CLRT_TEST_SETUP_CRASH=all in the environment, every worker process dies
 # while its device is set up (clrt.batch.worker.configure), before any task;
 # with CLRT_TEST_SETUP_CRASH=PATH, every one but the first (which makes PATH).
-# CLRT_TEST_NO_WORKER_TIMEOUT sets the batch's BATCH_NO_WORKER_TIMEOUT.
+# CLRT_TEST_NO_WORKER_TIMEOUT sets the batch's BATCH_NO_WORKER_TIMEOUT.  With
+# CLRT_TEST_TRACE_KILL=PATH, the first chunk that clrt.batch.trace sends to a
+# worker kills it (and makes PATH).
 # A killer dies 0.3 s into its task, as a driver that crashes mid-render: the
 # tasks sent to its worker after it are surely there, waiting.
 FAULTS = '''
@@ -72,6 +74,20 @@ if os.environ.get("CLRT_TEST_SETUP_CRASH"):
         os._exit(1)
 
     worker.configure = configure
+
+if os.environ.get("CLRT_TEST_TRACE_KILL"):
+    # the first chunk of rays that clrt.batch.trace sends to a worker kills its
+    # process (the file named there remembers): later ones trace
+    import clrt.batch.rays as rays
+
+    def trace_chunk(*args, _trace_chunk=rays.trace_chunk, **kwargs):
+        try:
+            os.close(os.open(os.environ["CLRT_TEST_TRACE_KILL"], os.O_CREAT | os.O_EXCL | os.O_WRONLY))
+        except FileExistsError:
+            return _trace_chunk(*args, **kwargs)
+        os._exit(1)
+
+    rays.trace_chunk = trace_chunk
 
 if os.environ.get("CLRT_TEST_NO_WORKER_TIMEOUT"):   # the batch's watchdog, in the command's process
     import clrt.batch.watch as watch
