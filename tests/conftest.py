@@ -30,7 +30,10 @@ def write_icosphere_obj(path: Path) -> Path:
 # with fault_hook()'s folder on its path loads -- the command and the batch's
 # worker processes (restarted ones too).  Rendering a source named boom.obj
 # raises; die.obj kills the worker process each time; flaky.obj kills it the
-# first time only (SOURCE.kills, beside the source, lists the processes killed).
+# first time only (SOURCE.kills, beside the source, lists the processes killed);
+# hang.obj never returns from its task, hangonce.obj the first time only
+# (SOURCE.hangs lists the processes that hung).  CLRT_TEST_HANG_FLOOR sets the
+# batch's BATCH_HANG_FLOOR.
 # With CLRT_TEST_SETUP_CRASH=all in the environment, every worker process dies
 # while its device is set up (clrt.batch.worker.configure), before any task;
 # with CLRT_TEST_SETUP_CRASH=PATH, every one but the first (which makes PATH).
@@ -49,6 +52,11 @@ def render_scene(source, **options):
     name = os.path.basename(str(source))
     if name == "boom.obj":
         raise RuntimeError("boom from the test")
+    if name == "hang.obj" or name == "hangonce.obj" and not os.path.exists(str(source) + ".hangs"):
+        with open(str(source) + ".hangs", "a") as hangs:
+            hangs.write(f"{os.getpid()}\\n")
+        while True:   # a driver call that never returns
+            time.sleep(1)
     if name == "die.obj" or name == "flaky.obj" and not os.path.exists(str(source) + ".kills"):
         with open(str(source) + ".kills", "a") as kills:
             kills.write(f"{os.getpid()}\\n")
@@ -92,6 +100,10 @@ if os.environ.get("CLRT_TEST_TRACE_KILL"):
 if os.environ.get("CLRT_TEST_NO_WORKER_TIMEOUT"):   # the batch's watchdog, in the command's process
     import clrt.batch.watch as watch
     watch.BATCH_NO_WORKER_TIMEOUT = float(os.environ["CLRT_TEST_NO_WORKER_TIMEOUT"])
+
+if os.environ.get("CLRT_TEST_HANG_FLOOR"):   # the batch's hang limit, in the command's process
+    import clrt.batch.watch as watch
+    watch.BATCH_HANG_FLOOR = float(os.environ["CLRT_TEST_HANG_FLOOR"])
 '''
 
 

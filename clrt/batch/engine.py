@@ -28,8 +28,8 @@ from clrt.batch.cluster import (cpu_cores, dashboard_link, default_workers, keep
                                 start_local_cluster)
 from clrt.batch.jobs import Source, expand_sources, output_path, plan_tasks, settings_key
 from clrt.batch.manifest import FolderLock, Manifest
-from clrt.config import (BATCH_CACHE_SCENES, BATCH_FORMAT, BATCH_KILLED_RESUBMITS, BATCH_LOST_RESUBMITS,
-                         BATCH_TASK_RETRIES, DEFAULT_ACCEL, DEFAULT_BUILDER, DEFAULT_LEAF_SIZE, MAX_IMAGE_SIDE,
+from clrt.config import (BATCH_CACHE_SCENES, BATCH_FORMAT, BATCH_HANG_RETRIES, BATCH_KILLED_RESUBMITS,
+                         BATCH_LOST_RESUBMITS, BATCH_TASK_RETRIES, DEFAULT_ACCEL, DEFAULT_BUILDER, DEFAULT_LEAF_SIZE, MAX_IMAGE_SIDE,
                          MAX_VIEWS, MAX_WORKERS)
 from clrt.errors import InputError, OutputError
 from clrt.scene.render_setup import CAMERA_OPTIONS, MATERIAL_OPTIONS, SCENE_OPTIONS
@@ -376,6 +376,7 @@ class _Task:
     deaths: int = 0         # of the workers it was sent to, in all its submissions
     ran: int = 0            # of those deaths, while it was running
     crashed: bool = False   # running at allowed-failures + 1 of them: it is the crash
+    hung: int = 0           # times it was found hung, cancelled and its worker restarted
 
 
 def _execute(client, jobs: list, folder: Path, manifest: Manifest, device, progress: bool,
@@ -391,7 +392,11 @@ def _execute(client, jobs: list, folder: Path, manifest: Manifest, device, progr
     have caused, those while it was running: a task failed so is reported once
     it was running at allowed-failures + 1 deaths, in all its submissions; until
     then it is submitted again as a new task (BATCH_KILLED_RESUBMITS times at
-    most, which bounds the deaths it waits through)."""
+    most, which bounds the deaths it waits through).
+
+    A task that runs far past the others (clrt.batch.watch.HangWatch) is
+    cancelled, its worker restarted, and it is submitted again, at most
+    BATCH_HANG_RETRIES times; then its frames are "device"."""
     from distributed import as_completed
 
     from clrt.batch.worker import DevicePlugin, render_task
@@ -405,8 +410,9 @@ def _execute(client, jobs: list, folder: Path, manifest: Manifest, device, progr
             raise
     watchdog = watch.Watchdog(client, token, local)
     logs = watch.run_logs(folder)
-    futures = {}
+    futures, keys = {}, {}
     handled = set()   # futures whose end was dealt with (a task submitted again has several)
+    hangs = watch.HangWatch(logs, lambda: {f.key: len(t.job["views"]) for f, t in futures.items() if f not in handled})
 
     def submit(task: _Task):
         job = task.job
@@ -414,7 +420,7 @@ def _execute(client, jobs: list, folder: Path, manifest: Manifest, device, progr
         if logs is not None:
             job = {**job, "run_log": f"{watch.RUN_LOGS}/{key}"}
         future = client.submit(render_task, job, pure=False, retries=BATCH_TASK_RETRIES, key=key)
-        futures[future] = task
+        futures[future], keys[key] = task, future
         return future
 
     # Each job's images as they are before any task runs (see _remove_unrecorded)
@@ -423,9 +429,41 @@ def _execute(client, jobs: list, folder: Path, manifest: Manifest, device, progr
     total = sum(len(job["views"]) for job in jobs)
     bar = _progress_bar(total, progress)
     outputs = []
+
+    def take(records):
+        for record in records:
+            manifest.add(record)
+            status = record["status"]
+            seconds = record.get("seconds") or 0.0
+            path = str(folder / record["path"]) if status == "done" else None
+            if status == "done" and record.get("note") == "found":
+                status = "skipped"   # written by an earlier attempt of a retried task
+            why = (redone or {}).get(record["path"], "") if status == "done" else ""
+            outputs.append(Output(path, record["source"], record["view"], seconds, record.get("worker"),
+                                  status, record.get("error", ""), why))
+        hangs.finished(records)
+        bar.update(len(records))
+        manifest.write(force=False)
+
     try:
         done = as_completed(list(futures))
-        for future in watch.completed(done, watchdog):
+        for future in watch.completed(done, watchdog, hangs):
+            if isinstance(future, watch.Hung):
+                hung, future = future, keys.get(future.key)
+                if future is None or future in handled or future.done():
+                    continue
+                handled.add(future)
+                task = futures[future]
+                _stop_hung(client, future, hung.worker)
+                task.hung += 1
+                if task.hung <= BATCH_HANG_RETRIES:
+                    done.add(submit(task))   # on the restarted worker, or another
+                else:
+                    _remove_unrecorded(folder, task.job, task.files)
+                    take(_hung_records(task, hung))
+                continue
+            if future in handled:   # cancelled when it hung
+                continue
             handled.add(future)
             task = futures[future]
             job = task.job
@@ -460,18 +498,7 @@ def _execute(client, jobs: list, folder: Path, manifest: Manifest, device, progr
                     done.add(submit(task))
                     continue
                 raise ClusterLost(_lost_reason(client, future))
-            for record in records:
-                manifest.add(record)
-                status = record["status"]
-                seconds = record.get("seconds") or 0.0
-                path = str(folder / record["path"]) if status == "done" else None
-                if status == "done" and record.get("note") == "found":
-                    status = "skipped"   # written by an earlier attempt of a retried task
-                why = (redone or {}).get(record["path"], "") if status == "done" else ""
-                outputs.append(Output(path, record["source"], record["view"], seconds, record.get("worker"),
-                                      status, record.get("error", ""), why))
-            bar.update(len(records))
-            manifest.write(force=False)
+            take(records)
     except watch.NoWorkers as exc:
         for future, task in futures.items():
             if future not in handled:
@@ -494,6 +521,38 @@ def _execute(client, jobs: list, folder: Path, manifest: Manifest, device, progr
         if logs is not None:
             watch.remove_run_logs(logs)
     return outputs
+
+
+def _stop_hung(client, future, worker: str | None) -> None:
+    """Cancel a hung task and restart the worker running it: a thread that never
+    returns cannot be stopped, only its process, and until then the worker
+    (one thread) would hold every task sent to it.  Through its nanny (always
+    there on a local cluster); a worker without one is retired instead."""
+    try:
+        client.cancel([future])
+    except Exception:   # noqa: BLE001 -- the scheduler gone: the next future says so
+        pass
+    if worker is None:
+        return
+    try:
+        client.restart_workers([worker])
+    except Exception:   # noqa: BLE001 -- no nanny, or the worker left already
+        try:
+            client.retire_workers([worker], close_workers=True)
+        except Exception:   # noqa: BLE001
+            pass
+
+
+def _hung_records(task: _Task, hung) -> list[dict]:
+    """Records of a task found hung once more than BATCH_HANG_RETRIES allow: one line, naming it."""
+    job = task.job
+    views = job["views"]
+    which = f"view {views[0]}" if len(views) == 1 else f"views {views[0]}-{views[-1]}"
+    error = (f"{job['source']}: hung: the task of {which} ran past {hung.limit:.1f} s {task.hung} times "
+             f"({watch.BATCH_HANG_FACTOR:g} x the median frame time per view, at least {watch.BATCH_HANG_FLOOR:g} "
+             "s); its worker was restarted each time")
+    return [{"path": job["paths"][v], "source": job["source"], "view": v, "views": job["count"],
+             "status": "device", "key": job["key"], "error": error, "worker": hung.worker} for v in views]
 
 
 def _lost_reason(client, future) -> str:

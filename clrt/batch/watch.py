@@ -1,5 +1,5 @@
 """What a batch watches while its tasks run (clrt.batch.engine._execute): the
-tasks' run logs and workers that never come up.
+tasks' run logs, workers that never come up, and tasks that hang.
 
 **Run logs.**  Each task notes in a file of its own under the output folder
 (RUN_LOGS, removed when the batch ends) a line ``s ADDRESS`` when it starts on
@@ -9,14 +9,21 @@ worker's death cut short, or a run still going on.
 
 **Workers that never come up** (:class:`Watchdog`): no worker up for
 BATCH_NO_WORKER_TIMEOUT seconds stops the batch.
+
+**Tasks that hang** (:class:`HangWatch`): a task that runs far past the
+others -- a driver call that never returns, a deadlock -- is cancelled, its
+worker restarted and the task submitted again.
 """
 
 from __future__ import annotations
 
+import os
+import statistics
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
-from clrt.config import BATCH_NO_WORKER_TIMEOUT
+from clrt.config import BATCH_HANG_FACTOR, BATCH_HANG_FLOOR, BATCH_NO_WORKER_TIMEOUT
 
 #: Under the output folder: one run log per task, while the batch runs.
 RUN_LOGS = ".clrt-runs"
@@ -31,15 +38,30 @@ class NoWorkers(Exception):
     """The watchdog's verdict: tasks are left and no worker came up (its text says why)."""
 
 
-def completed(done, watchdog):
-    """The futures of ``done`` (distributed.as_completed) as they end, with the
-    watchdog asked while none is ready; NoWorkers from it ends the batch."""
+@dataclass(frozen=True)
+class Hung:
+    """A task found running far past the others: ``seconds`` since the batch saw
+    it start, over ``limit``, on the worker at ``worker`` (None if unknown)."""
+
+    key: str
+    seconds: float
+    limit: float
+    worker: str | None
+
+
+def completed(done, watchdog, hangs=None):
+    """The futures of ``done`` (distributed.as_completed) as they end, and a
+    :class:`Hung` for each task that ``hangs`` (a HangWatch) finds hung; both
+    watchers are asked while no future is ready.  NoWorkers from the watchdog
+    ends the batch."""
     while not done.is_empty():
         if done.has_ready():
             watchdog.alive()
             yield next(done)
         else:
             watchdog.check()
+            if hangs is not None:
+                yield from hangs.check()
             time.sleep(0.05)
 
 
@@ -113,6 +135,63 @@ class Watchdog:
                     self.joins_seen.add(mark)
                     new += 1
         return new
+
+
+class HangWatch:
+    """Finds tasks that hang: a worker stuck in a task -- a driver call that never
+    returns, a deadlock -- stays connected and up, so neither Dask nor the
+    watchdog would ever end the batch.
+
+    A task is running from the first look that finds a start without an end in
+    its run log (once a second, while no task ends; a start more -- Dask ran it
+    again after a worker died -- starts the clock again) and hangs once it has
+    run longer than BATCH_HANG_FACTOR x the median seconds of the frames
+    rendered so far x its views, and at least BATCH_HANG_FLOOR.  With no
+    frame rendered yet there is nothing to compare with: no limit."""
+
+    def __init__(self, logs: Path | None, live):
+        self.logs, self.live = logs, live   # live(): {key: views} of the tasks not yet ended
+        self.frames: list = []              # seconds of each frame rendered in this batch
+        self.running: dict = {}             # key -> (starts, when first seen running)
+        self.checked = time.monotonic()
+
+    def finished(self, records) -> None:
+        """Frames of a task that ended: those rendered now set the median."""
+        self.frames += [r["seconds"] for r in records
+                        if r.get("status") == "done" and r.get("note") != "found" and r.get("seconds")]
+
+    def limit(self, views: int) -> float | None:
+        if not self.frames:
+            return None
+        return max(BATCH_HANG_FACTOR * statistics.median(self.frames) * max(views, 1), BATCH_HANG_FLOOR)
+
+    def check(self) -> list:
+        """The tasks found hung since the last look (:class:`Hung`), each once."""
+        now = time.monotonic()
+        if self.logs is None or now - self.checked < CHECK_SECONDS:
+            return []
+        self.checked = now
+        try:
+            started = set(os.listdir(self.logs))   # a task's log appears when it starts
+        except OSError:
+            return []
+        hung = []
+        for key, views in self.live().items():
+            if key not in started:
+                continue
+            starts, ends, worker = read_log(self.logs, key)
+            if starts <= ends:
+                self.running.pop(key, None)
+                continue
+            seen = self.running.get(key)
+            if seen is None or seen[0] != starts:
+                self.running[key] = (starts, now)
+                continue
+            limit = self.limit(views)
+            if limit is not None and now - seen[1] > limit:
+                del self.running[key]
+                hung.append(Hung(key, now - seen[1], limit, worker))
+        return hung
 
 
 # --------------------------------------------------------------------------- run logs
