@@ -6,10 +6,12 @@
 Every image is written atomically under a name that depends only on its source,
 view and format (``OUT/<source-stem>/view-0007.png``; ``--format``: any image
 format of clrt.output.WRITERS, such as .exr) and recorded in the folder's
-manifest (clrt.batch.manifest).  Running the same batch again renders only what
-is missing or was made with other settings, so a batch stopped by Ctrl-C, a
-crash or a lost worker is finished by running it again; a task whose worker
-dies is retried on another by Dask.
+manifest (clrt.batch.manifest), with the record of its SHA-256 beside it
+(clrt.output).  Running the same batch again renders only what is missing, no
+longer exactly what clrt wrote, or made with other settings, so a batch
+stopped by Ctrl-C, a crash or a lost worker is finished by running it again; a
+task whose worker dies is retried on another by Dask, one that hangs is
+cancelled and retried (clrt.batch.watch).
 """
 
 from __future__ import annotations
