@@ -181,10 +181,21 @@ BATCH_LOST_RESUBMITS = 2
 #: (0.06 s of it the device set-up, PoCL); not measured on the GPU hosts, where
 #: the driver's start adds some, and longer when many start at once on a loaded
 #: host: 60 s leaves ample room.  Program builds are no part of it (they come
-#: with a worker's first task, while it counts as up).  A
-#: --scheduler cluster with no worker at all waits for them; it stops only when
-#: workers join and die without coming up (clrt.batch.engine._Watchdog).
+#: with a worker's first task, while it counts as up).  A --scheduler cluster
+#: with no worker at all stops after the same time (clrt.batch.watch.Watchdog).
 BATCH_NO_WORKER_TIMEOUT = 60.0
+#: A task is taken to hang once it has run -- since the batch saw it start --
+#: longer than BATCH_HANG_FACTOR x the median seconds of the frames this batch
+#: rendered so far x its views, and at least BATCH_HANG_FLOOR seconds (which
+#: also covers a worker's set-up of a new source: load, BVH build, upload,
+#: program builds; 0.7-2.2 s a source on an H200 worker, docs/distributed.md).
+#: Before any frame has finished there is nothing to compare with, and no
+#: limit.  A hung task is cancelled, its worker restarted, and the task
+#: submitted again, at most BATCH_HANG_RETRIES times; hanging once more, its
+#: frames are "device" (exit 3) with one line naming it (clrt.batch.watch).
+BATCH_HANG_FACTOR = 10.0
+BATCH_HANG_FLOOR = 120.0
+BATCH_HANG_RETRIES = 1
 #: Seconds to wait for an existing Dask scheduler (--scheduler).
 BATCH_CONNECT_TIMEOUT = 10.0
 #: Seconds past BATCH_CONNECT_TIMEOUT that a scheduler has to finish Dask's

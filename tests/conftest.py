@@ -30,11 +30,16 @@ def write_icosphere_obj(path: Path) -> Path:
 # with fault_hook()'s folder on its path loads -- the command and the batch's
 # worker processes (restarted ones too).  Rendering a source named boom.obj
 # raises; die.obj kills the worker process each time; flaky.obj kills it the
-# first time only (SOURCE.kills, beside the source, lists the processes killed).
+# first time only (SOURCE.kills, beside the source, lists the processes killed);
+# hang.obj never returns from its task, hangonce.obj the first time only
+# (SOURCE.hangs lists the processes that hung).  CLRT_TEST_HANG_FLOOR sets the
+# batch's BATCH_HANG_FLOOR.
 # With CLRT_TEST_SETUP_CRASH=all in the environment, every worker process dies
 # while its device is set up (clrt.batch.worker.configure), before any task;
 # with CLRT_TEST_SETUP_CRASH=PATH, every one but the first (which makes PATH).
-# CLRT_TEST_NO_WORKER_TIMEOUT sets the batch's BATCH_NO_WORKER_TIMEOUT.
+# CLRT_TEST_NO_WORKER_TIMEOUT sets the batch's BATCH_NO_WORKER_TIMEOUT.  With
+# CLRT_TEST_TRACE_KILL=PATH, the first chunk that clrt.batch.trace sends to a
+# worker kills it (and makes PATH).
 # A killer dies 0.3 s into its task, as a driver that crashes mid-render: the
 # tasks sent to its worker after it are surely there, waiting.
 FAULTS = '''
@@ -47,6 +52,11 @@ def render_scene(source, **options):
     name = os.path.basename(str(source))
     if name == "boom.obj":
         raise RuntimeError("boom from the test")
+    if name == "hang.obj" or name == "hangonce.obj" and not os.path.exists(str(source) + ".hangs"):
+        with open(str(source) + ".hangs", "a") as hangs:
+            hangs.write(f"{os.getpid()}\\n")
+        while True:   # a driver call that never returns
+            time.sleep(1)
     if name == "die.obj" or name == "flaky.obj" and not os.path.exists(str(source) + ".kills"):
         with open(str(source) + ".kills", "a") as kills:
             kills.write(f"{os.getpid()}\\n")
@@ -73,9 +83,27 @@ if os.environ.get("CLRT_TEST_SETUP_CRASH"):
 
     worker.configure = configure
 
+if os.environ.get("CLRT_TEST_TRACE_KILL"):
+    # the first chunk of rays that clrt.batch.trace sends to a worker kills its
+    # process (the file named there remembers): later ones trace
+    import clrt.batch.rays as rays
+
+    def trace_chunk(*args, _trace_chunk=rays.trace_chunk, **kwargs):
+        try:
+            os.close(os.open(os.environ["CLRT_TEST_TRACE_KILL"], os.O_CREAT | os.O_EXCL | os.O_WRONLY))
+        except FileExistsError:
+            return _trace_chunk(*args, **kwargs)
+        os._exit(1)
+
+    rays.trace_chunk = trace_chunk
+
 if os.environ.get("CLRT_TEST_NO_WORKER_TIMEOUT"):   # the batch's watchdog, in the command's process
-    import clrt.batch.engine as engine
-    engine.BATCH_NO_WORKER_TIMEOUT = float(os.environ["CLRT_TEST_NO_WORKER_TIMEOUT"])
+    import clrt.batch.watch as watch
+    watch.BATCH_NO_WORKER_TIMEOUT = float(os.environ["CLRT_TEST_NO_WORKER_TIMEOUT"])
+
+if os.environ.get("CLRT_TEST_HANG_FLOOR"):   # the batch's hang limit, in the command's process
+    import clrt.batch.watch as watch
+    watch.BATCH_HANG_FLOOR = float(os.environ["CLRT_TEST_HANG_FLOOR"])
 '''
 
 

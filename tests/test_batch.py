@@ -138,6 +138,38 @@ def test_bad_options_are_one_line_errors(args, fragment, meshes, tmp_path, capsy
     assert not list((tmp_path / "out").rglob("*.png"))
 
 
+def test_workers_are_capped_at_the_cores_and_the_tasks(monkeypatch):
+    """--workers 64 on 2 cores started 64 processes (92 s for one tiny frame):
+    a local cluster gets at most one worker per core and per task, with a note."""
+    from clrt.batch import engine
+    monkeypatch.setattr(engine, "cpu_cores", lambda: 2)
+    notes, asked_for = [], []
+
+    def jobs(n):
+        def make(count):
+            asked_for.append(count)
+            return list(range(n))
+        return make
+
+    assert engine._local_workers(64, "cpu", notes.append, jobs(5)) == (2, [0, 1, 2, 3, 4])
+    assert asked_for == [2], "the tasks are cut for the workers that can run"
+    assert engine._local_workers(64, "cpu", notes.append, jobs(1))[0] == 1
+    assert engine._local_workers(2, "cpu", notes.append, jobs(3))[0] == 2
+    assert engine._local_workers(None, "cpu", notes.append, jobs(1))[0] == 1
+    assert notes == ["2 worker(s) instead of 64: 2 CPU core(s), 5 task(s)",
+                     "1 worker(s) instead of 64: 2 CPU core(s), 1 task(s)"]
+
+
+def test_workers_asked_beyond_the_tasks_are_not_started(meshes, tmp_path, device, capsys):
+    dev = ["--device", device] if device else []
+    assert main(["batch", "render", str(meshes[0]), "-o", str(tmp_path / "out"), *SIZE_ARGS, "--workers", "64",
+                 *dev]) == 0
+    printed, err = capsys.readouterr()
+    from clrt.batch.cluster import cpu_cores
+    assert f"1 worker(s) instead of 64: {cpu_cores()} CPU core(s), 1 task(s)" in err.splitlines(), err
+    assert "1 frame(s) rendered" in printed and "1 worker(s) ->" in printed, printed
+
+
 def test_each_worker_gets_its_own_device(monkeypatch):
     from clrt.batch import worker
     from clrt.device.context import DeviceInfo
@@ -265,7 +297,8 @@ def test_a_killed_workers_tasks_are_done_elsewhere(client, meshes, tmp_path, dev
     assert len(images) == 8
     records = _manifest(tmp_path / "out")
     assert sorted(r["path"] for r in records) == sorted(images), "each output recorded once"
-    assert not [p for p in (tmp_path / "out").rglob(".*.png*")], "no temporary file left"
+    assert not [p for p in (tmp_path / "out").rglob(".*.png*")
+                if not (p.name.endswith(".clrt") and p.with_name(p.name[1:-5]).is_file())], "no temporary file left"
     assert int(marker.read_text()) not in [p["pid"] for p in client.run(lambda: {"pid": os.getpid()}).values()]
 
 
@@ -310,7 +343,7 @@ def test_a_manifest_clrt_did_not_write_is_kept_without_force(client, meshes, tmp
     # A manifest changed since clrt wrote it is the user's now.
     ours = (out / BATCH_MANIFEST).read_text()
     (out / BATCH_MANIFEST).write_text(ours + "{}\n")
-    with pytest.raises(OutputError, match="not written by clrt"):
+    with pytest.raises(OutputError, match="manifest.jsonl was changed since clrt wrote it"):
         clrt.batch.render(meshes[0], out, client=client, device=device, **SIZE)
 
     # A folder from before manifests had records (clrt's lines, no record beside): resumed as before.
@@ -378,7 +411,7 @@ def test_resume_renders_only_what_is_missing(client, meshes, tmp_path, device):
 
     again = clrt.batch.render(meshes, out, views=3, client=client, device=device, **SIZE)
     redone = [o for o in again if o.seconds > 0]
-    assert [(o.source, o.view) for o in redone] == [(str(meshes[1]), 1)]
+    assert [(o.source, o.view, o.redone) for o in redone] == [(str(meshes[1]), 1, "missing")]
     assert sorted(o.status for o in again) == ["done"] + ["skipped"] * 5
     for p, stamp in before.items():
         if p != "block/view-0001.png":
@@ -391,16 +424,69 @@ def test_resume_renders_only_what_is_missing(client, meshes, tmp_path, device):
     assert all(img.shape == (14, 22, 3) for img in _images(out).values())
 
 
-def test_ctrl_c_keeps_what_finished_and_exits_130(meshes, tmp_path, device, capsys, monkeypatch):
-    from clrt.batch import engine
-    original = engine._completed
+def test_resume_rerenders_frames_missing_cut_short_or_replaced(client, meshes, tmp_path, device, capsys):
+    """A finished batch; then one frame deleted, one cut to 100 bytes, one
+    replaced by another image (its record left as it was): running it again
+    renders those three again -- the files, not their names, say what is done
+    -- and says why; the untouched frame is kept."""
+    out = tmp_path / "out"
+    first = clrt.batch.render([meshes[0]], out, views=4, client=client, device=device, **SIZE)
+    assert [o.status for o in first] == ["done"] * 4
+    frames = {v: out / f"ball/view-000{v}.png" for v in range(4)}
+    pixels = {v: np.asarray(Image.open(path)) for v, path in frames.items()}
+    kept = os.stat(frames[3]).st_mtime_ns
+    frames[0].unlink()
+    frames[1].write_bytes(frames[1].read_bytes()[:100])
+    Image.fromarray(255 - pixels[2]).save(frames[2])
+    dev = ["--device", device] if device else []
+    code = main(["batch", "render", str(meshes[0]), "-o", str(out), "--views", "4", *SIZE_ARGS, "--workers", "1",
+                 "-q", *dev])
+    printed, err = capsys.readouterr()
+    assert code == 0 and not err, err
+    assert printed.startswith("3 frame(s) rendered (3 re-rendered: 1 missing, 2 changed since written), "
+                              "1 already done, 0 not rendered"), printed
+    assert all(np.array_equal(np.asarray(Image.open(frames[v])), pixels[v]) for v in range(4))
+    assert all(clrt.output.file_state(path) == clrt.output.OURS for path in frames.values())
+    assert os.stat(frames[3]).st_mtime_ns == kept
+    assert {r["status"] for r in _manifest(out)} == {"done"} and len(_manifest(out)) == 4
 
-    def interrupted(done, watchdog):   # Ctrl-C once the first task finished
-        for future in original(done, watchdog):
+
+def test_a_foreign_file_where_a_frame_goes_is_refused_before_rendering(meshes, tmp_path, device, capsys):
+    """A file that clrt did not write, where the batch would put a frame, stops
+    the batch before anything is rendered (exit 2, one line, as clrt render
+    does); -f replaces it."""
+    out = tmp_path / "out"
+    (out / "ball").mkdir(parents=True)
+    foreign = out / "ball" / "view-0001.png"
+    Image.fromarray(np.full((4, 4, 3), 9, np.uint8)).save(foreign)
+    before = foreign.read_bytes()
+    dev = ["--device", device] if device else []
+    args = ["batch", "render", str(meshes[0]), "-o", str(out), "--views", "3", *SIZE_ARGS, "--workers", "1", "-q",
+            *dev]
+    assert main(args) == 2
+    printed, err = capsys.readouterr()
+    assert err == (f"clrt: {foreign} exists and was not written by clrt; pass --force (-f; force=True in Python) "
+                   "to replace it, or choose another -o\n"), err
+    assert not printed and foreign.read_bytes() == before
+    assert sorted(p.name for p in out.rglob("*") if p.is_file()) == [".clrt-batch.lock", "view-0001.png"], \
+        "nothing rendered, no manifest"
+    with pytest.raises(OutputError, match="view-0001.png exists and was not written by clrt"):
+        clrt.batch.render([meshes[0]], out, views=3, workers=1, device=device, **SIZE)
+    assert main([*args, "-f"]) == 0
+    assert "3 frame(s) rendered, 0 already done" in capsys.readouterr().out
+    assert foreign.read_bytes() != before and clrt.output.written_by_clrt(foreign)
+
+
+def test_ctrl_c_keeps_what_finished_and_exits_130(meshes, tmp_path, device, capsys, monkeypatch):
+    from clrt.batch import watch
+    original = watch.completed
+
+    def interrupted(*args):   # Ctrl-C once the first task finished
+        for future in original(*args):
             yield future
             raise KeyboardInterrupt
 
-    monkeypatch.setattr(engine, "_completed", interrupted)
+    monkeypatch.setattr(watch, "completed", interrupted)
     dev = ["--device", device] if device else []
     args = ["batch", "render", str(meshes[0]), "-o", str(tmp_path / "out"), "--views", "4", "--width", "20",
             "--height", "14", "--workers", "2", "-q", *dev]
@@ -539,7 +625,7 @@ def test_images_written_in_threads_keep_their_order_and_errors(meshes, tmp_path,
     assert [r["view"] for r in records] == views
     assert [r["status"] for r in records] == ["done", "done", "failed", "done", "done", "done"]
     assert "refused by the test" in records[2]["error"]
-    assert sorted(p.name for p in (tmp_path / "ball").iterdir()) == \
+    assert sorted(p.name for p in (tmp_path / "ball").iterdir() if not p.name.startswith(".")) == \
         [output_path("ball", v).rsplit("/", 1)[-1] for v in (0, 1, 3, 4, 5)]
 
 
@@ -700,7 +786,7 @@ class _KillingClient(_InProcessClient):
             return super().submit(fn, job, retries, **kwargs)
         from distributed.scheduler import KilledWorker
         self.submitted += 1
-        (Path(job["folder"]) / job["run_log"]).write_text("s" * self.ran)
+        (Path(job["folder"]) / job["run_log"]).write_text("s tcp://127.0.0.1:1\n" * self.ran)
         future = _Future(fn, job, "error")
         worker = type("Worker", (), {"address": "tcp://127.0.0.1:1"})()
         future.key, future._error = kwargs["key"], KilledWorker(kwargs["key"], worker, 3)
@@ -782,7 +868,8 @@ def test_views_found_after_a_lost_worker_are_counted_and_recorded(meshes, tmp_pa
     out = tmp_path / "out"
     for v in (0, 1):   # the first attempt wrote these before its worker died
         (out / "ball").mkdir(parents=True, exist_ok=True)
-        os.replace(tmp_path / "first" / job["paths"][v], out / job["paths"][v])
+        for name in (Path(job["paths"][v]), clrt.output.record_path(Path(job["paths"][v]))):
+            os.replace(tmp_path / "first" / name, out / name)
     retried = worker.render_task({**job, "folder": str(out)})
     assert [r.get("note") for r in retried] == ["found", "found", None, None]
     assert [r["camera"] for r in retried] == [r["camera"] for r in rendered]
@@ -834,7 +921,8 @@ def test_a_task_that_raises_after_writing_images_leaves_no_image_recorded_failed
     assert "raised after writing" in _manifest(out)[0]["error"]
     assert sorted(_images(out)) == names[2:], "the failed task's images are gone, the older one stays"
     assert (out / names[2]).read_bytes() == old
-    assert not [p for p in out.rglob(".*") if p.name != ".clrt-batch.lock" and "manifest" not in p.name]
+    assert not [p for p in out.rglob(".*") if p.name != ".clrt-batch.lock" and "manifest" not in p.name
+                and not (p.name.endswith(".clrt") and p.with_name(p.name[1:-5]).is_file())], "only records of files"
 
     monkeypatch.setattr(worker, "render_task", real)
     again = clrt.batch.run(meshes, out, views=3, client=_InProcessClient(100), device=device, **SIZE)

@@ -77,6 +77,28 @@ def test_scheduler_address_of_a_server_that_answers_garbage_is_an_input_error(tm
     assert not (tmp_path / "out").exists()
 
 
+def test_a_refused_scheduler_port_fails_at_once(tmp_path, monkeypatch, capsys):
+    """Dask's Client tries a refused port again until its timeout (10 s): clrt
+    asks the port first.  With a timeout of a minute, the answer is still the
+    refusal, not Dask's "timed out"."""
+    from clrt.batch.cluster import connect
+    from clrt.cli import main
+    from clrt.errors import InputError
+    monkeypatch.setattr("clrt.batch.cluster.BATCH_CONNECT_TIMEOUT", 60.0)
+    sock = socket.socket()
+    sock.bind(("127.0.0.1", 0))
+    port = sock.getsockname()[1]
+    sock.close()   # nothing listens there now
+    with pytest.raises(InputError, match=f"connection refused \\(nothing listens on port {port} of 127.0.0.1\\)"):
+        connect(f"tcp://127.0.0.1:{port}")
+    mesh = write_icosphere_obj(tmp_path / "m.obj")
+    assert main(["batch", "render", str(mesh), "-o", str(tmp_path / "out"), "--scheduler", f"127.0.0.1:{port}"]) == 2
+    err = capsys.readouterr().err
+    assert err == (f"clrt: cannot reach the Dask scheduler at tcp://127.0.0.1:{port}: connection refused "
+                   f"(nothing listens on port {port} of 127.0.0.1)\n"), err
+    assert not (tmp_path / "out").exists()
+
+
 def test_scheduler_address_of_a_silent_server_fails_within_the_connect_timeout():
     # Client(timeout=...) does not bound Dask's handshake read: connect's own deadline does
     server = _Server("silent")

@@ -74,3 +74,40 @@ def test_a_task_that_kills_its_worker_takes_no_healthy_task_with_it(killer, work
     done = sorted(r["path"] for r in records if r["status"] == "done")
     assert done == sorted(p.relative_to(out).as_posix() for p in out.rglob("*.png"))
     assert {p.name for p in out.iterdir() if p.name.startswith(".")} <= {".clrt-batch.lock", ".manifest.jsonl.clrt"}
+
+
+def test_ray_queries_survive_a_killed_worker(tmp_path, device):
+    """clrt.batch.trace on a cluster of one worker, whose process the first chunk
+    of rays kills: Dask retries the chunk on the restarted worker, and the hits
+    are those of clrt.trace.  The mesh used to be scattered to the workers, and
+    died with them ("lost dependencies")."""
+    marker = tmp_path / "killed"
+    env = repo_env(fault_hook(tmp_path / "hook"))
+    env["CLRT_TEST_TRACE_KILL"] = str(marker)
+    code = f"""
+import numpy as np, dask, dask.array as da
+from distributed import Client
+import clrt, clrt.batch
+from clrt.batch.cluster import start_local_cluster
+from clrt.scene import primitives
+if __name__ == "__main__":
+    mesh = primitives.torus(1.0, 0.35, 16, 8)
+    rng = np.random.default_rng(5)
+    origins = rng.normal(size=(2000, 3)) * 3.0
+    directions = -origins + rng.normal(size=(2000, 3))
+    with start_local_cluster(1, {device!r}) as cluster, Client(cluster) as client:
+        o, d = (da.from_array(a, chunks=(500, 3)) for a in (origins, directions))
+        hits = clrt.batch.trace(mesh, o, d, client=client, device={device!r})
+        t, prim = dask.compute(hits.t, hits.prim)
+        blocked = clrt.batch.occluded(mesh, o, d, tmax=2.0, client=client, device={device!r}).compute()
+    want = clrt.trace(mesh, origins, directions, device={device!r})
+    assert 0 < (want.prim >= 0).sum() < len(origins)
+    assert np.array_equal(prim, want.prim) and np.array_equal(t, want.t)
+    assert np.array_equal(blocked, clrt.occluded(mesh, origins, directions, tmax=2.0, device={device!r}))
+    print("same hits")
+"""
+    script = tmp_path / "trace.py"
+    script.write_text(code)
+    proc = subprocess.run([sys.executable, str(script)], env=env, capture_output=True, text=True, timeout=180)
+    assert marker.exists(), "a worker was killed"
+    assert proc.returncode == 0 and proc.stdout.strip() == "same hits", proc.stderr[-2000:]

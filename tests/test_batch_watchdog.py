@@ -1,7 +1,7 @@
 """Worker processes that die while they start -- a driver crashing when the
 device is set up (clrt.batch.worker.DevicePlugin), before any task runs -- are
 restarted by their nanny for ever, and no task is ever charged with their
-deaths.  The batch's watchdog (clrt.batch.engine._Watchdog) stops such a batch
+deaths.  The batch's watchdog (clrt.batch.watch.Watchdog) stops such a batch
 once no worker has been up for BATCH_NO_WORKER_TIMEOUT seconds: its frames are
 "device", one line says why, exit 3, the cluster shut down.  A healthy batch
 never hears of it, even with a tiny timeout.
@@ -76,3 +76,26 @@ def test_a_healthy_batch_never_hears_of_the_watchdog(tmp_path, src, device):
     proc, _, records, out = _batch(tmp_path, ("ball.obj", "block.obj"), device, timeout=1)
     assert proc.returncode == 0 and not proc.stderr.strip(), proc.stderr[-2000:]
     assert {r["status"] for r in records.values()} == {"done"} and len(records) == 4
+
+
+def test_a_scheduler_without_workers_is_given_up_after_the_timeout(tmp_path, monkeypatch, capsys):
+    """--scheduler with no worker at all waited until Ctrl-C: it stops after
+    BATCH_NO_WORKER_TIMEOUT (here 2 s), exit 3, one line, its frames "device"."""
+    import logging
+
+    from distributed import LocalCluster
+
+    from clrt.cli import main
+    monkeypatch.setattr("clrt.batch.watch.BATCH_NO_WORKER_TIMEOUT", 2.0)
+    mesh = write_icosphere_obj(tmp_path / "ball.obj")
+    out = tmp_path / "out"
+    with LocalCluster(n_workers=0, processes=False, protocol="tcp://", host="127.0.0.1", scheduler_port=0,
+                      dashboard_address=None, silence_logs=logging.CRITICAL) as cluster:
+        code = main(["batch", "render", str(mesh), "-o", str(out), "--views", "2", "--width", "20", "--height",
+                     "14", "--scheduler", cluster.scheduler_address, "-q"])
+    err = capsys.readouterr().err
+    assert code == 3, err
+    assert err == ("clrt: no worker stayed up for 2 s: the scheduler has no workers (docs/distributed.md: starting "
+                   "them); finished images are kept: run the same command again once it has workers\n"), err
+    records = json.loads("[" + ",".join((out / BATCH_MANIFEST).read_text().splitlines()) + "]")
+    assert [(r["view"], r["status"]) for r in records] == [(0, "device"), (1, "device")]

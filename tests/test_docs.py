@@ -63,8 +63,8 @@ def test_python_blocks_run(path, tmp_path, monkeypatch, device):
         ran += 1
     assert ran >= 1
     if path.name == "distributed.md":   # the guarded example ran: its images are there
-        assert sorted(p.name for p in (tmp_path / "out" / "knot").iterdir()) == ["view-0000.png",
-                                                                                 "view-0001.png"]
+        assert sorted(p.name for p in (tmp_path / "out" / "knot").iterdir()) == [
+            ".view-0000.png.clrt", ".view-0001.png.clrt", "view-0000.png", "view-0001.png"]
 
 
 def test_quickstart_resolves_paths_from_the_callers_directory(tmp_path, device):

@@ -46,7 +46,12 @@ def _read(exr, path) -> dict:
 
 
 def _files(folder) -> list:
-    return sorted(p.name for p in Path(folder).iterdir())
+    """The files in ``folder`` but the records of clrt's (``.NAME.clrt``), each
+    beside its file: no other hidden file (no temporary left behind)."""
+    names = sorted(p.name for p in Path(folder).iterdir())
+    visible = [n for n in names if not n.startswith(".")]
+    assert all(n.endswith(".clrt") and n[1:-5] in visible for n in names if n.startswith(".")), names
+    return visible
 
 
 def _cli_linear(mesh, device, *extra) -> np.ndarray:
@@ -63,7 +68,7 @@ def test_the_cli_writes_the_linear_image_bit_for_bit(exr, mesh_obj, tmp_path, de
     out.parent.mkdir()
     bright = ["--diffuse", "20"]        # values far above 1: nothing may be clamped
     assert _render(mesh_obj, out, device, *bright) == 0, capsys.readouterr().err
-    assert _files(out.parent) == ["x.exr"], "no temporary files, no record, no AOV files"
+    assert _files(out.parent) == ["x.exr"], "no temporary files, no AOV files"
     channels, header = _read(exr, out)
     assert sorted(channels) == ["B", "G", "R"]
     assert all(c.dtype == np.float32 for c in channels.values())
@@ -140,15 +145,18 @@ def test_a_users_exr_is_refused_and_clrts_own_is_replaced(exr, mesh_obj, tmp_pat
 
 
 @pytest.mark.parametrize("content", [b"", b"not an exr", b"v/1\x01\x02\x00\x00\x00software\x00string\x00\x04",
-                                     b"v/1\x01\x02\x00\x00\x00software\x00string\x00\xff\xff\xff\xffclrt",
-                                     b"v/1\x01\x02\x00\x00\x00software\x00string\x00\x04\x00\x00\x00clr"])
+                                     b"v/1\x01\x02\x00\x00\x00software\x00string\x00\x04\x00\x00\x00clrt\x00"])
 def test_a_broken_or_foreign_exr_is_not_clrts(content, tmp_path):
-    """The header is read without OpenEXR; cut-short or odd files are simply not clrt's."""
+    """Without the record of its SHA-256 an .exr is not clrt's -- even one whose
+    header carries clrt's mark -- and with a record it is clrt's only while its
+    bytes match."""
     path = tmp_path / "b.exr"
     path.write_bytes(content)
-    assert not output.written_by_clrt(path)
-    path.write_bytes(b"v/1\x01\x02\x00\x00\x00software\x00string\x00\x04\x00\x00\x00clrt\x00")
+    assert not output.written_by_clrt(path) and output.file_state(path) == output.FOREIGN
+    output.record_path(path).write_text(f"clrt 0.1.0 sha256 {output.files.sha256(path)}\n")
     assert output.written_by_clrt(path)
+    path.write_bytes(content + b"\0")
+    assert output.file_state(path) == output.CHANGED
 
 
 def test_without_openexr_the_cli_says_how_to_install_it(mesh_obj, tmp_path, device, capsys, monkeypatch):

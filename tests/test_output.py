@@ -2,6 +2,7 @@
 any other file -- or one changed since clrt wrote it -- is refused without --force."""
 
 import os
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -63,27 +64,94 @@ def test_a_file_clrt_did_not_write_is_refused_without_force(suffix, mesh_obj, tm
     assert _render(mesh_obj, image, device, *args) == 0, "once clrt wrote it, a re-run replaces it"
 
 
-@pytest.mark.parametrize("suffix", [".npy", ".bmp", ".ppm"])
-def test_a_recorded_file_changed_since_is_refused(suffix, tmp_path):
-    """Formats without room for a mark are recognised by the SHA-256 in their record."""
+@pytest.mark.parametrize("suffix", FORMATS + [".exr", ".npy"])
+def test_a_file_changed_since_clrt_wrote_it_is_refused(suffix, tmp_path):
+    """Every format is recognised by the SHA-256 in its record: cut short, one
+    byte changed, or replaced by another file, it is no longer clrt's."""
+    if suffix == ".exr":
+        pytest.importorskip("OpenEXR")
     path = tmp_path / f"a{suffix}"
-    if suffix == ".npy":
-        output.write_array(np.arange(4.0), path)
-    else:
-        output.write_image(np.zeros((2, 3, 3), np.uint8), path)
-    assert output.record_path(path).is_file() and output.written_by_clrt(path)
-    path.write_bytes(path.read_bytes() + b"\0")
-    assert not output.written_by_clrt(path)
-    with pytest.raises(OutputError, match="or was changed since"):
-        output.check_replace(path, force=False)
-    output.check_replace(path, force=True)
+
+    def write(value=0):
+        if suffix == ".npy":
+            output.write_array(np.arange(4.0) + value, path)
+        else:
+            output.write_image(np.full((2, 3, 3), value, np.float32 if suffix == ".exr" else np.uint8), path)
+
+    write()
+    ours = path.read_bytes()
+    assert output.record_path(path).is_file() and output.file_state(path) == output.OURS
+    for changed in (ours[:len(ours) // 2], ours[:-1] + bytes([ours[-1] ^ 1]), b""):
+        path.write_bytes(changed)
+        assert output.file_state(path) == output.CHANGED and not output.written_by_clrt(path)
+        with pytest.raises(OutputError, match="was changed since clrt wrote it.*--force"):
+            output.check_replace(path, force=False)
+        output.check_replace(path, force=True)
+        with pytest.raises(OutputError, match="was changed since"):
+            write(1)
+        assert path.read_bytes() == changed, "refused: left as it was"
+    path.write_bytes(ours)
+    assert output.written_by_clrt(path), "the same bytes again: clrt's"
+    write(1)   # its own: replaced without force, and recorded anew
+    assert path.read_bytes() != ours and output.file_state(path) == output.OURS
 
 
-def test_marked_formats_need_no_record(tmp_path):
-    for suffix in (".png", ".jpg", ".tif", ".webp", ".gif"):
+def test_the_cli_refuses_an_edited_png_that_kept_its_mark(mesh_obj, tmp_path, device, capsys):
+    """clrt render -o e.png; the PNG edited in an editor that keeps its text
+    chunks (clrt's Software mark among them); the command run again: refused,
+    exit 2, the edit kept -- until --force."""
+    from PIL import PngImagePlugin
+    out = tmp_path / "e.png"
+    assert _render(mesh_obj, out, device) == 0
+    with Image.open(out) as im:
+        info = PngImagePlugin.PngInfo()
+        info.add_text("Software", im.info["Software"])
+        edited = np.asarray(im).copy()
+    edited[0, 0] = 255 - edited[0, 0]
+    Image.fromarray(edited).save(out, pnginfo=info)
+    before = out.read_bytes()
+    capsys.readouterr()
+    assert _render(mesh_obj, out, device) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "was changed since clrt wrote it" in err and "--force" in err, err
+    assert out.read_bytes() == before
+    assert _render(mesh_obj, out, device, "--force") == 0 and output.written_by_clrt(out)
+
+
+def test_every_format_gets_a_record(tmp_path):
+    for suffix in FORMATS:
         path = tmp_path / f"a{suffix}"
         output.write_image(np.full((4, 4, 3), 128, np.uint8), path)
-        assert output.written_by_clrt(path) and not output.record_path(path).exists()
+        assert output.written_by_clrt(path) and output.record_path(path).is_file()
+        assert output.record_path(path).read_text().split()[2:] == ["sha256", output.files.sha256(path)]
+
+
+def test_a_record_goes_in_before_its_file_and_a_failed_rename_restores_the_old_one(tmp_path, monkeypatch):
+    """A process killed between the two renames leaves the new record beside the
+    old file (CHANGED) or beside nothing (ABSENT), never a new file without a
+    record (FOREIGN: a batch would refuse its own frame); a rename that fails
+    puts the old record back."""
+    path = tmp_path / "a.png"
+    replace = os.replace
+    seen, failing = [], set()
+
+    def spy(src, dst):
+        seen.append(Path(dst).name)
+        if Path(dst).name in failing:
+            raise OSError(5, "Input/output error")
+        return replace(src, dst)
+
+    monkeypatch.setattr(os, "replace", spy)
+    output.write_image(np.zeros((2, 2, 3), np.uint8), path)
+    assert seen == [".a.png.clrt", "a.png"]
+    record = output.record_path(path).read_bytes()
+    failing.update({"a.png", "new.png"})
+    with pytest.raises(OutputError, match="Input/output error"):
+        output.write_image(np.ones((2, 2, 3), np.uint8), path)
+    assert output.record_path(path).read_bytes() == record and output.written_by_clrt(path)
+    with pytest.raises(OutputError):
+        output.write_image(np.ones((2, 2, 3), np.uint8), tmp_path / "new.png")
+    assert sorted(p.name for p in tmp_path.iterdir()) == [".a.png.clrt", "a.png"]
 
 
 @pytest.mark.skipif(not os.path.exists("/proc/self/status"), reason="reads the umask from /proc/self/status")
@@ -155,8 +223,7 @@ def test_each_writer_holds_what_the_table_says(name, tmp_path):
             if writer.require:
                 pytest.importorskip("OpenEXR")
             output.write_image(image, path)
-            assert output.written_by_clrt(path), (name, channels)
-            assert output.record_path(path).exists() == (writer.read_mark is None)
+            assert output.written_by_clrt(path) and output.record_path(path).exists(), (name, channels)
             if not writer.lossless:
                 continue
             stored = output.encode_srgb(image) if dtype == np.float32 and depth == "8-bit" else image

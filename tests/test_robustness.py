@@ -319,7 +319,8 @@ def test_rerun_replaces_its_own_output_but_not_a_users_file(tmp_path, device, ca
     # ... and replaced with --force, after which it is clrt's own.
     assert _cli(_render_args("-o", "photo.png", "--force"), device, capsys)[0] == 0
     assert Image.open(photo).size == (16, 12) and output.written_by_clrt(photo)
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["clrt-default.png", "photo.png"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == [".clrt-default.png.clrt", ".photo.png.clrt",
+                                                         "clrt-default.png", "photo.png"]
 
 
 @pytest.mark.parametrize("suffix", [".png", ".jpg", ".tif", ".webp", ".gif"])
@@ -382,7 +383,7 @@ def test_failed_write_leaves_the_old_file_and_no_temporary(tmp_path, monkeypatch
     with pytest.raises(OutputError, match="No space left"):
         output.write_image(np.ones((2, 2, 3), np.uint8), path)
     assert path.read_bytes() == before
-    assert [p.name for p in tmp_path.iterdir()] == [name]
+    assert sorted(p.name for p in tmp_path.iterdir()) == [f".{name}.clrt", name]
 
 
 def test_failed_render_leaves_existing_output_untouched(tmp_path, device, capsys, monkeypatch):
@@ -396,7 +397,7 @@ def test_failed_render_leaves_existing_output_untouched(tmp_path, device, capsys
     code, out, err = _cli(_render_args(), device, capsys)
     assert code == 3 and "fell over" in _one_line(err)
     assert (tmp_path / "clrt-default.png").read_bytes() == before
-    assert [p.name for p in tmp_path.iterdir()] == ["clrt-default.png"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == [".clrt-default.png.clrt", "clrt-default.png"]
 
 
 def test_unwritable_folder_fails_before_rendering(tmp_path, device, capsys, monkeypatch):

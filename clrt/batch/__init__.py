@@ -7,8 +7,9 @@
 ``engine.py`` (many frames: planning, manifest, resume, progress), ``jobs.py``
 (sources, output names, tasks), ``manifest.py`` (the output folder's record),
 ``worker.py`` (what runs in a worker process: its device, its caches, the
-tasks), ``cluster.py`` (a local cluster on the loopback interface, or an
-existing one), ``rays.py`` (ray queries on dask arrays), ``cli.py`` (``clrt batch``).
+tasks), ``watch.py`` (run logs, workers that never come up, hung tasks),
+``cluster.py`` (a local cluster on the loopback interface, or an existing
+one), ``rays.py`` (ray queries on dask arrays), ``cli.py`` (``clrt batch``).
 Guide: docs/distributed.md.  ``import clrt`` never loads this package.
 """
 

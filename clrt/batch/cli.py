@@ -118,7 +118,10 @@ def _print_summary(summary, folder: str, quiet: bool) -> None:
     rendered, skipped = summary.rendered, summary.count("skipped")
     failed = sum(summary.count(s) for s in ("bad", "device", "failed"))
     bad = len(summary.bad_sources())
-    print(f"{rendered} frame(s) rendered, {skipped} already done, {failed} not rendered "
+    redone = summary.redone()
+    why = (f" ({sum(redone.values())} re-rendered: {', '.join(f'{n} {k}' for k, n in redone.items())})"
+           if redone else "")
+    print(f"{rendered} frame(s) rendered{why}, {skipped} already done, {failed} not rendered "
           f"({bad} bad source(s) or error(s)); {summary.seconds:.1f} s, {summary.frames_per_second:.2f} frames/s, "
           f"{summary.workers} worker(s) -> {folder}")
     if not quiet:

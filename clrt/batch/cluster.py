@@ -147,6 +147,7 @@ def connect(address: str):
         if not (security.tls_ca_file and security.tls_client_cert):
             raise InputError(f"--scheduler {address}: tls:// needs certificates in Dask's configuration: "
                              "distributed.comm.tls.ca-file, .client.cert and .client.key (docs/distributed.md)")
+    _probe(address)
     # The Client is made in a thread of its own with a deadline: Dask's connect
     # timeout covers opening the connection, not its handshake, so a server that
     # accepts and never answers (not a Dask scheduler) would hold it for ever.
@@ -187,6 +188,36 @@ def connect(address: str):
         reason = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
         raise InputError(f"cannot reach the Dask scheduler at {address}: {reason}") from None
     raise exc
+
+
+def _probe(address: str) -> None:
+    """InputError at once where nothing listens at a tcp:// or tls:// address
+    (connection refused, unknown host), or where nothing answers within
+    BATCH_CONNECT_TIMEOUT: Dask's Client tries a refused port again and again
+    until its timeout, so a typo in --scheduler cost 10 s before this."""
+    import socket
+
+    from distributed.comm.addressing import parse_address, parse_host_port
+    try:
+        scheme, location = parse_address(address)
+        host, port = parse_host_port(location, 8786)   # Dask's default port
+    except ValueError as exc:
+        raise InputError(f"--scheduler {address}: {exc}") from None
+    if scheme not in ("tcp", "tls"):
+        return   # other transports (ucx, inproc): Dask connects
+    try:
+        socket.create_connection((host, port), timeout=BATCH_CONNECT_TIMEOUT).close()
+    except ConnectionRefusedError:
+        raise InputError(f"cannot reach the Dask scheduler at {address}: connection refused "
+                         f"(nothing listens on port {port} of {host})") from None
+    except socket.gaierror as exc:
+        raise InputError(f"cannot reach the Dask scheduler at {address}: unknown host {host!r} "
+                         f"({exc.strerror or exc})") from None
+    except TimeoutError:
+        raise InputError(f"cannot reach the Dask scheduler at {address}: no answer within "
+                         f"{BATCH_CONNECT_TIMEOUT:g} s") from None
+    except OSError as exc:
+        raise InputError(f"cannot reach the Dask scheduler at {address}: {exc.strerror or exc}") from None
 
 
 def _close_quietly(clients) -> None:

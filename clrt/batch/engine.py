@@ -6,10 +6,12 @@
 Every image is written atomically under a name that depends only on its source,
 view and format (``OUT/<source-stem>/view-0007.png``; ``--format``: any image
 format of clrt.output.WRITERS, such as .exr) and recorded in the folder's
-manifest (clrt.batch.manifest).  Running the same batch again renders only what
-is missing or was made with other settings, so a batch stopped by Ctrl-C, a
-crash or a lost worker is finished by running it again; a task whose worker
-dies is retried on another by Dask.
+manifest (clrt.batch.manifest), with the record of its SHA-256 beside it
+(clrt.output).  Running the same batch again renders only what is missing, no
+longer exactly what clrt wrote, or made with other settings, so a batch
+stopped by Ctrl-C, a crash or a lost worker is finished by running it again; a
+task whose worker dies is retried on another by Dask, one that hangs is
+cancelled and retried (clrt.batch.watch).
 """
 
 from __future__ import annotations
@@ -23,12 +25,13 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from clrt import checks
-from clrt.batch.cluster import (dashboard_link, default_workers, keep_lost_workers, require_dask,
+from clrt.batch import watch
+from clrt.batch.cluster import (cpu_cores, dashboard_link, default_workers, keep_lost_workers, require_dask,
                                 start_local_cluster)
 from clrt.batch.jobs import Source, expand_sources, output_path, plan_tasks, settings_key
 from clrt.batch.manifest import FolderLock, Manifest
-from clrt.config import (BATCH_CACHE_SCENES, BATCH_FORMAT, BATCH_KILLED_RESUBMITS, BATCH_LOST_RESUBMITS,
-                         BATCH_NO_WORKER_TIMEOUT, BATCH_TASK_RETRIES, DEFAULT_ACCEL, DEFAULT_BUILDER,
+from clrt.config import (BATCH_CACHE_SCENES, BATCH_FORMAT, BATCH_HANG_RETRIES, BATCH_KILLED_RESUBMITS,
+                         BATCH_LOST_RESUBMITS, BATCH_TASK_RETRIES, DEFAULT_ACCEL, DEFAULT_BUILDER,
                          DEFAULT_LEAF_SIZE, MAX_IMAGE_SIDE, MAX_VIEWS, MAX_WORKERS)
 from clrt.errors import InputError, OutputError
 from clrt.scene.render_setup import CAMERA_OPTIONS, MATERIAL_OPTIONS, SCENE_OPTIONS
@@ -56,6 +59,7 @@ class Output:
     worker: str | None      # address of the worker that made it
     status: str = "done"    # see STATUSES
     error: str = ""
+    redone: str = ""        # "done" again: why its earlier image was not kept (a key of REDONE)
 
 
 @dataclass
@@ -78,6 +82,12 @@ class Summary:
     def rendered(self) -> int:
         return self.count("done")
 
+    def redone(self) -> dict:
+        """Frames rendered again because their earlier image was missing or had
+        changed since written, by reason (REDONE's words)."""
+        counts = Counter(o.redone for o in self.outputs if o.status == "done" and o.redone)
+        return {REDONE[k]: counts[k] for k in REDONE if counts[k]}
+
     def per_worker(self) -> dict:
         return dict(sorted(Counter(o.worker for o in self.outputs if o.status == "done").items()))
 
@@ -89,7 +99,7 @@ class Summary:
         for o in self.outputs:
             if o.status not in ("bad", "device", "failed"):
                 continue
-            if o.status == "device" and o.error.startswith(NO_WORKER):   # the batch's, not the source's
+            if o.status == "device" and o.error.startswith(watch.NO_WORKER):   # the batch's, not the source's
                 if (None, o.error) not in seen:
                     seen[None, o.error] = len(lines)
                     lines.append(o.error)
@@ -155,7 +165,7 @@ def run(sources, out_dir, views: int = 1, *, client=None, workers: int | None = 
     started = time.perf_counter()
     with FolderLock(folder):
         manifest = Manifest(folder, force)
-        outputs, pending = _plan(found, folder, manifest, views, settings, suffix)
+        outputs, pending, redone = _plan(found, folder, manifest, views, settings, suffix, force)
         manifest.write()
         if not pending:
             return Summary(outputs, time.perf_counter() - started, 0)
@@ -164,20 +174,24 @@ def run(sources, out_dir, views: int = 1, *, client=None, workers: int | None = 
         with ExitStack() as kept:   # keep_lost_workers() while a local cluster lives
             try:
                 if client is None:
-                    count = workers or default_workers(device)
+                    n_workers, jobs = _local_workers(workers, device, log, lambda count: _jobs(
+                        pending, folder, views, settings, force, count, suffix))
                     kept.enter_context(keep_lost_workers())
-                    cluster = start_local_cluster(count, device)
+                    cluster = start_local_cluster(n_workers, device)
                     from distributed import Client
                     client = own_client = Client(cluster)
+                else:
+                    n_workers = len(client.scheduler_info().get("workers", {}))
+                    if not n_workers and log:
+                        log(f"the scheduler has no workers yet: the jobs wait {watch.BATCH_NO_WORKER_TIMEOUT:g} s "
+                            "for one")
+                    jobs = _jobs(pending, folder, views, settings, force, n_workers, suffix)
                 link = dashboard_link(client)
                 if link and log:
                     log(f"dashboard: {link}")
-                n_workers = len(client.scheduler_info().get("workers", {}))
-                if not n_workers and log:
-                    log("the scheduler has no workers yet: the jobs wait for them")
-                jobs = _jobs(pending, folder, views, settings, force, n_workers, suffix)
                 sent = time.perf_counter()
-                outputs += _execute(client, jobs, folder, manifest, device, progress, local=cluster is not None)
+                outputs += _execute(client, jobs, folder, manifest, device, progress, local=cluster is not None,
+                                    redone=redone)
                 render_seconds = time.perf_counter() - sent
             finally:
                 manifest.write()
@@ -186,6 +200,21 @@ def run(sources, out_dir, views: int = 1, *, client=None, workers: int | None = 
                 if cluster is not None:
                     cluster.close()
     return Summary(outputs, time.perf_counter() - started, n_workers, render_seconds)
+
+
+def _local_workers(asked: int | None, device, log, make_jobs) -> tuple[int, list]:
+    """(worker processes, jobs) of a local cluster: ``asked`` (default: one per
+    GPU, else one per two cores), but never more than the CPU cores -- a worker
+    is a process that keeps at least one core busy, and 64 of them on 2 cores
+    took 92 s for a frame that 2 render in 1.7 s -- nor than the tasks (cut for
+    that many workers first).  A note in one line when ``asked`` is cut."""
+    cores = cpu_cores()
+    count = min(asked or default_workers(device), cores)
+    jobs = make_jobs(count)
+    count = max(1, min(count, len(jobs)))
+    if asked is not None and count < asked and log:
+        log(f"{count} worker(s) instead of {asked}: {cores} CPU core(s), {len(jobs)} task(s)")
+    return count, jobs
 
 
 def _check_options(views, accel, builder, leaf_size, lights, options) -> dict:
@@ -252,10 +281,25 @@ def _output_folder(out_dir) -> Path:
     return folder.resolve()
 
 
-def _plan(found: list[Source], folder: Path, manifest: Manifest, views: int, settings: dict, suffix: str):
-    """Rows for bad arguments and finished images, and per source the views to render."""
-    from clrt.output import written_by_clrt
-    outputs, pending = [], []
+#: Why an existing frame is rendered again (Output.redone): its file was gone,
+#: or is no longer the one clrt wrote (cut short, edited, replaced, unreadable).
+REDONE = {"missing": "missing", "changed": "changed since written"}
+
+
+def _plan(found: list[Source], folder: Path, manifest: Manifest, views: int, settings: dict, suffix: str,
+          force: bool = False):
+    """Rows for bad arguments and finished images, per source the views to
+    render, and why a frame recorded done is rendered again (REDONE, by path).
+
+    The files decide, by their content -- clrt.output.file_state, the rule of
+    clrt render's overwrites: a frame is done when its file is exactly what
+    clrt wrote (the record beside it holds its SHA-256) with the settings of
+    this batch (the manifest's key); it is rendered again when it is missing,
+    changed since written, or made with other settings.  A file where a frame
+    goes that clrt did not write and the manifest does not know is not the
+    batch's: OutputError before anything is rendered, unless ``force``."""
+    from clrt.output import CHANGED, FOREIGN, NOT_A_FILE, OURS, file_state
+    outputs, pending, redone, foreign = [], [], {}, []
     for source in found:
         if source.error:
             manifest.add({"path": None, "source": source.path, "view": None, "status": "bad",
@@ -269,20 +313,40 @@ def _plan(found: list[Source], folder: Path, manifest: Manifest, views: int, set
             rel = output_path(source.name, view, suffix)
             path = folder / rel
             record = manifest.get(rel)
-            if path.is_file():
-                if record is not None and record.get("status") == "done" and record.get("key") == key:
+            recorded = record is not None and record.get("status") == "done"
+            state = file_state(path)
+            if state == NOT_A_FILE:
+                raise OutputError(f"cannot write {path}: it is not a regular file")
+            if state == OURS:
+                if recorded and record.get("key") == key:
                     outputs.append(Output(str(path), source.path, view, 0.0, record.get("worker"), "skipped"))
                     continue
-                if record is None and written_by_clrt(path):   # made before the manifest was written
+                if record is None:   # written, and the command died before the manifest was
                     manifest.add({"path": rel, "source": source.path, "view": view, "views": views,
                                   "status": "done", "key": key, "note": "found"})
                     outputs.append(Output(str(path), source.path, view, 0.0, None, "skipped"))
                     continue
+                replace.add(view)                # other settings, or recorded failed
+            elif state == CHANGED or (state == FOREIGN and recorded):
+                # not the bytes clrt wrote: a frame of this batch's that was cut
+                # short, edited or replaced (or whose record is gone)
                 replace.add(view)
+                redone[rel] = "changed"
+            elif state == FOREIGN:
+                if not force:
+                    foreign.append(path)
+                    continue
+                replace.add(view)
+            elif recorded:
+                redone[rel] = "missing"
             todo.append(view)
         if todo:
             pending.append((source, key, todo, replace))
-    return outputs, pending
+    if foreign:
+        others = f" (and {len(foreign) - 1} other frame file(s) of this batch)" if len(foreign) > 1 else ""
+        raise OutputError(f"{foreign[0]} exists and was not written by clrt{others}; pass --force (-f; force=True "
+                          "in Python) to replace it, or choose another -o")
+    return outputs, pending, redone
 
 
 def _jobs(pending: list, folder: Path, views: int, settings: dict, force: bool, workers: int,
@@ -301,11 +365,6 @@ def _jobs(pending: list, folder: Path, views: int, settings: dict, force: bool, 
     return jobs
 
 
-#: Under the output folder: one run log per task (clrt.batch.worker.render_task),
-#: while the batch runs.
-RUN_LOGS = ".clrt-runs"
-
-
 @dataclass
 class _Task:
     """A job as submitted: its images before the batch (see _remove_unrecorded) and
@@ -319,22 +378,27 @@ class _Task:
     deaths: int = 0         # of the workers it was sent to, in all its submissions
     ran: int = 0            # of those deaths, while it was running
     crashed: bool = False   # running at allowed-failures + 1 of them: it is the crash
+    hung: int = 0           # times it was found hung, cancelled and its worker restarted
 
 
 def _execute(client, jobs: list, folder: Path, manifest: Manifest, device, progress: bool,
-             local: bool = False) -> list[Output]:
+             local: bool = False, redone: dict | None = None) -> list[Output]:
     """Run the jobs, record each finished one; Ctrl-C cancels what is left.
 
     A worker's death: Dask's scheduler charges it to every task it had sent to
     that worker -- the one running and those waiting in the worker's queue --
     and fails a task (KilledWorker) once allowed-failures + 1 of its workers
     died.  A healthy task queued behind one that crashes its worker each time
-    would be failed with it.  So each task notes in its run log (RUN_LOGS) when
+    would be failed with it.  So each task notes in its run log (clrt.batch.watch) when
     it starts and ends, and clrt applies Dask's rule to the deaths a task could
     have caused, those while it was running: a task failed so is reported once
     it was running at allowed-failures + 1 deaths, in all its submissions; until
     then it is submitted again as a new task (BATCH_KILLED_RESUBMITS times at
-    most, which bounds the deaths it waits through)."""
+    most, which bounds the deaths it waits through).
+
+    A task that runs far past the others (clrt.batch.watch.HangWatch) is
+    cancelled, its worker restarted, and it is submitted again, at most
+    BATCH_HANG_RETRIES times; then its frames are "device"."""
     from distributed import as_completed
 
     from clrt.batch.worker import DevicePlugin, render_task
@@ -346,18 +410,19 @@ def _execute(client, jobs: list, folder: Path, manifest: Manifest, device, progr
         # the other workers and the restarted ones; the watchdog sees whether any comes up.
         if getattr(client, "status", None) != "running":
             raise
-    watchdog = _Watchdog(client, token, local)
-    logs = _run_logs(folder)
-    futures = {}
+    watchdog = watch.Watchdog(client, token, local)
+    logs = watch.run_logs(folder)
+    futures, keys = {}, {}
     handled = set()   # futures whose end was dealt with (a task submitted again has several)
+    hangs = watch.HangWatch(logs, lambda: {f.key: len(t.job["views"]) for f, t in futures.items() if f not in handled})
 
     def submit(task: _Task):
         job = task.job
         key = f"clrt-render-{job['name']}-{job['views'][0]:04d}-{uuid.uuid4().hex[:12]}"
         if logs is not None:
-            job = {**job, "run_log": f"{RUN_LOGS}/{key}"}
+            job = {**job, "run_log": f"{watch.RUN_LOGS}/{key}"}
         future = client.submit(render_task, job, pure=False, retries=BATCH_TASK_RETRIES, key=key)
-        futures[future] = task
+        futures[future], keys[key] = task, future
         return future
 
     # Each job's images as they are before any task runs (see _remove_unrecorded)
@@ -366,9 +431,41 @@ def _execute(client, jobs: list, folder: Path, manifest: Manifest, device, progr
     total = sum(len(job["views"]) for job in jobs)
     bar = _progress_bar(total, progress)
     outputs = []
+
+    def take(records):
+        for record in records:
+            manifest.add(record)
+            status = record["status"]
+            seconds = record.get("seconds") or 0.0
+            path = str(folder / record["path"]) if status == "done" else None
+            if status == "done" and record.get("note") == "found":
+                status = "skipped"   # written by an earlier attempt of a retried task
+            why = (redone or {}).get(record["path"], "") if status == "done" else ""
+            outputs.append(Output(path, record["source"], record["view"], seconds, record.get("worker"),
+                                  status, record.get("error", ""), why))
+        hangs.finished(records)
+        bar.update(len(records))
+        manifest.write(force=False)
+
     try:
         done = as_completed(list(futures))
-        for future in _completed(done, watchdog):
+        for future in watch.completed(done, watchdog, hangs):
+            if isinstance(future, watch.Hung):
+                hung, future = future, keys.get(future.key)
+                if future is None or future in handled or future.done():
+                    continue
+                handled.add(future)
+                task = futures[future]
+                _stop_hung(client, future, hung.worker)
+                task.hung += 1
+                if task.hung <= BATCH_HANG_RETRIES:
+                    done.add(submit(task))   # on the restarted worker, or another
+                else:
+                    _remove_unrecorded(folder, task.job, task.files)
+                    take(_hung_records(task, hung))
+                continue
+            if future in handled:   # cancelled when it hung
+                continue
             handled.add(future)
             task = futures[future]
             job = task.job
@@ -382,7 +479,7 @@ def _execute(client, jobs: list, folder: Path, manifest: Manifest, device, progr
                 exc = future.exception()
                 if type(exc).__name__ == "KilledWorker":
                     deaths = getattr(exc, "allowed_failures", 0) + 1
-                    task.deaths, task.ran = task.deaths + deaths, task.ran + _runs(logs, future.key)
+                    task.deaths, task.ran = task.deaths + deaths, task.ran + watch.runs(logs, future.key)
                     task.crashed = task.ran >= deaths
                     if not task.crashed and task.killed < BATCH_KILLED_RESUBMITS and running:
                         # some of those deaths came while it waited behind a
@@ -403,18 +500,8 @@ def _execute(client, jobs: list, folder: Path, manifest: Manifest, device, progr
                     done.add(submit(task))
                     continue
                 raise ClusterLost(_lost_reason(client, future))
-            for record in records:
-                manifest.add(record)
-                status = record["status"]
-                seconds = record.get("seconds") or 0.0
-                path = str(folder / record["path"]) if status == "done" else None
-                if status == "done" and record.get("note") == "found":
-                    status = "skipped"   # written by an earlier attempt of a retried task
-                outputs.append(Output(path, record["source"], record["view"], seconds, record.get("worker"),
-                                      status, record.get("error", "")))
-            bar.update(len(records))
-            manifest.write(force=False)
-    except _NoWorkers as exc:
+            take(records)
+    except watch.NoWorkers as exc:
         for future, task in futures.items():
             if future not in handled:
                 records = [{"path": task.job["paths"][v], "source": task.job["source"], "view": v,
@@ -434,133 +521,40 @@ def _execute(client, jobs: list, folder: Path, manifest: Manifest, device, progr
             except Exception:   # noqa: BLE001 -- the scheduler may be gone already
                 pass
         if logs is not None:
-            _remove_run_logs(logs)
+            watch.remove_run_logs(logs)
     return outputs
 
 
-#: How a batch stopped by its watchdog (_Watchdog) explains its frames: the
-#: start of their error, one line for the whole batch.
-NO_WORKER = "no worker stayed up for"
-
-
-class _NoWorkers(Exception):
-    """The watchdog's verdict: tasks are left and no worker came up (its text says why)."""
-
-
-def _completed(done, watchdog):
-    """The futures of ``done`` (distributed.as_completed) as they end, with the
-    watchdog asked while none is ready; _NoWorkers from it ends the batch."""
-    while not done.is_empty():
-        if done.has_ready():
-            watchdog.alive()
-            yield next(done)
-        else:
-            watchdog.check()
-            time.sleep(0.05)
-
-
-class _Watchdog:
-    """Stops a batch whose tasks wait for workers that never come up.
-
-    A worker process that dies while it starts -- in DevicePlugin.setup, say, a
-    driver that crashes when a context is made -- is restarted by its nanny for
-    ever, and no task is charged with its deaths (it never ran one): the batch
-    would wait for ever.  A worker is up once it has set up its device (it logs
-    the batch's token under READY_TOPIC) and while it stays connected; a task
-    that ends shows one too.  With no worker up for BATCH_NO_WORKER_TIMEOUT
-    seconds, a local cluster's batch stops; a --scheduler cluster's only if
-    workers joined it in that time and none came up (with no worker at all, it
-    waits for them, as it says when it starts)."""
-
-    def __init__(self, client, token: str, local: bool):
-        from clrt.batch.worker import READY_TOPIC
-        self.client, self.token, self.local, self.topic = client, token, local, READY_TOPIC
-        self.up_since = self.checked = time.monotonic()
-        self.joins_seen: set = set()
-        self.joins = 0     # workers that joined the scheduler since one was last up
+def _stop_hung(client, future, worker: str | None) -> None:
+    """Cancel a hung task and restart the worker running it: a thread that never
+    returns cannot be stopped, only its process, and until then the worker
+    (one thread) would hold every task sent to it.  Through its nanny (always
+    there on a local cluster); a worker without one is retired instead."""
+    try:
+        client.cancel([future])
+    except Exception:   # noqa: BLE001 -- the scheduler gone: the next future says so
+        pass
+    if worker is None:
+        return
+    try:
+        client.restart_workers([worker])
+    except Exception:   # noqa: BLE001 -- no nanny, or the worker left already
         try:
-            self._joins()  # those before the batch are not counted
-        except Exception:   # noqa: BLE001 -- the scheduler gone: the tasks come back cancelled
+            client.retire_workers([worker], close_workers=True)
+        except Exception:   # noqa: BLE001
             pass
 
-    def alive(self) -> None:
-        self.up_since = time.monotonic()
-        self.joins = 0
 
-    def check(self) -> None:
-        now = time.monotonic()
-        if now - self.checked < 1.0:
-            return
-        self.checked = now
-        try:   # the scheduler's event logs are read only while no worker is known to be up
-            connected = set(self.client.nthreads())
-            if connected and connected & {msg.get("worker") for _, msg in self.client.get_events(self.topic)
-                                          if isinstance(msg, dict) and msg.get("token") == self.token}:
-                self.alive()
-                return
-            self.joins += self._joins()
-        except Exception:   # noqa: BLE001 -- the scheduler gone: the tasks come back cancelled
-            return
-        limit = BATCH_NO_WORKER_TIMEOUT
-        if now - self.up_since < limit or not (self.local or self.joins):
-            return
-        # Workers that joined in the window were restarted: a crash loop, even
-        # if one of them happens to be connected (and starting) right now.
-        if self.joins:
-            why = (f"every worker process died while starting its device ({self.joins} start(s); "
-                   "a crash in the OpenCL driver?)")
-        elif connected:
-            why = (f"{len(connected)} worker process(es) connected but never finished setting up their device "
-                   "(a hang in the OpenCL driver?)")
-        else:
-            why = "no worker process connected to the scheduler (each died while starting?)"
-        raise _NoWorkers(f"{NO_WORKER} {limit:g} s: {why}; finished images are kept: "
-                         "run the same command again once the device works")
-
-    def _joins(self) -> int:
-        """Workers that joined the scheduler since the last call (its "all" events)."""
-        new = 0
-        for stamp, msg in self.client.get_events("all"):
-            if isinstance(msg, dict) and msg.get("action") == "add-worker":
-                mark = (stamp, msg.get("worker"))
-                if mark not in self.joins_seen:
-                    self.joins_seen.add(mark)
-                    new += 1
-        return new
-
-
-def _run_logs(folder: Path) -> Path | None:
-    """The folder of the tasks' run logs, without the logs of a batch that
-    crashed (the folder lock says no other batch uses them); None if it cannot
-    be made (the tasks then count as never running)."""
-    logs = folder / RUN_LOGS
-    _remove_run_logs(logs)
-    try:
-        logs.mkdir(exist_ok=True)
-    except OSError:
-        return None
-    return logs
-
-
-def _remove_run_logs(logs: Path) -> None:
-    """The tasks' run logs, and their folder once empty: clrt removes only what it wrote."""
-    try:
-        for log in logs.glob("clrt-render-*"):
-            log.unlink()
-        logs.rmdir()
-    except OSError:
-        pass
-
-
-def _runs(logs: Path | None, key) -> int:
-    """Runs of task ``key`` that its worker's death cut short: starts with no end."""
-    if logs is None:
-        return 0
-    try:
-        marks = (logs / str(key)).read_text(encoding="ascii", errors="replace")
-    except OSError:
-        return 0
-    return max(marks.count("s") - marks.count("e"), 0)
+def _hung_records(task: _Task, hung) -> list[dict]:
+    """Records of a task found hung once more than BATCH_HANG_RETRIES allow: one line, naming it."""
+    job = task.job
+    views = job["views"]
+    which = f"view {views[0]}" if len(views) == 1 else f"views {views[0]}-{views[-1]}"
+    error = (f"{job['source']}: hung: the task of {which} ran past {hung.limit:.1f} s {task.hung} times "
+             f"({watch.BATCH_HANG_FACTOR:g} x the median frame time per view, at least {watch.BATCH_HANG_FLOOR:g} "
+             "s); its worker was restarted each time")
+    return [{"path": job["paths"][v], "source": job["source"], "view": v, "views": job["count"],
+             "status": "device", "key": job["key"], "error": error, "worker": hung.worker} for v in views]
 
 
 def _lost_reason(client, future) -> str:

@@ -32,8 +32,10 @@ def trace(mesh, origins, directions, *, tmin=0.0, tmax=np.inf, cull: str = "none
     ``("t", "prim")``) when given, the others None: less to compute, pack and move.
 
     ``origins``, ``directions``: (N, 3); ``tmin``, ``tmax``: scalars or (N,)
-    arrays.  ``client``: a ``distributed.Client`` to send the mesh to every
-    worker once (otherwise it travels in the task graph).  ``device``: None uses
+    arrays.  ``client``: accepted for older callers and unused: the mesh
+    travels in the task graph, so that a killed worker loses nothing that
+    cannot be sent again (the chunks it held are traced again elsewhere, as
+    Dask retries a task whose worker died).  ``device``: None uses
     each worker's own device (clrt.batch.worker).  Nothing runs until computed;
     compute the fields together (``dask.compute(*hits)``) to trace once.
     """
@@ -87,10 +89,12 @@ def _query(query, mesh, origins, directions, tmin, tmax, cull, accel, builder, l
 
     options = {"accel": accel, "builder": builder, "leaf_size": leaf_size, "chunk_rays": chunk_rays}
     token = tokenize(mesh.vertices, mesh.faces)
-    if client is not None:
-        shipped = client.scatter(mesh, broadcast=True, hash=False)
-    else:
-        shipped = dask.delayed(mesh, pure=True, traverse=False)
+    # The mesh travels in the task graph, not scattered to the workers
+    # (client.scatter): scattered data that dies with its workers cannot be
+    # made again -- one killed worker of one failed the whole compute ("lost
+    # dependencies") -- while a value of the graph is sent again to the worker
+    # that takes the dead one's tasks.  Each worker still builds its Accel once.
+    shipped = dask.delayed(mesh, pure=True, traverse=False)
     dtype = np.dtype(bool) if query == "occluded" else hit_records(fields)
     limits = [a for x in (tmin, tmax) for a in ((x, "i") if isinstance(x, da.Array) else (x, None))]
     name = f"clrt-{query}-{tokenize(origins, directions, tmin, tmax, token, options, device, cull, fields)}"

@@ -139,7 +139,7 @@ class DevicePlugin(WorkerPlugin):
             signal.signal(signal.SIGINT, signal.SIG_IGN)
         configure(choose_device(self.device, worker_index(worker.name)), self.cache_size)
         if self.token is not None:
-            # the scheduler adds the worker's address (clrt.batch.engine._Watchdog)
+            # the scheduler adds the worker's address (clrt.batch.watch.Watchdog)
             worker.log_event(READY_TOPIC, {"token": self.token})
 
 
@@ -203,12 +203,13 @@ def _scene_entry(source: str, scene_options: dict, accel: str, builder: str, lea
 
 def render_task(job: dict) -> list[dict]:
     """:func:`render_views`, its run noted in the task's run log (``job["run_log"]``,
-    a file under the output folder named by the batch): an ``s`` when it starts
-    and an ``e`` when it ends, returning or raising.  A run that its worker
-    process's death cut short leaves an ``s`` alone, which tells the batch that
-    this task was running -- not waiting behind another task -- when that worker
-    died (clrt.batch.engine._execute)."""
-    _note_run(job, "s")
+    a file under the output folder named by the batch): a line ``s ADDRESS``
+    (this worker's) when it starts and a line ``e`` when it ends, returning or
+    raising.  A run that its worker process's death cut short leaves an ``s``
+    alone, which tells the batch that this task was running -- not waiting
+    behind another task -- when that worker died; a run that goes on far past
+    the others, with the worker to restart (clrt.batch.watch)."""
+    _note_run(job, f"s {_worker_address()}")
     try:
         return render_views(job)
     finally:
@@ -216,14 +217,14 @@ def render_task(job: dict) -> list[dict]:
 
 
 def _note_run(job: dict, mark: str) -> None:
-    """Append ``mark`` to the task's run log; a log that cannot be written is no
+    """Append the line ``mark`` to the task's run log; a log that cannot be written is no
     reason to fail the task (the batch then takes the task as not running)."""
     name = job.get("run_log")
     if not name:
         return
     try:
-        with open(Path(job["folder"]) / name, "a", encoding="ascii") as log:
-            log.write(mark)
+        with open(Path(job["folder"]) / name, "a", encoding="utf-8") as log:
+            log.write(mark + "\n")
     except OSError:
         pass
 
@@ -234,8 +235,10 @@ def render_views(job: dict) -> list[dict]:
     ``job``: source, name, views, replace, count (views of the turntable), folder,
     paths (their suffix names the format), scene and camera options, lights,
     accel, builder, leaf_size, bit_depth (None, or 16 for 16-bit PNG), force, key.
-    Views whose image exists are skipped unless listed in ``replace`` (a retry
-    after a lost worker redoes only what is missing).  Errors of the source or
+    Views whose image is there, exactly as clrt wrote it, are skipped unless
+    listed in ``replace`` (a retry after a lost worker redoes only what is
+    missing); a view in ``replace`` is written over whatever is there (the
+    batch judged that file before it started).  Errors of the source or
     the device become records, never exceptions: "bad" (the source or an
     option), "device" (OpenCL), "failed" (an image that cannot be written, as
     on a read-only or full disk: not the source's fault); anything else is raised
@@ -244,7 +247,7 @@ def render_views(job: dict) -> list[dict]:
     instead of being rendered; later tasks of that folder on this worker give up
     after one failed write.
     """
-    from clrt.output import render_writer, write_image
+    from clrt.output import OURS, file_state, render_writer, write_image
     from clrt.scene.render_setup import render_camera, render_lights, turntable
 
     worker = _worker_address()
@@ -320,7 +323,8 @@ def render_views(job: dict) -> list[dict]:
                 fail(job["views"][i:], writes["error"], time.perf_counter())
                 return records
             out = folder / job["paths"][view]
-            if out.exists() and view not in job["replace"]:
+            replace = view in job["replace"]
+            if not replace and file_state(out) == OURS:
                 finish_all()
                 # written by an earlier attempt of this task (its worker died): done, not rendered now
                 records.append({**base, "path": job["paths"][view], "view": view, "status": "done",
@@ -349,8 +353,9 @@ def render_views(job: dict) -> list[dict]:
                     fail(job["views"][i:], DeviceError(f"OpenCL error: {exc}"), started)
                     return records
                 raise
-            pending.append((view, cam, started, writers.submit(write_image, frame.image, out, force=job["force"],
-                                                               bit_depth=bit_depth)))
+            # a replaced view's file was judged when the batch was planned (clrt.batch.engine._plan)
+            pending.append((view, cam, started, writers.submit(write_image, frame.image, out,
+                                                               force=job["force"] or replace, bit_depth=bit_depth)))
             while len(pending) > (0 if known_unwritable and not writes["ok"] else BATCH_IMAGE_WRITERS):
                 finish_one()
         finish_all()

@@ -1,15 +1,12 @@
 """OpenEXR files: the linear image, unclamped and without any sRGB curve, with
 named channels (AOVs) beside R, G, B -- written through the optional OpenEXR
 package (the 'exr' extra, imported only when an .exr is written), clrt's mark a
-header attribute read back without it."""
+header attribute."""
 
 from __future__ import annotations
 
-import struct
-from pathlib import Path
-
 from clrt.errors import InputError, OutputError
-from clrt.output.files import SOFTWARE_MARK, mark_text
+from clrt.output.files import mark_text
 
 #: What writing an .exr says when OpenEXR is not installed.
 EXR_INSTALL_HINT = "pip install 'clrt[exr]'"
@@ -96,41 +93,3 @@ def exr_writer(image, channels: dict | None = None):
             raise OSError(str(exc)) from None
 
     return write
-
-
-_EXR_MAGIC = b"\x76\x2f\x31\x01"
-_EXR_HEADER_LIMIT = 1 << 20   # clrt's headers are under 1 KB; one this long is not clrt's
-
-
-def read_exr_mark(path: Path) -> bool:
-    """Does an OpenEXR file carry clrt's mark -- a string attribute
-    EXR_MARK_ATTRIBUTE starting with SOFTWARE_MARK -- in its (first) header?
-    The header is read here, without OpenEXR: a re-render over its own .exr
-    needs only this, and a user's .exr is refused even where OpenEXR is not
-    installed.  Layout (openexr.com, "OpenEXR File Layout"): magic number,
-    4 version bytes, then attributes -- name NUL, type NUL, int32 size, value
-    -- until an empty name."""
-    try:
-        with open(path, "rb") as f:
-            head = f.read(_EXR_HEADER_LIMIT)
-    except OSError:
-        return False
-    if head[:4] != _EXR_MAGIC:
-        return False
-    at = 8
-    while True:
-        end = head.find(b"\0", at)
-        if end < 0 or end == at:   # cut short, or the empty name that ends the header
-            return False
-        name = head[at:end]
-        type_end = head.find(b"\0", end + 1)
-        if type_end < 0 or type_end + 5 > len(head):
-            return False
-        kind = head[end + 1:type_end]
-        (size,) = struct.unpack("<i", head[type_end + 1:type_end + 5])
-        value = head[type_end + 5:type_end + 5 + size]
-        if size < 0 or len(value) < size:
-            return False
-        if name == EXR_MARK_ATTRIBUTE.encode() and kind == b"string":
-            return value.decode("latin-1").startswith(SOFTWARE_MARK)
-        at = type_end + 5 + size

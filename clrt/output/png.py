@@ -1,16 +1,13 @@
 """PNG files, written by clrt itself: 8-bit and 16-bit gray, gray+alpha, RGB
-and RGBA, with clrt's mark in a ``Software`` text chunk -- and that mark read
-back without Pillow."""
+and RGBA, with clrt's mark in a ``Software`` text chunk."""
 
 from __future__ import annotations
 
-import os
 import struct
 import zlib
-from pathlib import Path
 
 from clrt.errors import InputError
-from clrt.output.files import SOFTWARE_MARK, mark_text
+from clrt.output.files import mark_text
 
 # zlib level 1 for PNG files: for a 1920x1080 render of bunny00 (png_bytes,
 # 2-core development machine) 18 ms for 179 KB, where level 6 (zlib's and
@@ -70,34 +67,3 @@ def png_writer(image, named=None):
     encoded before the temporary file is made."""
     data = png_bytes(image)
     return lambda file: file.write(data)
-
-
-def read_png_mark(path: Path) -> bool | None:
-    """Does a PNG carry clrt's mark in a ``Software`` tEXt chunk before its image
-    data (where clrt and Pillow write it)?  Read here without Pillow, whose
-    import costs a re-render over its own output some 20 ms; None where unsure
-    (not a PNG, compressed or international text chunks, a short file): then
-    Pillow decides."""
-    try:
-        with open(path, "rb") as f:
-            if f.read(8) != _SIGNATURE:
-                return None
-            while True:
-                head = f.read(8)
-                if len(head) < 8:
-                    return None
-                length, kind = struct.unpack(">I4s", head)
-                if kind in (b"IDAT", b"IEND"):
-                    return False
-                if kind in (b"zTXt", b"iTXt"):
-                    return None
-                if kind == b"tEXt":
-                    body = f.read(length)
-                    keyword, _, text = body.partition(b"\0")
-                    if keyword == b"Software" and text.decode("latin-1").startswith(SOFTWARE_MARK):
-                        return True
-                    f.seek(4, os.SEEK_CUR)           # its CRC
-                else:
-                    f.seek(length + 4, os.SEEK_CUR)
-    except OSError:
-        return None

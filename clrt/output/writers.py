@@ -6,14 +6,14 @@ API -- finds its format with :func:`writer_for` (by the file's suffix), which
 says in one line which formats can hold what was asked when this one cannot.
 Adding a format is one entry below and its write function.
 
-The rule: a file is written through a temporary file and a rename
-(clrt.output.files), and an existing file is replaced without ``force`` only if
-clrt can tell that it wrote it.  Images in formats with room for text carry
-clrt's mark inside (PNG and TIFF "Software", JPEG and GIF comment, WebP XMP,
-OpenEXR a ``software`` header attribute); files without such room (.npy
-arrays, BMP, PPM) get a record beside them, the hidden file ``.NAME.clrt``
-holding the SHA-256 of what clrt wrote -- so a re-run replaces its own
-outputs, and a file a user made or changed since is refused.
+The rule: a file is written through a temporary file and a rename, with the
+record of its SHA-256 beside it (the hidden file ``.NAME.clrt``,
+clrt.output.files), and an existing file is replaced without ``force`` only if
+it is still exactly what clrt wrote there (:func:`check_replace`) -- so a
+re-run replaces its own outputs, and a file a user made, edited or put in
+their place is refused.  Images in formats with room for text also carry
+clrt's mark (PNG and TIFF "Software", JPEG and GIF comment, WebP XMP, OpenEXR
+a ``software`` header attribute): it says who made them, and decides nothing.
 
 numpy is imported by the functions that use it: the command line builds its
 options from this table without it.
@@ -21,17 +21,16 @@ options from this table without it.
 
 from __future__ import annotations
 
-import os
 from dataclasses import dataclass
 from numbers import Integral
 from pathlib import Path
 from typing import Callable
 
 from clrt.errors import InputError, OutputError
-from clrt.output.exr import exr_writer, read_exr_mark, require_exr
-from clrt.output.files import matches_record, replace_atomically
-from clrt.output.pillow import pillow_writer, read_pillow_mark
-from clrt.output.png import png_writer, read_png_mark
+from clrt.output.exr import exr_writer, require_exr
+from clrt.output.files import ABSENT, CHANGED, NOT_A_FILE, OURS, file_state, record_path, replace_atomically
+from clrt.output.pillow import pillow_writer
+from clrt.output.png import png_writer
 
 #: What a format can hold, by the pixels' dtype: "8-bit" sRGB codes (uint8),
 #: "16-bit" sRGB codes (uint16), "float" linear light as it is (float32; float16
@@ -56,9 +55,8 @@ class Writer:
     depths: tuple[str, ...]          # of DEPTHS
     channels: tuple[str, ...]        # of CHANNELS
     lossless: bool                   # reads back the pixels written
-    mark: str                        # where clrt's mark goes (a record beside the file where there is no room)
+    mark: str                        # where clrt's mark goes ("none": no room); the record beside it decides
     prepare: Callable                # (pixels, named channels) -> write(target), which fills the temporary file
-    read_mark: Callable | None = None    # (path) -> does the file carry clrt's mark?  None: a record instead
     by_name: bool = False            # write() gets the temporary file's name, not an open file
     require: Callable | None = None  # imports an optional package, OutputError naming the fix
 
@@ -96,33 +94,28 @@ def _npy_writer(values, named=None):
     return lambda file: np.save(file, values)
 
 
-def _png_marked(path) -> bool:
-    marked = read_png_mark(path)   # without Pillow where it can
-    return read_pillow_mark(path) if marked is None else marked
-
-
 #: Every format clrt writes, by name.  clrt itself writes PNG and .npy, Pillow
 #: JPEG, TIFF, WebP (gray kept as RGB), GIF, BMP and PPM, OpenEXR the .exr files.
 WRITERS = {w.suffix.lstrip("."): w for w in (
     Writer("PNG", (".png",), depths=("8-bit", "16-bit"), channels=_ALL, lossless=True,
-           mark="Software text chunk", prepare=png_writer, read_mark=_png_marked),
+           mark="Software text chunk", prepare=png_writer),
     Writer("JPEG", (".jpg", ".jpeg"), depths=("8-bit",), channels=("gray", "RGB"), lossless=False,
-           mark="comment", prepare=pillow_writer("JPEG"), read_mark=read_pillow_mark),
+           mark="comment", prepare=pillow_writer("JPEG")),
     Writer("TIFF", (".tif", ".tiff"), depths=("8-bit",), channels=_ALL, lossless=True,
-           mark="Software tag", prepare=pillow_writer("TIFF"), read_mark=read_pillow_mark),
+           mark="Software tag", prepare=pillow_writer("TIFF")),
     Writer("WebP", (".webp",), depths=("8-bit",), channels=_ALL, lossless=True,
-           mark="XMP", prepare=pillow_writer("WEBP"), read_mark=read_pillow_mark),
+           mark="XMP", prepare=pillow_writer("WEBP")),
     Writer("GIF", (".gif",), depths=("8-bit",), channels=("gray", "RGB"), lossless=False,   # 256 colours
-           mark="comment", prepare=pillow_writer("GIF"), read_mark=read_pillow_mark),
+           mark="comment", prepare=pillow_writer("GIF")),
     Writer("BMP", (".bmp",), depths=("8-bit",), channels=("gray", "RGB"), lossless=True,
-           mark="record beside it", prepare=pillow_writer("BMP")),
+           mark="none", prepare=pillow_writer("BMP")),
     Writer("PPM", (".ppm",), depths=("8-bit",), channels=("gray", "RGB"), lossless=True,
-           mark="record beside it", prepare=pillow_writer("PPM")),
+           mark="none", prepare=pillow_writer("PPM")),
     Writer("OpenEXR", (".exr",), depths=("float",), channels=("RGB", "RGBA", "named"), lossless=True,
-           mark="software header attribute", prepare=exr_writer, read_mark=read_exr_mark, by_name=True,
+           mark="software header attribute", prepare=exr_writer, by_name=True,
            require=require_exr),
     Writer("NumPy", (".npy",), depths=("array",), channels=("any",), lossless=True,
-           mark="record beside it", prepare=_npy_writer),
+           mark="none", prepare=_npy_writer),
 )}
 _BY_SUFFIX = {s: w for w in WRITERS.values() for s in w.suffixes}
 #: Writers of images (not only arrays), and their suffixes: what ``-o`` takes.
@@ -258,28 +251,27 @@ def image_pixels(image, path, bit_depth: int | None = None, named: bool = False)
 # --------------------------------------------------------------------------- the one rule
 
 def written_by_clrt(path: Path) -> bool:
-    """Did clrt write the file at ``path``?  A format with room for a mark: does
-    the file carry it (only its header is read)?  Any other file -- and a chart
-    or sheet that write_file wrote as .png -- does its record (``.NAME.clrt``)
-    hold the file's SHA-256?"""
-    path = Path(path)
-    writer = _BY_SUFFIX.get(path.suffix.lower())
-    if writer is not None and writer.read_mark is not None and writer.read_mark(path):
-        return True
-    return matches_record(path)
+    """Is the file at ``path`` exactly what clrt wrote there: does the record
+    beside it (``.NAME.clrt``) hold its SHA-256?  (clrt.output.files.file_state)"""
+    return file_state(path) == OURS
 
 
 def check_replace(path: Path, force: bool, option: str = "-o") -> None:
-    """OutputError unless ``path`` may be written: it does not exist, or clrt wrote
-    it, or ``force``.  A folder or other non-file is never replaced.  ``option``:
-    the command-line option that names the output, for the message."""
-    if not os.path.lexists(path):
-        return
-    if path.is_dir() or (path.exists() and not path.is_file()):
+    """OutputError unless ``path`` may be written: it does not exist, or it is
+    exactly what clrt wrote there (its record holds its SHA-256), or ``force``.
+    A folder or other non-file is never replaced.  ``option``: the command-line
+    option that names the output, for the message."""
+    state = file_state(path)
+    if state == NOT_A_FILE:
         raise OutputError(f"cannot write {path}: it is not a regular file")
-    if not force and not written_by_clrt(path):
-        raise OutputError(f"{path} exists and was not written by clrt (or was changed since); "
-                          f"pass --force (-f; force=True in Python) to replace it, or choose another {option}")
+    if force or state in (ABSENT, OURS):
+        return
+    if state == CHANGED:
+        raise OutputError(f"{path} was changed since clrt wrote it (its bytes are not those whose SHA-256 "
+                          f"{record_path(path).name} holds); pass --force (-f; force=True in Python) to replace it, "
+                          f"or choose another {option}")
+    raise OutputError(f"{path} exists and was not written by clrt; pass --force (-f; force=True in Python) "
+                      f"to replace it, or choose another {option}")
 
 
 def _write(writer: Writer, path: Path, pixels, named: dict | None, force: bool) -> None:
@@ -287,7 +279,7 @@ def _write(writer: Writer, path: Path, pixels, named: dict | None, force: bool) 
     if writer.require:
         writer.require()
     write = writer.prepare(pixels, named)
-    replace_atomically(path, write, record=writer.read_mark is None, by_name=writer.by_name)
+    replace_atomically(path, write, by_name=writer.by_name)
 
 
 def write_image(image, path, force: bool = False, *, bit_depth: int | None = None,
@@ -328,9 +320,8 @@ def write_exr(image, path, channels: dict | None = None, force: bool = False) ->
 
 
 def write_array(values, path: Path, force: bool = False) -> None:
-    """Write ``values`` as .npy, with its record beside it (a .npy file has no room
-    for a mark): an existing file is replaced only if it is what clrt wrote there,
-    or with ``force``."""
+    """Write ``values`` as .npy, with its record beside it: an existing file is
+    replaced only if it is what clrt wrote there, or with ``force``."""
     path = Path(path)
     _write(writer_for(path, "array"), path, values, None, force)
 
@@ -343,4 +334,4 @@ def write_file(data: bytes | str, path: Path, force: bool = False, option: str =
     check_replace(path, force, option)
     if isinstance(data, str):
         data = data.encode("utf-8")
-    replace_atomically(path, lambda f: f.write(data), record=True)
+    replace_atomically(path, lambda f: f.write(data))
