@@ -256,3 +256,16 @@ def test_a_ray_file_with_far_origins_exits_2(tmp_path, capsys, device):
     err = capsys.readouterr().err
     assert code == 2 and err.count("\n") == 1 and "float32 triangle test overflows" in err, err
 
+
+
+def test_an_origin_past_float32_says_it_overflows(device):
+    """1e39 is finite as a Python float but infinite on the device: the error
+    says it overflows float32, not merely that origins must be finite."""
+    accel = clrt.Accel(primitives.icosphere(1), device=device)
+    with pytest.raises(clrt.InputError, match=r"^origin 1 is \[1e\+39, 0\.0, 0\.0\]: 1e39 overflows float32 "
+                                              r"\(the largest float32 is about 3\.4e38\); origins must be finite"):
+        accel.trace([[0.0, 0.0, 5.0], [1e39, 0.0, 0.0]], [0.0, 0.0, -1.0])
+    with pytest.raises(clrt.InputError, match=r"^origin 0 is \[inf, 0\.0, 0\.0\]: origins must be finite$"):
+        accel.trace([np.inf, 0.0, 0.0], [0.0, 0.0, -1.0])
+    with pytest.raises(clrt.InputError, match=r"1e39 overflows float32"):
+        clrt.Camera((1e39, 0.0, 0.0), (0.0, 0.0, 0.0))
