@@ -262,7 +262,9 @@ class Renderer:
         scene, their vertices moved (animation, deformation).  The BVH is refitted
         on the device (the tree kept, every volume fitted anew: the image stays
         exact) and the triangles, vertex normals, materials and lights uploaded
-        again; the camera and settings are ``scene``'s too.
+        again; the camera and settings are ``scene``'s too -- the renderer shows
+        ``scene`` as given, so a ``scene_from_mesh(moved)`` without a material
+        shows the default material: pass the material again to keep it.
         ``rebuild=True`` builds a new BVH instead (a tree refitted through large
         motions traces slower)."""
         scene = as_scene(scene)
