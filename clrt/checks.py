@@ -147,6 +147,12 @@ def boolean(name: str, value) -> bool:
     return value
 
 
+def text(name: str, value) -> str:
+    if not isinstance(value, str):
+        raise fail(name, "a string", value)
+    return value
+
+
 def choice(name: str, value, choices) -> str:
     """One of ``choices`` (a config table)."""
     choices = tuple(choices)

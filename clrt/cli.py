@@ -7,14 +7,16 @@ wrong>``, and a non-zero exit: 2 for bad input, 3 for OpenCL trouble.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import os
 import signal
 import sys
 import time
+import warnings
 from pathlib import Path
 
 from clrt import config, options, output
-from clrt.errors import ClrtError, DeviceError, InputError, OutputError
+from clrt.errors import ClrtError, DeviceError, InputError, NothingVisibleWarning, OutputError
 
 DEFAULT_OUTPUT = "clrt-default.png"
 
@@ -150,7 +152,8 @@ def _render(args) -> int:
                         limits=limits)
     try:
         # 8-bit: the kernel's own sRGB encoding; 16-bit and float: made of the linear image.
-        frame = renderer.render(camera, linear=depth != "8-bit", progress=progress and progress.update)
+        with _warnings_as_lines():
+            frame = renderer.render(camera, linear=depth != "8-bit", progress=progress and progress.update)
     finally:
         if progress:
             progress.close()
@@ -190,6 +193,22 @@ def _render(args) -> int:
             print(f"  AOVs: {aov_note}")
     print(out.resolve())
     return 0
+
+
+@contextlib.contextmanager
+def _warnings_as_lines():
+    """clrt's warnings (a frame with nothing visible) as one line each on stderr,
+    ``clrt: warning: ...``, once the block is done; other warnings as Python shows them."""
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", NothingVisibleWarning)
+        try:
+            yield
+        finally:
+            for w in caught:
+                if issubclass(w.category, NothingVisibleWarning):
+                    print(f"clrt: warning: {w.message}", file=sys.stderr)
+                else:
+                    warnings.showwarning(w.message, w.category, w.filename, w.lineno)
 
 
 class _LazyProgress:

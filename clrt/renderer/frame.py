@@ -18,6 +18,7 @@ from __future__ import annotations
 import dataclasses
 import threading
 import time
+import warnings
 import weakref
 from dataclasses import dataclass, field
 from typing import Callable
@@ -34,12 +35,13 @@ from clrt.device.pinned import PinnedPool
 from clrt.device.program import launch_size
 from clrt.device.scene import DeviceScene, stage
 from clrt.device.sharing import check_process, forked_after_start, one_at_a_time
-from clrt.errors import DeviceMemoryError, InputError
+from clrt.errors import DeviceMemoryError, InputError, NothingVisibleWarning
 from clrt.layouts import HIT, TILE
-from clrt.renderer.kernels import FRAME_ARRAYS, RENDER_KERNELS, frame_offsets, pack_tables
+from clrt.renderer.kernels import FRAME_ARRAYS, FRAME_HEADER, RENDER_KERNELS, frame_offsets, pack_tables
 from clrt.renderer.tiles import TileLimits, run_tiles
+from clrt.renderer.visible import nothing_visible
 from clrt.scene.arrays import flatten_scene, light_records
-from clrt.scene.scene import Camera, Scene, default_light
+from clrt.scene.scene import Camera, Scene, default_light, far_triangle
 from clrt.scene.sources import as_scene
 from clrt.scene.texture import srgb_encode8
 
@@ -55,6 +57,7 @@ class Frame:
     device: str = ""
     triangles: int = 0
     tiles: int = 1               # tiles the frame was rendered in (each: one launch per sample)
+    visible: bool = True         # a camera ray (of the first sample) hit a triangle; False: only background
 
     def __repr__(self) -> str:
         h, w = self.image.shape[:2]
@@ -208,7 +211,7 @@ class Renderer:
         """
         job = self._job(camera, linear, hits, samples, max_depth, seed)
         # Rays from too far for the float32 triangle test: one error, not missed hits.
-        self.geometry.reach.check_render(job.camera.eye)
+        self.geometry.reach.check_render(job.camera.eye, lambda: far_triangle(self.scene))
         job.camera_args, job.scene_args = self._frame_args(job.camera)
         job.progress = progress or (lambda n: None)
         capacity = self.tile_capacity(job.camera.width * job.camera.height)
@@ -219,7 +222,11 @@ class Renderer:
         except KeyboardInterrupt:
             self.queue.finish()   # no kernel may still write into buffers we drop
             raise
-        return Frame(job.image, job.prim, job.t, job.timings, self.device, len(self.arrays.corners), tiles=tiles)
+        if not job.seen:   # one warning, saying why where it can (clrt render prints it as one line)
+            warnings.warn(nothing_visible(self.arrays.corners, self.arrays.bounds, job.camera),
+                          NothingVisibleWarning, stacklevel=4)   # past one_at_a_time and keyword_options
+        return Frame(job.image, job.prim, job.t, job.timings, self.device, len(self.arrays.corners), tiles=tiles,
+                     visible=job.seen)
 
     def _job(self, camera, linear, hits, samples, max_depth, seed) -> "_Job":
         """The arguments of one render call checked and defaulted, and its outputs."""
@@ -325,7 +332,7 @@ class Renderer:
         at most half of what the scene leaves free and one buffer's size limit."""
         dev = self.queue.device
         free = max(dev.global_mem_size - self.device_bytes, 0) // 2
-        cap = min(pixels, MAX_TILE_PIXELS, dev.max_mem_alloc_size // FRAME_ARRAY_BYTES,
+        cap = min(pixels, MAX_TILE_PIXELS, (dev.max_mem_alloc_size - FRAME_HEADER) // FRAME_ARRAY_BYTES,
                   free // FRAME_BYTES_PER_PIXEL)
         cap = max(cap, min(pixels, self.limits.min_tile_pixels))   # if even that fails, the error says so
         if self.limits.max_tile_pixels is not None:
@@ -339,7 +346,7 @@ class Renderer:
             mf = cl.mem_flags
             self._frame_buffers = {
                 # The rays, hits and linear colours of a tile (render.cl, frame_offsets).
-                "frame": cl.Buffer(self.context, mf.READ_WRITE, pixels * FRAME_ARRAY_BYTES),
+                "frame": cl.Buffer(self.context, mf.READ_WRITE, frame_offsets(pixels)["end"]),
                 "srgb8": cl.Buffer(self.context, mf.WRITE_ONLY, pixels * 3),
                 # Page-locked host memory for tiles that cannot be read back in place.
                 "staging": cl.Buffer(self.context, mf.READ_WRITE | mf.ALLOC_HOST_PTR, pixels * 3),
@@ -413,7 +420,10 @@ class Renderer:
         if job.prim is not None:
             records = np.empty(count, HIT)
             copies.append(cl.enqueue_copy(q, records, frame, src_offset=at["hits"], is_blocking=False))
+        seen = np.zeros(1, np.uint32)   # did a camera ray hit anything (render.cl's TILE_SEEN)
+        copies.append(cl.enqueue_copy(q, seen, frame, src_offset=at["seen"], is_blocking=False))
         wait_for(copies[-1])
+        job.seen = job.seen or bool(seen[0])
         job.progress(count)
         host_start = time.perf_counter()
         if job.linear:
@@ -476,6 +486,7 @@ class _Job:
     timings: dict
     camera_args: np.ndarray | None = None   # generate_rays' Camera, and shade_pixels' scene arguments:
     scene_args: tuple = ()                   # set once per frame (Renderer._frame_args)
+    seen: bool = False           # a camera ray of a tile so far hit a triangle
     progress: Callable[[int], None] | None = None   # see Renderer.render
 
 

@@ -20,7 +20,7 @@ import numpy as np
 
 from clrt import config
 from clrt.errors import InputError
-from clrt.scene.scene import Camera, Light, Scene, default_light
+from clrt.scene.scene import Camera, Light, Scene, default_light, far_triangle
 
 #: The keyword options of render_scene and render_camera (the CLI's option names).
 MATERIAL_OPTIONS = ("color", "ambient", "diffuse", "specular", "shininess", "crease")
@@ -69,7 +69,10 @@ def render_camera(scene: Scene, *, width=None, height=None, eye=None, target=Non
         eye, target = placed.eye, placed.target
     elif eye is None or target is None:   # frame for the final size, fov and up
         # (Only then: a scene too large to frame renders from a camera the options place.)
-        framed = None if placed else Camera.framing(bounds, width, height, fov, up=up)
+        try:
+            framed = None if placed else Camera.framing(bounds, width, height, fov, up=up)
+        except InputError as exc:   # too large to frame: say where it reaches farthest
+            raise InputError(f"{far_triangle(scene)}: {exc}") from None
         target = target or (placed.target if placed else framed.target)
         eye = eye or (placed.eye if placed else tuple(t + e - f for t, e, f in zip(target, framed.eye,
                                                                                    framed.target)))
