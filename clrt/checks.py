@@ -229,6 +229,17 @@ def keyword_options(*former):
     return wrap
 
 
+def aov_names(name: str, text) -> tuple[str, ...]:
+    """'depth,normal' -> ('depth', 'normal'): per-pixel images of config.AOVS."""
+    names = tuple(dict.fromkeys(n.strip().lower() for n in str(text).split(",") if n.strip()))
+    if not names:
+        raise InputError(f"{name} needs one or more of {','.join(config.AOVS)}")
+    unknown = [n for n in names if n not in config.AOVS]
+    if unknown:
+        raise InputError(f"unknown AOV {unknown[0]!r}: choose from {','.join(config.AOVS)}")
+    return names
+
+
 _DEVICE_SPEC = re.compile(r"\d+(:\d+)?")
 
 

@@ -16,6 +16,7 @@ Tiling and the memory fallback: tiles.py; page-locked images: clrt/device/pinned
 from __future__ import annotations
 
 import dataclasses
+import inspect
 import threading
 import time
 import warnings
@@ -26,7 +27,8 @@ from typing import Callable
 import numpy as np
 import pyopencl as cl
 
-from clrt import checks, config
+from clrt import checks
+from clrt import options as opts
 from clrt.config import DEFAULT_ACCEL, DEFAULT_BUILDER, DEFAULT_LEAF_SIZE
 from clrt.device.args import camera_value
 from clrt.device.context import format_bytes as _size
@@ -41,7 +43,8 @@ from clrt.renderer.kernels import FRAME_ARRAYS, FRAME_HEADER, RENDER_KERNELS, fr
 from clrt.renderer.tiles import TileLimits, run_tiles
 from clrt.renderer.visible import nothing_visible
 from clrt.scene.arrays import flatten_scene, light_records
-from clrt.scene.scene import Camera, Scene, default_light, far_triangle
+from clrt.scene.scene import Camera, Scene, far_triangle
+from clrt.scene.render_setup import render_frame
 from clrt.scene.sources import as_scene
 from clrt.scene.texture import srgb_encode8
 
@@ -134,9 +137,10 @@ class Renderer:
     def __init__(self, scene: Scene, *, accel: str = DEFAULT_ACCEL, builder: str = DEFAULT_BUILDER,
                  leaf_size: int = DEFAULT_LEAF_SIZE, device: str | None = None,
                  limits: TileLimits | None = None, max_buffer_bytes: int | None = None):
-        device = checks.device(device)
+        device = opts.check("device", device)   # the table's rules (clrt/options.py), as clrt render's
         check_process()   # before a long host build that could not be used
-        accel, builder, leaf_size = checks.accel_options(accel, builder, leaf_size)
+        accel, builder, leaf_size = (opts.check(name, value) for name, value in
+                                     (("accel", accel), ("builder", builder), ("leaf_size", leaf_size)))
         self.limits = limits or TileLimits()
         self._options = dict(accel=accel, builder=builder, leaf_size=leaf_size, device=device,
                              max_buffer_bytes=max_buffer_bytes)   # for a rebuild (refit)
@@ -233,8 +237,8 @@ class Renderer:
         if camera is not None and not isinstance(camera, Camera):
             raise checks.fail("camera", "a clrt.Camera or None", camera)
         camera = camera or self.scene.camera or Camera.framing(self.arrays.bounds)
-        samples = checks.samples(self.scene.samples if samples is None else samples)
-        max_depth = checks.max_depth(self.scene.max_depth if max_depth is None else max_depth)
+        samples = opts.check("samples", self.scene.samples if samples is None else samples)
+        max_depth = opts.check("max_depth", self.scene.max_depth if max_depth is None else max_depth)
         seed = checks.integer("seed", seed, 0, 2**32 - 1)
         w, h = camera.width, camera.height
         host_bytes = w * h * ((12 if linear else 3) + (8 if hits else 0))
@@ -505,39 +509,51 @@ def _event_ms(event: cl.Event) -> float:
     return 1e-6 * (event.profile.end - event.profile.start)
 
 
-def render(source, camera: Camera | None = None, *, width: int | None = None,
-           height: int | None = None, device: str | None = None, linear: bool = False,
-           accel: str = DEFAULT_ACCEL, builder: str = DEFAULT_BUILDER,
-           leaf_size: int = DEFAULT_LEAF_SIZE) -> np.ndarray:
-    """Render ``source`` and return an (H, W, 3) image: uint8 sRGB, or float32 linear RGB
-    with ``linear=True``.  ``source``: a Scene, a TOML scene file, a mesh file or
-    anything else :func:`~clrt.scene.sources.as_scene` takes.  Without a camera the
-    scene's own (or a framing of its bounds) is used; ``width``/``height``
-    override the camera's resolution.  A mesh, or a scene file without lights, is
-    lit as ``clrt render`` lights it: by the default light placed for the
-    camera used -- where ``Renderer(scene_from_mesh(mesh))`` (or a Scene given
-    here) keeps the light placed for its own camera.  Values are checked
-    as the CLI checks them (clrt.checks)."""
+def render(source=None, camera: Camera | None = None, *, linear: bool = False, **options) -> np.ndarray:
+    """Render ``source`` and return an (H, W, 3) image: uint8 sRGB, or float32 linear
+    RGB with ``linear=True`` -- the image ``clrt render`` writes for the same options.
+
+    ``source``: a Scene, a TOML scene file, a mesh file or anything else
+    :func:`~clrt.scene.sources.as_scene` takes; None: the built-in scene.
+    ``camera``: a :class:`~clrt.scene.scene.Camera` to start from instead of
+    the scene's own (or a framing of its bounds); the camera options below
+    replace its fields.  A mesh, or a scene file without lights, is lit as
+    ``clrt render`` lights it: by the default light placed for the camera
+    used -- where ``Renderer(scene_from_mesh(mesh))`` (or a Scene given here)
+    keeps the light placed for its own camera (a Scene keeps its own lights
+    unless ``lights`` is given).
+
+    ``options``: the options of ``clrt render``, by their Python names, from one
+    table (clrt/options.py), checked by the same rules -- a bad value raises
+    InputError with the command line's message under this name ("width must be
+    ..." for "--width must be ..."); None or left out: the default.  Not taken,
+    as they make no sense for an image in memory: ``output`` (-o; write the
+    image with clrt.output.write_image), ``force`` (-f: no file is written),
+    ``bit_depth`` (it returns uint8, or float32 with ``linear=True``), ``aov``
+    (per-pixel images: clrt.camera_images) and ``quiet`` (-q: it prints
+    nothing).  A frame that shows only the background warns
+    (:class:`~clrt.errors.NothingVisibleWarning`).
+
+{options}
+    """
     if camera is not None and not isinstance(camera, Camera):
         raise checks.fail("camera", "a clrt.Camera or None", camera)
-    if width is not None:
-        checks.integer("width", width, 1, config.MAX_IMAGE_SIDE)
-    if height is not None:
-        checks.integer("height", height, 1, config.MAX_IMAGE_SIDE)
-    device = checks.device(device)
-    checks.accel_options(accel, builder, leaf_size)
-    scene = as_scene(source)
-    # A file without lights of its own gets the default light from the final camera, as in the CLI.
-    mesh_light = not isinstance(source, Scene) and scene.default_lights
-    if camera is None and (scene.camera is None or scene.camera_framed):
-        base = scene.camera or Camera.framing(scene.bounds)
-        camera = Camera.framing(scene.bounds, base.width if width is None else width,
-                                base.height if height is None else height, base.fov, up=base.up)
-    camera = camera or scene.camera
-    if width is not None or height is not None:
-        camera = Camera(camera.eye, camera.target, camera.up, camera.fov,
-                        camera.width if width is None else width, camera.height if height is None else height)
-    if mesh_light:
-        scene.lights = [default_light(scene.bounds, camera)]
-    renderer = Renderer(scene, device=device, accel=accel, builder=builder, leaf_size=leaf_size)
-    return renderer.render(camera, linear=linear).image
+    checks.boolean("linear", linear)
+    values = opts.check_api(options, "render")
+    scene, camera = render_frame(source, camera, **opts.by_stage(values, opts.SCENE, opts.CAMERA, opts.LIGHTS))
+    renderer = Renderer(scene, **opts.by_stage(values, opts.RENDERER))
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", NothingVisibleWarning)
+        image = renderer.render(camera, linear=linear).image
+    for w in caught:   # shown as the caller's (Renderer.render's own points at this function)
+        warnings.warn(w.message, w.category, stacklevel=2)
+    return image
+
+
+render.__doc__ = render.__doc__.format(options=opts.api_doc())
+render.__signature__ = inspect.Signature(
+    [inspect.Parameter("source", inspect.Parameter.POSITIONAL_OR_KEYWORD, default=None),
+     inspect.Parameter("camera", inspect.Parameter.POSITIONAL_OR_KEYWORD, default=None, annotation="Camera | None"),
+     inspect.Parameter("linear", inspect.Parameter.KEYWORD_ONLY, default=False, annotation="bool")]
+    + [inspect.Parameter(o.name, inspect.Parameter.KEYWORD_ONLY, default=o.default) for o in opts.API_OPTIONS.values()],
+    return_annotation="np.ndarray")
