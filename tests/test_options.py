@@ -70,6 +70,10 @@ def test_the_table_is_the_command_line_and_the_api():
     assert all(params[name].default == o.default for name, o in options.API_OPTIONS.items())
     for name in options.API_OPTIONS:   # and help() says what each is
         assert f"``{name}``" in clrt.render.__doc__
+    # render_setup's keyword lists (which the batch engine takes too) are the table's stages
+    from clrt.scene import render_setup
+    for stage, names in ((options.SCENE, render_setup.SCENE_OPTIONS), (options.CAMERA, render_setup.CAMERA_OPTIONS)):
+        assert {o.name for o in options.OPTIONS.values() if o.stage == stage} == set(names)
 
 
 @pytest.fixture(scope="module")
