@@ -18,7 +18,8 @@ Where to start:
   or ``"P:D"`` (platform and device indices, as ``clrt info`` lists them).
 
 Every error clrt raises on purpose is a ``clrt.ClrtError`` (bad input:
-``clrt.InputError``).
+``clrt.InputError``); a frame that shows nothing but the background warns
+with ``clrt.NothingVisibleWarning``.
 
 The pipeline, one package each: ``clrt.scene`` (meshes, materials, lights,
 camera, scene files) -> ``clrt.accel`` (BVH builders and volumes) ->
@@ -59,7 +60,8 @@ if _started_as_command():
 from importlib import import_module
 
 from clrt.errors import (ClrtError, ClrtWarning, DeviceError, DeviceMemoryError, InputError, KernelBuildError,
-                         MeshLoadError, MeshLoadWarning, OutputError, TooLargeError)
+                         MeshLoadError, MeshLoadWarning, NothingVisibleWarning, OutputError,
+                         TooLargeError)
 
 __version__ = "0.1.0"
 
@@ -79,7 +81,8 @@ _LAZY = {
 }
 
 __all__ = sorted(["ClrtError", "ClrtWarning", "DeviceError", "DeviceMemoryError", "InputError", "KernelBuildError",
-                  "MeshLoadError", "MeshLoadWarning", "OutputError", "TooLargeError", *_LAZY])
+                  "MeshLoadError", "MeshLoadWarning", "NothingVisibleWarning", "OutputError", "TooLargeError",
+                  *_LAZY])
 
 
 def __getattr__(name: str):

@@ -101,20 +101,28 @@ def number(name: str, value, **limits) -> float:
 
 def vector(name: str, value, n: int = 3, **limits) -> tuple:
     """``n`` finite numbers (a list, tuple or array), each within ``limits``
-    and within +-MAX_COORDINATE (the device computes in float32); a tuple of floats."""
+    and within +-MAX_COORDINATE (the device computes in float32); a tuple of floats.
+    A NaN or infinity is named as such ("3 finite numbers"), and a value past the
+    largest float32 (3.4e38, finite as a Python float) as overflowing float32."""
     rule = f"{n} numbers" + _range_text(limits)
     try:
         items = list(value) if not isinstance(value, (str, bytes, dict)) else None
     except TypeError:
         items = None
-    if items is None or len(items) != n or not all(
-            is_number(v) and math.isfinite(v) and all(_OPS[op][1](float(v), b) for op, b in limits.items())
-            for v in items):
+    if items is None or len(items) != n or not all(is_number(v) for v in items):
         raise fail(name, rule, value)
-    if any(abs(float(v)) > config.MAX_COORDINATE for v in items):
-        raise fail(name, f"{n} numbers within +-{_number_text(config.MAX_COORDINATE)} "
-                   "(the device computes in float32)",
-                   value)
+    if not all(math.isfinite(v) for v in items):
+        raise fail(name, f"{n} finite numbers" + _range_text(limits), value)
+    if not all(all(_OPS[op][1](float(v), b) for op, b in limits.items()) for v in items):
+        raise fail(name, rule, value)
+    largest = max(abs(float(v)) for v in items)
+    if largest > config.MAX_COORDINATE:
+        error = fail(name, f"{n} numbers within +-{_number_text(config.MAX_COORDINATE)} "
+                     "(the device computes in float32)", value)
+        if largest > config.FLOAT32_MAX:
+            error = InputError(f"{error}: {_number_text(largest)} overflows float32 (the largest float32 is "
+                               f"about {config.FLOAT32_MAX:.2g})".replace("e+", "e"))
+        raise error
     return tuple(float(v) for v in items)
 
 
@@ -136,6 +144,12 @@ def intensity(name: str, value) -> tuple:
 def boolean(name: str, value) -> bool:
     if not isinstance(value, bool):
         raise fail(name, "true or false", value)
+    return value
+
+
+def text(name: str, value) -> str:
+    if not isinstance(value, str):
+        raise fail(name, "a string", value)
     return value
 
 
@@ -213,6 +227,17 @@ def keyword_options(*former):
             return func(*args, **kwargs)
         return checked
     return wrap
+
+
+def aov_names(name: str, text) -> tuple[str, ...]:
+    """'depth,normal' -> ('depth', 'normal'): per-pixel images of config.AOVS."""
+    names = tuple(dict.fromkeys(n.strip().lower() for n in str(text).split(",") if n.strip()))
+    if not names:
+        raise InputError(f"{name} needs one or more of {','.join(config.AOVS)}")
+    unknown = [n for n in names if n not in config.AOVS]
+    if unknown:
+        raise InputError(f"unknown AOV {unknown[0]!r}: choose from {','.join(config.AOVS)}")
+    return names
 
 
 _DEVICE_SPEC = re.compile(r"\d+(:\d+)?")

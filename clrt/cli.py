@@ -9,6 +9,7 @@ texture) is one line too: ``clrt: warning: <what>``.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import os
 import signal
 import sys
@@ -19,7 +20,7 @@ from pathlib import Path
 from clrt import config, options, output
 from clrt.errors import ClrtError, ClrtWarning, DeviceError, InputError, OutputError
 
-DEFAULT_OUTPUT = "clrt-default.png"
+DEFAULT_OUTPUT = options.DEFAULT_OUTPUT
 
 
 class _Parser(argparse.ArgumentParser):
@@ -44,34 +45,14 @@ def _parser(bench: bool = False) -> argparse.ArgumentParser:
                                    "scene's, material options replace that field of every object's "
                                    "material. Prints the output path (absolute).")
     r.add_argument("mesh", nargs="?", help="mesh file or TOML scene file; omit for the built-in scene")
-    formats = ", ".join(output.IMAGE_SUFFIXES)
-    r.add_argument("-o", "--output", help=f"image to write ({formats}; default: MESH name "
-                                          f"{output.WRITERS['png'].suffix}, or {DEFAULT_OUTPUT}); .exr holds the "
-                                          "linear, unclamped image as float32 OpenEXR (needs "
-                                          f"{output.EXR_INSTALL_HINT}); an existing file is replaced only once the "
-                                          "render succeeded, and only if clrt wrote it (see --force)")
-    r.add_argument("-f", "--force", action="store_true",
-                   help="replace the output even if clrt did not write it (by default an existing "
-                        "file is replaced only if clrt wrote it, such as the previous render)")
-    options.add_render_options(r)
-    r.add_argument("--device", type=options.device, help="'gpu', 'cpu' or P:D platform/device indices (default: "
-                                                  "PYOPENCL_CTX, else the first GPU, else the first CPU)")
-    options.add_accel_options(r)
-    r.add_argument("--aov", type=_aov_list, metavar="NAMES",
-                   help="also write per-pixel images, comma-separated: depth (along the view axis), "
-                        "distance (along the ray), normal, prim (triangle index), hit, front; each as "
-                        "OUT.NAME.npy (the values; inf / -1 / 0 where nothing is hit) and OUT.NAME.png "
-                        "(a picture of them); with an .exr output, as channels of that file instead "
-                        "(Z, distance, N.X N.Y N.Z, prim, hit, front); see docs/ray-queries.md")
-    r.add_argument("-q", "--quiet", action="store_true", help="print only the output path")
+    options.add_options(r, options.RENDER)   # the table of clrt/options.py, which clrt.render takes too
 
     i = sub.add_parser("info", help="list OpenCL devices; with MESH, build statistics of its BVH",
                        description="Without MESH: OpenCL platforms and devices, '*' marking the one "
                                    "clrt would use. With MESH: statistics of the acceleration build "
                                    "for the device clrt would use (or --device).")
     i.add_argument("mesh", nargs="?", help="mesh file to build a BVH for")
-    i.add_argument("--device", type=options.device, help="device to use (same forms as render --device)")
-    options.add_accel_options(i)
+    options.add_options(i, options.INFO)
 
     sub.add_parser("batch", help="render many sources and views on a Dask cluster (docs/distributed.md)",
                    add_help=False)   # its options: clrt/batch/cli.py
@@ -83,11 +64,6 @@ def _parser(bench: bool = False) -> argparse.ArgumentParser:
         sub.add_parser("bench", help="rerun the paper's timing and detail-loss experiments on this machine",
                        add_help=False)
     return p
-
-
-def _aov_list(text: str) -> tuple:
-    from clrt.query.aov import parse_aovs
-    return parse_aovs(text)
 
 
 def _output_path(args) -> tuple[Path, output.Writer, str]:
@@ -126,16 +102,13 @@ _HOST_BYTES = {"8-bit": 10, "16-bit": 40, "float": 36}
 def _render(args) -> int:
     from clrt.renderer import Renderer, check_host_memory
     from clrt.renderer.tiles import TileLimits
-    from clrt.scene.render_setup import (CAMERA_OPTIONS, SCENE_OPTIONS, render_camera, render_lights,
-                                         render_scene)
+    from clrt.scene.render_setup import render_frame
 
     out, writer, depth = _output_path(args)
-    # Shared with `clrt batch render`, so both make the same frame of the same camera.
-    scene = render_scene(args.mesh, **{k: getattr(args, k) for k in SCENE_OPTIONS})
+    # The frame clrt.render draws for the same options (and `clrt batch render` for its first view).
+    scene, camera = render_frame(args.mesh, **options.values(args, options.SCENE, options.CAMERA, options.LIGHTS))
     # A scene file's or a glTF file's camera, unless an option places the camera.
     from_file = bool(args.mesh) and not scene.camera_framed and args.eye is None and args.target is None
-    camera = render_camera(scene, **{k: getattr(args, k) for k in CAMERA_OPTIONS})
-    scene.lights = render_lights(scene.bounds, camera, scene.lights, args.light)
 
     # Checked before the (possibly long) render; the writers check again.
     output.check_replace(out, args.force)
@@ -149,11 +122,11 @@ def _render(args) -> int:
     progress = None if args.quiet else _progress_bar(camera.width * camera.height * scene.samples ** 2)
     # With a progress bar the first tile is small, so that the bar moves from the start.
     limits = TileLimits(first_launch_pixels=config.PROGRESS_FIRST_TILE) if progress else None
-    renderer = Renderer(scene, device=args.device, accel=args.accel, builder=args.builder, leaf_size=args.leaf_size,
-                        limits=limits)
+    renderer = Renderer(scene, **options.values(args, options.RENDERER), limits=limits)
     try:
         # 8-bit: the kernel's own sRGB encoding; 16-bit and float: made of the linear image.
-        frame = renderer.render(camera, linear=depth != "8-bit", progress=progress and progress.update)
+        with _warnings_as_lines():
+            frame = renderer.render(camera, linear=depth != "8-bit", progress=progress and progress.update)
     finally:
         if progress:
             progress.close()
@@ -193,6 +166,21 @@ def _render(args) -> int:
             print(f"  AOVs: {aov_note}")
     print(out.resolve())
     return 0
+
+
+@contextlib.contextmanager
+def _warnings_as_lines():
+    """clrt's warnings of a render (a frame with nothing visible, a missing
+    texture) shown every time, once the block is done: as one line each on
+    stderr, ``clrt: warning: ...`` (main's _warning_line); other warnings as
+    Python shows them."""
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", ClrtWarning)
+        try:
+            yield
+        finally:
+            for w in caught:
+                warnings.showwarning(w.message, w.category, w.filename, w.lineno)
 
 
 class _LazyProgress:

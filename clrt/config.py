@@ -63,6 +63,9 @@ DEFAULT_FOV = 45.0
 #: Largest coordinate of a vertex, eye, target or light: the device computes in
 #: float32 (largest 3.4e38), and products of coordinates must stay finite there.
 MAX_COORDINATE = 1e30
+#: The largest float32 (numpy.finfo(numpy.float32).max): a larger value, finite
+#: as a Python float, becomes infinite on the device.
+FLOAT32_MAX = 3.4028234663852886e38
 #: Smooth shading: faces meeting at an edge at more than this angle (degrees)
 #: keep the edge hard (a crease); flatter edges are smoothed over.  Blender's
 #: auto-smooth and trimesh use 30; 45 keeps octagonal tubes round too, while
@@ -118,6 +121,8 @@ RAY_CHECKS = ("origin", "direction", "tmin", "tmax", "reach")
 
 #: What ``device=`` / ``--device`` takes besides "P:D" or "P" (platform and device indices).
 DEVICE_KINDS = ("gpu", "cpu")
+#: The per-pixel images of ``clrt render --aov`` (clrt.query.aov), in their order.
+AOVS = ("depth", "distance", "normal", "prim", "hit", "front")
 #: The formats of output files, and what each can hold: clrt.output.writers.WRITERS.
 
 # --------------------------------------------------------------------------- device buffers

@@ -55,3 +55,10 @@ class KernelBuildError(DeviceError):
 class DeviceMemoryError(DeviceError):
     """The scene does not fit in the device's memory even with the image split
     into the smallest tiles; the message gives the size needed and the device's."""
+
+
+class NothingVisibleWarning(ClrtWarning):
+    """A frame in which no camera ray hit a triangle: the image is only the
+    background (every triangle of zero area, the scene behind the camera or out
+    of its view).  ``clrt render`` prints it as one line, ``clrt: warning: ...``,
+    and writes the image; ``Frame.visible`` is False."""

@@ -98,7 +98,11 @@ def test_suite_reads_scans_from_a_folder(tmp_path):
     (tmp_path / "readme.txt").write_text("not a mesh")
     suite = MeshSuite(tmp_path)
     assert "camel-full" in suite and "cow" in suite and "camel" not in suite
-    assert any(n.startswith("camel:") for n in suite.notes)
+    # What --list says of it is what happens: no decimation (with or without the
+    # package) and no subdivision up to the paper's count, only camel-full.
+    (note,) = [n for n in suite.notes if n.startswith("camel:")]
+    assert note == ("camel: camel.off has 224 faces, not more than the paper's 4,884: not decimated (nor "
+                    "subdivided); it runs at full size as camel-full only"), note
     assert len(suite.make("cow").faces) == 2 * 8 * 3
     with pytest.raises(Exception, match="camel"):
         suite["camel"]

@@ -210,3 +210,20 @@ def test_a_glb_camera_is_read_from_the_json_chunk_alone(tmp_path):
     cut = file_camera(glb)
     assert cut is not None and np.allclose(cut["eye"], (0.3, 0.2, 4.0)) and cut["aspect"] == 1.5
     assert all(np.array_equal(np.asarray(cut[k]), np.asarray(whole[k])) for k in whole)
+
+
+@pytest.mark.parametrize("command", [["render", "--width", "8", "--height", "8"], ["info"]])
+def test_a_malformed_pyopencl_ctx_is_bad_input_like_device(command, tmp_path, capsys, monkeypatch):
+    """PYOPENCL_CTX=foo was OpenCL trouble (exit 3) where --device foo is bad
+    input (exit 2): both are now one line with the same rule, exit 2."""
+    monkeypatch.chdir(tmp_path)
+    assert cli.main([*command, "--device", "foo"]) == 2
+    by_option = capsys.readouterr().err
+    monkeypatch.setenv("PYOPENCL_CTX", "foo")
+    assert cli.main(command) == 2
+    by_env = capsys.readouterr().err
+    assert by_env.count("\n") == 1 and by_env == by_option.replace("--device", "PYOPENCL_CTX"), (by_env, by_option)
+    assert list(tmp_path.iterdir()) == []
+    monkeypatch.setenv("PYOPENCL_CTX", "7:7")   # well formed, but no such device: OpenCL trouble
+    assert cli.main(command) == 3
+    capsys.readouterr()

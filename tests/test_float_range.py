@@ -112,10 +112,16 @@ def test_a_scene_too_large_for_the_triangle_test_is_refused_when_rendered(device
     camera = Camera((0.0, 3.0, 5.0), (0.0, 0.3, 0.0), width=16, height=12)
     frame = clrt.Renderer(_ground_scene(1e12), device=device).render(camera, hits=True)   # within range
     assert (frame.prim >= 0).any()
+    with pytest.raises(clrt.InputError, match=r"^the camera's rays start up to 1e17 from the scene's far side, "
+                                              r"but the device's float32 triangle test overflows"):
+        clrt.Renderer(_ground_scene(1e12), device=device).render(Camera((0.0, 0.0, 1e17), (0.0, 0.0, 0.0)))
+    # Too large whatever the camera: the error names the geometry that makes it so.
     renderer = clrt.Renderer(_ground_scene(1e13), device=device)
-    with pytest.raises(clrt.InputError, match=r"^the camera's rays and the rays between the scene's surfaces "
-                                              r"start up to 2\.8e13 from the scene's far side, .* from about "
-                                              r"2\.\de11: "):
+    with pytest.raises(clrt.InputError, match=r"^object 1, triangle 0 has a vertex at \(-1e13, 0, -1e13\), "
+                                              r"1\.41e13 from the middle of the scene \(2 triangles that far out\): "
+                                              r"the scene is too large: the device's float32 triangle test "
+                                              r"overflows .* from about 2\.\de11 away, and rays between its "
+                                              r"surfaces start up to 2\.8e13 from its far side: "):
         renderer.render(camera)
     # The same from the command line: one line, exit 2, nothing written.
     scene = tmp_path / "ground.toml"
@@ -124,7 +130,33 @@ def test_a_scene_too_large_for_the_triangle_test_is_refused_when_rendered(device
     code = cli.main(["render", str(scene), "-o", str(tmp_path / "out.png"), *(["--device", device] if device else [])])
     err = capsys.readouterr().err.strip()
     assert code == 2 and len(err.splitlines()) == 1 and "float32 triangle test overflows" in err, err
+    assert err.startswith(f"clrt: {scene}: object 'objects[1] (plane)', triangle 0 has a vertex at (-1e13, 0, "), err
     assert not (tmp_path / "out.png").exists()
+
+
+def test_a_stray_vertex_is_named_with_its_file_and_triangle(device, tmp_path, capsys):
+    """One corrupt vertex (y = -4.4e28) among a sphere's: the error named the
+    camera's rays and no file or vertex; now the file, the object, the first
+    triangle that reaches out there and the vertex's coordinates."""
+    sphere = primitives.icosphere(2)
+    v = np.concatenate([sphere.vertices, [[0.0, -4.4e28, 0.0]]])
+    f = sphere.faces.copy()
+    f[70, 1] = len(v) - 1   # triangles 70 and 90 use the stray vertex
+    f[90, 2] = len(v) - 1
+    path = tmp_path / "corrupt.obj"
+    path.write_text("".join(f"v {x!r} {y!r} {z!r}\n" for x, y, z in v.astype(np.float64).tolist())
+                    + "".join(f"f {a + 1} {b + 1} {c + 1}\n" for a, b, c in f))
+    expected = (f"{path}: object 'corrupt', triangle 70 has a vertex at (0, -4.4e28, 0), 4.4e28 from the middle "
+                "of the scene (2 triangles that far out): the scene is too large: the device's float32 triangle "
+                "test overflows")
+    with pytest.raises(clrt.InputError) as info:
+        clrt.render(str(path), width=8, height=6, device=device)
+    assert str(info.value).startswith(expected), str(info.value)
+    code = cli.main(["render", str(path), "-o", str(tmp_path / "x.png"), "--width", "8", "--height", "6",
+                     *(["--device", device] if device else [])])
+    err = capsys.readouterr().err
+    assert code == 2 and err.count("\n") == 1 and err.startswith(f"clrt: {expected}"), err
+    assert not (tmp_path / "x.png").exists()
 
 
 @pytest.mark.parametrize("scale, offset", [(1e-6, 0.0), (1e-9, 0.0), (1e-12, 0.0), (1.0, 1e5), (1e-9, 1e-3)])
@@ -256,3 +288,16 @@ def test_a_ray_file_with_far_origins_exits_2(tmp_path, capsys, device):
     err = capsys.readouterr().err
     assert code == 2 and err.count("\n") == 1 and "float32 triangle test overflows" in err, err
 
+
+
+def test_an_origin_past_float32_says_it_overflows(device):
+    """1e39 is finite as a Python float but infinite on the device: the error
+    says it overflows float32, not merely that origins must be finite."""
+    accel = clrt.Accel(primitives.icosphere(1), device=device)
+    with pytest.raises(clrt.InputError, match=r"^origin 1 is \[1e\+39, 0\.0, 0\.0\]: 1e39 overflows float32 "
+                                              r"\(the largest float32 is about 3\.4e38\); origins must be finite"):
+        accel.trace([[0.0, 0.0, 5.0], [1e39, 0.0, 0.0]], [0.0, 0.0, -1.0])
+    with pytest.raises(clrt.InputError, match=r"^origin 0 is \[inf, 0\.0, 0\.0\]: origins must be finite$"):
+        accel.trace([np.inf, 0.0, 0.0], [0.0, 0.0, -1.0])
+    with pytest.raises(clrt.InputError, match=r"1e39 overflows float32"):
+        clrt.Camera((1e39, 0.0, 0.0), (0.0, 0.0, 0.0))

@@ -80,3 +80,23 @@ def test_renderer_refit_draws_the_moved_scene(builder, device):
         assert np.array_equal(getattr(frame, name), getattr(reference, name)), name
     with pytest.raises(clrt.InputError, match="same triangles"):
         renderer.refit(scene_from_mesh(primitives.icosphere(1)))
+
+
+def test_renderer_refit_shows_the_materials_of_the_scene_it_is_given(device):
+    """A refit shows the scene it is given: its materials too.  A scene_from_mesh
+    without a material has the default one (as the README's example once did,
+    silently turning its coloured mesh grey): pass the material again."""
+    mesh = primitives.icosphere(2)
+    red = clrt.Material(color=(0.9, 0.1, 0.1))
+    camera = Camera.framing(mesh.bounds * 1.1, 24, 18)
+    renderer = Renderer(scene_from_mesh(mesh, red), device=device)
+    moved = (mesh.vertices * 1.1, mesh.faces)
+    renderer.refit(scene_from_mesh(moved, red))
+    assert renderer.scene.objects[0].material == red
+    image = renderer.render(camera).image.astype(int)
+    seen = image.sum(axis=2) > 0
+    assert (image[..., 0] > 2 * image[..., 1])[seen].mean() > 0.9, "red, as the scene given says"
+    renderer.refit(scene_from_mesh(moved))
+    assert renderer.scene.objects[0].material == clrt.Material()
+    grey = renderer.render(camera).image.astype(int)
+    assert (np.abs(grey[..., 0] - grey[..., 1]) <= 1)[seen].all(), "the default material: grey"

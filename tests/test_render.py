@@ -1,6 +1,7 @@
 """The OpenCL renderer against the numpy reference tracer, on several meshes."""
 
 import numpy as np
+import pytest
 
 import clrt
 from clrt.reference import camera_rays, render_reference, srgb8
@@ -85,8 +86,9 @@ def test_shadow_of_a_box_on_the_floor(device):
 def test_miss_is_background(device):
     scene = scene_from_mesh(primitives.icosphere(1), background=(0.25, 0.5, 0.75))
     camera = Camera(eye=(0, 0, 5), target=(5, 0, 5), width=8, height=8)   # looking away
-    frame = Renderer(scene, device=device).render(camera, linear=True, hits=True)
-    assert (frame.prim == -1).all() and np.isinf(frame.t).all()
+    with pytest.warns(clrt.NothingVisibleWarning, match="out of the camera's view"):   # and it says so
+        frame = Renderer(scene, device=device).render(camera, linear=True, hits=True)
+    assert (frame.prim == -1).all() and np.isinf(frame.t).all() and not frame.visible
     np.testing.assert_allclose(frame.image, np.broadcast_to([0.25, 0.5, 0.75], (8, 8, 3)), atol=1e-6)
 
 

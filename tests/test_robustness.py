@@ -101,6 +101,21 @@ def test_bad_mesh_files(name, tmp_path, device, capsys, monkeypatch):
     assert sorted(p.name for p in tmp_path.iterdir()) == [name], "nothing written"
 
 
+@pytest.mark.parametrize("name, says", [
+    ("nan.obj", "1 vertices have NaN or infinite coordinates (the first: vertex 1 at (nan, 1, 0))"),
+    ("huge.obj", "vertex coordinates must lie within +-1e30 (the device computes in float32): 1 lie beyond "
+                 "(the first: vertex 1 at (1e38, 1, 0))"),
+    ("binary-nan.stl", "NaN or infinite coordinates (the first: vertex "),
+])
+def test_out_of_range_vertices_are_named(name, says, tmp_path):
+    """The file and the first vertex out of range, by index and coordinates."""
+    path = tmp_path / name
+    path.write_bytes(BAD_FILES[name])
+    with pytest.raises(MeshLoadError) as info:
+        clrt.load_mesh(path)
+    assert str(info.value).startswith(f"{path}: ") and says in str(info.value), str(info.value)
+
+
 def test_missing_unreadable_and_folder_inputs(tmp_path, device, capsys, monkeypatch):
     monkeypatch.chdir(tmp_path)
     (tmp_path / "dir.obj").mkdir()
@@ -126,8 +141,8 @@ def test_missing_unreadable_and_folder_inputs(tmp_path, device, capsys, monkeypa
     (["--samples", "0"], "samples"),
     (["--max-depth", "-1"], "--max-depth"),
     (["--leaf-size", "0"], "--leaf-size"),
-    (["--eye", "nan,0,0"], "--eye"),
-    (["--eye", "1e39,0,0"], "eye"),
+    (["--eye", "nan,0,0"], "--eye must be 3 finite numbers, got (nan, 0, 0)"),
+    (["--eye", "1e39,0,0"], "1e39 overflows float32 (the largest float32 is about 3.4e38)"),
     (["--light", "0,inf,0"], "--light"),
     (["--target", "1,2"], "--target"),
     (["--up", "0,0,0"], "up"),
@@ -217,9 +232,46 @@ def test_zero_area_triangles_are_never_hit(device):
         assert np.array_equal(frame.image, expected.image), (accel, builder)
     # A mesh of nothing but zero-area triangles renders (as background) and traces (as misses).
     flat = Mesh.from_arrays([[0, 0, 0], [1, 1, 1], [2, 2, 2], [3, 3, 3]], [[0, 1, 2], [1, 2, 3]])
-    frame = Renderer(scene_from_mesh(flat), device=device).render(Camera.framing(flat.bounds, 8, 8), hits=True)
-    assert (frame.prim == -1).all()
+    with pytest.warns(clrt.NothingVisibleWarning, match="zero area"):
+        frame = Renderer(scene_from_mesh(flat), device=device).render(Camera.framing(flat.bounds, 8, 8), hits=True)
+    assert (frame.prim == -1).all() and not frame.visible
     assert (clrt.trace(flat, [[-1, 0.5, 0.5]], [[1, 0, 0]], device=device).prim == -1).all()
+
+
+def test_nothing_visible_warns_with_the_reason(device, tmp_path, capsys, monkeypatch):
+    """A frame in which no camera ray hits a triangle was an all-black image
+    and exit 0, without a word: now a warning (one line from the CLI) saying
+    why, read from the frame's own hits (a flag the kernels set)."""
+    import warnings
+    flat = Mesh.from_arrays([[0, 0, 0], [1, 1, 1], [2, 2, 2], [3, 3, 3]], [[0, 1, 2], [1, 2, 3]])
+    with pytest.warns(clrt.NothingVisibleWarning, match=r"^nothing visible in the 8x6 image, only the background: "
+                                                         r"all 2 triangles of the scene have zero area"):
+        frame = Renderer(scene_from_mesh(flat), device=device).render(Camera.framing(flat.bounds, 8, 6))
+    assert not frame.visible
+    sphere = primitives.icosphere(1)
+    renderer = Renderer(scene_from_mesh(sphere), device=device)
+    with pytest.warns(clrt.NothingVisibleWarning, match=r"the scene lies behind the camera \(the camera at "
+                                                         r"\(0, 0, 5\) looks at \(0, 0, 9\)\)"):
+        assert not renderer.render(Camera((0, 0, 5), (0, 0, 9), width=8, height=6)).visible
+    with pytest.warns(clrt.NothingVisibleWarning, match="no camera ray hits the scene's 80 triangle"):
+        renderer.render(Camera((0, 0, 5), (5, 0, 5), width=8, height=6))
+    # Seen in one tile of many (the flag starts anew in each tile's first launch): visible, no warning.
+    tiled = Renderer(scene_from_mesh(sphere), device=device, limits=TileLimits(max_tile_pixels=64, block=None))
+    corner = Camera((-6, -4.5, 20), (-6, -4.5, 0), fov=40, width=32, height=24)   # the sphere in a corner
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        frame = tiled.render(corner, hits=True)
+        assert frame.tiles > 4 and frame.visible and 0 < (frame.prim >= 0).mean() < 0.2
+        assert renderer.render(Camera.framing(sphere.bounds, 8, 6)).visible
+    with pytest.warns(clrt.NothingVisibleWarning):   # and the next frame of the same buffers starts anew
+        assert not renderer.render(Camera((0, 0, 5), (0, 0, 9), width=8, height=6)).visible
+    # The CLI: the image is written, exit 0, and one line says why it is empty.
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "degenerate.obj").write_text("v 0 0 0\nv 1 0 0\nv 2 0 0\nf 1 2 3\n")
+    code, out, err = _cli(["render", "degenerate.obj", "--width", "8", "--height", "6", "-q"], device, capsys)
+    assert code == 0 and out == f"{tmp_path / 'degenerate.png'}\n"
+    assert err == ("clrt: warning: nothing visible in the 8x6 image, only the background: the scene's only "
+                   "triangle has zero area (a corrupt or flattened mesh?)\n"), err
 
 
 def _inside_scene(light_inside: bool) -> tuple[Scene, Camera]:

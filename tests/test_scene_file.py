@@ -1,5 +1,6 @@
 """TOML scene files: the example scene, transforms, path resolution and every validation error."""
 
+import re
 import textwrap
 from pathlib import Path
 
@@ -251,8 +252,10 @@ def test_an_object_past_float32_names_the_object(tmp_path, text, largest, capsys
         warnings.simplefilter("error")
         with pytest.raises(InputError) as info:
             load_scene(path)
-    assert str(info.value) == (f"{path}: objects[{index}]: vertex coordinates must lie within +-1e30 after its "
-                               f"transform (the device computes in float32), got up to {largest}")
+    said = (f"{path}: objects[{index}]: vertex coordinates must lie within +-1e30 after its "
+            f"transform (the device computes in float32), got up to {largest}")
+    # and the first vertex beyond, by index and coordinates
+    assert re.fullmatch(re.escape(said) + r" \(the first beyond: vertex \d+ at \([^()]*\)\)", str(info.value)), info.value
     from clrt import cli
     assert cli.main(["render", str(path), "-o", str(tmp_path / "x.png")]) == 2
     assert capsys.readouterr().err == f"clrt: {info.value}\n"

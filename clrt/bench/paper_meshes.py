@@ -456,15 +456,17 @@ class MeshSuite:
             if path is None:
                 self.notes.append(f"{name}: {file} not found in {self.mesh_dir}; skipped")
                 continue
-            if not can_decimate:
-                self.notes.append(f"{name}: decimating {path.name} to {target:,} faces needs the optional "
-                                  "package fast-simplification (pip install fast-simplification); skipped")
-                continue
+            # The face count first: a scan no larger than the paper's count is not
+            # decimated at all (nor subdivided up to it), package or not.
             full = _face_count(path)
             if full is not None and full <= target:
                 self.notes.append(f"{name}: {path.name} has {full:,} faces, not more than the paper's "
-                                  f"{target:,}, so it cannot be decimated to the paper's count; "
-                                  f"only {name}-full is run")
+                                  f"{target:,}: not decimated (nor subdivided); it runs at full size as "
+                                  f"{name}-full only")
+                continue
+            if not can_decimate:
+                self.notes.append(f"{name}: decimating {path.name} to {target:,} faces needs the optional "
+                                  "package fast-simplification (pip install fast-simplification); skipped")
                 continue
             source = f"{path.name} decimated from {full:,} faces" if full else f"{path.name} decimated"
             self.entries[name] = SuiteEntry(name, source, target,

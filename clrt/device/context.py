@@ -20,6 +20,7 @@ from typing import Iterable, Sequence
 
 import pyopencl as cl
 
+from clrt import checks
 from clrt.device import sharing, warmup
 from clrt.errors import DeviceError
 
@@ -314,6 +315,9 @@ def _resolve(spec: str | None, platforms: list):
         # pyopencl treats an empty PYOPENCL_CTX as "ask interactively"; we never ask.
         spec = os.environ.get("PYOPENCL_CTX", "").strip() or None
         source = f"PYOPENCL_CTX={spec}"
+        # Its syntax is bad input (InputError, exit 2), as --device's is; a
+        # well-formed spec naming no device here is OpenCL trouble (exit 3).
+        checks.device(spec, "PYOPENCL_CTX")
     if spec is not None:
         info, device = _by_spec(spec, source, devices, platforms)
         return info, device, f"from {source}"

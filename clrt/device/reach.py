@@ -145,12 +145,22 @@ class Reach:
             return
         raise InputError(self.message(what, rho))
 
-    def check_render(self, eye) -> None:
-        """:meth:`check` for a frame: rays from the camera's ``eye``, and the
-        shadow, reflection and refraction rays that start on the surfaces, off
-        them by their hit points' float32 error (shading.cl's spawn_origin): under
-        3e-6 of the largest coordinate (``SPAWN_REACH``)."""
+    def check_render(self, eye, where=None) -> None:
+        """:meth:`check` for a frame: the shadow, reflection and refraction rays
+        that start on the surfaces, off them by their hit points' float32 error
+        (shading.cl's spawn_origin): under 3e-6 of the largest coordinate
+        (``SPAWN_REACH``), and the rays from the camera's ``eye``.  The first
+        fail whatever the camera: then the scene is too large, and the error
+        begins with ``where()`` (the geometry that makes it so:
+        clrt.scene.scene.far_triangle), else with the camera's rays."""
         eye = np.asarray(eye, np.float64)
         off = SPAWN_REACH * float(np.max(np.abs([self.lo, self.hi])))
-        self.check(np.minimum(eye, self.lo - off), np.maximum(eye, self.hi + off),
-                   "the camera's rays and the rays between the scene's surfaces start up to")
+        lo, hi = self.lo - off, self.hi + off
+        rho = self.farthest(lo, hi)
+        if math.isfinite(rho) and self.largest_t(rho) >= FLT_MAX:
+            show = lambda x: checks.show(float(f"{x:.2g}"))   # noqa: E731
+            raise InputError(f"{where() if where else 'the scene'}: the scene is too large: the device's float32 "
+                             f"triangle test overflows and misses hits on its triangles from about "
+                             f"{show(self.limit())} away, and rays between its surfaces start up to {show(rho)} "
+                             "from its far side: fix that geometry, or scale the scene down")
+        self.check(np.minimum(eye, lo), np.maximum(eye, hi), "the camera's rays start up to")

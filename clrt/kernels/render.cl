@@ -18,7 +18,11 @@
 // work-groups are blocks of neighbouring pixels: their rays walk much the same
 // BVH nodes.  The tile's per-pixel arrays (rays, hits, linear colours) lie in
 // one buffer, `frame`, at the byte offsets the Tile gives (layouts.h), each
-// holding the tile's pixels in row-major order.
+// holding the tile's pixels in row-major order.  The buffer's first word, before
+// them, says whether any camera ray of the tile's first sample hit a triangle
+// (0 or 1): the host's "nothing visible" warning (frame.py), without reading
+// back the hits.
+#define TILE_SEEN(frame) ((__global uint*)(frame))
 #define TILE_RAYS(frame, tile) ((__global Ray*)((frame) + (tile).rays_at))
 #define TILE_HITS(frame, tile) ((__global Hit*)((frame) + (tile).hits_at))
 #define TILE_IMAGE(frame, tile) ((__global float4*)((frame) + (tile).image_at))
@@ -30,6 +34,8 @@ __kernel void generate_rays(__global uchar* frame, const Camera cam, const Tile 
     if (gx >= tile.w || gy >= tile.h)
         return;
     const uint px = tile.x + gx, py = tile.y + gy;
+    if (tile.first_sample && gx == 0 && gy == 0)
+        *TILE_SEEN(frame) = 0u;   // shade_pixels, launched after this kernel, sets it
     const float2 o = sample_offset(py * cam.width + px, tile.sample, tile.samples_per_axis, tile.seed);
     TILE_RAYS(frame, tile)[gy * tile.w + gx] = camera_ray(&cam, px, py, o.x, o.y);
 }
@@ -47,6 +53,8 @@ inline void shade_pixel(const Geometry* g, const Shading* sh, const Ray ray, __g
                                    &hit, hit_known, lit_known, lit);
     __global float4* image = TILE_IMAGE(frame, *tile);
     if (tile->first_sample) {
+        if (hit.prim >= 0 && !*TILE_SEEN(frame))   // read first: one write per tile, near enough
+            *TILE_SEEN(frame) = 1u;
         TILE_HITS(frame, *tile)[i] = reported_hit(g, hit);
         image[i] = (float4)(tile->sample_weight * c, 1.0f);
     } else {

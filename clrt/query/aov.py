@@ -9,13 +9,13 @@ from pathlib import Path
 
 import numpy as np
 
-from clrt.errors import InputError
+from clrt import checks, config
 from clrt.output import WRITERS, write_array, write_image
 from clrt.query.accel import Accel
 from clrt.query.results import CameraImages
 
 
-AOVS = ("depth", "distance", "normal", "prim", "hit", "front")
+AOVS = config.AOVS
 #: The formats of the files beside the image: each AOV's values as they are, and
 #: a picture of them (8-bit gray or RGB).
 VALUES, PICTURES = WRITERS["npy"], WRITERS["png"]
@@ -33,14 +33,9 @@ EXR_CHANNELS = {"depth": ("Z",), "distance": ("distance",), "normal": ("N.X", "N
 
 
 def parse_aovs(text) -> tuple[str, ...]:
-    """'depth,normal' -> ('depth', 'normal'); InputError naming an unknown one."""
-    names = tuple(dict.fromkeys(n.strip().lower() for n in str(text).split(",") if n.strip()))
-    if not names:
-        raise InputError(f"--aov needs one or more of {','.join(AOVS)}")
-    unknown = [n for n in names if n not in AOVS]
-    if unknown:
-        raise InputError(f"unknown AOV {unknown[0]!r}: choose from {','.join(AOVS)}")
-    return names
+    """'depth,normal' -> ('depth', 'normal'); InputError naming an unknown one
+    (clrt.checks.aov_names, which the --aov option checks with)."""
+    return checks.aov_names("--aov", text)
 
 
 def aov_arrays(images: CameraImages, name: str) -> tuple[np.ndarray, np.ndarray]:

@@ -10,9 +10,11 @@ float32 where they are not float32 already.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
-from clrt import checks
+from clrt import checks, config
 from clrt.config import CULL_MODES
 from clrt.device.args import camera_value
 from clrt.errors import InputError
@@ -182,10 +184,17 @@ class RayBatch:
             a = np.asarray(given)
             row = a if a.ndim <= (0 if kind in ("tmin", "tmax") else 1) else a[i]
             value = np.asarray(row).tolist()
+        overflow = ""
+        if kind in ("origin", "direction") and isinstance(value, list) and all(
+                isinstance(x, float) and math.isfinite(x) for x in value):
+            largest = max(abs(x) for x in value)
+            if largest > config.FLOAT32_MAX:   # finite as given, infinite on the device
+                overflow = f": {checks.show(largest)} overflows float32 (the largest float32 is about 3.4e38);"
         if kind == "origin":
-            return f"origin {i} is {value}: origins must be finite"
+            return f"origin {i} is {value}{overflow or ':'} origins must be finite" + (" in float32" if overflow else "")
         if kind == "direction":
-            return f"direction {i} is {value}: directions must be finite and non-zero"
+            return (f"direction {i} is {value}{overflow or ':'} directions must be finite"
+                    + (" in float32" if overflow else "") + " and non-zero")
         return f"{kind} of ray {i} is {value}: {kind} must not be NaN"
 
 

@@ -16,8 +16,10 @@ Tiling and the memory fallback: tiles.py; page-locked images: clrt/device/pinned
 from __future__ import annotations
 
 import dataclasses
+import inspect
 import threading
 import time
+import warnings
 import weakref
 from dataclasses import dataclass, field
 from typing import Callable
@@ -25,7 +27,8 @@ from typing import Callable
 import numpy as np
 import pyopencl as cl
 
-from clrt import checks, config
+from clrt import checks
+from clrt import options as opts
 from clrt.config import DEFAULT_ACCEL, DEFAULT_BUILDER, DEFAULT_LEAF_SIZE
 from clrt.device.args import camera_value
 from clrt.device.context import format_bytes as _size
@@ -34,12 +37,14 @@ from clrt.device.pinned import PinnedPool
 from clrt.device.program import launch_size
 from clrt.device.scene import DeviceScene, stage
 from clrt.device.sharing import check_process, forked_after_start, one_at_a_time
-from clrt.errors import DeviceMemoryError, InputError
+from clrt.errors import DeviceMemoryError, InputError, NothingVisibleWarning
 from clrt.layouts import HIT, TILE
-from clrt.renderer.kernels import FRAME_ARRAYS, RENDER_KERNELS, frame_offsets, pack_tables
+from clrt.renderer.kernels import FRAME_ARRAYS, FRAME_HEADER, RENDER_KERNELS, frame_offsets, pack_tables
 from clrt.renderer.tiles import TileLimits, run_tiles
+from clrt.renderer.visible import nothing_visible
 from clrt.scene.arrays import flatten_scene, light_records
-from clrt.scene.scene import Camera, Scene, default_light
+from clrt.scene.scene import Camera, Scene, far_triangle
+from clrt.scene.render_setup import render_frame
 from clrt.scene.sources import as_scene
 from clrt.scene.texture import srgb_encode8
 
@@ -55,6 +60,7 @@ class Frame:
     device: str = ""
     triangles: int = 0
     tiles: int = 1               # tiles the frame was rendered in (each: one launch per sample)
+    visible: bool = True         # a camera ray (of the first sample) hit a triangle; False: only background
 
     def __repr__(self) -> str:
         h, w = self.image.shape[:2]
@@ -131,9 +137,10 @@ class Renderer:
     def __init__(self, scene: Scene, *, accel: str = DEFAULT_ACCEL, builder: str = DEFAULT_BUILDER,
                  leaf_size: int = DEFAULT_LEAF_SIZE, device: str | None = None,
                  limits: TileLimits | None = None, max_buffer_bytes: int | None = None):
-        device = checks.device(device)
+        device = opts.check("device", device)   # the table's rules (clrt/options.py), as clrt render's
         check_process()   # before a long host build that could not be used
-        accel, builder, leaf_size = checks.accel_options(accel, builder, leaf_size)
+        accel, builder, leaf_size = (opts.check(name, value) for name, value in
+                                     (("accel", accel), ("builder", builder), ("leaf_size", leaf_size)))
         self.limits = limits or TileLimits()
         self._options = dict(accel=accel, builder=builder, leaf_size=leaf_size, device=device,
                              max_buffer_bytes=max_buffer_bytes)   # for a rebuild (refit)
@@ -208,7 +215,7 @@ class Renderer:
         """
         job = self._job(camera, linear, hits, samples, max_depth, seed)
         # Rays from too far for the float32 triangle test: one error, not missed hits.
-        self.geometry.reach.check_render(job.camera.eye)
+        self.geometry.reach.check_render(job.camera.eye, lambda: far_triangle(self.scene))
         job.camera_args, job.scene_args = self._frame_args(job.camera)
         job.progress = progress or (lambda n: None)
         capacity = self.tile_capacity(job.camera.width * job.camera.height)
@@ -219,15 +226,19 @@ class Renderer:
         except KeyboardInterrupt:
             self.queue.finish()   # no kernel may still write into buffers we drop
             raise
-        return Frame(job.image, job.prim, job.t, job.timings, self.device, len(self.arrays.corners), tiles=tiles)
+        if not job.seen:   # one warning, saying why where it can (clrt render prints it as one line)
+            warnings.warn(nothing_visible(self.arrays.corners, self.arrays.bounds, job.camera),
+                          NothingVisibleWarning, stacklevel=4)   # past one_at_a_time and keyword_options
+        return Frame(job.image, job.prim, job.t, job.timings, self.device, len(self.arrays.corners), tiles=tiles,
+                     visible=job.seen)
 
     def _job(self, camera, linear, hits, samples, max_depth, seed) -> "_Job":
         """The arguments of one render call checked and defaulted, and its outputs."""
         if camera is not None and not isinstance(camera, Camera):
             raise checks.fail("camera", "a clrt.Camera or None", camera)
         camera = camera or self.scene.camera or Camera.framing(self.arrays.bounds)
-        samples = checks.samples(self.scene.samples if samples is None else samples)
-        max_depth = checks.max_depth(self.scene.max_depth if max_depth is None else max_depth)
+        samples = opts.check("samples", self.scene.samples if samples is None else samples)
+        max_depth = opts.check("max_depth", self.scene.max_depth if max_depth is None else max_depth)
         seed = checks.integer("seed", seed, 0, 2**32 - 1)
         w, h = camera.width, camera.height
         host_bytes = w * h * ((12 if linear else 3) + (8 if hits else 0))
@@ -262,7 +273,9 @@ class Renderer:
         scene, their vertices moved (animation, deformation).  The BVH is refitted
         on the device (the tree kept, every volume fitted anew: the image stays
         exact) and the triangles, vertex normals, materials and lights uploaded
-        again; the camera and settings are ``scene``'s too.
+        again; the camera and settings are ``scene``'s too -- the renderer shows
+        ``scene`` as given, so a ``scene_from_mesh(moved)`` without a material
+        shows the default material: pass the material again to keep it.
         ``rebuild=True`` builds a new BVH instead (a tree refitted through large
         motions traces slower)."""
         scene = as_scene(scene)
@@ -323,7 +336,7 @@ class Renderer:
         at most half of what the scene leaves free and one buffer's size limit."""
         dev = self.queue.device
         free = max(dev.global_mem_size - self.device_bytes, 0) // 2
-        cap = min(pixels, MAX_TILE_PIXELS, dev.max_mem_alloc_size // FRAME_ARRAY_BYTES,
+        cap = min(pixels, MAX_TILE_PIXELS, (dev.max_mem_alloc_size - FRAME_HEADER) // FRAME_ARRAY_BYTES,
                   free // FRAME_BYTES_PER_PIXEL)
         cap = max(cap, min(pixels, self.limits.min_tile_pixels))   # if even that fails, the error says so
         if self.limits.max_tile_pixels is not None:
@@ -337,7 +350,7 @@ class Renderer:
             mf = cl.mem_flags
             self._frame_buffers = {
                 # The rays, hits and linear colours of a tile (render.cl, frame_offsets).
-                "frame": cl.Buffer(self.context, mf.READ_WRITE, pixels * FRAME_ARRAY_BYTES),
+                "frame": cl.Buffer(self.context, mf.READ_WRITE, frame_offsets(pixels)["end"]),
                 "srgb8": cl.Buffer(self.context, mf.WRITE_ONLY, pixels * 3),
                 # Page-locked host memory for tiles that cannot be read back in place.
                 "staging": cl.Buffer(self.context, mf.READ_WRITE | mf.ALLOC_HOST_PTR, pixels * 3),
@@ -411,7 +424,10 @@ class Renderer:
         if job.prim is not None:
             records = np.empty(count, HIT)
             copies.append(cl.enqueue_copy(q, records, frame, src_offset=at["hits"], is_blocking=False))
+        seen = np.zeros(1, np.uint32)   # did a camera ray hit anything (render.cl's TILE_SEEN)
+        copies.append(cl.enqueue_copy(q, seen, frame, src_offset=at["seen"], is_blocking=False))
         wait_for(copies[-1])
+        job.seen = job.seen or bool(seen[0])
         job.progress(count)
         host_start = time.perf_counter()
         if job.linear:
@@ -474,6 +490,7 @@ class _Job:
     timings: dict
     camera_args: np.ndarray | None = None   # generate_rays' Camera, and shade_pixels' scene arguments:
     scene_args: tuple = ()                   # set once per frame (Renderer._frame_args)
+    seen: bool = False           # a camera ray of a tile so far hit a triangle
     progress: Callable[[int], None] | None = None   # see Renderer.render
 
 
@@ -492,39 +509,51 @@ def _event_ms(event: cl.Event) -> float:
     return 1e-6 * (event.profile.end - event.profile.start)
 
 
-def render(source, camera: Camera | None = None, *, width: int | None = None,
-           height: int | None = None, device: str | None = None, linear: bool = False,
-           accel: str = DEFAULT_ACCEL, builder: str = DEFAULT_BUILDER,
-           leaf_size: int = DEFAULT_LEAF_SIZE) -> np.ndarray:
-    """Render ``source`` and return an (H, W, 3) image: uint8 sRGB, or float32 linear RGB
-    with ``linear=True``.  ``source``: a Scene, a TOML scene file, a mesh file or
-    anything else :func:`~clrt.scene.sources.as_scene` takes.  Without a camera the
-    scene's own (or a framing of its bounds) is used; ``width``/``height``
-    override the camera's resolution.  A mesh, or a scene file without lights, is
-    lit as ``clrt render`` lights it: by the default light placed for the
-    camera used -- where ``Renderer(scene_from_mesh(mesh))`` (or a Scene given
-    here) keeps the light placed for its own camera.  Values are checked
-    as the CLI checks them (clrt.checks)."""
+def render(source=None, camera: Camera | None = None, *, linear: bool = False, **options) -> np.ndarray:
+    """Render ``source`` and return an (H, W, 3) image: uint8 sRGB, or float32 linear
+    RGB with ``linear=True`` -- the image ``clrt render`` writes for the same options.
+
+    ``source``: a Scene, a TOML scene file, a mesh file or anything else
+    :func:`~clrt.scene.sources.as_scene` takes; None: the built-in scene.
+    ``camera``: a :class:`~clrt.scene.scene.Camera` to start from instead of
+    the scene's own (or a framing of its bounds); the camera options below
+    replace its fields.  A mesh, or a scene file without lights, is lit as
+    ``clrt render`` lights it: by the default light placed for the camera
+    used -- where ``Renderer(scene_from_mesh(mesh))`` (or a Scene given here)
+    keeps the light placed for its own camera (a Scene keeps its own lights
+    unless ``lights`` is given).
+
+    ``options``: the options of ``clrt render``, by their Python names, from one
+    table (clrt/options.py), checked by the same rules -- a bad value raises
+    InputError with the command line's message under this name ("width must be
+    ..." for "--width must be ..."); None or left out: the default.  Not taken,
+    as they make no sense for an image in memory: ``output`` (-o; write the
+    image with clrt.output.write_image), ``force`` (-f: no file is written),
+    ``bit_depth`` (it returns uint8, or float32 with ``linear=True``), ``aov``
+    (per-pixel images: clrt.camera_images) and ``quiet`` (-q: it prints
+    nothing).  A frame that shows only the background warns
+    (:class:`~clrt.errors.NothingVisibleWarning`).
+
+{options}
+    """
     if camera is not None and not isinstance(camera, Camera):
         raise checks.fail("camera", "a clrt.Camera or None", camera)
-    if width is not None:
-        checks.integer("width", width, 1, config.MAX_IMAGE_SIDE)
-    if height is not None:
-        checks.integer("height", height, 1, config.MAX_IMAGE_SIDE)
-    device = checks.device(device)
-    checks.accel_options(accel, builder, leaf_size)
-    scene = as_scene(source)
-    # A file without lights of its own gets the default light from the final camera, as in the CLI.
-    mesh_light = not isinstance(source, Scene) and scene.default_lights
-    if camera is None and (scene.camera is None or scene.camera_framed):
-        base = scene.camera or Camera.framing(scene.bounds)
-        camera = Camera.framing(scene.bounds, base.width if width is None else width,
-                                base.height if height is None else height, base.fov, up=base.up)
-    camera = camera or scene.camera
-    if width is not None or height is not None:
-        camera = Camera(camera.eye, camera.target, camera.up, camera.fov,
-                        camera.width if width is None else width, camera.height if height is None else height)
-    if mesh_light:
-        scene.lights = [default_light(scene.bounds, camera)]
-    renderer = Renderer(scene, device=device, accel=accel, builder=builder, leaf_size=leaf_size)
-    return renderer.render(camera, linear=linear).image
+    checks.boolean("linear", linear)
+    values = opts.check_api(options, "render")
+    scene, camera = render_frame(source, camera, **opts.by_stage(values, opts.SCENE, opts.CAMERA, opts.LIGHTS))
+    renderer = Renderer(scene, **opts.by_stage(values, opts.RENDERER))
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", NothingVisibleWarning)
+        image = renderer.render(camera, linear=linear).image
+    for w in caught:   # shown as the caller's (Renderer.render's own points at this function)
+        warnings.warn(w.message, w.category, stacklevel=2)
+    return image
+
+
+render.__doc__ = render.__doc__.format(options=opts.api_doc())
+render.__signature__ = inspect.Signature(
+    [inspect.Parameter("source", inspect.Parameter.POSITIONAL_OR_KEYWORD, default=None),
+     inspect.Parameter("camera", inspect.Parameter.POSITIONAL_OR_KEYWORD, default=None, annotation="Camera | None"),
+     inspect.Parameter("linear", inspect.Parameter.KEYWORD_ONLY, default=False, annotation="bool")]
+    + [inspect.Parameter(o.name, inspect.Parameter.KEYWORD_ONLY, default=o.default) for o in opts.API_OPTIONS.values()],
+    return_annotation="np.ndarray")

@@ -22,17 +22,22 @@ RENDER_KERNELS = {
 }
 
 #: Bytes of a tile's per-pixel arrays in its frame buffer: its ray, its hit
-#: record and its linear colour (float4), in that order (Tile in layouts.h).
+#: record and its linear colour (float4), in that order (Tile in layouts.h),
+#: after FRAME_HEADER bytes whose first uint says whether a camera ray of the
+#: tile hit anything (render.cl's TILE_SEEN).
 FRAME_ARRAYS = {"rays": RAY.itemsize, "hits": HIT.itemsize, "image": 16}
+FRAME_HEADER = 16
 TABLE_ALIGN = 16   # every table of the `tables` buffer starts at a multiple (float4 rows)
 
 
 def frame_offsets(pixels: int) -> dict[str, int]:
-    """Byte offset of each per-pixel array in a frame buffer of ``pixels`` pixels."""
-    offsets, at = {}, 0
+    """Byte offset of each per-pixel array in a frame buffer of ``pixels`` pixels
+    (and of the "seen" word, 0); "end": the buffer's size."""
+    offsets, at = {"seen": 0}, FRAME_HEADER
     for name, size in FRAME_ARRAYS.items():
         offsets[name] = at
         at += pixels * size
+    offsets["end"] = at
     return offsets
 
 

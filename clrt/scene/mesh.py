@@ -40,11 +40,26 @@ def _checked_vertices(vertices, label: str) -> np.ndarray:
     low, high = v.min(), v.max()   # NaN if any is (two passes, no temporary arrays)
     if not (np.isfinite(low) and np.isfinite(high)):
         bad = ~np.isfinite(v).all(axis=1)
-        raise MeshLoadError(f"{label}{int(bad.sum())} vertices have NaN or infinite coordinates")
+        raise MeshLoadError(f"{label}{int(bad.sum())} vertices have NaN or infinite coordinates "
+                            f"(the first: {vertex_text(v, int(np.argmax(bad)))})")
     if max(high, -low) > config.MAX_COORDINATE:
+        with np.errstate(over="ignore"):
+            bad = (np.abs(v) > config.MAX_COORDINATE).any(axis=1)   # only on the way to the error
         raise MeshLoadError(f"{label}vertex coordinates must lie within +-{config.MAX_COORDINATE:.0e} "
-                            "(the device computes in float32)".replace("e+", "e"))
+                            f"(the device computes in float32): {int(bad.sum())} lie beyond (the first: "
+                            f"{vertex_text(v, int(np.argmax(bad)))})".replace("e+", "e"))
     return np.ascontiguousarray(v, dtype=np.float32)
+
+
+def vertex_text(vertices, index: int) -> str:
+    """'vertex 3 at (0, -4.4e28, 0)', for errors: coordinates to 3 significant
+    digits, or 9 where 3 would round one past +-MAX_COORDINATE into range."""
+    def text(x: float) -> str:
+        short = f"{x:.3g}"
+        return short if abs(float(short)) > config.MAX_COORDINATE or not abs(x) > config.MAX_COORDINATE \
+            else f"{x:.9g}"
+    xyz = ", ".join(text(float(x)).replace("e+", "e") for x in np.asarray(vertices[index], np.float64))
+    return f"vertex {index} at ({xyz})"
 
 
 def _checked_faces(faces, n_vertices: int, label: str) -> np.ndarray:

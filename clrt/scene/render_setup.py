@@ -14,13 +14,14 @@ options (or the scene file) place it.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
 
 from clrt import config
 from clrt.errors import InputError
-from clrt.scene.scene import Camera, Light, Scene, default_light
+from clrt.scene.scene import Camera, Light, Scene, default_light, far_triangle
 
 #: The keyword options of render_scene and render_camera (the CLI's option names).
 MATERIAL_OPTIONS = ("color", "ambient", "diffuse", "specular", "shininess", "crease")
@@ -30,13 +31,17 @@ CAMERA_OPTIONS = ("width", "height", "eye", "target", "up", "fov")
 
 def render_scene(source, *, color=None, ambient=None, diffuse=None, specular=None, shininess=None,
                  crease=None, flat: bool = False, background=None, samples=None, max_depth=None) -> Scene:
-    """The scene of ``source``: None (the built-in scene), a ``.toml`` scene file or
-    a mesh file (clrt.scene.sources.as_scene).  The material options replace that
-    field of every object's material; a mesh's scene, and a scene file's without
-    lights, has no lights yet (:func:`render_lights` places the default one from
-    the final camera)."""
+    """The scene of ``source``: None (the built-in scene), a ``.toml`` scene file,
+    a mesh file or anything else clrt.scene.sources.as_scene takes.  The material
+    options replace that field of every object's material; a mesh's scene, and a
+    scene file's without lights, has no lights yet (:func:`render_lights` places
+    the default one from the final camera).  A Scene given is copied, with its
+    lights."""
     from clrt.scene.sources import as_scene
-    if source:
+    if isinstance(source, Scene):
+        # The caller's Scene is left as it is; it keeps its lights (a default one too).
+        scene = dataclasses.replace(source, objects=list(source.objects), lights=list(source.lights))
+    elif source is not None and not (isinstance(source, str) and not source):
         scene = as_scene(source)
         if scene.default_lights:
             scene.lights = []   # the default light is placed from the final camera
@@ -69,7 +74,10 @@ def render_camera(scene: Scene, *, width=None, height=None, eye=None, target=Non
         eye, target = placed.eye, placed.target
     elif eye is None or target is None:   # frame for the final size, fov and up
         # (Only then: a scene too large to frame renders from a camera the options place.)
-        framed = None if placed else Camera.framing(bounds, width, height, fov, up=up)
+        try:
+            framed = None if placed else Camera.framing(bounds, width, height, fov, up=up)
+        except InputError as exc:   # too large to frame: say where it reaches farthest
+            raise InputError(f"{far_triangle(scene)}: {exc}") from None
         target = target or (placed.target if placed else framed.target)
         eye = eye or (placed.eye if placed else tuple(t + e - f for t, e, f in zip(target, framed.eye,
                                                                                    framed.target)))
@@ -80,10 +88,28 @@ def render_lights(bounds, camera: Camera, own=(), positions=None) -> list:
     """The lights of a frame: ``positions`` (the --light options), else the scene's
     ``own`` lights, else one default light placed from ``camera``."""
     if positions:
-        return [Light(p) for p in positions]
+        return [Light.of(p) for p in positions]
     if own:
         return list(own)
     return [default_light(bounds, camera)]
+
+
+def render_frame(source, camera: Camera | None = None, *, lights=None, **options) -> tuple[Scene, Camera]:
+    """The scene (lights placed) and camera of one frame of ``source`` with the
+    render options -- what ``clrt render`` and ``clrt.render`` both draw:
+    :func:`render_scene` with the SCENE_OPTIONS, ``camera`` (if given) as the
+    scene's placed camera, :func:`render_camera` with the CAMERA_OPTIONS on top,
+    and :func:`render_lights` (``lights``: positions or Lights; a Scene given
+    keeps its own lights, even none, unless ``lights`` are given)."""
+    scene = render_scene(source, **{k: options.pop(k) for k in SCENE_OPTIONS if k in options})
+    if camera is not None:
+        scene.camera, scene.camera_framed = camera, False
+    camera = render_camera(scene, **{k: options.pop(k) for k in CAMERA_OPTIONS if k in options})
+    if options:
+        raise TypeError(f"render_frame got unknown options {sorted(options)}")
+    if lights or not isinstance(source, Scene):   # a Scene keeps its own lights, none included
+        scene.lights = render_lights(scene.bounds, camera, scene.lights, lights)
+    return scene, camera
 
 
 def turntable(camera: Camera, view: int, views: int) -> Camera:

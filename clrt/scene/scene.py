@@ -267,6 +267,7 @@ _SCENE_CHECKS = {
     "default_lights": lambda v: checks.boolean("default_lights", v),
     "max_depth": checks.max_depth,
     "samples": checks.samples,
+    "source": lambda v: checks.text("source", v),
 }
 
 
@@ -287,6 +288,7 @@ class Scene:
     default_lights: bool = False   # the lights are clrt's default one, placed from ``camera``, not the user's
     max_depth: int = config.DEFAULT_MAX_DEPTH   # reflection / refraction bounces after the camera ray
     samples: int = config.DEFAULT_SAMPLES       # anti-aliasing: samples x samples rays per pixel
+    source: str = ""               # the file it came from (a mesh or scene file), named by errors
 
     def __setattr__(self, name, value):
         check = _SCENE_CHECKS.get(name)
@@ -314,6 +316,50 @@ class Scene:
         fields = {k: v for k, v in fields.items() if v is not None}
         if fields:
             self.objects = [o.with_overrides(**fields) for o in self.objects]
+
+
+_SAMPLE = 1 << 20   # points of the median that finds a scene's middle (far_triangle)
+
+
+def far_triangle(scene: "Scene") -> str:
+    """Where ``scene`` reaches farthest out, for an error saying that it is too
+    large: "corrupt.obj: object 0 ('corrupt'), triangle 1 has a vertex at (0,
+    -4.4e28, 0), 4.4e28 from the middle of the scene (1 triangle that far out)".
+
+    The middle is the median of the vertices; "far out" is at least half the
+    farthest distance from it, or a thousand times the median distance where
+    that is less (so one stray vertex among thousands is found, and a scene
+    that is simply large names its farthest part).  The first such triangle is
+    named, by its index in the object (the file's triangle order: vertex
+    indices are renumbered by the crease split).  A pass over the vertices,
+    made only on the way to an error."""
+    meshes = [o.mesh for o in scene.objects]
+    total = sum(len(m.vertices) for m in meshes)
+    step = max(1, total // _SAMPLE)
+    sample = np.concatenate([m.vertices[::step] for m in meshes]).astype(np.float64)
+    middle = np.median(sample, axis=0)
+    typical = float(np.median(np.linalg.norm(sample - middle, axis=1)))
+    reach = [np.linalg.norm(m.vertices.astype(np.float64) - middle, axis=1) for m in meshes]
+    farthest = max(float(r.max(initial=0.0)) for r in reach)
+    far = farthest / 2 if typical == 0.0 else min(1000.0 * typical, farthest / 2)
+    first, count = None, 0
+    for k, (mesh, r) in enumerate(zip(meshes, reach)):
+        out = (r[mesh.faces] >= far).any(axis=1) if farthest > 0.0 else np.zeros(len(mesh.faces), bool)
+        count += int(out.sum())
+        if first is None and out.any():
+            f = int(np.argmax(out))
+            corner = mesh.faces[f][int(np.argmax(r[mesh.faces[f]]))]
+            first = k, f, mesh.vertices[corner].astype(np.float64), float(r[corner])
+    if first is None:
+        return scene.source or "the scene"
+    k, f, point, distance = first
+    name = meshes[k].name
+    where = f"{scene.source}: " if scene.source else ""
+    text = lambda x: f"{x:.3g}".replace("e+", "e")   # noqa: E731
+    return (f"{where}object {name!r}" if name else f"{where}object {k}") + (
+            f", triangle {f} has a vertex at "
+            f"({', '.join(map(text, point))}), {text(distance)} from the middle of the scene "
+            f"({count:,} triangle{'s' if count != 1 else ''} that far out)")
 
 
 def default_light(bounds, camera: Camera) -> Light:
@@ -356,7 +402,7 @@ def scene_from_mesh(mesh, material=None, lights=None, background=config.DEFAULT_
     else framed from the bounds (``scene.camera_framed``).
     """
     import os
-    view, file_materials = None, ()
+    view, file_materials, path = None, (), None
     if isinstance(mesh, (str, os.PathLike)):
         from clrt.scene.load import file_camera, load_asset
         path = mesh
@@ -372,6 +418,8 @@ def scene_from_mesh(mesh, material=None, lights=None, background=config.DEFAULT_
         except InputError:   # too large to frame: no camera, so that a camera the caller places still works
             scene.camera, scene.camera_framed = None, True
     scene.default_lights = not scene.lights
+    if path is not None:
+        scene.source = os.fsdecode(path)
     if scene.default_lights and scene.camera is not None:
         scene.lights = [default_light(scene.bounds, scene.camera)]
     return scene

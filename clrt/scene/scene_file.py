@@ -29,7 +29,7 @@ from clrt import checks, config
 from clrt.errors import InputError, MeshLoadError
 from clrt.scene import primitives
 from clrt.scene.load import load_asset
-from clrt.scene.mesh import Mesh
+from clrt.scene.mesh import Mesh, vertex_text
 from clrt.scene.scene import Camera, Light, Material, Scene, SceneObject, default_light, unknown_name
 
 __all__ = ["load_scene", "transform_matrix", "OBJECT_TYPES"]
@@ -382,9 +382,11 @@ class _Loader:
             shown = f"{largest:.3g}"
             if not float(shown) > config.MAX_COORDINATE:
                 shown = f"{largest:.9g}"
+            bad = ~(np.abs(v) <= config.MAX_COORDINATE).all(axis=1)   # NaN too
             raise self.doc.error(path, f"vertex coordinates must lie within +-{checks.show(config.MAX_COORDINATE)} "
                                  f"after its transform (the device computes in float32), got up to "
-                                 f"{shown}".replace("e+", "e"), MeshLoadError)
+                                 f"{shown} (the first beyond: {vertex_text(v, int(np.argmax(bad)))})".replace(
+                                     "e+", "e"), MeshLoadError)
         try:
             return mesh.transformed(matrix)
         except MeshLoadError as exc:
@@ -416,7 +418,7 @@ class _Loader:
             lights.append(Light(light["position"], color))
 
         scene = Scene(objects, lights, background=render["background"], ambient_light=render["ambient_light"],
-                      max_depth=render["max_depth"], samples=render["samples"])
+                      max_depth=render["max_depth"], samples=render["samples"], source=os.fsdecode(self.path))
         scene.camera = self.camera(data.get("camera", {}), scene)
         scene.camera_framed = "eye" not in data.get("camera", {})
         if "lights" not in data:   # as for a single mesh: one light above the eye
