@@ -174,13 +174,17 @@ def _warnings_as_lines():
     texture) shown every time, once the block is done: as one line each on
     stderr, ``clrt: warning: ...`` (main's _warning_line); other warnings as
     Python shows them."""
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always", ClrtWarning)
-        try:
-            yield
-        finally:
-            for w in caught:
-                warnings.showwarning(w.message, w.category, w.filename, w.lineno)
+    caught = []
+    try:
+        with warnings.catch_warnings(record=True) as recorded:
+            warnings.simplefilter("always", ClrtWarning)
+            try:
+                yield
+            finally:
+                caught = list(recorded)
+    finally:   # shown once the recording is over (shown inside, they would be recorded again)
+        for w in caught:
+            warnings.showwarning(w.message, w.category, w.filename, w.lineno)
 
 
 class _LazyProgress:
