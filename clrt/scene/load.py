@@ -131,18 +131,25 @@ def file_camera(path) -> dict | None:
 
 def as_mesh(source) -> Mesh:
     """A Mesh from a Mesh, a mesh file path (str or os.PathLike), a trimesh.Trimesh
-    (anything with ``vertices`` and ``faces``) or ``(vertices, faces)``; InputError
-    for anything else, MeshLoadError for a bad file or bad arrays."""
+    (anything with ``vertices`` and ``faces``), a trimesh.Scene (every geometry
+    placed by its node) or ``(vertices, faces)``; InputError for anything else,
+    MeshLoadError for a bad file or bad arrays."""
+    return as_asset(source)[0]
+
+
+def as_asset(source) -> "tuple[Mesh, list[dict]]":
+    """:func:`as_mesh`'s mesh and the materials its source gives its faces, as
+    dicts of :class:`clrt.Material` fields (``mesh.face_material`` indexes
+    them): a file's (:func:`load_asset`) or a trimesh object's (its
+    TextureVisuals' materials, mapped as the file readers map the same:
+    :mod:`clrt.scene.formats.trimesh_objects`); [] for the others."""
     if isinstance(source, Mesh):
-        return source
+        return source, []
     if isinstance(source, (str, os.PathLike)):
-        return load_mesh(source)
-    if hasattr(source, "vertices") and hasattr(source, "faces"):
-        return trimesh_objects.mesh_of(source)
+        return load_asset(source)
+    if hasattr(source, "vertices") and hasattr(source, "faces") or trimesh_objects.is_trimesh_scene(source):
+        return trimesh_objects.asset_of(source)
     if isinstance(source, (tuple, list)) and len(source) == 2:
-        return Mesh.from_arrays(*source)
-    if type(source).__name__ == "Scene" and hasattr(source, "dump"):   # trimesh.load("x.glb") gives one
-        raise InputError("expected a mesh, got a trimesh.Scene: pass the file's path instead (clrt reads its "
-                         "nodes and materials), or scene.dump(concatenate=True)")
+        return Mesh.from_arrays(*source), []
     raise InputError(f"expected a mesh (a clrt.Mesh, a file path, a trimesh object or (vertices, faces)), "
                      f"got {type(source).__name__}")

@@ -393,21 +393,22 @@ def _within_limit(point: np.ndarray, what: str, remedy: str) -> None:
 def scene_from_mesh(mesh, material=None, lights=None, background=config.DEFAULT_BACKGROUND) -> Scene:
     """The paper's scene: one mesh, one material, point lights (default: one above the eye).
 
-    ``mesh``: a Mesh, a mesh file path, a trimesh object or ``(vertices, faces)``;
-    ``material``: a :class:`Material` or a dict of its fields -- given, it is
-    every face's material; else a file's own materials apply (faces without
-    one get the defaults).  ``lights``: a list of :class:`Light` or of
+    ``mesh``: a Mesh, a mesh file path, a trimesh object (Trimesh or Scene) or
+    ``(vertices, faces)``; ``material``: a :class:`Material` or a dict of its
+    fields -- given, it is every face's material; else a file's own materials
+    apply, or a trimesh object's, mapped as the file readers map them
+    (faces without one get the defaults).  ``lights``: a list of :class:`Light` or of
     positions ``(x, y, z)``.  Bad values raise InputError here.
     The camera is the file's own where a glTF/GLB file has a camera node,
     else framed from the bounds (``scene.camera_framed``).
     """
     import os
-    view, file_materials, path = None, (), None
-    if isinstance(mesh, (str, os.PathLike)):
-        from clrt.scene.load import file_camera, load_asset
-        path = mesh
-        mesh, file_materials = load_asset(path)   # first: a broken file's error is the mesh reader's
-        view = file_camera(path)
+    from clrt.scene.load import as_asset, file_camera
+    view, source, path = None, mesh, None
+    mesh, file_materials = as_asset(source)   # first: a broken file's error is the mesh reader's
+    if isinstance(source, (str, os.PathLike)):
+        path = source
+        view = file_camera(source)
     scene = Scene([SceneObject(mesh, Material.of(material), file_materials if material is None else ())],
                   [] if lights is None else lights, background)
     if view is not None:

@@ -27,7 +27,8 @@ def as_mesh(source) -> Mesh:
 def as_scene(source) -> Scene:
     """A Scene from a Scene, a TOML scene file (``.toml``), or anything
     :func:`~clrt.scene.scene.scene_from_mesh` takes (a Mesh, a mesh file path --
-    a glTF camera node becomes the scene's camera --, a trimesh object,
+    a glTF camera node becomes the scene's camera --, a trimesh Trimesh or
+    Scene -- with its materials and textures, as its file by path --,
     (vertices, faces)) with the default framing and light; InputError otherwise."""
     if isinstance(source, Scene):
         return source

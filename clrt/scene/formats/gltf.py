@@ -37,7 +37,7 @@ import numpy as np
 
 from clrt.config import DEFAULT_DIFFUSE, MATERIAL_RANGES
 from clrt.errors import InputError, MeshLoadError
-from clrt.scene.formats.part import Part, build, fail, read_bytes, short
+from clrt.scene.formats.part import Part, build, fail, fill_normals, placed, read_bytes, short
 from clrt.scene.mesh import Mesh
 from clrt.scene.texture import Texture
 
@@ -376,14 +376,8 @@ def _gltf_parts(data: bytes, file_type: str, path: str) -> list[Part]:
                     if key not in cache:
                         cache[key] = gltf.primitive(node["mesh"], k, primitive)
                     if cache[key] is not None and len(cache[key].faces):
-                        parts.append(_gltf_placed(cache[key], world, materials))
-            if any(p.normals is not None for p in parts):
-                for part in parts:
-                    if part.normals is None:
-                        try:
-                            part.normals = Mesh.from_arrays(part.vertices, part.faces).vertex_normals()
-                        except MeshLoadError:
-                            pass   # build reports it, naming the file
+                        parts.append(replace(placed(cache[key], world), materials=materials))
+            fill_normals(parts)
     except MeshLoadError:
         raise
     except _GltfError as exc:
@@ -395,50 +389,44 @@ def _gltf_parts(data: bytes, file_type: str, path: str) -> list[Part]:
     return parts
 
 
-def _gltf_placed(part: Part, world: np.ndarray, materials: list) -> Part:
-    """A primitive's part in world space (see :func:`_gltf_parts`)."""
-    placed = replace(part, materials=materials)
-    m = world[:3, :3]
-    if not np.array_equal(world, np.eye(4)):
-        placed.vertices = part.vertices @ m.T + world[:3, 3]
-        if part.normals is not None:
-            det = np.linalg.det(m)
-            placed.normals = part.normals @ (np.linalg.inv(m) if det != 0 else np.linalg.pinv(m))
-    if np.linalg.det(m) < 0:
-        placed.faces = part.faces[:, [0, 2, 1]]
-        if part.uv is not None:
-            placed.uv = part.uv[:, [0, 2, 1]]
-    return placed
+def whitted_from_pbr(pbr: dict, extensions: dict | None = None) -> dict:
+    """Material fields (clrt.Material) of a glTF material's
+    ``pbrMetallicRoughness`` values and ``extensions`` (the table in
+    docs/scene-files.md), its texture aside: base colour (``baseColorFactor``,
+    its alpha unused), metallic/roughness to diffuse, specular, shininess and
+    reflectivity, KHR_materials_transmission and KHR_materials_ior to
+    transparency and ior.  A key left out has glTF's default.  Also how a
+    trimesh PBRMaterial is mapped (:mod:`clrt.scene.formats.trimesh_objects`)."""
+    extensions = extensions or {}
+    base = [float(c) for c in pbr.get("baseColorFactor", [1.0] * 4)][:3]
+    metallic = min(max(float(pbr.get("metallicFactor", 1.0)), 0.0), 1.0)
+    roughness = min(max(float(pbr.get("roughnessFactor", 1.0)), 0.0), 1.0)
+    reflectivity = metallic * (1.0 - roughness)
+    fields = {"color": tuple(min(max(c, 0.0), 1.0) for c in base),
+              "diffuse": DEFAULT_DIFFUSE * (1.0 - reflectivity),
+              "specular": 1.0 - roughness,
+              # the highlight's width: Blinn-Phong's exponent 2 / alpha^2 - 2 (alpha = roughness^2),
+              # divided by 4 for the Phong (R.V)^n lobe the shader uses, whose angle to the
+              # mirror direction is about twice the half-vector's angle to the normal
+              "shininess": min(max((2.0 / max(roughness ** 4, 1e-6) - 2.0) / 4.0, 1.0), 1000.0),
+              "reflectivity": reflectivity}
+    transmission = extensions.get("KHR_materials_transmission", {}).get("transmissionFactor", 0.0)
+    if transmission:
+        fields["transparency"] = min(max(float(transmission), 0.0), 1.0)
+    if "KHR_materials_ior" in extensions:
+        fields["ior"] = min(max(float(extensions["KHR_materials_ior"].get("ior", 1.5)), 1.0),
+                            MATERIAL_RANGES["ior"][1])
+    return fields
 
 
 def _gltf_materials(gltf: "_GltfFile") -> list:
-    """Material fields of each glTF material (the table in docs/scene-files.md):
-    base colour (factor and texture, with the sampler's wrap modes),
-    metallic/roughness to specular, shininess and reflectivity,
-    KHR_materials_transmission and KHR_materials_ior to transparency and ior."""
+    """Material fields of each glTF material: :func:`whitted_from_pbr`, and the
+    base colour texture with its sampler's wrap modes."""
     doc, path = gltf.doc, gltf.path
     textures, out = {}, []
     for i, m in enumerate(doc.get("materials", [])):
         pbr = m.get("pbrMetallicRoughness", {})
-        extensions = m.get("extensions", {})
-        base = [float(c) for c in pbr.get("baseColorFactor", [1.0] * 4)][:3]
-        metallic = min(max(float(pbr.get("metallicFactor", 1.0)), 0.0), 1.0)
-        roughness = min(max(float(pbr.get("roughnessFactor", 1.0)), 0.0), 1.0)
-        reflectivity = metallic * (1.0 - roughness)
-        fields = {"color": tuple(min(max(c, 0.0), 1.0) for c in base),
-                  "diffuse": DEFAULT_DIFFUSE * (1.0 - reflectivity),
-                  "specular": 1.0 - roughness,
-                  # the highlight's width: Blinn-Phong's exponent 2 / alpha^2 - 2 (alpha = roughness^2),
-                  # divided by 4 for the Phong (R.V)^n lobe the shader uses, whose angle to the
-                  # mirror direction is about twice the half-vector's angle to the normal
-                  "shininess": min(max((2.0 / max(roughness ** 4, 1e-6) - 2.0) / 4.0, 1.0), 1000.0),
-                  "reflectivity": reflectivity}
-        transmission = extensions.get("KHR_materials_transmission", {}).get("transmissionFactor", 0.0)
-        if transmission:
-            fields["transparency"] = min(max(float(transmission), 0.0), 1.0)
-        if "KHR_materials_ior" in extensions:
-            fields["ior"] = min(max(float(extensions["KHR_materials_ior"].get("ior", 1.5)), 1.0),
-                                MATERIAL_RANGES["ior"][1])
+        fields = whitted_from_pbr(pbr, m.get("extensions", {}))
         info = pbr.get("baseColorTexture")
         if isinstance(info, dict):
             texture = gltf.item("textures", info.get("index"), f"materials[{i}] baseColorTexture")

@@ -194,7 +194,7 @@ def _parse_mtl(path: str, label: str) -> dict:
                 current[key] = float(args[0])
         except ValueError:
             raise fail(label, f"{os.path.basename(path)}: malformed {key} line") from None
-    return {name: _mtl_material(m, f"{os.path.basename(path)}: material {name!r}", label)
+    return {name: mtl_material(m, f"{os.path.basename(path)}: material {name!r}", label)
             for name, m in materials.items()}
 
 
@@ -203,10 +203,15 @@ _MTL_KEYS = {"color": "Kd", "specular": "Ks", "reflectivity": "Ks", "shininess":
              "ior": "Ni", "texture": "map_Kd"}
 
 
-def _mtl_material(m: dict, where: str, label: str) -> dict:
+def mtl_material(m: dict, where: str, label: str) -> dict:
     """:func:`_whitted_from_mtl`, its values checked: a bad one is an error naming
     the mesh file, the MTL file, the material and the statement, with the values
-    as the file has them (not as clamped into range)."""
+    as the file has them (not as clamped into range).
+
+    ``m``: an MTL material's statements, ``{"Kd": [r, g, b], "Ks": [...], "Ns":
+    float, "d", "Tr", "Ni", "illum": float, "texture": Texture}``, each
+    optional; a trimesh SimpleMaterial is mapped through here too
+    (:mod:`clrt.scene.formats.trimesh_objects`)."""
     from clrt import checks, config
     for key, value in m.items():
         values = value if isinstance(value, list) else [value] if isinstance(value, float) else []

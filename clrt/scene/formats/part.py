@@ -88,6 +88,39 @@ def build(parts: "list[Part]", label: str, name: str) -> "tuple[Mesh, list]":
     return replace(mesh, name=name), parts[0].materials
 
 
+def placed(part: Part, world: np.ndarray) -> Part:
+    """A part moved into world space by a node's 4x4 ``world`` transform, as a
+    glTF node places its mesh: normals by the inverse transpose, and a
+    transform that mirrors (negative determinant) swaps the triangles' corners
+    1 and 2 (and their texture coordinates), so that faces still face out, as
+    the glTF specification says."""
+    out = replace(part)
+    m = world[:3, :3]
+    if not np.array_equal(world, np.eye(4)):
+        out.vertices = part.vertices @ m.T + world[:3, 3]
+        if part.normals is not None:
+            det = np.linalg.det(m)
+            out.normals = part.normals @ (np.linalg.inv(m) if det != 0 else np.linalg.pinv(m))
+    if np.linalg.det(m) < 0:
+        out.faces = part.faces[:, [0, 2, 1]]
+        if part.uv is not None:
+            out.uv = part.uv[:, [0, 2, 1]]
+    return out
+
+
+def fill_normals(parts: "list[Part]") -> None:
+    """Give the parts without normals their smooth (area-weighted) ones when
+    another part has authored normals, which are kept (Mesh.concatenate keeps
+    normals only when every mesh has them)."""
+    if any(p.normals is not None for p in parts):
+        for part in parts:
+            if part.normals is None:
+                try:
+                    part.normals = Mesh.from_arrays(part.vertices, part.faces).vertex_normals()
+                except MeshLoadError:
+                    pass   # build reports it, naming the file
+
+
 # ---------------------------------------------------------------------------
 # Reading files
 
