@@ -308,8 +308,9 @@ def by_stage(values: dict, *stages: str) -> dict:
 
 def _unknown(name, owner: str) -> str:
     other = OPTIONS.get(name) or next((o for o in OPTIONS.values() if name in (o.flag, o.dest, o.short)), None)
-    if other is not None and other.api is not None:
-        return f"{owner} does not take {other.name} ({other.flag}): {other.api}"
+    if other is not None and other.api is not None:   # (the reason is clrt.render's: it returns the image)
+        reason = f": {other.api}" if owner == "render" else ""
+        return f"{owner} does not take {other.name} ({other.flag}){reason}"
     if other is not None:
         return f"unknown option {name!r} of {owner} (did you mean {other.name!r}?)"
     close = difflib.get_close_matches(str(name), list(API_OPTIONS), n=1)

@@ -178,3 +178,18 @@ def test_render_takes_every_option_at_once_and_a_light_with_its_colour(tmp_path,
     dim = clrt.render(mesh, lights=[clrt.Light((2, 4, 3), color=(0.3, 0.3, 0.3))], **kwargs)
     assert white.shape == (12, 16, 3) and white[..., 0].astype(int).sum() > dim[..., 0].astype(int).sum()
     assert (white[..., 1] <= white[..., 0]).all(), "red"
+
+
+@pytest.mark.parametrize("name", [name for name, case in CASES.items() if case[1] is not None and name != "device"])
+def test_the_batch_api_refuses_a_bad_value_as_render_does(name, tmp_path):
+    """clrt.batch.render checks its options by the same table, before any
+    worker starts: the same message as clrt.render for the same bad value,
+    nothing written."""
+    import clrt.batch as batch
+    value = CASES[name][1][1]
+    with pytest.raises(clrt.InputError) as rendered:
+        clrt.render(None, **{"width": 8, "height": 6, name: value})
+    with pytest.raises(clrt.InputError) as batched:
+        batch.render([str(tmp_path / "none.obj")], tmp_path / "out", **{name: value})
+    assert str(batched.value) == str(rendered.value)
+    assert not (tmp_path / "out").exists()

@@ -32,9 +32,10 @@ from clrt.batch.jobs import Source, expand_sources, output_path, plan_tasks, set
 from clrt.batch.manifest import FolderLock, Manifest
 from clrt.config import (BATCH_CACHE_SCENES, BATCH_FORMAT, BATCH_HANG_RETRIES, BATCH_KILLED_RESUBMITS,
                          BATCH_LOST_RESUBMITS, BATCH_TASK_RETRIES, DEFAULT_ACCEL, DEFAULT_BUILDER,
-                         DEFAULT_LEAF_SIZE, MAX_IMAGE_SIDE, MAX_VIEWS, MAX_WORKERS)
+                         DEFAULT_LEAF_SIZE, MAX_VIEWS, MAX_WORKERS)
 from clrt.errors import InputError, OutputError
-from clrt.scene.render_setup import CAMERA_OPTIONS, MATERIAL_OPTIONS, SCENE_OPTIONS
+from clrt.options import check_api
+from clrt.scene.render_setup import CAMERA_OPTIONS, SCENE_OPTIONS
 
 #: Status of an output: rendered now ("done"), before ("skipped": also an image a
 #: retried task found written by its first attempt), or why not.
@@ -219,28 +220,16 @@ def _local_workers(asked: int | None, device, log, make_jobs) -> tuple[int, list
 
 def _check_options(views, accel, builder, leaf_size, lights, options) -> dict:
     """Every option checked before any worker starts; the settings that decide an image."""
-    from clrt.scene.scene import Light, Material
     checks.integer("views", views, 1, MAX_VIEWS)
     checks.accel_options(accel, builder, leaf_size)
+    # Checked here once, by clrt render's option table (clrt.options: the same
+    # rules and messages as the command line and clrt.render, a misspelt name's
+    # hint included), rather than failing every source the same way on the workers.
+    check_api({**options, "accel": accel, "builder": builder, "leaf_size": leaf_size, "lights": lights},
+              "batch render")
     unknown = set(options) - set(SCENE_OPTIONS) - set(CAMERA_OPTIONS)
-    if unknown:
-        raise InputError(f"unknown render option(s): {', '.join(sorted(unknown))}")
-    # Checked here once, by the rules of clrt render (clrt.checks), rather than
-    # failing every source the same way on the workers.
-    Material().with_overrides(**{k: options[k] for k in MATERIAL_OPTIONS if options.get(k) is not None})
-    for p in lights or ():
-        Light(p)
-    for name, check in (("samples", checks.samples), ("max_depth", checks.max_depth), ("fov", checks.fov)):
-        if options.get(name) is not None:
-            check(options[name], name)
-    for name in ("width", "height"):
-        if options.get(name) is not None:
-            checks.integer(name, options[name], 1, MAX_IMAGE_SIDE)
-    for name in ("eye", "target", "up"):
-        if options.get(name) is not None:
-            checks.position(name, options[name])
-    if options.get("background") is not None:
-        checks.intensity("background", options["background"])
+    if unknown:   # options of clrt render that a batch's frames do not take
+        raise InputError(f"batch render does not take {', '.join(sorted(unknown))}")
     scene = {k: _plain(options.get(k)) for k in SCENE_OPTIONS}
     scene["flat"] = bool(scene["flat"])
     camera = {k: _plain(options.get(k)) for k in CAMERA_OPTIONS}
