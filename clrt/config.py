@@ -194,12 +194,25 @@ BATCH_NO_WORKER_TIMEOUT = 60.0
 #: rendered so far x its views, and at least BATCH_HANG_FLOOR seconds (which
 #: also covers a worker's set-up of a new source: load, BVH build, upload,
 #: program builds; 0.7-2.2 s a source on an H200 worker, docs/distributed.md).
-#: Before any frame has finished there is nothing to compare with, and no
-#: limit.  A hung task is cancelled, its worker restarted, and the task
-#: submitted again, at most BATCH_HANG_RETRIES times; hanging once more, its
-#: frames are "device" (exit 3) with one line naming it (clrt.batch.watch).
+#: Before any frame has finished there is nothing to compare with: a task then
+#: hangs once it has run longer than BATCH_FIRST_TASK_SETUP seconds plus
+#: BATCH_FIRST_TASK_RAY_SECONDS per camera ray of its views (width x height x
+#: samples^2 each: the batch's options, else the scene file's, else the
+#: defaults).  Measured on the 2-core development machine with PoCL (the
+#: slowest device clrt runs on): loading and building the BVH of a 75k-triangle
+#: mesh took 0.68 s, some 9 us a triangle, so 600 s of set-up is room for some
+#: 60 M triangles; a 1080p frame of the glass showcase scene, 2x2 samples, took
+#: 5.8 s, 0.7 us a camera ray with its bounces and the PNG, so 10 us is 15
+#: times that (a task of 8 views at 640x480: 625 s; 8 at 1080p: 766 s).  A
+#: legitimately slower first task is given more with --task-timeout, which
+#: also caps the median's limit (task_timeout= in Python).  A hung task is
+#: cancelled, its worker restarted, and the task submitted again, at most
+#: BATCH_HANG_RETRIES times; hanging once more, its frames are "device" (exit
+#: 3) with one line naming it (clrt.batch.watch).
 BATCH_HANG_FACTOR = 10.0
 BATCH_HANG_FLOOR = 120.0
+BATCH_FIRST_TASK_SETUP = 600.0
+BATCH_FIRST_TASK_RAY_SECONDS = 1e-5
 BATCH_HANG_RETRIES = 1
 #: Seconds to wait for an existing Dask scheduler (--scheduler).
 BATCH_CONNECT_TIMEOUT = 10.0

@@ -14,7 +14,9 @@ import argparse
 import sys
 
 from clrt import options, output
-from clrt.config import BATCH_FORMAT, DEVICE_ENV, MAX_VIEWS, MAX_WORKERS
+from clrt.config import (BATCH_FIRST_TASK_RAY_SECONDS, BATCH_FIRST_TASK_SETUP, BATCH_FORMAT, BATCH_HANG_FACTOR,
+                         BATCH_HANG_FLOOR, BATCH_HANG_RETRIES, BATCH_VIEWS_PER_TASK, DEVICE_ENV, MAX_VIEWS,
+                         MAX_WORKERS)
 from clrt.errors import DeviceError, InputError, OutputError
 
 #: Options of ``clrt render`` that ``clrt batch render`` does not take, and why.
@@ -55,6 +57,12 @@ def parser() -> argparse.ArgumentParser:
     r.add_argument("--device", type=options.device,
                    help=f"'gpu', 'cpu' or P:D; 'gpu' gives worker i the i-th GPU (default: the "
                                     f"worker's {DEVICE_ENV}, else GPUs, else the CPU)")
+    r.add_argument("--task-timeout", type=options.number("--task-timeout", gt=0), metavar="SECONDS",
+                   help=f"a task (up to {BATCH_VIEWS_PER_TASK} views of a source) running longer is taken as hung: "
+                        f"cancelled, its worker restarted, and retried at most {BATCH_HANG_RETRIES} time(s) (default: "
+                        f"{BATCH_HANG_FACTOR:g} x the median frame time per view, at least {BATCH_HANG_FLOOR:g} s; "
+                        f"before any frame has finished, {BATCH_FIRST_TASK_SETUP:g} s plus "
+                        f"{BATCH_FIRST_TASK_RAY_SECONDS * 1e6:g} us per camera ray of its views; this caps both)")
     r.add_argument("-f", "--force", action="store_true",
                    help="replace images and the manifest in DIR even if clrt did not write them")
     # The options of clrt render, with the same meaning.
@@ -97,7 +105,7 @@ def _run(args):
         return run(args.sources, args.output, args.views, client=client, workers=args.workers,
                    device=args.device, accel=args.accel, builder=args.builder, leaf_size=args.leaf_size,
                    lights=args.light, force=args.force, progress=not args.quiet, log=log, format=args.format,
-                   bit_depth=args.bit_depth, **render_options)
+                   bit_depth=args.bit_depth, task_timeout=args.task_timeout, **render_options)
     except KeyboardInterrupt:
         print("clrt: interrupted; finished images are kept: run the same command again to resume",
               file=sys.stderr)

@@ -11,7 +11,7 @@ manifest (clrt.batch.manifest), with the record of its SHA-256 beside it
 longer exactly what clrt wrote, or made with other settings, so a batch
 stopped by Ctrl-C, a crash or a lost worker is finished by running it again; a
 task whose worker dies is retried on another by Dask, one that hangs is
-cancelled and retried (clrt.batch.watch).
+cancelled and retried, before any frame has finished too (clrt.batch.watch).
 """
 
 from __future__ import annotations
@@ -28,7 +28,7 @@ from clrt import checks
 from clrt.batch import watch
 from clrt.batch.cluster import (cpu_cores, dashboard_link, default_workers, keep_lost_workers, require_dask,
                                 start_local_cluster)
-from clrt.batch.jobs import Source, expand_sources, output_path, plan_tasks, settings_key
+from clrt.batch.jobs import Source, camera_rays, expand_sources, output_path, plan_tasks, settings_key
 from clrt.batch.manifest import FolderLock, Manifest
 from clrt.config import (BATCH_CACHE_SCENES, BATCH_FORMAT, BATCH_HANG_RETRIES, BATCH_KILLED_RESUBMITS,
                          BATCH_LOST_RESUBMITS, BATCH_TASK_RETRIES, DEFAULT_ACCEL, DEFAULT_BUILDER,
@@ -130,7 +130,8 @@ class Summary:
 def render(sources, out_dir, views: int = 1, *, client=None, workers: int | None = None,
            device: str | None = None, accel: str = DEFAULT_ACCEL, builder: str = DEFAULT_BUILDER,
            leaf_size: int = DEFAULT_LEAF_SIZE, lights=None, force: bool = False, progress: bool = False,
-           log=None, format: str = BATCH_FORMAT, bit_depth: int | None = None, **options) -> list[Output]:
+           log=None, format: str = BATCH_FORMAT, bit_depth: int | None = None, task_timeout: float | None = None,
+           **options) -> list[Output]:
     """Render ``views`` turntable views of every source into ``out_dir``.
 
     ``sources``: mesh and scene files, folders, glob patterns (one job per file).
@@ -143,22 +144,30 @@ def render(sources, out_dir, views: int = 1, *, client=None, workers: int | None
     lines (the dashboard link).  ``format``: the frames' format, an image
     suffix without its dot (png, exr, tif, ...: clrt.output.FORMAT_NAMES);
     ``bit_depth``: 8 or 16 (16-bit PNG), None for the format's own (8-bit;
-    linear float32 for exr).  Returns one :class:`Output` per image and per
-    bad source; :func:`run` also returns the summary.
+    linear float32 for exr).  ``task_timeout``: seconds a task (up to
+    BATCH_VIEWS_PER_TASK views of a source) may run before it counts as hung
+    and is cancelled and retried; default: a bound from the task's views and
+    image size until a frame has finished, then 10 x the median frame time
+    (clrt.batch.watch.HangWatch), which ``task_timeout`` also caps.  Returns
+    one :class:`Output` per image and per bad source; :func:`run` also returns
+    the summary.
     """
     return run(sources, out_dir, views, client=client, workers=workers, device=device, accel=accel,
                builder=builder, leaf_size=leaf_size, lights=lights, force=force, progress=progress,
-               log=log, format=format, bit_depth=bit_depth, **options).outputs
+               log=log, format=format, bit_depth=bit_depth, task_timeout=task_timeout, **options).outputs
 
 
 def run(sources, out_dir, views: int = 1, *, client=None, workers: int | None = None, device=None,
         accel=DEFAULT_ACCEL, builder=DEFAULT_BUILDER, leaf_size=DEFAULT_LEAF_SIZE, lights=None,
-        force=False, progress=False, log=None, format=BATCH_FORMAT, bit_depth=None, **options) -> Summary:
+        force=False, progress=False, log=None, format=BATCH_FORMAT, bit_depth=None, task_timeout=None,
+        **options) -> Summary:
     """:func:`render`, returning the :class:`Summary` (outputs, time, per-worker counts)."""
     settings = _check_options(views, accel, builder, leaf_size, lights, options)
     suffix = _frame_format(format, bit_depth, settings)
     if workers is not None:
         checks.integer("workers", workers, 1, MAX_WORKERS)
+    if task_timeout is not None:
+        task_timeout = checks.number("task_timeout", task_timeout, gt=0)
     if isinstance(sources, (str, Path)):
         sources = [sources]
     found = expand_sources(sources)
@@ -192,7 +201,7 @@ def run(sources, out_dir, views: int = 1, *, client=None, workers: int | None = 
                     log(f"dashboard: {link}")
                 sent = time.perf_counter()
                 outputs += _execute(client, jobs, folder, manifest, device, progress, local=cluster is not None,
-                                    redone=redone)
+                                    redone=redone, task_timeout=task_timeout)
                 render_seconds = time.perf_counter() - sent
             finally:
                 manifest.write()
@@ -362,6 +371,7 @@ class _Task:
 
     job: dict
     files: dict
+    rays: int = 0           # camera rays of one of its views, as known before rendering (jobs.camera_rays)
     lost: int = 0
     killed: int = 0
     deaths: int = 0         # of the workers it was sent to, in all its submissions
@@ -371,7 +381,7 @@ class _Task:
 
 
 def _execute(client, jobs: list, folder: Path, manifest: Manifest, device, progress: bool,
-             local: bool = False, redone: dict | None = None) -> list[Output]:
+             local: bool = False, redone: dict | None = None, task_timeout: float | None = None) -> list[Output]:
     """Run the jobs, record each finished one; Ctrl-C cancels what is left.
 
     A worker's death: Dask's scheduler charges it to every task it had sent to
@@ -385,9 +395,11 @@ def _execute(client, jobs: list, folder: Path, manifest: Manifest, device, progr
     then it is submitted again as a new task (BATCH_KILLED_RESUBMITS times at
     most, which bounds the deaths it waits through).
 
-    A task that runs far past the others (clrt.batch.watch.HangWatch) is
-    cancelled, its worker restarted, and it is submitted again, at most
-    BATCH_HANG_RETRIES times; then its frames are "device"."""
+    A task that runs far past the others, or before any frame has finished
+    past a bound from its views and image size, or past ``task_timeout``
+    (clrt.batch.watch.HangWatch), is cancelled, its worker restarted, and it
+    is submitted again, at most BATCH_HANG_RETRIES times; then its frames are
+    "device"."""
     from distributed import as_completed
 
     from clrt.batch.worker import DevicePlugin, render_task
@@ -403,7 +415,8 @@ def _execute(client, jobs: list, folder: Path, manifest: Manifest, device, progr
     logs = watch.run_logs(folder)
     futures, keys = {}, {}
     handled = set()   # futures whose end was dealt with (a task submitted again has several)
-    hangs = watch.HangWatch(logs, lambda: {f.key: len(t.job["views"]) for f, t in futures.items() if f not in handled})
+    hangs = watch.HangWatch(logs, lambda: {f.key: (len(t.job["views"]), t.rays) for f, t in futures.items()
+                                           if f not in handled}, task_timeout)
 
     def submit(task: _Task):
         job = task.job
@@ -416,7 +429,8 @@ def _execute(client, jobs: list, folder: Path, manifest: Manifest, device, progr
 
     # Each job's images as they are before any task runs (see _remove_unrecorded)
     for job in jobs:
-        submit(_Task(job, {v: _file_id(folder / job["paths"][v]) for v in job["views"]}))
+        submit(_Task(job, {v: _file_id(folder / job["paths"][v]) for v in job["views"]},
+                     camera_rays(job["source"], job["scene"], job["camera"])))
     total = sum(len(job["views"]) for job in jobs)
     bar = _progress_bar(total, progress)
     outputs = []
@@ -540,8 +554,7 @@ def _hung_records(task: _Task, hung) -> list[dict]:
     views = job["views"]
     which = f"view {views[0]}" if len(views) == 1 else f"views {views[0]}-{views[-1]}"
     error = (f"{job['source']}: hung: the task of {which} ran past {hung.limit:.1f} s {task.hung} times "
-             f"({watch.BATCH_HANG_FACTOR:g} x the median frame time per view, at least {watch.BATCH_HANG_FLOOR:g} "
-             "s); its worker was restarted each time")
+             f"({hung.rule}); its worker was restarted each time")
     return [{"path": job["paths"][v], "source": job["source"], "view": v, "views": job["count"],
              "status": "device", "key": job["key"], "error": error, "worker": hung.worker} for v in views]
 

@@ -9,10 +9,11 @@ import glob
 import hashlib
 import json
 import os
+import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from clrt.config import BATCH_FORMAT, BATCH_VIEWS_PER_TASK
+from clrt.config import BATCH_FORMAT, BATCH_VIEWS_PER_TASK, DEFAULT_HEIGHT, DEFAULT_SAMPLES, DEFAULT_WIDTH
 from clrt.output import WRITERS
 from clrt.scene.load import SCENE_EXTENSION, SUPPORTED_EXTENSIONS
 
@@ -101,6 +102,30 @@ def settings_key(source: str, settings: dict) -> str:
         stamp = None
     text = json.dumps([stamp, settings], sort_keys=True, default=str)
     return hashlib.sha1(text.encode()).hexdigest()[:16]
+
+
+def camera_rays(source: str, scene: dict, camera: dict) -> int:
+    """Camera rays of one view, width x height x samples^2, as far as they are
+    known before rendering: the batch's options, else a scene file's [camera]
+    and [render] values (its TOML alone is read, not its meshes), else the
+    defaults.  It sizes a task's hang limit before any frame has finished
+    (clrt.batch.watch.HangWatch); a file that cannot be read counts as the
+    defaults (its task reports why)."""
+    own = {}
+    if source.lower().endswith(SCENE_EXTENSION):
+        try:
+            with open(source, "rb") as f:
+                data = tomllib.load(f)
+            own = {**data.get("camera", {}), **data.get("render", {})}
+        except (OSError, ValueError, TypeError):   # TOML errors are ValueErrors
+            pass
+
+    def count(value, default):
+        return value if isinstance(value, int) and not isinstance(value, bool) and value > 0 else default
+    width = count(camera.get("width"), count(own.get("width"), DEFAULT_WIDTH))
+    height = count(camera.get("height"), count(own.get("height"), DEFAULT_HEIGHT))
+    samples = count(scene.get("samples"), count(own.get("samples"), DEFAULT_SAMPLES))
+    return width * height * samples * samples
 
 
 @dataclass

@@ -11,8 +11,9 @@ worker's death cut short, or a run still going on.
 BATCH_NO_WORKER_TIMEOUT seconds stops the batch.
 
 **Tasks that hang** (:class:`HangWatch`): a task that runs far past the
-others -- a driver call that never returns, a deadlock -- is cancelled, its
-worker restarted and the task submitted again.
+others -- a driver call that never returns, a deadlock -- or, before any frame
+has finished, past an absolute bound, is cancelled, its worker restarted and
+the task submitted again.
 """
 
 from __future__ import annotations
@@ -23,7 +24,8 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from clrt.config import BATCH_HANG_FACTOR, BATCH_HANG_FLOOR, BATCH_NO_WORKER_TIMEOUT
+from clrt.config import (BATCH_FIRST_TASK_RAY_SECONDS, BATCH_FIRST_TASK_SETUP, BATCH_HANG_FACTOR,
+                         BATCH_HANG_FLOOR, BATCH_NO_WORKER_TIMEOUT)
 
 #: Under the output folder: one run log per task, while the batch runs.
 RUN_LOGS = ".clrt-runs"
@@ -41,12 +43,14 @@ class NoWorkers(Exception):
 @dataclass(frozen=True)
 class Hung:
     """A task found running far past the others: ``seconds`` since the batch saw
-    it start, over ``limit``, on the worker at ``worker`` (None if unknown)."""
+    it start, over ``limit``, on the worker at ``worker`` (None if unknown);
+    ``rule``: how the limit was set, in words (HangWatch.limit)."""
 
     key: str
     seconds: float
     limit: float
     worker: str | None
+    rule: str = ""
 
 
 def completed(done, watchdog, hangs=None):
@@ -147,10 +151,15 @@ class HangWatch:
     again after a worker died -- starts the clock again) and hangs once it has
     run longer than BATCH_HANG_FACTOR x the median seconds of the frames
     rendered so far x its views, and at least BATCH_HANG_FLOOR.  With no
-    frame rendered yet there is nothing to compare with: no limit."""
+    frame rendered yet there is nothing to compare with: the limit is then
+    absolute, BATCH_FIRST_TASK_SETUP plus BATCH_FIRST_TASK_RAY_SECONDS per
+    camera ray of its views (clrt/config.py says why), so that a batch whose
+    every task hangs from the start ends too.  ``timeout`` (--task-timeout),
+    when given, replaces that bound and caps the median's limit."""
 
-    def __init__(self, logs: Path | None, live):
-        self.logs, self.live = logs, live   # live(): {key: views} of the tasks not yet ended
+    def __init__(self, logs: Path | None, live, timeout: float | None = None):
+        self.logs, self.live = logs, live   # live(): {key: (views, camera rays a view)} of the tasks not yet ended
+        self.timeout = timeout
         self.frames: list = []              # seconds of each frame rendered in this batch
         self.running: dict = {}             # key -> (starts, when first seen running)
         self.checked = time.monotonic()
@@ -160,10 +169,20 @@ class HangWatch:
         self.frames += [r["seconds"] for r in records
                         if r.get("status") == "done" and r.get("note") != "found" and r.get("seconds")]
 
-    def limit(self, views: int) -> float | None:
-        if not self.frames:
-            return None
-        return max(BATCH_HANG_FACTOR * statistics.median(self.frames) * max(views, 1), BATCH_HANG_FLOOR)
+    def limit(self, views: int, rays: int) -> tuple[float, str]:
+        """(seconds, the rule that gave them in words) a task of ``views`` views of
+        ``rays`` camera rays each may run before it counts as hung."""
+        if self.frames:
+            limit = max(BATCH_HANG_FACTOR * statistics.median(self.frames) * max(views, 1), BATCH_HANG_FLOOR)
+            rule = f"{BATCH_HANG_FACTOR:g} x the median frame time per view, at least {BATCH_HANG_FLOOR:g} s"
+        else:
+            limit = BATCH_FIRST_TASK_SETUP + BATCH_FIRST_TASK_RAY_SECONDS * max(views, 1) * rays
+            rule = (f"no frame had finished: {BATCH_FIRST_TASK_SETUP:g} s for set-up and "
+                    f"{BATCH_FIRST_TASK_RAY_SECONDS * 1e6:g} us per camera ray; --task-timeout (task_timeout=) "
+                    "sets another")
+        if self.timeout is not None and (self.timeout < limit or not self.frames):
+            return self.timeout, "the task timeout given"
+        return limit, rule
 
     def check(self) -> list:
         """The tasks found hung since the last look (:class:`Hung`), each once."""
@@ -176,7 +195,7 @@ class HangWatch:
         except OSError:
             return []
         hung = []
-        for key, views in self.live().items():
+        for key, (views, rays) in self.live().items():
             if key not in started:
                 continue
             starts, ends, worker = read_log(self.logs, key)
@@ -187,10 +206,10 @@ class HangWatch:
             if seen is None or seen[0] != starts:
                 self.running[key] = (starts, now)
                 continue
-            limit = self.limit(views)
-            if limit is not None and now - seen[1] > limit:
+            limit, rule = self.limit(views, rays)
+            if now - seen[1] > limit:
                 del self.running[key]
-                hung.append(Hung(key, now - seen[1], limit, worker))
+                hung.append(Hung(key, now - seen[1], limit, worker, rule))
         return hung
 
 
