@@ -33,7 +33,7 @@ def write_icosphere_obj(path: Path) -> Path:
 # first time only (SOURCE.kills, beside the source, lists the processes killed);
 # hang.obj never returns from its task, hangonce.obj the first time only
 # (SOURCE.hangs lists the processes that hung).  CLRT_TEST_HANG_FLOOR sets the
-# batch's BATCH_HANG_FLOOR.
+# batch's BATCH_HANG_FLOOR, CLRT_TEST_FIRST_TASK_SETUP its BATCH_FIRST_TASK_SETUP.
 # With CLRT_TEST_SETUP_CRASH=all in the environment, every worker process dies
 # while its device is set up (clrt.batch.worker.configure), before any task;
 # with CLRT_TEST_SETUP_CRASH=PATH, every one but the first (which makes PATH).
@@ -104,6 +104,10 @@ if os.environ.get("CLRT_TEST_NO_WORKER_TIMEOUT"):   # the batch's watchdog, in t
 if os.environ.get("CLRT_TEST_HANG_FLOOR"):   # the batch's hang limit, in the command's process
     import clrt.batch.watch as watch
     watch.BATCH_HANG_FLOOR = float(os.environ["CLRT_TEST_HANG_FLOOR"])
+
+if os.environ.get("CLRT_TEST_FIRST_TASK_SETUP"):   # the hang limit before any frame has finished
+    import clrt.batch.watch as watch
+    watch.BATCH_FIRST_TASK_SETUP = float(os.environ["CLRT_TEST_FIRST_TASK_SETUP"])
 '''
 
 
