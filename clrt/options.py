@@ -357,9 +357,5 @@ def number(name: str, **limits):
     return typed(lambda v: checks.number(name, v, **limits))
 
 
-def vector(name: str, check=checks.position):
-    return typed(lambda v: check(name, v), vector_text)
-
-
 def device(text: str) -> str:
     return checks.device(text, "--device")

@@ -929,3 +929,14 @@ def test_a_task_that_raises_after_writing_images_leaves_no_image_recorded_failed
     assert sorted(o.path for o in again.outputs if o.status == "done") == [str(out / n) for n in names[:3]]
     assert again.count("skipped") == 3 and again.exit_code() == 0
     assert {r["status"] for r in _manifest(out)} == {"done"} and sorted(_images(out)) == names
+
+
+def test_a_coloured_light_renders_as_clrt_render_draws_it(client, meshes, tmp_path, device):
+    """clrt.Light objects (with their colour) pass the batch's option check, travel
+    in its settings as plain values, and light view 0 as clrt.render does."""
+    light = clrt.Light((2.0, 4.0, 3.0), (1.0, 0.2, 0.1))
+    outputs = clrt.batch.render([meshes[0]], tmp_path / "out", client=client, device=device, lights=[light], **SIZE)
+    assert [o.status for o in outputs] == ["done"]
+    expected = clrt.render(str(meshes[0]), device=device, lights=[light], **SIZE)
+    assert np.array_equal(np.asarray(Image.open(outputs[0].path)), expected)
+    assert not np.array_equal(expected, clrt.render(str(meshes[0]), device=device, lights=[light.position], **SIZE))

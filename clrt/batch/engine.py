@@ -16,6 +16,8 @@ cancelled and retried, before any frame has finished too (clrt.batch.watch).
 
 from __future__ import annotations
 
+import dataclasses
+
 import sys
 import time
 import uuid
@@ -260,9 +262,12 @@ def _frame_format(format, bit_depth, settings: dict) -> str:
 
 
 def _plain(value):
-    """Tuples of floats and plain numbers, as they travel in tasks and JSON."""
+    """Tuples of floats and plain numbers, as they travel in tasks and JSON; a
+    clrt.Light as the dict of its fields (Light.of makes it again on the worker)."""
     if value is None or isinstance(value, (bool, int, float, str)):
         return value
+    if dataclasses.is_dataclass(value):
+        return {f.name: _plain(getattr(value, f.name)) for f in dataclasses.fields(value)}
     return [_plain(v) for v in value] if not hasattr(value, "item") else value.item()
 
 

@@ -119,10 +119,6 @@ def configure(device: str | None, cache_size: int = BATCH_CACHE_SCENES) -> None:
             pass
 
 
-def current_device() -> str | None:
-    return _STATE.device
-
-
 class DevicePlugin(WorkerPlugin):
     """Gives each Dask worker its OpenCL device when it starts (see the module's docstring)."""
 

@@ -91,7 +91,6 @@ from clrt.errors import DeviceError, InputError
 
 BUILD_GROUP = 256        # work-items per work-group of every build kernel
 RADIX_BITS = 4           # digit of one radix-sort pass: 16 bins, 8 passes for 30-bit codes
-MORTON_BITS = 30
 # The sort covers the whole 32-bit key: the SAH partition's keys put the
 # segment in the top 8 bits.  An even number of passes leaves the sorted keys
 # in the first key buffer, which init_leaves reads while it clears the second

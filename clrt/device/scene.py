@@ -1,6 +1,7 @@
 """A scene on one device: the set-up that Renderer and Accel share.
 
-    >>> scene = DeviceScene(corners, accel="box", builder="auto", leaf_size=4, device=None)
+    >>> scene = DeviceScene(corners, accel="box", builder="auto", leaf_size=4, device=None,
+    ...                     bounds=mesh.bounds, origin=None)
     >>> kernels = scene.kernels("trace.cl", QUERY_KERNELS)
 
 In order: the acceleration structure is built (clrt.device.acceleration, on

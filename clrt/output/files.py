@@ -93,11 +93,6 @@ def file_state(path: Path) -> str:
         return CHANGED
 
 
-def matches_record(path: Path) -> bool:
-    """Is ``path`` exactly the file that clrt recorded writing there?"""
-    return file_state(path) == OURS
-
-
 def _umask() -> int:
     """The process's umask, read without changing it: os.umask can only be read
     by setting it, and another thread creating a file or folder in between (the

@@ -13,11 +13,6 @@ from clrt.scene.mesh import Mesh
 from clrt.scene.texture import Texture
 
 
-def _vec3(value, what: str) -> np.ndarray:
-    return np.asarray(checks.position(what, value), dtype=np.float64)
-
-
-
 
 @dataclass(frozen=True)
 class Material:
@@ -102,7 +97,10 @@ class Light:
 
     @classmethod
     def of(cls, value) -> "Light":
-        """A Light from a Light or a position (x, y, z) (a white light there)."""
+        """A Light from a Light, a position (x, y, z) (a white light there), or a
+        dict of its fields (as a batch's settings carry it: plain JSON)."""
+        if isinstance(value, dict):
+            return cls(**value)
         return value if isinstance(value, cls) else cls(value)
 
 

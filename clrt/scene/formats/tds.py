@@ -198,18 +198,6 @@ def parse_3ds(data: bytes, label: str = "", name: str = "") -> Mesh:
     return Mesh.concatenate(meshes, name=name)
 
 
-def load_3ds(path) -> Mesh:
-    """Read a ``.3ds`` file; :class:`MeshLoadError` on any I/O or format problem."""
-    path = os.fspath(path)
-    try:
-        with open(path, "rb") as fh:
-            data = fh.read()
-    except OSError as exc:
-        raise MeshLoadError(f"{path}: cannot read file ({exc.strerror or exc})") from None
-    stem = os.path.splitext(os.path.basename(path))[0]
-    return parse_3ds(data, label=path, name=stem)
-
-
 # ---------------------------------------------------------------------------
 # Writer
 
