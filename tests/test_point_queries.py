@@ -223,3 +223,25 @@ def test_bad_fields_and_an_empty_mesh(device):
     with pytest.raises(InputError) as err:
         clrt.closest_points((np.zeros((0, 3)), np.zeros((0, 3), int)), [0, 0, 0], device=device)
     assert "\n" not in str(err.value)
+
+
+def test_device_arrays_and_split_buffers_answer_as_numpy(device):
+    """Points given as a pyopencl array give device arrays of the same values;
+    a scene whose buffers come in parts (split.cl) answers as a whole one."""
+    import pyopencl.array as cla
+    mesh = primitives.icosphere(2)
+    points = _points(mesh, seed=7)
+    accel = clrt.Accel(mesh, device=device)
+    host = accel.closest_points(points)
+    on_device = accel.closest_points(cla.to_device(accel.queue, points))
+    split = clrt.Accel(mesh, device=device, max_buffer_bytes=8192)
+    assert split.geometry.parts() > 1
+    parts = split.closest_points(points)
+    for field in POINT_FIELDS:
+        assert isinstance(getattr(on_device, field), cla.Array)
+        np.testing.assert_array_equal(getattr(on_device, field).get(), getattr(host, field))
+        np.testing.assert_array_equal(getattr(parts, field), getattr(host, field))
+    with pytest.raises(InputError, match="point 3 is not finite: points must be finite"):
+        bad = points.copy()
+        bad[3, 1] = np.nan
+        accel.closest_points(cla.to_device(accel.queue, bad))
