@@ -245,3 +245,25 @@ def test_device_arrays_and_split_buffers_answer_as_numpy(device):
         bad = points.copy()
         bad[3, 1] = np.nan
         accel.closest_points(cla.to_device(accel.queue, bad))
+
+
+def test_every_test_mesh_every_volume_as_brute_force(test_mesh, device):
+    """The shared test meshes (open, closed, faceted, a duplicate triangle):
+    every volume gives brute force's answers, and those the float64 reference's."""
+    points = _points(test_mesh, seed=11)
+    answers = [clrt.Accel(test_mesh, accel=accel, device=device).closest_points(points)
+               for accel in ("none", "box", "sphere", "ellipse")]
+    for got in answers[1:]:
+        for field in POINT_FIELDS:
+            np.testing.assert_array_equal(getattr(got, field), getattr(answers[0], field), err_msg=field)
+    _check_against_reference(test_mesh, points, answers[0])
+
+
+def test_equal_distances_go_to_the_lower_triangle(device):
+    """Triangle 4 duplicates triangle 0: a point over it gets 0, by every walk."""
+    v = np.array([[-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0], [0, -1, -1], [0, -1, 1], [0, 1, 1]], float)
+    mesh = Mesh.from_arrays(v, np.array([[4, 5, 6], [0, 2, 3], [5, 4, 6], [1, 2, 0], [0, 1, 2]]), "ties")
+    points = np.array([[0.5, -0.2, 0.3], [0.5, -0.2, -0.3]])
+    for accel in ("none", "box", "sphere", "ellipse"):
+        got = clrt.Accel(mesh, accel=accel, leaf_size=1, device=device).closest_points(points)
+        assert list(got.prim) == [3, 3], accel
