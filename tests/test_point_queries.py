@@ -267,3 +267,14 @@ def test_equal_distances_go_to_the_lower_triangle(device):
     for accel in ("none", "box", "sphere", "ellipse"):
         got = clrt.Accel(mesh, accel=accel, leaf_size=1, device=device).closest_points(points)
         assert list(got.prim) == [3, 3], accel
+
+
+def test_a_refitted_accel_answers_as_brute_force_on_the_moved_mesh(device):
+    mesh = primitives.torus(1.0, 0.35, 24, 12)
+    points = _points(mesh, seed=13)
+    accel = clrt.Accel(mesh, device=device)
+    accel.refit(mesh.vertices * 1.3)
+    got = accel.closest_points(points)
+    want = clrt.Accel((mesh.vertices * 1.3, mesh.faces), accel="none", device=device).closest_points(points)
+    for field in POINT_FIELDS:
+        np.testing.assert_array_equal(getattr(got, field), getattr(want, field), err_msg=field)
