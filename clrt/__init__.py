@@ -13,6 +13,7 @@ Where to start:
   call each), ``clrt.Accel`` (build once, query often), ``clrt.RayMeshIntersector``
   (trimesh's interface); results ``clrt.Hits``, ``clrt.AllHits``,
   ``clrt.CameraImages`` (``help()`` on each lists its arrays);
+- point queries: ``clrt.closest_points`` (``clrt.ClosestPoints``), ``clrt.distance``;
 - meshes: ``clrt.load_mesh``, ``clrt.Mesh``;
 - devices: ``device=None`` (the first GPU, else the CPU), ``"gpu"``, ``"cpu"``
   or ``"P:D"`` (platform and device indices, as ``clrt info`` lists them).
@@ -70,6 +71,7 @@ _LAZY = {
     "Accel": "clrt.query", "AllHits": "clrt.query", "CameraImages": "clrt.query", "Hits": "clrt.query",
     "all_hits": "clrt.query", "any_hit": "clrt.query", "camera_images": "clrt.query",
     "count_hits": "clrt.query", "occluded": "clrt.query", "trace": "clrt.query",
+    "ClosestPoints": "clrt.query", "closest_points": "clrt.query", "distance": "clrt.query",
     "RayMeshIntersector": "clrt.query.intersector",
     "Frame": "clrt.renderer", "Renderer": "clrt.renderer", "TileLimits": "clrt.renderer", "render": "clrt.renderer",
     "default_scene": "clrt.scene.default",

@@ -54,7 +54,7 @@ def test_every_hit_field_is_in_the_docstrings(doc_of, rows):
 
 
 @pytest.mark.parametrize("cls, table", [("Hits", "CLOSEST_FIELDS"), ("AllHits", "ALL_HITS_FIELDS"),
-                                        ("CameraImages", "CAMERA_FIELDS")])
+                                        ("CameraImages", "CAMERA_FIELDS"), ("ClosestPoints", "POINT_FIELDS")])
 def test_result_classes_are_their_tables(cls, table):
     """One table per result: the named tuple's fields, their order, each field's
     help and the class docstring all come from it."""
@@ -87,6 +87,44 @@ def test_ray_queries_doc_lists_every_hit_field():
         shape = "(N, 3)" if field.item_shape else "(N,)"
         assert any(f"`{name}`" in row.split("|")[1] and f"| {shape} | {np.dtype(field.dtype).name} |" in row
                    for row in rows), name
+
+
+@pytest.mark.parametrize("doc_of", [lambda: clrt.ClosestPoints, lambda: clrt.Accel.closest_points,
+                                    lambda: clrt.closest_points],
+                         ids=["ClosestPoints", "Accel.closest_points", "clrt.closest_points"])
+def test_every_point_field_is_in_the_docstrings(doc_of):
+    from clrt.query.results import POINT_FIELDS
+    doc = " ".join(inspect.getdoc(doc_of()).split())
+    for name, field in POINT_FIELDS.items():
+        shape = ("N", *map(str, field.item_shape))
+        kind = f"({', '.join(shape)}{',' if len(shape) == 1 else ''}) {np.dtype(field.dtype).name}"
+        assert f"{name} : {kind}" in doc and f"{field.miss} on a miss" in doc, (name, doc)
+
+
+def test_closest_points_return_what_the_table_says(sphere, device):
+    """Dtypes, shapes and miss values of a real answer: one point found, one beyond max_distance."""
+    from clrt.query.results import POINT_FIELDS
+    near = clrt.Accel(sphere, device=device).closest_points([[0, 0, 1.5], [0, 0, 9]], max_distance=2)
+    for name, field in POINT_FIELDS.items():
+        value = getattr(near, name)
+        assert value.dtype == field.dtype and value.shape == (2, *field.item_shape), name
+        assert np.array_equal(value[1], np.broadcast_to(eval(field.miss, {"inf": np.inf, "NaN": np.nan}),
+                                                        value[1].shape), equal_nan=True), name
+    assert near.prim[0] >= 0
+
+
+def test_ray_queries_doc_lists_every_point_field():
+    """docs/ray-queries.md's table of clrt.ClosestPoints, in its point queries' section."""
+    from pathlib import Path
+    from clrt.query.results import POINT_FIELDS
+    text = (Path(__file__).resolve().parents[1] / "docs" / "ray-queries.md").read_text()
+    section = text[text.index("## Point queries"):]
+    section = section[:section.index("\n## ", 1)]
+    rows = [line for line in section.splitlines() if line.startswith("| `")]
+    for name, field in POINT_FIELDS.items():
+        shape = "(N, 3)" if field.item_shape else "(N,)"
+        assert any(f"`{name}`" in row.split("|")[1] and f"| {shape} | {np.dtype(field.dtype).name} |" in row
+                   and f"`{field.miss}`" in row for row in rows), name
 
 
 # ---------------------------------------------------------------- one calling convention

@@ -170,6 +170,24 @@ inline bool load_ray(const RayInput* in, uint i, float3* origin, float3* dir, fl
     return ok;
 }
 
+// Point i of a point query (point.cl): its position from `origins`, moved
+// into the device's frame as load_ray moves an origin, and its largest
+// distance from `tmaxs`.  False (and the point reported in `bad`, as an
+// origin) when it is not finite; no reach check: a point's distance takes no
+// float32 triangle test that could overflow.
+inline bool load_point(const RayInput* in, uint i, float3* point, float* max_dist)
+{
+    const size_t k = (size_t)in->in_first + i;
+    *point = vload3(0, in->origins + k * in->origin_stride);
+    *max_dist = in->tmaxs[k * in->tmax_stride];
+    if (!all(isfinite(*point))) {
+        atomic_min(in->bad + BAD_ORIGIN, (int)(in->ray_first + i));
+        return false;
+    }
+    *point -= in->shift;
+    return true;
+}
+
 #ifdef RAY_PACKETS
 #if RAY_PACKETS != 8
 #error "packets of rays are float8 lanes: build with -DRAY_PACKETS=8"

@@ -17,6 +17,7 @@
 #include "accel.cl"
 #include "rays.cl"
 #include "accel_packet.cl"
+#include "point.cl"
 
 // A sink that stores nothing: the query's options only.
 inline HitSink query_options(const int cull)
@@ -229,6 +230,44 @@ __kernel void query_all(RAY_INPUT_PARAMS, __global uchar* results, GEOMETRY_PARA
     sink.capacity = launch.capacity;
     sink.ray = (int)i;
     query_hits(&g, origin, dir, tmin, tmax, QUERY_ALL, false, &sink);
+}
+
+// The nearest point of the mesh to each query point (point.cl), within the
+// point's largest distance (tmaxs: a miss beyond it), written field by field
+// into `results` (outputs 0 .. 4: point, distance, prim, u, v, as
+// clrt.query.results' POINT_FIELDS; any may be absent).  The point goes back
+// to the caller's frame here (+ shift, in double where the device has it,
+// rounded to float32 once).  A miss (or a bad point): point NaN, distance
+// INFINITY, prim -1, u = v = 0.
+__kernel void query_closest_point(RAY_INPUT_PARAMS, __global uchar* results, GEOMETRY_PARAMS)
+{
+    const uint i = get_global_id(0);
+    if (i >= launch.num_rays)
+        return;
+    const Geometry g = make_geometry(GEOMETRY_ARGS);
+    const RayInput in = make_ray_input(RAY_INPUT_ARGS);
+    float3 p;
+    float max_dist;
+    PointHit best;
+    best.prim = -1;
+    if (load_point(&in, i, &p, &max_dist))
+        best = closest_point(&g, p, max_dist, POINT_MARGIN(p, in.scene_lo, in.scene_hi));
+    const bool found = best.prim >= 0;
+    __global float* point_out = RESULT_AT(float, 0);
+    __global float* distance_out = RESULT_AT(float, 1);
+    __global int* prim_out = RESULT_AT(int, 2);
+    __global float* u_out = RESULT_AT(float, 3);
+    __global float* v_out = RESULT_AT(float, 4);
+    if (point_out)
+        vstore3(found ? convert_float3(best.point + TO_POINT_REAL3(in.shift)) : (float3)(NAN), i, point_out);
+    if (distance_out)
+        distance_out[i] = found ? (float)best.dist : INFINITY;
+    if (prim_out)
+        prim_out[i] = best.prim;
+    if (u_out)
+        u_out[i] = found ? best.u : 0.0f;
+    if (v_out)
+        v_out[i] = found ? best.v : 0.0f;
 }
 
 // The directions of the camera's pixel-centre rays (packed float3) for pixels

@@ -1,4 +1,5 @@
-// Ray tests against one bounding volume, the shape fixed when the program is
+// Ray tests against one bounding volume (and, point_bound, a lower bound of
+// a point's distance to it, for point.cl), the shape fixed when the program is
 // built: -DVOLUME_BOX (slab test), -DVOLUME_SPHERE or -DVOLUME_ELLIPSE
 // (quadratic in t, solved through the closest approach to the centre, which
 // loses far less precision than the textbook discriminant).  Each test is
@@ -123,6 +124,14 @@ inline bool volume_hit(const VolumeRay* r, float4 bound_a, float4 bound_b, float
     const float exit = SLACK_LATER(far);
     *t_enter = SLACK_EARLIER(enter);   // a lower bound: callers compare it with tmax
     return enter <= exit;
+}
+
+// A lower bound of the distance from point p to the box (point.cl's walk):
+// the length of p's overshoot of the slabs, 0 inside.  Rounded either way by
+// a few ulps; point.cl's POINT_MARGIN covers that.
+inline float point_bound(float3 p, float4 bound_a, float4 bound_b)
+{
+    return length(fmax(fmax(bound_a.xyz - p, p - bound_b.xyz), (float3)(0.0f)));
 }
 
 #ifdef BVH_WIDE
@@ -293,6 +302,11 @@ inline bool volume_hit(const VolumeRay* r, float4 bound_a, float4 bound_b, float
     *t_enter = fmax(enter, tmin);
     return exit >= tmin && enter <= tmax;
 }
+// A lower bound of the distance from point p to the sphere (point.cl's walk).
+inline float point_bound(float3 p, float4 bound_a, float4 bound_b)
+{
+    return fmax(length(p - bound_a.xyz) - bound_b.x, 0.0f);
+}
 #elif defined(VOLUME_ELLIPSE)
 // Axis-aligned ellipsoid: scale space so it becomes the unit sphere; the ray
 // direction then has length^2 = a, and t is unchanged by the scaling.
@@ -314,6 +328,14 @@ inline bool volume_hit(const VolumeRay* r, float4 bound_a, float4 bound_b, float
     const float enter = along - h - slack, exit = along + h + slack;
     *t_enter = fmax(enter, tmin);
     return exit >= tmin && enter <= tmax;
+}
+// A lower bound of the distance from point p to the ellipsoid (point.cl's
+// walk): the distance to its axis-aligned box, centre +- the semi-axes, which
+// holds it (the nearest point of the ellipsoid lies no nearer than its box).
+inline float point_bound(float3 p, float4 bound_a, float4 bound_b)
+{
+    const float3 axes = (float3)(1.0f) / bound_b.xyz;
+    return length(fmax(fmax(bound_a.xyz - axes - p, p - bound_a.xyz - axes), (float3)(0.0f)));
 }
 #elif defined(ACCEL_BVH)
 #error "build with -DVOLUME_BOX, -DVOLUME_SPHERE or -DVOLUME_ELLIPSE"

@@ -6,6 +6,7 @@
     >>> n = accel.count(origins, directions)              # hits along each ray
     >>> every = accel.all_hits(origins, directions)       # AllHits(ray_id, prim, t)
     >>> images = accel.camera_images(K=K, pose=pose, width=640, height=480)
+    >>> near = accel.closest_points(points)               # ClosestPoints (clrt/query/points.py)
 
 Conventions shared by every query (docs/ray-queries.md has the full guide):
 
@@ -49,6 +50,7 @@ from clrt.errors import InputError
 from clrt.config import NO_RESULT, RAY_CHECKS
 from clrt.layouts import QUERY_LAUNCH
 from clrt.query.kernels import QUERY_KERNELS
+from clrt.query.points import PointQueries
 from clrt.query.rays import CameraRays, PinholeRays, RayBatch, cull_code, is_device_array
 from clrt.query.results import (ALL_HITS_FIELDS, CAMERA_FIELDS, CLOSEST_FIELDS, RESULT_BYTES, RESULT_DTYPES,
                                 AllHits, CameraImages, Hits, with_fields)
@@ -152,7 +154,7 @@ def _rebuilt_accel(vertices, faces, name, options) -> "Accel":
     return Accel(mesh, **options)
 
 
-class Accel:
+class Accel(PointQueries):
     """A mesh and its acceleration structure, uploaded once to one device.
 
     ``mesh``: a Mesh, a mesh file, a trimesh object or ``(vertices, faces)``.

@@ -1,4 +1,4 @@
-"""The one-call forms of the ray queries: build an Accel, ask once.
+"""The one-call forms of the ray and point queries: build an Accel, ask once.
 
 All share one keyword-only signature after the rays: the query's own range
 (``tmin``, ``tmax``) and ``cull``, then the acceleration options of
@@ -13,8 +13,8 @@ import numpy as np
 from clrt.config import DEFAULT_ACCEL, DEFAULT_BUILDER, DEFAULT_LEAF_SIZE
 from clrt.query.accel import Accel
 from clrt.query.rays import cull_code
-from clrt.query.results import (ALL_HITS_FIELDS, CAMERA_FIELDS, CLOSEST_FIELDS, AllHits, CameraImages, Hits,
-                                with_fields)
+from clrt.query.results import (ALL_HITS_FIELDS, CAMERA_FIELDS, CLOSEST_FIELDS, POINT_FIELDS, AllHits, CameraImages,
+                                ClosestPoints, Hits, with_fields)
 
 
 def _accel(mesh, accel, builder, leaf_size, device, chunk_rays, cull) -> Accel:
@@ -69,3 +69,22 @@ def camera_images(mesh, camera=None, *, K=None, pose=None, width=None, height=No
     """Depth, normal, triangle and hit images (:meth:`Accel.camera_images`)."""
     return _accel(mesh, accel, builder, leaf_size, device, chunk_rays, cull).camera_images(
         camera, K=K, pose=pose, width=width, height=height, pixel_center=pixel_center, cull=cull)
+
+
+# Point queries: the same acceleration options; no rays, so no range and no culling.
+
+@with_fields(POINT_FIELDS, heading="Returns", lead="ClosestPoints, a named tuple of these arrays:")
+def closest_points(mesh, points, *, max_distance=np.inf,
+                   accel: str = DEFAULT_ACCEL, builder: str = DEFAULT_BUILDER, leaf_size: int = DEFAULT_LEAF_SIZE,
+                   device: str | None = None, chunk_rays: int | None = None) -> ClosestPoints:
+    """The mesh's nearest point to each query point (:meth:`Accel.closest_points`)."""
+    return _accel(mesh, accel, builder, leaf_size, device, chunk_rays, "none").closest_points(
+        points, max_distance=max_distance)
+
+
+def distance(mesh, points, *, max_distance=np.inf,
+             accel: str = DEFAULT_ACCEL, builder: str = DEFAULT_BUILDER, leaf_size: int = DEFAULT_LEAF_SIZE,
+             device: str | None = None, chunk_rays: int | None = None) -> np.ndarray:
+    """(N,) float32 distance of each point to the mesh (:meth:`Accel.distance`)."""
+    return _accel(mesh, accel, builder, leaf_size, device, chunk_rays, "none").distance(
+        points, max_distance=max_distance)

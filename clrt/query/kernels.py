@@ -23,6 +23,8 @@ QUERY_KERNELS = {
     "query_any": (*RAY_INPUT, buffer("results"), *GEOMETRY),
     "query_count": (*RAY_INPUT, buffer("results"), *GEOMETRY),
     "query_all": (*RAY_INPUT, buffer("results"), *GEOMETRY),
+    # point queries (point.cl): points in `origins`, their largest distance in `tmaxs`
+    "query_closest_point": (*RAY_INPUT, buffer("results"), *GEOMETRY),
     "camera_rays": (buffer("dirs"), value("cam", CAMERA), value("first", np.uint64), value("count", np.uint32)),
     # one-launch kernels of the primary-ray benchmark (Accel.launch_camera)
     "trace_camera": (buffer("hits"), value("cam", CAMERA), *GEOMETRY),

@@ -260,3 +260,51 @@ class CameraRays:
 
     def __len__(self) -> int:
         return self.camera.width * self.camera.height
+
+
+class PointBatch:
+    """Query points as the caller gave them, checked for shape and type only,
+    in the form of a RayBatch's inputs (rays.cl's load_point): ``points`` in
+    the origins, ``max_distance`` (one number for all) in tmax; directions
+    and tmin unused.  ``points``: (3,) or (N, 3), a numpy array of any real
+    dtype or a float32 ``pyopencl.array.Array``; the kernels report the first
+    point that is not finite."""
+
+    normalise = False
+
+    def __init__(self, points, max_distance=np.inf):
+        self.given = points
+        self.on_device = is_device_array(points)
+        if self.on_device:
+            a, self.n = _device_rows(points, "points", 3)
+            flat = a
+        else:
+            a = host_rows(points, "points")
+            self.n = len(a)
+            host_memory_for_rays(self.n, 0 if a.dtype == np.float32 else 12 * self.n)
+            with np.errstate(over="ignore"):   # beyond float32: inf, reported by the kernel as not finite
+                flat = np.ascontiguousarray(a, dtype=np.float32).reshape(-1)
+        if not checks.is_number(max_distance) or not float(max_distance) > 0:   # NaN fails too
+            raise checks.fail("max_distance", "a number > 0 (inf: no limit)", max_distance)
+        limit = float(max_distance)
+        with np.errstate(over="ignore"):
+            limit = np.full(1, limit, np.float32)
+        self.inputs = [(flat, 3), (np.zeros(3, np.float32), 0), (np.zeros(1, np.float32), 0), (limit, 0)]
+
+    def __len__(self) -> int:
+        return self.n
+
+    def host_chunk(self, k: int, start: int, stop: int):
+        a, stride = self.inputs[k]
+        return a if stride == 0 else a[start * stride:stop * stride]
+
+    def bad_ray_message(self, kind: str, i: int, reach=None) -> str:
+        """The error for point ``i`` (the kernels report it as a bad origin)."""
+        if self.on_device:
+            return f"point {i} is not finite: points must be finite"
+        row = np.asarray(host_rows(self.given, "points")[i]).tolist()
+        overflow = all(isinstance(x, float) and math.isfinite(x) for x in row)
+        if overflow:
+            return (f"point {i} is {row}: {checks.show(max(abs(x) for x in row))} overflows float32 "
+                    "(the largest float32 is about 3.4e38); points must be finite in float32")
+        return f"point {i} is {row}: points must be finite"

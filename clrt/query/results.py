@@ -1,4 +1,4 @@
-"""What ray queries return: closest hits, all hits, camera images.
+"""What ray queries return: closest hits, all hits, camera images, closest points.
 
 Each result is a named tuple of arrays whose fields are described once, in the
 tables below (shape, dtype, meaning, value on a miss).  The named tuples, their
@@ -46,6 +46,28 @@ ALL_HITS_FIELDS = {
     "prim": Field(np.int32, (), "triangle hit: its row in the mesh's faces", None),
     "t": Field(np.float32, (), "distance to the hit along the ray's normalised direction", None),
 }
+
+# The nearest point of the mesh to each query point (query_closest_point in
+# trace.cl), in kernel order.  The distance is float32, within
+# POINT_DISTANCE_BOUND of the exact one (docs/ray-queries.md, "Point queries").
+POINT_FIELDS = {
+    "point": Field(np.float32, (3,), "the mesh's point nearest to the query point, in the caller's frame (each "
+                   "coordinate rounded to float32 there)", "NaN"),
+    "distance": Field(np.float32, (), "distance from the query point to it (a miss: none within max_distance)",
+                      "inf"),
+    "prim": Field(np.int32, (), "its triangle: the row in the mesh's faces (the lowest of equally near ones)",
+                  "-1"),
+    "u": Field(np.float32, (), "barycentric weight of the triangle's vertex 1 at the point", "0"),
+    "v": Field(np.float32, (), "barycentric weight of the triangle's vertex 2 (vertex 0 has 1 - u - v)", "0"),
+}
+
+#: How far a reported distance may lie from the exact (float64) distance
+#: between the mesh and the query point rounded to float32: this times the
+#: largest coordinate of the point and of the mesh's vertices, both measured
+#: from the device frame's origin (clrt.scene.arrays.device_origin).  The
+#: point's move into that frame rounds once (float32), the distance once more;
+#: the closest point itself is computed in float64 where the device has it.
+POINT_DISTANCE_BOUND = 2.0 ** -21
 
 # The images of Accel.camera_images, row 0 at the top.
 CAMERA_FIELDS = {
@@ -130,6 +152,13 @@ AllHits = _result_class("AllHits", ALL_HITS_FIELDS, """Every hit of every ray, a
     Returned by Accel.all_hits and clrt.all_hits: K hits in all, sorted by
     ray, then distance, then triangle; a ray without hits has no entry.
     """, ("K",))
+
+ClosestPoints = _result_class("ClosestPoints", POINT_FIELDS, """The nearest points of a mesh, one row per query point.
+
+    Returned by Accel.closest_points and clrt.closest_points.  Fields left out
+    of the query's ``fields=`` are None.  Points given as
+    ``pyopencl.array.Array`` give device arrays.
+    """, ("N",))
 
 CameraImages = _result_class("CameraImages", CAMERA_FIELDS, """Per-pixel results of a camera's rays.
 

@@ -1,0 +1,202 @@
+// Point queries (trace.cl's query_closest_point): the point of the mesh
+// nearest to each query point, by brute force or by a walk over the binary
+// BVH rows (BvhPairNode) that every BVH device has -- CPU devices' wide BVH
+// included, whose binary rows stay uploaded beside it.
+//
+// The closest point on one triangle is Ericson's region test ("Real-Time
+// Collision Detection", 5.1.5): the point's projections onto the edges decide
+// whether a vertex, an edge or the face is nearest.  It runs in double
+// precision where the device has it (as trace.cl's face_normal), else in
+// float32, on the float32 corners of the device's frame; the distance is
+// rounded to float32 once, at the end.
+//
+// The walk visits children nearest first and drops a child whose volume lies
+// farther than the best distance so far plus a margin (POINT_MARGIN): the
+// volumes' lower bounds (volumes.cl, point_bound) are float32, so the margin
+// keeps every triangle that brute force could pick -- each walk then computes
+// the same distances for the same triangles and gives brute force's answer
+// bit for bit.  Ties go to the lower input triangle index, as hit.cl's.
+#ifndef CLRT_POINT_CL
+#define CLRT_POINT_CL
+
+#include "geometry.cl"
+#include "volumes.cl"
+#include "stack.cl"
+
+#ifdef cl_khr_fp64
+typedef double point_real;
+typedef double3 point_real3;
+#define TO_POINT_REAL3 convert_double3
+#else
+typedef float point_real;
+typedef float3 point_real3;
+#define TO_POINT_REAL3(x) (x)
+#endif
+
+// The best triangle so far: its input index, distance (inclusive bound while
+// prim < 0), closest point (device frame) and barycentric weights of v1, v2.
+typedef struct {
+    int prim;
+    point_real dist;
+    point_real3 point;
+    float u, v;
+} PointHit;
+
+// Closest point to p on the segment a + t (b - a), t in [0, 1]; *t set.
+inline point_real3 closest_on_segment(point_real3 p, point_real3 a, point_real3 b, point_real* t)
+{
+    const point_real3 ab = b - a;
+    const point_real len2 = dot(ab, ab);
+    point_real s = len2 > 0 ? dot(p - a, ab) / len2 : 0;
+    s = s < 0 ? 0 : (s > 1 ? 1 : s);
+    *t = s;
+    return a + s * ab;
+}
+
+// Closest point to p on triangle (a, b, c), with the barycentric weights of
+// b (*u) and c (*v) of that point.
+inline point_real3 closest_on_triangle(point_real3 p, point_real3 a, point_real3 b, point_real3 c,
+                                       point_real* u, point_real* v)
+{
+    const point_real3 ab = b - a, ac = c - a, ap = p - a;
+    const point_real d1 = dot(ab, ap), d2 = dot(ac, ap);
+    if (d1 <= 0 && d2 <= 0) {                    // behind a on both edges from it: vertex a
+        *u = 0; *v = 0;
+        return a;
+    }
+    const point_real3 bp = p - b;
+    const point_real d3 = dot(ab, bp), d4 = dot(ac, bp);
+    if (d3 >= 0 && d4 <= d3) {                   // past b: vertex b
+        *u = 1; *v = 0;
+        return b;
+    }
+    const point_real vc = d1 * d4 - d3 * d2;     // (scaled) weight of c: <= 0 outside edge ab
+    if (vc <= 0 && d1 >= 0 && d3 <= 0) {
+        const point_real t = d1 / (d1 - d3);
+        *u = t; *v = 0;
+        return a + t * ab;
+    }
+    const point_real3 cp = p - c;
+    const point_real d5 = dot(ab, cp), d6 = dot(ac, cp);
+    if (d6 >= 0 && d5 <= d6) {                   // past c: vertex c
+        *u = 0; *v = 1;
+        return c;
+    }
+    const point_real vb = d5 * d2 - d1 * d6;     // weight of b: <= 0 outside edge ac
+    if (vb <= 0 && d2 >= 0 && d6 <= 0) {
+        const point_real t = d2 / (d2 - d6);
+        *u = 0; *v = t;
+        return a + t * ac;
+    }
+    const point_real va = d3 * d6 - d5 * d4;     // weight of a: <= 0 outside edge bc
+    if (va <= 0 && d4 - d3 >= 0 && d5 - d6 >= 0) {
+        const point_real t = (d4 - d3) / ((d4 - d3) + (d5 - d6));
+        *u = 1 - t; *v = t;
+        return b + t * (c - b);
+    }
+    const point_real sum = va + vb + vc;
+    if (!(sum > 0)) {
+        // A triangle of no area (or one rounding made so): the nearest of its
+        // three edges, rather than a division by zero.
+        point_real t0, t1, t2;
+        const point_real3 q0 = closest_on_segment(p, a, b, &t0);
+        const point_real3 q1 = closest_on_segment(p, a, c, &t1);
+        const point_real3 q2 = closest_on_segment(p, b, c, &t2);
+        const point_real e0 = dot(p - q0, p - q0), e1 = dot(p - q1, p - q1), e2 = dot(p - q2, p - q2);
+        if (e0 <= e1 && e0 <= e2) {
+            *u = t0; *v = 0;
+            return q0;
+        }
+        if (e1 <= e2) {
+            *u = 0; *v = t1;
+            return q1;
+        }
+        *u = 1 - t2; *v = t2;
+        return q2;
+    }
+    *u = vb / sum;
+    *v = vc / sum;
+    return a + *u * ab + *v * ac;
+}
+
+// Take the triangle in `slot` into *best if it is nearer, or as near with a
+// lower input index.
+inline void visit_point_triangle(const Geometry* g, point_real3 p, int slot, PointHit* best)
+{
+    __global const TriangleVerts* tri = SPLIT_AT(g, tris, slot);
+    point_real u, v;
+    const point_real3 q = closest_on_triangle(p, TO_POINT_REAL3(tri->v0.xyz), TO_POINT_REAL3(tri->v1.xyz),
+                                              TO_POINT_REAL3(tri->v2.xyz), &u, &v);
+    const point_real dist = sqrt(dot(p - q, p - q));
+    if (dist > best->dist)
+        return;
+    const int prim = *SPLIT_AT(g, prim_ids, slot);
+    if (dist == best->dist && best->prim >= 0 && prim > best->prim)
+        return;
+    best->prim = prim;
+    best->dist = dist;
+    best->point = q;
+    best->u = (float)u;
+    best->v = (float)v;
+}
+
+// How much farther than the best distance a volume may seem and still be
+// entered: 2^-16 of the largest coordinate of the point and the scene's box
+// (device frame), some 256 float32 ulps of the values the lower bounds round.
+#define POINT_MARGIN(p, lo, hi) \
+    (0x1p-16f * fmax(fmax(fmax(fabs((p).x), fabs((p).y)), fabs((p).z)), \
+                     fmax(fmax(fmax(fabs((lo).x), fabs((lo).y)), fabs((lo).z)), \
+                          fmax(fmax(fabs((hi).x), fabs((hi).y)), fabs((hi).z)))))
+
+// The nearest triangle to p (device frame) within max_dist (inclusive);
+// prim -1 when none is.  `margin`: POINT_MARGIN.
+inline PointHit closest_point(const Geometry* g, float3 p, float max_dist, float margin)
+{
+    PointHit best;
+    best.prim = -1;
+    best.dist = max_dist;
+    best.point = (point_real3)(0);
+    best.u = 0.0f;
+    best.v = 0.0f;
+    const point_real3 pr = TO_POINT_REAL3(p);
+#ifdef ACCEL_BVH
+    int2 stack[BVH_STACK_SIZE];        // (row or first slot, leaf count: 0 for a row)
+    float stack_d[BVH_STACK_SIZE];     // the lower bound of its distance
+    int sp = 0;
+    int2 current = (int2)(0, 0);       // the root row
+    for (;;) {
+        if (current.y > 0) {
+            for (int s = current.x; s < current.x + current.y; ++s)
+                visit_point_triangle(g, pr, s, &best);
+        } else {
+            const BvhPairNode n = *SPLIT_AT(g, nodes, current.x);
+            const int2 left_child = PAIR_LEFT(n), right_child = PAIR_RIGHT(n);
+            const float reach = (float)best.dist + margin;
+            const float d_left = left_child.y >= 0 ? point_bound(p, n.left_a, n.left_b) : INFINITY;
+            const float d_right = right_child.y >= 0 ? point_bound(p, n.right_a, n.right_b) : INFINITY;
+            const bool left = left_child.y >= 0 && d_left <= reach;
+            const bool right = right_child.y >= 0 && d_right <= reach;
+            if (left && right) {
+                const bool right_first = d_right < d_left;
+                stack[sp] = right_first ? left_child : right_child;
+                stack_d[sp] = right_first ? d_left : d_right;
+                ++sp;
+                current = right_first ? right_child : left_child;
+                continue;
+            }
+            if (left || right) {
+                current = left ? left_child : right_child;
+                continue;
+            }
+        }
+        if (!resume_postponed(stack, stack_d, &sp, (float)best.dist + margin, &current, true))
+            break;
+    }
+#else
+    for (uint i = 0; i < g->num_tris; ++i)
+        visit_point_triangle(g, pr, (int)i, &best);
+#endif
+    return best;
+}
+
+#endif

@@ -1,0 +1,84 @@
+"""Point queries on an Accel: the nearest point of the mesh to each query
+point, and its distance (query_closest_point in trace.cl, point.cl).
+
+Points go through the ray queries' input path (``PointBatch`` fills a ray
+batch's origins and tmax), chunks and checks, so a point gives the same
+answer alone or in a batch, in any chunk.  :class:`PointQueries` is a part
+of :class:`~clrt.query.accel.Accel`: its methods use the Accel's chunks,
+buffers and launches.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from clrt.device.sharing import one_at_a_time
+from clrt.errors import InputError
+from clrt.query.rays import PointBatch
+from clrt.query.results import POINT_FIELDS, ClosestPoints, with_fields
+
+
+def check_point_fields(fields) -> list:
+    """The point fields asked for (default: all), in kernel order."""
+    if fields is None:
+        return list(POINT_FIELDS)
+    if isinstance(fields, str):
+        fields = (fields,)
+    unknown = [f for f in fields if f not in POINT_FIELDS]
+    if unknown:
+        raise InputError(f"unknown point field {unknown[0]!r}: choose from {', '.join(POINT_FIELDS)}")
+    return [f for f in POINT_FIELDS if f in fields]
+
+
+class PointQueries:
+    """Accel's point queries (mixed into :class:`~clrt.query.accel.Accel`)."""
+
+    def _point_outputs(self, n: int, fields, on_device: bool) -> dict:
+        shapes = {name: (n, *POINT_FIELDS[name].item_shape) for name in fields}
+        if on_device:
+            import pyopencl.array as cla
+            return {name: cla.empty(self.queue, shapes[name], POINT_FIELDS[name].dtype)   # no bool among them
+                    for name in fields}
+        return {name: np.empty(shapes[name], POINT_FIELDS[name].dtype) for name in fields}
+
+    @one_at_a_time
+    def _closest_points(self, batch: PointBatch, fields) -> ClosestPoints:
+        fields = check_point_fields(fields)
+        n = len(batch)
+        out = self._point_outputs(n, fields, batch.on_device)
+        slots = list(POINT_FIELDS)
+        self._begin(batch)
+        for start, stop in self._chunks(n):
+            m = stop - start
+            rays, launch = self._ray_args(batch, start, stop, 0)
+            placed, nbytes = {}, 0
+            for name in fields:   # every field is 4-byte aligned: float32 and int32 values
+                placed[name] = nbytes
+                launch["field_at"][slots.index(name)] = nbytes
+                nbytes += m * 4 * int(np.prod(POINT_FIELDS[name].item_shape, dtype=int))
+            results = self._buffer("results", nbytes)
+            self._run("query_closest_point", rays, launch, results)
+            for name, at in placed.items():
+                self._copy_out(out[name], start, stop, results, at)
+        self._check(batch)   # also waits for the copies
+        return ClosestPoints(*(out.get(name) for name in ClosestPoints._fields))
+
+    @with_fields(POINT_FIELDS, heading="Returns", lead="ClosestPoints, a named tuple of these arrays:")
+    def closest_points(self, points, *, max_distance=np.inf, fields=None) -> ClosestPoints:
+        """The mesh's nearest point to each query point, within ``max_distance``.
+
+        ``points``: (3,) or (N, 3), any real dtype (or a float32
+        ``pyopencl.array.Array``: the results are device arrays then);
+        ``max_distance``: a number > 0 -- a point with no triangle within it
+        (inclusive) is a miss.  ``fields``: the names of the fields below to
+        compute and return (default: all); the others are None.  Ties of equal
+        distance go to the lowest triangle index.  Distances are float32,
+        within ``clrt.query.results.POINT_DISTANCE_BOUND`` times the largest
+        coordinate (device frame) of the exact ones (docs/ray-queries.md).
+        """
+        return self._closest_points(PointBatch(points, max_distance), fields)
+
+    def distance(self, points, *, max_distance=np.inf):
+        """(N,) float32: each point's distance to the mesh (inf beyond
+        ``max_distance``); see :meth:`closest_points`."""
+        return self._closest_points(PointBatch(points, max_distance), ("distance",)).distance
