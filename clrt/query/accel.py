@@ -53,7 +53,7 @@ from clrt.query.kernels import QUERY_KERNELS
 from clrt.query.points import PointQueries
 from clrt.query.rays import CameraRays, PinholeRays, RayBatch, cull_code, is_device_array
 from clrt.query.results import (ALL_HITS_FIELDS, CAMERA_FIELDS, CLOSEST_FIELDS, RESULT_BYTES, RESULT_DTYPES,
-                                AllHits, CameraImages, Hits, with_fields)
+                                AllHits, CameraImages, Hits, asked_fields, with_fields)
 from clrt.accel import as_triangles
 from clrt.scene.arrays import device_origin, triangle_corners
 from clrt.scene.mesh import Mesh
@@ -114,14 +114,7 @@ _INFINITY = np.full(1, np.inf, np.float32)
 
 def check_fields(fields) -> list:
     """The closest-hit fields asked for (default: all), in kernel order."""
-    if fields is None:
-        return list(CLOSEST_FIELDS)
-    if isinstance(fields, str):
-        fields = (fields,)
-    unknown = [f for f in fields if f not in CLOSEST_FIELDS]
-    if unknown:
-        raise InputError(f"unknown hit field {unknown[0]!r}: choose from {', '.join(CLOSEST_FIELDS)}")
-    return [f for f in CLOSEST_FIELDS if f in fields]
+    return asked_fields(fields, CLOSEST_FIELDS, "hit")
 
 
 def _check_chunk_rays(chunk_rays) -> None:

@@ -13,21 +13,8 @@ from __future__ import annotations
 import numpy as np
 
 from clrt.device.sharing import one_at_a_time
-from clrt.errors import InputError
 from clrt.query.rays import PointBatch
-from clrt.query.results import POINT_FIELDS, ClosestPoints, with_fields
-
-
-def check_point_fields(fields) -> list:
-    """The point fields asked for (default: all), in kernel order."""
-    if fields is None:
-        return list(POINT_FIELDS)
-    if isinstance(fields, str):
-        fields = (fields,)
-    unknown = [f for f in fields if f not in POINT_FIELDS]
-    if unknown:
-        raise InputError(f"unknown point field {unknown[0]!r}: choose from {', '.join(POINT_FIELDS)}")
-    return [f for f in POINT_FIELDS if f in fields]
+from clrt.query.results import POINT_FIELDS, ClosestPoints, asked_fields, with_fields
 
 
 class PointQueries:
@@ -43,7 +30,7 @@ class PointQueries:
 
     @one_at_a_time
     def _closest_points(self, batch: PointBatch, fields) -> ClosestPoints:
-        fields = check_point_fields(fields)
+        fields = asked_fields(fields, POINT_FIELDS, "point")
         n = len(batch)
         out = self._point_outputs(n, fields, batch.on_device)
         slots = list(POINT_FIELDS)

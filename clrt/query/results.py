@@ -15,6 +15,8 @@ from typing import NamedTuple
 
 import numpy as np
 
+from clrt.errors import InputError
+
 
 class Field(NamedTuple):
     """One array of a query result."""
@@ -80,6 +82,20 @@ CAMERA_FIELDS = {
     "u": Field(np.float32, (), "barycentric weight of the triangle's vertex 1", "0"),
     "v": Field(np.float32, (), "barycentric weight of the triangle's vertex 2", "0"),
 }
+
+
+def asked_fields(fields, table: dict, kind: str) -> list:
+    """The fields of ``table`` asked for (``fields``: a name, names, or None for
+    all), in the table's (the kernel's) order; InputError naming a ``kind``
+    field that is not there."""
+    if fields is None:
+        return list(table)
+    if isinstance(fields, str):
+        fields = (fields,)
+    unknown = [f for f in fields if f not in table]
+    if unknown:
+        raise InputError(f"unknown {kind} field {unknown[0]!r}: choose from {', '.join(table)}")
+    return [f for f in table if f in fields]
 
 
 def _device_dtype(dtype) -> type:

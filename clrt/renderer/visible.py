@@ -37,7 +37,7 @@ def nothing_visible(corners: np.ndarray, bounds, camera) -> str:
     n = len(corners)
     image = f"nothing visible in the {camera.width}x{camera.height} image, only the background: "
     if zero_area_count(corners) == n:
-        return image + (f"the scene's only triangle has zero area" if n == 1 else
+        return image + ("the scene's only triangle has zero area" if n == 1 else
                         f"all {n:,} triangles of the scene have zero area") + " (a corrupt or flattened mesh?)"
     forward, _, _ = camera.basis()
     lo, hi = (np.asarray(b, np.float64) for b in bounds)
