@@ -13,7 +13,8 @@ Where to start:
   call each), ``clrt.Accel`` (build once, query often), ``clrt.RayMeshIntersector``
   (trimesh's interface); results ``clrt.Hits``, ``clrt.AllHits``,
   ``clrt.CameraImages`` (``help()`` on each lists its arrays);
-- point queries: ``clrt.closest_points`` (``clrt.ClosestPoints``), ``clrt.distance``;
+- point queries: ``clrt.closest_points`` (``clrt.ClosestPoints``), ``clrt.distance``,
+  ``clrt.signed_distance``, ``clrt.winding_number``, ``clrt.contains``, ``clrt.sdf_grid``;
 - meshes: ``clrt.load_mesh``, ``clrt.Mesh``;
 - devices: ``device=None`` (the first GPU, else the CPU), ``"gpu"``, ``"cpu"``
   or ``"P:D"`` (platform and device indices, as ``clrt info`` lists them).
@@ -72,6 +73,8 @@ _LAZY = {
     "all_hits": "clrt.query", "any_hit": "clrt.query", "camera_images": "clrt.query",
     "count_hits": "clrt.query", "occluded": "clrt.query", "trace": "clrt.query",
     "ClosestPoints": "clrt.query", "closest_points": "clrt.query", "distance": "clrt.query",
+    "signed_distance": "clrt.query", "winding_number": "clrt.query", "contains": "clrt.query",
+    "sdf_grid": "clrt.query",
     "RayMeshIntersector": "clrt.query.intersector",
     "Frame": "clrt.renderer", "Renderer": "clrt.renderer", "TileLimits": "clrt.renderer", "render": "clrt.renderer",
     "default_scene": "clrt.scene.default",

@@ -167,6 +167,31 @@ lane (lane k = triangle k), so that one float4 operation tests all four:
 A leaf's triangles fill its packets in slot order; the triangle buffers and
 ``prim_ids`` stay as they are (results and shading read them by slot).
 
+``WindingNode`` (144 B) -- the far field of one child of a BvhPairNode row, for
+winding numbers (winding.cl; rows x 2, child ``2 * row + side``, side 0 left):
+the first three terms of the Taylor series of its triangles' solid angles about
+``centre`` (Barill et al. 2018, "Fast winding numbers for soups and clouds"),
+made on the device from the rows and the triangles (trace.cl's winding_nodes),
+device frame, with d = x - centre over the triangles' points x and n their
+unit normals:
+    0: centre  float4  xyz: the triangles' area-weighted centroid; w: radius, no
+                       corner of them farther from the centre (rounded up)
+   16: normal  float4  xyz: sum of area * n, the dipole; w: their area
+   32: first   float[9]   row-major 3x3, [i][j]: sum of n_i * integral of d_j dA
+   68: second  float[18]  [i][jk], jk = xx, xy, xz, yy, yz, zz: sum of
+                          n_i * integral of d_j d_k dA
+  140: pad     float
+A missing child (the right of a one-leaf tree) holds zeros.
+
+``PseudoNormals`` (96 B) -- per slot, for signs by normal (point.cl): the
+angle-weighted pseudo-normals (Baerentzen & Aanaes 2005) of the triangle's
+edges and corners, unit length (zero where no face around has an area),
+made on the host from the mesh (clrt/query/inside.py), vertices merged by position:
+    0: edge    float4[3]  xyz: edge v0v1, v1v2, v2v0 -- the sum of the unit normals of
+                          the faces on it; w unused (0)
+   48: vertex  float4[3]  xyz: corner v0, v1, v2 -- the sum of the unit normals of the
+                          faces around it, each times its angle there; w unused (0)
+
 ``BuildNode`` (48 B) -- scratch of the device builder (clrt/device/build.py), one per
 node of its binary tree: triangles are nodes 0..F-1 (in Morton order), merged
 nodes F..2F-2 in the order they are made, the root last:
@@ -225,6 +250,9 @@ float8, int8, int4 = np.dtype((np.float32, 8)), np.dtype((np.int32, 8)), np.dtyp
 BVH_WIDE_NODE = np.dtype([("lo_x", float8), ("lo_y", float8), ("lo_z", float8), ("hi_x", float8),
                           ("hi_y", float8), ("hi_z", float8), ("child", int8), ("count", int8)])
 TRIANGLE_PACKET = np.dtype([("v0", float4, 3), ("v1", float4, 3), ("v2", float4, 3), ("slot", int4)])
+WINDING_NODE = np.dtype([("centre", float4), ("normal", float4), ("first", np.float32, 9),
+                         ("second", np.float32, 18), ("pad", np.float32)])
+PSEUDO_NORMALS = np.dtype([("edge", float4, 3), ("vertex", float4, 3)])
 BUILD_NODE = np.dtype([("lo", float4), ("hi", float4), ("parent", np.int32), ("count", np.int32),
                        ("rows", np.int32), ("cost", np.float32)])
 BUILD_CLUSTER = np.dtype([("lo", float4), ("hi", float4)])
@@ -260,6 +288,8 @@ STRUCTS = {
     "BvhPairNode": BVH_PAIR_NODE,
     "BvhWideNode": BVH_WIDE_NODE,
     "TrianglePacket": TRIANGLE_PACKET,
+    "WindingNode": WINDING_NODE,
+    "PseudoNormals": PSEUDO_NORMALS,
     "BuildNode": BUILD_NODE,
     "BuildCluster": BUILD_CLUSTER,
     "BuildPart": BUILD_PART,

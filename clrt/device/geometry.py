@@ -14,7 +14,7 @@ import numpy as np
 import pyopencl as cl
 
 from clrt.accel import Acceleration
-from clrt.accel.rows import child_refs
+from clrt.accel.rows import tree_levels
 from clrt.accel.wide import WIDE, WideBvh, collapse
 from clrt.config import MAX_PARTS, VOLUME_DEFINES, stack_size
 from clrt.device.args import scene_value
@@ -293,13 +293,8 @@ class _RefitPlan:
         from clrt.device.program import build_program
         defines = build_defines(acceleration.accel)
         self.kernels = typed_kernels(build_program(context, "refit.cl", defines), REFIT_KERNELS, defines)
-        refs = child_refs(acceleration.rows)
-        self.levels, current = [], np.zeros(1, np.int32)
-        while len(current):   # a row's inner children are one level deeper
-            self.levels.append(cl.Buffer(context, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR,
-                                         hostbuf=np.ascontiguousarray(current, np.int32)))
-            r = refs[current]
-            current = np.concatenate([r[r[:, 1] == 0, 0], r[r[:, 3] == 0, 2]]).astype(np.int32)
+        self.levels = [cl.Buffer(context, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR, hostbuf=level)
+                       for level in tree_levels(acceleration.rows)]
         self.level_sizes = [b.size // 4 for b in self.levels]
         self.num_rows = len(acceleration.rows)
         mf = cl.mem_flags

@@ -135,6 +135,21 @@ typedef struct {
     int4 slot;                    // lane k: slot of triangle k, -1: empty
 } TrianglePacket;
 
+// The far field of one BVH child for winding numbers (winding.cl); fields as layouts.py says.
+typedef struct {
+    float4 centre;       // xyz: area-weighted centroid; w: radius (rounded up)
+    float4 normal;       // xyz: sum of area * unit normal; w: area
+    float first[9];      // [i][j]: sum of n_i * integral of (x - centre)_j
+    float second[18];    // [i][jk], jk = xx, xy, xz, yy, yz, zz: sum of n_i * integral of (x - c)_j (x - c)_k
+    float pad;
+} WindingNode;
+
+// Per slot: pseudo-normals of its edges and corners (signs by normal, point.cl).
+typedef struct {
+    float4 edge[3];      // edge v0v1, v1v2, v2v0
+    float4 vertex[3];    // corner v0, v1, v2
+} PseudoNormals;
+
 // Scratch of the device builder (build_bvh.cl); fields as layouts.py says.
 typedef struct {
     float4 lo;      // xyz: exact min corner; w: as_int, left child (-1: a triangle)

@@ -170,22 +170,35 @@ inline bool load_ray(const RayInput* in, uint i, float3* origin, float3* dir, fl
     return ok;
 }
 
+// The point queries that take no largest distance (winding numbers, signed
+// distances: trace.cl) take their points alone, with the bad-point slots and
+// the launch; RayInput's other arrays then alias the points, never read.
+#define POINT_INPUT_PARAMS __global const float* points, __global int* bad, const QueryLaunch launch
+#define POINT_INPUT_ARGS points, points, points, points, bad, launch
+
 // Point i of a point query (point.cl): its position from `origins`, moved
-// into the device's frame as load_ray moves an origin, and its largest
-// distance from `tmaxs`.  False (and the point reported in `bad`, as an
-// origin) when it is not finite; no reach check: a point's distance takes no
-// float32 triangle test that could overflow.
-inline bool load_point(const RayInput* in, uint i, float3* point, float* max_dist)
+// into the device's frame as load_ray moves an origin.  False (and the point
+// reported in `bad`, as an origin) when it is not finite; no reach check: a
+// point's distance takes no float32 triangle test that could overflow (and
+// the parity sign casts rays only from points within the scene's box).
+inline bool load_query_point(const RayInput* in, uint i, float3* point)
 {
     const size_t k = (size_t)in->in_first + i;
     *point = vload3(0, in->origins + k * in->origin_stride);
-    *max_dist = in->tmaxs[k * in->tmax_stride];
     if (!all(isfinite(*point))) {
         atomic_min(in->bad + BAD_ORIGIN, (int)(in->ray_first + i));
         return false;
     }
     *point -= in->shift;
     return true;
+}
+
+// load_query_point, and the point's largest distance from `tmaxs`
+// (closest points).
+inline bool load_point(const RayInput* in, uint i, float3* point, float* max_dist)
+{
+    *max_dist = in->tmaxs[((size_t)in->in_first + i) * in->tmax_stride];
+    return load_query_point(in, i, point);
 }
 
 #ifdef RAY_PACKETS

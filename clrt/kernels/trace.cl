@@ -18,6 +18,7 @@
 #include "rays.cl"
 #include "accel_packet.cl"
 #include "point.cl"
+#include "winding.cl"
 
 // A sink that stores nothing: the query's options only.
 inline HitSink query_options(const int cull)
@@ -268,6 +269,121 @@ __kernel void query_closest_point(RAY_INPUT_PARAMS, __global uchar* results, GEO
         u_out[i] = found ? best.u : 0.0f;
     if (v_out)
         v_out[i] = found ? best.v : 0.0f;
+}
+
+// ---- Inside and outside (winding.cl, point.cl's sign rules)
+
+// The winding number of the mesh at each point (winding.cl): output 0, a
+// float a point; output 1, a byte a point: 1 where it is at least 1/2 (the
+// point is inside), as the float32 value says.  `winding`: the tree's
+// WindingNodes (winding_nodes; unused without a BVH).  A bad point writes 0.
+__kernel void query_winding_number(POINT_INPUT_PARAMS, __global uchar* results,
+                                   __global const WindingNode* winding, GEOMETRY_PARAMS)
+{
+    const uint i = get_global_id(0);
+    if (i >= launch.num_rays)
+        return;
+    const Geometry g = make_geometry(GEOMETRY_ARGS);
+    const RayInput in = make_ray_input(POINT_INPUT_ARGS);
+    float3 p;
+    float w = 0.0f;
+    if (load_query_point(&in, i, &p))
+        w = (float)winding_number(&g, winding, p);
+    __global float* winding_out = RESULT_AT(float, 0);
+    __global uchar* inside_out = RESULT_AT(uchar, 1);
+    if (winding_out)
+        winding_out[i] = w;
+    if (inside_out)
+        inside_out[i] = w >= 0.5f ? 1 : 0;
+}
+
+// Signed distances, output 0 (a float a point): the distance to the closest
+// point (point.cl), negative inside by one sign rule, a kernel each so that
+// each walks only what its rule needs -- the winding number (at least 1/2:
+// winding.cl), ray parity, or the pseudo-normal at the closest point.  A bad
+// point writes NaN.
+#define SIGN_WINDING 0
+#define SIGN_PARITY 1
+#define SIGN_NORMAL 2
+
+// Point i's signed distance by `rule` (`winding`, `normals`: the rule's
+// buffer, or 0), into output 0.
+inline void signed_distance(const Geometry* g, const RayInput* in, const QueryLaunch* launch,
+                            __global uchar* results, uint i, const int rule,
+                            __global const WindingNode* winding, __global const PseudoNormals* normals)
+{
+    float3 p;
+    float d = NAN;
+    if (load_query_point(in, i, &p)) {
+        const PointHit best = closest_point(g, p, INFINITY, POINT_MARGIN(p, in->scene_lo, in->scene_hi));
+        bool inside;
+        if (rule == SIGN_WINDING)
+            inside = (float)winding_number(g, winding, p) >= 0.5f;
+        else if (rule == SIGN_PARITY)
+            inside = inside_by_parity(g, p, in->scene_lo, in->scene_hi);
+        else
+            inside = inside_by_normal(g, normals, &best, p);
+        d = inside ? -(float)best.dist : (float)best.dist;
+    }
+    ((__global float*)(results + launch->field_at[0]))[i] = d;
+}
+
+__kernel void query_signed_distance_winding(POINT_INPUT_PARAMS, __global uchar* results,
+                                            __global const WindingNode* winding, GEOMETRY_PARAMS)
+{
+    const uint i = get_global_id(0);
+    if (i >= launch.num_rays)
+        return;
+    const Geometry g = make_geometry(GEOMETRY_ARGS);
+    const RayInput in = make_ray_input(POINT_INPUT_ARGS);
+    signed_distance(&g, &in, &launch, results, i, SIGN_WINDING, winding, 0);
+}
+
+__kernel void query_signed_distance_parity(POINT_INPUT_PARAMS, __global uchar* results, GEOMETRY_PARAMS)
+{
+    const uint i = get_global_id(0);
+    if (i >= launch.num_rays)
+        return;
+    const Geometry g = make_geometry(GEOMETRY_ARGS);
+    const RayInput in = make_ray_input(POINT_INPUT_ARGS);
+    signed_distance(&g, &in, &launch, results, i, SIGN_PARITY, 0, 0);
+}
+
+__kernel void query_signed_distance_normal(POINT_INPUT_PARAMS, __global uchar* results,
+                                           __global const PseudoNormals* normals, GEOMETRY_PARAMS)
+{
+    const uint i = get_global_id(0);
+    if (i >= launch.num_rays)
+        return;
+    const Geometry g = make_geometry(GEOMETRY_ARGS);
+    const RayInput in = make_ray_input(POINT_INPUT_ARGS);
+    signed_distance(&g, &in, &launch, results, i, SIGN_NORMAL, 0, normals);
+}
+
+// The WindingNodes of the rows of one tree level (`level_rows`, `count` of
+// them; winding.cl): the host launches the levels from the deepest up, so an
+// inner child's row is done before the row that holds it.
+__kernel void winding_nodes(__global WindingNode* winding, __global const int* level_rows, const uint count,
+                            GEOMETRY_PARAMS)
+{
+    const uint i = get_global_id(0);
+    if (i >= count)
+        return;
+    const Geometry g = make_geometry(GEOMETRY_ARGS);
+    const int row = level_rows[i];
+    const BvhPairNode n = *SPLIT_AT(&g, nodes, row);
+    for (int side = 0; side < 2; ++side) {
+        const int2 child = side == 0 ? PAIR_LEFT(n) : PAIR_RIGHT(n);
+        __global WindingNode* out = winding + 2 * row + side;
+        if (child.y > 0) {
+            *out = leaf_winding_node(&g, child.x, child.y);
+        } else if (child.y == 0) {
+            *out = joined_winding_node(winding + 2 * child.x, winding + 2 * child.x + 1);
+        } else {
+            WindingNode none = {(float4)(0.0f), (float4)(0.0f), {0}, {0}, 0.0f};
+            *out = none;
+        }
+    }
 }
 
 // The directions of the camera's pixel-centre rays (packed float3) for pixels

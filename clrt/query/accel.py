@@ -435,11 +435,12 @@ class Accel(PointQueries):
             pinned.upload(self.context, self.queue, buf, np.ascontiguousarray(array), staged)
         return buf
 
-    def _run(self, name: str, rays: tuple, launch: np.ndarray, results: cl.Buffer) -> None:
+    def _run(self, name: str, rays: tuple, launch: np.ndarray, results: cl.Buffer, *extra) -> None:
         """Launch query kernel ``name`` (QUERY_KERNELS) for the rays of ``rays``
-        and ``launch`` (_ray_args), its outputs into ``results``."""
+        and ``launch`` (_ray_args), its outputs into ``results``, ``extra``
+        buffers before the geometry (a point query's rule: clrt/query/points.py)."""
         kernel = self.kernels[name]
-        kernel.set_args(*rays, launch, results, *self.geometry.buffer_args, self._scene_value)
+        kernel.set_args(*rays, launch, results, *extra, *self.geometry.buffer_args, self._scene_value)
         m = int(launch["num_rays"])
         group = QUERY_GROUP[self._kind]
         if name in ("query_closest", "query_any") and self.rays_per_item > 1:

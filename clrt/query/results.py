@@ -1,4 +1,5 @@
-"""What ray queries return: closest hits, all hits, camera images, closest points.
+"""What ray queries return: closest hits, all hits, camera images, closest
+points, signed distances and winding numbers.
 
 Each result is a named tuple of arrays whose fields are described once, in the
 tables below (shape, dtype, meaning, value on a miss).  The named tuples, their
@@ -62,6 +63,25 @@ POINT_FIELDS = {
     "u": Field(np.float32, (), "barycentric weight of the triangle's vertex 1 at the point", "0"),
     "v": Field(np.float32, (), "barycentric weight of the triangle's vertex 2 (vertex 0 has 1 - u - v)", "0"),
 }
+
+# The inside queries' values, one array a query (Accel.signed_distance,
+# Accel.winding_number, Accel.contains; query_signed_distance_* and
+# query_winding_number in trace.cl): every point has one, so no miss value.
+INSIDE_FIELDS = {
+    "signed_distance": Field(np.float32, (), "the point's distance to the mesh (as ClosestPoints.distance), "
+                             "negative inside by the sign rule: the winding number >= 1/2, ray parity, or the "
+                             "pseudo-normal at the closest point", None),
+    "winding_number": Field(np.float32, (), "the generalised winding number: the triangles' signed solid angles "
+                            "over 4 pi (1 inside a closed mesh wound outwards, 0 outside, 1/2 on its faces), "
+                            "within WINDING_NUMBER_ERROR of the exact sum", None),
+    "inside": Field(np.bool_, (), "the winding number is >= 1/2 (Accel.contains)", None),
+}
+
+#: How far winding numbers lie from the exact sum of the triangles' solid
+#: angles, as measured on the tests' meshes (tests/test_inside.py) and five
+#: scans (winding.cl's WINDING_BETA says how): measured, not proven.  Without
+#: a BVH (accel="none") the sum is exact, in float64 where the device has it.
+WINDING_NUMBER_ERROR = 1e-4
 
 #: How far a reported distance may lie from the exact (float64) distance
 #: between the mesh and the query point rounded to float32: this times the
