@@ -7,6 +7,9 @@ volume, builder and after a refit (exact without a BVH); signed distances are
 the distances bit for bit, negative exactly where the exact winding number of
 a closed mesh says inside, by every sign rule; bad input is one line."""
 
+import re
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -17,6 +20,12 @@ from clrt.query.results import INSIDE_FIELDS, WINDING_NUMBER_ERROR
 from clrt.scene import primitives
 from clrt.scene.mesh import Mesh
 from test_point_queries import _bound, reference
+
+
+# The directions of the parity rule's rays, read from the kernel (point.cl).
+PARITY_DIRECTIONS = np.array([[float(x) for x in re.findall(r"-?\d+\.\d+", row)] for row in re.findall(
+    r"\{(-?[\d.]+f, -?[\d.]+f, -?[\d.]+f)\}",
+    (Path(clrt.__file__).parent / "kernels" / "point.cl").read_text())])
 
 
 def exact_winding_numbers(points, corners) -> np.ndarray:
@@ -47,8 +56,16 @@ def _split_box() -> Mesh:
     return Mesh.from_arrays(corners, np.arange(len(corners)).reshape(-1, 3), "split box")
 
 
+def _tetrahedron() -> Mesh:
+    """Sharp edges (70.5 degrees inside): outside them, one face's normal alone
+    may give the wrong side where the other face's is right."""
+    v = np.array([[1, 1, 1], [1, -1, -1], [-1, 1, -1], [-1, -1, 1]], np.float64)
+    return Mesh.from_arrays(v, np.array([[0, 1, 2], [0, 3, 1], [0, 2, 3], [1, 3, 2]]), "tetrahedron")
+
+
 CLOSED = {"torus": lambda: primitives.torus(1.0, 0.35, 24, 12), "icosphere": lambda: primitives.icosphere(2),
-          "box": lambda: primitives.box((1.0, 0.6, 1.4)), "slab": _slab, "split box": _split_box}
+          "box": lambda: primitives.box((1.0, 0.6, 1.4)), "slab": _slab, "split box": _split_box,
+          "tetrahedron": _tetrahedron}
 OPEN = {"heightfield": lambda: primitives.heightfield(12),
         "hemisphere": lambda: _hemisphere()}
 
@@ -59,9 +76,35 @@ def _hemisphere() -> Mesh:
     return Mesh.from_arrays(sphere.vertices, sphere.faces[keep], "open sphere")
 
 
+def _beside_edges(mesh, rng, count: int, size: float) -> np.ndarray:
+    """Points off ``count`` edges that two faces share (vertices merged by
+    position), each near one face's normal and leaning to the other's: the
+    closest feature is the edge, where one face's normal may point wrong."""
+    _, merged = np.unique(mesh.vertices, axis=0, return_inverse=True)
+    f = merged.reshape(-1)[mesh.faces]
+    keys = np.concatenate([np.sort(f[:, [k, (k + 1) % 3]], axis=1) for k in range(3)])
+    face = np.tile(np.arange(len(f)), 3)
+    order = np.lexsort(keys.T[::-1])
+    same = (keys[order][1:] == keys[order][:-1]).all(axis=1)
+    pairs = np.stack([face[order][:-1][same], face[order][1:][same]], axis=1)
+    pairs = pairs[rng.permutation(len(pairs))[:count]]
+    corners = mesh.vertices[mesh.faces].astype(np.float64)
+    normal = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+    normal /= np.linalg.norm(normal, axis=1, keepdims=True)
+    out = []
+    for a, b in pairs:
+        shared = [v for v in mesh.vertices[mesh.faces[a]] if np.isclose(mesh.vertices[mesh.faces[b]], v).all(1).any()]
+        mid = (shared[0] + shared[1]) / 2
+        for n1, n2 in ((normal[a], normal[b]), (normal[b], normal[a])):
+            lean = 0.9 * n1 + 0.1 * n2
+            out.append(mid + 0.02 * size * lean / np.linalg.norm(lean))
+    return np.array(out).reshape(-1, 3)
+
+
 def _points(mesh, seed=0) -> np.ndarray:
-    """Points around and inside the mesh's box, at its vertices, far away, and
-    inside its thin parts (a shell just under the surface); float32."""
+    """Points around and inside the mesh's box, at its vertices, far away,
+    inside its thin parts (a shell just under the surface) and beside its
+    edges; float32."""
     rng = np.random.default_rng(seed)
     lo, hi = mesh.bounds.astype(np.float64)
     size = np.linalg.norm(hi - lo)
@@ -74,7 +117,8 @@ def _points(mesh, seed=0) -> np.ndarray:
     normal = np.cross(corners[f, 1] - corners[f, 0], corners[f, 2] - corners[f, 0])
     normal /= np.linalg.norm(normal, axis=1, keepdims=True)
     under = np.einsum("nk,nkj->nj", w, corners[f]) - 2e-3 * size * normal * rng.choice([-1, 1], size=(30, 1))
-    return np.concatenate([around, vertices, far, under]).astype(np.float32)
+    edges = _beside_edges(mesh, rng, 12, size)
+    return np.concatenate([around, vertices, far, under, edges]).astype(np.float32)
 
 
 def _exact(mesh, points):
@@ -129,6 +173,15 @@ def test_signed_distances_by_every_rule(name, device):
         assert got.dtype == np.float32 and got.shape == (len(points),)
         np.testing.assert_array_equal(np.abs(got), distance, err_msg=sign)
         np.testing.assert_array_equal(got[clear] < 0, inside[clear], err_msg=sign)
+    # rays through vertices: each point sees a vertex exactly along one of the
+    # parity rule's directions (there a ray meets every triangle around it)
+    aimed = (mesh.vertices[:, None] - 0.3 * np.linalg.norm(np.ptp(mesh.bounds, axis=0))
+             * PARITY_DIRECTIONS[None]).reshape(-1, 3).astype(np.float32)
+    aimed_inside = _exact(mesh, aimed) > 0.5
+    aimed_clear = accel.distance(aimed) > 1e-4
+    assert aimed_clear.sum() > len(aimed) // 2
+    np.testing.assert_array_equal(accel.signed_distance(aimed, sign="parity")[aimed_clear] < 0,
+                                  aimed_inside[aimed_clear])
     # the float64 brute force's distances, as the distance query is held to
     exact = reference(points, mesh.vertices[mesh.faces])[0].min(axis=1)
     assert (np.abs(np.abs(accel.signed_distance(points)) - exact) <= _bound(mesh, points)).all()
