@@ -330,3 +330,14 @@ def test_a_mesh_without_faces_is_one_line(call, device):
     assert "\n" not in str(err.value)
     with pytest.raises(InputError, match="^sign must be one of"):
         clrt.signed_distance(primitives.icosphere(1), [0, 0, 0], sign="nearest", device=device)
+
+
+def test_the_guide_lists_every_inside_value():
+    """docs/ray-queries.md's table of the inside queries' values, in its own section."""
+    text = (Path(__file__).resolve().parents[1] / "docs" / "ray-queries.md").read_text()
+    section = text[text.index("## Inside and outside"):]
+    section = section[:section.index("\n## ", 1)]
+    rows = [line for line in section.splitlines() if line.startswith("| `")]
+    assert len(rows) == len(INSIDE_FIELDS)
+    for name, field in INSIDE_FIELDS.items():
+        assert any(row.startswith(f"| `{name}` | (N,) | {np.dtype(field.dtype).name} |") for row in rows), name

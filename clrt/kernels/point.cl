@@ -16,6 +16,11 @@
 // keeps every triangle that brute force could pick -- each walk then computes
 // the same distances for the same triangles and gives brute force's answer
 // bit for bit.  Ties go to the lower input triangle index, as hit.cl's.
+//
+// Below the walk, two of the sign rules of signed distances (the third,
+// winding numbers, is winding.cl): parity of ray crossings, and the
+// pseudo-normal at the feature -- face, edge or vertex -- that holds the
+// closest point.
 #ifndef CLRT_POINT_CL
 #define CLRT_POINT_CL
 

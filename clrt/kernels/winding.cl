@@ -19,10 +19,13 @@
 // the centre, while p lies farther than WINDING_BETA r from it, from that
 // series instead of opening it; the rest it opens, down to exact leaves.
 // The series' error falls as (r / distance)^3 times the child's own solid
-// angle; WINDING_BETA = 6 kept the largest error of 200 points around and
-// inside each of five scanned meshes (4 to 6 thousand triangles) under 4e-5,
-// and below 1e-4 on the tests' meshes (tests/test_inside.py): 2 (Barill's
-// choice) gave 6e-3.  Without a BVH every triangle is summed exactly.
+// angle, and the errors of many children partly cancel: WINDING_BETA = 6
+// kept the largest error of 200 points in and around each of seven scans (4k
+// to 75k triangles, device-built trees) at 2.1e-5 and of the tests' meshes at
+// 1e-5, against the exact sum (clrt.query.results.WINDING_NUMBER_ERROR is
+// 1e-4; tests/test_inside.py).  On one of those scans (cow, a host SAH tree)
+// 2, Barill's choice, gave 5.6e-3, and 4 gave 1.8e-4 -- 4.2e-3 without the
+// series' last term.  Without a BVH every triangle is summed exactly.
 #ifndef CLRT_WINDING_CL
 #define CLRT_WINDING_CL
 
@@ -78,7 +81,6 @@ inline point_real far_field(__global const WindingNode* node, point_real3 r, poi
                                          m[6] * r.x + m[7] * r.y + m[8] * r.z);
     const point_real trace_m = (point_real)m[0] + m[4] + m[8];
     point_real rrr = 0;   // T[r, r, r]
-    point_real3 rw;       // (r_i T[i][j][j]) lanes, summed below
     for (int i = 0; i < 3; ++i) {
         __global const float* ti = t + 6 * i;
         const point_real q = ti[0] * r.x * r.x + ti[3] * r.y * r.y + ti[5] * r.z * r.z
@@ -86,10 +88,10 @@ inline point_real far_field(__global const WindingNode* node, point_real3 r, poi
         rrr += (i == 0 ? r.x : (i == 1 ? r.y : r.z)) * q;
     }
     const point_real3 u = (point_real3)(t[0] + t[7] + t[14], t[1] + t[9] + t[16], t[2] + t[10] + t[17]);
-    rw = (point_real3)(r.x * (t[0] + t[3] + t[5]), r.y * (t[6] + t[9] + t[11]), r.z * (t[12] + t[15] + t[17]));
+    const point_real3 w = (point_real3)(t[0] + t[3] + t[5], t[6] + t[9] + t[11], t[12] + t[15] + t[17]);
     const point_real order0 = dot(N, r);
     const point_real order1 = trace_m - 3 * dot(r, Mr) * inv_r2;
-    const point_real order2 = (15 * rrr * inv_r2 * inv_r2 - 3 * (2 * dot(r, u) + rw.x + rw.y + rw.z) * inv_r2) / 2;
+    const point_real order2 = (15 * rrr * inv_r2 * inv_r2 - 3 * (2 * dot(r, u) + dot(r, w)) * inv_r2) / 2;
     return (order0 + order1 + order2) * inv_r3;
 }
 
