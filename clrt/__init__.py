@@ -11,8 +11,9 @@ Where to start:
   ``clrt.Material``, ``clrt.Light``;
 - ray queries: ``clrt.trace``, ``clrt.occluded``, ``clrt.camera_images`` (one
   call each), ``clrt.Accel`` (build once, query often), ``clrt.RayMeshIntersector``
-  (trimesh's interface); results ``clrt.Hits``, ``clrt.AllHits``,
-  ``clrt.CameraImages`` (``help()`` on each lists its arrays);
+  and ``clrt.ProximityQuery`` (trimesh's ``mesh.ray`` and ``mesh.nearest``);
+  results ``clrt.Hits``, ``clrt.AllHits``, ``clrt.CameraImages`` (``help()``
+  on each lists its arrays);
 - point queries: ``clrt.closest_points`` (``clrt.ClosestPoints``), ``clrt.distance``,
   ``clrt.signed_distance``, ``clrt.winding_number``, ``clrt.contains``, ``clrt.sdf_grid``;
 - meshes: ``clrt.load_mesh``, ``clrt.Mesh``;
@@ -76,6 +77,7 @@ _LAZY = {
     "signed_distance": "clrt.query", "winding_number": "clrt.query", "contains": "clrt.query",
     "sdf_grid": "clrt.query",
     "RayMeshIntersector": "clrt.query.intersector",
+    "ProximityQuery": "clrt.query.proximity",
     "Frame": "clrt.renderer", "Renderer": "clrt.renderer", "TileLimits": "clrt.renderer", "render": "clrt.renderer",
     "default_scene": "clrt.scene.default",
     "load_mesh": "clrt.scene.load",
