@@ -28,7 +28,6 @@ from clrt.device.context import format_bytes
 from clrt.device.program import launch_size
 from clrt.errors import DeviceMemoryError, InputError
 from clrt.layouts import PSEUDO_NORMALS, WINDING_NODE
-from clrt.query.rays import host_rows
 
 #: The sign rules of signed distances: the query kernel of each (trace.cl).
 SIGN_KERNELS = {"winding": "query_signed_distance_winding", "parity": "query_signed_distance_parity",
@@ -176,4 +175,4 @@ class GridPoints:
         return self.points(start, stop).reshape(-1) if k == 0 else a
 
     def bad_ray_message(self, kind: str, i: int, reach=None) -> str:
-        return f"grid sample {i} is {host_rows(self.points(i, i + 1), 'points')[0].tolist()}: not finite"
+        return f"grid sample {i} is {self.points(i, i + 1)[0].tolist()}: not finite"
