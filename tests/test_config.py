@@ -44,7 +44,8 @@ def test_the_kernels_see_the_table(device):
                 **{f"BAD_{k.upper()}": i for i, k in enumerate(config.RAY_CHECKS)},
                 **{f"WRAP_{k.upper()}": v for k, v in config.TEXTURE_WRAPS.items()},
                 "TEXEL_LIMIT": config.TEXEL_LIMIT, "RESULT_SLOTS": config.RESULT_SLOTS,
-                "NO_RESULT": -1}   # (int) of the all-ones ulong
+                "NO_RESULT": -1,   # (int) of the all-ones ulong
+                "POINT_CELL_BITS": config.POINT_CELL_BITS, "POINT_OFFSETS_GROUP": config.POINT_OFFSETS_GROUP}
     assert dict(zip(names, out.tolist())) == expected
 
 
