@@ -26,17 +26,38 @@ Byte layout (offset: field):
     0: vertex  int[3]  indices into the vertex-normal buffer
    12: material int    row of the material buffer
 
-``Material`` (48 B)
-    0: color     float4  linear RGB albedo; a: as_int, row of the Texture table
-                         multiplying it, -1 for none (read only in -DSURFACE_DETAIL builds)
+``Material`` (112 B) -- bytes 0..47 are the paper's Whitted model, the only
+ones the Whitted kernels read; bytes 48.. the path tracer's metallic-roughness
+model (glTF 2.0 appendix B).  The path tracer's base colour is ``color`` (times
+the corner colour and texture, as for Whitted: texture.cl's surface_albedo).
+Every row fills both parts: a material that gives no PBR values gets them from
+its Phong ones (``clrt.scene.scene.Material.pbr_values``, documented there).
+    0: color     float4  linear RGB albedo (the base colour); a: as_int, row of the
+                         Texture table multiplying it (sRGB), -1 for none (read only
+                         in -DSURFACE_DETAIL builds, as every texture row below)
    16: ambient   float   coefficients of the Phong model
    20: diffuse   float
    24: specular  float
    28: shininess float   Phong exponent
-   32: flags        uint  bit 0: smooth shading (interpolate vertex normals)
+   32: flags        uint  bit 0 MATERIAL_SMOOTH: smooth shading (interpolate vertex
+                          normals); bit 1 MATERIAL_DOUBLE_SIDED: emission leaves both
+                          faces (else only the front one, glTF's counter-clockwise side)
    36: reflectivity float weight of the mirror ray (0..1)
    40: transparency float weight of the refracted ray (0..1)
-   44: ior          float index of refraction (>= 1)
+   44: ior          float index of refraction (>= 1); the path tracer's too
+   48: emission     float4 xyz: linear emitted radiance (glTF emissiveFactor x
+                          KHR_materials_emissive_strength), >= 0; w: as_int, Texture
+                          row of the emissive texture multiplying it (sRGB), -1 none
+   64: metallic     float 0..1
+   68: roughness    float perceptual roughness 0..1 (GGX alpha = roughness^2)
+   72: specular_weight float KHR_materials_specular specularFactor 0..1 (0: pure Lambert)
+   76: transmission float KHR_materials_transmission factor 0..1 (a dielectric of ``ior``)
+   80: specular_color float4 xyz: KHR_materials_specular specularColorFactor (linear,
+                          >= 0); w: as_int, Texture row of the metallicRoughness
+                          texture (G = roughness, B = metallic; linear), -1 none
+   96: normal_texture int Texture row of the tangent-space normal map (linear), -1 none
+  100: normal_scale float glTF normalTexture.scale (1 default)
+  104: pad          uint[2]  0
 
 The next three exist only in scenes with textures or colours, whose programs
 are built with -DSURFACE_DETAIL; plain scenes upload and read none of them.
@@ -213,7 +234,10 @@ TRIANGLE_INFO = np.dtype([("vertex", np.int32, 3), ("material", np.int32)])
 MATERIAL = np.dtype([("color", float4), ("ambient", np.float32), ("diffuse", np.float32),
                      ("specular", np.float32), ("shininess", np.float32),
                      ("flags", np.uint32), ("reflectivity", np.float32), ("transparency", np.float32),
-                     ("ior", np.float32)])
+                     ("ior", np.float32),
+                     ("emission", float4), ("metallic", np.float32), ("roughness", np.float32),
+                     ("specular_weight", np.float32), ("transmission", np.float32), ("specular_color", float4),
+                     ("normal_texture", np.int32), ("normal_scale", np.float32), ("pad", np.uint32, 2)])
 TRIANGLE_DETAIL = np.dtype([("corner", float4, 3), ("v", float4)])
 TEXTURE = np.dtype([("first", np.uint32), ("width", np.int32), ("height", np.int32),
                     ("wrap_s", np.uint32), ("wrap_t", np.uint32)])

@@ -14,12 +14,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from clrt.config import MATERIAL_SMOOTH
-from clrt.config import TEXTURE_WRAPS
+from clrt.config import MATERIAL_DOUBLE_SIDED, MATERIAL_SMOOTH, TEXTURE_WRAPS
 from clrt.errors import TooLargeError
 from clrt.layouts import LIGHT, MATERIAL, TEXEL, TEXTURE, TRIANGLE_DETAIL, TRIANGLE_INFO, TRIANGLE_VERTS
 from clrt.scene.mesh import Mesh
-from clrt.scene.scene import Scene
+from clrt.scene.scene import MATERIAL_TEXTURES, Scene
 from clrt.scene.texture import srgb_decode
 
 
@@ -159,22 +158,20 @@ def flatten_scene(scene: Scene) -> SceneArrays:
         normals[start:start + len(m.vertices), :3] = m.vertex_normals()
         start += len(m.vertices)
 
-    # A texture colours only meshes with texture coordinates.
+    # A texture applies only to meshes with texture coordinates; each Texture
+    # gets one row, however many materials (and fields) share it.
     textures = {}   # id(Texture) -> (row, Texture), in order of first use
     flat_materials = []
     for o, mats in zip(scene.objects, object_materials):
         for mat in mats:
-            tex = mat.texture if o.mesh.uv is not None else None
-            if tex is not None:
-                textures.setdefault(id(tex), (len(textures), tex))
-            flat_materials.append((mat, textures[id(tex)][0] if tex is not None else -1))
-    materials = np.zeros(len(flat_materials), MATERIAL)
-    for i, (mat, texture) in enumerate(flat_materials):
-        materials[i]["color"][:3] = mat.color
-        materials[i]["color"][3:] = np.int32(texture).view(np.float32)
-        for name in ("ambient", "diffuse", "specular", "shininess", "reflectivity", "transparency", "ior"):
-            materials[i][name] = getattr(mat, name)
-        materials[i]["flags"] = MATERIAL_SMOOTH if mat.smooth else 0
+            rows = {}
+            for name in MATERIAL_TEXTURES:
+                tex = getattr(mat, name) if o.mesh.uv is not None else None
+                if tex is not None:
+                    textures.setdefault(id(tex), (len(textures), tex))
+                rows[name] = textures[id(tex)][0] if tex is not None else -1
+            flat_materials.append((mat, rows))
+    materials = material_rows(flat_materials)
 
     detail = None
     if textures or mesh.colors is not None:
@@ -183,6 +180,38 @@ def flatten_scene(scene: Scene) -> SceneArrays:
     origin = device_origin(bounds)
     return SceneArrays(triangle_corners(mesh, origin), tri_info, normals, materials,
                        light_records(scene.lights, origin), bounds, detail, origin)
+
+
+def material_rows(flat_materials: list) -> np.ndarray:
+    """(M,) MATERIAL rows of ``(Material, {texture field: Texture row or -1})``
+    pairs: the Phong fields as they are, the path tracer's from
+    :meth:`Material.pbr_values` (given, or mapped from Phong)."""
+    materials = np.zeros(len(flat_materials), MATERIAL)
+    for i, (mat, _) in enumerate(flat_materials):
+        row = materials[i]
+        row["color"][:3] = mat.color
+        for name in ("ambient", "diffuse", "specular", "shininess", "reflectivity", "transparency", "ior"):
+            row[name] = getattr(mat, name)
+        row["flags"] = (MATERIAL_SMOOTH if mat.smooth else 0) | (MATERIAL_DOUBLE_SIDED if mat.double_sided else 0)
+        row["emission"][:3] = mat.emission
+        pbr = mat.pbr_values()
+        for name in ("metallic", "roughness", "specular_weight", "transmission"):
+            row[name] = getattr(pbr, name)
+        row["specular_color"][:3] = mat.specular_color
+        row["normal_scale"] = mat.normal_scale
+    # Texture rows: int32 bits in the w lanes (as_int in the kernels), written as
+    # integers so that no float conversion touches the bits of -1 (a NaN).
+    rows = {name: np.array([r[name] for _, r in flat_materials], np.int32).reshape(-1)
+            for name in MATERIAL_TEXTURES}
+    for name, (field, lane) in _TEXTURE_LANES.items():
+        materials[field].view(np.int32).reshape(len(materials), -1)[:, lane] = rows[name]
+    materials["normal_texture"] = rows["normal_texture"]
+    return materials
+
+
+# Where each texture row of a Material lives in a MATERIAL row: (field, lane).
+_TEXTURE_LANES = {"texture": ("color", 3), "emission_texture": ("emission", 3),
+                  "metallic_roughness_texture": ("specular_color", 3)}
 
 
 def surface_detail(mesh: Mesh, textures: list) -> SurfaceDetail:
