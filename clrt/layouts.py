@@ -68,19 +68,25 @@ adds to the material, interpolated with the hit's barycentrics
                             colours), w = texture coordinate u
    48: v         float4     xyz = texture coordinate v of corners 0, 1, 2; w unused (0)
 
-``Texture`` (20 B) -- one row per texture of the scene
+``Texture`` (24 B) -- one row per texture and decoding of the scene (an image
+that one material reads as colour and another as data has two rows over the
+same texels)
     0: first   uint  texel of the image's top-left pixel in the texel buffer
     4: width   int   pixels
     8: height  int
    12: wrap_s  uint  along u: WRAP_REPEAT, WRAP_CLAMP or WRAP_MIRROR (clrt.config.TEXTURE_WRAPS)
    16: wrap_t  uint  along v
+   20: linear  uint  0: colours, 8-bit sRGB (base colour, emission); 1: data, read
+                     linearly as code * (1/255) (metallicRoughness, normal maps)
 
-Texels (``TEXEL``, 4 B each): uchar4, xyz = 8-bit sRGB, w unused (0), every
-texture's rows top to bottom, one after another, in one buffer (split like the
-geometry when it is larger than one allocation).  The kernels decode sRGB
-through a 256-entry float table (``SRGB_TABLE``, 1 KiB), so an image costs 4 B
-a texel on the device -- a quarter of float4 texels -- and the decoded values
-are exact float32 constants, the same on every device and in the reference.
+Texels (``TEXEL``, 4 B each): uchar4, xyz = 8-bit codes, w unused (0), every
+image's rows top to bottom, one after another, in one buffer (split like the
+geometry when it is larger than one allocation); each image once, however many
+rows and materials read it.  The kernels decode sRGB through a 256-entry float
+table (``SRGB_TABLE``, 1 KiB), so an image costs 4 B a texel on the device -- a
+quarter of float4 texels -- and the decoded values are exact float32 constants,
+the same on every device and in the reference; a linear code c is
+float(c) * float(1/255), one correctly rounded product, the same everywhere too.
 
 ``Light`` (32 B) -- point light
     0: position float4  xyz, w unused
@@ -240,7 +246,7 @@ MATERIAL = np.dtype([("color", float4), ("ambient", np.float32), ("diffuse", np.
                      ("normal_texture", np.int32), ("normal_scale", np.float32), ("pad", np.uint32, 2)])
 TRIANGLE_DETAIL = np.dtype([("corner", float4, 3), ("v", float4)])
 TEXTURE = np.dtype([("first", np.uint32), ("width", np.int32), ("height", np.int32),
-                    ("wrap_s", np.uint32), ("wrap_t", np.uint32)])
+                    ("wrap_s", np.uint32), ("wrap_t", np.uint32), ("linear", np.uint32)])
 TEXEL = np.dtype((np.uint8, 4))
 SRGB_TABLE = np.dtype((np.float32, 256))
 LIGHT = np.dtype([("position", float4), ("color", float4)])

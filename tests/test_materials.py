@@ -86,13 +86,20 @@ def test_the_host_fills_every_pbr_field_and_shares_texture_rows():
     np.testing.assert_array_equal(rows[1]["specular_color"][:3], np.float32([2.0, 1.0, 0.5]))
     assert [rows[1][k] for k in ("metallic", "roughness", "specular_weight", "transmission", "ior",
                                  "normal_scale")] == [np.float32(v) for v in (0.75, 0.125, 0.5, 0.25, 1.33, -0.5)]
-    # texture rows: each Texture once, in order of first use, whichever field refers to it
+    # texture rows: one per Texture and decoding, in order of first use, whichever
+    # materials refer to it; colours (base, emission) sRGB, data (metallicRoughness, normal) linear
     textures = a.detail.textures
-    assert len(textures) == 4
     assert list(_lane(rows, "color")) == [-1, 0, 0]
     assert list(_lane(rows, "emission")) == [-1, 1, -1]
     assert list(_lane(rows, "specular_color")) == [-1, 2, -1]
-    assert list(rows["normal_texture"]) == [-1, 3, 0]
+    assert list(rows["normal_texture"]) == [-1, 3, 4]
+    assert list(textures["linear"]) == [0, 0, 1, 1, 1]
+    # the texels of each image once: `base` read as colour (row 0) and as data (row 4) shares them
+    assert len(a.detail.texels) == 4 * 6
+    assert textures["first"][4] == textures["first"][0] == 0
+    for row, tex in enumerate((base, glow, mr, normal)):
+        first = textures["first"][row]
+        np.testing.assert_array_equal(a.detail.texels[first:first + 6, :3], tex.pixels.reshape(-1, 3))
     assert (rows["pad"] == 0).all()
     # without texture coordinates no texture applies
     plain = _rows(pbr, uv=False).materials
@@ -118,3 +125,20 @@ def test_bad_pbr_values_are_one_line_errors(fields, words):
     with pytest.raises(InputError) as info:
         Material(**fields)
     assert words in str(info.value) and "\n" not in str(info.value)
+
+
+def _quad_obj(tmp_path, mtl: str, materials=("a", "b")) -> "tuple":
+    """A two-triangle OBJ with texture coordinates, one triangle per material, and its MTL text."""
+    lines = ["mtllib m.mtl", "v 0 0 0", "v 1 0 0", "v 1 1 0", "v 0 1 0", "vt 0 0", "vt 1 0", "vt 1 1", "vt 0 1"]
+    lines += [f"usemtl {materials[0]}", "f 1/1 2/2 3/3", f"usemtl {materials[1]}", "f 1/1 3/3 4/4"]
+    (tmp_path / "quad.obj").write_text("\n".join(lines) + "\n")
+    (tmp_path / "m.mtl").write_text(mtl)
+    from clrt.scene.load import load_asset
+    return load_asset(tmp_path / "quad.obj")
+
+
+def test_an_image_that_several_mtl_materials_name_is_one_texture(tmp_path):
+    from PIL import Image
+    Image.fromarray(np.random.default_rng(5).integers(0, 256, (4, 4, 3), dtype=np.uint8)).save(tmp_path / "t.png")
+    _, materials = _quad_obj(tmp_path, "newmtl a\nmap_Kd t.png\nnewmtl b\nKd 1 0 0\nmap_Kd ./t.png\n")
+    assert materials[0]["texture"] is materials[1]["texture"]

@@ -60,6 +60,7 @@ typedef struct {
     uint first;           // texel of the top-left pixel
     int width, height;
     uint wrap_s, wrap_t;  // WRAP_REPEAT, WRAP_CLAMP, WRAP_MIRROR
+    uint linear;          // 0: sRGB colours; 1: linear data (metallicRoughness, normal maps)
 } Texture;
 
 typedef struct {

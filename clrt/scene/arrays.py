@@ -158,24 +158,26 @@ def flatten_scene(scene: Scene) -> SceneArrays:
         normals[start:start + len(m.vertices), :3] = m.vertex_normals()
         start += len(m.vertices)
 
-    # A texture applies only to meshes with texture coordinates; each Texture
-    # gets one row, however many materials (and fields) share it.
-    textures = {}   # id(Texture) -> (row, Texture), in order of first use
+    # A texture applies only to meshes with texture coordinates.  Each Texture
+    # gets one row per decoding (sRGB colour or linear data), however many
+    # materials and fields share it, and its texels are uploaded once.
+    textures = {}   # (id(Texture), linear) -> (row, Texture, linear), in order of first use
     flat_materials = []
     for o, mats in zip(scene.objects, object_materials):
         for mat in mats:
             rows = {}
-            for name in MATERIAL_TEXTURES:
+            for name, linear in MATERIAL_TEXTURES.items():
                 tex = getattr(mat, name) if o.mesh.uv is not None else None
                 if tex is not None:
-                    textures.setdefault(id(tex), (len(textures), tex))
-                rows[name] = textures[id(tex)][0] if tex is not None else -1
+                    rows[name] = textures.setdefault((id(tex), linear), (len(textures), tex, linear))[0]
+                else:
+                    rows[name] = -1
             flat_materials.append((mat, rows))
     materials = material_rows(flat_materials)
 
     detail = None
     if textures or mesh.colors is not None:
-        detail = surface_detail(mesh, [tex for _, tex in textures.values()])
+        detail = surface_detail(mesh, [(tex, linear) for _, tex, linear in textures.values()])
     bounds = scene.bounds
     origin = device_origin(bounds)
     return SceneArrays(triangle_corners(mesh, origin), tri_info, normals, materials,
@@ -216,22 +218,28 @@ _TEXTURE_LANES = {"texture": ("color", 3), "emission_texture": ("emission", 3),
 
 def surface_detail(mesh: Mesh, textures: list) -> SurfaceDetail:
     """Corner colours and texture coordinates of the concatenated ``mesh``, and
-    ``textures`` packed into one texel buffer (rows 0.. of the texture table)."""
+    the texture table of ``textures`` ((Texture, linear) pairs: rows 0.. in
+    order), each Texture's texels once in one texel buffer."""
     tri_detail = np.zeros(len(mesh.faces), TRIANGLE_DETAIL)
     tri_detail["corner"][:, :, :3] = 1.0 if mesh.colors is None else mesh.colors
     if mesh.uv is not None:
         tri_detail["corner"][:, :, 3] = mesh.uv[:, :, 0]
         tri_detail["v"][:, :3] = mesh.uv[:, :, 1]
-    table = np.zeros(max(len(textures), 1), TEXTURE)
-    sizes = [t.pixels.shape[0] * t.pixels.shape[1] for t in textures]
+    images = list({id(tex): tex for tex, _ in textures}.values())   # each once, in order of first use
+    sizes = [t.pixels.shape[0] * t.pixels.shape[1] for t in images]
     starts = np.cumsum([0] + sizes)
     if starts[-1] > np.iinfo(np.uint32).max:
         raise TooLargeError(f"the scene's textures hold {starts[-1]:,} texels, more than 2**32")
     texels = np.zeros((max(int(starts[-1]), 1),) + TEXEL.shape, TEXEL.base)
-    for row, (tex, start) in enumerate(zip(textures, starts)):
+    first = {}
+    for tex, start in zip(images, starts):
         h, w = tex.pixels.shape[:2]
-        table[row] = (start, w, h, TEXTURE_WRAPS[tex.wrap_s], TEXTURE_WRAPS[tex.wrap_t])
         texels[start:start + w * h, :3] = tex.pixels.reshape(-1, 3)
+        first[id(tex)] = start
+    table = np.zeros(max(len(textures), 1), TEXTURE)
+    for row, (tex, linear) in enumerate(textures):
+        h, w = tex.pixels.shape[:2]
+        table[row] = (first[id(tex)], w, h, TEXTURE_WRAPS[tex.wrap_s], TEXTURE_WRAPS[tex.wrap_t], int(linear))
     return SurfaceDetail(tri_detail, table, texels, srgb_table())
 
 

@@ -14,9 +14,11 @@ from clrt.scene.texture import Texture
 
 
 
-#: The textures a Material may hold, each read by its own decoding: base colour
-#: and emission are sRGB images, metallicRoughness and normal maps linear data.
-MATERIAL_TEXTURES = ("texture", "emission_texture", "metallic_roughness_texture", "normal_texture")
+#: The textures a Material may hold, each read by its own decoding (True:
+#: linear): base colour and emission are sRGB colours, metallicRoughness and
+#: normal maps linear data (glTF 2.0 says which is which).
+MATERIAL_TEXTURES = {"texture": False, "emission_texture": False, "metallic_roughness_texture": True,
+                     "normal_texture": True}
 
 
 @dataclass(frozen=True)
