@@ -142,3 +142,137 @@ def test_an_image_that_several_mtl_materials_name_is_one_texture(tmp_path):
     Image.fromarray(np.random.default_rng(5).integers(0, 256, (4, 4, 3), dtype=np.uint8)).save(tmp_path / "t.png")
     _, materials = _quad_obj(tmp_path, "newmtl a\nmap_Kd t.png\nnewmtl b\nKd 1 0 0\nmap_Kd ./t.png\n")
     assert materials[0]["texture"] is materials[1]["texture"]
+
+
+# ---------------------------------------------------------------------------- glTF
+
+
+def _image(seed: int, size=(4, 4)):
+    from PIL import Image
+    return Image.fromarray(np.random.default_rng(seed).integers(0, 256, (*size, 3), dtype=np.uint8))
+
+
+def _pbr_glb(tmp_path, **material):
+    """A textured quad exported by trimesh as GLB with a PBRMaterial of ``material``."""
+    import trimesh
+    v = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], float)
+    uv = np.array([[0, 0], [1, 0], [1, 1], [0, 1]], float)
+    pbr = trimesh.visual.material.PBRMaterial(name="look", **material)
+    quad = trimesh.Trimesh(v, [[0, 1, 2], [0, 2, 3]], visual=trimesh.visual.TextureVisuals(uv=uv, material=pbr),
+                           process=False)
+    path = tmp_path / "quad.glb"
+    quad.export(path)
+    return path
+
+
+def _edit_glb(path, edit):
+    """Rewrite a GLB file's JSON chunk with ``edit(doc)``."""
+    import json
+    import struct
+    data = path.read_bytes()
+    length = struct.unpack_from("<I", data, 12)[0]
+    doc = json.loads(data[20:20 + length])
+    edit(doc)
+    text = json.dumps(doc).encode()
+    text += b" " * (-len(text) % 4)
+    rest = data[20 + length:]
+    path.write_bytes(struct.pack("<4sIII4s", b"glTF", 2, 20 + len(text) + len(rest), len(text), b"JSON")
+                     + text + rest)
+
+
+def test_gltf_metallic_roughness_materials_are_read_whole(tmp_path):
+    """Every PBR field and texture of a glTF material, from a file trimesh writes
+    (factors, emissive, doubleSided, four textures) and extensions added to it."""
+    from clrt.scene.load import load_asset
+    images = {key: _image(k) for k, key in enumerate(("baseColorTexture", "metallicRoughnessTexture",
+                                                      "normalTexture", "emissiveTexture"))}
+    path = _pbr_glb(tmp_path, baseColorFactor=[1.0, 0.5, 0.25, 1.0], metallicFactor=0.75, roughnessFactor=0.375,
+                    emissiveFactor=[0.5, 0.25, 1.0], doubleSided=True, **images)
+
+    def extend(doc):
+        m = doc["materials"][0]
+        m["normalTexture"]["scale"] = 0.625
+        m["pbrMetallicRoughness"]["baseColorFactor"] = [1.0, 0.5, 0.25, 1.0]   # (trimesh wrote 8 bits of it)
+        m["extensions"] = {"KHR_materials_emissive_strength": {"emissiveStrength": 8.0},
+                           "KHR_materials_specular": {"specularFactor": 0.5, "specularColorFactor": [1.5, 1.0, 0.25]},
+                           "KHR_materials_transmission": {"transmissionFactor": 0.875},
+                           "KHR_materials_ior": {"ior": 1.25}}
+    _edit_glb(path, extend)
+    mesh, (fields,) = load_asset(path)
+    material = Material(**fields)
+    assert material.color == (1.0, 0.5, 0.25)
+    assert (material.metallic, material.roughness) == (0.75, 0.375)
+    assert material.emission == (4.0, 2.0, 8.0)          # emissiveFactor x emissiveStrength, linear
+    assert material.double_sided is True
+    assert (material.specular_weight, material.specular_color) == (0.5, (1.5, 1.0, 0.25))
+    assert (material.transmission, material.ior, material.normal_scale) == (0.875, 1.25, 0.625)
+    for field, key in (("texture", "baseColorTexture"), ("metallic_roughness_texture", "metallicRoughnessTexture"),
+                       ("normal_texture", "normalTexture"), ("emission_texture", "emissiveTexture")):
+        assert np.array_equal(getattr(material, field).pixels, np.asarray(images[key])), field
+    # Whitted keeps its own mapping of the same factors (gltf.whitted_from_pbr)
+    assert material.transparency == 0.875 and material.reflectivity == 0.75 * (1 - 0.375)
+    # on the device: colours sRGB, data linear, in the rows of the contract
+    rows = flatten_scene(Scene([SceneObject(mesh, Material(), [material])], [(0.0, 0.0, 5.0)]))
+    table, row = rows.detail.textures, rows.materials[1]
+    assert [table["linear"][_lane(rows.materials, f)[1]] for f in ("color", "emission", "specular_color")] == [0, 0, 1]
+    assert table["linear"][row["normal_texture"]] == 1
+    assert row["flags"] & config.MATERIAL_DOUBLE_SIDED
+
+
+def test_gltf_defaults_and_shared_textures(tmp_path):
+    """A glTF material without PBR keys has glTF's defaults (metal, rough, no emission,
+    one-sided), not the Phong mapping; an image two materials use is one Texture."""
+    from clrt.scene.load import load_asset
+    path = _pbr_glb(tmp_path, baseColorTexture=_image(1))
+
+    def second_material(doc):
+        doc["materials"].append({"pbrMetallicRoughness": {"baseColorTexture": {"index": 0}},
+                                 "emissiveTexture": {"index": 0}})
+        doc["meshes"][0]["primitives"][0]["material"] = 1
+        doc["materials"][0]["pbrMetallicRoughness"] = {"baseColorTexture": {"index": 0}}
+    _edit_glb(path, second_material)
+    _, (first, second) = load_asset(path)
+    assert first["texture"] is second["texture"] is second["emission_texture"]
+    m = Material(**first)
+    assert (m.metallic, m.roughness, m.specular_weight, m.specular_color, m.transmission) == (
+        1.0, 1.0, 1.0, (1.0, 1.0, 1.0), 0.0)
+    assert (m.emission, m.double_sided, m.normal_scale) == ((0.0, 0.0, 0.0), False, 1.0)
+    assert m.pbr_values() == Material(**first).pbr_values() and m.pbr_values().metallic == 1.0
+
+
+@pytest.mark.parametrize("edit, words", [
+    (lambda m: m.update(emissiveFactor=[1.0, -0.5, 0.0]), "emissiveFactor must be 3 numbers >= 0"),
+    (lambda m: m.update(emissiveFactor=[1.0, float("nan"), 0.0]), "emissiveFactor must be 3 finite numbers"),
+    (lambda m: m.update(extensions={"KHR_materials_emissive_strength": {"emissiveStrength": -2}}),
+     "emissiveStrength must be a number in 0..1e30, got -2"),
+    (lambda m: m["pbrMetallicRoughness"].update(metallicFactor=2.0), "metallicFactor must be a number in 0..1, got 2"),
+    (lambda m: m["pbrMetallicRoughness"].update(roughnessFactor=float("nan")), "roughnessFactor"),
+    (lambda m: m.update(extensions={"KHR_materials_specular": {"specularFactor": -1}}), "specularFactor"),
+    (lambda m: m.update(extensions={"KHR_materials_specular": {"specularColorFactor": [1, 1]}}),
+     "specularColorFactor must be 3 numbers"),
+    (lambda m: m.update(extensions={"KHR_materials_transmission": {"transmissionFactor": 1.5}}),
+     "transmissionFactor"),
+    (lambda m: m.update(doubleSided="yes"), "doubleSided must be true or false"),
+])
+def test_bad_gltf_pbr_values_are_one_line_errors_naming_file_and_material(tmp_path, edit, words):
+    from clrt.errors import MeshLoadError
+    from clrt.scene.load import load_asset
+    path = _pbr_glb(tmp_path, metallicFactor=0.5)
+    _edit_glb(path, lambda doc: edit(doc["materials"][0]))
+    with pytest.raises(MeshLoadError) as info:
+        load_asset(path)
+    message = str(info.value)
+    assert "\n" not in message and str(path) in message and "materials[0] 'look'" in message
+    assert words in message, message
+
+
+def test_the_cli_refuses_a_negative_emission_with_exit_2_and_no_file(tmp_path, device, capsys):
+    from clrt.cli import main
+    path = _pbr_glb(tmp_path, emissiveFactor=[1.0, 1.0, 1.0])
+    _edit_glb(path, lambda doc: doc["materials"][0].update(emissiveFactor=[1.0, -1.0, 1.0]))
+    out = tmp_path / "out.png"
+    code = main(["render", str(path), "-o", str(out), "--width", "8", "--height", "8",
+                 *(["--device", device] if device else [])])
+    err = capsys.readouterr().err
+    assert code == 2 and len(err.strip().splitlines()) == 1 and "emissiveFactor" in err
+    assert not out.exists()
