@@ -410,3 +410,53 @@ def test_bad_toml_pbr_keys_are_one_line_errors(tmp_path, key, words):
         load_scene(tmp_path / "scene.toml")
     message = str(info.value)
     assert "\n" not in message and "scene.toml" in message and words in message, message
+
+
+# ---------------------------------------------------------------------------- closed meshes
+
+
+def _brute_force_closed(mesh, faces) -> bool:
+    """Every undirected edge (welded by position) met once each way, counted in Python."""
+    count = {}
+    for f in faces:
+        p = [tuple(mesh.vertices[v]) for v in mesh.faces[f]]
+        for i in range(3):
+            a, b = p[i], p[(i + 1) % 3]
+            if a != b:
+                count[(a, b)] = count.get((a, b), 0) + 1
+    return all(count.get((b, a), 0) == n for (a, b), n in count.items())
+
+
+def test_transmitting_materials_need_closed_meshes():
+    from clrt.scene.closed import check_closed_transmission
+    from clrt.scene.mesh import Mesh
+    sphere = primitives.icosphere(2, 1.0)
+    glass = Material(transparency=0.9)
+    light = [(0.0, 5.0, 0.0)]
+    # closed (crease-split and welded back by position): fine, transmission from Phong or PBR alike
+    for material in (glass, Material(transmission=0.5), Material(transmission=0.5, smooth=False)):
+        check_closed_transmission(Scene([SceneObject(sphere, material)], light))
+    open_cap = Mesh.from_arrays(sphere.vertices, sphere.faces[1:], "cup")
+    assert not _brute_force_closed(open_cap, range(len(open_cap.faces)))
+    check_closed_transmission(Scene([SceneObject(open_cap, Material())], light))   # opaque: no need
+    with pytest.raises(InputError) as info:
+        check_closed_transmission(Scene([SceneObject(open_cap, glass)], light, source="cup.toml"))
+    message = str(info.value)
+    assert message.startswith("cup.toml: object 'cup' (its material, transmission 0.9): ") and "\n" not in message
+    assert "3 edges are open" in message
+    # a face turned the other way: closed, but not one inside
+    flipped = sphere.faces.copy()
+    flipped[7] = flipped[7][[0, 2, 1]]
+    turned = Mesh.from_arrays(sphere.vertices, flipped, "turned")
+    assert not _brute_force_closed(turned, range(len(flipped)))
+    with pytest.raises(InputError, match="3 edges join faces that face opposite ways"):
+        check_closed_transmission(Scene([SceneObject(turned, Material(transmission=1.0, smooth=False))], light))
+    # only the transmitting faces must close: a file's opaque part may be open
+    ids = np.zeros(len(sphere.faces), np.int64)
+    ids[0] = 1
+    parts = sphere.with_detail(face_material=ids)
+    check_closed_transmission(Scene([SceneObject(parts, Material(), [Material(), Material()])], light))
+    with pytest.raises(InputError, match=r"object 'icosphere' \(file material 0, transmission 0.25\)"):
+        check_closed_transmission(Scene([SceneObject(parts, Material(), [Material(transmission=0.25), Material()])],
+                                        light))
+    assert _brute_force_closed(sphere, range(len(sphere.faces)))
