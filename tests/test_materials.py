@@ -460,3 +460,34 @@ def test_transmitting_materials_need_closed_meshes():
         check_closed_transmission(Scene([SceneObject(parts, Material(), [Material(transmission=0.25), Material()])],
                                         light))
     assert _brute_force_closed(sphere, range(len(sphere.faces)))
+
+
+# ---------------------------------------------------------------------------- Whitted unchanged
+
+
+def test_whitted_renders_ignore_the_pbr_fields_bit_for_bit(device):
+    """The Whitted kernels read bytes 0..47 of a Material row only: the same
+    scene with every PBR field and texture set renders the image it renders
+    without them, to the bit (a textured scene too: the extra texture rows and
+    their linear decoding change nothing the Whitted kernels read)."""
+    from dataclasses import replace
+    from clrt.renderer import Renderer
+    from clrt.scene.scene import Camera
+    sphere = primitives.icosphere(2, 1.0)
+    sphere = sphere.with_detail(uv=np.random.default_rng(2).random((len(sphere.faces), 3, 2)))
+    floor = primitives.box((4.0, 0.2, 4.0))
+    floor = floor.__class__(floor.vertices - [0.0, 1.2, 0.0], floor.faces, "floor")
+    base = _texture(1)
+    plain = [Material(color=(0.9, 0.5, 0.2), texture=base, reflectivity=0.3),
+             Material(color=(0.8, 0.8, 0.8), transparency=0.6, specular=0.5, shininess=80.0)]
+    pbr = dict(emission=(3.0, 2.0, 1.0), emission_texture=_texture(2), double_sided=True, metallic=0.9,
+               roughness=0.2, metallic_roughness_texture=base, specular_weight=0.4, specular_color=(2.0, 1.0, 0.5),
+               transmission=0.7, normal_texture=_texture(3), normal_scale=-2.0)
+    images = []
+    for materials in (plain, [replace(m, **pbr) for m in plain]):
+        scene = Scene([SceneObject(sphere, materials[0]), SceneObject(floor, materials[1])],
+                      [(2.0, 4.0, 3.0), (-3.0, 2.0, 1.0)], background=(0.1, 0.2, 0.3))
+        camera = Camera((0.5, 1.5, 4.0), (0.0, -0.3, 0.0), width=48, height=36)
+        images.append(Renderer(scene, device=device).render(camera, linear=True).image)
+    assert np.array_equal(images[0], images[1])
+    assert images[0].std() > 0.05   # the scene is in view
