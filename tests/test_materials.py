@@ -19,12 +19,12 @@ def _texture(seed: int) -> Texture:
     return Texture(np.random.default_rng(seed).integers(0, 256, (2, 3, 3), dtype=np.uint8))
 
 
-def _rows(*materials, uv=True):
+def _rows(*materials, uv=True, pbr_textures=True):
     mesh = primitives.icosphere(1, 1.0)
     if uv:
         mesh = mesh.with_detail(uv=np.zeros((len(mesh.faces), 3, 2)))
     scene = Scene([SceneObject(mesh, m, ()) for m in materials], [(0.0, 5.0, 0.0)])
-    return flatten_scene(scene)
+    return flatten_scene(scene, pbr_textures)
 
 
 def _lane(rows, field):
@@ -101,6 +101,12 @@ def test_the_host_fills_every_pbr_field_and_shares_texture_rows():
         first = textures["first"][row]
         np.testing.assert_array_equal(a.detail.texels[first:first + 6, :3], tex.pixels.reshape(-1, 3))
     assert (rows["pad"] == 0).all()
+    # for the Whitted renderer only base colour textures, so that a scene with none keeps the plain program
+    whitted = _rows(phong, pbr, shares, pbr_textures=False)
+    assert list(_lane(whitted.materials, "color")) == [-1, 0, 0] and len(whitted.detail.textures) == 1
+    assert (_lane(whitted.materials, "emission") == -1).all() and (whitted.materials["normal_texture"] == -1).all()
+    assert (_lane(whitted.materials, "specular_color") == -1).all()
+    assert _rows(Material(normal_texture=normal), pbr_textures=False).detail is None
     # without texture coordinates no texture applies
     plain = _rows(pbr, uv=False).materials
     assert list(_lane(plain, "color")) + list(_lane(plain, "emission")) + list(_lane(plain, "specular_color")) \
@@ -212,7 +218,7 @@ def test_gltf_metallic_roughness_materials_are_read_whole(tmp_path):
     # Whitted keeps its own mapping of the same factors (gltf.whitted_from_pbr)
     assert material.transparency == 0.875 and material.reflectivity == 0.75 * (1 - 0.375)
     # on the device: colours sRGB, data linear, in the rows of the contract
-    rows = flatten_scene(Scene([SceneObject(mesh, Material(), [material])], [(0.0, 0.0, 5.0)]))
+    rows = flatten_scene(Scene([SceneObject(mesh, Material(), [material])], [(0.0, 0.0, 5.0)]), pbr_textures=True)
     table, row = rows.detail.textures, rows.materials[1]
     assert [table["linear"][_lane(rows.materials, f)[1]] for f in ("color", "emission", "specular_color")] == [0, 0, 1]
     assert table["linear"][row["normal_texture"]] == 1
@@ -468,8 +474,8 @@ def test_transmitting_materials_need_closed_meshes():
 def test_whitted_renders_ignore_the_pbr_fields_bit_for_bit(device):
     """The Whitted kernels read bytes 0..47 of a Material row only: the same
     scene with every PBR field and texture set renders the image it renders
-    without them, to the bit (a textured scene too: the extra texture rows and
-    their linear decoding change nothing the Whitted kernels read)."""
+    without them, to the bit (a textured scene too; the Whitted renderer
+    uploads base colour textures only: flatten_scene's pbr_textures)."""
     from dataclasses import replace
     from clrt.renderer import Renderer
     from clrt.scene.scene import Camera
