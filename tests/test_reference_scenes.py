@@ -27,6 +27,11 @@ def test_clrt_reads_the_cornell_box_as_built():
     np.testing.assert_array_equal(mesh.vertices[mesh.faces], built)
     colours = np.concatenate([[s.surface.base_color] * len(s.faces) for s in box.shapes])
     np.testing.assert_allclose([materials[m]["color"] for m in mesh.face_material], colours, rtol=1e-6)
+    # clrt's PBR fields: pure Lambert everywhere, Mitsuba's radiance on the light's faces only.
+    emission = np.concatenate([[s.surface.emission] * len(s.faces) for s in box.shapes])
+    np.testing.assert_allclose([materials[m]["emission"] for m in mesh.face_material], emission, rtol=1e-12)
+    assert {(m["metallic"], m["roughness"], m["specular_weight"], m["double_sided"]) for m in materials} == {
+        (0.0, 1.0, 0.0, False)}
     # Fronts (counter-clockwise) face into the box for the walls, out of the boxes, down for the light.
     n = np.cross(built[:, 1] - built[:, 0], built[:, 2] - built[:, 0])
     centre_of = {s.name: s.vertices.mean(axis=0) for s in box.shapes}
