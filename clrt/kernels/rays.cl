@@ -170,35 +170,34 @@ inline bool load_ray(const RayInput* in, uint i, float3* origin, float3* dir, fl
     return ok;
 }
 
-// The point queries that take no largest distance (winding numbers, signed
-// distances: trace.cl) take their points alone, with the bad-point slots and
-// the launch; RayInput's other arrays then alias the points, never read.
-#define POINT_INPUT_PARAMS __global const float* points, __global int* bad, const QueryLaunch launch
-#define POINT_INPUT_ARGS points, points, points, points, bad, launch
-
 // Point i of a point query (point.cl): its position from `origins`, moved
-// into the device's frame as load_ray moves an origin.  False (and the point
-// reported in `bad`, as an origin) when it is not finite; no reach check: a
-// point's distance takes no float32 triangle test that could overflow (and
-// the parity sign casts rays only from points within the scene's box).
-inline bool load_query_point(const RayInput* in, uint i, float3* point)
+// into the device's frame as load_ray moves an origin, and its largest
+// distance from `tmaxs`.  False (and the point reported in `bad`, as an
+// origin) when it is not finite; no reach check: a point's distance takes no
+// float32 triangle test that could overflow (and the parity sign of signed
+// distances casts rays only from points within the scene's box, point.cl).
+// Point queries read the origins (the points) and tmaxs (their largest
+// distances) of the ray input, and the points' order (point_order.cl).
+#define POINT_INPUT_PARAMS __global const float* origins, __global const float* tmaxs, __global int* bad, \
+    const QueryLaunch launch, __global const uint* order
+#define POINT_INPUT_ARGS origins, tmaxs, bad, launch, order
+
+inline RayInput make_point_input(POINT_INPUT_PARAMS)
+{
+    return make_ray_input(origins, 0, 0, tmaxs, bad, launch);
+}
+
+inline bool load_point(const RayInput* in, uint i, float3* point, float* max_dist)
 {
     const size_t k = (size_t)in->in_first + i;
     *point = vload3(0, in->origins + k * in->origin_stride);
+    *max_dist = in->tmaxs[k * in->tmax_stride];
     if (!all(isfinite(*point))) {
         atomic_min(in->bad + BAD_ORIGIN, (int)(in->ray_first + i));
         return false;
     }
     *point -= in->shift;
     return true;
-}
-
-// load_query_point, and the point's largest distance from `tmaxs`
-// (closest points).
-inline bool load_point(const RayInput* in, uint i, float3* point, float* max_dist)
-{
-    *max_dist = in->tmaxs[((size_t)in->in_first + i) * in->tmax_stride];
-    return load_query_point(in, i, point);
 }
 
 #ifdef RAY_PACKETS

@@ -18,6 +18,7 @@
 #include "rays.cl"
 #include "accel_packet.cl"
 #include "point.cl"
+#include "point_order.cl"
 #include "winding.cl"
 
 // A sink that stores nothing: the query's options only.
@@ -240,13 +241,14 @@ __kernel void query_all(RAY_INPUT_PARAMS, __global uchar* results, GEOMETRY_PARA
 // to the caller's frame here (+ shift, in double where the device has it,
 // rounded to float32 once).  A miss (or a bad point): point NaN, distance
 // INFINITY, prim -1, u = v = 0.
-__kernel void query_closest_point(RAY_INPUT_PARAMS, __global uchar* results, GEOMETRY_PARAMS)
+__kernel void query_closest_point(POINT_INPUT_PARAMS, __global uchar* results, GEOMETRY_PARAMS)
 {
-    const uint i = get_global_id(0);
-    if (i >= launch.num_rays)
+    const uint j = get_global_id(0);
+    if (j >= launch.num_rays)
         return;
+    const uint i = POINT_ORDER(order, launch.num_rays)[j];   // work-item j answers point i (point_order.cl)
     const Geometry g = make_geometry(GEOMETRY_ARGS);
-    const RayInput in = make_ray_input(RAY_INPUT_ARGS);
+    const RayInput in = make_point_input(POINT_INPUT_ARGS);
     float3 p;
     float max_dist;
     PointHit best;
@@ -271,7 +273,9 @@ __kernel void query_closest_point(RAY_INPUT_PARAMS, __global uchar* results, GEO
         v_out[i] = found ? best.v : 0.0f;
 }
 
-// ---- Inside and outside (winding.cl, point.cl's sign rules)
+// ---- Inside and outside (winding.cl, point.cl's sign rules).  Points as
+// query_closest_point takes them (their largest distances unused), in the
+// order of point_order.cl; each point's answer goes to its own place.
 
 // The winding number of the mesh at each point (winding.cl): output 0, a
 // float a point; output 1, a byte a point: 1 where it is at least 1/2 (the
@@ -280,14 +284,16 @@ __kernel void query_closest_point(RAY_INPUT_PARAMS, __global uchar* results, GEO
 __kernel void query_winding_number(POINT_INPUT_PARAMS, __global uchar* results,
                                    __global const WindingNode* winding, GEOMETRY_PARAMS)
 {
-    const uint i = get_global_id(0);
-    if (i >= launch.num_rays)
+    const uint j = get_global_id(0);
+    if (j >= launch.num_rays)
         return;
+    const uint i = POINT_ORDER(order, launch.num_rays)[j];
     const Geometry g = make_geometry(GEOMETRY_ARGS);
-    const RayInput in = make_ray_input(POINT_INPUT_ARGS);
+    const RayInput in = make_point_input(POINT_INPUT_ARGS);
     float3 p;
+    float max_dist;
     float w = 0.0f;
-    if (load_query_point(&in, i, &p))
+    if (load_point(&in, i, &p, &max_dist))
         w = (float)winding_number(&g, winding, p);
     __global float* winding_out = RESULT_AT(float, 0);
     __global uchar* inside_out = RESULT_AT(uchar, 1);
@@ -306,15 +312,16 @@ __kernel void query_winding_number(POINT_INPUT_PARAMS, __global uchar* results,
 #define SIGN_PARITY 1
 #define SIGN_NORMAL 2
 
-// Point i's signed distance by `rule` (`winding`, `normals`: the rule's
+// The signed distance of point i by `rule` (`winding`, `normals`: the rule's
 // buffer, or 0), into output 0.
 inline void signed_distance(const Geometry* g, const RayInput* in, const QueryLaunch* launch,
                             __global uchar* results, uint i, const int rule,
                             __global const WindingNode* winding, __global const PseudoNormals* normals)
 {
     float3 p;
+    float max_dist;
     float d = NAN;
-    if (load_query_point(in, i, &p)) {
+    if (load_point(in, i, &p, &max_dist)) {
         const PointHit best = closest_point(g, p, INFINITY, POINT_MARGIN(p, in->scene_lo, in->scene_hi));
         bool inside;
         if (rule == SIGN_WINDING)
@@ -331,33 +338,33 @@ inline void signed_distance(const Geometry* g, const RayInput* in, const QueryLa
 __kernel void query_signed_distance_winding(POINT_INPUT_PARAMS, __global uchar* results,
                                             __global const WindingNode* winding, GEOMETRY_PARAMS)
 {
-    const uint i = get_global_id(0);
-    if (i >= launch.num_rays)
+    const uint j = get_global_id(0);
+    if (j >= launch.num_rays)
         return;
     const Geometry g = make_geometry(GEOMETRY_ARGS);
-    const RayInput in = make_ray_input(POINT_INPUT_ARGS);
-    signed_distance(&g, &in, &launch, results, i, SIGN_WINDING, winding, 0);
+    const RayInput in = make_point_input(POINT_INPUT_ARGS);
+    signed_distance(&g, &in, &launch, results, POINT_ORDER(order, launch.num_rays)[j], SIGN_WINDING, winding, 0);
 }
 
 __kernel void query_signed_distance_parity(POINT_INPUT_PARAMS, __global uchar* results, GEOMETRY_PARAMS)
 {
-    const uint i = get_global_id(0);
-    if (i >= launch.num_rays)
+    const uint j = get_global_id(0);
+    if (j >= launch.num_rays)
         return;
     const Geometry g = make_geometry(GEOMETRY_ARGS);
-    const RayInput in = make_ray_input(POINT_INPUT_ARGS);
-    signed_distance(&g, &in, &launch, results, i, SIGN_PARITY, 0, 0);
+    const RayInput in = make_point_input(POINT_INPUT_ARGS);
+    signed_distance(&g, &in, &launch, results, POINT_ORDER(order, launch.num_rays)[j], SIGN_PARITY, 0, 0);
 }
 
 __kernel void query_signed_distance_normal(POINT_INPUT_PARAMS, __global uchar* results,
                                            __global const PseudoNormals* normals, GEOMETRY_PARAMS)
 {
-    const uint i = get_global_id(0);
-    if (i >= launch.num_rays)
+    const uint j = get_global_id(0);
+    if (j >= launch.num_rays)
         return;
     const Geometry g = make_geometry(GEOMETRY_ARGS);
-    const RayInput in = make_ray_input(POINT_INPUT_ARGS);
-    signed_distance(&g, &in, &launch, results, i, SIGN_NORMAL, 0, normals);
+    const RayInput in = make_point_input(POINT_INPUT_ARGS);
+    signed_distance(&g, &in, &launch, results, POINT_ORDER(order, launch.num_rays)[j], SIGN_NORMAL, 0, normals);
 }
 
 // The WindingNodes of the rows of one tree level (`level_rows`, `count` of

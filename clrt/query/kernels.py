@@ -14,22 +14,39 @@ import numpy as np
 from clrt.device.signature import GEOMETRY, buffer, value
 from clrt.layouts import CAMERA, QUERY_LAUNCH
 
+# Work-items per work-group of the query kernels; None lets the driver choose.
+# Measured on the H200 (benchmarks.raysets --group, docs/benchmark-log.md): 128
+# takes 5-7 % off incoherent sets (random, diffuse, AO) against the driver's
+# choice, and 1-2 % off camera rays; 64 is as good on incoherent rays but
+# slower on camera rays.  On a CPU device (PoCL) the driver's choice, 8, 64 and
+# 512 measured within the noise of each other, but PoCL compiles and keeps a
+# variant of the kernel for every work-group size it runs, and its own choice
+# follows the batch size (1000 rays: 1000; 4099: 1; 2^20: 4096): a program
+# sending batches of many sizes grew by tens of kB a new size, to hundreds of
+# MB.  A fixed size keeps one variant.  The kernels skip the work-items past
+# the last ray.
+QUERY_GROUP: dict = {"gpu": 128, "cpu": 64}
+
 #: RAY_INPUT_PARAMS (rays.cl).
 RAY_INPUT = (buffer("origins"), buffer("dirs"), buffer("tmins"), buffer("tmaxs"), buffer("bad"),
              value("launch", QUERY_LAUNCH))
 
-#: POINT_INPUT_PARAMS (rays.cl): the point queries that take no largest distance.
-POINT_INPUT = (buffer("points"), buffer("bad"), value("launch", QUERY_LAUNCH))
+#: POINT_INPUT_PARAMS (rays.cl).
+POINT_INPUT = (buffer("origins"), buffer("tmaxs"), buffer("bad"), value("launch", QUERY_LAUNCH), buffer("order"))
 
 QUERY_KERNELS = {
     "query_closest": (*RAY_INPUT, buffer("results"), *GEOMETRY),
     "query_any": (*RAY_INPUT, buffer("results"), *GEOMETRY),
     "query_count": (*RAY_INPUT, buffer("results"), *GEOMETRY),
     "query_all": (*RAY_INPUT, buffer("results"), *GEOMETRY),
-    # point queries (point.cl): points in `origins`, their largest distance in `tmaxs`
-    "query_closest_point": (*RAY_INPUT, buffer("results"), *GEOMETRY),
-    # inside and outside (winding.cl, point.cl): each takes its rule's buffer
-    # beside the points -- the tree's WindingNodes or the PseudoNormals
+    # point queries (point.cl): points in `origins`, their largest distance in `tmaxs`, visited in the
+    # order that point_order.cl's three kernels leave in `order`
+    "query_closest_point": (*POINT_INPUT, buffer("results"), *GEOMETRY),
+    "point_cells": (buffer("origins"), value("launch", QUERY_LAUNCH), buffer("order")),
+    "point_offsets": (buffer("order"),),
+    "point_scatter": (value("launch", QUERY_LAUNCH), buffer("order")),
+    # inside and outside (winding.cl, point.cl): points as query_closest_point takes them, and
+    # each kernel's rule's buffer -- the tree's WindingNodes or the PseudoNormals
     "query_winding_number": (*POINT_INPUT, buffer("results"), buffer("winding"), *GEOMETRY),
     "query_signed_distance_winding": (*POINT_INPUT, buffer("results"), buffer("winding"), *GEOMETRY),
     "query_signed_distance_parity": (*POINT_INPUT, buffer("results"), *GEOMETRY),
