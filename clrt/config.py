@@ -83,7 +83,17 @@ DEFAULT_IOR = 1.5
 #: sums overflow float32 on the device; a Phong exponent of 10000 already makes
 #: a highlight narrower than a pixel.
 MATERIAL_RANGES = {"ambient": (0, 1000), "diffuse": (0, 1000), "specular": (0, 1000),
-                   "shininess": (0, 10000), "reflectivity": (0, 1), "transparency": (0, 1), "ior": (1, 100)}
+                   "shininess": (0, 10000), "reflectivity": (0, 1), "transparency": (0, 1), "ior": (1, 100),
+                   # the path tracer's (glTF 2.0 metallic-roughness and its KHR extensions); a
+                   # normal map's scale has no range in glTF, and any finite one is safe (the
+                   # scaled normal is normalised), so this one only keeps it finite in float32
+                   "metallic": (0, 1), "roughness": (0, 1), "specular_weight": (0, 1), "transmission": (0, 1),
+                   "normal_scale": (-1000, 1000)}
+#: KHR_materials_specular's colour factor may exceed 1 (the BSDF clamps F0 to 1);
+#: this bound keeps it well inside float32.
+MAX_SPECULAR_COLOR = 1000.0
+DEFAULT_SPECULAR_COLOR = (1.0, 1.0, 1.0)
+DEFAULT_EMISSION = (0.0, 0.0, 0.0)
 DEFAULT_BACKGROUND = (0.0, 0.0, 0.0)
 DEFAULT_AMBIENT_LIGHT = (1.0, 1.0, 1.0)
 DEFAULT_LIGHT_COLOR = (1.0, 1.0, 1.0)
@@ -124,8 +134,10 @@ PATH_STRATEGIES = {"mis": 0, "light": 1, "bsdf": 2}
 #: Kinds of the path tracer's light table rows (LightEntry.kind in layouts.py).
 LIGHT_KINDS = {"point": 0, "triangle": 1, "background": 2}
 
-#: Material flag bits (``Material.flags`` in layouts.py).
+#: Material flag bits (``Material.flags`` in layouts.py): smooth shading;
+#: emission from both faces (else from the front one only, as glTF's doubleSided false).
 MATERIAL_SMOOTH = 1
+MATERIAL_DOUBLE_SIDED = 2
 #: How a texture coordinate outside 0..1 is mapped back into the image (glTF's
 #: sampler modes REPEAT, CLAMP_TO_EDGE, MIRRORED_REPEAT): name -> the code the
 #: kernels compare with (``Texture.wrap_s``/``wrap_t`` in layouts.py).
@@ -256,6 +268,7 @@ def kernel_defines() -> dict:
     return {
         "MAX_BOUNCES": MAX_BOUNCES,
         "MATERIAL_SMOOTH": f"{MATERIAL_SMOOTH}u",
+        "MATERIAL_DOUBLE_SIDED": f"{MATERIAL_DOUBLE_SIDED}u",
         "MAX_PARTS": MAX_PARTS,
         "RESULT_SLOTS": RESULT_SLOTS,
         "NO_RESULT": f"{NO_RESULT:#x}UL",

@@ -40,6 +40,7 @@ def test_the_kernels_see_the_table(device):
     program.probe(queue, (1,), None, buf)
     cl.enqueue_copy(queue, out, buf)
     expected = {"MAX_BOUNCES": config.MAX_BOUNCES, "MATERIAL_SMOOTH": config.MATERIAL_SMOOTH,
+                "MATERIAL_DOUBLE_SIDED": config.MATERIAL_DOUBLE_SIDED,
                 "MAX_PARTS": config.MAX_PARTS, **{f"CULL_{k.upper()}": v for k, v in config.CULL_MODES.items()},
                 **{f"BAD_{k.upper()}": i for i, k in enumerate(config.RAY_CHECKS)},
                 **{f"WRAP_{k.upper()}": v for k, v in config.TEXTURE_WRAPS.items()},

@@ -1,26 +1,47 @@
 // What the path tracer reads of a material: the BSDF's parameters and the
-// emission.  The one place that reads the physically based fields of the
-// Material rows (docs/pbr-contract.md), so that a change of the rows changes
-// this file alone.  Until the materials branch lands, the rows hold only the
-// paper's Phong fields: the BSDF is Lambert with albedo colour x diffuse, and
-// nothing emits.
+// emission -- the one place that reads the physically based fields of the
+// Material rows (bytes 48.., layouts.py), so that a change of the rows
+// changes this file alone.  The base colour is the Whitted model's `color`
+// with its texture and corner colours (surface_point applies them); the
+// metallicRoughness texture (G roughness, B metallic, linear) and the
+// emissive texture (sRGB) multiply their factors in -DSURFACE_DETAIL builds.
 #ifndef CLRT_MATERIAL_CL
 #define CLRT_MATERIAL_CL
 
 #include "layouts.h"
 #include "shading.cl"
+#include "texture.cl"
 #include "bsdf.cl"
 
-// The BSDF at surface point s (its colour already textured by surface_point).
-inline Bsdf material_bsdf(const SurfacePoint* s)
+#ifdef SURFACE_DETAIL
+// The texture coordinates of the point (u, v) of triangle `slot`.
+inline float2 surface_uv(const Shading* sh, uint slot, float u, float v)
+{
+    __global const TriangleDetail* d = SPLIT_AT(sh, tri_detail, slot);
+    return (float2)(CORNER_BLEND(d->corner[0].w, d->corner[1].w, d->corner[2].w, u, v),
+                    CORNER_BLEND(d->v.x, d->v.y, d->v.z, u, v));
+}
+#endif
+
+// The BSDF at surface point s, the point (u, v) of triangle `slot`.
+inline Bsdf material_bsdf(const Shading* sh, const SurfacePoint* s, uint slot, float u, float v)
 {
     Bsdf b;
-    b.base_color = fmin(s->m.color.xyz * s->m.diffuse, (float3)(1.0f));
-    b.metallic = 0.0f;
-    b.alpha = 1.0f;
-    b.specular_color = (float3)(1.0f);
-    b.specular_weight = 0.0f;
-    b.transmission = 0.0f;
+    b.base_color = s->m.color.xyz;
+    float metallic = s->m.metallic, roughness = s->m.roughness;
+#ifdef SURFACE_DETAIL
+    const int texture = as_int(s->m.specular_color.w);
+    if (texture >= 0) {
+        const float3 mr = sample_texture(&sh->textures, texture, surface_uv(sh, slot, u, v));
+        roughness *= mr.y;
+        metallic *= mr.z;
+    }
+#endif
+    b.metallic = clamp(metallic, 0.0f, 1.0f);
+    b.alpha = roughness * roughness;
+    b.specular_color = s->m.specular_color.xyz;
+    b.specular_weight = s->m.specular_weight;
+    b.transmission = s->m.transmission;
     b.ior = s->m.ior;
     return b;
 }
@@ -29,19 +50,25 @@ inline Bsdf material_bsdf(const SurfacePoint* s)
 // light table's power is made of (clrt/scene/emitters.py does the same).
 inline float3 emission_factor(__global const Material* m)
 {
-    return (float3)(0.0f);
+    return m->emission.xyz;
 }
 
 inline bool emits_both_sides(__global const Material* m)
 {
-    return false;
+    return (m->flags & MATERIAL_DOUBLE_SIDED) != 0u;
 }
 
 // The radiance material m emits at the point (u, v) of triangle `slot`
 // (barycentric weights of its corners 1 and 2), from whichever side emits.
 inline float3 surface_emission(const Shading* sh, __global const Material* m, uint slot, float u, float v)
 {
-    return emission_factor(m);
+    float3 e = m->emission.xyz;
+#ifdef SURFACE_DETAIL
+    const int texture = as_int(m->emission.w);
+    if (texture >= 0 && e.x + e.y + e.z > 0.0f)
+        e *= sample_texture(&sh->textures, texture, surface_uv(sh, slot, u, v));
+#endif
+    return e;
 }
 
 #endif

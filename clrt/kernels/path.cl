@@ -84,7 +84,7 @@ inline PathSample trace_path(const Geometry* g, const Shading* sh, const Lights*
         }
         const SurfacePoint s = surface_point(g, sh, dir, &hit);
         __global const Material* m = sh->materials + SPLIT_AT(sh, tri_info, hit.prim)->material;
-        const Bsdf b = material_bsdf(&s);
+        const Bsdf b = material_bsdf(sh, &s, (uint)hit.prim, hit.u, hit.v);
         if (depth == 1u) {
             out.seen = true;
             out.albedo = b.base_color;

@@ -29,13 +29,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from clrt.config import LIGHT_KINDS
+from clrt.config import LIGHT_KINDS, MATERIAL_DOUBLE_SIDED
 from clrt.layouts import LIGHT_ENTRY, MATERIAL
 
 LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
-#: Material flag of a double-sided emitter (clrt.config.MATERIAL_DOUBLE_SIDED
-#: once the materials land; until then no material emits).
-_DOUBLE_SIDED = 2
 
 
 @dataclass
@@ -75,10 +72,8 @@ def alias_table(weights) -> tuple[np.ndarray, np.ndarray]:
 
 def triangle_powers(corners: np.ndarray, material_of: np.ndarray, materials: np.ndarray) -> np.ndarray:
     """(F,) float64 power of each triangle (0 for those that do not emit)."""
-    if "emission" not in materials.dtype.names:
-        return np.zeros(len(corners))
     emission = materials["emission"][:, :3].astype(np.float64) @ LUMINANCE
-    sides = np.where(materials["flags"] & _DOUBLE_SIDED, 2.0, 1.0)
+    sides = np.where(materials["flags"] & MATERIAL_DOUBLE_SIDED, 2.0, 1.0)
     per_material = math.pi * emission * sides
     c = corners.astype(np.float64)
     area = 0.5 * np.linalg.norm(np.cross(c[:, 1] - c[:, 0], c[:, 2] - c[:, 0]), axis=1)

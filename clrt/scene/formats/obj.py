@@ -104,9 +104,9 @@ def _parse_obj(data: bytes, label: str, folder: str | None = None) -> Part:
     libraries = [line.split(None, 1)[1].strip() for line in lines
                  if line.startswith("mtllib ") and len(line.split()) > 1]
     if used and folder is not None:
-        materials = {}
+        materials, textures = {}, {}
         for name in _mtl_libraries(libraries, folder):
-            materials.update(_parse_mtl(os.path.join(folder, name), label))
+            materials.update(_parse_mtl(os.path.join(folder, name), label, textures))
         if materials:
             names = list(materials)
             current, polygon_material = -1, []
@@ -155,12 +155,15 @@ def _obj_absolute(index: np.ndarray, counts: np.ndarray, statements: list, keywo
     return np.where(index > 0, index, np.repeat(np.asarray(base, dtype=np.int64), counts) + index + 1)
 
 
-def _parse_mtl(path: str, label: str) -> dict:
+def _parse_mtl(path: str, label: str, textures: "dict | None" = None) -> dict:
     """``{name: material fields}`` of an MTL file (docs/scene-files.md has the
     table: Kd, Ks, Ns, d/Tr, Ni, illum, map_Kd).  A missing file, as MTL files
     and images often are beside downloaded OBJ files, is left out with a
     :class:`MeshLoadWarning` naming the OBJ (``label``) and the file: {} for the
-    library, no texture for its material."""
+    library, no texture for its material.  ``textures``: the Textures read so
+    far for the OBJ, by image file and wrap mode, so that an image several
+    materials name is read (and uploaded) once."""
+    textures = {} if textures is None else textures
     if not os.path.isfile(path):
         warnings.warn(f"{label}: material library {path} not found: its materials are left out",
                       MeshLoadWarning, stacklevel=2)
@@ -184,7 +187,10 @@ def _parse_mtl(path: str, label: str) -> dict:
                 wrap = "clamp" if clamp else "repeat"
                 image = os.path.join(folder, args[-1])
                 if os.path.isfile(image):
-                    current["texture"] = texture(image, wrap, wrap, label)
+                    key = (os.path.realpath(image), wrap)
+                    if key not in textures:
+                        textures[key] = texture(image, wrap, wrap, label)
+                    current["texture"] = textures[key]
                 else:
                     warnings.warn(f"{label}: {os.path.basename(path)}: material {name!r}: texture {image} "
                                   f"not found: the material is untextured", MeshLoadWarning, stacklevel=2)
