@@ -103,14 +103,22 @@ def render_camera(scene: Scene, *, width=None, height=None, eye=None, target=Non
     return Camera(eye, target, up, fov, width, height)
 
 
-def render_lights(bounds, camera: Camera, own=(), positions=None) -> list:
+def render_lights(bounds, camera: Camera, own=(), positions=None, integrator: str = "whitted") -> list:
     """The lights of a frame: ``positions`` (the --light options), else the scene's
-    ``own`` lights, else one default light placed from ``camera``."""
+    ``own`` lights, else one default light placed from ``camera`` -- for the
+    path tracer, whose point lights fall off with the squared distance, with
+    the intensity pi d^2 (d: its distance to the middle of ``bounds``), so that
+    it lights the middle of the scene as Whitted's unit light does (a white
+    diffuse surface facing it: radiance 1)."""
     if positions:
         return [Light.of(p) for p in positions]
     if own:
         return list(own)
-    return [default_light(bounds, camera)]
+    light = default_light(bounds, camera)
+    if integrator == "path":
+        d = np.linalg.norm(np.asarray(light.position) - np.asarray(bounds, np.float64).mean(axis=0))
+        light = Light(light.position, (math.pi * d * d,) * 3)
+    return [light]
 
 
 def render_frame(source, camera: Camera | None = None, *, lights=None, labels: dict | None = None,
@@ -128,7 +136,7 @@ def render_frame(source, camera: Camera | None = None, *, lights=None, labels: d
     if options:
         raise TypeError(f"render_frame got unknown options {sorted(options)}")
     if lights or not isinstance(source, Scene):   # a Scene keeps its own lights, none included
-        scene.lights = render_lights(scene.bounds, camera, scene.lights, lights)
+        scene.lights = render_lights(scene.bounds, camera, scene.lights, lights, scene.integrator)
     return scene, camera
 
 
