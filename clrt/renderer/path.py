@@ -9,7 +9,8 @@ have fixed sizes -- 1, 1, 2, 4, ... samples, at most PASS_SAMPLES -- so the
 order in which the sums are added up, and with the counter-based random
 numbers the image, depends on the seed and the sample count alone, not on
 the device's speed or the tiling.  Ctrl-C after the first pass ends the
-render early with the passes done (``Frame.interrupted``).
+render early with the samples done (``Frame.interrupted``; a launch that
+finished before Ctrl-C was seen counts, each pixel averaging its own samples).
 """
 
 from __future__ import annotations
@@ -172,7 +173,11 @@ class PathTracer:
         cl.enqueue_copy(r.queue, sums, frame, src_offset=FRAME_HEADER)
         cl.enqueue_copy(r.queue, seen, frame, src_offset=0)
         frame.release()
-        images = [(s[:, :3] / np.float32(max(done, 1))).reshape(h, w, 3) for s in sums]
+        # Each pixel's sums over its own count (w): a launch that finished before
+        # Ctrl-C was seen added its samples, whole, to its rows.
+        counts = np.maximum(sums[0, :, 3:4], np.float32(1.0))
+        images = [(s[:, :3] / counts).reshape(h, w, 3) for s in sums]
+        done = int(sums[0, :, 3].min())
         return dict(image=images[0], albedo=images[1], normal=images[2], spp=done, interrupted=interrupted,
                     seen=bool(seen[0]), tiles=launches, kernel_ms=kernel_ms,
                     read_ms=1e3 * (time.perf_counter() - start))
