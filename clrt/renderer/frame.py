@@ -206,11 +206,12 @@ class Renderer:
 
     @one_at_a_time
     @checks.keyword_options("linear", "hits", "samples", "max_depth", "seed", "progress", "integrator", "spp",
-                            "exposure", "strategy")
+                            "exposure", "strategy", "preview")
     def render(self, camera: Camera | None = None, *, linear: bool = False, hits: bool = False,
                samples: int | None = None, max_depth: int | None = None, seed: int | None = None,
                progress: Callable[[int], None] | None = None, integrator: str | None = None,
-               spp: int | None = None, exposure: float | None = None, strategy: str = "mis") -> Frame:
+               spp: int | None = None, exposure: float | None = None, strategy: str = "mis",
+               preview: Callable[["Frame"], None] | None = None) -> Frame:
         """Render one frame.
 
         ``integrator``: "whitted" (the paper's model) or "path" (the path
@@ -227,7 +228,9 @@ class Renderer:
         BSDFs together or one alone (clrt.config.PATH_STRATEGIES: a debugging
         aid); the frame also has the mean ``albedo`` and ``normal`` of the
         first hits, and Ctrl-C after the first pass of samples returns the
-        passes done (``Frame.interrupted``).  ``exposure``: the uint8 image is
+        passes done (``Frame.interrupted``); ``preview(frame)`` is called
+        with the image so far after each pass but the last (a notebook's
+        display handle can show it: docs/notebooks.md).  ``exposure``: the uint8 image is
         the linear one x 2**exposure, clamped, sRGB-encoded (a linear image is
         returned as it is).  ``hits=True`` (Whitted only) also reads back the
         camera rays' hits (``Frame.prim`` and ``Frame.t``, of the first sample;
@@ -240,7 +243,8 @@ class Renderer:
         exposure = opts.check("exposure", self.scene.exposure if exposure is None else exposure)
         seed = opts.check("seed", self.scene.seed if seed is None else seed)
         if integrator == "path":
-            return self._render_path(camera, linear, hits, max_depth, seed, spp, exposure, strategy, progress)
+            return self._render_path(camera, linear, hits, max_depth, seed, spp, exposure, strategy, progress,
+                                     preview)
         if exposure != 0 and not linear:   # tone-mapped on the host from the linear image
             frame = self.render(camera, linear=True, hits=hits, samples=samples, max_depth=max_depth, seed=seed,
                                 progress=progress, integrator=integrator)
@@ -265,7 +269,8 @@ class Renderer:
         return Frame(job.image, job.prim, job.t, job.timings, self.device, len(self.arrays.corners), tiles=tiles,
                      visible=job.seen)
 
-    def _render_path(self, camera, linear, hits, max_depth, seed, spp, exposure, strategy, progress) -> Frame:
+    def _render_path(self, camera, linear, hits, max_depth, seed, spp, exposure, strategy, progress,
+                     preview) -> Frame:
         """A frame of the path tracer (clrt/renderer/path.py)."""
         if hits:
             raise InputError("hits=True reads back the Whitted integrator's camera hits; for the path tracer, "
@@ -284,10 +289,15 @@ class Renderer:
             with stage(self.timings, "program build"):
                 self._path = PathTracer(self)
         timings = dict(self.timings)
+        shown = None
+        if preview is not None:
+            def shown(image, done):
+                preview(Frame(image if linear else tone_map(image, exposure), None, None, {}, self.device,
+                              len(self.arrays.corners), spp=done))
         with stage(timings, "path tracing"):
             out = self._path.render(camera, spp=spp, max_depth=depth, seed=seed, strategy=strategy,
                                     progress=progress or (lambda n: None), wait=lambda e: wait_for(e),
-                                    limits=self.limits)
+                                    limits=self.limits, preview=shown)
         timings["kernels"] = out["kernel_ms"]
         image = out["image"] if linear else tone_map(out["image"], exposure)
         if not out["seen"]:

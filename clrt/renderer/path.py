@@ -98,11 +98,12 @@ class PathTracer:
         return self._launch_values
 
     def render(self, camera, *, spp: int, max_depth: int, seed: int, strategy: str, progress: Callable,
-               wait: Callable, limits) -> dict:
+               wait: Callable, limits, preview: Callable | None = None) -> dict:
         """Render ``spp`` samples a pixel; return the linear image, the albedo
         and normal images (H, W, 3 float32), the samples done, whether Ctrl-C
         ended it early, whether a camera ray hit anything, the tiles
-        (launches) and the kernel milliseconds."""
+        (launches) and the kernel milliseconds.  ``preview(image, samples)``,
+        if given, gets the linear image after each pass but the last."""
         r = self.renderer
         scene = r.scene
         values = self._light_tables(scene)
@@ -161,6 +162,10 @@ class PathTracer:
                     progress(w * rows * n)
                     y += rows
                 done += n
+                if preview is not None and done < spp:   # the image so far (the last one is the frame)
+                    sums = np.empty((pixels, 4), np.float32)
+                    cl.enqueue_copy(r.queue, sums, frame, src_offset=FRAME_HEADER)
+                    preview((sums[:, :3] / np.maximum(sums[:, 3:4], 1.0)).reshape(h, w, 3), done)
         except KeyboardInterrupt:
             r.queue.finish()   # no kernel may still write into the sums we read
             if done == 0:
