@@ -87,3 +87,26 @@ def test_ctrl_c_after_a_pass_keeps_the_passes_done(scene_file, device, capsys, m
     code, _, err = _run([str(scene_file), "-o", "four.png", "--spp", "4", "--seed", "2"], device, capsys)
     assert code == 0, err
     np.testing.assert_array_equal(cut, np.asarray(Image.open("four.png")))
+
+
+def test_emitters_light_a_file_without_lights(tmp_path, device, capsys, monkeypatch):
+    """A glTF whose only light is an emissive quad: the path tracer adds no
+    default light, Whitted its usual one."""
+    trimesh = pytest.importorskip("trimesh")
+    from trimesh.visual.material import PBRMaterial
+    monkeypatch.chdir(tmp_path)
+    ground = trimesh.Trimesh([[-3, 0, -3], [3, 0, -3], [3, 0, 3], [-3, 0, 3]], [[0, 2, 1], [0, 3, 2]])
+    ground.visual = trimesh.visual.TextureVisuals(material=PBRMaterial(baseColorFactor=[255, 255, 255, 255],
+                                                                       metallicFactor=0.0))
+    lamp = trimesh.Trimesh([[-1, 1, -1], [1, 1, -1], [1, 1, 1], [-1, 1, 1]], [[0, 1, 2], [0, 2, 3]])
+    lamp.visual = trimesh.visual.TextureVisuals(material=PBRMaterial(baseColorFactor=[0, 0, 0, 255],
+                                                                     emissiveFactor=[1, 1, 1]))
+    trimesh.Scene([ground, lamp]).export("lamp.glb")
+    view = ["--eye", "0,0.5,2.5", "--target", "0,0,0", "--width", "16", "--height", "12"]
+    code, out, err = _run(["lamp.glb", "-o", "lamp.png", "--integrator", "path", "--spp", "8", *view], device, capsys)
+    assert code == 0, err
+    assert "0 light(s)" in out
+    assert np.asarray(Image.open("lamp.png"))[-1].min() > 20   # the ground under the lamp is lit
+    code, out, err = _run(["lamp.glb", "-o", "whitted.png", *view], device, capsys)
+    assert code == 0 and "1 light(s)" in out, err
+

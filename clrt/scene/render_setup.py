@@ -121,6 +121,13 @@ def render_lights(bounds, camera: Camera, own=(), positions=None, integrator: st
     return [light]
 
 
+def lit_otherwise(scene: Scene) -> bool:
+    """Does the path tracer find light in ``scene`` without point lights: an
+    emissive material or an environment map?"""
+    return scene.environment is not None or any(
+        max(m.emission) > 0 for o in scene.objects for m in (o.material, *o.materials))
+
+
 def render_frame(source, camera: Camera | None = None, *, lights=None, labels: dict | None = None,
                  **options) -> tuple[Scene, Camera]:
     """The scene (lights placed) and camera of one frame of ``source`` with the
@@ -128,7 +135,9 @@ def render_frame(source, camera: Camera | None = None, *, lights=None, labels: d
     :func:`render_scene` with the SCENE_OPTIONS, ``camera`` (if given) as the
     scene's placed camera, :func:`render_camera` with the CAMERA_OPTIONS on top,
     and :func:`render_lights` (``lights``: positions or Lights; a Scene given
-    keeps its own lights, even none, unless ``lights`` are given)."""
+    keeps its own lights, even none, unless ``lights`` are given; for the path
+    tracer, a scene with emissive materials or an environment map gets no
+    default light)."""
     scene = render_scene(source, labels=labels, **{k: options.pop(k) for k in SCENE_OPTIONS if k in options})
     if camera is not None:
         scene.camera, scene.camera_framed = camera, False
@@ -136,7 +145,10 @@ def render_frame(source, camera: Camera | None = None, *, lights=None, labels: d
     if options:
         raise TypeError(f"render_frame got unknown options {sorted(options)}")
     if lights or not isinstance(source, Scene):   # a Scene keeps its own lights, none included
-        scene.lights = render_lights(scene.bounds, camera, scene.lights, lights, scene.integrator)
+        if scene.integrator == "path" and not lights and not scene.lights and lit_otherwise(scene):
+            scene.lights = []   # its emitters or its sky light it: no default light added
+        else:
+            scene.lights = render_lights(scene.bounds, camera, scene.lights, lights, scene.integrator)
     return scene, camera
 
 
