@@ -263,6 +263,14 @@ BATCH_HANDSHAKE_SLACK = 5.0
 BATCH_RAY_CHUNK = 1 << 20
 
 
+# Point queries visit their points cell by cell of a grid over the scene's box
+# (kernels/point_order.cl says why): 2^POINT_CELL_BITS cells an axis, counted
+# into places by one work-group of POINT_OFFSETS_GROUP work-items.
+POINT_CELL_BITS = 5
+POINT_OFFSETS_GROUP = 256
+POINT_CELLS = 1 << (3 * POINT_CELL_BITS)
+
+
 def kernel_defines() -> dict:
     """The limits above that the kernels use, as ``-D`` defines of every program."""
     return {
@@ -279,6 +287,8 @@ def kernel_defines() -> dict:
         **{f"PATH_{name.upper()}": f"{code}u" for name, code in PATH_STRATEGIES.items()},
         **{f"LIGHT_{name.upper()}": f"{code}u" for name, code in LIGHT_KINDS.items()},
         **{f"BAD_{name.upper()}": slot for slot, name in enumerate(RAY_CHECKS)},
+        "POINT_CELL_BITS": POINT_CELL_BITS,
+        "POINT_OFFSETS_GROUP": POINT_OFFSETS_GROUP,
     }
 
 

@@ -80,7 +80,7 @@ def test_texture_sampling_on_the_device_is_the_reference_bit_for_bit(device):
     scene = Scene([SceneObject(Mesh.from_arrays([[0, 0, 0], [1, 0, 0], [0, 1, 0]], [[0, 1, 2]])
                                .with_detail(uv=np.zeros((1, 3, 2))), Material(texture=t, normal_texture=t))
                    for t in textures], [Light((0, 0, 1))])
-    detail = flatten_scene(scene).detail
+    detail = flatten_scene(scene, pbr_textures=True).detail
     assert list(detail.textures["linear"]) == [0, 1] * len(textures)
     assert len(detail.texels) == len(textures) * IMAGE.shape[0] * IMAGE.shape[1]
     uv = np.concatenate([RNG.uniform(-3, 4, (4000, 2)), RNG.uniform(-1e9, 1e9, (50, 2)),

@@ -137,9 +137,15 @@ def triangle_verts(corners: np.ndarray) -> np.ndarray:
     return records
 
 
-def flatten_scene(scene: Scene) -> SceneArrays:
+def flatten_scene(scene: Scene, pbr_textures: bool = False) -> SceneArrays:
     """One triangle list for all objects, each triangle tagged with its material:
-    each object's ``material`` then its ``materials``, object after object."""
+    each object's ``material`` then its ``materials``, object after object.
+
+    ``pbr_textures``: upload the path tracer's textures too (emission,
+    metallic-roughness, normal maps); without it only base colour textures
+    get rows (the others' rows are -1), as the Whitted renderer reads no
+    other -- a scene whose only textures are those then builds the plain
+    program, and renders bit for bit as it did before they were read."""
     meshes = [o.mesh for o in scene.objects]
     mesh = Mesh.concatenate(meshes)
     object_materials = [(o.material, *o.materials) for o in scene.objects]
@@ -167,7 +173,8 @@ def flatten_scene(scene: Scene) -> SceneArrays:
         for mat in mats:
             rows = {}
             for name, linear in MATERIAL_TEXTURES.items():
-                tex = getattr(mat, name) if o.mesh.uv is not None else None
+                used = o.mesh.uv is not None and (pbr_textures or name == "texture")
+                tex = getattr(mat, name) if used else None
                 if tex is not None:
                     rows[name] = textures.setdefault((id(tex), linear), (len(textures), tex, linear))[0]
                 else:
