@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from clrt.errors import InputError
+from clrt.reference import render_reference
 from clrt.renderer import Renderer, TileLimits
 from clrt.renderer.path import pass_sizes, tone_map
 from clrt.scene import primitives
@@ -162,8 +163,15 @@ def test_a_spot_light_lights_its_cone_only(device):
     expected = 0.5 / math.pi * 8.0 * cos ** 3 / 4.0
     np.testing.assert_allclose(image[inside], expected[inside], rtol=0.03)
     assert image[outside].max() == 0.0 and inside.sum() > 20 and outside.sum() > 100
-    whitted = Renderer(Scene([floor], [spot], background=(0, 0, 0)), device=device).render(camera, linear=True)
+    whitted_scene = Scene([floor], [spot], background=(0, 0, 0))
+    whitted = Renderer(whitted_scene, device=device).render(camera, linear=True)
     assert whitted.image[..., 0][outside].max() == 0.0 and whitted.image[..., 0][inside].min() > 0.0
+    # ... and as the numpy reference tracer draws it (the falloff between beam and cutoff too).
+    reference, _, _ = render_reference(whitted_scene, camera)
+    np.testing.assert_allclose(whitted.image, reference, atol=3e-3)
+    falling = (angle > 21.0) & (angle < 28.0)   # between beam and cutoff: dimmer than the beam, not dark
+    assert falling.sum() > 20 and 0.0 < whitted.image[..., 0][falling].max() < whitted.image[..., 0][inside].min()
+    assert whitted.image[..., 0][falling].min() > 0.0
 
 
 def test_environment_importance_sampling_has_the_mean_of_uniform_sampling(device):
