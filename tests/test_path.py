@@ -243,3 +243,29 @@ def test_path_settings_are_checked(furnace):
             furnace.render(camera, **bad)
     with pytest.raises(InputError, match=r"max_depth must be an integer in 0\.\.16, got -1"):
         furnace.render(camera, integrator="whitted", max_depth=-1)
+
+
+def test_scene_files_carry_the_path_tracer(tmp_path):
+    from clrt.scene.scene_file import load_scene
+    header = b"#?RADIANCE\nFORMAT=32-bit_rle_rgbe\n\n-Y 2 +X 4\n"
+    (tmp_path / "sky.hdr").write_bytes(header + bytes([128, 128, 128, 129]) * 8)
+    path = tmp_path / "scene.toml"
+    path.write_text('[render]\nintegrator = "path"\nspp = 32\nseed = 9\nexposure = -1\nmax_depth = -1\n'
+                    'environment = { image = "sky.hdr", rotation = 90, strength = 2 }\n'
+                    '[[objects]]\ntype = "sphere"\n'
+                    '[[lights]]\nposition = [0, 3, 0]\ndirection = [0, -2, 0]\ncutoff = 40\nbeam = 10\n')
+    scene = load_scene(path)
+    assert (scene.integrator, scene.spp, scene.seed, scene.exposure, scene.depth) == ("path", 32, 9, -1.0, -1)
+    env = scene.environment
+    assert env.image.shape == (2, 4, 3) and env.image.max() == 1.0 and (env.rotation, env.strength) == (90, 2)
+    light = scene.lights[0]
+    assert (light.direction, light.cutoff, light.beam) == ((0.0, -1.0, 0.0), 40.0, 10.0)
+    for text, says in (('[render]\nspp = 4\n', 'render.spp: is the path tracer\'s: add integrator = "path"'),
+                       ('[render]\nintegrator = "path"\nmax_depth = 0\n', "render.max_depth must be -1 (unbounded)"),
+                       ('[render]\nintegrator = "path"\nenvironment = "none.exr"\n', "render.environment: "),
+                       ('[[lights]]\nposition = [0, 3, 0]\ndirection = [0, -1, 0]\ncutoff = 10\nbeam = 20\n',
+                        "lights[0].beam: must be at most cutoff (10)")):
+        path.write_text(text + '[[objects]]\ntype = "sphere"\n')
+        with pytest.raises(InputError) as info:
+            load_scene(path)
+        assert says in str(info.value) and "\n" not in str(info.value), str(info.value)
