@@ -69,15 +69,23 @@ def _median(call, repeat: int, warmup: int, kernel_ms=None):
     return statistics.median(walls), (statistics.median(kernels) if kernels else None), result
 
 
-def _summary(result) -> tuple:
-    """(mean distance, share inside) of an answer: a distance array (signed or
-    not), a bool array (inside) or winding numbers (inside where >= 0.5)."""
+def _summary(result, kind: str) -> tuple:
+    """(mean distance, share inside) of an answer of ``kind``: "distance",
+    "signed" (negative inside; Open3D's convention), "inside" (bool) or
+    "winding" (winding numbers: inside where >= 0.5)."""
     a = np.asarray(result)
-    if a.dtype == bool:
+    if kind == "inside":
         return None, float(a.mean())
-    if a.ndim == 1 and np.issubdtype(a.dtype, np.floating) and a.size and (a < 0).any():
+    if kind == "winding":
+        return None, float((a >= 0.5).mean())
+    if kind == "signed":
         return float(np.abs(a).mean()), float((a < 0).mean())
     return float(a.mean()), None
+
+
+def _kind(name: str) -> str:
+    return ("signed" if name.startswith("signed") else "inside" if name == "inside"
+            else "winding" if name == "winding number" else "distance")
 
 
 def clrt_rows(mesh, points, device, repeat, warmup):
@@ -92,16 +100,18 @@ def clrt_rows(mesh, points, device, repeat, warmup):
                 for sign in SIGNS]
     queries += [("inside", lambda: accel.contains(points)),
                 ("winding number", lambda: accel.winding_number(points))]
+    device_name = str(accel.device)
+    label = "clrt (PoCL)" if "Portable Computing Language" in device_name else f"clrt ({device_name.split(' (')[0]})"
     rows = []
     for name, call in queries:
         wall, kernel, result = _median(call, repeat, warmup, accel.kernel_ms)
-        rows.append((name, f"clrt ({accel.device})", wall, kernel, *_summary(result)))
+        rows.append((name, label, wall, kernel, *_summary(result, _kind(name))))
     return build_ms, rows
 
 
 def _peer_row(name, library, call, repeat, warmup) -> tuple:
     wall, _, result = _median(call, repeat, warmup)
-    return (name, library, wall, None, *_summary(result))
+    return (name, library, wall, None, *_summary(result, _kind(name)))
 
 
 def open3d_rows(mesh, points, repeat, warmup):
