@@ -76,6 +76,7 @@ _LAZY = {
     "Frame": "clrt.renderer", "Renderer": "clrt.renderer", "TileLimits": "clrt.renderer", "render": "clrt.renderer",
     "default_scene": "clrt.scene.default",
     "load_mesh": "clrt.scene.load",
+    "Environment": "clrt.scene.environment",
     "Mesh": "clrt.scene.mesh",
     "Camera": "clrt.scene.scene", "Light": "clrt.scene.scene", "Material": "clrt.scene.scene",
     "Scene": "clrt.scene.scene", "SceneObject": "clrt.scene.scene", "scene_from_mesh": "clrt.scene.scene",

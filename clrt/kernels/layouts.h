@@ -1,8 +1,8 @@
 // Structs shared with the host.  The byte layout of each is documented once,
 // in clrt/layouts.py next to its numpy dtype; tests/test_layouts.py checks that
 // both sides agree on every offset.  Limits and flag values (MAX_BOUNCES,
-// MATERIAL_SMOOTH, CULL_*) come from clrt/config.py as -D defines of every
-// program build, never from a #define here.
+// MATERIAL_SMOOTH, MATERIAL_DOUBLE_SIDED, CULL_*) come from clrt/config.py as
+// -D defines of every program build, never from a #define here.
 #ifndef CLRT_LAYOUTS_H
 #define CLRT_LAYOUTS_H
 
@@ -30,13 +30,24 @@ typedef struct {
     int material;
 } TriangleInfo;
 
+// Bytes 0..47: the paper's Whitted model (all the Whitted kernels read);
+// 48..111: the path tracer's metallic-roughness model.  Texture rows: -1 none.
 typedef struct {
-    float4 color;         // w: as_int, row of the Texture table, -1 for none
+    float4 color;         // linear base colour; w: as_int, row of its Texture (sRGB)
     float ambient, diffuse, specular, shininess;
-    uint flags;
+    uint flags;           // MATERIAL_SMOOTH, MATERIAL_DOUBLE_SIDED
     float reflectivity;   // weight of the mirror ray
     float transparency;   // weight of the refracted ray
     float ior;            // index of refraction
+    float4 emission;      // xyz: linear emitted radiance; w: as_int, row of its Texture (sRGB)
+    float metallic;       // 0..1
+    float roughness;      // perceptual, 0..1 (GGX alpha = roughness^2)
+    float specular_weight;   // KHR_materials_specular factor (0: pure Lambert)
+    float transmission;   // KHR_materials_transmission factor (dielectric of ior)
+    float4 specular_color;   // xyz: KHR specular colour; w: as_int, row of the metallicRoughness Texture (linear)
+    int normal_texture;   // row of the tangent-space normal map Texture (linear)
+    float normal_scale;   // glTF normalTexture.scale
+    uint pad[2];
 } Material;
 
 // Only in -DSURFACE_DETAIL builds (textures or colours in the scene).
@@ -49,12 +60,27 @@ typedef struct {
     uint first;           // texel of the top-left pixel
     int width, height;
     uint wrap_s, wrap_t;  // WRAP_REPEAT, WRAP_CLAMP, WRAP_MIRROR
+    uint linear;          // 0: sRGB colours; 1: linear data (metallicRoughness, normal maps)
 } Texture;
 
 typedef struct {
     float4 position;
     float4 color;
+    float4 direction;     // xyz: a spot light's unit axis
+    float cos_outer;      // -1: a point light (no cone)
+    float cos_inner;
+    uint pad[2];
 } Light;
+
+// One light of the path tracer's table (lights.cl), chosen by the alias method.
+typedef struct {
+    float threshold;      // keep this entry when u (scaled to it) < threshold
+    int alias;            // else this one
+    uint kind;            // LIGHT_POINT, LIGHT_TRIANGLE, LIGHT_BACKGROUND
+    int index;            // Light row, or the triangle's slot
+    float probability;    // of choosing it
+    uint pad[3];
+} LightEntry;
 
 // ---- Kernel arguments passed by value: each kernel takes its buffers and at
 // most a few of these (clrt/device/signature.py counts them; every kernel
@@ -99,6 +125,23 @@ typedef struct {
     float sample_weight;         // 1 / samples
     uint first_sample;           // 1: the image starts from this sample
 } Tile;
+
+// One launch of the path tracer (path.cl) over a rectangle of the image; the
+// image's sums lie in `frame`, the light tables in `tables` (layouts.py).
+typedef struct {
+    Camera cam;
+    float4 background;           // xyz: constant background radiance
+    float4 environment;          // x, y: cos, sin of the map's turn; z: strength; w: background's probability
+    ulong image_at, albedo_at, normal_at;   // byte offsets in `frame` of the float4 sums
+    uint x, y, w, h;             // pixels of the image
+    uint sample_first, sample_count, samples_before, seed;
+    int max_depth;               // Mitsuba's count; -1: unbounded
+    uint rr_depth, strategy;
+    uint entries_at, num_entries;
+    float inv_power;             // 1 / the power of all lights
+    uint env_at, env_width, env_height, marginal_at, conditional_at;
+    uint pad[3];
+} PathLaunch;
 
 // What kernels know of the uploaded scene by value: the triangle count, where
 // the packets start in the wide BVH's buffer, and (the renderer) the light

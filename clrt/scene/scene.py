@@ -10,23 +10,81 @@ import numpy as np
 from clrt import checks, config
 from clrt.errors import InputError
 from clrt.scene.mesh import Mesh
+from clrt.scene.environment import Environment
 from clrt.scene.texture import Texture
 
 
 
+#: The textures a Material may hold, each read by its own decoding (True:
+#: linear): base colour and emission are sRGB colours, metallicRoughness and
+#: normal maps linear data (glTF 2.0 says which is which).
+MATERIAL_TEXTURES = {"texture": False, "emission_texture": False, "metallic_roughness_texture": True,
+                     "normal_texture": True}
+
+
+@dataclass(frozen=True)
+class PbrValues:
+    """The path tracer's scalars of a material: its own, or mapped from Phong
+    (:meth:`Material.pbr_values`)."""
+
+    metallic: float
+    roughness: float
+    specular_weight: float
+    transmission: float
+
+
 @dataclass(frozen=True)
 class Material:
-    """Phong material with Whitted optics.
+    """Phong material with Whitted optics, and the metallic-roughness model
+    (glTF 2.0 appendix B) of the path tracer.
 
-    ``color`` is linear RGB in [0, 1]; ``smooth`` interpolates vertex normals,
-    blending them over edges where faces meet at up to ``crease`` degrees (box
-    edges stay sharp, curved surfaces look round; 180 blends over every edge).
-    ``reflectivity`` (0..1) is the weight of the mirror reflection;
-    ``transparency`` (0..1) the weight of the refracted ray, with index of
-    refraction ``ior`` (Fresnel-weighted, total internal reflection included).
-    ``texture`` (a :class:`~clrt.scene.texture.Texture`, or None) multiplies
-    ``color`` where the mesh has texture coordinates (``Mesh.uv``), as a
-    file's base-colour texture does.
+    Whitted: ``color`` is linear RGB in [0, 1]; ``smooth`` interpolates vertex
+    normals, blending them over edges where faces meet at up to ``crease``
+    degrees (box edges stay sharp, curved surfaces look round; 180 blends over
+    every edge).  ``reflectivity`` (0..1) is the weight of the mirror
+    reflection; ``transparency`` (0..1) the weight of the refracted ray, with
+    index of refraction ``ior`` (Fresnel-weighted, total internal reflection
+    included).  ``texture`` (a :class:`~clrt.scene.texture.Texture`, or None)
+    multiplies ``color`` where the mesh has texture coordinates (``Mesh.uv``),
+    as a file's base-colour texture does.  The Whitted renderer reads only
+    these fields.
+
+    Path tracer: the base colour is ``color`` x ``texture`` (x the mesh's
+    colours), as above.  ``emission``: linear emitted radiance (RGB >= 0; glTF's
+    emissiveFactor x KHR_materials_emissive_strength), times
+    ``emission_texture`` (sRGB) where there is one; it leaves the front face
+    (counter-clockwise, glTF's) only, both when ``double_sided``.
+    ``metallic`` and ``roughness`` (perceptual, GGX alpha = roughness^2), each
+    0..1, times the G (roughness) and B (metallic) channels of
+    ``metallic_roughness_texture`` (linear); ``specular_weight`` (0..1, 0: pure
+    Lambert) and ``specular_color`` (linear RGB >= 0) as KHR_materials_specular
+    says; ``transmission`` (0..1): the weight of a dielectric of index ``ior``
+    (KHR_materials_transmission), smooth or rough by ``roughness``;
+    ``normal_texture``: a tangent-space normal map (linear), its x and y scaled
+    by ``normal_scale``.
+
+    The paper's materials in the path tracer: ``metallic``, ``roughness``,
+    ``specular_weight`` and ``transmission`` left None (as every Phong
+    material -- the built-in scene, TOML and OBJ/MTL files without PBR keys --
+    leaves them) come from the Phong fields through one mapping,
+    :meth:`pbr_values`: a diffuse + glossy approximation of the Whitted look.
+
+    ====================  ==================================================
+    path tracer           from the Phong fields
+    ====================  ==================================================
+    base colour           ``color`` as it is (``diffuse`` and ``ambient`` are
+                          not applied: the path tracer's light is bounded by
+                          the light arriving, and its indirect light takes
+                          the place of the ambient term)
+    ``metallic``          ``reflectivity`` (Whitted's mirror becomes a metal)
+    ``roughness``         ``(2 shininess + 1) ** -0.25``, the roughness whose
+                          GGX highlight is as wide as the Phong one (the
+                          inverse of the glTF reader's mapping), times ``1 -
+                          max(reflectivity, transparency)``: Whitted's mirror
+                          and refraction are sharp
+    ``specular_weight``   ``min(specular, 1)`` (0: no highlight, pure Lambert)
+    ``transmission``      ``transparency``
+    ====================  ==================================================
     """
 
     color: tuple = config.DEFAULT_COLOR
@@ -40,15 +98,46 @@ class Material:
     ior: float = config.DEFAULT_IOR
     crease: float = config.DEFAULT_CREASE_ANGLE
     texture: Texture | None = None
+    emission: tuple = config.DEFAULT_EMISSION
+    emission_texture: Texture | None = None
+    double_sided: bool = False
+    metallic: float | None = None
+    roughness: float | None = None
+    metallic_roughness_texture: Texture | None = None
+    specular_weight: float | None = None
+    specular_color: tuple = config.DEFAULT_SPECULAR_COLOR
+    transmission: float | None = None
+    normal_texture: Texture | None = None
+    normal_scale: float = 1.0
 
     def __post_init__(self):
         object.__setattr__(self, "color", checks.color("material color", self.color))
-        if self.texture is not None and not isinstance(self.texture, Texture):
-            raise checks.fail("material texture", "a clrt Texture or None", self.texture)
+        object.__setattr__(self, "emission", checks.intensity("material emission", self.emission))
+        object.__setattr__(self, "specular_color", checks.vector("material specular_color", self.specular_color,
+                                                                 ge=0, le=config.MAX_SPECULAR_COLOR))
+        for name in MATERIAL_TEXTURES:
+            value = getattr(self, name)
+            if value is not None and not isinstance(value, Texture):
+                raise checks.fail(f"material {name}", "a clrt Texture or None", value)
         for name in config.MATERIAL_RANGES:
-            object.__setattr__(self, name, checks.material_number(f"material {name}", getattr(self, name), name))
+            value = getattr(self, name)
+            if value is not None or name not in _PBR_MAPPED:
+                object.__setattr__(self, name, checks.material_number(f"material {name}", value, name))
         checks.boolean("material smooth", self.smooth)
+        checks.boolean("material double_sided", self.double_sided)
         object.__setattr__(self, "crease", checks.crease(self.crease, "material crease"))
+
+    def pbr_values(self) -> PbrValues:
+        """The path tracer's metallic, roughness, specular_weight and
+        transmission: each one given, else mapped from the Phong fields as the
+        class docstring's table says."""
+        sharp = 1.0 - max(self.reflectivity, self.transparency)
+        mapped = PbrValues(metallic=self.reflectivity,
+                           roughness=(2.0 * self.shininess + 1.0) ** -0.25 * sharp,
+                           specular_weight=min(self.specular, 1.0),
+                           transmission=self.transparency)
+        return replace(mapped, **{name: getattr(self, name) for name in _PBR_MAPPED
+                                  if getattr(self, name) is not None})
 
     @classmethod
     def of(cls, value) -> "Material":
@@ -68,8 +157,12 @@ class Material:
 
     def with_overrides(self, **overrides) -> "Material":
         """A copy with the fields given replaced (None leaves a field as it is,
-        except ``texture``, which None removes)."""
-        return replace(self, **{k: v for k, v in overrides.items() if v is not None or k == "texture"})
+        except a texture field, which None removes)."""
+        return replace(self, **{k: v for k, v in overrides.items() if v is not None or k in MATERIAL_TEXTURES})
+
+
+#: The path tracer's fields that None leaves to the Phong mapping (Material.pbr_values).
+_PBR_MAPPED = tuple(f.name for f in fields(PbrValues))
 
 
 def unknown_name(what: str, name, known) -> str:
@@ -86,14 +179,36 @@ def unknown_name(what: str, name, known) -> str:
 
 @dataclass(frozen=True)
 class Light:
-    """Point light at ``position`` with linear RGB ``color`` (an intensity: >= 0, may exceed 1)."""
+    """Point light at ``position`` with linear RGB ``color`` (an intensity: >= 0, may exceed 1).
+
+    With a ``direction`` it is a spot light: it shines into the cone of half
+    angle ``cutoff`` degrees about that direction (0 < cutoff <= 90), at full
+    intensity within ``beam`` degrees of the axis (default three quarters of
+    ``cutoff``), falling off smoothly between (smoothstep of the cosines; both
+    integrators).  The path tracer takes ``color`` as the radiant intensity
+    (W/sr, lighting falls off with the squared distance); Whitted's Phong model
+    uses it without falloff, as the paper does.
+    """
 
     position: tuple
     color: tuple = config.DEFAULT_LIGHT_COLOR
+    direction: tuple | None = None
+    cutoff: float = config.DEFAULT_SPOT_CUTOFF
+    beam: float | None = None
 
     def __post_init__(self):
         object.__setattr__(self, "position", checks.position("light position", self.position))
         object.__setattr__(self, "color", checks.intensity("light color", self.color))
+        if self.direction is not None:
+            d = checks.position("light direction", self.direction)
+            norm = math.sqrt(sum(x * x for x in d))
+            if not norm > 0:
+                raise checks.fail("light direction", "3 numbers, not all 0", self.direction)
+            object.__setattr__(self, "direction", tuple(x / norm for x in d))
+        object.__setattr__(self, "cutoff", checks.number("light cutoff", self.cutoff, gt=0, le=90))
+        beam = 0.75 * self.cutoff if self.beam is None else checks.number("light beam", self.beam, ge=0,
+                                                                          le=self.cutoff)
+        object.__setattr__(self, "beam", beam)
 
     @classmethod
     def of(cls, value) -> "Light":
@@ -263,8 +378,12 @@ _SCENE_CHECKS = {
     "camera": _camera,
     "camera_framed": lambda v: checks.boolean("camera_framed", v),
     "default_lights": lambda v: checks.boolean("default_lights", v),
-    "max_depth": checks.max_depth,
     "samples": checks.samples,
+    "integrator": lambda v: checks.choice("integrator", v, config.INTEGRATORS),
+    "spp": lambda v: None if v is None else checks.spp(v),
+    "seed": checks.seed,
+    "exposure": checks.exposure,
+    "environment": lambda v: None if v is None else Environment.of(v),
     "source": lambda v: checks.text("source", v),
 }
 
@@ -284,18 +403,37 @@ class Scene:
     camera: Camera | None = None   # suggested view; renderers may override
     camera_framed: bool = False    # the camera was framed from the bounds, not placed by the user
     default_lights: bool = False   # the lights are clrt's default one, placed from ``camera``, not the user's
-    max_depth: int = config.DEFAULT_MAX_DEPTH   # reflection / refraction bounces after the camera ray
-    samples: int = config.DEFAULT_SAMPLES       # anti-aliasing: samples x samples rays per pixel
+    max_depth: int | None = None   # None: the integrator's default (Whitted: 5 bounces; path: -1, unbounded)
+    samples: int = config.DEFAULT_SAMPLES       # Whitted's anti-aliasing: samples x samples rays per pixel
     source: str = ""               # the file it came from (a mesh or scene file), named by errors
+    integrator: str = config.DEFAULT_INTEGRATOR   # "whitted" (the paper's) or "path"
+    spp: int | None = None         # the path tracer's samples per pixel (None: config.DEFAULT_SPP)
+    seed: int = 0                  # of the sample jitter and the path tracer's random numbers
+    exposure: float = 0.0          # stops: 8- and 16-bit images show the linear one x 2**exposure
+    environment: Environment | None = None   # the path tracer's sky (an equirectangular HDR map)
 
     def __setattr__(self, name, value):
+        if name == "max_depth":   # the integrator's rule, where it is known already (not within __init__)
+            value = None if value is None else checks.max_depth(value, "max_depth", self.__dict__.get("integrator"))
         check = _SCENE_CHECKS.get(name)
         super().__setattr__(name, value if check is None else check(value))
+
+    def __post_init__(self):
+        self.max_depth = self.max_depth   # checked again, now for its integrator
+
+    @property
+    def depth(self) -> int:
+        """max_depth, or the integrator's default where it is None."""
+        if self.max_depth is not None:
+            return self.max_depth
+        return config.DEFAULT_PATH_MAX_DEPTH if self.integrator == "path" else config.DEFAULT_MAX_DEPTH
 
     def __repr__(self) -> str:
         camera = "no camera" if self.camera is None else f"camera {self.camera.width}x{self.camera.height}"
         return (f"<clrt.Scene: {len(self.objects)} object(s), {self.num_triangles:,} triangles, "
-                f"{len(self.lights)} light(s), {camera}, samples {self.samples}, max_depth {self.max_depth}>")
+                f"{len(self.lights)} light(s), {camera}, {self.integrator}, "
+                + (f"samples {self.samples}" if self.integrator == "whitted" else f"spp {self.spp or config.DEFAULT_SPP}")
+                + f", max_depth {self.depth}>")
 
     @property
     def bounds(self) -> np.ndarray:
