@@ -14,7 +14,8 @@ Where to start:
   (trimesh's interface); results ``clrt.Hits``, ``clrt.AllHits``,
   ``clrt.CameraImages`` (``help()`` on each lists its arrays);
 - point queries: ``clrt.closest_points`` (``clrt.ClosestPoints``), ``clrt.distance``;
-- meshes: ``clrt.load_mesh``, ``clrt.Mesh``;
+- meshes: ``clrt.load_mesh``, ``clrt.Mesh``; meshes placed many times:
+  ``clrt.Instances`` (or a list of ``(mesh, transform)`` pairs, docs/instances.md);
 - devices: ``device=None`` (the first GPU, else the CPU), ``"gpu"``, ``"cpu"``
   or ``"P:D"`` (platform and device indices, as ``clrt info`` lists them).
 
@@ -77,6 +78,7 @@ _LAZY = {
     "default_scene": "clrt.scene.default",
     "load_mesh": "clrt.scene.load",
     "Mesh": "clrt.scene.mesh",
+    "Instances": "clrt.scene.instances",
     "Camera": "clrt.scene.scene", "Light": "clrt.scene.scene", "Material": "clrt.scene.scene",
     "Scene": "clrt.scene.scene", "SceneObject": "clrt.scene.scene", "scene_from_mesh": "clrt.scene.scene",
     "load_scene": "clrt.scene.scene_file",
