@@ -346,3 +346,99 @@ def test_bad_instances_are_one_line(device, monkeypatch):
     accel = clrt.Accel([mesh, (mesh, _affine(shift=(3.0, 0.0, 0.0)))], device=device)
     _one_line_error(lambda: accel.closest_points([0.0, 0.0, 0.0]), "point queries on an Accel of instances")
     _one_line_error(lambda: accel.refit(mesh.vertices), "refit of an Accel of instances")
+
+
+# --------------------------------------------------------------------------- glTF files: nodes as instances
+
+def _hierarchy_glb(path, groups=4, per_group=5):
+    """A GLB written by trimesh whose node hierarchy places one mesh (a ball)
+    groups x per_group times under turned and shifted group nodes, one of each
+    group's children mirrored, and a box once at the root."""
+    import trimesh
+    from trimesh.transformations import rotation_matrix, translation_matrix
+    scene = trimesh.Scene()
+    scene.add_geometry(trimesh.creation.box(), geom_name="box", node_name="box")
+    scene.add_geometry(trimesh.creation.icosphere(subdivisions=1), geom_name="ball", node_name="ball")
+    for g in range(groups):
+        scene.graph.update(frame_to=f"group{g}", frame_from=scene.graph.base_frame,
+                           matrix=rotation_matrix(0.4 * g, [0, 0, 1]) @ translation_matrix([3.0 * g, 0, 0]))
+        for c in range(per_group):
+            m = translation_matrix([0.0, 3.0 * c, 2.0]) @ np.diag([1.0, 1.0, -1.0 if c == 1 else 1.5, 1.0])
+            scene.graph.update(frame_to=f"ball{g}_{c}", frame_from=f"group{g}", matrix=m, geometry="ball")
+    scene.export(path)
+    return path
+
+
+def test_a_gltf_files_mesh_nodes_are_its_instances(tmp_path, device):
+    """One glTF mesh placed by many nodes is one bottom-level mesh (a mirrored
+    placement another, rewound, as the file reads flattened); instances in
+    document order, depth first, transforms composed down the hierarchy: the
+    flattened scene of the instances is the file read flattened, corner for
+    corner, and the hits name the node's instance."""
+    path = _hierarchy_glb(tmp_path / "balls.glb")
+    accel = clrt.Accel(path, device=device)
+    instances = accel.instances
+    assert len(instances) == 22 and len(instances.meshes) == 3      # box, ball, the mirrored ball
+    flat = clrt.load_mesh(path)
+    mine = instances.flattened()
+    assert np.array_equal(mine.vertices[mine.faces], flat.vertices[flat.faces])
+    faces = np.array([len(instances.meshes[k].faces) for k in instances.mesh_of])
+    first = np.concatenate([[0], np.cumsum(faces)[:-1]])
+    origins, directions = _rays(flat.bounds, 2000, seed=9)
+    hits, want = accel.trace(origins, directions), clrt.Accel(flat, device=device).trace(origins, directions)
+    t, margin, cosine, inst, prim, _ = _flat_reference(instances, origins, directions)
+    clear = _clear(t, margin, cosine, float(np.linalg.norm(flat.bounds[1] - flat.bounds[0])))
+    assert clear.mean() > 0.9 and len(np.unique(hits.instance[clear & hits.hit])) > 15
+    assert np.array_equal(hits.hit[clear], want.hit[clear])
+    rows = clear & want.hit
+    of = np.searchsorted(first, want.prim[rows], side="right") - 1    # the flattened triangle's instance
+    assert np.array_equal(hits.instance[rows], of)
+    assert np.array_equal(hits.prim[rows], want.prim[rows] - first[of])
+    assert np.array_equal(hits.front[rows], want.front[rows])
+    assert np.allclose(hits.t[rows], want.t[rows], rtol=1e-5, atol=0)
+
+
+def test_a_gltf_file_of_one_mesh_node_stays_one_level(tmp_path, device):
+    import trimesh
+    path = tmp_path / "one.glb"
+    trimesh.Scene(trimesh.creation.icosphere(subdivisions=1)).export(path)
+    accel = clrt.Accel(path, device=device)
+    assert accel.instances is None and "ACCEL_INSTANCES" not in accel.device_scene.defines()
+    assert np.array_equal(accel.mesh.vertices[accel.mesh.faces], clrt.load_mesh(path).vertices[
+        clrt.load_mesh(path).faces])
+
+
+def _rewritten_glb(source, target, change):
+    """A copy of a GLB file with ``change(doc)`` applied to its JSON chunk."""
+    import json
+    import struct
+    data = source.read_bytes()
+    length = struct.unpack_from("<I", data, 12)[0]
+    doc = json.loads(data[20:20 + length])
+    change(doc)
+    text = json.dumps(doc).encode()
+    text += b" " * (-len(text) % 4)
+    rest = data[20 + length:]
+    target.write_bytes(struct.pack("<III", 0x46546C67, 2, 12 + 8 + len(text) + len(rest))
+                       + struct.pack("<II", len(text), 0x4E4F534A) + text + rest)
+    return target
+
+
+def test_bad_gltf_instances_are_one_line(tmp_path, device):
+    path = _hierarchy_glb(tmp_path / "balls.glb", groups=2, per_group=2)
+
+    def cycle(doc):   # the first group's first child lists the group as its own child
+        group = next(i for i, n in enumerate(doc["nodes"]) if n.get("name") == "group0")
+        doc["nodes"][doc["nodes"][group]["children"][0]]["children"] = [group]
+
+    def flat(doc):    # a node that scales z to 0
+        doc["nodes"][-1]["matrix"] = [1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 0, 0, 0, 0, 0, 1]
+
+    looped = _rewritten_glb(path, tmp_path / "cycle.glb", cycle)
+    for read in (lambda: clrt.Accel(looped, device=device), lambda: clrt.load_mesh(looped)):   # render's reader too
+        with pytest.raises(clrt.MeshLoadError, match=r"cycle.glb: corrupt GLB file: node \d+ is its own ancestor") \
+                as info:
+            read()
+        assert "\n" not in str(info.value)
+    _one_line_error(lambda: clrt.Accel(_rewritten_glb(path, tmp_path / "flat.glb", flat), device=device),
+                    r"instance \d+'s transform must be invertible")

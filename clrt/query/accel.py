@@ -156,7 +156,7 @@ class Accel(PointQueries):
 
     ``mesh``: a Mesh, a mesh file, a trimesh object or ``(vertices, faces)``; or
     several placed as instances: a list of meshes or of ``(mesh, 4x4 transform)``
-    pairs, or a :class:`clrt.Instances` (hits name them: docs/instances.md).  The options go by keyword, in the same order as
+    pairs, a :class:`clrt.Instances` or a glTF file's mesh nodes (docs/instances.md).  The options go by keyword, in the same order as
     :class:`~clrt.renderer.frame.Renderer`'s (the choices of the structure
     first, then the device): ``accel``: "box" (default), "sphere", "ellipse"
     or "none"; ``builder``: "auto" (default: "device" where the device

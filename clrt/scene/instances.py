@@ -7,8 +7,8 @@
 
 What the entry points take as several meshes: a list of meshes (each as
 :func:`clrt.scene.load.as_mesh` takes one: a Mesh, a file path, a trimesh
-object) or of ``(mesh, transform)`` pairs, or an :class:`Instances` made from
-arrays.  One mesh object listed twice is one mesh placed twice (instanced, not
+object) or of ``(mesh, transform)`` pairs, an :class:`Instances` made from
+arrays, or a glTF file (.gltf, .glb), whose mesh nodes are its instances.  One mesh object listed twice is one mesh placed twice (instanced, not
 copied); instance ``k`` is the ``k``-th entry, the index queries report.
 Every transform is checked here (4x4, finite, affine, invertible), so a bad
 one is one line naming its instance.
@@ -42,6 +42,11 @@ def is_instance_list(source) -> bool:
     such as ``(vertices, faces)``)?"""
     return isinstance(source, Instances) or (
         isinstance(source, (list, tuple)) and any(_is_mesh_source(x) or _is_pair(x) for x in source))
+
+
+def is_gltf_file(source) -> bool:
+    """Is ``source`` the path of a glTF file, whose mesh nodes are instances?"""
+    return isinstance(source, (str, os.PathLike)) and os.fspath(source).lower().endswith((".gltf", ".glb"))
 
 
 class Instances:
@@ -167,12 +172,18 @@ def _entry_text(matrix: np.ndarray, where: np.ndarray) -> str:
 
 
 def as_instances(source) -> Instances:
-    """:class:`Instances` from an Instances, or from a list of meshes or of
+    """:class:`Instances` from an Instances, from a list of meshes or of
     ``(mesh, transform)`` pairs (``transform``: a 4x4 affine matrix, object ->
-    world); one mesh object (or one path) listed twice is one mesh placed twice.
-    InputError naming the first bad entry."""
+    world; one mesh object, or one path, listed twice is one mesh placed
+    twice), or from a glTF file: its mesh nodes in document order, depth first,
+    each glTF mesh one mesh however many nodes place it (a node's world
+    transform composed down its hierarchy).  InputError naming the first bad
+    entry (MeshLoadError for a bad file)."""
     if isinstance(source, Instances):
         return source
+    if is_gltf_file(source):
+        from clrt.scene.formats.gltf import gltf_instances
+        return Instances(*gltf_instances(os.fspath(source)))
     if len(source) > config.MAX_INSTANCES:
         raise InputError(f"a scene holds at most {config.MAX_INSTANCES:,} instances (results name them by "
                          f"int32), got {len(source):,}")
@@ -204,3 +215,18 @@ def _checked_shape(k: int, transform) -> np.ndarray:
     if m.shape != (4, 4):
         raise _bad_transform(k, "a 4x4 affine matrix", f"shape {m.shape}")
     return m
+
+
+def placed_meshes(source) -> "Instances | Mesh":
+    """Instances of a list of meshes, an Instances, or a glTF file that places
+    meshes more than once (its mesh nodes); a glTF file with one mesh node is
+    its one Mesh, placed, as the file reads flattened."""
+    if is_gltf_file(source):
+        from clrt.scene.formats.gltf import gltf_instances
+        meshes, mesh_of, transforms = gltf_instances(os.fspath(source))
+        if len(mesh_of) > 1:
+            return Instances(meshes, mesh_of, transforms)
+        mesh, m = meshes[mesh_of[0]], transforms[0]
+        return Mesh.from_arrays(mesh.vertices.astype(np.float64) @ m[:3, :3].T + m[:3, 3], mesh.faces, mesh.name)
+    return as_instances(source)
+
