@@ -8,7 +8,8 @@
 What the entry points take as several meshes: a list of meshes (each as
 :func:`clrt.scene.load.as_mesh` takes one: a Mesh, a file path, a trimesh
 object) or of ``(mesh, transform)`` pairs, an :class:`Instances` made from
-arrays, or a glTF file (.gltf, .glb), whose mesh nodes are its instances.  One mesh object listed twice is one mesh placed twice (instanced, not
+arrays, or a glTF file (.gltf, .glb), whose mesh nodes are its instances.
+One mesh object listed twice is one mesh placed twice (instanced, not
 copied); instance ``k`` is the ``k``-th entry, the index queries report.
 Every transform is checked here (4x4, finite, affine, invertible), so a bad
 one is one line naming its instance.
@@ -22,6 +23,7 @@ import numpy as np
 
 from clrt import checks, config
 from clrt.errors import InputError
+from clrt.scene.formats.trimesh_objects import is_trimesh_scene
 from clrt.scene.mesh import Mesh
 
 
@@ -29,8 +31,7 @@ def _is_mesh_source(value) -> bool:
     """Something that names or is one mesh (not a (vertices, faces) pair: that
     is given as a clrt.Mesh inside a list of instances)."""
     return (isinstance(value, (Mesh, str, os.PathLike))
-            or hasattr(value, "vertices") and hasattr(value, "faces")
-            or hasattr(value, "geometry") and hasattr(getattr(value, "graph", None), "nodes_geometry"))
+            or hasattr(value, "vertices") and hasattr(value, "faces") or is_trimesh_scene(value))
 
 
 def _is_pair(value) -> bool:
