@@ -83,7 +83,17 @@ DEFAULT_IOR = 1.5
 #: sums overflow float32 on the device; a Phong exponent of 10000 already makes
 #: a highlight narrower than a pixel.
 MATERIAL_RANGES = {"ambient": (0, 1000), "diffuse": (0, 1000), "specular": (0, 1000),
-                   "shininess": (0, 10000), "reflectivity": (0, 1), "transparency": (0, 1), "ior": (1, 100)}
+                   "shininess": (0, 10000), "reflectivity": (0, 1), "transparency": (0, 1), "ior": (1, 100),
+                   # the path tracer's (glTF 2.0 metallic-roughness and its KHR extensions); a
+                   # normal map's scale has no range in glTF, and any finite one is safe (the
+                   # scaled normal is normalised), so this one only keeps it finite in float32
+                   "metallic": (0, 1), "roughness": (0, 1), "specular_weight": (0, 1), "transmission": (0, 1),
+                   "normal_scale": (-1000, 1000)}
+#: KHR_materials_specular's colour factor may exceed 1 (the BSDF clamps F0 to 1);
+#: this bound keeps it well inside float32.
+MAX_SPECULAR_COLOR = 1000.0
+DEFAULT_SPECULAR_COLOR = (1.0, 1.0, 1.0)
+DEFAULT_EMISSION = (0.0, 0.0, 0.0)
 DEFAULT_BACKGROUND = (0.0, 0.0, 0.0)
 DEFAULT_AMBIENT_LIGHT = (1.0, 1.0, 1.0)
 DEFAULT_LIGHT_COLOR = (1.0, 1.0, 1.0)
@@ -96,8 +106,10 @@ DEFAULT_SAMPLES = 1
 PROGRESS_DELAY = 1.0
 PROGRESS_FIRST_TILE = 1 << 19
 
-#: Material flag bits (``Material.flags`` in layouts.py).
+#: Material flag bits (``Material.flags`` in layouts.py): smooth shading;
+#: emission from both faces (else from the front one only, as glTF's doubleSided false).
 MATERIAL_SMOOTH = 1
+MATERIAL_DOUBLE_SIDED = 2
 #: How a texture coordinate outside 0..1 is mapped back into the image (glTF's
 #: sampler modes REPEAT, CLAMP_TO_EDGE, MIRRORED_REPEAT): name -> the code the
 #: kernels compare with (``Texture.wrap_s``/``wrap_t`` in layouts.py).
@@ -236,11 +248,20 @@ BATCH_HANDSHAKE_SLACK = 5.0
 BATCH_RAY_CHUNK = 1 << 20
 
 
+# Point queries visit their points cell by cell of a grid over the scene's box
+# (kernels/point_order.cl says why): 2^POINT_CELL_BITS cells an axis, counted
+# into places by one work-group of POINT_OFFSETS_GROUP work-items.
+POINT_CELL_BITS = 5
+POINT_OFFSETS_GROUP = 256
+POINT_CELLS = 1 << (3 * POINT_CELL_BITS)
+
+
 def kernel_defines() -> dict:
     """The limits above that the kernels use, as ``-D`` defines of every program."""
     return {
         "MAX_BOUNCES": MAX_BOUNCES,
         "MATERIAL_SMOOTH": f"{MATERIAL_SMOOTH}u",
+        "MATERIAL_DOUBLE_SIDED": f"{MATERIAL_DOUBLE_SIDED}u",
         "MAX_PARTS": MAX_PARTS,
         "RESULT_SLOTS": RESULT_SLOTS,
         "NO_RESULT": f"{NO_RESULT:#x}UL",
@@ -249,6 +270,8 @@ def kernel_defines() -> dict:
         "TEXEL_LIMIT": f"{float(TEXEL_LIMIT)!r}f",
         **{f"BAD_{name.upper()}": slot for slot, name in enumerate(RAY_CHECKS)},
         "INSTANCE_MIRROR": f"{INSTANCE_MIRROR}u",
+        "POINT_CELL_BITS": POINT_CELL_BITS,
+        "POINT_OFFSETS_GROUP": POINT_OFFSETS_GROUP,
     }
 
 

@@ -26,17 +26,38 @@ Byte layout (offset: field):
     0: vertex  int[3]  indices into the vertex-normal buffer
    12: material int    row of the material buffer
 
-``Material`` (48 B)
-    0: color     float4  linear RGB albedo; a: as_int, row of the Texture table
-                         multiplying it, -1 for none (read only in -DSURFACE_DETAIL builds)
+``Material`` (112 B) -- bytes 0..47 are the paper's Whitted model, the only
+ones the Whitted kernels read; bytes 48.. the path tracer's metallic-roughness
+model (glTF 2.0 appendix B).  The path tracer's base colour is ``color`` (times
+the corner colour and texture, as for Whitted: texture.cl's surface_albedo).
+Every row fills both parts: a material that gives no PBR values gets them from
+its Phong ones (``clrt.scene.scene.Material.pbr_values``, documented there).
+    0: color     float4  linear RGB albedo (the base colour); a: as_int, row of the
+                         Texture table multiplying it (sRGB), -1 for none (read only
+                         in -DSURFACE_DETAIL builds, as every texture row below)
    16: ambient   float   coefficients of the Phong model
    20: diffuse   float
    24: specular  float
    28: shininess float   Phong exponent
-   32: flags        uint  bit 0: smooth shading (interpolate vertex normals)
+   32: flags        uint  bit 0 MATERIAL_SMOOTH: smooth shading (interpolate vertex
+                          normals); bit 1 MATERIAL_DOUBLE_SIDED: emission leaves both
+                          faces (else only the front one, glTF's counter-clockwise side)
    36: reflectivity float weight of the mirror ray (0..1)
    40: transparency float weight of the refracted ray (0..1)
-   44: ior          float index of refraction (>= 1)
+   44: ior          float index of refraction (>= 1); the path tracer's too
+   48: emission     float4 xyz: linear emitted radiance (glTF emissiveFactor x
+                          KHR_materials_emissive_strength), >= 0; w: as_int, Texture
+                          row of the emissive texture multiplying it (sRGB), -1 none
+   64: metallic     float 0..1
+   68: roughness    float perceptual roughness 0..1 (GGX alpha = roughness^2)
+   72: specular_weight float KHR_materials_specular specularFactor 0..1 (0: pure Lambert)
+   76: transmission float KHR_materials_transmission factor 0..1 (a dielectric of ``ior``)
+   80: specular_color float4 xyz: KHR_materials_specular specularColorFactor (linear,
+                          >= 0); w: as_int, Texture row of the metallicRoughness
+                          texture (G = roughness, B = metallic; linear), -1 none
+   96: normal_texture int Texture row of the tangent-space normal map (linear), -1 none
+  100: normal_scale float glTF normalTexture.scale (1 default)
+  104: pad          uint[2]  0
 
 The next three exist only in scenes with textures or colours, whose programs
 are built with -DSURFACE_DETAIL; plain scenes upload and read none of them.
@@ -47,19 +68,25 @@ adds to the material, interpolated with the hit's barycentrics
                             colours), w = texture coordinate u
    48: v         float4     xyz = texture coordinate v of corners 0, 1, 2; w unused (0)
 
-``Texture`` (20 B) -- one row per texture of the scene
+``Texture`` (24 B) -- one row per texture and decoding of the scene (an image
+that one material reads as colour and another as data has two rows over the
+same texels)
     0: first   uint  texel of the image's top-left pixel in the texel buffer
     4: width   int   pixels
     8: height  int
    12: wrap_s  uint  along u: WRAP_REPEAT, WRAP_CLAMP or WRAP_MIRROR (clrt.config.TEXTURE_WRAPS)
    16: wrap_t  uint  along v
+   20: linear  uint  0: colours, 8-bit sRGB (base colour, emission); 1: data, read
+                     linearly as code * (1/255) (metallicRoughness, normal maps)
 
-Texels (``TEXEL``, 4 B each): uchar4, xyz = 8-bit sRGB, w unused (0), every
-texture's rows top to bottom, one after another, in one buffer (split like the
-geometry when it is larger than one allocation).  The kernels decode sRGB
-through a 256-entry float table (``SRGB_TABLE``, 1 KiB), so an image costs 4 B
-a texel on the device -- a quarter of float4 texels -- and the decoded values
-are exact float32 constants, the same on every device and in the reference.
+Texels (``TEXEL``, 4 B each): uchar4, xyz = 8-bit codes, w unused (0), every
+image's rows top to bottom, one after another, in one buffer (split like the
+geometry when it is larger than one allocation); each image once, however many
+rows and materials read it.  The kernels decode sRGB through a 256-entry float
+table (``SRGB_TABLE``, 1 KiB), so an image costs 4 B a texel on the device -- a
+quarter of float4 texels -- and the decoded values are exact float32 constants,
+the same on every device and in the reference; a linear code c is
+float(c) * float(1/255), one correctly rounded product, the same everywhere too.
 
 ``Light`` (32 B) -- point light
     0: position float4  xyz, w unused
@@ -239,10 +266,13 @@ TRIANGLE_INFO = np.dtype([("vertex", np.int32, 3), ("material", np.int32)])
 MATERIAL = np.dtype([("color", float4), ("ambient", np.float32), ("diffuse", np.float32),
                      ("specular", np.float32), ("shininess", np.float32),
                      ("flags", np.uint32), ("reflectivity", np.float32), ("transparency", np.float32),
-                     ("ior", np.float32)])
+                     ("ior", np.float32),
+                     ("emission", float4), ("metallic", np.float32), ("roughness", np.float32),
+                     ("specular_weight", np.float32), ("transmission", np.float32), ("specular_color", float4),
+                     ("normal_texture", np.int32), ("normal_scale", np.float32), ("pad", np.uint32, 2)])
 TRIANGLE_DETAIL = np.dtype([("corner", float4, 3), ("v", float4)])
 TEXTURE = np.dtype([("first", np.uint32), ("width", np.int32), ("height", np.int32),
-                    ("wrap_s", np.uint32), ("wrap_t", np.uint32)])
+                    ("wrap_s", np.uint32), ("wrap_t", np.uint32), ("linear", np.uint32)])
 TEXEL = np.dtype((np.uint8, 4))
 SRGB_TABLE = np.dtype((np.float32, 256))
 LIGHT = np.dtype([("position", float4), ("color", float4)])

@@ -78,10 +78,17 @@ def _wrap(i: np.ndarray, n: int, mode: str) -> np.ndarray:
     return i % n
 
 
-def sample_texture(texture, uv: np.ndarray) -> np.ndarray:
-    """(N, 3) float32 linear colour of ``texture`` (a clrt Texture) at (N, 2)
-    float32 coordinates: bilinear over sRGB-decoded texels, texel centres at
-    half-integers, (0, 0) the bottom-left corner, each axis wrapped by its mode."""
+def decode_linear8(pixels: np.ndarray) -> np.ndarray:
+    """8-bit codes of a data texture (metallicRoughness, normal map) to float32:
+    code * float32(1/255), one rounding, as texture.cl's texel does."""
+    return np.asarray(pixels, f32) * f32(1.0 / 255.0)
+
+
+def sample_texture(texture, uv: np.ndarray, linear: bool = False) -> np.ndarray:
+    """(N, 3) float32 linear values of ``texture`` (a clrt Texture) at (N, 2)
+    float32 coordinates: bilinear over sRGB-decoded texels (``linear``: over
+    linear codes, as data textures are read), texel centres at half-integers,
+    (0, 0) the bottom-left corner, each axis wrapped by its mode."""
     h, w = texture.pixels.shape[:2]
     limit = f32(TEXEL_LIMIT)
     uv = np.asarray(uv, f32)
@@ -94,7 +101,8 @@ def sample_texture(texture, uv: np.ndarray) -> np.ndarray:
     ys = [_wrap(y0 + k, h, texture.wrap_t) for k in (0, 1)]
     # Decode only the four texels read per point: decoding works texel by texel,
     # so this equals decoding the whole image, without doing that on every call.
-    (a, b), (c, d) = [[decode_srgb8(texture.pixels[y, x]) for x in xs] for y in ys]
+    decode = decode_linear8 if linear else decode_srgb8
+    (a, b), (c, d) = [[decode(texture.pixels[y, x]) for x in xs] for y in ys]
     top = a + fx * (b - a)
     bottom = c + fx * (d - c)
     return top + fy * (bottom - top)

@@ -73,12 +73,16 @@ def _glb_json(path, edit):
 
 def test_texture_sampling_on_the_device_is_the_reference_bit_for_bit(device):
     """texture.cl's sample_texture against reference.sample_texture at many
-    coordinates, inside, outside and far outside 0..1, for every wrap mode."""
+    coordinates, inside, outside and far outside 0..1, for every wrap mode,
+    each image read as sRGB colour and as linear data (two rows, one copy of
+    the texels)."""
     textures = [Texture(IMAGE, s, t) for s in config.TEXTURE_WRAPS for t in config.TEXTURE_WRAPS]
     scene = Scene([SceneObject(Mesh.from_arrays([[0, 0, 0], [1, 0, 0], [0, 1, 0]], [[0, 1, 2]])
-                               .with_detail(uv=np.zeros((1, 3, 2))), Material(texture=t)) for t in textures],
-                  [Light((0, 0, 1))])
-    detail = flatten_scene(scene).detail
+                               .with_detail(uv=np.zeros((1, 3, 2))), Material(texture=t, normal_texture=t))
+                   for t in textures], [Light((0, 0, 1))])
+    detail = flatten_scene(scene, pbr_textures=True).detail
+    assert list(detail.textures["linear"]) == [0, 1] * len(textures)
+    assert len(detail.texels) == len(textures) * IMAGE.shape[0] * IMAGE.shape[1]
     uv = np.concatenate([RNG.uniform(-3, 4, (4000, 2)), RNG.uniform(-1e9, 1e9, (50, 2)),
                          [[np.inf, -np.inf], [np.nan, 0.5], [0, 0], [1, 1], [0.5 / 8, 1 - 0.5 / 6]]]).astype(np.float32)
     context, queue = create_context(device)
@@ -97,16 +101,20 @@ def test_texture_sampling_on_the_device_is_the_reference_bit_for_bit(device):
     out = np.empty((len(uv), 4), np.float32)
     out_buf = cl.Buffer(context, mf.WRITE_ONLY, out.nbytes)
     probe = cl.Kernel(program, "probe")
-    for index, texture in enumerate(textures):
+    for index in range(2 * len(textures)):
+        texture, linear = textures[index // 2], index % 2 == 1
         probe(queue, (len(uv),), None, bufs[0], out_buf, np.int32(index), *bufs[1:])
         cl.enqueue_copy(queue, out, out_buf)
-        expected = sample_texture(texture, uv)
-        assert np.array_equal(out[:, :3], expected), (texture, np.abs(out[:, :3] - expected).max())
+        expected = sample_texture(texture, uv, linear)
+        assert np.array_equal(out[:, :3], expected), (texture, linear, np.abs(out[:, :3] - expected).max())
     # Texel centres give the texel's own colour, decoded from sRGB.
     centre = sample_texture(textures[0], np.array([[0.5 / 8, 1 - 0.5 / 6]], np.float32))
     c = IMAGE[0, 0] / 255
     np.testing.assert_allclose(centre[0], np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4),
                                atol=1e-6)   # the float32 centre is 2e-7 texels off
+    # ... and read as data, the code / 255.
+    centre = sample_texture(textures[0], np.array([[0.5 / 8, 1 - 0.5 / 6]], np.float32), linear=True)
+    np.testing.assert_allclose(centre[0], c, atol=1e-6)
 
 
 # ---------------------------------------------------------------------------- files

@@ -40,12 +40,14 @@ def test_the_kernels_see_the_table(device):
     program.probe(queue, (1,), None, buf)
     cl.enqueue_copy(queue, out, buf)
     expected = {"MAX_BOUNCES": config.MAX_BOUNCES, "MATERIAL_SMOOTH": config.MATERIAL_SMOOTH,
+                "MATERIAL_DOUBLE_SIDED": config.MATERIAL_DOUBLE_SIDED,
                 "MAX_PARTS": config.MAX_PARTS, **{f"CULL_{k.upper()}": v for k, v in config.CULL_MODES.items()},
                 **{f"BAD_{k.upper()}": i for i, k in enumerate(config.RAY_CHECKS)},
                 **{f"WRAP_{k.upper()}": v for k, v in config.TEXTURE_WRAPS.items()},
                 "TEXEL_LIMIT": config.TEXEL_LIMIT, "RESULT_SLOTS": config.RESULT_SLOTS,
                 "INSTANCE_MIRROR": config.INSTANCE_MIRROR,
-                "NO_RESULT": -1}   # (int) of the all-ones ulong
+                "NO_RESULT": -1,   # (int) of the all-ones ulong
+                "POINT_CELL_BITS": config.POINT_CELL_BITS, "POINT_OFFSETS_GROUP": config.POINT_OFFSETS_GROUP}
     assert dict(zip(names, out.tolist())) == expected
 
 

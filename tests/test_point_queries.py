@@ -278,3 +278,39 @@ def test_a_refitted_accel_answers_as_brute_force_on_the_moved_mesh(device):
     want = clrt.Accel((mesh.vertices * 1.3, mesh.faces), accel="none", device=device).closest_points(points)
     for field in POINT_FIELDS:
         np.testing.assert_array_equal(getattr(got, field), getattr(want, field), err_msg=field)
+
+
+def test_points_are_visited_in_cell_order_each_once(device):
+    """point_order.cl: the launch's order is a permutation of its points, cells
+    in Morton order (points outside the box and NaN clamp to border cells), and
+    answers do not depend on it: a shuffled batch gives the shuffled answers."""
+    import pyopencl as cl
+    from clrt.config import POINT_CELL_BITS, POINT_CELLS
+    from clrt.query.rays import PointBatch
+
+    mesh = primitives.icosphere(2)
+    rng = np.random.default_rng(11)
+    points = np.concatenate([rng.normal(0, 0.7, (3000, 3)), rng.uniform(-3, 3, (500, 3)),
+                             np.repeat(rng.uniform(-1, 1, (3, 3)), 400, axis=0)]).astype(np.float32)
+    accel = clrt.Accel(mesh, device=device)
+    batch = PointBatch(points, np.inf)
+    accel._begin(batch)
+    rays, launch = accel._ray_args(batch, 0, len(points), 0)
+    order = accel._point_order(rays[0], launch)
+    raw = np.empty(POINT_CELLS + 2 * len(points), np.uint32)
+    cl.enqueue_copy(accel.queue, raw, order)
+    cells, visit = raw[POINT_CELLS:POINT_CELLS + len(points)], raw[POINT_CELLS + len(points):]
+    np.testing.assert_array_equal(np.sort(visit), np.arange(len(points)))
+    assert (np.diff(cells[visit].astype(np.int64)) >= 0).all()   # cell by cell, in Morton order
+    lo, hi = launch["scene_lo"][:3], launch["scene_hi"][:3]
+    scaled = (points - launch["shift"][:3].astype(np.float64) - lo) / (hi - lo) * (1 << POINT_CELL_BITS)
+    q = np.clip(np.floor(scaled).astype(np.int64), 0, (1 << POINT_CELL_BITS) - 1)
+    morton = sum(((q[:, axis] >> b) & 1) << (3 * b + axis) for axis in range(3) for b in range(POINT_CELL_BITS))
+    clear = (np.abs(scaled - np.round(scaled)) > 1e-3).all(axis=1)   # not on a cell border, where rounding decides
+    assert clear.mean() > 0.9
+    np.testing.assert_array_equal(cells[clear], morton[clear])
+    whole = accel.closest_points(points)
+    shuffle = rng.permutation(len(points))
+    shuffled = accel.closest_points(points[shuffle])
+    for field in POINT_FIELDS:
+        np.testing.assert_array_equal(getattr(shuffled, field), getattr(whole, field)[shuffle])

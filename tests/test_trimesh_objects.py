@@ -16,7 +16,7 @@ from PIL import Image
 
 from clrt.errors import MeshLoadError
 from clrt.renderer import Renderer
-from clrt.scene.formats.gltf import whitted_from_pbr
+from clrt.scene.formats.gltf import pbr_from_gltf, whitted_from_pbr
 from clrt.scene.formats.trimesh_objects import asset_of
 from clrt.scene.load import load_asset, load_mesh
 from clrt.scene.scene import Camera, scene_from_mesh
@@ -170,7 +170,7 @@ def test_two_node_gltf_scene_joined_by_trimesh(tmp_path, device):
 ])
 def test_pbr_material_is_mapped_as_the_gltf_reader_maps_it(tmp_path, values):
     """trimesh's PBRMaterial (None: glTF's default) against the glTF reader's
-    fields for the file trimesh writes of it, and against whitted_from_pbr."""
+    fields for the file trimesh writes of it, and against whitted_from_pbr and pbr_from_gltf."""
     cube = _cube(PBR(baseColorTexture=Image.fromarray(IMAGE), **values))
     cube.export(tmp_path / "m.glb")
     _, (by_path,) = load_asset(tmp_path / "m.glb")
@@ -180,7 +180,7 @@ def test_pbr_material_is_mapped_as_the_gltf_reader_maps_it(tmp_path, values):
         assert np.array_equal(fields["texture"].pixels, by_path["texture"].pixels)
         assert (fields["texture"].wrap_s, fields["texture"].wrap_t) == ("repeat", "repeat")
     pbr = {k: (np.asarray(v) / 255).tolist() if k == "baseColorFactor" else v for k, v in values.items()}
-    assert _without_texture(fields) == whitted_from_pbr(pbr)
+    assert _without_texture(fields) == {**whitted_from_pbr(pbr), **pbr_from_gltf({"pbrMetallicRoughness": pbr}, "")}
 
 
 @pytest.mark.parametrize("mtl", [

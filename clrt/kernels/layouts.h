@@ -1,8 +1,8 @@
 // Structs shared with the host.  The byte layout of each is documented once,
 // in clrt/layouts.py next to its numpy dtype; tests/test_layouts.py checks that
 // both sides agree on every offset.  Limits and flag values (MAX_BOUNCES,
-// MATERIAL_SMOOTH, CULL_*) come from clrt/config.py as -D defines of every
-// program build, never from a #define here.
+// MATERIAL_SMOOTH, MATERIAL_DOUBLE_SIDED, CULL_*) come from clrt/config.py as
+// -D defines of every program build, never from a #define here.
 #ifndef CLRT_LAYOUTS_H
 #define CLRT_LAYOUTS_H
 
@@ -30,13 +30,24 @@ typedef struct {
     int material;
 } TriangleInfo;
 
+// Bytes 0..47: the paper's Whitted model (all the Whitted kernels read);
+// 48..111: the path tracer's metallic-roughness model.  Texture rows: -1 none.
 typedef struct {
-    float4 color;         // w: as_int, row of the Texture table, -1 for none
+    float4 color;         // linear base colour; w: as_int, row of its Texture (sRGB)
     float ambient, diffuse, specular, shininess;
-    uint flags;
+    uint flags;           // MATERIAL_SMOOTH, MATERIAL_DOUBLE_SIDED
     float reflectivity;   // weight of the mirror ray
     float transparency;   // weight of the refracted ray
     float ior;            // index of refraction
+    float4 emission;      // xyz: linear emitted radiance; w: as_int, row of its Texture (sRGB)
+    float metallic;       // 0..1
+    float roughness;      // perceptual, 0..1 (GGX alpha = roughness^2)
+    float specular_weight;   // KHR_materials_specular factor (0: pure Lambert)
+    float transmission;   // KHR_materials_transmission factor (dielectric of ior)
+    float4 specular_color;   // xyz: KHR specular colour; w: as_int, row of the metallicRoughness Texture (linear)
+    int normal_texture;   // row of the tangent-space normal map Texture (linear)
+    float normal_scale;   // glTF normalTexture.scale
+    uint pad[2];
 } Material;
 
 // Only in -DSURFACE_DETAIL builds (textures or colours in the scene).
@@ -49,6 +60,7 @@ typedef struct {
     uint first;           // texel of the top-left pixel
     int width, height;
     uint wrap_s, wrap_t;  // WRAP_REPEAT, WRAP_CLAMP, WRAP_MIRROR
+    uint linear;          // 0: sRGB colours; 1: linear data (metallicRoughness, normal maps)
 } Texture;
 
 typedef struct {

@@ -175,6 +175,17 @@ inline bool load_ray(const RayInput* in, uint i, float3* origin, float3* dir, fl
 // distance from `tmaxs`.  False (and the point reported in `bad`, as an
 // origin) when it is not finite; no reach check: a point's distance takes no
 // float32 triangle test that could overflow.
+// Point queries read the origins (the points) and tmaxs (their largest
+// distances) of the ray input, and the points' order (point_order.cl).
+#define POINT_INPUT_PARAMS __global const float* origins, __global const float* tmaxs, __global int* bad, \
+    const QueryLaunch launch, __global const uint* order
+#define POINT_INPUT_ARGS origins, tmaxs, bad, launch, order
+
+inline RayInput make_point_input(POINT_INPUT_PARAMS)
+{
+    return make_ray_input(origins, 0, 0, tmaxs, bad, launch);
+}
+
 inline bool load_point(const RayInput* in, uint i, float3* point, float* max_dist)
 {
     const size_t k = (size_t)in->in_first + i;

@@ -2,9 +2,11 @@
 // in -DSURFACE_DETAIL builds (the host defines it for scenes with textures or
 // colours), so plain scenes compile none of this.
 //
-// Sampling is bilinear on linear values: the 8-bit sRGB texels are decoded
-// through a 256-entry table (exact float32 constants from the host), then the
-// four texels around the point are blended.  Texel centres sit at half-integer
+// Sampling is bilinear on linear values: the 8-bit texels of a colour texture
+// (base colour, emission) are sRGB, decoded through a 256-entry table (exact
+// float32 constants from the host); those of a data texture (the row's
+// `linear`: metallicRoughness, normal maps) are linear, code * (1/255).  Then
+// the four texels around the point are blended.  Texel centres sit at half-integer
 // coordinates; (u, v) = (0, 0) is the image's bottom-left corner.  Out-of-range
 // coordinates wrap per axis (WRAP_REPEAT, WRAP_CLAMP, WRAP_MIRROR: glTF's
 // sampler modes).  clrt/reference.py samples the same way in numpy float32; the
@@ -56,6 +58,8 @@ inline int wrap_texel(int i, int n, uint mode)
 inline float3 texel(const TextureSet* ts, __global const Texture* tex, int x, int y)
 {
     const uchar4 c = *SPLIT_AT(ts, texels, tex->first + (uint)y * (uint)tex->width + (uint)x);
+    if (tex->linear)   // one correctly rounded product: the same on every device and in numpy
+        return convert_float3(c.xyz) * (1.0f / 255.0f);
     return (float3)(ts->srgb[c.x], ts->srgb[c.y], ts->srgb[c.z]);
 }
 
@@ -68,7 +72,7 @@ inline int texel_floor(float x, float* frac)
     return (int)f;
 }
 
-// Linear RGB of texture `index` at (u, v), bilinearly filtered.
+// Linear values of texture row `index` at (u, v), bilinearly filtered.
 inline float3 sample_texture(const TextureSet* ts, int index, float2 uv)
 {
     #pragma OPENCL FP_CONTRACT OFF

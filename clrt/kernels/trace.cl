@@ -18,6 +18,7 @@
 #include "rays.cl"
 #include "accel_packet.cl"
 #include "point.cl"
+#include "point_order.cl"
 #include "instances.cl"
 
 // A sink that stores nothing: the query's options only.
@@ -261,13 +262,14 @@ __kernel void query_all(RAY_INPUT_PARAMS, __global uchar* results, GEOMETRY_PARA
 // to the caller's frame here (+ shift, in double where the device has it,
 // rounded to float32 once).  A miss (or a bad point): point NaN, distance
 // INFINITY, prim -1, u = v = 0.
-__kernel void query_closest_point(RAY_INPUT_PARAMS, __global uchar* results, GEOMETRY_PARAMS)
+__kernel void query_closest_point(POINT_INPUT_PARAMS, __global uchar* results, GEOMETRY_PARAMS)
 {
-    const uint i = get_global_id(0);
-    if (i >= launch.num_rays)
+    const uint j = get_global_id(0);
+    if (j >= launch.num_rays)
         return;
+    const uint i = POINT_ORDER(order, launch.num_rays)[j];   // work-item j answers point i (point_order.cl)
     const Geometry g = make_geometry(GEOMETRY_ARGS);
-    const RayInput in = make_ray_input(RAY_INPUT_ARGS);
+    const RayInput in = make_point_input(POINT_INPUT_ARGS);
     float3 p;
     float max_dist;
     PointHit best;

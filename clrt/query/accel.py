@@ -50,7 +50,7 @@ from clrt.device.sharing import one_at_a_time
 from clrt.errors import InputError
 from clrt.config import NO_RESULT, RAY_CHECKS
 from clrt.layouts import QUERY_LAUNCH
-from clrt.query.kernels import QUERY_KERNELS
+from clrt.query.kernels import QUERY_GROUP, QUERY_KERNELS
 from clrt.query.points import PointQueries
 from clrt.query.instances import query_scene, source_of
 from clrt.query.rays import CameraRays, PinholeRays, PointBatch, RayBatch, cull_code, is_device_array
@@ -85,18 +85,7 @@ RAY_STAGING = {"gpu": True, "cpu": False}
 # size (1M rays numpy -> Hits: 7.4 ms in four chunks, 3.8 in one;
 # docs/benchmark-log.md, session 6): each transfer of pageable memory costs the
 # host more than the device time it could hide.
-# Work-items per work-group of the query kernels; None lets the driver choose.
-# Measured on the H200 (benchmarks.raysets --group, docs/benchmark-log.md): 128
-# takes 5-7 % off incoherent sets (random, diffuse, AO) against the driver's
-# choice, and 1-2 % off camera rays; 64 is as good on incoherent rays but
-# slower on camera rays.  On a CPU device (PoCL) the driver's choice, 8, 64 and
-# 512 measured within the noise of each other, but PoCL compiles and keeps a
-# variant of the kernel for every work-group size it runs, and its own choice
-# follows the batch size (1000 rays: 1000; 4099: 1; 2^20: 4096): a program
-# sending batches of many sizes grew by tens of kB a new size, to hundreds of
-# MB.  A fixed size keeps one variant.  The kernels skip the work-items past
-# the last ray.
-QUERY_GROUP: dict = {"gpu": 128, "cpu": 64}
+# (Work-items per work-group of the query kernels: QUERY_GROUP, clrt/query/kernels.py.)
 # camera_rays (the directions of a clrt.Camera's pixels): the driver's choice
 # on a GPU, the fixed size of QUERY_GROUP on a CPU device.
 CAMERA_RAYS_GROUP: dict = {"gpu": None, "cpu": 64}

@@ -14,17 +14,37 @@ import numpy as np
 from clrt.device.signature import GEOMETRY, buffer, value
 from clrt.layouts import CAMERA, QUERY_LAUNCH
 
+# Work-items per work-group of the query kernels; None lets the driver choose.
+# Measured on the H200 (benchmarks.raysets --group, docs/benchmark-log.md): 128
+# takes 5-7 % off incoherent sets (random, diffuse, AO) against the driver's
+# choice, and 1-2 % off camera rays; 64 is as good on incoherent rays but
+# slower on camera rays.  On a CPU device (PoCL) the driver's choice, 8, 64 and
+# 512 measured within the noise of each other, but PoCL compiles and keeps a
+# variant of the kernel for every work-group size it runs, and its own choice
+# follows the batch size (1000 rays: 1000; 4099: 1; 2^20: 4096): a program
+# sending batches of many sizes grew by tens of kB a new size, to hundreds of
+# MB.  A fixed size keeps one variant.  The kernels skip the work-items past
+# the last ray.
+QUERY_GROUP: dict = {"gpu": 128, "cpu": 64}
+
 #: RAY_INPUT_PARAMS (rays.cl).
 RAY_INPUT = (buffer("origins"), buffer("dirs"), buffer("tmins"), buffer("tmaxs"), buffer("bad"),
              value("launch", QUERY_LAUNCH))
+
+#: POINT_INPUT_PARAMS (rays.cl).
+POINT_INPUT = (buffer("origins"), buffer("tmaxs"), buffer("bad"), value("launch", QUERY_LAUNCH), buffer("order"))
 
 QUERY_KERNELS = {
     "query_closest": (*RAY_INPUT, buffer("results"), *GEOMETRY),
     "query_any": (*RAY_INPUT, buffer("results"), *GEOMETRY),
     "query_count": (*RAY_INPUT, buffer("results"), *GEOMETRY),
     "query_all": (*RAY_INPUT, buffer("results"), *GEOMETRY),
-    # point queries (point.cl): points in `origins`, their largest distance in `tmaxs`
-    "query_closest_point": (*RAY_INPUT, buffer("results"), *GEOMETRY),
+    # point queries (point.cl): points in `origins`, their largest distance in `tmaxs`, visited in the
+    # order that point_order.cl's three kernels leave in `order`
+    "query_closest_point": (*POINT_INPUT, buffer("results"), *GEOMETRY),
+    "point_cells": (buffer("origins"), value("launch", QUERY_LAUNCH), buffer("order")),
+    "point_offsets": (buffer("order"),),
+    "point_scatter": (value("launch", QUERY_LAUNCH), buffer("order")),
     "camera_rays": (buffer("dirs"), value("cam", CAMERA), value("first", np.uint64), value("count", np.uint32)),
     # one-launch kernels of the primary-ray benchmark (Accel.launch_camera)
     "trace_camera": (buffer("hits"), value("cam", CAMERA), *GEOMETRY),

@@ -11,8 +11,12 @@ buffers and launches.
 from __future__ import annotations
 
 import numpy as np
+import pyopencl as cl
 
+from clrt.config import POINT_CELLS, POINT_OFFSETS_GROUP
+from clrt.device.program import launch_size
 from clrt.device.sharing import one_at_a_time
+from clrt.query.kernels import QUERY_GROUP
 from clrt.query.rays import PointBatch
 from clrt.query.results import POINT_FIELDS, ClosestPoints, asked_fields, with_fields
 
@@ -28,6 +32,25 @@ class PointQueries:
                     for name in fields}
         return {name: np.empty(shapes[name], POINT_FIELDS[name].dtype) for name in fields}
 
+    def _launch(self, name: str, args: tuple, items: int, group: int | None = None) -> None:
+        """Kernel ``name`` (QUERY_KERNELS) with ``args`` over ``items`` work-items,
+        its event kept for kernel_ms."""
+        kernel = self.kernels[name]
+        kernel.set_args(*args)
+        self.launches.append(cl.enqueue_nd_range_kernel(
+            self.queue, kernel, *launch_size(items, group or QUERY_GROUP[self._kind])))
+
+    def _point_order(self, origins: cl.Buffer, launch: np.ndarray) -> cl.Buffer:
+        """The `order` buffer of a launch of point queries (point_order.cl): its
+        points sorted by cell of a grid over the scene, by three launches."""
+        m = int(launch["num_rays"])
+        order = self._buffer("order", 4 * (POINT_CELLS + 2 * m))
+        cl.enqueue_fill_buffer(self.queue, order, np.uint32(0), 0, 4 * POINT_CELLS)
+        self._launch("point_cells", (origins, launch, order), m)
+        self._launch("point_offsets", (order,), POINT_OFFSETS_GROUP, POINT_OFFSETS_GROUP)
+        self._launch("point_scatter", (launch, order), m)
+        return order
+
     @one_at_a_time
     def _closest_points(self, batch: PointBatch, fields) -> ClosestPoints:
         fields = asked_fields(fields, POINT_FIELDS, "point")
@@ -38,13 +61,16 @@ class PointQueries:
         for start, stop in self._chunks(n):
             m = stop - start
             rays, launch = self._ray_args(batch, start, stop, 0)
+            origins, _, _, tmaxs, bad = rays
+            order = self._point_order(origins, launch)
             placed, nbytes = {}, 0
             for name in fields:   # every field is 4-byte aligned: float32 and int32 values
                 placed[name] = nbytes
                 launch["field_at"][slots.index(name)] = nbytes
                 nbytes += m * 4 * int(np.prod(POINT_FIELDS[name].item_shape, dtype=int))
             results = self._buffer("results", nbytes)
-            self._run("query_closest_point", rays, launch, results)
+            self._launch("query_closest_point", (origins, tmaxs, bad, launch, order, results,
+                                                 *self.geometry.buffer_args, self._scene_value), m)
             for name, at in placed.items():
                 self._copy_out(out[name], start, stop, results, at)
         self._check(batch)   # also waits for the copies

@@ -14,12 +14,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from clrt.config import MATERIAL_SMOOTH
-from clrt.config import TEXTURE_WRAPS
+from clrt.config import MATERIAL_DOUBLE_SIDED, MATERIAL_SMOOTH, TEXTURE_WRAPS
 from clrt.errors import TooLargeError
 from clrt.layouts import LIGHT, MATERIAL, TEXEL, TEXTURE, TRIANGLE_DETAIL, TRIANGLE_INFO, TRIANGLE_VERTS
 from clrt.scene.mesh import Mesh
-from clrt.scene.scene import Scene
+from clrt.scene.scene import MATERIAL_TEXTURES, Scene
 from clrt.scene.texture import srgb_decode
 
 
@@ -138,9 +137,15 @@ def triangle_verts(corners: np.ndarray) -> np.ndarray:
     return records
 
 
-def flatten_scene(scene: Scene) -> SceneArrays:
+def flatten_scene(scene: Scene, pbr_textures: bool = False) -> SceneArrays:
     """One triangle list for all objects, each triangle tagged with its material:
-    each object's ``material`` then its ``materials``, object after object."""
+    each object's ``material`` then its ``materials``, object after object.
+
+    ``pbr_textures``: upload the path tracer's textures too (emission,
+    metallic-roughness, normal maps); without it only base colour textures
+    get rows (the others' rows are -1), as the Whitted renderer reads no
+    other -- a scene whose only textures are those then builds the plain
+    program, and renders bit for bit as it did before they were read."""
     meshes = [o.mesh for o in scene.objects]
     mesh = Mesh.concatenate(meshes)
     object_materials = [(o.material, *o.materials) for o in scene.objects]
@@ -159,50 +164,89 @@ def flatten_scene(scene: Scene) -> SceneArrays:
         normals[start:start + len(m.vertices), :3] = m.vertex_normals()
         start += len(m.vertices)
 
-    # A texture colours only meshes with texture coordinates.
-    textures = {}   # id(Texture) -> (row, Texture), in order of first use
+    # A texture applies only to meshes with texture coordinates.  Each Texture
+    # gets one row per decoding (sRGB colour or linear data), however many
+    # materials and fields share it, and its texels are uploaded once.
+    textures = {}   # (id(Texture), linear) -> (row, Texture, linear), in order of first use
     flat_materials = []
     for o, mats in zip(scene.objects, object_materials):
         for mat in mats:
-            tex = mat.texture if o.mesh.uv is not None else None
-            if tex is not None:
-                textures.setdefault(id(tex), (len(textures), tex))
-            flat_materials.append((mat, textures[id(tex)][0] if tex is not None else -1))
-    materials = np.zeros(len(flat_materials), MATERIAL)
-    for i, (mat, texture) in enumerate(flat_materials):
-        materials[i]["color"][:3] = mat.color
-        materials[i]["color"][3:] = np.int32(texture).view(np.float32)
-        for name in ("ambient", "diffuse", "specular", "shininess", "reflectivity", "transparency", "ior"):
-            materials[i][name] = getattr(mat, name)
-        materials[i]["flags"] = MATERIAL_SMOOTH if mat.smooth else 0
+            rows = {}
+            for name, linear in MATERIAL_TEXTURES.items():
+                used = o.mesh.uv is not None and (pbr_textures or name == "texture")
+                tex = getattr(mat, name) if used else None
+                if tex is not None:
+                    rows[name] = textures.setdefault((id(tex), linear), (len(textures), tex, linear))[0]
+                else:
+                    rows[name] = -1
+            flat_materials.append((mat, rows))
+    materials = material_rows(flat_materials)
 
     detail = None
     if textures or mesh.colors is not None:
-        detail = surface_detail(mesh, [tex for _, tex in textures.values()])
+        detail = surface_detail(mesh, [(tex, linear) for _, tex, linear in textures.values()])
     bounds = scene.bounds
     origin = device_origin(bounds)
     return SceneArrays(triangle_corners(mesh, origin), tri_info, normals, materials,
                        light_records(scene.lights, origin), bounds, detail, origin)
 
 
+def material_rows(flat_materials: list) -> np.ndarray:
+    """(M,) MATERIAL rows of ``(Material, {texture field: Texture row or -1})``
+    pairs: the Phong fields as they are, the path tracer's from
+    :meth:`Material.pbr_values` (given, or mapped from Phong)."""
+    materials = np.zeros(len(flat_materials), MATERIAL)
+    for i, (mat, _) in enumerate(flat_materials):
+        row = materials[i]
+        row["color"][:3] = mat.color
+        for name in ("ambient", "diffuse", "specular", "shininess", "reflectivity", "transparency", "ior"):
+            row[name] = getattr(mat, name)
+        row["flags"] = (MATERIAL_SMOOTH if mat.smooth else 0) | (MATERIAL_DOUBLE_SIDED if mat.double_sided else 0)
+        row["emission"][:3] = mat.emission
+        pbr = mat.pbr_values()
+        for name in ("metallic", "roughness", "specular_weight", "transmission"):
+            row[name] = getattr(pbr, name)
+        row["specular_color"][:3] = mat.specular_color
+        row["normal_scale"] = mat.normal_scale
+    # Texture rows: int32 bits in the w lanes (as_int in the kernels), written as
+    # integers so that no float conversion touches the bits of -1 (a NaN).
+    rows = {name: np.array([r[name] for _, r in flat_materials], np.int32).reshape(-1)
+            for name in MATERIAL_TEXTURES}
+    for name, (field, lane) in _TEXTURE_LANES.items():
+        materials[field].view(np.int32).reshape(len(materials), -1)[:, lane] = rows[name]
+    materials["normal_texture"] = rows["normal_texture"]
+    return materials
+
+
+# Where each texture row of a Material lives in a MATERIAL row: (field, lane).
+_TEXTURE_LANES = {"texture": ("color", 3), "emission_texture": ("emission", 3),
+                  "metallic_roughness_texture": ("specular_color", 3)}
+
+
 def surface_detail(mesh: Mesh, textures: list) -> SurfaceDetail:
     """Corner colours and texture coordinates of the concatenated ``mesh``, and
-    ``textures`` packed into one texel buffer (rows 0.. of the texture table)."""
+    the texture table of ``textures`` ((Texture, linear) pairs: rows 0.. in
+    order), each Texture's texels once in one texel buffer."""
     tri_detail = np.zeros(len(mesh.faces), TRIANGLE_DETAIL)
     tri_detail["corner"][:, :, :3] = 1.0 if mesh.colors is None else mesh.colors
     if mesh.uv is not None:
         tri_detail["corner"][:, :, 3] = mesh.uv[:, :, 0]
         tri_detail["v"][:, :3] = mesh.uv[:, :, 1]
-    table = np.zeros(max(len(textures), 1), TEXTURE)
-    sizes = [t.pixels.shape[0] * t.pixels.shape[1] for t in textures]
+    images = list({id(tex): tex for tex, _ in textures}.values())   # each once, in order of first use
+    sizes = [t.pixels.shape[0] * t.pixels.shape[1] for t in images]
     starts = np.cumsum([0] + sizes)
     if starts[-1] > np.iinfo(np.uint32).max:
         raise TooLargeError(f"the scene's textures hold {starts[-1]:,} texels, more than 2**32")
     texels = np.zeros((max(int(starts[-1]), 1),) + TEXEL.shape, TEXEL.base)
-    for row, (tex, start) in enumerate(zip(textures, starts)):
+    first = {}
+    for tex, start in zip(images, starts):
         h, w = tex.pixels.shape[:2]
-        table[row] = (start, w, h, TEXTURE_WRAPS[tex.wrap_s], TEXTURE_WRAPS[tex.wrap_t])
         texels[start:start + w * h, :3] = tex.pixels.reshape(-1, 3)
+        first[id(tex)] = start
+    table = np.zeros(max(len(textures), 1), TEXTURE)
+    for row, (tex, linear) in enumerate(textures):
+        h, w = tex.pixels.shape[:2]
+        table[row] = (first[id(tex)], w, h, TEXTURE_WRAPS[tex.wrap_s], TEXTURE_WRAPS[tex.wrap_t], int(linear))
     return SurfaceDetail(tri_detail, table, texels, srgb_table())
 
 

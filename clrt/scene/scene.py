@@ -14,19 +14,76 @@ from clrt.scene.texture import Texture
 
 
 
+#: The textures a Material may hold, each read by its own decoding (True:
+#: linear): base colour and emission are sRGB colours, metallicRoughness and
+#: normal maps linear data (glTF 2.0 says which is which).
+MATERIAL_TEXTURES = {"texture": False, "emission_texture": False, "metallic_roughness_texture": True,
+                     "normal_texture": True}
+
+
+@dataclass(frozen=True)
+class PbrValues:
+    """The path tracer's scalars of a material: its own, or mapped from Phong
+    (:meth:`Material.pbr_values`)."""
+
+    metallic: float
+    roughness: float
+    specular_weight: float
+    transmission: float
+
+
 @dataclass(frozen=True)
 class Material:
-    """Phong material with Whitted optics.
+    """Phong material with Whitted optics, and the metallic-roughness model
+    (glTF 2.0 appendix B) of the path tracer.
 
-    ``color`` is linear RGB in [0, 1]; ``smooth`` interpolates vertex normals,
-    blending them over edges where faces meet at up to ``crease`` degrees (box
-    edges stay sharp, curved surfaces look round; 180 blends over every edge).
-    ``reflectivity`` (0..1) is the weight of the mirror reflection;
-    ``transparency`` (0..1) the weight of the refracted ray, with index of
-    refraction ``ior`` (Fresnel-weighted, total internal reflection included).
-    ``texture`` (a :class:`~clrt.scene.texture.Texture`, or None) multiplies
-    ``color`` where the mesh has texture coordinates (``Mesh.uv``), as a
-    file's base-colour texture does.
+    Whitted: ``color`` is linear RGB in [0, 1]; ``smooth`` interpolates vertex
+    normals, blending them over edges where faces meet at up to ``crease``
+    degrees (box edges stay sharp, curved surfaces look round; 180 blends over
+    every edge).  ``reflectivity`` (0..1) is the weight of the mirror
+    reflection; ``transparency`` (0..1) the weight of the refracted ray, with
+    index of refraction ``ior`` (Fresnel-weighted, total internal reflection
+    included).  ``texture`` (a :class:`~clrt.scene.texture.Texture`, or None)
+    multiplies ``color`` where the mesh has texture coordinates (``Mesh.uv``),
+    as a file's base-colour texture does.  The Whitted renderer reads only
+    these fields.
+
+    Path tracer: the base colour is ``color`` x ``texture`` (x the mesh's
+    colours), as above.  ``emission``: linear emitted radiance (RGB >= 0; glTF's
+    emissiveFactor x KHR_materials_emissive_strength), times
+    ``emission_texture`` (sRGB) where there is one; it leaves the front face
+    (counter-clockwise, glTF's) only, both when ``double_sided``.
+    ``metallic`` and ``roughness`` (perceptual, GGX alpha = roughness^2), each
+    0..1, times the G (roughness) and B (metallic) channels of
+    ``metallic_roughness_texture`` (linear); ``specular_weight`` (0..1, 0: pure
+    Lambert) and ``specular_color`` (linear RGB >= 0) as KHR_materials_specular
+    says; ``transmission`` (0..1): the weight of a dielectric of index ``ior``
+    (KHR_materials_transmission), smooth or rough by ``roughness``;
+    ``normal_texture``: a tangent-space normal map (linear), its x and y scaled
+    by ``normal_scale``.
+
+    The paper's materials in the path tracer: ``metallic``, ``roughness``,
+    ``specular_weight`` and ``transmission`` left None (as every Phong
+    material -- the built-in scene, TOML and OBJ/MTL files without PBR keys --
+    leaves them) come from the Phong fields through one mapping,
+    :meth:`pbr_values`: a diffuse + glossy approximation of the Whitted look.
+
+    ====================  ==================================================
+    path tracer           from the Phong fields
+    ====================  ==================================================
+    base colour           ``color`` as it is (``diffuse`` and ``ambient`` are
+                          not applied: the path tracer's light is bounded by
+                          the light arriving, and its indirect light takes
+                          the place of the ambient term)
+    ``metallic``          ``reflectivity`` (Whitted's mirror becomes a metal)
+    ``roughness``         ``(2 shininess + 1) ** -0.25``, the roughness whose
+                          GGX highlight is as wide as the Phong one (the
+                          inverse of the glTF reader's mapping), times ``1 -
+                          max(reflectivity, transparency)``: Whitted's mirror
+                          and refraction are sharp
+    ``specular_weight``   ``min(specular, 1)`` (0: no highlight, pure Lambert)
+    ``transmission``      ``transparency``
+    ====================  ==================================================
     """
 
     color: tuple = config.DEFAULT_COLOR
@@ -40,15 +97,46 @@ class Material:
     ior: float = config.DEFAULT_IOR
     crease: float = config.DEFAULT_CREASE_ANGLE
     texture: Texture | None = None
+    emission: tuple = config.DEFAULT_EMISSION
+    emission_texture: Texture | None = None
+    double_sided: bool = False
+    metallic: float | None = None
+    roughness: float | None = None
+    metallic_roughness_texture: Texture | None = None
+    specular_weight: float | None = None
+    specular_color: tuple = config.DEFAULT_SPECULAR_COLOR
+    transmission: float | None = None
+    normal_texture: Texture | None = None
+    normal_scale: float = 1.0
 
     def __post_init__(self):
         object.__setattr__(self, "color", checks.color("material color", self.color))
-        if self.texture is not None and not isinstance(self.texture, Texture):
-            raise checks.fail("material texture", "a clrt Texture or None", self.texture)
+        object.__setattr__(self, "emission", checks.intensity("material emission", self.emission))
+        object.__setattr__(self, "specular_color", checks.vector("material specular_color", self.specular_color,
+                                                                 ge=0, le=config.MAX_SPECULAR_COLOR))
+        for name in MATERIAL_TEXTURES:
+            value = getattr(self, name)
+            if value is not None and not isinstance(value, Texture):
+                raise checks.fail(f"material {name}", "a clrt Texture or None", value)
         for name in config.MATERIAL_RANGES:
-            object.__setattr__(self, name, checks.material_number(f"material {name}", getattr(self, name), name))
+            value = getattr(self, name)
+            if value is not None or name not in _PBR_MAPPED:
+                object.__setattr__(self, name, checks.material_number(f"material {name}", value, name))
         checks.boolean("material smooth", self.smooth)
+        checks.boolean("material double_sided", self.double_sided)
         object.__setattr__(self, "crease", checks.crease(self.crease, "material crease"))
+
+    def pbr_values(self) -> PbrValues:
+        """The path tracer's metallic, roughness, specular_weight and
+        transmission: each one given, else mapped from the Phong fields as the
+        class docstring's table says."""
+        sharp = 1.0 - max(self.reflectivity, self.transparency)
+        mapped = PbrValues(metallic=self.reflectivity,
+                           roughness=(2.0 * self.shininess + 1.0) ** -0.25 * sharp,
+                           specular_weight=min(self.specular, 1.0),
+                           transmission=self.transparency)
+        return replace(mapped, **{name: getattr(self, name) for name in _PBR_MAPPED
+                                  if getattr(self, name) is not None})
 
     @classmethod
     def of(cls, value) -> "Material":
@@ -68,8 +156,12 @@ class Material:
 
     def with_overrides(self, **overrides) -> "Material":
         """A copy with the fields given replaced (None leaves a field as it is,
-        except ``texture``, which None removes)."""
-        return replace(self, **{k: v for k, v in overrides.items() if v is not None or k == "texture"})
+        except a texture field, which None removes)."""
+        return replace(self, **{k: v for k, v in overrides.items() if v is not None or k in MATERIAL_TEXTURES})
+
+
+#: The path tracer's fields that None leaves to the Phong mapping (Material.pbr_values).
+_PBR_MAPPED = tuple(f.name for f in fields(PbrValues))
 
 
 def unknown_name(what: str, name, known) -> str:

@@ -30,7 +30,9 @@ from clrt.errors import InputError, MeshLoadError
 from clrt.scene import primitives
 from clrt.scene.load import load_asset
 from clrt.scene.mesh import Mesh, vertex_text
-from clrt.scene.scene import Camera, Light, Material, Scene, SceneObject, default_light, unknown_name
+from clrt.scene.scene import (MATERIAL_TEXTURES, Camera, Light, Material, Scene, SceneObject, default_light,
+                              unknown_name)
+from clrt.scene.texture import Texture
 
 __all__ = ["load_scene", "transform_matrix", "OBJECT_TYPES"]
 
@@ -109,6 +111,17 @@ MATERIAL_KEYS = {
     "reflectivity": (material_number("reflectivity"), _MATERIAL_DEFAULTS.reflectivity),
     "transparency": (material_number("transparency"), _MATERIAL_DEFAULTS.transparency),
     "ior": (material_number("ior"), _MATERIAL_DEFAULTS.ior),
+    # the path tracer's (clrt.Material says how each is read); None: from the Phong keys above
+    "emission": (checks.intensity, _MATERIAL_DEFAULTS.emission),
+    "double_sided": (boolean, _MATERIAL_DEFAULTS.double_sided),
+    "metallic": (material_number("metallic"), None),
+    "roughness": (material_number("roughness"), None),
+    "specular_weight": (material_number("specular_weight"), None),
+    "specular_color": (vector(3, ge=0, le=config.MAX_SPECULAR_COLOR), _MATERIAL_DEFAULTS.specular_color),
+    "transmission": (material_number("transmission"), None),
+    "normal_scale": (material_number("normal_scale"), _MATERIAL_DEFAULTS.normal_scale),
+    # image files, relative to the scene file (read by _Loader.texture)
+    **{name: (string, None) for name in MATERIAL_TEXTURES},
 }
 
 # checkerboard's second material when the file gives none: dark tiles.
@@ -280,14 +293,30 @@ class _Loader:
         self.folder = os.path.dirname(os.path.abspath(self.path))
         self.doc = _Doc(self.path)
         self.materials: dict[str, Material] = {}
+        self.textures: dict[str, Texture] = {}   # full path -> Texture: an image several materials name, once
 
     def material(self, value, path: str) -> Material:
         """A material from its fields; the Material's own checks are a backstop."""
         fields = self.doc.table(value, path, MATERIAL_KEYS)
+        for name in MATERIAL_TEXTURES:
+            if fields[name] is not None:
+                fields[name] = self.texture(fields[name], _join(path, name))
         try:
             return Material(**fields)
         except InputError as exc:
             raise self.doc.error(path, exc) from None
+
+    def texture(self, name: str, path: str) -> Texture:
+        """The Texture of an image file named relative to the scene file (wraps repeat)."""
+        full = os.path.normpath(os.path.join(self.folder, os.path.expanduser(name)))
+        if full not in self.textures:
+            if not name.strip() or os.path.isdir(full):
+                raise self.doc.error(path, f"must name an image file, got {_show(name)}")
+            try:
+                self.textures[full] = Texture.read(full)
+            except InputError as exc:
+                raise self.doc.error(path, exc) from None
+        return self.textures[full]
 
     def material_ref(self, value, path: str, default: Material) -> Material:
         """``material = "name"`` or an inline ``material = { ... }`` table."""

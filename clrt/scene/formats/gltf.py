@@ -7,10 +7,12 @@ appears once per node); triangles, strips and fans (points and lines are
 skipped); POSITION, NORMAL, TEXCOORD_n (the base colour texture's set) and
 COLOR_0 (linear); sparse and normalised-integer accessors; buffers and images
 as data URIs, the GLB's binary chunk or regular files in the file's folder;
-materials' base colour (factor and texture, with the sampler's wrap modes),
-metallic/roughness, KHR_materials_transmission and KHR_materials_ior (the
-table in docs/scene-files.md).  Draco- and meshopt-compressed primitives are
-refused.
+materials' metallic-roughness model: base colour, metallicRoughness, normal
+and emissive textures (with their samplers' wrap modes), their factors,
+normalTexture's scale, doubleSided, KHR_materials_emissive_strength,
+KHR_materials_specular (its factors), KHR_materials_transmission and
+KHR_materials_ior -- mapped onto the Whitted model too (the table in
+docs/scene-files.md).  Draco- and meshopt-compressed primitives are refused.
 
 Faces come in a depth-first walk of the scene's nodes in file order (the
 scene's ``nodes`` in order, each node followed by its ``children`` in order,
@@ -35,7 +37,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from clrt.config import DEFAULT_DIFFUSE, MATERIAL_RANGES
+from clrt.config import DEFAULT_DIFFUSE, MATERIAL_RANGES, MAX_COORDINATE, MAX_SPECULAR_COLOR
 from clrt.errors import InputError, MeshLoadError
 from clrt.scene.formats.part import Part, build, fail, fill_normals, first_cycle, placed, read_bytes, short
 from clrt.scene.mesh import Mesh
@@ -269,9 +271,9 @@ class _GltfFile:
         texcoord = 0
         if "material" in prim:
             material = self.item("materials", prim["material"], f"{where}.material")
-            info = (material.get("pbrMetallicRoughness") or {}).get("baseColorTexture")
-            if isinstance(info, dict):
-                texcoord = info.get("texCoord", 0)
+            infos = list(gltf_texture_infos(material).values())   # the base colour's first
+            if infos:
+                texcoord = infos[0].get("texCoord", 0)
             part.face_material = np.full(len(part.faces), prim["material"], dtype=np.int64)
         key = f"TEXCOORD_{texcoord}"
         if key in attributes:
@@ -431,17 +433,84 @@ def whitted_from_pbr(pbr: dict, extensions: dict | None = None) -> dict:
     return fields
 
 
+#: The textures of a glTF material: Material field -> (where the textureInfo
+#: is: in pbrMetallicRoughness or at the material's top level, its key).
+GLTF_TEXTURES = {"texture": ("pbr", "baseColorTexture"),
+                 "metallic_roughness_texture": ("pbr", "metallicRoughnessTexture"),
+                 "normal_texture": ("top", "normalTexture"),
+                 "emission_texture": ("top", "emissiveTexture")}
+
+
+def gltf_texture_infos(material: dict) -> dict:
+    """``{Material field: textureInfo}`` of the textures a glTF material names
+    (GLTF_TEXTURES), the base colour's first.  A primitive's texture
+    coordinates are the set (``texCoord``) of the first: one set per material."""
+    pbr = material.get("pbrMetallicRoughness") or {}
+    infos = {field: (pbr if place == "pbr" else material).get(key) for field, (place, key) in GLTF_TEXTURES.items()}
+    return {field: info for field, info in infos.items() if isinstance(info, dict)}
+
+
+def pbr_from_gltf(material: dict, where: str) -> dict:
+    """The path tracer's Material fields of a glTF material (its JSON object),
+    its textures aside (the table in docs/scene-files.md): metallicFactor,
+    roughnessFactor; emission = emissiveFactor x
+    KHR_materials_emissive_strength's emissiveStrength (linear radiance, as
+    Mitsuba and Blender read it); KHR_materials_specular's specularFactor and
+    specularColorFactor; KHR_materials_transmission's transmissionFactor;
+    doubleSided; normalTexture's scale.  A key left out has glTF's default.
+    InputError ``'<where> <key> must be ..., got ...'`` for a value that is not
+    finite or out of its range (a negative emission, a metallicFactor of 2);
+    ``where`` names the material.  Also how a trimesh PBRMaterial is mapped."""
+    from clrt import checks
+    pbr = material.get("pbrMetallicRoughness") or {}
+    extensions = material.get("extensions") or {}
+
+    def factor(table, key, default, hi=1.0):
+        return checks.number(f"{where} {key}", table.get(key, default), ge=0, le=hi)
+
+    strength_table = extensions.get("KHR_materials_emissive_strength") or {}
+    # (glTF caps emissiveFactor at 1, leaving brighter to the strength; a factor
+    # above 1 is taken as the radiance it says all the same)
+    emissive = checks.intensity(f"{where} emissiveFactor", material.get("emissiveFactor", [0.0, 0.0, 0.0]))
+    strength = factor(strength_table, "emissiveStrength", 1.0, MAX_COORDINATE)
+    specular = extensions.get("KHR_materials_specular") or {}
+    transmission = extensions.get("KHR_materials_transmission") or {}
+    fields = {"metallic": factor(pbr, "metallicFactor", 1.0), "roughness": factor(pbr, "roughnessFactor", 1.0),
+              "emission": checks.intensity(f"{where} emissiveFactor x emissiveStrength",
+                                           [e * strength for e in emissive]),
+              "specular_weight": factor(specular, "specularFactor", 1.0),
+              "specular_color": checks.vector(f"{where} specularColorFactor",
+                                              specular.get("specularColorFactor", [1.0, 1.0, 1.0]),
+                                              ge=0, le=MAX_SPECULAR_COLOR),
+              "transmission": factor(transmission, "transmissionFactor", 0.0),
+              "double_sided": checks.boolean(f"{where} doubleSided", material.get("doubleSided", False))}
+    normal = material.get("normalTexture")
+    if isinstance(normal, dict):
+        lo, hi = MATERIAL_RANGES["normal_scale"]
+        fields["normal_scale"] = checks.number(f"{where} normalTexture.scale", normal.get("scale", 1.0),
+                                               ge=lo, le=hi)
+    return fields
+
+
 def _gltf_materials(gltf: "_GltfFile") -> list:
-    """Material fields of each glTF material: :func:`whitted_from_pbr`, and the
-    base colour texture with its sampler's wrap modes."""
+    """Material fields of each glTF material: :func:`whitted_from_pbr` (the
+    Whitted model), :func:`pbr_from_gltf` (the path tracer's), and the
+    textures (GLTF_TEXTURES) with their samplers' wrap modes, each image and
+    sampler one Texture however many materials use it."""
     doc, path = gltf.doc, gltf.path
     textures, out = {}, []
     for i, m in enumerate(doc.get("materials", [])):
-        pbr = m.get("pbrMetallicRoughness", {})
-        fields = whitted_from_pbr(pbr, m.get("extensions", {}))
-        info = pbr.get("baseColorTexture")
-        if isinstance(info, dict):
-            texture = gltf.item("textures", info.get("index"), f"materials[{i}] baseColorTexture")
+        if not isinstance(m, dict):
+            raise _GltfError(f"materials[{i}] is not an object")
+        name = m.get("name")
+        where = f"materials[{i}]" + (f" {name!r}" if isinstance(name, str) and name else "")
+        try:
+            pbr_fields = pbr_from_gltf(m, where)
+        except InputError as exc:
+            raise fail(path, str(exc)) from None
+        fields = {**whitted_from_pbr(m.get("pbrMetallicRoughness") or {}, m.get("extensions") or {}), **pbr_fields}
+        for field, info in gltf_texture_infos(m).items():
+            texture = gltf.item("textures", info.get("index"), f"{where} {GLTF_TEXTURES[field][1]}")
             sampler = texture.get("sampler")
             sampler = gltf.item("samplers", sampler, "sampler") if sampler is not None else {}
             wraps = tuple(_GLTF_WRAPS.get(sampler.get(k, 10497), "repeat") for k in ("wrapS", "wrapT"))
@@ -454,7 +523,7 @@ def _gltf_materials(gltf: "_GltfFile") -> list:
                 except InputError as exc:
                     raise fail(path, str(exc)) from None
             if textures[key] is not None:
-                fields["texture"] = textures[key]
+                fields[field] = textures[key]
         out.append(fields)
     return out
 

@@ -104,9 +104,9 @@ def _parse_obj(data: bytes, label: str, folder: str | None = None) -> Part:
     libraries = [line.split(None, 1)[1].strip() for line in lines
                  if line.startswith("mtllib ") and len(line.split()) > 1]
     if used and folder is not None:
-        materials = {}
+        materials, textures = {}, {}
         for name in _mtl_libraries(libraries, folder):
-            materials.update(_parse_mtl(os.path.join(folder, name), label))
+            materials.update(_parse_mtl(os.path.join(folder, name), label, textures))
         if materials:
             names = list(materials)
             current, polygon_material = -1, []
@@ -155,12 +155,15 @@ def _obj_absolute(index: np.ndarray, counts: np.ndarray, statements: list, keywo
     return np.where(index > 0, index, np.repeat(np.asarray(base, dtype=np.int64), counts) + index + 1)
 
 
-def _parse_mtl(path: str, label: str) -> dict:
+def _parse_mtl(path: str, label: str, textures: "dict | None" = None) -> dict:
     """``{name: material fields}`` of an MTL file (docs/scene-files.md has the
     table: Kd, Ks, Ns, d/Tr, Ni, illum, map_Kd).  A missing file, as MTL files
     and images often are beside downloaded OBJ files, is left out with a
     :class:`MeshLoadWarning` naming the OBJ (``label``) and the file: {} for the
-    library, no texture for its material."""
+    library, no texture for its material.  ``textures``: the Textures read so
+    far for the OBJ, by image file and wrap mode, so that an image several
+    materials name is read (and uploaded) once."""
+    textures = {} if textures is None else textures
     if not os.path.isfile(path):
         warnings.warn(f"{label}: material library {path} not found: its materials are left out",
                       MeshLoadWarning, stacklevel=2)
@@ -178,32 +181,43 @@ def _parse_mtl(path: str, label: str) -> dict:
         if current is None or not args:
             continue
         try:
-            if key == "map_Kd":
-                # Options ("-clamp on", "-s 1 1 1", ...) come before the file name.
+            if key in _MTL_MAPS:
+                # Options ("-clamp on", "-bm 0.5", "-s 1 1 1", ...) come before the file name.
                 clamp = "-clamp" in args and args[args.index("-clamp") + 1:][:1] == ["on"]
                 wrap = "clamp" if clamp else "repeat"
                 image = os.path.join(folder, args[-1])
                 if os.path.isfile(image):
-                    current["texture"] = texture(image, wrap, wrap, label)
+                    cached = (os.path.realpath(image), wrap)
+                    if cached not in textures:
+                        textures[cached] = texture(image, wrap, wrap, label)
+                    current[_MTL_MAPS[key]] = textures[cached]
+                    if _MTL_MAPS[key] == "norm" and "-bm" in args:
+                        current["bm"] = float(args[args.index("-bm") + 1])
                 else:
                     warnings.warn(f"{label}: {os.path.basename(path)}: material {name!r}: texture {image} "
                                   f"not found: the material is untextured", MeshLoadWarning, stacklevel=2)
-            elif key in ("Kd", "Ks"):
+            elif key in ("Kd", "Ks", "Ke", "Tf"):
                 current[key] = [float(x) for x in (args * 3)[:3]]
-            elif key in ("Ns", "d", "Tr", "Ni", "illum"):
+            elif key in ("Ns", "d", "Tr", "Ni", "illum", "Pr", "Pm"):
                 current[key] = float(args[0])
-        except ValueError:
+        except (ValueError, IndexError):
             raise fail(label, f"{os.path.basename(path)}: malformed {key} line") from None
-    return {name: mtl_material(m, f"{os.path.basename(path)}: material {name!r}", label)
+    return {name: mtl_material(m, f"{os.path.basename(path)}: material {name!r}", label, textures)
             for name, m in materials.items()}
 
+
+# The texture statements read: statement -> the key it is kept under.  A
+# normal map is named by the PBR extension's `norm`, or by a bump statement
+# (Blender writes its normal maps there; a greyscale one is a height map, not used).
+_MTL_MAPS = {"map_Kd": "texture", "map_Ke": "map_Ke", "map_Pr": "map_Pr", "map_Pm": "map_Pm",
+             "map_RMA": "map_RMA", "norm": "norm", "map_Bump": "norm", "map_bump": "norm", "bump": "norm"}
 
 # The MTL statement behind each material field, for messages.
 _MTL_KEYS = {"color": "Kd", "specular": "Ks", "reflectivity": "Ks", "shininess": "Ns", "transparency": "d",
              "ior": "Ni", "texture": "map_Kd"}
 
 
-def mtl_material(m: dict, where: str, label: str) -> dict:
+def mtl_material(m: dict, where: str, label: str, textures: "dict | None" = None) -> dict:
     """:func:`_whitted_from_mtl`, its values checked: a bad one is an error naming
     the mesh file, the MTL file, the material and the statement, with the values
     as the file has them (not as clamped into range).
@@ -219,7 +233,7 @@ def mtl_material(m: dict, where: str, label: str) -> dict:
             shown = checks.show(value)
             rule = f"{len(values)} finite numbers" if isinstance(value, list) else "a finite number"
             raise fail(label, f"{where}: {key} must be {rule}, got {shown}")
-    fields = _whitted_from_mtl(m)
+    fields = {**_whitted_from_mtl(m), **_pbr_from_mtl(m, where, label, {} if textures is None else textures)}
     try:   # the checks clrt.Material makes of these fields (the color is clamped into range already)
         for name in config.MATERIAL_RANGES:
             if name in fields:
@@ -253,3 +267,87 @@ def _whitted_from_mtl(m: dict) -> dict:
     if "texture" in m:
         fields["texture"] = m["texture"]
     return fields
+
+
+def _pbr_from_mtl(m: dict, where: str, label: str, textures: dict) -> dict:
+    """The path tracer's Material fields of an MTL material's statements (the
+    PBR extension's, as Blender and three.js write them; the table in
+    docs/scene-files.md), each checked: Pr -> roughness, Pm -> metallic (each
+    0..1); map_Pr and map_Pm (or map_RMA: R roughness, G metallic) -> one
+    metallic-roughness texture, its factors 1 where no Pr / Pm is given; Ke
+    (>= 0) -> emission and map_Ke -> its texture (an emission of 1 where no Ke
+    is given); norm (or a bump map in colour) -> the normal map, -bm its
+    scale; Tf -> transmission (the mean of its three, 0..1) in a material
+    with PBR statements, where it is the transmission weight -- in a classic
+    one it is a filter colour, not read, and the Phong mapping's transmission
+    (1 - d) applies.  Fields not given here come from the Phong mapping
+    (clrt.Material.pbr_values).  ``textures``: the OBJ's Textures so far, which
+    keeps one metallic-roughness Texture for the maps several materials share."""
+    from clrt import checks
+    fields = {}
+
+    def check(key, **limits):
+        try:
+            if isinstance(m[key], list):
+                return checks.vector(f"{where}: {key}", m[key], **limits)
+            return checks.number(f"{where}: {key}", m[key], **limits)
+        except InputError as exc:
+            raise fail(label, str(exc)) from None
+
+    if "Pr" in m:
+        fields["roughness"] = check("Pr", ge=0, le=1)
+    if "Pm" in m:
+        fields["metallic"] = check("Pm", ge=0, le=1)
+    maps = tuple(id(m.get(k)) for k in ("map_Pr", "map_Pm", "map_RMA"))
+    if ("metallic-roughness", maps) not in textures:
+        textures["metallic-roughness", maps] = _metallic_roughness_texture(m)
+    data = textures["metallic-roughness", maps]
+    if data is not None:
+        fields["metallic_roughness_texture"] = data
+        if "map_Pr" in m or "map_RMA" in m:
+            fields.setdefault("roughness", 1.0)
+        if "map_Pm" in m or "map_RMA" in m:
+            fields.setdefault("metallic", 1.0)
+    if "Ke" in m:
+        fields["emission"] = check("Ke", ge=0)
+    if "map_Ke" in m:
+        fields["emission_texture"] = m["map_Ke"]
+        fields.setdefault("emission", (1.0, 1.0, 1.0))
+    normal = m.get("norm")
+    if normal is not None and not (normal.pixels == normal.pixels[:, :, :1]).all():   # grey: a height map
+        fields["normal_texture"] = normal
+        if "bm" in m:
+            fields["normal_scale"] = check("bm", ge=-1000, le=1000)
+    if "Tf" in m and any(k in m for k in ("Pr", "Pm", "map_Pr", "map_Pm", "map_RMA")):
+        fields["transmission"] = sum(check("Tf", ge=0, le=1)) / 3.0
+    return fields
+
+
+def _metallic_roughness_texture(m: dict):
+    """One glTF-style metallic-roughness Texture (G roughness, B metallic) of an
+    MTL material's map_Pr and map_Pm (their red channels: grey images) or its
+    map_RMA (R roughness, G metallic); a missing channel is 255 (the factor
+    alone).  A map_Pm of another size than map_Pr is sampled at the nearest
+    texel.  None without such maps."""
+    from clrt.scene.texture import Texture
+    if "map_RMA" in m:
+        rma = m["map_RMA"]
+        roughness, metallic, like = rma.pixels[:, :, 0], rma.pixels[:, :, 1], rma
+    elif "map_Pr" in m or "map_Pm" in m:
+        like = m.get("map_Pr", m.get("map_Pm"))
+        h, w = like.pixels.shape[:2]
+        full = np.full((h, w), 255, np.uint8)
+
+        def channel(key):
+            if key not in m:
+                return full
+            p = m[key].pixels
+            rows = np.arange(h) * p.shape[0] // h
+            cols = np.arange(w) * p.shape[1] // w
+            return p[rows][:, cols, 0]
+        roughness, metallic = channel("map_Pr"), channel("map_Pm")
+    else:
+        return None
+    pixels = np.zeros(like.pixels.shape, np.uint8)
+    pixels[:, :, 1], pixels[:, :, 2] = roughness, metallic
+    return Texture(pixels, like.wrap_s, like.wrap_t, f"{like.name} (metallic-roughness)")

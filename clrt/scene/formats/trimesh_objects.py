@@ -17,9 +17,11 @@ readers (the table in docs/scene-files.md):
 * normals that came from the file (trimesh keeps loaded normals in its cache;
   it computes them only when asked).
 * ``TextureVisuals``: texture coordinates and the material.  A
-  ``PBRMaterial`` is mapped as the glTF reader maps pbrMetallicRoughness
-  (:func:`~clrt.scene.formats.gltf.whitted_from_pbr`), its
-  ``baseColorTexture`` the texture; a ``SimpleMaterial`` as the OBJ reader
+  ``PBRMaterial`` is mapped as the glTF reader maps a glTF material
+  (:func:`~clrt.scene.formats.gltf.whitted_from_pbr` and
+  :func:`~clrt.scene.formats.gltf.pbr_from_gltf`: its factors, emissiveFactor
+  and doubleSided), with its base colour, metallicRoughness, normal and
+  emissive textures; a ``SimpleMaterial`` as the OBJ reader
   maps an MTL material (:func:`~clrt.scene.formats.obj.mtl_material`:
   diffuse as Kd, specular as Ks, glossiness as Ns; ambient, like Ka, is not
   used), its ``image`` the texture; a ``MultiMaterial`` with
@@ -34,12 +36,13 @@ readers (the table in docs/scene-files.md):
   (:meth:`~clrt.scene.texture.Texture.from_image`).
 
 What trimesh (5.2.0) does not keep cannot be used: glTF samplers (textures
-repeat, glTF's default wrap), KHR_materials_transmission and _ior, a texture
-set other than TEXCOORD_0, MTL's ``-clamp``.  trimesh holds baseColorFactor
+repeat, glTF's default wrap), the KHR_materials extensions (emissive
+strength, specular, transmission, ior), normalTexture's scale, a texture set
+other than TEXCOORD_0, MTL's ``-clamp``.  trimesh holds baseColorFactor
 and MTL colours in 8 bits: a glTF factor that is no multiple of 1/255 comes
 out up to 1/510 off (an MTL's own numbers, which trimesh keeps aside in
-``kwargs``, are used where they agree with those 8 bits).  doubleSided and
-alphaMode are not used, as the glTF reader does not use them.  trimesh's own
+``kwargs``, are used where they agree with those 8 bits).  alphaMode and the
+occlusion texture are not used, as the glTF reader does not use them.  trimesh's own
 joining of a scene (``force="mesh"``) packs differing materials into one
 atlas image, or drops them: clrt renders what it is handed.
 
@@ -56,7 +59,7 @@ import numpy as np
 
 from clrt.errors import ClrtError, InputError, MeshLoadError
 from clrt.scene.formats import tds
-from clrt.scene.formats.gltf import whitted_from_pbr
+from clrt.scene.formats.gltf import GLTF_TEXTURES, pbr_from_gltf, whitted_from_pbr
 from clrt.scene.formats.obj import mtl_material
 from clrt.scene.formats.part import Part, build, fail, fill_normals, placed, short
 from clrt.scene.mesh import Mesh
@@ -242,10 +245,19 @@ class _Materials:
                     pbr[key] = self._number(value, f"{where}: {key}")
             if not np.isfinite(pbr.get("baseColorFactor", [0.0])).all():
                 raise fail(self.label, f"{where}: baseColorFactor must be finite")
-            fields = whitted_from_pbr(pbr)   # trimesh keeps none of the extensions
-            texture = self._texture(getattr(material, "baseColorTexture", None), where)
-            if texture is not None:
-                fields["texture"] = texture
+            gltf = {"pbrMetallicRoughness": pbr, "doubleSided": bool(getattr(material, "doubleSided", False))}
+            emissive = getattr(material, "emissiveFactor", None)
+            if emissive is not None:
+                gltf["emissiveFactor"] = [float(e) for e in np.asarray(emissive, np.float64).reshape(-1)]
+            try:
+                pbr_fields = pbr_from_gltf(gltf, where)
+            except InputError as exc:
+                raise fail(self.label, str(exc)) from None
+            fields = {**whitted_from_pbr(pbr), **pbr_fields}   # trimesh keeps none of the extensions
+            for field, (_, key) in GLTF_TEXTURES.items():
+                texture = self._texture(getattr(material, key, None), where)
+                if texture is not None:
+                    fields[field] = texture
             return fields
         if hasattr(material, "diffuse") and hasattr(material, "glossiness"):      # SimpleMaterial
             if _placeholder(material):
