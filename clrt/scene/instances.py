@@ -17,12 +17,15 @@ one is one line naming its instance.
 
 from __future__ import annotations
 
+import itertools
 import os
+from dataclasses import replace
 
 import numpy as np
 
 from clrt import checks, config
 from clrt.errors import InputError
+from clrt.scene.formats.part import Part, build, fill_normals
 from clrt.scene.formats.trimesh_objects import is_trimesh_scene
 from clrt.scene.mesh import Mesh
 
@@ -183,7 +186,6 @@ def as_instances(source) -> Instances:
     if isinstance(source, Instances):
         return source
     if is_gltf_file(source):
-        from clrt.scene.formats.gltf import gltf_instances
         return Instances(*gltf_instances(os.fspath(source)))
     if len(source) > config.MAX_INSTANCES:
         raise InputError(f"a scene holds at most {config.MAX_INSTANCES:,} instances (results name them by "
@@ -223,7 +225,6 @@ def placed_meshes(source) -> "Instances | Mesh":
     meshes more than once (its mesh nodes); a glTF file with one mesh node is
     its one Mesh, placed, as the file reads flattened."""
     if is_gltf_file(source):
-        from clrt.scene.formats.gltf import gltf_instances
         meshes, mesh_of, transforms = gltf_instances(os.fspath(source))
         if len(mesh_of) > 1:
             return Instances(meshes, mesh_of, transforms)
@@ -231,3 +232,33 @@ def placed_meshes(source) -> "Instances | Mesh":
         return Mesh.from_arrays(mesh.vertices.astype(np.float64) @ m[:3, :3].T + m[:3, 3], mesh.faces, mesh.name)
     return as_instances(source)
 
+
+def gltf_instances(path: str) -> "tuple[list[Mesh], np.ndarray, np.ndarray]":
+    """A glTF file's mesh nodes as instances: each glTF mesh once, in its own
+    space (its primitives in order, as the flattened file holds a node's
+    triangles), and once more with its triangles' corners 1 and 2 swapped if a
+    mirroring node places it (the flattened file's faces face out so, as glTF
+    says); then, for each mesh node in the flattened file's order (document
+    order, depth first), its mesh's index among those and the node's world
+    matrix (4x4, float64, composed down the hierarchy)."""
+    from clrt.scene.formats.gltf import gltf_nodes
+    name = os.path.splitext(os.path.basename(path))[0]
+    meshes, found, mesh_of, transforms = [], {}, [], []
+    for _, primitives in itertools.groupby(gltf_nodes(path), key=lambda entry: entry[0]):
+        primitives = list(primitives)
+        mesh, world = primitives[0][1:3]
+        key = (mesh, bool(np.linalg.det(world[:3, :3]) < 0))
+        if key not in found:
+            parts = [_rewound(part) if key[1] else replace(part) for *_, part in primitives]
+            fill_normals(parts)   # (on copies: the file's primitives are shared by its nodes)
+            found[key] = len(meshes)
+            meshes.append(build(parts, path, f"{name} mesh {mesh}")[0])
+        mesh_of.append(found[key])
+        transforms.append(world)
+    return meshes, np.array(mesh_of, np.int64), np.array(transforms, np.float64)
+
+
+def _rewound(part: Part) -> Part:
+    """A copy of ``part`` with its triangles' corners 1 and 2 swapped (and their
+    texture coordinates): a mirroring node's winding, without moving it."""
+    return replace(part, faces=part.faces[:, [0, 2, 1]], uv=None if part.uv is None else part.uv[:, [0, 2, 1]])

@@ -320,8 +320,8 @@ def _gltf_walk(doc: dict):
     (``scene``, else the first; without scenes, every node that is no node's
     child, in file order), depth first in file order: a root node, then its
     children in their ``children`` order, each with its own children before
-    the next; a node reached twice (it has two parents) is visited once (a
-    cycle is refused when the document is read: _gltf_document)."""
+    the next; a node reached twice (two parents) is visited once (_gltf_parts
+    refuses a cycle)."""
     nodes = doc.get("nodes", [])
     scenes = doc.get("scenes", [])
     if scenes:
@@ -342,7 +342,7 @@ def _gltf_walk(doc: dict):
         stack += [(int(c), world) for c in reversed(node.get("children", []))]
 
 
-def _gltf_parts(data: bytes, file_type: str, path: str) -> list[Part]:
+def _gltf_parts(data: bytes, file_type: str, path: str, nodes: list | None = None) -> list[Part]:
     """Every triangle of a glTF file's scene, with its normals, texture
     coordinates, vertex colours and materials.
 
@@ -353,39 +353,8 @@ def _gltf_parts(data: bytes, file_type: str, path: str) -> list[Part]:
     triangles' corners 1 and 2 swapped (and their texture coordinates), so
     that faces still face out, as the glTF specification says.  A primitive
     without NORMAL gets its smooth (area-weighted) normals when another
-    primitive of the file has authored ones, which are kept."""
-    kind = file_type.upper()
-    doc = _gltf_document(data, file_type, path)
-    try:
-        gltf = _GltfFile(doc, data, file_type, path)
-        with np.errstate(all="ignore"):  # bad numbers are reported by Mesh.from_arrays
-            materials = _gltf_materials(gltf)
-            cache, parts = {}, []
-            for _, node, world in _gltf_walk(doc):
-                if "mesh" not in node:
-                    continue
-                primitives = gltf.item("meshes", node["mesh"], "mesh").get("primitives", [])
-                for k, primitive in enumerate(primitives):
-                    key = (node["mesh"], k)
-                    if key not in cache:
-                        cache[key] = gltf.primitive(node["mesh"], k, primitive)
-                    if cache[key] is not None and len(cache[key].faces):
-                        parts.append(replace(placed(cache[key], world), materials=materials))
-            fill_normals(parts)
-    except MeshLoadError:
-        raise
-    except _GltfError as exc:
-        raise fail(path, f"corrupt or unsupported {kind} file: {exc}") from None
-    except Exception as exc:  # noqa: BLE001 -- a malformed document (a string where an object belongs, ...)
-        raise fail(path, f"corrupt or unsupported {kind} file ({short(exc)})") from exc
-    if not parts:
-        raise fail(path, "contains no triangles")
-    return parts
-
-
-def _gltf_document(data: bytes, file_type: str, path: str) -> dict:
-    """The JSON document of a glTF file's bytes, its references checked;
-    MeshLoadError naming the file for a corrupt one."""
+    primitive of the file has authored ones, which are kept.  With ``nodes``
+    (gltf_nodes), each primitive goes there unplaced instead, with its node."""
     kind = file_type.upper()
     try:
         doc = _gltf_json(data, "." + file_type)
@@ -400,7 +369,43 @@ def _gltf_document(data: bytes, file_type: str, path: str) -> dict:
     cycle = first_cycle([node.get("children", []) for node in doc.get("nodes", [])])
     if cycle is not None:
         raise fail(path, f"corrupt {kind} file: node {cycle} is its own ancestor (the nodes make a cycle)")
-    return doc
+    try:
+        gltf = _GltfFile(doc, data, file_type, path)
+        with np.errstate(all="ignore"):  # bad numbers are reported by Mesh.from_arrays
+            materials = _gltf_materials(gltf)
+            cache, parts = {}, []
+            for index, node, world in _gltf_walk(doc):
+                if "mesh" not in node:
+                    continue
+                primitives = gltf.item("meshes", node["mesh"], "mesh").get("primitives", [])
+                for k, primitive in enumerate(primitives):
+                    key = (node["mesh"], k)
+                    if key not in cache:
+                        cache[key] = gltf.primitive(node["mesh"], k, primitive)
+                    if cache[key] is not None and len(cache[key].faces) and nodes is not None:
+                        nodes.append((index, node["mesh"], world, replace(cache[key], materials=materials)))
+                    elif cache[key] is not None and len(cache[key].faces):
+                        parts.append(replace(placed(cache[key], world), materials=materials))
+            fill_normals(parts)
+    except MeshLoadError:
+        raise
+    except _GltfError as exc:
+        raise fail(path, f"corrupt or unsupported {kind} file: {exc}") from None
+    except Exception as exc:  # noqa: BLE001 -- a malformed document (a string where an object belongs, ...)
+        raise fail(path, f"corrupt or unsupported {kind} file ({short(exc)})") from exc
+    if not parts and not nodes:
+        raise fail(path, "contains no triangles")
+    return parts
+
+
+def gltf_nodes(path: str) -> list:
+    """A glTF file's scene as its nodes place it, nothing moved:
+    ``(node index, mesh index, the node's world matrix, a primitive of the
+    mesh as a Part in the mesh's own space)`` for each primitive of each mesh
+    node, in read_gltf's order (clrt.scene.instances makes instances of them)."""
+    nodes: list = []
+    _gltf_parts(read_bytes(path), os.path.splitext(path)[1].lower()[1:], path, nodes)
+    return nodes
 
 
 def whitted_from_pbr(pbr: dict, extensions: dict | None = None) -> dict:
@@ -677,61 +682,3 @@ def _file_camera(path: str, ext: str) -> dict | None:
     except Exception as exc:  # noqa: BLE001 -- a malformed camera is reported, not a traceback
         raise fail(path, f"cannot read the file's camera ({short(exc)})") from None
     return None
-
-
-# ---------------------------------------------------------------------------
-# The scene's mesh nodes as instances (docs/instances.md)
-
-
-def gltf_instances(path: str) -> "tuple[list[Mesh], np.ndarray, np.ndarray]":
-    """The mesh nodes of a .gltf or .glb file's scene as instances: each glTF
-    mesh once, in its own space (its primitives in order, as read_gltf places
-    a node's triangles), and once more with its triangles' corners 1 and 2
-    swapped if a mirroring node places it (read_gltf's faces face out so);
-    then, for each mesh node in read_gltf's depth-first order, the index of its
-    mesh among those and the node's world matrix (4x4, float64)."""
-    file_type = os.path.splitext(path)[1].lower()[1:]
-    kind = file_type.upper()
-    data = read_bytes(path)
-    doc = _gltf_document(data, file_type, path)
-    name = os.path.splitext(os.path.basename(path))[0]
-    try:
-        gltf = _GltfFile(doc, data, file_type, path)
-        with np.errstate(all="ignore"):  # bad numbers are reported by Mesh.from_arrays
-            materials = _gltf_materials(gltf)
-            primitives, meshes, found, mesh_of, transforms = {}, [], {}, [], []
-            for _, node, world in _gltf_walk(doc):
-                if "mesh" not in node:
-                    continue
-                key = (node["mesh"], bool(np.linalg.det(world[:3, :3]) < 0))
-                if key not in found:
-                    parts = []
-                    for k, primitive in enumerate(gltf.item("meshes", node["mesh"], "mesh").get("primitives", [])):
-                        if (node["mesh"], k) not in primitives:
-                            primitives[node["mesh"], k] = gltf.primitive(node["mesh"], k, primitive)
-                        part = primitives[node["mesh"], k]
-                        if part is not None and len(part.faces):
-                            parts.append(replace(_rewound(part) if key[1] else part, materials=materials))
-                    fill_normals(parts)
-                    found[key] = len(meshes) if parts else None
-                    if parts:
-                        meshes.append(build(parts, path, f"{name} mesh {node['mesh']}")[0])
-                if found[key] is not None:
-                    mesh_of.append(found[key])
-                    transforms.append(world)
-    except MeshLoadError:
-        raise
-    except _GltfError as exc:
-        raise fail(path, f"corrupt or unsupported {kind} file: {exc}") from None
-    except Exception as exc:  # noqa: BLE001 -- a malformed document
-        raise fail(path, f"corrupt or unsupported {kind} file ({short(exc)})") from exc
-    if not meshes:
-        raise fail(path, "contains no triangles")
-    return meshes, np.array(mesh_of, np.int64), np.array(transforms, np.float64)
-
-
-def _rewound(part: Part) -> Part:
-    """A part with its triangles' corners 1 and 2 swapped (and their texture
-    coordinates): placed's winding under a mirroring node, without moving it."""
-    return replace(part, faces=part.faces[:, [0, 2, 1]], uv=None if part.uv is None else part.uv[:, [0, 2, 1]])
-
