@@ -77,6 +77,7 @@ _LAZY = {
     "Frame": "clrt.renderer", "Renderer": "clrt.renderer", "TileLimits": "clrt.renderer", "render": "clrt.renderer",
     "default_scene": "clrt.scene.default",
     "load_mesh": "clrt.scene.load",
+    "Environment": "clrt.scene.environment",
     "Mesh": "clrt.scene.mesh",
     "Instances": "clrt.scene.instances",
     "Camera": "clrt.scene.scene", "Light": "clrt.scene.scene", "Material": "clrt.scene.scene",

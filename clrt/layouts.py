@@ -88,9 +88,25 @@ quarter of float4 texels -- and the decoded values are exact float32 constants,
 the same on every device and in the reference; a linear code c is
 float(c) * float(1/255), one correctly rounded product, the same everywhere too.
 
-``Light`` (32 B) -- point light
-    0: position float4  xyz, w unused
-   16: color    float4  linear RGB intensity, a unused
+``Light`` (64 B) -- point or spot light
+    0: position  float4  xyz, w unused
+   16: color     float4  linear RGB intensity (radiant intensity for the path tracer), a unused
+   32: direction float4  xyz: unit axis of a spot light's cone (zeros for a point light); w unused
+   48: cos_outer float   cosine of the cone's half angle, where the light ends; -1: a point light
+                         (no cone: Whitted and the path tracer skip the falloff, bit for bit)
+   52: cos_inner float   cosine of the half angle where the falloff begins (full intensity inside):
+                         falloff = smoothstep(cos_outer, cos_inner, cos(angle to the axis))
+   56: pad       uint[2]
+
+``LightEntry`` (32 B) -- one light of the path tracer's light table (lights.cl), chosen
+by Walker's alias method in proportion to its power (clrt/scene/emitters.py)
+    0: threshold   float  keep this entry when the uniform u, scaled to the entry, lies below it
+    4: alias       int    else take this entry
+    8: kind        uint   LIGHT_POINT (a Light row: point or spot), LIGHT_TRIANGLE (an emissive
+                          triangle's slot), LIGHT_BACKGROUND (the background or environment map)
+   12: index       int    the Light row or the triangle's slot (-1 for the background)
+   16: probability float  of choosing this entry (its power / all lights' power)
+   20: pad         uint[3]
 
 Kernel arguments passed by value (OpenCL lets no pointer into them: buffers
 travel beside them, and they hold byte offsets into those buffers).  Which
@@ -136,6 +152,32 @@ kernel takes which is declared once, in the signature tables
    40: max_depth    uint  reflection / refraction bounces
    44: sample_weight float 1 / samples
    48: first_sample uint  1: the image starts from this sample
+
+``PathLaunch`` (224 B) -- one launch of the path tracer (path.cl) over a rectangle of the image
+    0: cam          Camera  as above (80 B)
+   80: background   float4  xyz: radiance of the constant background (no environment map); w unused
+   96: environment  float4  x, y: cos and sin of the environment map's turn about +y; z: its strength;
+                            w: probability of choosing the background / environment among the lights
+  112: image_at     ulong   byte offset in `frame` of the image's float4 sums of radiance (w: samples)
+  120: albedo_at    ulong   ... of the float4 sums of the first hit's albedo
+  128: normal_at    ulong   ... of the float4 sums of the first hit's shading normal
+  136: x, y, w, h   uint    pixels (x, y) .. (x + w - 1, y + h - 1) of the image
+  152: sample_first uint    the launch's first sample of each pixel (the RNG's sample index)
+  156: sample_count uint    samples per pixel of this launch
+  160: samples_before uint  samples the sums hold already (0: this launch starts them)
+  164: seed         uint
+  168: max_depth    int     Mitsuba's count: 1 emitters seen directly, 2 direct light, ...; -1 unbounded
+  172: rr_depth     uint    Russian roulette from this depth on
+  176: strategy     uint    PATH_MIS, PATH_LIGHTS (light sampling only), PATH_BSDF (BSDF sampling only)
+  180: entries_at   uint    byte offset in `tables` of the LightEntry rows
+  184: num_entries  uint    0: no light to sample
+  188: inv_power    float   1 / the power of all lights (the emissive triangles' probabilities)
+  192: env_at       uint    byte offset in `tables` of the environment map's float4 texels, row 0 at the top
+  196: env_width    uint    0: no environment map (the constant background)
+  200: env_height   uint
+  204: marginal_at  uint    ... of its rows' CDF (env_height + 1 floats)
+  208: conditional_at uint  ... of each row's CDF over its texels (env_height rows of env_width + 1 floats)
+  212: pad          uint[3]
 
 ``SceneInfo`` (80 B) -- the uploaded scene's values (geometry.cl, shading.cl)
     0: ambient_light float4  linear RGB, w unused (renderer only, as the rest but
@@ -275,7 +317,10 @@ TEXTURE = np.dtype([("first", np.uint32), ("width", np.int32), ("height", np.int
                     ("wrap_s", np.uint32), ("wrap_t", np.uint32), ("linear", np.uint32)])
 TEXEL = np.dtype((np.uint8, 4))
 SRGB_TABLE = np.dtype((np.float32, 256))
-LIGHT = np.dtype([("position", float4), ("color", float4)])
+LIGHT = np.dtype([("position", float4), ("color", float4), ("direction", float4), ("cos_outer", np.float32),
+                  ("cos_inner", np.float32), ("pad", np.uint32, 2)])
+LIGHT_ENTRY = np.dtype([("threshold", np.float32), ("alias", np.int32), ("kind", np.uint32), ("index", np.int32),
+                        ("probability", np.float32), ("pad", np.uint32, 3)])
 BVH_PAIR_NODE = np.dtype([("left_a", float4), ("left_b", float4), ("right_a", float4), ("right_b", float4)])
 float8, int8, int4 = np.dtype((np.float32, 8)), np.dtype((np.int32, 8)), np.dtype((np.int32, 4))
 BVH_WIDE_NODE = np.dtype([("lo_x", float8), ("lo_y", float8), ("lo_z", float8), ("hi_x", float8),
@@ -299,6 +344,15 @@ TILE = np.dtype([("x", np.uint32), ("y", np.uint32), ("w", np.uint32), ("h", np.
                  ("rays_at", np.uint32), ("hits_at", np.uint32), ("image_at", np.uint32),
                  ("sample", np.uint32), ("samples_per_axis", np.uint32), ("seed", np.uint32),
                  ("max_depth", np.uint32), ("sample_weight", np.float32), ("first_sample", np.uint32)])
+PATH_LAUNCH = np.dtype([("cam", CAMERA), ("background", float4), ("environment", float4),
+                        ("image_at", np.uint64), ("albedo_at", np.uint64), ("normal_at", np.uint64),
+                        ("x", np.uint32), ("y", np.uint32), ("w", np.uint32), ("h", np.uint32),
+                        ("sample_first", np.uint32), ("sample_count", np.uint32), ("samples_before", np.uint32),
+                        ("seed", np.uint32), ("max_depth", np.int32), ("rr_depth", np.uint32),
+                        ("strategy", np.uint32), ("entries_at", np.uint32), ("num_entries", np.uint32),
+                        ("inv_power", np.float32), ("env_at", np.uint32), ("env_width", np.uint32),
+                        ("env_height", np.uint32), ("marginal_at", np.uint32), ("conditional_at", np.uint32),
+                        ("pad", np.uint32, 3)])
 SCENE_INFO = np.dtype([("ambient_light", float4), ("background", float4), ("packets_at", np.uint64),
                        ("num_tris", np.uint32), ("num_lights", np.uint32), ("materials_at", np.uint32),
                        ("lights_at", np.uint32), ("textures_at", np.uint32), ("srgb_at", np.uint32),
@@ -317,6 +371,7 @@ STRUCTS = {
     "TriangleDetail": TRIANGLE_DETAIL,
     "Texture": TEXTURE,
     "Light": LIGHT,
+    "LightEntry": LIGHT_ENTRY,
     "BvhPairNode": BVH_PAIR_NODE,
     "BvhWideNode": BVH_WIDE_NODE,
     "TrianglePacket": TRIANGLE_PACKET,
@@ -326,6 +381,7 @@ STRUCTS = {
     "Camera": CAMERA,
     "QueryLaunch": QUERY_LAUNCH,
     "Tile": TILE,
+    "PathLaunch": PATH_LAUNCH,
     "SceneInfo": SCENE_INFO,
     "Instance": INSTANCE,
 }

@@ -66,7 +66,21 @@ typedef struct {
 typedef struct {
     float4 position;
     float4 color;
+    float4 direction;     // xyz: a spot light's unit axis
+    float cos_outer;      // -1: a point light (no cone)
+    float cos_inner;
+    uint pad[2];
 } Light;
+
+// One light of the path tracer's table (lights.cl), chosen by the alias method.
+typedef struct {
+    float threshold;      // keep this entry when u (scaled to it) < threshold
+    int alias;            // else this one
+    uint kind;            // LIGHT_POINT, LIGHT_TRIANGLE, LIGHT_BACKGROUND
+    int index;            // Light row, or the triangle's slot
+    float probability;    // of choosing it
+    uint pad[3];
+} LightEntry;
 
 // ---- Kernel arguments passed by value: each kernel takes its buffers and at
 // most a few of these (clrt/device/signature.py counts them; every kernel
@@ -111,6 +125,23 @@ typedef struct {
     float sample_weight;         // 1 / samples
     uint first_sample;           // 1: the image starts from this sample
 } Tile;
+
+// One launch of the path tracer (path.cl) over a rectangle of the image; the
+// image's sums lie in `frame`, the light tables in `tables` (layouts.py).
+typedef struct {
+    Camera cam;
+    float4 background;           // xyz: constant background radiance
+    float4 environment;          // x, y: cos, sin of the map's turn; z: strength; w: background's probability
+    ulong image_at, albedo_at, normal_at;   // byte offsets in `frame` of the float4 sums
+    uint x, y, w, h;             // pixels of the image
+    uint sample_first, sample_count, samples_before, seed;
+    int max_depth;               // Mitsuba's count; -1: unbounded
+    uint rr_depth, strategy;
+    uint entries_at, num_entries;
+    float inv_power;             // 1 / the power of all lights
+    uint env_at, env_width, env_height, marginal_at, conditional_at;
+    uint pad[3];
+} PathLaunch;
 
 // What kernels know of the uploaded scene by value: the triangle count, where
 // the packets start in the wide BVH's buffer, and (the renderer) the light

@@ -1,0 +1,194 @@
+"""The path tracer's host side (``integrator="path"``): its program, its light
+tables, and a frame rendered in passes of samples.
+
+A frame's sums (radiance, albedo, shading normal: path.cl) live on the device
+for the whole image, so a render goes in passes: each pass adds its samples
+to every pixel, launch by launch over bands of rows sized to take about
+``TileLimits.launch_ms`` each (Ctrl-C is seen between launches).  The passes
+have fixed sizes -- 1, 1, 2, 4, ... samples, at most PASS_SAMPLES -- so the
+order in which the sums are added up, and with the counter-based random
+numbers the image, depends on the seed and the sample count alone, not on
+the device's speed or the tiling.  Ctrl-C after the first pass ends the
+render early with the samples done (``Frame.interrupted``; a launch that
+finished before Ctrl-C was seen counts, each pixel averaging its own samples).
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Callable
+
+import numpy as np
+import pyopencl as cl
+
+from clrt.config import PATH_RR_DEPTH, PATH_STRATEGIES
+from clrt.device.args import camera_value, vec4
+from clrt.device.geometry import replace_buffer
+from clrt.layouts import PATH_LAUNCH
+from clrt.renderer.kernels import FRAME_HEADER, PATH_ARRAYS, PATH_KERNELS, pack_tables
+from clrt.scene.emitters import light_tables
+from clrt.scene.texture import srgb_encode8
+
+#: The most samples of a pass: later passes add this many each.
+PASS_SAMPLES = 64
+#: Bytes a pixel of the path tracer's frame buffer: its three float4 sums.
+PATH_BYTES_PER_PIXEL = 16 * len(PATH_ARRAYS)
+
+
+def pass_sizes(spp: int) -> list[int]:
+    """The samples of each pass of a render of ``spp`` samples per pixel:
+    1, 1, 2, 4, ... up to PASS_SAMPLES a pass, the last one what is left."""
+    sizes, size, done = [], 1, 0
+    while done < spp:
+        n = min(size, spp - done)
+        sizes.append(n)
+        done += n
+        size = min(max(done, 1), PASS_SAMPLES)
+    return sizes
+
+
+def tone_map(linear: np.ndarray, exposure: float) -> np.ndarray:
+    """8-bit sRGB of a linear image: scaled by 2**exposure, clamped to 0..1,
+    then the sRGB curve (IEC 61966-2-1) -- the documented tone map of clrt's
+    PNG output (docs/path-tracing.md)."""
+    scaled = linear if exposure == 0 else linear * np.float32(2.0 ** exposure)
+    return srgb_encode8(scaled)
+
+
+class PathTracer:
+    """The path tracer of one Renderer: its program and its light tables on
+    that renderer's device (built on the first path-traced frame)."""
+
+    def __init__(self, renderer):
+        self.renderer = renderer
+        detail = {"SURFACE_DETAIL": None} if renderer.arrays.detail is not None else None
+        self.kernel = renderer.device_scene.kernels("path.cl", PATH_KERNELS, detail)["path_trace"]
+        self.max_group = self.kernel.get_work_group_info(cl.kernel_work_group_info.WORK_GROUP_SIZE,
+                                                          renderer.queue.device)
+        self.tables = None
+        self._tables_of = None   # what the tables were built from
+
+    def _light_tables(self, scene):
+        """The `tables` buffer with the light tables of the renderer's scene as
+        it is now (lights, background, environment), and PathLaunch's values."""
+        r = self.renderer
+        key = (tuple(scene.lights), tuple(scene.background), id(scene.environment), id(r.arrays))
+        if key == self._tables_of:
+            return self._launch_values
+        a = r.arrays
+        slots = r.acceleration.prim_ids
+        tables = light_tables(a.corners[slots], a.tri_info["material"][slots], a.materials, scene.lights,
+                              scene.background, scene.environment, a.bounds)
+        detail = (a.detail.textures, a.detail.srgb_table) if a.detail is not None else (None, None)
+        packed, offsets = pack_tables(a.materials, a.lights, *detail, entries=tables.entries, env=tables.texels,
+                                      marginal=tables.marginal, conditional=tables.conditional)
+        with r.device_scene.out_of_memory():
+            if self.tables is None:
+                self.tables = cl.Buffer(r.context, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR,
+                                        hostbuf=packed)
+            else:
+                self.tables = replace_buffer(r.queue, self.tables, packed)
+        self._tables_of = key
+        self._scene_offsets = {k: offsets[k] for k in ("materials_at", "lights_at", "textures_at", "srgb_at")}
+        self._launch_values = dict(entries_at=offsets["entries_at"], num_entries=tables.num_entries,
+                                   inv_power=tables.inv_power, env_at=offsets["env_at"],
+                                   env_width=tables.env_size[0], env_height=tables.env_size[1],
+                                   marginal_at=offsets["marginal_at"], conditional_at=offsets["conditional_at"],
+                                   background_probability=tables.background_probability)
+        return self._launch_values
+
+    def render(self, camera, *, spp: int, max_depth: int, seed: int, strategy: str, progress: Callable,
+               wait: Callable, limits, preview: Callable | None = None) -> dict:
+        """Render ``spp`` samples a pixel; return the linear image, the albedo
+        and normal images (H, W, 3 float32), the samples done, whether Ctrl-C
+        ended it early, whether a camera ray hit anything, the tiles
+        (launches) and the kernel milliseconds.  ``preview(image, samples)``,
+        if given, gets the linear image after each pass but the last."""
+        r = self.renderer
+        scene = r.scene
+        values = self._light_tables(scene)
+        w, h = camera.width, camera.height
+        pixels = w * h
+        nbytes = FRAME_HEADER + PATH_BYTES_PER_PIXEL * pixels
+        dev = r.queue.device
+        if PATH_BYTES_PER_PIXEL * pixels > dev.max_mem_alloc_size - FRAME_HEADER:
+            raise r.device_scene.memory_error(MemoryError("the image's sums exceed one allocation"),
+                                              f" and {nbytes:,} bytes for the path tracer's image sums")
+        with r.device_scene.out_of_memory():
+            frame = cl.Buffer(r.context, cl.mem_flags.READ_WRITE, nbytes)
+            cl.enqueue_fill_buffer(r.queue, frame, np.zeros(1, np.uint32), 0, FRAME_HEADER)
+        launch = np.zeros((), PATH_LAUNCH)
+        launch["cam"] = camera_value(camera, r.arrays.origin)
+        launch["background"] = vec4(scene.background)
+        env = scene.environment
+        angle = np.radians(env.rotation) if env is not None else 0.0
+        launch["environment"] = (np.cos(angle), np.sin(angle), env.strength if env is not None else 1.0,
+                                 values["background_probability"])
+        for k, name in enumerate(PATH_ARRAYS):
+            launch[f"{name}_at"] = FRAME_HEADER + k * 16 * pixels
+        launch["seed"], launch["max_depth"], launch["rr_depth"] = seed, max_depth, PATH_RR_DEPTH
+        launch["strategy"] = PATH_STRATEGIES[strategy]
+        for name in ("entries_at", "num_entries", "inv_power", "env_at", "env_width", "env_height", "marginal_at",
+                     "conditional_at"):
+            launch[name] = values[name]
+        b = r.geometry.buffers
+        scene_value = r.geometry.scene_value(ambient_light=scene.ambient_light, background=scene.background,
+                                             num_lights=len(r.arrays.lights), **self._scene_offsets)
+        detail = (*b["tri_detail"], *b["texels"]) if r.arrays.detail is not None else ()
+        args = (*r.geometry.buffer_args, scene_value, *b["tri_info"], *b["vertex_normals"], self.tables, *detail)
+
+        done, launches, kernel_ms = 0, 0, 0.0
+        interrupted = False
+        ms_per_sample = 0.0   # the most a pixel sample has cost so far (rows differ: sky vs. mesh)
+        try:
+            for n in pass_sizes(spp):
+                launch["sample_first"], launch["sample_count"], launch["samples_before"] = done, n, done
+                y = 0
+                while y < h:
+                    if ms_per_sample > 0:
+                        rows = int(limits.launch_ms / (ms_per_sample * n * w))
+                    else:
+                        rows = limits.first_launch_pixels // (w * n)
+                    rows = max(1, min(rows, h - y))
+                    launch["x"], launch["y"], launch["w"], launch["h"] = 0, y, w, rows
+                    size, local = self._launch_shape(w, rows, limits)
+                    self.kernel.set_args(frame, launch, *args)
+                    event = cl.enqueue_nd_range_kernel(r.queue, self.kernel, size, local)
+                    wait(event)
+                    ms = 1e-6 * (event.profile.end - event.profile.start)
+                    kernel_ms += ms
+                    ms_per_sample = max(ms_per_sample, ms / (n * w * rows))
+                    launches += 1
+                    progress(w * rows * n)
+                    y += rows
+                done += n
+                if preview is not None and done < spp:   # the image so far (the last one is the frame)
+                    sums = np.empty((pixels, 4), np.float32)
+                    cl.enqueue_copy(r.queue, sums, frame, src_offset=FRAME_HEADER)
+                    preview((sums[:, :3] / np.maximum(sums[:, 3:4], 1.0)).reshape(h, w, 3), done)
+        except KeyboardInterrupt:
+            r.queue.finish()   # no kernel may still write into the sums we read
+            if done == 0:
+                frame.release()
+                raise
+            interrupted = True
+        sums = np.empty((len(PATH_ARRAYS), pixels, 4), np.float32)
+        seen = np.zeros(1, np.uint32)
+        start = time.perf_counter()
+        cl.enqueue_copy(r.queue, sums, frame, src_offset=FRAME_HEADER)
+        cl.enqueue_copy(r.queue, seen, frame, src_offset=0)
+        frame.release()
+        # Each pixel's sums over its own count (w): a launch that finished before
+        # Ctrl-C was seen added its samples, whole, to its rows.
+        counts = np.maximum(sums[0, :, 3:4], np.float32(1.0))
+        images = [(s[:, :3] / counts).reshape(h, w, 3) for s in sums]
+        done = int(sums[0, :, 3].min())
+        return dict(image=images[0], albedo=images[1], normal=images[2], spp=done, interrupted=interrupted,
+                    seen=bool(seen[0]), tiles=launches, kernel_ms=kernel_ms,
+                    read_ms=1e3 * (time.perf_counter() - start))
+
+    def _launch_shape(self, w: int, h: int, limits) -> tuple:
+        bw, bh = limits.block or (0, 0)
+        if not 0 < bw * bh <= self.max_group:
+            return (w, h), None
+        return (-(-w // bw) * bw, -(-h // bh) * bh), (bw, bh)
