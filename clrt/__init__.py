@@ -16,7 +16,8 @@ Where to start:
   on each lists its arrays);
 - point queries: ``clrt.closest_points`` (``clrt.ClosestPoints``), ``clrt.distance``,
   ``clrt.signed_distance``, ``clrt.winding_number``, ``clrt.contains``, ``clrt.sdf_grid``;
-- meshes: ``clrt.load_mesh``, ``clrt.Mesh``;
+- meshes: ``clrt.load_mesh``, ``clrt.Mesh``; meshes placed many times:
+  ``clrt.Instances`` (or a list of ``(mesh, transform)`` pairs, docs/instances.md);
 - devices: ``device=None`` (the first GPU, else the CPU), ``"gpu"``, ``"cpu"``
   or ``"P:D"`` (platform and device indices, as ``clrt info`` lists them).
 
@@ -83,6 +84,7 @@ _LAZY = {
     "load_mesh": "clrt.scene.load",
     "Environment": "clrt.scene.environment",
     "Mesh": "clrt.scene.mesh",
+    "Instances": "clrt.scene.instances",
     "Camera": "clrt.scene.scene", "Light": "clrt.scene.scene", "Material": "clrt.scene.scene",
     "Scene": "clrt.scene.scene", "SceneObject": "clrt.scene.scene", "scene_from_mesh": "clrt.scene.scene",
     "load_scene": "clrt.scene.scene_file",

@@ -165,6 +165,19 @@ DEVICE_KINDS = ("gpu", "cpu")
 AOVS = ("depth", "distance", "normal", "prim", "hit", "front")
 #: The formats of output files, and what each can hold: clrt.output.writers.WRITERS.
 
+# --------------------------------------------------------------------------- instances (docs/instances.md)
+
+#: Instance.flags (clrt/layouts.py): the instance's transform has a negative
+#: determinant (a mirror), so a triangle's winding turns over in the world.
+INSTANCE_MIRROR = 1
+#: The most instances of one scene: results report an instance as an int32.
+MAX_INSTANCES = 2**31 - 1
+#: An instance transform whose linear part has a larger condition number (the
+#: ratio of its largest to its smallest singular value) is refused as
+#: singular: its float32 inverse would keep less than a few bits of the
+#: scene's coordinates.
+MAX_TRANSFORM_CONDITION = 1e6
+
 # --------------------------------------------------------------------------- device buffers
 
 #: Most parts one scene buffer is split into when it exceeds the device's
@@ -172,7 +185,7 @@ AOVS = ("depth", "distance", "normal", "prim", "hit", "front")
 #: largest allocation of at least a quarter of the device memory.
 MAX_PARTS = 4
 #: Outputs one ray-query launch can write (QueryLaunch.field_at in layouts.h):
-#: the closest hit's seven fields, query_all's three and its hit counter.
+#: the closest hit's eight fields; query_all's three, its hit counter and the hits' instances.
 RESULT_SLOTS = 8
 #: QueryLaunch.field_at of an output not asked for (no byte of `results` is one).
 NO_RESULT = 2**64 - 1
@@ -287,6 +300,7 @@ def kernel_defines() -> dict:
         **{f"PATH_{name.upper()}": f"{code}u" for name, code in PATH_STRATEGIES.items()},
         **{f"LIGHT_{name.upper()}": f"{code}u" for name, code in LIGHT_KINDS.items()},
         **{f"BAD_{name.upper()}": slot for slot, name in enumerate(RAY_CHECKS)},
+        "INSTANCE_MIRROR": f"{INSTANCE_MIRROR}u",
         "POINT_CELL_BITS": POINT_CELL_BITS,
         "POINT_OFFSETS_GROUP": POINT_OFFSETS_GROUP,
     }

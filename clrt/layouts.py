@@ -179,9 +179,9 @@ kernel takes which is declared once, in the signature tables
   208: conditional_at uint  ... of each row's CDF over its texels (env_height rows of env_width + 1 floats)
   212: pad          uint[3]
 
-``SceneInfo`` (64 B) -- the uploaded scene's values (geometry.cl, shading.cl)
+``SceneInfo`` (80 B) -- the uploaded scene's values (geometry.cl, shading.cl)
     0: ambient_light float4  linear RGB, w unused (renderer only, as the rest but
-                             num_tris and packets_at)
+                             num_tris, packets_at and num_instances)
    16: background    float4
    32: packets_at    ulong   -DBVH_WIDE: byte offset of the first TrianglePacket in
                              the wide buffer (BvhWideNode rows before it)
@@ -190,6 +190,32 @@ kernel takes which is declared once, in the signature tables
    48: materials_at, lights_at, textures_at, srgb_at  uint  byte offsets in the
                              renderer's `tables` buffer (Material, Light, Texture
                              rows and the SRGB_TABLE)
+   64: num_instances uint    -DACCEL_INSTANCES: rows of the instance table (0 otherwise)
+   68: pad           uint[3]
+
+``Instance`` (160 B) -- one placement of a mesh in a two-level scene
+(-DACCEL_INSTANCES; docs/instances.md), rows in the caller's order (the
+index a query reports).  Both maps are computed in float64 on the host and
+rounded to float32 once; "world" is the device's frame of the scene, "object"
+the mesh's own device frame:
+    0: to_world   float4[3]  row i: xyz = row i of the linear part, w = translation i:
+                             world_i = dot(to_world[i].xyz, p) + to_world[i].w
+   48: to_object  float4[3]  its inverse, rows likewise
+   96: lo         float4     xyz: min corner of the instance's world box (the mesh's box
+                             mapped and padded for the transform's rounding, rounded
+                             outwards); w unused (0)
+  112: hi         float4     xyz: max corner; w unused (0)
+  128: mesh       int        index of its mesh among the scene's distinct meshes
+  132: root       int        row of that mesh's BVH root in the rows (0 without a BVH)
+  136: first      int        the mesh's first slot (its slots are first .. first + count - 1)
+  140: count      int        the mesh's triangles
+  144: flags      uint       INSTANCE_MIRROR (clrt.config): to_world's determinant is negative
+  148: pad        uint[3]
+In a two-level scene the BvhPairNode rows are the top level's (root at row
+0; a leaf holds one instance, its reference the instance's row here), then
+each distinct mesh's, every reference global; the slots are each mesh's
+triangles in its leaf order, meshes one after another, and ``prim_ids`` gives
+a slot's row in its own mesh's faces.
 
 ``BvhPairNode`` (64 B) -- the BVH as the kernels walk it: one row per inner node, holding
 both children's volumes and references (as Aila & Laine 2009 do with boxes), so
@@ -357,7 +383,11 @@ PATH_LAUNCH = np.dtype([("cam", CAMERA), ("background", float4), ("environment",
                         ("pad", np.uint32, 3)])
 SCENE_INFO = np.dtype([("ambient_light", float4), ("background", float4), ("packets_at", np.uint64),
                        ("num_tris", np.uint32), ("num_lights", np.uint32), ("materials_at", np.uint32),
-                       ("lights_at", np.uint32), ("textures_at", np.uint32), ("srgb_at", np.uint32)])
+                       ("lights_at", np.uint32), ("textures_at", np.uint32), ("srgb_at", np.uint32),
+                       ("num_instances", np.uint32), ("pad", np.uint32, 3)])
+INSTANCE = np.dtype([("to_world", float4, 3), ("to_object", float4, 3), ("lo", float4), ("hi", float4),
+                     ("mesh", np.int32), ("root", np.int32), ("first", np.int32), ("count", np.int32),
+                     ("flags", np.uint32), ("pad", np.uint32, 3)])
 
 # struct name in layouts.h -> numpy dtype; the layout test walks this table.
 STRUCTS = {
@@ -383,4 +413,5 @@ STRUCTS = {
     "Tile": TILE,
     "PathLaunch": PATH_LAUNCH,
     "SceneInfo": SCENE_INFO,
+    "Instance": INSTANCE,
 }

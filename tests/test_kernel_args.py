@@ -66,6 +66,12 @@ def test_signature_tables_match_the_kernels(device, max_buffer_bytes):
     for accel in ("box", "none", "sphere"):
         queries = Accel(mesh, accel=accel, device=device, max_buffer_bytes=max_buffer_bytes)
         _check(queries.context, "trace.cl", queries.device_scene.defines(), queries.kernels, split)
+        # Two levels (-DACCEL_INSTANCES): the instance table too.
+        shifted = np.eye(4)
+        shifted[:3, 3] = (3.0, 0.0, 0.0)
+        instances = Accel([mesh, (mesh, shifted)], accel=accel, device=device, max_buffer_bytes=max_buffer_bytes)
+        assert "ACCEL_INSTANCES" in instances.device_scene.defines()
+        _check(instances.context, "trace.cl", instances.device_scene.defines(), instances.kernels, split)
 
 
 def test_the_device_builders_signatures_match(device):

@@ -153,7 +153,23 @@ typedef struct {
     uint num_tris;               // slots
     uint num_lights;
     uint materials_at, lights_at, textures_at, srgb_at;   // byte offsets in `tables`
+    uint num_instances;          // ACCEL_INSTANCES: rows of the instance table
+    uint pad[3];
 } SceneInfo;
+
+// One placement of a mesh in a two-level scene (-DACCEL_INSTANCES,
+// instances.cl; docs/instances.md): row i of each map holds row i of its
+// linear part in xyz and its translation in w.
+typedef struct {
+    float4 to_world[3];          // object -> world (the device's frames)
+    float4 to_object[3];         // world -> object
+    float4 lo, hi;               // xyz: the instance's conservative world box
+    int mesh;                    // index among the distinct meshes
+    int root;                    // row of the mesh's BVH root
+    int first, count;            // the mesh's slots: first .. first + count - 1
+    uint flags;                  // INSTANCE_MIRROR: to_world's determinant is negative
+    uint pad[3];
+} Instance;
 
 typedef struct {
     float4 left_a, left_b;     // left child: volume in the xyz lanes; w: as_int -> left, left_count
