@@ -262,21 +262,36 @@ lane (lane k = triangle k), so that one float4 operation tests all four:
 A leaf's triangles fill its packets in slot order; the triangle buffers and
 ``prim_ids`` stay as they are (results and shading read them by slot).
 
-``WindingNode`` (144 B) -- the far field of one child of a BvhPairNode row, for
+``WindingNode`` (96 B) -- the far field of one child of a BvhPairNode row, for
 winding numbers (winding.cl; rows x 2, child ``2 * row + side``, side 0 left):
 the first three terms of the Taylor series of its triangles' solid angles about
 ``centre`` (Barill et al. 2018, "Fast winding numbers for soups and clouds"),
 made on the device from the rows and the triangles (trace.cl's winding_nodes),
 device frame, with d = x - centre over the triangles' points x and n their
-unit normals:
+unit normals.  Only the symmetric parts of the moments reach the series (and
+they alone move to a new centre), so only they are kept:
     0: centre  float4  xyz: the triangles' area-weighted centroid; w: radius, no
                        corner of them farther from the centre (rounded up)
-   16: normal  float4  xyz: sum of area * n, the dipole; w: their area
-   32: first   float[9]   row-major 3x3, [i][j]: sum of n_i * integral of d_j dA
-   68: second  float[18]  [i][jk], jk = xx, xy, xz, yy, yz, zz: sum of
-                          n_i * integral of d_j d_k dA
-  140: pad     float
+   16: normal  float4  xyz: sum of area * n, the dipole; w: their area (the sum
+                       of the triangles' areas: it bounds the series' error)
+   32: first   float[6]   the symmetric part of sum of n_i * integral of d_j dA:
+                          [ij] = xx, xy, xz, yy, yz, zz
+   56: second  float[10]  the fully symmetric part of sum of n_i * integral of
+                          d_j d_k dA: [ijk] = xxx, xxy, xxz, xyy, xyz, xzz, yyy,
+                          yyz, yzz, zzz
 A missing child (the right of a one-leaf tree) holds zeros.
+
+``WideWindingNode`` (768 B) -- the same far fields for the wide BVH of CPU devices
+(accel_wide.cl), lane k for child k of a BvhWideNode (the WindingNode of the
+binary child the lane holds, ``WideBvh.sources``), so that one float8 series
+serves all eight; gathered on the host (clrt/query/inside.py), zeros in lanes
+without a child:
+    0: cx, cy, cz      float8  the centres
+   96: radius          float8
+  128: nx, ny, nz      float8  the dipoles
+  224: area            float8
+  256: first           float8[6]   as WindingNode's, lane by lane
+  448: second          float8[10]
 
 ``PseudoNormals`` (96 B) -- per slot, for signs by normal (point.cl): the
 angle-weighted pseudo-normals (Baerentzen & Aanaes 2005) of the triangle's
@@ -351,8 +366,10 @@ float8, int8, int4 = np.dtype((np.float32, 8)), np.dtype((np.int32, 8)), np.dtyp
 BVH_WIDE_NODE = np.dtype([("lo_x", float8), ("lo_y", float8), ("lo_z", float8), ("hi_x", float8),
                           ("hi_y", float8), ("hi_z", float8), ("child", int8), ("count", int8)])
 TRIANGLE_PACKET = np.dtype([("v0", float4, 3), ("v1", float4, 3), ("v2", float4, 3), ("slot", int4)])
-WINDING_NODE = np.dtype([("centre", float4), ("normal", float4), ("first", np.float32, 9),
-                         ("second", np.float32, 18), ("pad", np.float32)])
+WINDING_NODE = np.dtype([("centre", float4), ("normal", float4), ("first", np.float32, 6),
+                         ("second", np.float32, 10)])
+WIDE_WINDING_NODE = np.dtype([(name, float8) for name in ("cx", "cy", "cz", "radius", "nx", "ny", "nz", "area")]
+                             + [("first", float8, 6), ("second", float8, 10)])
 PSEUDO_NORMALS = np.dtype([("edge", float4, 3), ("vertex", float4, 3)])
 BUILD_NODE = np.dtype([("lo", float4), ("hi", float4), ("parent", np.int32), ("count", np.int32),
                        ("rows", np.int32), ("cost", np.float32)])
@@ -404,6 +421,7 @@ STRUCTS = {
     "BvhWideNode": BVH_WIDE_NODE,
     "TrianglePacket": TRIANGLE_PACKET,
     "WindingNode": WINDING_NODE,
+    "WideWindingNode": WIDE_WINDING_NODE,
     "PseudoNormals": PSEUDO_NORMALS,
     "BuildNode": BUILD_NODE,
     "BuildCluster": BUILD_CLUSTER,

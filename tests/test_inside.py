@@ -243,7 +243,10 @@ def test_chunks_single_points_device_arrays_and_one_call_forms(device):
     assert accel.contains(np.zeros((0, 3))).dtype == INSIDE_FIELDS["inside"].dtype
     split = clrt.Accel(mesh, device=device, max_buffer_bytes=8192)
     assert split.geometry.parts() > 1
-    np.testing.assert_array_equal(split.winding_number(points), whole["w"])
+    # split buffers walk the binary rows, where a CPU device walks the wide BVH otherwise: the far fields of
+    # other children, as close to the exact sum
+    assert np.abs(split.winding_number(points) - _exact(mesh, points)).max() <= WINDING_NUMBER_ERROR
+    np.testing.assert_array_equal(split.contains(points), split.winding_number(points) >= 0.5)
     np.testing.assert_array_equal(split.signed_distance(points, sign="normal"),
                                   accel.signed_distance(points, sign="normal"))
 

@@ -198,10 +198,18 @@ typedef struct {
 typedef struct {
     float4 centre;       // xyz: area-weighted centroid; w: radius (rounded up)
     float4 normal;       // xyz: sum of area * unit normal; w: area
-    float first[9];      // [i][j]: sum of n_i * integral of (x - centre)_j
-    float second[18];    // [i][jk], jk = xx, xy, xz, yy, yz, zz: sum of n_i * integral of (x - c)_j (x - c)_k
-    float pad;
+    float first[6];      // [ij] = xx, xy, xz, yy, yz, zz: symmetric part of sum n_i * integral (x - c)_j
+    float second[10];    // [ijk] = xxx, xxy, xxz, xyy, xyz, xzz, yyy, yyz, yzz, zzz: fully symmetric part
+                         // of sum n_i * integral (x - c)_j (x - c)_k
 } WindingNode;
+
+// The WindingNodes of a BvhWideNode's children, lane by lane (CPU devices); fields as layouts.py says.
+typedef struct {
+    float8 cx, cy, cz, radius;
+    float8 nx, ny, nz, area;
+    float8 first[6];
+    float8 second[10];
+} WideWindingNode;
 
 // Per slot: pseudo-normals of its edges and corners (signs by normal, point.cl).
 typedef struct {

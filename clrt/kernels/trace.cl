@@ -301,10 +301,11 @@ __kernel void query_closest_point(POINT_INPUT_PARAMS, __global uchar* results, G
 
 // The winding number of the mesh at each point (winding.cl): output 0, a
 // float a point; output 1, a byte a point: 1 where it is at least 1/2 (the
-// point is inside), as the float32 value says.  `winding`: the tree's
-// WindingNodes (winding_nodes; unused without a BVH).  A bad point writes 0.
+// point is inside), as the float32 value says -- asked alone, by
+// winding_inside's shorter walk, which agrees with it.  `winding`: the tree's
+// far fields (winding_nodes; unused without a BVH).  A bad point writes 0.
 __kernel void query_winding_number(POINT_INPUT_PARAMS, __global uchar* results,
-                                   __global const WindingNode* winding, GEOMETRY_PARAMS)
+                                   __global const WindingFarField* winding, GEOMETRY_PARAMS)
 {
     const uint j = get_global_id(0);
     if (j >= launch.num_rays)
@@ -312,15 +313,18 @@ __kernel void query_winding_number(POINT_INPUT_PARAMS, __global uchar* results,
     const uint i = POINT_ORDER(order, launch.num_rays)[j];
     const Geometry g = make_geometry(GEOMETRY_ARGS);
     const RayInput in = make_point_input(POINT_INPUT_ARGS);
-    float3 p;
-    float max_dist;
-    float w = 0.0f;
-    if (load_point(&in, i, &p, &max_dist))
-        w = (float)winding_number(&g, winding, p);
     __global float* winding_out = RESULT_AT(float, 0);
     __global uchar* inside_out = RESULT_AT(uchar, 1);
-    if (winding_out)
-        winding_out[i] = w;
+    float3 p;
+    float max_dist;
+    const bool good = load_point(&in, i, &p, &max_dist);
+    if (!winding_out) {
+        if (inside_out)
+            inside_out[i] = good && winding_inside(&g, winding, p) ? 1 : 0;
+        return;
+    }
+    const float w = good ? (float)winding_number(&g, winding, p) : 0.0f;
+    winding_out[i] = w;
     if (inside_out)
         inside_out[i] = w >= 0.5f ? 1 : 0;
 }
@@ -338,7 +342,7 @@ __kernel void query_winding_number(POINT_INPUT_PARAMS, __global uchar* results,
 // buffer, or 0), into output 0.
 inline void signed_distance(const Geometry* g, const RayInput* in, const QueryLaunch* launch,
                             __global uchar* results, uint i, const int rule,
-                            __global const WindingNode* winding, __global const PseudoNormals* normals)
+                            __global const WindingFarField* winding, __global const PseudoNormals* normals)
 {
     float3 p;
     float max_dist;
@@ -347,7 +351,7 @@ inline void signed_distance(const Geometry* g, const RayInput* in, const QueryLa
         const PointHit best = closest_point(g, p, INFINITY, POINT_MARGIN(p, in->scene_lo, in->scene_hi));
         bool inside;
         if (rule == SIGN_WINDING)
-            inside = (float)winding_number(g, winding, p) >= 0.5f;
+            inside = winding_inside(g, winding, p);
         else if (rule == SIGN_PARITY)
             inside = inside_by_parity(g, p, in->scene_lo, in->scene_hi);
         else
@@ -358,7 +362,7 @@ inline void signed_distance(const Geometry* g, const RayInput* in, const QueryLa
 }
 
 __kernel void query_signed_distance_winding(POINT_INPUT_PARAMS, __global uchar* results,
-                                            __global const WindingNode* winding, GEOMETRY_PARAMS)
+                                            __global const WindingFarField* winding, GEOMETRY_PARAMS)
 {
     const uint j = get_global_id(0);
     if (j >= launch.num_rays)
@@ -409,7 +413,7 @@ __kernel void winding_nodes(__global WindingNode* winding, __global const int* l
         } else if (child.y == 0) {
             *out = joined_winding_node(winding + 2 * child.x, winding + 2 * child.x + 1);
         } else {
-            WindingNode none = {(float4)(0.0f), (float4)(0.0f), {0}, {0}, 0.0f};
+            WindingNode none = {(float4)(0.0f), (float4)(0.0f), {0}, {0}};
             *out = none;
         }
     }

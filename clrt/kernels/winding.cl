@@ -12,28 +12,58 @@
 // closed surface's face has w = 1/2.
 //
 // Through the BVH (Barill et al. 2018, "Fast winding numbers for soups and
-// clouds"): each child of a row carries the first three terms of the Taylor
-// series of its triangles' solid angles about their centre (a WindingNode,
-// layouts.h: the dipole, and the first and second moments of the normals),
-// and the walk takes a child whose every corner lies within its radius r of
-// the centre, while p lies farther than WINDING_BETA r from it, from that
-// series instead of opening it; the rest it opens, down to exact leaves.
-// The series' error falls as (r / distance)^3 times the child's own solid
-// angle, and the errors of many children partly cancel: WINDING_BETA = 6
-// kept the largest error of 200 points in and around each of seven scans (4k
-// to 75k triangles, device-built trees) at 2.1e-5 and of the tests' meshes at
-// 1e-5, against the exact sum (clrt.query.results.WINDING_NUMBER_ERROR is
-// 1e-4; tests/test_inside.py).  On one of those scans (cow, a host SAH tree)
-// 2, Barill's choice, gave 5.6e-3, and 4 gave 1.8e-4 -- 4.2e-3 without the
-// series' last term.  Without a BVH every triangle is summed exactly.
+// clouds"): each child carries the first three terms of the Taylor series of
+// its triangles' solid angles about their centre (a WindingNode, layouts.h:
+// the dipole, and the symmetric parts of the first and second moments of the
+// normals), and the walk takes a child whose every corner lies within its
+// radius r of the centre, while p lies farther than beta r from it, from that
+// series instead of opening it; the rest it opens, down to exact leaves.  The
+// series is evaluated in float32 (its terms are each within some 20 ulps of
+// the child's A / R^2, A its area, R the distance: far below the series' own
+// error) and summed in double precision.
+//
+// Values (winding_number): beta = WINDING_BETA = 6.  The series' error falls
+// as (r / distance)^3 times the child's own solid angle, and the errors of
+// many children partly cancel: 6 kept the largest error of 200 points in and
+// around each of seven scans (4k to 75k triangles, device-built trees) at
+// 2.1e-5 and of the tests' meshes at 1e-5, against the exact sum
+// (clrt.query.results.WINDING_NUMBER_ERROR is 1e-4; tests/test_inside.py).
+// On one of those scans (cow, a host SAH tree) 2, Barill's choice, gave
+// 5.6e-3, and 4 gave 1.8e-4 -- 4.2e-3 without the series' last term.
+// Without a BVH every triangle is summed exactly.
+//
+// Inside or not (winding_inside: contains, the "winding" sign) needs only the
+// side of 1/2, so a first walk takes beta = WINDING_SIGN_BETA = 3 (a quarter
+// of the far fields) and adds up a proven bound of its own error
+// (remainder_bound); only where that leaves the side in doubt does the second,
+// winding_number's walk decide -- see winding_inside for why the two agree.
+//
+// CPU devices that walk the wide BVH (-DBVH_WIDE, accel_wide.cl) walk it here
+// too: one float8 series for the eight children of a wide node
+// (WideWindingNode), and a leaf's packets of four triangles in double4.
 #ifndef CLRT_WINDING_CL
 #define CLRT_WINDING_CL
 
 #include "geometry.cl"
 #include "point.cl"
+#include "lanes.cl"
 
-#define WINDING_BETA 6.0
+#define WINDING_BETA 6.0f
+#define WINDING_SIGN_BETA 3.0f
 #define INV_4PI 0.07957747154594767
+
+// How far from 1/2 winding_inside's first walk must put a point, beyond its
+// own error bound, to decide: ten times WINDING_NUMBER_ERROR, the documented
+// error of winding_number's values (see winding_inside).
+#define WINDING_SIGN_MARGIN 1e-3
+
+// The far fields the walk reads: a WindingNode per child of a binary row, or
+// on CPU devices that walk the wide BVH a WideWindingNode per wide node.
+#ifdef BVH_WIDE
+typedef WideWindingNode WindingFarField;
+#else
+typedef WindingNode WindingFarField;
+#endif
 
 // The signed solid angle of triangle (a, b, c) seen from p: positive where p
 // lies behind its face ((b - a) x (c - a) points away from p).
@@ -61,46 +91,153 @@ inline point_real leaf_solid_angle(const Geometry* g, point_real3 p, int first, 
     return sum;
 }
 
-// The series of a WindingNode at p, times 4 pi: with r = centre - p, R = |r|,
-// N the dipole, M the first moment and T the second,
+// The series of a far field at p, times 4 pi, for a scalar (float) or lanes
+// (float8) of children: with (x, y, z) = r = centre - p, R = |r|, N the
+// dipole, S1 and S2 the symmetric first and second moments and
+// c_k = sum_i S2[i][i][k],
 //   N.r / R^3
-// + (tr M - 3 r.M r / R^2) / R^3
-// + (15 T[r, r, r] / R^4 - 3 (2 r.u + r.w) / R^2) / (2 R^3),
-// u_k = sum_i T[i][i][k], w_i = sum_j T[i][j][j]: the three terms of
-// integral n . (x - p) / |x - p|^3 dA with (x - p) / |x - p|^3 expanded about
-// the centre (its first and second derivatives contracted with the moments).
-inline point_real far_field(__global const WindingNode* node, point_real3 r, point_real r2)
+// + (tr S1 - 3 r.S1 r / R^2) / R^3
+// + (15 S2[r, r, r] / R^4 - 9 r.c / R^2) / (2 R^3):
+// the three terms of integral n . (x - p) / |x - p|^3 dA with (x - p) / |x - p|^3
+// expanded about the centre (its first and second derivatives, symmetric
+// tensors, contracted with the moments).
+#define DEFINE_FAR_FIELD(NAME, T) \
+inline T NAME(T x, T y, T z, T r2, T nx, T ny, T nz, __global const T* s1, __global const T* s2) \
+{ \
+    const T inv_r2 = 1.0f / r2; \
+    const T xx = x * x, yy = y * y, zz = z * z; \
+    const T order0 = nx * x + ny * y + nz * z; \
+    const T s1rr = s1[0] * xx + s1[3] * yy + s1[5] * zz + 2.0f * (s1[1] * x * y + s1[2] * x * z + s1[4] * y * z); \
+    const T order1 = s1[0] + s1[3] + s1[5] - 3.0f * s1rr * inv_r2; \
+    const T s2rrr = x * (s2[0] * xx + 3.0f * (s2[1] * x * y + s2[2] * x * z + s2[3] * yy + s2[5] * zz) \
+                         + 6.0f * s2[4] * y * z) \
+                  + y * (s2[6] * yy + 3.0f * (s2[7] * y * z + s2[8] * zz)) + s2[9] * z * zz; \
+    const T cr = x * (s2[0] + s2[3] + s2[5]) + y * (s2[1] + s2[6] + s2[8]) + z * (s2[2] + s2[7] + s2[9]); \
+    const T order2 = 0.5f * (15.0f * s2rrr * inv_r2 - 9.0f * cr) * inv_r2; \
+    return (order0 + order1 + order2) * inv_r2 * rsqrt(r2); \
+}
+DEFINE_FAR_FIELD(far_field, float)
+#ifdef BVH_WIDE
+DEFINE_FAR_FIELD(far_field_lanes, float8)
+#endif
+
+// A proven bound of the error of a child's series at p, times 4 pi (area A,
+// radius r, r2 = R^2, q = r / R < 1).  (x - p) / |x - p|^3 . n is the
+// derivative along n of -1 / |x - p|; the k-th derivative of 1 / |y| along one
+// direction is k! P_k(cos) / |y|^(k + 1), |P_k| <= 1 (Legendre's generating
+// function), and a symmetric multilinear form is no larger on mixed directions
+// than on one (Banach 1938); so the series' term of order k is at most
+// (k + 1) (r / R)^k / R^2 a unit of area, and the remainder after the terms of
+// order 0, 1, 2, summed over k >= 3, is at most
+//   A / R^2 * sum_{k >= 3} (k + 1) q^k = A / R^2 * q^3 (4 - 3 q) / (1 - q)^2.
+// Added: 2^-12 A / R^2 for the float32 evaluation (its terms are at most
+// 20 A / R when q <= 1/3, each rounded some 20 times), and 1/1000 of the
+// whole for the rounding of this bound and of A.
+#define DEFINE_REMAINDER_BOUND(NAME, T) \
+inline T NAME(T area, T radius, T r2) \
+{ \
+    const T q = radius * rsqrt(r2); \
+    return 1.001f * area / r2 * (q * q * q * (4.0f - 3.0f * q) / ((1.0f - q) * (1.0f - q)) + 0x1p-12f); \
+}
+DEFINE_REMAINDER_BOUND(remainder_bound, float)
+#ifdef BVH_WIDE
+DEFINE_REMAINDER_BOUND(remainder_bound_lanes, float8)
+
+// The sum of the eight lanes.
+inline float lanes_sum(float8 v)
 {
-    const point_real inv_r2 = 1 / r2;
-    const point_real inv_r3 = inv_r2 / sqrt(r2);
-    __global const float* m = node->first;
-    __global const float* t = node->second;
-    const point_real3 N = TO_POINT_REAL3(node->normal.xyz);
-    const point_real3 Mr = (point_real3)(m[0] * r.x + m[1] * r.y + m[2] * r.z,
-                                         m[3] * r.x + m[4] * r.y + m[5] * r.z,
-                                         m[6] * r.x + m[7] * r.y + m[8] * r.z);
-    const point_real trace_m = (point_real)m[0] + m[4] + m[8];
-    point_real rrr = 0;   // T[r, r, r]
-    for (int i = 0; i < 3; ++i) {
-        __global const float* ti = t + 6 * i;
-        const point_real q = ti[0] * r.x * r.x + ti[3] * r.y * r.y + ti[5] * r.z * r.z
-                           + 2 * (ti[1] * r.x * r.y + ti[2] * r.x * r.z + ti[4] * r.y * r.z);
-        rrr += (i == 0 ? r.x : (i == 1 ? r.y : r.z)) * q;
-    }
-    const point_real3 u = (point_real3)(t[0] + t[7] + t[14], t[1] + t[9] + t[16], t[2] + t[10] + t[17]);
-    const point_real3 w = (point_real3)(t[0] + t[3] + t[5], t[6] + t[9] + t[11], t[12] + t[15] + t[17]);
-    const point_real order0 = dot(N, r);
-    const point_real order1 = trace_m - 3 * dot(r, Mr) * inv_r2;
-    const point_real order2 = (15 * rrr * inv_r2 * inv_r2 - 3 * (2 * dot(r, u) + dot(r, w)) * inv_r2) / 2;
-    return (order0 + order1 + order2) * inv_r3;
+    const float4 a = v.lo + v.hi;
+    const float2 b = a.lo + a.hi;
+    return b.x + b.y;
 }
 
-// The winding number of the mesh at p (device frame); `winding`: the
-// WindingNodes of the rows (unused without a BVH).
-inline point_real winding_number(const Geometry* g, __global const WindingNode* winding, float3 p)
+#ifdef cl_khr_fp64
+typedef double4 point_real4;
+#define TO_POINT_REAL4 convert_double4
+#else
+typedef float4 point_real4;
+#define TO_POINT_REAL4(x) (x)
+#endif
+
+// The solid angles of the triangles of a leaf's packets first .. first +
+// count - 1 seen from p, summed: solid_angle's steps, four triangles a time
+// (an empty lane's corners are zeros, their det exactly 0).
+inline point_real leaf_packets_solid_angle(const Geometry* g, point_real3 p, int first, int count)
+{
+    point_real4 sum = 0;
+    for (int k = first; k < first + count; ++k) {
+        __global const TrianglePacket* t = g->packets + k;
+        const point_real4 ax = TO_POINT_REAL4(t->v0[0]) - p.x, ay = TO_POINT_REAL4(t->v0[1]) - p.y;
+        const point_real4 az = TO_POINT_REAL4(t->v0[2]) - p.z;
+        const point_real4 bx = TO_POINT_REAL4(t->v1[0]) - p.x, by = TO_POINT_REAL4(t->v1[1]) - p.y;
+        const point_real4 bz = TO_POINT_REAL4(t->v1[2]) - p.z;
+        const point_real4 cx = TO_POINT_REAL4(t->v2[0]) - p.x, cy = TO_POINT_REAL4(t->v2[1]) - p.y;
+        const point_real4 cz = TO_POINT_REAL4(t->v2[2]) - p.z;
+        const point_real4 la = sqrt(ax * ax + ay * ay + az * az), lb = sqrt(bx * bx + by * by + bz * bz);
+        const point_real4 lc = sqrt(cx * cx + cy * cy + cz * cz);
+        const point_real4 det = ax * (by * cz - bz * cy) + ay * (bz * cx - bx * cz) + az * (bx * cy - by * cx);
+        const point_real4 den = la * lb * lc + (ax * bx + ay * by + az * bz) * lc + (bx * cx + by * cy + bz * cz) * la
+                              + (cx * ax + cy * ay + cz * az) * lb;
+        sum += select(2 * atan2(det, den), (point_real4)(0), det == 0);
+    }
+    return sum.x + sum.y + sum.z + sum.w;
+}
+#endif
+
+// The sum of the solid angles of the mesh seen from p (device frame), with
+// each child farther than beta times its radius taken from its series;
+// `winding`: the far fields (unused without a BVH).  With `bounded`, *bound
+// is set to a proven bound of the sum's error (remainder_bound).
+#if defined(ACCEL_BVH) && defined(BVH_WIDE)
+inline point_real winding_sum(const Geometry* g, __global const WindingFarField* winding, float3 p, float beta,
+                              const bool bounded, float* bound)
 {
     const point_real3 pr = TO_POINT_REAL3(p);
     point_real sum = 0;
+    float err = 0.0f;
+    // Each node pushes its near inner children and takes the last: at most
+    // WIDE - 1 more a level.
+    int stack[WIDE_STACK_SIZE];
+    int sp = 0;
+    int node = 0;
+    for (;;) {
+        __global const BvhWideNode* n = g->wide_nodes + node;
+        __global const WideWindingNode* w = winding + node;
+        const float8 x = w->cx - p.x, y = w->cy - p.y, z = w->cz - p.z;
+        const float8 r2 = x * x + y * y + z * z;
+        const float8 reach = beta * w->radius;
+        const int8 present = n->count >= 0;
+        const int8 far = present & (r2 > reach * reach);
+        if (any(far)) {
+            sum += lanes_sum(select((float8)(0.0f),
+                                    far_field_lanes(x, y, z, r2, w->nx, w->ny, w->nz, w->first, w->second), far));
+            if (bounded)
+                err += lanes_sum(select((float8)(0.0f), remainder_bound_lanes(w->area, w->radius, r2), far));
+        }
+        __global const int* child = (__global const int*)&n->child;
+        __global const int* count = (__global const int*)&n->count;
+        for (uint near = lane_bits(present & ~far); near; near &= near - 1u) {
+            const int k = 31 - clz(near & (0u - near));
+            if (count[k] > 0)
+                sum += leaf_packets_solid_angle(g, pr, child[k], count[k]);
+            else
+                stack[sp++] = child[k];
+        }
+        if (sp == 0)
+            break;
+        node = stack[--sp];
+    }
+    if (bounded)
+        *bound = err;
+    return sum;
+}
+#else
+inline point_real winding_sum(const Geometry* g, __global const WindingFarField* winding, float3 p, float beta,
+                              const bool bounded, float* bound)
+{
+    const point_real3 pr = TO_POINT_REAL3(p);
+    point_real sum = 0;
+    float err = 0.0f;
 #ifdef ACCEL_BVH
     // Every near inner child is opened; the right one waits on the stack while
     // the left is walked, so it holds at most one row a level.
@@ -115,17 +252,21 @@ inline point_real winding_number(const Geometry* g, __global const WindingNode* 
             if (child.y < 0)
                 continue;
             __global const WindingNode* node = winding + 2 * row + side;
-            const point_real3 r = TO_POINT_REAL3(node->centre.xyz) - pr;
-            const point_real r2 = dot(r, r);
-            const point_real reach = WINDING_BETA * node->centre.w;
-            if (r2 > reach * reach)
-                sum += far_field(node, r, r2);
-            else if (child.y > 0)
+            const float3 r = node->centre.xyz - p;
+            const float r2 = dot(r, r);
+            const float reach = beta * node->centre.w;
+            if (r2 > reach * reach) {
+                sum += far_field(r.x, r.y, r.z, r2, node->normal.x, node->normal.y, node->normal.z, node->first,
+                                 node->second);
+                if (bounded)
+                    err += remainder_bound(node->normal.w, node->centre.w, r2);
+            } else if (child.y > 0) {
                 sum += leaf_solid_angle(g, pr, child.x, child.y);
-            else if (next < 0)
+            } else if (next < 0) {
                 next = child.x;
-            else
+            } else {
                 stack[sp++] = child.x;
+            }
         }
         if (next < 0) {
             if (sp == 0)
@@ -137,7 +278,37 @@ inline point_real winding_number(const Geometry* g, __global const WindingNode* 
 #else
     sum = leaf_solid_angle(g, pr, 0, (int)g->num_tris);
 #endif
-    return sum * INV_4PI;
+    if (bounded)
+        *bound = err;
+    return sum;
+}
+#endif
+
+// The winding number of the mesh at p (device frame); `winding`: the far
+// fields (unused without a BVH).
+inline point_real winding_number(const Geometry* g, __global const WindingFarField* winding, float3 p)
+{
+    float unused;
+    return winding_sum(g, winding, p, WINDING_BETA, false, &unused) * INV_4PI;
+}
+
+// Is p inside -- (float)winding_number(p) >= 1/2?  A first walk with
+// WINDING_SIGN_BETA gives w1 and a proven bound e1 of |w1 - w| (w the exact
+// sum; the solid angles of the leaves' triangles are taken as exact: they are
+// double precision).  Where |w1 - 1/2| > e1 + WINDING_SIGN_MARGIN, the exact
+// w lies more than WINDING_SIGN_MARGIN from 1/2, on w1's side, and so does
+// winding_number's value as long as it keeps within WINDING_SIGN_MARGIN of w
+// -- ten times its documented error (clrt.query.results.WINDING_NUMBER_ERROR).
+// Elsewhere winding_number decides, so the two agree there by construction.
+inline bool winding_inside(const Geometry* g, __global const WindingFarField* winding, float3 p)
+{
+#ifdef ACCEL_BVH
+    float bound;
+    const point_real w1 = winding_sum(g, winding, p, WINDING_SIGN_BETA, true, &bound) * INV_4PI;
+    if (fabs(w1 - (point_real)0.5) > bound * INV_4PI + WINDING_SIGN_MARGIN)
+        return w1 > 0.5;
+#endif
+    return (float)winding_number(g, winding, p) >= 0.5f;
 }
 
 // ---- The WindingNodes of a tree, made level by level from the deepest up
@@ -146,6 +317,12 @@ inline point_real winding_number(const Geometry* g, __global const WindingNode* 
 // Sums in double precision where the device has it; the centre is rounded to
 // float32 first and every moment taken about the rounded one.
 
+// Index of the symmetric pair (i, j) among first[6], and the index triples
+// of second[10], as layouts.h orders them.
+__constant uchar SYM2_AT[3][3] = {{0, 1, 2}, {1, 3, 4}, {2, 4, 5}};
+__constant uchar SYM3_OF[10][3] = {{0, 0, 0}, {0, 0, 1}, {0, 0, 2}, {0, 1, 1}, {0, 1, 2},
+                                   {0, 2, 2}, {1, 1, 1}, {1, 1, 2}, {1, 2, 2}, {2, 2, 2}};
+
 // The float32 radius of a child from its double one: rounded up.
 inline float radius_up(point_real r)
 {
@@ -153,7 +330,10 @@ inline float radius_up(point_real r)
     return (point_real)f >= r ? f : nextafter(f, INFINITY);
 }
 
-// The WindingNode of the triangles in slots first .. first + count - 1.
+// The WindingNode of the triangles in slots first .. first + count - 1.  With
+// v a triangle's vector area (area times unit normal), m its centroid and
+// Q[j][k] = integral of d_j d_k over it / area = (sum of its corners' d_j d_k
+// + (sum d)_j (sum d)_k) / 12: first = sym(sum v (x) m), second = sym(sum v (x) Q).
 inline WindingNode leaf_winding_node(const Geometry* g, int first, int count)
 {
     point_real area = 0;
@@ -173,46 +353,48 @@ inline WindingNode leaf_winding_node(const Geometry* g, int first, int count)
     const point_real3 cr = TO_POINT_REAL3(centre);
     WindingNode node;
     point_real3 dipole = (point_real3)(0);
-    point_real m[9] = {0, 0, 0, 0, 0, 0, 0, 0, 0};
-    point_real sec[18] = {0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0};
+    point_real m[6] = {0, 0, 0, 0, 0, 0};
+    point_real sec[10] = {0, 0, 0, 0, 0, 0, 0, 0, 0, 0};
     point_real radius2 = 0;
     for (int s = first; s < first + count; ++s) {
         __global const TriangleVerts* t = SPLIT_AT(g, tris, s);
         const point_real3 d0 = TO_POINT_REAL3(t->v0.xyz) - cr, d1 = TO_POINT_REAL3(t->v1.xyz) - cr;
         const point_real3 d2 = TO_POINT_REAL3(t->v2.xyz) - cr;
         radius2 = fmax(radius2, fmax(dot(d0, d0), fmax(dot(d1, d1), dot(d2, d2))));
-        const point_real3 va = cross(d1 - d0, d2 - d0) / 2;   // area times the unit normal
+        const point_real3 va = cross(d1 - d0, d2 - d0) / 2;
         const point_real3 sum = d0 + d1 + d2;
         dipole += va;
-        const point_real vi[3] = {va.x, va.y, va.z};
-        const point_real di[3] = {sum.x / 3, sum.y / 3, sum.z / 3};
-        // integral of d_j d_k over the triangle, over its area: (sum of the
-        // corners' d_j d_k + (sum d)_j (sum d)_k) / 12
+        const point_real v[3] = {va.x, va.y, va.z};
+        const point_real mid[3] = {sum.x / 3, sum.y / 3, sum.z / 3};
         const point_real x0[3] = {d0.x, d0.y, d0.z}, x1[3] = {d1.x, d1.y, d1.z}, x2[3] = {d2.x, d2.y, d2.z};
         const point_real sx[3] = {sum.x, sum.y, sum.z};
-        for (int i = 0; i < 3; ++i) {
-            for (int j = 0; j < 3; ++j)
-                m[3 * i + j] += vi[i] * di[j];
-            int jk = 0;
-            for (int j = 0; j < 3; ++j)
-                for (int k = j; k < 3; ++k, ++jk)
-                    sec[6 * i + jk] += vi[i] * (x0[j] * x0[k] + x1[j] * x1[k] + x2[j] * x2[k] + sx[j] * sx[k]) / 12;
+        point_real q[3][3];
+        for (int j = 0; j < 3; ++j)
+            for (int k = 0; k < 3; ++k)
+                q[j][k] = (x0[j] * x0[k] + x1[j] * x1[k] + x2[j] * x2[k] + sx[j] * sx[k]) / 12;
+        for (int i = 0; i < 3; ++i)
+            for (int j = i; j < 3; ++j)
+                m[SYM2_AT[i][j]] += (v[i] * mid[j] + v[j] * mid[i]) / 2;
+        for (int t3 = 0; t3 < 10; ++t3) {
+            const int i = SYM3_OF[t3][0], j = SYM3_OF[t3][1], k = SYM3_OF[t3][2];
+            sec[t3] += (v[i] * q[j][k] + v[j] * q[i][k] + v[k] * q[i][j]) / 3;
         }
     }
     node.centre = (float4)(centre, radius_up(sqrt(radius2)));
     node.normal = (float4)(convert_float3(dipole), (float)area);
-    for (int k = 0; k < 9; ++k)
+    for (int k = 0; k < 6; ++k)
         node.first[k] = (float)m[k];
-    for (int k = 0; k < 18; ++k)
+    for (int k = 0; k < 10; ++k)
         node.second[k] = (float)sec[k];
-    node.pad = 0.0f;
     return node;
 }
 
 // The WindingNode of two children joined (an inner child: its row's two
-// WindingNodes, `a` and `b`): moments moved to the joint centre (with
-// e = child centre - joint centre, d = d' + e) and summed, the radius the
-// farthest child's reach.
+// WindingNodes, `a` and `b`): moments moved to the joint centre and summed,
+// the radius the farthest child's reach.  With e = child centre - joint
+// centre (d = d' + e) the full moments move as M + N (x) e and
+// T + M (x) e + (M (x) e)^(jk swapped) + N (x) e (x) e; their symmetric parts
+// therefore as S1 + sym(N (x) e) and S2 + 2 sym(S1 (x) e) + sym(N (x) e (x) e).
 inline WindingNode joined_winding_node(__global const WindingNode* a, __global const WindingNode* b)
 {
     const point_real area_a = a->normal.w, area_b = b->normal.w;
@@ -223,8 +405,8 @@ inline WindingNode joined_winding_node(__global const WindingNode* a, __global c
     WindingNode node;
     point_real radius = 0;
     point_real3 dipole = (point_real3)(0);
-    point_real m[9] = {0, 0, 0, 0, 0, 0, 0, 0, 0};
-    point_real sec[18] = {0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0};
+    point_real m[6] = {0, 0, 0, 0, 0, 0};
+    point_real sec[10] = {0, 0, 0, 0, 0, 0, 0, 0, 0, 0};
     for (int c = 0; c < 2; ++c) {
         __global const WindingNode* child = c == 0 ? a : b;
         const point_real3 e3 = TO_POINT_REAL3(child->centre.xyz) - cr;
@@ -232,24 +414,25 @@ inline WindingNode joined_winding_node(__global const WindingNode* a, __global c
         const point_real3 n3 = TO_POINT_REAL3(child->normal.xyz);
         dipole += n3;
         const point_real e[3] = {e3.x, e3.y, e3.z}, n[3] = {n3.x, n3.y, n3.z};
-        // first: M_ij + N_i e_j; second: T_ijk + M_ij e_k + M_ik e_j + N_i e_j e_k
-        for (int i = 0; i < 3; ++i) {
+        point_real s1[3][3];
+        for (int i = 0; i < 3; ++i)
             for (int j = 0; j < 3; ++j)
-                m[3 * i + j] += child->first[3 * i + j] + n[i] * e[j];
-            int jk = 0;
-            for (int j = 0; j < 3; ++j)
-                for (int k = j; k < 3; ++k, ++jk)
-                    sec[6 * i + jk] += child->second[6 * i + jk] + child->first[3 * i + j] * e[k]
-                                     + child->first[3 * i + k] * e[j] + n[i] * e[j] * e[k];
+                s1[i][j] = child->first[SYM2_AT[i][j]];
+        for (int i = 0; i < 3; ++i)
+            for (int j = i; j < 3; ++j)
+                m[SYM2_AT[i][j]] += s1[i][j] + (n[i] * e[j] + n[j] * e[i]) / 2;
+        for (int t3 = 0; t3 < 10; ++t3) {
+            const int i = SYM3_OF[t3][0], j = SYM3_OF[t3][1], k = SYM3_OF[t3][2];
+            sec[t3] += child->second[t3] + 2 * (s1[i][j] * e[k] + s1[j][k] * e[i] + s1[i][k] * e[j]) / 3
+                     + (n[i] * e[j] * e[k] + n[j] * e[i] * e[k] + n[k] * e[i] * e[j]) / 3;
         }
     }
     node.centre = (float4)(centre, radius_up(radius));
     node.normal = (float4)(convert_float3(dipole), (float)area);
-    for (int k = 0; k < 9; ++k)
+    for (int k = 0; k < 6; ++k)
         node.first[k] = (float)m[k];
-    for (int k = 0; k < 18; ++k)
+    for (int k = 0; k < 10; ++k)
         node.second[k] = (float)sec[k];
-    node.pad = 0.0f;
     return node;
 }
 

@@ -27,7 +27,8 @@ from clrt.accel.rows import tree_levels
 from clrt.device.context import format_bytes
 from clrt.device.program import launch_size
 from clrt.errors import DeviceMemoryError, InputError
-from clrt.layouts import PSEUDO_NORMALS, WINDING_NODE
+from clrt.accel.wide import WideBvh
+from clrt.layouts import PSEUDO_NORMALS, WIDE_WINDING_NODE, WINDING_NODE
 
 #: The sign rules of signed distances: the query kernel of each (trace.cl).
 SIGN_KERNELS = {"winding": "query_signed_distance_winding", "parity": "query_signed_distance_parity",
@@ -47,16 +48,48 @@ def sign_kernel(sign) -> str:
 
 
 def winding_nodes(queue: cl.CommandQueue, kernel: cl.Kernel, rows: np.ndarray, geometry_args: tuple,
-                  max_alloc: int) -> cl.Buffer:
-    """The WindingNodes (``2 * len(rows)``) of the uploaded tree whose rows the
-    host holds as ``rows``, made on the device by ``kernel`` (trace.cl's
-    winding_nodes) with the geometry's arguments ``geometry_args`` (its
-    buffers, then its SceneInfo).  DeviceMemoryError when they exceed one
-    allocation (``max_alloc`` bytes)."""
+                  max_alloc: int, wide: WideBvh | None = None) -> cl.Buffer:
+    """The far fields that the winding numbers' walk reads (winding.cl's
+    WindingFarField): the WindingNodes (``2 * len(rows)``) of the uploaded tree
+    whose rows the host holds as ``rows``, made on the device by ``kernel``
+    (trace.cl's winding_nodes) with the geometry's arguments ``geometry_args``
+    (its buffers, then its SceneInfo) -- or, where the device walks the wide
+    BVH ``wide``, those gathered lane by lane into its WideWindingNodes.
+    DeviceMemoryError when they exceed one allocation (``max_alloc`` bytes)."""
     nbytes = 2 * len(rows) * WINDING_NODE.itemsize
+    if wide is not None:
+        nbytes = max(nbytes, len(wide.nodes) * WIDE_WINDING_NODE.itemsize)
     if nbytes > max_alloc:
         raise DeviceMemoryError(f"the winding numbers' far fields need {format_bytes(nbytes)} in one buffer, "
                                 f"more than the device's largest allocation ({format_bytes(max_alloc)})")
+    nodes = binary_winding_nodes(queue, kernel, rows, geometry_args)
+    if wide is None:
+        return nodes
+    binary = np.empty(2 * len(rows), WINDING_NODE)
+    cl.enqueue_copy(queue, binary, nodes)
+    return cl.Buffer(queue.context, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR,
+                     hostbuf=wide_winding_nodes(binary, wide.sources))
+
+
+def wide_winding_nodes(binary: np.ndarray, sources: np.ndarray) -> np.ndarray:
+    """(N,) WIDE_WINDING_NODE: lane k of node n the WindingNode ``binary[sources[n, k]]``
+    (clrt.accel.wide.WideBvh.sources), zeros where that is -1."""
+    present = sources >= 0
+    lanes = binary[np.where(present, sources, 0)]
+    out = np.zeros(len(sources), WIDE_WINDING_NODE)
+    for k, name in enumerate(("cx", "cy", "cz", "radius")):
+        out[name] = np.where(present, lanes["centre"][..., k], 0)
+    for k, name in enumerate(("nx", "ny", "nz", "area")):
+        out[name] = np.where(present, lanes["normal"][..., k], 0)
+    for name in ("first", "second"):   # (N, 8, m) -> (N, m, 8)
+        out[name] = np.where(present[..., None], lanes[name], 0).transpose(0, 2, 1)
+    return out
+
+
+def binary_winding_nodes(queue: cl.CommandQueue, kernel: cl.Kernel, rows: np.ndarray,
+                         geometry_args: tuple) -> cl.Buffer:
+    """The WindingNodes (``2 * len(rows)``) of the uploaded tree, a level at a time."""
+    nbytes = 2 * len(rows) * WINDING_NODE.itemsize
     mf = cl.mem_flags
     nodes = cl.Buffer(queue.context, mf.READ_WRITE, nbytes)
     levels = [cl.Buffer(queue.context, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=level) for level in tree_levels(rows)]

@@ -113,7 +113,7 @@ class PointQueries:
             return cached[1]
         if self.acceleration.is_bvh:
             nodes = winding_nodes(self.queue, self.kernels["winding_nodes"], self.acceleration.rows,
-                                  (*self.geometry.buffer_args, self._scene_value), self.max_alloc)
+                                  (*self.geometry.buffer_args, self._scene_value), self.max_alloc, self.geometry.wide)
         else:
             nodes = self._buffer("no_winding_nodes", 1)
         self._winding_cache = (key, nodes)
