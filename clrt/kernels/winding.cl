@@ -312,9 +312,10 @@ inline point_real winding_number(const Geometry* g, __global const WindingFarFie
 // winding_number's value as long as it keeps within WINDING_SIGN_MARGIN of w
 // -- ten times its documented error (clrt.query.results.WINDING_NUMBER_ERROR).
 // Elsewhere winding_number decides, so the two agree there by construction.
+// (Without double precision the leaves are float32 too: no first walk.)
 inline bool winding_inside(const Geometry* g, __global const WindingFarField* winding, float3 p)
 {
-#ifdef ACCEL_BVH
+#if defined(ACCEL_BVH) && defined(cl_khr_fp64)
     float bound;
     const point_real w1 = winding_sum(g, winding, p, WINDING_SIGN_BETA, true, &bound) * INV_4PI;
     if (fabs(w1 - (point_real)0.5) > bound * INV_4PI + WINDING_SIGN_MARGIN)
