@@ -17,6 +17,15 @@
 // the same distances for the same triangles and gives brute force's answer
 // bit for bit.  Ties go to the lower input triangle index, as hit.cl's.
 //
+// CPU devices that walk the wide BVH (-DBVH_WIDE, accel_wide.cl) walk it
+// here too (walk_wide_points): the box distances of a node's eight children
+// in one float8 computation, nearest first, and a leaf's packets of four
+// triangles through a float32 lower bound of each one's distance
+// (packet_distance_bounds), proven to lie below the double precision one
+// that visit_point_triangle would compute: only a triangle that could still
+// be the answer (or tie with it) is visited, so the answer is the binary
+// walk's and brute force's, bit for bit.
+//
 // Below the walk, two of the sign rules of signed distances (the third,
 // winding numbers, is winding.cl): parity of ray crossings, and the
 // pseudo-normal at the feature -- face, edge or vertex -- that holds the
@@ -28,6 +37,7 @@
 #include "volumes.cl"
 #include "stack.cl"
 #include "accel.cl"
+#include "lanes.cl"
 
 #ifdef cl_khr_fp64
 typedef double point_real;
@@ -176,6 +186,149 @@ inline void visit_point_triangle(const Geometry* g, point_real3 p, int slot, Poi
                      fmax(fmax(fmax(fabs((lo).x), fabs((lo).y)), fabs((lo).z)), \
                           fmax(fmax(fabs((hi).x), fabs((hi).y)), fabs((hi).z)))))
 
+#if defined(ACCEL_BVH) && defined(BVH_WIDE)
+// How much nearer than the best distance so far a triangle's lower bound must
+// lie for walk_wide_points to visit it: 2^-24 of POINT_MARGIN, 2^-40 of the
+// largest coordinate -- above the rounding of visit_point_triangle's double
+// precision distance (its closest point lies on the triangle, or in its plane,
+// to within some ulps of the coordinates), so that a triangle it skips
+// computes farther than the best, never as near.  Without double precision
+// that distance is float32: the whole margin.
+#ifdef cl_khr_fp64
+#define POINT_TIE_SLACK(margin) (0x1p-24f * (margin))
+#else
+#define POINT_TIE_SLACK(margin) (margin)
+#endif
+
+// Lower bounds of the distances from p to the four triangles of a packet, in
+// float32.  For any unit vector n, no point x of a triangle lies nearer to p
+// than the least of n.(p - x) over its corners (|p - x| >= n.(p - x), linear
+// in x); closest_on_triangle's regions, taken lane by lane with selects (its
+// order of tests, one division a lane), give x' near the closest point, and
+// n = (p - x') / |p - x'|, which makes the bound the distance itself up to
+// rounding wherever x' is right.  Rounding: each corner's p - x is rounded
+// (relative 2^-24 a coordinate), each n.(p - x) (three products and two sums:
+// 4.01 * 2^-24 * sum |n_i| |(p - x)_i| <= 4.01 * 2^-24 * |p - x|), and 1 / |n|
+// by rsqrt of the rounded n.n (at most 8 * 2^-24 relative): in all under
+// 13 * 2^-24 * |p - x|, and |p - x| <= its L1 norm; 2^-20 of the largest L1
+// norm of p - x is taken off.  A lane with n = 0 (p on the triangle) gets 0;
+// one of no area, or other NaNs, compare false and are visited.
+inline float4 packet_distance_bounds(__global const TrianglePacket* t, float3 p)
+{
+    const float4 apx = p.x - t->v0[0], apy = p.y - t->v0[1], apz = p.z - t->v0[2];
+    const float4 bpx = p.x - t->v1[0], bpy = p.y - t->v1[1], bpz = p.z - t->v1[2];
+    const float4 cpx = p.x - t->v2[0], cpy = p.y - t->v2[1], cpz = p.z - t->v2[2];
+    const float4 abx = t->v1[0] - t->v0[0], aby = t->v1[1] - t->v0[1], abz = t->v1[2] - t->v0[2];
+    const float4 acx = t->v2[0] - t->v0[0], acy = t->v2[1] - t->v0[1], acz = t->v2[2] - t->v0[2];
+    const float4 d1 = abx * apx + aby * apy + abz * apz, d2 = acx * apx + acy * apy + acz * apz;
+    const float4 d3 = abx * bpx + aby * bpy + abz * bpz, d4 = acx * bpx + acy * bpy + acz * bpz;
+    const float4 d5 = abx * cpx + aby * cpy + abz * cpz, d6 = acx * cpx + acy * cpy + acz * cpz;
+    const float4 vc = d1 * d4 - d3 * d2, vb = d5 * d2 - d1 * d6, va = d3 * d6 - d5 * d4;
+    // (u, v) = (u_num, v_num) / den, region by region, the first of
+    // closest_on_triangle's tests that holds winning: set in reverse order
+    float4 u_num = vb, v_num = vc, den = va + vb + vc;                        // the face
+    const float4 e_bc = d4 - d3, f_bc = d5 - d6;
+    const int4 on_bc = (va <= 0.0f) & (e_bc >= 0.0f) & (f_bc >= 0.0f);
+    u_num = select(u_num, f_bc, on_bc);
+    v_num = select(v_num, e_bc, on_bc);
+    den = select(den, e_bc + f_bc, on_bc);
+    const int4 on_ac = (vb <= 0.0f) & (d2 >= 0.0f) & (d6 <= 0.0f);
+    u_num = select(u_num, (float4)(0.0f), on_ac);
+    v_num = select(v_num, d2, on_ac);
+    den = select(den, d2 - d6, on_ac);
+    const int4 at_c = (d6 >= 0.0f) & (d5 <= d6);
+    u_num = select(u_num, (float4)(0.0f), at_c);
+    v_num = select(v_num, (float4)(1.0f), at_c);
+    den = select(den, (float4)(1.0f), at_c);
+    const int4 on_ab = (vc <= 0.0f) & (d1 >= 0.0f) & (d3 <= 0.0f);
+    u_num = select(u_num, d1, on_ab);
+    v_num = select(v_num, (float4)(0.0f), on_ab);
+    den = select(den, d1 - d3, on_ab);
+    const int4 at_b = (d3 >= 0.0f) & (d4 <= d3);
+    u_num = select(u_num, (float4)(1.0f), at_b);
+    v_num = select(v_num, (float4)(0.0f), at_b);
+    den = select(den, (float4)(1.0f), at_b);
+    const int4 at_a = (d1 <= 0.0f) & (d2 <= 0.0f);
+    u_num = select(u_num, (float4)(0.0f), at_a);
+    v_num = select(v_num, (float4)(0.0f), at_a);
+    den = select(den, (float4)(1.0f), at_a);
+    const float4 inv = 1.0f / den;
+    const float4 u = u_num * inv, v = v_num * inv;
+    // n = p - x' = ap - u ab - v ac
+    const float4 nx = apx - u * abx - v * acx, ny = apy - u * aby - v * acy, nz = apz - u * abz - v * acz;
+    const float4 sa = nx * apx + ny * apy + nz * apz, sb = nx * bpx + ny * bpy + nz * bpz;
+    const float4 sc = nx * cpx + ny * cpy + nz * cpz;
+    const float4 n2 = nx * nx + ny * ny + nz * nz;
+    const float4 la = fabs(apx) + fabs(apy) + fabs(apz), lb = fabs(bpx) + fabs(bpy) + fabs(bpz);
+    const float4 lc = fabs(cpx) + fabs(cpy) + fabs(cpz);
+    const float4 bound = fmin(sa, fmin(sb, sc)) * rsqrt(n2) - 0x1p-20f * fmax(la, fmax(lb, lc));
+    return select(bound, (float4)(0.0f), n2 == 0.0f);
+}
+
+// closest_point's walk over the wide BVH: as the binary one, children within
+// the best distance plus `margin` taken nearest first (their box distances in
+// float8: each a lower bound of the distance to its triangles, rounded as
+// volumes.cl's point_bound within the margin); a leaf's triangles through
+// packet_distance_bounds.
+inline void walk_wide_points(const Geometry* g, float3 p, float margin, PointHit* best)
+{
+    const point_real3 pr = TO_POINT_REAL3(p);
+    const point_real tie = POINT_TIE_SLACK(margin);
+    int2 stack[WIDE_STACK_SIZE];       // (node or first packet, packet count: 0 for a node)
+    float stack_d[WIDE_STACK_SIZE];    // the lower bound of its distance
+    int sp = 0;
+    int2 current = (int2)(0, 0);       // the root node
+    for (;;) {
+        if (current.y > 0) {
+            for (int k = current.x; k < current.x + current.y; ++k) {
+                __global const TrianglePacket* t = g->packets + k;
+                const float4 lower = packet_distance_bounds(t, p);
+                for (int lane = 0; lane < 4; ++lane)
+                    if (t->slot[lane] >= 0 && !((point_real)lower[lane] > best->dist + tie))
+                        visit_point_triangle(g, pr, t->slot[lane], best);
+            }
+        } else {
+            __global const BvhWideNode* n = g->wide_nodes + current.x;
+            const float8 dx = fmax(fmax(n->lo_x - p.x, p.x - n->hi_x), 0.0f);
+            const float8 dy = fmax(fmax(n->lo_y - p.y, p.y - n->hi_y), 0.0f);
+            const float8 dz = fmax(fmax(n->lo_z - p.z, p.z - n->hi_z), 0.0f);
+            const float8 d = sqrt(dx * dx + dy * dy + dz * dz);
+            uint lanes = lane_bits((n->count >= 0) & (d <= (float)best->dist + margin));
+            if (lanes) {
+                __global const int* child = (__global const int*)&n->child;
+                __global const int* count = (__global const int*)&n->count;
+                int k = 31 - clz(lanes & (0u - lanes));   // the lowest lane left
+                lanes &= lanes - 1u;
+                if (!lanes) {                             // one child near: no stack
+                    current = (int2)(child[k], count[k]);
+                    continue;
+                }
+                // the others onto the stack farthest first (insertion sort), the nearest taken
+                const int base = sp;
+                for (;;) {
+                    const float dk = d[k];
+                    int j = sp++;
+                    for (; j > base && stack_d[j - 1] < dk; --j) {
+                        stack[j] = stack[j - 1];
+                        stack_d[j] = stack_d[j - 1];
+                    }
+                    stack[j] = (int2)(child[k], count[k]);
+                    stack_d[j] = dk;
+                    if (!lanes)
+                        break;
+                    k = 31 - clz(lanes & (0u - lanes));
+                    lanes &= lanes - 1u;
+                }
+                current = stack[--sp];
+                continue;
+            }
+        }
+        if (!resume_postponed(stack, stack_d, &sp, (float)best->dist + margin, &current, true))
+            break;
+    }
+}
+#endif
+
 // The nearest triangle to p (device frame) within max_dist (inclusive);
 // prim -1 when none is.  `margin`: POINT_MARGIN.
 inline PointHit closest_point(const Geometry* g, float3 p, float max_dist, float margin)
@@ -189,7 +342,9 @@ inline PointHit closest_point(const Geometry* g, float3 p, float max_dist, float
     best.slot = -1;
     best.feature = FEATURE_FACE;
     const point_real3 pr = TO_POINT_REAL3(p);
-#ifdef ACCEL_BVH
+#if defined(ACCEL_BVH) && defined(BVH_WIDE)
+    walk_wide_points(g, p, margin, &best);
+#elif defined(ACCEL_BVH)
     int2 stack[BVH_STACK_SIZE];        // (row or first slot, leaf count: 0 for a row)
     float stack_d[BVH_STACK_SIZE];     // the lower bound of its distance
     int sp = 0;
