@@ -262,6 +262,17 @@ lane (lane k = triangle k), so that one float4 operation tests all four:
 A leaf's triangles fill its packets in slot order; the triangle buffers and
 ``prim_ids`` stay as they are (results and shading read them by slot).
 
+``WideDisk`` (256 B) -- for the point queries of CPU devices (point.cl's
+walk_wide_points; clrt/accel/disks.py): each child of a BvhWideNode, lane k for
+child k, its triangles enclosed in a flat cylinder: every point x of them has
+|n.(x - c)| <= half_height and lies within radius of the axis through c along n.
+Zeros in lanes without a child.  The point queries' copy of the wide BVH holds
+one per node, between the nodes and the packets (geometry.cl):
+    0: cx, cy, cz   float8  the centre c
+   96: nx, ny, nz   float8  the axis n (unit, rounded to float32)
+  192: radius       float8
+  224: half_height  float8  half the cylinder's height, along n
+
 ``WindingNode`` (96 B) -- the far field of one child of a BvhPairNode row, for
 winding numbers (winding.cl; rows x 2, child ``2 * row + side``, side 0 left):
 the first three terms of the Taylor series of its triangles' solid angles about
@@ -366,6 +377,8 @@ float8, int8, int4 = np.dtype((np.float32, 8)), np.dtype((np.int32, 8)), np.dtyp
 BVH_WIDE_NODE = np.dtype([("lo_x", float8), ("lo_y", float8), ("lo_z", float8), ("hi_x", float8),
                           ("hi_y", float8), ("hi_z", float8), ("child", int8), ("count", int8)])
 TRIANGLE_PACKET = np.dtype([("v0", float4, 3), ("v1", float4, 3), ("v2", float4, 3), ("slot", int4)])
+WIDE_DISK = np.dtype([(name, float8) for name in ("cx", "cy", "cz", "nx", "ny", "nz", "radius",
+                                                  "half_height")])
 WINDING_NODE = np.dtype([("centre", float4), ("normal", float4), ("first", np.float32, 6),
                          ("second", np.float32, 10)])
 WIDE_WINDING_NODE = np.dtype([(name, float8) for name in ("cx", "cy", "cz", "radius", "nx", "ny", "nz", "area")]
@@ -420,6 +433,7 @@ STRUCTS = {
     "BvhPairNode": BVH_PAIR_NODE,
     "BvhWideNode": BVH_WIDE_NODE,
     "TrianglePacket": TRIANGLE_PACKET,
+    "WideDisk": WIDE_DISK,
     "WindingNode": WINDING_NODE,
     "WideWindingNode": WIDE_WINDING_NODE,
     "PseudoNormals": PSEUDO_NORMALS,

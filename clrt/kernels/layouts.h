@@ -194,6 +194,14 @@ typedef struct {
     int4 slot;                    // lane k: slot of triangle k, -1: empty
 } TrianglePacket;
 
+// Flat cylinders around the children of a BvhWideNode, lane by lane (point queries on CPU devices);
+// fields as layouts.py says.
+typedef struct {
+    float8 cx, cy, cz;
+    float8 nx, ny, nz;
+    float8 radius, half_height;
+} WideDisk;
+
 // The far field of one BVH child for winding numbers (winding.cl); fields as layouts.py says.
 typedef struct {
     float4 centre;       // xyz: area-weighted centroid; w: radius (rounded up)

@@ -201,28 +201,33 @@ inline void visit_point_triangle(const Geometry* g, point_real3 p, int slot, Poi
 #endif
 
 // Lower bounds of the distances from p to the four triangles of a packet, in
-// float32.  For any unit vector n, no point x of a triangle lies nearer to p
-// than the least of n.(p - x) over its corners (|p - x| >= n.(p - x), linear
-// in x); closest_on_triangle's regions, taken lane by lane with selects (its
-// order of tests, one division a lane), give x' near the closest point, and
+// float32.  For any unit vector n, no point x of a triangle (a, b, c) lies
+// nearer to p than the least of n.(p - x) over its corners (|p - x| >=
+// n.(p - x), linear in x), that is n.(p - a) - max(0, n.(b - a), n.(c - a)).
+// closest_on_triangle's regions, taken lane by lane with selects (its order
+// of tests, one division a lane), give x' near the closest point, and
 // n = (p - x') / |p - x'|, which makes the bound the distance itself up to
-// rounding wherever x' is right.  Rounding: each corner's p - x is rounded
-// (relative 2^-24 a coordinate), each n.(p - x) (three products and two sums:
-// 4.01 * 2^-24 * sum |n_i| |(p - x)_i| <= 4.01 * 2^-24 * |p - x|), and 1 / |n|
-// by rsqrt of the rounded n.n (at most 8 * 2^-24 relative): in all under
-// 13 * 2^-24 * |p - x|, and |p - x| <= its L1 norm; 2^-20 of the largest L1
-// norm of p - x is taken off.  A lane with n = 0 (p on the triangle) gets 0;
-// one of no area, or other NaNs, compare false and are visited.
+// rounding wherever x' is right.  Rounding: p - a, b - a and c - a are
+// rounded (relative 2^-24 a coordinate), each dot product with n (three
+// products and two sums: 4.01 * 2^-24 * sum |n_i| |y_i| <= 4.01 * 2^-24 *
+// |n| |y|), the difference and the max (2^-24 of the result), and 1 / |n| by
+// rsqrt of the rounded n.n (at most 8 * 2^-24 relative): in all under
+// 14 * 2^-24 * (|p - a| + max(|b - a|, |c - a|)), and each length is at most
+// its L1 norm; 2^-20 of that sum of L1 norms is taken off.  A lane with n = 0
+// (p on the triangle) gets 0; one of no area, or other NaNs, compare false
+// and are visited.  The corners' dot products come from the edges' (b - p =
+// (a - p) + (b - a)): some 130 float4 operations for four triangles.
+__attribute__((always_inline))
 inline float4 packet_distance_bounds(__global const TrianglePacket* t, float3 p)
 {
     const float4 apx = p.x - t->v0[0], apy = p.y - t->v0[1], apz = p.z - t->v0[2];
-    const float4 bpx = p.x - t->v1[0], bpy = p.y - t->v1[1], bpz = p.z - t->v1[2];
-    const float4 cpx = p.x - t->v2[0], cpy = p.y - t->v2[1], cpz = p.z - t->v2[2];
     const float4 abx = t->v1[0] - t->v0[0], aby = t->v1[1] - t->v0[1], abz = t->v1[2] - t->v0[2];
     const float4 acx = t->v2[0] - t->v0[0], acy = t->v2[1] - t->v0[1], acz = t->v2[2] - t->v0[2];
+    // closest_on_triangle's d1 .. d6: ab.ap, ac.ap, ab.bp, ac.bp, ab.cp, ac.cp
     const float4 d1 = abx * apx + aby * apy + abz * apz, d2 = acx * apx + acy * apy + acz * apz;
-    const float4 d3 = abx * bpx + aby * bpy + abz * bpz, d4 = acx * bpx + acy * bpy + acz * bpz;
-    const float4 d5 = abx * cpx + aby * cpy + abz * cpz, d6 = acx * cpx + acy * cpy + acz * cpz;
+    const float4 ab2 = abx * abx + aby * aby + abz * abz, ac2 = acx * acx + acy * acy + acz * acz;
+    const float4 abac = abx * acx + aby * acy + abz * acz;
+    const float4 d3 = d1 - ab2, d4 = d2 - abac, d5 = d1 - abac, d6 = d2 - ac2;
     const float4 vc = d1 * d4 - d3 * d2, vb = d5 * d2 - d1 * d6, va = d3 * d6 - d5 * d4;
     // (u, v) = (u_num, v_num) / den, region by region, the first of
     // closest_on_triangle's tests that holds winning: set in reverse order
@@ -256,24 +261,46 @@ inline float4 packet_distance_bounds(__global const TrianglePacket* t, float3 p)
     const float4 u = u_num * inv, v = v_num * inv;
     // n = p - x' = ap - u ab - v ac
     const float4 nx = apx - u * abx - v * acx, ny = apy - u * aby - v * acy, nz = apz - u * abz - v * acz;
-    const float4 sa = nx * apx + ny * apy + nz * apz, sb = nx * bpx + ny * bpy + nz * bpz;
-    const float4 sc = nx * cpx + ny * cpy + nz * cpz;
+    const float4 s_ap = nx * apx + ny * apy + nz * apz, s_ab = nx * abx + ny * aby + nz * abz;
+    const float4 s_ac = nx * acx + ny * acy + nz * acz;
     const float4 n2 = nx * nx + ny * ny + nz * nz;
-    const float4 la = fabs(apx) + fabs(apy) + fabs(apz), lb = fabs(bpx) + fabs(bpy) + fabs(bpz);
-    const float4 lc = fabs(cpx) + fabs(cpy) + fabs(cpz);
-    const float4 bound = fmin(sa, fmin(sb, sc)) * rsqrt(n2) - 0x1p-20f * fmax(la, fmax(lb, lc));
+    const float4 l_ap = fabs(apx) + fabs(apy) + fabs(apz), l_ab = fabs(abx) + fabs(aby) + fabs(abz);
+    const float4 l_ac = fabs(acx) + fabs(acy) + fabs(acz);
+    const float4 bound = (s_ap - fmax(fmax(s_ab, s_ac), 0.0f)) * rsqrt(n2) - 0x1p-20f * (l_ap + fmax(l_ab, l_ac));
     return select(bound, (float4)(0.0f), n2 == 0.0f);
 }
 
+// x rounded up to float32.
+inline float float_up(point_real x)
+{
+    const float f = (float)x;
+    return (point_real)f >= x ? f : nextafter(f, INFINITY);
+}
+
+// The WideDisks of the wide BVH (clrt/accel/disks.py), one a node, which the
+// point queries' copy of it holds between its nodes and its packets
+// (geometry.cl): as many bytes as the nodes.
+inline __global const WideDisk* wide_disks(const Geometry* g)
+{
+    const size_t nodes_bytes = ((__global const uchar*)g->packets - (__global const uchar*)g->wide_nodes) / 2;
+    return (__global const WideDisk*)((__global const uchar*)g->wide_nodes + nodes_bytes);
+}
+
 // closest_point's walk over the wide BVH: as the binary one, children within
-// the best distance plus `margin` taken nearest first (their box distances in
-// float8: each a lower bound of the distance to its triangles, rounded as
-// volumes.cl's point_bound within the margin); a leaf's triangles through
-// packet_distance_bounds.
+// the best distance plus `margin` taken nearest first, a leaf's triangles
+// through packet_distance_bounds.  A child's distance: the larger of those to
+// its box and to its disk (WideDisk: with v = p - c, h = n.v and l the length
+// of v - h n, the hypotenuse of |h| - half_height and l - radius, each at least 0),
+// both lower bounds of the distance to its triangles, eight children in
+// float8.  Their rounding (some 20 * 2^-24 of |p - c| for the disk, with
+// |n| within 2^-23 of 1) stays far within the margin (2^-16 of the largest
+// coordinate, at least 2^-17 |p - c|).
+
 inline void walk_wide_points(const Geometry* g, float3 p, float margin, PointHit* best)
 {
     const point_real3 pr = TO_POINT_REAL3(p);
     const point_real tie = POINT_TIE_SLACK(margin);
+    __global const WideDisk* disks = wide_disks(g);
     int2 stack[WIDE_STACK_SIZE];       // (node or first packet, packet count: 0 for a node)
     float stack_d[WIDE_STACK_SIZE];    // the lower bound of its distance
     int sp = 0;
@@ -283,8 +310,12 @@ inline void walk_wide_points(const Geometry* g, float3 p, float margin, PointHit
             for (int k = current.x; k < current.x + current.y; ++k) {
                 __global const TrianglePacket* t = g->packets + k;
                 const float4 lower = packet_distance_bounds(t, p);
+                // the lanes at or below the best distance (plus the slack) rounded up to float32, then
+                // each against the best as it is when its turn comes
+                const float near = float_up(best->dist + tie);
+                int4 visit = (t->slot >= 0) & !(lower > near);
                 for (int lane = 0; lane < 4; ++lane)
-                    if (t->slot[lane] >= 0 && !((point_real)lower[lane] > best->dist + tie))
+                    if (visit[lane] && !((point_real)lower[lane] > best->dist + tie))
                         visit_point_triangle(g, pr, t->slot[lane], best);
             }
         } else {
@@ -292,8 +323,15 @@ inline void walk_wide_points(const Geometry* g, float3 p, float margin, PointHit
             const float8 dx = fmax(fmax(n->lo_x - p.x, p.x - n->hi_x), 0.0f);
             const float8 dy = fmax(fmax(n->lo_y - p.y, p.y - n->hi_y), 0.0f);
             const float8 dz = fmax(fmax(n->lo_z - p.z, p.z - n->hi_z), 0.0f);
-            const float8 d = sqrt(dx * dx + dy * dy + dz * dz);
-            uint lanes = lane_bits((n->count >= 0) & (d <= (float)best->dist + margin));
+            __global const WideDisk* disk = disks + current.x;
+            const float8 vx = p.x - disk->cx, vy = p.y - disk->cy, vz = p.z - disk->cz;
+            const float8 h = vx * disk->nx + vy * disk->ny + vz * disk->nz;
+            const float8 lx = vx - h * disk->nx, ly = vy - h * disk->ny, lz = vz - h * disk->nz;
+            const float8 across = fmax(fabs(h) - disk->half_height, 0.0f);
+            const float8 beside = fmax(sqrt(lx * lx + ly * ly + lz * lz) - disk->radius, 0.0f);
+            const float8 d = fmax(dx * dx + dy * dy + dz * dz, across * across + beside * beside);
+            const float reach = (float)best->dist + margin;
+            uint lanes = lane_bits((n->count >= 0) & (d <= reach * reach));
             if (lanes) {
                 __global const int* child = (__global const int*)&n->child;
                 __global const int* count = (__global const int*)&n->count;
@@ -323,7 +361,8 @@ inline void walk_wide_points(const Geometry* g, float3 p, float margin, PointHit
                 continue;
             }
         }
-        if (!resume_postponed(stack, stack_d, &sp, (float)best->dist + margin, &current, true))
+        const float reach = (float)best->dist + margin;
+        if (!resume_postponed(stack, stack_d, &sp, reach * reach, &current, true))
             break;
     }
 }

@@ -15,6 +15,7 @@ from __future__ import annotations
 import numpy as np
 import pyopencl as cl
 
+from clrt.accel.disks import packet_corners, wide_disks
 from clrt.config import POINT_CELLS, POINT_OFFSETS_GROUP
 from clrt.device.program import launch_size
 from clrt.device.sharing import one_at_a_time
@@ -34,6 +35,32 @@ class PointQueries:
             return {name: cla.empty(self.queue, shapes[name], POINT_FIELDS[name].dtype)   # no bool among them
                     for name in fields}
         return {name: np.empty(shapes[name], POINT_FIELDS[name].dtype) for name in fields}
+
+    def _point_geometry(self) -> tuple:
+        """The geometry's arguments for the point queries' kernels (GEOMETRY_PARAMS):
+        where the device walks the wide BVH, its copy that holds the children's
+        disks (clrt/accel/disks.py) between its nodes and its packets, made on
+        first use and again after a refit (a new ``geometry.reach``); else the
+        geometry's own."""
+        geometry = self.geometry
+        wide = geometry.wide
+        if wide is None:
+            return (*geometry.buffer_args, self._scene_value)
+        key = (geometry, geometry.reach)
+        cached = self.__dict__.get("_disk_cache")
+        if cached is not None and all(a is b for a, b in zip(cached[0], key)):
+            return cached[1]
+        slotted = packet_corners(wide.packets, len(self.acceleration.prim_ids))
+        disks = wide_disks(self.acceleration.rows, wide.sources, slotted)
+        combined = np.concatenate([wide.nodes.view(np.uint8).ravel(), disks.view(np.uint8).ravel(),
+                                   wide.packets.view(np.uint8).ravel()])
+        buffer = cl.Buffer(self.context, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR, hostbuf=combined)
+        scene = self._scene_value.copy()
+        scene["packets_at"] = wide.nodes.nbytes + disks.nbytes
+        b = geometry.buffers
+        args = (*b["tris"], *b["nodes"], *b["prim_ids"], buffer, scene)
+        self._disk_cache = (key, args)
+        return args
 
     def _launch(self, name: str, args: tuple, items: int, group: int | None = None) -> None:
         """Kernel ``name`` (QUERY_KERNELS) with ``args`` over ``items`` work-items,
@@ -73,7 +100,7 @@ class PointQueries:
                 nbytes += m * 4 * int(np.prod(POINT_FIELDS[name].item_shape, dtype=int))
             results = self._buffer("results", nbytes)
             self._launch("query_closest_point", (origins, tmaxs, bad, launch, order, results,
-                                                 *self.geometry.buffer_args, self._scene_value), m)
+                                                 *self._point_geometry()), m)
             for name, at in placed.items():
                 self._copy_out(out[name], start, stop, results, at)
         self._check(batch)   # also waits for the copies
@@ -165,8 +192,7 @@ class PointQueries:
                 launch["field_at"][slot] = nbytes
                 nbytes += m * np.dtype(INSIDE_FIELDS[name].dtype).itemsize
             results = self._buffer("results", nbytes)
-            self._launch(kernel, (origins, tmaxs, bad, launch, order, results, *rule, *self.geometry.buffer_args,
-                                  self._scene_value), m)
+            self._launch(kernel, (origins, tmaxs, bad, launch, order, results, *rule, *self._point_geometry()), m)
             for name, at in placed.items():
                 self._copy_out(out[name], start, stop, results, at)
         self._check(source)   # also waits for the copies
