@@ -369,8 +369,12 @@ inline void walk_wide_points(const Geometry* g, float3 p, float margin, PointHit
 #endif
 
 // The nearest triangle to p (device frame) within max_dist (inclusive);
-// prim -1 when none is.  `margin`: POINT_MARGIN.
-inline PointHit closest_point(const Geometry* g, float3 p, float max_dist, float margin)
+// prim -1 when none is.  `margin`: POINT_MARGIN.  `seed`: a slot to visit
+// before the walk (-1: none) -- the nearest triangle of a point close by,
+// whose distance then prunes the walk from its start.  Any triangle visited
+// more (or first) changes no answer: the best is the least (distance, input
+// index) of those visited, and every walk visits all that could be it.
+inline PointHit closest_point(const Geometry* g, float3 p, float max_dist, float margin, int seed)
 {
     PointHit best;
     best.prim = -1;
@@ -381,6 +385,8 @@ inline PointHit closest_point(const Geometry* g, float3 p, float max_dist, float
     best.slot = -1;
     best.feature = FEATURE_FACE;
     const point_real3 pr = TO_POINT_REAL3(p);
+    if (seed >= 0)
+        visit_point_triangle(g, pr, seed, &best);
 #if defined(ACCEL_BVH) && defined(BVH_WIDE)
     walk_wide_points(g, p, margin, &best);
 #elif defined(ACCEL_BVH)

@@ -262,37 +262,45 @@ __kernel void query_all(RAY_INPUT_PARAMS, __global uchar* results, GEOMETRY_PARA
 // clrt.query.results' POINT_FIELDS; any may be absent).  The point goes back
 // to the caller's frame here (+ shift, in double where the device has it,
 // rounded to float32 once).  A miss (or a bad point): point NaN, distance
-// INFINITY, prim -1, u = v = 0.
+// INFINITY, prim -1, u = v = 0.  A work-item answers ITEM_RAYS points, in
+// turn, consecutive in the order of point_order.cl: each walk starts from
+// the nearest triangle of the one before (closest_point's seed), which took
+// a third off the walks of points in a mesh's box on PoCL.
 __kernel void query_closest_point(POINT_INPUT_PARAMS, __global uchar* results, GEOMETRY_PARAMS)
 {
-    const uint j = get_global_id(0);
-    if (j >= launch.num_rays)
+    const uint first = ITEM_RAYS * get_global_id(0);
+    if (first >= launch.num_rays)
         return;
-    const uint i = POINT_ORDER(order, launch.num_rays)[j];   // work-item j answers point i (point_order.cl)
     const Geometry g = make_geometry(GEOMETRY_ARGS);
     const RayInput in = make_point_input(POINT_INPUT_ARGS);
-    float3 p;
-    float max_dist;
-    PointHit best;
-    best.prim = -1;
-    if (load_point(&in, i, &p, &max_dist))
-        best = closest_point(&g, p, max_dist, POINT_MARGIN(p, in.scene_lo, in.scene_hi));
-    const bool found = best.prim >= 0;
     __global float* point_out = RESULT_AT(float, 0);
     __global float* distance_out = RESULT_AT(float, 1);
     __global int* prim_out = RESULT_AT(int, 2);
     __global float* u_out = RESULT_AT(float, 3);
     __global float* v_out = RESULT_AT(float, 4);
-    if (point_out)
-        vstore3(found ? convert_float3(best.point + TO_POINT_REAL3(in.shift)) : (float3)(NAN), i, point_out);
-    if (distance_out)
-        distance_out[i] = found ? (float)best.dist : INFINITY;
-    if (prim_out)
-        prim_out[i] = best.prim;
-    if (u_out)
-        u_out[i] = found ? best.u : 0.0f;
-    if (v_out)
-        v_out[i] = found ? best.v : 0.0f;
+    int seed = -1;
+    for (uint j = first; j < min(first + ITEM_RAYS, launch.num_rays); ++j) {
+        const uint i = POINT_ORDER(order, launch.num_rays)[j];   // point_order.cl
+        float3 p;
+        float max_dist;
+        PointHit best;
+        best.prim = -1;
+        if (load_point(&in, i, &p, &max_dist))
+            best = closest_point(&g, p, max_dist, POINT_MARGIN(p, in.scene_lo, in.scene_hi), seed);
+        const bool found = best.prim >= 0;
+        if (found)
+            seed = best.slot;
+        if (point_out)
+            vstore3(found ? convert_float3(best.point + TO_POINT_REAL3(in.shift)) : (float3)(NAN), i, point_out);
+        if (distance_out)
+            distance_out[i] = found ? (float)best.dist : INFINITY;
+        if (prim_out)
+            prim_out[i] = best.prim;
+        if (u_out)
+            u_out[i] = found ? best.u : 0.0f;
+        if (v_out)
+            v_out[i] = found ? best.v : 0.0f;
+    }
 }
 
 // ---- Inside and outside (winding.cl, point.cl's sign rules).  Points as
@@ -338,59 +346,65 @@ __kernel void query_winding_number(POINT_INPUT_PARAMS, __global uchar* results,
 #define SIGN_PARITY 1
 #define SIGN_NORMAL 2
 
-// The signed distance of point i by `rule` (`winding`, `normals`: the rule's
-// buffer, or 0), into output 0.
-inline void signed_distance(const Geometry* g, const RayInput* in, const QueryLaunch* launch,
-                            __global uchar* results, uint i, const int rule,
-                            __global const WindingFarField* winding, __global const PseudoNormals* normals)
+// The signed distances of the ITEM_RAYS points from the launch's `first` on
+// (in the order of point_order.cl, each walk seeded as query_closest_point's)
+// by `rule` (`winding`, `normals`: the rule's buffer, or 0), into output 0.
+inline void signed_distances(const Geometry* g, const RayInput* in, const QueryLaunch* launch,
+                             __global uchar* results, __global const uint* order, uint first, const int rule,
+                             __global const WindingFarField* winding, __global const PseudoNormals* normals)
 {
-    float3 p;
-    float max_dist;
-    float d = NAN;
-    if (load_point(in, i, &p, &max_dist)) {
-        const PointHit best = closest_point(g, p, INFINITY, POINT_MARGIN(p, in->scene_lo, in->scene_hi));
-        bool inside;
-        if (rule == SIGN_WINDING)
-            inside = winding_inside(g, winding, p);
-        else if (rule == SIGN_PARITY)
-            inside = inside_by_parity(g, p, in->scene_lo, in->scene_hi);
-        else
-            inside = inside_by_normal(g, normals, &best, p);
-        d = inside ? -(float)best.dist : (float)best.dist;
+    int seed = -1;
+    for (uint j = first; j < min(first + ITEM_RAYS, launch->num_rays); ++j) {
+        const uint i = POINT_ORDER(order, launch->num_rays)[j];
+        float3 p;
+        float max_dist;
+        float d = NAN;
+        if (load_point(in, i, &p, &max_dist)) {
+            const PointHit best = closest_point(g, p, INFINITY, POINT_MARGIN(p, in->scene_lo, in->scene_hi), seed);
+            seed = best.slot;
+            bool inside;
+            if (rule == SIGN_WINDING)
+                inside = winding_inside(g, winding, p);
+            else if (rule == SIGN_PARITY)
+                inside = inside_by_parity(g, p, in->scene_lo, in->scene_hi);
+            else
+                inside = inside_by_normal(g, normals, &best, p);
+            d = inside ? -(float)best.dist : (float)best.dist;
+        }
+        ((__global float*)(results + launch->field_at[0]))[i] = d;
     }
-    ((__global float*)(results + launch->field_at[0]))[i] = d;
 }
 
 __kernel void query_signed_distance_winding(POINT_INPUT_PARAMS, __global uchar* results,
                                             __global const WindingFarField* winding, GEOMETRY_PARAMS)
 {
-    const uint j = get_global_id(0);
-    if (j >= launch.num_rays)
+    const uint first = ITEM_RAYS * get_global_id(0);
+    if (first >= launch.num_rays)
         return;
     const Geometry g = make_geometry(GEOMETRY_ARGS);
     const RayInput in = make_point_input(POINT_INPUT_ARGS);
-    signed_distance(&g, &in, &launch, results, POINT_ORDER(order, launch.num_rays)[j], SIGN_WINDING, winding, 0);
+    signed_distances(&g, &in, &launch, results, order, first, SIGN_WINDING, winding, 0);
 }
 
 __kernel void query_signed_distance_parity(POINT_INPUT_PARAMS, __global uchar* results, GEOMETRY_PARAMS)
 {
-    const uint j = get_global_id(0);
-    if (j >= launch.num_rays)
+    const uint first = ITEM_RAYS * get_global_id(0);
+    if (first >= launch.num_rays)
         return;
     const Geometry g = make_geometry(GEOMETRY_ARGS);
     const RayInput in = make_point_input(POINT_INPUT_ARGS);
-    signed_distance(&g, &in, &launch, results, POINT_ORDER(order, launch.num_rays)[j], SIGN_PARITY, 0, 0);
+    signed_distances(&g, &in, &launch, results, order, first, SIGN_PARITY, 0, 0);
 }
 
 __kernel void query_signed_distance_normal(POINT_INPUT_PARAMS, __global uchar* results,
                                            __global const PseudoNormals* normals, GEOMETRY_PARAMS)
 {
-    const uint j = get_global_id(0);
-    if (j >= launch.num_rays)
+    const uint first = ITEM_RAYS * get_global_id(0);
+    if (first >= launch.num_rays)
         return;
     const Geometry g = make_geometry(GEOMETRY_ARGS);
     const RayInput in = make_point_input(POINT_INPUT_ARGS);
-    signed_distance(&g, &in, &launch, results, POINT_ORDER(order, launch.num_rays)[j], SIGN_NORMAL, 0, normals);
+    signed_distances(&g, &in, &launch, results, order, first, SIGN_NORMAL, 0, normals);
 }
 
 // The WindingNodes of the rows of one tree level (`level_rows`, `count` of

@@ -100,7 +100,7 @@ class PointQueries:
                 nbytes += m * 4 * int(np.prod(POINT_FIELDS[name].item_shape, dtype=int))
             results = self._buffer("results", nbytes)
             self._launch("query_closest_point", (origins, tmaxs, bad, launch, order, results,
-                                                 *self._point_geometry()), m)
+                                                 *self._point_geometry()), -(-m // self.rays_per_item))
             for name, at in placed.items():
                 self._copy_out(out[name], start, stop, results, at)
         self._check(batch)   # also waits for the copies
@@ -192,7 +192,9 @@ class PointQueries:
                 launch["field_at"][slot] = nbytes
                 nbytes += m * np.dtype(INSIDE_FIELDS[name].dtype).itemsize
             results = self._buffer("results", nbytes)
-            self._launch(kernel, (origins, tmaxs, bad, launch, order, results, *rule, *self._point_geometry()), m)
+            # the signed distances' kernels, as query_closest_point, answer rays_per_item points a work-item
+            items = m if kernel == "query_winding_number" else -(-m // self.rays_per_item)
+            self._launch(kernel, (origins, tmaxs, bad, launch, order, results, *rule, *self._point_geometry()), items)
             for name, at in placed.items():
                 self._copy_out(out[name], start, stop, results, at)
         self._check(source)   # also waits for the copies
