@@ -19,6 +19,7 @@
 #include "accel_packet.cl"
 #include "point.cl"
 #include "point_order.cl"
+#include "point_grid.cl"
 #include "winding.cl"
 #include "instances.cl"
 

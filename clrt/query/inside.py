@@ -12,7 +12,7 @@ the device.
 - The pseudo-normals of every slot (``PSEUDO_NORMALS``, signs by normal),
   made on the host from the mesh.
 - The sample points of :meth:`~clrt.query.points.PointQueries.sdf_grid`,
-  made on the host a chunk at a time.
+  made on the device a chunk at a time (point_grid.cl), from their axes.
 """
 
 from __future__ import annotations
@@ -178,10 +178,10 @@ def grid_axes(resolution, bounds, mesh_bounds) -> tuple:
 
 
 class GridPoints:
-    """The samples of a grid (axes ``xs``, ``ys``, ``zs``) as a point batch in
-    C order -- sample (i, j, k) is point (i * Y + j) * Z + k -- made a chunk at
-    a time on the host (float64, rounded to float32 once), in the form of
-    PointBatch's inputs."""
+    """The samples of a grid (axes ``xs``, ``ys``, ``zs``, float64) as a point
+    batch in C order -- sample (i, j, k) is point (i * Y + j) * Z + k -- made a
+    chunk at a time on the device (point_grid.cl's grid_points) from the axes
+    rounded to float32: no host array of the samples."""
 
     normalise = False
     on_device = False
@@ -190,22 +190,18 @@ class GridPoints:
         self.axes = (xs, ys, zs)
         self.shape = (len(xs), len(ys), len(zs))
         self.n = math.prod(self.shape)
-        self.inputs = [(None, 3), (np.zeros(3, np.float32), 0), (np.zeros(1, np.float32), 0),
-                       (np.full(1, np.inf, np.float32), 0)]
+        #: what grid_points reads: zs, then ys, then xs, float32
+        self.axis_values = np.concatenate([zs, ys, xs]).astype(np.float32)
 
     def __len__(self) -> int:
         return self.n
 
     def points(self, start: int, stop: int) -> np.ndarray:
-        """(M, 3) float32 samples start..stop-1."""
+        """(M, 3) float32 samples start..stop-1 (on the host: for messages)."""
         flat = np.arange(start, stop, dtype=np.int64)
         _, y, z = self.shape
         index = (flat // (y * z), flat // z % y, flat % z)
         return np.stack([axis[i] for axis, i in zip(self.axes, index)], axis=1).astype(np.float32)
-
-    def host_chunk(self, k: int, start: int, stop: int):
-        a, stride = self.inputs[k]
-        return self.points(start, stop).reshape(-1) if k == 0 else a
 
     def bad_ray_message(self, kind: str, i: int, reach=None) -> str:
         return f"grid sample {i} is {self.points(i, i + 1)[0].tolist()}: not finite"

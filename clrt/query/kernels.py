@@ -52,6 +52,9 @@ QUERY_KERNELS = {
     "query_signed_distance_parity": (*POINT_INPUT, buffer("results"), *GEOMETRY),
     "query_signed_distance_normal": (*POINT_INPUT, buffer("results"), buffer("normals"), *GEOMETRY),
     "winding_nodes": (buffer("winding"), buffer("level_rows"), value("count", np.uint32), *GEOMETRY),
+    # sdf_grid's samples, a chunk at a time (point_grid.cl)
+    "grid_points": (buffer("points"), buffer("axes"), value("first", np.uint64), value("count", np.uint32),
+                    value("size_y", np.uint32), value("size_z", np.uint32)),
     "camera_rays": (buffer("dirs"), value("cam", CAMERA), value("first", np.uint64), value("count", np.uint32)),
     # one-launch kernels of the primary-ray benchmark (Accel.launch_camera)
     "trace_camera": (buffer("hits"), value("cam", CAMERA), *GEOMETRY),

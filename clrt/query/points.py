@@ -16,7 +16,7 @@ import numpy as np
 import pyopencl as cl
 
 from clrt.accel.disks import packet_corners, wide_disks
-from clrt.config import POINT_CELLS, POINT_OFFSETS_GROUP
+from clrt.config import NO_RESULT, POINT_CELLS, POINT_OFFSETS_GROUP, RAY_CHECKS
 from clrt.device.program import launch_size
 from clrt.device.sharing import one_at_a_time
 from clrt.query.inside import GridPoints, grid_axes, pseudo_normals, sign_kernel, winding_nodes
@@ -183,8 +183,10 @@ class PointQueries:
         self._begin(source)
         for start, stop in self._chunks(n):
             m = stop - start
-            rays, launch = self._ray_args(source, start, stop, 0)
-            origins, _, _, tmaxs, bad = rays
+            if isinstance(source, GridPoints):
+                origins, tmaxs, bad, launch = self._grid_args(source, start, stop)
+            else:
+                (origins, _, _, tmaxs, bad), launch = self._ray_args(source, start, stop, 0)
             order = self._point_order(origins, launch)
             placed, nbytes = {}, 0
             for name, slot in outputs.items():   # the float32 values first: each output stays aligned
@@ -199,6 +201,23 @@ class PointQueries:
                 self._copy_out(out[name], start, stop, results, at)
         self._check(source)   # also waits for the copies
         return out
+
+    def _grid_args(self, grid: GridPoints, start: int, stop: int) -> tuple:
+        """POINT_INPUT_PARAMS' origins, tmaxs and bad buffers and the QueryLaunch
+        for samples start..stop-1 of ``grid``, as _ray_args gives them for a
+        host batch of points -- the samples made on the device (grid_points)."""
+        m = stop - start
+        origins = self._buffer("in_0", 12 * m)
+        axes = self._upload("grid_axes", grid.axis_values)
+        _, size_y, size_z = grid.shape
+        self._launch("grid_points", (origins, axes, np.uint64(start), np.uint32(m), np.uint32(size_y),
+                                     np.uint32(size_z)), m)
+        launch = self._batch_launch.copy()
+        launch["origin_stride"], launch["dir_stride"], launch["tmin_stride"], launch["tmax_stride"] = 3, 0, 0, 0
+        launch["in_first"], launch["ray_first"], launch["num_rays"], launch["cull"] = 0, start, m, 0
+        launch["field_at"] = NO_RESULT
+        tmaxs = self._upload("in_3", np.full(1, np.inf, np.float32))
+        return origins, tmaxs, self._buffer("bad", 4 * len(RAY_CHECKS)), launch
 
     def signed_distance(self, points, *, sign: str = "winding"):
         """(N,) float32: each point's distance to the mesh, negative inside.
@@ -248,8 +267,8 @@ class PointQueries:
         (``clrt.query.inside.GRID_MARGIN``).  Sample (i, j, k) lies at
         ``(xs[i], ys[j], zs[k])``, ``xs = np.linspace(xmin, xmax, X)`` (both
         ends included), likewise ys and zs, rounded to float32.  The samples are
-        made a chunk at a time (``chunk_rays`` points), so memory beyond the
-        result stays bounded."""
+        made on the device a chunk at a time (``chunk_rays`` points), so memory
+        beyond the result stays bounded."""
         kernel = sign_kernel(sign)
         grid = GridPoints(*grid_axes(resolution, bounds, self.mesh.bounds))
         volume = np.empty(grid.shape, np.float32)
