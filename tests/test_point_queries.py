@@ -314,3 +314,73 @@ def test_points_are_visited_in_cell_order_each_once(device):
     shuffled = accel.closest_points(points[shuffle])
     for field in POINT_FIELDS:
         np.testing.assert_array_equal(getattr(shuffled, field), getattr(whole, field)[shuffle])
+
+
+def test_the_wide_walk_skips_nothing_brute_force_picks(device, monkeypatch):
+    """CPU devices' walk of the wide BVH (point.cl's walk_wide_points: disks
+    beside boxes, float32 lower bounds before each double precision test, each
+    walk seeded with the previous point's triangle) against the binary walk
+    and brute force, bit for bit, on a 16k-triangle torus: points in its box
+    (most far from the surface, where a child's box and disk are both near
+    the best distance), near it and on it, also one a work-item."""
+    from clrt.device import geometry
+
+    mesh = primitives.torus(1.0, 0.35, 128, 64)
+    rng = np.random.default_rng(17)
+    corners = mesh.vertices[mesh.faces].astype(np.float64)
+    f = rng.integers(len(corners), size=200)
+    on = np.einsum("nk,nkj->nj", rng.dirichlet((1, 1, 1), size=200), corners[f])
+    lo, hi = mesh.bounds
+    points = np.concatenate([lo + rng.random((1500, 3)) * (hi - lo), on, on + 1e-3 * rng.normal(size=on.shape)])
+    points = points.astype(np.float32)
+    wide = clrt.Accel(mesh, device=device)
+    if wide.geometry.wide is None:
+        pytest.skip("the device under test does not walk the wide BVH")
+    got = wide.closest_points(points)
+    monkeypatch.setattr(geometry, "RAY_PACKET_KINDS", ())   # one point a work-item: no seeds
+    single = clrt.Accel(mesh, device=device)
+    monkeypatch.setattr(geometry, "WIDE_BVH_KINDS", ())
+    binary = clrt.Accel(mesh, device=device)
+    brute = clrt.Accel(mesh, accel="none", device=device).closest_points(points)
+    assert single.rays_per_item == 1 and binary.geometry.wide is None
+    for other in (single.closest_points(points), binary.closest_points(points), brute):
+        for field in POINT_FIELDS:
+            np.testing.assert_array_equal(getattr(got, field), getattr(other, field), err_msg=field)
+    np.testing.assert_array_equal(wide.signed_distance(points, sign="normal"),
+                                  brute_normal := binary.signed_distance(points, sign="normal"))
+    assert (brute_normal < 0).any()
+
+
+def test_every_wide_child_s_triangles_lie_in_its_disk():
+    """clrt/accel/disks.py against a float64 check: every corner of every
+    triangle under each child of each wide node lies within the child's
+    cylinder (its radius from the axis, half_height along it), and the axis
+    is unit; empty lanes hold zeros."""
+    from clrt.accel import build
+    from clrt.accel.disks import child_slots, wide_disks
+    from clrt.accel.wide import collapse
+
+    mesh = primitives.torus(1.0, 0.35, 48, 24)
+    corners = mesh.vertices[mesh.faces].astype(np.float32)
+    acceleration = build(corners, "box", "sah", 2)
+    slotted = corners[acceleration.slot_order()]
+    wide = collapse(acceleration.rows, slotted)
+    disks = wide_disks(acceleration.rows, wide.sources, slotted)
+    first, size = child_slots(acceleration.rows)
+    assert size[0] + size[1] == len(corners)   # the root row's two children hold every slot
+    checked = 0
+    for node, lanes in enumerate(wide.sources):
+        for k, child in enumerate(lanes):
+            values = {name: float(disks[name][node][k]) for name in disks.dtype.names}
+            if child < 0:
+                assert not any(values.values())
+                continue
+            c = np.array([values["cx"], values["cy"], values["cz"]])
+            n = np.array([values["nx"], values["ny"], values["nz"]])
+            assert abs(np.linalg.norm(n) - 1) < 1e-6
+            x = slotted[first[child]:first[child] + size[child]].reshape(-1, 3).astype(np.float64) - c
+            height = x @ n
+            assert np.abs(height).max() <= values["half_height"]
+            assert np.linalg.norm(x - height[:, None] * n, axis=1).max() <= values["radius"]
+            checked += 1
+    assert checked > 2 * len(wide.sources)
