@@ -187,17 +187,29 @@ inline RayInput make_point_input(POINT_INPUT_PARAMS)
     return make_ray_input(origins, 0, 0, tmaxs, bad, launch);
 }
 
-inline bool load_point(const RayInput* in, uint i, float3* point, float* max_dist)
+// Point i as the caller gave it: load_point's read, apart for kernels that
+// answer several points a work-item -- they read all of theirs first, so that
+// the reads of points scattered in memory wait for memory together.
+inline float3 point_position(const RayInput* in, uint i)
 {
-    const size_t k = (size_t)in->in_first + i;
-    *point = vload3(0, in->origins + k * in->origin_stride);
-    *max_dist = in->tmaxs[k * in->tmax_stride];
-    if (!all(isfinite(*point))) {
+    return vload3(0, in->origins + ((size_t)in->in_first + i) * in->origin_stride);
+}
+
+// load_point of point i read already (`position`: point_position).
+inline bool take_point(const RayInput* in, uint i, float3 position, float3* point, float* max_dist)
+{
+    *max_dist = in->tmaxs[((size_t)in->in_first + i) * in->tmax_stride];
+    if (!all(isfinite(position))) {
         atomic_min(in->bad + BAD_ORIGIN, (int)(in->ray_first + i));
         return false;
     }
-    *point -= in->shift;
+    *point = position - in->shift;
     return true;
+}
+
+inline bool load_point(const RayInput* in, uint i, float3* point, float* max_dist)
+{
+    return take_point(in, i, point_position(in, i), point, max_dist);
 }
 
 #ifdef RAY_PACKETS

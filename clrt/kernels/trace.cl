@@ -257,6 +257,23 @@ __kernel void query_all(RAY_INPUT_PARAMS, __global uchar* results, GEOMETRY_PARA
     query_hits(&g, origin, dir, tmin, tmax, QUERY_ALL, false, &sink);
 }
 
+// The points of a work-item of query_closest_point or signed_distances: from
+// the launch's `first` in the order of point_order.cl (of `num` points),
+// ITEM_RAYS of them (or those left), their indices into `ids` and positions into `positions`, all
+// read before any is answered (rays.cl's point_position says why: on PoCL the
+// read of each point waited a cache miss, a fifth of the time on 1M random
+// points).  Returns how many.
+inline uint read_item_points(const RayInput* in, __global const uint* order, uint num, uint first, uint* ids,
+                             float3* positions)
+{
+    const uint count = min((uint)ITEM_RAYS, num - first);
+    for (uint k = 0; k < count; ++k) {
+        ids[k] = POINT_ORDER(order, num)[first + k];
+        positions[k] = point_position(in, ids[k]);
+    }
+    return count;
+}
+
 // The nearest point of the mesh to each query point (point.cl), within the
 // point's largest distance (tmaxs: a miss beyond it), written field by field
 // into `results` (outputs 0 .. 4: point, distance, prim, u, v, as
@@ -279,14 +296,17 @@ __kernel void query_closest_point(POINT_INPUT_PARAMS, __global uchar* results, G
     __global int* prim_out = RESULT_AT(int, 2);
     __global float* u_out = RESULT_AT(float, 3);
     __global float* v_out = RESULT_AT(float, 4);
+    uint ids[ITEM_RAYS];
+    float3 positions[ITEM_RAYS];
+    const uint count = read_item_points(&in, order, launch.num_rays, first, ids, positions);
     int seed = -1;
-    for (uint j = first; j < min(first + ITEM_RAYS, launch.num_rays); ++j) {
-        const uint i = POINT_ORDER(order, launch.num_rays)[j];   // point_order.cl
+    for (uint k = 0; k < count; ++k) {
+        const uint i = ids[k];
         float3 p;
         float max_dist;
         PointHit best;
         best.prim = -1;
-        if (load_point(&in, i, &p, &max_dist))
+        if (take_point(&in, i, positions[k], &p, &max_dist))
             best = closest_point(&g, p, max_dist, POINT_MARGIN(p, in.scene_lo, in.scene_hi), seed);
         const bool found = best.prim >= 0;
         if (found)
@@ -354,13 +374,16 @@ inline void signed_distances(const Geometry* g, const RayInput* in, const QueryL
                              __global uchar* results, __global const uint* order, uint first, const int rule,
                              __global const WindingFarField* winding, __global const PseudoNormals* normals)
 {
+    uint ids[ITEM_RAYS];
+    float3 positions[ITEM_RAYS];
+    const uint count = read_item_points(in, order, launch->num_rays, first, ids, positions);
     int seed = -1;
-    for (uint j = first; j < min(first + ITEM_RAYS, launch->num_rays); ++j) {
-        const uint i = POINT_ORDER(order, launch->num_rays)[j];
+    for (uint k = 0; k < count; ++k) {
+        const uint i = ids[k];
         float3 p;
         float max_dist;
         float d = NAN;
-        if (load_point(in, i, &p, &max_dist)) {
+        if (take_point(in, i, positions[k], &p, &max_dist)) {
             const PointHit best = closest_point(g, p, INFINITY, POINT_MARGIN(p, in->scene_lo, in->scene_hi), seed);
             seed = best.slot;
             bool inside;
