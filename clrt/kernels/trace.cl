@@ -333,29 +333,35 @@ __kernel void query_closest_point(POINT_INPUT_PARAMS, __global uchar* results, G
 // point is inside), as the float32 value says -- asked alone, by
 // winding_inside's shorter walk, which agrees with it.  `winding`: the tree's
 // far fields (winding_nodes; unused without a BVH).  A bad point writes 0.
+// ITEM_RAYS points a work-item, as query_closest_point.
 __kernel void query_winding_number(POINT_INPUT_PARAMS, __global uchar* results,
                                    __global const WindingFarField* winding, GEOMETRY_PARAMS)
 {
-    const uint j = get_global_id(0);
-    if (j >= launch.num_rays)
+    const uint first = ITEM_RAYS * get_global_id(0);
+    if (first >= launch.num_rays)
         return;
-    const uint i = POINT_ORDER(order, launch.num_rays)[j];
     const Geometry g = make_geometry(GEOMETRY_ARGS);
     const RayInput in = make_point_input(POINT_INPUT_ARGS);
     __global float* winding_out = RESULT_AT(float, 0);
     __global uchar* inside_out = RESULT_AT(uchar, 1);
-    float3 p;
-    float max_dist;
-    const bool good = load_point(&in, i, &p, &max_dist);
-    if (!winding_out) {
+    uint ids[ITEM_RAYS];
+    float3 positions[ITEM_RAYS];
+    const uint count = read_item_points(&in, order, launch.num_rays, first, ids, positions);
+    for (uint k = 0; k < count; ++k) {
+        const uint i = ids[k];
+        float3 p;
+        float max_dist;
+        const bool good = take_point(&in, i, positions[k], &p, &max_dist);
+        if (!winding_out) {
+            if (inside_out)
+                inside_out[i] = good && winding_inside(&g, winding, p) ? 1 : 0;
+            continue;
+        }
+        const float w = good ? (float)winding_number(&g, winding, p) : 0.0f;
+        winding_out[i] = w;
         if (inside_out)
-            inside_out[i] = good && winding_inside(&g, winding, p) ? 1 : 0;
-        return;
+            inside_out[i] = w >= 0.5f ? 1 : 0;
     }
-    const float w = good ? (float)winding_number(&g, winding, p) : 0.0f;
-    winding_out[i] = w;
-    if (inside_out)
-        inside_out[i] = w >= 0.5f ? 1 : 0;
 }
 
 // Signed distances, output 0 (a float a point): the distance to the closest

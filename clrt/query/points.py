@@ -194,9 +194,8 @@ class PointQueries:
                 launch["field_at"][slot] = nbytes
                 nbytes += m * np.dtype(INSIDE_FIELDS[name].dtype).itemsize
             results = self._buffer("results", nbytes)
-            # the signed distances' kernels, as query_closest_point, answer rays_per_item points a work-item
-            items = m if kernel == "query_winding_number" else -(-m // self.rays_per_item)
-            self._launch(kernel, (origins, tmaxs, bad, launch, order, results, *rule, *self._point_geometry()), items)
+            self._launch(kernel, (origins, tmaxs, bad, launch, order, results, *rule, *self._point_geometry()),
+                         -(-m // self.rays_per_item))   # trace.cl's ITEM_RAYS points a work-item
             for name, at in placed.items():
                 self._copy_out(out[name], start, stop, results, at)
         self._check(source)   # also waits for the copies
