@@ -27,6 +27,7 @@ if not __package__:   # run as a script, python benchmarks/NAME.py: import from 
     sys.path[0] = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 import argparse
+import itertools
 
 import numpy as np
 
@@ -37,7 +38,9 @@ def host_winding_nodes(rows: np.ndarray, corners: np.ndarray) -> dict:
     """The WindingNodes' values of ``rows`` over slot-ordered ``corners`` (F, 3, 3),
     float64, in numpy: centre, radius, dipole, area, first and second moments
     per child (2 * rows), leaves from their triangles, inner children from
-    their row's two, the deepest level first (as trace.cl's winding_nodes)."""
+    their row's two, the deepest level first (as trace.cl's winding_nodes);
+    the moments made whole, then their symmetric parts taken (what a
+    WindingNode keeps; here as full 3 x 3 and 3 x 3 x 3 arrays)."""
     from clrt.accel.rows import child_refs, tree_levels
     refs = child_refs(rows).astype(np.int64)
     c = corners.astype(np.float64)
@@ -84,6 +87,9 @@ def host_winding_nodes(rows: np.ndarray, corners: np.ndarray) -> dict:
                 out["second"][inner] += (out["second"][k] + np.einsum("nij,nk->nijk", m, e)
                                          + np.einsum("nik,nj->nijk", m, e)
                                          + np.einsum("ni,nj,nk->nijk", out["dipole"][k], e, e))
+    out["first"] = (out["first"] + out["first"].transpose(0, 2, 1)) / 2
+    t = out["second"]
+    out["second"] = sum(t.transpose(0, *axes) for axes in itertools.permutations((1, 2, 3))) / 6
     return out
 
 
