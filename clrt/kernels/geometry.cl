@@ -8,7 +8,9 @@
 //   wide      with -DBVH_WIDE (CPU devices, clrt/device/geometry.py): the same
 //             BVH collapsed into nodes of eight children (accel_wide.cl), then,
 //             from byte scene.packets_at on, each leaf's triangles in packets
-//             of four -- one buffer, so that a kernel takes one parameter less
+//             of four -- one buffer, so that a kernel takes one parameter less;
+//             the point queries' copy of it (clrt/query/points.py) holds a
+//             WideDisk a node between the nodes and the packets (point.cl)
 //   instances with -DACCEL_INSTANCES (a two-level scene, docs/instances.md):
 //             the Instance table (layouts.h), in the caller's order
 //   scene     SceneInfo (layouts.h) by value: the triangle count among others

@@ -6,9 +6,11 @@ the device.
   device from the uploaded rows and triangles, one launch of trace.cl's
   ``winding_nodes`` a tree level, deepest first -- so for every builder
   (host or device) and volume shape alike, and again after a refit, without
-  reading the triangles back.  For bunny00 (75k triangles, 44k rows) on
-  PoCL (2 cores) they took 77 ms, where the same sums in numpy on the host
-  took 289 ms before any upload (``python -m benchmarks.inside``).
+  reading the triangles back.  A CPU device that walks the wide BVH reads
+  them gathered lane by lane into its nodes (``WIDE_WINDING_NODE``, on the
+  host: its memory is the device's).  For bunny00 (75k triangles, 44k rows)
+  on PoCL (2 cores) both took 28 ms, where the same sums in numpy on the
+  host took 211 ms before any upload (``python -m benchmarks.inside``).
 - The pseudo-normals of every slot (``PSEUDO_NORMALS``, signs by normal),
   made on the host from the mesh.
 - The sample points of :meth:`~clrt.query.points.PointQueries.sdf_grid`,
