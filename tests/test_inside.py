@@ -146,6 +146,43 @@ def test_winding_numbers_match_the_exact_sum(name, device):
     assert np.abs(brute - exact).max() <= 1e-6
 
 
+def test_contains_decides_near_one_half_as_the_winding_number(device):
+    """contains takes a first walk that opens few children and decides only
+    where its proven error bound leaves no doubt (winding.cl's
+    winding_inside): points of an open bowl whose exact winding numbers lie
+    within 1e-6 to 1e-3 of 1/2 (found by bisection along random segments) are
+    inside exactly where winding_number says so, and where the exact sum
+    does (away from 1/2 by more than winding_number's error)."""
+    bowl = primitives.icosphere(3)
+    bowl = Mesh.from_arrays(bowl.vertices, bowl.faces[bowl.vertices[bowl.faces][:, :, 1].min(axis=1) > 0.2], "bowl")
+    corners = bowl.vertices[bowl.faces].astype(np.float32)
+    rng = np.random.default_rng(23)
+    # vertical segments through the bowl's opening (y = 0.2), under its dome (y > 0.7 there): w is
+    # continuous along them, above 1/2 at the top, below at the bottom
+    xz = rng.uniform(-0.5, 0.5, (400, 2))
+    a = np.stack([xz[:, 0], np.full(400, 0.6), xz[:, 1]], axis=1)
+    b = np.stack([xz[:, 0], np.full(400, -0.3), xz[:, 1]], axis=1)
+    wa, wb = exact_winding_numbers(a, corners), exact_winding_numbers(b, corners)
+    keep = (wa - 0.5) * (wb - 0.5) < 0
+    a, b, wa = a[keep], b[keep], wa[keep]
+    for _ in range(40):   # bisection on the exact winding number
+        mid = (a + b) / 2
+        wm = exact_winding_numbers(mid, corners)
+        same = (wm - 0.5) * (wa - 0.5) > 0
+        a, wa = np.where(same[:, None], mid, a), np.where(same, wm, wa)
+        b = np.where(same[:, None], b, mid)
+    along = (b - a) / np.linalg.norm(b - a, axis=1, keepdims=True)
+    offsets = np.array([-1e-3, -1e-4, -1e-5, 1e-5, 1e-4, 1e-3])
+    points = (a[:, None] + offsets[None, :, None] * along[:, None]).reshape(-1, 3).astype(np.float32)
+    exact = _exact(bowl, points)
+    assert len(points) >= 300 and (np.abs(exact - 0.5) < 1e-4).sum() >= 100
+    accel = clrt.Accel(bowl, device=device)
+    inside, w = accel.contains(points), accel.winding_number(points)
+    np.testing.assert_array_equal(inside, w >= 0.5)
+    clear = np.abs(exact - 0.5) > WINDING_NUMBER_ERROR
+    np.testing.assert_array_equal(inside[clear], exact[clear] >= 0.5)
+
+
 def test_points_on_a_face_and_at_corners(device):
     """A point on a face of a box (exactly in the plane of two triangles) has
     winding number 1/2; one at a corner, the exact sum of the others'."""
