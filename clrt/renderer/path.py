@@ -31,7 +31,8 @@ from clrt.config import PATH_RR_DEPTH, PATH_STRATEGIES
 from clrt.device.args import camera_value, vec4
 from clrt.device.context import device_kind
 from clrt.device.geometry import replace_buffer
-from clrt.device.program import launch_size
+from clrt.device.program import build_program, launch_size
+from clrt.device.signature import typed_kernels
 from clrt.layouts import PATH_LAUNCH
 from clrt.renderer.kernels import FRAME_HEADER, PATH_ARRAYS, PATH_KERNELS, pack_tables
 from clrt.scene.emitters import light_tables
@@ -48,6 +49,21 @@ QUEUED_LAUNCHES = 1
 #: Work-items per work-group of path_resolve: the driver's choice on a GPU,
 #: fixed on a CPU device (PoCL compiles a variant per size: launch_size).
 RESOLVE_GROUP: dict = {"gpu": None, "cpu": 64}
+#: Registers a work-item of the megakernel may use on NVIDIA devices.  Left
+#: to itself the compiler takes 110 (the lent H200's driver, 2026-12-02),
+#: room for 18 warps an SM; capped, more warps fit and hide the latency of
+#: the BVH walks' memory reads, which outweighs the spills: kernel time at
+#: depth 8 fell by 20 % (Cornell box) and 17 % (bunny00) at 40, against 12
+#: and 13 % at 64 (docs/benchmark-log.md).
+NVIDIA_MAX_REGISTERS = 40
+
+
+def register_cap(device: cl.Device) -> tuple[str, ...]:
+    """The path program's compiler options that cap its registers, where the
+    device's compiler takes them (NVIDIA's cl_nv_compiler_options)."""
+    if "cl_nv_compiler_options" in device.extensions.split():
+        return (f"-cl-nv-maxrregcount={NVIDIA_MAX_REGISTERS}",)
+    return ()
 
 
 def pass_sizes(spp: int) -> list[int]:
@@ -78,7 +94,9 @@ class PathTracer:
     def __init__(self, renderer):
         self.renderer = renderer
         detail = {"SURFACE_DETAIL": None} if renderer.arrays.detail is not None else None
-        self.kernels = renderer.device_scene.kernels("path.cl", PATH_KERNELS, detail)
+        defines = renderer.device_scene.defines(detail)
+        program = build_program(renderer.context, "path.cl", defines, register_cap(renderer.queue.device))
+        self.kernels = typed_kernels(program, PATH_KERNELS, defines)
         self.kernel = self.kernels["path_trace"]
         self.max_group = self.kernel.get_work_group_info(cl.kernel_work_group_info.WORK_GROUP_SIZE,
                                                           renderer.queue.device)
