@@ -51,7 +51,7 @@ QUEUED_LAUNCHES = 1
 RESOLVE_GROUP: dict = {"gpu": None, "cpu": 64}
 #: Registers a work-item of the megakernel may use on NVIDIA devices.  Left
 #: to itself the compiler takes 110 (the lent H200's driver, 2026-12-02),
-#: room for 18 warps an SM; capped, more warps fit and hide the latency of
+#: room for 16 warps an SM; capped, more warps fit and hide the latency of
 #: the BVH walks' memory reads, which outweighs the spills: kernel time at
 #: depth 8 fell by 20 % (Cornell box) and 17 % (bunny00) at 40, against 12
 #: and 13 % at 64 (docs/benchmark-log.md).
