@@ -5,6 +5,7 @@ the same seed.  Small images and few samples on PoCL; the tolerances are
 several standard errors of the estimate (measured from the renders
 themselves where the noise is not known beforehand)."""
 
+import importlib
 import math
 
 import numpy as np
@@ -19,6 +20,8 @@ from clrt.scene.emitters import alias_table, environment_cdfs
 from clrt.scene.environment import Environment, read_hdr
 from clrt.scene.mesh import Mesh
 from clrt.scene.scene import Camera, Light, Material, Scene, SceneObject
+
+frame_module = importlib.import_module("clrt.renderer.frame")
 
 # Pure Lambert of albedo 1: no specular lobe, no metal, no transmission.
 WHITE = Material(color=(1.0, 1.0, 1.0), specular=0.0, metallic=0.0, specular_weight=0.0, roughness=1.0)
@@ -135,6 +138,42 @@ def test_a_seed_gives_the_same_image_whatever_the_launches(cornerless_room, devi
     rows = narrow.render(camera, linear=True, spp=5, seed=7)
     assert rows.tiles >= 14 * len(pass_sizes(5))
     np.testing.assert_array_equal(rows.image, first)
+
+
+def test_previews_and_ctrl_c_hold_the_samples_done(cornerless_room, device, monkeypatch):
+    """A preview after each pass but the last shows the image of the samples
+    done, bit for bit; Ctrl-C keeps every queued launch's samples, each pixel
+    averaging its own (rows a launch of the next pass reached have more), and
+    is a plain interruption while the first pass is not yet queued whole."""
+    camera = Camera((0.0, 0.6, 4.0), (0.0, 0.0, 0.0), width=20, height=14, fov=50)
+    shown = []
+    cornerless_room.render(camera, linear=True, spp=8, seed=7, preview=lambda f: shown.append((f.spp, f.image)))
+    assert [samples for samples, _ in shown] == [1, 2, 4]
+    alone = {n: cornerless_room.render(camera, linear=True, spp=n, seed=7).image for n in (1, 2, 4)}
+    for samples, image in shown:
+        np.testing.assert_array_equal(image, alone[samples])
+    # One row a launch: the first pass takes 14 launches; the host waits for
+    # each with one more queued behind it.
+    narrow = Renderer(cornerless_room.scene, device=device,
+                      limits=TileLimits(first_launch_pixels=20, launch_ms=1e-6))
+    real_wait, waits = frame_module.wait_for, []
+
+    def ctrl_c_at(k):
+        def wait(event):
+            real_wait(event)
+            waits.append(1)
+            if len(waits) == k:
+                raise KeyboardInterrupt
+        return wait
+    monkeypatch.setattr(frame_module, "wait_for", ctrl_c_at(1))
+    with pytest.raises(KeyboardInterrupt):
+        narrow.render(camera, linear=True, spp=8, seed=7)
+    waits.clear()
+    monkeypatch.setattr(frame_module, "wait_for", ctrl_c_at(15))   # launches 1..16 queued: rows 0 and 1 twice
+    cut = narrow.render(camera, linear=True, spp=8, seed=7)
+    assert cut.interrupted and cut.spp == 1 and cut.tiles == 16
+    np.testing.assert_array_equal(cut.image[:2], alone[2][:2])
+    np.testing.assert_array_equal(cut.image[2:], alone[1][2:])
 
 
 def test_a_spot_light_lights_its_cone_only(device):

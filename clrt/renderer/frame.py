@@ -298,7 +298,7 @@ class Renderer:
             out = self._path.render(camera, spp=spp, max_depth=depth, seed=seed, strategy=strategy,
                                     progress=progress or (lambda n: None), wait=lambda e: wait_for(e),
                                     limits=self.limits, preview=shown)
-        timings["kernels"] = out["kernel_ms"]
+        timings["kernels"], timings["read back"] = out["kernel_ms"], out["read_ms"]
         image = out["image"] if linear else tone_map(out["image"], exposure)
         if not out["seen"]:
             warnings.warn(nothing_visible(self.arrays.corners, self.arrays.bounds, camera),
