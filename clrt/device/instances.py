@@ -16,32 +16,37 @@ import numpy as np
 from clrt.accel.instances import TwoLevel, assemble, instance_table
 from clrt.device.acceleration import build_acceleration
 from clrt.device.scene import DeviceScene, stage
-from clrt.scene.arrays import device_origin, triangle_corners
+from clrt.scene.arrays import device_origin, mesh_frames
 from clrt.scene.instances import Instances
 
 
-def build_two_level(instances: Instances, accel: str, builder: str, leaf_size: int,
-                    device: str | None) -> tuple[TwoLevel, np.ndarray, np.ndarray, np.ndarray]:
+def build_two_level(instances: Instances, accel: str, builder: str, leaf_size: int, device: str | None,
+                    material_base=None) -> tuple[TwoLevel, np.ndarray, np.ndarray, np.ndarray]:
     """The two-level structure of ``instances`` with the meshes' corners (each
     mesh in its own device frame, mesh after mesh: what its slots index), the
-    instances' world box (caller's frame) and the world's device origin."""
+    instances' world box (caller's frame) and the world's device origin.
+    ``material_base``: (I,) each instance's first material row (the renderer's;
+    Instance.material), else 0."""
     start = time.perf_counter()
-    mesh_origins = np.stack([device_origin(m.bounds) for m in instances.meshes])
-    corners = [triangle_corners(m, c) for m, c in zip(instances.meshes, mesh_origins)]
+    mesh_origins, corners = mesh_frames(instances.meshes)
     bottoms = [build_acceleration(c, accel, builder, leaf_size, device) for c in corners]
     for b in bottoms:   # the rows are read back and joined: the builder's device buffers go
         b.device_buffers = None
     bounds = instances.bounds
     origin = device_origin(bounds)
-    two = assemble(bottoms, instance_table(instances, mesh_origins, origin), accel, start)
+    table = instance_table(instances, mesh_origins, origin)
+    if material_base is not None:
+        table["material"] = material_base
+    two = assemble(bottoms, table, accel, start)
     return two, np.concatenate(corners), bounds, origin
 
 
 def instanced_scene(instances: Instances, *, accel: str, builder: str, leaf_size: int, device: str | None,
-                    timings: dict | None = None, **upload) -> DeviceScene:
+                    timings: dict | None = None, material_base=None, **upload) -> DeviceScene:
     """The DeviceScene of ``instances`` (options as DeviceScene takes them;
-    ``upload``: its keywords past the build, max_buffer_bytes and the like)."""
+    ``upload``: its keywords past the build, max_buffer_bytes and the like;
+    ``material_base``: build_two_level's)."""
     with stage(timings, "acceleration build"):
-        two, corners, bounds, origin = build_two_level(instances, accel, builder, leaf_size, device)
+        two, corners, bounds, origin = build_two_level(instances, accel, builder, leaf_size, device, material_base)
     return DeviceScene(corners, accel=accel, builder=builder, leaf_size=leaf_size, device=device, bounds=bounds,
                        origin=origin, timings=timings, acceleration=two, **upload)

@@ -84,7 +84,8 @@ inline bool path_segment(const Geometry* g, const Shading* sh, const Lights* lig
     const uint depth = p->depth, sample = p->sample, seed = launch->seed;
     const uint strategy = launch->strategy;
     const float3 dir = p->dir;
-    const Hit hit = closest_hit(g, p->origin, dir, 0.0f, INFINITY, depth > 1u);
+    int instance;
+    const Hit hit = closest_instance_hit(g, p->origin, dir, 0.0f, INFINITY, depth > 1u, &instance);
     // Light found by this BSDF-sampled ray: all of it after a delta choice
     // (nothing else could find it), else weighed against light sampling.
     if (hit.prim < 0) {
@@ -98,8 +99,8 @@ inline bool path_segment(const Geometry* g, const Shading* sh, const Lights* lig
         p->radiance += p->beta * le * w;
         return true;
     }
-    const SurfacePoint s = surface_point(g, sh, dir, &hit);
-    __global const Material* m = sh->materials + SPLIT_AT(sh, tri_info, hit.prim)->material;
+    const SurfacePoint s = surface_point(g, sh, dir, &hit, instance);
+    __global const Material* m = sh->materials + s.material;
     const Bsdf b = material_bsdf(sh, &s, (uint)hit.prim, hit.u, hit.v);
     if (depth == 1u) {
         first->seen = true;

@@ -216,8 +216,10 @@ class Accel(PointQueries):
     def from_renderer(cls, renderer, *, chunk_rays: int | None = None) -> "Accel":
         """Ray queries on a Renderer's scene, sharing its device, BVH and buffers;
         ``prim`` is then the triangle index in the scene's objects, in order
-        (as ``Frame.prim``).  They follow the renderer: after ``Renderer.refit``
-        (a rebuild included) they answer for the moved scene."""
+        (as ``Frame.prim``) -- in a scene of placed meshes the triangle's row in
+        its instance's mesh, ``instance`` the placement (clrt.scene.placed's
+        order).  They follow the renderer: after ``Renderer.refit`` (a rebuild
+        included) or ``Renderer.move_instances`` they answer for the moved scene."""
         self = cls.__new__(cls)
         self._lock = renderer._lock   # one scene on the device: its refits wait for these queries
         self._options = None   # the renderer's scene: refit the renderer instead
@@ -229,7 +231,10 @@ class Accel(PointQueries):
     def follow(self, renderer, chunk_rays: int | None = None) -> None:
         """Take ``renderer``'s current scene, device and buffers (Renderer.refit
         calls this on the queries made by :meth:`from_renderer`)."""
-        self.mesh, self.instances = as_mesh(renderer.scene), None
+        if renderer.instances is not None:   # a scene of placed meshes: queries name the instance
+            self.mesh, self.instances = None, renderer.instances
+        else:
+            self.mesh, self.instances = as_mesh(renderer.scene), None
         self._setup(renderer.device_scene, chunk_rays)
 
     # An Accel holds device buffers that a copy would share (a refit of the copy

@@ -1,6 +1,7 @@
 """What an Accel is made from: one mesh, or several meshes placed as
 instances (a list of meshes or of ``(mesh, transform)`` pairs, a
-clrt.Instances, or a glTF file whose nodes place meshes more than once) --
+clrt.Instances, a glTF file whose nodes place meshes more than once, or a
+Scene whose objects place their meshes by transforms) --
 a two-level scene on the device (docs/instances.md).
 
     >>> mesh, instances, scene = query_scene([bunny, (bunny, lifted)], accel="box", ...)
@@ -15,6 +16,8 @@ from clrt.device.scene import DeviceScene
 from clrt.scene.arrays import device_origin, triangle_corners
 from clrt.scene.instances import Instances, is_gltf_file, is_instance_list, placed_meshes
 from clrt.scene.mesh import Mesh
+from clrt.scene.placed import scene_instances
+from clrt.scene.scene import Scene
 from clrt.scene.sources import as_mesh
 
 
@@ -26,7 +29,10 @@ def query_scene(source, *, accel: str, builder: str, leaf_size: int, device: str
     options checked already, as Accel takes them (``upload``:
     max_buffer_bytes, max_buffer_label)."""
     options = dict(accel=accel, builder=builder, leaf_size=leaf_size, device=device, **upload)
-    mesh = placed_meshes(source) if is_instance_list(source) or is_gltf_file(source) else as_mesh(source)
+    if isinstance(source, Scene) and source.instanced:   # a Scene of placed meshes: its placements
+        mesh = scene_instances(source)
+    else:
+        mesh = placed_meshes(source) if is_instance_list(source) or is_gltf_file(source) else as_mesh(source)
     if isinstance(mesh, Instances):
         return None, mesh, instanced_scene(mesh, **options)
     origin = device_origin(mesh.bounds)   # the device's frame (clrt.scene.arrays)

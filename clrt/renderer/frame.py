@@ -34,6 +34,7 @@ from clrt.config import (DEFAULT_ACCEL, DEFAULT_BUILDER, DEFAULT_LEAF_SIZE, DEFA
 from clrt.device.args import camera_value
 from clrt.device.context import format_bytes as _size
 from clrt.device.geometry import replace_buffer
+from clrt.device.instances import instanced_scene
 from clrt.device.pinned import PinnedPool
 from clrt.device.program import launch_size
 from clrt.device.scene import DeviceScene, stage
@@ -160,17 +161,21 @@ class Renderer:
 
         def shading_arrays(acceleration) -> dict:
             """Per-slot and per-vertex arrays (split with the geometry when large)."""
-            slots = acceleration.prim_ids   # shading data in slot order
+            slots = acceleration.slot_order()   # shading data in slot order
             split = {"tri_info": a.tri_info[slots], "vertex_normals": a.vertex_normals}
             if a.detail is not None:   # textures or colours: the -DSURFACE_DETAIL program (texture.cl)
                 split.update(tri_detail=a.detail.tri_detail[slots], texels=a.detail.texels)
             return split
 
         tables = self._tables()
-        self.device_scene = DeviceScene(
-            a.corners, accel=accel, builder=builder, leaf_size=leaf_size, device=device, bounds=a.bounds,
-            origin=a.origin, extra=shading_arrays, whole_bytes=tables.nbytes, reserve=MIN_FRAME_BYTES,
-            max_buffer_bytes=max_buffer_bytes, timings=self.timings)
+        upload = dict(accel=accel, builder=builder, leaf_size=leaf_size, device=device, extra=shading_arrays,
+                      whole_bytes=tables.nbytes, reserve=MIN_FRAME_BYTES, max_buffer_bytes=max_buffer_bytes,
+                      timings=self.timings)
+        self.instances = a.instances   # placed meshes: a two-level scene (docs/instances.md), else None
+        if a.instances is not None:
+            self.device_scene = instanced_scene(a.instances, material_base=a.material_base, **upload)
+        else:
+            self.device_scene = DeviceScene(a.corners, bounds=a.bounds, origin=a.origin, **upload)
         scene_on_device = self.device_scene
         self.acceleration, self.geometry = scene_on_device.acceleration, scene_on_device.geometry
         self.context, self.queue, self.device = scene_on_device.context, scene_on_device.queue, scene_on_device.device
@@ -358,6 +363,9 @@ class Renderer:
         ``rebuild=True`` builds a new BVH instead (a tree refitted through large
         motions traces slower)."""
         scene = as_scene(scene)
+        if self.instances is not None or scene.instanced:
+            raise InputError("refit of a scene of placed meshes is not supported: move its instances "
+                             "(Renderer.move_instances) or make a new Renderer")
         arrays = flatten_scene(scene)
         # The same triangles of the same objects; their vertex normals may be
         # split differently (the crease angle looks at the moved faces).

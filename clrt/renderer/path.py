@@ -35,7 +35,7 @@ from clrt.device.program import build_program, launch_size
 from clrt.device.signature import typed_kernels
 from clrt.layouts import PATH_LAUNCH
 from clrt.renderer.kernels import FRAME_HEADER, PATH_ARRAYS, PATH_KERNELS, pack_tables
-from clrt.scene.emitters import light_tables
+from clrt.scene.emitters import emitting_triangles, light_tables
 from clrt.scene.texture import srgb_encode8
 
 #: The most samples of a pass: later passes add this many each.
@@ -114,9 +114,9 @@ class PathTracer:
         if key == self._tables_of:
             return self._launch_values
         a = r.arrays
-        slots = r.acceleration.prim_ids
-        tables = light_tables(a.corners[slots], a.tri_info["material"][slots], a.materials, scene.lights,
-                              scene.background, scene.environment, a.bounds)
+        corners, material_of, slots, instances = emitting_triangles(a, r.acceleration.slot_order())
+        tables = light_tables(corners, material_of, a.materials, scene.lights, scene.background, scene.environment,
+                              a.bounds, slots=slots, instances=instances)
         detail = (a.detail.textures, a.detail.srgb_table) if a.detail is not None else (None, None)
         packed, offsets = pack_tables(a.materials, a.lights, *detail, entries=tables.entries, env=tables.texels,
                                       marginal=tables.marginal, conditional=tables.conditional)
