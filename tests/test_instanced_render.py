@@ -262,3 +262,30 @@ def test_bad_instance_entries_are_one_line_and_exit_2(tmp_path, entry, message, 
     err = capsys.readouterr().err.strip()
     assert "\n" not in err and not out.exists()
     assert __import__("re").search(message, err), err
+
+
+def test_moved_placements_render_as_a_new_renderer_of_them(device):
+    """Renderer.move_instances: the next frames -- Whitted's and the path
+    tracer's, its emitters moved with them -- and the queries that follow it
+    are those of a Renderer made of the moved scene, bit for bit; the
+    meshes' rows and shading arrays stay."""
+    scene = _path_scene()
+    renderer = clrt.Renderer(scene, device=device)
+    queries = clrt.Accel.from_renderer(renderer)
+    camera = Camera((0, 4, 8), (0, 0, 0), width=40, height=30)
+    renderer.render(camera, spp=2)   # (light tables made before the move)
+    moved = renderer.instances.transforms.copy()
+    moved[3:, :3, 3] += (0.6, 0.4, -0.3)                        # the lamps
+    moved[0, :3, :3] = _rotation((0, 0, 1), 0.5) @ np.diag([1.0, -1.0, 1.0])   # a torus turned and mirrored
+    tri_info = renderer.geometry.buffers["tri_info"]
+    renderer.move_instances(moved)
+    assert renderer.geometry.buffers["tri_info"] is tri_info and np.array_equal(renderer.instances.transforms, moved)
+    fresh = clrt.Renderer(renderer.scene, device=device)
+    for integrator in ("whitted", "path"):
+        frames = [r.render(camera, linear=True, integrator=integrator, spp=4, seed=2).image for r in (renderer, fresh)]
+        assert np.array_equal(*frames), integrator
+    mine, theirs = queries.camera_images(camera), clrt.Accel.from_renderer(fresh).camera_images(camera)
+    assert np.array_equal(mine.instance, theirs.instance) and np.array_equal(mine.t, theirs.t)
+    with pytest.raises(clrt.InputError, match="move_instances needs a scene of placed meshes"):
+        clrt.Renderer(primitives.box((1, 1, 1)), device=device).move_instances(moved)
+

@@ -13,11 +13,13 @@ import time
 
 import numpy as np
 
-from clrt.accel.instances import TwoLevel, assemble, instance_table
+from clrt.accel.instances import TwoLevel, assemble, instance_table, move
+from clrt.config import MAX_COORDINATE
 from clrt.device.acceleration import build_acceleration
 from clrt.device.scene import DeviceScene, stage
+from clrt.errors import InputError
 from clrt.scene.arrays import device_origin, mesh_frames
-from clrt.scene.instances import Instances
+from clrt.scene.instances import Instances, checked_transforms
 
 
 def build_two_level(instances: Instances, accel: str, builder: str, leaf_size: int, device: str | None,
@@ -50,3 +52,29 @@ def instanced_scene(instances: Instances, *, accel: str, builder: str, leaf_size
         two, corners, bounds, origin = build_two_level(instances, accel, builder, leaf_size, device, material_base)
     return DeviceScene(corners, accel=accel, builder=builder, leaf_size=leaf_size, device=device, bounds=bounds,
                        origin=origin, timings=timings, acceleration=two, **upload)
+
+
+def move_instances(scene: DeviceScene, instances: Instances, transforms) -> tuple[Instances, bool]:
+    """Move the instances of ``scene`` (a two-level DeviceScene of
+    ``instances``) to ``transforms`` ((I, 4, 4), object -> world, checked as
+    every instance's are): the instance table and the top level built again
+    on the host and uploaded over the old ones (clrt.accel.instances.move),
+    the meshes' levels left as they are, the world's device frame and reach
+    chosen anew -- the scene as a fresh build of the moved instances would
+    make it, bit for bit.  Returns the moved Instances and whether the
+    programs' defines changed (clrt.device.geometry.DeviceGeometry.move_instances)."""
+    start = time.perf_counter()
+    moved = Instances(instances.meshes, instances.mesh_of, checked_transforms(transforms, len(instances)))
+    reach = np.abs(moved.boxes()).max(axis=(1, 2))
+    if not (reach <= MAX_COORDINATE).all():
+        k = int(np.argmax(~(reach <= MAX_COORDINATE)))
+        raise InputError(f"instance {k}'s transform takes its mesh to {float(reach[k]):.3g}, past "
+                         f"+-{MAX_COORDINATE:.0e} (the device computes in float32)")
+    mesh_origins = np.stack([device_origin(m.bounds) for m in moved.meshes])
+    bounds = moved.bounds
+    origin = device_origin(bounds)
+    rows = move(scene.acceleration, instance_table(moved, mesh_origins, origin))
+    with scene.out_of_memory():
+        changed = scene.geometry.move_instances(scene.queue, rows, bounds, origin)
+    scene.acceleration.move_ms = 1e3 * (time.perf_counter() - start)
+    return moved, changed

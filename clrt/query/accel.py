@@ -52,7 +52,7 @@ from clrt.config import NO_RESULT, RAY_CHECKS
 from clrt.layouts import QUERY_LAUNCH
 from clrt.query.kernels import QUERY_GROUP, QUERY_KERNELS
 from clrt.query.points import PointQueries
-from clrt.query.instances import query_scene, source_of
+from clrt.query.instances import InstanceMoves, query_scene, source_of
 from clrt.query.rays import CameraRays, PinholeRays, PointBatch, RayBatch, cull_code, is_device_array
 from clrt.query.results import (ALL_HITS_FIELDS, CAMERA_FIELDS, CLOSEST_FIELDS, RESULT_BYTES, RESULT_DTYPES,
                                 AllHits, CameraImages, Hits, asked_fields, with_fields)
@@ -140,7 +140,7 @@ def _rebuilt_accel(source, options) -> "Accel":
     return Accel(source, **options)
 
 
-class Accel(PointQueries):
+class Accel(PointQueries, InstanceMoves):
     """A mesh and its acceleration structure, uploaded once to one device.
 
     ``mesh``: a Mesh, a mesh file, a trimesh object or ``(vertices, faces)``; or
@@ -193,7 +193,8 @@ class Accel(PointQueries):
         the hits of brute force) and only get slower as the motion tangles the
         tree -- ``rebuild=True`` builds a new one instead."""
         if self.instances is not None:
-            raise InputError("refit of an Accel of instances is not supported yet: make a new Accel")
+            raise InputError("refit of an Accel of instances is not supported yet: move them (move_instances) "
+                             "or make a new Accel")
         faces = self.mesh.faces
         vertices = np.asarray(vertices)
         if vertices.shape != self.mesh.vertices.shape:

@@ -11,8 +11,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from clrt.device.instances import instanced_scene
+from clrt.device.instances import instanced_scene, move_instances
 from clrt.device.scene import DeviceScene
+from clrt.device.sharing import one_at_a_time
+from clrt.errors import InputError
+from clrt.query.kernels import QUERY_KERNELS
 from clrt.scene.arrays import device_origin, triangle_corners
 from clrt.scene.instances import Instances, is_gltf_file, is_instance_list, placed_meshes
 from clrt.scene.mesh import Mesh
@@ -46,3 +49,25 @@ def source_of(mesh: Mesh | None, instances: Instances | None):
     if instances is not None:
         return instances
     return Mesh(np.asarray(mesh.vertices), np.asarray(mesh.faces), mesh.name)
+
+
+class InstanceMoves:
+    """What an Accel of instances does besides queries (mixed into
+    clrt.query.accel.Accel)."""
+
+    @one_at_a_time
+    def move_instances(self, transforms) -> None:
+        """Place the instances anew: ``transforms`` (I, 4, 4), object -> world,
+        one for each instance in its order (checked as when made).  Only the
+        instance table and the top level are built again (on the host:
+        docs/instances.md says how long it takes) and uploaded over the old
+        ones; each mesh's BVH stays.  The queries then answer as an Accel
+        made of the moved instances does, bit for bit."""
+        if self.instances is None:
+            raise InputError("move_instances needs an Accel of instances (a list of meshes or of (mesh, "
+                             "transform) pairs, a clrt.Instances, a glTF file); one mesh's vertices move by refit")
+        if self._options is None:
+            raise InputError("these queries share a Renderer's scene: use Renderer.move_instances")
+        self.instances, changed = move_instances(self.device_scene, self.instances, transforms)
+        if changed:   # a deeper or shallower top level: a program of another stack size
+            self.kernels = self.device_scene.kernels("trace.cl", QUERY_KERNELS)

@@ -34,7 +34,7 @@ from clrt.config import (DEFAULT_ACCEL, DEFAULT_BUILDER, DEFAULT_LEAF_SIZE, DEFA
 from clrt.device.args import camera_value
 from clrt.device.context import format_bytes as _size
 from clrt.device.geometry import replace_buffer
-from clrt.device.instances import instanced_scene
+from clrt.device.instances import instanced_scene, move_instances
 from clrt.device.pinned import PinnedPool
 from clrt.device.program import launch_size
 from clrt.device.scene import DeviceScene, stage
@@ -46,6 +46,7 @@ from clrt.renderer.path import PathTracer, tone_map
 from clrt.renderer.tiles import TileLimits, run_tiles
 from clrt.renderer.visible import nothing_visible
 from clrt.scene.arrays import flatten_scene, light_records
+from clrt.scene.placed import moved_scene
 from clrt.scene.scene import Camera, Scene, far_triangle
 from clrt.scene.render_setup import render_frame
 from clrt.scene.sources import as_scene
@@ -386,6 +387,32 @@ class Renderer:
             self.geometry.replace(self.queue, "vertex_normals", arrays.vertex_normals)
             self.scene, self.arrays = _own_copy(scene), arrays
             self.set_lights(scene.lights)   # uploads the tables, the new materials with the lights
+        for queries in list(self._followers):
+            queries.follow(self, queries.chunk_rays)
+
+    @one_at_a_time
+    def move_instances(self, transforms) -> None:
+        """Place a scene of placed meshes anew: ``transforms`` (I, 4, 4),
+        object -> world, one for each placement in the order of
+        ``self.instances`` (docs/instances.md).  Only the instance table and
+        the top level are built again (on the host) and uploaded; the meshes'
+        BVHs, shading arrays and materials stay.  The frames after show the
+        moved scene as a new Renderer of it would, bit for bit (its lights
+        stay where they are)."""
+        if self.instances is None:
+            raise InputError("move_instances needs a scene of placed meshes (docs/instances.md); one whose "
+                             "vertices move is refitted (Renderer.refit)")
+        instances, changed = move_instances(self.device_scene, self.instances, transforms)
+        origin = self.geometry.origin
+        self.scene, self.instances = moved_scene(self.scene, instances.transforms), instances
+        self.arrays = dataclasses.replace(self.arrays, instances=instances, bounds=instances.bounds, origin=origin,
+                                          lights=light_records(self.scene.lights, origin))
+        self.tables = replace_buffer(self.queue, self.tables, self._tables())
+        if changed:   # a top level of another depth: programs of another stack size
+            detail = {"SURFACE_DETAIL": None} if self.arrays.detail is not None else None
+            self.kernels, self._path = self.device_scene.kernels("render.cl", RENDER_KERNELS, detail), None
+        elif self._path is not None:
+            self._path.forget_tables()   # its lights' triangles moved
         for queries in list(self._followers):
             queries.follow(self, queries.chunk_rays)
 

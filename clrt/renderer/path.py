@@ -106,6 +106,11 @@ class PathTracer:
         self._frame = self._means = None   # the sums and the means of a frame of _pixels pixels
         self._pixels = 0
 
+    def forget_tables(self) -> None:
+        """Build the light tables again for the next frame (the renderer's
+        instances moved, and their emitters with them)."""
+        self._tables_of = None
+
     def _light_tables(self, scene):
         """The `tables` buffer with the light tables of the renderer's scene as
         it is now (lights, background, environment), and PathLaunch's values."""

@@ -17,6 +17,7 @@ document order, depth first (as clrt.Accel numbers them).
 from __future__ import annotations
 
 import os
+from dataclasses import replace
 
 import numpy as np
 
@@ -74,3 +75,21 @@ def scene_instances(scene: Scene) -> Instances:
         mesh_of += [k] * o.placements
         transforms.append(np.eye(4)[None] if o.transforms is None else o.transforms)
     return Instances(meshes, np.array(mesh_of, np.int64), np.concatenate(transforms))
+
+
+def moved_scene(scene: Scene, transforms: np.ndarray) -> Scene:
+    """A copy of ``scene`` whose placements are ``transforms`` ((I, 4, 4), in
+    the order of :func:`scene_instances`; checked already): each object keeps
+    its mesh -- the same Mesh object, so that it stays the one uploaded --
+    and its materials, and takes its run of the transforms."""
+    objects, k = [], 0
+    for o in scene.objects:
+        obj = object.__new__(SceneObject)   # (made again, a smooth mesh would be split once more)
+        placed = np.array(transforms[k:k + o.placements], np.float64)
+        placed.flags.writeable = False
+        for name, value in (("mesh", o.mesh), ("material", o.material), ("materials", o.materials),
+                            ("transforms", placed)):
+            object.__setattr__(obj, name, value)
+        objects.append(obj)
+        k += o.placements
+    return replace(scene, objects=objects, lights=list(scene.lights))
