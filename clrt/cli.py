@@ -118,8 +118,8 @@ def _render(args) -> int:
     aovs_inside = writer.holds(channels="named")
     if args.aov and not aovs_inside:
         from clrt.query.aov import aov_paths
-        for path in aov_paths(out, args.aov):
-            output.check_replace(path, args.force)
+        for aov_path in aov_paths(out, args.aov):   # (not `path`: that says which integrator)
+            output.check_replace(aov_path, args.force)
     check_host_memory(camera.width * camera.height * _HOST_BYTES[depth], f"a {camera.width}x{camera.height} image")
     samples = (scene.spp or config.DEFAULT_SPP) if path else scene.samples ** 2
     progress = None if args.quiet else _progress_bar(camera.width * camera.height * samples)
@@ -171,7 +171,9 @@ def _render(args) -> int:
         accel = "brute force" if args.accel == "none" else f"{builder} BVH of {config.VOLUME_WORDS[args.accel]}"
         view = f", camera from {args.mesh}" if from_file else ""
         how = f", path tracing {frame.spp} spp" if path else ""
-        print(f"{camera.width}x{camera.height} pixels, {frame.triangles:,} triangles, "
+        placed = renderer.instances
+        placed = f", {len(placed):,} placements ({scene.num_triangles:,} placed)" if placed is not None else ""
+        print(f"{camera.width}x{camera.height} pixels, {frame.triangles:,} triangles{placed}, "
               f"{len(scene.lights)} light(s), {accel}{view}{how}, device: {frame.device}")
         for stage, ms in frame.timings.items():
             print(f"  {stage:<20} {ms:10.2f} ms")
