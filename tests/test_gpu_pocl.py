@@ -43,6 +43,13 @@ def test_the_path_tracer_agrees_on_gpu_and_pocl(source, options):
 
 
 def test_point_queries_agree_on_gpu_and_pocl():
+    """Within the documented bounds (the devices round double and float32
+    arithmetic alike but not always identically: contraction into FMAs is the
+    compiler's choice): distances within POINT_DISTANCE_BOUND of each other,
+    the same triangle where no other is as near, the same sign and inside
+    answer away from the surface and from w = 0.5."""
+    from clrt.query.results import POINT_DISTANCE_BOUND, WINDING_NUMBER_ERROR
+
     mesh = primitives.torus(1.0, 0.35, 48, 24)
     points = np.random.default_rng(2).uniform(-1.6, 1.6, (20000, 3))
     answers = {}
@@ -51,9 +58,13 @@ def test_point_queries_agree_on_gpu_and_pocl():
         answers[device] = (accel.closest_points(points), accel.signed_distance(points, sign="normal"),
                            accel.contains(points), accel.winding_number(points))
     (g_closest, g_signed, g_inside, g_winding), (c_closest, c_signed, c_inside, c_winding) = answers.values()
-    np.testing.assert_array_equal(g_closest.prim, c_closest.prim)
-    np.testing.assert_array_equal(g_closest.distance, c_closest.distance)
-    np.testing.assert_array_equal(g_signed, c_signed)
-    assert np.abs(g_winding - c_winding).max() <= 1e-4
-    clear = np.abs(c_winding - 0.5) > 1e-3
+    bound = 4 * POINT_DISTANCE_BOUND * 1.6
+    assert np.abs(g_closest.distance - c_closest.distance).max() <= bound
+    differ = g_closest.prim != c_closest.prim
+    assert differ.mean() < 0.01   # ties and near-ties only
+    assert np.abs(np.abs(g_signed) - np.abs(c_signed)).max() <= bound
+    away = np.abs(c_signed) > 4 * bound
+    np.testing.assert_array_equal(np.sign(g_signed[away]), np.sign(c_signed[away]))
+    assert np.abs(g_winding - c_winding).max() <= 2 * WINDING_NUMBER_ERROR
+    clear = np.abs(c_winding - 0.5) > 4 * WINDING_NUMBER_ERROR
     np.testing.assert_array_equal(g_inside[clear], c_inside[clear])
