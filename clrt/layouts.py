@@ -215,7 +215,10 @@ the mesh's own device frame:
   148: material   int        the renderer: the row of its object's first material in the
                              Material table (a triangle's TriangleInfo.material counts from
                              it: materials per placement); 0 for ray queries
-  152: pad        uint[2]
+  152: min_scale  float      the linear part's smallest singular value, rounded down: no
+                             point of the placed mesh lies nearer a point than that times
+                             their distance in object space (closest points, point.cl)
+  156: pad        uint
 In a two-level scene the BvhPairNode rows are the top level's (root at row
 0; a leaf holds one instance, its reference the instance's row here), then
 each distinct mesh's, every reference global; the slots are each mesh's
@@ -392,7 +395,8 @@ SCENE_INFO = np.dtype([("ambient_light", float4), ("background", float4), ("pack
                        ("num_instances", np.uint32), ("pad", np.uint32, 3)])
 INSTANCE = np.dtype([("to_world", float4, 3), ("to_object", float4, 3), ("lo", float4), ("hi", float4),
                      ("mesh", np.int32), ("root", np.int32), ("first", np.int32), ("count", np.int32),
-                     ("flags", np.uint32), ("material", np.int32), ("pad", np.uint32, 2)])
+                     ("flags", np.uint32), ("material", np.int32),
+                     ("min_scale", np.float32), ("pad", np.uint32)])
 
 # struct name in layouts.h -> numpy dtype; the layout test walks this table.
 STRUCTS = {

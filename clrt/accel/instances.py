@@ -103,6 +103,7 @@ def instance_table(instances: Instances, mesh_origins: np.ndarray, origin: np.nd
     table["hi"][:, :3] = round_up32(boxes[:, 1] + pad)
     table["mesh"] = mesh_of
     table["flags"] = np.where(np.linalg.det(linear) < 0.0, INSTANCE_MIRROR, 0)
+    table["min_scale"] = round_down32(singular[:, 2] * (1.0 - 2.0 ** -20))
     return table
 
 

@@ -170,7 +170,8 @@ typedef struct {
     int first, count;            // the mesh's slots: first .. first + count - 1
     uint flags;                  // INSTANCE_MIRROR: to_world's determinant is negative
     int material;                // the renderer: row of its object's first Material (0 for queries)
-    uint pad[2];
+    float min_scale;             // smallest singular value of the linear part, rounded down
+    uint pad;
 } Instance;
 
 typedef struct {

@@ -258,7 +258,7 @@ __kernel void query_all(RAY_INPUT_PARAMS, __global uchar* results, GEOMETRY_PARA
 
 // The nearest point of the mesh to each query point (point.cl), within the
 // point's largest distance (tmaxs: a miss beyond it), written field by field
-// into `results` (outputs 0 .. 4: point, distance, prim, u, v, as
+// into `results` (outputs 0 .. 5: point, distance, prim, u, v, instance, as
 // clrt.query.results' POINT_FIELDS; any may be absent).  The point goes back
 // to the caller's frame here (+ shift, in double where the device has it,
 // rounded to float32 once).  A miss (or a bad point): point NaN, distance
@@ -283,6 +283,7 @@ __kernel void query_closest_point(POINT_INPUT_PARAMS, __global uchar* results, G
     __global int* prim_out = RESULT_AT(int, 2);
     __global float* u_out = RESULT_AT(float, 3);
     __global float* v_out = RESULT_AT(float, 4);
+    __global int* instance_out = RESULT_AT(int, 5);
     if (point_out)
         vstore3(found ? convert_float3(best.point + TO_POINT_REAL3(in.shift)) : (float3)(NAN), i, point_out);
     if (distance_out)
@@ -293,6 +294,8 @@ __kernel void query_closest_point(POINT_INPUT_PARAMS, __global uchar* results, G
         u_out[i] = found ? best.u : 0.0f;
     if (v_out)
         v_out[i] = found ? best.v : 0.0f;
+    if (instance_out)
+        instance_out[i] = found ? best.instance : -1;
 }
 
 // ---- Inside and outside (winding.cl, point.cl's sign rules).  Points as

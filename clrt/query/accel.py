@@ -51,6 +51,7 @@ from clrt.errors import InputError
 from clrt.config import NO_RESULT, RAY_CHECKS
 from clrt.layouts import QUERY_LAUNCH
 from clrt.query.kernels import QUERY_GROUP, QUERY_KERNELS
+from clrt.query.inside import GridPoints
 from clrt.query.points import PointQueries
 from clrt.query.instances import InstanceMoves, query_scene, source_of
 from clrt.query.rays import CameraRays, PinholeRays, PointBatch, RayBatch, cull_code, is_device_array
@@ -349,13 +350,16 @@ class Accel(PointQueries, InstanceMoves):
 
     # ----------------------------------------------------------------------- rays in
 
-    def _begin(self, source) -> None:
+    def _begin(self, source, points_on_instances: bool = False) -> None:
         """Before the first chunk of a batch: a camera's eye within the range of
         the triangle test (clrt.device.reach), no bad ray reported yet, and the
-        range the kernels hold a batch's own origins to (rays.cl's BAD_REACH)."""
+        range the kernels hold a batch's own origins to (rays.cl's BAD_REACH).
+        ``points_on_instances``: the query answers points on instances too
+        (closest points; the inside queries do not yet)."""
         self._check_reach(source)
-        if self.instances is not None and isinstance(source, PointBatch):
-            raise InputError("point queries on an Accel of instances are not supported yet")
+        if self.instances is not None and isinstance(source, (PointBatch, GridPoints)) and not points_on_instances:
+            raise InputError("signed distances, winding numbers and inside tests on an Accel of instances are not "
+                             "supported yet (closest_points and distance are)")
         reach, origin = self.geometry.reach, self.geometry.origin
         # A camera's eye was checked here, as the renderer checks it, and goes
         # to the device in its frame already, moved in float64 as the
