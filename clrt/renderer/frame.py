@@ -427,8 +427,9 @@ class Renderer:
             return "<clrt.Renderer, not made>"
         if "arrays" not in self.__dict__:   # _rebuilt_renderer's shell
             return f"<clrt.Renderer of {self.scene.num_triangles:,} triangles, unpickled where OpenCL cannot run>"
-        return (f"<clrt.Renderer of {self.arrays.corners.shape[0]:,} triangles, {len(self.arrays.lights)} light(s), "
-                f"{self.acceleration.accel} ({self.acceleration.builder}) on {self.device}>")
+        placed = f" in {len(self.instances):,} placements" if self.instances is not None else ""
+        return (f"<clrt.Renderer of {self.arrays.corners.shape[0]:,} triangles{placed}, {len(self.arrays.lights)} "
+                f"light(s), {self.acceleration.accel} ({self.acceleration.builder}) on {self.device}>")
 
     def add_follower(self, queries) -> None:
         """Keep ``queries`` (Accel.from_renderer's) on this renderer's scene through refits."""
