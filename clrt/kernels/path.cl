@@ -98,7 +98,8 @@ inline bool path_segment(const Geometry* g, const Shading* sh, const Lights* lig
         p->radiance += p->beta * le * w;
         return true;
     }
-    const SurfacePoint s = surface_point(g, sh, dir, &hit);
+    SurfacePoint s = surface_point(g, sh, dir, &hit);
+    s.n = mapped_normal(g, sh, &s, (uint)hit.prim, hit.u, hit.v);
     __global const Material* m = sh->materials + SPLIT_AT(sh, tri_info, hit.prim)->material;
     const Bsdf b = material_bsdf(sh, &s, (uint)hit.prim, hit.u, hit.v);
     if (depth == 1u) {

@@ -191,6 +191,16 @@ def flatten_scene(scene: Scene, pbr_textures: bool = False) -> SceneArrays:
                        light_records(scene.lights, origin), bounds, detail, origin)
 
 
+def uses_pbr_textures(scene: Scene) -> bool:
+    """Whether ``scene`` has a texture that only the path tracer reads
+    (emission, metallic-roughness, normal map) on a mesh with texture
+    coordinates: what ``flatten_scene(pbr_textures=True)`` adds."""
+    return any(getattr(mat, name) is not None
+               for o in scene.objects if o.mesh.uv is not None
+               for mat in (o.material, *o.materials)
+               for name in MATERIAL_TEXTURES if name != "texture")
+
+
 def material_rows(flat_materials: list) -> np.ndarray:
     """(M,) MATERIAL rows of ``(Material, {texture field: Texture row or -1})``
     pairs: the Phong fields as they are, the path tracer's from
