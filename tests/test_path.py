@@ -63,6 +63,33 @@ def test_a_white_sphere_in_a_white_furnace_vanishes(furnace, device):
     assert abs(mapped.mean() - 1.0) < 0.005 and np.abs(mapped - 1.0).max() < 0.12
 
 
+def test_russian_roulette_looks_past_the_eta_scale_of_glass(device):
+    """A white Lambert ball inside a shell of smooth glass (ior 2) in a white
+    furnace: a path that enters the glass carries 1 / eta^2 of radiance and
+    gets eta^2 back on the way out, so every path that leaves returns exactly
+    1 (the image is 1), and only the roulette adds noise.  Paths trapped by
+    total internal reflection reach the roulette inside the glass; judged by
+    their throughput alone (0.25) three in four would die there and the
+    survivors leave with weight 4.  With the eta scale undone (pbrt's
+    etaScale, Mitsuba's eta^2) they continue with probability 0.95.  One
+    path's standard deviation, from the spread of pixels that all converge to
+    1: 0.69 and 0.77 here (seeds 1 and 2), 1.65 and 1.80 with the roulette
+    on the throughput alone -- a variance 5.5 times higher."""
+    glass = Material(color=(1.0, 1.0, 1.0), metallic=0.0, specular_weight=1.0, roughness=0.0, transmission=1.0,
+                     ior=2.0, smooth=False)
+    white = Material(color=(1.0, 1.0, 1.0), specular=0.0, metallic=0.0, specular_weight=0.0, roughness=1.0,
+                     smooth=False)
+    scene = Scene([SceneObject(primitives.icosphere(2), glass), SceneObject(primitives.icosphere(2, radius=0.8), white)],
+                  [], background=(1.0, 1.0, 1.0), integrator="path")
+    camera = Camera((0.0, 0.0, 2.6), (0.0, 0.0, 0.0), width=16, height=16, fov=40)
+    spp = 256
+    for seed in (1, 2):
+        centre = Renderer(scene, device=device).render(camera, linear=True, spp=spp, seed=seed).image[4:12, 4:12]
+        path_std = centre.std() * math.sqrt(spp)
+        assert path_std < 1.2, (seed, path_std)
+        assert abs(centre.mean() - 1.0) < 4.0 * max(path_std, 0.5) / math.sqrt(centre.size / 3 * spp), centre.mean()
+
+
 def test_max_depth_counts_as_mitsuba_does(device):
     """A diffuse floor (albedo 0.5) under an emitting ceiling (radiance 2,
     facing down, black) that covers the view: the floor's radiance is exactly
