@@ -282,8 +282,8 @@ class Renderer:
                              "query them with clrt.camera_images")
         if not self._pbr_textures and uses_pbr_textures(self.scene):
             raise InputError("the scene's emission, metallic-roughness or normal textures were not uploaded: "
-                             "this Renderer was made for the Whitted integrator; make it from a scene with "
-                             "integrator = \"path\" to path-trace them")
+                             "this Renderer was made for the Whitted integrator; set the Scene's "
+                             "integrator = \"path\" before making the Renderer to path-trace them")
         camera = self._camera(camera)
         spp = opts.check("spp", spp if spp is not None else self.scene.spp or DEFAULT_SPP)
         depth = max_depth if max_depth is not None else self.scene.max_depth
