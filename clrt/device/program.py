@@ -10,7 +10,7 @@ kept on disk (``$CLRT_CACHE_DIR``, else ``$XDG_CACHE_HOME/clrt`` or
 ``~/.cache/clrt``), keyed by the expanded source, the options, the device and
 its driver version: a new process loads the binary instead of compiling
 (seconds on NVIDIA's compiler).  ``CLRT_NO_PROGRAM_CACHE=1`` turns the disk
-cache off.  Not on PoCL, which keeps a cache of its own (driver_keeps_programs).
+cache off.  Not on PoCL, which keeps a cache of its own (keeps_binaries).
 """
 
 from __future__ import annotations
@@ -135,8 +135,9 @@ def build_program(context: cl.Context, entry: str, defines: dict | None = None,
         from_disk, stored = program is not None, 0.0
         if program is None:
             program, stored = _compile(context, entry, source, options)
-        builds.append(ProgramBuild(entry, dict(defines or {}), len(source), len(program.kernel_names.split(";")),
-                                   time.perf_counter() - start, stored, from_disk))
+        kernels = len([name for name in program.kernel_names.split(";") if name])
+        builds.append(ProgramBuild(entry, dict(defines or {}), len(source), kernels, time.perf_counter() - start,
+                                   stored, from_disk))
         _programs[key] = program
     return program
 
@@ -165,23 +166,22 @@ def cache_dir() -> Path | None:
     return Path(root) / "programs"
 
 
-def driver_keeps_programs(context: cl.Context) -> bool:
-    """Does the driver keep the programs it builds on disk itself, keyed by
-    their source and options?  PoCL does (``$POCL_CACHE_DIR``, else
-    ``~/.cache/pocl``, unless ``POCL_KERNEL_CACHE=0``): the program's LLVM IR
-    when it is built, and each kernel compiled for a work-group size when it
-    first runs with it.  There clrt keeps no binaries: asking PoCL for one
-    makes it compile every kernel of the program for any work-group size,
-    which on 2 cores was 16 of the 17 s that build_bvh.cl's first build took,
-    for kernels that then ran compiled anew for their own sizes, or never ran
-    (docs/benchmark-log.md, "Ready at once")."""
-    return (os.environ.get("POCL_KERNEL_CACHE", "").strip() != "0"
-            and all(d.platform.name == "Portable Computing Language" for d in context.devices))
+def keeps_binaries(context: cl.Context) -> bool:
+    """Does clrt keep the binaries of programs built on ``context`` on disk?
+    Not on PoCL.  PoCL keeps a cache of its own (``$POCL_CACHE_DIR``, else
+    ``~/.cache/pocl``), keyed by source and options: a program's LLVM IR when
+    it is built, and each kernel compiled for a work-group size when it first
+    runs with it -- only the kernels a call runs are compiled.  Asking PoCL for
+    a program's binary makes it compile every kernel of the program for any
+    work-group size, kernels that then run compiled anew for their own sizes
+    or never run: 16 of the 17 s of build_bvh.cl's first build on 2 cores
+    (``python -m benchmarks.cold_start``, docs/benchmark-log.md "Ready at once")."""
+    return not any(d.platform.name == "Portable Computing Language" for d in context.devices)
 
 
 def _cache_path(context: cl.Context, source: str, options: list[str]) -> Path | None:
     folder = cache_dir()
-    if folder is None or driver_keeps_programs(context):
+    if folder is None or not keeps_binaries(context):
         return None
     h = hashlib.sha256()
     for part in (source, "\0".join(options), cl.VERSION_TEXT):
