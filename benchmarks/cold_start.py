@@ -92,7 +92,8 @@ def _spread(values) -> str:
     return f"median {statistics.median(values):7.2f}  min {min(values):7.2f}  max {max(values):7.2f}"
 
 
-def run(cases, mesh, device, runs: int, breakdown: bool, out=sys.stdout) -> None:
+def run(cases, mesh, device, runs: int, breakdown: bool, out=None) -> None:
+    out = out or sys.stdout
     with tempfile.TemporaryDirectory(prefix="clrt-cold-start-") as folder:
         folder = Path(folder)
         times = {case: [] for case in cases}
@@ -126,7 +127,8 @@ def _parse_breakdown(stdout: str) -> dict:
     return json.loads(lines[-1][len(BREAKDOWN_MARK):])
 
 
-def _print_breakdown(case: str, cold: dict, warm: dict, out) -> None:
+def _print_breakdown(case: str, cold: dict, warm: dict, out=None) -> None:
+    out = out or sys.stdout
     print(f"\n{case}: breakdown of one more cold and warm process, ms", file=out)
     print(f"  {'program build (its defines below it)':<74} {'KB':>5} {'kernels':>7} "
           f"{'cold':>8} {'(binary)':>8} {'warm':>8}", file=out)
