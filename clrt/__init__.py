@@ -11,10 +11,13 @@ Where to start:
   ``clrt.Material``, ``clrt.Light``;
 - ray queries: ``clrt.trace``, ``clrt.occluded``, ``clrt.camera_images`` (one
   call each), ``clrt.Accel`` (build once, query often), ``clrt.RayMeshIntersector``
-  (trimesh's interface); results ``clrt.Hits``, ``clrt.AllHits``,
-  ``clrt.CameraImages`` (``help()`` on each lists its arrays);
-- point queries: ``clrt.closest_points`` (``clrt.ClosestPoints``), ``clrt.distance``;
-- meshes: ``clrt.load_mesh``, ``clrt.Mesh``;
+  and ``clrt.ProximityQuery`` (trimesh's ``mesh.ray`` and ``mesh.nearest``);
+  results ``clrt.Hits``, ``clrt.AllHits``, ``clrt.CameraImages`` (``help()``
+  on each lists its arrays);
+- point queries: ``clrt.closest_points`` (``clrt.ClosestPoints``), ``clrt.distance``,
+  ``clrt.signed_distance``, ``clrt.winding_number``, ``clrt.contains``, ``clrt.sdf_grid``;
+- meshes: ``clrt.load_mesh``, ``clrt.Mesh``; meshes placed many times:
+  ``clrt.Instances`` (or a list of ``(mesh, transform)`` pairs, docs/instances.md);
 - devices: ``device=None`` (the first GPU, else the CPU), ``"gpu"``, ``"cpu"``
   or ``"P:D"`` (platform and device indices, as ``clrt info`` lists them).
 
@@ -72,11 +75,16 @@ _LAZY = {
     "all_hits": "clrt.query", "any_hit": "clrt.query", "camera_images": "clrt.query",
     "count_hits": "clrt.query", "occluded": "clrt.query", "trace": "clrt.query",
     "ClosestPoints": "clrt.query", "closest_points": "clrt.query", "distance": "clrt.query",
+    "signed_distance": "clrt.query", "winding_number": "clrt.query", "contains": "clrt.query",
+    "sdf_grid": "clrt.query",
     "RayMeshIntersector": "clrt.query.intersector",
+    "ProximityQuery": "clrt.query.proximity",
     "Frame": "clrt.renderer", "Renderer": "clrt.renderer", "TileLimits": "clrt.renderer", "render": "clrt.renderer",
     "default_scene": "clrt.scene.default",
     "load_mesh": "clrt.scene.load",
+    "Environment": "clrt.scene.environment",
     "Mesh": "clrt.scene.mesh",
+    "Instances": "clrt.scene.instances",
     "Camera": "clrt.scene.scene", "Light": "clrt.scene.scene", "Material": "clrt.scene.scene",
     "Scene": "clrt.scene.scene", "SceneObject": "clrt.scene.scene", "scene_from_mesh": "clrt.scene.scene",
     "load_scene": "clrt.scene.scene_file",

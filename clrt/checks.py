@@ -183,8 +183,34 @@ def samples(value, name: str = "samples") -> int:
     return integer(name, value, 1, config.MAX_SAMPLES)
 
 
-def max_depth(value, name: str = "max_depth") -> int:
-    return integer(name, value, 0, config.MAX_BOUNCES)
+def max_depth(value, name: str = "max_depth", integrator: str | None = None) -> int:
+    """A max_depth for ``integrator``: Whitted's bounces 0..MAX_BOUNCES; the path
+    tracer's depth as Mitsuba counts it, -1 (unbounded) or 1..MAX_PATH_DEPTH;
+    either of those where the integrator is not known yet (an option's value
+    before the scene is read)."""
+    if integrator == "whitted":
+        return integer(name, value, 0, config.MAX_BOUNCES)
+    if integrator == "path":
+        whole = isinstance(value, Integral) and not isinstance(value, bool)
+        if not (whole and (value == -1 or 1 <= value <= config.MAX_PATH_DEPTH)):
+            raise fail(name, f"-1 (unbounded) or an integer in 1..{config.MAX_PATH_DEPTH} (the path tracer's "
+                             "depth)", value)
+        return int(value)
+    return integer(name, value, -1, config.MAX_PATH_DEPTH)
+
+
+def spp(value, name: str = "spp") -> int:
+    """The path tracer's samples per pixel, 1..2**31 - 1."""
+    return integer(name, value, 1, config.MAX_SPP)
+
+
+def seed(value, name: str = "seed") -> int:
+    return integer(name, value, 0, 2**32 - 1)
+
+
+def exposure(value, name: str = "exposure") -> float:
+    """Stops of exposure: the image x 2**exposure before it is clamped and encoded."""
+    return number(name, value, ge=-64, le=64)
 
 
 def crease(value, name: str = "crease") -> float:

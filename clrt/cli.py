@@ -106,7 +106,9 @@ def _render(args) -> int:
 
     out, writer, depth = _output_path(args)
     # The frame clrt.render draws for the same options (and `clrt batch render` for its first view).
-    scene, camera = render_frame(args.mesh, **options.values(args, options.SCENE, options.CAMERA, options.LIGHTS))
+    scene, camera = render_frame(args.mesh, labels=options.FLAGS,
+                                 **options.values(args, options.SCENE, options.CAMERA, options.LIGHTS))
+    path = scene.integrator == "path"
     # A scene file's or a glTF file's camera, unless an option places the camera.
     from_file = bool(args.mesh) and not scene.camera_framed and args.eye is None and args.target is None
 
@@ -119,7 +121,8 @@ def _render(args) -> int:
         for path in aov_paths(out, args.aov):
             output.check_replace(path, args.force)
     check_host_memory(camera.width * camera.height * _HOST_BYTES[depth], f"a {camera.width}x{camera.height} image")
-    progress = None if args.quiet else _progress_bar(camera.width * camera.height * scene.samples ** 2)
+    samples = (scene.spp or config.DEFAULT_SPP) if path else scene.samples ** 2
+    progress = None if args.quiet else _progress_bar(camera.width * camera.height * samples)
     # With a progress bar the first tile is small, so that the bar moves from the start.
     limits = TileLimits(first_launch_pixels=config.PROGRESS_FIRST_TILE) if progress else None
     renderer = Renderer(scene, **options.values(args, options.RENDERER), limits=limits)
@@ -131,12 +134,17 @@ def _render(args) -> int:
         if progress:
             progress.close()
     aov_note = ""
+    image = frame.image
+    if depth == "16-bit" and scene.exposure != 0:   # the 8-bit image is tone-mapped by the renderer
+        image = image * (2.0 ** scene.exposure)
     if aovs_inside:
         channels = {}
+        if path:   # the denoisers' guides: the first hits' albedo and shading normal
+            channels.update(path_channels(frame))
         if args.aov:
             from clrt.query.aov import camera_images_of, exr_channels
-            channels = exr_channels(camera_images_of(renderer, camera), args.aov)
-        output.write_image(frame.image, out, force=args.force, bit_depth=args.bit_depth, channels=channels)
+            channels.update(exr_channels(camera_images_of(renderer, camera), args.aov))
+        output.write_image(image, out, force=args.force, bit_depth=args.bit_depth, channels=channels)
         aov_note = f"channels {' '.join(channels)} of {out.name}"
     else:
         aov_images = None
@@ -145,7 +153,7 @@ def _render(args) -> int:
             aov_images = camera_images_of(renderer, camera)
         written = []
         try:
-            output.write_image(frame.image, out, force=args.force, bit_depth=args.bit_depth)
+            output.write_image(image, out, force=args.force, bit_depth=args.bit_depth)
             written.append(out)
             if args.aov:
                 write_aovs(renderer, camera, args.aov, out, force=args.force, images=aov_images, written=written)
@@ -154,18 +162,35 @@ def _render(args) -> int:
             output.remove_written(written)
             raise
         aov_note = " ".join(str(p.resolve()) for p in written[1:])
+    if frame.interrupted:   # Ctrl-C after a pass of the path tracer: what was done is written
+        print(f"clrt: interrupted after {frame.spp} of {samples} samples per pixel; wrote {out.resolve()}",
+              file=sys.stderr)
+        return 130
     if not args.quiet:
         builder = renderer.acceleration.builder   # what "auto" chose
         accel = "brute force" if args.accel == "none" else f"{builder} BVH of {config.VOLUME_WORDS[args.accel]}"
         view = f", camera from {args.mesh}" if from_file else ""
+        how = f", path tracing {frame.spp} spp" if path else ""
         print(f"{camera.width}x{camera.height} pixels, {frame.triangles:,} triangles, "
-              f"{len(scene.lights)} light(s), {accel}{view}, device: {frame.device}")
+              f"{len(scene.lights)} light(s), {accel}{view}{how}, device: {frame.device}")
         for stage, ms in frame.timings.items():
             print(f"  {stage:<20} {ms:10.2f} ms")
         if args.aov:
             print(f"  AOVs: {aov_note}")
     print(out.resolve())
     return 0
+
+
+#: The EXR channels of the path tracer's guides for denoisers: the mean albedo
+#: and shading normal (world space) of the camera rays' first hits, as
+#: Mitsuba's AOV integrator and Intel Open Image Denoise's tools name them.
+PATH_CHANNELS = {"albedo": ("albedo.R", "albedo.G", "albedo.B"), "normal": ("normal.X", "normal.Y", "normal.Z")}
+
+
+def path_channels(frame) -> dict:
+    """The path tracer's albedo and normal images as EXR channels (PATH_CHANNELS)."""
+    return {name: getattr(frame, layer)[..., k] for layer, names in PATH_CHANNELS.items()
+            for k, name in enumerate(names)}
 
 
 @contextlib.contextmanager

@@ -97,6 +97,8 @@ DEFAULT_EMISSION = (0.0, 0.0, 0.0)
 DEFAULT_BACKGROUND = (0.0, 0.0, 0.0)
 DEFAULT_AMBIENT_LIGHT = (1.0, 1.0, 1.0)
 DEFAULT_LIGHT_COLOR = (1.0, 1.0, 1.0)
+#: A spot light's cone: its half angle in degrees (Mitsuba's spot ``cutoff_angle`` default).
+DEFAULT_SPOT_CUTOFF = 20.0
 DEFAULT_UP = (0.0, 1.0, 0.0)
 DEFAULT_SAMPLES = 1
 #: ``clrt render``'s progress bar (tqdm, when installed): it shows once a frame has
@@ -105,6 +107,32 @@ DEFAULT_SAMPLES = 1
 #: quarter of a 1080p frame: every tile costs a wait, which fast GPU frames feel.
 PROGRESS_DELAY = 1.0
 PROGRESS_FIRST_TILE = 1 << 19
+
+#: Integrators: the paper's Whitted model (the default, unchanged) and a
+#: unidirectional path tracer with next-event estimation and MIS (path.cl).
+INTEGRATORS = ("whitted", "path")
+DEFAULT_INTEGRATOR = "whitted"
+#: The path tracer's samples per pixel when none is given; the most it takes
+#: (the RNG counts samples in 32 bits).
+DEFAULT_SPP = 16
+MAX_SPP = 2**31 - 1
+#: The path tracer's max_depth, counted as Mitsuba counts it (1: emitters seen
+#: directly, 2: direct light, ...; -1: unbounded, paths then end by Russian
+#: roulette) -- and its largest finite value, which also bounds an "unbounded"
+#: path in the kernel.  Whitted's max_depth counts bounces instead (0..MAX_BOUNCES).
+DEFAULT_PATH_MAX_DEPTH = -1
+MAX_PATH_DEPTH = 1024
+#: Russian roulette starts at this depth (Mitsuba's rr_depth default).
+PATH_RR_DEPTH = 5
+#: Light sampling strategies of the path tracer (Renderer.render's ``strategy``,
+#: a debugging aid): "mis" (the default: light and BSDF sampling combined by the
+#: power heuristic), "light" (light sampling only: emitters hit by BSDF-sampled
+#: rays add nothing, except after a specular bounce), "bsdf" (BSDF sampling
+#: only: no light is sampled, so point and spot lights add nothing).  All three
+#: converge to the same image for scenes without point lights.
+PATH_STRATEGIES = {"mis": 0, "light": 1, "bsdf": 2}
+#: Kinds of the path tracer's light table rows (LightEntry.kind in layouts.py).
+LIGHT_KINDS = {"point": 0, "triangle": 1, "background": 2}
 
 #: Material flag bits (``Material.flags`` in layouts.py): smooth shading;
 #: emission from both faces (else from the front one only, as glTF's doubleSided false).
@@ -137,6 +165,19 @@ DEVICE_KINDS = ("gpu", "cpu")
 AOVS = ("depth", "distance", "normal", "prim", "hit", "front")
 #: The formats of output files, and what each can hold: clrt.output.writers.WRITERS.
 
+# --------------------------------------------------------------------------- instances (docs/instances.md)
+
+#: Instance.flags (clrt/layouts.py): the instance's transform has a negative
+#: determinant (a mirror), so a triangle's winding turns over in the world.
+INSTANCE_MIRROR = 1
+#: The most instances of one scene: results report an instance as an int32.
+MAX_INSTANCES = 2**31 - 1
+#: An instance transform whose linear part has a larger condition number (the
+#: ratio of its largest to its smallest singular value) is refused as
+#: singular: its float32 inverse would keep less than a few bits of the
+#: scene's coordinates.
+MAX_TRANSFORM_CONDITION = 1e6
+
 # --------------------------------------------------------------------------- device buffers
 
 #: Most parts one scene buffer is split into when it exceeds the device's
@@ -144,7 +185,7 @@ AOVS = ("depth", "distance", "normal", "prim", "hit", "front")
 #: largest allocation of at least a quarter of the device memory.
 MAX_PARTS = 4
 #: Outputs one ray-query launch can write (QueryLaunch.field_at in layouts.h):
-#: the closest hit's seven fields, query_all's three and its hit counter.
+#: the closest hit's eight fields; query_all's three, its hit counter and the hits' instances.
 RESULT_SLOTS = 8
 #: QueryLaunch.field_at of an output not asked for (no byte of `results` is one).
 NO_RESULT = 2**64 - 1
@@ -255,7 +296,11 @@ def kernel_defines() -> dict:
         **{f"CULL_{name.upper()}": code for name, code in CULL_MODES.items()},
         **{f"WRAP_{name.upper()}": f"{code}u" for name, code in TEXTURE_WRAPS.items()},
         "TEXEL_LIMIT": f"{float(TEXEL_LIMIT)!r}f",
+        "MAX_PATH_DEPTH": MAX_PATH_DEPTH,
+        **{f"PATH_{name.upper()}": f"{code}u" for name, code in PATH_STRATEGIES.items()},
+        **{f"LIGHT_{name.upper()}": f"{code}u" for name, code in LIGHT_KINDS.items()},
         **{f"BAD_{name.upper()}": slot for slot, name in enumerate(RAY_CHECKS)},
+        "INSTANCE_MIRROR": f"{INSTANCE_MIRROR}u",
         "POINT_CELL_BITS": POINT_CELL_BITS,
         "POINT_OFFSETS_GROUP": POINT_OFFSETS_GROUP,
     }

@@ -88,9 +88,25 @@ quarter of float4 texels -- and the decoded values are exact float32 constants,
 the same on every device and in the reference; a linear code c is
 float(c) * float(1/255), one correctly rounded product, the same everywhere too.
 
-``Light`` (32 B) -- point light
-    0: position float4  xyz, w unused
-   16: color    float4  linear RGB intensity, a unused
+``Light`` (64 B) -- point or spot light
+    0: position  float4  xyz, w unused
+   16: color     float4  linear RGB intensity (radiant intensity for the path tracer), a unused
+   32: direction float4  xyz: unit axis of a spot light's cone (zeros for a point light); w unused
+   48: cos_outer float   cosine of the cone's half angle, where the light ends; -1: a point light
+                         (no cone: Whitted and the path tracer skip the falloff, bit for bit)
+   52: cos_inner float   cosine of the half angle where the falloff begins (full intensity inside):
+                         falloff = smoothstep(cos_outer, cos_inner, cos(angle to the axis))
+   56: pad       uint[2]
+
+``LightEntry`` (32 B) -- one light of the path tracer's light table (lights.cl), chosen
+by Walker's alias method in proportion to its power (clrt/scene/emitters.py)
+    0: threshold   float  keep this entry when the uniform u, scaled to the entry, lies below it
+    4: alias       int    else take this entry
+    8: kind        uint   LIGHT_POINT (a Light row: point or spot), LIGHT_TRIANGLE (an emissive
+                          triangle's slot), LIGHT_BACKGROUND (the background or environment map)
+   12: index       int    the Light row or the triangle's slot (-1 for the background)
+   16: probability float  of choosing this entry (its power / all lights' power)
+   20: pad         uint[3]
 
 Kernel arguments passed by value (OpenCL lets no pointer into them: buffers
 travel beside them, and they hold byte offsets into those buffers).  Which
@@ -137,9 +153,35 @@ kernel takes which is declared once, in the signature tables
    44: sample_weight float 1 / samples
    48: first_sample uint  1: the image starts from this sample
 
-``SceneInfo`` (64 B) -- the uploaded scene's values (geometry.cl, shading.cl)
+``PathLaunch`` (224 B) -- one launch of the path tracer (path.cl) over a rectangle of the image
+    0: cam          Camera  as above (80 B)
+   80: background   float4  xyz: radiance of the constant background (no environment map); w unused
+   96: environment  float4  x, y: cos and sin of the environment map's turn about +y; z: its strength;
+                            w: probability of choosing the background / environment among the lights
+  112: image_at     ulong   byte offset in `frame` of the image's float4 sums of radiance (w: samples)
+  120: albedo_at    ulong   ... of the float4 sums of the first hit's albedo
+  128: normal_at    ulong   ... of the float4 sums of the first hit's shading normal
+  136: x, y, w, h   uint    pixels (x, y) .. (x + w - 1, y + h - 1) of the image
+  152: sample_first uint    the launch's first sample of each pixel (the RNG's sample index)
+  156: sample_count uint    samples per pixel of this launch
+  160: samples_before uint  samples the sums hold already (0: this launch starts them)
+  164: seed         uint
+  168: max_depth    int     Mitsuba's count: 1 emitters seen directly, 2 direct light, ...; -1 unbounded
+  172: rr_depth     uint    Russian roulette from this depth on
+  176: strategy     uint    PATH_MIS, PATH_LIGHTS (light sampling only), PATH_BSDF (BSDF sampling only)
+  180: entries_at   uint    byte offset in `tables` of the LightEntry rows
+  184: num_entries  uint    0: no light to sample
+  188: inv_power    float   1 / the power of all lights (the emissive triangles' probabilities)
+  192: env_at       uint    byte offset in `tables` of the environment map's float4 texels, row 0 at the top
+  196: env_width    uint    0: no environment map (the constant background)
+  200: env_height   uint
+  204: marginal_at  uint    ... of its rows' CDF (env_height + 1 floats)
+  208: conditional_at uint  ... of each row's CDF over its texels (env_height rows of env_width + 1 floats)
+  212: pad          uint[3]
+
+``SceneInfo`` (80 B) -- the uploaded scene's values (geometry.cl, shading.cl)
     0: ambient_light float4  linear RGB, w unused (renderer only, as the rest but
-                             num_tris and packets_at)
+                             num_tris, packets_at and num_instances)
    16: background    float4
    32: packets_at    ulong   -DBVH_WIDE: byte offset of the first TrianglePacket in
                              the wide buffer (BvhWideNode rows before it)
@@ -148,6 +190,32 @@ kernel takes which is declared once, in the signature tables
    48: materials_at, lights_at, textures_at, srgb_at  uint  byte offsets in the
                              renderer's `tables` buffer (Material, Light, Texture
                              rows and the SRGB_TABLE)
+   64: num_instances uint    -DACCEL_INSTANCES: rows of the instance table (0 otherwise)
+   68: pad           uint[3]
+
+``Instance`` (160 B) -- one placement of a mesh in a two-level scene
+(-DACCEL_INSTANCES; docs/instances.md), rows in the caller's order (the
+index a query reports).  Both maps are computed in float64 on the host and
+rounded to float32 once; "world" is the device's frame of the scene, "object"
+the mesh's own device frame:
+    0: to_world   float4[3]  row i: xyz = row i of the linear part, w = translation i:
+                             world_i = dot(to_world[i].xyz, p) + to_world[i].w
+   48: to_object  float4[3]  its inverse, rows likewise
+   96: lo         float4     xyz: min corner of the instance's world box (the mesh's box
+                             mapped and padded for the transform's rounding, rounded
+                             outwards); w unused (0)
+  112: hi         float4     xyz: max corner; w unused (0)
+  128: mesh       int        index of its mesh among the scene's distinct meshes
+  132: root       int        row of that mesh's BVH root in the rows (0 without a BVH)
+  136: first      int        the mesh's first slot (its slots are first .. first + count - 1)
+  140: count      int        the mesh's triangles
+  144: flags      uint       INSTANCE_MIRROR (clrt.config): to_world's determinant is negative
+  148: pad        uint[3]
+In a two-level scene the BvhPairNode rows are the top level's (root at row
+0; a leaf holds one instance, its reference the instance's row here), then
+each distinct mesh's, every reference global; the slots are each mesh's
+triangles in its leaf order, meshes one after another, and ``prim_ids`` gives
+a slot's row in its own mesh's faces.
 
 ``BvhPairNode`` (64 B) -- the BVH as the kernels walk it: one row per inner node, holding
 both children's volumes and references (as Aila & Laine 2009 do with boxes), so
@@ -193,6 +261,31 @@ lane (lane k = triangle k), so that one float4 operation tests all four:
   144: slot   int4       slot of each lane's triangle, -1: an empty lane (corners 0)
 A leaf's triangles fill its packets in slot order; the triangle buffers and
 ``prim_ids`` stay as they are (results and shading read them by slot).
+
+``WindingNode`` (144 B) -- the far field of one child of a BvhPairNode row, for
+winding numbers (winding.cl; rows x 2, child ``2 * row + side``, side 0 left):
+the first three terms of the Taylor series of its triangles' solid angles about
+``centre`` (Barill et al. 2018, "Fast winding numbers for soups and clouds"),
+made on the device from the rows and the triangles (trace.cl's winding_nodes),
+device frame, with d = x - centre over the triangles' points x and n their
+unit normals:
+    0: centre  float4  xyz: the triangles' area-weighted centroid; w: radius, no
+                       corner of them farther from the centre (rounded up)
+   16: normal  float4  xyz: sum of area * n, the dipole; w: their area
+   32: first   float[9]   row-major 3x3, [i][j]: sum of n_i * integral of d_j dA
+   68: second  float[18]  [i][jk], jk = xx, xy, xz, yy, yz, zz: sum of
+                          n_i * integral of d_j d_k dA
+  140: pad     float
+A missing child (the right of a one-leaf tree) holds zeros.
+
+``PseudoNormals`` (96 B) -- per slot, for signs by normal (point.cl): the
+angle-weighted pseudo-normals (Baerentzen & Aanaes 2005) of the triangle's
+edges and corners, unit length (zero where no face around has an area),
+made on the host from the mesh (clrt/query/inside.py), vertices merged by position:
+    0: edge    float4[3]  xyz: edge v0v1, v1v2, v2v0 -- the sum of the unit normals of
+                          the faces on it; w unused (0)
+   48: vertex  float4[3]  xyz: corner v0, v1, v2 -- the sum of the unit normals of the
+                          faces around it, each times its angle there; w unused (0)
 
 ``BuildNode`` (48 B) -- scratch of the device builder (clrt/device/build.py), one per
 node of its binary tree: triangles are nodes 0..F-1 (in Morton order), merged
@@ -249,12 +342,18 @@ TEXTURE = np.dtype([("first", np.uint32), ("width", np.int32), ("height", np.int
                     ("wrap_s", np.uint32), ("wrap_t", np.uint32), ("linear", np.uint32)])
 TEXEL = np.dtype((np.uint8, 4))
 SRGB_TABLE = np.dtype((np.float32, 256))
-LIGHT = np.dtype([("position", float4), ("color", float4)])
+LIGHT = np.dtype([("position", float4), ("color", float4), ("direction", float4), ("cos_outer", np.float32),
+                  ("cos_inner", np.float32), ("pad", np.uint32, 2)])
+LIGHT_ENTRY = np.dtype([("threshold", np.float32), ("alias", np.int32), ("kind", np.uint32), ("index", np.int32),
+                        ("probability", np.float32), ("pad", np.uint32, 3)])
 BVH_PAIR_NODE = np.dtype([("left_a", float4), ("left_b", float4), ("right_a", float4), ("right_b", float4)])
 float8, int8, int4 = np.dtype((np.float32, 8)), np.dtype((np.int32, 8)), np.dtype((np.int32, 4))
 BVH_WIDE_NODE = np.dtype([("lo_x", float8), ("lo_y", float8), ("lo_z", float8), ("hi_x", float8),
                           ("hi_y", float8), ("hi_z", float8), ("child", int8), ("count", int8)])
 TRIANGLE_PACKET = np.dtype([("v0", float4, 3), ("v1", float4, 3), ("v2", float4, 3), ("slot", int4)])
+WINDING_NODE = np.dtype([("centre", float4), ("normal", float4), ("first", np.float32, 9),
+                         ("second", np.float32, 18), ("pad", np.float32)])
+PSEUDO_NORMALS = np.dtype([("edge", float4, 3), ("vertex", float4, 3)])
 BUILD_NODE = np.dtype([("lo", float4), ("hi", float4), ("parent", np.int32), ("count", np.int32),
                        ("rows", np.int32), ("cost", np.float32)])
 BUILD_CLUSTER = np.dtype([("lo", float4), ("hi", float4)])
@@ -273,9 +372,22 @@ TILE = np.dtype([("x", np.uint32), ("y", np.uint32), ("w", np.uint32), ("h", np.
                  ("rays_at", np.uint32), ("hits_at", np.uint32), ("image_at", np.uint32),
                  ("sample", np.uint32), ("samples_per_axis", np.uint32), ("seed", np.uint32),
                  ("max_depth", np.uint32), ("sample_weight", np.float32), ("first_sample", np.uint32)])
+PATH_LAUNCH = np.dtype([("cam", CAMERA), ("background", float4), ("environment", float4),
+                        ("image_at", np.uint64), ("albedo_at", np.uint64), ("normal_at", np.uint64),
+                        ("x", np.uint32), ("y", np.uint32), ("w", np.uint32), ("h", np.uint32),
+                        ("sample_first", np.uint32), ("sample_count", np.uint32), ("samples_before", np.uint32),
+                        ("seed", np.uint32), ("max_depth", np.int32), ("rr_depth", np.uint32),
+                        ("strategy", np.uint32), ("entries_at", np.uint32), ("num_entries", np.uint32),
+                        ("inv_power", np.float32), ("env_at", np.uint32), ("env_width", np.uint32),
+                        ("env_height", np.uint32), ("marginal_at", np.uint32), ("conditional_at", np.uint32),
+                        ("pad", np.uint32, 3)])
 SCENE_INFO = np.dtype([("ambient_light", float4), ("background", float4), ("packets_at", np.uint64),
                        ("num_tris", np.uint32), ("num_lights", np.uint32), ("materials_at", np.uint32),
-                       ("lights_at", np.uint32), ("textures_at", np.uint32), ("srgb_at", np.uint32)])
+                       ("lights_at", np.uint32), ("textures_at", np.uint32), ("srgb_at", np.uint32),
+                       ("num_instances", np.uint32), ("pad", np.uint32, 3)])
+INSTANCE = np.dtype([("to_world", float4, 3), ("to_object", float4, 3), ("lo", float4), ("hi", float4),
+                     ("mesh", np.int32), ("root", np.int32), ("first", np.int32), ("count", np.int32),
+                     ("flags", np.uint32), ("pad", np.uint32, 3)])
 
 # struct name in layouts.h -> numpy dtype; the layout test walks this table.
 STRUCTS = {
@@ -287,14 +399,19 @@ STRUCTS = {
     "TriangleDetail": TRIANGLE_DETAIL,
     "Texture": TEXTURE,
     "Light": LIGHT,
+    "LightEntry": LIGHT_ENTRY,
     "BvhPairNode": BVH_PAIR_NODE,
     "BvhWideNode": BVH_WIDE_NODE,
     "TrianglePacket": TRIANGLE_PACKET,
+    "WindingNode": WINDING_NODE,
+    "PseudoNormals": PSEUDO_NORMALS,
     "BuildNode": BUILD_NODE,
     "BuildCluster": BUILD_CLUSTER,
     "BuildPart": BUILD_PART,
     "Camera": CAMERA,
     "QueryLaunch": QUERY_LAUNCH,
     "Tile": TILE,
+    "PathLaunch": PATH_LAUNCH,
     "SceneInfo": SCENE_INFO,
+    "Instance": INSTANCE,
 }

@@ -144,6 +144,18 @@ def _path(label: str, value):
     return checks.text(label, value)   # checked as a file to write by the command (cli._output_path)
 
 
+def _environment(label: str, value):
+    """An environment map: a file name (.exr or .hdr, read when the scene is
+    made), or in Python also a clrt.Environment, an (H, W, 3) array or a dict of
+    an Environment's fields."""
+    if isinstance(value, (str, bytes)) or hasattr(value, "__fspath__"):
+        text = str(value if not isinstance(value, bytes) else value.decode(errors="replace"))
+        if not text.lower().endswith((".exr", ".hdr")):
+            raise checks.fail(label, "an equirectangular .exr or .hdr image", value)
+        return str(value)
+    return value   # an Environment, an array or a dict: clrt.Environment checks it
+
+
 def _switch(label: str, value):
     return checks.boolean(label, value)
 
@@ -198,8 +210,29 @@ OPTIONS = {o.name: o for o in [
            help=f"anti-aliasing: N x N rays per pixel, 1..{config.MAX_SAMPLES} (default: the scene's; 1 for a "
                 "mesh, 2 for the built-in scene)"),
     Option("max_depth", "--max-depth", lambda label, v: checks.max_depth(v, label), stage=SCENE,
-           help=f"reflection/refraction bounces, 0..{config.MAX_BOUNCES} (default: the scene's, "
-                f"{config.DEFAULT_MAX_DEPTH})"),
+           help=f"whitted: reflection/refraction bounces, 0..{config.MAX_BOUNCES} (default: the scene's, else "
+                f"{config.DEFAULT_MAX_DEPTH}); path: the longest path as Mitsuba counts max_depth, 1 = emitters "
+                f"seen directly, 2 = direct light, ..., up to {config.MAX_PATH_DEPTH}, or -1 = unbounded (default: "
+                f"the scene's, else {config.DEFAULT_PATH_MAX_DEPTH}; Russian roulette from depth "
+                f"{config.PATH_RR_DEPTH})"),
+    Option("integrator", "--integrator", lambda label, v: checks.choice(label, v, config.INTEGRATORS),
+           stage=SCENE, parse=_as_is, metavar="|".join(config.INTEGRATORS),
+           help=f"whitted (the paper's Phong and Whitted optics; default: the scene's, else "
+                f"{config.DEFAULT_INTEGRATOR}) or path (path tracing: soft shadows, indirect light, emissive "
+                "surfaces, environment maps; see docs/path-tracing.md)"),
+    Option("spp", "--spp", lambda label, v: checks.spp(v, label), stage=SCENE,
+           help=f"path: samples per pixel, 1..{config.MAX_SPP} (default: the scene's, else {config.DEFAULT_SPP}), "
+                "added in passes (Ctrl-C after the first keeps the passes done)"),
+    Option("seed", "--seed", lambda label, v: checks.seed(v, label), stage=SCENE,
+           help="seed of the random numbers (path) and the sample jitter (whitted), 0..2^32-1 (default: the "
+                "scene's, else 0): one seed gives the same image on one device"),
+    Option("exposure", "--exposure", lambda label, v: checks.exposure(v, label), stage=SCENE, metavar="STOPS",
+           help="8- and 16-bit images show the linear image x 2^STOPS, clamped to 0..1, sRGB-encoded (default: "
+                "the scene's, else 0; .exr files hold the linear image as it is)"),
+    Option("environment", "--environment", _environment, stage=SCENE, parse=_as_is, metavar="FILE",
+           help="path: an equirectangular HDR environment map (.exr, needs the 'exr' extra, or .hdr) lighting "
+                "the scene and seen behind it, importance-sampled (default: the scene's, else the background "
+                "colour)"),
     Option("bit_depth", "--bit-depth", lambda label, v: output.check_bit_depth(v, label), stage=OUTPUT,
            metavar="|".join(map(str, output.BIT_DEPTHS)),
            api="it returns uint8 sRGB, or float32 linear RGB with linear=True (write_image(..., bit_depth=16) "
@@ -231,6 +264,8 @@ OPTIONS = {o.name: o for o in [
            api="it prints nothing", help="print only the output path"),
 ]}
 
+#: Each option's name as the command line writes it (render_setup's labels).
+FLAGS = {name: o.flag for name, o in OPTIONS.items()}
 #: The options ``clrt.render`` takes: every one but the output options.
 API_OPTIONS = {name: o for name, o in OPTIONS.items() if o.api is None}
 VECTOR_FLAGS = {o.flag for o in OPTIONS.values() if o.parse is vector_text}

@@ -12,9 +12,11 @@ the kernels keep pending rays on a stack, it traces them in waves.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
-from clrt.config import TEXEL_LIMIT
+from clrt.config import DEFAULT_MAX_DEPTH, TEXEL_LIMIT
 from clrt.scene.scene import Camera, Scene
 
 f32 = np.float32
@@ -326,6 +328,17 @@ def spawn_origin(s: dict, w: np.ndarray, rows=slice(None)) -> np.ndarray:
     return np.where(away != 0, np.nextafter(o, np.copysign(f32(np.inf), away)), o).astype(f32)
 
 
+def spot_falloff(light, w) -> np.ndarray:
+    """(N,) share of a spot light's intensity towards the unit directions ``w``
+    (N, 3) from it: smoothstep between the cone's and the beam's cosines."""
+    lo, hi = math.cos(math.radians(light.cutoff)), math.cos(math.radians(light.beam))
+    c = w @ np.asarray(light.direction, np.float64)
+    if not hi - lo > 0:
+        return (c >= lo).astype(np.float64)
+    t = np.clip((c - lo) / (hi - lo), 0.0, 1.0)
+    return t * t * (3.0 - 2.0 * t)
+
+
 def local_shading(data: SceneData, scene: Scene, s: dict) -> np.ndarray:
     """(N, 3) Phong ambient + diffuse + specular, each light behind one shadow ray
     (every surface blocks light fully, transparent ones included)."""
@@ -347,6 +360,8 @@ def local_shading(data: SceneData, scene: Scene, s: dict) -> np.ndarray:
         reflected = 2 * n_dot_l[:, None] * n_s - l
         r_dot_v = np.maximum(np.einsum("ij,ij->i", reflected, -d), 0)
         lc = np.asarray(light.color, np.float64)
+        if light.direction is not None:   # a spot light: the kernels' spot_falloff (shading.cl)
+            lc = lc * spot_falloff(light, -l)[:, None]
         diffuse = mat["diffuse"][:, None] * n_dot_l[:, None] * albedo * lc
         spec = (mat["specular"] * np.power(r_dot_v, mat["shininess"]))[:, None] * lc
         out += np.where(lit[:, None], diffuse + spec, 0.0)
@@ -456,7 +471,8 @@ def render_reference(scene: Scene, camera: Camera, samples: int | None = None,
     """(image float64 (H, W, 3) linear, prim (H, W) int32, t (H, W) float32) --
     prim and t of the first sample's camera rays."""
     samples = scene.samples if samples is None else samples
-    max_depth = scene.max_depth if max_depth is None else max_depth
+    max_depth = (scene.max_depth if scene.max_depth is not None else DEFAULT_MAX_DEPTH) if max_depth is None \
+        else max_depth
     data = SceneData(scene)
     shape = (camera.height, camera.width)
     image = np.zeros((camera.width * camera.height, 3))

@@ -45,7 +45,11 @@ def test_the_kernels_see_the_table(device):
                 **{f"BAD_{k.upper()}": i for i, k in enumerate(config.RAY_CHECKS)},
                 **{f"WRAP_{k.upper()}": v for k, v in config.TEXTURE_WRAPS.items()},
                 "TEXEL_LIMIT": config.TEXEL_LIMIT, "RESULT_SLOTS": config.RESULT_SLOTS,
+                "INSTANCE_MIRROR": config.INSTANCE_MIRROR,
                 "NO_RESULT": -1,   # (int) of the all-ones ulong
+                "MAX_PATH_DEPTH": config.MAX_PATH_DEPTH,
+                **{f"PATH_{k.upper()}": v for k, v in config.PATH_STRATEGIES.items()},
+                **{f"LIGHT_{k.upper()}": v for k, v in config.LIGHT_KINDS.items()},
                 "POINT_CELL_BITS": config.POINT_CELL_BITS, "POINT_OFFSETS_GROUP": config.POINT_OFFSETS_GROUP}
     assert dict(zip(names, out.tolist())) == expected
 

@@ -14,6 +14,7 @@ from clrt.device.program import build_options, expand_source
 from clrt.device.signature import MAX_KERNEL_PARAMS
 from clrt.query import Accel
 from clrt.renderer import Renderer
+from clrt.renderer.path import PathTracer
 from clrt.scene import primitives
 from clrt.scene.scene import Light, Material, Scene, SceneObject, scene_from_mesh
 from clrt.scene.texture import Texture
@@ -51,6 +52,8 @@ def test_signature_tables_match_the_kernels(device, max_buffer_bytes):
     renderer = Renderer(scene_from_mesh(mesh), device=device, max_buffer_bytes=max_buffer_bytes)
     assert (renderer.geometry.parts() > 1) == split
     _check(renderer.context, "render.cl", renderer.device_scene.defines(), renderer.kernels, split)
+    _check(renderer.context, "path.cl", renderer.device_scene.defines(), PathTracer(renderer).kernels,
+           split)
     # A scene with corner colours and a texture: the -DSURFACE_DETAIL parameters too.
     colours = np.random.default_rng(1).random((len(mesh.faces), 3, 3))
     texture = Texture(np.zeros((4, 4, 3), np.uint8), "repeat", "repeat")
@@ -58,9 +61,17 @@ def test_signature_tables_match_the_kernels(device, max_buffer_bytes):
     textured = Renderer(detail, device=device, max_buffer_bytes=max_buffer_bytes)
     _check(textured.context, "render.cl", textured.device_scene.defines({"SURFACE_DETAIL": None}),
            textured.kernels, split)
+    _check(textured.context, "path.cl", textured.device_scene.defines({"SURFACE_DETAIL": None}),
+           PathTracer(textured).kernels, split)
     for accel in ("box", "none", "sphere"):
         queries = Accel(mesh, accel=accel, device=device, max_buffer_bytes=max_buffer_bytes)
         _check(queries.context, "trace.cl", queries.device_scene.defines(), queries.kernels, split)
+        # Two levels (-DACCEL_INSTANCES): the instance table too.
+        shifted = np.eye(4)
+        shifted[:3, 3] = (3.0, 0.0, 0.0)
+        instances = Accel([mesh, (mesh, shifted)], accel=accel, device=device, max_buffer_bytes=max_buffer_bytes)
+        assert "ACCEL_INSTANCES" in instances.device_scene.defines()
+        _check(instances.context, "trace.cl", instances.device_scene.defines(), instances.kernels, split)
 
 
 def test_the_device_builders_signatures_match(device):

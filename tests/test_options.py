@@ -11,6 +11,8 @@ Tiny images of a tiny scene, so the walk stays fast.
 import importlib
 import inspect
 import math
+import tempfile
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -25,6 +27,13 @@ SCENE = ('[camera]\neye = [0, 0.8, 3.2]\ntarget = [0, -0.2, 0]\n'
          '[[objects]]\ntype = "sphere"\nsubdivisions = 1\nmaterial = { reflectivity = 0.5 }\n'
          '[[objects]]\ntype = "plane"\nsize = [8, 8]\ntranslate = [0, -1, 0]\n')
 BASE = {"width": ("16", 16), "height": ("12", 12)}
+
+# A small equirectangular sky (Radiance .hdr, flat scanlines: a bright band over a dim one) for --environment.
+SKY = str(Path(tempfile.mkdtemp(prefix="clrt-options-")) / "sky.hdr")
+Path(SKY).write_bytes(b"#?RADIANCE\nFORMAT=32-bit_rle_rgbe\n\n-Y 2 +X 4\n"
+                      + bytes([128, 128, 128, 130]) * 4 + bytes([128, 64, 32, 127]) * 4)
+# Options that only the path tracer takes: their good value is drawn with these too (with and without it).
+NEEDS = {name: ((["--integrator", "path"]), {"integrator": "path"}) for name in ("spp", "seed", "environment")}
 
 # name -> ((CLI words, Python value) of a good value, (CLI words, Python value) of a bad one or None
 # where the command line cannot say it: a switch takes no value)
@@ -46,7 +55,12 @@ CASES = {
     "crease": ((["--crease", "5"], 5), (["--crease", "200"], 200)),
     "background": ((["--background", "0.2,0.3,0.4"], (0.2, 0.3, 0.4)), (["--background", "-1,0,0"], (-1, 0, 0))),
     "samples": ((["--samples", "2"], 2), (["--samples", "17"], 17)),
-    "max_depth": ((["--max-depth", "0"], 0), (["--max-depth", "-1"], -1)),
+    "max_depth": ((["--max-depth", "0"], 0), (["--max-depth", "-2"], -2)),
+    "integrator": ((["--integrator", "path"], "path"), (["--integrator", "mitsuba"], "mitsuba")),
+    "spp": ((["--spp", "4"], 4), (["--spp", "0"], 0)),
+    "seed": ((["--seed", "5"], 5), (["--seed", "-1"], -1)),
+    "exposure": ((["--exposure", "1.5"], 1.5), (["--exposure", "nan"], math.nan)),
+    "environment": ((["--environment", SKY], SKY), (["--environment", "sky.png"], "sky.png")),
     "device": (None, (["--device", "foo"], "foo")),   # good value: the suite's device, below
     "accel": ((["--accel", "sphere"], "sphere"), (["--accel", "octree"], "octree")),
     "builder": ((["--builder", "paper"], "paper"), (["--builder", "fast"], "fast")),
@@ -111,8 +125,9 @@ def _both_ways(scene_file, tmp_path, capsys, words, values):
 def test_each_option_draws_the_same_image_both_ways(name, scene_file, tmp_path, capsys, monkeypatch, device):
     good = CASES[name][0] or (["--device", device or "0:0"], device or "0:0")
     words, value = good
-    base_words = [w for key, (text, _) in BASE.items() if key != name for w in (f"--{key}", text)]
-    base_values = {key: v for key, (_, v) in BASE.items() if key != name}
+    needs_words, needs_values = NEEDS.get(name, ([], {}))
+    base_words = [w for key, (text, _) in BASE.items() if key != name for w in (f"--{key}", text)] + needs_words
+    base_values = {**{key: v for key, (_, v) in BASE.items() if key != name}, **needs_values}
     dev = [] if name == "device" or not device else ["--device", device]
     dev_values = {} if name == "device" or not device else {"device": device}
     spy = _Spy(monkeypatch)
@@ -125,8 +140,9 @@ def test_each_option_draws_the_same_image_both_ways(name, scene_file, tmp_path, 
         expected = options.check(name, value)
         assert [made[name] for made in spy.made] == [expected, expected], spy.made
     else:
-        plain_cli, plain_api = _both_ways(scene_file, tmp_path, capsys, [*dev, "--width", "16", "--height", "12"],
-                                          {**dev_values, "width": 16, "height": 12})
+        plain_cli, plain_api = _both_ways(scene_file, tmp_path, capsys,
+                                          [*dev, "--width", "16", "--height", "12", *needs_words],
+                                          {**dev_values, "width": 16, "height": 12, **needs_values})
         np.testing.assert_array_equal(plain_cli, plain_api)
         if plain_cli.shape == on_cli.shape:
             changed = (np.abs(plain_cli.astype(int) - on_cli).max(axis=2) > 2).sum()

@@ -112,7 +112,7 @@ def test_defaults_and_primitives(tmp_path):
     assert len(light.mesh.faces) == len(dark.mesh.faces) == 4
     assert light.material == Material() and dark.material != light.material
     np.testing.assert_allclose(np.ptp(torus.mesh.bounds, axis=0)[1], 4 * 0.35, rtol=1e-3)   # non-uniform scale
-    assert (scene.max_depth, scene.samples, scene.background) == (5, 1, (0.0, 0.0, 0.0))
+    assert (scene.max_depth, scene.depth, scene.samples, scene.background) == (None, 5, 1, (0.0, 0.0, 0.0))
     assert scene.camera is not None and len(scene.lights) == 1   # framed, default light
 
 

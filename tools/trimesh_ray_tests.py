@@ -1,4 +1,5 @@
-"""Run trimesh's own ray tests with clrt.RayMeshIntersector behind every ``mesh.ray``.
+"""Run trimesh's own ray and proximity tests with clrt.RayMeshIntersector behind
+every ``mesh.ray`` and clrt.ProximityQuery behind every ``mesh.nearest``.
 
     python tools/trimesh_ray_tests.py                      # the installed trimesh's tests
     python tools/trimesh_ray_tests.py --source ~/src/trimesh
@@ -15,9 +16,10 @@ with ``--source-tests``: a helper module of another version may lack what the
 archive's tests use).  Without both, the run is skipped with a message saying
 what is missing.
 
-The test files that use ``mesh.ray`` are found by a search of their text, run
-with pytest and the plugin ``tools/trimesh_ray_plugin.py`` (``Trimesh.ray``
-made a property that hands out clrt's intersector), and the counts printed.
+The test files that use ``mesh.ray`` or ``mesh.nearest`` are found by a search
+of their text, run with pytest and the plugin ``tools/trimesh_ray_plugin.py``
+(``Trimesh.ray`` and ``Trimesh.nearest`` made properties that hand out clrt's
+intersector and proximity query), and the counts printed.
 Tests of the Embree engine need ``embreex`` (``pip install -e '.[raybench]'``):
 without it pytest skips them.  Nothing of trimesh is copied into this repository.
 """
@@ -35,7 +37,7 @@ import xml.etree.ElementTree as ET
 from pathlib import Path
 
 TOOLS = Path(__file__).resolve().parent
-USES_RAY = re.compile(r"\.ray\b")
+USES_RAY = re.compile(r"\.(ray|nearest)\b")
 
 
 def installed_version() -> str:
@@ -161,7 +163,7 @@ def main(argv=None) -> int:
             return 0
         files = ray_test_files(work / "tests")
         origin = f"trimesh {version} source distribution" if sdist else f"{args.source}"
-        print(f"trimesh {version}: {len(files)} test files use mesh.ray "
+        print(f"trimesh {version}: {len(files)} test files use mesh.ray or mesh.nearest "
               f"({', '.join(p.name for p in files)}), from the {origin}"
               + (f", helpers and models from {args.source}" if args.source and sdist else ""))
         import trimesh.ray
@@ -170,7 +172,7 @@ def main(argv=None) -> int:
         results = {"clrt": run_pytest(work, files, True, args.pytest_args)}
         if args.also_trimesh:
             results["trimesh"] = run_pytest(work, files, False, args.pytest_args)
-        show("clrt.RayMeshIntersector behind mesh.ray", results["clrt"])
+        show("clrt.RayMeshIntersector behind mesh.ray, clrt.ProximityQuery behind mesh.nearest", results["clrt"])
         if "trimesh" in results:
             show("trimesh's own engines", results["trimesh"])
         c = results["clrt"]["counts"]

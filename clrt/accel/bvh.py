@@ -49,6 +49,8 @@ class Acceleration:
     exact_rows: np.ndarray | None = field(repr=False, default=None)
     device_buffers: object = field(repr=False, default=None, compare=False)
     _summary: dict | None = field(repr=False, default=None)
+    # A two-level scene's instance table (clrt.accel.instances.TwoLevel); None here.
+    instances = None
 
     def take_device_buffers(self, context):
         """The device builder's buffers (rows, tri_verts, prim_ids: clrt.device.build.
@@ -69,6 +71,13 @@ class Acceleration:
     def brute_force(cls, num_triangles: int) -> "Acceleration":
         """No acceleration: every ray meets every triangle, in input order."""
         return cls("none", None, np.zeros(1, BVH_PAIR_NODE), np.arange(num_triangles, dtype=np.int32), 0, 0.0)
+
+    def slot_order(self) -> np.ndarray:
+        """The row of the input corners each slot holds: the triangles go to the
+        device as ``corners[slot_order()]`` -- ``prim_ids`` here; a two-level
+        scene's slots hold its meshes' corners, mesh after mesh, while its
+        ``prim_ids`` count within each mesh (clrt.accel.instances)."""
+        return self.prim_ids
 
     @property
     def is_bvh(self) -> bool:

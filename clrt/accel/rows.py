@@ -38,6 +38,19 @@ def child_refs(rows: np.ndarray) -> np.ndarray:
     return rows.view(np.int32).reshape(len(rows), 16)[:, 3::4]
 
 
+def tree_levels(rows: np.ndarray) -> list[np.ndarray]:
+    """(R_k,) int32 rows of each level of the tree, the root's level first: a
+    row's inner children lie one level deeper (the order of the bottom-up
+    passes over a tree on the device: refit, winding numbers' far fields)."""
+    refs = child_refs(rows)
+    levels, current = [], np.zeros(1, np.int32)
+    while len(current):
+        levels.append(current)
+        r = refs[current]
+        current = np.concatenate([r[r[:, 1] == 0, 0], r[r[:, 3] == 0, 2]]).astype(np.int32)
+    return levels
+
+
 def _set_child(rows, side: str, bound_a, bound_b, ref, count, volume: str) -> None:
     """Write one side of rows: the child's volume (xyz lanes) and reference (w lanes)."""
     rows[f"{side}_a"][:, :3] = bound_a[:, :3]

@@ -335,7 +335,8 @@ def render_views(job: dict) -> list[dict]:
                 except OSError as exc:
                     raise OutputError(f"cannot create {out.parent}: {exc.strerror or exc}") from None
                 with device_lock():
-                    renderer.set_lights(render_lights(renderer.scene.bounds, cam, own, job["lights"]))
+                    renderer.set_lights(render_lights(renderer.scene.bounds, cam, own, job["lights"],
+                                                      renderer.scene.integrator))
                     # 8-bit: the kernel's own sRGB encoding; 16-bit and float: made of the linear image
                     frame = renderer.render(cam, linear=depth != "8-bit")
             except ClrtError as exc:

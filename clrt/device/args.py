@@ -28,12 +28,13 @@ def camera_value(camera: Camera, origin=None) -> np.ndarray:
     return record
 
 
-def scene_value(num_tris: int, packets_at: int = 0, **shading) -> np.ndarray:
+def scene_value(num_tris: int, packets_at: int = 0, num_instances: int = 0, **shading) -> np.ndarray:
     """A SceneInfo struct (layouts.h): the triangle count, where the wide BVH's
-    packets start, and any of the renderer's ``shading`` fields
-    (ambient_light, background as 3 numbers; num_lights; the tables' offsets)."""
+    packets start, the instances of a two-level scene, and any of the
+    renderer's ``shading`` fields (ambient_light, background as 3 numbers;
+    num_lights; the tables' offsets)."""
     record = np.zeros((), SCENE_INFO)
-    record["num_tris"], record["packets_at"] = num_tris, packets_at
+    record["num_tris"], record["packets_at"], record["num_instances"] = num_tris, packets_at, num_instances
     for name, v in shading.items():
         record[name] = vec4(v) if name in ("ambient_light", "background") else v
     return record

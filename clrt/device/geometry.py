@@ -14,7 +14,7 @@ import numpy as np
 import pyopencl as cl
 
 from clrt.accel import Acceleration
-from clrt.accel.rows import child_refs
+from clrt.accel.rows import tree_levels
 from clrt.accel.wide import WIDE, WideBvh, collapse
 from clrt.config import MAX_PARTS, VOLUME_DEFINES, stack_size
 from clrt.device.args import scene_value
@@ -48,10 +48,12 @@ PACKET_RAYS = 8      # the float8 lanes of rays.cl and accel_packet.cl (rays.cl 
 def accel_defines(acceleration: Acceleration, wide: WideBvh | None = None) -> dict:
     """Program build options that select the traversal of ``acceleration``
     (with ``wide``, its wide BVH: the walk of accel_wide.cl)."""
+    # A two-level scene (clrt.accel.instances): its walk (docs/instances.md).
+    instanced = {"ACCEL_INSTANCES": None} if acceleration.instances is not None else {}
     if not acceleration.is_bvh:
-        return {}
+        return instanced
     defines = {"ACCEL_BVH": None, VOLUME_DEFINES[acceleration.accel]: None,
-               "BVH_STACK_SIZE": stack_size(acceleration.depth)}
+               "BVH_STACK_SIZE": stack_size(acceleration.depth), **instanced}
     if wide is not None:
         # Each node on the path pushes at most WIDE - 1 children and takes one;
         # the wide tree is no deeper than the binary one, whose rounded depth
@@ -61,8 +63,9 @@ def accel_defines(acceleration: Acceleration, wide: WideBvh | None = None) -> di
 
 
 def walks_wide(context: cl.Context, acceleration: Acceleration, split: bool) -> bool:
-    """Do queries on ``context`` walk the wide BVH of ``acceleration``?"""
-    return (acceleration.accel == "box" and not split
+    """Do queries on ``context`` walk the wide BVH of ``acceleration``?  (Not yet
+    a two-level scene's: it walks the binary rows.)"""
+    return (acceleration.accel == "box" and not split and acceleration.instances is None
             and all(device_kind(d) in WIDE_BVH_KINDS for d in context.devices))
 
 
@@ -119,7 +122,8 @@ class DeviceGeometry:
     renderer move their rays' origins into it (``origin`` here).
 
     ``bounds``: (2, 3) min and max corner of the triangles in the caller's
-    frame, when the caller has them (else computed); ``reach``
+    frame, when the caller has them (else computed; a two-level scene gives
+    its instances' world box, its corners being in the meshes' frames); ``reach``
     (:class:`clrt.device.reach.Reach`, in the caller's frame) tells the queries
     and the renderer how far from the triangles their rays may start.
     """
@@ -130,14 +134,16 @@ class DeviceGeometry:
                  bounds=None, origin=None):
         self.acceleration = acceleration
         self._place(corners, bounds, origin)
-        prim_ids = acceleration.prim_ids
+        prim_ids, order = acceleration.prim_ids, acceleration.slot_order()
         # A tree built on this context's device is on it already, with its
         # triangles in slot order: taken over (once), not uploaded again.
         # The triangles' host array is then only a stand-in of the right size.
         built = acceleration.take_device_buffers(context)
         slotted = (np.broadcast_to(np.zeros(1, TRIANGLE_VERTS), (len(prim_ids),)) if built is not None
-                   else triangle_verts(corners[prim_ids]))
+                   else triangle_verts(corners[order]))
         arrays = {"tris": slotted, "nodes": acceleration.rows, "prim_ids": prim_ids, **(extra or {})}
+        if acceleration.instances is not None:
+            arrays["instances"] = acceleration.instances
         arrays = {name: a if a is slotted else np.ascontiguousarray(a) for name, a in arrays.items()}
         limit = min(d.max_mem_alloc_size for d in context.devices)
         source = "the device's largest allocation"
@@ -146,9 +152,9 @@ class DeviceGeometry:
         self.shifts = part_shifts(arrays, limit, source)
         if built is not None and self.shifts is not None:    # split into parts: uploaded as always
             built = None
-            arrays["tris"] = triangle_verts(corners[prim_ids])
+            arrays["tris"] = triangle_verts(corners[order])
         # The wide BVH only where it is walked: other devices pay nothing.
-        self.wide = (collapse(acceleration.rows, corners[prim_ids].astype(np.float32, copy=False))
+        self.wide = (collapse(acceleration.rows, corners[order].astype(np.float32, copy=False))
                      if walks_wide(context, acceleration, self.shifts is not None) else None)
         # The wide BVH's nodes and packets in one buffer (geometry.cl says why),
         # the packets from byte packets_at on (a multiple of a node's 256 B).
@@ -184,6 +190,7 @@ class DeviceGeometry:
             parts = [upload(array[k:k + step]) for k in range(0, max(len(array), 1), step)]
             self.buffers[name] = tuple(parts + parts[-1:] * (MAX_PARTS - len(parts)))
         self.num_tris = np.uint32(len(prim_ids))
+        self.num_instances = 0 if acceleration.instances is None else len(acceleration.instances)
         self._refit = None   # made by the first refit
 
     def _place(self, corners: np.ndarray, bounds, origin) -> None:
@@ -193,18 +200,21 @@ class DeviceGeometry:
             flat = corners.reshape(-1, 3)
             bounds = np.array([[flat[:, k].min() for k in range(3)], [flat[:, k].max() for k in range(3)]],
                               np.float64) + self.origin
-        self.reach = Reach(corners, bounds)
+        # A two-level scene's corners lie in its meshes' frames: its reach is
+        # bounded from its world box alone.
+        self.reach = Reach(corners if self.acceleration.instances is None else None, bounds)
 
     @property
     def buffer_args(self) -> tuple:
         """The buffers of GEOMETRY_PARAMS (geometry.cl), in order: each one, or its parts."""
         b = self.buffers
-        return (*b["tris"], *b["nodes"], *b["prim_ids"], *(b["wide"] if self.wide is not None else ()))
+        return (*b["tris"], *b["nodes"], *b["prim_ids"], *(b["wide"] if self.wide is not None else ()),
+                *b.get("instances", ()))
 
     def scene_value(self, **shading) -> np.ndarray:
         """The SceneInfo value of GEOMETRY_PARAMS: this geometry's triangle count
         and packets, with the renderer's ``shading`` fields (clrt.device.args.scene_value)."""
-        return scene_value(int(self.num_tris), self.packets_at, **shading)
+        return scene_value(int(self.num_tris), self.packets_at, num_instances=self.num_instances, **shading)
 
     def refit(self, queue: cl.CommandQueue, corners: np.ndarray, bounds=None, origin=None) -> None:
         """Move the triangles to ``corners`` (F, 3, 3) float32, input order, the same
@@ -219,6 +229,8 @@ class DeviceGeometry:
         if self.shifts is not None:
             raise InputError("refit of a scene whose buffers are split into parts is not supported: "
                              "build it anew")
+        if acceleration.instances is not None:
+            raise InputError("refit of a scene of instances is not supported yet: build it anew")
         if len(corners) != len(acceleration.prim_ids):
             raise InputError(f"refit needs the same {len(acceleration.prim_ids):,} triangles, got {len(corners):,}")
         self._place(corners, bounds, origin)
@@ -293,13 +305,8 @@ class _RefitPlan:
         from clrt.device.program import build_program
         defines = build_defines(acceleration.accel)
         self.kernels = typed_kernels(build_program(context, "refit.cl", defines), REFIT_KERNELS, defines)
-        refs = child_refs(acceleration.rows)
-        self.levels, current = [], np.zeros(1, np.int32)
-        while len(current):   # a row's inner children are one level deeper
-            self.levels.append(cl.Buffer(context, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR,
-                                         hostbuf=np.ascontiguousarray(current, np.int32)))
-            r = refs[current]
-            current = np.concatenate([r[r[:, 1] == 0, 0], r[r[:, 3] == 0, 2]]).astype(np.int32)
+        self.levels = [cl.Buffer(context, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR, hostbuf=level)
+                       for level in tree_levels(acceleration.rows)]
         self.level_sizes = [b.size // 4 for b in self.levels]
         self.num_rows = len(acceleration.rows)
         mf = cl.mem_flags

@@ -83,6 +83,9 @@ class Reach:
 
     ``corners``: (F, 3, 3) float32 triangle corners (not kept); ``bounds``:
     (2, 3) their min and max corner (computed from ``corners`` when None).
+    Without ``corners`` (a two-level scene, whose triangles lie in their
+    meshes' frames) a large scene's triangles are bounded by its diagonal too,
+    as a small one's are: a larger bound, so a limit that refuses sooner.
     """
 
     def __init__(self, corners: np.ndarray, bounds=None):
@@ -92,7 +95,7 @@ class Reach:
         self.lo, self.hi = (np.asarray(b, np.float64) for b in bounds)
         self._limit = None   # limit(), found once
         self.diagonal = float(np.linalg.norm(self.hi - self.lo))
-        if self.diagonal > MEASURE_DIAGONAL:
+        if self.diagonal > MEASURE_DIAGONAL and corners is not None:
             self.area, self.edge = _largest_triangle(corners)
         else:
             # Every triangle lies in the bounds: no edge is longer than the diagonal,

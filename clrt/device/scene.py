@@ -58,7 +58,9 @@ class DeviceScene:
     ``whole_bytes``: what else the caller uploads (counted when checking the
     fit); ``reserve``: device bytes to leave for per-launch buffers.
     ``timings``: where the stages' wall times go ("acceleration build",
-    "copy to device"), if given.
+    "copy to device"), if given.  ``acceleration``: one built already (a
+    two-level scene's, clrt.device.instances: ``corners`` are then its
+    meshes' corners, mesh after mesh).
 
     Attributes: ``acceleration``, ``context``, ``queue``, ``device`` (its
     label), ``kind`` ("gpu" or "cpu"), ``geometry`` (DeviceGeometry),
@@ -70,9 +72,10 @@ class DeviceScene:
     def __init__(self, corners: np.ndarray, *, accel: str, builder: str, leaf_size: int, device: str | None,
                  bounds, origin, extra: dict | Callable | None = None, whole_bytes: int = 0, reserve: int = 0,
                  max_buffer_bytes: int | None = None, max_buffer_label: str = "max_buffer_bytes",
-                 timings: dict | None = None):
+                 timings: dict | None = None, acceleration=None):
         with stage(timings, "acceleration build"):
-            self.acceleration = build_acceleration(corners, accel, builder, leaf_size, device)
+            self.acceleration = (acceleration if acceleration is not None
+                                 else build_acceleration(corners, accel, builder, leaf_size, device))
             if callable(extra):
                 extra = extra(self.acceleration)
         with stage(timings, "copy to device"):

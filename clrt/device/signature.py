@@ -53,9 +53,11 @@ def value(name: str, dtype, *, when: str | None = None) -> Param:
 
 #: The scene's geometry as every tracing kernel takes it (GEOMETRY_PARAMS in
 #: geometry.cl): the triangles, the BVH rows, the slot -> triangle ids, the
-#: wide BVH of CPU devices, and the SceneInfo values.
+#: wide BVH of CPU devices, a two-level scene's instance table, and the
+#: SceneInfo values.
 GEOMETRY = (buffer("tris", split=True), buffer("nodes", split=True), buffer("prim_ids", split=True),
-            buffer("wide", when="BVH_WIDE"), value("scene", SCENE_INFO))
+            buffer("wide", when="BVH_WIDE"), buffer("instances", when="ACCEL_INSTANCES", split=True),
+            value("scene", SCENE_INFO))
 
 
 def parameters(signature, defines: dict) -> list[tuple[str, np.dtype | None]]:

@@ -1,7 +1,7 @@
 // The acceleration structure behind every ray query, chosen when the program
 // is built: -DACCEL_BVH (with a VOLUME_* shape and BVH_STACK_SIZE; on CPU
 // devices also -DBVH_WIDE, the wide walk of accel_wide.cl) or nothing (brute
-// force).  Both read the same Geometry (geometry.cl), so kernels and
+// force), each with -DACCEL_INSTANCES for a two-level scene (docs/instances.md).  Both read the same Geometry (geometry.cl), so kernels and
 // host need no variants, and both provide query_hits(), from which the
 // queries below are made.
 #ifndef CLRT_ACCEL_CL
@@ -14,6 +14,27 @@
 #include "accel_bvh.cl"
 #include "accel_wide.cl"
 #include "accel_none.cl"
+
+#ifdef ACCEL_INSTANCES
+// A two-level scene's walks give the hit's instance too (query_instance_hits:
+// accel_bvh.cl, accel_none.cl); query_hits leaves it out.
+inline Hit query_hits(const Geometry* g, float3 origin, float3 dir, float tmin, float tmax,
+                      const int query, const bool spawned, HitSink* sink)
+{
+    int instance;
+    return query_instance_hits(g, origin, dir, tmin, tmax, query, spawned, sink, &instance);
+}
+#else
+// A one-level scene is instance 0 of itself: *hit_instance 0 for a hit, -1
+// for none.
+inline Hit query_instance_hits(const Geometry* g, float3 origin, float3 dir, float tmin, float tmax,
+                               const int query, const bool spawned, HitSink* sink, int* hit_instance)
+{
+    const Hit hit = query_hits(g, origin, dir, tmin, tmax, query, spawned, sink);
+    *hit_instance = hit.prim >= 0 ? 0 : -1;
+    return hit;
+}
+#endif
 
 // Nearest hit in (tmin, tmax]; Hit.prim is the slot (see reported_hit).
 // `spawned`: the ray leaves a surface (shading.cl's spawn_origin) and takes

@@ -3,7 +3,9 @@
 // each BVH answer every query by the same code.
 //
 // Ties: equal distances go to the lower input triangle index, so the nearest
-// hit never depends on the order in which triangles are visited.
+// hit never depends on the order in which triangles are visited.  In a
+// two-level scene (-DACCEL_INSTANCES) to the lower instance, then the lower
+// triangle of its mesh: the flattened scene's order (visit_instance_triangle).
 #ifndef CLRT_HIT_CL
 #define CLRT_HIT_CL
 
@@ -43,6 +45,7 @@ typedef struct {
     __global int* ray_ids;
     __global int* prims;
     __global float* ts;
+    __global int* instances;  // the hits' instances (0 in a one-level scene), where asked for (else 0)
     __global uint* next;      // shared append position
     uint capacity;            // length of the output arrays
     int ray;                  // this ray's index
@@ -50,7 +53,7 @@ typedef struct {
     int cull;                 // CULL_NONE, CULL_BACK or CULL_FRONT
 } HitSink;
 
-inline void sink_hit(HitSink* sink, int prim, float t)
+inline void sink_hit(HitSink* sink, int instance, int prim, float t)
 {
     sink->count++;
     if (sink->ray_ids) {
@@ -59,31 +62,46 @@ inline void sink_hit(HitSink* sink, int prim, float t)
             sink->ray_ids[k] = sink->ray;
             sink->prims[k] = prim;
             sink->ts[k] = t;
+            if (sink->instances)
+                sink->instances[k] = instance;
         }
     }
 }
 
-// Take a hit (t, u, v) of the triangle in `slot` for `query`; true once the
-// query is answered.  The closest hit reads input indices only on a tie of
-// distances (both triangles' then), which is rare, so the walks keep no index
-// of their best hit (the same kernel times on the H200, docs/benchmark-log.md).
-inline bool record_hit(const Geometry* g, int slot, float t, float u, float v, float* tmax,
-                       const int query, Hit* best, HitSink* sink)
+// Take a hit (t, u, v) of the triangle in `slot` of `instance` for `query`
+// (*best_instance: the best hit's); true once the query is answered.  The
+// closest hit reads input indices only on a tie of distances (both
+// triangles' then), which is rare, so the walks keep no index of their best
+// hit (the same kernel times on the H200, docs/benchmark-log.md).
+inline bool record_instance_hit(const Geometry* g, int instance, int slot, float t, float u, float v, float* tmax,
+                                const int query, Hit* best, int* best_instance, HitSink* sink)
 {
     if (query == QUERY_ANY) {
         *best = make_hit(t, slot, u, v);
+        *best_instance = instance;
         return true;
     }
     if (query == QUERY_ALL) {
-        sink_hit(sink, *SPLIT_AT(g, prim_ids, slot), t);
+        sink_hit(sink, instance, *SPLIT_AT(g, prim_ids, slot), t);
         return false;
     }
     if (t < best->t || (t == best->t && best->prim >= 0
-                        && *SPLIT_AT(g, prim_ids, slot) < *SPLIT_AT(g, prim_ids, best->prim))) {
+                        && (instance < *best_instance || (instance == *best_instance
+                            && *SPLIT_AT(g, prim_ids, slot) < *SPLIT_AT(g, prim_ids, best->prim))))) {
         *best = make_hit(t, slot, u, v);
+        *best_instance = instance;
         *tmax = t;   // inclusive: an equal distance with a lower index is still taken
     }
     return false;
+}
+
+// record_instance_hit in a one-level scene: one instance, 0 (its comparisons
+// fold away).
+inline bool record_hit(const Geometry* g, int slot, float t, float u, float v, float* tmax,
+                       const int query, Hit* best, HitSink* sink)
+{
+    int best_instance = 0;
+    return record_instance_hit(g, 0, slot, t, u, v, tmax, query, best, &best_instance, sink);
 }
 
 // Test the triangle in `slot` for `query`; true once the query is answered.
@@ -94,6 +112,18 @@ inline bool visit_triangle(const Geometry* g, const ShearedRay* r, int slot, flo
     if (!intersect_triangle_culled(r, SPLIT_AT(g, tris, slot), tmin, *tmax, sink ? sink->cull : CULL_NONE, &t, &u, &v))
         return false;
     return record_hit(g, slot, t, u, v, tmax, query, best, sink);
+}
+
+// The same for the triangle in `slot` of `instance`, `r` in its object space
+// and `cull` as the instance sees it (instances.cl's instance_cull).
+inline bool visit_instance_triangle(const Geometry* g, const ShearedRay* r, int slot, int instance, const int cull,
+                                    float tmin, float* tmax, const int query, Hit* best, int* best_instance,
+                                    HitSink* sink)
+{
+    float t, u, v;
+    if (!intersect_triangle_culled(r, SPLIT_AT(g, tris, slot), tmin, *tmax, cull, &t, &u, &v))
+        return false;
+    return record_instance_hit(g, instance, slot, t, u, v, tmax, query, best, best_instance, sink);
 }
 
 #endif

@@ -66,7 +66,21 @@ typedef struct {
 typedef struct {
     float4 position;
     float4 color;
+    float4 direction;     // xyz: a spot light's unit axis
+    float cos_outer;      // -1: a point light (no cone)
+    float cos_inner;
+    uint pad[2];
 } Light;
+
+// One light of the path tracer's table (lights.cl), chosen by the alias method.
+typedef struct {
+    float threshold;      // keep this entry when u (scaled to it) < threshold
+    int alias;            // else this one
+    uint kind;            // LIGHT_POINT, LIGHT_TRIANGLE, LIGHT_BACKGROUND
+    int index;            // Light row, or the triangle's slot
+    float probability;    // of choosing it
+    uint pad[3];
+} LightEntry;
 
 // ---- Kernel arguments passed by value: each kernel takes its buffers and at
 // most a few of these (clrt/device/signature.py counts them; every kernel
@@ -112,6 +126,23 @@ typedef struct {
     uint first_sample;           // 1: the image starts from this sample
 } Tile;
 
+// One launch of the path tracer (path.cl) over a rectangle of the image; the
+// image's sums lie in `frame`, the light tables in `tables` (layouts.py).
+typedef struct {
+    Camera cam;
+    float4 background;           // xyz: constant background radiance
+    float4 environment;          // x, y: cos, sin of the map's turn; z: strength; w: background's probability
+    ulong image_at, albedo_at, normal_at;   // byte offsets in `frame` of the float4 sums
+    uint x, y, w, h;             // pixels of the image
+    uint sample_first, sample_count, samples_before, seed;
+    int max_depth;               // Mitsuba's count; -1: unbounded
+    uint rr_depth, strategy;
+    uint entries_at, num_entries;
+    float inv_power;             // 1 / the power of all lights
+    uint env_at, env_width, env_height, marginal_at, conditional_at;
+    uint pad[3];
+} PathLaunch;
+
 // What kernels know of the uploaded scene by value: the triangle count, where
 // the packets start in the wide BVH's buffer, and (the renderer) the light
 // and colours and where each table lies in the `tables` buffer.
@@ -122,7 +153,23 @@ typedef struct {
     uint num_tris;               // slots
     uint num_lights;
     uint materials_at, lights_at, textures_at, srgb_at;   // byte offsets in `tables`
+    uint num_instances;          // ACCEL_INSTANCES: rows of the instance table
+    uint pad[3];
 } SceneInfo;
+
+// One placement of a mesh in a two-level scene (-DACCEL_INSTANCES,
+// instances.cl; docs/instances.md): row i of each map holds row i of its
+// linear part in xyz and its translation in w.
+typedef struct {
+    float4 to_world[3];          // object -> world (the device's frames)
+    float4 to_object[3];         // world -> object
+    float4 lo, hi;               // xyz: the instance's conservative world box
+    int mesh;                    // index among the distinct meshes
+    int root;                    // row of the mesh's BVH root
+    int first, count;            // the mesh's slots: first .. first + count - 1
+    uint flags;                  // INSTANCE_MIRROR: to_world's determinant is negative
+    uint pad[3];
+} Instance;
 
 typedef struct {
     float4 left_a, left_b;     // left child: volume in the xyz lanes; w: as_int -> left, left_count
@@ -146,6 +193,21 @@ typedef struct {
     float4 v0[3], v1[3], v2[3];   // [axis], lane k: that corner of triangle k
     int4 slot;                    // lane k: slot of triangle k, -1: empty
 } TrianglePacket;
+
+// The far field of one BVH child for winding numbers (winding.cl); fields as layouts.py says.
+typedef struct {
+    float4 centre;       // xyz: area-weighted centroid; w: radius (rounded up)
+    float4 normal;       // xyz: sum of area * unit normal; w: area
+    float first[9];      // [i][j]: sum of n_i * integral of (x - centre)_j
+    float second[18];    // [i][jk], jk = xx, xy, xz, yy, yz, zz: sum of n_i * integral of (x - c)_j (x - c)_k
+    float pad;
+} WindingNode;
+
+// Per slot: pseudo-normals of its edges and corners (signs by normal, point.cl).
+typedef struct {
+    float4 edge[3];      // edge v0v1, v1v2, v2v0
+    float4 vertex[3];    // corner v0, v1, v2
+} PseudoNormals;
 
 // Scratch of the device builder (build_bvh.cl); fields as layouts.py says.
 typedef struct {

@@ -16,12 +16,18 @@
 // keeps every triangle that brute force could pick -- each walk then computes
 // the same distances for the same triangles and gives brute force's answer
 // bit for bit.  Ties go to the lower input triangle index, as hit.cl's.
+//
+// Below the walk, two of the sign rules of signed distances (the third,
+// winding numbers, is winding.cl): parity of ray crossings, and the
+// pseudo-normal at the feature -- face, edge or vertex -- that holds the
+// closest point.
 #ifndef CLRT_POINT_CL
 #define CLRT_POINT_CL
 
 #include "geometry.cl"
 #include "volumes.cl"
 #include "stack.cl"
+#include "accel.cl"
 
 #ifdef cl_khr_fp64
 typedef double point_real;
@@ -33,13 +39,22 @@ typedef float3 point_real3;
 #define TO_POINT_REAL3(x) (x)
 #endif
 
+// Which part of a triangle holds its point nearest to p (closest_on_triangle):
+// the face, corner FEATURE_VERTEX + k, or edge FEATURE_EDGE + k, from corner k
+// to corner k + 1 (mod 3).  The signs by normal take the pseudo-normal there.
+#define FEATURE_FACE 0
+#define FEATURE_VERTEX 1
+#define FEATURE_EDGE 4
+
 // The best triangle so far: its input index, distance (inclusive bound while
-// prim < 0), closest point (device frame) and barycentric weights of v1, v2.
+// prim < 0), closest point (device frame) and barycentric weights of v1, v2,
+// its slot and the feature (FEATURE_*) the point lies on.
 typedef struct {
     int prim;
     point_real dist;
     point_real3 point;
     float u, v;
+    int slot, feature;
 } PointHit;
 
 // Closest point to p on the segment a + t (b - a), t in [0, 1]; *t set.
@@ -54,44 +69,50 @@ inline point_real3 closest_on_segment(point_real3 p, point_real3 a, point_real3 
 }
 
 // Closest point to p on triangle (a, b, c), with the barycentric weights of
-// b (*u) and c (*v) of that point.
+// b (*u) and c (*v) of that point and the feature it lies on (FEATURE_*).
 inline point_real3 closest_on_triangle(point_real3 p, point_real3 a, point_real3 b, point_real3 c,
-                                       point_real* u, point_real* v)
+                                       point_real* u, point_real* v, int* feature)
 {
     const point_real3 ab = b - a, ac = c - a, ap = p - a;
     const point_real d1 = dot(ab, ap), d2 = dot(ac, ap);
     if (d1 <= 0 && d2 <= 0) {                    // behind a on both edges from it: vertex a
         *u = 0; *v = 0;
+        *feature = FEATURE_VERTEX;
         return a;
     }
     const point_real3 bp = p - b;
     const point_real d3 = dot(ab, bp), d4 = dot(ac, bp);
     if (d3 >= 0 && d4 <= d3) {                   // past b: vertex b
         *u = 1; *v = 0;
+        *feature = FEATURE_VERTEX + 1;
         return b;
     }
     const point_real vc = d1 * d4 - d3 * d2;     // (scaled) weight of c: <= 0 outside edge ab
     if (vc <= 0 && d1 >= 0 && d3 <= 0) {
         const point_real t = d1 / (d1 - d3);
         *u = t; *v = 0;
+        *feature = FEATURE_EDGE;
         return a + t * ab;
     }
     const point_real3 cp = p - c;
     const point_real d5 = dot(ab, cp), d6 = dot(ac, cp);
     if (d6 >= 0 && d5 <= d6) {                   // past c: vertex c
         *u = 0; *v = 1;
+        *feature = FEATURE_VERTEX + 2;
         return c;
     }
     const point_real vb = d5 * d2 - d1 * d6;     // weight of b: <= 0 outside edge ac
     if (vb <= 0 && d2 >= 0 && d6 <= 0) {
         const point_real t = d2 / (d2 - d6);
         *u = 0; *v = t;
+        *feature = FEATURE_EDGE + 2;
         return a + t * ac;
     }
     const point_real va = d3 * d6 - d5 * d4;     // weight of a: <= 0 outside edge bc
     if (va <= 0 && d4 - d3 >= 0 && d5 - d6 >= 0) {
         const point_real t = (d4 - d3) / ((d4 - d3) + (d5 - d6));
         *u = 1 - t; *v = t;
+        *feature = FEATURE_EDGE + 1;
         return b + t * (c - b);
     }
     const point_real sum = va + vb + vc;
@@ -105,15 +126,19 @@ inline point_real3 closest_on_triangle(point_real3 p, point_real3 a, point_real3
         const point_real e0 = dot(p - q0, p - q0), e1 = dot(p - q1, p - q1), e2 = dot(p - q2, p - q2);
         if (e0 <= e1 && e0 <= e2) {
             *u = t0; *v = 0;
+            *feature = FEATURE_EDGE;
             return q0;
         }
         if (e1 <= e2) {
             *u = 0; *v = t1;
+            *feature = FEATURE_EDGE + 2;
             return q1;
         }
         *u = 1 - t2; *v = t2;
+        *feature = FEATURE_EDGE + 1;
         return q2;
     }
+    *feature = FEATURE_FACE;
     *u = vb / sum;
     *v = vc / sum;
     return a + *u * ab + *v * ac;
@@ -125,8 +150,9 @@ inline void visit_point_triangle(const Geometry* g, point_real3 p, int slot, Poi
 {
     __global const TriangleVerts* tri = SPLIT_AT(g, tris, slot);
     point_real u, v;
+    int feature;
     const point_real3 q = closest_on_triangle(p, TO_POINT_REAL3(tri->v0.xyz), TO_POINT_REAL3(tri->v1.xyz),
-                                              TO_POINT_REAL3(tri->v2.xyz), &u, &v);
+                                              TO_POINT_REAL3(tri->v2.xyz), &u, &v, &feature);
     const point_real dist = sqrt(dot(p - q, p - q));
     if (dist > best->dist)
         return;
@@ -138,6 +164,8 @@ inline void visit_point_triangle(const Geometry* g, point_real3 p, int slot, Poi
     best->point = q;
     best->u = (float)u;
     best->v = (float)v;
+    best->slot = slot;
+    best->feature = feature;
 }
 
 // How much farther than the best distance a volume may seem and still be
@@ -158,6 +186,8 @@ inline PointHit closest_point(const Geometry* g, float3 p, float max_dist, float
     best.point = (point_real3)(0);
     best.u = 0.0f;
     best.v = 0.0f;
+    best.slot = -1;
+    best.feature = FEATURE_FACE;
     const point_real3 pr = TO_POINT_REAL3(p);
 #ifdef ACCEL_BVH
     int2 stack[BVH_STACK_SIZE];        // (row or first slot, leaf count: 0 for a row)
@@ -197,6 +227,68 @@ inline PointHit closest_point(const Geometry* g, float3 p, float max_dist, float
         visit_point_triangle(g, pr, (int)i, &best);
 #endif
     return best;
+}
+
+// ---- The sign rules of signed distances (trace.cl's query_signed_distance_*;
+// "winding" is winding.cl's).
+
+// Inside by the pseudo-normal at the closest point (Baerentzen and Aanaes
+// 2005, "Signed distance computation using the angle weighted pseudonormal"):
+// p lies inside where it lies behind the normal of the feature holding its
+// closest point -- the face's own normal, or the PseudoNormals (layouts.h, by
+// slot) of the edge or corner, which weigh every face around it so that the
+// faces sharing the point agree.  Exact for closed, consistently wound
+// meshes; a point on the surface is outside.
+inline bool inside_by_normal(const Geometry* g, __global const PseudoNormals* normals, const PointHit* best,
+                             float3 p)
+{
+    point_real3 n;
+    if (best->feature == FEATURE_FACE) {
+        __global const TriangleVerts* t = SPLIT_AT(g, tris, best->slot);
+        const point_real3 a = TO_POINT_REAL3(t->v0.xyz);
+        n = cross(TO_POINT_REAL3(t->v1.xyz) - a, TO_POINT_REAL3(t->v2.xyz) - a);
+    } else if (best->feature >= FEATURE_EDGE) {
+        n = TO_POINT_REAL3(normals[best->slot].edge[best->feature - FEATURE_EDGE].xyz);
+    } else {
+        n = TO_POINT_REAL3(normals[best->slot].vertex[best->feature - FEATURE_VERTEX].xyz);
+    }
+    return dot(TO_POINT_REAL3(p) - best->point, n) < 0;
+}
+
+// Inside by ray parity: p lies inside where a ray from it crosses the surface
+// an odd number of times (any winding, closed meshes).  A ray through an edge
+// or a corner meets every triangle there (triangle.cl's watertight test), so
+// one direction can count a crossing twice: three fixed directions, in no
+// plane of a grid or an axis, vote, and two of three decide.  A point outside
+// the box of the triangles (lo .. hi) is outside without a ray: so no ray
+// starts beyond the triangle test's float32 reach (clrt/device/reach.py).
+#define PARITY_DIRECTIONS 3
+__constant float PARITY_DIRECTION[PARITY_DIRECTIONS][3] = {
+    {0.265299859f, 0.851599549f, 0.452099760f},
+    {-0.768079281f, 0.179495158f, -0.614683419f},
+    {0.431073572f, -0.625361660f, 0.650460122f},
+};
+
+inline bool inside_by_parity(const Geometry* g, float3 p, float3 lo, float3 hi)
+{
+    if (any(p < lo) || any(p > hi))
+        return false;
+    int odd = 0;
+    for (int k = 0; k < PARITY_DIRECTIONS; ++k) {
+        HitSink counter;   // counts only: no output arrays
+        counter.ray_ids = 0;
+        counter.prims = 0;
+        counter.ts = 0;
+        counter.next = 0;
+        counter.capacity = 0u;
+        counter.ray = 0;
+        counter.count = 0u;
+        counter.cull = CULL_NONE;
+        const float3 dir = (float3)(PARITY_DIRECTION[k][0], PARITY_DIRECTION[k][1], PARITY_DIRECTION[k][2]);
+        query_hits(g, p, dir, 0.0f, INFINITY, QUERY_ALL, false, &counter);
+        odd += (int)(counter.count & 1u);
+    }
+    return 2 * odd > PARITY_DIRECTIONS;
 }
 
 #endif

@@ -174,7 +174,8 @@ inline bool load_ray(const RayInput* in, uint i, float3* origin, float3* dir, fl
 // into the device's frame as load_ray moves an origin, and its largest
 // distance from `tmaxs`.  False (and the point reported in `bad`, as an
 // origin) when it is not finite; no reach check: a point's distance takes no
-// float32 triangle test that could overflow.
+// float32 triangle test that could overflow (and the parity sign of signed
+// distances casts rays only from points within the scene's box, point.cl).
 // Point queries read the origins (the points) and tmaxs (their largest
 // distances) of the ray input, and the points' order (point_order.cl).
 #define POINT_INPUT_PARAMS __global const float* origins, __global const float* tmaxs, __global int* bad, \

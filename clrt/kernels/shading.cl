@@ -166,6 +166,20 @@ inline bool shadow_ray(const Shading* sh, const SurfacePoint* s, uint i, float3*
     return dot(s->ng, *l) > 0.0f && dot(s->n, *l) > 0.0f;
 }
 
+// A spot light's intensity towards unit direction w (from the light), as a
+// share of its colour: 1 within the beam, 0 outside the cone, smoothstep of
+// the cosine between (pbrt-v4's spot light falloff).  Whitted's Phong model
+// and the path tracer (lights.cl) use it alike.
+inline float spot_falloff(__global const Light* light, float3 w)
+{
+    const float c = dot(light->direction.xyz, w);
+    const float width = light->cos_inner - light->cos_outer;
+    if (!(width > 0.0f))   // beam == cutoff: a hard edge
+        return c >= light->cos_outer ? 1.0f : 0.0f;
+    const float t = clamp((c - light->cos_outer) / width, 0.0f, 1.0f);
+    return t * t * (3.0f - 2.0f * t);
+}
+
 // Phong ambient + diffuse + specular at a surface point, each light tested by
 // a shadow ray -- or, with `shadows_known`, lit where bit i of `lit` is set
 // (render.cl's packets of shadow rays found them).  Every surface blocks light
@@ -186,7 +200,9 @@ inline float3 local_shading(const Geometry* g, const Shading* sh, const SurfaceP
         const float n_dot_l = dot(s->n, l);
         const float3 reflected = 2.0f * n_dot_l * s->n - l;
         const float r_dot_v = fmax(dot(reflected, to_eye), 0.0f);
-        const float3 light = sh->lights[i].color.xyz;
+        float3 light = sh->lights[i].color.xyz;
+        if (sh->lights[i].cos_outer > -1.0f)   // a spot light (point lights skip this: bit for bit as before)
+            light *= spot_falloff(&sh->lights[i], -l);
         color += s->m.diffuse * n_dot_l * s->m.color.xyz * light;
         if (s->m.specular > 0.0f && r_dot_v > 0.0f)
             color += s->m.specular * pow(r_dot_v, s->m.shininess) * light;

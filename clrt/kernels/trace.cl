@@ -19,6 +19,8 @@
 #include "accel_packet.cl"
 #include "point.cl"
 #include "point_order.cl"
+#include "winding.cl"
+#include "instances.cl"
 
 // A sink that stores nothing: the query's options only.
 inline HitSink query_options(const int cull)
@@ -27,6 +29,7 @@ inline HitSink query_options(const int cull)
     s.ray_ids = 0;
     s.prims = 0;
     s.ts = 0;
+    s.instances = 0;
     s.next = 0;
     s.capacity = 0u;
     s.ray = 0;
@@ -71,11 +74,12 @@ inline float3 face_normal(__global const TriangleVerts* tri)
 #endif
 
 // Answer `query` for the rays first .. first + ITEM_RAYS - 1 (those below
-// num_rays): hits[k] (Hit.prim a slot; a miss for a bad ray), with each ray's
-// origin and unit direction as loaded.  Eight rays that make a packet walk
-// together; any others one by one.
+// num_rays): hits[k] (Hit.prim a slot; a miss for a bad ray) and its instance
+// (instances[k], -1 for a miss), with each ray's origin and unit direction as
+// loaded.  Eight rays that make a packet walk together (one-level scenes
+// only); any others one by one.
 inline void answer_rays(const Geometry* g, const RayInput* in, uint first, uint num_rays, const int query,
-                        const int cull, Hit* hits, float3* origins, float3* dirs)
+                        const int cull, Hit* hits, int* instances, float3* origins, float3* dirs)
 {
 #ifdef RAY_PACKETS
     RayLanes lanes;
@@ -91,24 +95,27 @@ inline void answer_rays(const Geometry* g, const RayInput* in, uint first, uint 
         RayPacket packet;
         if (make_ray_packet(&lanes, &shear, &volume, &packet)) {
             answer_ray_packet(g, &packet, lanes.tmax, query, cull, hits);
-            return;
+        } else {
+            for (int k = 0; k < RAY_PACKETS; ++k) {
+                const ShearedRay r = sheared_ray_lane(&shear, origins[k], k);
+                const VolumeRay vr = volume_ray_lane(&volume, origins[k], dirs[k], k);
+                HitSink options = query_options(cull);
+                hits[k] = walk_ray(g, &r, &vr, lanes.tmin[k], lanes.tmax[k], query, &options);
+            }
         }
-        for (int k = 0; k < RAY_PACKETS; ++k) {
-            const ShearedRay r = sheared_ray_lane(&shear, origins[k], k);
-            const VolumeRay vr = volume_ray_lane(&volume, origins[k], dirs[k], k);
-            HitSink options = query_options(cull);
-            hits[k] = walk_ray(g, &r, &vr, lanes.tmin[k], lanes.tmax[k], query, &options);
-        }
+        for (int k = 0; k < RAY_PACKETS; ++k)
+            instances[k] = hits[k].prim >= 0 ? 0 : -1;
         return;
     }
 #endif
     // one by one: the last rays of a launch, and eight with a bad ray among them
     for (int k = 0; k < ITEM_RAYS; ++k) {
         hits[k] = miss_hit();
+        instances[k] = -1;
         float tmin, tmax;
         if (first + k < num_rays && load_ray(in, first + k, &origins[k], &dirs[k], &tmin, &tmax)) {
             HitSink options = query_options(cull);
-            hits[k] = query_hits(g, origins[k], dirs[k], tmin, tmax, query, false, &options);
+            hits[k] = query_instance_hits(g, origins[k], dirs[k], tmin, tmax, query, false, &options, &instances[k]);
         }
     }
 }
@@ -119,9 +126,11 @@ inline void answer_rays(const Geometry* g, const RayInput* in, uint first, uint 
                             : (__global type*)(results + launch.field_at[k]))
 
 // Closest hit of each ray, written field by field into `results` (outputs
-// 0 .. 6: t, prim, u, v, normal, front, hit, as clrt.query.results'
+// 0 .. 7: t, instance, prim, u, v, normal, front, hit, as clrt.query.results'
 // CLOSEST_FIELDS; any may be absent).  Index: the ray's in the launch; a miss
-// writes t = INFINITY, prim = -1, u = v = 0, normal = 0, front = hit = 0.
+// writes t = INFINITY, instance = prim = -1, u = v = 0, normal = 0, front =
+// hit = 0.  In a two-level scene the normal and the face are the placed
+// triangle's, in the world (instances.cl).
 __kernel void query_closest(RAY_INPUT_PARAMS, __global uchar* results, GEOMETRY_PARAMS)
 {
     const uint num_rays = launch.num_rays;
@@ -131,17 +140,19 @@ __kernel void query_closest(RAY_INPUT_PARAMS, __global uchar* results, GEOMETRY_
     const Geometry g = make_geometry(GEOMETRY_ARGS);
     const RayInput in = make_ray_input(RAY_INPUT_ARGS);
     Hit hits[ITEM_RAYS];
+    int hit_instances[ITEM_RAYS];
     float3 ray_origins[ITEM_RAYS], ray_dirs[ITEM_RAYS];
-    answer_rays(&g, &in, first, num_rays, QUERY_CLOSEST, launch.cull, hits, ray_origins, ray_dirs);
+    answer_rays(&g, &in, first, num_rays, QUERY_CLOSEST, launch.cull, hits, hit_instances, ray_origins, ray_dirs);
     // The outputs only now: made before the walk, their pointers took seven
     // registers through it (6 % of random rays' time on the H200).
     __global float* t_out = RESULT_AT(float, 0);
-    __global int* prim_out = RESULT_AT(int, 1);
-    __global float* u_out = RESULT_AT(float, 2);
-    __global float* v_out = RESULT_AT(float, 3);
-    __global float* normal_out = RESULT_AT(float, 4);
-    __global uchar* front_out = RESULT_AT(uchar, 5);
-    __global uchar* hit_out = RESULT_AT(uchar, 6);
+    __global int* instance_out = RESULT_AT(int, 1);
+    __global int* prim_out = RESULT_AT(int, 2);
+    __global float* u_out = RESULT_AT(float, 3);
+    __global float* v_out = RESULT_AT(float, 4);
+    __global float* normal_out = RESULT_AT(float, 5);
+    __global uchar* front_out = RESULT_AT(uchar, 6);
+    __global uchar* hit_out = RESULT_AT(uchar, 7);
     for (int j = 0; j < ITEM_RAYS && first + j < num_rays; ++j) {
         Hit hit = hits[j];
         const size_t k = (size_t)first + j;
@@ -151,9 +162,17 @@ __kernel void query_closest(RAY_INPUT_PARAMS, __global uchar* results, GEOMETRY_
             uchar f = 0;
             if (found) {
                 __global const TriangleVerts* tri = SPLIT_AT(&g, tris, hit.prim);
+#ifdef ACCEL_INSTANCES
+                __global const Instance* placed = SPLIT_AT(&g, instances, hit_instances[j]);
+                const ShearedRay r = shear_ray(object_point(placed, ray_origins[j]),
+                                               object_vector(placed, ray_dirs[j]), false, INFINITY);
+                f = sees_front(&r, tri) != mirrored(placed) ? 1 : 0;
+                n = instance_normal(placed, tri);
+#else
                 const ShearedRay r = shear_ray(ray_origins[j], ray_dirs[j], false, INFINITY);
                 f = sees_front(&r, tri) ? 1 : 0;
                 n = face_normal(tri);
+#endif
             }
             if (normal_out)
                 vstore3(n, k, normal_out);
@@ -163,6 +182,8 @@ __kernel void query_closest(RAY_INPUT_PARAMS, __global uchar* results, GEOMETRY_
         hit = reported_hit(&g, hit);
         if (t_out)
             t_out[k] = hit.t;
+        if (instance_out)
+            instance_out[k] = hit_instances[j];
         if (prim_out)
             prim_out[k] = hit.prim;
         if (u_out)
@@ -184,8 +205,9 @@ __kernel void query_any(RAY_INPUT_PARAMS, __global uchar* results, GEOMETRY_PARA
     const Geometry g = make_geometry(GEOMETRY_ARGS);
     const RayInput in = make_ray_input(RAY_INPUT_ARGS);
     Hit hits[ITEM_RAYS];
+    int hit_instances[ITEM_RAYS];
     float3 ray_origins[ITEM_RAYS], ray_dirs[ITEM_RAYS];
-    answer_rays(&g, &in, first, num_rays, QUERY_ANY, launch.cull, hits, ray_origins, ray_dirs);
+    answer_rays(&g, &in, first, num_rays, QUERY_ANY, launch.cull, hits, hit_instances, ray_origins, ray_dirs);
     __global uchar* occluded = RESULT_AT(uchar, 0);
     for (int j = 0; j < ITEM_RAYS && first + j < num_rays; ++j)
         occluded[(size_t)first + j] = hits[j].prim >= 0 ? 1 : 0;
@@ -208,8 +230,8 @@ __kernel void query_count(RAY_INPUT_PARAMS, __global uchar* results, GEOMETRY_PA
 }
 
 // Every hit of every ray in one traversal, appended in no particular order to
-// outputs 0 .. 2 (ray ids, prims, ts) at the counter, output 3; ray ids
-// relative to the launch's first ray.  The counter ends as the number of hits
+// outputs 0 .. 2 (ray ids, prims, ts) and 4 (instances, where asked for) at
+// the counter, output 3; ray ids relative to the launch's first ray.  The counter ends as the number of hits
 // of the whole launch, also when that exceeds launch.capacity (then the host
 // runs the chunk again with room for all of them).
 __kernel void query_all(RAY_INPUT_PARAMS, __global uchar* results, GEOMETRY_PARAMS)
@@ -228,6 +250,7 @@ __kernel void query_all(RAY_INPUT_PARAMS, __global uchar* results, GEOMETRY_PARA
     sink.prims = RESULT_AT(int, 1);
     sink.ts = RESULT_AT(float, 2);
     sink.next = RESULT_AT(uint, 3);
+    sink.instances = RESULT_AT(int, 4);
     sink.capacity = launch.capacity;
     sink.ray = (int)i;
     query_hits(&g, origin, dir, tmin, tmax, QUERY_ALL, false, &sink);
@@ -270,6 +293,126 @@ __kernel void query_closest_point(POINT_INPUT_PARAMS, __global uchar* results, G
         u_out[i] = found ? best.u : 0.0f;
     if (v_out)
         v_out[i] = found ? best.v : 0.0f;
+}
+
+// ---- Inside and outside (winding.cl, point.cl's sign rules).  Points as
+// query_closest_point takes them (their largest distances unused), in the
+// order of point_order.cl; each point's answer goes to its own place.
+
+// The winding number of the mesh at each point (winding.cl): output 0, a
+// float a point; output 1, a byte a point: 1 where it is at least 1/2 (the
+// point is inside), as the float32 value says.  `winding`: the tree's
+// WindingNodes (winding_nodes; unused without a BVH).  A bad point writes 0.
+__kernel void query_winding_number(POINT_INPUT_PARAMS, __global uchar* results,
+                                   __global const WindingNode* winding, GEOMETRY_PARAMS)
+{
+    const uint j = get_global_id(0);
+    if (j >= launch.num_rays)
+        return;
+    const uint i = POINT_ORDER(order, launch.num_rays)[j];
+    const Geometry g = make_geometry(GEOMETRY_ARGS);
+    const RayInput in = make_point_input(POINT_INPUT_ARGS);
+    float3 p;
+    float max_dist;
+    float w = 0.0f;
+    if (load_point(&in, i, &p, &max_dist))
+        w = (float)winding_number(&g, winding, p);
+    __global float* winding_out = RESULT_AT(float, 0);
+    __global uchar* inside_out = RESULT_AT(uchar, 1);
+    if (winding_out)
+        winding_out[i] = w;
+    if (inside_out)
+        inside_out[i] = w >= 0.5f ? 1 : 0;
+}
+
+// Signed distances, output 0 (a float a point): the distance to the closest
+// point (point.cl), negative inside by one sign rule, a kernel each so that
+// each walks only what its rule needs -- the winding number (at least 1/2:
+// winding.cl), ray parity, or the pseudo-normal at the closest point.  A bad
+// point writes NaN.
+#define SIGN_WINDING 0
+#define SIGN_PARITY 1
+#define SIGN_NORMAL 2
+
+// The signed distance of point i by `rule` (`winding`, `normals`: the rule's
+// buffer, or 0), into output 0.
+inline void signed_distance(const Geometry* g, const RayInput* in, const QueryLaunch* launch,
+                            __global uchar* results, uint i, const int rule,
+                            __global const WindingNode* winding, __global const PseudoNormals* normals)
+{
+    float3 p;
+    float max_dist;
+    float d = NAN;
+    if (load_point(in, i, &p, &max_dist)) {
+        const PointHit best = closest_point(g, p, INFINITY, POINT_MARGIN(p, in->scene_lo, in->scene_hi));
+        bool inside;
+        if (rule == SIGN_WINDING)
+            inside = (float)winding_number(g, winding, p) >= 0.5f;
+        else if (rule == SIGN_PARITY)
+            inside = inside_by_parity(g, p, in->scene_lo, in->scene_hi);
+        else
+            inside = inside_by_normal(g, normals, &best, p);
+        d = inside ? -(float)best.dist : (float)best.dist;
+    }
+    ((__global float*)(results + launch->field_at[0]))[i] = d;
+}
+
+__kernel void query_signed_distance_winding(POINT_INPUT_PARAMS, __global uchar* results,
+                                            __global const WindingNode* winding, GEOMETRY_PARAMS)
+{
+    const uint j = get_global_id(0);
+    if (j >= launch.num_rays)
+        return;
+    const Geometry g = make_geometry(GEOMETRY_ARGS);
+    const RayInput in = make_point_input(POINT_INPUT_ARGS);
+    signed_distance(&g, &in, &launch, results, POINT_ORDER(order, launch.num_rays)[j], SIGN_WINDING, winding, 0);
+}
+
+__kernel void query_signed_distance_parity(POINT_INPUT_PARAMS, __global uchar* results, GEOMETRY_PARAMS)
+{
+    const uint j = get_global_id(0);
+    if (j >= launch.num_rays)
+        return;
+    const Geometry g = make_geometry(GEOMETRY_ARGS);
+    const RayInput in = make_point_input(POINT_INPUT_ARGS);
+    signed_distance(&g, &in, &launch, results, POINT_ORDER(order, launch.num_rays)[j], SIGN_PARITY, 0, 0);
+}
+
+__kernel void query_signed_distance_normal(POINT_INPUT_PARAMS, __global uchar* results,
+                                           __global const PseudoNormals* normals, GEOMETRY_PARAMS)
+{
+    const uint j = get_global_id(0);
+    if (j >= launch.num_rays)
+        return;
+    const Geometry g = make_geometry(GEOMETRY_ARGS);
+    const RayInput in = make_point_input(POINT_INPUT_ARGS);
+    signed_distance(&g, &in, &launch, results, POINT_ORDER(order, launch.num_rays)[j], SIGN_NORMAL, 0, normals);
+}
+
+// The WindingNodes of the rows of one tree level (`level_rows`, `count` of
+// them; winding.cl): the host launches the levels from the deepest up, so an
+// inner child's row is done before the row that holds it.
+__kernel void winding_nodes(__global WindingNode* winding, __global const int* level_rows, const uint count,
+                            GEOMETRY_PARAMS)
+{
+    const uint i = get_global_id(0);
+    if (i >= count)
+        return;
+    const Geometry g = make_geometry(GEOMETRY_ARGS);
+    const int row = level_rows[i];
+    const BvhPairNode n = *SPLIT_AT(&g, nodes, row);
+    for (int side = 0; side < 2; ++side) {
+        const int2 child = side == 0 ? PAIR_LEFT(n) : PAIR_RIGHT(n);
+        __global WindingNode* out = winding + 2 * row + side;
+        if (child.y > 0) {
+            *out = leaf_winding_node(&g, child.x, child.y);
+        } else if (child.y == 0) {
+            *out = joined_winding_node(winding + 2 * child.x, winding + 2 * child.x + 1);
+        } else {
+            WindingNode none = {(float4)(0.0f), (float4)(0.0f), {0}, {0}, 0.0f};
+            *out = none;
+        }
+    }
 }
 
 // The directions of the camera's pixel-centre rays (packed float3) for pixels

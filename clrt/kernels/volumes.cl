@@ -285,6 +285,31 @@ inline int8 box_hit_lanes(const PacketPlanes* v, __global const BvhWideNode* n, 
 #endif
 #endif
 #elif defined(VOLUME_SPHERE)
+#ifdef ACCEL_INSTANCES
+// A two-level scene's rays inside an instance have directions of any length
+// (instances.cl): the test below in units of t, the closest approach and the
+// half chord divided by the direction's square length a (1 in the world,
+// within rounding), the slack by its length.
+inline bool volume_hit(const VolumeRay* r, float4 bound_a, float4 bound_b, float tmin, float tmax,
+                       float* t_enter, const bool oblique)
+{
+    const float3 oc = bound_a.xyz - r->origin;
+    const float radius = bound_b.x;
+    const float a = dot(r->dir, r->dir);
+    const float along = dot(oc, r->dir) / a;             // t of the closest approach
+    const float3 perp = oc - along * r->dir;
+    const float slack = VOLUME_SLACK * (length(oc) + radius);
+    const float reach = radius + slack;
+    const float h2 = reach * reach - dot(perp, perp);
+    if (h2 < 0.0f)
+        return false;
+    const float h = sqrt(h2 / a);
+    const float slack_t = slack / sqrt(a) + VOLUME_SLACK * (fabs(along) + h);
+    const float enter = along - h - slack_t, exit = along + h + slack_t;
+    *t_enter = fmax(enter, tmin);
+    return exit >= tmin && enter <= tmax;
+}
+#else
 inline bool volume_hit(const VolumeRay* r, float4 bound_a, float4 bound_b, float tmin, float tmax,
                        float* t_enter, const bool oblique)
 {
@@ -302,6 +327,7 @@ inline bool volume_hit(const VolumeRay* r, float4 bound_a, float4 bound_b, float
     *t_enter = fmax(enter, tmin);
     return exit >= tmin && enter <= tmax;
 }
+#endif
 // A lower bound of the distance from point p to the sphere (point.cl's walk).
 inline float point_bound(float3 p, float4 bound_a, float4 bound_b)
 {

@@ -1,5 +1,6 @@
 """Batch ray queries on the device: closest, any, count and all hits, camera
-images, closest points of a mesh (``points.py``), and a drop-in for trimesh's intersector.
+images, closest points of a mesh, signed distances and winding numbers
+(``points.py``, ``inside.py``), and a drop-in for trimesh's intersector.
 
 ``rays.py`` (the rays a query takes), ``accel.py`` (:class:`Accel`: a mesh
 uploaded once, queried often), ``results.py`` (what queries return),
@@ -8,9 +9,10 @@ uploaded once, queried often), ``results.py`` (what queries return),
 """
 
 from clrt.query.accel import Accel
-from clrt.query.api import (all_hits, any_hit, camera_images, closest_points, count_hits, distance, occluded,
-                            trace)
+from clrt.query.api import (all_hits, any_hit, camera_images, closest_points, contains, count_hits, distance,
+                            occluded, sdf_grid, signed_distance, trace, winding_number)
 from clrt.query.results import AllHits, CameraImages, ClosestPoints, Hits
 
 __all__ = ["Accel", "AllHits", "CameraImages", "ClosestPoints", "Hits", "all_hits", "any_hit", "camera_images",
-           "closest_points", "count_hits", "distance", "occluded", "trace"]
+           "closest_points", "contains", "count_hits", "distance", "occluded", "sdf_grid", "signed_distance", "trace",
+           "winding_number"]

@@ -44,6 +44,7 @@ from clrt.device import pinned
 from clrt.device.pinned import PinnedPool
 from clrt.device.program import launch_size
 from clrt.device.scene import DeviceScene
+from clrt.scene.instances import Instances
 from clrt.device import sharing
 from clrt.device.sharing import one_at_a_time
 from clrt.errors import InputError
@@ -51,7 +52,8 @@ from clrt.config import NO_RESULT, RAY_CHECKS
 from clrt.layouts import QUERY_LAUNCH
 from clrt.query.kernels import QUERY_GROUP, QUERY_KERNELS
 from clrt.query.points import PointQueries
-from clrt.query.rays import CameraRays, PinholeRays, RayBatch, cull_code, is_device_array
+from clrt.query.instances import query_scene, source_of
+from clrt.query.rays import CameraRays, PinholeRays, PointBatch, RayBatch, cull_code, is_device_array
 from clrt.query.results import (ALL_HITS_FIELDS, CAMERA_FIELDS, CLOSEST_FIELDS, RESULT_BYTES, RESULT_DTYPES,
                                 AllHits, CameraImages, Hits, asked_fields, with_fields)
 from clrt.accel import as_triangles
@@ -63,9 +65,10 @@ DEFAULT_CHUNK_RAYS = 1 << 20        # rays per launch: ~50 MB of device buffers
 BRUTE_FORCE_TESTS = 1 << 30         # ray-triangle tests per launch without a BVH
 MIN_CHUNK_RAYS = 4096
 ALL_HITS_PER_RAY = 4                # first guess of room for all_hits, grown as hits show up
-ALL_HITS_CAPACITY = 1 << 24         # most hits of one launch kept on the device (192 MiB)
+ALL_HITS_CAPACITY = 1 << 24         # most hits of one launch kept on the device (256 MiB)
+ALL_HITS_BYTES = 16                 # a hit's ray id, prim, t and instance
 ALL_HITS_HEAD = 16                  # bytes before query_all's arrays: its hit counter
-CHUNK_RESULT_BYTES = sum(RESULT_BYTES[name] for name in CLOSEST_FIELDS)   # the most results a ray (30)
+CHUNK_RESULT_BYTES = sum(RESULT_BYTES[name] for name in CLOSEST_FIELDS)   # the most results a ray (34)
 RAY_INPUT_BYTES = 32                # origin, direction, tmin, tmax of a ray in its chunk buffers
 # Ray arrays (per chunk) from this size go through page-locked staging on a
 # GPU (clrt.device.pinned.upload): the driver's own copy of pageable memory
@@ -120,27 +123,29 @@ def _checked_camera(camera):
     return camera
 
 
-def _rebuilt_accel(vertices, faces, name, options) -> "Accel":
-    """An unpickled Accel: built again from its mesh and options (Accel.__reduce__).
+def _rebuilt_accel(source, options) -> "Accel":
+    """An unpickled Accel: built again from its mesh or instances and options
+    (Accel.__reduce__).
 
     In a child forked after OpenCL started, no device can be used
     (clrt.device.sharing): the Accel is then a shell whose queries raise that
     DeviceError.  Raised here, while unpickling, it would be lost by
     multiprocessing's pool, which drops a task whose arguments fail to load
     and waits for its result forever."""
-    mesh = Mesh(vertices, faces, name)
     if sharing.forked_after_start():
         shell = Accel.__new__(Accel)
-        shell._lock, shell.mesh, shell._options = threading.RLock(), mesh, options
+        shell._lock, shell._options = threading.RLock(), options
+        shell.mesh, shell.instances = (None, source) if isinstance(source, Instances) else (source, None)
         return shell
-    return Accel(mesh, **options)
+    return Accel(source, **options)
 
 
 class Accel(PointQueries):
     """A mesh and its acceleration structure, uploaded once to one device.
 
-    ``mesh``: a Mesh, a mesh file, a trimesh object or ``(vertices, faces)``.
-    The options go by keyword, in the same order as
+    ``mesh``: a Mesh, a mesh file, a trimesh object or ``(vertices, faces)``; or
+    several placed as instances: a list of meshes or of ``(mesh, 4x4 transform)``
+    pairs, a :class:`clrt.Instances` or a glTF file's mesh nodes (docs/instances.md).  The options go by keyword, in the same order as
     :class:`~clrt.renderer.frame.Renderer`'s (the choices of the structure
     first, then the device): ``accel``: "box" (default), "sphere", "ellipse"
     or "none"; ``builder``: "auto" (default: "device" where the device
@@ -171,11 +176,10 @@ class Accel(PointQueries):
         sharing.check_process()   # before a long host build that could not be used
         accel, builder, leaf_size = checks.accel_options(accel, builder, leaf_size)
         self._lock = threading.RLock()
-        self.mesh = as_mesh(mesh)
-        origin = device_origin(self.mesh.bounds)   # the device's frame (clrt.scene.arrays)
-        scene = DeviceScene(triangle_corners(self.mesh, origin), accel=accel, builder=builder, leaf_size=leaf_size,
-                            device=device, bounds=self.mesh.bounds, origin=origin,
-                            max_buffer_bytes=max_buffer_bytes, max_buffer_label=max_buffer_label)
+        # One mesh, or several placed as instances (clrt.query.instances): one of the two is None.
+        self.mesh, self.instances, scene = query_scene(mesh, accel=accel, builder=builder, leaf_size=leaf_size,
+                                                       device=device, max_buffer_bytes=max_buffer_bytes,
+                                                       max_buffer_label=max_buffer_label)
         self._options = dict(accel=accel, builder=builder, leaf_size=leaf_size, device=device,
                              chunk_rays=chunk_rays, max_buffer_bytes=max_buffer_bytes,
                              max_buffer_label=max_buffer_label)
@@ -188,6 +192,8 @@ class Accel(PointQueries):
         every volume fitted anew, so queries stay exact (a refitted tree finds
         the hits of brute force) and only get slower as the motion tangles the
         tree -- ``rebuild=True`` builds a new one instead."""
+        if self.instances is not None:
+            raise InputError("refit of an Accel of instances is not supported yet: make a new Accel")
         faces = self.mesh.faces
         vertices = np.asarray(vertices)
         if vertices.shape != self.mesh.vertices.shape:
@@ -223,7 +229,7 @@ class Accel(PointQueries):
     def follow(self, renderer, chunk_rays: int | None = None) -> None:
         """Take ``renderer``'s current scene, device and buffers (Renderer.refit
         calls this on the queries made by :meth:`from_renderer`)."""
-        self.mesh = as_mesh(renderer.scene)
+        self.mesh, self.instances = as_mesh(renderer.scene), None
         self._setup(renderer.device_scene, chunk_rays)
 
     # An Accel holds device buffers that a copy would share (a refit of the copy
@@ -231,10 +237,11 @@ class Accel(PointQueries):
     # is a new one, built from the same mesh and options -- on the device named
     # by them, which for a pickle may be another machine's.
     def __repr__(self) -> str:
+        what = (f"{len(self.mesh.faces):,} triangles" if self.instances is None
+                else f"{len(self.instances):,} instances of {len(self.instances.meshes):,} meshes")
         if "acceleration" not in self.__dict__:   # _rebuilt_accel's shell
-            return f"<clrt.Accel of {len(self.mesh.faces):,} triangles, unpickled where OpenCL cannot run>"
-        return (f"<clrt.Accel of {len(self.mesh.faces):,} triangles, {self.acceleration.accel} "
-                f"({self.acceleration.builder}) on {self.device}>")
+            return f"<clrt.Accel of {what}, unpickled where OpenCL cannot run>"
+        return f"<clrt.Accel of {what}, {self.acceleration.accel} ({self.acceleration.builder}) on {self.device}>"
 
     def _own_options(self) -> dict:
         if self._options is None:
@@ -243,13 +250,13 @@ class Accel(PointQueries):
         return self._options
 
     def __copy__(self) -> "Accel":
-        return Accel(self.mesh, **self._own_options())
+        return Accel(self.mesh if self.instances is None else self.instances, **self._own_options())
 
     def __deepcopy__(self, memo) -> "Accel":
         return self.__copy__()
 
     def __reduce__(self):
-        return _rebuilt_accel, (self.mesh.vertices, self.mesh.faces, self.mesh.name, dict(self._own_options()))
+        return _rebuilt_accel, (source_of(self.mesh, self.instances), dict(self._own_options()))
 
     def _setup(self, scene: DeviceScene, chunk_rays):
         _check_chunk_rays(chunk_rays)
@@ -295,19 +302,19 @@ class Accel(PointQueries):
     def memory(self) -> dict:
         """Upper bounds, in bytes, of what queries keep on the device: ``scene``
         (triangles, BVH, triangle ids), ``chunk`` (rays and results of the
-        chunk in flight: 62 bytes a ray for the closest hit with every field,
+        chunk in flight: 66 bytes a ray for the closest hit with every field,
         the largest query)
-        and ``all_hits`` (12 bytes a hit for at most ``all_hits_capacity`` hits; a
+        and ``all_hits`` (16 bytes a hit for at most ``all_hits_capacity`` hits; a
         chunk with more hits is split in halves).  Host memory beyond the
         caller's arrays and the results: a float32 copy of the rays where they
         are not float32 already."""
         chunk = self.chunk_size()
         per_ray = RAY_INPUT_BYTES + sum(RESULT_BYTES[name] for name in CLOSEST_FIELDS)
         return {"scene": int(self.geometry.nbytes), "chunk_rays": chunk, "chunk": chunk * per_ray,
-                "all_hits": 12 * self._all_hits_limit()}
+                "all_hits": ALL_HITS_BYTES * self._all_hits_limit()}
 
     def _all_hits_limit(self) -> int:
-        return max(1, min(self.all_hits_capacity, (self.max_alloc - ALL_HITS_HEAD) // 12))
+        return max(1, min(self.all_hits_capacity, (self.max_alloc - ALL_HITS_HEAD) // ALL_HITS_BYTES))
 
     def _copy_out(self, out, start: int, stop: int, results: cl.Buffer, offset: int) -> None:
         """Rays start..stop-1's values of one output, at byte ``offset`` of the
@@ -341,6 +348,8 @@ class Accel(PointQueries):
         the triangle test (clrt.device.reach), no bad ray reported yet, and the
         range the kernels hold a batch's own origins to (rays.cl's BAD_REACH)."""
         self._check_reach(source)
+        if self.instances is not None and isinstance(source, PointBatch):
+            raise InputError("point queries on an Accel of instances are not supported yet")
         reach, origin = self.geometry.reach, self.geometry.origin
         # A camera's eye was checked here, as the renderer checks it, and goes
         # to the device in its frame already, moved in float64 as the
@@ -563,7 +572,7 @@ class Accel(PointQueries):
             self._all_hits_chunk(batch, start, stop, code, parts)
         self._check(batch)
         if not parts:
-            return AllHits(np.zeros(0, np.int64), np.zeros(0, np.int32), np.zeros(0, np.float32))
+            return AllHits(np.zeros(0, np.int64), np.zeros(0, np.int32), np.zeros(0, np.int32), np.zeros(0, np.float32))
         return AllHits(*(np.concatenate(p) for p in zip(*parts)))
 
     def _all_hits_chunk(self, batch, start, stop, code, parts) -> None:
@@ -578,11 +587,11 @@ class Accel(PointQueries):
         total = np.zeros(1, np.uint32)
         for _attempt in range(2):
             # The hit counter first (ALL_HITS_HEAD bytes keep the arrays aligned),
-            # then the ray ids, prims and ts, room for ``capacity`` hits each.
-            at = [ALL_HITS_HEAD + k * 4 * capacity for k in range(3)]
+            # then the ray ids, prims, ts and instances, room for ``capacity`` hits each.
+            at = [ALL_HITS_HEAD + k * 4 * capacity for k in range(4)]
             launch["capacity"] = capacity
-            launch["field_at"][:4] = (*at, 0)
-            results = self._buffer("all_hits", ALL_HITS_HEAD + 12 * capacity)
+            launch["field_at"][:5] = (*at[:3], 0, at[3])
+            results = self._buffer("all_hits", ALL_HITS_HEAD + ALL_HITS_BYTES * capacity)
             cl.enqueue_copy(self.queue, results, np.zeros(1, np.uint32))
             self._run("query_all", rays, launch, results)
             cl.enqueue_copy(self.queue, total, results)
@@ -601,13 +610,13 @@ class Accel(PointQueries):
             capacity = found
         else:
             raise RuntimeError(f"all_hits: {found} hits found for room of {capacity} twice")
-        ray, prim = np.empty(found, np.int32), np.empty(found, np.int32)
+        ray, prim, instance = (np.empty(found, np.int32) for _ in range(3))
         t = np.empty(found, np.float32)
-        for host, offset in zip((ray, prim, t), at):
+        for host, offset in zip((ray, prim, t, instance), at):
             if found:
                 cl.enqueue_copy(self.queue, host, results, src_offset=offset)
-        order = np.lexsort((prim, t, ray))
-        parts.append((ray[order].astype(np.int64) + start, prim[order], t[order]))
+        order = np.lexsort((prim, instance, t, ray))
+        parts.append((ray[order].astype(np.int64) + start, instance[order], prim[order], t[order]))
 
     # ----------------------------------------------------------------------- cameras
 
@@ -646,10 +655,9 @@ class Accel(PointQueries):
         cosine = directions.astype(np.float64) @ np.asarray(axis, np.float64)
         with np.errstate(invalid="ignore", over="ignore"):
             depth = np.where(hits.hit, hits.t * cosine, np.inf).astype(np.float32)
-        h, w = shape
-        return CameraImages(depth.reshape(h, w), hits.t.reshape(h, w), hits.normal.reshape(h, w, 3),
-                            hits.prim.reshape(h, w), hits.hit.reshape(h, w), hits.front.reshape(h, w),
-                            hits.u.reshape(h, w), hits.v.reshape(h, w))
+        images = {name: getattr(hits, name).reshape(*shape, *CAMERA_FIELDS[name].item_shape)
+                  for name in CAMERA_FIELDS if name != "depth"}
+        return CameraImages(depth=depth.reshape(shape), **images)
 
     @with_fields(CLOSEST_FIELDS, ("H", "W"), heading="Returns", lead="Hits, a named tuple of these images:")
     def trace_camera(self, camera) -> Hits:

@@ -12,6 +12,7 @@ import numpy as np
 
 from clrt.config import DEFAULT_ACCEL, DEFAULT_BUILDER, DEFAULT_LEAF_SIZE
 from clrt.query.accel import Accel
+from clrt.query.inside import sign_kernel
 from clrt.query.rays import cull_code
 from clrt.query.results import (ALL_HITS_FIELDS, CAMERA_FIELDS, CLOSEST_FIELDS, POINT_FIELDS, AllHits, CameraImages,
                                 ClosestPoints, Hits, with_fields)
@@ -88,3 +89,36 @@ def distance(mesh, points, *, max_distance=np.inf,
     """(N,) float32 distance of each point to the mesh (:meth:`Accel.distance`)."""
     return _accel(mesh, accel, builder, leaf_size, device, chunk_rays, "none").distance(
         points, max_distance=max_distance)
+
+
+def signed_distance(mesh, points, *, sign: str = "winding",
+                    accel: str = DEFAULT_ACCEL, builder: str = DEFAULT_BUILDER, leaf_size: int = DEFAULT_LEAF_SIZE,
+                    device: str | None = None, chunk_rays: int | None = None):
+    """(N,) float32 distance of each point to the mesh, negative inside by rule
+    ``sign``: "winding", "parity" or "normal" (:meth:`Accel.signed_distance`)."""
+    sign_kernel(sign)   # before the build
+    return _accel(mesh, accel, builder, leaf_size, device, chunk_rays, "none").signed_distance(points, sign=sign)
+
+
+def winding_number(mesh, points, *,
+                   accel: str = DEFAULT_ACCEL, builder: str = DEFAULT_BUILDER, leaf_size: int = DEFAULT_LEAF_SIZE,
+                   device: str | None = None, chunk_rays: int | None = None):
+    """(N,) float32 generalised winding number of the mesh at each point (:meth:`Accel.winding_number`)."""
+    return _accel(mesh, accel, builder, leaf_size, device, chunk_rays, "none").winding_number(points)
+
+
+def contains(mesh, points, *,
+             accel: str = DEFAULT_ACCEL, builder: str = DEFAULT_BUILDER, leaf_size: int = DEFAULT_LEAF_SIZE,
+             device: str | None = None, chunk_rays: int | None = None):
+    """(N,) bool: is each point inside the mesh (winding number >= 1/2; :meth:`Accel.contains`)?"""
+    return _accel(mesh, accel, builder, leaf_size, device, chunk_rays, "none").contains(points)
+
+
+def sdf_grid(mesh, resolution, bounds=None, *, sign: str = "winding",
+             accel: str = DEFAULT_ACCEL, builder: str = DEFAULT_BUILDER, leaf_size: int = DEFAULT_LEAF_SIZE,
+             device: str | None = None, chunk_rays: int | None = None) -> np.ndarray:
+    """(X, Y, Z) float32 signed distances at the samples of a grid over
+    ``bounds`` (default: the mesh's box and a margin; :meth:`Accel.sdf_grid`)."""
+    sign_kernel(sign)
+    return _accel(mesh, accel, builder, leaf_size, device, chunk_rays, "none").sdf_grid(resolution, bounds,
+                                                                                         sign=sign)

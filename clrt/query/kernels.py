@@ -45,6 +45,13 @@ QUERY_KERNELS = {
     "point_cells": (buffer("origins"), value("launch", QUERY_LAUNCH), buffer("order")),
     "point_offsets": (buffer("order"),),
     "point_scatter": (value("launch", QUERY_LAUNCH), buffer("order")),
+    # inside and outside (winding.cl, point.cl): points as query_closest_point takes them, and
+    # each kernel's rule's buffer -- the tree's WindingNodes or the PseudoNormals
+    "query_winding_number": (*POINT_INPUT, buffer("results"), buffer("winding"), *GEOMETRY),
+    "query_signed_distance_winding": (*POINT_INPUT, buffer("results"), buffer("winding"), *GEOMETRY),
+    "query_signed_distance_parity": (*POINT_INPUT, buffer("results"), *GEOMETRY),
+    "query_signed_distance_normal": (*POINT_INPUT, buffer("results"), buffer("normals"), *GEOMETRY),
+    "winding_nodes": (buffer("winding"), buffer("level_rows"), value("count", np.uint32), *GEOMETRY),
     "camera_rays": (buffer("dirs"), value("cam", CAMERA), value("first", np.uint64), value("count", np.uint32)),
     # one-launch kernels of the primary-ray benchmark (Accel.launch_camera)
     "trace_camera": (buffer("hits"), value("cam", CAMERA), *GEOMETRY),

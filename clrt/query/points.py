@@ -1,5 +1,7 @@
 """Point queries on an Accel: the nearest point of the mesh to each query
-point, and its distance (query_closest_point in trace.cl, point.cl).
+point and its distance (query_closest_point in trace.cl, point.cl); signed
+distances, winding numbers, inside tests and SDF grids (the kernels after
+it in trace.cl; winding.cl; what they need beyond the scene: ``inside.py``).
 
 Points go through the ray queries' input path (``PointBatch`` fills a ray
 batch's origins and tmax), chunks and checks, so a point gives the same
@@ -16,9 +18,10 @@ import pyopencl as cl
 from clrt.config import POINT_CELLS, POINT_OFFSETS_GROUP
 from clrt.device.program import launch_size
 from clrt.device.sharing import one_at_a_time
+from clrt.query.inside import GridPoints, grid_axes, pseudo_normals, sign_kernel, winding_nodes
 from clrt.query.kernels import QUERY_GROUP
 from clrt.query.rays import PointBatch
-from clrt.query.results import POINT_FIELDS, ClosestPoints, asked_fields, with_fields
+from clrt.query.results import INSIDE_FIELDS, POINT_FIELDS, ClosestPoints, asked_fields, with_fields
 
 
 class PointQueries:
@@ -95,3 +98,132 @@ class PointQueries:
         """(N,) float32: each point's distance to the mesh (inf beyond
         ``max_distance``); see :meth:`closest_points`."""
         return self._closest_points(PointBatch(points, max_distance), ("distance",)).distance
+
+    # ------------------------------------------------------------------- inside and outside
+
+    def _winding_nodes(self):
+        """The far fields of the tree as it is now (clrt/query/inside.py), made
+        on first use; a 1-byte stand-in without a BVH (the kernels then sum
+        every triangle).  A refit -- of this Accel or of the Renderer it
+        follows -- places the triangles anew (a new ``geometry.reach``), and
+        they are made again."""
+        key = (self.geometry, self.geometry.reach)
+        cached = self.__dict__.get("_winding_cache")
+        if cached is not None and all(a is b for a, b in zip(cached[0], key)):
+            return cached[1]
+        if self.acceleration.is_bvh:
+            nodes = winding_nodes(self.queue, self.kernels["winding_nodes"], self.acceleration.rows,
+                                  (*self.geometry.buffer_args, self._scene_value), self.max_alloc)
+        else:
+            nodes = self._buffer("no_winding_nodes", 1)
+        self._winding_cache = (key, nodes)
+        return nodes
+
+    def _pseudo_normals(self):
+        """The PseudoNormals of every slot (clrt/query/inside.py), made on first
+        use and again for a moved mesh (a refit makes a new ``mesh``)."""
+        key = (self.mesh, self.acceleration)
+        cached = self.__dict__.get("_normals_cache")
+        if cached is not None and all(a is b for a, b in zip(cached[0], key)):
+            return cached[1]
+        import pyopencl as cl
+        by_slot = pseudo_normals(self.mesh.vertices, self.mesh.faces)[self.acceleration.prim_ids]
+        normals = cl.Buffer(self.context, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR, hostbuf=by_slot)
+        self._normals_cache = (key, normals)
+        return normals
+
+    @one_at_a_time
+    def _inside(self, source, kernel: str, outputs: dict, out=None) -> dict:
+        """Run inside-query ``kernel`` over the points of ``source`` (a PointBatch
+        or GridPoints): ``outputs`` maps each value asked for (INSIDE_FIELDS) to
+        its output slot in the kernel; ``out``: arrays to fill, by value (else
+        made here: numpy, or device arrays for points given on the device)."""
+        n = len(source)
+        if out is None:
+            out = {}
+            for name in outputs:
+                dtype = INSIDE_FIELDS[name].dtype
+                if source.on_device:
+                    import pyopencl.array as cla
+                    out[name] = cla.empty(self.queue, (n,), np.uint8 if dtype is np.bool_ else dtype)
+                else:
+                    out[name] = np.empty(n, dtype)
+        rule = ()
+        if kernel in ("query_winding_number", "query_signed_distance_winding"):
+            rule = (self._winding_nodes(),)
+        elif kernel == "query_signed_distance_normal":
+            rule = (self._pseudo_normals(),)
+        self._begin(source)
+        for start, stop in self._chunks(n):
+            m = stop - start
+            rays, launch = self._ray_args(source, start, stop, 0)
+            origins, _, _, tmaxs, bad = rays
+            order = self._point_order(origins, launch)
+            placed, nbytes = {}, 0
+            for name, slot in outputs.items():   # the float32 values first: each output stays aligned
+                placed[name] = nbytes
+                launch["field_at"][slot] = nbytes
+                nbytes += m * np.dtype(INSIDE_FIELDS[name].dtype).itemsize
+            results = self._buffer("results", nbytes)
+            self._launch(kernel, (origins, tmaxs, bad, launch, order, results, *rule, *self.geometry.buffer_args,
+                                  self._scene_value), m)
+            for name, at in placed.items():
+                self._copy_out(out[name], start, stop, results, at)
+        self._check(source)   # also waits for the copies
+        return out
+
+    def signed_distance(self, points, *, sign: str = "winding"):
+        """(N,) float32: each point's distance to the mesh, negative inside.
+
+        ``points`` as :meth:`closest_points` takes them (device arrays give a
+        device array).  The distance is :meth:`distance`'s, bit for bit; the
+        sign follows rule ``sign``:
+
+        - "winding" (default): inside where the winding number is >= 1/2
+          (:meth:`winding_number`) -- any mesh, open ones and soups included;
+        - "parity": inside where rays from the point cross the surface an odd
+          number of times, three fixed directions voting (a ray through an
+          edge may count a crossing twice) -- closed meshes, any winding;
+        - "normal": inside where the point lies behind the angle-weighted
+          pseudo-normal of the face, edge or vertex holding its closest point
+          (Baerentzen and Aanaes 2005) -- closed meshes wound consistently
+          outwards; the fastest (no second walk).
+
+        A point on the surface has distance 0 (either sign).
+        """
+        kernel = sign_kernel(sign)
+        return self._inside(PointBatch(points), kernel, {"signed_distance": 0})["signed_distance"]
+
+    def winding_number(self, points):
+        """(N,) float32: the generalised winding number of the mesh at each point
+        (Jacobson et al. 2013): the triangles' signed solid angles over 4 pi --
+        1 inside a closed mesh wound outwards (-1 wound inwards), 0 outside,
+        fractions for open meshes and soups, 1/2 on a face.  Through the BVH with
+        the far-field series of Barill et al. 2018, within
+        ``clrt.query.results.WINDING_NUMBER_ERROR`` (1e-4) of the exact sum
+        (exact without a BVH); ``points`` as :meth:`closest_points` takes them."""
+        return self._inside(PointBatch(points), "query_winding_number", {"winding_number": 0})["winding_number"]
+
+    def contains(self, points):
+        """(N,) bool: is each point inside the mesh -- its winding number >= 1/2
+        (:meth:`winding_number`; the float32 value, so the two agree), for open
+        meshes and soups as for closed ones.  Device arrays in give uint8 0 / 1."""
+        out = self._inside(PointBatch(points), "query_winding_number", {"inside": 1})["inside"]
+        return out.view(bool) if isinstance(out, np.ndarray) else out
+
+    def sdf_grid(self, resolution, bounds=None, *, sign: str = "winding") -> np.ndarray:
+        """(X, Y, Z) float32: :meth:`signed_distance` at the samples of a grid.
+
+        ``resolution``: samples a side, an int (X = Y = Z) or three, each >= 2;
+        ``bounds``: ((xmin, ymin, zmin), (xmax, ymax, zmax)), default the mesh's
+        box grown on every side by 5 % of its longest side
+        (``clrt.query.inside.GRID_MARGIN``).  Sample (i, j, k) lies at
+        ``(xs[i], ys[j], zs[k])``, ``xs = np.linspace(xmin, xmax, X)`` (both
+        ends included), likewise ys and zs, rounded to float32.  The samples are
+        made a chunk at a time (``chunk_rays`` points), so memory beyond the
+        result stays bounded."""
+        kernel = sign_kernel(sign)
+        grid = GridPoints(*grid_axes(resolution, bounds, self.mesh.bounds))
+        volume = np.empty(grid.shape, np.float32)
+        self._inside(grid, kernel, {"signed_distance": 0}, {"signed_distance": volume.reshape(-1)})
+        return volume

@@ -1,4 +1,5 @@
-"""What ray queries return: closest hits, all hits, camera images, closest points.
+"""What ray queries return: closest hits, all hits, camera images, closest
+points, signed distances and winding numbers.
 
 Each result is a named tuple of arrays whose fields are described once, in the
 tables below (shape, dtype, meaning, value on a miss).  The named tuples, their
@@ -31,21 +32,25 @@ class Field(NamedTuple):
 # order of the kernel's output arguments and of Hits' fields.
 CLOSEST_FIELDS = {
     "t": Field(np.float32, (), "distance to the hit along the normalised direction", "inf"),
-    "prim": Field(np.int32, (), "triangle hit: its row in the mesh's faces (for Accel.from_renderer: "
-                  "its index in the scene's triangles, objects in order)", "-1"),
+    "instance": Field(np.int32, (), "instance hit: its index in the list of meshes or instances the Accel "
+                      "was made from (0 for a single mesh)", "-1"),
+    "prim": Field(np.int32, (), "triangle hit: its row in the faces of the instance's mesh (for "
+                  "Accel.from_renderer: its index in the scene's triangles, objects in order)", "-1"),
     "u": Field(np.float32, (), "barycentric weight of the triangle's vertex 1", "0"),
     "v": Field(np.float32, (), "barycentric weight of the triangle's vertex 2 (vertex 0 has 1 - u - v)", "0"),
-    "normal": Field(np.float32, (3,), "unit geometric normal (v1 - v0) x (v2 - v0), as wound (not "
-                    "flipped towards the ray)", "(0, 0, 0)"),
+    "normal": Field(np.float32, (3,), "unit geometric normal (v1 - v0) x (v2 - v0) in the world (of the "
+                    "placed triangle), as wound (not flipped towards the ray)", "(0, 0, 0)"),
     "front": Field(np.bool_, (), "the ray met the triangle against its normal (saw v0, v1, v2 "
                    "counter-clockwise)", "False"),
     "hit": Field(np.bool_, (), "the ray hit something: prim >= 0", "False"),
 }
 
-# Every hit of every ray (query_all in trace.cl), sorted by ray, then t, then triangle.
+# Every hit of every ray (query_all in trace.cl), sorted by ray, then t, then
+# instance, then triangle.
 ALL_HITS_FIELDS = {
     "ray_id": Field(np.int64, (), "index of the ray", None),
-    "prim": Field(np.int32, (), "triangle hit: its row in the mesh's faces", None),
+    "instance": Field(np.int32, (), "instance hit: its index in the Accel's list (0 for a single mesh)", None),
+    "prim": Field(np.int32, (), "triangle hit: its row in the faces of the instance's mesh", None),
     "t": Field(np.float32, (), "distance to the hit along the ray's normalised direction", None),
 }
 
@@ -63,6 +68,25 @@ POINT_FIELDS = {
     "v": Field(np.float32, (), "barycentric weight of the triangle's vertex 2 (vertex 0 has 1 - u - v)", "0"),
 }
 
+# The inside queries' values, one array a query (Accel.signed_distance,
+# Accel.winding_number, Accel.contains; query_signed_distance_* and
+# query_winding_number in trace.cl): every point has one, so no miss value.
+INSIDE_FIELDS = {
+    "signed_distance": Field(np.float32, (), "the point's distance to the mesh (as ClosestPoints.distance), "
+                             "negative inside by the sign rule: the winding number >= 1/2, ray parity, or the "
+                             "pseudo-normal at the closest point", None),
+    "winding_number": Field(np.float32, (), "the generalised winding number: the triangles' signed solid angles "
+                            "over 4 pi (1 inside a closed mesh wound outwards, 0 outside, 1/2 on its faces), "
+                            "within WINDING_NUMBER_ERROR of the exact sum", None),
+    "inside": Field(np.bool_, (), "the winding number is >= 1/2 (Accel.contains)", None),
+}
+
+#: How far winding numbers lie from the exact sum of the triangles' solid
+#: angles, as measured on the tests' meshes (tests/test_inside.py) and five
+#: scans (winding.cl's WINDING_BETA says how): measured, not proven.  Without
+#: a BVH (accel="none") the sum is exact, in float64 where the device has it.
+WINDING_NUMBER_ERROR = 1e-4
+
 #: How far a reported distance may lie from the exact (float64) distance
 #: between the mesh and the query point rounded to float32: this times the
 #: largest coordinate of the point and of the mesh's vertices, both measured
@@ -76,7 +100,8 @@ CAMERA_FIELDS = {
     "depth": Field(np.float32, (), "distance along the optical axis (z in the camera frame)", "inf"),
     "t": Field(np.float32, (), "distance along the pixel's ray from the eye", "inf"),
     "normal": Field(np.float32, (3,), "world-space unit geometric normal (v1 - v0) x (v2 - v0)", "(0, 0, 0)"),
-    "prim": Field(np.int32, (), "triangle seen: its row in the mesh's faces", "-1"),
+    "instance": Field(np.int32, (), "instance seen: its index in the Accel's list (0 for a single mesh)", "-1"),
+    "prim": Field(np.int32, (), "triangle seen: its row in the faces of the instance's mesh", "-1"),
     "hit": Field(np.bool_, (), "the pixel's ray hit something: prim >= 0", "False"),
     "front": Field(np.bool_, (), "the front face was seen", "False"),
     "u": Field(np.float32, (), "barycentric weight of the triangle's vertex 1", "0"),
@@ -166,7 +191,8 @@ Hits = _result_class("Hits", CLOSEST_FIELDS, """Closest hits, one row per ray.
 AllHits = _result_class("AllHits", ALL_HITS_FIELDS, """Every hit of every ray, as flat arrays.
 
     Returned by Accel.all_hits and clrt.all_hits: K hits in all, sorted by
-    ray, then distance, then triangle; a ray without hits has no entry.
+    ray, then distance, then instance, then triangle; a ray without hits has
+    no entry.
     """, ("K",))
 
 ClosestPoints = _result_class("ClosestPoints", POINT_FIELDS, """The nearest points of a mesh, one row per query point.

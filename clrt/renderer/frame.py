@@ -29,7 +29,8 @@ import pyopencl as cl
 
 from clrt import checks
 from clrt import options as opts
-from clrt.config import DEFAULT_ACCEL, DEFAULT_BUILDER, DEFAULT_LEAF_SIZE
+from clrt.config import (DEFAULT_ACCEL, DEFAULT_BUILDER, DEFAULT_LEAF_SIZE, DEFAULT_MAX_DEPTH,
+                         DEFAULT_PATH_MAX_DEPTH, DEFAULT_SPP, INTEGRATORS, PATH_STRATEGIES)
 from clrt.device.args import camera_value
 from clrt.device.context import format_bytes as _size
 from clrt.device.geometry import replace_buffer
@@ -40,6 +41,7 @@ from clrt.device.sharing import check_process, forked_after_start, one_at_a_time
 from clrt.errors import DeviceMemoryError, InputError, NothingVisibleWarning
 from clrt.layouts import HIT, TILE
 from clrt.renderer.kernels import FRAME_ARRAYS, FRAME_HEADER, RENDER_KERNELS, frame_offsets, pack_tables
+from clrt.renderer.path import PathTracer, tone_map
 from clrt.renderer.tiles import TileLimits, run_tiles
 from clrt.renderer.visible import nothing_visible
 from clrt.scene.arrays import flatten_scene, light_records
@@ -61,6 +63,10 @@ class Frame:
     triangles: int = 0
     tiles: int = 1               # tiles the frame was rendered in (each: one launch per sample)
     visible: bool = True         # a camera ray (of the first sample) hit a triangle; False: only background
+    albedo: np.ndarray | None = None   # path tracer: (H, W, 3) float32 mean albedo of the first hits (0: none)
+    normal: np.ndarray | None = None   # path tracer: (H, W, 3) float32 mean shading normal of the first hits
+    spp: int = 0                 # path tracer: samples per pixel done (fewer than asked if interrupted)
+    interrupted: bool = False    # path tracer: Ctrl-C ended the render after `spp` samples
 
     def __repr__(self) -> str:
         h, w = self.image.shape[:2]
@@ -178,6 +184,7 @@ class Renderer:
         self._frame_pixels = -1
         self._staging = None
         self.image_pool = PinnedPool(self.context, self.queue, IMAGE_POOL_SIZE)
+        self._path = None   # the path tracer's program and tables, made on its first frame
         self._max_group = min(   # work-items a launch's group may have, see _launch_shape
             k.get_work_group_info(cl.kernel_work_group_info.WORK_GROUP_SIZE, self.queue.device)
             for name, k in self.kernels.items() if name != "encode_srgb8")
@@ -198,21 +205,51 @@ class Renderer:
     # ----------------------------------------------------------------------- a frame
 
     @one_at_a_time
-    @checks.keyword_options("linear", "hits", "samples", "max_depth", "seed", "progress")
+    @checks.keyword_options("linear", "hits", "samples", "max_depth", "seed", "progress", "integrator", "spp",
+                            "exposure", "strategy", "preview")
     def render(self, camera: Camera | None = None, *, linear: bool = False, hits: bool = False,
-               samples: int | None = None, max_depth: int | None = None, seed: int = 0,
-               progress: Callable[[int], None] | None = None) -> Frame:
+               samples: int | None = None, max_depth: int | None = None, seed: int | None = None,
+               progress: Callable[[int], None] | None = None, integrator: str | None = None,
+               spp: int | None = None, exposure: float | None = None, strategy: str = "mis",
+               preview: Callable[["Frame"], None] | None = None) -> Frame:
         """Render one frame.
 
-        ``samples``: anti-aliasing with samples x samples stratified, jittered rays
-        per pixel (the jitter is a hash of pixel, sample and ``seed``, so renders
-        are reproducible; 1 = one ray through each pixel centre).  ``max_depth``:
-        reflection/refraction bounces.  Both default to the scene's.
-        ``hits=True`` also reads back the camera rays' hits (``Frame.prim`` and
-        ``Frame.t``, of the first sample; otherwise None).  ``progress(n)`` is
-        called each time n more pixel samples are done (width x height x
-        samples**2 in all; a tile retried after running out of memory counts again).
+        ``integrator``: "whitted" (the paper's model) or "path" (the path
+        tracer, docs/path-tracing.md); the scene's by default, as are
+        ``samples``, ``spp``, ``max_depth``, ``seed`` and ``exposure``.
+        Whitted: ``samples``: anti-aliasing with samples x samples stratified,
+        jittered rays per pixel (the jitter is a hash of pixel, sample and
+        ``seed``, so renders are reproducible; 1 = one ray through each pixel
+        centre); ``max_depth``: reflection/refraction bounces (0..16).  Path:
+        ``spp`` samples per pixel, ``max_depth`` counted as Mitsuba counts it (1
+        emitters seen directly, 2 direct light, -1 unbounded), ``seed`` keys
+        the random numbers (a seed gives the same image on one device);
+        ``strategy`` "mis" (default), "light" or "bsdf" samples lights and
+        BSDFs together or one alone (clrt.config.PATH_STRATEGIES: a debugging
+        aid); the frame also has the mean ``albedo`` and ``normal`` of the
+        first hits, and Ctrl-C after the first pass of samples returns the
+        passes done (``Frame.interrupted``); ``preview(frame)`` is called
+        with the image so far after each pass but the last (a notebook's
+        display handle can show it: docs/notebooks.md).  ``exposure``: the uint8 image is
+        the linear one x 2**exposure, clamped, sRGB-encoded (a linear image is
+        returned as it is).  ``hits=True`` (Whitted only) also reads back the
+        camera rays' hits (``Frame.prim`` and ``Frame.t``, of the first sample;
+        otherwise None).  ``progress(n)`` is called each time n more pixel
+        samples are done (width x height x samples**2, or x spp, in all; a tile
+        retried after running out of memory counts again).
         """
+        integrator = checks.choice("integrator", self.scene.integrator if integrator is None else integrator,
+                                   INTEGRATORS)
+        exposure = opts.check("exposure", self.scene.exposure if exposure is None else exposure)
+        seed = opts.check("seed", self.scene.seed if seed is None else seed)
+        if integrator == "path":
+            return self._render_path(camera, linear, hits, max_depth, seed, spp, exposure, strategy, progress,
+                                     preview)
+        if exposure != 0 and not linear:   # tone-mapped on the host from the linear image
+            frame = self.render(camera, linear=True, hits=hits, samples=samples, max_depth=max_depth, seed=seed,
+                                progress=progress, integrator=integrator)
+            frame.image = tone_map(frame.image, exposure)
+            return frame
         job = self._job(camera, linear, hits, samples, max_depth, seed)
         # Rays from too far for the float32 triangle test: one error, not missed hits.
         self.geometry.reach.check_render(job.camera.eye, lambda: far_triangle(self.scene))
@@ -232,13 +269,55 @@ class Renderer:
         return Frame(job.image, job.prim, job.t, job.timings, self.device, len(self.arrays.corners), tiles=tiles,
                      visible=job.seen)
 
-    def _job(self, camera, linear, hits, samples, max_depth, seed) -> "_Job":
-        """The arguments of one render call checked and defaulted, and its outputs."""
+    def _render_path(self, camera, linear, hits, max_depth, seed, spp, exposure, strategy, progress,
+                     preview) -> Frame:
+        """A frame of the path tracer (clrt/renderer/path.py)."""
+        if hits:
+            raise InputError("hits=True reads back the Whitted integrator's camera hits; for the path tracer, "
+                             "query them with clrt.camera_images")
+        camera = self._camera(camera)
+        spp = opts.check("spp", spp if spp is not None else self.scene.spp or DEFAULT_SPP)
+        depth = max_depth if max_depth is not None else self.scene.max_depth
+        depth = checks.max_depth(DEFAULT_PATH_MAX_DEPTH if depth is None else depth, "max_depth", "path")
+        strategy = checks.choice("strategy", strategy, tuple(PATH_STRATEGIES))
+        self.geometry.reach.check_render(camera.eye, lambda: far_triangle(self.scene))
+        w, h = camera.width, camera.height
+        host_bytes = w * h * 4 * 12 * 2
+        if host_bytes > HOST_CHECK_BYTES:
+            check_host_memory(host_bytes, f"a {w}x{h} image")
+        if self._path is None:
+            with stage(self.timings, "program build"):
+                self._path = PathTracer(self)
+        timings = dict(self.timings)
+        shown = None
+        if preview is not None:
+            def shown(image, done):
+                preview(Frame(image if linear else tone_map(image, exposure), None, None, {}, self.device,
+                              len(self.arrays.corners), spp=done))
+        with stage(timings, "path tracing"):
+            out = self._path.render(camera, spp=spp, max_depth=depth, seed=seed, strategy=strategy,
+                                    progress=progress or (lambda n: None), wait=lambda e: wait_for(e),
+                                    limits=self.limits, preview=shown)
+        timings["kernels"], timings["read back"] = out["kernel_ms"], out["read_ms"]
+        image = out["image"] if linear else tone_map(out["image"], exposure)
+        if not out["seen"]:
+            warnings.warn(nothing_visible(self.arrays.corners, self.arrays.bounds, camera),
+                          NothingVisibleWarning, stacklevel=4)
+        return Frame(image, None, None, timings, self.device, len(self.arrays.corners), tiles=out["tiles"],
+                     visible=out["seen"], albedo=out["albedo"], normal=out["normal"], spp=out["spp"],
+                     interrupted=out["interrupted"])
+
+    def _camera(self, camera) -> Camera:
         if camera is not None and not isinstance(camera, Camera):
             raise checks.fail("camera", "a clrt.Camera or None", camera)
-        camera = camera or self.scene.camera or Camera.framing(self.arrays.bounds)
+        return camera or self.scene.camera or Camera.framing(self.arrays.bounds)
+
+    def _job(self, camera, linear, hits, samples, max_depth, seed) -> "_Job":
+        """The arguments of one render call checked and defaulted, and its outputs."""
+        camera = self._camera(camera)
         samples = opts.check("samples", self.scene.samples if samples is None else samples)
-        max_depth = opts.check("max_depth", self.scene.max_depth if max_depth is None else max_depth)
+        depth = self.scene.max_depth if max_depth is None else max_depth
+        max_depth = checks.max_depth(DEFAULT_MAX_DEPTH if depth is None else depth, "max_depth", "whitted")
         seed = checks.integer("seed", seed, 0, 2**32 - 1)
         w, h = camera.width, camera.height
         host_bytes = w * h * ((12 if linear else 3) + (8 if hits else 0))

@@ -1,6 +1,7 @@
-"""The render program (entry render.cl): every kernel's parameters, declared
-once (clrt.device.signature; tests/test_kernel_args.py checks them against
-the compiler's view of render.cl), and the buffers only it reads: a tile's
+"""The render programs -- Whitted's (entry render.cl) and the path tracer's
+(entry path.cl) -- with every kernel's parameters, declared once
+(clrt.device.signature; tests/test_kernel_args.py checks them against the
+compiler's view of each program), and the buffers only they read: a tile's
 frame buffer and the scene's small tables.
 """
 
@@ -9,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from clrt.device.signature import GEOMETRY, buffer, value
-from clrt.layouts import CAMERA, HIT, MATERIAL, RAY, TILE
+from clrt.layouts import CAMERA, HIT, MATERIAL, PATH_LAUNCH, RAY, TILE
 
 #: SHADING_PARAMS (shading.cl, texture.cl).
 SHADING = (buffer("tri_info", split=True), buffer("vertex_normals", split=True), buffer("tables"),
@@ -20,6 +21,20 @@ RENDER_KERNELS = {
     "shade_pixels": (buffer("frame"), value("tile", TILE), *GEOMETRY, *SHADING),
     "encode_srgb8": (buffer("frame"), value("tile", TILE), buffer("out")),
 }
+
+#: The path tracer's program (path.cl): a megakernel that traces whole paths,
+#: its image's sums in `frame` (PATH_ARRAYS), its light tables in `tables`
+#: beside the materials (pack_tables); and the kernel that turns the sums into
+#: the means read back, the first `arrays` of PATH_ARRAYS packed in `out`.
+PATH_KERNELS = {
+    "path_trace": (buffer("frame"), value("launch", PATH_LAUNCH), *GEOMETRY, *SHADING),
+    "path_resolve": (buffer("frame"), value("launch", PATH_LAUNCH), value("arrays", np.uint32), buffer("out")),
+}
+
+#: The path tracer's per-pixel sums in its frame buffer, float4 each (w: the
+#: samples summed), after FRAME_HEADER bytes whose first uint says whether a
+#: camera ray hit anything: radiance, the first hit's albedo and shading normal.
+PATH_ARRAYS = ("image", "albedo", "normal")
 
 #: Bytes of a tile's per-pixel arrays in its frame buffer: its ray, its hit
 #: record and its linear colour (float4), in that order (Tile in layouts.h),
@@ -42,14 +57,15 @@ def frame_offsets(pixels: int) -> dict[str, int]:
 
 
 def pack_tables(materials: np.ndarray, lights: np.ndarray, textures: np.ndarray | None = None,
-                srgb_table: np.ndarray | None = None) -> tuple[np.ndarray, dict]:
+                srgb_table: np.ndarray | None = None, **more: np.ndarray) -> tuple[np.ndarray, dict]:
     """The scene's small tables in one byte array (the `tables` buffer,
-    shading.cl), and the SceneInfo offsets of each (materials_at, lights_at,
-    textures_at, srgb_at; 0 for a table not there)."""
+    shading.cl), and the offsets of each: SceneInfo's (materials_at, lights_at,
+    textures_at, srgb_at; 0 for a table not there), then NAME_at of each of
+    ``more`` (the path tracer's light tables, PathLaunch's offsets)."""
     assert materials.dtype == MATERIAL
     parts, offsets, at = [], {}, 0
     for name, table in (("materials_at", materials), ("lights_at", lights), ("textures_at", textures),
-                        ("srgb_at", srgb_table)):
+                        ("srgb_at", srgb_table), *((f"{k}_at", v) for k, v in more.items())):
         offsets[name] = at if table is not None else 0
         if table is None:
             continue

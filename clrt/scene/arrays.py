@@ -254,8 +254,13 @@ def light_records(lights, origin=None) -> np.ndarray:
     """(L,) LIGHT records of a list of Lights, at least one (OpenCL buffers cannot
     be empty); positions moved by ``-origin`` (in float64, then rounded) when given."""
     records = np.zeros(max(len(lights), 1), LIGHT)
+    records["cos_outer"] = records["cos_inner"] = -1.0   # point lights: no cone
     shift = np.zeros(3) if origin is None else np.asarray(origin, np.float64)
     for i, light in enumerate(lights):
         records[i]["position"][:3] = np.asarray(light.position, np.float64) - shift
         records[i]["color"][:3] = light.color
+        if light.direction is not None:   # a spot light
+            records[i]["direction"][:3] = light.direction
+            records[i]["cos_outer"] = np.cos(np.radians(light.cutoff))
+            records[i]["cos_inner"] = np.cos(np.radians(light.beam))
     return records

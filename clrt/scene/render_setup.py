@@ -19,24 +19,28 @@ import math
 
 import numpy as np
 
-from clrt import config
+from clrt import checks, config
 from clrt.errors import InputError
 from clrt.scene.scene import Camera, Light, Scene, default_light, far_triangle
 
 #: The keyword options of render_scene and render_camera (the CLI's option names).
 MATERIAL_OPTIONS = ("color", "ambient", "diffuse", "specular", "shininess", "crease")
-SCENE_OPTIONS = MATERIAL_OPTIONS + ("flat", "background", "samples", "max_depth")
+SCENE_OPTIONS = MATERIAL_OPTIONS + ("flat", "background", "samples", "max_depth", "integrator", "spp", "seed",
+                                    "exposure", "environment")
 CAMERA_OPTIONS = ("width", "height", "eye", "target", "up", "fov")
 
 
 def render_scene(source, *, color=None, ambient=None, diffuse=None, specular=None, shininess=None,
-                 crease=None, flat: bool = False, background=None, samples=None, max_depth=None) -> Scene:
+                 crease=None, flat: bool = False, background=None, samples=None, max_depth=None, integrator=None,
+                 spp=None, seed=None, exposure=None, environment=None, labels: dict | None = None) -> Scene:
     """The scene of ``source``: None (the built-in scene), a ``.toml`` scene file,
     a mesh file or anything else clrt.scene.sources.as_scene takes.  The material
     options replace that field of every object's material; a mesh's scene, and a
     scene file's without lights, has no lights yet (:func:`render_lights` places
     the default one from the final camera).  A Scene given is copied, with its
-    lights."""
+    lights.  The render options are checked against the integrator they end
+    with (``max_depth``'s range; ``spp`` and ``environment`` are the path
+    tracer's), each named as ``labels`` names it (the command line's flags)."""
     from clrt.scene.sources import as_scene
     if isinstance(source, Scene):
         # The caller's Scene is left as it is; it keeps its lights (a default one too).
@@ -54,8 +58,23 @@ def render_scene(source, *, color=None, ambient=None, diffuse=None, specular=Non
         scene.background = background
     if samples is not None:
         scene.samples = samples
+    label = (labels or {}).get
+    if integrator is not None:
+        scene.integrator = integrator
+    named = scene.integrator
     if max_depth is not None:
-        scene.max_depth = max_depth
+        max_depth = checks.max_depth(max_depth, label("max_depth", "max_depth"), named)
+    elif scene.max_depth is not None:
+        checks.max_depth(scene.max_depth, "max_depth", named)
+    for name, value in (("spp", spp), ("environment", environment)):
+        if value is not None and named != "path":
+            raise InputError(f"{label(name, name)} is the path tracer's: add {label('integrator', 'integrator')} "
+                             "path (the Whitted integrator takes samples N for N x N rays a pixel and draws the "
+                             "background colour)")
+    for name, value in (("max_depth", max_depth), ("spp", spp), ("seed", seed), ("exposure", exposure),
+                        ("environment", environment)):
+        if value is not None:
+            setattr(scene, name, value)
     return scene
 
 
@@ -84,31 +103,52 @@ def render_camera(scene: Scene, *, width=None, height=None, eye=None, target=Non
     return Camera(eye, target, up, fov, width, height)
 
 
-def render_lights(bounds, camera: Camera, own=(), positions=None) -> list:
+def render_lights(bounds, camera: Camera, own=(), positions=None, integrator: str = "whitted") -> list:
     """The lights of a frame: ``positions`` (the --light options), else the scene's
-    ``own`` lights, else one default light placed from ``camera``."""
+    ``own`` lights, else one default light placed from ``camera`` -- for the
+    path tracer, whose point lights fall off with the squared distance, with
+    the intensity pi d^2 (d: its distance to the middle of ``bounds``), so that
+    it lights the middle of the scene as Whitted's unit light does (a white
+    diffuse surface facing it: radiance 1)."""
     if positions:
         return [Light.of(p) for p in positions]
     if own:
         return list(own)
-    return [default_light(bounds, camera)]
+    light = default_light(bounds, camera)
+    if integrator == "path":
+        d = np.linalg.norm(np.asarray(light.position) - np.asarray(bounds, np.float64).mean(axis=0))
+        light = Light(light.position, (math.pi * d * d,) * 3)
+    return [light]
 
 
-def render_frame(source, camera: Camera | None = None, *, lights=None, **options) -> tuple[Scene, Camera]:
+def lit_otherwise(scene: Scene) -> bool:
+    """Does the path tracer find light in ``scene`` without point lights: an
+    emissive material or an environment map?"""
+    return scene.environment is not None or any(
+        max(m.emission) > 0 for o in scene.objects for m in (o.material, *o.materials))
+
+
+def render_frame(source, camera: Camera | None = None, *, lights=None, labels: dict | None = None,
+                 **options) -> tuple[Scene, Camera]:
     """The scene (lights placed) and camera of one frame of ``source`` with the
     render options -- what ``clrt render`` and ``clrt.render`` both draw:
     :func:`render_scene` with the SCENE_OPTIONS, ``camera`` (if given) as the
     scene's placed camera, :func:`render_camera` with the CAMERA_OPTIONS on top,
     and :func:`render_lights` (``lights``: positions or Lights; a Scene given
-    keeps its own lights, even none, unless ``lights`` are given)."""
-    scene = render_scene(source, **{k: options.pop(k) for k in SCENE_OPTIONS if k in options})
+    keeps its own lights, even none, unless ``lights`` are given; for the path
+    tracer, a scene with emissive materials or an environment map gets no
+    default light)."""
+    scene = render_scene(source, labels=labels, **{k: options.pop(k) for k in SCENE_OPTIONS if k in options})
     if camera is not None:
         scene.camera, scene.camera_framed = camera, False
     camera = render_camera(scene, **{k: options.pop(k) for k in CAMERA_OPTIONS if k in options})
     if options:
         raise TypeError(f"render_frame got unknown options {sorted(options)}")
     if lights or not isinstance(source, Scene):   # a Scene keeps its own lights, none included
-        scene.lights = render_lights(scene.bounds, camera, scene.lights, lights)
+        if scene.integrator == "path" and not lights and not scene.lights and lit_otherwise(scene):
+            scene.lights = []   # its emitters or its sky light it: no default light added
+        else:
+            scene.lights = render_lights(scene.bounds, camera, scene.lights, lights, scene.integrator)
     return scene, camera
 
 

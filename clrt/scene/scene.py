@@ -10,6 +10,7 @@ import numpy as np
 from clrt import checks, config
 from clrt.errors import InputError
 from clrt.scene.mesh import Mesh
+from clrt.scene.environment import Environment
 from clrt.scene.texture import Texture
 
 
@@ -178,14 +179,36 @@ def unknown_name(what: str, name, known) -> str:
 
 @dataclass(frozen=True)
 class Light:
-    """Point light at ``position`` with linear RGB ``color`` (an intensity: >= 0, may exceed 1)."""
+    """Point light at ``position`` with linear RGB ``color`` (an intensity: >= 0, may exceed 1).
+
+    With a ``direction`` it is a spot light: it shines into the cone of half
+    angle ``cutoff`` degrees about that direction (0 < cutoff <= 90), at full
+    intensity within ``beam`` degrees of the axis (default three quarters of
+    ``cutoff``), falling off smoothly between (smoothstep of the cosines; both
+    integrators).  The path tracer takes ``color`` as the radiant intensity
+    (W/sr, lighting falls off with the squared distance); Whitted's Phong model
+    uses it without falloff, as the paper does.
+    """
 
     position: tuple
     color: tuple = config.DEFAULT_LIGHT_COLOR
+    direction: tuple | None = None
+    cutoff: float = config.DEFAULT_SPOT_CUTOFF
+    beam: float | None = None
 
     def __post_init__(self):
         object.__setattr__(self, "position", checks.position("light position", self.position))
         object.__setattr__(self, "color", checks.intensity("light color", self.color))
+        if self.direction is not None:
+            d = checks.position("light direction", self.direction)
+            norm = math.sqrt(sum(x * x for x in d))
+            if not norm > 0:
+                raise checks.fail("light direction", "3 numbers, not all 0", self.direction)
+            object.__setattr__(self, "direction", tuple(x / norm for x in d))
+        object.__setattr__(self, "cutoff", checks.number("light cutoff", self.cutoff, gt=0, le=90))
+        beam = 0.75 * self.cutoff if self.beam is None else checks.number("light beam", self.beam, ge=0,
+                                                                          le=self.cutoff)
+        object.__setattr__(self, "beam", beam)
 
     @classmethod
     def of(cls, value) -> "Light":
@@ -355,8 +378,12 @@ _SCENE_CHECKS = {
     "camera": _camera,
     "camera_framed": lambda v: checks.boolean("camera_framed", v),
     "default_lights": lambda v: checks.boolean("default_lights", v),
-    "max_depth": checks.max_depth,
     "samples": checks.samples,
+    "integrator": lambda v: checks.choice("integrator", v, config.INTEGRATORS),
+    "spp": lambda v: None if v is None else checks.spp(v),
+    "seed": checks.seed,
+    "exposure": checks.exposure,
+    "environment": lambda v: None if v is None else Environment.of(v),
     "source": lambda v: checks.text("source", v),
 }
 
@@ -376,18 +403,37 @@ class Scene:
     camera: Camera | None = None   # suggested view; renderers may override
     camera_framed: bool = False    # the camera was framed from the bounds, not placed by the user
     default_lights: bool = False   # the lights are clrt's default one, placed from ``camera``, not the user's
-    max_depth: int = config.DEFAULT_MAX_DEPTH   # reflection / refraction bounces after the camera ray
-    samples: int = config.DEFAULT_SAMPLES       # anti-aliasing: samples x samples rays per pixel
+    max_depth: int | None = None   # None: the integrator's default (Whitted: 5 bounces; path: -1, unbounded)
+    samples: int = config.DEFAULT_SAMPLES       # Whitted's anti-aliasing: samples x samples rays per pixel
     source: str = ""               # the file it came from (a mesh or scene file), named by errors
+    integrator: str = config.DEFAULT_INTEGRATOR   # "whitted" (the paper's) or "path"
+    spp: int | None = None         # the path tracer's samples per pixel (None: config.DEFAULT_SPP)
+    seed: int = 0                  # of the sample jitter and the path tracer's random numbers
+    exposure: float = 0.0          # stops: 8- and 16-bit images show the linear one x 2**exposure
+    environment: Environment | None = None   # the path tracer's sky (an equirectangular HDR map)
 
     def __setattr__(self, name, value):
+        if name == "max_depth":   # the integrator's rule, where it is known already (not within __init__)
+            value = None if value is None else checks.max_depth(value, "max_depth", self.__dict__.get("integrator"))
         check = _SCENE_CHECKS.get(name)
         super().__setattr__(name, value if check is None else check(value))
+
+    def __post_init__(self):
+        self.max_depth = self.max_depth   # checked again, now for its integrator
+
+    @property
+    def depth(self) -> int:
+        """max_depth, or the integrator's default where it is None."""
+        if self.max_depth is not None:
+            return self.max_depth
+        return config.DEFAULT_PATH_MAX_DEPTH if self.integrator == "path" else config.DEFAULT_MAX_DEPTH
 
     def __repr__(self) -> str:
         camera = "no camera" if self.camera is None else f"camera {self.camera.width}x{self.camera.height}"
         return (f"<clrt.Scene: {len(self.objects)} object(s), {self.num_triangles:,} triangles, "
-                f"{len(self.lights)} light(s), {camera}, samples {self.samples}, max_depth {self.max_depth}>")
+                f"{len(self.lights)} light(s), {camera}, {self.integrator}, "
+                + (f"samples {self.samples}" if self.integrator == "whitted" else f"spp {self.spp or config.DEFAULT_SPP}")
+                + f", max_depth {self.depth}>")
 
     @property
     def bounds(self) -> np.ndarray:

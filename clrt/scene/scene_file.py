@@ -28,6 +28,7 @@ import numpy as np
 from clrt import checks, config
 from clrt.errors import InputError, MeshLoadError
 from clrt.scene import primitives
+from clrt.scene.environment import Environment
 from clrt.scene.load import load_asset
 from clrt.scene.mesh import Mesh, vertex_text
 from clrt.scene.scene import (MATERIAL_TEXTURES, Camera, Light, Material, Scene, SceneObject, default_light,
@@ -138,16 +139,25 @@ CAMERA_KEYS = {
 }
 
 RENDER_KEYS = {
-    "max_depth": (lambda name, value: checks.max_depth(value, name), config.DEFAULT_MAX_DEPTH),
+    # max_depth is checked for the integrator of the same table (load); None: the integrator's default
+    "max_depth": (lambda name, value: checks.max_depth(value, name), None),
     "samples": (lambda name, value: checks.samples(value, name), config.DEFAULT_SAMPLES),
     "background": (checks.intensity, config.DEFAULT_BACKGROUND),
     "ambient_light": (checks.intensity, config.DEFAULT_AMBIENT_LIGHT),
+    "integrator": (lambda name, value: checks.choice(name, value, config.INTEGRATORS), config.DEFAULT_INTEGRATOR),
+    "spp": (lambda name, value: checks.spp(value, name), None),
+    "seed": (lambda name, value: checks.seed(value, name), 0),
+    "exposure": (lambda name, value: checks.exposure(value, name), 0.0),
+    "environment": (anything, None),   # a file name (relative to the scene file) or {image, rotation, strength}
 }
 
 LIGHT_KEYS = {
     "position": (checks.position, _REQUIRED),
     "color": (checks.intensity, config.DEFAULT_LIGHT_COLOR),
     "intensity": (number(ge=0), 1.0),
+    "direction": (checks.position, None),   # a spot light's axis
+    "cutoff": (number(gt=0, le=90), config.DEFAULT_SPOT_CUTOFF),
+    "beam": (number(ge=0, le=90), None),
 }
 
 TOP_KEYS = {"camera", "render", "materials", "objects", "lights"}
@@ -444,15 +454,46 @@ class _Loader:
         for index, value in enumerate(doc.array_of_tables(data.get("lights", []), "lights")):
             light = doc.table(value, _join("lights", index), LIGHT_KEYS)
             color = tuple(c * light["intensity"] for c in light["color"])
-            lights.append(Light(light["position"], color))
+            where = _join("lights", index)
+            if light["direction"] is not None and not any(light["direction"]):
+                raise doc.error(_join(where, "direction"), "must not be 0, 0, 0")
+            if light["beam"] is not None and light["beam"] > light["cutoff"]:
+                raise doc.error(_join(where, "beam"), f"must be at most cutoff ({light['cutoff']:g}), got "
+                                f"{_show(light['beam'])}")
+            lights.append(Light(light["position"], color, light["direction"], light["cutoff"], light["beam"]))
 
+        integrator = render["integrator"]
+        if render["max_depth"] is not None:
+            doc.check(render["max_depth"], "render.max_depth",
+                      lambda name, value: checks.max_depth(value, name, integrator))
+        for key in ("spp", "environment"):
+            if render[key] is not None and integrator != "path":
+                raise doc.error(_join("render", key), 'is the path tracer\'s: add integrator = "path"')
+        environment = self.environment(render["environment"]) if render["environment"] is not None else None
         scene = Scene(objects, lights, background=render["background"], ambient_light=render["ambient_light"],
-                      max_depth=render["max_depth"], samples=render["samples"], source=os.fsdecode(self.path))
+                      max_depth=render["max_depth"], samples=render["samples"], source=os.fsdecode(self.path),
+                      integrator=integrator, spp=render["spp"], seed=render["seed"], exposure=render["exposure"],
+                      environment=environment)
         scene.camera = self.camera(data.get("camera", {}), scene)
         scene.camera_framed = "eye" not in data.get("camera", {})
         if "lights" not in data:   # as for a single mesh: one light above the eye
             scene.lights, scene.default_lights = [default_light(scene.bounds, scene.camera)], True
         return scene
+
+    def environment(self, value) -> Environment:
+        """[render] environment: a file name (relative to the scene file) or a
+        table {image, rotation, strength}."""
+        path = "render.environment"
+        fields = {"image": value} if isinstance(value, str) else value
+        if not isinstance(fields, dict) or not isinstance(fields.get("image"), str):
+            raise self.doc.error(path, "expected a .exr / .hdr file name or a table {image = FILE, rotation = "
+                                       f"DEGREES, strength = FACTOR}}, got {_show(value)}")
+        fields = dict(fields)
+        fields["image"] = os.path.normpath(os.path.join(self.folder, os.path.expanduser(fields["image"])))
+        try:
+            return Environment.of(fields)
+        except InputError as exc:
+            raise self.doc.error(path, exc) from None
 
     def camera(self, value, scene: Scene) -> Camera:
         c = self.doc.table(value, "camera", CAMERA_KEYS)

@@ -39,7 +39,7 @@ import numpy as np
 
 from clrt.config import DEFAULT_DIFFUSE, MATERIAL_RANGES, MAX_COORDINATE, MAX_SPECULAR_COLOR
 from clrt.errors import InputError, MeshLoadError
-from clrt.scene.formats.part import Part, build, fail, fill_normals, placed, read_bytes, short
+from clrt.scene.formats.part import Part, build, fail, fill_normals, first_cycle, placed, read_bytes, short
 from clrt.scene.mesh import Mesh
 from clrt.scene.texture import Texture
 
@@ -320,7 +320,8 @@ def _gltf_walk(doc: dict):
     (``scene``, else the first; without scenes, every node that is no node's
     child, in file order), depth first in file order: a root node, then its
     children in their ``children`` order, each with its own children before
-    the next; a node reached twice (a cycle) is visited once."""
+    the next; a node reached twice (two parents) is visited once (_gltf_parts
+    refuses a cycle)."""
     nodes = doc.get("nodes", [])
     scenes = doc.get("scenes", [])
     if scenes:
@@ -341,7 +342,7 @@ def _gltf_walk(doc: dict):
         stack += [(int(c), world) for c in reversed(node.get("children", []))]
 
 
-def _gltf_parts(data: bytes, file_type: str, path: str) -> list[Part]:
+def _gltf_parts(data: bytes, file_type: str, path: str, nodes: list | None = None) -> list[Part]:
     """Every triangle of a glTF file's scene, with its normals, texture
     coordinates, vertex colours and materials.
 
@@ -352,7 +353,8 @@ def _gltf_parts(data: bytes, file_type: str, path: str) -> list[Part]:
     triangles' corners 1 and 2 swapped (and their texture coordinates), so
     that faces still face out, as the glTF specification says.  A primitive
     without NORMAL gets its smooth (area-weighted) normals when another
-    primitive of the file has authored ones, which are kept."""
+    primitive of the file has authored ones, which are kept.  With ``nodes``
+    (gltf_nodes), each primitive goes there unplaced instead, with its node."""
     kind = file_type.upper()
     try:
         doc = _gltf_json(data, "." + file_type)
@@ -364,12 +366,15 @@ def _gltf_parts(data: bytes, file_type: str, path: str) -> list[Part]:
     problem = _gltf_reference_problem(doc)
     if problem:
         raise fail(path, f"corrupt {kind} file: {problem}")
+    cycle = first_cycle([node.get("children", []) for node in doc.get("nodes", [])])
+    if cycle is not None:
+        raise fail(path, f"corrupt {kind} file: node {cycle} is its own ancestor (the nodes make a cycle)")
     try:
         gltf = _GltfFile(doc, data, file_type, path)
         with np.errstate(all="ignore"):  # bad numbers are reported by Mesh.from_arrays
             materials = _gltf_materials(gltf)
             cache, parts = {}, []
-            for _, node, world in _gltf_walk(doc):
+            for index, node, world in _gltf_walk(doc):
                 if "mesh" not in node:
                     continue
                 primitives = gltf.item("meshes", node["mesh"], "mesh").get("primitives", [])
@@ -377,7 +382,9 @@ def _gltf_parts(data: bytes, file_type: str, path: str) -> list[Part]:
                     key = (node["mesh"], k)
                     if key not in cache:
                         cache[key] = gltf.primitive(node["mesh"], k, primitive)
-                    if cache[key] is not None and len(cache[key].faces):
+                    if cache[key] is not None and len(cache[key].faces) and nodes is not None:
+                        nodes.append((index, node["mesh"], world, replace(cache[key], materials=materials)))
+                    elif cache[key] is not None and len(cache[key].faces):
                         parts.append(replace(placed(cache[key], world), materials=materials))
             fill_normals(parts)
     except MeshLoadError:
@@ -386,9 +393,19 @@ def _gltf_parts(data: bytes, file_type: str, path: str) -> list[Part]:
         raise fail(path, f"corrupt or unsupported {kind} file: {exc}") from None
     except Exception as exc:  # noqa: BLE001 -- a malformed document (a string where an object belongs, ...)
         raise fail(path, f"corrupt or unsupported {kind} file ({short(exc)})") from exc
-    if not parts:
+    if not parts and not nodes:
         raise fail(path, "contains no triangles")
     return parts
+
+
+def gltf_nodes(path: str) -> list:
+    """A glTF file's scene as its nodes place it, nothing moved:
+    ``(node index, mesh index, the node's world matrix, a primitive of the
+    mesh as a Part in the mesh's own space)`` for each primitive of each mesh
+    node, in read_gltf's order (clrt.scene.instances makes instances of them)."""
+    nodes: list = []
+    _gltf_parts(read_bytes(path), os.path.splitext(path)[1].lower()[1:], path, nodes)
+    return nodes
 
 
 def whitted_from_pbr(pbr: dict, extensions: dict | None = None) -> dict:

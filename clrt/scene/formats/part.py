@@ -121,6 +121,28 @@ def fill_normals(parts: "list[Part]") -> None:
                     pass   # build reports it, naming the file
 
 
+def first_cycle(children: list) -> int | None:
+    """A node that is its own ancestor in a hierarchy given as each node's list
+    of children (a glTF file's nodes); None when there is no cycle."""
+    state = [0] * len(children)   # 0 unseen, 1 on the current path, 2 done
+    for root in range(len(children)):
+        if state[root]:
+            continue
+        state[root], path = 1, [(root, iter(children[root]))]
+        while path:
+            node, rest = path[-1]
+            child = next(rest, None)
+            if child is None:
+                state[node] = 2
+                path.pop()
+            elif state[child] == 1:
+                return int(child)
+            elif state[child] == 0:
+                state[child] = 1
+                path.append((child, iter(children[child])))
+    return None
+
+
 # ---------------------------------------------------------------------------
 # Reading files
 

@@ -1,0 +1,208 @@
+"""Point queries, clrt beside its peers on the same points:
+``python -m benchmarks.points [MESH ...]``.
+
+Points: ``--points`` of them uniform in the mesh's bounding box enlarged by
+10 % about its centre (numpy ``default_rng(seed).random((N, 3))``, float64,
+then stored as float32), one set per mesh that every library answers.
+
+Queries, where each library has them:
+
+==================  ==================================  ===========================================
+query               clrt (Accel)                        Open3D ``RaycastingScene`` / Warp
+==================  ==================================  ===========================================
+closest points      ``closest_points``                  ``compute_closest_points`` / ``mesh_query_point_no_sign``
+distance            ``distance``                        ``compute_distance`` / (the same query)
+signed distance     ``signed_distance`` (each ``sign``) ``compute_signed_distance`` / ``mesh_query_point*``
+inside              ``contains``                        ``compute_occupancy``
+winding number      ``winding_number``                  -- / ``mesh_query_point_sign_winding_number``
+==================  ==================================  ===========================================
+
+Open3D (Embree inside, ``pip install open3d-cpu``) runs on the CPU and Warp
+(``pip install warp-lang``) on an NVIDIA GPU through CUDA; both are optional
+imports, measured when installed.  Times are medians of ``--repeat`` calls
+after ``--warmup`` untimed ones, from numpy points to numpy answers (wall),
+with clrt's kernel time (profiling events) beside its wall time.  The last
+columns say whether the answers agree: the mean distance, and the share of
+points inside.
+"""
+
+from __future__ import annotations
+
+import sys
+
+if not __package__:   # run as a script, python benchmarks/NAME.py: import from the repository, not this folder
+    import os.path
+    sys.path[0] = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
+import argparse
+import statistics
+import time
+
+import numpy as np
+
+from benchmarks.common import NON_NEGATIVE, POSITIVE, SHARED_MESHES, exit_code, parse_count
+from clrt.errors import InputError
+
+#: The signed-distance rules of clrt's signed_distance, each measured.
+SIGNS = ("winding", "normal", "parity")
+
+
+def make_points(mesh, count: int, seed: int = 0) -> np.ndarray:
+    """(count, 3) float32 points uniform in the mesh's box enlarged by 10 % about its centre."""
+    lo, hi = np.asarray(mesh.bounds, np.float64)
+    centre, half = (lo + hi) / 2, 1.1 * (hi - lo) / 2
+    return (centre - half + np.random.default_rng(seed).random((count, 3)) * 2 * half).astype(np.float32)
+
+
+def _median(call, repeat: int, warmup: int, kernel_ms=None):
+    for _ in range(warmup):
+        call()
+    if kernel_ms:
+        kernel_ms()
+    walls, kernels, result = [], [], None
+    for _ in range(repeat):
+        start = time.perf_counter()
+        result = call()
+        walls.append(1e3 * (time.perf_counter() - start))
+        if kernel_ms:
+            kernels.append(kernel_ms())
+    return statistics.median(walls), (statistics.median(kernels) if kernels else None), result
+
+
+def _summary(result, kind: str) -> tuple:
+    """(mean distance, share inside) of an answer of ``kind``: "distance",
+    "signed" (negative inside; Open3D's convention), "inside" (bool) or
+    "winding" (winding numbers: inside where >= 0.5)."""
+    a = np.asarray(result)
+    if kind == "inside":
+        return None, float(a.mean())
+    if kind == "winding":
+        return None, float((a >= 0.5).mean())
+    if kind == "signed":
+        return float(np.abs(a).mean()), float((a < 0).mean())
+    return float(a.mean()), None
+
+
+def _kind(name: str) -> str:
+    return ("signed" if name.startswith("signed") else "inside" if name == "inside"
+            else "winding" if name == "winding number" else "distance")
+
+
+def clrt_rows(mesh, points, device, repeat, warmup):
+    import clrt
+
+    start = time.perf_counter()
+    accel = clrt.Accel(mesh, device=device)
+    build_ms = 1e3 * (time.perf_counter() - start)
+    queries = [("closest points", lambda: accel.closest_points(points).distance),
+               ("distance", lambda: accel.distance(points))]
+    queries += [(f"signed distance ({sign})", lambda sign=sign: accel.signed_distance(points, sign=sign))
+                for sign in SIGNS]
+    queries += [("inside", lambda: accel.contains(points)),
+                ("winding number", lambda: accel.winding_number(points))]
+    device_name = str(accel.device)
+    label = "clrt (PoCL)" if "Portable Computing Language" in device_name else f"clrt ({device_name.split(' (')[0]})"
+    rows = []
+    for name, call in queries:
+        wall, kernel, result = _median(call, repeat, warmup, accel.kernel_ms)
+        rows.append((name, label, wall, kernel, *_summary(result, _kind(name))))
+    return build_ms, rows
+
+
+def _peer_row(name, library, call, repeat, warmup) -> tuple:
+    wall, _, result = _median(call, repeat, warmup)
+    return (name, library, wall, None, *_summary(result, _kind(name)))
+
+
+def open3d_rows(mesh, points, repeat, warmup):
+    try:
+        import open3d as o3d
+    except ImportError:
+        return []
+    scene = o3d.t.geometry.RaycastingScene()
+    scene.add_triangles(o3d.core.Tensor(np.asarray(mesh.vertices, np.float32)),
+                        o3d.core.Tensor(np.asarray(mesh.faces, np.uint32)))
+    p = o3d.core.Tensor(points)
+    queries = [("closest points", lambda: np.linalg.norm(scene.compute_closest_points(p)["points"].numpy() - points,
+                                                         axis=1)),
+               ("distance", lambda: scene.compute_distance(p).numpy()),
+               ("signed distance", lambda: scene.compute_signed_distance(p).numpy()),
+               ("inside", lambda: scene.compute_occupancy(p).numpy() > 0.5)]
+    return [_peer_row(name, "Open3D (CPU)", call, repeat, warmup) for name, call in queries]
+
+
+def warp_rows(mesh, points, repeat, warmup):
+    try:
+        import warp as wp
+    except ImportError:
+        return []
+    wp.init()
+    if not wp.is_cuda_available():
+        return []
+    wmesh = wp.Mesh(points=wp.array(np.asarray(mesh.vertices, np.float32), dtype=wp.vec3),
+                    indices=wp.array(np.asarray(mesh.faces, np.int32).ravel(), dtype=int))
+
+    @wp.kernel
+    def unsigned(mesh_id: wp.uint64, pts: wp.array(dtype=wp.vec3), out: wp.array(dtype=float)):
+        i = wp.tid()
+        q = wp.mesh_query_point_no_sign(mesh_id, pts[i], 1.0e10)
+        out[i] = wp.length(pts[i] - wp.mesh_eval_position(mesh_id, q.face, q.u, q.v))
+
+    @wp.kernel
+    def winding(mesh_id: wp.uint64, pts: wp.array(dtype=wp.vec3), out: wp.array(dtype=float)):
+        i = wp.tid()
+        q = wp.mesh_query_point_sign_winding_number(mesh_id, pts[i], 1.0e10)
+        out[i] = q.sign * wp.length(pts[i] - wp.mesh_eval_position(mesh_id, q.face, q.u, q.v))
+
+    def run(kernel):
+        pts = wp.array(points, dtype=wp.vec3)
+        out = wp.empty(len(points), dtype=float)
+        wp.launch(kernel, dim=len(points), inputs=[wmesh.id, pts, out])
+        return out.numpy()
+
+    return [_peer_row(name, "Warp (CUDA)", lambda k=kernel: run(k), repeat, warmup)
+            for name, kernel in (("distance", unsigned), ("signed distance", winding))]
+
+
+def run(mesh_paths, count, seed, device, repeat, warmup, peers) -> None:
+    from clrt.scene import primitives
+    from clrt.scene.sources import as_mesh
+
+    print("| mesh | triangles | query | library | wall ms | kernel ms | Mpoints/s (wall) | mean distance | inside |")
+    print("|---|---|---|---|---|---|---|---|---|")
+    for path in mesh_paths:
+        mesh = as_mesh(path) if path else primitives.torus(1.0, 0.35, 256, 128)
+        points = make_points(mesh, count, seed)
+        build_ms, rows = clrt_rows(mesh, points, device, repeat, warmup)
+        if peers:
+            rows += open3d_rows(mesh, points, repeat, warmup) + warp_rows(mesh, points, repeat, warmup)
+        label = str(path.name if path else "torus (generated)")
+        for name, library, wall, kernel, mean, inside in sorted(rows, key=lambda r: r[0]):
+            print(f"| {label} | {len(mesh.faces):,} | {name} | {library} | {wall:.2f} | "
+                  f"{'' if kernel is None else f'{kernel:.2f}'} | {count / wall / 1e3:.3f} | "
+                  f"{'' if mean is None else f'{mean:.6f}'} | {'' if inside is None else f'{100 * inside:.2f} %'} |")
+        print(f"\n{label}: clrt.Accel built in {build_ms:.1f} ms; {count:,} points, seed {seed}", file=sys.stderr)
+
+
+def main(argv=None) -> int:
+    from pathlib import Path
+
+    p = argparse.ArgumentParser(prog="python -m benchmarks.points", description=__doc__.split("\n\n")[0])
+    p.add_argument("mesh", nargs="*", type=Path,
+                   help=f"mesh files (default: a generated torus; scans are in {SHARED_MESHES})")
+    p.add_argument("--points", type=parse_count, default=1_000_000, help="points per mesh (default 1M)")
+    p.add_argument("--seed", type=NON_NEGATIVE, default=0, help="of the points (default 0)")
+    p.add_argument("--device", help="'gpu', 'cpu' or P:D (default: clrt's choice, the first GPU if any)")
+    p.add_argument("--repeat", type=POSITIVE, default=5, help="timed calls, median reported (default 5)")
+    p.add_argument("--warmup", type=NON_NEGATIVE, default=1, help="untimed calls first (default 1)")
+    p.add_argument("--no-peers", action="store_true", help="clrt alone (Open3D and Warp not measured)")
+    args = p.parse_args(argv)
+    for path in args.mesh:
+        if not path.is_file():
+            raise SystemExit(f"benchmarks.points: no mesh file {path}")
+    return exit_code(run, args.mesh or [None], args.points, args.seed, args.device, args.repeat, args.warmup,
+                     not args.no_peers)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,444 @@
+"""Two-level scenes (docs/instances.md): an Accel of meshes placed by affine
+transforms answers as the flattened scene does.
+
+* Every two-level BVH (each volume shape, each bottom-level builder) gives
+  exactly what the two-level brute force gives, bit for bit, in every query
+  and cull mode -- grazing rays, ties and mirrors included.
+* Both give the hits of the flattened scene, computed in float64 by numpy
+  (every mesh moved by its transform, instances in order): the same instance
+  and triangle, t, normal and face within float32 rounding, for every ray
+  that no rounding could send elsewhere (one far from every edge and from a
+  second hit), which is nearly all of them.
+* Rays that enter an instance exactly through an edge or corner of its box
+  are never lost; exact ties go to the lower instance, then triangle.
+* Bad instances are one line each.
+"""
+
+import copy
+import itertools
+
+import numpy as np
+import pytest
+
+import clrt
+from clrt import config
+from clrt.scene import primitives
+from clrt.scene.instances import Instances, as_instances
+
+from conftest import TEST_MESHES
+
+
+def _rotation(axis, angle) -> np.ndarray:
+    axis = np.asarray(axis, float) / np.linalg.norm(axis)
+    k = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
+    return np.eye(3) + np.sin(angle) * k + (1 - np.cos(angle)) * k @ k
+
+
+def _affine(linear=np.eye(3), shift=(0.0, 0.0, 0.0)) -> np.ndarray:
+    m = np.eye(4)
+    m[:3, :3], m[:3, 3] = linear, shift
+    return m
+
+
+def _scene_list():
+    """Real meshes (the suite's own: a torus, a box, a heightfield and the
+    crossing quads with a duplicated triangle), the torus placed three times:
+    rotated and stretched, mirrored, and sheared; a mirror among the others."""
+    torus, box = TEST_MESHES["torus"](), TEST_MESHES["box"]()
+    field, crossing = TEST_MESHES["heightfield"](), TEST_MESHES["crossing"]()
+    shear = np.array([[1.0, 0.4, 0.0], [0.0, 1.0, 0.0], [0.3, 0.0, 0.8]])
+    return [
+        (torus, _affine(_rotation((1, 2, 3), 0.7) @ np.diag([1.5, 0.7, 1.2]), (0.2, -0.3, 0.1))),
+        (box, _affine(_rotation((0, 1, 1), 2.1), (2.5, 0.5, -0.5))),
+        (torus, _affine(np.diag([-1.0, 1.0, 1.0]) @ _rotation((1, 0, 0), 0.4), (-2.6, 0.4, 0.3))),
+        (field, _affine(np.diag([1.0, 1.0, -0.5]), (0.0, 2.8, 0.0))),
+        (crossing, _affine(_rotation((0, 0, 1), 0.3) * 0.8, (0.1, -2.4, 0.6))),
+        (torus, _affine(shear, (2.4, -2.2, -0.4))),
+    ]
+
+
+def _rays(bounds, count, seed):
+    """Rays from a sphere around the scene aimed at random points of its box
+    (about a third miss), and a few from inside."""
+    rng = np.random.default_rng(seed)
+    lo, hi = bounds
+    centre, radius = (lo + hi) / 2, np.linalg.norm(hi - lo)
+    outside = rng.normal(size=(count, 3))
+    origins = centre + radius * outside / np.linalg.norm(outside, axis=1, keepdims=True)
+    origins[: count // 10] = rng.uniform(lo, hi, (count // 10, 3))
+    targets = rng.uniform(lo, hi, (count, 3))
+    return origins, targets - origins
+
+
+def _flat_reference(instances: Instances, origins, directions):
+    """float64 hits of the flattened scene, by brute force: per ray and
+    triangle t (inf where missed), the barycentrics' smallest weight
+    (signed: negative outside), the cosine of the ray with the triangle's
+    plane, and each triangle's instance, row in its mesh, unit normal."""
+    corners, inst, prim, normals = [], [], [], []
+    for k, (mesh, m) in enumerate(zip((instances.meshes[i] for i in instances.mesh_of), instances.transforms)):
+        c = mesh.vertices.astype(np.float64)[mesh.faces] @ m[:3, :3].T + m[:3, 3]
+        n = np.cross(c[:, 1] - c[:, 0], c[:, 2] - c[:, 0])
+        corners.append(c)
+        normals.append(n / np.linalg.norm(n, axis=1, keepdims=True))
+        inst.append(np.full(len(c), k))
+        prim.append(np.arange(len(c)))
+    c, n = np.concatenate(corners), np.concatenate(normals)
+    d = directions / np.linalg.norm(directions, axis=1, keepdims=True)
+    e1, e2 = c[:, 1] - c[:, 0], c[:, 2] - c[:, 0]                          # (F, 3)
+    p = np.cross(d[:, None], e2[None])                                     # (N, F, 3)
+    det = np.einsum("nfk,fk->nf", p, e1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        inv = 1.0 / det
+        s = origins[:, None] - c[None, :, 0]
+        u = np.einsum("nfk,nfk->nf", s, p) * inv
+        q = np.cross(s, e1[None])
+        v = np.einsum("nk,nfk->nf", d, q) * inv
+        t = np.einsum("fk,nfk->nf", e2, q) * inv
+    margin = np.minimum(np.minimum(u, v), 1 - u - v)
+    cosine = np.abs(np.einsum("nk,fk->nf", d, n))
+    t = np.where((margin >= 0) & (t > 0) & (det != 0), t, np.inf)
+    return t, margin, cosine, np.concatenate(inst), np.concatenate(prim), n
+
+
+def _clear(t, margin, cosine, scale):
+    """Rays whose answers no float32 rounding can change: no triangle's edge
+    within 1e-4 (barycentric) of the ray in front of it, no grazing triangle,
+    and the nearest two hits 1e-4 of the scene apart."""
+    ahead = np.isfinite(t) | (np.abs(margin) < 1e-4)
+    near_edge = (ahead & (np.abs(margin) < 1e-4)).any(axis=1)
+    grazing = (np.isfinite(t) & (cosine < 1e-3)).any(axis=1)
+    two = np.sort(t, axis=1)[:, :2]
+    with np.errstate(invalid="ignore"):
+        close = (two[:, 1] - two[:, 0]) < 1e-4 * scale
+    return ~near_edge & ~grazing & ~close
+
+
+# Every volume shape and every bottom-level builder, each at least once.
+VARIANTS = [("box", "sah", 4), ("box", "device", 4), ("sphere", "paper", 1), ("ellipse", "device", 2),
+            ("ellipse", "paper", 4), ("sphere", "sah", 4)]
+
+
+@pytest.fixture(scope="module")
+def scene(device):
+    """The instances, rays, the float64 flattened reference and the two-level
+    brute force's answers."""
+    instances = as_instances(_scene_list())
+    origins, directions = _rays(instances.bounds, 1500, seed=5)
+    brute = clrt.Accel(instances, accel="none", device=device)
+    answers = {cull: brute.trace(origins, directions, cull=cull) for cull in config.CULL_MODES}
+    answers["count"] = brute.count(origins, directions)
+    answers["all"] = brute.all_hits(origins, directions)
+    answers["any"] = brute.any_hit(origins, directions, tmax=3.0)
+    return instances, origins, directions, answers
+
+
+def test_the_scene_is_instanced_not_copied(scene):
+    instances = scene[0]
+    assert len(instances) == 6 and len(instances.meshes) == 4
+    assert instances.mesh_of.tolist() == [0, 1, 0, 2, 3, 0]
+    assert (np.linalg.det(instances.transforms[:, :3, :3]) < 0).tolist() == [False, False, True, True, False, False]
+
+
+@pytest.mark.parametrize("volume, builder, leaf", VARIANTS)
+def test_every_two_level_bvh_answers_as_brute_force_bit_for_bit(scene, volume, builder, leaf, device):
+    instances, origins, directions, want = scene
+    accel = clrt.Accel(instances, accel=volume, builder=builder, leaf_size=leaf, device=device)
+    assert len(accel.acceleration.bottoms) == 4 and len(accel.acceleration.instances) == 6
+    for cull in config.CULL_MODES:
+        got = accel.trace(origins, directions, cull=cull)
+        for field in got._fields:
+            assert np.array_equal(getattr(got, field), getattr(want[cull], field)), (cull, field)
+    assert np.array_equal(accel.count(origins, directions), want["count"])
+    assert np.array_equal(accel.any_hit(origins, directions, tmax=3.0), want["any"])
+    for a, b in zip(accel.all_hits(origins, directions), want["all"]):
+        assert np.array_equal(a, b)
+
+
+def test_hits_are_the_flattened_scenes(scene):
+    instances, origins, directions, answers = scene
+    t, margin, cosine, inst, prim, normals = _flat_reference(instances, origins, directions)
+    bounds = instances.bounds
+    scale = float(np.linalg.norm(bounds[1] - bounds[0]))
+    clear = _clear(t, margin, cosine, scale)
+    nearest = np.argmin(t, axis=1)
+    hit = np.isfinite(t.min(axis=1))
+    assert clear.mean() > 0.9 and (clear & hit).sum() > 500 and (clear & ~hit).sum() > 100
+    got = answers["none"]
+    rows = clear & hit
+    assert np.array_equal(got.hit[clear], hit[clear])
+    assert np.array_equal(got.instance[rows], inst[nearest[rows]])
+    assert np.array_equal(got.prim[rows], prim[nearest[rows]])
+    assert (got.instance[clear & ~hit] == -1).all() and (got.prim[clear & ~hit] == -1).all()
+    assert np.allclose(got.t[rows], t.min(axis=1)[rows], rtol=0, atol=2e-6 * scale)
+    assert np.allclose(got.normal[rows], normals[nearest[rows]], rtol=0, atol=1e-5)
+    d = directions[rows] / np.linalg.norm(directions[rows], axis=1, keepdims=True)
+    front = np.einsum("nk,nk->n", d, normals[nearest[rows]]) < 0      # met against the placed normal
+    assert np.array_equal(got.front[rows], front)
+    # The mirrored instances (2 and 3) among the hits, seen from both sides.
+    assert {2, 3} <= set(got.instance[rows].tolist()) and front.any() and (~front).any()
+    # Culling keeps the nearest hit of the faces kept, as in the flattened scene.
+    d_all = directions / np.linalg.norm(directions, axis=1, keepdims=True)
+    facing = np.einsum("nk,fk->nf", d_all, normals) < 0
+    for cull, keep in (("back", facing), ("front", ~facing)):
+        kept = np.where(keep, t, np.inf)
+        sure = clear & _clear(kept, np.where(keep, margin, 1.0), cosine, scale)
+        first = np.argmin(kept, axis=1)
+        found = np.isfinite(kept.min(axis=1))
+        assert np.array_equal(answers[cull].hit[sure], found[sure]), cull
+        rows = sure & found
+        assert np.array_equal(answers[cull].instance[rows], inst[first[rows]]), cull
+        assert np.array_equal(answers[cull].prim[rows], prim[first[rows]]), cull
+    # Every hit along a ray: the flattened scene's, in order.
+    ahead = np.isfinite(t)
+    assert np.array_equal(answers["count"][clear], ahead[clear].sum(axis=1))
+    every = answers["all"]
+    mine = np.isin(every.ray_id, np.nonzero(clear)[0])
+    ray, k = np.nonzero(ahead & clear[:, None])
+    order = np.lexsort((prim[k], inst[k], t[ray, k], ray))
+    assert np.array_equal(every.ray_id[mine], ray[order])
+    assert np.array_equal(every.instance[mine], inst[k][order])
+    assert np.array_equal(every.prim[mine], prim[k][order])
+
+
+def _grazing_rays(lo, hi, rng, per_line=24):
+    """Rays that graze the box lo..hi: axis-parallel rays lying in each face's
+    plane (at its edges among others), from both sides, and rays from outside
+    through points of its edges and corners; every coordinate on a grid of
+    eighths of the box, so that the placements below move them exactly."""
+    rays = []
+    for axis, along in itertools.permutations(range(3), 2):
+        other = 3 - axis - along
+        for side in (lo, hi):
+            grid = np.concatenate([[0.0, 1.0, 0.5], rng.integers(0, 9, per_line - 3) / 8])
+            points = np.zeros((per_line, 3))
+            points[:, axis] = side[axis]
+            points[:, other] = lo[other] + grid * (hi[other] - lo[other])
+            for start, sign in ((lo, 1.0), (hi, -1.0)):
+                points[:, along] = start[along] - sign
+                d = np.zeros((per_line, 3))
+                d[:, along] = sign
+                rays.append((points.copy(), d))
+    corners = np.array(list(itertools.product(*zip(lo, hi))))
+    a, b = corners[rng.integers(0, 8, 300)], corners[rng.integers(0, 8, 300)]
+    on_edges = a + rng.integers(0, 9, (300, 1)) / 8 * (b - a)   # corners, edges and diagonals
+    origins = lo + (hi - lo) * rng.integers(-16, 25, (300, 3)) / 8
+    rays.append((origins, on_edges - origins))
+    origins, d = (np.concatenate(x) for x in zip(*rays))
+    keep = np.linalg.norm(d, axis=1) > 0
+    return origins[keep], d[keep]
+
+
+@pytest.mark.parametrize("volume", ["box", "sphere", "ellipse"])
+def test_rays_grazing_an_instances_box_answer_as_the_flattened_scene(volume, device):
+    """A box mesh placed where its faces are its world box's (quarter turns,
+    mirrors, scales by powers of two, shifts on a grid: moves that float32
+    makes exactly, so that the flattened scene is the same scene): rays in the
+    faces' planes and through the edges and corners of each instance's box
+    hit what they hit in the flattened scene (brute force) -- none is lost to
+    the box, none gained -- the same triangle up to a tie within rounding (at
+    a corner: the test shears the ray along other axes in object space, so t
+    may round to a neighbouring float), bit for bit for 98 % of them."""
+    cube = primitives.box((2.0, 2.0, 2.0))
+    quarter, mirror = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]]), np.diag([-1.0, 1.0, 1.0])
+    placements = [_affine(2.0 * np.eye(3), (6.0, 0.0, 0.0)), _affine(0.5 * quarter, (0.0, 5.0, 0.25)),
+                  _affine(mirror @ quarter.T, (-6.0, 0.5, -1.0)), _affine(0.25 * mirror @ quarter, (0.0, -5.0, 1.5))]
+    instances = as_instances([(cube, m) for m in placements])
+    accel = clrt.Accel(instances, accel=volume, device=device)
+    flat = clrt.Accel(instances.flattened(), accel="none", device=device)
+    rng = np.random.default_rng(11)
+    rays = [_grazing_rays(*box, rng) for box in instances.boxes()]
+    origins, directions = (np.concatenate(x) for x in zip(*rays))
+    got, want = accel.trace(origins, directions), flat.trace(origins, directions)
+    assert want.hit.mean() > 0.8 and np.array_equal(got.hit, want.hit)
+    faces = len(cube.faces)
+    flat_index = np.where(got.hit, got.instance * faces + got.prim, -1)
+    # The triangle is one the flattened scene meets within 4 ulps of its nearest hit.
+    every = flat.all_hits(origins, directions)
+    nearest = want.t[every.ray_id]
+    tied = every.t <= nearest + 4 * np.spacing(nearest)
+    near = set(zip(every.ray_id[tied].tolist(), every.prim[tied].tolist()))
+    assert all((i, int(flat_index[i])) in near for i in np.nonzero(got.hit)[0].tolist())
+    assert np.allclose(got.t[got.hit], want.t[got.hit], rtol=5e-7, atol=0)
+    same = got.hit & (flat_index == want.prim)
+    for field in ("u", "v", "normal"):
+        assert np.allclose(getattr(got, field)[same], getattr(want, field)[same], rtol=0, atol=1e-6), field
+    assert np.array_equal(got.front[same], want.front[same])
+    bitwise = same & (got.t == want.t) & (got.u == want.u) & (got.v == want.v) & (got.normal == want.normal).all(1)
+    assert bitwise.sum() > 0.97 * got.hit.sum()
+
+
+def test_ties_go_to_the_lower_instance_then_triangle(device):
+    """The crossing quads (with an exact duplicate of triangle 0 as triangle 4)
+    placed twice by the same transform: every hit is instance 0's, never
+    triangle 4, in every walk."""
+    crossing = TEST_MESHES["crossing"]()
+    m = _affine(_rotation((1, 1, 0), 0.5) * 2.0, (0.3, 0.0, 0.0))
+    origins, directions = _rays(Instances([crossing], [0], [m]).bounds, 400, seed=3)
+    for accel in ("none", "box", "sphere"):
+        hits = clrt.Accel([(crossing, m), (crossing, m)], accel=accel, device=device).trace(origins, directions)
+        assert hits.hit.sum() > 100
+        assert (hits.instance[hits.hit] == 0).all() and (hits.prim[hits.hit] != 4).all(), accel
+
+
+def test_one_mesh_is_instance_zero_of_itself(device):
+    mesh = primitives.icosphere(2)
+    origins = np.array([[0.1, 0.2, 5.0], [5.0, 5.0, 5.0]])
+    directions = np.array([[0.0, 0.0, -1.0], [0.0, 0.0, -1.0]])
+    one = clrt.Accel(mesh, device=device)
+    assert "ACCEL_INSTANCES" not in one.device_scene.defines()
+    hits = one.trace(origins, directions)
+    assert hits.instance.tolist() == [0, -1]
+    assert one.all_hits(origins, directions).instance.tolist() == [0, 0]
+    listed = clrt.Accel([mesh], device=device)   # a list of one: one instance, same answers
+    assert "ACCEL_INSTANCES" in listed.device_scene.defines()
+    again = listed.trace(origins, directions)
+    for field in hits._fields:
+        assert np.array_equal(getattr(again, field), getattr(hits, field)), field
+
+
+def test_split_buffers_copies_and_pickles_answer_alike(scene, device):
+    import pickle
+    instances, origins, directions, answers = scene
+    split = clrt.Accel(instances, accel="box", device=device, max_buffer_bytes=32768)
+    assert split.geometry.parts() > 1
+    for accel in (split, copy.copy(split), pickle.loads(pickle.dumps(split))):
+        hits = accel.trace(origins, directions)
+        for field in hits._fields:
+            assert np.array_equal(getattr(hits, field), getattr(answers["none"], field)), field
+    assert "instances" in repr(split)
+
+
+def _one_line_error(call, match):
+    with pytest.raises(clrt.InputError, match=match) as info:
+        call()
+    assert "\n" not in str(info.value)
+
+
+@pytest.mark.parametrize("transform, match", [
+    (np.diag([1.0, 1.0, 0.0, 1.0]), r"instance 1's transform must be invertible .* got a singular one"),
+    (np.diag([1.0, 1e-7, 1.0, 1.0]), r"must be invertible .* got one of condition number 1e\+07"),
+    (np.array([[1.0, 0, 0, np.nan], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]),
+     r"instance 1's transform must be finite, got nan in row 0, column 3"),
+    (np.full((4, 4), np.inf), r"must be finite, got inf in row 0, column 0"),
+    (np.eye(3), r"instance 1's transform must be a 4x4 affine matrix, got shape \(3, 3\)"),
+    (np.eye(4)[:, :3], r"must be a 4x4 affine matrix, got shape \(4, 3\)"),
+    ("not a matrix", r"instance 1's transform must be a 4x4 affine matrix"),
+    (np.array([[1.0, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0.5, 1]]),
+     r"must be affine \(last row 0 0 0 1\), got last row \(0, 0, 0.5, 1\)"),
+])
+def test_a_bad_transform_is_one_line(transform, match):
+    mesh = primitives.icosphere(1)
+    _one_line_error(lambda: clrt.Accel([mesh, (mesh, transform)]), match)
+
+
+def test_bad_instances_are_one_line(device, monkeypatch):
+    mesh = primitives.icosphere(1)
+    _one_line_error(lambda: Instances([mesh], [0, 1]), r"instance 1 names mesh 1, but there is 1 mesh \(0..0\)")
+    _one_line_error(lambda: Instances([mesh, mesh], [0, -1]), r"instance 1 names mesh -1, but there are 2 meshes")
+    _one_line_error(lambda: Instances([mesh], [0.5]), r"mesh_of must be a non-empty list of mesh indices")
+    _one_line_error(lambda: Instances([mesh], [0, 0], np.eye(4)[None]), r"transforms must have shape \(2, 4, 4\)")
+    _one_line_error(lambda: clrt.Accel([mesh, 3]), r"instance 1 must be a mesh or a \(mesh, 4x4 transform\) pair")
+    monkeypatch.setattr(config, "MAX_INSTANCES", 3)
+    _one_line_error(lambda: clrt.Accel([mesh] * 4), r"a scene holds at most 3 instances .* got 4")
+    _one_line_error(lambda: Instances([mesh], [0] * 4), r"a scene holds at most 3 instances .* got 4")
+    monkeypatch.undo()
+    accel = clrt.Accel([mesh, (mesh, _affine(shift=(3.0, 0.0, 0.0)))], device=device)
+    _one_line_error(lambda: accel.closest_points([0.0, 0.0, 0.0]), "point queries on an Accel of instances")
+    _one_line_error(lambda: accel.refit(mesh.vertices), "refit of an Accel of instances")
+
+
+# --------------------------------------------------------------------------- glTF files: nodes as instances
+
+def _hierarchy_glb(path, groups=4, per_group=5):
+    """A GLB written by trimesh whose node hierarchy places one mesh (a ball)
+    groups x per_group times under turned and shifted group nodes, one of each
+    group's children mirrored, and a box once at the root."""
+    import trimesh
+    from trimesh.transformations import rotation_matrix, translation_matrix
+    scene = trimesh.Scene()
+    scene.add_geometry(trimesh.creation.box(), geom_name="box", node_name="box")
+    scene.add_geometry(trimesh.creation.icosphere(subdivisions=1), geom_name="ball", node_name="ball")
+    for g in range(groups):
+        scene.graph.update(frame_to=f"group{g}", frame_from=scene.graph.base_frame,
+                           matrix=rotation_matrix(0.4 * g, [0, 0, 1]) @ translation_matrix([3.0 * g, 0, 0]))
+        for c in range(per_group):
+            m = translation_matrix([0.0, 3.0 * c, 2.0]) @ np.diag([1.0, 1.0, -1.0 if c == 1 else 1.5, 1.0])
+            scene.graph.update(frame_to=f"ball{g}_{c}", frame_from=f"group{g}", matrix=m, geometry="ball")
+    scene.export(path)
+    return path
+
+
+def test_a_gltf_files_mesh_nodes_are_its_instances(tmp_path, device):
+    """One glTF mesh placed by many nodes is one bottom-level mesh (a mirrored
+    placement another, rewound, as the file reads flattened); instances in
+    document order, depth first, transforms composed down the hierarchy: the
+    flattened scene of the instances is the file read flattened, corner for
+    corner, and the hits name the node's instance."""
+    path = _hierarchy_glb(tmp_path / "balls.glb")
+    accel = clrt.Accel(path, device=device)
+    instances = accel.instances
+    assert len(instances) == 22 and len(instances.meshes) == 3      # box, ball, the mirrored ball
+    flat = clrt.load_mesh(path)
+    mine = instances.flattened()
+    assert np.array_equal(mine.vertices[mine.faces], flat.vertices[flat.faces])
+    faces = np.array([len(instances.meshes[k].faces) for k in instances.mesh_of])
+    first = np.concatenate([[0], np.cumsum(faces)[:-1]])
+    origins, directions = _rays(flat.bounds, 2000, seed=9)
+    hits, want = accel.trace(origins, directions), clrt.Accel(flat, device=device).trace(origins, directions)
+    t, margin, cosine, inst, prim, _ = _flat_reference(instances, origins, directions)
+    clear = _clear(t, margin, cosine, float(np.linalg.norm(flat.bounds[1] - flat.bounds[0])))
+    assert clear.mean() > 0.9 and len(np.unique(hits.instance[clear & hits.hit])) > 15
+    assert np.array_equal(hits.hit[clear], want.hit[clear])
+    rows = clear & want.hit
+    of = np.searchsorted(first, want.prim[rows], side="right") - 1    # the flattened triangle's instance
+    assert np.array_equal(hits.instance[rows], of)
+    assert np.array_equal(hits.prim[rows], want.prim[rows] - first[of])
+    assert np.array_equal(hits.front[rows], want.front[rows])
+    assert np.allclose(hits.t[rows], want.t[rows], rtol=1e-5, atol=0)
+
+
+def test_a_gltf_file_of_one_mesh_node_stays_one_level(tmp_path, device):
+    import trimesh
+    path = tmp_path / "one.glb"
+    trimesh.Scene(trimesh.creation.icosphere(subdivisions=1)).export(path)
+    accel = clrt.Accel(path, device=device)
+    assert accel.instances is None and "ACCEL_INSTANCES" not in accel.device_scene.defines()
+    assert np.array_equal(accel.mesh.vertices[accel.mesh.faces], clrt.load_mesh(path).vertices[
+        clrt.load_mesh(path).faces])
+
+
+def _rewritten_glb(source, target, change):
+    """A copy of a GLB file with ``change(doc)`` applied to its JSON chunk."""
+    import json
+    import struct
+    data = source.read_bytes()
+    length = struct.unpack_from("<I", data, 12)[0]
+    doc = json.loads(data[20:20 + length])
+    change(doc)
+    text = json.dumps(doc).encode()
+    text += b" " * (-len(text) % 4)
+    rest = data[20 + length:]
+    target.write_bytes(struct.pack("<III", 0x46546C67, 2, 12 + 8 + len(text) + len(rest))
+                       + struct.pack("<II", len(text), 0x4E4F534A) + text + rest)
+    return target
+
+
+def test_bad_gltf_instances_are_one_line(tmp_path, device):
+    path = _hierarchy_glb(tmp_path / "balls.glb", groups=2, per_group=2)
+
+    def cycle(doc):   # the first group's first child lists the group as its own child
+        group = next(i for i, n in enumerate(doc["nodes"]) if n.get("name") == "group0")
+        doc["nodes"][doc["nodes"][group]["children"][0]]["children"] = [group]
+
+    def flat(doc):    # a node that scales z to 0
+        doc["nodes"][-1]["matrix"] = [1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 0, 0, 0, 0, 0, 1]
+
+    looped = _rewritten_glb(path, tmp_path / "cycle.glb", cycle)
+    for read in (lambda: clrt.Accel(looped, device=device), lambda: clrt.load_mesh(looped)):   # render's reader too
+        with pytest.raises(clrt.MeshLoadError, match=r"cycle.glb: corrupt GLB file: node \d+ is its own ancestor") \
+                as info:
+            read()
+        assert "\n" not in str(info.value)
+    _one_line_error(lambda: clrt.Accel(_rewritten_glb(path, tmp_path / "flat.glb", flat), device=device),
+                    r"instance \d+'s transform must be invertible")
