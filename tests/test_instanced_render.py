@@ -316,3 +316,25 @@ def test_many_placements_of_one_mesh_stay_one_mesh_on_the_device(device):
     image = renderer.render(camera).image
     seen = clrt.Accel.from_renderer(renderer).camera_images(camera).instance
     assert image.mean() > 20 and len(np.unique(seen)) > 60
+
+
+def test_normal_maps_of_placed_meshes_bend_as_the_twins(device):
+    """The path tracer's normal maps take their tangent frame from the
+    triangle as placed (material.cl's mapped_normal): the first hits' mean
+    shading normal, under a stretch and under a turned mirror, is the
+    flattened twin's within float32 rounding."""
+    from test_path_normal_maps import LAMBERT, _squares
+    from clrt.scene.texture import Texture
+    codes = np.random.default_rng(3).integers(60, 255, (8, 8, 3)).astype(np.uint8)
+    codes[..., 2] = 255
+    material = Material(**LAMBERT, normal_texture=Texture(codes))
+    placed = [_affine(np.diag([1.3, 0.8, 1.0]), (-1.2, 0, 0)),
+              _affine(_rotation((0, 1, 0), 0.4) @ np.diag([-1.0, 1.0, 1.0]), (1.2, 0, 0))]
+    scene = Scene([SceneObject(_squares(), material, (), placed)], [Light((0, 0, 10), (100.0,) * 3)],
+                  integrator="path")
+    camera = Camera((0.0, 0.0, 10.0), (0.0, 0.0, 0.0), width=48, height=32, fov=25)
+    mine, twin = (clrt.Renderer(s, device=device).render(camera, linear=True, spp=4, seed=1)
+                  for s in (scene, scene.flattened()))
+    seen = np.abs(mine.normal).sum(axis=2) > 0
+    bent = np.abs(mine.normal[..., :2]).max(axis=2) > 0.05    # the map tilts most seen pixels' normals
+    assert seen.mean() > 0.2 and bent[seen].mean() > 0.5 and np.abs(mine.normal - twin.normal).max() < 1e-5

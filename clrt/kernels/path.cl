@@ -46,6 +46,7 @@ inline float max_component(float3 c)
 typedef struct {
     float3 origin, dir;     // of the ray of the next segment
     float3 beta;            // throughput so far
+    float eta_scale;        // the eta^2 factors beta lost crossing into glass (and got back leaving it)
     float3 radiance;        // gathered so far
     float prev_pdf;         // solid-angle pdf of the BSDF sample that made the ray
     bool prev_delta;        // that choice was a delta one (the camera ray counts as one: nothing to weigh against)
@@ -67,6 +68,7 @@ inline Path start_path(const PathLaunch* launch, uint px, uint py, uint pixel, u
     p.origin = camera.origin.xyz;
     p.dir = camera.dir.xyz;
     p.beta = (float3)(1.0f);
+    p.eta_scale = 1.0f;
     p.radiance = (float3)(0.0f);
     p.prev_pdf = 0.0f;
     p.prev_delta = true;
@@ -99,7 +101,8 @@ inline bool path_segment(const Geometry* g, const Shading* sh, const Lights* lig
         p->radiance += p->beta * le * w;
         return true;
     }
-    const SurfacePoint s = surface_point(g, sh, dir, &hit, instance);
+    SurfacePoint s = surface_point(g, sh, dir, &hit, instance);
+    s.n = mapped_normal(g, sh, &s, (uint)hit.prim, hit.u, hit.v);
     __global const Material* m = sh->materials + s.material;
     const Bsdf b = material_bsdf(sh, &s, (uint)hit.prim, hit.u, hit.v);
     if (depth == 1u) {
@@ -145,8 +148,19 @@ inline bool path_segment(const Geometry* g, const Shading* sh, const Lights* lig
     p->beta *= bs.weight;
     if (!(max_component(p->beta) > 0.0f))
         return true;
+#ifndef BSDF_DIFFUSE_ONLY
+    // Radiance refracted into a denser side is scaled by 1 / eta^2 (bsdf.cl),
+    // and given back on the way out.  The roulette looks at the throughput
+    // with that factor undone (pbrt-v4's etaScale): a path inside glass
+    // carries no less energy, and culling it for the 1 / eta^2 would send
+    // its survivors out with weights up to eta^2 -- noise, not light.
+    if (dot(bs.wi, ng) * dot(wo, ng) < 0.0f) {
+        const float eta2 = b.ior * b.ior;
+        p->eta_scale *= dot(wo, ng) > 0.0f ? eta2 : 1.0f / eta2;   // wo on ng's side: entering
+    }
+#endif
     if (depth >= launch->rr_depth) {   // Russian roulette: continue with probability q
-        const float q = fmin(max_component(p->beta), 0.95f);
+        const float q = fmin(max_component(p->beta) * p->eta_scale, 0.95f);
         if (ul.w >= q)
             return true;
         p->beta /= q;

@@ -116,6 +116,7 @@ typedef struct {
     float offset;      // how far along ng rays leaving p start (spawn_origin)
     bool front;        // the ray hit the side the triangle's winding faces (it is entering)
     uint material;     // the row of m in the materials table
+    int instance;      // the hit's instance (0 in a one-level scene): where its triangle is placed
     Material m;
 } SurfacePoint;
 
@@ -179,6 +180,7 @@ inline SurfacePoint surface_point(const Geometry* g, const Shading* sh, float3 d
 {
     __global const TriangleInfo* info = SPLIT_AT(sh, tri_info, hit->prim);
     SurfacePoint s;
+    s.instance = instance;
     s.material = triangle_material(g, sh, instance, hit->prim);
     s.m = sh->materials[s.material];
 #ifdef SURFACE_DETAIL

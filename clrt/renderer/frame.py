@@ -45,7 +45,7 @@ from clrt.renderer.kernels import FRAME_ARRAYS, FRAME_HEADER, RENDER_KERNELS, fr
 from clrt.renderer.path import PathTracer, tone_map
 from clrt.renderer.tiles import TileLimits, run_tiles
 from clrt.renderer.visible import nothing_visible
-from clrt.scene.arrays import flatten_scene, light_records
+from clrt.scene.arrays import flatten_scene, light_records, uses_pbr_textures
 from clrt.scene.placed import moved_scene
 from clrt.scene.scene import Camera, Scene, far_triangle
 from clrt.scene.render_setup import render_frame
@@ -157,7 +157,10 @@ class Renderer:
         self._followers = weakref.WeakSet()   # Accel.from_renderer's queries, kept on this scene
         with stage(self.timings, "initialisation"):
             self.scene = _own_copy(as_scene(scene))   # or a mesh, a mesh or scene file: what clrt.render takes
-            self.arrays = flatten_scene(self.scene)
+            # The path tracer's textures (emission, metallic-roughness, normal
+            # maps) for scenes made for it; Whitted reads base colours only.
+            self._pbr_textures = self.scene.integrator == "path"
+            self.arrays = flatten_scene(self.scene, pbr_textures=self._pbr_textures)
         a = self.arrays
 
         def shading_arrays(acceleration) -> dict:
@@ -221,7 +224,9 @@ class Renderer:
         """Render one frame.
 
         ``integrator``: "whitted" (the paper's model) or "path" (the path
-        tracer, docs/path-tracing.md); the scene's by default, as are
+        tracer, docs/path-tracing.md; its emission, metallic-roughness and
+        normal textures are uploaded for a Renderer made from a scene whose
+        integrator is "path"); the scene's by default, as are
         ``samples``, ``spp``, ``max_depth``, ``seed`` and ``exposure``.
         Whitted: ``samples``: anti-aliasing with samples x samples stratified,
         jittered rays per pixel (the jitter is a hash of pixel, sample and
@@ -281,6 +286,10 @@ class Renderer:
         if hits:
             raise InputError("hits=True reads back the Whitted integrator's camera hits; for the path tracer, "
                              "query them with clrt.camera_images")
+        if not self._pbr_textures and uses_pbr_textures(self.scene):
+            raise InputError("the scene's emission, metallic-roughness or normal textures were not uploaded: "
+                             "this Renderer was made for the Whitted integrator; set the Scene's "
+                             "integrator = \"path\" before making the Renderer to path-trace them")
         camera = self._camera(camera)
         spp = opts.check("spp", spp if spp is not None else self.scene.spp or DEFAULT_SPP)
         depth = max_depth if max_depth is not None else self.scene.max_depth
@@ -367,7 +376,7 @@ class Renderer:
         if self.instances is not None or scene.instanced:
             raise InputError("refit of a scene of placed meshes is not supported: move its instances "
                              "(Renderer.move_instances) or make a new Renderer")
-        arrays = flatten_scene(scene)
+        arrays = flatten_scene(scene, pbr_textures=self._pbr_textures)
         # The same triangles of the same objects; their vertex normals may be
         # split differently (the crease angle looks at the moved faces).
         same = (arrays.corners.shape == self.arrays.corners.shape

@@ -103,6 +103,33 @@ def tone_map(linear: np.ndarray, exposure: float) -> np.ndarray:
     return srgb_encode8(scaled)
 
 
+#: The EXR channels of the path tracer's guides for denoisers: the mean albedo
+#: and shading normal (world space) of the camera rays' first hits, as
+#: Mitsuba's AOV integrator and Intel Open Image Denoise's tools name them.
+PATH_CHANNELS = {"albedo": ("albedo.R", "albedo.G", "albedo.B"), "normal": ("normal.X", "normal.Y", "normal.Z")}
+
+
+def path_channels(frame) -> dict:
+    """A frame's albedo and normal images as EXR channels (PATH_CHANNELS);
+    none for a Whitted frame, which has neither."""
+    if frame.albedo is None or frame.normal is None:
+        return {}
+    return {name: getattr(frame, layer)[..., k] for layer, names in PATH_CHANNELS.items()
+            for k, name in enumerate(names)}
+
+
+def file_image(frame, depth: str, exposure: float) -> np.ndarray:
+    """The image a file of ``depth`` (clrt.output's "8-bit", "16-bit",
+    "float") gets from a frame rendered linear for 16-bit and float, 8-bit
+    otherwise: 8-bit as the renderer tone-mapped it, 16-bit scaled by
+    2**exposure (its writer clamps and encodes, so both follow the
+    documented tone map), float linear as rendered -- what ``clrt render``
+    and ``clrt batch render`` write alike."""
+    if depth == "16-bit" and exposure != 0:
+        return frame.image * np.float32(2.0 ** exposure)
+    return frame.image
+
+
 class PathTracer:
     """The path tracer of one Renderer: its program, its light tables and its
     frame buffers on that renderer's device (built on the first path-traced

@@ -257,6 +257,16 @@ def mesh_frames(meshes) -> "tuple[np.ndarray, list[np.ndarray]]":
     return origins, [triangle_corners(m, c) for m, c in zip(meshes, origins)]
 
 
+def uses_pbr_textures(scene: Scene) -> bool:
+    """Whether ``scene`` has a texture that only the path tracer reads
+    (emission, metallic-roughness, normal map) on a mesh with texture
+    coordinates: what ``flatten_scene(pbr_textures=True)`` adds."""
+    return any(getattr(mat, name) is not None
+               for o in scene.objects if o.mesh.uv is not None
+               for mat in (o.material, *o.materials)
+               for name in MATERIAL_TEXTURES if name != "texture")
+
+
 def material_rows(flat_materials: list) -> np.ndarray:
     """(M,) MATERIAL rows of ``(Material, {texture field: Texture row or -1})``
     pairs: the Phong fields as they are, the path tracer's from
