@@ -10,7 +10,9 @@ the issue's Mitsuba anchor counts them; its kernel time (profiling events) besid
 
 ``--mitsuba`` renders the same scenes with Mitsuba 3 in this process after clrt (its cuda_ad_rgb
 variant on a GPU, llvm_ad_rgb elsewhere; an optional import), same size, spp and max depth, so the
-two stand side by side in one table from one run.
+two stand side by side in one table from one run.  ``--rmse N`` adds the error at equal time: the
+time is Mitsuba's median wall at ``--spp``; clrt renders the spp its own wall affords in it; both
+images are compared with Mitsuba's render at N spp (RMSE of the linear RGB values).
 """
 
 from __future__ import annotations
@@ -59,7 +61,9 @@ def clrt_row(path: Path, size, spp: int, max_depth: int, runs: int, device) -> d
     wall = statistics.median(walls)
     return {"library": "clrt", "wall_ms": 1e3 * wall, "kernel_ms": statistics.median(kernels),
             "msamples": size[0] * size[1] * spp / wall / 1e6, "mean": float(np.mean(frame.image)),
-            "timings": frame.timings}
+            "timings": frame.timings,
+            "render": lambda n, seed: renderer.render(camera, spp=n, max_depth=max_depth, seed=seed,
+                                                      linear=True).image}
 
 
 def mitsuba_row(name: str, path: Path, size, spp: int, max_depth: int, runs: int) -> dict | None:
@@ -72,7 +76,8 @@ def mitsuba_row(name: str, path: Path, size, spp: int, max_depth: int, runs: int
     except ImportError:
         return None
     mi = mr.start_mitsuba("cuda_ad_rgb" if _has_cuda() else "llvm_ad_rgb")
-    scene = mr.mitsuba_scene(mi, mr.read_scene(path, size), max_depth, spp)
+    read = mr.read_scene(path, size)
+    scene = mr.mitsuba_scene(mi, read, max_depth, spp)
     image = mr.render(mi, scene, spp, 0)   # warm-up: its JIT compiles here
     walls = []
     for run in range(runs):
@@ -82,7 +87,25 @@ def mitsuba_row(name: str, path: Path, size, spp: int, max_depth: int, runs: int
     wall, variant = statistics.median(walls), mi.variant()
     return {"library": f"Mitsuba 3 ({variant})", "wall_ms": 1e3 * wall,
             "msamples": size[0] * size[1] * spp / wall / 1e6, "mean": float(np.mean(image)), "kernel_ms": None,
-            "timings": {}}
+            "timings": {}, "render": lambda n, seed: mr.render(mi, mr.mitsuba_scene(mi, read, max_depth, n), n, seed)}
+
+
+def rmse(image, reference) -> float:
+    return float(np.sqrt(np.mean((np.asarray(image, np.float64) - reference) ** 2)))
+
+
+def equal_time(name: str, clrt: dict, mitsuba: dict, spp: int, reference_spp: int) -> None:
+    """RMSE against a converged image at equal time: Mitsuba at ``spp`` (its
+    median wall above is the time), clrt at the spp its own wall affords in
+    that time; the reference is Mitsuba's render at ``reference_spp``, whose
+    own noise adds (spp / reference_spp) of a render's MSE to both rows."""
+    reference = np.asarray(mitsuba["render"](reference_spp, 10_000), np.float64)
+    clrt_spp = max(1, int(spp * mitsuba["wall_ms"] / clrt["wall_ms"]))
+    start = time.perf_counter()
+    clrt_image = clrt["render"](clrt_spp, 20_000)
+    clrt_ms = 1e3 * (time.perf_counter() - start)
+    print(f"| {name} | {mitsuba['wall_ms']:.1f} | {clrt_spp} ({clrt_ms:.1f} ms) | {rmse(clrt_image, reference):.5f} | "
+          f"{spp} | {rmse(mitsuba['render'](spp, 30_000), reference):.5f} | {reference_spp} |", flush=True)
 
 
 def _has_cuda() -> bool:
@@ -93,9 +116,10 @@ def _has_cuda() -> bool:
         return False
 
 
-def run(names, spp, max_depth, runs, device, mitsuba, bunny) -> None:
+def run(names, spp, max_depth, runs, device, mitsuba, bunny, reference_spp=0) -> None:
     print("| scene | size | spp | max depth | renderer | wall ms | kernel ms | Msamples/s | mean radiance |")
     print("|---|---|---|---|---|---|---|---|---|")
+    pairs = []
     for name in names:
         size = SCENES[name]
         path = scene_file(name, bunny)
@@ -110,6 +134,15 @@ def run(names, spp, max_depth, runs, device, mitsuba, bunny) -> None:
                   f"{r['mean']:.5f} |", flush=True)
         print(f"{name}: clrt timings of the last render: "
               + ", ".join(f"{k} {v:.2f} ms" for k, v in rows[0]["timings"].items()), file=sys.stderr)
+        if reference_spp and len(rows) == 2:
+            pairs.append((name, *rows))
+    if pairs:
+        print("\nEqual time, RMSE of the linear image against Mitsuba's render at the reference spp:\n")
+        print("| scene | time (Mitsuba's wall, ms) | clrt spp (its wall) | clrt RMSE | Mitsuba spp | Mitsuba RMSE | "
+              "reference spp |")
+        print("|---|---|---|---|---|---|---|")
+        for name, clrt, mitsuba in pairs:
+            equal_time(name, clrt, mitsuba, spp, reference_spp)
 
 
 def main(argv=None) -> int:
@@ -121,9 +154,13 @@ def main(argv=None) -> int:
     p.add_argument("--device", help="'gpu', 'cpu' or P:D (default: clrt's choice)")
     p.add_argument("--mitsuba", action="store_true", help="Mitsuba 3 on the same scenes, after clrt")
     p.add_argument("--bunny", type=Path, help="folder holding bunny00.off (default: ../shared/meshes)")
+    p.add_argument("--rmse", type=POSITIVE, metavar="REFERENCE_SPP",
+                   help="with --mitsuba: RMSE at equal time against Mitsuba's render at REFERENCE_SPP")
     args = p.parse_args(argv)
+    if args.rmse and not args.mitsuba:
+        p.error("--rmse needs --mitsuba")
     return exit_code(run, args.scene or sorted(SCENES), args.spp, args.max_depth, args.runs, args.device,
-                     args.mitsuba, args.bunny)
+                     args.mitsuba, args.bunny, args.rmse or 0)
 
 
 if __name__ == "__main__":

@@ -101,6 +101,7 @@ _HOST_BYTES = {"8-bit": 10, "16-bit": 40, "float": 36}
 
 def _render(args) -> int:
     from clrt.renderer import Renderer, check_host_memory
+    from clrt.renderer.path import file_image, path_channels
     from clrt.renderer.tiles import TileLimits
     from clrt.scene.render_setup import render_frame
 
@@ -118,8 +119,8 @@ def _render(args) -> int:
     aovs_inside = writer.holds(channels="named")
     if args.aov and not aovs_inside:
         from clrt.query.aov import aov_paths
-        for path in aov_paths(out, args.aov):
-            output.check_replace(path, args.force)
+        for aov_path in aov_paths(out, args.aov):
+            output.check_replace(aov_path, args.force)
     check_host_memory(camera.width * camera.height * _HOST_BYTES[depth], f"a {camera.width}x{camera.height} image")
     samples = (scene.spp or config.DEFAULT_SPP) if path else scene.samples ** 2
     progress = None if args.quiet else _progress_bar(camera.width * camera.height * samples)
@@ -134,13 +135,9 @@ def _render(args) -> int:
         if progress:
             progress.close()
     aov_note = ""
-    image = frame.image
-    if depth == "16-bit" and scene.exposure != 0:   # the 8-bit image is tone-mapped by the renderer
-        image = image * (2.0 ** scene.exposure)
+    image = file_image(frame, depth, scene.exposure)
     if aovs_inside:
-        channels = {}
-        if path:   # the denoisers' guides: the first hits' albedo and shading normal
-            channels.update(path_channels(frame))
+        channels = path_channels(frame)   # the path tracer's guides for denoisers: first hits' albedo, normal
         if args.aov:
             from clrt.query.aov import camera_images_of, exr_channels
             channels.update(exr_channels(camera_images_of(renderer, camera), args.aov))
@@ -171,7 +168,9 @@ def _render(args) -> int:
         accel = "brute force" if args.accel == "none" else f"{builder} BVH of {config.VOLUME_WORDS[args.accel]}"
         view = f", camera from {args.mesh}" if from_file else ""
         how = f", path tracing {frame.spp} spp" if path else ""
-        print(f"{camera.width}x{camera.height} pixels, {frame.triangles:,} triangles, "
+        placed = renderer.instances
+        placed = f", {len(placed):,} placements ({scene.num_triangles:,} placed)" if placed is not None else ""
+        print(f"{camera.width}x{camera.height} pixels, {frame.triangles:,} triangles{placed}, "
               f"{len(scene.lights)} light(s), {accel}{view}{how}, device: {frame.device}")
         for stage, ms in frame.timings.items():
             print(f"  {stage:<20} {ms:10.2f} ms")
@@ -179,18 +178,6 @@ def _render(args) -> int:
             print(f"  AOVs: {aov_note}")
     print(out.resolve())
     return 0
-
-
-#: The EXR channels of the path tracer's guides for denoisers: the mean albedo
-#: and shading normal (world space) of the camera rays' first hits, as
-#: Mitsuba's AOV integrator and Intel Open Image Denoise's tools name them.
-PATH_CHANNELS = {"albedo": ("albedo.R", "albedo.G", "albedo.B"), "normal": ("normal.X", "normal.Y", "normal.Z")}
-
-
-def path_channels(frame) -> dict:
-    """The path tracer's albedo and normal images as EXR channels (PATH_CHANNELS)."""
-    return {name: getattr(frame, layer)[..., k] for layer, names in PATH_CHANNELS.items()
-            for k, name in enumerate(names)}
 
 
 @contextlib.contextmanager

@@ -162,7 +162,7 @@ RAY_CHECKS = ("origin", "direction", "tmin", "tmax", "reach")
 #: What ``device=`` / ``--device`` takes besides "P:D" or "P" (platform and device indices).
 DEVICE_KINDS = ("gpu", "cpu")
 #: The per-pixel images of ``clrt render --aov`` (clrt.query.aov), in their order.
-AOVS = ("depth", "distance", "normal", "prim", "hit", "front")
+AOVS = ("depth", "distance", "normal", "prim", "instance", "hit", "front")
 #: The formats of output files, and what each can hold: clrt.output.writers.WRITERS.
 
 # --------------------------------------------------------------------------- instances (docs/instances.md)

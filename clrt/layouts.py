@@ -106,7 +106,9 @@ by Walker's alias method in proportion to its power (clrt/scene/emitters.py)
                           triangle's slot), LIGHT_BACKGROUND (the background or environment map)
    12: index       int    the Light row or the triangle's slot (-1 for the background)
    16: probability float  of choosing this entry (its power / all lights' power)
-   20: pad         uint[3]
+   20: instance    int    a triangle's instance in a two-level scene (the placed triangle:
+                          each placement of an emitter is an entry; 0 in a one-level scene)
+   24: pad         uint[2]
 
 Kernel arguments passed by value (OpenCL lets no pointer into them: buffers
 travel beside them, and they hold byte offsets into those buffers).  Which
@@ -210,7 +212,13 @@ the mesh's own device frame:
   136: first      int        the mesh's first slot (its slots are first .. first + count - 1)
   140: count      int        the mesh's triangles
   144: flags      uint       INSTANCE_MIRROR (clrt.config): to_world's determinant is negative
-  148: pad        uint[3]
+  148: material   int        the renderer: the row of its object's first material in the
+                             Material table (a triangle's TriangleInfo.material counts from
+                             it: materials per placement); 0 for ray queries
+  152: min_scale  float      the linear part's smallest singular value, rounded down: no
+                             point of the placed mesh lies nearer a point than that times
+                             their distance in object space (closest points, point.cl)
+  156: pad        uint
 In a two-level scene the BvhPairNode rows are the top level's (root at row
 0; a leaf holds one instance, its reference the instance's row here), then
 each distinct mesh's, every reference global; the slots are each mesh's
@@ -371,7 +379,7 @@ SRGB_TABLE = np.dtype((np.float32, 256))
 LIGHT = np.dtype([("position", float4), ("color", float4), ("direction", float4), ("cos_outer", np.float32),
                   ("cos_inner", np.float32), ("pad", np.uint32, 2)])
 LIGHT_ENTRY = np.dtype([("threshold", np.float32), ("alias", np.int32), ("kind", np.uint32), ("index", np.int32),
-                        ("probability", np.float32), ("pad", np.uint32, 3)])
+                        ("probability", np.float32), ("instance", np.int32), ("pad", np.uint32, 2)])
 BVH_PAIR_NODE = np.dtype([("left_a", float4), ("left_b", float4), ("right_a", float4), ("right_b", float4)])
 float8, int8, int4 = np.dtype((np.float32, 8)), np.dtype((np.int32, 8)), np.dtype((np.int32, 4))
 BVH_WIDE_NODE = np.dtype([("lo_x", float8), ("lo_y", float8), ("lo_z", float8), ("hi_x", float8),
@@ -417,7 +425,8 @@ SCENE_INFO = np.dtype([("ambient_light", float4), ("background", float4), ("pack
                        ("num_instances", np.uint32), ("pad", np.uint32, 3)])
 INSTANCE = np.dtype([("to_world", float4, 3), ("to_object", float4, 3), ("lo", float4), ("hi", float4),
                      ("mesh", np.int32), ("root", np.int32), ("first", np.int32), ("count", np.int32),
-                     ("flags", np.uint32), ("pad", np.uint32, 3)])
+                     ("flags", np.uint32), ("material", np.int32),
+                     ("min_scale", np.float32), ("pad", np.uint32)])
 
 # struct name in layouts.h -> numpy dtype; the layout test walks this table.
 STRUCTS = {

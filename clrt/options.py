@@ -257,9 +257,10 @@ OPTIONS = {o.name: o for o in [
     Option("aov", "--aov", _aovs, stage=OUTPUT, parse=_as_is, metavar="NAMES", commands=(RENDER,),
            api="per-pixel images come from clrt.camera_images (or Accel.camera_images)",
            help="also write per-pixel images, comma-separated: depth (along the view axis), distance (along the "
-                "ray), normal, prim (triangle index), hit, front; each as OUT.NAME.npy (the values; inf / -1 / 0 "
-                "where nothing is hit) and OUT.NAME.png (a picture of them); with an .exr output, as channels of "
-                "that file instead (Z, distance, N.X N.Y N.Z, prim, hit, front); see docs/ray-queries.md"),
+                "ray), normal, prim (triangle index), instance (placement of a mesh), hit, front; each as "
+                "OUT.NAME.npy (the values; inf / -1 / 0 where nothing is hit) and OUT.NAME.png (a picture of them); "
+                "with an .exr output, as channels of that file instead (Z, distance, N.X N.Y N.Z, prim, instance, "
+                "hit, front); see docs/ray-queries.md"),
     Option("quiet", "--quiet", _switch, short="-q", stage=OUTPUT, parse=None, default=False, commands=(RENDER,),
            api="it prints nothing", help="print only the output path"),
 ]}

@@ -35,6 +35,8 @@ class SceneData:
     FIELDS = ("ambient", "diffuse", "specular", "shininess", "reflectivity", "transparency", "ior")
 
     def __init__(self, scene: Scene):
+        if scene.instanced:   # placed meshes: the flattened twin (Scene.flattened), as the device shows them
+            scene = scene.flattened()
         corners, vertex, material, normals, colors, uv = [], [], [], [], [], []
         mats, textured = [], []   # every material; its texture, where its mesh has texture coordinates
         offset = 0

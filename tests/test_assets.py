@@ -4,14 +4,14 @@ from the files, on the device and in the reference tracer alike.
 Every asset is written here, into tmp_path, with trimesh, numpy and Pillow.
 """
 
-import json
-import struct
 
 import numpy as np
 import pyopencl as cl
 import pytest
 import trimesh
 from PIL import Image
+
+from glb import edit_glb_file
 
 import clrt
 from clrt import cli, config
@@ -53,19 +53,6 @@ def _agree(scene, device, size=(40, 30), **render):
     close = np.abs(frame.image - ref).max(axis=2) <= 2e-3
     assert close.mean() >= 0.995, f"{(~close).sum()} pixels differ"
     return frame
-
-
-def _glb_json(path, edit):
-    """Rewrite a GLB file's JSON chunk with ``edit(doc)``."""
-    data = path.read_bytes()
-    length = struct.unpack_from("<I", data, 12)[0]
-    doc = json.loads(data[20:20 + length])
-    edit(doc)
-    text = json.dumps(doc).encode()
-    text += b" " * (-len(text) % 4)
-    rest = data[20 + length:]
-    path.write_bytes(struct.pack("<4sIII4s", b"glTF", 2, 20 + len(text) + len(rest), len(text), b"JSON")
-                     + text + rest)
 
 
 # ---------------------------------------------------------------------------- sampling
@@ -156,7 +143,7 @@ def test_glb_samplers_transmission_and_ior(tmp_path, device):
         doc["materials"][0]["extensions"] = {"KHR_materials_transmission": {"transmissionFactor": 0.7},
                                              "KHR_materials_ior": {"ior": 1.33}}
         doc["materials"][0]["pbrMetallicRoughness"].update(metallicFactor=1.0, roughnessFactor=0.0)
-    _glb_json(tmp_path / "glass.glb", edit)
+    edit_glb_file(tmp_path / "glass.glb", edit)
     _, (m,) = load_asset(tmp_path / "glass.glb")
     assert (m["texture"].wrap_s, m["texture"].wrap_t) == ("mirror", "clamp")
     assert m["transparency"] == 0.7 and m["ior"] == 1.33
@@ -165,7 +152,7 @@ def test_glb_samplers_transmission_and_ior(tmp_path, device):
 
     def rough(doc):   # roughness 0.5: Blinn-Phong's 2 / 0.5^4 - 2 = 30, a Phong exponent of 7.5
         doc["materials"][0]["pbrMetallicRoughness"].update(metallicFactor=0.0, roughnessFactor=0.5)
-    _glb_json(tmp_path / "glass.glb", rough)
+    edit_glb_file(tmp_path / "glass.glb", rough)
     _, (m,) = load_asset(tmp_path / "glass.glb")
     assert m["shininess"] == 7.5 and m["specular"] == 0.5 and m["reflectivity"] == 0.0
 

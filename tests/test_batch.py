@@ -399,6 +399,45 @@ def test_frames_as_linear_exr_and_16_bit_png(client, meshes, tmp_path, device, c
                                                                 for v in (0, 1))
 
 
+def test_path_traced_frames_are_those_of_clrt_render(client, meshes, tmp_path, device, capsys):
+    """With the path tracer, an EXR frame holds what ``clrt render -o x.exr``
+    writes -- the linear image and the denoisers' albedo and normal channels
+    -- and a 16-bit PNG frame applies ``exposure`` as ``clrt render
+    --bit-depth 16`` does: bit for bit, the same seed on the same device."""
+    OpenEXR = pytest.importorskip("OpenEXR", reason="EXR frames need the exr extra (the test extra has it)")
+    from png_reference import spec_decode
+
+    from clrt.scene.texture import srgb_encode
+
+    def read_exr(path):
+        with OpenEXR.File(str(path), separate_channels=True) as f:
+            return {name: c.pixels for name, c in f.channels().items()}
+    out = tmp_path / "out"
+    path = dict(integrator="path", spp=3, seed=5, exposure=1.5)
+    dev = ["--device", device] if device else []
+    for kwargs, name in ((dict(format="exr"), "view-0000.exr"), (dict(bit_depth=16), "view-0000.png")):
+        outputs = clrt.batch.render([meshes[0]], out, client=client, device=device, **SIZE, **path, **kwargs)
+        assert [o.status for o in outputs] == ["done"]
+        cam = {r["path"]: r for r in _manifest(out)}[f"ball/{name}"]["camera"]
+        single = tmp_path / f"single-{name}"
+        assert main(["render", str(meshes[0]), "-o", str(single), *SIZE_ARGS, "-q", *dev, "--integrator", "path",
+                     "--spp", "3", "--seed", "5", "--exposure", "1.5", "--eye", ",".join(map(repr, cam["eye"])),
+                     "--target", ",".join(map(repr, cam["target"])),
+                     *(["--bit-depth", "16"] if "bit_depth" in kwargs else [])]) == 0
+        capsys.readouterr()
+        if name.endswith(".exr"):
+            frame, expected = read_exr(out / "ball" / name), read_exr(single)
+            assert sorted(frame) == sorted(expected) and {"albedo.R", "normal.Z"} <= set(frame)
+            assert all(frame[c].tobytes() == expected[c].tobytes() for c in frame)
+            linear = np.stack([frame[c] for c in "RGB"], axis=-1)
+        else:
+            codes = spec_decode((out / "ball" / name).read_bytes())
+            np.testing.assert_array_equal(codes, spec_decode(single.read_bytes()))
+            # the linear EXR frame x 2^1.5, clamped, sRGB-encoded to 16 bits
+            np.testing.assert_array_equal(codes, srgb_encode(linear * np.float32(2.0 ** 1.5), 16))
+            assert (codes > 0).any() and (codes < 65535).any()
+
+
 def test_resume_renders_only_what_is_missing(client, meshes, tmp_path, device):
     out = tmp_path / "out"
     first = clrt.batch.render(meshes, out, views=3, client=client, device=device, **SIZE)

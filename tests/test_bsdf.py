@@ -593,10 +593,20 @@ def test_white_metal_albedo_matches_the_float64_quadrature(probe):
 FURNACE = {  # name: (Material keywords, keeps energy)
     "white_plastic_r0.5": (dict(roughness=0.5, specular_weight=1.0, metallic=0.0), True),
     "white_plastic_r0.1": (dict(roughness=0.1, specular_weight=1.0, metallic=0.0), True),
-    "mirror": (dict(roughness=0.0, metallic=1.0), True),
-    "white_metal_r0.1": (dict(roughness=0.1, metallic=1.0), True),
     "smooth_glass": (dict(roughness=0.0, metallic=0.0, specular_weight=1.0, transmission=1.0, ior=1.5), True),
+    # The metal lobe at every roughness where single scattering keeps the
+    # energy (within 0.1 % at the views of the sphere's centre, docs'
+    # table): the mirror (delta), the narrowest rough lobe just above
+    # BSDF_DELTA_ALPHA, and on to 0.15 ...
+    "mirror": (dict(roughness=0.0, metallic=1.0), True),
+    "white_metal_r0.035": (dict(roughness=0.035, metallic=1.0), True),
+    "white_metal_r0.1": (dict(roughness=0.1, metallic=1.0), True),
+    "white_metal_r0.15": (dict(roughness=0.15, metallic=1.0), True),
+    # ... and those that lose by design what bounces between facets (from
+    # roughness 0.25 on: 0.4 % at normal view, 5 % at grazing; 69 % at 1).
+    "white_metal_r0.25": (dict(roughness=0.25, metallic=1.0), False),
     "white_metal_r0.5": (dict(roughness=0.5, metallic=1.0), False),
+    "white_metal_r1": (dict(roughness=1.0, metallic=1.0), False),
 }
 
 
@@ -605,7 +615,10 @@ def test_white_furnace_through_the_path_tracer(name, device):
     """A white sphere under uniform radiance 1, rendered by the path tracer:
     materials that keep energy vanish (mean 1, less the little that the
     wedges of its interpolated normals drop at the silhouette); a rough metal
-    shows its single-scattering loss."""
+    shows its single-scattering loss, pixel by pixel the float64 quadrature's
+    directional albedo at the pixel's view angle (a convex sphere: one
+    bounce, then the sky)."""
+    from clrt.reference import camera_rays
     from clrt.renderer import Renderer
     from clrt.scene import primitives
     from clrt.scene.scene import Camera, Material, Scene, SceneObject
@@ -615,12 +628,28 @@ def test_white_furnace_through_the_path_tracer(name, device):
     scene = Scene([SceneObject(primitives.icosphere(2), material)], [], background=(1.0, 1.0, 1.0),
                   integrator="path")
     camera = Camera((0.0, 0.0, 2.6), (0.0, 0.0, 0.0), width=16, height=16, fov=50)
-    image = Renderer(scene, device=device).render(camera, linear=True, spp=64, seed=3).image
+    image = Renderer(scene, device=device).render(camera, linear=True, spp=64 if keeps else 256, seed=3).image
     centre = image[5:11, 5:11].mean()       # the sphere seen head on
     if keeps:
         assert abs(image.mean() - 1.0) < 0.006 and abs(centre - 1.0) < 0.01, (image.mean(), centre)
-    else:
-        assert centre < 0.95 and centre == pytest.approx(metal_albedo(0.25, 1.0), abs=0.03), centre
+        return
+    # The view cosine of each pixel centre's ray at the unit sphere (where it meets it away from the rim).
+    origins, dirs = (a.astype(np.float64) for a in camera_rays(camera))
+    b = np.einsum("ij,ij->i", origins, dirs)
+    disc = b * b - (np.einsum("ij,ij->i", origins, origins) - 1.0)
+    t = -b - np.sqrt(np.maximum(disc, 0.0))
+    cos_view = np.where(disc > 0, -np.einsum("ij,ij->i", origins + t[:, None] * dirs, dirs), 0.0)
+    face = (cos_view > 0.5).reshape(16, 16)
+    alpha = keywords["roughness"] ** 2
+    grid = np.linspace(0.45, 1.0, 12)
+    expected = np.interp(cos_view, grid, [metal_albedo(alpha, c) for c in grid]).reshape(16, 16)
+    assert face.sum() > 40 and expected[face].max() < 0.997
+    # The mean over those pixels within four of its standard errors (measured
+    # from their spread about the quadrature) and 0.002 (a pixel's jitter
+    # averages its view cosines about the centre's).
+    diff = image[face].mean(axis=-1) - expected[face]
+    error = diff.std() / math.sqrt(diff.size)
+    assert abs(diff.mean()) < 4.0 * error + 0.002, (diff.mean(), error)
 
 
 def test_the_docs_table_of_metal_albedo_is_the_quadratures():

@@ -165,3 +165,23 @@ def test_create_context_profiling_and_cache():
     event = cl.enqueue_copy(queue, np.empty_like(host), buf)
     event.wait()
     assert event.profile.end >= event.profile.start
+
+
+def test_program_binaries_are_kept_on_disk_except_on_pocl(device, tmp_path, monkeypatch):
+    """clrt keeps a built program's binary in CLRT_CACHE_DIR and a new process
+    loads it -- except on PoCL, whose own cache keeps programs, and where
+    taking a binary would compile every kernel for any work-group size."""
+    from clrt.device import program
+    monkeypatch.setenv("CLRT_CACHE_DIR", str(tmp_path))
+    monkeypatch.delenv("CLRT_NO_PROGRAM_CACHE", raising=False)
+    context, _ = create_context(device)
+    defines = {"CLRT_TEST_BINARY_CACHE": 1}   # a program of its own, whatever else this process built
+    monkeypatch.setattr(program, "_programs", {})
+    program.build_program(context, "lanes.cl", defines)
+    stored = list((tmp_path / "programs").glob("*.bin")) if (tmp_path / "programs").is_dir() else []
+    pocl = context.devices[0].platform.name == "Portable Computing Language"
+    assert program.keeps_binaries(context) == (not pocl)
+    assert len(stored) == (0 if pocl else 1)
+    monkeypatch.setattr(program, "_programs", {})     # as a new process
+    program.build_program(context, "lanes.cl", defines)
+    assert [b.from_disk for b in program.builds[-2:]] == [False, not pocl]

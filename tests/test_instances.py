@@ -309,6 +309,105 @@ def test_split_buffers_copies_and_pickles_answer_alike(scene, device):
     assert "instances" in repr(split)
 
 
+def _moved(transforms):
+    """The transforms turned, shifted and rescaled, one mirrored anew and one
+    mirror undone: boxes, flags and the top level all change."""
+    rng = np.random.default_rng(11)
+    moved = transforms.copy()
+    for k, m in enumerate(moved):
+        m[:3, :3] = _rotation(rng.normal(size=3), rng.uniform(0.3, 3.0)) @ m[:3, :3] * rng.uniform(0.6, 1.4)
+        m[:3, 3] += rng.normal(size=3) * 2.0
+    moved[1, :3, :3] = moved[1, :3, :3] @ np.diag([1.0, -1.0, 1.0])
+    moved[2, :3, :3] = moved[2, :3, :3] @ np.diag([-1.0, 1.0, 1.0])
+    return moved
+
+
+@pytest.mark.parametrize("volume, builder, split", [("box", "sah", None), ("ellipse", "device", None),
+                                                    ("sphere", "paper", 32768)])
+def test_moved_instances_are_a_fresh_build_of_them_bit_for_bit(scene, volume, builder, split, device):
+    """move_instances builds the instance table and the top level again and
+    keeps each mesh's rows: the host arrays, the uploaded buffers, the
+    program's defines and every answer are those of an Accel made of the
+    moved instances."""
+    instances = scene[0]
+    moved = _moved(instances.transforms)
+    accel = clrt.Accel(instances, accel=volume, builder=builder, device=device, max_buffer_bytes=split)
+    base = len(accel.acceleration.top.rows)
+    meshes_rows = accel.acceleration.rows[base:].copy()
+    accel.move_instances(moved)
+    fresh = clrt.Accel(clrt.Instances(instances.meshes, instances.mesh_of, moved), accel=volume, builder=builder,
+                       device=device, max_buffer_bytes=split)
+    mine, theirs = accel.acceleration, fresh.acceleration
+    assert np.array_equal(mine.rows[base:], meshes_rows)
+    assert mine.rows.tobytes() == theirs.rows.tobytes() and mine.instances.tobytes() == theirs.instances.tobytes()
+    assert accel.device_scene.defines() == fresh.device_scene.defines() and mine.move_ms > 0
+    assert np.array_equal(accel.geometry.origin, fresh.geometry.origin)
+    import pyopencl as cl
+    for name, host in (("nodes", theirs.rows), ("instances", theirs.instances)):
+        back = [np.empty_like(host) for _ in range(2)]
+        for a, out in zip((accel, fresh), back):
+            parts, at = a.geometry.buffers[name], 0
+            for part in dict.fromkeys(parts):   # each part once (the last is repeated), in order
+                n = min(part.size // host.itemsize, len(host) - at)
+                cl.enqueue_copy(a.queue, out[at:at + n], part)
+                at += n
+        assert back[0].tobytes() == back[1].tobytes() == host.tobytes(), name
+    origins, directions = _rays(fresh.instances.bounds, 1500, seed=8)
+    directions = fresh.instances.boxes().mean(axis=1)[np.arange(1500) % 6] - origins   # at the instances
+    got, want = accel.trace(origins, directions), fresh.trace(origins, directions)
+    assert got.hit.mean() > 0.3
+    for field in got._fields:
+        assert np.array_equal(getattr(got, field), getattr(want, field)), field
+    assert np.array_equal(accel.count(origins, directions), fresh.count(origins, directions))
+
+
+def test_bad_moves_are_one_line(scene, device):
+    instances = scene[0]
+    accel = clrt.Accel(instances, device=device)
+    _one_line_error(lambda: accel.move_instances(instances.transforms[:5]),
+                    r"transforms must have shape \(6, 4, 4\), got \(5, 4, 4\)")
+    bad = instances.transforms.copy()
+    bad[3, 2] = 0.0
+    _one_line_error(lambda: accel.move_instances(bad), r"instance 3's transform must be invertible")
+    far = instances.transforms.copy()
+    far[4, :3, 3] = (9e29, 0, 0)
+    far[4, :3, :3] *= 1e29
+    _one_line_error(lambda: accel.move_instances(far), r"instance 4's transform takes its mesh to .*, past \+-1e\+30")
+    _one_line_error(lambda: clrt.Accel(TEST_MESHES["box"](), device=device).move_instances(instances.transforms),
+                    r"move_instances needs an Accel of instances")
+    hits = accel.trace(*_rays(instances.bounds, 200, seed=1))   # nothing moved by the refusals
+    assert np.array_equal(hits.t, clrt.Accel(instances, device=device).trace(*_rays(instances.bounds, 200, seed=1)).t)
+
+
+@pytest.mark.parametrize("volume, builder", [("box", "sah"), ("sphere", "device"), ("ellipse", "paper")])
+def test_closest_points_on_instances(scene, volume, builder, device):
+    """Every two-level BVH finds the closest points of the two-level brute
+    force, bit for bit; both are the flattened scene's -- the same instance
+    and triangle but at near ties (equal distances, within rounding), the
+    distance and the point within float32 rounding of the transforms -- under
+    rotations, non-uniform scales, shears and mirrors (the walk bounds a
+    mesh's volumes by the instance's smallest scale)."""
+    instances = scene[0]
+    lo, hi = instances.bounds
+    points = np.random.default_rng(4).uniform(lo - 0.5, hi + 0.5, (2000, 3))
+    brute = clrt.Accel(instances, accel="none", device=device).closest_points(points)
+    got = clrt.Accel(instances, accel=volume, builder=builder, device=device).closest_points(points)
+    for field in got._fields:
+        assert np.array_equal(getattr(got, field), getattr(brute, field), equal_nan=True), field
+    want = clrt.Accel(instances.flattened(), device=device).closest_points(points)
+    faces = np.array([len(instances.meshes[k].faces) for k in instances.mesh_of])
+    first = np.concatenate([[0], np.cumsum(faces)])
+    same = first[got.instance] + got.prim == want.prim
+    scale = float(np.abs(hi - lo).max())
+    assert same.mean() > 0.95 and set(got.instance) == set(range(6))
+    assert np.abs(got.distance - want.distance).max() < 1e-6 * scale
+    assert np.abs(got.point[same] - want.point[same]).max() < 1e-5 * scale
+    far = clrt.Accel(instances, device=device).closest_points(points, max_distance=0.05)
+    assert np.array_equal(far.instance == -1, ~(brute.distance <= 0.05)) and (far.instance >= 0).any()
+    with pytest.raises(clrt.InputError, match="inside tests on an Accel of instances are not supported yet"):
+        clrt.Accel(instances, device=device).signed_distance(points[:3])
+
+
 def _one_line_error(call, match):
     with pytest.raises(clrt.InputError, match=match) as info:
         call()
@@ -344,7 +443,7 @@ def test_bad_instances_are_one_line(device, monkeypatch):
     _one_line_error(lambda: Instances([mesh], [0] * 4), r"a scene holds at most 3 instances .* got 4")
     monkeypatch.undo()
     accel = clrt.Accel([mesh, (mesh, _affine(shift=(3.0, 0.0, 0.0)))], device=device)
-    _one_line_error(lambda: accel.closest_points([0.0, 0.0, 0.0]), "point queries on an Accel of instances")
+    _one_line_error(lambda: accel.winding_number([0.0, 0.0, 0.0]), "inside tests on an Accel of instances")
     _one_line_error(lambda: accel.refit(mesh.vertices), "refit of an Accel of instances")
 
 

@@ -52,7 +52,7 @@ def test_signature_tables_match_the_kernels(device, max_buffer_bytes):
     renderer = Renderer(scene_from_mesh(mesh), device=device, max_buffer_bytes=max_buffer_bytes)
     assert (renderer.geometry.parts() > 1) == split
     _check(renderer.context, "render.cl", renderer.device_scene.defines(), renderer.kernels, split)
-    _check(renderer.context, "path.cl", renderer.device_scene.defines(), {"path_trace": PathTracer(renderer).kernel},
+    _check(renderer.context, "path.cl", renderer.device_scene.defines(), PathTracer(renderer).kernels,
            split)
     # A scene with corner colours and a texture: the -DSURFACE_DETAIL parameters too.
     colours = np.random.default_rng(1).random((len(mesh.faces), 3, 3))
@@ -62,7 +62,7 @@ def test_signature_tables_match_the_kernels(device, max_buffer_bytes):
     _check(textured.context, "render.cl", textured.device_scene.defines({"SURFACE_DETAIL": None}),
            textured.kernels, split)
     _check(textured.context, "path.cl", textured.device_scene.defines({"SURFACE_DETAIL": None}),
-           {"path_trace": PathTracer(textured).kernel}, split)
+           PathTracer(textured).kernels, split)
     for accel in ("box", "none", "sphere"):
         queries = Accel(mesh, accel=accel, device=device, max_buffer_bytes=max_buffer_bytes)
         _check(queries.context, "trace.cl", queries.device_scene.defines(), queries.kernels, split)

@@ -11,6 +11,8 @@ import numpy as np
 import pytest
 import trimesh
 
+from glb import glb_with_json
+
 from clrt.errors import MeshLoadError, MeshLoadWarning
 from clrt.scene import load as load_module
 from clrt.scene.formats import part as part_module
@@ -902,19 +904,6 @@ def test_no_triangles(tmp_path, name, data):
     assert_one_line_error(write(tmp_path, name, data), "no triangles")
 
 
-def _glb_json_replaced(glb: bytes, edit) -> bytes:
-    """The GLB with its JSON chunk's document changed by ``edit(doc)``."""
-    import json
-    (length,) = struct.unpack_from("<I", glb, 12)
-    doc = json.loads(glb[20:20 + length])
-    edit(doc)
-    text = json.dumps(doc).encode()
-    text += b" " * (-len(text) % 4)
-    rest = glb[20 + length:]
-    return struct.pack("<4sII", b"glTF", 2, 20 + len(text) + len(rest)) + struct.pack("<I", len(text)) + b"JSON" \
-        + text + rest
-
-
 def test_broken_gltf_gets_the_mesh_readers_reason(tmp_path):
     """Not the camera reader's error, nor an exception name of trimesh's."""
     from clrt.scene.scene import scene_from_mesh
@@ -924,15 +913,15 @@ def test_broken_gltf_gets_the_mesh_readers_reason(tmp_path):
         "cut.glb": (glb[:60], "corrupt or unsupported GLB file: truncated GLB file (its JSON chunk is"),
         "short.glb": (glb[:-8], "corrupt or unsupported GLB file: truncated GLB file (header says"),
         "bad.gltf": (b'{"asset": {"version": "2.0"}, "meshes": [', "corrupt or unsupported GLTF file: invalid JSON ("),
-        "accessor.glb": (_glb_json_replaced(glb, lambda d: d["meshes"][0]["primitives"][0]["attributes"]
+        "accessor.glb": (glb_with_json(glb, lambda d: d["meshes"][0]["primitives"][0]["attributes"]
                                             .update(POSITION=7)),
                          "corrupt GLB file: meshes[0].primitives[0].attributes.POSITION: accessor 7 does not "
                          "exist (the file has 2)"),
-        "indices.glb": (_glb_json_replaced(glb, lambda d: d["meshes"][0]["primitives"][0].update(indices=-1)),
+        "indices.glb": (glb_with_json(glb, lambda d: d["meshes"][0]["primitives"][0].update(indices=-1)),
                         "meshes[0].primitives[0].indices: accessor -1 does not exist"),
-        "view.glb": (_glb_json_replaced(glb, lambda d: d["accessors"][0].update(bufferView=9)),
+        "view.glb": (glb_with_json(glb, lambda d: d["accessors"][0].update(bufferView=9)),
                      "accessors[0].bufferView: bufferView 9 does not exist"),
-        "node.glb": (_glb_json_replaced(glb, lambda d: d["nodes"][0].update(mesh=3)),
+        "node.glb": (glb_with_json(glb, lambda d: d["nodes"][0].update(mesh=3)),
                      "nodes[0].mesh: mesh 3 does not exist (the file has 1)"),
     }
     for name, (data, expected) in cases.items():

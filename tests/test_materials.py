@@ -13,6 +13,7 @@ from clrt.scene import primitives
 from clrt.scene.arrays import flatten_scene
 from clrt.scene.scene import Material, Scene, SceneObject
 from clrt.scene.texture import Texture
+from glb import edit_glb_file
 
 
 def _texture(seed: int) -> Texture:
@@ -171,21 +172,6 @@ def _pbr_glb(tmp_path, **material):
     return path
 
 
-def _edit_glb(path, edit):
-    """Rewrite a GLB file's JSON chunk with ``edit(doc)``."""
-    import json
-    import struct
-    data = path.read_bytes()
-    length = struct.unpack_from("<I", data, 12)[0]
-    doc = json.loads(data[20:20 + length])
-    edit(doc)
-    text = json.dumps(doc).encode()
-    text += b" " * (-len(text) % 4)
-    rest = data[20 + length:]
-    path.write_bytes(struct.pack("<4sIII4s", b"glTF", 2, 20 + len(text) + len(rest), len(text), b"JSON")
-                     + text + rest)
-
-
 def test_gltf_metallic_roughness_materials_are_read_whole(tmp_path):
     """Every PBR field and texture of a glTF material, from a file trimesh writes
     (factors, emissive, doubleSided, four textures) and extensions added to it."""
@@ -203,7 +189,7 @@ def test_gltf_metallic_roughness_materials_are_read_whole(tmp_path):
                            "KHR_materials_specular": {"specularFactor": 0.5, "specularColorFactor": [1.5, 1.0, 0.25]},
                            "KHR_materials_transmission": {"transmissionFactor": 0.875},
                            "KHR_materials_ior": {"ior": 1.25}}
-    _edit_glb(path, extend)
+    edit_glb_file(path, extend)
     mesh, (fields,) = load_asset(path)
     material = Material(**fields)
     assert material.color == (1.0, 0.5, 0.25)
@@ -236,7 +222,7 @@ def test_gltf_defaults_and_shared_textures(tmp_path):
                                  "emissiveTexture": {"index": 0}})
         doc["meshes"][0]["primitives"][0]["material"] = 1
         doc["materials"][0]["pbrMetallicRoughness"] = {"baseColorTexture": {"index": 0}}
-    _edit_glb(path, second_material)
+    edit_glb_file(path, second_material)
     _, (first, second) = load_asset(path)
     assert first["texture"] is second["texture"] is second["emission_texture"]
     m = Material(**first)
@@ -264,7 +250,7 @@ def test_bad_gltf_pbr_values_are_one_line_errors_naming_file_and_material(tmp_pa
     from clrt.errors import MeshLoadError
     from clrt.scene.load import load_asset
     path = _pbr_glb(tmp_path, metallicFactor=0.5)
-    _edit_glb(path, lambda doc: edit(doc["materials"][0]))
+    edit_glb_file(path, lambda doc: edit(doc["materials"][0]))
     with pytest.raises(MeshLoadError) as info:
         load_asset(path)
     message = str(info.value)
@@ -275,7 +261,7 @@ def test_bad_gltf_pbr_values_are_one_line_errors_naming_file_and_material(tmp_pa
 def test_the_cli_refuses_a_negative_emission_with_exit_2_and_no_file(tmp_path, device, capsys):
     from clrt.cli import main
     path = _pbr_glb(tmp_path, emissiveFactor=[1.0, 1.0, 1.0])
-    _edit_glb(path, lambda doc: doc["materials"][0].update(emissiveFactor=[1.0, -1.0, 1.0]))
+    edit_glb_file(path, lambda doc: doc["materials"][0].update(emissiveFactor=[1.0, -1.0, 1.0]))
     out = tmp_path / "out.png"
     code = main(["render", str(path), "-o", str(out), "--width", "8", "--height", "8",
                  *(["--device", device] if device else [])])

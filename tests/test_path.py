@@ -5,6 +5,7 @@ the same seed.  Small images and few samples on PoCL; the tolerances are
 several standard errors of the estimate (measured from the renders
 themselves where the noise is not known beforehand)."""
 
+import importlib
 import math
 
 import numpy as np
@@ -19,6 +20,8 @@ from clrt.scene.emitters import alias_table, environment_cdfs
 from clrt.scene.environment import Environment, read_hdr
 from clrt.scene.mesh import Mesh
 from clrt.scene.scene import Camera, Light, Material, Scene, SceneObject
+
+frame_module = importlib.import_module("clrt.renderer.frame")
 
 # Pure Lambert of albedo 1: no specular lobe, no metal, no transmission.
 WHITE = Material(color=(1.0, 1.0, 1.0), specular=0.0, metallic=0.0, specular_weight=0.0, roughness=1.0)
@@ -58,6 +61,33 @@ def test_a_white_sphere_in_a_white_furnace_vanishes(furnace, device):
     mapped = Renderer(scene, device=device).render(
         _sphere_camera(), linear=True, spp=64, seed=3).image
     assert abs(mapped.mean() - 1.0) < 0.005 and np.abs(mapped - 1.0).max() < 0.12
+
+
+def test_russian_roulette_looks_past_the_eta_scale_of_glass(device):
+    """A white Lambert ball inside a shell of smooth glass (ior 2) in a white
+    furnace: a path that enters the glass carries 1 / eta^2 of radiance and
+    gets eta^2 back on the way out, so every path that leaves returns exactly
+    1 (the image is 1), and only the roulette adds noise.  Paths trapped by
+    total internal reflection reach the roulette inside the glass; judged by
+    their throughput alone (0.25) three in four would die there and the
+    survivors leave with weight 4.  With the eta scale undone (pbrt's
+    etaScale, Mitsuba's eta^2) they continue with probability 0.95.  One
+    path's standard deviation, from the spread of pixels that all converge to
+    1: 0.69 and 0.77 here (seeds 1 and 2), 1.65 and 1.80 with the roulette
+    on the throughput alone -- a variance 5.5 times higher."""
+    glass = Material(color=(1.0, 1.0, 1.0), metallic=0.0, specular_weight=1.0, roughness=0.0, transmission=1.0,
+                     ior=2.0, smooth=False)
+    white = Material(color=(1.0, 1.0, 1.0), specular=0.0, metallic=0.0, specular_weight=0.0, roughness=1.0,
+                     smooth=False)
+    scene = Scene([SceneObject(primitives.icosphere(2), glass), SceneObject(primitives.icosphere(2, radius=0.8), white)],
+                  [], background=(1.0, 1.0, 1.0), integrator="path")
+    camera = Camera((0.0, 0.0, 2.6), (0.0, 0.0, 0.0), width=16, height=16, fov=40)
+    spp = 256
+    for seed in (1, 2):
+        centre = Renderer(scene, device=device).render(camera, linear=True, spp=spp, seed=seed).image[4:12, 4:12]
+        path_std = centre.std() * math.sqrt(spp)
+        assert path_std < 1.2, (seed, path_std)
+        assert abs(centre.mean() - 1.0) < 4.0 * max(path_std, 0.5) / math.sqrt(centre.size / 3 * spp), centre.mean()
 
 
 def test_max_depth_counts_as_mitsuba_does(device):
@@ -102,24 +132,55 @@ def cornerless_room(device):
     return Renderer(scene, device=device)
 
 
-def test_light_bsdf_and_mis_sampling_agree(cornerless_room):
+@pytest.fixture(scope="module")
+def glossy_room_under_a_sky(device):
+    """Rough gold on rough white plastic under an emissive quad and an
+    environment map with a bright patch: an area light and a sampled map
+    beside glossy lobes (metal, the dielectric layer), not only Lambert."""
+    sky = np.full((16, 32, 3), 0.3, np.float32)
+    sky[:8] *= np.linspace(0.5, 1.5, 8, dtype=np.float32)[:, None, None]   # brighter towards the zenith
+    sky[2:6, 18:24] = (6.0, 5.0, 4.0)
+    objects = [SceneObject(_quad(-1.0, 4.0, down=False), Material(color=(0.8, 0.8, 0.8), metallic=0.0,
+                                                                   roughness=0.6, specular_weight=1.0)),
+               SceneObject(primitives.icosphere(2), Material(color=(1.0, 0.78, 0.34), metallic=1.0,
+                                                               roughness=0.45)),
+               SceneObject(_quad(2.0, 0.7, down=True), Material(emission=(6.0, 6.0, 5.0), **BLACK_EMITTER))]
+    scene = Scene(objects, [], integrator="path", max_depth=3, environment=Environment(sky, rotation=40.0))
+    return Renderer(scene, device=device)
+
+
+@pytest.mark.parametrize("room, spps", [("cornerless_room", (12, 12, 24)),
+                                        ("glossy_room_under_a_sky", (32, 32, 64))])
+def test_light_bsdf_and_mis_sampling_agree(room, spps, request):
     """Light sampling alone, BSDF sampling alone and both by MIS estimate one
-    image: block means agree within five standard errors, each measured from
-    two seeds of the same strategy."""
+    image: 4x4 block means agree within six standard errors, each block's
+    measured from the spread of eight seeds of each strategy (their noise
+    differs from block to block: a glossy highlight of a small light is
+    noisy for light sampling alone; estimated from eight runs, the errors
+    are uncertain themselves -- Student's t of 7 degrees of freedom, whence
+    six), and the image means within four.  Once with Lambert surfaces, an
+    area light and a constant sky; once with rough metal and plastic, an
+    area light and an importance-sampled environment map (where the map's
+    pdf made 10 % too large puts the image means 4-7 standard errors apart,
+    seeds 1-8, 11-18 and 21-28)."""
+    renderer = request.getfixturevalue(room)
     camera = Camera((0.0, 0.6, 4.0), (0.0, 0.0, 0.0), width=24, height=16, fov=50)
-    means, errors = {}, {}
-    for strategy, spp in (("mis", 48), ("light", 48), ("bsdf", 96)):
-        a, b = (_block_means(cornerless_room.render(camera, linear=True, spp=spp, seed=seed,
-                                                    strategy=strategy).image) for seed in (1, 2))
-        means[strategy] = 0.5 * (a + b)
-        errors[strategy] = np.sqrt(np.mean((a - b) ** 2) / 4.0)   # rms standard error of the mean of two
+    means, errors, image_errors = {}, {}, {}
+    for strategy, spp in zip(("mis", "light", "bsdf"), spps):
+        runs = np.stack([_block_means(renderer.render(camera, linear=True, spp=spp, seed=seed,
+                                                      strategy=strategy).image) for seed in range(1, 9)])
+        means[strategy] = runs.mean(axis=0)
+        errors[strategy] = runs.std(axis=0, ddof=1) / math.sqrt(len(runs))   # each block's standard error
+        image_errors[strategy] = runs.mean(axis=(1, 2, 3)).std(ddof=1) / math.sqrt(len(runs))
     for strategy in ("light", "bsdf"):
-        sigma = math.hypot(errors["mis"], errors[strategy])
-        diff = np.abs(means[strategy] - means["mis"])
-        assert diff.max() < 5.0 * sigma + 1e-3, (strategy, diff.max(), sigma)
-        assert abs(means[strategy].mean() - means["mis"].mean()) < 2.0 * sigma, strategy
-    # And MIS is the least noisy of the three here (what it is for).
-    assert errors["mis"] <= min(errors["light"], errors["bsdf"]) * 1.1, errors
+        sigma = np.hypot(errors["mis"], errors[strategy])
+        z = np.abs(means[strategy] - means["mis"]) / np.maximum(sigma, 1e-4)
+        assert z.max() < 6.0, (strategy, z.max())
+        image_sigma = math.hypot(image_errors["mis"], image_errors[strategy])
+        assert abs(means[strategy].mean() - means["mis"].mean()) < 4.0 * image_sigma, strategy
+    # And MIS is the least noisy of the three (what it is for).
+    rms = {strategy: np.sqrt(np.mean(e**2)) for strategy, e in errors.items()}
+    assert rms["mis"] <= min(rms["light"], rms["bsdf"]) * 1.1, rms
 
 
 def test_a_seed_gives_the_same_image_whatever_the_launches(cornerless_room, device):
@@ -135,6 +196,42 @@ def test_a_seed_gives_the_same_image_whatever_the_launches(cornerless_room, devi
     rows = narrow.render(camera, linear=True, spp=5, seed=7)
     assert rows.tiles >= 14 * len(pass_sizes(5))
     np.testing.assert_array_equal(rows.image, first)
+
+
+def test_previews_and_ctrl_c_hold_the_samples_done(cornerless_room, device, monkeypatch):
+    """A preview after each pass but the last shows the image of the samples
+    done, bit for bit; Ctrl-C keeps every queued launch's samples, each pixel
+    averaging its own (rows a launch of the next pass reached have more), and
+    is a plain interruption while the first pass is not yet queued whole."""
+    camera = Camera((0.0, 0.6, 4.0), (0.0, 0.0, 0.0), width=20, height=14, fov=50)
+    shown = []
+    cornerless_room.render(camera, linear=True, spp=8, seed=7, preview=lambda f: shown.append((f.spp, f.image)))
+    assert [samples for samples, _ in shown] == [1, 2, 4]
+    alone = {n: cornerless_room.render(camera, linear=True, spp=n, seed=7).image for n in (1, 2, 4)}
+    for samples, image in shown:
+        np.testing.assert_array_equal(image, alone[samples])
+    # One row a launch: the first pass takes 14 launches; the host waits for
+    # each with one more queued behind it.
+    narrow = Renderer(cornerless_room.scene, device=device,
+                      limits=TileLimits(first_launch_pixels=20, launch_ms=1e-6))
+    real_wait, waits = frame_module.wait_for, []
+
+    def ctrl_c_at(k):
+        def wait(event):
+            real_wait(event)
+            waits.append(1)
+            if len(waits) == k:
+                raise KeyboardInterrupt
+        return wait
+    monkeypatch.setattr(frame_module, "wait_for", ctrl_c_at(1))
+    with pytest.raises(KeyboardInterrupt):
+        narrow.render(camera, linear=True, spp=8, seed=7)
+    waits.clear()
+    monkeypatch.setattr(frame_module, "wait_for", ctrl_c_at(15))   # launches 1..16 queued: rows 0 and 1 twice
+    cut = narrow.render(camera, linear=True, spp=8, seed=7)
+    assert cut.interrupted and cut.spp == 1 and cut.tiles == 16
+    np.testing.assert_array_equal(cut.image[:2], alone[2][:2])
+    np.testing.assert_array_equal(cut.image[2:], alone[1][2:])
 
 
 def test_a_spot_light_lights_its_cone_only(device):

@@ -10,7 +10,7 @@ import pytest
 from PIL import Image
 
 from clrt import cli
-from clrt.renderer.path import tone_map
+from clrt.renderer.path import QUEUED_LAUNCHES, tone_map
 
 render_module = importlib.import_module("clrt.renderer.frame")
 
@@ -74,19 +74,21 @@ def test_bad_input_is_one_line_exit_2_and_no_file(words, says, scene_file, devic
 def test_ctrl_c_after_a_pass_keeps_the_passes_done(scene_file, device, capsys, monkeypatch):
     real_wait, calls = render_module.wait_for, []
 
-    def interrupted(event):   # after the third launch: passes of 1, 1 and 2 samples are done
+    def interrupted(event):   # Ctrl-C while waiting for the third launch (the pass of 2 samples)
         real_wait(event)
         calls.append(1)
         if len(calls) == 3:
             raise KeyboardInterrupt
     monkeypatch.setattr(render_module, "wait_for", interrupted)
     code, _, err = _run([str(scene_file), "-o", "cut.png", "--spp", "64", "--seed", "2"], device, capsys)
-    assert code == 130 and err.startswith("clrt: interrupted after 4 of 64 samples per pixel; wrote "), err
+    # The launch queued behind it (QUEUED_LAUNCHES), the pass of 4, finishes too: passes 1, 1, 2, 4.
+    assert QUEUED_LAUNCHES == 1
+    assert code == 130 and err.startswith("clrt: interrupted after 8 of 64 samples per pixel; wrote "), err
     cut = np.asarray(Image.open("cut.png"))
     monkeypatch.setattr(render_module, "wait_for", real_wait)
-    code, _, err = _run([str(scene_file), "-o", "four.png", "--spp", "4", "--seed", "2"], device, capsys)
+    code, _, err = _run([str(scene_file), "-o", "eight.png", "--spp", "8", "--seed", "2"], device, capsys)
     assert code == 0, err
-    np.testing.assert_array_equal(cut, np.asarray(Image.open("four.png")))
+    np.testing.assert_array_equal(cut, np.asarray(Image.open("eight.png")))
 
 
 def test_emitters_light_a_file_without_lights(tmp_path, device, capsys, monkeypatch):

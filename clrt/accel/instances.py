@@ -53,12 +53,15 @@ class TwoLevel(Acceleration):
     bottoms:   each distinct mesh's Acceleration, as built (own references).
     order:     (S,) int64, the row of the meshes' concatenated corners (input
                order, mesh after mesh) that each slot holds.
+    move_ms:   host milliseconds of the last move of the instances (:func:`move`
+               with its instance table and upload: clrt.device.instances), 0 before.
     """
 
     instances: np.ndarray = field(repr=False, default=None)
     top: Acceleration | None = field(repr=False, default=None)
     bottoms: list = field(repr=False, default_factory=list)
     order: np.ndarray = field(repr=False, default=None)
+    move_ms: float = 0.0
 
     def slot_order(self) -> np.ndarray:
         return self.order
@@ -100,6 +103,7 @@ def instance_table(instances: Instances, mesh_origins: np.ndarray, origin: np.nd
     table["hi"][:, :3] = round_up32(boxes[:, 1] + pad)
     table["mesh"] = mesh_of
     table["flags"] = np.where(np.linalg.det(linear) < 0.0, INSTANCE_MIRROR, 0)
+    table["min_scale"] = round_down32(singular[:, 2] * (1.0 - 2.0 ** -20))
     return table
 
 
@@ -153,3 +157,26 @@ def assemble(bottoms: list, table: np.ndarray, accel: str, start: float | None =
     return TwoLevel(accel, bottoms[0].builder, np.concatenate(rows), prim_ids, depth=int(depth),
                     build_ms=1e3 * (time.perf_counter() - start), leaf_size=bottoms[0].leaf_size,
                     instances=table, top=top, bottoms=list(bottoms), order=order)
+
+
+def move(two: TwoLevel, table: np.ndarray) -> int:
+    """Place ``two``'s instances anew: ``table`` their INSTANCE rows for the
+    new transforms (:func:`instance_table`; their meshes' places are copied
+    here), the top level built again over its boxes, as :func:`assemble`
+    builds it -- the meshes' levels stay, rows and all: a binary top level
+    over I instances, one a leaf, has I - 1 rows (one for a single instance)
+    whatever the boxes, so every mesh's rows keep their place.  Returns how
+    many rows from the first changed (the top level's; 0 without a BVH)."""
+    for name in ("mesh", "root", "first", "count", "material"):
+        table[name] = two.instances[name]
+    two.instances = table
+    if two.top is None:
+        return 0
+    top = top_level(table, two.accel)
+    base = len(two.top.rows)
+    if len(top.rows) != base:   # (cannot happen: the count above)
+        raise RuntimeError(f"a top level of {len(table)} instances has {len(top.rows)} rows, not {base}")
+    two.rows[:base] = top.rows
+    two.top = top
+    two.depth = int(top.depth + 1 + max(b.depth for b in two.bottoms))
+    return base

@@ -244,6 +244,7 @@ def render_views(job: dict) -> list[dict]:
     after one failed write.
     """
     from clrt.output import OURS, file_state, render_writer, write_image
+    from clrt.renderer.path import file_image, path_channels
     from clrt.scene.render_setup import render_camera, render_lights, turntable
 
     worker = _worker_address()
@@ -264,7 +265,8 @@ def render_views(job: dict) -> list[dict]:
     bit_depth = job.get("bit_depth")
     try:
         # the format of the task's frames (one suffix for all), and what it needs (OpenEXR)
-        _, depth = render_writer(folder / job["paths"][job["views"][0]], bit_depth)
+        writer, depth = render_writer(folder / job["paths"][job["views"][0]], bit_depth)
+        guides = writer.holds(channels="named")   # .exr: the path tracer's albedo and normal, as clrt render's
         with device_lock():
             renderer, own = _scene_entry(job["source"], job["scene"], job["accel"], job["builder"],
                                          job["leaf_size"])
@@ -351,8 +353,11 @@ def render_views(job: dict) -> list[dict]:
                     return records
                 raise
             # a replaced view's file was judged when the batch was planned (clrt.batch.engine._plan)
-            pending.append((view, cam, started, writers.submit(write_image, frame.image, out,
-                                                               force=job["force"] or replace, bit_depth=bit_depth)))
+            # the image as clrt render writes it: 16-bit PNGs get the exposure, EXR files the guides
+            image = file_image(frame, depth, renderer.scene.exposure)
+            channels = path_channels(frame) if guides else None
+            pending.append((view, cam, started, writers.submit(write_image, image, out, force=job["force"] or replace,
+                                                               bit_depth=bit_depth, channels=channels)))
             while len(pending) > (0 if known_unwritable and not writes["ok"] else BATCH_IMAGE_WRITERS):
                 finish_one()
         finish_all()

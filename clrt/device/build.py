@@ -31,8 +31,9 @@ The algorithm (kernels in ``clrt/kernels/build_*.cl``, entry ``build_bvh.cl``):
    then one work-group runs the remaining iterations in one launch
    (``ploc_tail``, the same choices in a loop: the tree does not depend on
    where the host hands over) until ``SAH_TOP_CLUSTERS`` clusters are left,
-   and splits those top-down by the SAH (``build_top.cl``: exact splits over
-   the clusters, weighted by their triangles).  Every new node decides
+   and one more (``ploc_top``) splits those top-down by the SAH
+   (``build_top.cl``: exact splits over the clusters, weighted by their
+   triangles).  Every new node decides
    by the SAH whether its subtree (at most ``leaf_size`` triangles) is emitted
    as one leaf, and records its height;
 3b. treelet restructuring (Karras & Aila 2013, ``TREELET_LEAVES``; GPUs only
@@ -111,7 +112,7 @@ PLOC_RADIUS = 16
 TAIL_THRESHOLD = {"gpu": 2048, "cpu": 2048}
 TAIL_MAX = 32768         # ploc_tail counts its clusters in 16 bits
 TAIL_GROUP = {"gpu": 1024, "cpu": BUILD_GROUP}
-# PLOC stops at this many clusters, and ploc_tail splits them top-down by the
+# PLOC stops at this many clusters, and ploc_top splits them top-down by the
 # SAH (build_top.cl says why; 1: PLOC up to the root).  At most the tail's
 # work-group and SAH_TOP_MAX (its tables in local memory).
 # On the H200 (docs/benchmark-log.md, session 12), 1M random rays: bunny00 -5 %,
@@ -196,7 +197,9 @@ STATE["STATE_PART_NODES"] = STATE["STATE_SORT_DIGITS"] + SORT_PASSES * (1 << RAD
 STATE["STATE_PART_SEGMENTS"] = STATE["STATE_PART_NODES"] + 1
 STATE["STATE_PART_FIRST"] = STATE["STATE_PART_NODES"] + 2
 STATE["STATE_PART_END"] = STATE["STATE_PART_NODES"] + 3
-STATE_INTS = STATE["STATE_INTS"] = STATE["STATE_PART_NODES"] + 4
+STATE["STATE_TAIL"] = STATE["STATE_PART_NODES"] + 4
+TAIL_INTS = 4            # ploc_tail's hand-over to ploc_top (build_state.cl's TAIL_*)
+STATE_INTS = STATE["STATE_INTS"] = STATE["STATE_TAIL"] + TAIL_INTS
 
 def sah_top_clusters(kind: str, tail_group: int | None = None, top_clusters: int | None = None) -> int:
     """Clusters the SAH top takes (SAH_TOP_CLUSTERS), no more than ploc_tail's work-items."""
@@ -501,6 +504,7 @@ def build_on_device(context: cl.Context, queue: cl.CommandQueue, corners, volume
     last, spare = (merged, clusters) if nearest is None and queued % 2 else (clusters, merged)
     launch("ploc", k["ploc_tail"], 1, last, spare, tile_kept, nodes, heights, F, state, queued, leaf_size,
            group=tail_group)
+    launch("ploc", k["ploc_top"], 1, last, spare, nodes, heights, F, state, leaf_size, group=tail_group)
     treelets = TREELET_LEAVES[kind] if treelet_leaves is None else int(treelet_leaves)
     treelets = treelets if F > 2 else 0
 

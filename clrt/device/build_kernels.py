@@ -43,6 +43,7 @@ BUILD_KERNELS = {
     "ploc_compact": (B("merged"), B("clusters"), B("tile_offsets"), B("state"), I("iteration")),
     "ploc_tail": (B("clusters"), B("spare"), B("nearest"), B("nodes"), B("heights"), I("num_tris"), B("state"),
         I("first_iteration"), U("leaf_size")),
+    "ploc_top": (B("clusters"), B("spare"), B("nodes"), B("heights"), I("num_tris"), B("state"), U("leaf_size")),
     "ploc_nearest_tiles": (B("clusters"), B("nearest"), B("state"), I("iteration")),
     "ploc_merge_tiles": (B("clusters"), B("merged"), B("tile_kept"), B("nearest"), B("nodes"), B("heights"),
         I("num_tris"), B("state"), I("iteration"), U("leaf_size")),

@@ -247,6 +247,34 @@ class DeviceGeometry:
             cl.enqueue_copy(queue, wide, self.wide.nodes)
             cl.enqueue_copy(queue, wide, self.wide.packets, dst_offset=self.packets_at)
 
+    def move_instances(self, queue: cl.CommandQueue, rows: int, bounds, origin) -> bool:
+        """Upload a two-level scene's moved instances (clrt.accel.instances.move
+        changed the acceleration's instance table and its first ``rows``
+        rows), in the frame of ``origin``, their world box ``bounds``.
+        Returns whether the program defines changed (the top level's depth
+        can change the stack's size): then the caller's kernels must be made
+        anew."""
+        acceleration = self.acceleration
+        self._place(None, bounds, origin)
+        self._write(queue, "nodes", acceleration.rows[:rows])
+        self._write(queue, "instances", acceleration.instances)
+        defines = accel_defines(acceleration, self.wide)
+        changed = any(self.defines.get(k, "none") != v for k, v in defines.items())
+        self.defines.update(defines)
+        return changed
+
+    def _write(self, queue: cl.CommandQueue, name: str, array: np.ndarray) -> None:
+        """Overwrite the first ``len(array)`` elements of buffer ``name`` (its
+        parts, where split) with ``array``."""
+        array = np.ascontiguousarray(array)
+        buffers = self.buffers[name]
+        if self.shifts is None:
+            cl.enqueue_copy(queue, buffers[0], array)
+            return
+        step = 1 << self.shifts[name]
+        for k in range(0, len(array), step):
+            cl.enqueue_copy(queue, buffers[k // step], array[k:k + step])
+
     def replace(self, queue: cl.CommandQueue, name: str, array: np.ndarray) -> None:
         """Upload ``array`` as the extra buffer ``name`` anew (a scene not split into
         parts): in place when its size is unchanged, else in a new buffer."""

@@ -10,7 +10,7 @@ kept on disk (``$CLRT_CACHE_DIR``, else ``$XDG_CACHE_HOME/clrt`` or
 ``~/.cache/clrt``), keyed by the expanded source, the options, the device and
 its driver version: a new process loads the binary instead of compiling
 (seconds on NVIDIA's compiler).  ``CLRT_NO_PROGRAM_CACHE=1`` turns the disk
-cache off.
+cache off.  Not on PoCL, which keeps a cache of its own (keeps_binaries).
 """
 
 from __future__ import annotations
@@ -19,7 +19,9 @@ import hashlib
 import os
 import re
 import tempfile
+import time
 import warnings
+from dataclasses import dataclass
 from functools import lru_cache
 from importlib import resources
 from pathlib import Path
@@ -85,6 +87,24 @@ def _has_guard(name: str) -> bool:
 _programs: dict[tuple, cl.Program] = {}
 
 
+@dataclass(frozen=True)
+class ProgramBuild:
+    """One program this process built or loaded (``builds``): where a first
+    call's time goes (benchmarks.cold_start)."""
+
+    entry: str
+    defines: dict            # the program's own defines, beyond config.kernel_defines()
+    source_bytes: int        # of the expanded source
+    kernels: int
+    seconds: float           # wall time of the build (a driver with a cache of its own may have hit it)
+    binary_seconds: float    # of which taking the binary for clrt's disk cache
+    from_disk: bool          # loaded from clrt's disk cache
+
+
+#: Every program built or loaded, in order.
+builds: list[ProgramBuild] = []
+
+
 def build_options(context: cl.Context, defines: dict | None = None,
                   extra_options: tuple[str, ...] = ()) -> list[str]:
     """Compiler options: ``config.kernel_defines()`` and ``defines`` as ``-D NAME=VALUE``,
@@ -110,12 +130,20 @@ def build_program(context: cl.Context, entry: str, defines: dict | None = None,
     key = (context.int_ptr, source, tuple(options))
     program = _programs.get(key)
     if program is None:
-        program = _load_cached(context, source, options) or _compile(context, entry, source, options)
+        start = time.perf_counter()
+        program = _load_cached(context, source, options)
+        from_disk, stored = program is not None, 0.0
+        if program is None:
+            program, stored = _compile(context, entry, source, options)
+        kernels = len([name for name in program.kernel_names.split(";") if name])
+        builds.append(ProgramBuild(entry, dict(defines or {}), len(source), kernels, time.perf_counter() - start,
+                                   stored, from_disk))
         _programs[key] = program
     return program
 
 
-def _compile(context: cl.Context, entry: str, source: str, options: list[str]) -> cl.Program:
+def _compile(context: cl.Context, entry: str, source: str, options: list[str]) -> tuple[cl.Program, float]:
+    """The program compiled from ``source``, and the seconds its binary took to store."""
     try:
         with warnings.catch_warnings():
             # pyopencl turns any non-empty build log into a warning; the
@@ -124,8 +152,9 @@ def _compile(context: cl.Context, entry: str, source: str, options: list[str]) -
             program = cl.Program(context, source).build(options=options)
     except cl.RuntimeError as exc:
         raise KernelBuildError(f"OpenCL build of {entry} failed:\n{exc}") from None
+    start = time.perf_counter()
     _store_cached(context, source, options, program)
-    return program
+    return program, time.perf_counter() - start
 
 
 def cache_dir() -> Path | None:
@@ -137,9 +166,22 @@ def cache_dir() -> Path | None:
     return Path(root) / "programs"
 
 
+def keeps_binaries(context: cl.Context) -> bool:
+    """Does clrt keep the binaries of programs built on ``context`` on disk?
+    Not on PoCL.  PoCL keeps a cache of its own (``$POCL_CACHE_DIR``, else
+    ``~/.cache/pocl``), keyed by source and options: a program's LLVM IR when
+    it is built, and each kernel compiled for a work-group size when it first
+    runs with it -- only the kernels a call runs are compiled.  Asking PoCL for
+    a program's binary makes it compile every kernel of the program for any
+    work-group size, kernels that then run compiled anew for their own sizes
+    or never run: 16 of the 17 s of build_bvh.cl's first build on 2 cores
+    (``python -m benchmarks.cold_start``, docs/benchmark-log.md "Ready at once")."""
+    return not any(d.platform.name == "Portable Computing Language" for d in context.devices)
+
+
 def _cache_path(context: cl.Context, source: str, options: list[str]) -> Path | None:
     folder = cache_dir()
-    if folder is None:
+    if folder is None or not keeps_binaries(context):
         return None
     h = hashlib.sha256()
     for part in (source, "\0".join(options), cl.VERSION_TEXT):

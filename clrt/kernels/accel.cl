@@ -44,6 +44,14 @@ inline Hit closest_hit(const Geometry* g, float3 origin, float3 dir, float tmin,
     return query_hits(g, origin, dir, tmin, tmax, QUERY_CLOSEST, spawned, 0);
 }
 
+// closest_hit and the hit's instance (*instance: 0 in a one-level scene, -1
+// for no hit): what the renderer shades (shading.cl's surface_point).
+inline Hit closest_instance_hit(const Geometry* g, float3 origin, float3 dir, float tmin, float tmax,
+                                const bool spawned, int* instance)
+{
+    return query_instance_hits(g, origin, dir, tmin, tmax, QUERY_CLOSEST, spawned, 0, instance);
+}
+
 // Is anything hit in (tmin, tmax]?  Stops at the first hit (shadow rays).
 inline bool any_hit(const Geometry* g, float3 origin, float3 dir, float tmin, float tmax, const bool spawned)
 {

@@ -348,6 +348,67 @@ inline float bsdf_pdf_local(const BsdfLocal* L, float3 wi, int side)
     return 0.0f;
 }
 
+#ifdef BSDF_DIFFUSE_ONLY
+// Every material of the scene scatters by its Lambert base alone -- no metal,
+// no specular layer, no transmission (the host defines BSDF_DIFFUSE_ONLY
+// then: clrt/renderer/path.py, bsdf_defines).  The general functions below
+// give such a material exactly this: its diffuse lobe chosen with probability
+// 1, weights of 1 on the base (base_o, base_i, base_scale), the same frame,
+// the same side test and the same cosine warp of u.xy.  Written apart, the
+// megakernel holds none of the microfacet code's state: on the H200 that
+// decides how many of its warps fit (the register cap, path.py).
+inline bool diffuse_setup(const Bsdf* b, float3 n, float3 ng, float3 wo, BsdfLocal* L)
+{
+    const float cos_g = dot(wo, ng);
+    if (!(fabs(cos_g) > 0.0f))
+        return false;
+    const float3 ng_wo = cos_g > 0.0f ? ng : -ng;
+    float3 ns = normalize(dot(n, ng_wo) < 0.0f ? -n : n);
+    if (!(dot(wo, ns) > 0.0f))
+        ns = ng_wo;
+    L->frame = frame_from_normal(ns);
+    L->ng = ng_wo;
+    L->base = fmax(b->base_color, 0.0f);
+    return rgb_max(L->base) > 0.0f;
+}
+
+float3 bsdf_eval(const Bsdf* b, float3 n, float3 ng, float3 wo, float3 wi)
+{
+    BsdfLocal L;
+    if (!diffuse_setup(b, n, ng, wo, &L))
+        return (float3)(0.0f);
+    const float3 wl = frame_to_local(&L.frame, wi);
+    return bsdf_side(&L, wi, wl) > 0 ? (M_1_PI_F * wl.z) * L.base : (float3)(0.0f);
+}
+
+float bsdf_pdf(const Bsdf* b, float3 n, float3 ng, float3 wo, float3 wi)
+{
+    BsdfLocal L;
+    if (!diffuse_setup(b, n, ng, wo, &L))
+        return 0.0f;
+    const float3 wl = frame_to_local(&L.frame, wi);
+    return bsdf_side(&L, wi, wl) > 0 ? cosine_hemisphere_pdf(wl) : 0.0f;
+}
+
+bool bsdf_sample(const Bsdf* b, float3 n, float3 ng, float3 wo, float3 u, BsdfSample* s)
+{
+    BsdfLocal L;
+    if (!diffuse_setup(b, n, ng, wo, &L))
+        return false;
+    const float3 wi = square_to_cosine_hemisphere(u.xy);
+    const float3 wi_world = frame_to_world(&L.frame, wi);
+    if (bsdf_side(&L, wi_world, wi) != 1)
+        return false;
+    const float pdf = cosine_hemisphere_pdf(wi);
+    if (!(pdf > 0.0f) || !isfinite(pdf))
+        return false;
+    s->wi = wi_world;
+    s->weight = ((M_1_PI_F * wi.z) * L.base) / pdf;
+    s->pdf = pdf;
+    s->delta = 0;
+    return true;
+}
+#else
 float3 bsdf_eval(const Bsdf* b, float3 n, float3 ng, float3 wo, float3 wi)
 {
     BsdfLocal L;
@@ -435,5 +496,7 @@ bool bsdf_sample(const Bsdf* b, float3 n, float3 ng, float3 wo, float3 u, BsdfSa
     s->delta = 0;
     return true;
 }
+
+#endif   // BSDF_DIFFUSE_ONLY
 
 #endif

@@ -24,7 +24,7 @@
 // and ploc_compact, which moves the kept clusters together; below says why).
 // Each kernel reads the cluster count from the state buffer, so the host can
 // queue iterations without waiting for one; once SAH_TOP_CLUSTERS or fewer
-// are left (PLOC_DONE) the kernels do nothing, and ploc_tail makes the top of
+// are left (PLOC_DONE) the kernels do nothing, and ploc_top makes the top of
 // the tree over those by the SAH (build_top.cl).
 //
 // Launches pay off while there are many clusters.  Each iteration removes
@@ -370,20 +370,23 @@ inline int tail_nearest(const global BuildCluster* clusters, int count, int p)
 
 // One work-group: every PLOC iteration from first_iteration until
 // SAH_TOP_CLUSTERS or fewer clusters are left, between `clusters` (holding
-// the clusters at the start) and `spare`, then the SAH top over those
-// (build_top.cl; each of its levels counts as an iteration); nearest:
-// scratch of at least the starting count of ints.  Writes the node counter,
-// the iteration total and the last count to the state (when one cluster is
-// left already, ploc_merge or ploc_count_kept wrote the total).
+// the clusters at the start) and `spare`; nearest: scratch of at least the
+// starting count of ints.  Leaves at STATE_TAIL what ploc_top, launched next,
+// needs: the clusters left, the node counter, the iterations that merged
+// (this loop's count, or else the total that ploc_merge or ploc_count_kept
+// wrote: the host may have queued more launches, which merged nothing, so
+// that the total does not depend on where the host handed over), and
+// whether this loop merged and left the clusters in `spare`.
 // Each work-item keeps a contiguous block of places, so that its kept
 // clusters and new nodes are ranked by one prefix sum over the group.
+// (The SAH top was once the end of this kernel: PoCL took 1.4 s to compile
+// the two loops of barriers in one kernel, 0.7 s as two kernels.)
 __kernel __attribute__((reqd_work_group_size(TAIL_GROUP, 1, 1)))
 void ploc_tail(global BuildCluster* clusters, global BuildCluster* spare, global int* nearest,
                global BuildNode* nodes, global int* heights, const int num_tris, global int* state,
                const int first_iteration, const uint leaf_size)
 {
     local uint scratch[TAIL_GROUP];
-    local TopScratch top;
     const int lid = get_local_id(0);
     int count = state[CLUSTERS_BEFORE(first_iteration)];
     int next_node = state[STATE_NEXT_NODE];
@@ -427,15 +430,35 @@ void ploc_tail(global BuildCluster* clusters, global BuildCluster* spare, global
         from = to;
         to = t;
     }
-    // The iterations that merged: this loop's count, or else the total that
-    // ploc_merge or ploc_count_kept wrote (the host may have queued more
-    // launches, which merged nothing), so that the total does not depend on
-    // where the host handed over.  Read before sah_top's barriers: only
-    // work-item 0 writes it, after them.
-    const bool merged_here = iteration > first_iteration;
-    const int merged_iterations = merged_here ? iteration : state[STATE_ITERATIONS];
+    if (lid == 0) {
+        const bool merged_here = iteration > first_iteration;
+        state[STATE_TAIL + TAIL_COUNT] = count;
+        state[STATE_TAIL + TAIL_NEXT_NODE] = next_node;
+        state[STATE_TAIL + TAIL_ITERATIONS] = merged_here ? iteration : state[STATE_ITERATIONS];
+        state[STATE_TAIL + TAIL_FLAGS] = (merged_here ? TAIL_MERGED : 0)
+                                       | ((iteration - first_iteration) % 2 ? TAIL_IN_SPARE : 0);
+    }
+}
+
+// One work-group, after ploc_tail (with the same buffers): the SAH top over
+// the clusters it left (build_top.cl; each of its levels counts as an
+// iteration).  Writes the node counter, the iteration total and the last
+// count to the state, unless nothing merged since ploc_merge or
+// ploc_count_kept wrote them.
+__kernel __attribute__((reqd_work_group_size(TAIL_GROUP, 1, 1)))
+void ploc_top(global BuildCluster* clusters, global BuildCluster* spare, global BuildNode* nodes,
+              global int* heights, const int num_tris, global int* state, const uint leaf_size)
+{
+    local TopScratch top;
+    // Read before sah_top's barriers: only work-item 0 writes the state, after them.
+    const int count = state[STATE_TAIL + TAIL_COUNT];
+    const int next_node = state[STATE_TAIL + TAIL_NEXT_NODE];
+    const int merged_iterations = state[STATE_TAIL + TAIL_ITERATIONS];
+    const int flags = state[STATE_TAIL + TAIL_FLAGS];
+    global BuildCluster* from = flags & TAIL_IN_SPARE ? spare : clusters;
+    global BuildCluster* to = flags & TAIL_IN_SPARE ? clusters : spare;
     const int levels = sah_top(from, count, to, nodes, heights, num_tris, next_node, leaf_size, &top);
-    if (lid == 0 && (merged_here || levels)) {
+    if (get_local_id(0) == 0 && ((flags & TAIL_MERGED) || levels)) {
         state[STATE_NEXT_NODE] = next_node + (levels ? count - 1 : 0);
         state[STATE_ITERATIONS] = merged_iterations + levels;
         state[CLUSTERS_BEFORE(merged_iterations + levels)] = levels ? 1 : count;

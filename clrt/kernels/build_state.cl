@@ -6,7 +6,7 @@
 //   STATE_BAD_TRIANGLE   least index of a triangle with a NaN or infinite
 //                        corner (the input is checked here, not on the host:
 //                        a host pass over 10M triangles costs more than the build)
-//   STATE_ITERATIONS     PLOC iterations that merged (ploc_merge, ploc_count_kept or ploc_tail)
+//   STATE_ITERATIONS     PLOC iterations that merged (ploc_merge, ploc_count_kept or ploc_top)
 //   STATE_TICKETS + 0, 1 ploc_merge's tile tickets of even and odd iterations
 //   STATE_TREELET_TICKET treelet_restructure's tickets
 //   STATE_BOUNDS + 0..5  centre bounds min xyz, max xyz (order-preserving bits)
@@ -17,6 +17,7 @@
 //   STATE_LEVEL_CURSORS + h  nodes of height h placed so far (treelet_order)
 //   STATE_SORT_TICKETS + p   radix_scatter_lookback's tile tickets of pass p
 //   STATE_SORT_DIGITS + p * RADIX_BINS + d  keys whose pass-p digit is d (radix_digit_counts)
+//   STATE_TAIL + TAIL_*  what ploc_tail leaves ploc_top (build_ploc.cl)
 // Offsets are -D defines from clrt/device/build.py, which reads the same values.
 #ifndef CLRT_BUILD_STATE_CL
 #define CLRT_BUILD_STATE_CL
@@ -26,11 +27,20 @@
     || !defined(STATE_TREELET_TICKET) \
     || !defined(STATE_BOUNDS) || !defined(STATE_COUNTS) || !defined(COUNT_RING) \
     || !defined(STATE_LEVELS) || !defined(STATE_LEVEL_CURSORS) || !defined(TREELET_LEVELS) \
-    || !defined(STATE_SORT_TICKETS) || !defined(STATE_SORT_DIGITS) || !defined(STATE_INTS)
+    || !defined(STATE_SORT_TICKETS) || !defined(STATE_SORT_DIGITS) || !defined(STATE_TAIL) \
+    || !defined(STATE_INTS)
 #error "build with the STATE_*, COUNT_RING and TREELET_LEVELS defines of clrt/device/build.py"
 #endif
 
 #define CLUSTERS_BEFORE(iteration) (STATE_COUNTS + (iteration) % COUNT_RING)
+
+// ploc_tail's ints at STATE_TAIL (build.py keeps TAIL_INTS of them).
+#define TAIL_COUNT 0          // clusters left for the SAH top
+#define TAIL_NEXT_NODE 1      // the node counter
+#define TAIL_ITERATIONS 2     // PLOC iterations that merged
+#define TAIL_FLAGS 3          // TAIL_MERGED | TAIL_IN_SPARE
+#define TAIL_MERGED 1         // ploc_tail's loop merged
+#define TAIL_IN_SPARE 2       // and left the clusters in its `spare` buffer
 
 // One work-item: the state before a build of num_tris triangles.
 __kernel void init_build_state(global uint* state, const uint num_tris)

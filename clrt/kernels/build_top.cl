@@ -39,7 +39,7 @@
 #endif
 
 // Per place (cluster), per axis and rank, and per split middle; local memory
-// of ploc_tail (about 110 bytes a cluster).
+// of ploc_top (about 110 bytes a cluster).
 typedef struct {
     float4 lo[SAH_TOP_CLUSTERS];      // the cluster at each place (BuildCluster.lo: w its node)
     float4 hi[SAH_TOP_CLUSTERS];

@@ -37,6 +37,25 @@ inline float3 object_vector(__global const Instance* in, float3 d)
                     AFFINE_ROW(in->to_object, 2, d, 0.0f));
 }
 
+// p (object space) where the instance places it: to_world, rounded once.
+inline float3 world_point(__global const Instance* in, float3 p)
+{
+    return (float3)(AFFINE_ROW(in->to_world, 0, p, 1.0f), AFFINE_ROW(in->to_world, 1, p, 1.0f),
+                    AFFINE_ROW(in->to_world, 2, p, 1.0f));
+}
+
+// A normal n of the mesh as the instance places it, unit: through the
+// inverse transpose of to_world (to_object's linear part, transposed), so it
+// stays perpendicular to the placed surface under any scale or shear, on the
+// same side of it (for a mirror too: the side, not the winding); 0 for 0.
+inline float3 world_normal(__global const Instance* in, float3 n)
+{
+    __global const float4* m = in->to_object;
+    const float3 w = n.x * m[0].xyz + n.y * m[1].xyz + n.z * m[2].xyz;
+    const float len = length(w);
+    return len > 0.0f ? w / len : (float3)(0.0f);
+}
+
 inline bool mirrored(__global const Instance* in)
 {
     return (in->flags & INSTANCE_MIRROR) != 0u;
@@ -80,5 +99,24 @@ inline float3 instance_normal(__global const Instance* in, __global const Triang
 }
 
 #endif
+
+// The corners of the triangle in `slot` where `instance` places it: in the
+// world (the device's frame), as the renderer shades it and samples it as a
+// light -- the instance's map of its mesh's corners, each coordinate rounded
+// once; in a one-level scene the corners as they are.
+inline void placed_corners(const Geometry* g, int instance, int slot, float3* v0, float3* v1, float3* v2)
+{
+    __global const TriangleVerts* tri = SPLIT_AT(g, tris, slot);
+#ifdef ACCEL_INSTANCES
+    __global const Instance* in = SPLIT_AT(g, instances, instance);
+    *v0 = world_point(in, tri->v0.xyz);
+    *v1 = world_point(in, tri->v1.xyz);
+    *v2 = world_point(in, tri->v2.xyz);
+#else
+    *v0 = tri->v0.xyz;
+    *v1 = tri->v1.xyz;
+    *v2 = tri->v2.xyz;
+#endif
+}
 
 #endif

@@ -79,7 +79,8 @@ typedef struct {
     uint kind;            // LIGHT_POINT, LIGHT_TRIANGLE, LIGHT_BACKGROUND
     int index;            // Light row, or the triangle's slot
     float probability;    // of choosing it
-    uint pad[3];
+    int instance;         // a triangle's instance (two-level scenes; 0 otherwise)
+    uint pad[2];
 } LightEntry;
 
 // ---- Kernel arguments passed by value: each kernel takes its buffers and at
@@ -168,7 +169,9 @@ typedef struct {
     int root;                    // row of the mesh's BVH root
     int first, count;            // the mesh's slots: first .. first + count - 1
     uint flags;                  // INSTANCE_MIRROR: to_world's determinant is negative
-    uint pad[3];
+    int material;                // the renderer: row of its object's first Material (0 for queries)
+    float min_scale;             // smallest singular value of the linear part, rounded down
+    uint pad;
 } Instance;
 
 typedef struct {

@@ -205,9 +205,9 @@ inline bool sample_light(const Geometry* g, const Shading* sh, const Lights* l, 
     }
     if (e->kind == LIGHT_TRIANGLE) {
         const uint slot = (uint)e->index;
-        __global const TriangleVerts* tri = SPLIT_AT(g, tris, slot);
-        __global const Material* m = sh->materials + SPLIT_AT(sh, tri_info, slot)->material;
-        const float3 v0 = tri->v0.xyz, v1 = tri->v1.xyz, v2 = tri->v2.xyz;
+        __global const Material* m = sh->materials + triangle_material(g, sh, e->instance, slot);
+        float3 v0, v1, v2;   // (a two-level scene's: placed by the entry's instance)
+        placed_corners(g, e->instance, slot, &v0, &v1, &v2);
         // Area-uniform: b0 = 1 - sqrt(u1), b1 = u2 sqrt(u1) (weights of v0, v1).
         const float su = sqrt(u.y);
         const float w1 = u.z * su, w2 = 1.0f - (1.0f - su) - w1;

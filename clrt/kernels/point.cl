@@ -58,13 +58,15 @@ typedef float3 point_real3;
 
 // The best triangle so far: its input index, distance (inclusive bound while
 // prim < 0), closest point (device frame) and barycentric weights of v1, v2,
-// its slot and the feature (FEATURE_*) the point lies on.
+// its slot and the feature (FEATURE_*) the point lies on; in a two-level
+// scene its instance (0 in a one-level one).
 typedef struct {
     int prim;
     point_real dist;
     point_real3 point;
     float u, v;
     int slot, feature;
+    int instance;
 } PointHit;
 
 // Closest point to p on the segment a + t (b - a), t in [0, 1]; *t set.
@@ -154,21 +156,25 @@ inline point_real3 closest_on_triangle(point_real3 p, point_real3 a, point_real3
     return a + *u * ab + *v * ac;
 }
 
-// Take the triangle in `slot` into *best if it is nearer, or as near with a
-// lower input index.
-inline void visit_point_triangle(const Geometry* g, point_real3 p, int slot, PointHit* best)
+// Take the triangle in `slot` (of `instance`, as it places it in the world:
+// instances.cl's placed_corners) into *best if it is nearer, or as near with
+// a lower instance, then input index (hit.cl's tie rule).
+inline void visit_point_triangle(const Geometry* g, point_real3 p, int instance, int slot, PointHit* best)
 {
-    __global const TriangleVerts* tri = SPLIT_AT(g, tris, slot);
+    float3 a, b, c;
+    placed_corners(g, instance, slot, &a, &b, &c);
     point_real u, v;
     int feature;
-    const point_real3 q = closest_on_triangle(p, TO_POINT_REAL3(tri->v0.xyz), TO_POINT_REAL3(tri->v1.xyz),
-                                              TO_POINT_REAL3(tri->v2.xyz), &u, &v, &feature);
+    const point_real3 q = closest_on_triangle(p, TO_POINT_REAL3(a), TO_POINT_REAL3(b), TO_POINT_REAL3(c),
+                                              &u, &v, &feature);
     const point_real dist = sqrt(dot(p - q, p - q));
     if (dist > best->dist)
         return;
     const int prim = *SPLIT_AT(g, prim_ids, slot);
-    if (dist == best->dist && best->prim >= 0 && prim > best->prim)
+    if (dist == best->dist && best->prim >= 0
+        && (instance > best->instance || (instance == best->instance && prim > best->prim)))
         return;
+    best->instance = instance;
     best->prim = prim;
     best->dist = dist;
     best->point = q;
@@ -316,7 +322,7 @@ inline void walk_wide_points(const Geometry* g, float3 p, float margin, PointHit
                 int4 visit = (t->slot >= 0) & !(lower > near);
                 for (int lane = 0; lane < 4; ++lane)
                     if (visit[lane] && !((point_real)lower[lane] > best->dist + tie))
-                        visit_point_triangle(g, pr, t->slot[lane], best);
+                        visit_point_triangle(g, pr, 0, t->slot[lane], best);
             }
         } else {
             __global const BvhWideNode* n = g->wide_nodes + current.x;
@@ -368,6 +374,98 @@ inline void walk_wide_points(const Geometry* g, float3 p, float margin, PointHit
 }
 #endif
 
+#ifdef ACCEL_INSTANCES
+// A two-level scene's closest point (docs/instances.md): one walk, one stack
+// over both levels, as accel_bvh.cl's walk_instances.  Distances are the
+// world's throughout: every triangle is measured as its instance places it
+// (visit_point_triangle), and a mesh's volumes, tested in its own space
+// against the point moved there, count their lower bound times the
+// instance's smallest scale (Instance.min_scale: no point of the placed
+// volume lies nearer), less a slack for the move's and the bound's rounding:
+// 2^-16 of the object point's size and distance, times the map's condition
+// number, mapped back by its largest scale -- so that no triangle brute force
+// could pick is passed by, for any affine map.
+#define LEAVE_INSTANCE_POINT (-2)
+
+inline void closest_point_placed(const Geometry* g, float3 p, float margin, PointHit* best)
+{
+    const point_real3 pr = TO_POINT_REAL3(p);
+#ifdef ACCEL_BVH
+    int2 stack[BVH_STACK_SIZE];
+    float stack_d[BVH_STACK_SIZE];     // lower bounds of world distances
+    int sp = 0;
+    int2 current = (int2)(0, 0);
+    int instance = -1;                 // the instance walked (-1: the top level)
+    float3 q = p;                      // the point in the space walked
+    float scale = 1.0f, slack_scale = 0.0f, slack_base = 0.0f;
+    for (;;) {
+        if (current.y > 0 && instance < 0) {          // a top-level leaf: enter its instance
+            instance = current.x;
+            __global const Instance* in = SPLIT_AT(g, instances, instance);
+            q = object_point(in, p);
+            float norm_a = 0.0f, norm_b = 0.0f;
+            for (int i = 0; i < 3; ++i) {
+                norm_a = fmax(norm_a, fabs(in->to_world[i].x) + fabs(in->to_world[i].y) + fabs(in->to_world[i].z));
+                norm_b = fmax(norm_b, fabs(in->to_object[i].x) + fabs(in->to_object[i].y)
+                                      + fabs(in->to_object[i].z));
+            }
+            scale = in->min_scale;
+            slack_scale = 0x1p-16f * norm_a * norm_a * norm_b;
+            slack_base = slack_scale * fmax(fmax(fabs(q.x), fabs(q.y)), fabs(q.z));
+            stack[sp] = (int2)(0, LEAVE_INSTANCE_POINT);
+            stack_d[sp] = -INFINITY;
+            ++sp;
+            current = (int2)(in->root, 0);
+            continue;
+        }
+        if (current.y > 0) {
+            for (int s = current.x; s < current.x + current.y; ++s)
+                visit_point_triangle(g, pr, instance, s, best);
+        } else if (current.y == LEAVE_INSTANCE_POINT) {
+            instance = -1;
+            q = p;
+            scale = 1.0f;
+            slack_scale = slack_base = 0.0f;
+        } else {
+            const BvhPairNode n = *SPLIT_AT(g, nodes, current.x);
+            const int2 left_child = PAIR_LEFT(n), right_child = PAIR_RIGHT(n);
+            const float reach = (float)best->dist + margin;
+            float d_left = INFINITY, d_right = INFINITY;
+            if (left_child.y >= 0) {
+                const float d = point_bound(q, n.left_a, n.left_b);
+                d_left = scale * d - (slack_base + slack_scale * d);
+            }
+            if (right_child.y >= 0) {
+                const float d = point_bound(q, n.right_a, n.right_b);
+                d_right = scale * d - (slack_base + slack_scale * d);
+            }
+            const bool left = d_left <= reach, right = d_right <= reach;
+            if (left && right) {
+                const bool right_first = d_right < d_left;
+                stack[sp] = right_first ? left_child : right_child;
+                stack_d[sp] = right_first ? d_left : d_right;
+                ++sp;
+                current = right_first ? right_child : left_child;
+                continue;
+            }
+            if (left || right) {
+                current = left ? left_child : right_child;
+                continue;
+            }
+        }
+        if (!resume_postponed(stack, stack_d, &sp, (float)best->dist + margin, &current, true))
+            break;
+    }
+#else
+    for (uint i = 0; i < g->num_instances; ++i) {
+        __global const Instance* in = SPLIT_AT(g, instances, i);
+        for (int s = in->first; s < in->first + in->count; ++s)
+            visit_point_triangle(g, pr, (int)i, s, best);
+    }
+#endif
+}
+#endif
+
 // The nearest triangle to p (device frame) within max_dist (inclusive);
 // prim -1 when none is.  `margin`: POINT_MARGIN.  `seed`: a slot to visit
 // before the walk (-1: none) -- the nearest triangle of a point close by,
@@ -384,10 +482,16 @@ inline PointHit closest_point(const Geometry* g, float3 p, float max_dist, float
     best.v = 0.0f;
     best.slot = -1;
     best.feature = FEATURE_FACE;
+    best.instance = 0;
     const point_real3 pr = TO_POINT_REAL3(p);
+#ifdef ACCEL_INSTANCES
+    closest_point_placed(g, p, margin, &best);   // (a seed slot names no instance: not taken)
+#else
     if (seed >= 0)
-        visit_point_triangle(g, pr, seed, &best);
-#if defined(ACCEL_BVH) && defined(BVH_WIDE)
+        visit_point_triangle(g, pr, 0, seed, &best);
+#endif
+#if defined(ACCEL_INSTANCES)
+#elif defined(ACCEL_BVH) && defined(BVH_WIDE)
     walk_wide_points(g, p, margin, &best);
 #elif defined(ACCEL_BVH)
     int2 stack[BVH_STACK_SIZE];        // (row or first slot, leaf count: 0 for a row)
@@ -397,7 +501,7 @@ inline PointHit closest_point(const Geometry* g, float3 p, float max_dist, float
     for (;;) {
         if (current.y > 0) {
             for (int s = current.x; s < current.x + current.y; ++s)
-                visit_point_triangle(g, pr, s, &best);
+                visit_point_triangle(g, pr, 0, s, &best);
         } else {
             const BvhPairNode n = *SPLIT_AT(g, nodes, current.x);
             const int2 left_child = PAIR_LEFT(n), right_child = PAIR_RIGHT(n);
@@ -424,7 +528,7 @@ inline PointHit closest_point(const Geometry* g, float3 p, float max_dist, float
     }
 #else
     for (uint i = 0; i < g->num_tris; ++i)
-        visit_point_triangle(g, pr, (int)i, &best);
+        visit_point_triangle(g, pr, 0, (int)i, &best);
 #endif
     return best;
 }

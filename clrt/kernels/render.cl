@@ -94,7 +94,7 @@ inline void camera_packet_lights(const Geometry* g, const Shading* sh, __global 
     for (int k = 0; k < RAY_PACKETS; ++k) {
         lit[k] = 0u;
         if (first[k].prim >= 0)
-            s[k] = surface_point(g, sh, rays[k].dir.xyz, &first[k]);
+            s[k] = surface_point(g, sh, rays[k].dir.xyz, &first[k], 0);   // (one-level scenes only)
     }
     for (uint i = 0; i < sh->num_lights; ++i) {
         float3 origin[RAY_PACKETS], l[RAY_PACKETS];

@@ -62,17 +62,45 @@ inline Shading make_shading(SHADING_PARAMS, const SceneInfo scene)
     return sh;
 }
 
+// The materials-table row of the triangle in `slot` as `instance` places it:
+// in a two-level scene a triangle's TriangleInfo.material counts from its
+// instance's object's first material (Instance.material: materials per
+// placement, one mesh); else it is the row itself.
+inline uint triangle_material(const Geometry* g, const Shading* sh, int instance, int slot)
+{
+    const int material = SPLIT_AT(sh, tri_info, slot)->material;
+#ifdef ACCEL_INSTANCES
+    return (uint)(material + SPLIT_AT(g, instances, instance)->material);
+#else
+    return (uint)material;
+#endif
+}
+
+// Vertex `vertex`'s normal as `instance` places it (instances.cl's
+// world_normal: each vertex's own normal turned into the world and made unit
+// before they are blended, as the flattened scene's are); in a one-level
+// scene the stored normal itself.
+inline float3 vertex_normal(const Geometry* g, const Shading* sh, int instance, int vertex)
+{
+    const float3 n = SPLIT_AT(sh, vertex_normals, vertex)->xyz;
+#ifdef ACCEL_INSTANCES
+    return world_normal(SPLIT_AT(g, instances, instance), n);
+#else
+    return n;
+#endif
+}
+
 // Shading normal: interpolated vertex normals for smooth materials, turned
 // to the same side as the geometric normal.
-inline float3 shading_normal(const Shading* sh, __global const TriangleInfo* info, const Hit* hit,
-                             float3 geometric, uint flags)
+inline float3 shading_normal(const Geometry* g, const Shading* sh, int instance, __global const TriangleInfo* info,
+                             const Hit* hit, float3 geometric, uint flags)
 {
     if (!(flags & MATERIAL_SMOOTH))
         return geometric;
     const float w0 = 1.0f - hit->u - hit->v;
-    const float3 n = w0 * SPLIT_AT(sh, vertex_normals, info->vertex[0])->xyz
-                   + hit->u * SPLIT_AT(sh, vertex_normals, info->vertex[1])->xyz
-                   + hit->v * SPLIT_AT(sh, vertex_normals, info->vertex[2])->xyz;
+    const float3 n = w0 * vertex_normal(g, sh, instance, info->vertex[0])
+                   + hit->u * vertex_normal(g, sh, instance, info->vertex[1])
+                   + hit->v * vertex_normal(g, sh, instance, info->vertex[2]);
     const float len = length(n);
     if (!(len > 0.0f))
         return geometric;
@@ -87,6 +115,8 @@ typedef struct {
     float3 n;          // shading normal, on the same side as ng
     float offset;      // how far along ng rays leaving p start (spawn_origin)
     bool front;        // the ray hit the side the triangle's winding faces (it is entering)
+    uint material;     // the row of m in the materials table
+    int instance;      // the hit's instance (0 in a one-level scene): where its triangle is placed
     Material m;
 } SurfacePoint;
 
@@ -110,30 +140,70 @@ typedef struct {
 // (shear_ray says why it must).  u is taken as 6.0e-8 (u + 0.7 %) to cover
 // the rounding of these few operations; a is capped at 0.25 (a sliver whose
 // normal is that uncertain is not really a triangle).
+//
+// In a two-level scene the point is taken from the triangle's corners placed
+// in the world (instances.cl's placed_corners), so it shades as the flattened
+// scene's triangle does, but the ray leaving it is traced against the mesh's
+// own corners after a move into the instance's object space -- and the placed
+// corners, the move and the float32 maps both ways each round by a few ulps
+// of the coordinates, times the map's condition number.  The offset grows by
+// a bound of that (instance_spawn_error) to keep its promise.
 #define OFFSET_U 6.0e-8f
 
-inline SurfacePoint surface_point(const Geometry* g, const Shading* sh, float3 dir, const Hit* hit)
+#ifdef ACCEL_INSTANCES
+// A bound, in the world, of how far the rounding of instance `in` moves a
+// ray's origin off the placed triangle's plane through the mesh's own (corners
+// w placed, point p): 24 u cond^2 (|w|max + |p| + |translation|), max norms,
+// cond = |A| |A^-1| of the maps' linear parts (each step's rounding is a few
+// u of its operands, which the maps scale by up to cond; sqrt 3 from the
+// max norm to the distance along the normal).
+inline float instance_spawn_error(__global const Instance* in, float3 w0, float3 w1, float3 w2, float3 p)
+{
+    __global const float4* a = in->to_world;
+    __global const float4* b = in->to_object;
+    float norm_a = 0.0f, norm_b = 0.0f, shift = 0.0f;
+    for (int i = 0; i < 3; ++i) {
+        norm_a = fmax(norm_a, fabs(a[i].x) + fabs(a[i].y) + fabs(a[i].z));
+        norm_b = fmax(norm_b, fabs(b[i].x) + fabs(b[i].y) + fabs(b[i].z));
+        shift = fmax(shift, fabs(a[i].w));
+    }
+    const float3 w = fmax(fabs(w0), fmax(fabs(w1), fabs(w2)));
+    const float3 q = fabs(p);
+    const float cond = norm_a * norm_b;
+    return 24.0f * OFFSET_U * cond * cond * (fmax(w.x, fmax(w.y, w.z)) + fmax(q.x, fmax(q.y, q.z)) + shift);
+}
+#endif
+
+// `instance`: the hit's (closest_instance_hit; 0 in a one-level scene).
+inline SurfacePoint surface_point(const Geometry* g, const Shading* sh, float3 dir, const Hit* hit,
+                                  const int instance)
 {
     __global const TriangleInfo* info = SPLIT_AT(sh, tri_info, hit->prim);
-    __global const TriangleVerts* tri = SPLIT_AT(g, tris, hit->prim);
     SurfacePoint s;
-    s.m = sh->materials[info->material];
+    s.instance = instance;
+    s.material = triangle_material(g, sh, instance, hit->prim);
+    s.m = sh->materials[s.material];
 #ifdef SURFACE_DETAIL
     s.m.color.xyz = surface_albedo(&sh->textures, SPLIT_AT(sh, tri_detail, hit->prim), s.m.color, hit->u, hit->v);
 #endif
-    const float3 v0 = tri->v0.xyz, v1 = tri->v1.xyz, v2 = tri->v2.xyz;
+    float3 v0, v1, v2;
+    placed_corners(g, instance, hit->prim, &v0, &v1, &v2);
     const float3 e1 = v1 - v0, e2 = v2 - v0;
     const float3 c = cross(e1, e2);
     const float3 wound = normalize(c);
     s.front = dot(wound, dir) < 0.0f;
     s.ng = s.front ? wound : -wound;
-    s.n = shading_normal(sh, info, hit, s.ng, s.m.flags);
+    s.n = shading_normal(g, sh, instance, info, hit, s.ng, s.m.flags);
     const float w0 = 1.0f - hit->u - hit->v;
     s.p = w0 * v0 + hit->u * v1 + hit->v * v2;
     const float3 error = 3.0f * OFFSET_U * (fabs(w0 * v0) + fabs(hit->u * v1) + fabs(hit->v * v2))
                        + 2.0f * OFFSET_U * fabs(v0);
     const float a = fmin(10.0f * OFFSET_U * (length(e1) * length(e2) / length(c)) + 16.0f * OFFSET_U, 0.25f);
     s.offset = (dot(fabs(s.ng), error) + 3.0f * a * (error.x + error.y + error.z)) / (1.0f - 2.0f * a);
+#ifdef ACCEL_INSTANCES
+    s.offset += instance_spawn_error(SPLIT_AT(g, instances, instance), v0, v1, v2, s.p) * (1.0f + 3.0f * a)
+              / (1.0f - 2.0f * a);
+#endif
     return s;
 }
 

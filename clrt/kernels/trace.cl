@@ -276,7 +276,7 @@ inline uint read_item_points(const RayInput* in, __global const uint* order, uin
 
 // The nearest point of the mesh to each query point (point.cl), within the
 // point's largest distance (tmaxs: a miss beyond it), written field by field
-// into `results` (outputs 0 .. 4: point, distance, prim, u, v, as
+// into `results` (outputs 0 .. 5: point, distance, prim, u, v, instance, as
 // clrt.query.results' POINT_FIELDS; any may be absent).  The point goes back
 // to the caller's frame here (+ shift, in double where the device has it,
 // rounded to float32 once).  A miss (or a bad point): point NaN, distance
@@ -296,6 +296,7 @@ __kernel void query_closest_point(POINT_INPUT_PARAMS, __global uchar* results, G
     __global int* prim_out = RESULT_AT(int, 2);
     __global float* u_out = RESULT_AT(float, 3);
     __global float* v_out = RESULT_AT(float, 4);
+    __global int* instance_out = RESULT_AT(int, 5);
     uint ids[ITEM_RAYS];
     float3 positions[ITEM_RAYS];
     const uint count = read_item_points(&in, order, launch.num_rays, first, ids, positions);
@@ -321,6 +322,8 @@ __kernel void query_closest_point(POINT_INPUT_PARAMS, __global uchar* results, G
             u_out[i] = found ? best.u : 0.0f;
         if (v_out)
             v_out[i] = found ? best.v : 0.0f;
+        if (instance_out)
+            instance_out[i] = found ? best.instance : -1;
     }
 }
 

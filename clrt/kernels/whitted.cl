@@ -82,9 +82,11 @@ inline float3 trace_whitted(const Geometry* g, const Shading* sh, const uint max
     bool camera_ray = true;
     while (sp > 0) {
         const PendingRay r = stack[--sp];
+        int instance = 0;   // the hit's (packets of camera rays, first_known, walk one-level scenes only)
         const Hit hit = camera_ray && first_known ? *first
-                                                  : closest_hit(g, r.origin, r.dir, camera_ray ? tmin : 0.0f,
-                                                                camera_ray ? tmax : INFINITY, !camera_ray);
+                                                  : closest_instance_hit(g, r.origin, r.dir, camera_ray ? tmin : 0.0f,
+                                                                         camera_ray ? tmax : INFINITY, !camera_ray,
+                                                                         &instance);
         if (camera_ray)
             *first = hit;
         const bool lights_known = camera_ray && lit_known;
@@ -93,7 +95,7 @@ inline float3 trace_whitted(const Geometry* g, const Shading* sh, const uint max
             color += r.weight * sh->background.xyz;
             continue;
         }
-        const SurfacePoint s = surface_point(g, sh, r.dir, &hit);
+        const SurfacePoint s = surface_point(g, sh, r.dir, &hit, instance);
         color += r.weight * local_shading(g, sh, &s, r.dir, lights_known, lit);
         const float kr = s.m.reflectivity, kt = s.m.transparency;
         if (r.depth >= max_depth || (kr <= 0.0f && kt <= 0.0f))

@@ -51,8 +51,9 @@ from clrt.errors import InputError
 from clrt.config import NO_RESULT, RAY_CHECKS
 from clrt.layouts import QUERY_LAUNCH
 from clrt.query.kernels import QUERY_GROUP, QUERY_KERNELS
+from clrt.query.inside import GridPoints
 from clrt.query.points import PointQueries
-from clrt.query.instances import query_scene, source_of
+from clrt.query.instances import InstanceMoves, query_scene, source_of
 from clrt.query.rays import CameraRays, PinholeRays, PointBatch, RayBatch, cull_code, is_device_array
 from clrt.query.results import (ALL_HITS_FIELDS, CAMERA_FIELDS, CLOSEST_FIELDS, RESULT_BYTES, RESULT_DTYPES,
                                 AllHits, CameraImages, Hits, asked_fields, with_fields)
@@ -140,7 +141,7 @@ def _rebuilt_accel(source, options) -> "Accel":
     return Accel(source, **options)
 
 
-class Accel(PointQueries):
+class Accel(PointQueries, InstanceMoves):
     """A mesh and its acceleration structure, uploaded once to one device.
 
     ``mesh``: a Mesh, a mesh file, a trimesh object or ``(vertices, faces)``; or
@@ -193,7 +194,8 @@ class Accel(PointQueries):
         the hits of brute force) and only get slower as the motion tangles the
         tree -- ``rebuild=True`` builds a new one instead."""
         if self.instances is not None:
-            raise InputError("refit of an Accel of instances is not supported yet: make a new Accel")
+            raise InputError("refit of an Accel of instances is not supported yet: move them (move_instances) "
+                             "or make a new Accel")
         faces = self.mesh.faces
         vertices = np.asarray(vertices)
         if vertices.shape != self.mesh.vertices.shape:
@@ -216,8 +218,10 @@ class Accel(PointQueries):
     def from_renderer(cls, renderer, *, chunk_rays: int | None = None) -> "Accel":
         """Ray queries on a Renderer's scene, sharing its device, BVH and buffers;
         ``prim`` is then the triangle index in the scene's objects, in order
-        (as ``Frame.prim``).  They follow the renderer: after ``Renderer.refit``
-        (a rebuild included) they answer for the moved scene."""
+        (as ``Frame.prim``) -- in a scene of placed meshes the triangle's row in
+        its instance's mesh, ``instance`` the placement (clrt.scene.placed's
+        order).  They follow the renderer: after ``Renderer.refit`` (a rebuild
+        included) or ``Renderer.move_instances`` they answer for the moved scene."""
         self = cls.__new__(cls)
         self._lock = renderer._lock   # one scene on the device: its refits wait for these queries
         self._options = None   # the renderer's scene: refit the renderer instead
@@ -229,7 +233,10 @@ class Accel(PointQueries):
     def follow(self, renderer, chunk_rays: int | None = None) -> None:
         """Take ``renderer``'s current scene, device and buffers (Renderer.refit
         calls this on the queries made by :meth:`from_renderer`)."""
-        self.mesh, self.instances = as_mesh(renderer.scene), None
+        if renderer.instances is not None:   # a scene of placed meshes: queries name the instance
+            self.mesh, self.instances = None, renderer.instances
+        else:
+            self.mesh, self.instances = as_mesh(renderer.scene), None
         self._setup(renderer.device_scene, chunk_rays)
 
     # An Accel holds device buffers that a copy would share (a refit of the copy
@@ -343,13 +350,16 @@ class Accel(PointQueries):
 
     # ----------------------------------------------------------------------- rays in
 
-    def _begin(self, source) -> None:
+    def _begin(self, source, points_on_instances: bool = False) -> None:
         """Before the first chunk of a batch: a camera's eye within the range of
         the triangle test (clrt.device.reach), no bad ray reported yet, and the
-        range the kernels hold a batch's own origins to (rays.cl's BAD_REACH)."""
+        range the kernels hold a batch's own origins to (rays.cl's BAD_REACH).
+        ``points_on_instances``: the query answers points on instances too
+        (closest points; the inside queries do not yet)."""
         self._check_reach(source)
-        if self.instances is not None and isinstance(source, PointBatch):
-            raise InputError("point queries on an Accel of instances are not supported yet")
+        if self.instances is not None and isinstance(source, (PointBatch, GridPoints)) and not points_on_instances:
+            raise InputError("signed distances, winding numbers and inside tests on an Accel of instances are not "
+                             "supported yet (closest_points and distance are)")
         reach, origin = self.geometry.reach, self.geometry.origin
         # A camera's eye was checked here, as the renderer checks it, and goes
         # to the device in its frame already, moved in float64 as the

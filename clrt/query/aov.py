@@ -26,10 +26,12 @@ VALUES, PICTURES = WRITERS["npy"], WRITERS["png"]
 #: N.Z`` (FLOAT, world space, 0 on a miss: layer ``N``, as compositors name
 #: normals), prim as ``prim`` (UINT: the int32 index as its two's complement,
 #: so a miss, -1, is 0xFFFFFFFF and ``.view(np.int32)`` gives the .npy back;
-#: float would lose indices above 2**24), hit and front as ``hit`` and
-#: ``front`` (HALF 1.0 / 0.0, mattes for compositing).
+#: float would lose indices above 2**24), instance as ``instance`` (UINT
+#: likewise: the placement seen in a scene of placed meshes, 0 for a single
+#: mesh), hit and front as ``hit`` and ``front`` (HALF 1.0 / 0.0, mattes for
+#: compositing).
 EXR_CHANNELS = {"depth": ("Z",), "distance": ("distance",), "normal": ("N.X", "N.Y", "N.Z"),
-                "prim": ("prim",), "hit": ("hit",), "front": ("front",)}
+                "prim": ("prim",), "instance": ("instance",), "hit": ("hit",), "front": ("front",)}
 
 
 def parse_aovs(text) -> tuple[str, ...]:
@@ -52,10 +54,11 @@ def aov_arrays(images: CameraImages, name: str) -> tuple[np.ndarray, np.ndarray]
     if name == "normal":
         picture = np.where(hit[..., None], np.round((images.normal + 1) * 127.5), 0).astype(np.uint8)
         return images.normal, picture
-    if name == "prim":
-        key = images.prim.astype(np.uint32) * np.uint32(2654435761)
+    if name in ("prim", "instance"):   # indices: each its own arbitrary colour
+        values = getattr(images, name)
+        key = values.astype(np.uint32) * np.uint32(2654435761)
         rgb = np.stack([(key >> s) & 0xFF for s in (8, 16, 24)], axis=-1).astype(np.uint8) | 0x30
-        return images.prim, np.where(hit[..., None], rgb, 0).astype(np.uint8)
+        return values, np.where(hit[..., None], rgb, 0).astype(np.uint8)
     flag = images.hit if name == "hit" else images.front
     return flag, flag.astype(np.uint8) * 255
 
@@ -68,7 +71,7 @@ def exr_channels(images: CameraImages, names) -> dict:
         values, _ = aov_arrays(images, name)
         if name == "normal":
             parts = [np.ascontiguousarray(values[..., k], np.float32) for k in range(3)]
-        elif name == "prim":
+        elif name in ("prim", "instance"):
             parts = [np.ascontiguousarray(values, np.int32).view(np.uint32)]
         elif name in ("hit", "front"):
             parts = [values.astype(np.float16)]

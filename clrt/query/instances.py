@@ -1,6 +1,7 @@
 """What an Accel is made from: one mesh, or several meshes placed as
 instances (a list of meshes or of ``(mesh, transform)`` pairs, a
-clrt.Instances, or a glTF file whose nodes place meshes more than once) --
+clrt.Instances, a glTF file whose nodes place meshes more than once, or a
+Scene whose objects place their meshes by transforms) --
 a two-level scene on the device (docs/instances.md).
 
     >>> mesh, instances, scene = query_scene([bunny, (bunny, lifted)], accel="box", ...)
@@ -10,11 +11,16 @@ from __future__ import annotations
 
 import numpy as np
 
-from clrt.device.instances import instanced_scene
+from clrt.device.instances import instanced_scene, move_instances
 from clrt.device.scene import DeviceScene
+from clrt.device.sharing import one_at_a_time
+from clrt.errors import InputError
+from clrt.query.kernels import QUERY_KERNELS
 from clrt.scene.arrays import device_origin, triangle_corners
 from clrt.scene.instances import Instances, is_gltf_file, is_instance_list, placed_meshes
 from clrt.scene.mesh import Mesh
+from clrt.scene.placed import scene_instances
+from clrt.scene.scene import Scene
 from clrt.scene.sources import as_mesh
 
 
@@ -26,7 +32,10 @@ def query_scene(source, *, accel: str, builder: str, leaf_size: int, device: str
     options checked already, as Accel takes them (``upload``:
     max_buffer_bytes, max_buffer_label)."""
     options = dict(accel=accel, builder=builder, leaf_size=leaf_size, device=device, **upload)
-    mesh = placed_meshes(source) if is_instance_list(source) or is_gltf_file(source) else as_mesh(source)
+    if isinstance(source, Scene) and source.instanced:   # a Scene of placed meshes: its placements
+        mesh = scene_instances(source)
+    else:
+        mesh = placed_meshes(source) if is_instance_list(source) or is_gltf_file(source) else as_mesh(source)
     if isinstance(mesh, Instances):
         return None, mesh, instanced_scene(mesh, **options)
     origin = device_origin(mesh.bounds)   # the device's frame (clrt.scene.arrays)
@@ -40,3 +49,25 @@ def source_of(mesh: Mesh | None, instances: Instances | None):
     if instances is not None:
         return instances
     return Mesh(np.asarray(mesh.vertices), np.asarray(mesh.faces), mesh.name)
+
+
+class InstanceMoves:
+    """What an Accel of instances does besides queries (mixed into
+    clrt.query.accel.Accel)."""
+
+    @one_at_a_time
+    def move_instances(self, transforms) -> None:
+        """Place the instances anew: ``transforms`` (I, 4, 4), object -> world,
+        one for each instance in its order (checked as when made).  Only the
+        instance table and the top level are built again (on the host:
+        docs/instances.md says how long it takes) and uploaded over the old
+        ones; each mesh's BVH stays.  The queries then answer as an Accel
+        made of the moved instances does, bit for bit."""
+        if self.instances is None:
+            raise InputError("move_instances needs an Accel of instances (a list of meshes or of (mesh, "
+                             "transform) pairs, a clrt.Instances, a glTF file); one mesh's vertices move by refit")
+        if self._options is None:
+            raise InputError("these queries share a Renderer's scene: use Renderer.move_instances")
+        self.instances, changed = move_instances(self.device_scene, self.instances, transforms)
+        if changed:   # a deeper or shallower top level: a program of another stack size
+            self.kernels = self.device_scene.kernels("trace.cl", QUERY_KERNELS)

@@ -87,7 +87,7 @@ class PointQueries:
         n = len(batch)
         out = self._point_outputs(n, fields, batch.on_device)
         slots = list(POINT_FIELDS)
-        self._begin(batch)
+        self._begin(batch, points_on_instances=True)
         for start, stop in self._chunks(n):
             m = stop - start
             rays, launch = self._ray_args(batch, start, stop, 0)

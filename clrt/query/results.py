@@ -62,10 +62,12 @@ POINT_FIELDS = {
                    "coordinate rounded to float32 there)", "NaN"),
     "distance": Field(np.float32, (), "distance from the query point to it (a miss: none within max_distance)",
                       "inf"),
-    "prim": Field(np.int32, (), "its triangle: the row in the mesh's faces (the lowest of equally near ones)",
-                  "-1"),
+    "prim": Field(np.int32, (), "its triangle: the row in the mesh's faces (the lowest of equally near ones; "
+                  "of its instance's mesh in an Accel of instances)", "-1"),
     "u": Field(np.float32, (), "barycentric weight of the triangle's vertex 1 at the point", "0"),
     "v": Field(np.float32, (), "barycentric weight of the triangle's vertex 2 (vertex 0 has 1 - u - v)", "0"),
+    "instance": Field(np.int32, (), "its instance: the index in the Accel's list (0 for a single mesh; the "
+                      "lowest of equally near ones, then the lowest triangle)", "-1"),
 }
 
 # The inside queries' values, one array a query (Accel.signed_distance,

@@ -34,6 +34,7 @@ from clrt.config import (DEFAULT_ACCEL, DEFAULT_BUILDER, DEFAULT_LEAF_SIZE, DEFA
 from clrt.device.args import camera_value
 from clrt.device.context import format_bytes as _size
 from clrt.device.geometry import replace_buffer
+from clrt.device.instances import instanced_scene, move_instances
 from clrt.device.pinned import PinnedPool
 from clrt.device.program import launch_size
 from clrt.device.scene import DeviceScene, stage
@@ -44,7 +45,8 @@ from clrt.renderer.kernels import FRAME_ARRAYS, FRAME_HEADER, RENDER_KERNELS, fr
 from clrt.renderer.path import PathTracer, tone_map
 from clrt.renderer.tiles import TileLimits, run_tiles
 from clrt.renderer.visible import nothing_visible
-from clrt.scene.arrays import flatten_scene, light_records
+from clrt.scene.arrays import flatten_scene, light_records, uses_pbr_textures
+from clrt.scene.placed import moved_scene
 from clrt.scene.scene import Camera, Scene, far_triangle
 from clrt.scene.render_setup import render_frame
 from clrt.scene.sources import as_scene
@@ -155,22 +157,29 @@ class Renderer:
         self._followers = weakref.WeakSet()   # Accel.from_renderer's queries, kept on this scene
         with stage(self.timings, "initialisation"):
             self.scene = _own_copy(as_scene(scene))   # or a mesh, a mesh or scene file: what clrt.render takes
-            self.arrays = flatten_scene(self.scene)
+            # The path tracer's textures (emission, metallic-roughness, normal
+            # maps) for scenes made for it; Whitted reads base colours only.
+            self._pbr_textures = self.scene.integrator == "path"
+            self.arrays = flatten_scene(self.scene, pbr_textures=self._pbr_textures)
         a = self.arrays
 
         def shading_arrays(acceleration) -> dict:
             """Per-slot and per-vertex arrays (split with the geometry when large)."""
-            slots = acceleration.prim_ids   # shading data in slot order
+            slots = acceleration.slot_order()   # shading data in slot order
             split = {"tri_info": a.tri_info[slots], "vertex_normals": a.vertex_normals}
             if a.detail is not None:   # textures or colours: the -DSURFACE_DETAIL program (texture.cl)
                 split.update(tri_detail=a.detail.tri_detail[slots], texels=a.detail.texels)
             return split
 
         tables = self._tables()
-        self.device_scene = DeviceScene(
-            a.corners, accel=accel, builder=builder, leaf_size=leaf_size, device=device, bounds=a.bounds,
-            origin=a.origin, extra=shading_arrays, whole_bytes=tables.nbytes, reserve=MIN_FRAME_BYTES,
-            max_buffer_bytes=max_buffer_bytes, timings=self.timings)
+        upload = dict(accel=accel, builder=builder, leaf_size=leaf_size, device=device, extra=shading_arrays,
+                      whole_bytes=tables.nbytes, reserve=MIN_FRAME_BYTES, max_buffer_bytes=max_buffer_bytes,
+                      timings=self.timings)
+        self.instances = a.instances   # placed meshes: a two-level scene (docs/instances.md), else None
+        if a.instances is not None:
+            self.device_scene = instanced_scene(a.instances, material_base=a.material_base, **upload)
+        else:
+            self.device_scene = DeviceScene(a.corners, bounds=a.bounds, origin=a.origin, **upload)
         scene_on_device = self.device_scene
         self.acceleration, self.geometry = scene_on_device.acceleration, scene_on_device.geometry
         self.context, self.queue, self.device = scene_on_device.context, scene_on_device.queue, scene_on_device.device
@@ -215,7 +224,9 @@ class Renderer:
         """Render one frame.
 
         ``integrator``: "whitted" (the paper's model) or "path" (the path
-        tracer, docs/path-tracing.md); the scene's by default, as are
+        tracer, docs/path-tracing.md; its emission, metallic-roughness and
+        normal textures are uploaded for a Renderer made from a scene whose
+        integrator is "path"); the scene's by default, as are
         ``samples``, ``spp``, ``max_depth``, ``seed`` and ``exposure``.
         Whitted: ``samples``: anti-aliasing with samples x samples stratified,
         jittered rays per pixel (the jitter is a hash of pixel, sample and
@@ -275,6 +286,10 @@ class Renderer:
         if hits:
             raise InputError("hits=True reads back the Whitted integrator's camera hits; for the path tracer, "
                              "query them with clrt.camera_images")
+        if not self._pbr_textures and uses_pbr_textures(self.scene):
+            raise InputError("the scene's emission, metallic-roughness or normal textures were not uploaded: "
+                             "this Renderer was made for the Whitted integrator; set the Scene's "
+                             "integrator = \"path\" before making the Renderer to path-trace them")
         camera = self._camera(camera)
         spp = opts.check("spp", spp if spp is not None else self.scene.spp or DEFAULT_SPP)
         depth = max_depth if max_depth is not None else self.scene.max_depth
@@ -298,7 +313,7 @@ class Renderer:
             out = self._path.render(camera, spp=spp, max_depth=depth, seed=seed, strategy=strategy,
                                     progress=progress or (lambda n: None), wait=lambda e: wait_for(e),
                                     limits=self.limits, preview=shown)
-        timings["kernels"] = out["kernel_ms"]
+        timings["kernels"], timings["read back"] = out["kernel_ms"], out["read_ms"]
         image = out["image"] if linear else tone_map(out["image"], exposure)
         if not out["seen"]:
             warnings.warn(nothing_visible(self.arrays.corners, self.arrays.bounds, camera),
@@ -358,7 +373,10 @@ class Renderer:
         ``rebuild=True`` builds a new BVH instead (a tree refitted through large
         motions traces slower)."""
         scene = as_scene(scene)
-        arrays = flatten_scene(scene)
+        if self.instances is not None or scene.instanced:
+            raise InputError("refit of a scene of placed meshes is not supported: move its instances "
+                             "(Renderer.move_instances) or make a new Renderer")
+        arrays = flatten_scene(scene, pbr_textures=self._pbr_textures)
         # The same triangles of the same objects; their vertex normals may be
         # split differently (the crease angle looks at the moved faces).
         same = (arrays.corners.shape == self.arrays.corners.shape
@@ -381,6 +399,32 @@ class Renderer:
         for queries in list(self._followers):
             queries.follow(self, queries.chunk_rays)
 
+    @one_at_a_time
+    def move_instances(self, transforms) -> None:
+        """Place a scene of placed meshes anew: ``transforms`` (I, 4, 4),
+        object -> world, one for each placement in the order of
+        ``self.instances`` (docs/instances.md).  Only the instance table and
+        the top level are built again (on the host) and uploaded; the meshes'
+        BVHs, shading arrays and materials stay.  The frames after show the
+        moved scene as a new Renderer of it would, bit for bit (its lights
+        stay where they are)."""
+        if self.instances is None:
+            raise InputError("move_instances needs a scene of placed meshes (docs/instances.md); one whose "
+                             "vertices move is refitted (Renderer.refit)")
+        instances, changed = move_instances(self.device_scene, self.instances, transforms)
+        origin = self.geometry.origin
+        self.scene, self.instances = moved_scene(self.scene, instances.transforms), instances
+        self.arrays = dataclasses.replace(self.arrays, instances=instances, bounds=instances.bounds, origin=origin,
+                                          lights=light_records(self.scene.lights, origin))
+        self.tables = replace_buffer(self.queue, self.tables, self._tables())
+        if changed:   # a top level of another depth: programs of another stack size
+            detail = {"SURFACE_DETAIL": None} if self.arrays.detail is not None else None
+            self.kernels, self._path = self.device_scene.kernels("render.cl", RENDER_KERNELS, detail), None
+        elif self._path is not None:
+            self._path.forget_tables()   # its lights' triangles moved
+        for queries in list(self._followers):
+            queries.follow(self, queries.chunk_rays)
+
     # As an Accel: a copy, a deep copy or an unpickled Renderer is a new one, made
     # from this one's scene (its lights and refits included) and options -- on the
     # device named by them -- without the queries that follow this one.
@@ -392,8 +436,9 @@ class Renderer:
             return "<clrt.Renderer, not made>"
         if "arrays" not in self.__dict__:   # _rebuilt_renderer's shell
             return f"<clrt.Renderer of {self.scene.num_triangles:,} triangles, unpickled where OpenCL cannot run>"
-        return (f"<clrt.Renderer of {self.arrays.corners.shape[0]:,} triangles, {len(self.arrays.lights)} light(s), "
-                f"{self.acceleration.accel} ({self.acceleration.builder}) on {self.device}>")
+        placed = f" in {len(self.instances):,} placements" if self.instances is not None else ""
+        return (f"<clrt.Renderer of {self.arrays.corners.shape[0]:,} triangles{placed}, {len(self.arrays.lights)} "
+                f"light(s), {self.acceleration.accel} ({self.acceleration.builder}) on {self.device}>")
 
     def add_follower(self, queries) -> None:
         """Keep ``queries`` (Accel.from_renderer's) on this renderer's scene through refits."""

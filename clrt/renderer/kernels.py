@@ -22,11 +22,13 @@ RENDER_KERNELS = {
     "encode_srgb8": (buffer("frame"), value("tile", TILE), buffer("out")),
 }
 
-#: The path tracer's program (path.cl): one kernel, a megakernel that traces
-#: whole paths, its image's sums in `frame` (PATH_ARRAYS), its light tables
-#: in `tables` beside the materials (pack_tables).
+#: The path tracer's program (path.cl): a megakernel that traces whole paths,
+#: its image's sums in `frame` (PATH_ARRAYS), its light tables in `tables`
+#: beside the materials (pack_tables); and the kernel that turns the sums into
+#: the means read back, the first `arrays` of PATH_ARRAYS packed in `out`.
 PATH_KERNELS = {
     "path_trace": (buffer("frame"), value("launch", PATH_LAUNCH), *GEOMETRY, *SHADING),
+    "path_resolve": (buffer("frame"), value("launch", PATH_LAUNCH), value("arrays", np.uint32), buffer("out")),
 }
 
 #: The path tracer's per-pixel sums in its frame buffer, float4 each (w: the

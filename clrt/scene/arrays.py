@@ -17,7 +17,9 @@ import numpy as np
 from clrt.config import MATERIAL_DOUBLE_SIDED, MATERIAL_SMOOTH, TEXTURE_WRAPS
 from clrt.errors import TooLargeError
 from clrt.layouts import LIGHT, MATERIAL, TEXEL, TEXTURE, TRIANGLE_DETAIL, TRIANGLE_INFO, TRIANGLE_VERTS
+from clrt.scene.instances import Instances
 from clrt.scene.mesh import Mesh
+from clrt.scene.placed import scene_instances
 from clrt.scene.scene import MATERIAL_TEXTURES, Scene
 from clrt.scene.texture import srgb_decode
 
@@ -37,6 +39,8 @@ class SceneArrays:
     detail: "SurfaceDetail | None" = None   # None: no textures or colours (a plain program)
     origin: np.ndarray = field(default_factory=lambda: np.zeros(3))   # (3,) float64: the device frame's
     #                                                                    origin, in the scene's frame
+    instances: "Instances | None" = None     # an instanced scene's placements (placed_arrays), else None
+    material_base: np.ndarray | None = None  # (I,) int32: each instance's first material row
 
 
 @dataclass
@@ -140,12 +144,16 @@ def triangle_verts(corners: np.ndarray) -> np.ndarray:
 def flatten_scene(scene: Scene, pbr_textures: bool = False) -> SceneArrays:
     """One triangle list for all objects, each triangle tagged with its material:
     each object's ``material`` then its ``materials``, object after object.
+    (An instanced scene, ``Scene.instanced``, is not flattened: it gives
+    :func:`placed_arrays`.)
 
     ``pbr_textures``: upload the path tracer's textures too (emission,
     metallic-roughness, normal maps); without it only base colour textures
     get rows (the others' rows are -1), as the Whitted renderer reads no
     other -- a scene whose only textures are those then builds the plain
     program, and renders bit for bit as it did before they were read."""
+    if scene.instanced:
+        return placed_arrays(scene, pbr_textures)
     meshes = [o.mesh for o in scene.objects]
     mesh = Mesh.concatenate(meshes)
     object_materials = [(o.material, *o.materials) for o in scene.objects]
@@ -164,22 +172,10 @@ def flatten_scene(scene: Scene, pbr_textures: bool = False) -> SceneArrays:
         normals[start:start + len(m.vertices), :3] = m.vertex_normals()
         start += len(m.vertices)
 
-    # A texture applies only to meshes with texture coordinates.  Each Texture
-    # gets one row per decoding (sRGB colour or linear data), however many
-    # materials and fields share it, and its texels are uploaded once.
     textures = {}   # (id(Texture), linear) -> (row, Texture, linear), in order of first use
     flat_materials = []
     for o, mats in zip(scene.objects, object_materials):
-        for mat in mats:
-            rows = {}
-            for name, linear in MATERIAL_TEXTURES.items():
-                used = o.mesh.uv is not None and (pbr_textures or name == "texture")
-                tex = getattr(mat, name) if used else None
-                if tex is not None:
-                    rows[name] = textures.setdefault((id(tex), linear), (len(textures), tex, linear))[0]
-                else:
-                    rows[name] = -1
-            flat_materials.append((mat, rows))
+        flat_materials += _texture_rows(mats, o.mesh.uv is not None, pbr_textures, textures)
     materials = material_rows(flat_materials)
 
     detail = None
@@ -189,6 +185,86 @@ def flatten_scene(scene: Scene, pbr_textures: bool = False) -> SceneArrays:
     origin = device_origin(bounds)
     return SceneArrays(triangle_corners(mesh, origin), tri_info, normals, materials,
                        light_records(scene.lights, origin), bounds, detail, origin)
+
+
+def _texture_rows(materials, uv: bool, pbr_textures: bool, textures: dict) -> list:
+    """``(Material, {texture field: Texture row or -1})`` of an object's
+    materials (``uv``: its mesh has texture coordinates), rows added to
+    ``textures`` as first used.  A texture applies only to meshes with texture
+    coordinates.  Each Texture gets one row per decoding (sRGB colour or linear
+    data), however many materials and fields share it, and its texels are
+    uploaded once."""
+    out = []
+    for mat in materials:
+        rows = {}
+        for name, linear in MATERIAL_TEXTURES.items():
+            tex = getattr(mat, name) if uv and (pbr_textures or name == "texture") else None
+            if tex is not None:
+                rows[name] = textures.setdefault((id(tex), linear), (len(textures), tex, linear))[0]
+            else:
+                rows[name] = -1
+        out.append((mat, rows))
+    return out
+
+
+def placed_arrays(scene: Scene, pbr_textures: bool = False) -> SceneArrays:
+    """An instanced scene (``Scene.instanced``) as a two-level scene's device
+    arrays (docs/instances.md): each placement of an object an instance --
+    objects in order, each object's placements in order (an object without
+    transforms once, where it stands) -- and each distinct Mesh object once,
+    however many objects place it.
+
+    ``corners``, ``tri_info`` and ``vertex_normals`` (and the surface detail)
+    are then the distinct meshes', mesh after mesh, in their own frames
+    (corners each in its own device frame, :func:`mesh_frames`), a
+    triangle's ``material`` counting from its object's first material:
+    ``material_base`` gives each instance's (objects with the same materials
+    and the same kind of mesh, by identity, share their rows).  ``bounds``,
+    ``origin`` and the lights are the world's."""
+    instances = scene_instances(scene)
+    blocks, material_base, textures, flat_materials = {}, [], {}, []
+    for o in scene.objects:
+        mats = (o.material, *o.materials)
+        key = (o.mesh.uv is not None, *(id(m) for m in mats))
+        if key not in blocks:
+            blocks[key] = len(flat_materials)
+            flat_materials += _texture_rows(mats, o.mesh.uv is not None, pbr_textures, textures)
+        material_base += [blocks[key]] * o.placements
+    meshes = instances.meshes
+    mesh = Mesh.concatenate(meshes)
+    tri_info = np.zeros(len(mesh.faces), TRIANGLE_INFO)
+    tri_info["vertex"] = mesh.faces
+    tri_info["material"] = np.concatenate([np.zeros(len(m.faces), np.int32) if m.face_material is None
+                                           else 1 + m.face_material for m in meshes])
+    normals = np.zeros((len(mesh.vertices), 4), np.float32)
+    normals[:, :3] = np.concatenate([m.vertex_normals() for m in meshes])
+    detail = None
+    if textures or mesh.colors is not None:
+        detail = surface_detail(mesh, [(tex, linear) for _, tex, linear in textures.values()])
+    bounds = instances.bounds
+    origin = device_origin(bounds)
+    arrays = SceneArrays(np.concatenate(mesh_frames(meshes)[1]), tri_info, normals, material_rows(flat_materials),
+                         light_records(scene.lights, origin), bounds, detail, origin)
+    arrays.instances, arrays.material_base = instances, np.array(material_base, np.int32)
+    return arrays
+
+
+def mesh_frames(meshes) -> "tuple[np.ndarray, list[np.ndarray]]":
+    """Each mesh's device frame (:func:`device_origin` of its own box: a
+    two-level scene's meshes each have one) as (M, 3) float64 origins, and
+    its corners in it ((F, 3, 3) float32 each)."""
+    origins = np.stack([device_origin(m.bounds) for m in meshes])
+    return origins, [triangle_corners(m, c) for m, c in zip(meshes, origins)]
+
+
+def uses_pbr_textures(scene: Scene) -> bool:
+    """Whether ``scene`` has a texture that only the path tracer reads
+    (emission, metallic-roughness, normal map) on a mesh with texture
+    coordinates: what ``flatten_scene(pbr_textures=True)`` adds."""
+    return any(getattr(mat, name) is not None
+               for o in scene.objects if o.mesh.uv is not None
+               for mat in (o.material, *o.materials)
+               for name in MATERIAL_TEXTURES if name != "texture")
 
 
 def material_rows(flat_materials: list) -> np.ndarray:

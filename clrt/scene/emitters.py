@@ -116,10 +116,54 @@ def _cdf32(cdf: np.ndarray) -> np.ndarray:
     return np.minimum(out, np.float32(1.0))
 
 
+def emitting_triangles(arrays, order: np.ndarray) -> tuple:
+    """The triangles :func:`light_tables` weighs, of a scene's SceneArrays
+    (clrt.scene.arrays) uploaded in slot order ``order`` (the input row each
+    slot holds: Acceleration.slot_order): ``(corners, material_of, slots,
+    instances)``.  A one-level scene: every triangle in slot order, ``slots``
+    and ``instances`` None.  An instanced one: each placement of each
+    triangle whose material emits (Instance.material, its object's, counted
+    in), its corners as placed (float64, for its area), its material row, its
+    slot and its instance -- one light per placed emitter, so that a mesh
+    placed K times emits K times."""
+    if arrays.instances is None:
+        return arrays.corners[order], arrays.tri_info["material"][order], None, None
+    placed = arrays.instances
+    emits = materials_emit(arrays.materials)
+    slot_of = np.empty(len(order), np.int64)
+    slot_of[order] = np.arange(len(order))
+    first = np.cumsum([0] + [len(m.faces) for m in placed.meshes])
+    local = arrays.tri_info["material"].astype(np.int64)
+    corners, material_of, slots, instances = [], [], [], []
+    pairs = np.stack([placed.mesh_of, arrays.material_base.astype(np.int64)], axis=1)
+    for k, base in np.unique(pairs, axis=0):
+        rows = first[k] + np.flatnonzero(emits[base + local[first[k]:first[k + 1]]])
+        if not len(rows):
+            continue
+        which = np.flatnonzero((pairs[:, 0] == k) & (pairs[:, 1] == base))
+        mesh = placed.meshes[k]
+        own = mesh.vertices[mesh.faces[rows - first[k]]].astype(np.float64)            # (E, 3, 3)
+        m = placed.transforms[which]
+        corners.append((np.einsum("nij,ecj->neci", m[:, :3, :3], own) + m[:, None, None, :3, 3]).reshape(-1, 3, 3))
+        material_of.append(np.tile(base + local[rows], len(which)))
+        slots.append(np.tile(slot_of[rows], len(which)))
+        instances.append(np.repeat(which, len(rows)))
+    if not corners:
+        return np.zeros((0, 3, 3)), np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0, np.int64)
+    return tuple(np.concatenate(x) for x in (corners, material_of, slots, instances))
+
+
+def materials_emit(materials: np.ndarray) -> np.ndarray:
+    """(M,) bool: which MATERIAL rows emit (an emission factor of luminance above 0)."""
+    return materials["emission"][:, :3].astype(np.float64) @ LUMINANCE > 0.0
+
+
 def light_tables(corners: np.ndarray, material_of: np.ndarray, materials: np.ndarray, lights, background,
-                 environment, bounds) -> LightTables:
+                 environment, bounds, slots=None, instances=None) -> LightTables:
     """The light table of a scene.  ``corners`` (F, 3, 3) and ``material_of``
-    (F,): the triangles in slot order (the rows the kernels index);
+    (F,): the triangles in slot order (the rows the kernels index) -- or,
+    with ``slots`` and ``instances`` (F,) (:func:`emitting_triangles` of a
+    two-level scene), each triangle's slot and instance, its corners as placed;
     ``materials``: MATERIAL rows; ``lights``: clrt Lights; ``background``: the
     constant radiance (used without an ``environment``, an Environment or
     None); ``bounds``: the scene's (2, 3) box."""
@@ -131,10 +175,12 @@ def light_tables(corners: np.ndarray, material_of: np.ndarray, materials: np.nda
         kinds.append(LIGHT_KINDS["point"])
         indices.append(i)
         powers.append(light_power(light))
+    placed = [0] * len(kinds)   # each entry's instance
     tri_power = triangle_powers(corners, material_of, materials)
     emitting = np.nonzero(tri_power > 0.0)[0]
     kinds += [LIGHT_KINDS["triangle"]] * len(emitting)
-    indices += emitting.tolist()
+    indices += (emitting if slots is None else np.asarray(slots)[emitting]).tolist()
+    placed += [0] * len(emitting) if instances is None else np.asarray(instances)[emitting].tolist()
     powers += tri_power[emitting].tolist()
     if environment is not None:
         marginal, conditional, mean = environment_cdfs(environment.image)
@@ -151,6 +197,7 @@ def light_tables(corners: np.ndarray, material_of: np.ndarray, materials: np.nda
     if background_power > 0.0:
         kinds.append(LIGHT_KINDS["background"])
         indices.append(-1)
+        placed.append(0)
         powers.append(background_power)
     powers = np.asarray(powers, np.float64)
     keep = powers > 0.0
@@ -163,6 +210,7 @@ def light_tables(corners: np.ndarray, material_of: np.ndarray, materials: np.nda
         entries["alias"][:len(alias)] = alias
         entries["kind"][:len(alias)] = np.asarray(kinds)[keep]
         entries["index"][:len(alias)] = np.asarray(indices)[keep]
+        entries["instance"][:len(alias)] = np.asarray(placed)[keep]
         entries["probability"][:len(alias)] = powers[keep] / total
         if background_power > 0.0:
             background_probability = background_power / total

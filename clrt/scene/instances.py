@@ -134,6 +134,34 @@ def mapped_boxes(transforms: np.ndarray, boxes: np.ndarray) -> np.ndarray:
     return np.stack([mid - reach, mid + reach], axis=1)
 
 
+def far_placement(scene) -> str:
+    """clrt.scene.scene.far_triangle's words for a Scene of placed meshes,
+    from the boxes of its placements (their meshes' boxes, mapped):
+    "scene.toml: object 'ring', placement 3 reaches (1e+25, 0, 0), 1e+25 from
+    the middle of the scene (1 placement that far out)" -- the middle the
+    median of the boxes' centres."""
+    boxes, names = [], []
+    for k, o in enumerate(scene.objects):
+        m = np.eye(4)[None] if o.transforms is None else o.transforms
+        boxes.append(mapped_boxes(m, np.broadcast_to(o.mesh.bounds, (len(m), 2, 3))))
+        names += [(f"object {o.mesh.name!r}" if o.mesh.name else f"object {k}", p) for p in range(len(m))]
+    boxes = np.concatenate(boxes)
+    middle = np.median(boxes.mean(axis=1), axis=0)
+    reach = np.abs(boxes - middle).max(axis=1)                                   # (P, 3) farthest corner
+    distance = np.linalg.norm(reach, axis=1)
+    farthest = float(distance.max())
+    typical = float(np.median(distance))
+    far = farthest / 2 if typical == 0.0 else min(1000.0 * typical, farthest / 2)
+    count = int((distance >= far).sum())
+    k = int(np.argmax(distance))
+    corner = np.where(np.abs(boxes[k, 1] - middle) >= np.abs(boxes[k, 0] - middle), boxes[k, 1], boxes[k, 0])
+    text = lambda x: f"{x:.3g}".replace("e+", "e")   # noqa: E731
+    where = f"{scene.source}: " if scene.source else ""
+    return (f"{where}{names[k][0]}, placement {names[k][1]} reaches ({', '.join(map(text, corner))}), "
+            f"{text(farthest)} from the middle of the scene ({count:,} placement{'s' if count != 1 else ''} "
+            "that far out)")
+
+
 def checked_transforms(transforms, count: int) -> np.ndarray:
     """(count, 4, 4) float64 affine, invertible transforms; InputError naming the
     first instance whose transform is not one."""
@@ -241,9 +269,17 @@ def gltf_instances(path: str) -> "tuple[list[Mesh], np.ndarray, np.ndarray]":
     says); then, for each mesh node in the flattened file's order (document
     order, depth first), its mesh's index among those and the node's world
     matrix (4x4, float64, composed down the hierarchy)."""
+    meshes, _, mesh_of, transforms = gltf_placements(path)
+    return meshes, mesh_of, transforms
+
+
+def gltf_placements(path: str) -> "tuple[list[Mesh], list, np.ndarray, np.ndarray]":
+    """:func:`gltf_instances` with the file's materials (a list of clrt
+    Materials, the same for every mesh: a mesh's face_material indexes it)
+    after the meshes."""
     from clrt.scene.formats.gltf import gltf_nodes
     name = os.path.splitext(os.path.basename(path))[0]
-    meshes, found, mesh_of, transforms = [], {}, [], []
+    meshes, materials, found, mesh_of, transforms = [], [], {}, [], []
     for _, primitives in itertools.groupby(gltf_nodes(path), key=lambda entry: entry[0]):
         primitives = list(primitives)
         mesh, world = primitives[0][1:3]
@@ -252,10 +288,12 @@ def gltf_instances(path: str) -> "tuple[list[Mesh], np.ndarray, np.ndarray]":
             parts = [_rewound(part) if key[1] else replace(part) for *_, part in primitives]
             fill_normals(parts)   # (on copies: the file's primitives are shared by its nodes)
             found[key] = len(meshes)
-            meshes.append(build(parts, path, f"{name} mesh {mesh}")[0])
+            built, file_materials = build(parts, path, f"{name} mesh {mesh}")
+            meshes.append(built)
+            materials.append(file_materials)
         mesh_of.append(found[key])
         transforms.append(world)
-    return meshes, np.array(mesh_of, np.int64), np.array(transforms, np.float64)
+    return meshes, materials, np.array(mesh_of, np.int64), np.array(transforms, np.float64)
 
 
 def _rewound(part: Part) -> Part:

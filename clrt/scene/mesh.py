@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import weakref
 from dataclasses import dataclass, replace
 from functools import cached_property
 
@@ -165,6 +166,29 @@ class Mesh:
             raise MeshLoadError(f"{label}face material ids must be integers >= -1")
         return np.ascontiguousarray(a, dtype=dtype)
 
+    @cached_property
+    def _variants(self) -> "weakref.WeakValueDictionary":
+        # What split_at_creases and the scene's objects derive from this mesh,
+        # by what was asked for: asked again, the same Mesh object comes back
+        # while anything holds it -- so that the objects of a scene that place
+        # one mesh many times share one mesh (one bottom-level BVH), not copies.
+        return weakref.WeakValueDictionary()
+
+    def __getstate__(self) -> dict:
+        state = dict(self.__dict__)
+        state.pop("_variants", None)   # weak references do not pickle (and a copy makes its own)
+        return state
+
+    def variant(self, key, make) -> "Mesh":
+        """``make()``, a Mesh derived from this one, made once for each ``key``
+        while it is in use (the same object for every caller that asks)."""
+        found = self._variants.get(key)
+        if found is None:
+            found = make()
+            if found is not self:   # (a mesh holding itself would never be let go)
+                self._variants[key] = found
+        return found
+
     def _keep_detail(self, vertices, faces, name, normals=None) -> "Mesh":
         """A Mesh of new vertices and faces (the same faces in the same order) with this one's per-face detail."""
         return Mesh(vertices, faces, name, normals, self.uv, self.colors, self.face_material)
@@ -239,6 +263,9 @@ class Mesh:
         """
         if self.normals is not None:
             return self
+        return self.variant(("split", float(crease)), lambda: self._split(crease))
+
+    def _split(self, crease: float) -> "Mesh":
         faces = self.faces
         n_faces = len(faces)
         # Merge bitwise-equal positions (-0.0 and 0.0 stay apart, so positions never change).

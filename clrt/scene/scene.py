@@ -287,7 +287,7 @@ class Camera:
 
 @dataclass(frozen=True)
 class SceneObject:
-    """A mesh and its materials.
+    """A mesh and its materials, and where the mesh is placed.
 
     ``mesh`` may be anything :func:`clrt.scene.load.as_mesh` takes (a Mesh, a
     file path, a trimesh object, ``(vertices, faces)``), ``material`` a
@@ -298,11 +298,21 @@ class SceneObject:
     smooth shading (:meth:`Mesh.split_at_creases` with ``material``'s crease
     angle): the same triangles in the same order at the same positions, with
     vertices shared where normals blend.
+
+    ``transforms``: None -- the mesh stands where its vertices are -- or
+    ``(K, 4, 4)`` affine maps (a single 4x4 is one) from the mesh's own space
+    to the world: the mesh placed K times, each placement an instance of one
+    mesh on the device, never a copy (docs/instances.md).  Objects that give
+    one Mesh object, with the same crease angle, share one bottom-level mesh
+    whatever their materials: a material per placement is an object per
+    placement.  Checked here: finite, affine, invertible, the placed mesh
+    within the device's range.
     """
 
     mesh: Mesh
     material: Material = field(default_factory=Material)
     materials: tuple = ()
+    transforms: np.ndarray | None = field(default=None, compare=False)
 
     def __post_init__(self):
         from clrt.scene.load import as_mesh
@@ -313,7 +323,7 @@ class SceneObject:
         mesh = as_mesh(self.mesh)
         ids = mesh.face_material
         if ids is not None and not materials:   # the file's materials were not wanted
-            mesh, ids = replace(mesh, face_material=None), None
+            mesh, ids = _without(mesh, "face_material"), None
         if ids is not None and len(ids) and ids.max() >= len(materials):
             raise InputError(f"{mesh.name or 'mesh'}: face material id {int(ids.max())} but only "
                              f"{len(materials)} materials")
@@ -322,6 +332,13 @@ class SceneObject:
         object.__setattr__(self, "material", material)
         object.__setattr__(self, "materials", materials)
         object.__setattr__(self, "mesh", mesh)
+        if self.transforms is not None:
+            object.__setattr__(self, "transforms", _placements(self.transforms, mesh))
+
+    @property
+    def placements(self) -> int:
+        """How many times the mesh is placed (1 without transforms)."""
+        return 1 if self.transforms is None else len(self.transforms)
 
     def with_overrides(self, **fields) -> "SceneObject":
         """The object with the material fields given (not None) replaced in all its
@@ -329,19 +346,50 @@ class SceneObject:
         colours: ``--color 1,0,0`` makes an object red, whatever its file says."""
         fields = {k: v for k, v in fields.items() if v is not None}
         mesh = self.mesh
+        if "color" in fields and mesh.colors is not None:
+            mesh = _without(mesh, "colors")
         if "color" in fields:
             fields["texture"] = None
-            mesh = replace(mesh, colors=None)
         material = self.material.with_overrides(**fields)
         materials = tuple(m.with_overrides(**fields) for m in self.materials)
         if "smooth" in fields or "crease" in fields:   # the mesh may need splitting anew
-            return SceneObject(mesh, material, materials)
+            return SceneObject(mesh, material, materials, self.transforms)
         # Same shading, so the mesh is already split for it: do not split it again
         # (a second crease split of a large mesh costs as much as the first).
         obj = object.__new__(SceneObject)
-        for name, value in (("mesh", mesh), ("material", material), ("materials", materials)):
+        for name, value in (("mesh", mesh), ("material", material), ("materials", materials),
+                            ("transforms", self.transforms)):
             object.__setattr__(obj, name, value)
         return obj
+
+
+def _without(mesh: Mesh, detail: str) -> Mesh:
+    """``mesh`` without its ``detail`` (colours, face materials): one Mesh for
+    every object that asks (Mesh.variant), so that placements stay shared."""
+    return mesh.variant(("without", detail), lambda: replace(mesh, **{detail: None}))
+
+
+def _placements(value, mesh: Mesh) -> np.ndarray:
+    """(K, 4, 4) float64 read-only transforms of a SceneObject, checked (as
+    instances' are: clrt.scene.instances) and the placed mesh within +-MAX_COORDINATE."""
+    from clrt.scene.instances import checked_transforms, mapped_boxes
+    try:
+        m = np.array(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise checks.fail("transforms", "(K, 4, 4) affine matrices", value) from None
+    if m.shape == (4, 4):
+        m = m[None]
+    if m.ndim != 3 or m.shape[1:] != (4, 4) or not len(m):
+        raise InputError(f"transforms must have shape (K, 4, 4) with K >= 1, or (4, 4), got {m.shape}")
+    m = checked_transforms(m, len(m))
+    boxes = mapped_boxes(m, np.broadcast_to(mesh.bounds, (len(m), 2, 3)))
+    reach = np.abs(boxes).max(axis=(1, 2))
+    if not (reach <= config.MAX_COORDINATE).all():
+        k = int(np.argmax(~(reach <= config.MAX_COORDINATE)))
+        raise InputError(f"{mesh.name or 'mesh'}: placement {k} takes it to {float(reach[k]):.3g}, past "
+                         f"+-{checks.show(config.MAX_COORDINATE)} (the device computes in float32)")
+    m.flags.writeable = False
+    return m
 
 
 def _objects(value) -> list:
@@ -430,19 +478,53 @@ class Scene:
 
     def __repr__(self) -> str:
         camera = "no camera" if self.camera is None else f"camera {self.camera.width}x{self.camera.height}"
+        placed = sum(o.placements for o in self.objects if o.transforms is not None)
         return (f"<clrt.Scene: {len(self.objects)} object(s), {self.num_triangles:,} triangles, "
-                f"{len(self.lights)} light(s), {camera}, {self.integrator}, "
+                + (f"{placed:,} placements, " if placed else "")
+                + f"{len(self.lights)} light(s), {camera}, {self.integrator}, "
                 + (f"samples {self.samples}" if self.integrator == "whitted" else f"spp {self.spp or config.DEFAULT_SPP}")
                 + f", max_depth {self.depth}>")
 
     @property
     def bounds(self) -> np.ndarray:
-        b = np.stack([o.mesh.bounds for o in self.objects])
+        """(2, 3) float64: the box of every object as placed (a placed mesh's:
+        the box of its own box's corners, mapped)."""
+        from clrt.scene.instances import mapped_boxes
+        b = np.concatenate([o.mesh.bounds[None] if o.transforms is None else
+                            mapped_boxes(o.transforms, np.broadcast_to(o.mesh.bounds, (o.placements, 2, 3)))
+                            for o in self.objects])
         return np.stack([b[:, 0].min(axis=0), b[:, 1].max(axis=0)])
 
     @property
     def num_triangles(self) -> int:
-        return sum(len(o.mesh.faces) for o in self.objects)
+        """Triangles as placed (a mesh placed K times counts K times)."""
+        return sum(len(o.mesh.faces) * o.placements for o in self.objects)
+
+    @property
+    def instanced(self) -> bool:
+        """Does an object place its mesh by transforms (a two-level scene on the
+        device: docs/instances.md)?"""
+        return any(o.transforms is not None for o in self.objects)
+
+    def flattened(self) -> "Scene":
+        """A copy whose objects are every placement moved into the world (in
+        float64, then rounded to float32), in order: the scene an instanced
+        one shows.  A placed mesh's vertex normals go with it, transformed by
+        the inverse transpose (normalised again), so that it shades as its
+        instances do; triangles keep their winding (a mirror turns it over)."""
+        objects = []
+        for o in self.objects:
+            if o.transforms is None:
+                objects.append(o)
+                continue
+            shaded = o.mesh if o.mesh.normals is not None else replace(o.mesh, normals=o.mesh.vertex_normals())
+            for m in o.transforms:
+                obj = object.__new__(SceneObject)   # its mesh keeps its split: normals given, none is needed
+                for name, value in (("mesh", shaded.transformed(m)), ("material", o.material),
+                                    ("materials", o.materials), ("transforms", None)):
+                    object.__setattr__(obj, name, value)
+                objects.append(obj)
+        return replace(self, objects=objects, lights=list(self.lights))
 
     def override_materials(self, **fields) -> None:
         """Replace the fields given (not None) of every object's material, e.g.
@@ -468,7 +550,11 @@ def far_triangle(scene: "Scene") -> str:
     that is simply large names its farthest part).  The first such triangle is
     named, by its index in the object (the file's triangle order: vertex
     indices are renumbered by the crease split).  A pass over the vertices,
-    made only on the way to an error."""
+    made only on the way to an error.  (A scene of placed meshes names the
+    placement that reaches farthest: far_placement.)"""
+    if scene.instanced:
+        from clrt.scene.instances import far_placement
+        return far_placement(scene)
     meshes = [o.mesh for o in scene.objects]
     total = sum(len(m.vertices) for m in meshes)
     step = max(1, total // _SAMPLE)

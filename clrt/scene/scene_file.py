@@ -81,6 +81,24 @@ def scale_value(name, value):
     raise checks.fail(name, "a number > 0 or 3 numbers > 0", value)
 
 
+def placement_scale(name, value):
+    """An instance's scale: one number or 3, none 0 (negative: a mirror)."""
+    values = [value] if checks.is_number(value) else value
+    if not isinstance(values, list) or len(values) not in (1, 3) or not all(checks.is_number(v) for v in values):
+        raise checks.fail(name, "a number or 3 numbers, not 0 (negative mirrors)", value)
+    values = [checks.number(name, v) for v in values]
+    if not all(values):
+        raise checks.fail(name, "a number or 3 numbers, not 0 (negative mirrors)", value)
+    return tuple(values * 3 if len(values) == 1 else values)
+
+
+def matrix_value(name, value):
+    """A 4x4 matrix: 4 rows of 4 finite numbers (checked as a transform later)."""
+    if not (isinstance(value, list) and len(value) == 4 and all(isinstance(r, list) and len(r) == 4 for r in value)):
+        raise checks.fail(name, "4 rows of 4 numbers", value)
+    return np.array([checks.vector(name, row, 4) for row in value], np.float64)
+
+
 def boolean(name, value):
     return checks.boolean(name, value)
 
@@ -160,7 +178,7 @@ LIGHT_KEYS = {
     "beam": (number(ge=0, le=90), None),
 }
 
-TOP_KEYS = {"camera", "render", "materials", "objects", "lights"}
+TOP_KEYS = {"camera", "render", "materials", "objects", "instances", "lights"}
 
 # Keys every object accepts, then the keys of each type.
 OBJECT_KEYS = {
@@ -170,6 +188,7 @@ OBJECT_KEYS = {
     "translate": (checks.position, (0.0, 0.0, 0.0)),
     "rotate": (checks.position, (0.0, 0.0, 0.0)),
     "scale": (scale_value, (1.0, 1.0, 1.0)),
+    "show": (boolean, True),   # false: drawn only where [[instances]] place it
 }
 OBJECT_TYPES = {
     "mesh": {"path": (string, _REQUIRED)},
@@ -180,6 +199,15 @@ OBJECT_TYPES = {
     "checkerboard": {"tiles": (integer(1, 1024), 8), "size": (number(gt=0), 8.0),
                      "material2": (anything, None)},
     "torus": {"major": (number(gt=0), 1.0), "minor": (number(gt=0), 0.35)},
+}
+# [[instances]]: an object placed once more (docs/scene-files.md, "Instances").
+INSTANCE_KEYS = {
+    "object": (string, _REQUIRED),
+    "translate": (checks.position, None),
+    "rotate": (checks.position, None),
+    "scale": (placement_scale, None),
+    "matrix": (matrix_value, None),
+    "material": (anything, None),
 }
 TORUS_SEGMENTS = (48, 24)   # finer than primitives.torus's default: it is seen close up
 
@@ -355,7 +383,10 @@ class _Loader:
         except MeshLoadError as exc:
             raise self.doc.error(path, exc, MeshLoadError) from None
 
-    def objects(self, raw: list) -> list[SceneObject]:
+    def objects(self, raw: list) -> "list[dict]":
+        """Each [[objects]] table as a record: its key path, name, whether it
+        is shown, its transform and its parts -- (mesh in its own space, named,
+        material, a file's materials): one, or a checkerboard's two."""
         out = []
         for index, value in enumerate(raw):
             path = _join("objects", index)
@@ -385,13 +416,80 @@ class _Loader:
             materials = [material]
             if kind == "checkerboard":
                 materials.append(self.material_ref(o["material2"], _join(path, "material2"), DEFAULT_MATERIAL2))
-            matrix = transform_matrix(o["translate"], o["rotate"], o["scale"])
             name = o["name"] or f"{path} ({kind})"
-            for k, (mesh, mat) in enumerate(zip(meshes, materials)):
-                suffix = f" tiles {k}" if len(meshes) > 1 else ""
-                mesh = replace(self.transformed(mesh, matrix, path), name=name + suffix)
-                out.append(SceneObject(mesh, mat, file_materials))
+            parts = [(replace(mesh, name=name + (f" tiles {k}" if len(meshes) > 1 else "")), mat, file_materials)
+                     for k, (mesh, mat) in enumerate(zip(meshes, materials))]
+            out.append({"path": path, "name": o["name"], "show": o["show"], "parts": parts,
+                        "matrix": transform_matrix(o["translate"], o["rotate"], o["scale"])})
         return out
+
+    def placed(self, records: list, raw: list) -> list[SceneObject]:
+        """The scene's objects: each shown object where its transform puts it,
+        then each [[instances]] table's placement of the object it names (its
+        transform after the object's own), in file order.  An object that an
+        instance names is placed, not moved: its mesh is shared by all its
+        placements (one bottom-level mesh: docs/instances.md); the others'
+        vertices are moved as before."""
+        by_name: dict = {}
+        for rec in records:
+            if rec["name"]:
+                by_name.setdefault(rec["name"], []).append(rec)
+        placements = []   # (record, matrix, material or None, key path)
+        for index, value in enumerate(raw):
+            path = _join("instances", index)
+            i = self.doc.table(value, path, INSTANCE_KEYS)
+            named = by_name.get(i["object"], [])
+            if not named:
+                raise self.doc.error(_join(path, "object"), _unknown("object", i["object"], by_name) if by_name
+                                     else f"no object is named {i['object']!r} (an [[objects]] table takes "
+                                          f"name = {i['object']!r})")
+            if len(named) > 1:
+                raise self.doc.error(_join(path, "object"), f"{len(named)} objects are named {i['object']!r}: "
+                                     "an instance names one")
+            material = (self.material_ref(i["material"], _join(path, "material"), Material())
+                        if i["material"] is not None else None)
+            placements.append((named[0], self.placement(i, path) @ named[0]["matrix"], material, path))
+        referenced = {id(rec) for rec, *_ in placements}
+        objects = []
+        for rec in records:
+            if not rec["show"] and id(rec) not in referenced:
+                raise self.doc.error(_join(rec["path"], "show"), "is false, but no [[instances]] table names the "
+                                     "object (give it a name and place it, or remove it)")
+            for mesh, mat, file_materials in rec["parts"] if rec["show"] else ():
+                if id(rec) in referenced:
+                    objects.append(self.scene_object(rec["path"], mesh, mat, file_materials, rec["matrix"]))
+                else:
+                    objects.append(SceneObject(self.transformed(mesh, rec["matrix"], rec["path"]), mat,
+                                               file_materials))
+        for rec, matrix, material, path in placements:
+            for k, (mesh, mat, file_materials) in enumerate(rec["parts"]):
+                if material is not None and k == 0:   # (a checkerboard's odd tiles keep material2)
+                    mat, file_materials = material, ()
+                objects.append(self.scene_object(path, mesh, mat, file_materials, matrix))
+        return objects
+
+    def placement(self, i: dict, path: str) -> np.ndarray:
+        """An [[instances]] table's 4x4 transform: ``matrix``, or translate,
+        rotate and scale -- checked as every instance's is."""
+        from clrt.scene.instances import checked_transforms
+        given = [key for key in ("translate", "rotate", "scale") if i[key] is not None]
+        if i["matrix"] is not None and given:
+            raise self.doc.error(_join(path, "matrix"), f"give matrix or {', '.join(given)}, not both")
+        key = "matrix" if i["matrix"] is not None else "scale"
+        m = i["matrix"] if i["matrix"] is not None else transform_matrix(
+            i["translate"] or (0.0, 0.0, 0.0), i["rotate"] or (0.0, 0.0, 0.0), i["scale"] or (1.0, 1.0, 1.0))
+        try:
+            return checked_transforms(m[None], 1)[0]
+        except InputError as exc:
+            raise self.doc.error("", str(exc).replace("instance 0's transform", _join(path, key))) from None
+
+    def scene_object(self, path: str, mesh: Mesh, material: Material, file_materials, matrix) -> SceneObject:
+        """``mesh`` placed by ``matrix``: a SceneObject whose errors (a placement
+        past the device's range) name ``path``."""
+        try:
+            return SceneObject(mesh, material, file_materials, matrix[None])
+        except InputError as exc:
+            raise self.doc.error(path, exc) from None
 
     def primitive(self, kind: str, o: dict, path: str) -> "list[Mesh]":
         """The meshes of a built-in object type; a size past the device's range is
@@ -448,7 +546,8 @@ class _Loader:
         raw_objects = doc.array_of_tables(data.get("objects", []), "objects")
         if not raw_objects:
             raise doc.error("objects", "no objects: add at least one [[objects]] table")
-        objects = self.objects(raw_objects)
+        objects = self.placed(self.objects(raw_objects),
+                              doc.array_of_tables(data.get("instances", []), "instances"))
 
         lights = []
         for index, value in enumerate(doc.array_of_tables(data.get("lights", []), "lights")):

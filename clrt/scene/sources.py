@@ -10,16 +10,18 @@ from __future__ import annotations
 
 import os
 
+from clrt.scene.instances import as_instances, is_gltf_file, is_instance_list
 from clrt.scene.mesh import Mesh
+from clrt.scene.placed import gltf_scene, placed_scene
 from clrt.scene.scene import Scene, scene_from_mesh
 
 
 def as_mesh(source) -> Mesh:
-    """A Mesh from a Scene (all objects, in order) or from anything
+    """A Mesh from a Scene (all objects, in order, as placed) or from anything
     :func:`clrt.scene.load.as_mesh` takes (a Mesh, a path, a trimesh object,
     (vertices, faces))."""
     if isinstance(source, Scene):
-        return Mesh.concatenate([o.mesh for o in source.objects])
+        return Mesh.concatenate([o.mesh for o in (source.flattened() if source.instanced else source).objects])
     from clrt.scene.load import as_mesh as mesh_of
     return mesh_of(source)
 
@@ -29,9 +31,18 @@ def as_scene(source) -> Scene:
     :func:`~clrt.scene.scene.scene_from_mesh` takes (a Mesh, a mesh file path --
     a glTF camera node becomes the scene's camera --, a trimesh Trimesh or
     Scene -- with its materials and textures, as its file by path --,
-    (vertices, faces)) with the default framing and light; InputError otherwise."""
+    (vertices, faces)) with the default framing and light; InputError otherwise.
+    Several meshes -- a list of meshes or of ``(mesh, 4x4 transform)`` pairs,
+    a clrt.Instances, a glTF file whose nodes place a mesh more than once --
+    make a Scene of placed meshes (clrt.scene.placed; docs/instances.md)."""
     if isinstance(source, Scene):
         return source
+    if is_instance_list(source):
+        return placed_scene(as_instances(source))
+    if is_gltf_file(source):
+        from clrt.scene.formats.gltf import gltf_shares_meshes
+        if gltf_shares_meshes(os.fspath(source)):
+            return gltf_scene(source)
     from clrt.scene.load import SCENE_EXTENSION
     if isinstance(source, (str, os.PathLike)) and os.fspath(source).lower().endswith(SCENE_EXTENSION):
         from clrt.scene.scene_file import load_scene

@@ -408,6 +408,21 @@ def gltf_nodes(path: str) -> list:
     return nodes
 
 
+def gltf_shares_meshes(path: str) -> bool:
+    """Does a glTF/GLB file's scene place a mesh in several nodes (the renderer
+    keeps those as instances)?  From the JSON; False where that fails."""
+    ext = os.path.splitext(path)[1].lower()
+    try:
+        doc = _gltf_json(_glb_json_bytes(path) if ext == ".glb" else read_bytes(path), ext)
+        cycle = first_cycle([n.get("children", []) for n in doc.get("nodes", [])])
+        if _gltf_reference_problem(doc) or cycle is not None:
+            return False
+        meshes = [node["mesh"] for _, node, _ in _gltf_walk(doc) if "mesh" in node]
+    except Exception:  # noqa: BLE001 -- any problem is the reader's to report
+        return False
+    return len(set(meshes)) < len(meshes)
+
+
 def whitted_from_pbr(pbr: dict, extensions: dict | None = None) -> dict:
     """Material fields (clrt.Material) of a glTF material's
     ``pbrMetallicRoughness`` values and ``extensions`` (the table in
