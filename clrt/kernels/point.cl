@@ -316,10 +316,11 @@ inline void walk_wide_points(const Geometry* g, float3 p, float margin, PointHit
             for (int k = current.x; k < current.x + current.y; ++k) {
                 __global const TrianglePacket* t = g->packets + k;
                 const float4 lower = packet_distance_bounds(t, p);
-                // the lanes at or below the best distance (plus the slack) rounded up to float32, then
-                // each against the best as it is when its turn comes
+                // the lanes at or below the best distance (plus the slack) rounded up to float32, but
+                // the best triangle itself (visited: the seed, often), then each against the best as it
+                // is when its turn comes
                 const float near = float_up(best->dist + tie);
-                int4 visit = (t->slot >= 0) & !(lower > near);
+                int4 visit = (t->slot >= 0) & (t->slot != best->slot) & !(lower > near);
                 for (int lane = 0; lane < 4; ++lane)
                     if (visit[lane] && !((point_real)lower[lane] > best->dist + tie))
                         visit_point_triangle(g, pr, 0, t->slot[lane], best);
