@@ -27,7 +27,9 @@
 // many children partly cancel: 6 kept the largest error of 200 points in and
 // around each of seven scans (4k to 75k triangles, device-built trees) at
 // 2.1e-5 and of the tests' meshes at 1e-5, against the exact sum
-// (clrt.query.results.WINDING_NUMBER_ERROR is 1e-4; tests/test_inside.py).
+// (clrt.query.results.WINDING_NUMBER_ERROR is 1e-4; tests/test_inside.py);
+// with the float32 series, 2.8e-5 over eight scans (sphere volumes, whose
+// CPU walk is the binary one; docs/benchmark-log.md, 2026-12-02).
 // On one of those scans (cow, a host SAH tree) 2, Barill's choice, gave
 // 5.6e-3, and 4 gave 1.8e-4 -- 4.2e-3 without the series' last term.
 // Without a BVH every triangle is summed exactly.

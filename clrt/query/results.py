@@ -84,7 +84,7 @@ INSIDE_FIELDS = {
 }
 
 #: How far winding numbers lie from the exact sum of the triangles' solid
-#: angles, as measured on the tests' meshes (tests/test_inside.py) and five
+#: angles, as measured on the tests' meshes (tests/test_inside.py) and eight
 #: scans (winding.cl's WINDING_BETA says how): measured, not proven.  Without
 #: a BVH (accel="none") the sum is exact, in float64 where the device has it.
 WINDING_NUMBER_ERROR = 1e-4
