@@ -3,23 +3,24 @@ node, for the point queries of CPU devices (kernels/point.cl's
 walk_wide_points): ``WIDE_DISK`` in clrt/layouts.py, one per wide node, lane k
 for child k.
 
-Why: a point far from the surface is about as far from hundreds of leaves'
+Why: a point far from the surface is about as far from dozens of leaves'
 boxes as from its nearest triangle -- an axis-aligned box around a tilted
 patch of a smooth surface sticks out towards the point -- and each of those
 leaves costs a test of its triangles.  A disk of the patch's own orientation
 does not stick out: its distance follows the surface's.  On bunny00 (75k
-triangles, points in its box) the walk's leaves fall from 36 a point to about
-10 and its nodes from 28 to 20 (the box and the disk are both lower bounds of
-the distance: the walk takes the larger).
+triangles, 100k points in its box) the walk's leaves fell from 36 a point to
+14 and its nodes from 28 to 20, its time by a quarter (the box and the disk
+are both lower bounds of the distance: the walk takes the larger).
 
-Each child's triangles are its binary child's (``WideBvh.sources``), consecutive
-slots; its disk: the axis n, the sum of their vector areas made unit (any unit
-vector where that sum is zero); the centre c, their corners' mean moved along
-n to the middle of their extent along it; ``half_height``, half that extent (every
-corner x has |n.(x - c)| <= half_height) and ``radius``, the largest distance of a
-corner from the axis.  The triangles are the convex hulls of their corners, so
-they lie in the cylinder too.  Centre and axis are rounded to float32 first,
-and half_height and radius measured about the rounded ones, in float64, rounded up.
+Each child's triangles are its binary child's (``WideBvh.sources``),
+consecutive slots; its disk: the axis n, the sum of their vector areas made
+unit (any unit vector where that sum is zero); the centre c, their corners'
+mean moved along n to the middle of their extent along it; ``half_height``,
+half that extent (every corner x has |n.(x - c)| <= half_height) and
+``radius``, the largest distance of a corner from the axis.  The triangles are
+the convex hulls of their corners, so they lie in the cylinder too.  Centre
+and axis are rounded to float32 first, and half_height and radius measured
+about the rounded ones, in float64, rounded up.
 """
 
 from __future__ import annotations

@@ -296,12 +296,11 @@ inline __global const WideDisk* wide_disks(const Geometry* g)
 // the best distance plus `margin` taken nearest first, a leaf's triangles
 // through packet_distance_bounds.  A child's distance: the larger of those to
 // its box and to its disk (WideDisk: with v = p - c, h = n.v and l the length
-// of v - h n, the hypotenuse of |h| - half_height and l - radius, each at least 0),
-// both lower bounds of the distance to its triangles, eight children in
-// float8.  Their rounding (some 20 * 2^-24 of |p - c| for the disk, with
+// of v - h n, the hypotenuse of |h| - half_height and l - radius, each at
+// least 0), both lower bounds of the distance to its triangles, eight
+// children in float8.  Their rounding (some 20 * 2^-24 of |p - c| for the disk, with
 // |n| within 2^-23 of 1) stays far within the margin (2^-16 of the largest
 // coordinate, at least 2^-17 |p - c|).
-
 inline void walk_wide_points(const Geometry* g, float3 p, float margin, PointHit* best)
 {
     const point_real3 pr = TO_POINT_REAL3(p);
