@@ -17,6 +17,10 @@ inside              ``contains``                        ``compute_occupancy``
 winding number      ``winding_number``                  -- / ``mesh_query_point_sign_winding_number``
 ==================  ==================================  ===========================================
 
+With ``--grid N``, also ``sdf_grid(N)`` (each ``sign``; the mesh's box grown by
+5 % of its longest side) beside Open3D's ``compute_signed_distance`` of the
+same N^3 samples, made in numpy.
+
 Open3D (Embree inside, ``pip install open3d-cpu``) runs on the CPU and Warp
 (``pip install warp-lang``) on an NVIDIA GPU through CUDA; both are optional
 imports, measured when installed.  Times are medians of ``--repeat`` calls
@@ -84,11 +88,13 @@ def _summary(result, kind: str) -> tuple:
 
 
 def _kind(name: str) -> str:
-    return ("signed" if name.startswith("signed") else "inside" if name == "inside"
+    return ("signed" if name.startswith(("signed", "sdf_grid")) else "inside" if name == "inside"
             else "winding" if name == "winding number" else "distance")
 
 
-def clrt_rows(mesh, points, device, repeat, warmup):
+def clrt_rows(mesh, points, device, repeat, warmup, grid=0):
+    """Rows (query, library, wall ms, kernel ms, mean distance, share inside,
+    points) of clrt's queries (with ``grid``, sdf_grid's too)."""
     import clrt
 
     start = time.perf_counter()
@@ -100,21 +106,31 @@ def clrt_rows(mesh, points, device, repeat, warmup):
                 for sign in SIGNS]
     queries += [("inside", lambda: accel.contains(points)),
                 ("winding number", lambda: accel.winding_number(points))]
+    if grid:
+        queries += [(f"sdf_grid {grid}^3 ({sign})", lambda sign=sign: accel.sdf_grid(grid, sign=sign))
+                    for sign in SIGNS]
     device_name = str(accel.device)
     label = "clrt (PoCL)" if "Portable Computing Language" in device_name else f"clrt ({device_name.split(' (')[0]})"
     rows = []
     for name, call in queries:
         wall, kernel, result = _median(call, repeat, warmup, accel.kernel_ms)
-        rows.append((name, label, wall, kernel, *_summary(result, _kind(name))))
+        rows.append((name, label, wall, kernel, *_summary(result, _kind(name)), np.size(result)))
     return build_ms, rows
 
 
 def _peer_row(name, library, call, repeat, warmup) -> tuple:
     wall, _, result = _median(call, repeat, warmup)
-    return (name, library, wall, None, *_summary(result, _kind(name)))
+    return (name, library, wall, None, *_summary(result, _kind(name)), np.size(result))
 
 
-def open3d_rows(mesh, points, repeat, warmup):
+def grid_samples(mesh, grid: int) -> np.ndarray:
+    """(grid^3, 3) float32: sdf_grid's samples (its default bounds), in its order."""
+    from clrt.query.inside import grid_axes
+    axes = grid_axes(grid, None, mesh.bounds)
+    return np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3).astype(np.float32)
+
+
+def open3d_rows(mesh, points, repeat, warmup, grid=0):
     try:
         import open3d as o3d
     except ImportError:
@@ -128,6 +144,9 @@ def open3d_rows(mesh, points, repeat, warmup):
                ("distance", lambda: scene.compute_distance(p).numpy()),
                ("signed distance", lambda: scene.compute_signed_distance(p).numpy()),
                ("inside", lambda: scene.compute_occupancy(p).numpy() > 0.5)]
+    if grid:
+        samples = o3d.core.Tensor(grid_samples(mesh, grid))
+        queries.append((f"sdf_grid {grid}^3", lambda: scene.compute_signed_distance(samples).numpy()))
     return [_peer_row(name, "Open3D (CPU)", call, repeat, warmup) for name, call in queries]
 
 
@@ -164,7 +183,7 @@ def warp_rows(mesh, points, repeat, warmup):
             for name, kernel in (("distance", unsigned), ("signed distance", winding))]
 
 
-def run(mesh_paths, count, seed, device, repeat, warmup, peers) -> None:
+def run(mesh_paths, count, seed, device, repeat, warmup, peers, grid=0) -> None:
     from clrt.scene import primitives
     from clrt.scene.sources import as_mesh
 
@@ -173,13 +192,13 @@ def run(mesh_paths, count, seed, device, repeat, warmup, peers) -> None:
     for path in mesh_paths:
         mesh = as_mesh(path) if path else primitives.torus(1.0, 0.35, 256, 128)
         points = make_points(mesh, count, seed)
-        build_ms, rows = clrt_rows(mesh, points, device, repeat, warmup)
+        build_ms, rows = clrt_rows(mesh, points, device, repeat, warmup, grid)
         if peers:
-            rows += open3d_rows(mesh, points, repeat, warmup) + warp_rows(mesh, points, repeat, warmup)
+            rows += open3d_rows(mesh, points, repeat, warmup, grid) + warp_rows(mesh, points, repeat, warmup)
         label = str(path.name if path else "torus (generated)")
-        for name, library, wall, kernel, mean, inside in sorted(rows, key=lambda r: r[0]):
+        for name, library, wall, kernel, mean, inside, n in sorted(rows, key=lambda r: r[0]):
             print(f"| {label} | {len(mesh.faces):,} | {name} | {library} | {wall:.2f} | "
-                  f"{'' if kernel is None else f'{kernel:.2f}'} | {count / wall / 1e3:.3f} | "
+                  f"{'' if kernel is None else f'{kernel:.2f}'} | {n / wall / 1e3:.3f} | "
                   f"{'' if mean is None else f'{mean:.6f}'} | {'' if inside is None else f'{100 * inside:.2f} %'} |")
         print(f"\n{label}: clrt.Accel built in {build_ms:.1f} ms; {count:,} points, seed {seed}", file=sys.stderr)
 
@@ -196,12 +215,16 @@ def main(argv=None) -> int:
     p.add_argument("--repeat", type=POSITIVE, default=5, help="timed calls, median reported (default 5)")
     p.add_argument("--warmup", type=NON_NEGATIVE, default=1, help="untimed calls first (default 1)")
     p.add_argument("--no-peers", action="store_true", help="clrt alone (Open3D and Warp not measured)")
+    p.add_argument("--grid", type=NON_NEGATIVE, default=0,
+                   help="also sdf_grid of this many samples a side (default 0: none)")
     args = p.parse_args(argv)
     for path in args.mesh:
         if not path.is_file():
             raise SystemExit(f"benchmarks.points: no mesh file {path}")
+    if args.grid == 1:
+        raise SystemExit("benchmarks.points: --grid must be 0 (none) or at least 2")
     return exit_code(run, args.mesh or [None], args.points, args.seed, args.device, args.repeat, args.warmup,
-                     not args.no_peers)
+                     not args.no_peers, args.grid)
 
 
 if __name__ == "__main__":
