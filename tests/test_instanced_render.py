@@ -28,20 +28,7 @@ from clrt.scene import primitives
 from clrt.scene.emitters import emitting_triangles
 from clrt.scene.scene import Camera, Light, Material, Scene, SceneObject
 
-from test_instances import _hierarchy_glb
-
-
-def _rotation(axis, angle) -> np.ndarray:
-    axis = np.asarray(axis, float) / np.linalg.norm(axis)
-    k = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
-    return np.eye(3) + np.sin(angle) * k + (1 - np.cos(angle)) * k @ k
-
-
-def _affine(linear=np.eye(3), shift=(0.0, 0.0, 0.0)) -> np.ndarray:
-    m = np.eye(4)
-    m[:3, :3], m[:3, 3] = linear, shift
-    return m
-
+from test_instances import _affine, _hierarchy_glb, _rotation
 
 SHEAR = np.array([[1.0, 0.4, 0.0], [0.0, 1.0, 0.0], [0.3, 0.0, 0.8]])
 
