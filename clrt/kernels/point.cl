@@ -374,6 +374,33 @@ inline void walk_wide_points(const Geometry* g, float3 p, float margin, PointHit
 }
 #endif
 
+#ifdef ACCEL_BVH
+// One step of the binary walks (the one-level walk below, closest_point_placed):
+// of a row's two children, with lower bounds d_left and d_right of their
+// distances, those that exist (count >= 0) within `reach`: the nearer becomes
+// *current, the other waits on the stack with its bound.  False when neither
+// is within reach (the walk then resumes from the stack).
+inline bool enter_nearer_child(int2 left_child, int2 right_child, float d_left, float d_right, float reach,
+                               int2* stack, float* stack_d, int* sp, int2* current)
+{
+    const bool left = left_child.y >= 0 && d_left <= reach;
+    const bool right = right_child.y >= 0 && d_right <= reach;
+    if (left && right) {
+        const bool right_first = d_right < d_left;
+        stack[*sp] = right_first ? left_child : right_child;
+        stack_d[*sp] = right_first ? d_left : d_right;
+        ++*sp;
+        *current = right_first ? right_child : left_child;
+        return true;
+    }
+    if (left || right) {
+        *current = left ? left_child : right_child;
+        return true;
+    }
+    return false;
+}
+#endif
+
 #ifdef ACCEL_INSTANCES
 // A two-level scene's closest point (docs/instances.md): one walk, one stack
 // over both levels, as accel_bvh.cl's walk_instances.  Distances are the
@@ -429,7 +456,6 @@ inline void closest_point_placed(const Geometry* g, float3 p, float margin, Poin
         } else {
             const BvhPairNode n = *SPLIT_AT(g, nodes, current.x);
             const int2 left_child = PAIR_LEFT(n), right_child = PAIR_RIGHT(n);
-            const float reach = (float)best->dist + margin;
             float d_left = INFINITY, d_right = INFINITY;
             if (left_child.y >= 0) {
                 const float d = point_bound(q, n.left_a, n.left_b);
@@ -439,19 +465,9 @@ inline void closest_point_placed(const Geometry* g, float3 p, float margin, Poin
                 const float d = point_bound(q, n.right_a, n.right_b);
                 d_right = scale * d - (slack_base + slack_scale * d);
             }
-            const bool left = d_left <= reach, right = d_right <= reach;
-            if (left && right) {
-                const bool right_first = d_right < d_left;
-                stack[sp] = right_first ? left_child : right_child;
-                stack_d[sp] = right_first ? d_left : d_right;
-                ++sp;
-                current = right_first ? right_child : left_child;
+            if (enter_nearer_child(left_child, right_child, d_left, d_right, (float)best->dist + margin, stack,
+                                   stack_d, &sp, &current))
                 continue;
-            }
-            if (left || right) {
-                current = left ? left_child : right_child;
-                continue;
-            }
         }
         if (!resume_postponed(stack, stack_d, &sp, (float)best->dist + margin, &current, true))
             break;
@@ -505,23 +521,11 @@ inline PointHit closest_point(const Geometry* g, float3 p, float max_dist, float
         } else {
             const BvhPairNode n = *SPLIT_AT(g, nodes, current.x);
             const int2 left_child = PAIR_LEFT(n), right_child = PAIR_RIGHT(n);
-            const float reach = (float)best.dist + margin;
             const float d_left = left_child.y >= 0 ? point_bound(p, n.left_a, n.left_b) : INFINITY;
             const float d_right = right_child.y >= 0 ? point_bound(p, n.right_a, n.right_b) : INFINITY;
-            const bool left = left_child.y >= 0 && d_left <= reach;
-            const bool right = right_child.y >= 0 && d_right <= reach;
-            if (left && right) {
-                const bool right_first = d_right < d_left;
-                stack[sp] = right_first ? left_child : right_child;
-                stack_d[sp] = right_first ? d_left : d_right;
-                ++sp;
-                current = right_first ? right_child : left_child;
+            if (enter_nearer_child(left_child, right_child, d_left, d_right, (float)best.dist + margin, stack,
+                                   stack_d, &sp, &current))
                 continue;
-            }
-            if (left || right) {
-                current = left ? left_child : right_child;
-                continue;
-            }
         }
         if (!resume_postponed(stack, stack_d, &sp, (float)best.dist + margin, &current, true))
             break;

@@ -345,6 +345,21 @@ inline float radius_up(point_real r)
     return (point_real)f >= r ? f : nextafter(f, INFINITY);
 }
 
+// A WindingNode of its centre and radius, its dipole and area, and the
+// symmetric parts of its first (6) and second (10) moments, rounded to float32.
+inline WindingNode winding_node_of(float3 centre, float radius, point_real3 dipole, point_real area,
+                                   const point_real* m, const point_real* sec)
+{
+    WindingNode node;
+    node.centre = (float4)(centre, radius);
+    node.normal = (float4)(convert_float3(dipole), (float)area);
+    for (int k = 0; k < 6; ++k)
+        node.first[k] = (float)m[k];
+    for (int k = 0; k < 10; ++k)
+        node.second[k] = (float)sec[k];
+    return node;
+}
+
 // The WindingNode of the triangles in slots first .. first + count - 1.  With
 // v a triangle's vector area (area times unit normal), m its centroid and
 // Q[j][k] = integral of d_j d_k over it / area = (sum of its corners' d_j d_k
@@ -366,7 +381,6 @@ inline WindingNode leaf_winding_node(const Geometry* g, int first, int count)
     // Triangles of no area: any centre serves (their series is zero), the mean of their centroids.
     const float3 centre = convert_float3(area > 0 ? weighted / area : mean / count);
     const point_real3 cr = TO_POINT_REAL3(centre);
-    WindingNode node;
     point_real3 dipole = (point_real3)(0);
     point_real m[6] = {0, 0, 0, 0, 0, 0};
     point_real sec[10] = {0, 0, 0, 0, 0, 0, 0, 0, 0, 0};
@@ -395,13 +409,7 @@ inline WindingNode leaf_winding_node(const Geometry* g, int first, int count)
             sec[t3] += (v[i] * q[j][k] + v[j] * q[i][k] + v[k] * q[i][j]) / 3;
         }
     }
-    node.centre = (float4)(centre, radius_up(sqrt(radius2)));
-    node.normal = (float4)(convert_float3(dipole), (float)area);
-    for (int k = 0; k < 6; ++k)
-        node.first[k] = (float)m[k];
-    for (int k = 0; k < 10; ++k)
-        node.second[k] = (float)sec[k];
-    return node;
+    return winding_node_of(centre, radius_up(sqrt(radius2)), dipole, area, m, sec);
 }
 
 // The WindingNode of two children joined (an inner child: its row's two
@@ -417,7 +425,6 @@ inline WindingNode joined_winding_node(__global const WindingNode* a, __global c
     const point_real area = area_a + area_b;
     const float3 centre = convert_float3(area > 0 ? (area_a * ca + area_b * cb) / area : (ca + cb) / 2);
     const point_real3 cr = TO_POINT_REAL3(centre);
-    WindingNode node;
     point_real radius = 0;
     point_real3 dipole = (point_real3)(0);
     point_real m[6] = {0, 0, 0, 0, 0, 0};
@@ -442,13 +449,7 @@ inline WindingNode joined_winding_node(__global const WindingNode* a, __global c
                      + (n[i] * e[j] * e[k] + n[j] * e[i] * e[k] + n[k] * e[i] * e[j]) / 3;
         }
     }
-    node.centre = (float4)(centre, radius_up(radius));
-    node.normal = (float4)(convert_float3(dipole), (float)area);
-    for (int k = 0; k < 6; ++k)
-        node.first[k] = (float)m[k];
-    for (int k = 0; k < 10; ++k)
-        node.second[k] = (float)sec[k];
-    return node;
+    return winding_node_of(centre, radius_up(radius), dipole, area, m, sec);
 }
 
 #endif
