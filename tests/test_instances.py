@@ -404,8 +404,6 @@ def test_closest_points_on_instances(scene, volume, builder, device):
     assert np.abs(got.point[same] - want.point[same]).max() < 1e-5 * scale
     far = clrt.Accel(instances, device=device).closest_points(points, max_distance=0.05)
     assert np.array_equal(far.instance == -1, ~(brute.distance <= 0.05)) and (far.instance >= 0).any()
-    with pytest.raises(clrt.InputError, match="inside tests on an Accel of instances are not supported yet"):
-        clrt.Accel(instances, device=device).signed_distance(points[:3])
 
 
 def _one_line_error(call, match):
@@ -443,7 +441,6 @@ def test_bad_instances_are_one_line(device, monkeypatch):
     _one_line_error(lambda: Instances([mesh], [0] * 4), r"a scene holds at most 3 instances .* got 4")
     monkeypatch.undo()
     accel = clrt.Accel([mesh, (mesh, _affine(shift=(3.0, 0.0, 0.0)))], device=device)
-    _one_line_error(lambda: accel.winding_number([0.0, 0.0, 0.0]), "inside tests on an Accel of instances")
     _one_line_error(lambda: accel.refit(mesh.vertices), "refit of an Accel of instances")
 
 

@@ -51,10 +51,9 @@ from clrt.errors import InputError
 from clrt.config import NO_RESULT, RAY_CHECKS
 from clrt.layouts import QUERY_LAUNCH
 from clrt.query.kernels import QUERY_GROUP, QUERY_KERNELS
-from clrt.query.inside import GridPoints
 from clrt.query.points import PointQueries
 from clrt.query.instances import InstanceMoves, query_scene, source_of
-from clrt.query.rays import CameraRays, PinholeRays, PointBatch, RayBatch, cull_code, is_device_array
+from clrt.query.rays import CameraRays, PinholeRays, RayBatch, cull_code, is_device_array
 from clrt.query.results import (ALL_HITS_FIELDS, CAMERA_FIELDS, CLOSEST_FIELDS, RESULT_BYTES, RESULT_DTYPES,
                                 AllHits, CameraImages, Hits, asked_fields, with_fields)
 from clrt.accel import as_triangles
@@ -350,16 +349,11 @@ class Accel(PointQueries, InstanceMoves):
 
     # ----------------------------------------------------------------------- rays in
 
-    def _begin(self, source, points_on_instances: bool = False) -> None:
+    def _begin(self, source) -> None:
         """Before the first chunk of a batch: a camera's eye within the range of
         the triangle test (clrt.device.reach), no bad ray reported yet, and the
-        range the kernels hold a batch's own origins to (rays.cl's BAD_REACH).
-        ``points_on_instances``: the query answers points on instances too
-        (closest points; the inside queries do not yet)."""
+        range the kernels hold a batch's own origins to (rays.cl's BAD_REACH)."""
         self._check_reach(source)
-        if self.instances is not None and isinstance(source, (PointBatch, GridPoints)) and not points_on_instances:
-            raise InputError("signed distances, winding numbers and inside tests on an Accel of instances are not "
-                             "supported yet (closest_points and distance are)")
         reach, origin = self.geometry.reach, self.geometry.origin
         # A camera's eye was checked here, as the renderer checks it, and goes
         # to the device in its frame already, moved in float64 as the
