@@ -65,16 +65,46 @@ def move_instances(scene: DeviceScene, instances: Instances, transforms) -> tupl
     programs' defines changed (clrt.device.geometry.DeviceGeometry.move_instances)."""
     start = time.perf_counter()
     moved = Instances(instances.meshes, instances.mesh_of, checked_transforms(transforms, len(instances)))
-    reach = np.abs(moved.boxes()).max(axis=(1, 2))
+    _check_reach(moved)
+    return moved, _place(scene, moved, start)
+
+
+def refit_meshes(scene: DeviceScene, instances: Instances, meshes: list[int]) -> bool:
+    """Show ``instances`` on ``scene``, a two-level DeviceScene of instances
+    that differ from them only in the vertices of the distinct meshes
+    ``meshes`` (and perhaps the transforms): each of those meshes moved into
+    its new device frame, its slots uploaded anew and its rows refitted on the
+    device (DeviceGeometry.refit_mesh), then the instance table and the top
+    level placed anew as :func:`move_instances` places them (every instance
+    of a moved mesh has a new world box).  Returns whether the programs'
+    defines changed."""
+    start = time.perf_counter()
+    _check_reach(instances)
+    _, corners = mesh_frames([instances.meshes[k] for k in meshes])
+    with scene.out_of_memory():
+        for k, c in zip(meshes, corners):
+            scene.geometry.refit_mesh(scene.queue, k, c)
+    return _place(scene, instances, start)
+
+
+def _check_reach(instances: Instances) -> None:
+    """InputError naming the first instance placed past the device's range."""
+    reach = np.abs(instances.boxes()).max(axis=(1, 2))
     if not (reach <= MAX_COORDINATE).all():
         k = int(np.argmax(~(reach <= MAX_COORDINATE)))
         raise InputError(f"instance {k}'s transform takes its mesh to {float(reach[k]):.3g}, past "
                          f"+-{MAX_COORDINATE:.0e} (the device computes in float32)")
-    mesh_origins = np.stack([device_origin(m.bounds) for m in moved.meshes])
-    bounds = moved.bounds
+
+
+def _place(scene: DeviceScene, instances: Instances, start: float) -> bool:
+    """The instance table of ``instances`` and the top level over their boxes,
+    built on the host and uploaded (their meshes' rows as they are on the
+    device); whether the programs' defines changed."""
+    mesh_origins = np.stack([device_origin(m.bounds) for m in instances.meshes])
+    bounds = instances.bounds
     origin = device_origin(bounds)
-    rows = move(scene.acceleration, instance_table(moved, mesh_origins, origin))
+    rows = move(scene.acceleration, instance_table(instances, mesh_origins, origin))
     with scene.out_of_memory():
         changed = scene.geometry.move_instances(scene.queue, rows, bounds, origin)
     scene.acceleration.move_ms = 1e3 * (time.perf_counter() - start)
-    return moved, changed
+    return changed
