@@ -228,6 +228,7 @@ typedef struct {
 typedef struct {
     float4 centre;       // xyz: area-weighted centroid; w: radius (rounded up; INFINITY: never far)
     float4 normal;       // xyz: sum of area * unit normal; w: area (in the world: a bound of it)
+    float4 extent;       // xyz: no corner farther from the centre along each axis (rounded up)
     float first[9];      // [3 i + j] = sum n_i * integral (x - c)_j
     float second[18];    // [6 i + jk], jk = xx, xy, xz, yy, yz, zz: sum n_i * integral (x - c)_j (x - c)_k
     uint pad;

@@ -11,9 +11,9 @@
 // and serve every placement of it.  A placement x' = A x + b maps the vector
 // area n dA to cof(A) n dA (cof(A) = det(A) A^-T: a mirror turns it over) and
 // x - c to A (x - c).  With q = A^-1 (p - b) the point in the mesh's space,
-// r = c - q, G = A^T A, w = G r and R^2 = r.w (the world's distance squared),
-// the world's series of the mapped moments (winding.cl's far_field) is det(A)
-// times
+// r = c - q, G = A^T A, w = G r and R^2 = |A r|^2 = r.w (the world's distance
+// squared), the world's series of the mapped moments (winding.cl's far_field)
+// is det(A) times
 //   N.r / R^3 + (tr M - 3 r.M w / R^2) / R^3
 //   + (15 T[r, w, w] / R^2 - 3 (2 t.w + sum_l r_l T_l : G)) / (2 R^5),
 // t_k = sum_l T[l][l][k]: each contraction of world tensors with world vectors
@@ -21,20 +21,28 @@
 // moments M[i][j] and T[i][j][k] are needed, not their symmetric parts alone:
 // cof(A) and A mix them differently unless A is a similarity.  This is the
 // world's series itself, so the world's rule holds: a child is taken from it
-// where R exceeds beta times its world radius, bounded by its radius times the
-// map's largest scale (Gershgorin's bound of G's largest eigenvalue: exact for
-// a similarity), and its error bound is the world's (remainder_bound with the
-// world's area and radius bounded so).  The top level's rows hold the world's
-// far fields -- an instance's is its mesh's root mapped by its transform --
-// so an instance far from p costs one series, not a walk.
+// where R exceeds beta times its world radius, bounded by the lesser of its
+// radius times the map's largest scale (bounded from G, map_scales: exact for
+// a similarity and for one scale apart) and its box (half-extents about the
+// centre, PlacedWindingNode.extent) mapped -- a child lying across an uneven
+// map's stretch is placed smaller than the largest scale says --; its error
+// bound is the world's (remainder_bound, the world's area and radius bounded
+// so).  A leaf under a similarity sums its mesh's own solid angles at q (a
+// mirror turns them over).  The top level's rows hold the world's far fields
+// -- an instance's is its mesh's root mapped by its transform --, so an
+// instance far from p costs one series, not a walk.
 //
-// Rounding.  The stored moments are float32; mapped, an entry's rounding can
-// grow against the world's terms by up to the square of the map's condition
-// number (a direction shrunk by the smallest scale, an error stretched by the
-// largest).  Up to WINDING_PLACED_CONDITION (8: 64 times 2^-24 of each term,
-// evaluated in double precision where the device has it) the series serves;
-// a placement conditioned worse is summed exactly, leaf by leaf, and its
-// world far field is never taken (radius INFINITY).
+// Rounding.  The stored moments are float32, and mapped, an entry's rounding
+// grows against the world's terms with the map's condition number c: bounded
+// term by term (|r| <= R / sigma_3, |w| <= sigma_1^2 |r|, the world's area at
+// least sigma_2 sigma_3 times the mesh's), a node's error is some 2^-24 (1 +
+// c q)^2 of sigma_1 sigma_2 A / R^2 (q = world radius / R), and the sum over
+// the far nodes some 2^-24 c^3 q^2 of the world's solid angles they span:
+// within WINDING_NUMBER_ERROR for c up to WINDING_PLACED_CONDITION (32: 5e-5
+// at the worst, a hundredth of that measured on bunny00 up to c = 96).  A
+// placement conditioned worse is summed exactly, leaf by leaf, and its world
+// far field is never taken (radius INFINITY).  R^2 is |A r|^2, not r.G r,
+// whose terms would cancel down to c^2 2^-24 of it.
 #ifndef CLRT_WINDING_PLACED_CL
 #define CLRT_WINDING_PLACED_CL
 
@@ -44,17 +52,20 @@
 
 #ifdef ACCEL_INSTANCES
 
-#define WINDING_PLACED_CONDITION 8.0f
+#define WINDING_PLACED_CONDITION 32.0f
 
 // The space a walk is in: the world (the top level's rows) or an instance's
 // mesh's own, with what its map A to the world does to the series.
 typedef struct {
     point_real3 q;        // the point in this space
-    point_real g[6];      // G = A^T A: xx, xy, xz, yy, yz, zz (the identity in the world)
-    point_real det;       // det(A) (1 in the world)
-    float scale;          // a bound of A's largest scale; INFINITY: no series in this space
+    float g[6];           // G = A^T A: xx, xy, xz, yy, yz, zz (the identity in the world)
+    float det;            // det(A) (1 in the world)
+    float scale;          // a bound of A's largest scale
     float area;           // a bound of sigma_1 sigma_2, the world's area per unit of this space's
-    float rounding;       // how much the series' rounding may grow: the condition number squared
+    float condition;      // a bound of A's condition number (the series' rounding grows with it)
+    float3 a0, a1, a2;    // A's rows: the world's distance |A r| (r.G r would cancel)
+    bool exact;           // no series in this space (conditioned worse than WINDING_PLACED_CONDITION)
+    bool similar;         // A a similarity to within 2^-20: a leaf's solid angles are its mesh's own
 } WindingSpace;
 
 inline WindingSpace world_space(point_real3 p)
@@ -62,11 +73,16 @@ inline WindingSpace world_space(point_real3 p)
     WindingSpace s;
     s.q = p;
     for (int k = 0; k < 6; ++k)
-        s.g[k] = (k == 0 || k == 3 || k == 5) ? 1 : 0;
-    s.det = 1;
+        s.g[k] = (k == 0 || k == 3 || k == 5) ? 1.0f : 0.0f;
+    s.det = 1.0f;
     s.scale = 1.0f;
     s.area = 1.0f;
-    s.rounding = 1.0f;
+    s.condition = 1.0f;
+    s.a0 = (float3)(1.0f, 0.0f, 0.0f);
+    s.a1 = (float3)(0.0f, 1.0f, 0.0f);
+    s.a2 = (float3)(0.0f, 0.0f, 1.0f);
+    s.exact = false;
+    s.similar = true;
     return s;
 }
 
@@ -90,10 +106,14 @@ inline void map_scales(__global const Instance* in, point_real* g, point_real* d
     g[4] = dot(c1, c2);
     g[5] = dot(c2, c2);
     *det = dot(a0, cross(a1, a2));
-    // Gershgorin: no eigenvalue of G exceeds its largest absolute row sum.
+    // G's largest eigenvalue, sigma_1^2, is at most its largest absolute row
+    // sum (Gershgorin: exact for a similarity), and at most its trace less the
+    // two others, each at least min_scale^2 (exact for one scale apart).
     const point_real rows = fmax(fabs(g[0]) + fabs(g[1]) + fabs(g[2]),
                                  fmax(fabs(g[1]) + fabs(g[3]) + fabs(g[4]), fabs(g[2]) + fabs(g[4]) + fabs(g[5])));
-    *largest = 1.0001f * (float)sqrt(rows);   // (a margin for the rounding of G and of the square root)
+    const point_real low = in->min_scale;
+    const point_real trace = g[0] + g[3] + g[5] - 2 * low * low;
+    *largest = 1.0001f * (float)sqrt(fmax(fmin(rows, trace), 0));   // (a margin for the rounding of G, sqrt)
     *condition = *largest / in->min_scale;
 }
 
@@ -102,67 +122,89 @@ inline void map_scales(__global const Instance* in, point_real* g, point_real* d
 inline WindingSpace instance_space(__global const Instance* in, point_real3 p)
 {
     WindingSpace s;
-    for (int i = 0; i < 3; ++i) {
-        const point_real v = dot(map_row(in->to_object, i), p) + in->to_object[i].w;
-        if (i == 0)
-            s.q.x = v;
-        else if (i == 1)
-            s.q.y = v;
-        else
-            s.q.z = v;
-    }
+    __global const float4* b = in->to_object;
+    s.q = (point_real3)(dot(map_row(b, 0), p) + b[0].w, dot(map_row(b, 1), p) + b[1].w, dot(map_row(b, 2), p) + b[2].w);
     float largest, condition;
-    map_scales(in, s.g, &s.det, &largest, &condition);
-    s.scale = condition > WINDING_PLACED_CONDITION ? INFINITY : largest;
-    s.area = 1.000001f * (float)fabs(s.det) / in->min_scale;   // sigma_1 sigma_2 = |det| / sigma_3
-    s.rounding = condition * condition;
+    point_real g[6], det;
+    map_scales(in, g, &det, &largest, &condition);
+    for (int k = 0; k < 6; ++k)
+        s.g[k] = (float)g[k];
+    s.det = (float)det;
+    s.scale = largest;
+    s.area = 1.000001f * (float)fabs(det) / in->min_scale;   // sigma_1 sigma_2 = |det| / sigma_3
+    s.condition = condition;
+    s.a0 = in->to_world[0].xyz;
+    s.a1 = in->to_world[1].xyz;
+    s.a2 = in->to_world[2].xyz;
+    s.exact = condition > WINDING_PLACED_CONDITION;
+    const point_real s2 = (g[0] + g[3] + g[5]) / 3;
+    s.similar = fmax(fmax(fabs(g[0] - s2), fabs(g[3] - s2)), fmax(fabs(g[5] - s2),
+                     fmax(fabs(g[1]), fmax(fabs(g[2]), fabs(g[4]))))) <= 0x1p-20 * s2;
     return s;
 }
 
-// G r for G's six entries.
-inline point_real3 times_sym(const point_real* g, point_real3 r)
+// A bound of the squared world radius of a child (its radius `radius` and
+// half-extents `extent` about its centre, in the space's units) as the
+// space's map places it: the sphere's, radius times the largest scale, or
+// the box's, the largest of e.G e over its corners e -- at most sum_ij
+// |G_ij| extent_i extent_j -- which is tighter where a child lies across an
+// uneven map's stretch.
+inline float placed_radius2(const WindingSpace* s, float radius, float4 extent)
 {
-    return (point_real3)(g[0] * r.x + g[1] * r.y + g[2] * r.z, g[1] * r.x + g[3] * r.y + g[4] * r.z,
-                         g[2] * r.x + g[4] * r.y + g[5] * r.z);
+    const float sphere = s->scale * radius;
+    if (s->similar)   // (the sphere's is exact)
+        return sphere * sphere;
+    const float x = extent.x, y = extent.y, z = extent.z;
+    const float box = s->g[0] * x * x + s->g[3] * y * y + s->g[5] * z * z
+                    + 2.0f * (fabs(s->g[1]) * x * y + fabs(s->g[2]) * x * z + fabs(s->g[4]) * y * z);
+    return fmin(sphere * sphere, 1.000001f * box);
+}
+
+// G r for G's six entries.
+inline float3 times_sym(const float* g, float3 r)
+{
+    return (float3)(g[0] * r.x + g[1] * r.y + g[2] * r.z, g[1] * r.x + g[3] * r.y + g[4] * r.z,
+                    g[2] * r.x + g[4] * r.y + g[5] * r.z);
 }
 
 // The series of a PlacedWindingNode over det(A), times 4 pi (see above): r =
-// centre - q, w = G r, r2 = r.w.
-inline point_real placed_far_field(__global const PlacedWindingNode* node, point_real3 r, point_real3 w,
-                                   point_real r2, const point_real* g)
+// centre - q, w = G r, r2 = |A r|^2; in float32, as winding.cl's far_field.
+inline float placed_far_field(__global const PlacedWindingNode* node, float3 r, float3 w, float r2, const float* g)
 {
     __global const float* m = node->first;
     __global const float* t = node->second;
-    const point_real inv_r2 = 1 / r2;
-    const point_real order0 = dot(TO_POINT_REAL3(node->normal.xyz), r);
-    const point_real3 mw = (point_real3)(m[0] * w.x + m[1] * w.y + m[2] * w.z, m[3] * w.x + m[4] * w.y + m[5] * w.z,
-                                         m[6] * w.x + m[7] * w.y + m[8] * w.z);
-    const point_real order1 = (point_real)m[0] + m[4] + m[8] - 3 * dot(r, mw) * inv_r2;
-    const point_real rl[3] = {r.x, r.y, r.z};
-    point_real t_rww = 0, t_g = 0;
-    for (int l = 0; l < 3; ++l) {
-        __global const float* s = t + 6 * l;
-        const point_real sww = s[0] * w.x * w.x + s[3] * w.y * w.y + s[5] * w.z * w.z
-                             + 2 * (s[1] * w.x * w.y + s[2] * w.x * w.z + s[4] * w.y * w.z);
-        const point_real sg = s[0] * g[0] + s[3] * g[3] + s[5] * g[5] + 2 * (s[1] * g[1] + s[2] * g[2] + s[4] * g[4]);
-        t_rww += rl[l] * sww;
-        t_g += rl[l] * sg;
-    }
+    const float inv_r2 = 1.0f / r2;
+    const float order0 = dot(node->normal.xyz, r);
+    const float3 mw = (float3)(m[0] * w.x + m[1] * w.y + m[2] * w.z, m[3] * w.x + m[4] * w.y + m[5] * w.z,
+                               m[6] * w.x + m[7] * w.y + m[8] * w.z);
+    const float order1 = m[0] + m[4] + m[8] - 3.0f * dot(r, mw) * inv_r2;
+    // T[l] contracted with w (x) w and with G, l = x, y, z: the six entries of
+    // each against w's and G's, the off-diagonal ones twice
+    const float w0 = w.x * w.x, w1 = 2.0f * w.x * w.y, w2 = 2.0f * w.x * w.z, w3 = w.y * w.y;
+    const float w4 = 2.0f * w.y * w.z, w5 = w.z * w.z;
+    const float g0 = g[0], g1 = 2.0f * g[1], g2 = 2.0f * g[2], g3 = g[3], g4 = 2.0f * g[4], g5 = g[5];
+#define T_DOT(l, a0, a1, a2, a3, a4, a5) (t[6 * (l)] * (a0) + t[6 * (l) + 1] * (a1) + t[6 * (l) + 2] * (a2) \
+                                          + t[6 * (l) + 3] * (a3) + t[6 * (l) + 4] * (a4) + t[6 * (l) + 5] * (a5))
+    const float t_rww = r.x * T_DOT(0, w0, w1, w2, w3, w4, w5) + r.y * T_DOT(1, w0, w1, w2, w3, w4, w5)
+                      + r.z * T_DOT(2, w0, w1, w2, w3, w4, w5);
+    const float t_g = r.x * T_DOT(0, g0, g1, g2, g3, g4, g5) + r.y * T_DOT(1, g0, g1, g2, g3, g4, g5)
+                    + r.z * T_DOT(2, g0, g1, g2, g3, g4, g5);
+#undef T_DOT
     // t_k = T[x][x k] + T[y][y k] + T[z][z k]
-    const point_real3 tk = (point_real3)((point_real)t[0] + t[7] + t[14], (point_real)t[1] + t[9] + t[16],
-                                         (point_real)t[2] + t[10] + t[17]);
-    const point_real order2 = 0.5 * (15 * t_rww * inv_r2 - 3 * (2 * dot(tk, w) + t_g)) * inv_r2;
-    return (order0 + order1 + order2) * inv_r2 / sqrt(r2);
+    const float3 tk = (float3)(t[0] + t[7] + t[14], t[1] + t[9] + t[16], t[2] + t[10] + t[17]);
+    const float order2 = 0.5f * (15.0f * t_rww * inv_r2 - 3.0f * (2.0f * dot(tk, w) + t_g)) * inv_r2;
+    return (order0 + order1 + order2) * inv_r2 * rsqrt(r2);
 }
 
 // remainder_bound for a child of area `area` and radius `radius` (the
-// world's, or bounds of them) at squared distance r2, its float32 rounding
-// grown by `rounding` (WindingSpace).
-inline float placed_remainder_bound(float area, float radius, point_real r2, float rounding)
+// world's, or bounds of them) at squared distance r2 under a map of
+// condition number `condition`: the series' rounding, 2^-12 of A / R^2 there,
+// grows here with (1 + condition q)^2 (see above).
+inline float placed_remainder_bound(float area, float radius, float r2, float condition)
 {
-    const float d2 = (float)r2;
-    const float q = radius * rsqrt(d2);
-    return 1.001f * area / d2 * (q * q * q * (4.0f - 3.0f * q) / ((1.0f - q) * (1.0f - q)) + 0x1p-12f * rounding);
+    const float q = radius * rsqrt(r2);
+    const float grown = (1.0f + condition * q) * (1.0f + condition * q);
+    return 1.001f * area / r2 * (q * q * q * (4.0f - 3.0f * q) / ((1.0f - q) * (1.0f - q)) + 0x1p-12f * grown);
 }
 
 // Object point v of instance `in` where it places it, in the world (to_world,
@@ -214,22 +256,28 @@ inline point_real winding_sum(const Geometry* g, __global const PlacedWindingNod
             if (child.y < 0)
                 continue;
             __global const PlacedWindingNode* node = winding + 2 * at.x + side;
-            const point_real3 r = TO_POINT_REAL3(node->centre.xyz) - space.q;
-            const point_real3 w = times_sym(space.g, r);
-            const point_real r2 = dot(r, w);
-            const point_real reach = (point_real)(beta * space.scale) * node->centre.w;   // NaN (0 x inf): opened
-            if (r2 > reach * reach) {
+            // (centre - q in double where the device has it: q is not rounded)
+            const float3 r = convert_float3(TO_POINT_REAL3(node->centre.xyz) - space.q);
+            const float3 w = times_sym(space.g, r);
+            float r2 = dot(r, w);
+            if (!space.similar) {
+                const float3 placed = (float3)(dot(space.a0, r), dot(space.a1, r), dot(space.a2, r));
+                r2 = dot(placed, placed);
+            }
+            const float radius2 = placed_radius2(&space, node->centre.w, node->extent);   // INFINITY: opened
+            if (!space.exact && r2 > beta * beta * radius2) {
                 sum += space.det * placed_far_field(node, r, w, r2, space.g);
                 if (bounded)
-                    err += placed_remainder_bound(node->normal.w * space.area, node->centre.w * space.scale, r2,
-                                                  space.rounding);
+                    err += placed_remainder_bound(node->normal.w * space.area, sqrt(radius2), r2, space.condition);
                 continue;
             }
             int2 target;
             if (child.y > 0 && at.y < 0) {          // a top-level leaf: an instance, from its mesh's root
                 target = (int2)(SPLIT_AT(g, instances, child.x)->root, child.x);
-            } else if (child.y > 0) {
-                sum += placed_leaf_solid_angle(g, SPLIT_AT(g, instances, at.y), pw, child.x, child.y);
+            } else if (child.y > 0) {   // (a similarity keeps solid angles; a mirror turns them over)
+                const point_real leaf = space.similar ? leaf_solid_angle(g, space.q, child.x, child.y)
+                    : placed_leaf_solid_angle(g, SPLIT_AT(g, instances, at.y), pw, child.x, child.y);
+                sum += space.similar && space.det < 0.0f ? -leaf : leaf;
                 continue;
             } else {
                 target = (int2)(child.x, at.y);
@@ -263,12 +311,13 @@ inline point_real winding_sum(const Geometry* g, __global const PlacedWindingNod
 // triangles, in its own space, as winding.cl makes WindingNodes; then the top
 // level's, in the world: an instance's from its mesh's root mapped.
 
-inline PlacedWindingNode placed_winding_node_of(float3 centre, float radius, point_real3 dipole, point_real area,
-                                                const point_real* m, const point_real* t)
+inline PlacedWindingNode placed_winding_node_of(float3 centre, float radius, point_real3 extent, point_real3 dipole,
+                                                point_real area, const point_real* m, const point_real* t)
 {
     PlacedWindingNode node;
     node.centre = (float4)(centre, radius);
     node.normal = (float4)(convert_float3(dipole), (float)area);
+    node.extent = (float4)(radius_up(extent.x), radius_up(extent.y), radius_up(extent.z), 0.0f);
     for (int k = 0; k < 9; ++k)
         node.first[k] = (float)m[k];
     for (int k = 0; k < 18; ++k)
@@ -280,7 +329,7 @@ inline PlacedWindingNode placed_winding_node_of(float3 centre, float radius, poi
 inline PlacedWindingNode empty_placed_winding_node(void)
 {
     const point_real zeros[18] = {0};
-    return placed_winding_node_of((float3)(0.0f), 0.0f, (point_real3)(0), 0, zeros, zeros);
+    return placed_winding_node_of((float3)(0.0f), 0.0f, (point_real3)(0), (point_real3)(0), 0, zeros, zeros);
 }
 
 // Moments about a centre moved by -e (d = d' + e: the old centre is the new one
@@ -322,11 +371,13 @@ inline PlacedWindingNode leaf_placed_winding_node(const Geometry* g, int first, 
     point_real m[9] = {0};
     point_real sec[18] = {0};
     point_real radius2 = 0;
+    point_real3 extent = (point_real3)(0);
     for (int s = first; s < first + count; ++s) {
         __global const TriangleVerts* t = SPLIT_AT(g, tris, s);
         const point_real3 d0 = TO_POINT_REAL3(t->v0.xyz) - cr, d1 = TO_POINT_REAL3(t->v1.xyz) - cr;
         const point_real3 d2 = TO_POINT_REAL3(t->v2.xyz) - cr;
         radius2 = fmax(radius2, fmax(dot(d0, d0), fmax(dot(d1, d1), dot(d2, d2))));
+        extent = fmax(extent, fmax(fabs(d0), fmax(fabs(d1), fabs(d2))));
         const point_real3 va = cross(d1 - d0, d2 - d0) / 2;
         const point_real3 sum = d0 + d1 + d2;
         dipole += va;
@@ -342,7 +393,7 @@ inline PlacedWindingNode leaf_placed_winding_node(const Geometry* g, int first, 
                                                           + sx[j] * sx[k]) / 12;
         }
     }
-    return placed_winding_node_of(centre, radius_up(sqrt(radius2)), dipole, area, m, sec);
+    return placed_winding_node_of(centre, radius_up(sqrt(radius2)), extent, dipole, area, m, sec);
 }
 
 // The PlacedWindingNode of a row's children joined: `a`, and `b` where
@@ -356,6 +407,7 @@ inline PlacedWindingNode joined_placed_winding_node(__global const PlacedWinding
     const float3 centre = convert_float3(area > 0 ? (area_a * ca + area_b * cb) / area : (ca + cb) / 2);
     const point_real3 cr = TO_POINT_REAL3(centre);
     point_real radius = 0;
+    point_real3 extent = (point_real3)(0);
     point_real3 dipole = (point_real3)(0);
     point_real m[9] = {0};
     point_real sec[18] = {0};
@@ -363,6 +415,7 @@ inline PlacedWindingNode joined_placed_winding_node(__global const PlacedWinding
         __global const PlacedWindingNode* child = c == 0 ? a : b;
         const point_real3 e = TO_POINT_REAL3(child->centre.xyz) - cr;
         radius = fmax(radius, sqrt(dot(e, e)) + child->centre.w);
+        extent = fmax(extent, fabs(e) + TO_POINT_REAL3(child->extent.xyz));
         const point_real3 n = TO_POINT_REAL3(child->normal.xyz);
         dipole += n;
         point_real m0[9], t0[18];
@@ -372,7 +425,7 @@ inline PlacedWindingNode joined_placed_winding_node(__global const PlacedWinding
             t0[k] = child->second[k];
         add_moved_moments(n, m0, t0, e, m, sec);
     }
-    return placed_winding_node_of(centre, radius_up(radius), dipole, area, m, sec);
+    return placed_winding_node_of(centre, radius_up(radius), extent, dipole, area, m, sec);
 }
 
 // The world's PlacedWindingNode of instance `instance` (a top-level leaf):
@@ -432,10 +485,16 @@ inline PlacedWindingNode instance_winding_node(const Geometry* g, __global const
     point_real g6[6], det;
     float largest, condition;
     map_scales(in, g6, &det, &largest, &condition);
-    const float radius = condition > WINDING_PLACED_CONDITION
-                         ? INFINITY : radius_up(largest * (point_real)o.centre.w + sqrt(dot(moved, moved)));
+    // the box of the mapped box about the mapped centre: |A| e, and the move
+    const point_real3 e = TO_POINT_REAL3(o.extent.xyz);
+    point_real3 extent = fabs(moved) + (point_real3)(dot(fabs(a0), e), dot(fabs(a1), e), dot(fabs(a2), e));
+    point_real radius = largest * (point_real)o.centre.w + sqrt(dot(moved, moved));
+    if (condition > WINDING_PLACED_CONDITION) {
+        radius = INFINITY;
+        extent = (point_real3)(INFINITY);
+    }
     const point_real area = 1.000001 * o.normal.w * fabs(det) / in->min_scale;
-    return placed_winding_node_of(centre, radius, n, area, m, sec);
+    return placed_winding_node_of(centre, radius_up(radius), extent, n, area, m, sec);
 }
 
 #endif
