@@ -419,6 +419,7 @@ inline bool enter_nearer_child(int2 left_child, int2 right_child, float d_left, 
 // two-level scene a mesh's own, in its space: instance -1, the triangles as
 // they are stored, for the signs by normal), nearest children first, into
 // *best.
+__attribute__((always_inline))
 inline void walk_rows_points(const Geometry* g, float3 p, int root, int instance, float margin, PointHit* best)
 {
     const point_real3 pr = TO_POINT_REAL3(p);
