@@ -40,6 +40,10 @@
 // lockstep, each summing its own series and leaves.  A child far from the
 // cell is far from the point, so the error can only shrink; on the H200 the
 // walk of a million random points took half the time (docs/benchmarks.md).
+// The stricter test leaves room for a smaller beta there, 4.5: on the tests'
+// meshes (tests/test_inside.py: this program on the CPU) the largest error
+// was 5.4e-5 (beta 6: 2.0e-5); float32 leaves, tried beside it, missed
+// WINDING_NUMBER_ERROR by half (1.5e-4 at a point just off a large face).
 //
 // CPU devices that walk the wide BVH (-DBVH_WIDE, accel_wide.cl) walk it here
 // too: one float8 series for the eight children of a wide node
@@ -66,6 +70,9 @@
 #ifdef BVH_WIDE
 #define WINDING_BETA 5.0f
 #define WINDING_SIGN_BETA 2.5f
+#elif defined(POINT_CELL_REGIONS)
+#define WINDING_BETA 4.5f
+#define WINDING_SIGN_BETA 3.0f
 #else
 #define WINDING_BETA 6.0f
 #define WINDING_SIGN_BETA 3.0f
