@@ -15,7 +15,7 @@ from clrt.device.instances import instanced_scene, move_instances
 from clrt.device.scene import DeviceScene
 from clrt.device.sharing import one_at_a_time
 from clrt.errors import InputError
-from clrt.query.kernels import QUERY_KERNELS
+from clrt.query.kernels import QUERY_KERNELS, point_defines
 from clrt.scene.arrays import device_origin, triangle_corners
 from clrt.scene.instances import Instances, is_gltf_file, is_instance_list, placed_meshes
 from clrt.scene.mesh import Mesh
@@ -70,4 +70,4 @@ class InstanceMoves:
             raise InputError("these queries share a Renderer's scene: use Renderer.move_instances")
         self.instances, changed = move_instances(self.device_scene, self.instances, transforms)
         if changed:   # a deeper or shallower top level: a program of another stack size
-            self.kernels = self.device_scene.kernels("trace.cl", QUERY_KERNELS)
+            self.kernels = self.device_scene.kernels("trace.cl", QUERY_KERNELS, point_defines(self.queue.device))
