@@ -91,9 +91,9 @@ class TwoLevel(Acceleration):
     device_top: the device's top-level build (clrt.device.top_level), when
                the device built the top level: the moves build it there again.
     pending:   after such a move, what reads its rows and table back: the
-               host copies of ``rows`` and ``instances`` are read when first
-               asked for (reading back 2 MB a move of 10,000 instances would
-               cost more than the move).
+               host copies of ``rows``, ``instances`` and ``top`` are read
+               when first asked for (reading back 2 MB a move of 10,000
+               instances would cost more than the move).
     """
 
     instances: np.ndarray = field(repr=False, default=None)
@@ -124,9 +124,8 @@ class TwoLevel(Acceleration):
         pending, self.pending = self.pending, None
         if pending is not None:
             table, top = pending()
-            self.__dict__["instances"] = table
+            self.__dict__["instances"], self.__dict__["top"] = table, top
             self.__dict__["rows"][:len(top.rows)] = top.rows
-            self.top = top
 
     def __getstate__(self):
         self.read_back()
@@ -156,6 +155,7 @@ class _ReadBack:
 # (After the dataclass is made: its __init__ then sets them through __set__.)
 TwoLevel.rows = _ReadBack("rows")
 TwoLevel.instances = _ReadBack("instances")
+TwoLevel.top = _ReadBack("top")
 
 
 def _cross(p, q):
