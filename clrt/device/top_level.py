@@ -89,6 +89,7 @@ class DeviceTopLevel:
         except (cl.Error, MemoryError):    # page-locked memory is scarce: ordinary memory
             self.staged = np.empty((n, 4, 4))
         self.last: cl.Event | None = None
+        self.writes = ()
         self.depth_bound = lbvh_depth_bound(n)
 
     def place(self, transforms: np.ndarray, frame_of, queue: cl.CommandQueue | None = None,
@@ -129,7 +130,8 @@ class DeviceTopLevel:
             keys = [ws.get("keys0", 4 * n), ws.get("keys1", 4 * n)]
             ids = [ws.get("ids0", 4 * n), ws.get("ids1", 4 * n)]
             np.copyto(self.staged, transforms)
-            events["upload"].append(cl.enqueue_copy(queue, self.transforms, self.staged, is_blocking=False))
+            upload = cl.enqueue_copy(queue, self.transforms, self.staged, is_blocking=False)
+            events["upload"].append(upload)
             launch("place", k["place_instances"], self.groups, self.transforms, self.mesh_of, self.meshes,
                    np.uint32(n), self.group_results, state)
             queued = time.perf_counter()
@@ -143,7 +145,9 @@ class DeviceTopLevel:
             frame = np.zeros((3, 4), np.float32)
             frame[0, :3] = origin
             frame[1, :3], frame[2, :3] = r[:, 6:9].min(axis=0) - origin, r[:, 9:12].max(axis=0) - origin
-            cl.enqueue_copy(queue, self.frame, frame, is_blocking=False)
+            # (pyopencl waits for a write from host memory when its event goes:
+            # the writes' events stay until the next place, done by then.)
+            self.writes = (upload, cl.enqueue_copy(queue, self.frame, frame, is_blocking=False))
             last = launch("rows", k["instance_rows"], _groups(n), self.transforms, self.mesh_of, self.meshes,
                           self.frame, np.uint32(n), self.table, keys[0], ids[0], self.arrivals)
             sorted_ids = ids[0]
