@@ -185,6 +185,7 @@ CPU_TILE_WORKERS = 4     # work-items per core of the CPU merge passes (build_pl
 MAX_REDUCE_GROUPS = 256  # work-groups of the bounds reduction (grid-stride beyond)
 EARLY_ROWS_BYTES = 64 << 20   # row buffers made before the row count is known, up to this size
 EMIT_JUMPS = 7           # pointer jumps queued without reading the tree's height (2**7 levels)
+GROUP_RESULTS = 14       # doubles each work-group of place_instances writes (build_instances.cl)
 
 # The state buffer (build_state.cl): int offsets, and the ring of cluster counts.
 STATE = {"STATE_NEXT_NODE": 0, "STATE_DEPTH": 1, "STATE_ERROR": 2, "STATE_BAD_TRIANGLE": 3, "STATE_BOUNDS": 4,
@@ -224,6 +225,7 @@ def build_defines(volume: str, kind: str = "gpu", treelet_leaves: int | None = N
         "TREELET_FULL_MIN": TREELET_SMALL[kind][1],
         "TREELET_GROUP": TREELET_GROUP, "TREELET_LEVELS": TREELET_LEVELS, **STATE,
         "PART_BINS": PART_BINS, "PART_MAX_NODES": PART_MAX_NODES, "PART_LEVELS": PART_LEVELS,
+        "GROUP_RESULTS": GROUP_RESULTS,
         **({"PLOC_SEGMENTS": None} if segmented else {}),
         "C_TRAVERSAL": f"((float){C_TRAVERSAL!r})", "C_INTERSECT": f"((float){C_INTERSECT!r})",
         **volumes.fit_defines(), **instance_defines(),

@@ -9,7 +9,7 @@ world boxes (build_instances.cl, in the device builder's program; docs/instances
 What it is for: moving instances (clrt.device.instances.move_instances)
 rebuilds only the table and the top level, and their host part must be
 tiny -- one copy of the transforms into page-locked memory, one read of a
-few hundred numbers between the two passes, the launches (eleven on a GPU),
+few hundred numbers between the two passes, the launches (thirteen on a GPU),
 one wait at the end.  The host's twin is clrt.accel.instances
 (instance_table, the same rows bit for bit; top_level, a binned SAH tree):
 a scene built with a host builder moves there.
@@ -29,15 +29,14 @@ import pyopencl as cl
 from clrt.accel import Acceleration
 from clrt.accel.instances import lbvh_depth_bound, top_rows
 from clrt.accel.rows import child_refs, tree_levels
-from clrt.device.build import MAX_REDUCE_GROUPS, STATE_INTS, build_defines, queue_sort
+from clrt.device.build import (BUILD_GROUP, GROUP_RESULTS, MAX_REDUCE_GROUPS, STATE_INTS, build_defines,
+                               queue_sort)
 from clrt.device.build_kernels import build_queue, workspace
 from clrt.device.context import device_kind
 from clrt.device.pinned import mapped_block
 from clrt.device.program import build_program
 from clrt.layouts import BVH_PAIR_NODE, INSTANCE
 
-BUILD_GROUP = 256        # build_instances.cl's work-groups (the builder's BUILD_GROUP)
-GROUP_RESULTS = 14       # doubles of place_instances per work-group (build_instances.cl)
 # Phases of a place(), in order, as its timings name them.
 PHASES = ("upload", "place", "rows", "sort", "nodes", "fit")
 
@@ -110,7 +109,7 @@ class DeviceTopLevel:
         queue.  ``timings`` also gets host ms: "host" (the copy of the
         transforms, the launches' queueing, the frame) and "first pass" (the
         wait for the bounds)."""
-        n, k = self.count, None
+        n = self.count
         profiled = queue is not None
         queue = queue if profiled else build_queue(self.context, self.context.devices[0])
         events = {phase: [] for phase in PHASES}
@@ -161,9 +160,10 @@ class DeviceTopLevel:
             if timings is not None:
                 timings["host"] = 1e3 * ((queued - start) + (time.perf_counter() - read))
                 timings["first pass"] = 1e3 * (read - queued)
-            # The next build on this context may reuse the keys and ids at once:
-            # on the build queue its launches queue behind these; a queue of
-            # the caller's is waited for here.
+            # The next build on this context reuses the keys and ids: on the
+            # build queue its launches queue behind these (and the callers
+            # wait for the end before they return); a queue of the caller's
+            # is waited for here.
             if profiled:
                 last.wait()
                 if timings is not None:

@@ -15,10 +15,10 @@
 //   lbvh_fit         bottom up: a leaf climbs while it is the second child to
 //                    arrive at a node, and writes that node's row
 //
-// Eleven launches on a GPU (and one read between the first two): moving 10k
+// Thirteen launches on a GPU (and one read between the first two): moving 10k
 // instances is bound by launches, not by arithmetic.  The row arithmetic is
 // clrt/accel/instances.py's, operation for operation in float64 without
-// contraction (build_fit.cl turns it off) and without a function that rounds
+// contraction into fma (the host rounds each product) and without a function that rounds
 // otherwise than IEEE's +, -, *, / and sqrt, so the table is the host's bit
 // for bit (tests/test_instances.py) and a scene answers alike whichever built
 // its top level.
@@ -31,15 +31,22 @@
 #include "build_fit.cl"
 #include "build_emit.cl"
 
+#pragma OPENCL EXTENSION cl_khr_fp64 : enable
+#pragma OPENCL FP_CONTRACT OFF
+
 #if !defined(INSTANCE_BOX_PAD) || !defined(MIN_SCALE_SLACK) || !defined(INVERSE_SLACK) \
-    || !defined(RECHECK_CONDITION) || !defined(MAX_COORDINATE) || !defined(INSTANCE_MIRROR)
+    || !defined(RECHECK_CONDITION) || !defined(MAX_COORDINATE) || !defined(INSTANCE_MIRROR) \
+    || !defined(GROUP_RESULTS)
 #error "build with the instance constants of clrt/accel/instances.py (instance_defines)"
 #endif
 
-// Per work-group results of place_instances, doubles: box lo xyz, box hi xyz,
-// centre lo xyz, centre hi xyz, then the first instance to check on the host
-// and the first placed past MAX_COORDINATE (num_instances: none).
-#define GROUP_RESULTS 14
+// Per work-group results of place_instances, GROUP_RESULTS doubles (a -D
+// define of clrt/device/build.py): box lo xyz, box hi xyz, centre lo xyz,
+// centre hi xyz, then the first instance to check on the host and the first
+// placed past MAX_COORDINATE (num_instances: none).
+#if GROUP_RESULTS != 14
+#error "place_instances writes 14 doubles a work-group"
+#endif
 
 inline double dot3(double3 p, double3 q)
 {
