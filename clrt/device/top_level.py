@@ -89,6 +89,7 @@ class DeviceTopLevel:
             self.staged = np.empty((n, 4, 4))
         self.last: cl.Event | None = None
         self.writes = ()
+        self.place_ms = 0.0     # host ms of the last place() (its launches queued, not done)
         self.depth_bound = lbvh_depth_bound(n)
 
     def place(self, transforms: np.ndarray, frame_of, queue: cl.CommandQueue | None = None,
@@ -157,6 +158,7 @@ class DeviceTopLevel:
             last = launch("fit", k["lbvh_fit"], _groups(n), self.children, self.parents, sorted_ids, self.table,
                           np.uint32(n), self.boxes, self.arrivals, self.rows, self.exact_rows)
             self.last = last
+            self.place_ms = 1e3 * (time.perf_counter() - start)
             if timings is not None:
                 timings["host"] = 1e3 * ((queued - start) + (time.perf_counter() - read))
                 timings["first pass"] = 1e3 * (read - queued)
@@ -186,6 +188,6 @@ class DeviceTopLevel:
         refs = child_refs(rows)
         leaves = np.stack([refs[:, 0], refs[:, 2]], axis=1)[np.stack([refs[:, 1], refs[:, 3]], axis=1) == 1]
         depth = 1 if self.count == 1 else len(tree_levels(rows)) + 1
-        top = Acceleration(self.volume, "device", rows, leaves.astype(np.int32), depth=depth, build_ms=0.0,
-                           leaf_size=1, exact_rows=exact)
+        top = Acceleration(self.volume, "device", rows, leaves.astype(np.int32), depth=depth,
+                           build_ms=self.place_ms, leaf_size=1, exact_rows=exact)
         return table, top
