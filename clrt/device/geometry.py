@@ -22,7 +22,7 @@ from clrt.device.context import device_kind, format_bytes
 from clrt.device.reach import Reach
 from clrt.device.signature import buffer, typed_kernels, value
 from clrt.errors import DeviceMemoryError, InputError
-from clrt.layouts import TRIANGLE_VERTS
+from clrt.layouts import BVH_PAIR_NODE, INSTANCE, TRIANGLE_VERTS
 from clrt.scene.arrays import triangle_verts
 
 
@@ -262,6 +262,33 @@ class DeviceGeometry:
         changed = any(self.defines.get(k, "none") != v for k, v in defines.items())
         self.defines.update(defines)
         return changed
+
+    def place_instances(self, queue: cl.CommandQueue, top, after: cl.Event, bounds, origin) -> tuple[bool, cl.Event]:
+        """Take a two-level scene's instances as the device placed them anew
+        (clrt.device.top_level.DeviceTopLevel ``top``: its table and top-level
+        rows, written when ``after`` is done), copied on the device over the
+        old ones on ``queue`` -- after every launch queued there before -- in
+        the frame of ``origin``, their world box ``bounds``.  Returns whether
+        the program defines changed, as move_instances does, and the last
+        copy's event."""
+        self._place(None, bounds, origin)
+        self._copy(queue, "nodes", top.rows, top.num_rows, BVH_PAIR_NODE.itemsize, after)
+        copied = self._copy(queue, "instances", top.table, top.count, INSTANCE.itemsize, after)
+        defines = accel_defines(self.acceleration, self.wide)
+        changed = any(self.defines.get(k, "none") != v for k, v in defines.items())
+        self.defines.update(defines)
+        return changed, copied
+
+    def _copy(self, queue: cl.CommandQueue, name: str, source: cl.Buffer, count: int, itemsize: int,
+              after: cl.Event) -> cl.Event:
+        """Copy the first ``count`` elements of device buffer ``source`` over
+        those of buffer ``name`` (its parts, where split), after ``after``."""
+        buffers = self.buffers[name]
+        step = count if self.shifts is None else 1 << self.shifts[name]
+        for k in range(0, count, step):
+            event = cl.enqueue_copy(queue, buffers[k // step], source, byte_count=min(step, count - k) * itemsize,
+                                    src_offset=k * itemsize, wait_for=[after])
+        return event
 
     def _write(self, queue: cl.CommandQueue, name: str, array: np.ndarray) -> None:
         """Overwrite the first ``len(array)`` elements of buffer ``name`` (its

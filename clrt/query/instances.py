@@ -59,9 +59,10 @@ class InstanceMoves:
     def move_instances(self, transforms) -> None:
         """Place the instances anew: ``transforms`` (I, 4, 4), object -> world,
         one for each instance in its order (checked as when made).  Only the
-        instance table and the top level are built again (on the host:
-        docs/instances.md says how long it takes) and uploaded over the old
-        ones; each mesh's BVH stays.  The queries then answer as an Accel
+        instance table and the top level are built again, over the old ones:
+        on the device where the device built the meshes (the default where it
+        has float64), else on the host (docs/instances.md says how long each
+        takes); each mesh's BVH stays.  The queries then answer as an Accel
         made of the moved instances does, bit for bit."""
         if self.instances is None:
             raise InputError("move_instances needs an Accel of instances (a list of meshes or of (mesh, "

@@ -404,8 +404,9 @@ class Renderer:
         """Place a scene of placed meshes anew: ``transforms`` (I, 4, 4),
         object -> world, one for each placement in the order of
         ``self.instances`` (docs/instances.md).  Only the instance table and
-        the top level are built again (on the host) and uploaded; the meshes'
-        BVHs, shading arrays and materials stay.  The frames after show the
+        the top level are built again (on the device where it built the
+        meshes, else on the host); the meshes' BVHs, shading arrays and
+        materials stay.  The frames after show the
         moved scene as a new Renderer of it would, bit for bit (its lights
         stay where they are)."""
         if self.instances is None:
