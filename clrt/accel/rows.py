@@ -87,3 +87,42 @@ def tree_stats(exact_rows: np.ndarray, depth: int) -> dict:
     return {"nodes": int(leaf.sum() + inner.sum() + (0 if one_leaf else 1)), "leaves": int(leaf.sum()),
             "depth": int(depth), "max_leaf_size": int(counts.max()),
             "mean_leaf_size": float(counts[leaf].mean()), "sah_cost": float(sah)}
+
+
+def exact_rows(rows: np.ndarray, slotted: np.ndarray) -> np.ndarray:
+    """``rows`` with every child's exact box in box layout (its min corner in
+    the a lanes, its max corner in the b lanes, the references kept in the w
+    lanes), found from ``slotted``, the (F, 3, 3) float32 triangle corners in
+    slot order: what the device builder writes into its exact rows when asked
+    (clrt.device.build, ``keep_boxes``), for :func:`tree_stats`, here made only
+    when statistics are asked for.  Float32 minima and maxima are exact, so
+    the boxes are those of any builder's exact fit, bit for bit."""
+    refs = child_refs(rows)
+    tri_lo = np.minimum(np.minimum(slotted[:, 0], slotted[:, 1]), slotted[:, 2])
+    tri_hi = np.maximum(np.maximum(slotted[:, 0], slotted[:, 1]), slotted[:, 2])
+    lo = np.zeros((len(rows), 2, 3), np.float32)
+    hi = np.zeros((len(rows), 2, 3), np.float32)
+    counts = refs[:, [1, 3]]
+    # The leaves' slot ranges tile the slots: in order of their first slot,
+    # one reduceat gives every leaf's box.
+    leaf_row, leaf_side = np.nonzero(counts > 0)
+    first = refs[leaf_row, 2 * leaf_side]
+    order = np.argsort(first, kind="stable")
+    leaf_row, leaf_side, first = leaf_row[order], leaf_side[order], first[order]
+    if len(first) and (first[0] != 0 or not np.array_equal(first[1:], (first + counts[leaf_row, leaf_side])[:-1])):
+        raise ValueError("the rows' leaves do not cover the slots one after the other")
+    lo[leaf_row, leaf_side] = np.minimum.reduceat(tri_lo, first, axis=0)
+    hi[leaf_row, leaf_side] = np.maximum.reduceat(tri_hi, first, axis=0)
+    # Inner children bottom-up, a level at a time (a child row lies one level deeper).
+    for level in reversed(tree_levels(rows)):
+        for side in (0, 1):
+            inner = level[counts[level, side] == 0]
+            child = refs[inner, 2 * side]
+            lo[inner, side] = np.minimum(lo[child, 0], lo[child, 1])
+            hi[inner, side] = np.maximum(hi[child, 0], hi[child, 1])
+    exact = rows.copy()
+    for side, name in enumerate(("left", "right")):
+        present = counts[:, side] >= 0
+        exact[f"{name}_a"][present, :3] = lo[present, side]
+        exact[f"{name}_b"][present, :3] = hi[present, side]
+    return exact

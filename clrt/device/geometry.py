@@ -22,7 +22,7 @@ from clrt.device.context import device_kind, format_bytes
 from clrt.device.reach import Reach
 from clrt.device.signature import buffer, typed_kernels, value
 from clrt.errors import DeviceMemoryError, InputError
-from clrt.layouts import TRIANGLE_VERTS
+from clrt.layouts import BVH_PAIR_NODE, TRIANGLE_VERTS
 from clrt.scene.arrays import triangle_verts
 
 
@@ -74,6 +74,17 @@ def packet_rays(context: cl.Context, geometry: "DeviceGeometry") -> int:
     on ``context`` for ``geometry``: PACKET_RAYS where packets are walked, else 1."""
     packets = geometry.wide is not None and all(device_kind(d) in RAY_PACKET_KINDS for d in context.devices)
     return PACKET_RAYS if packets else 1
+
+
+def _stand_in(dtype, count: int) -> np.ndarray:
+    """(count,) of ``dtype`` in no memory: the size of an array kept on the device."""
+    return np.broadcast_to(np.zeros(1, dtype), (count,))
+
+
+def _host_arrays(corners: np.ndarray, acceleration: Acceleration) -> dict:
+    """The triangles in slot order, the rows and the ids of ``acceleration``, for upload."""
+    return {"tris": triangle_verts(corners[acceleration.slot_order()]),
+            "nodes": np.ascontiguousarray(acceleration.rows), "prim_ids": np.ascontiguousarray(acceleration.prim_ids)}
 
 
 def check_fits(device, label: str, nbytes: int, reserve: int = 0) -> None:
@@ -134,27 +145,32 @@ class DeviceGeometry:
                  bounds=None, origin=None):
         self.acceleration = acceleration
         self._place(corners, bounds, origin)
-        prim_ids, order = acceleration.prim_ids, acceleration.slot_order()
         # A tree built on this context's device is on it already, with its
-        # triangles in slot order: taken over (once), not uploaded again.
-        # The triangles' host array is then only a stand-in of the right size.
+        # triangles in slot order: taken over (once), not uploaded again, and
+        # its arrays here are stand-ins of the right size (a device build's
+        # host copies are not even read back: clrt.device.acceleration).
         built = acceleration.take_device_buffers(context)
-        slotted = (np.broadcast_to(np.zeros(1, TRIANGLE_VERTS), (len(prim_ids),)) if built is not None
-                   else triangle_verts(corners[order]))
-        arrays = {"tris": slotted, "nodes": acceleration.rows, "prim_ids": prim_ids, **(extra or {})}
-        if acceleration.instances is not None:
-            arrays["instances"] = acceleration.instances
-        arrays = {name: a if a is slotted else np.ascontiguousarray(a) for name, a in arrays.items()}
+        if built is not None:
+            arrays = {"tris": _stand_in(TRIANGLE_VERTS, acceleration.num_slots),
+                      "nodes": _stand_in(BVH_PAIR_NODE, acceleration.num_rows),
+                      "prim_ids": _stand_in(np.int32, acceleration.num_slots)}
+        else:
+            arrays = _host_arrays(corners, acceleration)
+        for name, array in {**(extra or {}), **({} if acceleration.instances is None
+                                               else {"instances": acceleration.instances})}.items():
+            arrays[name] = np.ascontiguousarray(array)
         limit = min(d.max_mem_alloc_size for d in context.devices)
         source = "the device's largest allocation"
         if max_buffer_bytes is not None and int(max_buffer_bytes) < limit:
             limit, source = int(max_buffer_bytes), f"set by {max_buffer_label}"
         self.shifts = part_shifts(arrays, limit, source)
-        if built is not None and self.shifts is not None:    # split into parts: uploaded as always
+        if built is not None and self.shifts is not None:    # split into parts: uploaded from the host
+            acceleration.keep_on_host()
+            built.release()
             built = None
-            arrays["tris"] = triangle_verts(corners[order])
+            arrays.update(_host_arrays(corners, acceleration))
         # The wide BVH only where it is walked: other devices pay nothing.
-        self.wide = (collapse(acceleration.rows, corners[order].astype(np.float32, copy=False))
+        self.wide = (collapse(acceleration.rows, corners[acceleration.slot_order()].astype(np.float32, copy=False))
                      if walks_wide(context, acceleration, self.shifts is not None) else None)
         # The wide BVH's nodes and packets in one buffer (geometry.cl says why),
         # the packets from byte packets_at on (a multiple of a node's 256 B).
@@ -189,7 +205,7 @@ class DeviceGeometry:
             step = 1 << self.shifts[name]
             parts = [upload(array[k:k + step]) for k in range(0, max(len(array), 1), step)]
             self.buffers[name] = tuple(parts + parts[-1:] * (MAX_PARTS - len(parts)))
-        self.num_tris = np.uint32(len(prim_ids))
+        self.num_tris = np.uint32(acceleration.num_slots)
         self.num_instances = 0 if acceleration.instances is None else len(acceleration.instances)
         self._refit = None   # made by the first refit
 
@@ -231,8 +247,9 @@ class DeviceGeometry:
                              "build it anew")
         if acceleration.instances is not None:
             raise InputError("refit of a scene of instances is not supported yet: build it anew")
-        if len(corners) != len(acceleration.prim_ids):
-            raise InputError(f"refit needs the same {len(acceleration.prim_ids):,} triangles, got {len(corners):,}")
+        if len(corners) != acceleration.num_slots:
+            raise InputError(f"refit needs the same {acceleration.num_slots:,} triangles, got {len(corners):,}")
+        acceleration.settle()   # the statistics describe the tree as built
         self._place(corners, bounds, origin)
         cl.enqueue_copy(queue, self.buffers["tris"][0], triangle_verts(corners[acceleration.prim_ids]))
         if not acceleration.is_bvh:

@@ -52,6 +52,24 @@ def _checked_vertices(vertices, label: str) -> np.ndarray:
     return np.ascontiguousarray(v, dtype=np.float32)
 
 
+# Rows of (N, 3) points folded into one row of a reduction: numpy reduces an
+# (N / 1024, 3072) array along its first axis at memory speed, an (N, 3) one
+# three numbers at a time (1M vertices: 0.4 ms against 40 ms).
+FOLD_ROWS = 1024
+
+
+def column_bounds(points: np.ndarray) -> np.ndarray:
+    """(2, 3) float64: the minimum and maximum of each column of (N, 3) points, N >= 1."""
+    points = np.asarray(points)
+    whole = len(points) - len(points) % FOLD_ROWS
+    parts = [points[whole:]] if whole < len(points) else []
+    if whole:
+        folded = points[:whole].reshape(-1, 3 * FOLD_ROWS)
+        parts += [folded.min(axis=0).reshape(-1, 3), folded.max(axis=0).reshape(-1, 3)]
+    rows = np.concatenate(parts)
+    return np.stack([rows.min(axis=0), rows.max(axis=0)]).astype(np.float64)
+
+
 def vertex_text(vertices, index: int) -> str:
     """'vertex 3 at (0, -4.4e28, 0)', for errors: coordinates to 3 significant
     digits, or 9 where 3 would round one past +-MAX_COORDINATE into range."""
@@ -201,11 +219,12 @@ class Mesh:
     @cached_property
     def _bounds(self) -> np.ndarray:
         # Computed once: scenes, cameras and lights ask for the bounds again and
-        # again (a mesh is not changed after it is made).
+        # again (a mesh is not changed after it is made).  The float32 minima
+        # and maxima are exact: no float64 copy; no copy at all where every
+        # vertex is used (the usual mesh).
         used = np.zeros(len(self.vertices), bool)
         used[self.faces.reshape(-1)] = True
-        v = self.vertices[used].astype(np.float64)
-        return np.stack([v.min(axis=0), v.max(axis=0)])
+        return column_bounds(self.vertices if used.all() else self.vertices[used])
 
     @cached_property
     def _area_normals(self) -> np.ndarray:
