@@ -172,7 +172,7 @@ def _render(args) -> int:
         placed = f", {len(placed):,} placements ({scene.num_triangles:,} placed)" if placed is not None else ""
         print(f"{camera.width}x{camera.height} pixels, {frame.triangles:,} triangles{placed}, "
               f"{len(scene.lights)} light(s), {accel}{view}{how}, device: {frame.device}")
-        for stage, ms in frame.timings.items():
+        for stage, ms in {**renderer.timings, **frame.timings}.items():   # the set-up, then the frame
             print(f"  {stage:<20} {ms:10.2f} ms")
         if args.aov:
             print(f"  AOVs: {aov_note}")
