@@ -155,7 +155,7 @@ def flatten_scene(scene: Scene, pbr_textures: bool = False) -> SceneArrays:
     if scene.instanced:
         return placed_arrays(scene, pbr_textures)
     meshes = [o.mesh for o in scene.objects]
-    mesh = Mesh.concatenate(meshes)
+    mesh = meshes[0] if len(meshes) == 1 else Mesh.concatenate(meshes)   # (one object: no copy)
     object_materials = [(o.material, *o.materials) for o in scene.objects]
     first = np.cumsum([0] + [len(m) for m in object_materials[:-1]])
     material_of_tri = np.concatenate([
