@@ -11,6 +11,7 @@ import numpy as np
 
 from clrt import config
 from clrt.errors import MeshLoadError
+from clrt.scene.blocks import map_blocks
 
 
 def _real_array(value, what: str) -> np.ndarray:
@@ -38,7 +39,7 @@ def _checked_vertices(vertices, label: str) -> np.ndarray:
         raise MeshLoadError(f"{label}vertices must have shape (V, 3), got {v.shape}")
     if not v.size:
         return np.zeros((0, 3), np.float32)
-    low, high = v.min(), v.max()   # NaN if any is (two passes, no temporary arrays)
+    low, high = min_max(v)   # NaN if any is (no temporary arrays)
     if not (np.isfinite(low) and np.isfinite(high)):
         bad = ~np.isfinite(v).all(axis=1)
         raise MeshLoadError(f"{label}{int(bad.sum())} vertices have NaN or infinite coordinates "
@@ -74,9 +75,21 @@ def _welded(vertices: np.ndarray) -> np.ndarray:
 FOLD_ROWS = 1024
 
 
+def min_max(a: np.ndarray) -> tuple:
+    """The least and the greatest element of a non-empty array (NaN if one is),
+    its blocks of rows reduced side by side (clrt.scene.blocks)."""
+    parts = np.array(map_blocks(lambda start, stop: (a[start:stop].min(), a[start:stop].max()), len(a)))
+    return parts[:, 0].min(), parts[:, 1].max()
+
+
 def column_bounds(points: np.ndarray) -> np.ndarray:
     """(2, 3) float64: the minimum and maximum of each column of (N, 3) points, N >= 1."""
     points = np.asarray(points)
+    parts = np.array(map_blocks(lambda start, stop: _column_bounds(points[start:stop]), len(points)))
+    return np.stack([parts[:, 0].min(axis=0), parts[:, 1].max(axis=0)])
+
+
+def _column_bounds(points: np.ndarray) -> np.ndarray:
     whole = len(points) - len(points) % FOLD_ROWS
     parts = [points[whole:]] if whole < len(points) else []
     if whole:
@@ -107,7 +120,7 @@ def _checked_faces(faces, n_vertices: int, label: str) -> np.ndarray:
     if not np.issubdtype(f.dtype, np.integer):
         if not np.all(np.isfinite(f)) or np.any(f != np.round(f)):
             raise MeshLoadError(f"{label}face indices must be integers")
-    low, high = f.min(), f.max()
+    low, high = min_max(f)
     if low < 0 or high >= n_vertices:
         raise MeshLoadError(f"{label}face index out of range (indices {int(low)}..{int(high)}, "
                             f"{n_vertices} vertices)")
@@ -239,7 +252,12 @@ class Mesh:
         # and maxima are exact: no float64 copy; no copy at all where every
         # vertex is used (the usual mesh).
         used = np.zeros(len(self.vertices), bool)
-        used[self.faces.reshape(-1)] = True
+
+        def mark(start: int, stop: int) -> None:
+            # (threads marking blocks of faces store the same byte, True, where they meet)
+            used[self.faces[start:stop].reshape(-1)] = True
+
+        map_blocks(mark, len(self.faces))
         return column_bounds(self.vertices if used.all() else self.vertices[used])
 
     @cached_property
