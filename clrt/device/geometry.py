@@ -17,6 +17,7 @@ from clrt.accel import Acceleration
 from clrt.accel.rows import tree_levels
 from clrt.accel.wide import WIDE, WideBvh, collapse
 from clrt.config import MAX_PARTS, VOLUME_DEFINES, stack_size
+from clrt.device import pinned
 from clrt.device.args import scene_value
 from clrt.device.context import device_kind, format_bytes
 from clrt.device.reach import Reach
@@ -132,6 +133,9 @@ class DeviceGeometry:
     tree are in the device's frame, moved by ``-origin``; the queries and the
     renderer move their rays' origins into it (``origin`` here).
 
+    ``queue``: a queue of ``context``, for the large arrays' staged uploads
+    (clrt.device.pinned.upload); without it every buffer is made from its array.
+
     ``bounds``: (2, 3) min and max corner of the triangles in the caller's
     frame, when the caller has them (else computed; a two-level scene gives
     its instances' world box, its corners being in the meshes' frames); ``reach``
@@ -142,7 +146,7 @@ class DeviceGeometry:
     def __init__(self, context: cl.Context, corners: np.ndarray, acceleration: Acceleration,
                  extra: dict | None = None, max_buffer_bytes: int | None = None,
                  fits: Callable[[int], None] | None = None, max_buffer_label: str = "max_buffer_bytes",
-                 bounds=None, origin=None):
+                 bounds=None, origin=None, queue: cl.CommandQueue | None = None):
         self.acceleration = acceleration
         self._place(corners, bounds, origin)
         # A tree built on this context's device is on it already, with its
@@ -189,8 +193,16 @@ class DeviceGeometry:
             self.defines.update({f"{name}_PART_SHIFT": shift for name, shift in self.shifts.items()})
         mf = cl.mem_flags
 
+        copies = []
+
         def upload(array, flags=mf.READ_ONLY):
-            return cl.Buffer(context, flags | mf.COPY_HOST_PTR, hostbuf=array)
+            # Large arrays through clrt.device.pinned's staging (the driver's own
+            # copy of pageable memory ran at about 8 GB/s on the H200's host).
+            if queue is None or array.nbytes < pinned.STAGED_MIN_BYTES:
+                return cl.Buffer(context, flags | mf.COPY_HOST_PTR, hostbuf=array)
+            buffer = cl.Buffer(context, flags, array.nbytes)
+            copies.append(pinned.upload(context, queue, buffer, array))
+            return buffer
 
         self.buffers: dict[str, tuple] = {}
         if built is not None:
@@ -205,6 +217,8 @@ class DeviceGeometry:
             step = 1 << self.shifts[name]
             parts = [upload(array[k:k + step]) for k in range(0, max(len(array), 1), step)]
             self.buffers[name] = tuple(parts + parts[-1:] * (MAX_PARTS - len(parts)))
+        for copy in copies:   # the host arrays may go once this returns
+            copy.wait()
         self.num_tris = np.uint32(acceleration.num_slots)
         self.num_instances = 0 if acceleration.instances is None else len(acceleration.instances)
         self._refit = None   # made by the first refit
