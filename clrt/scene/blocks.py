@@ -18,7 +18,7 @@ import threading
 from concurrent.futures import ThreadPoolExecutor
 from typing import Callable
 
-BLOCK_ROWS = 1 << 20          # rows a block holds at least
+BLOCK_ROWS = 1 << 18          # rows a block holds at least (a few ms of work)
 MAX_THREADS = 8
 
 _pool: ThreadPoolExecutor | None = None
