@@ -596,6 +596,9 @@ def test_let_go_buffers_are_freed_after_the_host_copies_are_read(device, queue):
     kept = build_on_device(*queue, corners, leaf_size=4, keep_boxes=True)
     assert np.array_equal(built.rows.view(np.uint8), kept.read_back()[0].view(np.uint8))
     assert built.stats()["sah_cost"] == kept.stats()["sah_cost"]
+    import pickle
+    again = pickle.loads(pickle.dumps(build_acceleration(corners, "box", "device", 4, device)))
+    assert again.stats()["sah_cost"] == kept.stats()["sah_cost"]       # the host copies travelled
     mesh = TEST_MESHES["torus"]()
     queries = clrt.Accel(mesh, builder="device", device=device)
     before = build_on_device(*queue, mesh.vertices[mesh.faces].astype(np.float32), leaf_size=4,

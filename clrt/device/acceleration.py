@@ -79,9 +79,9 @@ class DeviceAcceleration(Acceleration):
     triangles on (docs/benchmarks.md).
 
     Letting go of ``device_buffers`` without taking them (a two-level scene
-    joins its meshes' rows on the host) reads every host copy and frees the
-    device buffers.  A refit calls :meth:`settle` first, so that the
-    statistics keep describing the tree as built.
+    joins its meshes' rows on the host) reads the host copies and frees the
+    device buffers.  A refit calls :meth:`settle` first, which keeps the
+    slot-ordered triangles as built for the statistics.
     """
 
     _LAZY = ("rows", "prim_ids", "exact_rows")
@@ -92,6 +92,7 @@ class DeviceAcceleration(Acceleration):
         for name in self._LAZY:     # read on first use (functools.cached_property below)
             del self.__dict__[name]
         self._bvh = bvh
+        self._slotted = None        # the triangles as built, slot order, once settled
         self._counts = (int(bvh.num_rows), int(bvh.num_triangles))
 
     @functools.cached_property
@@ -104,8 +105,12 @@ class DeviceAcceleration(Acceleration):
 
     @functools.cached_property
     def exact_rows(self) -> np.ndarray:
-        slotted = self._source().read_triangles().view(np.float32).reshape(-1, 3, 4)[:, :, :3]
+        slotted, self._slotted = self._slotted if self._slotted is not None else self._read_slotted(), None
         return exact_rows(self.rows, slotted)
+
+    def _read_slotted(self) -> np.ndarray:
+        """(F, 3, 3) float32 view of the slot-ordered triangles read back."""
+        return self._source().read_triangles().view(np.float32).reshape(-1, 3, 4)[:, :, :3]
 
     def _source(self):
         if self._bvh is None or self._bvh.rows is None:
@@ -138,27 +143,26 @@ class DeviceAcceleration(Acceleration):
         return built
 
     def keep_on_host(self) -> None:
-        """Read every host copy (and the statistics) now and free the device
-        buffers, unless a geometry took them over."""
+        """Read the host copies now (the rows, the ids, and what the statistics
+        need) and free the device buffers, unless a geometry took them over."""
         if self._bvh is None:
             return
         self.settle()
-        for name in self._LAZY:
-            getattr(self, name)
+        self.rows, self.prim_ids   # noqa: B018 -- read now
         if self.__dict__.get("_offered") is not None:
             self._bvh.release()
             self.__dict__["_offered"] = None
         self._bvh = None
 
     def settle(self) -> None:
-        """Compute the statistics now, from the tree as built (before a refit
-        moves the triangles on the device)."""
-        if self._bvh is not None:
-            self.stats()
+        """Keep the slot-ordered triangles as built on the host (before a refit
+        moves them on the device), for statistics asked for later."""
+        if self._slotted is None and "exact_rows" not in self.__dict__ and self._bvh is not None:
+            self._slotted = self._read_slotted()
 
     def __getstate__(self):
-        for name in self._LAZY:     # what is on the device does not travel: its host copies do
-            getattr(self, name)
+        self.settle()        # what is on the device does not travel: its host copies do
+        self.rows, self.prim_ids   # noqa: B018 -- read now
         state = super().__getstate__()
         state.pop("_offered", None)
         state["_bvh"] = None
