@@ -29,7 +29,7 @@ def test_frame_bench_without_and_with_a_bvh(device, capsys):
     ("frame", ["--repeat", "0"]), ("frame", ["--warmup", "-1"]), ("frame", ["--repeat", "x"]),
     ("speed", ["--repeat", "0"]), ("speed", ["--warmup", "-2"]),
     ("build", ["--repeat", "-1"]), ("scale", ["--repeat", "0"]),
-    ("raysets", ["--repeat", "0"]), ("rays", ["--repeat", "0"]),
+    ("raysets", ["--repeat", "0"]), ("rays", ["--repeat", "0"]), ("host_stages", ["--repeat", "0"]),
 ])
 def test_benchmarks_refuse_bad_counts_in_one_line(module, args, capsys):
     """A benchmark's counts are checked while parsing: one line naming the
