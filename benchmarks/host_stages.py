@@ -14,7 +14,7 @@ device build, its upload included) and ``Renderer.timings``.  What a whole
 call spends beyond its build and the stages above is the rest of the host's
 set-up (context, programs, uploads).  ``--no-split`` leaves the crease split
 out (a flat-shaded scene), which takes seconds from a few million triangles
-on.  Timing is done here, never in tests.
+on; ``--no-calls`` times the stages alone.  Timing is done here, never in tests.
 """
 
 from __future__ import annotations
@@ -56,7 +56,7 @@ def _median_ms(make, repeat: int, before=None) -> tuple[float, object]:
     return statistics.median(walls), result
 
 
-def stages(vertices, faces, device, repeat: int, split: bool) -> dict:
+def stages(vertices, faces, device, repeat: int, split: bool, calls: bool = True) -> dict:
     """Stage name -> median ms for one mesh (see the module docstring)."""
     import clrt
     from clrt.scene.arrays import device_origin, flatten_scene, triangle_corners
@@ -72,7 +72,7 @@ def stages(vertices, faces, device, repeat: int, split: bool) -> dict:
     name = "scene_from_mesh (crease split)" if split else "scene_from_mesh (flat: no split)"
     out[name], scene = _median_ms(lambda m: scene_from_mesh(m, material), repeat, lambda: Mesh(vertices, faces))
     out["flatten_scene"], _ = _median_ms(lambda: flatten_scene(scene), repeat)
-    for call, make in (("Accel(V, F)", lambda: clrt.Accel((vertices, faces), device=device)),
+    for call, make in () if not calls else (("Accel(V, F)", lambda: clrt.Accel((vertices, faces), device=device)),
                        ("Renderer(scene)", lambda: clrt.Renderer(scene, device=device))):
         make()   # programs built, driver warm
         out[f"{call}: whole call"], made = _median_ms(lambda: _finished(make()), repeat)
@@ -88,14 +88,14 @@ def _finished(made):
     return made
 
 
-def run(counts, device=None, repeat=3, split=True, out=None):
+def run(counts, device=None, repeat=3, split=True, out=None, calls=True):
     from clrt.device.context import create_context, device_label
     out = out or sys.stdout
     _, queue = create_context(device)
     columns = {}
     for count in counts:
         vertices, faces = torus_arrays(count)
-        columns[len(faces)] = stages(vertices, faces, device, repeat, split)
+        columns[len(faces)] = stages(vertices, faces, device, repeat, split, calls)
     print(f"device: {device_label(queue.device)}; medians of {repeat}, ms\n", file=out)
     print("| stage | " + " | ".join(f"{n:,} triangles" for n in columns) + " |", file=out)
     print("|---|" + "---|" * len(columns), file=out)
@@ -110,8 +110,9 @@ def main(argv=None) -> int:
     p.add_argument("--device", help="'gpu', 'cpu' or P:D (default: clrt's choice)")
     p.add_argument("--repeat", type=POSITIVE, default=3, help="runs of each stage, median reported (default 3)")
     p.add_argument("--no-split", action="store_true", help="a flat-shaded scene: no crease split")
+    p.add_argument("--no-calls", action="store_true", help="the stages alone, not the whole calls")
     args = p.parse_args(argv)
-    return exit_code(run, args.triangles, args.device, args.repeat, not args.no_split)
+    return exit_code(run, args.triangles, args.device, args.repeat, not args.no_split, calls=not args.no_calls)
 
 
 if __name__ == "__main__":
