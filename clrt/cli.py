@@ -251,7 +251,7 @@ def _info_mesh(args) -> int:
     mesh = load_mesh(args.mesh)
     device = select_device(args.device)   # as render would: a missing device is exit 3, not ignored
     corners = triangle_corners(mesh, device_origin(mesh.bounds))   # the tree render and queries build
-    built = build_acceleration(corners, args.accel, args.builder, args.leaf_size, args.device)
+    built = build_acceleration(corners, args.accel, args.builder, args.leaf_size, args.device, statistics=True)
     print(f"{args.mesh}: {len(mesh.faces):,} triangles, {len(mesh.vertices):,} vertices; "
           f"device: {device_label(device)}")
     if not built.is_bvh:

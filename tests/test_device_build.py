@@ -577,6 +577,11 @@ def test_host_copies_are_read_when_asked_and_exact_boxes_made_on_the_host(name, 
     assert np.array_equal(built.prim_ids, prim_ids) and np.array_equal(built.rows.view(np.uint8), rows.view(np.uint8))
     assert "exact_rows" not in vars(built)
     assert np.array_equal(built.exact_rows.view(np.uint8), kept.read_exact_rows().view(np.uint8))
+    asked = build_acceleration(corners, volume, "device", 4, device, statistics=True)    # as clrt info builds
+    bvh = asked.device_buffers
+    assert bvh.exact_rows is not None
+    assert np.array_equal(asked.exact_rows.view(np.uint8), built.exact_rows.view(np.uint8))
+    assert bvh.exact_rows is None, "the exact rows stayed on the device once read"
     want = kept.stats()
     assert {k: v for k, v in built.stats().items() if k != "build_ms"} == {k: want[k] for k in want
                                                                             if k != "build_ms"}

@@ -35,7 +35,7 @@ FIXED_SCRATCH = ("parts", "part_bins")
 
 
 def build_acceleration(corners: np.ndarray, accel: str, builder: str, leaf_size: int,
-                       device: str | None = None) -> Acceleration:
+                       device: str | None = None, statistics: bool = False) -> Acceleration:
     """The acceleration structure over ``corners`` (F, 3, 3): clrt.accel.build for
     the host builders, for ``builder="device"`` a build on ``device`` (clrt's
     device choice, as the renderer and queries use it), and for "auto" the
@@ -45,7 +45,9 @@ def build_acceleration(corners: np.ndarray, accel: str, builder: str, leaf_size:
     A device build keeps its buffers on the device for the first
     DeviceGeometry on that context (clrt.accel.Acceleration.take_device_buffers);
     its host copies of the rows and ids are read back when first asked for
-    (refit, statistics, per-slot data: DeviceAcceleration).
+    (refit, statistics, per-slot data: DeviceAcceleration).  ``statistics``:
+    the caller will ask for ``stats()`` (``clrt info``): a device build then
+    writes the exact boxes too, read back rather than made on the host.
     """
     if builder == "auto" and accel != "none":
         builder = "device" if "cl_khr_fp64" in create_context(device)[1].device.extensions else HOST_DEFAULT_BUILDER
@@ -55,7 +57,7 @@ def build_acceleration(corners: np.ndarray, accel: str, builder: str, leaf_size:
     start = time.perf_counter()
     context, queue = create_context(device)
     try:
-        bvh = build_on_device(context, queue, corners, volume=accel, leaf_size=leaf_size)
+        bvh = build_on_device(context, queue, corners, volume=accel, leaf_size=leaf_size, keep_boxes=statistics)
     except (cl.Error, MemoryError) as exc:
         if not is_out_of_memory(exc):
             raise
@@ -105,6 +107,12 @@ class DeviceAcceleration(Acceleration):
 
     @functools.cached_property
     def exact_rows(self) -> np.ndarray:
+        bvh = self._bvh
+        if self._slotted is None and bvh is not None and bvh.exact_rows is not None:   # kept by the build
+            exact = bvh.read_exact_rows()
+            bvh.exact_rows.release()
+            bvh.exact_rows = None
+            return exact
         slotted, self._slotted = self._slotted if self._slotted is not None else self._read_slotted(), None
         return exact_rows(self.rows, slotted)
 
@@ -155,9 +163,14 @@ class DeviceAcceleration(Acceleration):
         self._bvh = None
 
     def settle(self) -> None:
-        """Keep the slot-ordered triangles as built on the host (before a refit
-        moves them on the device), for statistics asked for later."""
-        if self._slotted is None and "exact_rows" not in self.__dict__ and self._bvh is not None:
+        """Keep what the statistics need on the host (before a refit moves the
+        triangles on the device): the exact rows a build kept, else the
+        slot-ordered triangles as built."""
+        if self._slotted is not None or "exact_rows" in self.__dict__ or self._bvh is None:
+            return
+        if self._bvh.exact_rows is not None:
+            self.exact_rows   # noqa: B018 -- read now
+        else:
             self._slotted = self._read_slotted()
 
     def __getstate__(self):
