@@ -66,3 +66,21 @@ def test_bad_values_in_any_block_give_the_one_line_errors(small_blocks, row):
     wrong[row % len(faces), 0] = len(vertices)
     with pytest.raises(MeshLoadError, match=rf"^face index out of range \(indices 0..{len(vertices)}, "):
         Mesh(vertices, wrong)
+
+
+def test_a_forked_child_works_in_blocks_too(small_blocks):
+    """A child forked after the parent's threads worked blocks (a process pool
+    loading meshes) has none of those threads: it makes its own, rather than
+    waiting forever on blocks no thread will take."""
+    import multiprocessing
+    vertices, faces = _mesh()
+    Mesh(vertices, faces).bounds                                   # the parent's pool is running
+    context = multiprocessing.get_context("fork")
+    with context.Pool(1) as pool:
+        got = pool.apply_async(_child_bounds, (vertices, faces)).get(timeout=60)
+    assert np.array_equal(got, Mesh(vertices, faces).bounds)
+
+
+def _child_bounds(vertices, faces):
+    blocks.BLOCK_ROWS, blocks.thread_count = 64, lambda: 4        # (the fixture's patch, in the child too)
+    return Mesh(vertices, faces).bounds

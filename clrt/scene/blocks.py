@@ -22,6 +22,7 @@ BLOCK_ROWS = 1 << 18          # rows a block holds at least (a few ms of work)
 MAX_THREADS = 8
 
 _pool: ThreadPoolExecutor | None = None
+_pool_pid = 0                 # the process that made _pool: a forked child has none of its threads
 _pool_lock = threading.Lock()
 
 
@@ -50,9 +51,9 @@ def map_blocks(work: Callable[[int, int], object], rows: int) -> list:
     blocks = spans(rows)
     if len(blocks) == 1:
         return [work(*blocks[0])]
-    global _pool
+    global _pool, _pool_pid
     with _pool_lock:
-        if _pool is None:
-            _pool = ThreadPoolExecutor(MAX_THREADS, thread_name_prefix="clrt-blocks")
+        if _pool is None or _pool_pid != os.getpid():
+            _pool, _pool_pid = ThreadPoolExecutor(MAX_THREADS, thread_name_prefix="clrt-blocks"), os.getpid()
     jobs = [_pool.submit(work, start, stop) for start, stop in blocks]
     return [job.result() for job in jobs]
