@@ -278,11 +278,19 @@ class DeviceBvh:
 
     def read_back(self) -> tuple[np.ndarray, np.ndarray]:
         """Host copies: rows (num_rows,) BVH_PAIR_NODE and prim_ids (F,) int32."""
+        return self.read_rows(), self.read_prim_ids()
+
+    def read_rows(self) -> np.ndarray:
+        """Host copy of the rows, (num_rows,) BVH_PAIR_NODE."""
         rows = np.empty(self.num_rows, layouts.BVH_PAIR_NODE)
+        cl.enqueue_copy(self.queue, rows, self.rows, is_blocking=True)
+        return rows
+
+    def read_prim_ids(self) -> np.ndarray:
+        """Host copy of the slot -> triangle ids, (F,) int32."""
         prim_ids = np.empty(self.num_triangles, np.int32)
-        cl.enqueue_copy(self.queue, rows, self.rows)
         cl.enqueue_copy(self.queue, prim_ids, self.prim_ids, is_blocking=True)
-        return rows, prim_ids
+        return prim_ids
 
     def read_triangles(self) -> np.ndarray:
         """Host copy of the slot-ordered triangles, (F,) TRIANGLE_VERTS."""
