@@ -176,13 +176,16 @@ def compile_driver(sources: Path, compiler: str = "g++", loader: str = OPENCL_LO
     # -march=native as tinybvh's own CMake build: on x86 its default builder is then BuildAVX
     flags = ["-O2", "-march=native", "-std=c++17", "-pthread", f"-I{sources}"]
     key = hashlib.sha256(DRIVER.read_bytes() + (sources / "tiny_bvh.h").read_bytes()
-                         + " ".join([compiler, *flags, loader]).encode()).hexdigest()[:16]
+                         + " ".join([compiler, *flags, loader, "rpath"]).encode()).hexdigest()[:16]
     exe = Path(tempfile.gettempdir()) / "clrt-tinybvh" / f"tinybvh_driver-{key}"
     if exe.is_file():
         return exe
     exe.parent.mkdir(parents=True, exist_ok=True)
     partial = exe.with_suffix(f".{os.getpid()}")
-    result = subprocess.run([compiler, *flags, str(DRIVER), "-o", str(partial), loader],
+    # The loader by path, and its folder searched first at run time (DT_RPATH, before LD_LIBRARY_PATH and
+    # ld.so's cache): a name alone found CUDA's libOpenCL.so.1 on the GPU machine, which lists no platform.
+    rpath = ["-Wl,--disable-new-dtags", f"-Wl,-rpath,{os.path.dirname(loader)}"]
+    result = subprocess.run([compiler, *flags, str(DRIVER), "-o", str(partial), loader, *rpath],
                             capture_output=True, text=True)
     if result.returncode:
         errors = [line for line in result.stderr.splitlines() if "error" in line] or result.stderr.splitlines()
