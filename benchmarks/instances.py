@@ -2,7 +2,7 @@
 
     python -m benchmarks.instances --device cpu                       # 13^3 tori of 75k triangles
     python -m benchmarks.instances --mesh ../shared/meshes/bunny00.off --grid 13 --size 160x120
-    python -m benchmarks.instances --move 1000,10000 --device gpu
+    python -m benchmarks.instances --move 1k,10k,100k --device gpu
 
 Two tables.  ``render``: one mesh (a torus of about ``--triangles``
 triangles, or ``--mesh``) placed ``--grid``^3 times on a cubic grid, each
@@ -11,9 +11,15 @@ stages, the scene's device bytes, the process's peak host memory, and per
 integrator the wall time of the first frame (programs built or loaded) and
 the median of ``--repeat`` after it.  ``move``: ``Accel.move_instances`` of N
 placements of a small ball to new random transforms -- the instance table and
-the top level built again on the host and uploaded (TwoLevel.move_ms, the
-median of ``--repeat``).  Prints markdown tables; timing is done here, never
-in tests.
+the top level built again, on the device or on the host by the meshes'
+builder (``--builders``) -- its wall time (the median of ``--repeat`` after a
+warm-up) and parts: on the host clock ``convert`` (the transforms as an
+array), for the device ``host`` (their copy into page-locked memory, the
+launches, the world's frame), ``first pass`` (upload, checks and boxes, the
+read of their bounds), ``finish`` (the copies over the scene's buffers, the
+wait); for the host ``table``, ``top level``, ``upload``; then the device's
+phases from profiling events.  Prints markdown tables; timing is done here,
+never in tests.
 """
 
 from __future__ import annotations
@@ -91,23 +97,60 @@ def render_table(mesh, side: int, size, device, repeat: int, spp: int) -> list[s
     return rows
 
 
-def move_table(counts, device, repeat: int) -> list[str]:
+def _median_parts(runs: list[dict]) -> dict:
+    return {name: statistics.median(run[name] for run in runs) for name in runs[0]}
+
+
+def _parts_text(parts: dict) -> str:
+    return " + ".join(f"{name} {ms:.2f}" for name, ms in parts.items())
+
+
+def move_table(counts, device, repeat: int, builders) -> list[str]:
+    """``Accel.move_instances`` of N placements of a small ball to new random
+    transforms (turned, stretched, a third mirrored), per top-level builder:
+    the whole call's wall time and its parts on the host clock (move_times),
+    then the device's phases from profiling events (a second series of moves
+    on the scene's profiling queue: launches cost the host more there, so the
+    walls above come from the plain queue), and the top level's SAH cost."""
+    from clrt.device.instances import move_instances
     from clrt.query import Accel
     from clrt.scene import primitives
     from clrt.scene.instances import Instances
     rows = []
     rng = np.random.default_rng(0)
+    ball = primitives.icosphere(1)
+
+    def place(n):
+        transforms = np.tile(np.eye(4), (n, 1, 1))
+        q, r = np.linalg.qr(rng.normal(size=(n, 3, 3)))
+        transforms[:, :3, :3] = q * rng.uniform(0.5, 2.0, (n, 1, 3))
+        transforms[:, :3, 3] = rng.uniform(-50.0, 50.0, (n, 3)) * (n / 1000) ** (1 / 3)
+        return transforms
+
     for n in counts:
-        ball = primitives.icosphere(1)
-        place = lambda: np.concatenate([np.tile(np.eye(4)[:3], (n, 1, 1)), np.tile(  # noqa: E731
-            [[[0.0, 0, 0, 1]]], (n, 1, 1))], axis=1) + np.pad(rng.uniform(-50, 50, (n, 3, 1)), ((0, 0), (0, 1), (3, 0)))
-        accel = Accel(Instances([ball], np.zeros(n, np.int64), place()), builder="sah", device=device)
-        times = []
-        for _ in range(1 + repeat):
-            accel.move_instances(place())
-            times.append(accel.acceleration.move_ms)
-        rows.append(f"| {n:,} | {_short(accel.device)} | {statistics.median(times[1:]):.1f} ms "
-                    f"| {statistics.median(times[1:]) / n * 1e4:.1f} ms |")
+        for builder in builders:
+            accel = Accel(Instances([ball], np.zeros(n, np.int64), place(n)), builder=builder, device=device)
+            two = accel.acceleration
+            walls, parts = [], []
+            for _ in range(1 + repeat):
+                moved = place(n)
+                start = time.perf_counter()
+                accel.move_instances(moved)
+                walls.append(1e3 * (time.perf_counter() - start))
+                parts.append(dict(two.move_times))
+            wall = statistics.median(walls[1:])
+            kernels = "(host)"
+            if two.device_top is not None:
+                profiled = []
+                for _ in range(1 + repeat):
+                    accel.instances, _ = move_instances(accel.device_scene, accel.instances, place(n), profile=True)
+                    profiled.append({name: two.move_times[name] for name in ("upload", "place", "rows", "sort",
+                                                                            "nodes", "fit")})
+                device_ms = _median_parts(profiled[1:])
+                kernels = f"{_parts_text(device_ms)} = {sum(device_ms.values()):.2f}"
+            rows.append(f"| {n:,} | {_short(accel.device)} | {'device' if two.device_top is not None else 'host'} "
+                        f"| **{wall:.2f} ms** | {wall / n * 1e4:.2f} ms | {_parts_text(_median_parts(parts[1:]))} "
+                        f"| {kernels} | {two.top.stats()['sah_cost']:.1f} |")
     return rows
 
 
@@ -119,14 +162,19 @@ def main(argv=None) -> int:
     p.add_argument("--size", type=parse_size, default=(160, 120), help="image size WxH (default 160x120)")
     p.add_argument("--spp", type=POSITIVE, default=4, help="the path tracer's samples a pixel (default 4)")
     p.add_argument("--move", type=lambda s: [parse_count(x) for x in s.split(",")],
-                   help="instead: time move_instances of these counts, e.g. 1000,10000")
+                   help="instead: time move_instances of these counts, e.g. 1k,10k,100k")
+    p.add_argument("--builders", default="device,sah",
+                   help="--move: the meshes' builders, whose choice picks where the top level is built: "
+                        "'device' (the device's top level), 'sah' (the host's); default both")
     p.add_argument("--repeat", type=POSITIVE, default=3, help="runs timed after one warm-up (default 3)")
     p.add_argument("--device", help="'gpu', 'cpu' or P:D (default: clrt's choice)")
     args = p.parse_args(argv)
     try:
         if args.move:
-            print("| instances | device | move_instances (host) | per 10k |\n|---|---|---|---|")
-            rows = move_table(args.move, args.device, args.repeat)
+            builders = [b for b in args.builders.split(",") if b]
+            print("| instances | device | top level | move_instances wall | per 10k | its parts, host clock (ms) "
+                  "| device phases, profiled (ms) | top SAH cost |\n|---|---|---|---|---|---|---|---|")
+            rows = move_table(args.move, args.device, args.repeat, builders)
         else:
             from clrt.scene import primitives
             from clrt.scene.load import load_mesh

@@ -183,14 +183,26 @@ def warp_rows(mesh, points, repeat, warmup):
             for name, kernel in (("distance", unsigned), ("signed distance", winding))]
 
 
-def run(mesh_paths, count, seed, device, repeat, warmup, peers, grid=0) -> None:
+def subdivided(mesh, times: int):
+    """``mesh`` with each triangle split into 4^times (trimesh's midpoint subdivision)."""
+    if not times:
+        return mesh
+    import trimesh
+    from clrt.scene.mesh import Mesh
+    t = trimesh.Trimesh(mesh.vertices, mesh.faces, process=False)
+    for _ in range(times):
+        t = t.subdivide()
+    return Mesh(np.asarray(t.vertices, np.float32), np.asarray(t.faces, np.int32))
+
+
+def run(mesh_paths, count, seed, device, repeat, warmup, peers, grid=0, subdivide=0) -> None:
     from clrt.scene import primitives
     from clrt.scene.sources import as_mesh
 
     print("| mesh | triangles | query | library | wall ms | kernel ms | Mpoints/s (wall) | mean distance | inside |")
     print("|---|---|---|---|---|---|---|---|---|")
     for path in mesh_paths:
-        mesh = as_mesh(path) if path else primitives.torus(1.0, 0.35, 256, 128)
+        mesh = subdivided(as_mesh(path) if path else primitives.torus(1.0, 0.35, 256, 128), subdivide)
         points = make_points(mesh, count, seed)
         build_ms, rows = clrt_rows(mesh, points, device, repeat, warmup, grid)
         if peers:
@@ -217,6 +229,8 @@ def main(argv=None) -> int:
     p.add_argument("--no-peers", action="store_true", help="clrt alone (Open3D and Warp not measured)")
     p.add_argument("--grid", type=NON_NEGATIVE, default=0,
                    help="also sdf_grid of this many samples a side (default 0: none)")
+    p.add_argument("--subdivide", type=NON_NEGATIVE, default=0,
+                   help="split each triangle into 4^N first (default 0; 2 makes bunny00 1.2M triangles)")
     args = p.parse_args(argv)
     for path in args.mesh:
         if not path.is_file():
@@ -224,7 +238,7 @@ def main(argv=None) -> int:
     if args.grid == 1:
         raise SystemExit("benchmarks.points: --grid must be 0 (none) or at least 2")
     return exit_code(run, args.mesh or [None], args.points, args.seed, args.device, args.repeat, args.warmup,
-                     not args.no_peers, args.grid)
+                     not args.no_peers, args.grid, args.subdivide)
 
 
 if __name__ == "__main__":

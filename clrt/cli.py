@@ -172,7 +172,7 @@ def _render(args) -> int:
         placed = f", {len(placed):,} placements ({scene.num_triangles:,} placed)" if placed is not None else ""
         print(f"{camera.width}x{camera.height} pixels, {frame.triangles:,} triangles{placed}, "
               f"{len(scene.lights)} light(s), {accel}{view}{how}, device: {frame.device}")
-        for stage, ms in frame.timings.items():
+        for stage, ms in {**renderer.timings, **frame.timings}.items():   # the set-up, then the frame
             print(f"  {stage:<20} {ms:10.2f} ms")
         if args.aov:
             print(f"  AOVs: {aov_note}")
@@ -251,7 +251,7 @@ def _info_mesh(args) -> int:
     mesh = load_mesh(args.mesh)
     device = select_device(args.device)   # as render would: a missing device is exit 3, not ignored
     corners = triangle_corners(mesh, device_origin(mesh.bounds))   # the tree render and queries build
-    built = build_acceleration(corners, args.accel, args.builder, args.leaf_size, args.device)
+    built = build_acceleration(corners, args.accel, args.builder, args.leaf_size, args.device, statistics=True)
     print(f"{args.mesh}: {len(mesh.faces):,} triangles, {len(mesh.vertices):,} vertices; "
           f"device: {device_label(device)}")
     if not built.is_bvh:

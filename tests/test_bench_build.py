@@ -15,7 +15,9 @@ def test_build_bench_prints_every_variant(device, capsys, monkeypatch):
                        "--profile"])
     assert code == 0
     out = capsys.readouterr().out
-    rows = [line.split("|") for line in out.splitlines() if line.startswith("| knot50k ")]
+    table, calls = out.split("whole calls")     # the builds' table, then the whole calls' (the device builder's)
+    rows = [line.split("|") for line in table.splitlines() if line.startswith("| knot50k ")]
+    assert [line.split("|")[3].strip() for line in calls.splitlines() if line.startswith("| knot50k ")] == ["device"]
     assert [r[3].strip() for r in rows] == ["device", "device/treelets=7", "device/tail=64", "device/sah-top=128",
                                             "Embree (embreex, host CPU)"]
     assert all(r[2].strip() == "50,048" for r in rows)
@@ -28,6 +30,29 @@ def test_build_bench_prints_every_variant(device, capsys, monkeypatch):
     assert out.count("one warm build:") == 4
     # (the scatter of each pass: radix_scatter on CPU devices, radix_scatter_lookback on GPUs)
     assert ("| radix_scatter | 8 |" in out or "| radix_scatter_lookback | 8 |" in out) and "| ploc_tail | 1 |" in out
+
+
+def test_whole_calls_are_printed_beside_the_build(device, capsys):
+    """The second table: for each builder, the warm build of the first beside
+    the upload alone, Accel() and Renderer() walls and their ratios to build
+    + upload -- numbers that add up, and whole calls no shorter than the
+    build they contain."""
+    code = build.main(["--device", device or "cpu", "--meshes", "knot50k", "--builders", "sah,device",
+                       "--repeat", "1", "--no-trace"])
+    assert code == 0
+    table, calls = capsys.readouterr().out.split("whole calls")
+    warm = {r[3].strip(): float(r[5].replace(",", "")) for r in (line.split("|") for line in table.splitlines())
+            if r[1:2] == [" knot50k "]}
+    rows = [line.split("|") for line in calls.splitlines() if line.startswith("| knot50k ")]
+    assert [r[3].strip() for r in rows] == ["sah", "device"]
+    for r in rows:
+        build_ms, upload, target, accel, ratio, scene, renderer, renderer_ratio = (
+            float(x.replace(",", "")) for x in r[4:12])
+        assert build_ms == warm[r[3].strip()] and upload > 0 and scene > 0
+        assert target == pytest.approx(1.5 * (build_ms + upload), abs=0.1)
+        assert accel >= build_ms * 0.5 and renderer >= build_ms * 0.5      # they contain a build (noise aside)
+        assert ratio == pytest.approx(accel / (build_ms + upload), abs=0.01)
+        assert renderer_ratio == pytest.approx(renderer / (build_ms + upload), abs=0.01)
 
 
 @pytest.mark.parametrize("builder, message", [

@@ -19,13 +19,17 @@ def test_frame_bench_without_and_with_a_bvh(device, capsys):
             if line.startswith("| none ") or line.startswith("| box ")]
     assert [(r[0], r[1], r[2]) for r in rows] == [("none", "-", "48x32"), ("box", "sah", "48x32")]
     assert all(r[-1] == "yes" for r in rows)        # the BVH's image is brute force's, pixel for pixel
+    for r in rows:   # the whole call beside its stages, the frame's wall beside its stages
+        build, copy, made, gen, colour, read, wall, host = (float(c.split()[0]) for c in r[3:11])
+        assert made >= build + copy - 0.2
+        assert host == pytest.approx(wall - gen - colour - read, abs=0.01)
 
 
 @pytest.mark.parametrize("module, args", [
     ("frame", ["--repeat", "0"]), ("frame", ["--warmup", "-1"]), ("frame", ["--repeat", "x"]),
     ("speed", ["--repeat", "0"]), ("speed", ["--warmup", "-2"]),
     ("build", ["--repeat", "-1"]), ("scale", ["--repeat", "0"]),
-    ("raysets", ["--repeat", "0"]), ("rays", ["--repeat", "0"]),
+    ("raysets", ["--repeat", "0"]), ("rays", ["--repeat", "0"]), ("host_stages", ["--repeat", "0"]),
 ])
 def test_benchmarks_refuse_bad_counts_in_one_line(module, args, capsys):
     """A benchmark's counts are checked while parsing: one line naming the

@@ -557,6 +557,62 @@ def test_the_geometry_takes_over_the_built_buffers(device):
         assert np.array_equal(got.view(np.uint8), want.view(np.uint8)), name     # the same bytes either way
 
 
+@pytest.mark.parametrize("volume", VOLUMES)
+@pytest.mark.parametrize("name", ["random", "torus", "degenerate", "one point", "F=1", "F=2"])
+def test_host_copies_are_read_when_asked_and_exact_boxes_made_on_the_host(name, volume, device, queue):
+    """A device build through the front end reads nothing back until asked
+    (the rows, the ids, the exact boxes are read or made on first use), and
+    what it then gives is what a build that keeps its exact rows on the device
+    reads back, bit for bit: the exact boxes made on the host from the rows
+    and the slot-ordered triangles (clrt.accel.rows.exact_rows) included, so
+    the statistics are the same numbers."""
+    from clrt.device.acceleration import build_acceleration
+    corners = CORNERS[name]()
+    built = build_acceleration(corners, volume, "device", 4, device)
+    assert not {"rows", "prim_ids", "exact_rows"} & set(vars(built)), "read back before it was asked for"
+    kept = build_on_device(*queue, corners, volume=volume, leaf_size=4, keep_boxes=True)
+    rows, prim_ids = kept.read_back()
+    assert built.num_rows == len(rows) and built.num_slots == len(corners)
+    assert built.device_bytes() == kept.device_bytes
+    assert np.array_equal(built.prim_ids, prim_ids) and np.array_equal(built.rows.view(np.uint8), rows.view(np.uint8))
+    assert "exact_rows" not in vars(built)
+    assert np.array_equal(built.exact_rows.view(np.uint8), kept.read_exact_rows().view(np.uint8))
+    asked = build_acceleration(corners, volume, "device", 4, device, statistics=True)    # as clrt info builds
+    bvh = asked.device_buffers
+    assert bvh.exact_rows is not None
+    assert np.array_equal(asked.exact_rows.view(np.uint8), built.exact_rows.view(np.uint8))
+    assert bvh.exact_rows is None, "the exact rows stayed on the device once read"
+    want = kept.stats()
+    assert {k: v for k, v in built.stats().items() if k != "build_ms"} == {k: want[k] for k in want
+                                                                            if k != "build_ms"}
+
+
+def test_let_go_buffers_are_freed_after_the_host_copies_are_read(device, queue):
+    """An Acceleration whose device buffers are let go without being taken
+    (a two-level scene joins its meshes' rows on the host) reads its host
+    copies and its statistics first, then frees the device buffers; a refit
+    keeps the statistics of the tree as built."""
+    from clrt.device.acceleration import build_acceleration
+    corners = _random_triangles(2000, seed=31)
+    built = build_acceleration(corners, "box", "device", 4, device)
+    bvh = built.device_buffers
+    built.device_buffers = None
+    assert bvh.rows is None and bvh.tri_verts is None, "the device buffers were kept"
+    kept = build_on_device(*queue, corners, leaf_size=4, keep_boxes=True)
+    assert np.array_equal(built.rows.view(np.uint8), kept.read_back()[0].view(np.uint8))
+    assert built.stats()["sah_cost"] == kept.stats()["sah_cost"]
+    import pickle
+    again = pickle.loads(pickle.dumps(build_acceleration(corners, "box", "device", 4, device)))
+    assert again.stats()["sah_cost"] == kept.stats()["sah_cost"]       # the host copies travelled
+    mesh = TEST_MESHES["torus"]()
+    queries = clrt.Accel(mesh, builder="device", device=device)
+    before = build_on_device(*queue, mesh.vertices[mesh.faces].astype(np.float32), leaf_size=4,
+                             keep_boxes=True).stats()
+    moved = mesh.vertices * np.array([3.0, 1.0, 0.2], np.float32)     # a tree of another cost, refitted
+    queries.refit(moved)
+    assert queries.acceleration.stats()["sah_cost"] == before["sah_cost"]
+
+
 @pytest.mark.parametrize("partition", (False, True))
 @pytest.mark.parametrize("top_clusters", (1, 128))
 @pytest.mark.parametrize("name", ["random", "soup", "torus", "degenerate", "F=3"])

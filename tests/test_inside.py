@@ -381,3 +381,25 @@ def test_the_guide_lists_every_inside_value():
     assert len(rows) == len(INSIDE_FIELDS)
     for name, field in INSIDE_FIELDS.items():
         assert any(row.startswith(f"| `{name}` | (N,) | {np.dtype(field.dtype).name} |") for row in rows), name
+
+
+@pytest.mark.parametrize("name", sorted(CLOSED) + sorted(OPEN))
+def test_cell_regions_of_gpus_keep_the_answers(name, device, monkeypatch):
+    """GPUs take a child's far field only where the whole cell of the point is
+    far from it (POINT_CELL_REGIONS, point_order.cl's point_region): the same
+    program choice on this device, through the binary walk (sphere volumes),
+    stays within the documented error, contains agrees with it, and the
+    distances of the signed distances are the per-point walk's bit for bit."""
+    import clrt.query.accel as query_accel
+
+    mesh = {**CLOSED, **OPEN}[name]()
+    points = _points(mesh, seed=3)
+    exact = _exact(mesh, points)
+    plain = clrt.Accel(mesh, accel="sphere", device=device)
+    monkeypatch.setattr(query_accel, "point_defines", lambda _: {"POINT_CELL_REGIONS": None})
+    regions = clrt.Accel(mesh, accel="sphere", device=device)
+    w = regions.winding_number(points)
+    assert np.abs(w - exact).max() <= WINDING_NUMBER_ERROR
+    np.testing.assert_array_equal(regions.contains(points), w >= 0.5)
+    assert not np.array_equal(w, plain.winding_number(points))   # the regions did change the walk
+    np.testing.assert_array_equal(np.abs(regions.signed_distance(points)), np.abs(plain.signed_distance(points)))

@@ -323,7 +323,7 @@ def _moved(transforms):
 
 
 @pytest.mark.parametrize("volume, builder, split", [("box", "sah", None), ("ellipse", "device", None),
-                                                    ("sphere", "paper", 32768)])
+                                                    ("sphere", "paper", 32768), ("box", "device", 32768)])
 def test_moved_instances_are_a_fresh_build_of_them_bit_for_bit(scene, volume, builder, split, device):
     """move_instances builds the instance table and the top level again and
     keeps each mesh's rows: the host arrays, the uploaded buffers, the
@@ -332,9 +332,11 @@ def test_moved_instances_are_a_fresh_build_of_them_bit_for_bit(scene, volume, bu
     instances = scene[0]
     moved = _moved(instances.transforms)
     accel = clrt.Accel(instances, accel=volume, builder=builder, device=device, max_buffer_bytes=split)
+    assert (accel.acceleration.device_top is not None) == (builder == "device")   # the top level's builder
     base = len(accel.acceleration.top.rows)
     meshes_rows = accel.acceleration.rows[base:].copy()
     accel.move_instances(moved)
+    assert (accel.acceleration.pending is not None) == (builder == "device")   # (read back when asked for)
     fresh = clrt.Accel(clrt.Instances(instances.meshes, instances.mesh_of, moved), accel=volume, builder=builder,
                        device=device, max_buffer_bytes=split)
     mine, theirs = accel.acceleration, fresh.acceleration
@@ -361,9 +363,13 @@ def test_moved_instances_are_a_fresh_build_of_them_bit_for_bit(scene, volume, bu
     assert np.array_equal(accel.count(origins, directions), fresh.count(origins, directions))
 
 
-def test_bad_moves_are_one_line(scene, device):
+@pytest.mark.parametrize("builder", ["device", "sah"])
+def test_bad_moves_are_one_line(scene, builder, device):
+    """Refused on the device's path (whose fast checks send doubtful
+    transforms to the host's exact ones) as on the host's, with the same
+    words as when instances are made; nothing moves."""
     instances = scene[0]
-    accel = clrt.Accel(instances, device=device)
+    accel = clrt.Accel(instances, builder=builder, device=device)
     _one_line_error(lambda: accel.move_instances(instances.transforms[:5]),
                     r"transforms must have shape \(6, 4, 4\), got \(5, 4, 4\)")
     bad = instances.transforms.copy()
@@ -373,10 +379,178 @@ def test_bad_moves_are_one_line(scene, device):
     far[4, :3, 3] = (9e29, 0, 0)
     far[4, :3, :3] *= 1e29
     _one_line_error(lambda: accel.move_instances(far), r"instance 4's transform takes its mesh to .*, past \+-1e\+30")
+    nan = instances.transforms.copy()
+    nan[2, 1, 3] = np.nan
+    _one_line_error(lambda: accel.move_instances(nan), r"instance 2's transform must be finite, got nan in row 1")
+    skew = instances.transforms.copy()
+    skew[5, 3, 0] = 0.5
+    _one_line_error(lambda: accel.move_instances(skew), r"instance 5's transform must be affine")
+    # Near the condition limit the bound sends a transform to the host's singular values, which decide.
+    thin = instances.transforms.copy()
+    turned = _rotation((1, 2, 0), 0.3), _rotation((0, 1, 1), 1.1)
+    thin[1, :3, :3] = turned[0] @ np.diag([1.0, 0.95e-6, 1.0]) @ turned[1]
+    _one_line_error(lambda: accel.move_instances(thin),
+                    r"instance 1's transform must be invertible .* got one of condition number 1.05e\+06")
     _one_line_error(lambda: clrt.Accel(TEST_MESHES["box"](), device=device).move_instances(instances.transforms),
                     r"move_instances needs an Accel of instances")
-    hits = accel.trace(*_rays(instances.bounds, 200, seed=1))   # nothing moved by the refusals
-    assert np.array_equal(hits.t, clrt.Accel(instances, device=device).trace(*_rays(instances.bounds, 200, seed=1)).t)
+    rays = _rays(instances.bounds, 200, seed=1)
+    hits = accel.trace(*rays)   # nothing moved by the refusals
+    assert np.array_equal(hits.t, clrt.Accel(instances, builder=builder, device=device).trace(*rays).t)
+    thin[1, :3, :3] = turned[0] @ np.diag([1.0, 1.05e-6, 1.0]) @ turned[1]   # condition 9.5e5: it moves
+    accel.move_instances(thin)
+    fresh = clrt.Accel(Instances(instances.meshes, instances.mesh_of, thin), builder=builder, device=device)
+    assert np.array_equal(accel.trace(*rays).t, fresh.trace(*rays).t)
+    assert np.array_equal(accel.instances.transforms, thin)
+
+
+def _many_placements(count, seed):
+    """``count`` placements of three of the suite's meshes: turned, stretched
+    along three axes, every third mirrored and every third sheared, scattered
+    far from the origin (the world's device frame moves there), and eight at
+    one place (one Morton code for eight leaves of the device's top level)."""
+    rng = np.random.default_rng(seed)
+    transforms = np.tile(np.eye(4), (count, 1, 1))
+    for k in range(count):
+        linear = _rotation(rng.normal(size=3), rng.uniform(0.0, 2.0 * np.pi)) @ np.diag(rng.uniform(0.3, 2.0, 3))
+        if k % 3 == 1:
+            linear = linear @ np.diag([-1.0, 1.0, 1.0])
+        elif k % 3 == 2:
+            linear = linear @ np.array([[1.0, 0.5, 0.0], [0.0, 1.0, 0.0], [0.3, 0.0, 1.0]])
+        transforms[k, :3, :3] = linear
+    transforms[:, :3, 3] = rng.uniform(-10.0, 10.0, (count, 3)) + (3000.0, 0.0, -2000.0)
+    transforms[count // 2:count // 2 + 8] = transforms[count // 2]
+    meshes = [TEST_MESHES["torus"](), TEST_MESHES["box"](), TEST_MESHES["crossing"]()]
+    return Instances(meshes, rng.integers(0, 3, count), transforms)
+
+
+def _check_device_top_level(two):
+    """The device's top level of TwoLevel ``two`` is a binary tree whose leaves
+    hold every instance once, each row's children fitted (volumes.fit, the
+    host's fit, bit for bit) to their exact boxes -- a leaf's the instance's
+    world box, an inner node's the union of its children's -- and no deeper
+    than the bound its programs' stack was sized for."""
+    from clrt.accel.instances import lbvh_depth_bound
+    from clrt.accel.rows import child_refs
+    from clrt.accel.volumes import fit
+    top, table = two.top, two.instances
+    count = len(table)
+    rows, exact = top.rows, top.exact_rows
+    assert len(rows) == max(count - 1, 1) and rows.tobytes() == two.rows[:len(rows)].tobytes()
+    refs = child_refs(rows).reshape(-1, 2)                    # (ref, count) of each child, left then right
+    leaf, inner = refs[:, 1] == 1, refs[:, 1] == 0
+    assert np.array_equal(np.sort(refs[leaf, 0]), np.arange(count))
+    assert np.array_equal(np.sort(refs[inner, 0]), np.arange(1, len(rows)))
+    assert (leaf | inner).sum() == (2 * count - 2 if count > 1 else 1)
+    lo = np.stack([exact["left_a"][:, :3], exact["right_a"][:, :3]], 1).reshape(-1, 3)
+    hi = np.stack([exact["left_b"][:, :3], exact["right_b"][:, :3]], 1).reshape(-1, 3)
+    assert np.array_equal(lo[leaf], table["lo"][refs[leaf, 0], :3])
+    assert np.array_equal(hi[leaf], table["hi"][refs[leaf, 0], :3])
+    below = refs[inner, 0]                                    # an inner child's row: its exact box, its children's union
+    assert np.array_equal(lo[inner], np.minimum(lo[2 * below], lo[2 * below + 1]))
+    assert np.array_equal(hi[inner], np.maximum(hi[2 * below], hi[2 * below + 1]))
+    present = leaf | inner
+    a, b = fit(top.accel, np.stack([lo[present], hi[present]], axis=1))
+    got_a = np.stack([rows["left_a"], rows["right_a"]], 1).reshape(-1, 4)[present]
+    got_b = np.stack([rows["left_b"], rows["right_b"]], 1).reshape(-1, 4)[present]
+    assert np.array_equal(got_a[:, :3], a[:, :3])
+    if top.accel == "sphere":
+        assert np.array_equal(got_b[:, 0], a[:, 3])
+    else:
+        assert np.array_equal(got_b[:, :3], b[:, :3])
+    assert top.depth <= lbvh_depth_bound(count)
+    assert two.depth == lbvh_depth_bound(count) + 1 + max(m.depth for m in two.bottoms)
+
+
+@pytest.mark.parametrize("volume", ["box", "sphere", "ellipse"])
+def test_the_device_top_level_answers_as_the_hosts(volume, device):
+    """The top level built on the device (a linear BVH over its instance
+    table) and the host's (binned SAH over the host's table), over 150
+    placements turned, stretched, mirrored and sheared, eight at one place:
+    the same table bit for bit, a sound tree (_check_device_top_level), and
+    the same answers, bit for bit, as each other and as the two-level brute
+    force -- hits in every cull mode, counts, every hit along a ray, closest
+    points."""
+    instances = _many_placements(150, seed=21)
+    on_device = clrt.Accel(instances, accel=volume, builder="device", device=device)
+    on_host = clrt.Accel(instances, accel=volume, builder="sah", device=device)
+    brute = clrt.Accel(instances, accel="none", device=device)
+    assert on_device.acceleration.device_top is not None and on_host.acceleration.device_top is None
+    assert np.array_equal(on_device.geometry.origin, on_host.geometry.origin) and on_host.geometry.origin.any()
+    mine, theirs = on_device.acceleration.instances, on_host.acceleration.instances
+    for name in ("to_world", "to_object", "lo", "hi", "mesh", "flags", "min_scale"):
+        assert mine[name].tobytes() == theirs[name].tobytes() == brute.acceleration.instances[name].tobytes(), name
+    _check_device_top_level(on_device.acceleration)
+    boxes = instances.boxes()
+    rng = np.random.default_rng(22)
+    origins, _ = _rays(instances.bounds, 1500, seed=23)
+    directions = boxes.mean(axis=1)[rng.integers(0, 150, 1500)] + rng.normal(size=(1500, 3)) - origins
+    for cull in config.CULL_MODES:
+        want = brute.trace(origins, directions, cull=cull)
+        assert want.hit.mean() > 0.5 and len(set(want.instance[want.hit].tolist())) > 100
+        for accel in (on_device, on_host):
+            got = accel.trace(origins, directions, cull=cull)
+            for field in got._fields:
+                assert np.array_equal(getattr(got, field), getattr(want, field)), (cull, field)
+    want = brute.count(origins, directions)
+    every = brute.all_hits(origins, directions)
+    points = rng.uniform(*instances.bounds, (800, 3))
+    nearest = brute.closest_points(points)
+    for accel in (on_device, on_host):
+        assert np.array_equal(accel.count(origins, directions), want)
+        for a, b in zip(accel.all_hits(origins, directions), every):
+            assert np.array_equal(a, b)
+        got = accel.closest_points(points)
+        for field in got._fields:
+            assert np.array_equal(getattr(got, field), getattr(nearest, field), equal_nan=True), field
+
+
+@pytest.mark.parametrize("count", [1, 2, 3])
+def test_the_fewest_instances_on_the_device(count, device):
+    """A top level of one instance (a root row, its leaf on the left), two
+    and three, built and moved on the device: sound trees, and the brute
+    force's answers."""
+    instances = _many_placements(12, seed=31)
+    few = Instances(instances.meshes, instances.mesh_of[:count], instances.transforms[:count])
+    accel = clrt.Accel(few, accel="box", builder="device", device=device)
+    for placed in (few, Instances(instances.meshes, instances.mesh_of[:count], instances.transforms[6:6 + count])):
+        if placed is not few:
+            accel.move_instances(placed.transforms)
+        _check_device_top_level(accel.acceleration)
+        origins, directions = _rays(placed.bounds, 400, seed=32)
+        want = clrt.Accel(placed, accel="none", device=device).trace(origins, directions)
+        got = accel.trace(origins, directions)
+        assert want.hit.any()
+        for field in got._fields:
+            assert np.array_equal(getattr(got, field), getattr(want, field)), field
+
+
+def test_the_table_bounds_each_transforms_scales():
+    """Instance.min_scale is at most the linear part's smallest singular value
+    and at most 7 % below it; the condition bound at least the condition
+    number (less the slack of float64 rounding that the recheck of moved
+    transforms allows for) and at most 15 % above it -- for rotations and uniform scales
+    (the loosest case), stretches, shears, mirrors, and the thinnest
+    transforms allowed (two singular values a millionth of the third, where
+    the determinant loses most to rounding)."""
+    from clrt.accel.instances import INVERSE_SLACK, MIN_SCALE_SLACK, linear_part
+    rng = np.random.default_rng(41)
+    linear = []
+    for scales in ([1.0, 1.0, 1.0], [3.0, 0.2, 1.0], [-1.0, 2.0, 0.5], [1.0, 1e-6, 1e-6], [1.0, 1e-3, 1.05e-6],
+                   [1.0, 1.0, 1e-6]):
+        for _ in range(200):
+            linear.append(_rotation(rng.normal(size=3), rng.uniform(0, 7)) @ np.diag(scales)
+                          @ _rotation(rng.normal(size=3), rng.uniform(0, 7)) * rng.uniform(0.01, 100.0))
+    linear.append(np.array([[1.0, 0.7, 0.0], [0.0, 1.0, 0.0], [0.3, 0.0, 0.9]]))
+    linear = np.array(linear)
+    singular = np.linalg.svd(linear, compute_uv=False)
+    _, det, condition, min_scale = linear_part(np.moveaxis(linear, 0, -1))
+    ratio = min_scale / singular[:, 2]
+    assert (ratio <= 1.0).all() and ratio.min() > 0.93
+    assert ratio.max() > 0.98   # (tight where one singular value stands apart)
+    kappa = singular[:, 0] / singular[:, 2]
+    slack = MIN_SCALE_SLACK + INVERSE_SLACK * condition * condition   # (as to_recheck allows)
+    assert (condition >= kappa * (1.0 - slack)).all() and (condition <= 1.15 * kappa).all()
+    assert np.array_equal(det < 0, np.linalg.det(linear) < 0)
 
 
 @pytest.mark.parametrize("volume, builder", [("box", "sah"), ("sphere", "device"), ("ellipse", "paper")])

@@ -114,3 +114,25 @@ def test_copies_of_a_renderer_are_renderers_of_their_own(device):
         assert np.array_equal(frame.image, before) and frame.tiles > 1
         duplicate.set_lights([])
         assert np.array_equal(original.render(cam).image, before)
+
+
+def test_set_up_timings_are_reported_once_and_frames_report_their_own(device):
+    """The set-up's stages are the Renderer's (``Renderer.timings``), made once;
+    every frame's ``timings`` hold that frame's stages alone -- the first
+    frame's as the later ones', the path tracer's program build (made on its
+    first frame) going to the set-up's."""
+    set_up = {"initialisation", "acceleration build", "copy to device"}
+    frame_stages = {"ray generation", "pixel colour", "read back"}
+    scene = clrt.scene_from_mesh(TORUS)
+    renderer = clrt.Renderer(scene, device=device)
+    assert set(renderer.timings) == set_up and all(ms >= 0.0 for ms in renderer.timings.values())
+    made = dict(renderer.timings)
+    cam = _camera(scene)
+    frames = [renderer.render(cam) for _ in range(2)]
+    assert [set(f.timings) for f in frames] == [frame_stages] * 2
+    assert renderer.timings == made, "a frame changed the set-up's timings"
+    path = renderer.render(cam, integrator="path", spp=1)
+    assert set(path.timings) == {"path tracing", "kernels", "read back"}
+    assert set(renderer.timings) == set_up | {"program build"}
+    again = renderer.render(cam, integrator="path", spp=1)
+    assert set(again.timings) == set(path.timings) and set(renderer.timings) == set_up | {"program build"}

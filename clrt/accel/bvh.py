@@ -62,6 +62,17 @@ class Acceleration:
         self.device_buffers = None
         return built
 
+    def keep_on_host(self) -> None:
+        """Hold every host copy and let the device buffers go (an Acceleration
+        built on the device reads its host copies when first asked for:
+        clrt.device.acceleration.DeviceAcceleration); here they are all on
+        the host already."""
+        self.device_buffers = None
+
+    def settle(self) -> None:
+        """Fix the statistics of the tree as built before a refit moves its
+        triangles (a device build computes them when first asked for)."""
+
     def __getstate__(self):
         state = dict(self.__dict__)
         state["device_buffers"] = None        # device memory does not travel
@@ -83,9 +94,19 @@ class Acceleration:
     def is_bvh(self) -> bool:
         return self.accel != "none"
 
+    @property
+    def num_slots(self) -> int:
+        """Triangles the device holds, one a slot (``len(prim_ids)``)."""
+        return len(self.prim_ids)
+
+    @property
+    def num_rows(self) -> int:
+        """``len(rows)``."""
+        return len(self.rows)
+
     def device_bytes(self) -> int:
         """Bytes the kernels read: rows, triangle ids and the slot-ordered triangles."""
-        return int(self.rows.nbytes + self.prim_ids.nbytes + TRIANGLE_VERTS.itemsize * len(self.prim_ids))
+        return int(self.num_rows * BVH_PAIR_NODE.itemsize + (4 + TRIANGLE_VERTS.itemsize) * self.num_slots)
 
     def stats(self) -> dict:
         """Summary numbers: nodes, leaves, depth, leaf sizes, SAH cost, build time,

@@ -10,6 +10,7 @@ build through here, so every caller makes the same choice for "auto".
 
 from __future__ import annotations
 
+import functools
 import time
 
 import numpy as np
@@ -17,6 +18,7 @@ import pyopencl as cl
 
 from clrt.accel import Acceleration
 from clrt.accel import build as build_on_host
+from clrt.accel.rows import exact_rows
 from clrt.config import HOST_BUILDERS, HOST_DEFAULT_BUILDER
 from clrt.device.build import build_on_device
 from clrt.device.context import create_context, format_bytes, is_out_of_memory
@@ -33,7 +35,7 @@ FIXED_SCRATCH = ("parts", "part_bins")
 
 
 def build_acceleration(corners: np.ndarray, accel: str, builder: str, leaf_size: int,
-                       device: str | None = None) -> Acceleration:
+                       device: str | None = None, statistics: bool = False) -> Acceleration:
     """The acceleration structure over ``corners`` (F, 3, 3): clrt.accel.build for
     the host builders, for ``builder="device"`` a build on ``device`` (clrt's
     device choice, as the renderer and queries use it), and for "auto" the
@@ -42,7 +44,10 @@ def build_acceleration(corners: np.ndarray, accel: str, builder: str, leaf_size:
 
     A device build keeps its buffers on the device for the first
     DeviceGeometry on that context (clrt.accel.Acceleration.take_device_buffers);
-    the rows and ids are also read back (refit, statistics, per-slot data).
+    its host copies of the rows and ids are read back when first asked for
+    (refit, statistics, per-slot data: DeviceAcceleration).  ``statistics``:
+    the caller will ask for ``stats()`` (``clrt info``): a device build then
+    writes the exact boxes too, read back rather than made on the host.
     """
     if builder == "auto" and accel != "none":
         builder = "device" if "cl_khr_fp64" in create_context(device)[1].device.extensions else HOST_DEFAULT_BUILDER
@@ -52,7 +57,7 @@ def build_acceleration(corners: np.ndarray, accel: str, builder: str, leaf_size:
     start = time.perf_counter()
     context, queue = create_context(device)
     try:
-        bvh = build_on_device(context, queue, corners, volume=accel, leaf_size=leaf_size, keep_boxes=True)
+        bvh = build_on_device(context, queue, corners, volume=accel, leaf_size=leaf_size, keep_boxes=statistics)
     except (cl.Error, MemoryError) as exc:
         if not is_out_of_memory(exc):
             raise
@@ -60,10 +65,118 @@ def build_acceleration(corners: np.ndarray, accel: str, builder: str, leaf_size:
             f"out of device memory building the BVH of {len(corners):,} triangles on "
             f"{queue.device.name.strip()}: it needs about {format_bytes(SCRATCH_BYTES_PER_TRIANGLE * len(corners))} "
             "of scratch memory; use --builder sah (built on the host)") from None
-    rows, prim_ids = bvh.read_back()
-    exact_rows = bvh.read_exact_rows()      # the statistics are computed when asked for
-    bvh.exact_rows.release()
-    bvh.exact_rows = None
-    return Acceleration(accel, "device", rows, prim_ids, depth=int(bvh.depth),
-                        build_ms=1e3 * (time.perf_counter() - start), leaf_size=int(leaf_size),
-                        exact_rows=exact_rows, device_buffers=bvh)
+    return DeviceAcceleration(bvh, accel, build_ms=1e3 * (time.perf_counter() - start))
+
+
+class DeviceAcceleration(Acceleration):
+    """An Acceleration built on the device (clrt.device.build.DeviceBvh ``bvh``):
+    its buffers stay there, for the first DeviceGeometry on their context to
+    take over, and its host copies are read back only when first asked for --
+    ``rows`` (a refit, the wide BVH of CPU devices, point queries' far
+    fields), ``prim_ids`` (a Renderer's per-slot shading data) and
+    ``exact_rows`` (``stats()``: made on the host from the rows and the
+    slot-ordered triangles, clrt.accel.rows.exact_rows).  A build that read
+    them all back at once (the rows and their exact boxes, 128 bytes a
+    triangle) spent longer on that than on the build from a million
+    triangles on (docs/benchmarks.md).
+
+    Letting go of ``device_buffers`` without taking them (a two-level scene
+    joins its meshes' rows on the host) reads the host copies and frees the
+    device buffers.  A refit calls :meth:`settle` first, which keeps the
+    slot-ordered triangles as built for the statistics.
+    """
+
+    _LAZY = ("rows", "prim_ids", "exact_rows")
+
+    def __init__(self, bvh, accel: str, build_ms: float):
+        super().__init__(accel, "device", None, None, depth=int(bvh.depth), build_ms=build_ms,
+                         leaf_size=int(bvh.leaf_size), device_buffers=bvh)
+        for name in self._LAZY:     # read on first use (functools.cached_property below)
+            del self.__dict__[name]
+        self._bvh = bvh
+        self._slotted = None        # the triangles as built, slot order, once settled
+        self._counts = (int(bvh.num_rows), int(bvh.num_triangles))
+
+    @functools.cached_property
+    def rows(self) -> np.ndarray:
+        return self._source().read_rows()
+
+    @functools.cached_property
+    def prim_ids(self) -> np.ndarray:
+        return self._source().read_prim_ids()
+
+    @functools.cached_property
+    def exact_rows(self) -> np.ndarray:
+        bvh = self._bvh
+        if self._slotted is None and bvh is not None and bvh.exact_rows is not None:   # kept by the build
+            exact = bvh.read_exact_rows()
+            bvh.exact_rows.release()
+            bvh.exact_rows = None
+            return exact
+        slotted, self._slotted = self._slotted if self._slotted is not None else self._read_slotted(), None
+        return exact_rows(self.rows, slotted)
+
+    def _read_slotted(self) -> np.ndarray:
+        """(F, 3, 3) float32 view of the slot-ordered triangles read back."""
+        return self._source().read_triangles().view(np.float32).reshape(-1, 3, 4)[:, :, :3]
+
+    def _source(self):
+        if self._bvh is None or self._bvh.rows is None:
+            raise RuntimeError("the device buffers of this BVH were released before its host copies were read")
+        return self._bvh
+
+    @property
+    def num_rows(self) -> int:
+        return self._counts[0]
+
+    @property
+    def num_slots(self) -> int:
+        return self._counts[1]
+
+    @property
+    def device_buffers(self):
+        return self.__dict__.get("_offered")
+
+    @device_buffers.setter
+    def device_buffers(self, bvh) -> None:
+        if bvh is None and self.__dict__.get("_offered") is not None:   # let go, not taken
+            self.keep_on_host()
+        self.__dict__["_offered"] = bvh
+
+    def take_device_buffers(self, context):
+        built = self.device_buffers
+        if built is None or built.rows is None or built.queue.context.int_ptr != context.int_ptr:
+            return None
+        self.__dict__["_offered"] = None    # handed out once: the geometry owns them now
+        return built
+
+    def keep_on_host(self) -> None:
+        """Read the host copies now (the rows, the ids, and what the statistics
+        need) and free the device buffers, unless a geometry took them over."""
+        if self._bvh is None:
+            return
+        self.settle()
+        self.rows, self.prim_ids   # noqa: B018 -- read now
+        if self.__dict__.get("_offered") is not None:
+            self._bvh.release()
+            self.__dict__["_offered"] = None
+        self._bvh = None
+
+    def settle(self) -> None:
+        """Keep what the statistics need on the host (before a refit moves the
+        triangles on the device): the exact rows a build kept, else the
+        slot-ordered triangles as built."""
+        if self._slotted is not None or "exact_rows" in self.__dict__ or self._bvh is None:
+            return
+        if self._bvh.exact_rows is not None:
+            self.exact_rows   # noqa: B018 -- read now
+        else:
+            self._slotted = self._read_slotted()
+
+    def __getstate__(self):
+        self.settle()        # what is on the device does not travel: its host copies do
+        self.rows, self.prim_ids   # noqa: B018 -- read now
+        state = super().__getstate__()
+        state.pop("_offered", None)
+        state["_bvh"] = None
+        return state

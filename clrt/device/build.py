@@ -81,6 +81,7 @@ import pyopencl as cl
 
 from clrt import layouts
 from clrt.accel import as_triangles, check_options, volumes
+from clrt.accel.instances import instance_defines
 from clrt.accel.rows import tree_stats
 from clrt.accel.topdown import C_INTERSECT, C_TRAVERSAL
 from clrt.config import VOLUME_DEFINES, VOLUMES
@@ -184,6 +185,7 @@ CPU_TILE_WORKERS = 4     # work-items per core of the CPU merge passes (build_pl
 MAX_REDUCE_GROUPS = 256  # work-groups of the bounds reduction (grid-stride beyond)
 EARLY_ROWS_BYTES = 64 << 20   # row buffers made before the row count is known, up to this size
 EMIT_JUMPS = 7           # pointer jumps queued without reading the tree's height (2**7 levels)
+GROUP_RESULTS = 14       # doubles each work-group of place_instances writes (build_instances.cl)
 
 # The state buffer (build_state.cl): int offsets, and the ring of cluster counts.
 STATE = {"STATE_NEXT_NODE": 0, "STATE_DEPTH": 1, "STATE_ERROR": 2, "STATE_BAD_TRIANGLE": 3, "STATE_BOUNDS": 4,
@@ -210,8 +212,8 @@ def sah_top_clusters(kind: str, tail_group: int | None = None, top_clusters: int
 def build_defines(volume: str, kind: str = "gpu", treelet_leaves: int | None = None,
                   tail_group: int | None = None, top_clusters: int | None = None, segmented: bool = False) -> dict:
     """Program defines: the shape, the work-group and state layout, and the
-    constants of topdown.py and volumes.py (one source of truth: repr() of a float
-    is a C double literal of the same value)."""
+    constants of topdown.py, volumes.py and instances.py (one source of truth:
+    repr() of a float is a C double literal of the same value)."""
     return {
         VOLUME_DEFINES[volume]: None, "BUILD_GROUP": BUILD_GROUP, "RADIX_BITS": RADIX_BITS,
         "SORT_PASSES": SORT_PASSES,
@@ -223,9 +225,10 @@ def build_defines(volume: str, kind: str = "gpu", treelet_leaves: int | None = N
         "TREELET_FULL_MIN": TREELET_SMALL[kind][1],
         "TREELET_GROUP": TREELET_GROUP, "TREELET_LEVELS": TREELET_LEVELS, **STATE,
         "PART_BINS": PART_BINS, "PART_MAX_NODES": PART_MAX_NODES, "PART_LEVELS": PART_LEVELS,
+        "GROUP_RESULTS": GROUP_RESULTS,
         **({"PLOC_SEGMENTS": None} if segmented else {}),
         "C_TRAVERSAL": f"((float){C_TRAVERSAL!r})", "C_INTERSECT": f"((float){C_INTERSECT!r})",
-        **volumes.fit_defines(),
+        **volumes.fit_defines(), **instance_defines(),
     }
 
 
@@ -275,11 +278,19 @@ class DeviceBvh:
 
     def read_back(self) -> tuple[np.ndarray, np.ndarray]:
         """Host copies: rows (num_rows,) BVH_PAIR_NODE and prim_ids (F,) int32."""
+        return self.read_rows(), self.read_prim_ids()
+
+    def read_rows(self) -> np.ndarray:
+        """Host copy of the rows, (num_rows,) BVH_PAIR_NODE."""
         rows = np.empty(self.num_rows, layouts.BVH_PAIR_NODE)
+        cl.enqueue_copy(self.queue, rows, self.rows, is_blocking=True)
+        return rows
+
+    def read_prim_ids(self) -> np.ndarray:
+        """Host copy of the slot -> triangle ids, (F,) int32."""
         prim_ids = np.empty(self.num_triangles, np.int32)
-        cl.enqueue_copy(self.queue, rows, self.rows)
         cl.enqueue_copy(self.queue, prim_ids, self.prim_ids, is_blocking=True)
-        return rows, prim_ids
+        return prim_ids
 
     def read_triangles(self) -> np.ndarray:
         """Host copy of the slot-ordered triangles, (F,) TRIANGLE_VERTS."""
@@ -461,29 +472,8 @@ def build_on_device(context: cl.Context, queue: cl.CommandQueue, corners, volume
     else:
         launch("morton", k["morton_codes"], _groups(F), corners_buf, np.uint32(F), state, keys[0], ids[0])
 
-    # 2. Radix sort, ping-ponging between the two key/id buffers (build_sort.cl):
-    # on a GPU one launch a pass (decoupled look-back), elsewhere three.
-    tiles = max(-(-F // (BUILD_GROUP * 8)), 1)          # SORT_TILE = BUILD_GROUP * SORT_ITEMS
-    bins = 1 << RADIX_BITS
-    passes = SORT_PASSES
-    if kind == "gpu":
-        sort_status = ws.get("sort_status", 4 * 2 * tiles * bins)     # two halves, see radix_scatter_lookback
-        launch("sort", k["radix_digit_counts"], min(_groups(F), MAX_REDUCE_GROUPS), keys[0], np.uint32(F), state,
-               sort_status, np.uint32(tiles * bins))
-    else:
-        tile_counts = ws.get("tile_counts", 4 * bins * tiles)
-    for p in range(passes):
-        src, dst = p % 2, 1 - p % 2
-        if kind == "gpu":
-            launch("sort", k["radix_scatter_lookback"], tiles, keys[src], ids[src], np.uint32(F), np.uint32(p),
-                   state, sort_status, keys[dst], ids[dst])
-            continue
-        shift = np.uint32(p * RADIX_BITS)
-        launch("sort", k["radix_histogram"], tiles, keys[src], np.uint32(F), shift, tile_counts)
-        launch("sort", k["scan_counts"], 1, tile_counts, np.uint32(bins * tiles))
-        launch("sort", k["radix_scatter"], tiles, keys[src], ids[src], np.uint32(F), shift, tile_counts,
-               keys[dst], ids[dst])
-    sorted_ids = ids[passes % 2]
+    # 2. Radix sort.
+    sorted_ids = queue_sort(k, launch, ws, kind, F, keys, ids, state)
 
     # 3. PLOC.
     nodes = ws.get("nodes", layouts.BUILD_NODE.itemsize * num_nodes)
@@ -585,6 +575,34 @@ def _row_buffers(context: cl.Context, num_rows: int, keep_boxes: bool):
     nbytes = num_rows * layouts.BVH_PAIR_NODE.itemsize
     rows = cl.Buffer(context, cl.mem_flags.READ_WRITE, nbytes)
     return rows, cl.Buffer(context, cl.mem_flags.READ_WRITE, nbytes) if keep_boxes else None
+
+
+def queue_sort(k, launch, ws, kind: str, n: int, keys: list, ids: list, state: cl.Buffer) -> cl.Buffer:
+    """Queue the radix sort of the n (key, id) pairs in keys[0], ids[0],
+    ping-ponging between the two buffers of each (build_sort.cl): on a GPU one
+    launch a pass (decoupled look-back), elsewhere three; ``state`` as
+    init_build_state leaves it.  Returns the buffer of the sorted ids (the
+    sorted keys are in keys[0]: SORT_PASSES is even)."""
+    tiles = max(-(-n // (BUILD_GROUP * 8)), 1)          # SORT_TILE = BUILD_GROUP * SORT_ITEMS
+    bins = 1 << RADIX_BITS
+    if kind == "gpu":
+        sort_status = ws.get("sort_status", 4 * 2 * tiles * bins)     # two halves, see radix_scatter_lookback
+        launch("sort", k["radix_digit_counts"], min(_groups(n), MAX_REDUCE_GROUPS), keys[0], np.uint32(n), state,
+               sort_status, np.uint32(tiles * bins))
+    else:
+        tile_counts = ws.get("tile_counts", 4 * bins * tiles)
+    for p in range(SORT_PASSES):
+        src, dst = p % 2, 1 - p % 2
+        if kind == "gpu":
+            launch("sort", k["radix_scatter_lookback"], tiles, keys[src], ids[src], np.uint32(n), np.uint32(p),
+                   state, sort_status, keys[dst], ids[dst])
+            continue
+        shift = np.uint32(p * RADIX_BITS)
+        launch("sort", k["radix_histogram"], tiles, keys[src], np.uint32(n), shift, tile_counts)
+        launch("sort", k["scan_counts"], 1, tile_counts, np.uint32(bins * tiles))
+        launch("sort", k["radix_scatter"], tiles, keys[src], ids[src], np.uint32(n), shift, tile_counts,
+               keys[dst], ids[dst])
+    return ids[SORT_PASSES % 2]
 
 
 def _root_height(queue, heights: cl.Buffer, F: int) -> int:

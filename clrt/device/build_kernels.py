@@ -62,6 +62,14 @@ BUILD_KERNELS = {
     "jump_root_paths": (B("ancestor"), B("path"), U("num_nodes"), B("ancestor_out"), B("path_out")),
     "emit_tree": (B("nodes"), U("num_nodes"), I("root"), B("corners"), B("sorted_ids"), B("ancestor"), B("path"),
         B("rows"), B("exact_rows"), B("tris"), B("prim_ids"), B("state")),
+    # The top level of a scene of instances (build_instances.cl, clrt/device/top_level.py).
+    "place_instances": (B("transforms"), B("mesh_of"), B("meshes"), U("num_instances"), B("group_results"),
+        B("state")),
+    "instance_rows": (B("transforms"), B("mesh_of"), B("meshes"), B("frame"), U("num_instances"), B("table"),
+        B("keys"), B("ids"), B("arrivals")),
+    "lbvh_nodes": (B("keys"), U("num_instances"), B("children"), B("parents")),
+    "lbvh_fit": (B("children"), B("parents"), B("sorted_ids"), B("table"), U("num_instances"), B("boxes"),
+        B("arrivals"), B("rows"), B("exact_rows")),
 }
 
 

@@ -17,12 +17,13 @@ from clrt.accel import Acceleration
 from clrt.accel.rows import tree_levels
 from clrt.accel.wide import WIDE, WideBvh, collapse
 from clrt.config import MAX_PARTS, VOLUME_DEFINES, stack_size
+from clrt.device import pinned
 from clrt.device.args import scene_value
 from clrt.device.context import device_kind, format_bytes
 from clrt.device.reach import Reach
 from clrt.device.signature import buffer, typed_kernels, value
 from clrt.errors import DeviceMemoryError, InputError
-from clrt.layouts import TRIANGLE_VERTS
+from clrt.layouts import BVH_PAIR_NODE, INSTANCE, TRIANGLE_VERTS
 from clrt.scene.arrays import triangle_verts
 
 
@@ -76,6 +77,17 @@ def packet_rays(context: cl.Context, geometry: "DeviceGeometry") -> int:
     return PACKET_RAYS if packets else 1
 
 
+def _stand_in(dtype, count: int) -> np.ndarray:
+    """(count,) of ``dtype`` in no memory: the size of an array kept on the device."""
+    return np.broadcast_to(np.zeros(1, dtype), (count,))
+
+
+def _host_arrays(corners: np.ndarray, acceleration: Acceleration) -> dict:
+    """The triangles in slot order, the rows and the ids of ``acceleration``, for upload."""
+    return {"tris": triangle_verts(corners[acceleration.slot_order()]),
+            "nodes": np.ascontiguousarray(acceleration.rows), "prim_ids": np.ascontiguousarray(acceleration.prim_ids)}
+
+
 def check_fits(device, label: str, nbytes: int, reserve: int = 0) -> None:
     """DeviceMemoryError, before any upload, if ``nbytes`` of scene (plus ``reserve``
     for per-launch buffers) cannot fit on ``device``.  (A buffer larger than one
@@ -121,6 +133,9 @@ class DeviceGeometry:
     tree are in the device's frame, moved by ``-origin``; the queries and the
     renderer move their rays' origins into it (``origin`` here).
 
+    ``queue``: a queue of ``context``, for the large arrays' staged uploads
+    (clrt.device.pinned.upload); without it every buffer is made from its array.
+
     ``bounds``: (2, 3) min and max corner of the triangles in the caller's
     frame, when the caller has them (else computed; a two-level scene gives
     its instances' world box, its corners being in the meshes' frames); ``reach``
@@ -131,30 +146,35 @@ class DeviceGeometry:
     def __init__(self, context: cl.Context, corners: np.ndarray, acceleration: Acceleration,
                  extra: dict | None = None, max_buffer_bytes: int | None = None,
                  fits: Callable[[int], None] | None = None, max_buffer_label: str = "max_buffer_bytes",
-                 bounds=None, origin=None):
+                 bounds=None, origin=None, queue: cl.CommandQueue | None = None):
         self.acceleration = acceleration
         self._place(corners, bounds, origin)
-        prim_ids, order = acceleration.prim_ids, acceleration.slot_order()
         # A tree built on this context's device is on it already, with its
-        # triangles in slot order: taken over (once), not uploaded again.
-        # The triangles' host array is then only a stand-in of the right size.
+        # triangles in slot order: taken over (once), not uploaded again, and
+        # its arrays here are stand-ins of the right size (a device build's
+        # host copies are not even read back: clrt.device.acceleration).
         built = acceleration.take_device_buffers(context)
-        slotted = (np.broadcast_to(np.zeros(1, TRIANGLE_VERTS), (len(prim_ids),)) if built is not None
-                   else triangle_verts(corners[order]))
-        arrays = {"tris": slotted, "nodes": acceleration.rows, "prim_ids": prim_ids, **(extra or {})}
-        if acceleration.instances is not None:
-            arrays["instances"] = acceleration.instances
-        arrays = {name: a if a is slotted else np.ascontiguousarray(a) for name, a in arrays.items()}
+        if built is not None:
+            arrays = {"tris": _stand_in(TRIANGLE_VERTS, acceleration.num_slots),
+                      "nodes": _stand_in(BVH_PAIR_NODE, acceleration.num_rows),
+                      "prim_ids": _stand_in(np.int32, acceleration.num_slots)}
+        else:
+            arrays = _host_arrays(corners, acceleration)
+        for name, array in {**(extra or {}), **({} if acceleration.instances is None
+                                               else {"instances": acceleration.instances})}.items():
+            arrays[name] = np.ascontiguousarray(array)
         limit = min(d.max_mem_alloc_size for d in context.devices)
         source = "the device's largest allocation"
         if max_buffer_bytes is not None and int(max_buffer_bytes) < limit:
             limit, source = int(max_buffer_bytes), f"set by {max_buffer_label}"
         self.shifts = part_shifts(arrays, limit, source)
-        if built is not None and self.shifts is not None:    # split into parts: uploaded as always
+        if built is not None and self.shifts is not None:    # split into parts: uploaded from the host
+            acceleration.keep_on_host()
+            built.release()
             built = None
-            arrays["tris"] = triangle_verts(corners[order])
+            arrays.update(_host_arrays(corners, acceleration))
         # The wide BVH only where it is walked: other devices pay nothing.
-        self.wide = (collapse(acceleration.rows, corners[order].astype(np.float32, copy=False))
+        self.wide = (collapse(acceleration.rows, corners[acceleration.slot_order()].astype(np.float32, copy=False))
                      if walks_wide(context, acceleration, self.shifts is not None) else None)
         # The wide BVH's nodes and packets in one buffer (geometry.cl says why),
         # the packets from byte packets_at on (a multiple of a node's 256 B).
@@ -173,8 +193,16 @@ class DeviceGeometry:
             self.defines.update({f"{name}_PART_SHIFT": shift for name, shift in self.shifts.items()})
         mf = cl.mem_flags
 
+        copies = []
+
         def upload(array, flags=mf.READ_ONLY):
-            return cl.Buffer(context, flags | mf.COPY_HOST_PTR, hostbuf=array)
+            # Large arrays through clrt.device.pinned's staging (the driver's own
+            # copy of pageable memory ran at about 8 GB/s on the H200's host).
+            if queue is None or array.nbytes < pinned.STAGED_MIN_BYTES:
+                return cl.Buffer(context, flags | mf.COPY_HOST_PTR, hostbuf=array)
+            buffer = cl.Buffer(context, flags, array.nbytes)
+            copies.append(pinned.upload(context, queue, buffer, array))
+            return buffer
 
         self.buffers: dict[str, tuple] = {}
         if built is not None:
@@ -189,7 +217,9 @@ class DeviceGeometry:
             step = 1 << self.shifts[name]
             parts = [upload(array[k:k + step]) for k in range(0, max(len(array), 1), step)]
             self.buffers[name] = tuple(parts + parts[-1:] * (MAX_PARTS - len(parts)))
-        self.num_tris = np.uint32(len(prim_ids))
+        for copy in copies:   # the host arrays may go once this returns
+            copy.wait()
+        self.num_tris = np.uint32(acceleration.num_slots)
         self.num_instances = 0 if acceleration.instances is None else len(acceleration.instances)
         self._refit: dict = {}   # the refit plans (None: the whole tree; k: mesh k's rows), made on first use
 
@@ -231,8 +261,9 @@ class DeviceGeometry:
                              "build it anew")
         if acceleration.instances is not None:
             raise InputError("refit of a scene of instances is not supported yet: build it anew")
-        if len(corners) != len(acceleration.prim_ids):
-            raise InputError(f"refit needs the same {len(acceleration.prim_ids):,} triangles, got {len(corners):,}")
+        if len(corners) != acceleration.num_slots:
+            raise InputError(f"refit needs the same {acceleration.num_slots:,} triangles, got {len(corners):,}")
+        acceleration.settle()   # the statistics describe the tree as built
         self._place(corners, bounds, origin)
         cl.enqueue_copy(queue, self.buffers["tris"][0], triangle_verts(corners[acceleration.prim_ids]))
         if not acceleration.is_bvh:
@@ -291,6 +322,33 @@ class DeviceGeometry:
         changed = any(self.defines.get(k, "none") != v for k, v in defines.items())
         self.defines.update(defines)
         return changed
+
+    def place_instances(self, queue: cl.CommandQueue, top, after: cl.Event, bounds, origin) -> tuple[bool, cl.Event]:
+        """Take a two-level scene's instances as the device placed them anew
+        (clrt.device.top_level.DeviceTopLevel ``top``: its table and top-level
+        rows, written when ``after`` is done), copied on the device over the
+        old ones on ``queue`` -- after every launch queued there before -- in
+        the frame of ``origin``, their world box ``bounds``.  Returns whether
+        the program defines changed, as move_instances does, and the last
+        copy's event."""
+        self._place(None, bounds, origin)
+        self._copy(queue, "nodes", top.rows, top.num_rows, BVH_PAIR_NODE.itemsize, after)
+        copied = self._copy(queue, "instances", top.table, top.count, INSTANCE.itemsize, after)
+        defines = accel_defines(self.acceleration, self.wide)
+        changed = any(self.defines.get(k, "none") != v for k, v in defines.items())
+        self.defines.update(defines)
+        return changed, copied
+
+    def _copy(self, queue: cl.CommandQueue, name: str, source: cl.Buffer, count: int, itemsize: int,
+              after: cl.Event) -> cl.Event:
+        """Copy the first ``count`` elements of device buffer ``source`` over
+        those of buffer ``name`` (its parts, where split), after ``after``."""
+        buffers = self.buffers[name]
+        step = count if self.shifts is None else 1 << self.shifts[name]
+        for k in range(0, count, step):
+            event = cl.enqueue_copy(queue, buffers[k // step], source, byte_count=min(step, count - k) * itemsize,
+                                    src_offset=k * itemsize, wait_for=[after])
+        return event
 
     def _write(self, queue: cl.CommandQueue, name: str, array: np.ndarray) -> None:
         """Overwrite the first ``len(array)`` elements of buffer ``name`` (its

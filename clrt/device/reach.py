@@ -94,6 +94,7 @@ class Reach:
             bounds = [[flat[:, k].min() for k in range(3)], [flat[:, k].max() for k in range(3)]]
         self.lo, self.hi = (np.asarray(b, np.float64) for b in bounds)
         self._limit = None   # limit(), found once
+        self._render_checked = None   # the last eye check_render passed
         self.diagonal = float(np.linalg.norm(self.hi - self.lo))
         if self.diagonal > MEASURE_DIAGONAL and corners is not None:
             self.area, self.edge = _largest_triangle(corners)
@@ -156,7 +157,10 @@ class Reach:
         fail whatever the camera: then the scene is too large, and the error
         begins with ``where()`` (the geometry that makes it so:
         clrt.scene.scene.far_triangle), else with the camera's rays."""
-        eye = np.asarray(eye, np.float64)
+        key = tuple(float(x) for x in eye)
+        if key == self._render_checked:   # every frame of one view asks again: answered once
+            return
+        eye = np.asarray(key, np.float64)
         off = SPAWN_REACH * float(np.max(np.abs([self.lo, self.hi])))
         lo, hi = self.lo - off, self.hi + off
         rho = self.farthest(lo, hi)
@@ -167,3 +171,4 @@ class Reach:
                              f"{show(self.limit())} away, and rays between its surfaces start up to {show(rho)} "
                              "from its far side: fix that geometry, or scale the scene down")
         self.check(np.minimum(eye, lo), np.maximum(eye, hi), "the camera's rays start up to")
+        self._render_checked = key

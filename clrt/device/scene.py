@@ -94,7 +94,7 @@ class DeviceScene:
             with self.out_of_memory():
                 self.geometry = DeviceGeometry(self.context, corners, self.acceleration, extra, max_buffer_bytes,
                                                fits=fits, max_buffer_label=max_buffer_label, bounds=bounds,
-                                               origin=origin)
+                                               origin=origin, queue=self.queue)
             self.rays_per_item = packet_rays(self.context, self.geometry)
 
     @contextlib.contextmanager

@@ -4,6 +4,8 @@
 // restructuring -> depth-first
 // BvhPairNode rows, slot-ordered triangles and slot -> triangle ids.  The
 // host driver, and the order of the launches, is clrt/device/build.py.
+// Also the top level of a scene of instances (build_instances.cl, driven by
+// clrt/device/top_level.py), which shares the sort and the volume fit.
 // Build-time choices arrive as -D defines: BUILD_GROUP, RADIX_BITS,
 // PLOC_RADIUS, the state offsets, the SAH constants of clrt/accel/topdown.py, the
 // padding constants of clrt/accel/volumes.py and the volume shape (VOLUME_*).
@@ -16,3 +18,4 @@
 #include "build_ploc.cl"
 #include "build_treelet.cl"
 #include "build_emit.cl"
+#include "build_instances.cl"

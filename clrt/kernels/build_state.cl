@@ -42,8 +42,8 @@
 #define TAIL_MERGED 1         // ploc_tail's loop merged
 #define TAIL_IN_SPARE 2       // and left the clusters in its `spare` buffer
 
-// One work-item: the state before a build of num_tris triangles.
-__kernel void init_build_state(global uint* state, const uint num_tris)
+// The state before a build of num_tris triangles (one work-item writes it).
+inline void clear_build_state(global uint* state, const uint num_tris)
 {
     for (uint k = 0; k < STATE_INTS; ++k)
         state[k] = 0u;
@@ -54,6 +54,11 @@ __kernel void init_build_state(global uint* state, const uint num_tris)
         state[STATE_BOUNDS + 3 + k] = 0u;          // max: atomic_max from the smallest
     }
     state[CLUSTERS_BEFORE(0)] = num_tris;
+}
+
+__kernel void init_build_state(global uint* state, const uint num_tris)
+{
+    clear_build_state(state, num_tris);
 }
 
 #endif

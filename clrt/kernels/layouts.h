@@ -170,7 +170,7 @@ typedef struct {
     int first, count;            // the mesh's slots: first .. first + count - 1
     uint flags;                  // INSTANCE_MIRROR: to_world's determinant is negative
     int material;                // the renderer: row of its object's first Material (0 for queries)
-    float min_scale;             // smallest singular value of the linear part, rounded down
+    float min_scale;             // a lower bound of the linear part's smallest singular value (at most 7 % below)
     uint pad;
 } Instance;
 

@@ -29,6 +29,46 @@
 #define POINT_CELL_OF(order) ((order) + POINT_CELLS)
 #define POINT_ORDER(order, n) ((order) + POINT_CELLS + (n))
 
+// The box that steers a point's walk where the walk may take the same steps
+// for every point of a cell (winding.cl's far fields): with
+// -DPOINT_CELL_REGIONS (GPUs) the point's cell of the grid above, padded by
+// 2^-20 of the scene's size and coordinates against the rounding of its
+// corners and stretched to hold the point (one outside the scene's box lies
+// beyond its clamped cell) -- so every point of a cell, walked by the
+// neighbouring work-items point_order puts together, opens the same nodes and
+// reads them at once; else the point itself.  A child far from the whole box
+// is far from the point: the choice can only open more children than the
+// point alone would, so no answer loses accuracy.
+typedef struct {
+    float3 lo, hi;
+} PointRegion;
+
+inline PointRegion point_region(float3 p, float3 scene_lo, float3 scene_hi)
+{
+    PointRegion r;
+#ifdef POINT_CELL_REGIONS
+    const float3 extent = fmax(scene_hi - scene_lo, (float3)(FLT_MIN));
+    const float3 cells = (float3)(float)(1 << POINT_CELL_BITS);
+    const float3 q = clamp(floor((p - scene_lo) / extent * cells), (float3)(0.0f), cells - 1.0f);
+    const float3 size = fmax(fmax(fabs(scene_lo), fabs(scene_hi)), extent);
+    const float pad = 0x1p-20f * fmax(fmax(size.x, size.y), size.z);
+    r.lo = fmin(scene_lo + q / cells * extent - pad, p);
+    r.hi = fmax(scene_lo + (q + 1.0f) / cells * extent + pad, p);
+#else
+    r.lo = p;
+    r.hi = p;
+#endif
+    return r;
+}
+
+// The square distance from c to the region (0 inside it): |c - p|^2 bit for
+// bit where the region is the point p.
+inline float region_distance2(const PointRegion* r, float3 c)
+{
+    const float3 gap = fmax(fmax(r->lo - c, c - r->hi), (float3)(0.0f));
+    return dot(gap, gap);
+}
+
 // Bits 0..4 of x at bits 0, 3, 6, 9, 12.
 inline uint spread_cell_bits(uint x)
 {
@@ -38,17 +78,24 @@ inline uint spread_cell_bits(uint x)
     return out;
 }
 
+// The cell of point p (device frame) of the grid over the box lo .. hi, in
+// Morton order.  NaN points (reported by the query) land in cell 0:
+// convert_uint_sat takes NaN to 0.
+inline uint point_cell(float3 p, float3 lo, float3 hi)
+{
+    const float3 extent = fmax(hi - lo, (float3)(FLT_MIN));
+    const uint3 q = min(convert_uint3_sat((p - lo) / extent * (float)(1 << POINT_CELL_BITS)),
+                        (uint3)((1u << POINT_CELL_BITS) - 1u));
+    return spread_cell_bits(q.x) | (spread_cell_bits(q.y) << 1) | (spread_cell_bits(q.z) << 2);
+}
+
 __kernel void point_cells(__global const float* origins, const QueryLaunch launch, __global uint* order)
 {
     const uint i = get_global_id(0);
     if (i >= launch.num_rays)
         return;
     const float3 p = vload3(0, origins + (size_t)(launch.in_first + i) * launch.origin_stride) - launch.shift.xyz;
-    const float3 extent = fmax(launch.scene_hi.xyz - launch.scene_lo.xyz, (float3)(FLT_MIN));
-    // NaN points (reported by the query) land in cell 0: convert_uint_sat takes NaN to 0.
-    const uint3 q = min(convert_uint3_sat((p - launch.scene_lo.xyz) / extent * (float)(1 << POINT_CELL_BITS)),
-                        (uint3)((1u << POINT_CELL_BITS) - 1u));
-    const uint cell = spread_cell_bits(q.x) | (spread_cell_bits(q.y) << 1) | (spread_cell_bits(q.z) << 2);
+    const uint cell = point_cell(p, launch.scene_lo.xyz, launch.scene_hi.xyz);
     POINT_CELL_OF(order)[i] = cell;
     atomic_inc(order + cell);
 }

@@ -257,6 +257,11 @@ __kernel void query_all(RAY_INPUT_PARAMS, __global uchar* results, GEOMETRY_PARA
     query_hits(&g, origin, dir, tmin, tmax, QUERY_ALL, false, &sink);
 }
 
+// Points a work-item's loop takes: its `count`, but where the warp walks
+// together (WARP_WALKS) one more turn with none (count 0: the work-items
+// past the last point), walking with the others.
+#define ITEM_POINTS(count) (WARP_WALKS ? max((count), 1u) : (count))
+
 // The points of a work-item of query_closest_point or signed_distances: from
 // the launch's `first` in the order of point_order.cl (of `num` points),
 // ITEM_RAYS of them (or those left), their indices into `ids` and positions into `positions`, all
@@ -266,7 +271,7 @@ __kernel void query_all(RAY_INPUT_PARAMS, __global uchar* results, GEOMETRY_PARA
 inline uint read_item_points(const RayInput* in, __global const uint* order, uint num, uint first, uint* ids,
                              float3* positions)
 {
-    const uint count = min((uint)ITEM_RAYS, num - first);
+    const uint count = first < num ? min((uint)ITEM_RAYS, num - first) : 0u;
     for (uint k = 0; k < count; ++k) {
         ids[k] = POINT_ORDER(order, num)[first + k];
         positions[k] = point_position(in, ids[k]);
@@ -287,7 +292,7 @@ inline uint read_item_points(const RayInput* in, __global const uint* order, uin
 __kernel void query_closest_point(POINT_INPUT_PARAMS, __global uchar* results, GEOMETRY_PARAMS)
 {
     const uint first = ITEM_RAYS * get_global_id(0);
-    if (first >= launch.num_rays)
+    if (first >= launch.num_rays && !WARP_WALKS)   // (else it walks with its warp: closest_point_item)
         return;
     const Geometry g = make_geometry(GEOMETRY_ARGS);
     const RayInput in = make_point_input(POINT_INPUT_ARGS);
@@ -301,14 +306,15 @@ __kernel void query_closest_point(POINT_INPUT_PARAMS, __global uchar* results, G
     float3 positions[ITEM_RAYS];
     const uint count = read_item_points(&in, order, launch.num_rays, first, ids, positions);
     int seed = -1;
-    for (uint k = 0; k < count; ++k) {
-        const uint i = ids[k];
-        float3 p;
-        float max_dist;
-        PointHit best;
-        best.prim = -1;
-        if (take_point(&in, i, positions[k], &p, &max_dist))
-            best = closest_point(&g, p, max_dist, POINT_MARGIN(p, in.scene_lo, in.scene_hi), seed);
+    for (uint k = 0; k < ITEM_POINTS(count); ++k) {
+        const uint i = k < count ? ids[k] : 0u;
+        float3 p = in.scene_lo;
+        float max_dist = 0.0f;
+        const bool taken = k < count && take_point(&in, i, positions[k], &p, &max_dist);
+        const PointHit best = closest_point_item(&g, p, taken, max_dist, POINT_MARGIN(p, in.scene_lo, in.scene_hi),
+                                                 seed);
+        if (k >= count)
+            break;
         const bool found = best.prim >= 0;
         if (found)
             seed = best.slot;
@@ -352,15 +358,16 @@ __kernel void query_winding_number(POINT_INPUT_PARAMS, __global uchar* results,
     const uint count = read_item_points(&in, order, launch.num_rays, first, ids, positions);
     for (uint k = 0; k < count; ++k) {
         const uint i = ids[k];
-        float3 p;
+        float3 p = in.scene_lo;   // (a bad point's walk is not taken)
         float max_dist;
         const bool good = take_point(&in, i, positions[k], &p, &max_dist);
+        const PointRegion region = point_region(p, in.scene_lo, in.scene_hi);
         if (!winding_out) {
             if (inside_out)
-                inside_out[i] = good && winding_inside(&g, winding, p) ? 1 : 0;
+                inside_out[i] = good && winding_inside(&g, winding, p, &region) ? 1 : 0;
             continue;
         }
-        const float w = good ? (float)winding_number(&g, winding, p) : 0.0f;
+        const float w = good ? (float)winding_number(&g, winding, p, &region) : 0.0f;
         winding_out[i] = w;
         if (inside_out)
             inside_out[i] = w >= 0.5f ? 1 : 0;
@@ -387,17 +394,22 @@ inline void signed_distances(const Geometry* g, const RayInput* in, const QueryL
     float3 positions[ITEM_RAYS];
     const uint count = read_item_points(in, order, launch->num_rays, first, ids, positions);
     int seed = -1;
-    for (uint k = 0; k < count; ++k) {
-        const uint i = ids[k];
-        float3 p;
+    for (uint k = 0; k < ITEM_POINTS(count); ++k) {
+        const uint i = k < count ? ids[k] : 0u;
+        float3 p = in->scene_lo;
         float max_dist;
         float d = NAN;
-        if (take_point(in, i, positions[k], &p, &max_dist)) {
-            const PointHit best = closest_point(g, p, INFINITY, POINT_MARGIN(p, in->scene_lo, in->scene_hi), seed);
+        const bool taken = k < count && take_point(in, i, positions[k], &p, &max_dist);
+        const PointHit best = closest_point_item(g, p, taken, INFINITY, POINT_MARGIN(p, in->scene_lo, in->scene_hi),
+                                                 seed);
+        if (k >= count)
+            break;
+        if (taken) {
             seed = best.slot;
             bool inside;
+            const PointRegion region = point_region(p, in->scene_lo, in->scene_hi);
             if (rule == SIGN_WINDING)
-                inside = winding_inside(g, winding, p);
+                inside = winding_inside(g, winding, p, &region);
             else if (rule == SIGN_PARITY)
                 inside = inside_by_parity(g, p, in->scene_lo, in->scene_hi);
             else
@@ -416,7 +428,7 @@ __kernel void query_signed_distance_winding(POINT_INPUT_PARAMS, __global uchar* 
                                             __global const WindingFarField* winding, GEOMETRY_PARAMS)
 {
     const uint first = ITEM_RAYS * get_global_id(0);
-    if (first >= launch.num_rays)
+    if (first >= launch.num_rays && !WARP_WALKS)
         return;
     const Geometry g = make_geometry(GEOMETRY_ARGS);
     const RayInput in = make_point_input(POINT_INPUT_ARGS);
@@ -426,7 +438,7 @@ __kernel void query_signed_distance_winding(POINT_INPUT_PARAMS, __global uchar* 
 __kernel void query_signed_distance_parity(POINT_INPUT_PARAMS, __global uchar* results, GEOMETRY_PARAMS)
 {
     const uint first = ITEM_RAYS * get_global_id(0);
-    if (first >= launch.num_rays)
+    if (first >= launch.num_rays && !WARP_WALKS)
         return;
     const Geometry g = make_geometry(GEOMETRY_ARGS);
     const RayInput in = make_point_input(POINT_INPUT_ARGS);
@@ -437,7 +449,7 @@ __kernel void query_signed_distance_normal(POINT_INPUT_PARAMS, __global uchar* r
                                            __global const PseudoNormals* normals, GEOMETRY_PARAMS)
 {
     const uint first = ITEM_RAYS * get_global_id(0);
-    if (first >= launch.num_rays)
+    if (first >= launch.num_rays && !WARP_WALKS)
         return;
     const Geometry g = make_geometry(GEOMETRY_ARGS);
     const RayInput in = make_point_input(POINT_INPUT_ARGS);

@@ -34,6 +34,19 @@
 // 5.6e-3, and 4 gave 1.8e-4 -- 4.2e-3 without the series' last term.
 // Without a BVH every triangle is summed exactly.
 //
+// On GPUs (-DPOINT_CELL_REGIONS) "farther than beta r" is asked of the
+// point's whole cell (point_order.cl's point_region): the points of a cell,
+// neighbours in the launch, then open the same children and walk in
+// lockstep, each summing its own series and leaves.  A child far from the
+// cell is far from the point, so the error can only shrink; on the H200 the
+// walk of a million random points took half the time (docs/benchmarks.md).
+// The stricter test leaves room for a smaller beta there, 4.5: on the tests'
+// meshes (tests/test_inside.py: this program on the CPU) the largest error
+// was 5.4e-5 (beta 6: 2.0e-5); float32 leaves, tried beside it, missed
+// WINDING_NUMBER_ERROR by half (1.5e-4 at a point just off a large face).
+// A two-level scene's walk (winding_placed.cl) asks it of the point alone,
+// region or not, so it keeps beta 6 there.
+//
 // CPU devices that walk the wide BVH (-DBVH_WIDE, accel_wide.cl) walk it here
 // too: one float8 series for the eight children of a wide node
 // (WideWindingNode), and a leaf's packets of four triangles in double4.  Its
@@ -53,11 +66,15 @@
 
 #include "geometry.cl"
 #include "point.cl"
+#include "point_order.cl"
 #include "lanes.cl"
 
 #ifdef BVH_WIDE
 #define WINDING_BETA 5.0f
 #define WINDING_SIGN_BETA 2.5f
+#elif defined(POINT_CELL_REGIONS) && !defined(ACCEL_INSTANCES)
+#define WINDING_BETA 4.5f
+#define WINDING_SIGN_BETA 3.0f
 #else
 #define WINDING_BETA 6.0f
 #define WINDING_SIGN_BETA 3.0f
@@ -229,8 +246,8 @@ inline float radius_up(point_real r)
 #if defined(ACCEL_INSTANCES)
 // (A two-level scene's walk: winding_placed.cl.)
 #elif defined(ACCEL_BVH) && defined(BVH_WIDE)
-inline point_real winding_sum(const Geometry* g, __global const WindingFarField* winding, float3 p, float beta,
-                              const bool bounded, float* bound)
+inline point_real winding_sum(const Geometry* g, __global const WindingFarField* winding, float3 p,
+                              const PointRegion* region, float beta, const bool bounded, float* bound)
 {
     const point_real3 pr = TO_POINT_REAL3(p);
     point_real sum = 0;
@@ -272,8 +289,8 @@ inline point_real winding_sum(const Geometry* g, __global const WindingFarField*
     return sum;
 }
 #else
-inline point_real winding_sum(const Geometry* g, __global const WindingFarField* winding, float3 p, float beta,
-                              const bool bounded, float* bound)
+inline point_real winding_sum(const Geometry* g, __global const WindingFarField* winding, float3 p,
+                              const PointRegion* region, float beta, const bool bounded, float* bound)
 {
     const point_real3 pr = TO_POINT_REAL3(p);
     point_real sum = 0;
@@ -295,7 +312,7 @@ inline point_real winding_sum(const Geometry* g, __global const WindingFarField*
             const float3 r = node->centre.xyz - p;
             const float r2 = dot(r, r);
             const float reach = beta * node->centre.w;
-            if (r2 > reach * reach) {
+            if (region_distance2(region, node->centre.xyz) > reach * reach) {
                 sum += far_field(r.x, r.y, r.z, r2, node->normal.x, node->normal.y, node->normal.z, node->first,
                                  node->second);
                 if (bounded)
@@ -326,10 +343,11 @@ inline point_real winding_sum(const Geometry* g, __global const WindingFarField*
 
 // The winding number of the mesh at p (device frame); `winding`: the far
 // fields (unused without a BVH).
-inline point_real winding_number(const Geometry* g, __global const WindingFarField* winding, float3 p)
+inline point_real winding_number(const Geometry* g, __global const WindingFarField* winding, float3 p,
+                                 const PointRegion* region)
 {
     float unused;
-    return winding_sum(g, winding, p, WINDING_BETA, false, &unused) * INV_4PI;
+    return winding_sum(g, winding, p, region, WINDING_BETA, false, &unused) * INV_4PI;
 }
 
 // Is p inside -- (float)winding_number(p) >= 1/2?  A first walk with
@@ -341,15 +359,16 @@ inline point_real winding_number(const Geometry* g, __global const WindingFarFie
 // -- ten times its documented error (clrt.query.results.WINDING_NUMBER_ERROR).
 // Elsewhere winding_number decides, so the two agree there by construction.
 // (Without double precision the leaves are float32 too: no first walk.)
-inline bool winding_inside(const Geometry* g, __global const WindingFarField* winding, float3 p)
+inline bool winding_inside(const Geometry* g, __global const WindingFarField* winding, float3 p,
+                           const PointRegion* region)
 {
 #if defined(ACCEL_BVH) && defined(cl_khr_fp64)
     float bound;
-    const point_real w1 = winding_sum(g, winding, p, WINDING_SIGN_BETA, true, &bound) * INV_4PI;
+    const point_real w1 = winding_sum(g, winding, p, region, WINDING_SIGN_BETA, true, &bound) * INV_4PI;
     if (fabs(w1 - (point_real)0.5) > bound * INV_4PI + WINDING_SIGN_MARGIN)
         return w1 > 0.5;
 #endif
-    return (float)winding_number(g, winding, p) >= 0.5f;
+    return (float)winding_number(g, winding, p, region) >= 0.5f;
 }
 
 // ---- The WindingNodes of a tree, made level by level from the deepest up

@@ -234,9 +234,10 @@ inline point_real placed_leaf_solid_angle(const Geometry* g, __global const Inst
 // beta times its world radius taken from its series; with `bounded`, *bound a
 // proven bound of the sum's error.  One walk and one stack over both levels,
 // as the rays' walk: a top-level leaf is an instance, walked from its mesh's
-// root in its mesh's space.
-inline point_real winding_sum(const Geometry* g, __global const PlacedWindingNode* winding, float3 p, float beta,
-                              const bool bounded, float* bound)
+// root in its mesh's space.  `region` (point_order.cl's, winding.cl's
+// signature) is not read: each point decides for itself (WINDING_BETA 6).
+inline point_real winding_sum(const Geometry* g, __global const PlacedWindingNode* winding, float3 p,
+                              const PointRegion* region, float beta, const bool bounded, float* bound)
 {
     const point_real3 pw = TO_POINT_REAL3(p);
     point_real sum = 0;

@@ -50,7 +50,7 @@ from clrt.device.sharing import one_at_a_time
 from clrt.errors import InputError
 from clrt.config import NO_RESULT, RAY_CHECKS
 from clrt.layouts import QUERY_LAUNCH
-from clrt.query.kernels import QUERY_GROUP, QUERY_KERNELS
+from clrt.query.kernels import QUERY_GROUP, QUERY_KERNELS, point_defines
 from clrt.query.points import PointQueries
 from clrt.query.instances import SceneMoves, query_scene, source_of
 from clrt.query.rays import CameraRays, PinholeRays, RayBatch, cull_code, is_device_array
@@ -246,7 +246,7 @@ class Accel(PointQueries, SceneMoves):
         self.all_hits_capacity = ALL_HITS_CAPACITY
         # Rays a work-item of query_closest / query_any answers (trace.cl's ITEM_RAYS).
         self.rays_per_item = scene.rays_per_item
-        self.kernels = scene.kernels("trace.cl", QUERY_KERNELS)
+        self.kernels = scene.kernels("trace.cl", QUERY_KERNELS, point_defines(self.queue.device))
         self._scene_value = scene.geometry.scene_value()
         self._buffers: dict[str, cl.Buffer] = {}
         self._hits_per_ray = float(ALL_HITS_PER_RAY)

@@ -10,6 +10,7 @@ in at the launch's byte offsets (QueryLaunch.field_at), and the geometry.
 from __future__ import annotations
 
 import numpy as np
+import pyopencl as cl
 
 from clrt.device.signature import GEOMETRY, buffer, value
 from clrt.layouts import CAMERA, QUERY_LAUNCH
@@ -26,6 +27,23 @@ from clrt.layouts import CAMERA, QUERY_LAUNCH
 # MB.  A fixed size keeps one variant.  The kernels skip the work-items past
 # the last ray.
 QUERY_GROUP: dict = {"gpu": 128, "cpu": 64}
+
+def point_defines(device) -> dict:
+    """The trace.cl program's point-query choices for ``device`` (point.cl,
+    point_order.cl and winding.cl say what each does).  On GPUs, whose
+    neighbouring work-items run in lockstep, the far fields of winding numbers
+    are taken for a whole cell of points at once (POINT_CELL_REGIONS); on
+    NVIDIA's, whose compiler takes PTX, the 32 points of a warp walk the BVH
+    for their closest points together (POINT_WARP_WALK).  CPU devices walk
+    the wide BVH (point.cl's walk_wide_points), one point at a time.  Measured
+    on the H200: docs/benchmarks.md."""
+    if device.type & cl.device_type.CPU:
+        return {}
+    defines = {"POINT_CELL_REGIONS": None}
+    if "cl_nv_compiler_options" in device.extensions.split():
+        defines["POINT_WARP_WALK"] = None
+    return defines
+
 
 #: RAY_INPUT_PARAMS (rays.cl).
 RAY_INPUT = (buffer("origins"), buffer("dirs"), buffer("tmins"), buffer("tmaxs"), buffer("bad"),

@@ -55,7 +55,10 @@ from clrt.scene.texture import srgb_encode8
 
 @dataclass
 class Frame:
-    """One rendered image and how long each stage took (milliseconds)."""
+    """One rendered image and how long each of its stages took (milliseconds):
+    ``timings`` holds this frame's work alone ("ray generation", "pixel
+    colour", "read back"; the path tracer's "path tracing", "kernels", "read
+    back") -- the set-up done once per Renderer is in ``Renderer.timings``."""
 
     image: np.ndarray            # (H, W, 3) uint8 sRGB, or float32 linear RGB
     prim: np.ndarray | None      # (H, W) int32 triangle seen by each pixel, -1 for background
@@ -135,6 +138,11 @@ class Renderer:
     their own (device, accel, builder, leaf_size, where Accel had accel,
     builder, leaf_size, device), so ``Renderer(scene, "gpu")`` now raises
     InputError showing the call with keywords rather than meaning something else.
+
+    ``timings``: the set-up's stages, in ms, reported once here rather than
+    in every frame's: "initialisation", "acceleration build", "copy to
+    device" (the context, the upload and the programs), and "program build"
+    once the path tracer's program is built (its first frame).
 
     Threads may share a Renderer: its renders, refits and light changes take
     turns (clrt.device.sharing), so a frame shows the scene as it was when
@@ -303,7 +311,7 @@ class Renderer:
         if self._path is None:
             with stage(self.timings, "program build"):
                 self._path = PathTracer(self)
-        timings = dict(self.timings)
+        timings = {}
         shown = None
         if preview is not None:
             def shown(image, done):
@@ -338,8 +346,7 @@ class Renderer:
         host_bytes = w * h * ((12 if linear else 3) + (8 if hits else 0))
         if host_bytes > HOST_CHECK_BYTES:   # reading /proc/meminfo costs more than a small frame
             check_host_memory(host_bytes, f"a {w}x{h} image")
-        timings = dict(self.timings)
-        timings.update({"ray generation": 0.0, "pixel colour": 0.0, "read back": 0.0})
+        timings = {"ray generation": 0.0, "pixel colour": 0.0, "read back": 0.0}
         if linear:
             image, pinned = np.empty((h, w, 3), np.float32), False
         else:
@@ -412,8 +419,9 @@ class Renderer:
         """Place a scene of placed meshes anew: ``transforms`` (I, 4, 4),
         object -> world, one for each placement in the order of
         ``self.instances`` (docs/instances.md).  Only the instance table and
-        the top level are built again (on the host) and uploaded; the meshes'
-        BVHs, shading arrays and materials stay.  The frames after show the
+        the top level are built again (on the device where it built the
+        meshes, else on the host); the meshes' BVHs, shading arrays and
+        materials stay.  The frames after show the
         moved scene as a new Renderer of it would, bit for bit (its lights
         stay where they are)."""
         if self.instances is None:
@@ -573,9 +581,10 @@ class Renderer:
         job.timings["read back"] += sum(_event_ms(e) for e in copies) + 1e3 * (time.perf_counter() - host_start)
         slowest = 0.0
         for gen, shade in launches:
-            job.timings["ray generation"] += _event_ms(gen)
-            job.timings["pixel colour"] += _event_ms(shade)
-            slowest = max(slowest, _event_ms(gen) + _event_ms(shade))
+            gen_ms, shade_ms = _event_ms(gen), _event_ms(shade)
+            job.timings["ray generation"] += gen_ms
+            job.timings["pixel colour"] += shade_ms
+            slowest = max(slowest, gen_ms + shade_ms)
         return slowest
 
     def _launch_shape(self, w: int, h: int, row_pixels: int = 1) -> tuple:
@@ -638,7 +647,11 @@ def check_host_memory(nbytes: int, what: str) -> None:
 
 
 def _event_ms(event: cl.Event) -> float:
-    return 1e-6 * (event.profile.end - event.profile.start)
+    # (get_profiling_info directly: event.profile's attribute lookup costs 10x more)
+    return 1e-6 * (event.get_profiling_info(_END) - event.get_profiling_info(_START))
+
+
+_START, _END = cl.profiling_info.START, cl.profiling_info.END
 
 
 def render(source=None, camera: Camera | None = None, *, linear: bool = False, **options) -> np.ndarray:

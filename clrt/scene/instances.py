@@ -107,8 +107,23 @@ class Instances:
     @property
     def bounds(self) -> np.ndarray:
         """(2, 3) float64: the box of every instance's box."""
+        known = self.__dict__.get("_bounds")
+        if known is not None:
+            return known.copy()
         boxes = self.boxes()
         return np.stack([boxes[:, 0].min(axis=0), boxes[:, 1].max(axis=0)])
+
+    def with_transforms(self, transforms: np.ndarray, bounds: np.ndarray) -> "Instances":
+        """These meshes placed by ``transforms`` instead: a new Instances that
+        takes (does not copy) the (I, 4, 4) float64 array, checked already
+        (clrt.device.instances.move_instances checks a move as
+        :func:`checked_transforms` does, without its singular values for
+        10,000 instances), and ``bounds``, their world box as :attr:`bounds`
+        gives it (a move computes it)."""
+        moved = object.__new__(Instances)
+        moved.meshes, moved.mesh_of, moved.transforms = self.meshes, self.mesh_of, transforms
+        moved._bounds = np.array(bounds, np.float64)
+        return moved
 
     def flattened(self) -> Mesh:
         """All instances as one Mesh: each instance's mesh moved by its transform
@@ -126,12 +141,26 @@ class Instances:
 def mapped_boxes(transforms: np.ndarray, boxes: np.ndarray) -> np.ndarray:
     """(I, 2, 3) float64 boxes of ``boxes`` (I, 2, 3) mapped by ``transforms``
     (I, 4, 4): centre mapped, half extent through |linear part| (the box of
-    the mapped corners, in float64)."""
-    centre, half = 0.5 * (boxes[:, 0] + boxes[:, 1]), 0.5 * (boxes[:, 1] - boxes[:, 0])
-    linear = transforms[:, :3, :3]
-    mid = np.einsum("nij,nj->ni", linear, centre) + transforms[:, :3, 3]
-    reach = np.einsum("nij,nj->ni", np.abs(linear), half)
-    return np.stack([mid - reach, mid + reach], axis=1)
+    the mapped corners, in float64; :func:`mapped_columns`)."""
+    rows = np.moveaxis(transforms[:, :3], 0, -1)                 # (3, 4, I)
+    lo, hi = mapped_columns(rows, *np.moveaxis(boxes, 0, -1))
+    return np.stack([lo.T, hi.T], axis=1)
+
+
+def mapped_columns(rows: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The boxes lo..hi ((3, I) each) mapped by affine maps of rows ``rows``
+    ((3, 4, I): linear part, translation): lo, hi (3, I).  Each sum from left
+    to right, as the device's top-level build sums (build_instances.cl's
+    mapped_box): the same boxes, bit for bit."""
+    centre, half = 0.5 * (lo + hi), 0.5 * (hi - lo)
+    mid = np.stack([dot3(r[:3], centre) + r[3] for r in rows])
+    reach = np.stack([dot3(np.abs(r[:3]), half) for r in rows])
+    return mid - reach, mid + reach
+
+
+def dot3(p, q):
+    """The dot products of p and q ((3, ...) each), summed from left to right."""
+    return (p[0] * q[0] + p[1] * q[1]) + p[2] * q[2]
 
 
 def far_placement(scene) -> str:

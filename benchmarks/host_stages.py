@@ -1,0 +1,119 @@
+"""The host's stages of making an Accel or a Renderer: ``python -m benchmarks.host_stages``.
+
+    python -m benchmarks.host_stages --device gpu --triangles 1M,10M,50M
+    python -m benchmarks.host_stages --device cpu --triangles 1M --no-split
+
+On a torus of about each count of triangles (vertices float32, faces int32,
+as a caller's arrays arrive), the median wall ms of ``--repeat`` runs of each
+host stage -- the mesh's checks, its bounds (the vertices its faces use), the
+corner gather into the device's frame, ``scene_from_mesh`` (the crease split
+for smooth shading), ``flatten_scene`` -- then the whole calls,
+``clrt.Accel(V, F)`` and ``clrt.Renderer(scene)`` (warm: one untimed call of
+each first), beside the build they contain (``Acceleration.build_ms``: the
+device build, its upload included) and ``Renderer.timings``.  What a whole
+call spends beyond its build and the stages above is the rest of the host's
+set-up (context, programs, uploads).  ``--no-split`` leaves the crease split
+out (a flat-shaded scene), which takes seconds from a few million triangles
+on; ``--no-calls`` times the stages alone.  Timing is done here, never in tests.
+"""
+
+from __future__ import annotations
+
+import sys
+
+if not __package__:   # run as a script, python benchmarks/NAME.py: import from the repository, not this folder
+    import os.path
+    sys.path[0] = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
+import argparse
+import gc
+import math
+import statistics
+import time
+
+import numpy as np
+
+from benchmarks.common import POSITIVE, exit_code, parse_count
+
+
+def torus_arrays(count: int) -> tuple[np.ndarray, np.ndarray]:
+    """(V, 3) float32 and (F, 3) int32 of a torus of about ``count`` triangles."""
+    from clrt.scene.primitives import torus
+    ring = max(3, int(math.sqrt(count / 2) * 1.4))
+    mesh = torus(n_major=ring, n_minor=max(3, count // 2 // ring))
+    return np.ascontiguousarray(mesh.vertices, np.float32), np.ascontiguousarray(mesh.faces, np.int32)
+
+
+def _median_ms(make, repeat: int, before=None) -> tuple[float, object]:
+    """Median wall ms of ``make(before())`` (``before`` untimed), and the last result."""
+    walls, result = [], None
+    for _ in range(repeat):
+        gc.collect()
+        arg = before() if before is not None else None
+        start = time.perf_counter()
+        result = make(arg) if before is not None else make()
+        walls.append(1e3 * (time.perf_counter() - start))
+    return statistics.median(walls), result
+
+
+def stages(vertices, faces, device, repeat: int, split: bool, calls: bool = True) -> dict:
+    """Stage name -> median ms for one mesh (see the module docstring)."""
+    import clrt
+    from clrt.scene.arrays import device_origin, flatten_scene, triangle_corners
+    from clrt.scene.mesh import Mesh
+    from clrt.scene.scene import scene_from_mesh
+    out = {}
+    out["Mesh(V, F): the checks"], mesh = _median_ms(lambda: Mesh(vertices, faces), repeat)
+    out["Mesh.bounds (used vertices)"], bounds = _median_ms(lambda m: m.bounds, repeat,
+                                                            lambda: Mesh(vertices, faces))
+    origin = device_origin(bounds)
+    out["triangle_corners (gather, frame)"], _ = _median_ms(lambda: triangle_corners(mesh, origin), repeat)
+    material = None if split else {"smooth": False}
+    name = "scene_from_mesh (crease split)" if split else "scene_from_mesh (flat: no split)"
+    out[name], scene = _median_ms(lambda m: scene_from_mesh(m, material), repeat, lambda: Mesh(vertices, faces))
+    out["flatten_scene"], _ = _median_ms(lambda: flatten_scene(scene), repeat)
+    for call, make in () if not calls else (("Accel(V, F)", lambda: clrt.Accel((vertices, faces), device=device)),
+                       ("Renderer(scene)", lambda: clrt.Renderer(scene, device=device))):
+        make()   # programs built, driver warm
+        out[f"{call}: whole call"], made = _median_ms(lambda: _finished(make()), repeat)
+        out[f"{call}: of it the build"] = made.acceleration.build_ms
+        if call.startswith("Renderer"):
+            out.update({f"{call}: {stage}": ms for stage, ms in made.timings.items()})
+        del made
+    return out
+
+
+def _finished(made):
+    made.queue.finish()
+    return made
+
+
+def run(counts, device=None, repeat=3, split=True, out=None, calls=True):
+    from clrt.device.context import create_context, device_label
+    out = out or sys.stdout
+    _, queue = create_context(device)
+    columns = {}
+    for count in counts:
+        vertices, faces = torus_arrays(count)
+        columns[len(faces)] = stages(vertices, faces, device, repeat, split, calls)
+    print(f"device: {device_label(queue.device)}; medians of {repeat}, ms\n", file=out)
+    print("| stage | " + " | ".join(f"{n:,} triangles" for n in columns) + " |", file=out)
+    print("|---|" + "---|" * len(columns), file=out)
+    for stage in next(iter(columns.values())):
+        print(f"| {stage} | " + " | ".join(f"{c[stage]:,.1f}" for c in columns.values()) + " |", file=out)
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(prog="python -m benchmarks.host_stages", description=__doc__.split("\n")[0])
+    p.add_argument("--triangles", type=lambda s: [parse_count(x) for x in s.split(",")], default=[1_000_000],
+                   help="comma-separated counts, e.g. 1M,10M (default 1M)")
+    p.add_argument("--device", help="'gpu', 'cpu' or P:D (default: clrt's choice)")
+    p.add_argument("--repeat", type=POSITIVE, default=3, help="runs of each stage, median reported (default 3)")
+    p.add_argument("--no-split", action="store_true", help="a flat-shaded scene: no crease split")
+    p.add_argument("--no-calls", action="store_true", help="the stages alone, not the whole calls")
+    args = p.parse_args(argv)
+    return exit_code(run, args.triangles, args.device, args.repeat, not args.no_split, calls=not args.no_calls)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
