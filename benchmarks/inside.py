@@ -14,6 +14,16 @@ clrt's torus knot):
    ``--repeat`` calls after one warm-up (which makes the far fields and the
    pseudo-normals), with the share of points inside.
 
+With ``--placed``, instead: the mesh placed once as an instance (a
+two-level scene: docs/instances.md, "Point queries") by maps from a rotation
+to an uneven scale of condition number 40 (summed exactly), beside the
+one-level Accel of the same placed triangles (flattened) -- its wide BVH
+where the device walks one (CPU devices), and its binary rows, which a GPU
+walks and a two-level scene walks everywhere --, on the same points:
+``winding_number``'s median ms of each, and the largest error of each
+against the exact sum over the placed triangles (the two-level brute force,
+float64) on the first ``--exact`` points.
+
 Speed is not yet a goal of these queries (issue 36's GPU step is); this
 records where they stand.
 """
@@ -99,8 +109,12 @@ def main(argv=None) -> int:
     parser.add_argument("--points", type=parse_count, default=200_000, help="query points (default 200K)")
     parser.add_argument("--repeat", type=POSITIVE, default=3, help="timed calls a query (default 3)")
     parser.add_argument("--device", default=None, help="OpenCL device (default: clrt's choice)")
+    parser.add_argument("--placed", action="store_true", help="the mesh as an instance under several maps, "
+                        "beside its flattened copy")
+    parser.add_argument("--exact", type=parse_count, default=2000, help="--placed: points whose error is "
+                        "measured (default 2K)")
     args = parser.parse_args(argv)
-    return exit_code(run, args)
+    return exit_code(placed if args.placed else run, args)
 
 
 def run(args) -> None:
@@ -134,6 +148,54 @@ def run(args) -> None:
         share = (result.astype(bool) if name == "contains" else result >= 0.5 if name == "winding_number"
                  else result < 0)
         print(f"| {name} | {ms:.1f} | {args.points / ms / 1e3:.2f} | {100 * share.mean():.2f} % |")
+
+
+def _placements() -> dict:
+    """name -> 3x3 linear map: a rotation, a mirror, then uneven scales (their
+    condition numbers 2, 4, 7, 30 and 40) between two rotations."""
+    def turn(axis, angle):
+        a = np.asarray(axis, float) / np.linalg.norm(axis)
+        k = np.array([[0, -a[2], a[1]], [a[2], 0, -a[0]], [-a[1], a[0], 0]])
+        return np.eye(3) + np.sin(angle) * k + (1 - np.cos(angle)) * k @ k
+    uneven = {f"scale {int(round(max(d) / min(d)))}:1": turn((1, 2, 3), 1.1) @ np.diag(d) @ turn((3, -1, 2), 0.4)
+              for d in ([1.0, 2.0, 1.0], [1.0, 4.0, 1.5], [0.5, 1.0, 3.5], [0.3, 1.0, 9.0], [0.1, 1.0, 4.0])}
+    return {"rotation": turn((1, 2, 3), 1.1), "mirror": np.diag([-1.0, 1.0, 1.0]) @ turn((0, 1, 1), 0.5), **uneven}
+
+
+def placed(args) -> None:
+    import clrt
+    from clrt.device import geometry
+    from clrt.scene import primitives
+    path = args.mesh or (SHARED_MESHES / "bunny00.off")
+    mesh = clrt.load_mesh(path) if args.mesh or path.exists() else primitives.torus_knot()
+    print(f"{getattr(mesh, 'name', path)}: {len(mesh.faces):,} triangles; {args.points:,} points uniform in the "
+          f"placed mesh's box grown by 10 %, errors on the first {min(args.exact, args.points):,}\n")
+    print("| placement | condition | two-level ms | flattened ms | flattened, binary rows ms | two-level error "
+          "| flattened error |")
+    print("|---|---|---|---|---|---|---|")
+    rng = np.random.default_rng(0)
+    for name, linear in _placements().items():
+        transform = np.eye(4)
+        transform[:3, :3] = linear
+        instances = clrt.Instances([mesh], [0], transform[None])
+        two = clrt.Accel(instances, device=args.device)
+        flat = clrt.Accel(instances.flattened(), device=args.device)
+        kinds, geometry.WIDE_BVH_KINDS = geometry.WIDE_BVH_KINDS, ()   # (as the tests compare the walks)
+        try:
+            rows = clrt.Accel(instances.flattened(), device=args.device)
+        finally:
+            geometry.WIDE_BVH_KINDS = kinds
+        lo, hi = instances.bounds
+        grow = 0.1 * (hi - lo)
+        points = (lo - grow + rng.random((args.points, 3)) * (hi - lo + 2 * grow)).astype(np.float32)
+        two_ms, w_two = median_wall_ms(lambda: two.winding_number(points), args.repeat)
+        flat_ms, w_flat = median_wall_ms(lambda: flat.winding_number(points), args.repeat)
+        rows_ms, _ = median_wall_ms(lambda: rows.winding_number(points), args.repeat)
+        some = points[:args.exact]
+        exact = clrt.Accel(instances, accel="none", device=args.device).winding_number(some)
+        singular = np.linalg.svd(linear, compute_uv=False)
+        print(f"| {name} | {singular[0] / singular[2]:.1f} | {two_ms:.1f} | {flat_ms:.1f} | {rows_ms:.1f} | "
+              f"{np.abs(w_two[:len(some)] - exact).max():.1e} | {np.abs(w_flat[:len(some)] - exact).max():.1e} |")
 
 
 if __name__ == "__main__":

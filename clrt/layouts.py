@@ -312,6 +312,23 @@ without a child:
   256: first           float8[6]   as WindingNode's, lane by lane
   448: second          float8[10]
 
+``PlacedWindingNode`` (160 B) -- WindingNode's far field in a two-level scene
+(-DACCEL_INSTANCES; winding.cl, docs/instances.md), the moments whole: an
+affine map that scales unevenly or shears mixes their symmetric and other parts,
+so a mesh's node, kept in the mesh's own space, serves every placement only
+whole.  The rows of the top level hold the world's: an instance's, its mesh's
+moments mapped by its transform, and their joins.
+    0: centre  float4  as WindingNode's; w: the radius, or INFINITY for a node
+                       never taken from its series (an instance too unevenly scaled)
+   16: normal  float4  as WindingNode's (in the world: w bounds the area)
+   32: extent  float4  xyz: no corner farther from the centre along each axis
+                       (rounded up; a box, which an uneven placement maps to a
+                       tighter world radius than the sphere); w unused
+   48: first   float[9]   sum of n_i * integral of d_j dA: [3 i + j]
+   84: second  float[18]  sum of n_i * integral of d_j d_k dA: [6 i + jk], jk =
+                          xx, xy, xz, yy, yz, zz (symmetric in j, k)
+  156: pad     uint
+
 ``PseudoNormals`` (96 B) -- per slot, for signs by normal (point.cl): the
 angle-weighted pseudo-normals (Baerentzen & Aanaes 2005) of the triangle's
 edges and corners, unit length (zero where no face around has an area),
@@ -391,6 +408,8 @@ WINDING_NODE = np.dtype([("centre", float4), ("normal", float4), ("first", np.fl
                          ("second", np.float32, 10)])
 WIDE_WINDING_NODE = np.dtype([(name, float8) for name in ("cx", "cy", "cz", "radius", "nx", "ny", "nz", "area")]
                              + [("first", float8, 6), ("second", float8, 10)])
+PLACED_WINDING_NODE = np.dtype([("centre", float4), ("normal", float4), ("extent", float4),
+                                ("first", np.float32, 9), ("second", np.float32, 18), ("pad", np.uint32, 1)])
 PSEUDO_NORMALS = np.dtype([("edge", float4, 3), ("vertex", float4, 3)])
 BUILD_NODE = np.dtype([("lo", float4), ("hi", float4), ("parent", np.int32), ("count", np.int32),
                        ("rows", np.int32), ("cost", np.float32)])
@@ -445,6 +464,7 @@ STRUCTS = {
     "WideDisk": WIDE_DISK,
     "WindingNode": WINDING_NODE,
     "WideWindingNode": WIDE_WINDING_NODE,
+    "PlacedWindingNode": PLACED_WINDING_NODE,
     "PseudoNormals": PSEUDO_NORMALS,
     "BuildNode": BUILD_NODE,
     "BuildCluster": BUILD_CLUSTER,

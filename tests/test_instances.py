@@ -578,8 +578,6 @@ def test_closest_points_on_instances(scene, volume, builder, device):
     assert np.abs(got.point[same] - want.point[same]).max() < 1e-5 * scale
     far = clrt.Accel(instances, device=device).closest_points(points, max_distance=0.05)
     assert np.array_equal(far.instance == -1, ~(brute.distance <= 0.05)) and (far.instance >= 0).any()
-    with pytest.raises(clrt.InputError, match="inside tests on an Accel of instances are not supported yet"):
-        clrt.Accel(instances, device=device).signed_distance(points[:3])
 
 
 def _one_line_error(call, match):
@@ -616,9 +614,19 @@ def test_bad_instances_are_one_line(device, monkeypatch):
     _one_line_error(lambda: clrt.Accel([mesh] * 4), r"a scene holds at most 3 instances .* got 4")
     _one_line_error(lambda: Instances([mesh], [0] * 4), r"a scene holds at most 3 instances .* got 4")
     monkeypatch.undo()
-    accel = clrt.Accel([mesh, (mesh, _affine(shift=(3.0, 0.0, 0.0)))], device=device)
-    _one_line_error(lambda: accel.winding_number([0.0, 0.0, 0.0]), "inside tests on an Accel of instances")
-    _one_line_error(lambda: accel.refit(mesh.vertices), "refit of an Accel of instances")
+    accel = clrt.Accel([(mesh, _affine(100.0 * np.eye(3))), (primitives.box((1.0, 1.0, 1.0)),
+                                                             _affine(shift=(3.0, 0.0, 0.0)))], device=device)
+    _one_line_error(lambda: accel.refit(mesh.vertices), r"refit of an Accel of 2 meshes needs mesh=: the index of "
+                                                        r"the one whose vertices move \(0..1, as instances.meshes")
+    _one_line_error(lambda: accel.refit(mesh.vertices, mesh=2), r"mesh must be an integer in 0..1, got 2")
+    _one_line_error(lambda: accel.refit(mesh.vertices, mesh=1.0), r"mesh must be an integer in 0..1, got 1.0")
+    _one_line_error(lambda: accel.refit(mesh.vertices, mesh=1), r"refit needs vertices of shape \(8, 3\), got ")
+    _one_line_error(lambda: clrt.Accel(mesh, device=device).refit(mesh.vertices, mesh=1),
+                    r"mesh must be an integer in 0..0, got 1")
+    _one_line_error(lambda: accel.refit(mesh.vertices * 1e31, mesh=0), r"vertex coordinates must lie within \+-1e30")
+    far = mesh.vertices * 1e29   # within the range, but placed 100 times larger
+    _one_line_error(lambda: accel.refit(far, mesh=0), r"instance 0's transform takes its mesh to .*, past \+-1e\+30")
+    assert np.array_equal(accel.instances.meshes[0].vertices, mesh.vertices)   # nothing moved by the refusals
 
 
 # --------------------------------------------------------------------------- glTF files: nodes as instances

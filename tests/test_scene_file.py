@@ -326,3 +326,66 @@ def test_the_default_light_of_a_file_without_lights_follows_the_camera(tmp_path)
     # a file's own lights stay where the file puts them
     lit = render_scene(str(write(tmp_path, SPHERE + '[[lights]]\nposition = [0, 5, 5]\n', "lit.toml")))
     assert [light.position for light in render_lights(lit.bounds, moved, lit.lights)] == [(0, 5, 5)]
+
+
+def test_a_gltf_file_whose_nodes_share_a_mesh_is_read_as_instances(tmp_path, device):
+    """A mesh object naming a glTF file whose nodes place one mesh many times
+    is the file's placements, as the renderer reads the file itself
+    (clrt.scene.placed.gltf_scene): each glTF mesh one mesh, not flattened,
+    placed by its nodes after the object's own transform; an [[instances]]
+    table places them all again, in its material; the flattened scene is the
+    file read flattened and moved.  A glTF file whose nodes each place their
+    own mesh still reads as one mesh."""
+    import trimesh
+    import clrt
+    from clrt.scene.mesh import Mesh
+    from clrt.scene.placed import gltf_scene, scene_instances
+    from test_instances import _hierarchy_glb
+    glb = _hierarchy_glb(tmp_path / "balls.glb")
+    path = write(tmp_path, """
+        [[objects]]
+        type = "mesh"
+        name = "balls"
+        path = "balls.glb"
+        rotate = [0, 30, 0]
+        translate = [0, 0, 5]
+
+        [[objects]]
+        type = "box"
+        size = [30, 0.1, 30]
+        translate = [0, -3, 0]
+
+        [[instances]]
+        object = "balls"
+        translate = [20, 0, 0]
+        material = { color = [0.2, 0.3, 0.8] }
+    """)
+    scene = load_scene(path)
+    direct, placed = scene_instances(gltf_scene(glb)), scene_instances(scene)
+    n = len(direct)
+    own = transform_matrix((0, 0, 5), (0, 30, 0), (1, 1, 1))
+    assert n > 20 and len(placed) == 2 * n + 1 and len(placed.meshes) == len(direct.meshes) + 1 == 4
+    assert np.allclose(placed.transforms[:n], own @ direct.transforms)
+    assert np.allclose(placed.transforms[n + 1:], transform_matrix((20, 0, 0), (0, 0, 0), (1, 1, 1)) @ own
+                       @ direct.transforms)
+    file_meshes = placed.mesh_of[:n]
+    assert np.array_equal(placed.mesh_of[n + 1:], file_meshes)
+    assert len(np.unique(file_meshes)) == 3 and np.array_equal(np.unique(file_meshes, return_inverse=True)[1],
+                                                             np.unique(direct.mesh_of, return_inverse=True)[1])
+    again = [o for o in scene.objects[-len(scene.objects) // 2:] if o.transforms is not None]
+    assert all(o.material.color == (0.2, 0.3, 0.8) for o in again)
+    flat = clrt.load_mesh(glb)
+    mine = Mesh.concatenate([o.mesh for o in scene.flattened().objects[:n]])   # a flattened object a placement
+    want = flat.vertices.astype(np.float64)[flat.faces] @ own[:3, :3].T + own[:3, 3]
+    assert mine.faces.shape == flat.faces.shape
+    np.testing.assert_allclose(mine.vertices[mine.faces], want, atol=1e-5)
+    renderer = Renderer(path, device=device)
+    assert len(renderer.instances) == 2 * n + 1
+    assert int(renderer.geometry.num_tris) == sum(len(m.faces) for m in renderer.instances.meshes) \
+        < 2 * len(flat.faces)
+    frame = renderer.render(Camera((10, 8, 30), (10, 0, 3), width=48, height=36), hits=True)
+    assert (frame.prim >= 0).mean() > 0.3
+    single = tmp_path / "one.glb"
+    trimesh.Scene([trimesh.creation.icosphere(subdivisions=1), trimesh.creation.box()]).export(single)
+    lone = load_scene(write(tmp_path, '[[objects]]\ntype = "mesh"\npath = "one.glb"\n', "one.toml"))
+    assert len(lone.objects) == 1 and not lone.instanced and lone.objects[0].transforms is None

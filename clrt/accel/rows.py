@@ -38,12 +38,14 @@ def child_refs(rows: np.ndarray) -> np.ndarray:
     return rows.view(np.int32).reshape(len(rows), 16)[:, 3::4]
 
 
-def tree_levels(rows: np.ndarray) -> list[np.ndarray]:
-    """(R_k,) int32 rows of each level of the tree, the root's level first: a
-    row's inner children lie one level deeper (the order of the bottom-up
-    passes over a tree on the device: refit, winding numbers' far fields)."""
+def tree_levels(rows: np.ndarray, root: int = 0) -> list[np.ndarray]:
+    """(R_k,) int32 rows of each level of the tree whose root is row ``root``,
+    the root's level first: a row's inner children lie one level deeper (the
+    order of the bottom-up passes over a tree on the device: refit, winding
+    numbers' far fields).  In a two-level scene's rows, the top level's from
+    row 0 (its leaves are instances), a mesh's from its root."""
     refs = child_refs(rows)
-    levels, current = [], np.zeros(1, np.int32)
+    levels, current = [], np.full(1, root, np.int32)
     while len(current):
         levels.append(current)
         r = refs[current]

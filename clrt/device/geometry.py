@@ -221,7 +221,7 @@ class DeviceGeometry:
             copy.wait()
         self.num_tris = np.uint32(acceleration.num_slots)
         self.num_instances = 0 if acceleration.instances is None else len(acceleration.instances)
-        self._refit = None   # made by the first refit
+        self._refit: dict = {}   # the refit plans (None: the whole tree; k: mesh k's rows), made on first use
 
     def _place(self, corners: np.ndarray, bounds, origin) -> None:
         """The frame (``origin``) and ``reach`` of triangles ``corners`` (device frame)."""
@@ -268,15 +268,44 @@ class DeviceGeometry:
         cl.enqueue_copy(queue, self.buffers["tris"][0], triangle_verts(corners[acceleration.prim_ids]))
         if not acceleration.is_bvh:
             return
-        if self._refit is None:
-            self._refit = _RefitPlan(queue.context, acceleration)
-        self._refit.run(queue, self.buffers["nodes"][0], self.buffers["tris"][0])
+        if None not in self._refit:
+            self._refit[None] = _RefitPlan(queue.context, acceleration)
+        self._refit[None].run(queue, self.buffers["nodes"][0], self.buffers["tris"][0])
         cl.enqueue_copy(queue, acceleration.rows, self.buffers["nodes"][0])
         if self.wide is not None:   # the same wide tree, the refitted boxes and moved corners
             self.wide.refit(acceleration.rows, corners[acceleration.prim_ids].astype(np.float32, copy=False))
             (wide,) = self.buffers["wide"]
             cl.enqueue_copy(queue, wide, self.wide.nodes)
             cl.enqueue_copy(queue, wide, self.wide.packets, dst_offset=self.packets_at)
+
+    def refit_mesh(self, queue: cl.CommandQueue, mesh: int, corners: np.ndarray) -> None:
+        """Move a two-level scene's mesh ``mesh`` (an index among its distinct
+        meshes) to ``corners`` ((F, 3, 3) float32, its faces' order, in its own
+        device frame -- which may differ from the last one) and refit its rows
+        on the device as :meth:`refit` refits a tree: its slots uploaded anew,
+        its rows' volumes fitted anew, the host copy of its rows following.
+        The instances that place it and the top level over their boxes are
+        the caller's to place anew (clrt.device.instances.refit_meshes)."""
+        two = self.acceleration
+        if self.shifts is not None:
+            raise InputError("refit of a scene whose buffers are split into parts is not supported: "
+                             "build it anew")
+        bottom = two.bottoms[mesh]
+        if len(corners) != len(bottom.prim_ids):
+            raise InputError(f"refit needs the same {len(bottom.prim_ids):,} triangles, got {len(corners):,}")
+        placing = two.instances[int(np.flatnonzero(two.instances["mesh"] == mesh)[0])]
+        first, root = int(placing["first"]), int(placing["root"])
+        cl.enqueue_copy(queue, self.buffers["tris"][0], triangle_verts(corners[bottom.prim_ids]),
+                        dst_offset=first * TRIANGLE_VERTS.itemsize)
+        if not two.is_bvh:
+            return
+        if mesh not in self._refit:
+            self._refit[mesh] = _RefitPlan(queue.context, two, root, len(bottom.rows))
+        self._refit[mesh].run(queue, self.buffers["nodes"][0], self.buffers["tris"][0])
+        rows = two.rows[root:root + len(bottom.rows)]
+        cl.enqueue_copy(queue, rows, self.buffers["nodes"][0], src_offset=root * rows.itemsize)
+        for name in bottom.rows.dtype.names:   # its own copy: the volumes, its references its own
+            bottom.rows[name][:, :3] = rows[name][:, :3]
 
     def move_instances(self, queue: cl.CommandQueue, rows: int, bounds, origin) -> bool:
         """Upload a two-level scene's moved instances (clrt.accel.instances.move
@@ -374,39 +403,43 @@ def part_shifts(arrays: dict, limit: int, limit_source: str = "the device's larg
 
 # The refit program (refit.cl): its kernels' parameters (clrt.device.signature).
 REFIT_KERNELS = {
-    "refit_leaves": (buffer("rows"), value("num_rows", np.uint32), buffer("tris"), buffer("box_lo"),
-                     buffer("box_hi")),
+    "refit_leaves": (buffer("rows"), value("first_row", np.uint32), value("num_rows", np.uint32), buffer("tris"),
+                     buffer("box_lo"), buffer("box_hi")),
     "refit_level": (buffer("rows"), buffer("level_rows"), value("count", np.uint32), buffer("box_lo"),
                     buffer("box_hi")),
-    "refit_fit": (buffer("rows"), value("num_rows", np.uint32), buffer("box_lo"), buffer("box_hi")),
+    "refit_fit": (buffer("rows"), value("first_row", np.uint32), value("num_rows", np.uint32), buffer("box_lo"),
+                  buffer("box_hi")),
 }
 
 
 class _RefitPlan:
     """What a refit of one tree needs, made once: the program, the rows of every
-    tree level (the order of refit_level's launches), the boxes' scratch."""
+    tree level (the order of refit_level's launches), the boxes' scratch.  The
+    tree: ``num_rows`` rows from ``root`` among the acceleration's rows (a
+    two-level scene's mesh), all of them by default."""
 
-    def __init__(self, context: cl.Context, acceleration: Acceleration):
+    def __init__(self, context: cl.Context, acceleration: Acceleration, root: int = 0, num_rows: int | None = None):
         from clrt.device.build import build_defines   # the fit's constants, as the device builder's
         from clrt.device.program import build_program
         defines = build_defines(acceleration.accel)
         self.kernels = typed_kernels(build_program(context, "refit.cl", defines), REFIT_KERNELS, defines)
         self.levels = [cl.Buffer(context, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR, hostbuf=level)
-                       for level in tree_levels(acceleration.rows)]
+                       for level in tree_levels(acceleration.rows, root)]
         self.level_sizes = [b.size // 4 for b in self.levels]
-        self.num_rows = len(acceleration.rows)
-        mf = cl.mem_flags
-        self.box_lo = cl.Buffer(context, mf.READ_WRITE, 2 * 16 * self.num_rows)
-        self.box_hi = cl.Buffer(context, mf.READ_WRITE, 2 * 16 * self.num_rows)
+        self.first_row = root
+        self.num_rows = len(acceleration.rows) if num_rows is None else num_rows
+        mf = cl.mem_flags   # (indexed by the global row: a box for each of the acceleration's rows)
+        self.box_lo = cl.Buffer(context, mf.READ_WRITE, 2 * 16 * len(acceleration.rows))
+        self.box_hi = cl.Buffer(context, mf.READ_WRITE, 2 * 16 * len(acceleration.rows))
 
     def run(self, queue: cl.CommandQueue, rows: cl.Buffer, tris: cl.Buffer) -> None:
         """Refit ``rows`` (the uploaded BVH, in place) to ``tris`` (the uploaded,
         moved triangles)."""
-        k, n = self.kernels, self.num_rows
-        k["refit_leaves"].set_args(rows, n, tris, self.box_lo, self.box_hi)
+        k, first, n = self.kernels, self.first_row, self.num_rows
+        k["refit_leaves"].set_args(rows, first, n, tris, self.box_lo, self.box_hi)
         cl.enqueue_nd_range_kernel(queue, k["refit_leaves"], (n,), None)
         for level, size in zip(reversed(self.levels), reversed(self.level_sizes)):
             k["refit_level"].set_args(rows, level, size, self.box_lo, self.box_hi)
             cl.enqueue_nd_range_kernel(queue, k["refit_level"], (size,), None)
-        k["refit_fit"].set_args(rows, n, self.box_lo, self.box_hi)
+        k["refit_fit"].set_args(rows, first, n, self.box_lo, self.box_hi)
         cl.enqueue_nd_range_kernel(queue, k["refit_fit"], (n,), None)

@@ -7,6 +7,7 @@ meshes' builder is the device's, else on the host.
     >>> scene = instanced_scene(instances, accel="box", builder="auto", leaf_size=4, device=None)
     >>> scene.acceleration.instances       # (I,) INSTANCE rows, uploaded with the rest
     >>> moved, changed = move_instances(scene, instances, transforms)
+    >>> changed = refit_meshes(scene, refitted, [k])   # mesh k's vertices moved
 """
 
 from __future__ import annotations
@@ -174,3 +175,35 @@ def move_instances(scene: DeviceScene, instances: Instances, transforms, profile
     two.move_ms = 1e3 * (time.perf_counter() - start)
     two.move_times = times
     return instances.with_transforms(m, bounds), changed
+
+
+def refit_meshes(scene: DeviceScene, instances: Instances, meshes: list[int]) -> bool:
+    """Show ``instances`` on ``scene``, a two-level DeviceScene of instances
+    that differ from them only in the vertices of the distinct meshes
+    ``meshes`` (and perhaps the transforms): each of those meshes moved into
+    its new device frame, its slots uploaded anew and its rows refitted on the
+    device (DeviceGeometry.refit_mesh), then the instance table and the top
+    level placed anew as :func:`move_instances` places them (every instance
+    of a moved mesh has a new world box) -- on the device, where it built the
+    top level, after its copy of the meshes' boxes and origins is rewritten.
+    One line and nothing refitted for an instance placed past MAX_COORDINATE.
+    Returns whether the programs' defines changed."""
+    _check_reach(instances)
+    origins, corners = mesh_frames([instances.meshes[k] for k in meshes])
+    top = scene.acceleration.device_top
+    with scene.out_of_memory():
+        for k, origin, c in zip(meshes, origins, corners):
+            scene.geometry.refit_mesh(scene.queue, k, c)
+            if top is not None:
+                top.set_mesh_frame(k, np.asarray(instances.meshes[k].bounds, np.float64), origin)
+    _, changed = move_instances(scene, instances, instances.transforms)
+    return changed
+
+
+def _check_reach(instances: Instances) -> None:
+    """InputError naming the first instance placed past the device's range."""
+    reach = np.abs(instances.boxes()).max(axis=(1, 2))
+    if not (reach <= MAX_COORDINATE).all():
+        k = int(np.argmax(~(reach <= MAX_COORDINATE)))
+        raise InputError(f"instance {k}'s transform takes its mesh to {float(reach[k]):.3g}, past "
+                         f"+-{MAX_COORDINATE:.0e} (the device computes in float32)")

@@ -5,6 +5,7 @@ world boxes (build_instances.cl, in the device builder's program; docs/instances
     >>> top = DeviceTopLevel(context, table, mesh_bounds, mesh_origins, "box")
     >>> last = top.place(transforms, frame_of)    # the table and rows, in top's buffers
     >>> table, acceleration = top.read()          # host copies (the first build; statistics)
+    >>> top.set_mesh_frame(k, bounds, origin)     # mesh k refitted: its box and origin for the next place
 
 What it is for: moving instances (clrt.device.instances.move_instances)
 rebuilds only the table and the top level, and their host part must be
@@ -50,9 +51,10 @@ class DeviceTopLevel:
     ``context``: ``table`` (I,) INSTANCE whose mesh, root, first, count and
     material the scene keeps (the rest is computed here); the meshes' boxes
     ``mesh_bounds`` (M, 2, 3) and device origins ``mesh_origins`` (M, 3), as
-    clrt.accel.instances.instance_table takes them; ``volume`` the BVH's
-    shape.  Buffers: ``table``, ``rows`` (top_rows(I) BVH_PAIR_NODE) and
-    ``exact_rows`` (their exact boxes, box layout), written by each place()."""
+    clrt.accel.instances.instance_table takes them (set_mesh_frame: a
+    refitted mesh's anew); ``volume`` the BVH's shape.  Buffers:
+    ``table``, ``rows`` (top_rows(I) BVH_PAIR_NODE) and ``exact_rows``
+    (their exact boxes, box layout), written by each place()."""
 
     def __init__(self, context: cl.Context, table: np.ndarray, mesh_bounds: np.ndarray,
                  mesh_origins: np.ndarray, volume: str):
@@ -91,6 +93,16 @@ class DeviceTopLevel:
         self.writes = ()
         self.place_ms = 0.0     # host ms of the last place() (its launches queued, not done)
         self.depth_bound = lbvh_depth_bound(n)
+
+    def set_mesh_frame(self, mesh: int, bounds: np.ndarray, origin: np.ndarray) -> None:
+        """Mesh ``mesh``'s box ``bounds`` ((2, 3), its own frame) and device
+        origin ``origin`` (3,) anew, for the next place(): its vertices were
+        refitted (clrt.device.instances.refit_meshes).  Written before this
+        returns, behind every place() queued."""
+        row = np.zeros((3, 4))
+        row[:2, :3], row[2, :3] = bounds, origin
+        queue = build_queue(self.context, self.context.devices[0])
+        cl.enqueue_copy(queue, self.meshes, row, dst_offset=row.nbytes * int(mesh), is_blocking=True)
 
     def place(self, transforms: np.ndarray, frame_of, queue: cl.CommandQueue | None = None,
               timings: dict | None = None) -> cl.Event:

@@ -103,20 +103,23 @@ inline float3 instance_normal(__global const Instance* in, __global const Triang
 // The corners of the triangle in `slot` where `instance` places it: in the
 // world (the device's frame), as the renderer shades it and samples it as a
 // light -- the instance's map of its mesh's corners, each coordinate rounded
-// once; in a one-level scene the corners as they are.
+// once; in a one-level scene, or for instance -1 (a mesh's own space: the
+// signs by normal, point.cl), the corners as they are.
 inline void placed_corners(const Geometry* g, int instance, int slot, float3* v0, float3* v1, float3* v2)
 {
     __global const TriangleVerts* tri = SPLIT_AT(g, tris, slot);
 #ifdef ACCEL_INSTANCES
-    __global const Instance* in = SPLIT_AT(g, instances, instance);
-    *v0 = world_point(in, tri->v0.xyz);
-    *v1 = world_point(in, tri->v1.xyz);
-    *v2 = world_point(in, tri->v2.xyz);
-#else
+    if (instance >= 0) {
+        __global const Instance* in = SPLIT_AT(g, instances, instance);
+        *v0 = world_point(in, tri->v0.xyz);
+        *v1 = world_point(in, tri->v1.xyz);
+        *v2 = world_point(in, tri->v2.xyz);
+        return;
+    }
+#endif
     *v0 = tri->v0.xyz;
     *v1 = tri->v1.xyz;
     *v2 = tri->v2.xyz;
-#endif
 }
 
 #endif

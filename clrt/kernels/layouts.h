@@ -222,6 +222,18 @@ typedef struct {
     float8 second[10];
 } WideWindingNode;
 
+// The far field of a child in a two-level scene (winding.cl, -DACCEL_INSTANCES): the moments whole, not
+// only their symmetric parts, so that any affine map of them can be evaluated (a placement that scales
+// unevenly or shears mixes the parts).  A mesh's rows hold them in its own space, the top level's in the world.
+typedef struct {
+    float4 centre;       // xyz: area-weighted centroid; w: radius (rounded up; INFINITY: never far)
+    float4 normal;       // xyz: sum of area * unit normal; w: area (in the world: a bound of it)
+    float4 extent;       // xyz: no corner farther from the centre along each axis (rounded up)
+    float first[9];      // [3 i + j] = sum n_i * integral (x - c)_j
+    float second[18];    // [6 i + jk], jk = xx, xy, xz, yy, yz, zz: sum n_i * integral (x - c)_j (x - c)_k
+    uint pad;
+} PlacedWindingNode;
+
 // Per slot: pseudo-normals of its edges and corners (signs by normal, point.cl).
 typedef struct {
     float4 edge[3];      // edge v0v1, v1v2, v2v0

@@ -375,7 +375,7 @@ inline void walk_wide_points(const Geometry* g, float3 p, float margin, PointHit
 #endif
 
 #ifdef ACCEL_BVH
-// One step of the binary walks (the one-level walk below, closest_point_placed):
+// One step of the binary walks (walk_rows_points, closest_point_placed):
 // of a row's two children, with lower bounds d_left and d_right of their
 // distances, those that exist (count >= 0) within `reach`: the nearer becomes
 // *current, the other waits on the stack with its bound.  False when neither
@@ -398,6 +398,36 @@ inline bool enter_nearer_child(int2 left_child, int2 right_child, float d_left, 
         return true;
     }
     return false;
+}
+
+// The binary walk of one tree from row `root` (the one-level walk; in a
+// two-level scene a mesh's own, in its space: instance -1, the triangles as
+// they are stored, for the signs by normal), nearest children first, into
+// *best.
+__attribute__((always_inline))
+inline void walk_rows_points(const Geometry* g, float3 p, int root, int instance, float margin, PointHit* best)
+{
+    const point_real3 pr = TO_POINT_REAL3(p);
+    int2 stack[BVH_STACK_SIZE];        // (row or first slot, leaf count: 0 for a row)
+    float stack_d[BVH_STACK_SIZE];     // the lower bound of its distance
+    int sp = 0;
+    int2 current = (int2)(root, 0);
+    for (;;) {
+        if (current.y > 0) {
+            for (int s = current.x; s < current.x + current.y; ++s)
+                visit_point_triangle(g, pr, instance, s, best);
+        } else {
+            const BvhPairNode n = *SPLIT_AT(g, nodes, current.x);
+            const int2 left_child = PAIR_LEFT(n), right_child = PAIR_RIGHT(n);
+            const float d_left = left_child.y >= 0 ? point_bound(p, n.left_a, n.left_b) : INFINITY;
+            const float d_right = right_child.y >= 0 ? point_bound(p, n.right_a, n.right_b) : INFINITY;
+            if (enter_nearer_child(left_child, right_child, d_left, d_right, (float)best->dist + margin, stack,
+                                   stack_d, &sp, &current))
+                continue;
+        }
+        if (!resume_postponed(stack, stack_d, &sp, (float)best->dist + margin, &current, true))
+            break;
+    }
 }
 #endif
 
@@ -592,26 +622,7 @@ inline PointHit closest_point(const Geometry* g, float3 p, float max_dist, float
 #elif defined(ACCEL_BVH) && defined(BVH_WIDE)
     walk_wide_points(g, p, margin, &best);
 #elif defined(ACCEL_BVH)
-    int2 stack[BVH_STACK_SIZE];        // (row or first slot, leaf count: 0 for a row)
-    float stack_d[BVH_STACK_SIZE];     // the lower bound of its distance
-    int sp = 0;
-    int2 current = (int2)(0, 0);       // the root row
-    for (;;) {
-        if (current.y > 0) {
-            for (int s = current.x; s < current.x + current.y; ++s)
-                visit_point_triangle(g, pr, 0, s, &best);
-        } else {
-            const BvhPairNode n = *SPLIT_AT(g, nodes, current.x);
-            const int2 left_child = PAIR_LEFT(n), right_child = PAIR_RIGHT(n);
-            const float d_left = left_child.y >= 0 ? point_bound(p, n.left_a, n.left_b) : INFINITY;
-            const float d_right = right_child.y >= 0 ? point_bound(p, n.right_a, n.right_b) : INFINITY;
-            if (enter_nearer_child(left_child, right_child, d_left, d_right, (float)best.dist + margin, stack,
-                                   stack_d, &sp, &current))
-                continue;
-        }
-        if (!resume_postponed(stack, stack_d, &sp, (float)best.dist + margin, &current, true))
-            break;
-    }
+    walk_rows_points(g, p, 0, 0, margin, &best);
 #else
     for (uint i = 0; i < g->num_tris; ++i)
         visit_point_triangle(g, pr, 0, (int)i, &best);
@@ -665,6 +676,66 @@ inline bool inside_by_normal(const Geometry* g, __global const PseudoNormals* no
     return dot(TO_POINT_REAL3(p) - best->point, n) < 0;
 }
 
+#ifdef ACCEL_INSTANCES
+// Is instance `in`'s map a similarity -- a rotation, perhaps a mirror, and one
+// scale: A^T A a multiple of the identity to within 2^-16 (the float32
+// rounding of the map, and room)?
+inline bool similar_placement(__global const Instance* in)
+{
+    __global const float4* m = in->to_world;
+    const float3 c0 = (float3)(m[0].x, m[1].x, m[2].x), c1 = (float3)(m[0].y, m[1].y, m[2].y);
+    const float3 c2 = (float3)(m[0].z, m[1].z, m[2].z);
+    const float xx = dot(c0, c0), yy = dot(c1, c1), zz = dot(c2, c2);
+    const float s2 = (xx + yy + zz) / 3.0f;
+    const float off = fmax(fmax(fabs(dot(c0, c1)), fabs(dot(c0, c2))), fabs(dot(c1, c2)));
+    return fmax(fmax(fmax(fabs(xx - s2), fabs(yy - s2)), fabs(zz - s2)), off) <= 0x1p-16f * s2;
+}
+
+// inside_by_normal in a two-level scene: p (world) and its closest point
+// `best`, on instance best->instance.  A face's normal is the placed
+// triangle's as wound (instance_normal: a mirror's turned over).  An edge's or
+// a corner's pseudo-normal stays one under a similarity -- turned by the
+// inverse transpose, negated in a mirror: each face's normal turns so and the
+// angles that weigh them stay.  An uneven scale or a shear changes the angles
+// and the faces' weights, and the mapped pseudo-normal can point wrong beside
+// a sharp edge or corner; there the rule is asked in the mesh's own space: the
+// closest point of the point moved there and its feature's own pseudo-normal
+// (an affine map keeps the side of a closed surface a point lies on; a mirror
+// turns the wound side over).
+inline bool inside_by_placed_normal(const Geometry* g, __global const PseudoNormals* normals, const PointHit* best,
+                                    float3 p)
+{
+    __global const Instance* in = SPLIT_AT(g, instances, best->instance);
+    point_real3 n;
+    if (best->feature == FEATURE_FACE) {
+        n = TO_POINT_REAL3(instance_normal(in, SPLIT_AT(g, tris, best->slot)));
+    } else if (similar_placement(in)) {
+        const float4 m = best->feature >= FEATURE_EDGE ? normals[best->slot].edge[best->feature - FEATURE_EDGE]
+                                                       : normals[best->slot].vertex[best->feature - FEATURE_VERTEX];
+        n = TO_POINT_REAL3(world_normal(in, m.xyz));
+        if (mirrored(in))
+            n = -n;
+    } else {
+        const float3 q = object_point(in, p);
+        PointHit here = no_point_hit(INFINITY);
+#ifdef ACCEL_BVH
+        // The margin from a box that holds the mesh in its space: the instance's world box mapped back.
+        const float3 mid = object_point(in, 0.5f * (in->lo.xyz + in->hi.xyz));
+        const float3 extent = 0.5f * (in->hi.xyz - in->lo.xyz);
+        __global const float4* b = in->to_object;
+        const float3 reach = (float3)(dot(fabs(b[0].xyz), extent), dot(fabs(b[1].xyz), extent),
+                                      dot(fabs(b[2].xyz), extent));
+        walk_rows_points(g, q, in->root, -1, POINT_MARGIN(q, mid - reach, mid + reach), &here);
+#else
+        for (int s = in->first; s < in->first + in->count; ++s)
+            visit_point_triangle(g, TO_POINT_REAL3(q), -1, s, &here);
+#endif
+        return inside_by_normal(g, normals, &here, q) != mirrored(in);
+    }
+    return dot(TO_POINT_REAL3(p) - best->point, n) < 0;
+}
+#endif
+
 // Inside by ray parity: p lies inside where a ray from it crosses the surface
 // an odd number of times (any winding, closed meshes).  A ray through an edge
 // or a corner meets every triangle there (triangle.cl's watertight test), so
@@ -689,6 +760,7 @@ inline bool inside_by_parity(const Geometry* g, float3 p, float3 lo, float3 hi)
         counter.ray_ids = 0;
         counter.prims = 0;
         counter.ts = 0;
+        counter.instances = 0;
         counter.next = 0;
         counter.capacity = 0u;
         counter.ray = 0;

@@ -10,6 +10,9 @@
 //    fit them (build_fit.cl, the argument of clrt/accel/volumes.py), so a
 //    refitted tree finds exactly the hits of brute force, as a built one does.
 // Boxes are kept per row and side: box_lo[2 * row + side], box_hi[...].
+// The rows refitted are first_row .. first_row + num_rows - 1: a whole tree,
+// or one mesh's rows among a two-level scene's (Accel.refit(vertices, mesh=k)),
+// whose references are global as these kernels read them.
 #include "layouts.h"
 #include "build_fit.cl"
 
@@ -18,12 +21,12 @@ inline int2 child_ref(const BvhPairNode* n, int side)
     return side == 0 ? PAIR_LEFT(*n) : PAIR_RIGHT(*n);
 }
 
-__kernel void refit_leaves(__global const BvhPairNode* rows, const uint num_rows,
+__kernel void refit_leaves(__global const BvhPairNode* rows, const uint first_row, const uint num_rows,
                            __global const TriangleVerts* tris, __global float4* box_lo, __global float4* box_hi)
 {
-    const uint r = get_global_id(0);
-    if (r >= num_rows)
+    if (get_global_id(0) >= num_rows)
         return;
+    const uint r = first_row + get_global_id(0);
     const BvhPairNode n = rows[r];
     for (int side = 0; side < 2; ++side) {
         const int2 ref = child_ref(&n, side);
@@ -59,12 +62,12 @@ __kernel void refit_level(__global const BvhPairNode* rows, __global const int* 
     }
 }
 
-__kernel void refit_fit(__global BvhPairNode* rows, const uint num_rows, __global const float4* box_lo,
-                        __global const float4* box_hi)
+__kernel void refit_fit(__global BvhPairNode* rows, const uint first_row, const uint num_rows,
+                        __global const float4* box_lo, __global const float4* box_hi)
 {
-    const uint r = get_global_id(0);
-    if (r >= num_rows)
+    if (get_global_id(0) >= num_rows)
         return;
+    const uint r = first_row + get_global_id(0);
     BvhPairNode n = rows[r];
     for (int side = 0; side < 2; ++side) {
         if (child_ref(&n, side).y < 0)   // no child

@@ -413,7 +413,11 @@ inline void signed_distances(const Geometry* g, const RayInput* in, const QueryL
             else if (rule == SIGN_PARITY)
                 inside = inside_by_parity(g, p, in->scene_lo, in->scene_hi);
             else
+#ifdef ACCEL_INSTANCES
+                inside = inside_by_placed_normal(g, normals, &best, p);
+#else
                 inside = inside_by_normal(g, normals, &best, p);
+#endif
             d = inside ? -(float)best.dist : (float)best.dist;
         }
         ((__global float*)(results + launch->field_at[0]))[i] = d;
@@ -452,11 +456,13 @@ __kernel void query_signed_distance_normal(POINT_INPUT_PARAMS, __global uchar* r
     signed_distances(&g, &in, &launch, results, order, first, SIGN_NORMAL, 0, normals);
 }
 
-// The WindingNodes of the rows of one tree level (`level_rows`, `count` of
+// The far fields of the rows of one tree level (`level_rows`, `count` of
 // them; winding.cl): the host launches the levels from the deepest up, so an
-// inner child's row is done before the row that holds it.
-__kernel void winding_nodes(__global WindingNode* winding, __global const int* level_rows, const uint count,
-                            GEOMETRY_PARAMS)
+// inner child's row is done before the row that holds it -- in a two-level
+// scene the meshes' rows first, then the top level's (`top_level` 1), whose
+// leaves are instances of meshes done.
+__kernel void winding_nodes(__global RowWindingNode* winding, __global const int* level_rows, const uint count,
+                            const uint top_level, GEOMETRY_PARAMS)
 {
     const uint i = get_global_id(0);
     if (i >= count)
@@ -464,18 +470,8 @@ __kernel void winding_nodes(__global WindingNode* winding, __global const int* l
     const Geometry g = make_geometry(GEOMETRY_ARGS);
     const int row = level_rows[i];
     const BvhPairNode n = *SPLIT_AT(&g, nodes, row);
-    for (int side = 0; side < 2; ++side) {
-        const int2 child = side == 0 ? PAIR_LEFT(n) : PAIR_RIGHT(n);
-        __global WindingNode* out = winding + 2 * row + side;
-        if (child.y > 0) {
-            *out = leaf_winding_node(&g, child.x, child.y);
-        } else if (child.y == 0) {
-            *out = joined_winding_node(winding + 2 * child.x, winding + 2 * child.x + 1);
-        } else {
-            WindingNode none = {(float4)(0.0f), (float4)(0.0f), {0}, {0}};
-            *out = none;
-        }
-    }
+    winding[2 * row] = child_winding_node(&g, winding, PAIR_LEFT(n), top_level != 0u);
+    winding[2 * row + 1] = child_winding_node(&g, winding, PAIR_RIGHT(n), top_level != 0u);
 }
 
 // The directions of the camera's pixel-centre rays (packed float3) for pixels

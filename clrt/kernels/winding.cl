@@ -44,6 +44,8 @@
 // meshes (tests/test_inside.py: this program on the CPU) the largest error
 // was 5.4e-5 (beta 6: 2.0e-5); float32 leaves, tried beside it, missed
 // WINDING_NUMBER_ERROR by half (1.5e-4 at a point just off a large face).
+// A two-level scene's walk (winding_placed.cl) asks it of the point alone,
+// region or not, so it keeps beta 6 there.
 //
 // CPU devices that walk the wide BVH (-DBVH_WIDE, accel_wide.cl) walk it here
 // too: one float8 series for the eight children of a wide node
@@ -70,7 +72,7 @@
 #ifdef BVH_WIDE
 #define WINDING_BETA 5.0f
 #define WINDING_SIGN_BETA 2.5f
-#elif defined(POINT_CELL_REGIONS)
+#elif defined(POINT_CELL_REGIONS) && !defined(ACCEL_INSTANCES)
 #define WINDING_BETA 4.5f
 #define WINDING_SIGN_BETA 3.0f
 #else
@@ -86,10 +88,19 @@
 
 // The far fields the walk reads: a WindingNode per child of a binary row, or
 // on CPU devices that walk the wide BVH a WideWindingNode per wide node.
-#ifdef BVH_WIDE
+// A two-level scene's rows hold PlacedWindingNodes (winding_placed.cl).
+#if defined(ACCEL_INSTANCES)
+typedef PlacedWindingNode WindingFarField;
+#elif defined(BVH_WIDE)
 typedef WideWindingNode WindingFarField;
 #else
 typedef WindingNode WindingFarField;
+#endif
+// What trace.cl's winding_nodes makes, a node a child of a binary row.
+#ifdef ACCEL_INSTANCES
+typedef PlacedWindingNode RowWindingNode;
+#else
+typedef WindingNode RowWindingNode;
 #endif
 
 // The signed solid angle of triangle (a, b, c) seen from p: positive where p
@@ -213,11 +224,28 @@ inline point_real leaf_packets_solid_angle(const Geometry* g, point_real3 p, int
 }
 #endif
 
+// Index of the symmetric pair (i, j) among first[6], and the index triples
+// of second[10], as layouts.h orders them.
+__constant uchar SYM2_AT[3][3] = {{0, 1, 2}, {1, 3, 4}, {2, 4, 5}};
+__constant uchar SYM3_OF[10][3] = {{0, 0, 0}, {0, 0, 1}, {0, 0, 2}, {0, 1, 1}, {0, 1, 2},
+                                   {0, 2, 2}, {1, 1, 1}, {1, 1, 2}, {1, 2, 2}, {2, 2, 2}};
+
+// The float32 radius of a child from its double one: rounded up.
+inline float radius_up(point_real r)
+{
+    const float f = (float)r;
+    return (point_real)f >= r ? f : nextafter(f, INFINITY);
+}
+
+#include "winding_placed.cl"
+
 // The sum of the solid angles of the mesh seen from p (device frame), with
 // each child farther than beta times its radius taken from its series;
 // `winding`: the far fields (unused without a BVH).  With `bounded`, *bound
 // is set to a proven bound of the sum's error (remainder_bound).
-#if defined(ACCEL_BVH) && defined(BVH_WIDE)
+#if defined(ACCEL_INSTANCES)
+// (A two-level scene's walk: winding_placed.cl.)
+#elif defined(ACCEL_BVH) && defined(BVH_WIDE)
 inline point_real winding_sum(const Geometry* g, __global const WindingFarField* winding, float3 p,
                               const PointRegion* region, float beta, const bool bounded, float* bound)
 {
@@ -349,19 +377,6 @@ inline bool winding_inside(const Geometry* g, __global const WindingFarField* wi
 // Sums in double precision where the device has it; the centre is rounded to
 // float32 first and every moment taken about the rounded one.
 
-// Index of the symmetric pair (i, j) among first[6], and the index triples
-// of second[10], as layouts.h orders them.
-__constant uchar SYM2_AT[3][3] = {{0, 1, 2}, {1, 3, 4}, {2, 4, 5}};
-__constant uchar SYM3_OF[10][3] = {{0, 0, 0}, {0, 0, 1}, {0, 0, 2}, {0, 1, 1}, {0, 1, 2},
-                                   {0, 2, 2}, {1, 1, 1}, {1, 1, 2}, {1, 2, 2}, {2, 2, 2}};
-
-// The float32 radius of a child from its double one: rounded up.
-inline float radius_up(point_real r)
-{
-    const float f = (float)r;
-    return (point_real)f >= r ? f : nextafter(f, INFINITY);
-}
-
 // A WindingNode of its centre and radius, its dipole and area, and the
 // symmetric parts of its first (6) and second (10) moments, rounded to float32.
 inline WindingNode winding_node_of(float3 centre, float radius, point_real3 dipole, point_real area,
@@ -467,6 +482,29 @@ inline WindingNode joined_winding_node(__global const WindingNode* a, __global c
         }
     }
     return winding_node_of(centre, radius_up(radius), dipole, area, m, sec);
+}
+
+// The RowWindingNode of a row's child (trace.cl's winding_nodes): a leaf's
+// from its triangles -- in a two-level scene's top level, its instance's mesh
+// mapped into the world --, an inner child's from its own row's two (made by
+// an earlier launch), a missing child's zeros.
+inline RowWindingNode child_winding_node(const Geometry* g, __global const RowWindingNode* winding, int2 child,
+                                         const bool top_level)
+{
+#ifdef ACCEL_INSTANCES
+    if (child.y > 0)
+        return top_level ? instance_winding_node(g, winding, child.x) : leaf_placed_winding_node(g, child.x, child.y);
+    if (child.y == 0)
+        return joined_placed_winding_node(winding + 2 * child.x, winding + 2 * child.x + 1, true);
+    return empty_placed_winding_node();
+#else
+    if (child.y > 0)
+        return leaf_winding_node(g, child.x, child.y);
+    if (child.y == 0)
+        return joined_winding_node(winding + 2 * child.x, winding + 2 * child.x + 1);
+    WindingNode none = {(float4)(0.0f), (float4)(0.0f), {0}, {0}};
+    return none;
+#endif
 }
 
 #endif

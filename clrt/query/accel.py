@@ -51,15 +51,11 @@ from clrt.errors import InputError
 from clrt.config import NO_RESULT, RAY_CHECKS
 from clrt.layouts import QUERY_LAUNCH
 from clrt.query.kernels import QUERY_GROUP, QUERY_KERNELS, point_defines
-from clrt.query.inside import GridPoints
 from clrt.query.points import PointQueries
-from clrt.query.instances import InstanceMoves, query_scene, source_of
-from clrt.query.rays import CameraRays, PinholeRays, PointBatch, RayBatch, cull_code, is_device_array
+from clrt.query.instances import SceneMoves, query_scene, source_of
+from clrt.query.rays import CameraRays, PinholeRays, RayBatch, cull_code, is_device_array
 from clrt.query.results import (ALL_HITS_FIELDS, CAMERA_FIELDS, CLOSEST_FIELDS, RESULT_BYTES, RESULT_DTYPES,
                                 AllHits, CameraImages, Hits, asked_fields, with_fields)
-from clrt.accel import as_triangles
-from clrt.scene.arrays import device_origin, triangle_corners
-from clrt.scene.mesh import Mesh
 from clrt.scene.sources import as_mesh
 
 DEFAULT_CHUNK_RAYS = 1 << 20        # rays per launch: ~50 MB of device buffers
@@ -141,7 +137,7 @@ def _rebuilt_accel(source, options) -> "Accel":
     return Accel(source, **options)
 
 
-class Accel(PointQueries, InstanceMoves):
+class Accel(PointQueries, SceneMoves):
     """A mesh and its acceleration structure, uploaded once to one device.
 
     ``mesh``: a Mesh, a mesh file, a trimesh object or ``(vertices, faces)``; or
@@ -185,33 +181,6 @@ class Accel(PointQueries, InstanceMoves):
                              chunk_rays=chunk_rays, max_buffer_bytes=max_buffer_bytes,
                              max_buffer_label=max_buffer_label)
         self._setup(scene, chunk_rays)
-
-    @one_at_a_time
-    def refit(self, vertices, *, rebuild: bool = False) -> None:
-        """Move the mesh's vertices to ``vertices`` ((V, 3), the same count; the faces
-        stay) and refit the BVH to them on the device: the tree is kept and
-        every volume fitted anew, so queries stay exact (a refitted tree finds
-        the hits of brute force) and only get slower as the motion tangles the
-        tree -- ``rebuild=True`` builds a new one instead."""
-        if self.instances is not None:
-            raise InputError("refit of an Accel of instances is not supported yet: move them (move_instances) "
-                             "or make a new Accel")
-        faces = self.mesh.faces
-        vertices = np.asarray(vertices)
-        if vertices.shape != self.mesh.vertices.shape:
-            raise InputError(f"refit needs vertices of shape {self.mesh.vertices.shape}, got {vertices.shape}")
-        if self._options is None:
-            raise InputError("these queries share a Renderer's scene: use Renderer.refit")
-        mesh = Mesh.from_arrays(vertices, faces, self.mesh.name)
-        if rebuild or self.geometry.shifts is not None:
-            fresh = Accel(mesh, **self._options).__dict__
-            fresh.pop("_lock")   # the threads waiting on this one's
-            self.__dict__.update(fresh)
-            return
-        # The frame chosen for the moved mesh, as a new Accel would choose it.
-        origin = device_origin(mesh.bounds)
-        self.geometry.refit(self.queue, as_triangles(triangle_corners(mesh, origin)), mesh.bounds, origin)
-        self.mesh = mesh
 
     @classmethod
     @checks.keyword_options("chunk_rays")
@@ -350,16 +319,11 @@ class Accel(PointQueries, InstanceMoves):
 
     # ----------------------------------------------------------------------- rays in
 
-    def _begin(self, source, points_on_instances: bool = False) -> None:
+    def _begin(self, source) -> None:
         """Before the first chunk of a batch: a camera's eye within the range of
         the triangle test (clrt.device.reach), no bad ray reported yet, and the
-        range the kernels hold a batch's own origins to (rays.cl's BAD_REACH).
-        ``points_on_instances``: the query answers points on instances too
-        (closest points; the inside queries do not yet)."""
+        range the kernels hold a batch's own origins to (rays.cl's BAD_REACH)."""
         self._check_reach(source)
-        if self.instances is not None and isinstance(source, (PointBatch, GridPoints)) and not points_on_instances:
-            raise InputError("signed distances, winding numbers and inside tests on an Accel of instances are not "
-                             "supported yet (closest_points and distance are)")
         reach, origin = self.geometry.reach, self.geometry.origin
         # A camera's eye was checked here, as the renderer checks it, and goes
         # to the device in its frame already, moved in float64 as the

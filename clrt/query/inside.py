@@ -25,12 +25,13 @@ import numpy as np
 import pyopencl as cl
 
 from clrt import checks
+from clrt.accel.bvh import Acceleration
 from clrt.accel.rows import tree_levels
 from clrt.device.context import format_bytes
 from clrt.device.program import launch_size
 from clrt.errors import DeviceMemoryError, InputError
 from clrt.accel.wide import WideBvh
-from clrt.layouts import PSEUDO_NORMALS, WIDE_WINDING_NODE, WINDING_NODE
+from clrt.layouts import PLACED_WINDING_NODE, PSEUDO_NORMALS, WIDE_WINDING_NODE, WINDING_NODE
 
 #: The sign rules of signed distances: the query kernel of each (trace.cl).
 SIGN_KERNELS = {"winding": "query_signed_distance_winding", "parity": "query_signed_distance_parity",
@@ -49,22 +50,26 @@ def sign_kernel(sign) -> str:
     return SIGN_KERNELS[checks.choice("sign", sign, SIGN_KERNELS)]
 
 
-def winding_nodes(queue: cl.CommandQueue, kernel: cl.Kernel, rows: np.ndarray, geometry_args: tuple,
+def winding_nodes(queue: cl.CommandQueue, kernel: cl.Kernel, acceleration: Acceleration, geometry_args: tuple,
                   max_alloc: int, wide: WideBvh | None = None) -> cl.Buffer:
     """The far fields that the winding numbers' walk reads (winding.cl's
     WindingFarField): the WindingNodes (``2 * len(rows)``) of the uploaded tree
-    whose rows the host holds as ``rows``, made on the device by ``kernel``
+    whose rows the host holds (``acceleration.rows``) -- a two-level scene's
+    PlacedWindingNodes (winding_placed.cl) --, made on the device by ``kernel``
     (trace.cl's winding_nodes) with the geometry's arguments ``geometry_args``
     (its buffers, then its SceneInfo) -- or, where the device walks the wide
     BVH ``wide``, those gathered lane by lane into its WideWindingNodes.
     DeviceMemoryError when they exceed one allocation (``max_alloc`` bytes)."""
-    nbytes = 2 * len(rows) * WINDING_NODE.itemsize
+    rows = acceleration.rows
+    node = PLACED_WINDING_NODE if acceleration.instances is not None else WINDING_NODE
+    nbytes = 2 * len(rows) * node.itemsize
     if wide is not None:
         nbytes = max(nbytes, len(wide.nodes) * WIDE_WINDING_NODE.itemsize)
     if nbytes > max_alloc:
         raise DeviceMemoryError(f"the winding numbers' far fields need {format_bytes(nbytes)} in one buffer, "
                                 f"more than the device's largest allocation ({format_bytes(max_alloc)})")
-    nodes = binary_winding_nodes(queue, kernel, rows, geometry_args)
+    nodes = binary_winding_nodes(queue, kernel, 2 * len(rows) * node.itemsize, winding_levels(acceleration),
+                                 geometry_args)
     if wide is None:
         return nodes
     binary = np.empty(2 * len(rows), WINDING_NODE)
@@ -88,17 +93,34 @@ def wide_winding_nodes(binary: np.ndarray, sources: np.ndarray) -> np.ndarray:
     return out
 
 
-def binary_winding_nodes(queue: cl.CommandQueue, kernel: cl.Kernel, rows: np.ndarray,
+def winding_levels(acceleration: Acceleration) -> list[tuple[np.ndarray, int]]:
+    """The launches of winding_nodes, in order: the rows of each tree level,
+    the deepest first, and whether they are a two-level scene's top level --
+    there the meshes' levels come first (those of one depth below their roots
+    in one launch), then the top level's, whose leaves are instances."""
+    rows = acceleration.rows
+    if acceleration.instances is None:
+        return [(level, 0) for level in reversed(tree_levels(rows))]
+    by_depth: list[list[np.ndarray]] = []
+    for root in np.unique(acceleration.instances["root"]):
+        for depth, level in enumerate(tree_levels(rows, int(root))):
+            if depth == len(by_depth):
+                by_depth.append([])
+            by_depth[depth].append(level)
+    meshes = [np.concatenate(levels) for levels in reversed(by_depth)]
+    return [(level, 0) for level in meshes] + [(level, 1) for level in reversed(tree_levels(rows))]
+
+
+def binary_winding_nodes(queue: cl.CommandQueue, kernel: cl.Kernel, nbytes: int, levels: list,
                          geometry_args: tuple) -> cl.Buffer:
-    """The WindingNodes (``2 * len(rows)``) of the uploaded tree, a level at a time."""
-    nbytes = 2 * len(rows) * WINDING_NODE.itemsize
+    """The far fields of the uploaded tree's rows (``nbytes`` of them), one
+    launch a level of ``levels`` (winding_levels)."""
     mf = cl.mem_flags
     nodes = cl.Buffer(queue.context, mf.READ_WRITE, nbytes)
-    levels = [cl.Buffer(queue.context, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=level) for level in tree_levels(rows)]
-    for level in reversed(levels):   # the deepest first: an inner child's row is done before its parent's
-        count = level.size // 4
-        kernel.set_args(nodes, level, np.uint32(count), *geometry_args)
-        cl.enqueue_nd_range_kernel(queue, kernel, *launch_size(count, WINDING_NODES_GROUP))
+    buffers = [cl.Buffer(queue.context, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=level) for level, _ in levels]
+    for (level, top), rows in zip(levels, buffers):
+        kernel.set_args(nodes, rows, np.uint32(len(level)), np.uint32(top), *geometry_args)
+        cl.enqueue_nd_range_kernel(queue, kernel, *launch_size(len(level), WINDING_NODES_GROUP))
     queue.finish()   # before the level buffers go
     return nodes
 

@@ -11,7 +11,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from clrt.device.instances import instanced_scene, move_instances
+from clrt import checks
+from clrt.accel import as_triangles
+from clrt.device.instances import instanced_scene, move_instances, refit_meshes
 from clrt.device.scene import DeviceScene
 from clrt.device.sharing import one_at_a_time
 from clrt.errors import InputError
@@ -51,9 +53,61 @@ def source_of(mesh: Mesh | None, instances: Instances | None):
     return Mesh(np.asarray(mesh.vertices), np.asarray(mesh.faces), mesh.name)
 
 
-class InstanceMoves:
-    """What an Accel of instances does besides queries (mixed into
-    clrt.query.accel.Accel)."""
+class SceneMoves:
+    """What an Accel does besides queries: its scene moved, a mesh's vertices
+    refitted or the instances placed anew (mixed into clrt.query.accel.Accel)."""
+
+    @one_at_a_time
+    def refit(self, vertices, *, mesh: int | None = None, rebuild: bool = False) -> None:
+        """Move a mesh's vertices to ``vertices`` ((V, 3), the same count; the faces
+        stay) and refit its BVH to them on the device: the tree is kept and
+        every volume fitted anew, so queries stay exact (a refitted tree finds
+        the hits of brute force) and only get slower as the motion tangles the
+        tree -- ``rebuild=True`` builds a new one instead.
+
+        In an Accel of instances, ``mesh`` names the distinct mesh that moves
+        (an index into ``instances.meshes``; it may be left out where there is
+        one): its slots and its rows are refitted, every instance of it moves
+        with it, and the instance table and the top level are built again over
+        the instances' new boxes (as :meth:`move_instances` builds them) -- the
+        queries then answer as an Accel made of the moved instances."""
+        k = self._refit_mesh_index(mesh)
+        own = self.mesh if self.instances is None else self.instances.meshes[k]
+        vertices = np.asarray(vertices)
+        if vertices.shape != own.vertices.shape:
+            raise InputError(f"refit needs vertices of shape {own.vertices.shape}, got {vertices.shape}")
+        if self._options is None:
+            raise InputError("these queries share a Renderer's scene: use Renderer.refit")
+        moved = Mesh.from_arrays(vertices, own.faces, own.name)
+        if self.instances is not None:
+            meshes = list(self.instances.meshes)
+            meshes[k] = moved
+            moved = Instances(meshes, self.instances.mesh_of, self.instances.transforms)
+        if rebuild or self.geometry.shifts is not None:
+            fresh = type(self)(moved, **self._options).__dict__
+            fresh.pop("_lock")   # the threads waiting on this one's
+            self.__dict__.update(fresh)
+            return
+        if self.instances is None:
+            # The frame chosen for the moved mesh, as a new Accel would choose it.
+            origin = device_origin(moved.bounds)
+            self.geometry.refit(self.queue, as_triangles(triangle_corners(moved, origin)), moved.bounds, origin)
+            self.mesh = moved
+            return
+        changed = refit_meshes(self.device_scene, moved, [k])
+        self.instances = moved
+        if changed:   # a deeper or shallower top level: a program of another stack size
+            self.kernels = self.device_scene.kernels("trace.cl", QUERY_KERNELS, point_defines(self.queue.device))
+
+    def _refit_mesh_index(self, mesh) -> int:
+        """The distinct mesh that ``refit``'s ``mesh`` names (0 for one mesh)."""
+        count = 1 if self.instances is None else len(self.instances.meshes)
+        if mesh is None:
+            if count > 1:
+                raise InputError(f"refit of an Accel of {count} meshes needs mesh=: the index of the one whose "
+                                 f"vertices move (0..{count - 1}, as instances.meshes lists them)")
+            return 0
+        return checks.integer("mesh", mesh, 0, count - 1)
 
     @one_at_a_time
     def move_instances(self, transforms) -> None:

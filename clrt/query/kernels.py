@@ -69,7 +69,8 @@ QUERY_KERNELS = {
     "query_signed_distance_winding": (*POINT_INPUT, buffer("results"), buffer("winding"), *GEOMETRY),
     "query_signed_distance_parity": (*POINT_INPUT, buffer("results"), *GEOMETRY),
     "query_signed_distance_normal": (*POINT_INPUT, buffer("results"), buffer("normals"), *GEOMETRY),
-    "winding_nodes": (buffer("winding"), buffer("level_rows"), value("count", np.uint32), *GEOMETRY),
+    "winding_nodes": (buffer("winding"), buffer("level_rows"), value("count", np.uint32),
+                      value("top_level", np.uint32), *GEOMETRY),
     # sdf_grid's samples, a chunk at a time (point_grid.cl)
     "grid_points": (buffer("points"), buffer("axes"), value("first", np.uint64), value("count", np.uint32),
                     value("size_y", np.uint32), value("size_z", np.uint32)),

@@ -87,7 +87,7 @@ class PointQueries:
         n = len(batch)
         out = self._point_outputs(n, fields, batch.on_device)
         slots = list(POINT_FIELDS)
-        self._begin(batch, points_on_instances=True)
+        self._begin(batch)
         for start, stop in self._chunks(n):
             m = stop - start
             rays, launch = self._ray_args(batch, start, stop, 0)
@@ -139,7 +139,7 @@ class PointQueries:
         if cached is not None and all(a is b for a, b in zip(cached[0], key)):
             return cached[1]
         if self.acceleration.is_bvh:
-            nodes = winding_nodes(self.queue, self.kernels["winding_nodes"], self.acceleration.rows,
+            nodes = winding_nodes(self.queue, self.kernels["winding_nodes"], self.acceleration,
                                   (*self.geometry.buffer_args, self._scene_value), self.max_alloc, self.geometry.wide)
         else:
             nodes = self._buffer("no_winding_nodes", 1)
@@ -148,13 +148,18 @@ class PointQueries:
 
     def _pseudo_normals(self):
         """The PseudoNormals of every slot (clrt/query/inside.py), made on first
-        use and again for a moved mesh (a refit makes a new ``mesh``)."""
-        key = (self.mesh, self.acceleration)
+        use and again for a moved mesh (a refit makes a new ``mesh``, or new
+        ``instances``); in a two-level scene each distinct mesh's, in its own
+        space (point.cl turns them into the world)."""
+        key = (self.mesh, self.instances, self.acceleration)
         cached = self.__dict__.get("_normals_cache")
         if cached is not None and all(a is b for a, b in zip(cached[0], key)):
             return cached[1]
-        import pyopencl as cl
-        by_slot = pseudo_normals(self.mesh.vertices, self.mesh.faces)[self.acceleration.prim_ids]
+        if self.instances is None:
+            by_slot = pseudo_normals(self.mesh.vertices, self.mesh.faces)[self.acceleration.prim_ids]
+        else:   # each mesh's faces in order, mesh after mesh: the rows TwoLevel.order counts
+            by_slot = np.concatenate([pseudo_normals(m.vertices, m.faces) for m in self.instances.meshes])[
+                self.acceleration.slot_order()]
         normals = cl.Buffer(self.context, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR, hostbuf=by_slot)
         self._normals_cache = (key, normals)
         return normals
@@ -269,7 +274,8 @@ class PointQueries:
         made on the device a chunk at a time (``chunk_rays`` points), so memory
         beyond the result stays bounded."""
         kernel = sign_kernel(sign)
-        grid = GridPoints(*grid_axes(resolution, bounds, self.mesh.bounds))
+        scene = self.mesh if self.instances is None else self.instances
+        grid = GridPoints(*grid_axes(resolution, bounds, scene.bounds))
         volume = np.empty(grid.shape, np.float32)
         self._inside(grid, kernel, {"signed_distance": 0}, {"signed_distance": volume.reshape(-1)})
         return volume

@@ -34,7 +34,7 @@ from clrt.config import (DEFAULT_ACCEL, DEFAULT_BUILDER, DEFAULT_LEAF_SIZE, DEFA
 from clrt.device.args import camera_value
 from clrt.device.context import format_bytes as _size
 from clrt.device.geometry import replace_buffer
-from clrt.device.instances import instanced_scene, move_instances
+from clrt.device.instances import instanced_scene, move_instances, refit_meshes
 from clrt.device.pinned import PinnedPool
 from clrt.device.program import launch_size
 from clrt.device.scene import DeviceScene, stage
@@ -45,7 +45,7 @@ from clrt.renderer.kernels import FRAME_ARRAYS, FRAME_HEADER, RENDER_KERNELS, fr
 from clrt.renderer.path import PathTracer, tone_map
 from clrt.renderer.tiles import TileLimits, run_tiles
 from clrt.renderer.visible import nothing_visible
-from clrt.scene.arrays import flatten_scene, light_records, uses_pbr_textures
+from clrt.scene.arrays import flatten_scene, light_records, moved_meshes, uses_pbr_textures
 from clrt.scene.placed import moved_scene
 from clrt.scene.scene import Camera, Scene, far_triangle
 from clrt.scene.render_setup import render_frame
@@ -378,28 +378,36 @@ class Renderer:
         ``scene`` as given, so a ``scene_from_mesh(moved)`` without a material
         shows the default material: pass the material again to keep it.
         ``rebuild=True`` builds a new BVH instead (a tree refitted through large
-        motions traces slower)."""
+        motions traces slower).  A scene of placed meshes: the same objects
+        placing the same meshes (objects sharing a Mesh object still share
+        one), their vertices moved -- their placements too, if given so --:
+        each moved mesh's BVH is refitted, and the instance table and the top
+        level are built again over the new boxes (docs/instances.md)."""
         scene = as_scene(scene)
-        if self.instances is not None or scene.instanced:
-            raise InputError("refit of a scene of placed meshes is not supported: move its instances "
-                             "(Renderer.move_instances) or make a new Renderer")
         arrays = flatten_scene(scene, pbr_textures=self._pbr_textures)
         # The same triangles of the same objects; their vertex normals may be
         # split differently (the crease angle looks at the moved faces).
         same = (arrays.corners.shape == self.arrays.corners.shape
                 and np.array_equal(arrays.tri_info["material"], self.arrays.tri_info["material"])
                 and len(arrays.materials) == len(self.arrays.materials))
-        if not same:
+        moved = moved_meshes(self.arrays, arrays)   # a scene of placed meshes: those whose vertices moved
+        if not same or (moved is None) != (self.instances is None):
             raise InputError("refit needs the scene's objects with the same triangles (only their vertices "
-                             "may move): make a new Renderer")
+                             "may move) and, for placed meshes, the same placements of the same meshes: "
+                             "make a new Renderer")
         if rebuild or self.geometry.shifts is not None:
             fresh = Renderer(scene, **self._options, limits=self.limits)
             followers, lock = self._followers, self._lock   # the queries and threads on this one
             self.__dict__.update(fresh.__dict__)
             self._followers, self._lock = followers, lock
         else:
-            self.geometry.refit(self.queue, arrays.corners, arrays.bounds, arrays.origin)
-            self.geometry.replace(self.queue, "tri_info", arrays.tri_info[self.acceleration.prim_ids])
+            if moved is None:
+                self.geometry.refit(self.queue, arrays.corners, arrays.bounds, arrays.origin)
+            elif refit_meshes(self.device_scene, arrays.instances, moved):   # programs of another stack size
+                detail = {"SURFACE_DETAIL": None} if arrays.detail is not None else None
+                self.kernels, self._path = self.device_scene.kernels("render.cl", RENDER_KERNELS, detail), None
+            self.instances = arrays.instances
+            self.geometry.replace(self.queue, "tri_info", arrays.tri_info[self.acceleration.slot_order()])
             self.geometry.replace(self.queue, "vertex_normals", arrays.vertex_normals)
             self.scene, self.arrays = _own_copy(scene), arrays
             self.set_lights(scene.lights)   # uploads the tables, the new materials with the lights

@@ -260,6 +260,25 @@ def placed_arrays(scene: Scene, pbr_textures: bool = False) -> SceneArrays:
     return arrays
 
 
+def moved_meshes(old: SceneArrays, new: SceneArrays) -> "list[int] | None":
+    """The distinct meshes of a scene of placed meshes ``new`` whose corners
+    differ from ``old``'s, where ``new`` is ``old``'s scene with vertices moved
+    (and perhaps placements): the same distinct meshes, each with as many
+    triangles, placed by the same instances with the same materials -- what
+    a refit uploads anew.  None where either scene is not one of placed
+    meshes or ``new`` is not such a scene."""
+    a, b = old.instances, new.instances
+    if a is None or b is None or len(a.meshes) != len(b.meshes) or not np.array_equal(a.mesh_of, b.mesh_of) \
+            or not np.array_equal(old.material_base, new.material_base):
+        return None
+    counts = [len(m.faces) for m in b.meshes]
+    if counts != [len(m.faces) for m in a.meshes]:
+        return None
+    first = np.cumsum([0] + counts)
+    return [k for k in range(len(counts))
+            if not np.array_equal(old.corners[first[k]:first[k + 1]], new.corners[first[k]:first[k + 1]])]
+
+
 def mesh_frames(meshes) -> "tuple[np.ndarray, list[np.ndarray]]":
     """Each mesh's device frame (:func:`device_origin` of its own box: a
     two-level scene's meshes each have one) as (M, 3) float64 origins, and

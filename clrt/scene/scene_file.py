@@ -368,8 +368,14 @@ class _Loader:
             return self.material(value, path)
         raise self.doc.error(path, f"expected a material name or an inline table, got {_show(value)}")
 
-    def mesh_file(self, name: str, path: str) -> "tuple[Mesh, list]":
-        """The mesh file's mesh and its own materials (clrt.scene.load.load_asset)."""
+    def mesh_file(self, name: str, path: str) -> "list[tuple[Mesh, list, np.ndarray | None]]":
+        """The mesh file's meshes: ``(mesh, its file materials, placements)``.
+        One mesh, placements None (clrt.scene.load.load_asset) -- but for a
+        glTF file whose nodes place a mesh more than once, as the renderer
+        reads one (clrt.scene.placed.gltf_scene): each glTF mesh one Mesh
+        object in its own space, placed by its nodes' world matrices ((K, 4,
+        4), a run of consecutive nodes placing one mesh each entry, nodes in
+        document order, depth first: the instances it makes)."""
         # Relative to the scene file, so a scene renders the same from any directory.
         if not name.strip():
             raise self.doc.error(path, f"is empty (give the mesh file's path), got {_show(name)}", MeshLoadError)
@@ -378,10 +384,17 @@ class _Loader:
             raise self.doc.error(path, f"is a folder, not a mesh file: {full}", MeshLoadError)
         if not os.path.isfile(full):
             raise self.doc.error(path, f"mesh file not found: {full}", MeshLoadError)
+        from clrt.scene.formats.gltf import gltf_shares_meshes
+        from clrt.scene.instances import gltf_placements, is_gltf_file
         try:
-            return load_asset(full)
+            if not (is_gltf_file(full) and gltf_shares_meshes(full)):
+                return [(*load_asset(full), None)]
+            meshes, materials, mesh_of, transforms = gltf_placements(full)
         except MeshLoadError as exc:
             raise self.doc.error(path, exc, MeshLoadError) from None
+        starts = np.flatnonzero(np.r_[True, mesh_of[1:] != mesh_of[:-1]])
+        ends = np.r_[starts[1:], len(mesh_of)]
+        return [(meshes[mesh_of[a]], materials[mesh_of[a]], transforms[a:b]) for a, b in zip(starts, ends)]
 
     def objects(self, raw: list) -> "list[dict]":
         """Each [[objects]] table as a record: its key path, name, whether it
@@ -405,21 +418,24 @@ class _Loader:
                                          f"(its own keys: {', '.join(OBJECT_TYPES[kind])})")
             o = self.doc.table(value, path, schema)
             material = self.material_ref(o["material"], _join(path, "material"), Material())
-            file_materials = ()
+            name = o["name"] or f"{path} ({kind})"
             if kind == "mesh":
-                mesh, file_materials = self.mesh_file(o["path"], _join(path, "path"))
-                meshes = [mesh]
+                pieces = self.mesh_file(o["path"], _join(path, "path"))
                 if o["material"] is not None:   # the scene's material replaces the file's
-                    file_materials = ()
+                    pieces = [(mesh, (), nodes) for mesh, _, nodes in pieces]
+                # one Mesh object for each of the file's meshes, however many runs of nodes place it
+                named = {id(mesh): replace(mesh, name=name if len(pieces) == 1 else f"{name}: {mesh.name}")
+                         for mesh, _, _ in pieces}
+                parts = [(named[id(mesh)], material, file_materials, nodes) for mesh, file_materials, nodes in pieces]
             else:
                 meshes = self.primitive(kind, o, path)
-            materials = [material]
-            if kind == "checkerboard":
-                materials.append(self.material_ref(o["material2"], _join(path, "material2"), DEFAULT_MATERIAL2))
-            name = o["name"] or f"{path} ({kind})"
-            parts = [(replace(mesh, name=name + (f" tiles {k}" if len(meshes) > 1 else "")), mat, file_materials)
-                     for k, (mesh, mat) in enumerate(zip(meshes, materials))]
-            out.append({"path": path, "name": o["name"], "show": o["show"], "parts": parts,
+                materials = [material]
+                if kind == "checkerboard":
+                    materials.append(self.material_ref(o["material2"], _join(path, "material2"),
+                                                       DEFAULT_MATERIAL2))
+                parts = [(replace(mesh, name=name + (f" tiles {k}" if len(meshes) > 1 else "")), mat, (), None)
+                         for k, (mesh, mat) in enumerate(zip(meshes, materials))]
+            out.append({"path": path, "name": o["name"], "show": o["show"], "parts": parts, "kind": kind,
                         "matrix": transform_matrix(o["translate"], o["rotate"], o["scale"])})
         return out
 
@@ -455,17 +471,17 @@ class _Loader:
             if not rec["show"] and id(rec) not in referenced:
                 raise self.doc.error(_join(rec["path"], "show"), "is false, but no [[instances]] table names the "
                                      "object (give it a name and place it, or remove it)")
-            for mesh, mat, file_materials in rec["parts"] if rec["show"] else ():
-                if id(rec) in referenced:
-                    objects.append(self.scene_object(rec["path"], mesh, mat, file_materials, rec["matrix"]))
+            for mesh, mat, file_materials, nodes in rec["parts"] if rec["show"] else ():
+                if id(rec) in referenced or nodes is not None:
+                    objects.append(self.scene_object(rec["path"], mesh, mat, file_materials, rec["matrix"], nodes))
                 else:
                     objects.append(SceneObject(self.transformed(mesh, rec["matrix"], rec["path"]), mat,
                                                file_materials))
         for rec, matrix, material, path in placements:
-            for k, (mesh, mat, file_materials) in enumerate(rec["parts"]):
-                if material is not None and k == 0:   # (a checkerboard's odd tiles keep material2)
-                    mat, file_materials = material, ()
-                objects.append(self.scene_object(path, mesh, mat, file_materials, matrix))
+            for k, (mesh, mat, file_materials, nodes) in enumerate(rec["parts"]):
+                if material is not None and (k == 0 or rec["kind"] != "checkerboard"):   # (its odd tiles keep
+                    mat, file_materials = material, ()                                    # material2)
+                objects.append(self.scene_object(path, mesh, mat, file_materials, matrix, nodes))
         return objects
 
     def placement(self, i: dict, path: str) -> np.ndarray:
@@ -483,11 +499,13 @@ class _Loader:
         except InputError as exc:
             raise self.doc.error("", str(exc).replace("instance 0's transform", _join(path, key))) from None
 
-    def scene_object(self, path: str, mesh: Mesh, material: Material, file_materials, matrix) -> SceneObject:
-        """``mesh`` placed by ``matrix``: a SceneObject whose errors (a placement
-        past the device's range) name ``path``."""
+    def scene_object(self, path: str, mesh: Mesh, material: Material, file_materials, matrix,
+                     nodes=None) -> SceneObject:
+        """``mesh`` placed by ``matrix`` -- after each of ``nodes`` ((K, 4, 4): a
+        glTF file's node matrices; None: once) --: a SceneObject whose errors (a
+        placement past the device's range, a singular one) name ``path``."""
         try:
-            return SceneObject(mesh, material, file_materials, matrix[None])
+            return SceneObject(mesh, material, file_materials, matrix[None] if nodes is None else matrix @ nodes)
         except InputError as exc:
             raise self.doc.error(path, exc) from None
 
