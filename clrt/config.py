@@ -282,6 +282,13 @@ BATCH_RAY_CHUNK = 1 << 20
 POINT_CELL_BITS = 5
 POINT_OFFSETS_GROUP = 256
 POINT_CELLS = 1 << (3 * POINT_CELL_BITS)
+# CPU devices walk closest points eight at a time (kernels/point.cl's
+# walk_wide_point_group): POINT_GROUPS such groups a work-item, one after the
+# other, each seeded by the one before (1M points in a scan's box: 16 groups
+# 10-25 % faster than 1, as fast as 32 or 64), and POINT_CANDIDATES triangles
+# a point keeps to visit at the end of its walk.
+POINT_GROUPS = 16
+POINT_CANDIDATES = 8
 
 
 def kernel_defines() -> dict:

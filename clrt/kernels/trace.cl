@@ -18,6 +18,7 @@
 #include "rays.cl"
 #include "accel_packet.cl"
 #include "point.cl"
+#include "point_group.cl"
 #include "point_order.cl"
 #include "point_grid.cl"
 #include "winding.cl"
@@ -274,57 +275,138 @@ inline uint read_item_points(const RayInput* in, __global const uint* order, uin
     return count;
 }
 
+// Points a work-item of query_closest_point and the signed distances answers
+// (CLOSEST_ITEM_POINTS): ITEM_RAYS, or with -DPOINT_GROUPS (CPU devices,
+// clrt/query/accel.py) POINT_GROUPS groups of eight that walk together
+// (point.cl's walk_wide_point_group), one group after the other.
+#ifdef POINT_GROUPS
+#define CLOSEST_ITEM_POINTS (POINT_GROUPS * ITEM_RAYS)
+#else
+#define CLOSEST_ITEM_POINTS ITEM_RAYS
+#endif
+
+#ifdef POINT_GROUPS
+// Group `group` of the work-item whose points start at `first`: the points'
+// indices (ids) and positions (device frame), and their nearest triangles
+// within their largest distances (`limited`; else any) into best, as
+// closest_point gives them; *good: the lanes of good points (the bad ones
+// are reported).  `seeds`: the slots of the nearest triangles of the group
+// before (-1: none), then of this one.  Returns how many points (0: none).
+inline uint closest_points_of_group(const Geometry* g, const RayInput* in, __global const uint* order, uint num,
+                                    uint first, bool limited, int* seeds, uint* ids, float3* points,
+                                    PointHit* best, uint* good)
+{
+    if (first >= num)
+        return 0u;
+    float3 positions[ITEM_RAYS];
+    float margin[ITEM_RAYS];
+    const uint count = read_item_points(in, order, num, first, ids, positions);
+    *good = 0u;
+    for (uint k = 0; k < count; ++k) {
+        float max_dist;
+        best[k].prim = -1;
+        best[k].dist = INFINITY;
+        best[k].point = (point_real3)(0);
+        best[k].u = best[k].v = 0.0f;
+        best[k].slot = -1;
+        best[k].feature = FEATURE_FACE;
+        best[k].instance = 0;
+        if (take_point(in, ids[k], positions[k], points + k, &max_dist)) {
+            *good |= 1u << k;
+            if (limited)
+                best[k].dist = max_dist;
+            margin[k] = POINT_MARGIN(points[k], in->scene_lo, in->scene_hi);
+        }
+    }
+    if (*good)
+        walk_wide_point_group(g, points, margin, *good, seeds, best);
+    for (uint k = 0; k < ITEM_RAYS; ++k)
+        seeds[k] = k < count && best[k].prim >= 0 ? best[k].slot : -1;
+    return count;
+}
+#endif
+
 // The nearest point of the mesh to each query point (point.cl), within the
 // point's largest distance (tmaxs: a miss beyond it), written field by field
 // into `results` (outputs 0 .. 5: point, distance, prim, u, v, instance, as
 // clrt.query.results' POINT_FIELDS; any may be absent).  The point goes back
 // to the caller's frame here (+ shift, in double where the device has it,
 // rounded to float32 once).  A miss (or a bad point): point NaN, distance
-// INFINITY, prim -1, u = v = 0.  A work-item answers ITEM_RAYS points, in
-// turn, consecutive in the order of point_order.cl: each walk starts from
-// the nearest triangle of the one before (closest_point's seed), which took
-// a third off the walks of points in a mesh's box on PoCL.
+// INFINITY, prim -1, u = v = 0.
+typedef struct {
+    __global float* point;
+    __global float* distance;
+    __global int* prim;
+    __global float* u;
+    __global float* v;
+    __global int* instance;
+} ClosestPointOutputs;
+
+// Point i's answer `best` into the outputs that are there.
+inline void write_closest_point(const ClosestPointOutputs* out, uint i, const PointHit* best, float3 shift)
+{
+    const bool found = best->prim >= 0;
+    if (out->point)
+        vstore3(found ? convert_float3(best->point + TO_POINT_REAL3(shift)) : (float3)(NAN), i, out->point);
+    if (out->distance)
+        out->distance[i] = found ? (float)best->dist : INFINITY;
+    if (out->prim)
+        out->prim[i] = best->prim;
+    if (out->u)
+        out->u[i] = found ? best->u : 0.0f;
+    if (out->v)
+        out->v[i] = found ? best->v : 0.0f;
+    if (out->instance)
+        out->instance[i] = found ? best->instance : -1;
+}
+
+// A work-item answers CLOSEST_ITEM_POINTS points, consecutive in the order of
+// point_order.cl: ITEM_RAYS in turn, each walk starting from the nearest
+// triangle of the one before (closest_point's seed), which took a third off
+// the walks of points in a mesh's box on PoCL; or POINT_GROUPS groups of
+// eight (closest_points_of_group).
 __kernel void query_closest_point(POINT_INPUT_PARAMS, __global uchar* results, GEOMETRY_PARAMS)
 {
-    const uint first = ITEM_RAYS * get_global_id(0);
+    const uint first = CLOSEST_ITEM_POINTS * get_global_id(0);
     if (first >= launch.num_rays)
         return;
     const Geometry g = make_geometry(GEOMETRY_ARGS);
     const RayInput in = make_point_input(POINT_INPUT_ARGS);
-    __global float* point_out = RESULT_AT(float, 0);
-    __global float* distance_out = RESULT_AT(float, 1);
-    __global int* prim_out = RESULT_AT(int, 2);
-    __global float* u_out = RESULT_AT(float, 3);
-    __global float* v_out = RESULT_AT(float, 4);
-    __global int* instance_out = RESULT_AT(int, 5);
+    ClosestPointOutputs out;
+    out.point = RESULT_AT(float, 0);
+    out.distance = RESULT_AT(float, 1);
+    out.prim = RESULT_AT(int, 2);
+    out.u = RESULT_AT(float, 3);
+    out.v = RESULT_AT(float, 4);
+    out.instance = RESULT_AT(int, 5);
     uint ids[ITEM_RAYS];
+#ifdef POINT_GROUPS
+    int seeds[ITEM_RAYS] = {-1, -1, -1, -1, -1, -1, -1, -1};
+    for (uint group = 0; group < POINT_GROUPS; ++group) {
+        float3 points[ITEM_RAYS];
+        PointHit best[ITEM_RAYS];
+        uint good;
+        const uint count = closest_points_of_group(&g, &in, order, launch.num_rays, first + ITEM_RAYS * group, true,
+                                                   seeds, ids, points, best, &good);
+        for (uint k = 0; k < count; ++k)
+            write_closest_point(&out, ids[k], best + k, in.shift);
+    }
+#else
     float3 positions[ITEM_RAYS];
     const uint count = read_item_points(&in, order, launch.num_rays, first, ids, positions);
     int seed = -1;
     for (uint k = 0; k < count; ++k) {
-        const uint i = ids[k];
         float3 p;
         float max_dist;
         PointHit best;
         best.prim = -1;
-        if (take_point(&in, i, positions[k], &p, &max_dist))
+        if (take_point(&in, ids[k], positions[k], &p, &max_dist))
             best = closest_point(&g, p, max_dist, POINT_MARGIN(p, in.scene_lo, in.scene_hi), seed);
-        const bool found = best.prim >= 0;
-        if (found)
+        if (best.prim >= 0)
             seed = best.slot;
-        if (point_out)
-            vstore3(found ? convert_float3(best.point + TO_POINT_REAL3(in.shift)) : (float3)(NAN), i, point_out);
-        if (distance_out)
-            distance_out[i] = found ? (float)best.dist : INFINITY;
-        if (prim_out)
-            prim_out[i] = best.prim;
-        if (u_out)
-            u_out[i] = found ? best.u : 0.0f;
-        if (v_out)
-            v_out[i] = found ? best.v : 0.0f;
-        if (instance_out)
-            instance_out[i] = found ? best.instance : -1;
+        write_closest_point(&out, ids[k], &best, in.shift);
     }
+#endif
 }
 
 // ---- Inside and outside (winding.cl, point.cl's sign rules).  Points as
@@ -376,42 +458,65 @@ __kernel void query_winding_number(POINT_INPUT_PARAMS, __global uchar* results,
 #define SIGN_PARITY 1
 #define SIGN_NORMAL 2
 
-// The signed distances of the ITEM_RAYS points from the launch's `first` on
+// Point p's distance to the mesh, its nearest triangle `best`, negative
+// inside by `rule` (`winding`, `normals`: the rule's buffer, or 0).
+inline float signed_distance(const Geometry* g, const RayInput* in, const int rule,
+                             __global const WindingFarField* winding, __global const PseudoNormals* normals,
+                             const PointHit* best, float3 p)
+{
+    bool inside;
+    if (rule == SIGN_WINDING)
+        inside = winding_inside(g, winding, p);
+    else if (rule == SIGN_PARITY)
+        inside = inside_by_parity(g, p, in->scene_lo, in->scene_hi);
+    else
+        inside = inside_by_normal(g, normals, best, p);
+    return inside ? -(float)best->dist : (float)best->dist;
+}
+
+// The signed distances of the CLOSEST_ITEM_POINTS points from the launch's `first` on
 // (in the order of point_order.cl, each walk seeded as query_closest_point's)
 // by `rule` (`winding`, `normals`: the rule's buffer, or 0), into output 0.
 inline void signed_distances(const Geometry* g, const RayInput* in, const QueryLaunch* launch,
                              __global uchar* results, __global const uint* order, uint first, const int rule,
                              __global const WindingFarField* winding, __global const PseudoNormals* normals)
 {
+    __global float* out = (__global float*)(results + launch->field_at[0]);
     uint ids[ITEM_RAYS];
+#ifdef POINT_GROUPS
+    int seeds[ITEM_RAYS] = {-1, -1, -1, -1, -1, -1, -1, -1};
+    for (uint group = 0; group < POINT_GROUPS; ++group) {
+        float3 points[ITEM_RAYS];
+        PointHit best[ITEM_RAYS];
+        uint good;
+        const uint count = closest_points_of_group(g, in, order, launch->num_rays, first + ITEM_RAYS * group, false,
+                                                   seeds, ids, points, best, &good);
+        for (uint k = 0; k < count; ++k)
+            out[ids[k]] = good & (1u << k) ? signed_distance(g, in, rule, winding, normals, best + k, points[k])
+                                            : NAN;
+    }
+#else
     float3 positions[ITEM_RAYS];
     const uint count = read_item_points(in, order, launch->num_rays, first, ids, positions);
     int seed = -1;
     for (uint k = 0; k < count; ++k) {
-        const uint i = ids[k];
         float3 p;
         float max_dist;
         float d = NAN;
-        if (take_point(in, i, positions[k], &p, &max_dist)) {
+        if (take_point(in, ids[k], positions[k], &p, &max_dist)) {
             const PointHit best = closest_point(g, p, INFINITY, POINT_MARGIN(p, in->scene_lo, in->scene_hi), seed);
             seed = best.slot;
-            bool inside;
-            if (rule == SIGN_WINDING)
-                inside = winding_inside(g, winding, p);
-            else if (rule == SIGN_PARITY)
-                inside = inside_by_parity(g, p, in->scene_lo, in->scene_hi);
-            else
-                inside = inside_by_normal(g, normals, &best, p);
-            d = inside ? -(float)best.dist : (float)best.dist;
+            d = signed_distance(g, in, rule, winding, normals, &best, p);
         }
-        ((__global float*)(results + launch->field_at[0]))[i] = d;
+        out[ids[k]] = d;
     }
+#endif
 }
 
 __kernel void query_signed_distance_winding(POINT_INPUT_PARAMS, __global uchar* results,
                                             __global const WindingFarField* winding, GEOMETRY_PARAMS)
 {
-    const uint first = ITEM_RAYS * get_global_id(0);
+    const uint first = CLOSEST_ITEM_POINTS * get_global_id(0);
     if (first >= launch.num_rays)
         return;
     const Geometry g = make_geometry(GEOMETRY_ARGS);
@@ -421,7 +526,7 @@ __kernel void query_signed_distance_winding(POINT_INPUT_PARAMS, __global uchar* 
 
 __kernel void query_signed_distance_parity(POINT_INPUT_PARAMS, __global uchar* results, GEOMETRY_PARAMS)
 {
-    const uint first = ITEM_RAYS * get_global_id(0);
+    const uint first = CLOSEST_ITEM_POINTS * get_global_id(0);
     if (first >= launch.num_rays)
         return;
     const Geometry g = make_geometry(GEOMETRY_ARGS);
@@ -432,7 +537,7 @@ __kernel void query_signed_distance_parity(POINT_INPUT_PARAMS, __global uchar* r
 __kernel void query_signed_distance_normal(POINT_INPUT_PARAMS, __global uchar* results,
                                            __global const PseudoNormals* normals, GEOMETRY_PARAMS)
 {
-    const uint first = ITEM_RAYS * get_global_id(0);
+    const uint first = CLOSEST_ITEM_POINTS * get_global_id(0);
     if (first >= launch.num_rays)
         return;
     const Geometry g = make_geometry(GEOMETRY_ARGS);

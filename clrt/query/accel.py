@@ -52,7 +52,7 @@ from clrt.config import NO_RESULT, RAY_CHECKS
 from clrt.layouts import QUERY_LAUNCH
 from clrt.query.kernels import QUERY_GROUP, QUERY_KERNELS
 from clrt.query.inside import GridPoints
-from clrt.query.points import PointQueries
+from clrt.query.points import PointQueries, point_group_defines
 from clrt.query.instances import InstanceMoves, query_scene, source_of
 from clrt.query.rays import CameraRays, PinholeRays, PointBatch, RayBatch, cull_code, is_device_array
 from clrt.query.results import (ALL_HITS_FIELDS, CAMERA_FIELDS, CLOSEST_FIELDS, RESULT_BYTES, RESULT_DTYPES,
@@ -277,7 +277,9 @@ class Accel(PointQueries, InstanceMoves):
         self.all_hits_capacity = ALL_HITS_CAPACITY
         # Rays a work-item of query_closest / query_any answers (trace.cl's ITEM_RAYS).
         self.rays_per_item = scene.rays_per_item
-        self.kernels = scene.kernels("trace.cl", QUERY_KERNELS)
+        # Closest points eight at a time on CPU devices (clrt/query/points.py).
+        self.point_defines = point_group_defines(scene)
+        self.kernels = scene.kernels("trace.cl", QUERY_KERNELS, self.point_defines)
         self._scene_value = scene.geometry.scene_value()
         self._buffers: dict[str, cl.Buffer] = {}
         self._hits_per_ray = float(ALL_HITS_PER_RAY)
