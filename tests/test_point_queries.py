@@ -351,23 +351,25 @@ def test_the_wide_walk_skips_nothing_brute_force_picks(device, monkeypatch):
     assert (brute_normal < 0).any()
 
 
-@pytest.mark.parametrize("candidates", [1, None])
-def test_points_walked_eight_at_a_time_answer_as_one_at_a_time(candidates, device, monkeypatch):
-    """CPU devices' closest points eight at a time (point.cl's
+@pytest.mark.parametrize("lanes, candidates", [(None, None), (None, 1), (8, None)])
+def test_points_walked_in_groups_answer_as_one_at_a_time(lanes, candidates, device, monkeypatch):
+    """CPU devices' closest points many at a time (point_group.cl's
     walk_wide_point_group: the group's box before each point's bounds, float32
     upper bounds, triangles visited at the end, each group seeded by the one
-    before) against the walk of one point at a time and brute force, bit for
-    bit: on the axis of a torus (a ring of triangles at one distance, more
-    than a point keeps to visit: with candidates=1 nearly every triangle
-    overflows and is visited at once), points far outside the box (groups of
-    points far apart), copies of one point, points on and near the surface,
-    points beyond max_distance (misses beside hits in a group), in chunks
-    that end inside a group; signed distances too."""
+    before; float16 or float8 lanes) against the walk of one point at a time
+    and brute force, bit for bit: on the axis of a torus (a ring of triangles
+    at one distance, more than a point keeps to visit: with candidates=1
+    nearly every triangle overflows and is visited at once), points far
+    outside the box (groups of points far apart), copies of one point, points
+    on and near the surface, points beyond max_distance (misses beside hits
+    in a group), in chunks that end inside a group; signed distances too."""
+    from clrt import config
     from clrt.device import geometry
     from clrt.query import points as point_queries
 
-    if candidates is not None:
-        monkeypatch.setattr(point_queries, "POINT_CANDIDATES", candidates)
+    for name, value in (("POINT_LANES", lanes), ("POINT_CANDIDATES", candidates)):
+        if value is not None:
+            monkeypatch.setattr(point_queries, name, value)
     mesh = primitives.torus(1.0, 0.35, 96, 48)
     rng = np.random.default_rng(23)
     corners = mesh.vertices[mesh.faces].astype(np.float64)
@@ -383,7 +385,8 @@ def test_points_walked_eight_at_a_time_answer_as_one_at_a_time(candidates, devic
     grouped = clrt.Accel(mesh, device=device, chunk_rays=1000)
     if not grouped.point_defines:
         pytest.skip("the device under test does not walk points in groups")
-    assert grouped.point_defines["POINT_CANDIDATES"] == (candidates or 8)
+    assert grouped.point_defines["POINT_CANDIDATES"] == (candidates or config.POINT_CANDIDATES)
+    assert grouped.point_defines["POINT_LANES"] == (lanes or config.POINT_LANES)
     monkeypatch.setattr(geometry, "RAY_PACKET_KINDS", ())   # one point a work-item
     single = clrt.Accel(mesh, device=device)
     brute = clrt.Accel(mesh, accel="none", device=device)

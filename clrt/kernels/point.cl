@@ -24,9 +24,9 @@
 // (packet_distance_bounds), proven to lie below the double precision one
 // that visit_point_triangle would compute: only a triangle that could still
 // be the answer (or tie with it) is visited, so the answer is the binary
-// walk's and brute force's, bit for bit.  Where such a device walks eight
-// rays a work-item, the closest-point kernels walk eight points at once
-// instead (point_group.cl), through the same bounds.
+// walk's and brute force's, bit for bit.  Where such a device walks ray
+// packets, the closest-point kernels walk sixteen points at once instead
+// (point_group.cl), through the same bounds.
 //
 // Below the walk, two of the sign rules of signed distances (the third,
 // winding numbers, is winding.cl): parity of ray crossings, and the

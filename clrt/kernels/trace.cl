@@ -277,10 +277,10 @@ inline uint read_item_points(const RayInput* in, __global const uint* order, uin
 
 // Points a work-item of query_closest_point and the signed distances answers
 // (CLOSEST_ITEM_POINTS): ITEM_RAYS, or with -DPOINT_GROUPS (CPU devices,
-// clrt/query/accel.py) POINT_GROUPS groups of eight that walk together
-// (point.cl's walk_wide_point_group), one group after the other.
+// clrt/query/points.py) POINT_GROUPS groups of POINT_LANES that walk together
+// (point_group.cl's walk_wide_point_group), one group after the other.
 #ifdef POINT_GROUPS
-#define CLOSEST_ITEM_POINTS (POINT_GROUPS * ITEM_RAYS)
+#define CLOSEST_ITEM_POINTS (POINT_GROUPS * POINT_LANES)
 #else
 #define CLOSEST_ITEM_POINTS ITEM_RAYS
 #endif
@@ -298,9 +298,13 @@ inline uint closest_points_of_group(const Geometry* g, const RayInput* in, __glo
 {
     if (first >= num)
         return 0u;
-    float3 positions[ITEM_RAYS];
-    float margin[ITEM_RAYS];
-    const uint count = read_item_points(in, order, num, first, ids, positions);
+    float3 positions[POINT_LANES];
+    float margin[POINT_LANES];
+    const uint count = min((uint)POINT_LANES, num - first);
+    for (uint k = 0; k < count; ++k) {
+        ids[k] = POINT_ORDER(order, num)[first + k];
+        positions[k] = point_position(in, ids[k]);
+    }
     *good = 0u;
     for (uint k = 0; k < count; ++k) {
         float max_dist;
@@ -320,7 +324,7 @@ inline uint closest_points_of_group(const Geometry* g, const RayInput* in, __glo
     }
     if (*good)
         walk_wide_point_group(g, points, margin, *good, seeds, best);
-    for (uint k = 0; k < ITEM_RAYS; ++k)
+    for (uint k = 0; k < POINT_LANES; ++k)
         seeds[k] = k < count && best[k].prim >= 0 ? best[k].slot : -1;
     return count;
 }
@@ -364,7 +368,7 @@ inline void write_closest_point(const ClosestPointOutputs* out, uint i, const Po
 // point_order.cl: ITEM_RAYS in turn, each walk starting from the nearest
 // triangle of the one before (closest_point's seed), which took a third off
 // the walks of points in a mesh's box on PoCL; or POINT_GROUPS groups of
-// eight (closest_points_of_group).
+// POINT_LANES (closest_points_of_group).
 __kernel void query_closest_point(POINT_INPUT_PARAMS, __global uchar* results, GEOMETRY_PARAMS)
 {
     const uint first = CLOSEST_ITEM_POINTS * get_global_id(0);
@@ -379,19 +383,22 @@ __kernel void query_closest_point(POINT_INPUT_PARAMS, __global uchar* results, G
     out.u = RESULT_AT(float, 3);
     out.v = RESULT_AT(float, 4);
     out.instance = RESULT_AT(int, 5);
-    uint ids[ITEM_RAYS];
 #ifdef POINT_GROUPS
-    int seeds[ITEM_RAYS] = {-1, -1, -1, -1, -1, -1, -1, -1};
+    uint ids[POINT_LANES];
+    int seeds[POINT_LANES];
+    for (uint k = 0; k < POINT_LANES; ++k)
+        seeds[k] = -1;
     for (uint group = 0; group < POINT_GROUPS; ++group) {
-        float3 points[ITEM_RAYS];
-        PointHit best[ITEM_RAYS];
+        float3 points[POINT_LANES];
+        PointHit best[POINT_LANES];
         uint good;
-        const uint count = closest_points_of_group(&g, &in, order, launch.num_rays, first + ITEM_RAYS * group, true,
+        const uint count = closest_points_of_group(&g, &in, order, launch.num_rays, first + POINT_LANES * group, true,
                                                    seeds, ids, points, best, &good);
         for (uint k = 0; k < count; ++k)
             write_closest_point(&out, ids[k], best + k, in.shift);
     }
 #else
+    uint ids[ITEM_RAYS];
     float3 positions[ITEM_RAYS];
     const uint count = read_item_points(&in, order, launch.num_rays, first, ids, positions);
     int seed = -1;
@@ -482,20 +489,23 @@ inline void signed_distances(const Geometry* g, const RayInput* in, const QueryL
                              __global const WindingFarField* winding, __global const PseudoNormals* normals)
 {
     __global float* out = (__global float*)(results + launch->field_at[0]);
-    uint ids[ITEM_RAYS];
 #ifdef POINT_GROUPS
-    int seeds[ITEM_RAYS] = {-1, -1, -1, -1, -1, -1, -1, -1};
+    uint ids[POINT_LANES];
+    int seeds[POINT_LANES];
+    for (uint k = 0; k < POINT_LANES; ++k)
+        seeds[k] = -1;
     for (uint group = 0; group < POINT_GROUPS; ++group) {
-        float3 points[ITEM_RAYS];
-        PointHit best[ITEM_RAYS];
+        float3 points[POINT_LANES];
+        PointHit best[POINT_LANES];
         uint good;
-        const uint count = closest_points_of_group(g, in, order, launch->num_rays, first + ITEM_RAYS * group, false,
+        const uint count = closest_points_of_group(g, in, order, launch->num_rays, first + POINT_LANES * group, false,
                                                    seeds, ids, points, best, &good);
         for (uint k = 0; k < count; ++k)
             out[ids[k]] = good & (1u << k) ? signed_distance(g, in, rule, winding, normals, best + k, points[k])
                                             : NAN;
     }
 #else
+    uint ids[ITEM_RAYS];
     float3 positions[ITEM_RAYS];
     const uint count = read_item_points(in, order, launch->num_rays, first, ids, positions);
     int seed = -1;

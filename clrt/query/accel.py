@@ -277,7 +277,7 @@ class Accel(PointQueries, InstanceMoves):
         self.all_hits_capacity = ALL_HITS_CAPACITY
         # Rays a work-item of query_closest / query_any answers (trace.cl's ITEM_RAYS).
         self.rays_per_item = scene.rays_per_item
-        # Closest points eight at a time on CPU devices (clrt/query/points.py).
+        # Closest points many at a time on CPU devices (clrt/query/points.py).
         self.point_defines = point_group_defines(scene)
         self.kernels = scene.kernels("trace.cl", QUERY_KERNELS, self.point_defines)
         self._scene_value = scene.geometry.scene_value()

@@ -16,7 +16,8 @@ import numpy as np
 import pyopencl as cl
 
 from clrt.accel.disks import packet_corners, wide_disks
-from clrt.config import NO_RESULT, POINT_CANDIDATES, POINT_CELLS, POINT_GROUPS, POINT_OFFSETS_GROUP, RAY_CHECKS
+from clrt.config import (NO_RESULT, POINT_CANDIDATES, POINT_CELLS, POINT_GROUPS, POINT_LANES, POINT_OFFSETS_GROUP,
+                         RAY_CHECKS)
 from clrt.device.program import launch_size
 from clrt.device.sharing import one_at_a_time
 from clrt.query.inside import SIGN_KERNELS, GridPoints, grid_axes, pseudo_normals, sign_kernel, winding_nodes
@@ -31,12 +32,12 @@ CLOSEST_KERNELS = ("query_closest_point", *SIGN_KERNELS.values())
 
 def point_group_defines(scene) -> dict:
     """The defines of the query program (trace.cl) with which the closest-point
-    kernels walk eight points at a time (point.cl's walk_wide_point_group):
-    where the device walks the wide BVH of a one-level scene and eight rays a
-    work-item (RAY_PACKETS) -- CPU devices; else none."""
+    kernels walk POINT_LANES points at a time (point_group.cl's
+    walk_wide_point_group): where the device walks the wide BVH of a one-level
+    scene and packets of eight rays (RAY_PACKETS) -- CPU devices; else none."""
     if scene.rays_per_item != 8 or scene.geometry.wide is None or "ACCEL_INSTANCES" in scene.geometry.defines:
         return {}
-    return {"POINT_GROUPS": POINT_GROUPS, "POINT_CANDIDATES": POINT_CANDIDATES}
+    return {"POINT_LANES": POINT_LANES, "POINT_GROUPS": POINT_GROUPS, "POINT_CANDIDATES": POINT_CANDIDATES}
 
 
 class PointQueries:
@@ -44,11 +45,12 @@ class PointQueries:
 
     def _point_items(self, kernel: str, m: int) -> int:
         """Work-items of point kernel ``kernel`` for ``m`` points: trace.cl's
-        ITEM_RAYS points a work-item, POINT_GROUPS times that for the
-        closest-point kernels where they walk points in groups."""
+        ITEM_RAYS points a work-item, or for the closest-point kernels where
+        they walk points in groups its CLOSEST_ITEM_POINTS (POINT_GROUPS
+        groups of POINT_LANES)."""
         per_item = self.rays_per_item
-        if kernel in CLOSEST_KERNELS:
-            per_item *= self.point_defines.get("POINT_GROUPS", 1)
+        if kernel in CLOSEST_KERNELS and self.point_defines:
+            per_item = self.point_defines["POINT_GROUPS"] * self.point_defines["POINT_LANES"]
         return -(-m // per_item)
 
     def _point_outputs(self, n: int, fields, on_device: bool) -> dict:
