@@ -49,8 +49,8 @@
 #if POINT_LANES == 16
 typedef float16 lanes_float;
 typedef int16 lanes_int;
-#define LANES_BITS(x) (lane_bits((x).lo) | (lane_bits((x).hi) << 8))
-#define LANES_MASK(bits) ((lanes_int)(lane_mask(bits), lane_mask((uint)(bits) >> 8)))
+#define LANES_BITS(x) lane16_bits(x)
+#define LANES_MASK(bits) lane16_mask(bits)
 #define LANES_MIN(x) min_lane(fmin((x).lo, (x).hi))
 #define LANES_MAX(x) max_lane(fmax((x).lo, (x).hi))
 #elif POINT_LANES == 8
