@@ -147,9 +147,12 @@ inline void walk_wide_point_group(const Geometry* g, const float3* p, const floa
         lo = fmin(lo, p[k]);
         hi = fmax(hi, p[k]);
     }
-    for (int k = 0; k < POINT_LANES; ++k) {
+    for (int k = 0; k < POINT_LANES; ++k) {   // each seed once (neighbours share them)
         const int slot = seeds[k];
-        if (slot >= 0 && (k == 0 || seeds[k - 1] != slot)) {
+        bool seen = false;
+        for (int j = 0; j < k; ++j)
+            seen |= seeds[j] == slot;
+        if (slot >= 0 && !seen) {
             float3 a, b, c;
             placed_corners(g, 0, slot, &a, &b, &c);
             lanes_float seed_upper;
