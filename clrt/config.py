@@ -282,6 +282,14 @@ BATCH_RAY_CHUNK = 1 << 20
 POINT_CELL_BITS = 5
 POINT_OFFSETS_GROUP = 256
 POINT_CELLS = 1 << (3 * POINT_CELL_BITS)
+# CPU devices walk closest points POINT_LANES at a time (8 or 16: the lanes
+# of float8 or float16 values; kernels/point_group.cl), POINT_GROUPS such
+# groups a work-item, one after the other, each seeded by the one before, and
+# a point keeps POINT_CANDIDATES triangles to visit at the end of its walk
+# (docs/benchmark-log.md has the measurements that chose them).
+POINT_LANES = 16
+POINT_GROUPS = 8
+POINT_CANDIDATES = 8
 
 
 def kernel_defines() -> dict:

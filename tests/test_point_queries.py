@@ -317,12 +317,12 @@ def test_points_are_visited_in_cell_order_each_once(device):
 
 
 def test_the_wide_walk_skips_nothing_brute_force_picks(device, monkeypatch):
-    """CPU devices' walk of the wide BVH (point.cl's walk_wide_points: disks
-    beside boxes, float32 lower bounds before each double precision test, each
-    walk seeded with the previous point's triangle) against the binary walk
-    and brute force, bit for bit, on a 16k-triangle torus: points in its box
-    (most far from the surface, where a child's box and disk are both near
-    the best distance), near it and on it, also one a work-item."""
+    """CPU devices' walks of the wide BVH (point.cl's walk_wide_points: disks
+    beside boxes, float32 lower bounds before each double precision test; and
+    walk_wide_point_group, eight points at a time, the default) against the
+    binary walk and brute force, bit for bit, on a 16k-triangle torus: points
+    in its box (most far from the surface, where a child's box and disk are
+    both near the best distance), near it and on it, also one a work-item."""
     from clrt.device import geometry
 
     mesh = primitives.torus(1.0, 0.35, 128, 64)
@@ -349,6 +349,58 @@ def test_the_wide_walk_skips_nothing_brute_force_picks(device, monkeypatch):
     np.testing.assert_array_equal(wide.signed_distance(points, sign="normal"),
                                   brute_normal := binary.signed_distance(points, sign="normal"))
     assert (brute_normal < 0).any()
+
+
+@pytest.mark.parametrize("lanes, candidates", [(None, None), (None, 1), (8, None)])
+def test_points_walked_in_groups_answer_as_one_at_a_time(lanes, candidates, device, monkeypatch):
+    """CPU devices' closest points many at a time (point_group.cl's
+    walk_wide_point_group: the group's box before each point's bounds, float32
+    upper bounds, triangles visited at the end, each group seeded by the one
+    before; float16 or float8 lanes) against the walk of one point at a time
+    and brute force, bit for bit: on the axis of a torus (a ring of triangles
+    at one distance, more than a point keeps to visit: with candidates=1
+    nearly every triangle overflows and is visited at once), points far
+    outside the box (groups of points far apart), copies of one point, points
+    on and near the surface, points beyond max_distance (misses beside hits
+    in a group), in chunks that end inside a group; signed distances too."""
+    from clrt import config
+    from clrt.device import geometry
+    from clrt.query import points as point_queries
+
+    for name, value in (("POINT_LANES", lanes), ("POINT_CANDIDATES", candidates)):
+        if value is not None:
+            monkeypatch.setattr(point_queries, name, value)
+    mesh = primitives.torus(1.0, 0.35, 96, 48)
+    rng = np.random.default_rng(23)
+    corners = mesh.vertices[mesh.faces].astype(np.float64)
+    f = rng.integers(len(corners), size=300)
+    on = np.einsum("nk,nkj->nj", rng.dirichlet((1, 1, 1), size=300), corners[f])
+    lo, hi = mesh.bounds
+    axis = np.zeros((120, 3))
+    axis[:, 2] = rng.uniform(-0.5, 0.5, 120)
+    axis[::3, :2] = 1e-4 * rng.normal(size=(40, 2))
+    points = np.concatenate([axis, 40 * rng.normal(size=(200, 3)), np.repeat(rng.uniform(lo, hi, (5, 3)), 30, axis=0),
+                             on, on + 0.02 * rng.normal(size=on.shape), lo + rng.random((1500, 3)) * (hi - lo)])
+    points = rng.permutation(points).astype(np.float32)
+    grouped = clrt.Accel(mesh, device=device, chunk_rays=1000)
+    if not grouped.point_defines:
+        pytest.skip("the device under test does not walk points in groups")
+    assert grouped.point_defines["POINT_CANDIDATES"] == (candidates or config.POINT_CANDIDATES)
+    assert grouped.point_defines["POINT_LANES"] == (lanes or config.POINT_LANES)
+    monkeypatch.setattr(geometry, "RAY_PACKET_KINDS", ())   # one point a work-item
+    single = clrt.Accel(mesh, device=device)
+    brute = clrt.Accel(mesh, accel="none", device=device)
+    assert not single.point_defines
+    for max_distance in (np.inf, 0.3):
+        got = grouped.closest_points(points, max_distance=max_distance)
+        assert 0 < (got.prim < 0).sum() < len(points) / 2 if max_distance < 1 else (got.prim >= 0).all()
+        for other in (single, brute):
+            want = other.closest_points(points, max_distance=max_distance)
+            for field in POINT_FIELDS:
+                np.testing.assert_array_equal(getattr(got, field), getattr(want, field), err_msg=field)
+    for sign in ("normal", "parity"):
+        np.testing.assert_array_equal(grouped.signed_distance(points, sign=sign),
+                                      single.signed_distance(points, sign=sign))
 
 
 def test_every_wide_child_s_triangles_lie_in_its_disk():

@@ -334,6 +334,36 @@ def test_collapse_is_sah_optimal(builder, leaf, device):
 
 
 @pytest.mark.parametrize("portable", [False, True])
+def test_sixteen_lane_bits_and_masks_invert_each_other(portable, device):
+    """lanes.cl's lane16_bits and lane16_mask (point_group.cl's groups of
+    sixteen points): every set of sixteen lanes gives its bits and back, in
+    the AVX-512 form (where the device's compiler defines __AVX512DQ__) and
+    the portable one."""
+    import pyopencl as cl
+    from clrt.device.context import create_context
+    from clrt.device.program import build_options, expand_source
+
+    context, queue = create_context(device or "cpu")
+    source = expand_source("lanes.cl") + """
+    __kernel void probe(__global uint* bits, __global int16* lanes) {
+        const uint b = get_global_id(0);
+        lanes[b] = lane16_mask(b);
+        bits[b] = lane16_bits(lane16_mask(b));
+    }"""
+    defines = {"PORTABLE_LANE_BITS": None} if portable else {}
+    program = cl.Program(context, source).build(options=build_options(context, defines))
+    n = 1 << 16
+    bits, lanes = np.empty(n, np.uint32), np.empty((n, 16), np.int32)
+    bits_buf = cl.Buffer(context, cl.mem_flags.WRITE_ONLY, bits.nbytes)
+    lanes_buf = cl.Buffer(context, cl.mem_flags.WRITE_ONLY, lanes.nbytes)
+    cl.Kernel(program, "probe")(queue, (n,), None, bits_buf, lanes_buf)
+    cl.enqueue_copy(queue, bits, bits_buf)
+    cl.enqueue_copy(queue, lanes, lanes_buf)
+    np.testing.assert_array_equal(lanes, -((np.arange(n)[:, None] >> np.arange(16)) & 1))
+    np.testing.assert_array_equal(bits, np.arange(n))
+
+
+@pytest.mark.parametrize("portable", [False, True])
 def test_lane_bits_and_lane_mask_invert_each_other(portable, device):
     """lanes.cl: every set of eight lanes gives its bits and back, in the x86 form
     (vmovmskps, where the device's compiler defines __AVX__) and the portable one."""

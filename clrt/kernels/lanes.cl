@@ -29,4 +29,26 @@ inline int8 lane_mask(uint bits)
     return ((((int8)((int)bits)) >> (int8)(0, 1, 2, 3, 4, 5, 6, 7)) & (int8)(1)) != (int8)(0);
 }
 
+// Sixteen lanes and sixteen bits, the same way (point_group.cl's groups of
+// sixteen points): with AVX-512 (__AVX512DQ__) one vpmovd2m or vpmovm2d --
+// 3 % of the closest-point walk on PoCL against two halves of eight
+// (docs/benchmark-log.md) --, else, or with -DPORTABLE_LANE_BITS, the halves.
+inline uint lane16_bits(int16 lanes)
+{
+#if defined(__AVX512DQ__) && !defined(PORTABLE_LANE_BITS)
+    return (uint)__builtin_ia32_cvtd2mask512(lanes);
+#else
+    return lane_bits(lanes.lo) | (lane_bits(lanes.hi) << 8);
+#endif
+}
+
+inline int16 lane16_mask(uint bits)
+{
+#if defined(__AVX512DQ__) && !defined(PORTABLE_LANE_BITS)
+    return __builtin_ia32_cvtmask2d512((ushort)bits);
+#else
+    return (int16)(lane_mask(bits), lane_mask(bits >> 8));
+#endif
+}
+
 #endif

@@ -24,7 +24,9 @@
 // (packet_distance_bounds), proven to lie below the double precision one
 // that visit_point_triangle would compute: only a triangle that could still
 // be the answer (or tie with it) is visited, so the answer is the binary
-// walk's and brute force's, bit for bit.
+// walk's and brute force's, bit for bit.  Where such a device walks ray
+// packets, the closest-point kernels walk sixteen points at once instead
+// (point_group.cl), through the same bounds.
 //
 // Below the walk, two of the sign rules of signed distances (the third,
 // winding numbers, is winding.cl): parity of ray crossings, and the
@@ -206,74 +208,97 @@ inline void visit_point_triangle(const Geometry* g, point_real3 p, int instance,
 #define POINT_TIE_SLACK(margin) (margin)
 #endif
 
-// Lower bounds of the distances from p to the four triangles of a packet, in
-// float32.  For any unit vector n, no point x of a triangle (a, b, c) lies
-// nearer to p than the least of n.(p - x) over its corners (|p - x| >=
-// n.(p - x), linear in x), that is n.(p - a) - max(0, n.(b - a), n.(c - a)).
-// closest_on_triangle's regions, taken lane by lane with selects (its order
-// of tests, one division a lane), give x' near the closest point, and
-// n = (p - x') / |p - x'|, which makes the bound the distance itself up to
-// rounding wherever x' is right.  Rounding: p - a, b - a and c - a are
-// rounded (relative 2^-24 a coordinate), each dot product with n (three
-// products and two sums: 4.01 * 2^-24 * sum |n_i| |y_i| <= 4.01 * 2^-24 *
-// |n| |y|), the difference and the max (2^-24 of the result), and 1 / |n| by
-// rsqrt of the rounded n.n (at most 8 * 2^-24 relative): in all under
-// 14 * 2^-24 * (|p - a| + max(|b - a|, |c - a|)), and each length is at most
-// its L1 norm; 2^-20 of that sum of L1 norms is taken off.  A lane with n = 0
-// (p on the triangle) gets 0; one of no area, or other NaNs, compare false
-// and are visited.  The corners' dot products come from the edges' (b - p =
-// (a - p) + (b - a)): some 130 float4 operations for four triangles.
+// Bounds of the distances from points to triangles, in float32: below the
+// double precision distance that visit_point_triangle would compute, and
+// (upper) above it.  For any unit vector n, no point x of a triangle (a, b,
+// c) lies nearer to p than the least of n.(p - x) over its corners (|p - x|
+// >= n.(p - x), linear in x), that is n.(p - a) - max(0, n.(b - a), n.(c -
+// a)).  closest_on_triangle's regions, taken lane by lane with selects (its
+// order of tests, one division a lane), give barycentric weights (u, v) --
+// clamped to u, v >= 0, u + v <= 1, which also settles a division by zero --
+// of a point x' of the triangle near the closest one, and n = (p - x') / |p -
+// x'|, which makes the bound the distance itself up to rounding wherever x'
+// is right.  Rounding: p - a, b - a and c - a are rounded (relative 2^-24 a
+// coordinate), each dot product with n (three products and two sums: 4.01 *
+// 2^-24 * sum |n_i| |y_i| <= 4.01 * 2^-24 * |n| |y|), the difference and the
+// max (2^-24 of the result), and 1 / |n| by rsqrt of the rounded n.n (at most
+// 8 * 2^-24 relative): in all under 14 * 2^-24 * (|p - a| + max(|b - a|, |c -
+// a|)), and each length is at most its L1 norm; 2^-20 of that sum of L1 norms
+// is taken off.  A lane with n = 0 (p on the triangle) gets 0; NaNs (from
+// overflow) compare false, and the walks visit such lanes.
+//
+// The upper bound is |p - x'| itself: the rounded n differs from p - x' (x'
+// with the rounded weights, on the triangle up to u + v <= 1 + 2^-24) by at
+// most some 5 * 2^-24 * (|p - a| + |b - a| + |c - a|), and sqrt(n.n) from |n|
+// by 2 * 2^-24 relative: 2^-20 of that sum of L1 norms, and of |n|, is added.
+// It bounds the exact distance; the double precision one lies within some
+// ulps of the coordinates of that, far below the tie slack (POINT_TIE_SLACK)
+// that the walks add to it.
+//
+// The body below takes the edges apx .. acz (ap = p - a, ab = b - a, ac = c -
+// a) of type V (lanes) or E (one value for all lanes) and declares `lower`
+// and `upper` (V); IV: V's comparison type.  The corners' dot products come
+// from the edges' (b - p = (a - p) + (b - a)): some 130 operations.
+#define POINT_TRIANGLE_BOUNDS(V, IV, E)                                                                 \
+    /* closest_on_triangle's d1 .. d6: ab.ap, ac.ap, ab.bp, ac.bp, ab.cp, ac.cp */                      \
+    const V d1 = abx * apx + aby * apy + abz * apz, d2 = acx * apx + acy * apy + acz * apz;             \
+    const E ab2 = abx * abx + aby * aby + abz * abz, ac2 = acx * acx + acy * acy + acz * acz;           \
+    const E abac = abx * acx + aby * acy + abz * acz;                                                   \
+    const V d3 = d1 - ab2, d4 = d2 - abac, d5 = d1 - abac, d6 = d2 - ac2;                               \
+    const V vc = d1 * d4 - d3 * d2, vb = d5 * d2 - d1 * d6, va = d3 * d6 - d5 * d4;                    \
+    /* (u, v) = (u_num, v_num) / den, region by region, the first of closest_on_triangle's tests */    \
+    /* that holds winning: set in reverse order */                                                      \
+    V u_num = vb, v_num = vc, den = va + vb + vc;                              /* the face */           \
+    const V e_bc = d4 - d3, f_bc = d5 - d6;                                                             \
+    const IV on_bc = (va <= 0.0f) & (e_bc >= 0.0f) & (f_bc >= 0.0f);                                    \
+    u_num = select(u_num, f_bc, on_bc);                                                                 \
+    v_num = select(v_num, e_bc, on_bc);                                                                 \
+    den = select(den, e_bc + f_bc, on_bc);                                                              \
+    const IV on_ac = (vb <= 0.0f) & (d2 >= 0.0f) & (d6 <= 0.0f);                                        \
+    u_num = select(u_num, (V)(0.0f), on_ac);                                                            \
+    v_num = select(v_num, d2, on_ac);                                                                   \
+    den = select(den, d2 - d6, on_ac);                                                                  \
+    const IV at_c = (d6 >= 0.0f) & (d5 <= d6);                                                          \
+    u_num = select(u_num, (V)(0.0f), at_c);                                                             \
+    v_num = select(v_num, (V)(1.0f), at_c);                                                             \
+    den = select(den, (V)(1.0f), at_c);                                                                 \
+    const IV on_ab = (vc <= 0.0f) & (d1 >= 0.0f) & (d3 <= 0.0f);                                        \
+    u_num = select(u_num, d1, on_ab);                                                                   \
+    v_num = select(v_num, (V)(0.0f), on_ab);                                                            \
+    den = select(den, d1 - d3, on_ab);                                                                  \
+    const IV at_b = (d3 >= 0.0f) & (d4 <= d3);                                                          \
+    u_num = select(u_num, (V)(1.0f), at_b);                                                             \
+    v_num = select(v_num, (V)(0.0f), at_b);                                                             \
+    den = select(den, (V)(1.0f), at_b);                                                                 \
+    const IV at_a = (d1 <= 0.0f) & (d2 <= 0.0f);                                                        \
+    u_num = select(u_num, (V)(0.0f), at_a);                                                             \
+    v_num = select(v_num, (V)(0.0f), at_a);                                                             \
+    den = select(den, (V)(1.0f), at_a);                                                                 \
+    const V inv = 1.0f / den;                                                                           \
+    const V u = fmin(fmax(u_num * inv, 0.0f), 1.0f);                  /* fmax takes NaN to 0 */        \
+    const V v = fmin(fmax(v_num * inv, 0.0f), 1.0f - u);                                                \
+    /* n = p - x' = ap - u ab - v ac */                                                                 \
+    const V nx = apx - u * abx - v * acx, ny = apy - u * aby - v * acy, nz = apz - u * abz - v * acz;  \
+    const V s_ap = nx * apx + ny * apy + nz * apz, s_ab = nx * abx + ny * aby + nz * abz;               \
+    const V s_ac = nx * acx + ny * acy + nz * acz;                                                      \
+    const V n2 = nx * nx + ny * ny + nz * nz;                                                           \
+    const V l_ap = fabs(apx) + fabs(apy) + fabs(apz);                                                   \
+    const E l_ab = fabs(abx) + fabs(aby) + fabs(abz), l_ac = fabs(acx) + fabs(acy) + fabs(acz);         \
+    const V lower = select((s_ap - fmax(fmax(s_ab, s_ac), 0.0f)) * rsqrt(n2)                            \
+                           - 0x1p-20f * (l_ap + fmax(l_ab, l_ac)), (V)(0.0f), n2 == 0.0f);              \
+    const V upper = sqrt(n2) * (1.0f + 0x1p-20f) + 0x1p-20f * (l_ap + l_ab + l_ac)
+
+// Lower bounds of the distances from p to the four triangles of a packet
+// (POINT_TRIANGLE_BOUNDS; walk_wide_points).
 __attribute__((always_inline))
 inline float4 packet_distance_bounds(__global const TrianglePacket* t, float3 p)
 {
     const float4 apx = p.x - t->v0[0], apy = p.y - t->v0[1], apz = p.z - t->v0[2];
     const float4 abx = t->v1[0] - t->v0[0], aby = t->v1[1] - t->v0[1], abz = t->v1[2] - t->v0[2];
     const float4 acx = t->v2[0] - t->v0[0], acy = t->v2[1] - t->v0[1], acz = t->v2[2] - t->v0[2];
-    // closest_on_triangle's d1 .. d6: ab.ap, ac.ap, ab.bp, ac.bp, ab.cp, ac.cp
-    const float4 d1 = abx * apx + aby * apy + abz * apz, d2 = acx * apx + acy * apy + acz * apz;
-    const float4 ab2 = abx * abx + aby * aby + abz * abz, ac2 = acx * acx + acy * acy + acz * acz;
-    const float4 abac = abx * acx + aby * acy + abz * acz;
-    const float4 d3 = d1 - ab2, d4 = d2 - abac, d5 = d1 - abac, d6 = d2 - ac2;
-    const float4 vc = d1 * d4 - d3 * d2, vb = d5 * d2 - d1 * d6, va = d3 * d6 - d5 * d4;
-    // (u, v) = (u_num, v_num) / den, region by region, the first of
-    // closest_on_triangle's tests that holds winning: set in reverse order
-    float4 u_num = vb, v_num = vc, den = va + vb + vc;                        // the face
-    const float4 e_bc = d4 - d3, f_bc = d5 - d6;
-    const int4 on_bc = (va <= 0.0f) & (e_bc >= 0.0f) & (f_bc >= 0.0f);
-    u_num = select(u_num, f_bc, on_bc);
-    v_num = select(v_num, e_bc, on_bc);
-    den = select(den, e_bc + f_bc, on_bc);
-    const int4 on_ac = (vb <= 0.0f) & (d2 >= 0.0f) & (d6 <= 0.0f);
-    u_num = select(u_num, (float4)(0.0f), on_ac);
-    v_num = select(v_num, d2, on_ac);
-    den = select(den, d2 - d6, on_ac);
-    const int4 at_c = (d6 >= 0.0f) & (d5 <= d6);
-    u_num = select(u_num, (float4)(0.0f), at_c);
-    v_num = select(v_num, (float4)(1.0f), at_c);
-    den = select(den, (float4)(1.0f), at_c);
-    const int4 on_ab = (vc <= 0.0f) & (d1 >= 0.0f) & (d3 <= 0.0f);
-    u_num = select(u_num, d1, on_ab);
-    v_num = select(v_num, (float4)(0.0f), on_ab);
-    den = select(den, d1 - d3, on_ab);
-    const int4 at_b = (d3 >= 0.0f) & (d4 <= d3);
-    u_num = select(u_num, (float4)(1.0f), at_b);
-    v_num = select(v_num, (float4)(0.0f), at_b);
-    den = select(den, (float4)(1.0f), at_b);
-    const int4 at_a = (d1 <= 0.0f) & (d2 <= 0.0f);
-    u_num = select(u_num, (float4)(0.0f), at_a);
-    v_num = select(v_num, (float4)(0.0f), at_a);
-    den = select(den, (float4)(1.0f), at_a);
-    const float4 inv = 1.0f / den;
-    const float4 u = u_num * inv, v = v_num * inv;
-    // n = p - x' = ap - u ab - v ac
-    const float4 nx = apx - u * abx - v * acx, ny = apy - u * aby - v * acy, nz = apz - u * abz - v * acz;
-    const float4 s_ap = nx * apx + ny * apy + nz * apz, s_ab = nx * abx + ny * aby + nz * abz;
-    const float4 s_ac = nx * acx + ny * acy + nz * acz;
-    const float4 n2 = nx * nx + ny * ny + nz * nz;
-    const float4 l_ap = fabs(apx) + fabs(apy) + fabs(apz), l_ab = fabs(abx) + fabs(aby) + fabs(abz);
-    const float4 l_ac = fabs(acx) + fabs(acy) + fabs(acz);
-    const float4 bound = (s_ap - fmax(fmax(s_ab, s_ac), 0.0f)) * rsqrt(n2) - 0x1p-20f * (l_ap + fmax(l_ab, l_ac));
-    return select(bound, (float4)(0.0f), n2 == 0.0f);
+    POINT_TRIANGLE_BOUNDS(float4, int4, float4);
+    (void)upper;
+    return lower;
 }
 
 // x rounded up to float32.
@@ -372,6 +397,7 @@ inline void walk_wide_points(const Geometry* g, float3 p, float margin, PointHit
             break;
     }
 }
+
 #endif
 
 #ifdef ACCEL_BVH

@@ -18,6 +18,7 @@
 #include "rays.cl"
 #include "accel_packet.cl"
 #include "point.cl"
+#include "point_group.cl"
 #include "point_order.cl"
 #include "point_grid.cl"
 #include "winding.cl"
@@ -279,29 +280,129 @@ inline uint read_item_points(const RayInput* in, __global const uint* order, uin
     return count;
 }
 
+// Points a work-item of query_closest_point and the signed distances answers
+// (CLOSEST_ITEM_POINTS): ITEM_RAYS, or with -DPOINT_GROUPS (CPU devices,
+// clrt/query/points.py) POINT_GROUPS groups of POINT_LANES that walk together
+// (point_group.cl's walk_wide_point_group), one group after the other.
+#ifdef POINT_GROUPS
+#define CLOSEST_ITEM_POINTS (POINT_GROUPS * POINT_LANES)
+#else
+#define CLOSEST_ITEM_POINTS ITEM_RAYS
+#endif
+
+#ifdef POINT_GROUPS
+// Group `group` of the work-item whose points start at `first`: the points'
+// indices (ids) and positions (device frame), and their nearest triangles
+// within their largest distances (`limited`; else any) into best, as
+// closest_point gives them; *good: the lanes of good points (the bad ones
+// are reported).  `seeds`: the slots of the nearest triangles of the group
+// before (-1: none), then of this one.  Returns how many points (0: none).
+inline uint closest_points_of_group(const Geometry* g, const RayInput* in, __global const uint* order, uint num,
+                                    uint first, bool limited, int* seeds, uint* ids, float3* points,
+                                    PointHit* best, uint* good)
+{
+    if (first >= num)
+        return 0u;
+    float3 positions[POINT_LANES];
+    float margin[POINT_LANES];
+    const uint count = min((uint)POINT_LANES, num - first);
+    for (uint k = 0; k < count; ++k) {
+        ids[k] = POINT_ORDER(order, num)[first + k];
+        positions[k] = point_position(in, ids[k]);
+    }
+    *good = 0u;
+    for (uint k = 0; k < count; ++k) {
+        float max_dist;
+        best[k].prim = -1;
+        best[k].dist = INFINITY;
+        best[k].point = (point_real3)(0);
+        best[k].u = best[k].v = 0.0f;
+        best[k].slot = -1;
+        best[k].feature = FEATURE_FACE;
+        best[k].instance = 0;
+        if (take_point(in, ids[k], positions[k], points + k, &max_dist)) {
+            *good |= 1u << k;
+            if (limited)
+                best[k].dist = max_dist;
+            margin[k] = POINT_MARGIN(points[k], in->scene_lo, in->scene_hi);
+        }
+    }
+    if (*good)
+        walk_wide_point_group(g, points, margin, *good, seeds, best);
+    for (uint k = 0; k < POINT_LANES; ++k)
+        seeds[k] = k < count && best[k].prim >= 0 ? best[k].slot : -1;
+    return count;
+}
+#endif
+
 // The nearest point of the mesh to each query point (point.cl), within the
 // point's largest distance (tmaxs: a miss beyond it), written field by field
 // into `results` (outputs 0 .. 5: point, distance, prim, u, v, instance, as
 // clrt.query.results' POINT_FIELDS; any may be absent).  The point goes back
 // to the caller's frame here (+ shift, in double where the device has it,
 // rounded to float32 once).  A miss (or a bad point): point NaN, distance
-// INFINITY, prim -1, u = v = 0.  A work-item answers ITEM_RAYS points, in
-// turn, consecutive in the order of point_order.cl: each walk starts from
-// the nearest triangle of the one before (closest_point's seed), which took
-// a third off the walks of points in a mesh's box on PoCL.
+// INFINITY, prim -1, u = v = 0.
+typedef struct {
+    __global float* point;
+    __global float* distance;
+    __global int* prim;
+    __global float* u;
+    __global float* v;
+    __global int* instance;
+} ClosestPointOutputs;
+
+// Point i's answer `best` into the outputs that are there.
+inline void write_closest_point(const ClosestPointOutputs* out, uint i, const PointHit* best, float3 shift)
+{
+    const bool found = best->prim >= 0;
+    if (out->point)
+        vstore3(found ? convert_float3(best->point + TO_POINT_REAL3(shift)) : (float3)(NAN), i, out->point);
+    if (out->distance)
+        out->distance[i] = found ? (float)best->dist : INFINITY;
+    if (out->prim)
+        out->prim[i] = best->prim;
+    if (out->u)
+        out->u[i] = found ? best->u : 0.0f;
+    if (out->v)
+        out->v[i] = found ? best->v : 0.0f;
+    if (out->instance)
+        out->instance[i] = found ? best->instance : -1;
+}
+
+// A work-item answers CLOSEST_ITEM_POINTS points, consecutive in the order of
+// point_order.cl: ITEM_RAYS in turn, each walk starting from the nearest
+// triangle of the one before (closest_point's seed), which took a third off
+// the walks of points in a mesh's box on PoCL; or POINT_GROUPS groups of
+// POINT_LANES (closest_points_of_group).
 __kernel void query_closest_point(POINT_INPUT_PARAMS, __global uchar* results, GEOMETRY_PARAMS)
 {
-    const uint first = ITEM_RAYS * get_global_id(0);
+    const uint first = CLOSEST_ITEM_POINTS * get_global_id(0);
     if (first >= launch.num_rays && !WARP_WALKS)   // (else it walks with its warp: closest_point_item)
         return;
     const Geometry g = make_geometry(GEOMETRY_ARGS);
     const RayInput in = make_point_input(POINT_INPUT_ARGS);
-    __global float* point_out = RESULT_AT(float, 0);
-    __global float* distance_out = RESULT_AT(float, 1);
-    __global int* prim_out = RESULT_AT(int, 2);
-    __global float* u_out = RESULT_AT(float, 3);
-    __global float* v_out = RESULT_AT(float, 4);
-    __global int* instance_out = RESULT_AT(int, 5);
+    ClosestPointOutputs out;
+    out.point = RESULT_AT(float, 0);
+    out.distance = RESULT_AT(float, 1);
+    out.prim = RESULT_AT(int, 2);
+    out.u = RESULT_AT(float, 3);
+    out.v = RESULT_AT(float, 4);
+    out.instance = RESULT_AT(int, 5);
+#ifdef POINT_GROUPS
+    uint ids[POINT_LANES];
+    int seeds[POINT_LANES];
+    for (uint k = 0; k < POINT_LANES; ++k)
+        seeds[k] = -1;
+    for (uint group = 0; group < POINT_GROUPS; ++group) {
+        float3 points[POINT_LANES];
+        PointHit best[POINT_LANES];
+        uint good;
+        const uint count = closest_points_of_group(&g, &in, order, launch.num_rays, first + POINT_LANES * group, true,
+                                                   seeds, ids, points, best, &good);
+        for (uint k = 0; k < count; ++k)
+            write_closest_point(&out, ids[k], best + k, in.shift);
+    }
+#else
     uint ids[ITEM_RAYS];
     float3 positions[ITEM_RAYS];
     const uint count = read_item_points(&in, order, launch.num_rays, first, ids, positions);
@@ -315,22 +416,11 @@ __kernel void query_closest_point(POINT_INPUT_PARAMS, __global uchar* results, G
                                                  seed);
         if (k >= count)
             break;
-        const bool found = best.prim >= 0;
-        if (found)
+        if (best.prim >= 0)
             seed = best.slot;
-        if (point_out)
-            vstore3(found ? convert_float3(best.point + TO_POINT_REAL3(in.shift)) : (float3)(NAN), i, point_out);
-        if (distance_out)
-            distance_out[i] = found ? (float)best.dist : INFINITY;
-        if (prim_out)
-            prim_out[i] = best.prim;
-        if (u_out)
-            u_out[i] = found ? best.u : 0.0f;
-        if (v_out)
-            v_out[i] = found ? best.v : 0.0f;
-        if (instance_out)
-            instance_out[i] = found ? best.instance : -1;
+        write_closest_point(&out, i, &best, in.shift);
     }
+#endif
 }
 
 // ---- Inside and outside (winding.cl, point.cl's sign rules).  Points as
@@ -383,13 +473,51 @@ __kernel void query_winding_number(POINT_INPUT_PARAMS, __global uchar* results,
 #define SIGN_PARITY 1
 #define SIGN_NORMAL 2
 
-// The signed distances of the ITEM_RAYS points from the launch's `first` on
+// Point p's distance to the mesh, its nearest triangle `best`, negative
+// inside by `rule` (`winding`, `normals`: the rule's buffer, or 0).
+inline float signed_distance(const Geometry* g, const RayInput* in, const int rule,
+                             __global const WindingFarField* winding, __global const PseudoNormals* normals,
+                             const PointHit* best, float3 p)
+{
+    bool inside;
+    const PointRegion region = point_region(p, in->scene_lo, in->scene_hi);
+    if (rule == SIGN_WINDING)
+        inside = winding_inside(g, winding, p, &region);
+    else if (rule == SIGN_PARITY)
+        inside = inside_by_parity(g, p, in->scene_lo, in->scene_hi);
+    else
+#ifdef ACCEL_INSTANCES
+        inside = inside_by_placed_normal(g, normals, best, p);
+#else
+        inside = inside_by_normal(g, normals, best, p);
+#endif
+    return inside ? -(float)best->dist : (float)best->dist;
+}
+
+// The signed distances of the CLOSEST_ITEM_POINTS points from the launch's `first` on
 // (in the order of point_order.cl, each walk seeded as query_closest_point's)
 // by `rule` (`winding`, `normals`: the rule's buffer, or 0), into output 0.
 inline void signed_distances(const Geometry* g, const RayInput* in, const QueryLaunch* launch,
                              __global uchar* results, __global const uint* order, uint first, const int rule,
                              __global const WindingFarField* winding, __global const PseudoNormals* normals)
 {
+    __global float* out = (__global float*)(results + launch->field_at[0]);
+#ifdef POINT_GROUPS
+    uint ids[POINT_LANES];
+    int seeds[POINT_LANES];
+    for (uint k = 0; k < POINT_LANES; ++k)
+        seeds[k] = -1;
+    for (uint group = 0; group < POINT_GROUPS; ++group) {
+        float3 points[POINT_LANES];
+        PointHit best[POINT_LANES];
+        uint good;
+        const uint count = closest_points_of_group(g, in, order, launch->num_rays, first + POINT_LANES * group, false,
+                                                   seeds, ids, points, best, &good);
+        for (uint k = 0; k < count; ++k)
+            out[ids[k]] = good & (1u << k) ? signed_distance(g, in, rule, winding, normals, best + k, points[k])
+                                            : NAN;
+    }
+#else
     uint ids[ITEM_RAYS];
     float3 positions[ITEM_RAYS];
     const uint count = read_item_points(in, order, launch->num_rays, first, ids, positions);
@@ -406,28 +534,17 @@ inline void signed_distances(const Geometry* g, const RayInput* in, const QueryL
             break;
         if (taken) {
             seed = best.slot;
-            bool inside;
-            const PointRegion region = point_region(p, in->scene_lo, in->scene_hi);
-            if (rule == SIGN_WINDING)
-                inside = winding_inside(g, winding, p, &region);
-            else if (rule == SIGN_PARITY)
-                inside = inside_by_parity(g, p, in->scene_lo, in->scene_hi);
-            else
-#ifdef ACCEL_INSTANCES
-                inside = inside_by_placed_normal(g, normals, &best, p);
-#else
-                inside = inside_by_normal(g, normals, &best, p);
-#endif
-            d = inside ? -(float)best.dist : (float)best.dist;
+            d = signed_distance(g, in, rule, winding, normals, &best, p);
         }
-        ((__global float*)(results + launch->field_at[0]))[i] = d;
+        out[i] = d;
     }
+#endif
 }
 
 __kernel void query_signed_distance_winding(POINT_INPUT_PARAMS, __global uchar* results,
                                             __global const WindingFarField* winding, GEOMETRY_PARAMS)
 {
-    const uint first = ITEM_RAYS * get_global_id(0);
+    const uint first = CLOSEST_ITEM_POINTS * get_global_id(0);
     if (first >= launch.num_rays && !WARP_WALKS)
         return;
     const Geometry g = make_geometry(GEOMETRY_ARGS);
@@ -437,7 +554,7 @@ __kernel void query_signed_distance_winding(POINT_INPUT_PARAMS, __global uchar* 
 
 __kernel void query_signed_distance_parity(POINT_INPUT_PARAMS, __global uchar* results, GEOMETRY_PARAMS)
 {
-    const uint first = ITEM_RAYS * get_global_id(0);
+    const uint first = CLOSEST_ITEM_POINTS * get_global_id(0);
     if (first >= launch.num_rays && !WARP_WALKS)
         return;
     const Geometry g = make_geometry(GEOMETRY_ARGS);
@@ -448,7 +565,7 @@ __kernel void query_signed_distance_parity(POINT_INPUT_PARAMS, __global uchar* r
 __kernel void query_signed_distance_normal(POINT_INPUT_PARAMS, __global uchar* results,
                                            __global const PseudoNormals* normals, GEOMETRY_PARAMS)
 {
-    const uint first = ITEM_RAYS * get_global_id(0);
+    const uint first = CLOSEST_ITEM_POINTS * get_global_id(0);
     if (first >= launch.num_rays && !WARP_WALKS)
         return;
     const Geometry g = make_geometry(GEOMETRY_ARGS);

@@ -51,7 +51,7 @@ from clrt.errors import InputError
 from clrt.config import NO_RESULT, RAY_CHECKS
 from clrt.layouts import QUERY_LAUNCH
 from clrt.query.kernels import QUERY_GROUP, QUERY_KERNELS, point_defines
-from clrt.query.points import PointQueries
+from clrt.query.points import PointQueries, point_group_defines
 from clrt.query.instances import SceneMoves, query_scene, source_of
 from clrt.query.rays import CameraRays, PinholeRays, RayBatch, cull_code, is_device_array
 from clrt.query.results import (ALL_HITS_FIELDS, CAMERA_FIELDS, CLOSEST_FIELDS, RESULT_BYTES, RESULT_DTYPES,
@@ -246,13 +246,21 @@ class Accel(PointQueries, SceneMoves):
         self.all_hits_capacity = ALL_HITS_CAPACITY
         # Rays a work-item of query_closest / query_any answers (trace.cl's ITEM_RAYS).
         self.rays_per_item = scene.rays_per_item
-        self.kernels = scene.kernels("trace.cl", QUERY_KERNELS, point_defines(self.queue.device))
+        # Closest points many at a time on CPU devices (clrt/query/points.py); the point walks of GPUs
+        # (clrt.query.kernels.point_defines).
+        self.point_defines = point_group_defines(scene)
+        self.kernels = scene.kernels("trace.cl", QUERY_KERNELS, self.trace_defines())
         self._scene_value = scene.geometry.scene_value()
         self._buffers: dict[str, cl.Buffer] = {}
         self._hits_per_ray = float(ALL_HITS_PER_RAY)
         self.launches: list[cl.Event] = []   # query launches, see kernel_ms
         self._launches_ns = 0                  # kernel time of launches let go since kernel_ms
         self.result_pool = PinnedPool(self.context, self.queue, RESULT_POOL_SIZE, RESULT_POOL_MAX_BYTES)
+
+    def trace_defines(self) -> dict:
+        """The defines of this Accel's trace.cl program beyond the scene's: the
+        device's point walks and, on CPU devices, the point groups."""
+        return {**point_defines(self.queue.device), **self.point_defines}
 
     # ----------------------------------------------------------------------- chunks and memory
 

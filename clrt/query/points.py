@@ -16,17 +16,42 @@ import numpy as np
 import pyopencl as cl
 
 from clrt.accel.disks import packet_corners, wide_disks
-from clrt.config import NO_RESULT, POINT_CELLS, POINT_OFFSETS_GROUP, RAY_CHECKS
+from clrt.config import (NO_RESULT, POINT_CANDIDATES, POINT_CELLS, POINT_GROUPS, POINT_LANES, POINT_OFFSETS_GROUP,
+                         RAY_CHECKS)
 from clrt.device.program import launch_size
 from clrt.device.sharing import one_at_a_time
-from clrt.query.inside import GridPoints, grid_axes, pseudo_normals, sign_kernel, winding_nodes
+from clrt.query.inside import SIGN_KERNELS, GridPoints, grid_axes, pseudo_normals, sign_kernel, winding_nodes
 from clrt.query.kernels import QUERY_GROUP
 from clrt.query.rays import PointBatch
 from clrt.query.results import INSIDE_FIELDS, POINT_FIELDS, ClosestPoints, asked_fields, with_fields
 
 
+#: The kernels that answer closest points (trace.cl's CLOSEST_ITEM_POINTS a work-item).
+CLOSEST_KERNELS = ("query_closest_point", *SIGN_KERNELS.values())
+
+
+def point_group_defines(scene) -> dict:
+    """The defines of the query program (trace.cl) with which the closest-point
+    kernels walk POINT_LANES points at a time (point_group.cl's
+    walk_wide_point_group): where the device walks the wide BVH of a one-level
+    scene and packets of eight rays (RAY_PACKETS) -- CPU devices; else none."""
+    if scene.rays_per_item != 8 or scene.geometry.wide is None or "ACCEL_INSTANCES" in scene.geometry.defines:
+        return {}
+    return {"POINT_LANES": POINT_LANES, "POINT_GROUPS": POINT_GROUPS, "POINT_CANDIDATES": POINT_CANDIDATES}
+
+
 class PointQueries:
     """Accel's point queries (mixed into :class:`~clrt.query.accel.Accel`)."""
+
+    def _point_items(self, kernel: str, m: int) -> int:
+        """Work-items of point kernel ``kernel`` for ``m`` points: trace.cl's
+        ITEM_RAYS points a work-item, or for the closest-point kernels where
+        they walk points in groups its CLOSEST_ITEM_POINTS (POINT_GROUPS
+        groups of POINT_LANES)."""
+        per_item = self.rays_per_item
+        if kernel in CLOSEST_KERNELS and self.point_defines:
+            per_item = self.point_defines["POINT_GROUPS"] * self.point_defines["POINT_LANES"]
+        return -(-m // per_item)
 
     def _point_outputs(self, n: int, fields, on_device: bool) -> dict:
         shapes = {name: (n, *POINT_FIELDS[name].item_shape) for name in fields}
@@ -100,7 +125,7 @@ class PointQueries:
                 nbytes += m * 4 * int(np.prod(POINT_FIELDS[name].item_shape, dtype=int))
             results = self._buffer("results", nbytes)
             self._launch("query_closest_point", (origins, tmaxs, bad, launch, order, results,
-                                                 *self._point_geometry()), -(-m // self.rays_per_item))
+                                                 *self._point_geometry()), self._point_items("query_closest_point", m))
             for name, at in placed.items():
                 self._copy_out(out[name], start, stop, results, at)
         self._check(batch)   # also waits for the copies
@@ -200,7 +225,7 @@ class PointQueries:
                 nbytes += m * np.dtype(INSIDE_FIELDS[name].dtype).itemsize
             results = self._buffer("results", nbytes)
             self._launch(kernel, (origins, tmaxs, bad, launch, order, results, *rule, *self._point_geometry()),
-                         -(-m // self.rays_per_item))   # trace.cl's ITEM_RAYS points a work-item
+                         self._point_items(kernel, m))
             for name, at in placed.items():
                 self._copy_out(out[name], start, stop, results, at)
         self._check(source)   # also waits for the copies
