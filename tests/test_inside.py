@@ -43,6 +43,25 @@ def exact_winding_numbers(points, corners) -> np.ndarray:
     return angle.sum(axis=1) / (4 * np.pi)
 
 
+def points_across_one_half(a, b, corners) -> np.ndarray:
+    """float32 points just either side of where the exact winding number of
+    the triangles ``corners`` crosses 1/2 on segments a -> b (those it crosses
+    on): found by bisection, then offset 1e-5 to 1e-3 along each segment."""
+    wa, wb = exact_winding_numbers(a, corners), exact_winding_numbers(b, corners)
+    keep = (wa - 0.5) * (wb - 0.5) < 0
+    a, b, wa = a[keep], b[keep], wa[keep]
+    for _ in range(40):   # bisection on the exact winding number
+        mid = (a + b) / 2
+        wm = exact_winding_numbers(mid, corners)
+        same = (wm - 0.5) * (wa - 0.5) > 0
+        a, wa = np.where(same[:, None], mid, a), np.where(same, wm, wa)
+        b = np.where(same[:, None], b, mid)
+    along = (b - a) / np.linalg.norm(b - a, axis=1, keepdims=True)
+    offsets = np.array([-1e-3, -1e-4, -1e-5, 1e-5, 1e-4, 1e-3])
+    points = (a[:, None] + offsets[None, :, None] * along[:, None]).reshape(-1, 3).astype(np.float32)
+    return points
+
+
 def _slab() -> Mesh:
     """A plate 2 x 2 x 0.02: thin, so points inside lie near both large faces."""
     return primitives.box((2.0, 2.0, 0.02))
@@ -162,18 +181,7 @@ def test_contains_decides_near_one_half_as_the_winding_number(device):
     xz = rng.uniform(-0.5, 0.5, (400, 2))
     a = np.stack([xz[:, 0], np.full(400, 0.6), xz[:, 1]], axis=1)
     b = np.stack([xz[:, 0], np.full(400, -0.3), xz[:, 1]], axis=1)
-    wa, wb = exact_winding_numbers(a, corners), exact_winding_numbers(b, corners)
-    keep = (wa - 0.5) * (wb - 0.5) < 0
-    a, b, wa = a[keep], b[keep], wa[keep]
-    for _ in range(40):   # bisection on the exact winding number
-        mid = (a + b) / 2
-        wm = exact_winding_numbers(mid, corners)
-        same = (wm - 0.5) * (wa - 0.5) > 0
-        a, wa = np.where(same[:, None], mid, a), np.where(same, wm, wa)
-        b = np.where(same[:, None], b, mid)
-    along = (b - a) / np.linalg.norm(b - a, axis=1, keepdims=True)
-    offsets = np.array([-1e-3, -1e-4, -1e-5, 1e-5, 1e-4, 1e-3])
-    points = (a[:, None] + offsets[None, :, None] * along[:, None]).reshape(-1, 3).astype(np.float32)
+    points = points_across_one_half(a, b, corners)
     exact = _exact(bowl, points)
     assert len(points) >= 300 and (np.abs(exact - 0.5) < 1e-4).sum() >= 100
     accel = clrt.Accel(bowl, device=device)

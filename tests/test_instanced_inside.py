@@ -26,7 +26,8 @@ from clrt.scene.instances import as_instances
 from clrt.scene.mesh import Mesh
 from clrt.scene import primitives
 
-from test_inside import CLOSED, OPEN, PARITY_DIRECTIONS, _beside_edges, exact_winding_numbers
+from test_inside import (CLOSED, OPEN, PARITY_DIRECTIONS, _beside_edges, exact_winding_numbers,
+                         points_across_one_half)
 from test_instances import _affine, _rotation
 from test_point_queries import reference
 
@@ -225,18 +226,7 @@ def test_contains_decides_near_one_half_in_an_unevenly_scaled_instance(device):
     xz = rng.uniform(-0.5, 0.5, (300, 2))   # vertical segments (in the bowl's space) through its opening
     a = np.stack([xz[:, 0], np.full(300, 0.6), xz[:, 1]], axis=1) @ linear.T + m[:3, 3]
     b = np.stack([xz[:, 0], np.full(300, -0.3), xz[:, 1]], axis=1) @ linear.T + m[:3, 3]
-    wa, wb = exact_winding_numbers(a, corners), exact_winding_numbers(b, corners)
-    keep = (wa - 0.5) * (wb - 0.5) < 0
-    a, b, wa = a[keep], b[keep], wa[keep]
-    for _ in range(40):   # bisection on the exact winding number
-        mid = (a + b) / 2
-        wm = exact_winding_numbers(mid, corners)
-        same = (wm - 0.5) * (wa - 0.5) > 0
-        a, wa = np.where(same[:, None], mid, a), np.where(same, wm, wa)
-        b = np.where(same[:, None], b, mid)
-    along = (b - a) / np.linalg.norm(b - a, axis=1, keepdims=True)
-    offsets = np.array([-1e-3, -1e-4, -1e-5, 1e-5, 1e-4, 1e-3])
-    points = (a[:, None] + offsets[None, :, None] * along[:, None]).reshape(-1, 3).astype(np.float32)
+    points = points_across_one_half(a, b, corners)
     exact = exact_winding_numbers(points, corners)
     assert len(points) >= 300 and (np.abs(exact - 0.5) < 1e-4).sum() >= 100
     accel = clrt.Accel([(bowl, m), (primitives.icosphere(1), _affine(shift=(5.0, 0.0, 0.0)))], device=device)

@@ -237,6 +237,28 @@ inline float radius_up(point_real r)
     return (point_real)f >= r ? f : nextafter(f, INFINITY);
 }
 
+// The area of the triangles in slots first .. first + count - 1 (*area) and
+// their area-weighted centroid, rounded to float32: the centre a leaf's
+// far field is taken about (leaf_winding_node, leaf_placed_winding_node).
+inline float3 leaf_centre(const Geometry* g, int first, int count, point_real* area_out)
+{
+    point_real area = 0;
+    point_real3 weighted = (point_real3)(0), mean = (point_real3)(0);
+    for (int s = first; s < first + count; ++s) {
+        __global const TriangleVerts* t = SPLIT_AT(g, tris, s);
+        const point_real3 a = TO_POINT_REAL3(t->v0.xyz), b = TO_POINT_REAL3(t->v1.xyz);
+        const point_real3 c = TO_POINT_REAL3(t->v2.xyz);
+        const point_real3 vector_area = cross(b - a, c - a) / 2;
+        const point_real at = sqrt(dot(vector_area, vector_area));
+        area += at;
+        weighted += at * (a + b + c) / 3;
+        mean += (a + b + c) / 3;
+    }
+    *area_out = area;
+    // Triangles of no area: any centre serves (their series is zero), the mean of their centroids.
+    return convert_float3(area > 0 ? weighted / area : mean / count);
+}
+
 #include "winding_placed.cl"
 
 // The sum of the solid angles of the mesh seen from p (device frame), with
@@ -398,20 +420,8 @@ inline WindingNode winding_node_of(float3 centre, float radius, point_real3 dipo
 // + (sum d)_j (sum d)_k) / 12: first = sym(sum v (x) m), second = sym(sum v (x) Q).
 inline WindingNode leaf_winding_node(const Geometry* g, int first, int count)
 {
-    point_real area = 0;
-    point_real3 weighted = (point_real3)(0), mean = (point_real3)(0);
-    for (int s = first; s < first + count; ++s) {
-        __global const TriangleVerts* t = SPLIT_AT(g, tris, s);
-        const point_real3 a = TO_POINT_REAL3(t->v0.xyz), b = TO_POINT_REAL3(t->v1.xyz);
-        const point_real3 c = TO_POINT_REAL3(t->v2.xyz);
-        const point_real3 vector_area = cross(b - a, c - a) / 2;
-        const point_real at = sqrt(dot(vector_area, vector_area));
-        area += at;
-        weighted += at * (a + b + c) / 3;
-        mean += (a + b + c) / 3;
-    }
-    // Triangles of no area: any centre serves (their series is zero), the mean of their centroids.
-    const float3 centre = convert_float3(area > 0 ? weighted / area : mean / count);
+    point_real area;
+    const float3 centre = leaf_centre(g, first, count, &area);
     const point_real3 cr = TO_POINT_REAL3(centre);
     point_real3 dipole = (point_real3)(0);
     point_real m[6] = {0, 0, 0, 0, 0, 0};

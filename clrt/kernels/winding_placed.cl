@@ -354,19 +354,8 @@ inline void add_moved_moments(point_real3 n3, const point_real* m0, const point_
 // (leaf_winding_node's sums, the moments whole).
 inline PlacedWindingNode leaf_placed_winding_node(const Geometry* g, int first, int count)
 {
-    point_real area = 0;
-    point_real3 weighted = (point_real3)(0), mean = (point_real3)(0);
-    for (int s = first; s < first + count; ++s) {
-        __global const TriangleVerts* t = SPLIT_AT(g, tris, s);
-        const point_real3 a = TO_POINT_REAL3(t->v0.xyz), b = TO_POINT_REAL3(t->v1.xyz);
-        const point_real3 c = TO_POINT_REAL3(t->v2.xyz);
-        const point_real3 vector_area = cross(b - a, c - a) / 2;
-        const point_real at = sqrt(dot(vector_area, vector_area));
-        area += at;
-        weighted += at * (a + b + c) / 3;
-        mean += (a + b + c) / 3;
-    }
-    const float3 centre = convert_float3(area > 0 ? weighted / area : mean / count);
+    point_real area;
+    const float3 centre = leaf_centre(g, first, count, &area);
     const point_real3 cr = TO_POINT_REAL3(centre);
     point_real3 dipole = (point_real3)(0);
     point_real m[9] = {0};
