@@ -78,24 +78,17 @@ inline uint spread_cell_bits(uint x)
     return out;
 }
 
-// The cell of point p (device frame) of the grid over the box lo .. hi, in
-// Morton order.  NaN points (reported by the query) land in cell 0:
-// convert_uint_sat takes NaN to 0.
-inline uint point_cell(float3 p, float3 lo, float3 hi)
-{
-    const float3 extent = fmax(hi - lo, (float3)(FLT_MIN));
-    const uint3 q = min(convert_uint3_sat((p - lo) / extent * (float)(1 << POINT_CELL_BITS)),
-                        (uint3)((1u << POINT_CELL_BITS) - 1u));
-    return spread_cell_bits(q.x) | (spread_cell_bits(q.y) << 1) | (spread_cell_bits(q.z) << 2);
-}
-
 __kernel void point_cells(__global const float* origins, const QueryLaunch launch, __global uint* order)
 {
     const uint i = get_global_id(0);
     if (i >= launch.num_rays)
         return;
     const float3 p = vload3(0, origins + (size_t)(launch.in_first + i) * launch.origin_stride) - launch.shift.xyz;
-    const uint cell = point_cell(p, launch.scene_lo.xyz, launch.scene_hi.xyz);
+    const float3 extent = fmax(launch.scene_hi.xyz - launch.scene_lo.xyz, (float3)(FLT_MIN));
+    // NaN points (reported by the query) land in cell 0: convert_uint_sat takes NaN to 0.
+    const uint3 q = min(convert_uint3_sat((p - launch.scene_lo.xyz) / extent * (float)(1 << POINT_CELL_BITS)),
+                        (uint3)((1u << POINT_CELL_BITS) - 1u));
+    const uint cell = spread_cell_bits(q.x) | (spread_cell_bits(q.y) << 1) | (spread_cell_bits(q.z) << 2);
     POINT_CELL_OF(order)[i] = cell;
     atomic_inc(order + cell);
 }

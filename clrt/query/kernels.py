@@ -10,8 +10,8 @@ in at the launch's byte offsets (QueryLaunch.field_at), and the geometry.
 from __future__ import annotations
 
 import numpy as np
-import pyopencl as cl
 
+from clrt.device.context import device_kind
 from clrt.device.signature import GEOMETRY, buffer, value
 from clrt.layouts import CAMERA, QUERY_LAUNCH
 
@@ -28,6 +28,7 @@ from clrt.layouts import CAMERA, QUERY_LAUNCH
 # the last ray.
 QUERY_GROUP: dict = {"gpu": 128, "cpu": 64}
 
+
 def point_defines(device) -> dict:
     """The trace.cl program's point-query choices for ``device`` (point.cl,
     point_order.cl and winding.cl say what each does).  On GPUs, whose
@@ -35,9 +36,9 @@ def point_defines(device) -> dict:
     are taken for a whole cell of points at once (POINT_CELL_REGIONS); on
     NVIDIA's, whose compiler takes PTX, the 32 points of a warp walk the BVH
     for their closest points together (POINT_WARP_WALK).  CPU devices walk
-    the wide BVH (point.cl's walk_wide_points), one point at a time.  Measured
+    the wide BVH instead (their point groups: clrt.query.points).  Measured
     on the H200: docs/benchmarks.md."""
-    if device.type & cl.device_type.CPU:
+    if device_kind(device) == "cpu":
         return {}
     defines = {"POINT_CELL_REGIONS": None}
     if "cl_nv_compiler_options" in device.extensions.split():
