@@ -15,9 +15,9 @@ the top level built again, on the device or on the host by the meshes'
 builder (``--builders``) -- its wall time (the median of ``--repeat`` after a
 warm-up) and parts: on the host clock ``convert`` (the transforms as an
 array), for the device ``host`` (their copy into page-locked memory, the
-launches, the world's frame), ``first pass`` (upload, checks and boxes, the
-read of their bounds), ``finish`` (the copies over the scene's buffers, the
-wait); for the host ``table``, ``top level``, ``upload``; then the device's
+launches queued at once, the checks), ``wait`` (for the first pass's
+summary: upload, checks, boxes and the frame the device chose), ``finish``
+(the copies over the scene's buffers, the wait for the end); for the host ``table``, ``top level``, ``upload``; then the device's
 phases from profiling events.  Prints markdown tables; timing is done here,
 never in tests.
 """

@@ -370,6 +370,7 @@ def test_bad_moves_are_one_line(scene, builder, device):
     words as when instances are made; nothing moves."""
     instances = scene[0]
     accel = clrt.Accel(instances, builder=builder, device=device)
+    accel.move_instances(instances.transforms)   # moved: its host copies are read from the device when asked
     _one_line_error(lambda: accel.move_instances(instances.transforms[:5]),
                     r"transforms must have shape \(6, 4, 4\), got \(5, 4, 4\)")
     bad = instances.transforms.copy()
@@ -395,7 +396,11 @@ def test_bad_moves_are_one_line(scene, builder, device):
                     r"move_instances needs an Accel of instances")
     rays = _rays(instances.bounds, 200, seed=1)
     hits = accel.trace(*rays)   # nothing moved by the refusals
-    assert np.array_equal(hits.t, clrt.Accel(instances, builder=builder, device=device).trace(*rays).t)
+    unmoved = clrt.Accel(instances, builder=builder, device=device)
+    assert np.array_equal(hits.t, unmoved.trace(*rays).t)
+    # nor the host copies, read when asked from the device's buffers (the refused placements were built there)
+    assert accel.acceleration.instances.tobytes() == unmoved.acceleration.instances.tobytes()
+    assert accel.acceleration.rows.tobytes() == unmoved.acceleration.rows.tobytes()
     thin[1, :3, :3] = turned[0] @ np.diag([1.0, 1.05e-6, 1.0]) @ turned[1]   # condition 9.5e5: it moves
     accel.move_instances(thin)
     fresh = clrt.Accel(Instances(instances.meshes, instances.mesh_of, thin), builder=builder, device=device)

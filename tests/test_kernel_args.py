@@ -21,6 +21,7 @@ from clrt.scene.texture import Texture
 
 # numpy dtype of a declared scalar -> the OpenCL type name clGetKernelArgInfo reports
 TYPE_NAMES = {np.dtype(np.uint32): "uint", np.dtype(np.int32): "int", np.dtype(np.float32): "float",
+              np.dtype(np.float64): "double",
               np.dtype(np.uint64): "ulong", **{dtype: name for name, dtype in layouts.STRUCTS.items()}}
 
 

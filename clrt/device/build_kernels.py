@@ -65,6 +65,8 @@ BUILD_KERNELS = {
     # The top level of a scene of instances (build_instances.cl, clrt/device/top_level.py).
     "place_instances": (B("transforms"), B("mesh_of"), B("meshes"), U("num_instances"), B("group_results"),
         B("state")),
+    "instance_frame": (B("group_results"), U("groups"), value("recentre_distance", np.float64), B("frame"),
+        B("summary")),
     "instance_rows": (B("transforms"), B("mesh_of"), B("meshes"), B("frame"), U("num_instances"), B("table"),
         B("keys"), B("ids"), B("arrivals")),
     "lbvh_nodes": (B("keys"), U("num_instances"), B("children"), B("parents")),

@@ -52,17 +52,15 @@ def build_two_level(instances: Instances, accel: str, builder: str, leaf_size: i
     if accel != "none" and bottoms[0].builder == "device":
         found = {}
 
-        def frame_of(recheck, far, bounds):   # (the instances' transforms are checked: Instances)
-            found["bounds"] = bounds
-            return device_origin(bounds)
+        def checked(recheck, far, bounds, origin):   # (the instances' transforms are checked: Instances)
+            found.update(bounds=bounds, origin=origin)
 
         top_build = DeviceTopLevel(create_context(device)[0], places, mesh_bounds, mesh_origins, accel)
-        top_build.place(instances.transforms, frame_of)
+        top_build.place(instances.transforms, checked)
         table, top = top_build.read()
-        bounds = found["bounds"]
         two = assemble(bottoms, table, top, accel, top_build.depth_bound, start)
         two.device_top = top_build
-        return two, np.concatenate(corners), bounds, device_origin(bounds)
+        return two, np.concatenate(corners), found["bounds"], found["origin"]
     bounds = instances.bounds
     origin = device_origin(bounds)
     table, _ = instance_table(instances.transforms, instances.mesh_of, mesh_bounds, mesh_origins, origin)
@@ -135,12 +133,15 @@ def move_instances(scene: DeviceScene, instances: Instances, transforms, profile
     if on_device:
         frame = {}
 
-        def frame_of(recheck, far, bounds):
+        def checked(recheck, far, bounds, origin):
             _checked(m, instances, recheck, far)
-            frame.update(bounds=bounds, origin=device_origin(bounds))
-            return frame["origin"]
+            frame.update(bounds=bounds, origin=origin)
 
-        last = two.device_top.place(m, frame_of, scene.queue if profile else None, times)
+        try:
+            last = two.device_top.place(m, checked, scene.queue if profile else None, times)
+        except InputError:   # its buffers back to the last placement (the host copies read from them)
+            two.device_top.place(instances.transforms, lambda *_: None)
+            raise
         placed = time.perf_counter()
         bounds = frame["bounds"]
         # The host copies are read back when asked for, from this move's

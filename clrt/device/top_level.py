@@ -3,15 +3,15 @@ table computed from the transforms, and a linear BVH over the instances'
 world boxes (build_instances.cl, in the device builder's program; docs/instances.md).
 
     >>> top = DeviceTopLevel(context, table, mesh_bounds, mesh_origins, "box")
-    >>> last = top.place(transforms, frame_of)    # the table and rows, in top's buffers
+    >>> last = top.place(transforms, checked)     # the table and rows, in top's buffers
     >>> table, acceleration = top.read()          # host copies (the first build; statistics)
     >>> top.set_mesh_frame(k, bounds, origin)     # mesh k refitted: its box and origin for the next place
 
 What it is for: moving instances (clrt.device.instances.move_instances)
 rebuilds only the table and the top level, and their host part must be
-tiny -- one copy of the transforms into page-locked memory, one read of a
-few hundred numbers between the two passes, the launches (thirteen on a GPU),
-one wait at the end.  The host's twin is clrt.accel.instances
+tiny -- one copy of the transforms into page-locked memory, the launches
+(fourteen on a GPU) queued at once, the device choosing the world's frame
+itself, one read of a dozen numbers for the host's checks.  The host's twin is clrt.accel.instances
 (instance_table, the same rows bit for bit; top_level, a binned SAH tree):
 a scene built with a host builder moves there.
 
@@ -38,6 +38,7 @@ from clrt.device.pinned import mapped_block
 from clrt.device.program import build_program
 from clrt.device.signature import typed_kernels
 from clrt.layouts import BVH_PAIR_NODE, INSTANCE
+from clrt.scene import arrays
 
 # Phases of a place(), in order, as its timings name them.
 PHASES = ("upload", "place", "rows", "sort", "nodes", "fit")
@@ -100,7 +101,9 @@ class DeviceTopLevel:
         self.groups = min(_groups(n), MAX_REDUCE_GROUPS)
         self.group_results = cl.Buffer(context, mf.READ_WRITE, 8 * GROUP_RESULTS * self.groups)
         self.results = np.empty((self.groups, GROUP_RESULTS))
-        self.frame = cl.Buffer(context, mf.READ_ONLY, 48)
+        self.frame = cl.Buffer(context, mf.READ_WRITE, 48)
+        self.summary = cl.Buffer(context, mf.READ_WRITE, 8 * 12)
+        self.summary_host = np.zeros(12)
         # Scratch of its own (the sort's keys, ids and state): the builder's
         # grow and go, and the launch sites keep their arguments.
         self.scratch = Workspace(context)
@@ -135,24 +138,29 @@ class DeviceTopLevel:
         queue = build_queue(self.context, self.context.devices[0])
         cl.enqueue_copy(queue, self.meshes, row, dst_offset=row.nbytes * int(mesh), is_blocking=True)
 
-    def place(self, transforms: np.ndarray, frame_of, queue: cl.CommandQueue | None = None,
+    def place(self, transforms: np.ndarray, checked, queue: cl.CommandQueue | None = None,
               timings: dict | None = None) -> cl.Event:
         """Build the table and the top level for ``transforms`` ((I, 4, 4),
         object -> world) into this object's buffers; returns the last launch's
         event (nothing waits for it here).
 
-        ``frame_of(recheck, far, bounds)`` is called between the passes, with
-        the first instance whose transform the host must check
+        Every launch is queued at once: the device chooses the world's frame
+        itself (instance_frame, as the host's device_origin).  Then the host
+        waits for the summary of the first pass -- the device goes on with the
+        rest -- and calls ``checked(recheck, far, bounds, origin)`` with the
+        first instance whose transform it must check
         (clrt.accel.instances.to_recheck; None if none), the first placed
-        past MAX_COORDINATE (or None) and the instances' world box ((2, 3)
-        float64, the caller's frame): it returns the world's device origin,
-        or raises -- then only scratch has been written.
+        past MAX_COORDINATE (or None), the instances' world box ((2, 3)
+        float64, the caller's frame) and the world's device origin ((3,)
+        float64); it may raise -- then this object's buffers hold the refused
+        placement (the caller places the last good one again), the scene's
+        are untouched.
 
         ``queue``: a queue with profiling to run on (benchmarks; ``timings``
         then gets each phase's device ms, PHASES), else the context's build
         queue.  ``timings`` also gets host ms: "host" (the copy of the
-        transforms, the launches' queueing, the frame) and "first pass" (the
-        wait for the bounds)."""
+        transforms, the launches' queueing, the checks) and "wait" (for the
+        summary)."""
         n = self.count
         profiled = queue is not None
         queue = queue if profiled else build_queue(self.context, self.context.devices[0])
@@ -178,22 +186,13 @@ class DeviceTopLevel:
         events["upload"].append(upload)
         launch("place", k["place_instances"], self.groups, self.transforms, self.mesh_of, self.meshes,
                np.uint32(n), self.group_results, state)
-        queued = time.perf_counter()
-        cl.enqueue_copy(queue, self.results, self.group_results, is_blocking=True)
-        read = time.perf_counter()
-        low, high = self.results.min(axis=0), self.results.max(axis=0)   # each column needs one of them
-        bounds = np.stack([low[0:3], high[3:6]])
-        first = [int(low[12 + j]) for j in range(2)]
-        origin = np.asarray(frame_of(*[f if f < n else None for f in first], bounds), np.float64)
-        # The Morton codes' box: the centres' bounds in the device's frame.
-        frame = np.zeros((3, 4), np.float32)
-        frame[0, :3] = origin
-        frame[1, :3], frame[2, :3] = low[6:9] - origin, high[9:12] - origin
-        # (pyopencl waits for a write from host memory when its event goes:
-        # the writes' events stay until the next place, done by then.)
-        self.writes = (upload, cl.enqueue_copy(queue, self.frame, frame, is_blocking=False))
-        last = launch("rows", k["instance_rows"], _groups(n), self.transforms, self.mesh_of, self.meshes,
-                      self.frame, np.uint32(n), self.table, keys[0], ids[0], self.arrivals)
+        frame_kernel = k["instance_frame"]
+        frame_kernel.bound = False     # its arguments each time: RECENTRE_DISTANCE may change (tests)
+        launch("place", frame_kernel, 1, self.group_results, np.uint32(self.groups),
+               np.float64(arrays.RECENTRE_DISTANCE), self.frame, self.summary, group=1)
+        summary = cl.enqueue_copy(queue, self.summary_host, self.summary, is_blocking=False)
+        launch("rows", k["instance_rows"], _groups(n), self.transforms, self.mesh_of, self.meshes,
+               self.frame, np.uint32(n), self.table, keys[0], ids[0], self.arrivals)
         sorted_ids = ids[0]
         if n > 1:
             sorted_ids = queue_sort(k, launch, ws, self.kind, n, keys, ids, state)
@@ -201,11 +200,20 @@ class DeviceTopLevel:
                    self.parents)
         last = launch("fit", k["lbvh_fit"], _groups(n), self.children, self.parents, sorted_ids, self.table,
                       np.uint32(n), self.boxes, self.arrivals, self.rows, self.exact_rows)
+        queue.flush()
+        queued = time.perf_counter()
+        summary.wait()
+        waited = time.perf_counter()
         self.last = last
-        self.place_ms = 1e3 * (time.perf_counter() - start)
-        if timings is not None:
-            timings["host"] = 1e3 * ((queued - start) + (time.perf_counter() - read))
-            timings["first pass"] = 1e3 * (read - queued)
+        self.writes = (upload,)   # (pyopencl waits for a write from host memory when its event goes)
+        r = self.summary_host
+        try:
+            checked(*[int(f) if f < n else None for f in r[9:11]], r[0:6].reshape(2, 3).copy(), r[6:9].copy())
+        finally:
+            self.place_ms = 1e3 * (time.perf_counter() - start)
+            if timings is not None:
+                timings["host"] = 1e3 * ((queued - start) + (time.perf_counter() - waited))
+                timings["wait"] = 1e3 * (waited - queued)
         # (the next place's launches reuse the scratch: on the build queue
         # they queue behind these; a queue of the caller's is waited for)
         if profiled:

@@ -4,8 +4,9 @@
 //   place_instances  each transform checked and its mesh's box mapped into
 //                    the world (the caller's frame); per work-group the
 //                    bounds of those boxes and of their centres, and the
-//                    first instance each check names -- all the host reads
-//                    before it chooses the world's device frame
+//                    first instance each check names
+//   instance_frame   the world's device frame (device_origin's choice) from
+//                    them, and a summary the host reads at the end
 //   instance_rows    each instance's Instance row in that frame (both maps,
 //                    the padded world box, the mirror flag, the smallest
 //                    scale's bound) and the Morton code of its box's centre
@@ -15,7 +16,7 @@
 //   lbvh_fit         bottom up: a leaf climbs while it is the second child to
 //                    arrive at a node, and writes that node's row
 //
-// Thirteen launches on a GPU (and one read between the first two): moving 10k
+// Fourteen launches on a GPU, queued at once (one read at the end): moving 10k
 // instances is bound by launches, not by arithmetic.  The row arithmetic is
 // clrt/accel/instances.py's, operation for operation in float64 without
 // contraction into fma (the host rounds each product) and without a function that rounds
@@ -200,6 +201,64 @@ void place_instances(const global double4* transforms, const global int* mesh_of
         out[12] = (double)firsts[0];
         out[13] = (double)firsts[BUILD_GROUP];
     }
+}
+
+// clrt.scene.arrays.device_origin on one axis: the box lo..hi on it, the
+// box's diagonal (its rounding as the host's: no contraction, same order).
+inline double origin_on_axis(double lo, double hi, double diagonal, double recentre_distance)
+{
+    const double near = fmin(fabs(lo), fabs(hi));
+    if (lo * hi <= 0.0 || !(near >= recentre_distance * diagonal))
+        return 0.0;
+    const double far = fmax(fabs(lo), fabs(hi));
+    const float far32 = convert_float(far);
+    double grain = (double)(nextafter(far32, INFINITY) - far32);     // numpy's spacing of a float32
+    if (diagonal > 0.0) {
+        int e;
+        frexp(diagonal / 4.0, &e);                                    // 2^(e - 1) <= diagonal / 4 < 2^e
+        grain = fmax(grain, ldexp(1.0, e - 1));
+    }
+    const double c = rint(0.5 * (lo + hi) / grain) * grain;          // rint: ties to even, as Python's round
+    return (double)convert_float(c) == c && c * lo > 0.0 && fabs(c) <= 2.0 * near && far <= 2.0 * fabs(c) ? c
+                                                                                                        : 0.0;
+}
+
+// The world's device frame from place_instances' per-group results (`groups`
+// of them, at most MAX_REDUCE_GROUPS: one work-item reads them all): the
+// device origin of the instances' box, as the host's device_origin chooses
+// it, and the box of the centres in that frame, into `frame` (instance_rows
+// reads it: no wait for the host between the passes); and for the host, read
+// at the end, `summary`: the box lo, hi, the origin (xyz each) and the first
+// instance each check names (num_instances: none), as doubles.
+__kernel void instance_frame(const global double* group_results, const uint groups,
+                             const double recentre_distance, global float4* frame, global double* summary)
+{
+    if (get_global_id(0) != 0)
+        return;
+    double r[GROUP_RESULTS];
+    for (int k = 0; k < GROUP_RESULTS; ++k)
+        r[k] = group_results[k];
+    for (uint g = 1; g < groups; ++g) {
+        const global double* o = group_results + GROUP_RESULTS * g;
+        for (int k = 0; k < GROUP_RESULTS; ++k)                      // lo xyz, hi xyz, mid lo, mid hi, firsts
+            r[k] = (k / 3) % 2 == 0 || k >= 12 ? fmin(r[k], o[k]) : fmax(r[k], o[k]);
+    }
+    const double dx = r[3] - r[0], dy = r[4] - r[1], dz = r[5] - r[2];
+    const double diagonal = sqrt((dx * dx + dy * dy) + dz * dz);
+    double origin[3] = {0.0, 0.0, 0.0};
+    if (isfinite(diagonal))
+        for (int k = 0; k < 3; ++k)
+            origin[k] = origin_on_axis(r[k], r[3 + k], diagonal, recentre_distance);
+    const double3 o3 = (double3)(origin[0], origin[1], origin[2]);
+    frame[0] = (float4)(convert_float3(o3), 0.0f);
+    frame[1] = (float4)(convert_float3((double3)(r[6], r[7], r[8]) - o3), 0.0f);
+    frame[2] = (float4)(convert_float3((double3)(r[9], r[10], r[11]) - o3), 0.0f);
+    for (int k = 0; k < 6; ++k)
+        summary[k] = r[k];
+    for (int k = 0; k < 3; ++k)
+        summary[6 + k] = origin[k];
+    summary[9] = r[12];
+    summary[10] = r[13];
 }
 
 // frame: the world's device origin (float32 values, as device_origin chooses

@@ -103,10 +103,14 @@ def device_origin(bounds) -> np.ndarray:
     significant bits), or the float32 step at the box's far side where that is
     larger (so c is a float32) -- such that v - c is exact for every float32 v
     in the box; 0 on the other axes (the comment above says why)."""
-    lo, hi = (np.asarray(b, np.float64) for b in bounds)
+    # Each step an IEEE operation in double, as the device's twin
+    # (build_instances.cl's instance_frame, which chooses a moved scene's
+    # frame) takes them: the same origin bit for bit.
+    lo, hi = ([float(x) for x in np.asarray(b, np.float64)] for b in bounds)
     origin = np.zeros(3)
-    diagonal = float(np.linalg.norm(hi - lo))
-    if not np.isfinite(diagonal):
+    dx, dy, dz = hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]
+    diagonal = math.sqrt((dx * dx + dy * dy) + dz * dz)    # (Python's floats overflow to inf; NaN stays)
+    if not math.isfinite(diagonal):
         return origin
     for k in range(3):
         near = min(abs(lo[k]), abs(hi[k]))            # the box's distance from 0 on this axis
@@ -115,8 +119,9 @@ def device_origin(bounds) -> np.ndarray:
         if lo[k] * hi[k] <= 0.0 or not near >= RECENTRE_DISTANCE * diagonal:
             continue
         far = max(abs(lo[k]), abs(hi[k]))
+        # The largest power of two at most diagonal / 4: frexp's exponent is exact where log2 may round up.
         grain = max(float(np.spacing(np.float32(far))),
-                    2.0 ** math.floor(math.log2(diagonal / 4.0)) if diagonal > 0.0 else 0.0)
+                    math.ldexp(1.0, math.frexp(diagonal / 4.0)[1] - 1) if diagonal > 0.0 else 0.0)
         c = round(0.5 * (lo[k] + hi[k]) / grain) * grain
         # Sterbenz for every v in [lo, hi]: c a float32 of their sign, c/2 <= |v| <= 2c.
         if float(np.float32(c)) == c and c * lo[k] > 0.0 and abs(c) <= 2.0 * near and far <= 2.0 * abs(c):
