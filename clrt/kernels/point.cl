@@ -26,7 +26,8 @@
 // be the answer (or tie with it) is visited, so the answer is the binary
 // walk's and brute force's, bit for bit.  Where such a device walks ray
 // packets, the closest-point kernels walk sixteen points at once instead
-// (point_group.cl), through the same bounds.
+// (point_group.cl), through the same bounds.  On NVIDIA GPUs the 32 points of
+// a warp walk together (point_warp.cl).
 //
 // Below the walk, two of the sign rules of signed distances (the third,
 // winding numbers, is winding.cl): parity of ray crossings, and the
@@ -538,81 +539,7 @@ inline void closest_point_placed(const Geometry* g, float3 p, float margin, Poin
 }
 #endif
 
-#if defined(POINT_WARP_WALK) && defined(ACCEL_BVH) && !defined(BVH_WIDE) && !defined(ACCEL_INSTANCES)
-// NVIDIA GPUs (-DPOINT_WARP_WALK, clrt.query.kernels.point_defines): the 32
-// work-items of a warp -- 32 points of one cell or two, as point_order.cl
-// lays them out -- walk the binary BVH together.  Each computes its own
-// children's bounds against its own best distance; a child is entered when
-// any point needs it (a PTX vote), nearer first by a count of the points
-// that find it so, and each point visits every leaf entered (a triangle more
-// changes no answer: the best is the least (distance, index) of those seen,
-// and every triangle a point could need is seen).  Every decision is the
-// same for all 32, so they keep one path through the tree: no work-item waits
-// on another's branch, and each node is read once for all of them.  Alone,
-// the points' walks diverged: a third of the closest points' time on the H200
-// (docs/benchmarks.md).  The caller calls it from every work-item of the warp
-// (`active` false where there is no point), none returning before.
-inline bool warp_any(bool p)
-{
-    int r;
-    asm volatile("{ .reg .pred a, b; setp.ne.s32 a, %1, 0; vote.sync.any.pred b, a, 0xffffffff; "
-                 "selp.s32 %0, 1, 0, b; }" : "=r"(r) : "r"((int)p));
-    return r != 0;
-}
-
-inline uint warp_count(bool p)
-{
-    uint r;
-    asm volatile("{ .reg .pred a; setp.ne.s32 a, %1, 0; vote.sync.ballot.b32 %0, a, 0xffffffff; }"
-                 : "=r"(r) : "r"((int)p));
-    return popcount(r);
-}
-
-inline void warp_closest_walk(const Geometry* g, float3 p, bool active, float margin, PointHit* best)
-{
-    const point_real3 pr = TO_POINT_REAL3(p);
-    int2 stack[BVH_STACK_SIZE];        // the same rows and leaves in every work-item
-    float stack_d[BVH_STACK_SIZE];     // each its own point's bound
-    int sp = 0;
-    int2 current = (int2)(0, 0);
-    for (;;) {
-        if (current.y > 0) {
-            if (active)
-                for (int s = current.x; s < current.x + current.y; ++s)
-                    visit_point_triangle(g, pr, 0, s, best);
-        } else {
-            const BvhPairNode n = *SPLIT_AT(g, nodes, current.x);
-            const int2 left_child = PAIR_LEFT(n), right_child = PAIR_RIGHT(n);
-            const float reach = active ? (float)best->dist + margin : -INFINITY;
-            const float d_left = left_child.y >= 0 ? point_bound(p, n.left_a, n.left_b) : INFINITY;
-            const float d_right = right_child.y >= 0 ? point_bound(p, n.right_a, n.right_b) : INFINITY;
-            const bool left = d_left <= reach, right = d_right <= reach;
-            const bool any_left = warp_any(left), any_right = warp_any(right);
-            if (any_left && any_right) {
-                const bool right_first = warp_count(right && (!left || d_right < d_left))
-                                         > warp_count(left && (!right || d_left <= d_right));
-                stack[sp] = right_first ? left_child : right_child;
-                stack_d[sp] = right_first ? d_left : d_right;
-                ++sp;
-                current = right_first ? right_child : left_child;
-                continue;
-            }
-            if (any_left || any_right) {
-                current = any_left ? left_child : right_child;
-                continue;
-            }
-        }
-        for (;;) {                     // the deepest postponed child that a point still needs
-            if (sp == 0)
-                return;
-            --sp;
-            if (warp_any(active && stack_d[sp] <= (float)best->dist + margin))
-                break;
-        }
-        current = stack[sp];
-    }
-}
-#endif
+#include "point_warp.cl"
 
 // The nearest triangle to p (device frame) within max_dist (inclusive);
 // prim -1 when none is.  `margin`: POINT_MARGIN.  `seed`: a slot to visit
@@ -658,12 +585,8 @@ inline PointHit closest_point(const Geometry* g, float3 p, float max_dist, float
 
 // The closest point of a work-item's point p, if `taken` (a point there, and
 // valid), as closest_point finds it; else none (prim -1).  Where the warp
-// walks together (WARP_WALKS) every work-item of the warp must call it.
-#if defined(POINT_WARP_WALK) && defined(ACCEL_BVH) && !defined(BVH_WIDE) && !defined(ACCEL_INSTANCES)
-#define WARP_WALKS 1
-#else
-#define WARP_WALKS 0
-#endif
+// walks together (WARP_WALKS, point_warp.cl) every work-item of the warp
+// must call it.
 
 inline PointHit closest_point_item(const Geometry* g, float3 p, bool taken, float max_dist, float margin, int seed)
 {

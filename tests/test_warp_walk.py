@@ -1,0 +1,71 @@
+"""The GPU warp walk of closest points (point_warp.cl, NVIDIA's
+-DPOINT_WARP_WALK), run on any device one point a work-item through the votes
+of a warp of one (-DPOINT_WARP_EMULATE), against the plain walk and brute
+force on the device, bit for bit: closest triangle, distance, point,
+barycentrics and feature, with misses beyond max_distance among them, and
+signed distances by normal."""
+
+import numpy as np
+import pytest
+
+import clrt
+from clrt.query.results import POINT_FIELDS
+from clrt.scene import primitives
+
+EMULATED = {"POINT_WARP_WALK": None, "POINT_WARP_EMULATE": None}
+
+
+def _points(mesh, rng):
+    """Points uniform in the box grown by 10 % (issue 36's benchmark points),
+    on the surface, just off it, at vertices and far away."""
+    lo, hi = mesh.bounds.astype(np.float64)
+    corners = mesh.vertices[mesh.faces].astype(np.float64)
+    f = rng.integers(len(corners), size=150)
+    on = np.einsum("nk,nkj->nj", rng.dirichlet((1, 1, 1), size=150), corners[f])
+    box = lo - 0.05 * (hi - lo) + rng.random((800, 3)) * 1.1 * (hi - lo)
+    vertices = mesh.vertices[rng.integers(len(mesh.vertices), size=40)]
+    far = 30 * rng.normal(size=(40, 3))
+    return rng.permutation(np.concatenate([box, on, on + 1e-3 * rng.normal(size=on.shape), vertices, far]))\
+        .astype(np.float32)
+
+
+def _accel(mesh, volume, defines, device, monkeypatch):
+    """An Accel of ``mesh`` whose query program walks the binary rows one point
+    a work-item (as a GPU's: no wide BVH, no packets) with point defines ``defines``."""
+    import clrt.query.accel as query_accel
+    from clrt.device import geometry
+
+    monkeypatch.setattr(geometry, "WIDE_BVH_KINDS", ())
+    monkeypatch.setattr(geometry, "RAY_PACKET_KINDS", ())
+    monkeypatch.setattr(query_accel, "point_defines", lambda _: dict(defines))
+    return clrt.Accel(mesh, accel=volume, device=device)
+
+
+@pytest.mark.parametrize("volume", ["box", "sphere"])
+def test_warp_walk_answers_as_the_plain_walk(volume, device, monkeypatch):
+    """The warp walk, emulated, gives the plain walk's and brute force's
+    closest points bit for bit -- with misses beyond max_distance among them
+    -- and the same signed distances by normal; its program is built where
+    point_warp.cl walks (WARP_WALKS: a one-level binary BVH)."""
+    mesh = primitives.torus(1.0, 0.35, 40, 20)
+    points = _points(mesh, np.random.default_rng(5))
+    plain = _accel(mesh, volume, {}, device, monkeypatch)
+    brute = clrt.Accel(mesh, accel="none", device=device)
+    wants = {max_distance: plain.closest_points(points, max_distance=max_distance) for max_distance in (np.inf, 0.2)}
+    assert 0 < (wants[0.2].prim < 0).sum() < len(points) / 2
+    for max_distance, want in wants.items():
+        other = brute.closest_points(points, max_distance=max_distance)
+        for field in POINT_FIELDS:
+            np.testing.assert_array_equal(getattr(want, field), getattr(other, field), err_msg=field)
+    want_signed = plain.signed_distance(points, sign="normal")
+    assert (want_signed < 0).any() and (want_signed > 0).any()
+
+    walk = _accel(mesh, volume, EMULATED, device, monkeypatch)
+    defines = walk.device_scene.defines(walk.trace_defines())
+    assert EMULATED.keys() <= defines.keys() and "ACCEL_BVH" in defines
+    assert not {"BVH_WIDE", "ACCEL_INSTANCES"} & defines.keys()
+    for max_distance, want in wants.items():
+        got = walk.closest_points(points, max_distance=max_distance)
+        for field in POINT_FIELDS:
+            np.testing.assert_array_equal(getattr(got, field), getattr(want, field), err_msg=field)
+    np.testing.assert_array_equal(walk.signed_distance(points, sign="normal"), want_signed)
