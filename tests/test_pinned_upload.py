@@ -9,10 +9,11 @@ from clrt.device import pinned
 from clrt.device.context import create_context
 
 
-@pytest.mark.parametrize("staged", (True, False))
-def test_upload_writes_the_array(device, staged, monkeypatch):
+@pytest.mark.parametrize("staged, piece", ((True, None), (True, 300_001), (False, None)))
+def test_upload_writes_the_array(device, staged, piece, monkeypatch):
     context, queue = create_context(device)
     monkeypatch.setattr(pinned, "STAGE_BYTES", 1 << 20)       # several blocks from a few MB
+    monkeypatch.setattr(pinned, "STAGE_PIECE_BYTES", piece or pinned.STAGE_BYTES)   # odd pieces: 4 a block
     rng = np.random.default_rng(3)
     for nbytes in (4, (1 << 20) - 4, 1 << 20, 5 * (1 << 20) + 12, 9 * (1 << 20) + 4):
         array = rng.integers(0, 2 ** 31, nbytes // 4, dtype=np.int32)

@@ -78,6 +78,12 @@ class PinnedPool:
 # ----------------------------------------------------------------------------- staged upload
 
 STAGE_BYTES = 64 << 20       # one page-locked staging block; two are kept per context
+# A block is filled and sent in pieces of this size, each submitted at once
+# (clFlush), so that the device reads one piece while the host fills the
+# next: a 12 MB array of points or rays otherwise waits for its whole host
+# copy before its DMA starts.  STAGE_BYTES: one piece a block (before
+# 2026-12-02); benchmarks/point_stages.py measures the choices.
+STAGE_PIECE_BYTES = STAGE_BYTES
 STAGED_MIN_BYTES = 16 << 20  # smaller arrays go straight to the driver
 PARALLEL_COPY_MIN_BYTES = 4 << 20   # smaller copies into a staging block take one thread
 _stages: dict[int, list] = {}
@@ -143,7 +149,10 @@ def upload(context: cl.Context, queue: cl.CommandQueue, buffer: cl.Buffer, array
             if last_copy is not None:
                 last_copy.wait()                      # the device has read this block's last chunk
             chunk = flat[start:start + STAGE_BYTES]
-            _parallel_copy(block[:len(chunk)], chunk)
-            event = stage[1] = cl.enqueue_copy(queue, buffer, block[:len(chunk)], dst_offset=start,
-                                               is_blocking=False)
+            for at in range(0, len(chunk), STAGE_PIECE_BYTES):
+                piece = slice(at, min(len(chunk), at + STAGE_PIECE_BYTES))
+                _parallel_copy(block[piece], chunk[piece])
+                event = cl.enqueue_copy(queue, buffer, block[piece], dst_offset=start + at, is_blocking=False)
+                queue.flush()                         # the device reads it while the host fills the next
+            stage[1] = event                          # in order: the block's last copy ends after the others
         return event

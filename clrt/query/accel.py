@@ -99,6 +99,7 @@ RESULT_POOL_MAX_BYTES = 1 << 30     # larger results go to ordinary memory
 LAUNCHES_KEPT = 64
 _ZERO = np.zeros(1, np.float32)
 _INFINITY = np.full(1, np.inf, np.float32)
+_NO_BAD_RAY = np.full(len(RAY_CHECKS), np.iinfo(np.int32).max, np.int32)   # never written: uploads read it late
 
 
 def check_fields(fields) -> list:
@@ -347,8 +348,7 @@ class Accel(PointQueries, SceneMoves):
         self._batch_launch = launch
         if len(self.launches) >= LAUNCHES_KEPT:   # all finished: the last query waited for its results
             self._sum_launches()
-        cl.enqueue_copy(self.queue, self._buffer("bad", 4 * len(RAY_CHECKS)),
-                        np.full(len(RAY_CHECKS), np.iinfo(np.int32).max, np.int32), is_blocking=True)
+        cl.enqueue_copy(self.queue, self._buffer("bad", 4 * len(RAY_CHECKS)), _NO_BAD_RAY, is_blocking=False)
 
     def _check_reach(self, source) -> None:
         """InputError when a camera's eye lies so far from the scene that the
