@@ -255,6 +255,9 @@ class Accel(PointQueries, SceneMoves):
         self._buffers: dict[str, cl.Buffer] = {}
         self._hits_per_ray = float(ALL_HITS_PER_RAY)
         self.launches: list[cl.Event] = []   # query launches, see kernel_ms
+        # The batch's transfers of host memory: pyopencl waits for one whose event is let go, so they are
+        # kept until _check has waited for the whole batch (the host enqueues on while the device works).
+        self._transfers: list[cl.Event] = []
         self._launches_ns = 0                  # kernel time of launches let go since kernel_ms
         self.result_pool = PinnedPool(self.context, self.queue, RESULT_POOL_SIZE, RESULT_POOL_MAX_BYTES)
 
@@ -306,7 +309,8 @@ class Accel(PointQueries, SceneMoves):
         chunk's ``results``, into ``out`` (the caller's array: host memory, or
         a device array, copied on the device), without waiting."""
         if isinstance(out, np.ndarray):
-            cl.enqueue_copy(self.queue, out[start:stop], results, src_offset=offset, is_blocking=False)
+            self._transfers.append(cl.enqueue_copy(self.queue, out[start:stop], results, src_offset=offset,
+                                                   is_blocking=False))
             return
         row = out.nbytes // max(len(out), 1)
         cl.enqueue_copy(self.queue, out.data, results, byte_count=(stop - start) * row, src_offset=offset,
@@ -348,7 +352,8 @@ class Accel(PointQueries, SceneMoves):
         self._batch_launch = launch
         if len(self.launches) >= LAUNCHES_KEPT:   # all finished: the last query waited for its results
             self._sum_launches()
-        cl.enqueue_copy(self.queue, self._buffer("bad", 4 * len(RAY_CHECKS)), _NO_BAD_RAY, is_blocking=False)
+        self._transfers = [cl.enqueue_copy(self.queue, self._buffer("bad", 4 * len(RAY_CHECKS)), _NO_BAD_RAY,
+                                           is_blocking=False)]
 
     def _check_reach(self, source) -> None:
         """InputError when a camera's eye lies so far from the scene that the
@@ -364,6 +369,7 @@ class Accel(PointQueries, SceneMoves):
         """After the last chunk: InputError for the first bad ray the kernels saw."""
         bad = np.empty(len(RAY_CHECKS), np.int32)
         cl.enqueue_copy(self.queue, bad, self._buffer("bad", bad.nbytes))   # waits for the whole batch
+        self._transfers = []   # all done: the caller's arrays let go
         if (bad < np.iinfo(np.int32).max).any():
             kind = int(np.argmin(bad))          # the lowest ray; on a tie, the first check
             raise InputError(source.bad_ray_message(RAY_CHECKS[kind], int(bad[kind]), self.geometry.reach))
@@ -383,7 +389,8 @@ class Accel(PointQueries, SceneMoves):
                 kernel.set_args(dirs, source.camera_value, np.uint64(start), np.uint32(m))
                 cl.enqueue_nd_range_kernel(self.queue, kernel, *launch_size(m, CAMERA_RAYS_GROUP[self._kind]))
             else:
-                cl.enqueue_copy(self.queue, dirs, source.directions(start, stop), is_blocking=False)
+                self._transfers.append(cl.enqueue_copy(self.queue, dirs, source.directions(start, stop),
+                                                       is_blocking=False))
             inputs = [(self._upload("in_0", eye), 0), (dirs, 3), (self._upload("in_2", _ZERO), 0),
                       (self._upload("in_3", _INFINITY), 0)]
             in_first = 0
@@ -412,7 +419,7 @@ class Accel(PointQueries, SceneMoves):
         buf = self._buffer(name, array.nbytes)
         if array.nbytes:
             staged = RAY_STAGING[self._kind] and array.nbytes >= RAY_STAGED_MIN_BYTES
-            pinned.upload(self.context, self.queue, buf, np.ascontiguousarray(array), staged)
+            self._transfers.append(pinned.upload(self.context, self.queue, buf, np.ascontiguousarray(array), staged))
         return buf
 
     def _run(self, name: str, rays: tuple, launch: np.ndarray, results: cl.Buffer) -> None:
@@ -426,6 +433,7 @@ class Accel(PointQueries, SceneMoves):
             m = -(-m // self.rays_per_item)      # trace.cl's ITEM_RAYS rays a work-item
             group = PACKET_GROUP[self._kind]
         self.launches.append(cl.enqueue_nd_range_kernel(self.queue, kernel, *launch_size(m, group)))
+        self.queue.flush()   # the device starts on it while the host enqueues the copies and the next chunk
 
     @one_at_a_time
     def kernel_ms(self) -> float:
@@ -485,8 +493,8 @@ class Accel(PointQueries, SceneMoves):
             results = self._buffer("results", nbytes)
             self._run("query_closest", rays, launch, results)
             if directions_out is not None:     # before the next chunk's rays replace them
-                cl.enqueue_copy(self.queue, directions_out[start:stop], self._buffer("in_1", 12 * m),
-                                is_blocking=False)
+                self._transfers.append(cl.enqueue_copy(self.queue, directions_out[start:stop],
+                                                       self._buffer("in_1", 12 * m), is_blocking=False))
             for name, at in placed.items():
                 self._copy_out(out[name], start, stop, results, at)
         self._check(source)   # also waits for the copies

@@ -109,11 +109,15 @@ class PointQueries:
 
     def _launch(self, name: str, args: tuple, items: int, group: int | None = None) -> None:
         """Kernel ``name`` (QUERY_KERNELS) with ``args`` over ``items`` work-items,
-        its event kept for kernel_ms."""
+        its event kept for kernel_ms; a query kernel submitted at once
+        (clFlush), so that the device runs the chunk while the host enqueues
+        its copies and makes the next chunk's points."""
         kernel = self.kernels[name]
         kernel.set_args(*args)
         self.launches.append(cl.enqueue_nd_range_kernel(
             self.queue, kernel, *launch_size(items, group or QUERY_GROUP[self._kind])))
+        if name.startswith("query_"):
+            self.queue.flush()
 
     def _point_order(self, origins: cl.Buffer, launch: np.ndarray) -> cl.Buffer:
         """The `order` buffer of a launch of point queries (point_order.cl): its
