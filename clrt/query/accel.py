@@ -401,7 +401,7 @@ class Accel(PointQueries, SceneMoves):
                        else self._upload(f"in_{k}", a), stride) for k, (a, stride) in enumerate(source.inputs)]
             in_first = start
         else:
-            inputs = [(self._upload(f"in_{k}", source.host_chunk(k, start, stop)), stride)
+            inputs = [(self._upload(f"in_{k}", source.host_chunk(k, start, stop), np.float32), stride)
                       for k, (_, stride) in enumerate(source.inputs)]
             in_first = 0
         launch = self._batch_launch.copy()
@@ -411,15 +411,17 @@ class Accel(PointQueries, SceneMoves):
         launch["field_at"] = NO_RESULT
         return (*(buf for buf, _ in inputs), self._buffer("bad", 4 * len(RAY_CHECKS))), launch
 
-    def _upload(self, name: str, array: np.ndarray) -> cl.Buffer:
-        """``array`` into the kept buffer ``name``, without waiting (the queue
-        is in order: the launch that reads it comes after); on a GPU, arrays of
+    def _upload(self, name: str, array: np.ndarray, dtype=None) -> cl.Buffer:
+        """``array`` into the kept buffer ``name`` as ``dtype`` (default its own;
+        converted on the way), without waiting (the queue is in order: the
+        launch that reads it comes after); on a GPU, arrays of
         RAY_STAGED_MIN_BYTES or more through page-locked staging (clrt.device.pinned;
         RAY_STAGING)."""
-        buf = self._buffer(name, array.nbytes)
-        if array.nbytes:
-            staged = RAY_STAGING[self._kind] and array.nbytes >= RAY_STAGED_MIN_BYTES
-            self._transfers.append(pinned.upload(self.context, self.queue, buf, np.ascontiguousarray(array), staged))
+        nbytes = array.size * np.dtype(array.dtype if dtype is None else dtype).itemsize
+        buf = self._buffer(name, nbytes)
+        if nbytes:
+            staged = RAY_STAGING[self._kind] and nbytes >= RAY_STAGED_MIN_BYTES
+            self._transfers.append(pinned.upload(self.context, self.queue, buf, array, staged, dtype))
         return buf
 
     def _run(self, name: str, rays: tuple, launch: np.ndarray, results: cl.Buffer) -> None:
