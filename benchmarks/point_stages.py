@@ -19,7 +19,9 @@ by side in one process:
   (pageable memory; clrt.query.accel.RAY_STAGED_MIN_BYTES out of reach);
 - ``two chunks``: the batch in two launches (``chunk_rays`` = N / 2), one
   after the other: what the smaller chunks of a pipelined batch would cost
-  the kernels (each chunk orders its own points by cell, point_order.cl).
+  the kernels (each chunk orders its own points by cell, point_order.cl);
+- ``float64 points``: the same points as float64 (numpy's default), converted
+  on their way to the device.
 
 Then one more call per query (the ``as is`` path), with every command the
 queue ran: when the host enqueued it (ms after the call began) and when the
@@ -65,28 +67,31 @@ def _patched(obj, name: str, value):
 
 
 @contextmanager
-def variant(name: str, accel, n: int):
-    """The path of variant ``name`` (see the module docstring) while inside."""
+def variant(name: str, accel, points: np.ndarray):
+    """The path of variant ``name`` (see the module docstring) while inside;
+    gives the points to ask with."""
     from clrt.device import pinned
     from clrt.query import accel as query_accel
     if name == "pageable results":
         with _patched(accel.result_pool, "take", lambda nbytes: None):
-            yield
+            yield points
     elif name.startswith("pieces"):
         with _patched(pinned, "STAGE_PIECE_BYTES", int(float(name.split()[1]) * (1 << 20))):
-            yield
+            yield points
     elif name == "points not staged":
         with _patched(query_accel, "RAY_STAGED_MIN_BYTES", 1 << 62):
-            yield
+            yield points
     elif name == "two chunks":
-        with _patched(accel, "chunk_rays", -(-n // 2)):
-            yield
+        with _patched(accel, "chunk_rays", -(-len(points) // 2)):
+            yield points
+    elif name == "float64 points":
+        yield points.astype(np.float64)
     else:
-        yield
+        yield points
 
 
 VARIANTS = ("as is", "pageable results", "pieces 4 MB", "pieces 2 MB", "pieces 1 MB", "points not staged",
-            "two chunks")
+            "two chunks", "float64 points")
 
 
 def _median(call, accel, repeat: int, warmup: int) -> tuple[float, float]:
@@ -159,8 +164,8 @@ def run(mesh_path, count: int, device, repeat: int, warmup: int, variants) -> No
     print("|---|---|---|---|---|")
     for query, ask in QUERIES.items():
         for name in variants:
-            with variant(name, accel, count):
-                wall, kernel = _median(lambda: ask(accel, points), accel, repeat, warmup)
+            with variant(name, accel, points) as given:
+                wall, kernel = _median(lambda: ask(accel, given), accel, repeat, warmup)
             print(f"| {query} | {name} | {wall:.2f} | {kernel:.2f} | {wall - kernel:.2f} |")
     for query, ask in QUERIES.items():
         ask(accel, points)
