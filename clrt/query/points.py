@@ -322,6 +322,6 @@ class PointQueries:
         kernel = sign_kernel(sign)
         scene = self.mesh if self.instances is None else self.instances
         grid = GridPoints(*grid_axes(resolution, bounds, scene.bounds))
-        volume = np.empty(grid.shape, np.float32)
+        volume = self._host_outputs({"volume": (grid.shape, np.float32)})["volume"]   # page-locked where it can be
         self._inside(grid, kernel, {"signed_distance": 0}, {"signed_distance": volume.reshape(-1)})
         return volume
