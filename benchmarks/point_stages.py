@@ -20,6 +20,9 @@ by side in one process:
 - ``two chunks``: the batch in two launches (``chunk_rays`` = N / 2), one
   after the other: what the smaller chunks of a pipelined batch would cost
   the kernels (each chunk orders its own points by cell, point_order.cl);
+- ``pipelined N``: the batch in N parts taking turns on two queues
+  (clrt.query.points.POINT_PIPELINE_PARTS), one part's transfers beside
+  another's kernels -- kernel ms then sums kernels that may overlap;
 - ``float64 points``: the same points as float64 (numpy's default), converted
   on their way to the device.
 
@@ -84,6 +87,10 @@ def variant(name: str, accel, points: np.ndarray):
     elif name == "two chunks":
         with _patched(accel, "chunk_rays", -(-len(points) // 2)):
             yield points
+    elif name.startswith("pipelined"):
+        from clrt.query import points as point_queries
+        with _patched(point_queries, "POINT_PIPELINE_PARTS", int(name.split()[1])):
+            yield points
     elif name == "float64 points":
         yield points.astype(np.float64)
     else:
@@ -91,7 +98,7 @@ def variant(name: str, accel, points: np.ndarray):
 
 
 VARIANTS = ("as is", "pageable results", "pieces 4 MB", "pieces 2 MB", "pieces 1 MB", "points not staged",
-            "two chunks", "float64 points")
+            "two chunks", "pipelined 2", "pipelined 4", "float64 points")
 
 
 def _median(call, accel, repeat: int, warmup: int) -> tuple[float, float]:
