@@ -99,7 +99,7 @@ RESULT_POOL_MAX_BYTES = 1 << 30     # larger results go to ordinary memory
 LAUNCHES_KEPT = 64
 _ZERO = np.zeros(1, np.float32)
 _INFINITY = np.full(1, np.inf, np.float32)
-_NO_BAD_RAY = np.full(len(RAY_CHECKS), np.iinfo(np.int32).max, np.int32)   # never written: uploads read it late
+_NO_BAD_RAY = np.full(len(RAY_CHECKS), np.iinfo(np.int32).max, np.int32)   # read by uploads that don't wait
 
 
 def check_fields(fields) -> list:

@@ -34,9 +34,9 @@ CLOSEST_KERNELS = ("query_closest_point", *SIGN_KERNELS.values())
 #: points), taking turns on two queues of the device so that one part's
 #: upload and download overlap another's kernels; 1: one launch a chunk on the
 #: Accel's queue.  Each part orders its own points by cell (point_order.cl),
-#: so smaller parts walk less coherently.  Not yet measured on a GPU
-#: (benchmarks/point_stages.py, "pipelined N"); points on the device and
-#: sdf_grid's samples always take one queue.
+#: so smaller parts walk less coherently; two parts' buffers are on the
+#: device at once.  Not yet measured on a GPU (benchmarks/point_stages.py,
+#: "pipelined N"); points on the device and sdf_grid's samples take one queue.
 POINT_PIPELINE_PARTS = 1
 
 
