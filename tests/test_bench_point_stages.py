@@ -9,7 +9,7 @@ from benchmarks import point_stages
 
 
 def test_point_stages_print_every_variant_and_the_queue(device, capsys):
-    variants = ["as is", "pageable results", "two chunks", "pipelined 2", "float64 points"]
+    variants = ["as is", "pageable results", "two chunks", "float64 points"]
     assert point_stages.main(["--points", "2K", "--repeat", "1", "--warmup", "0", "--variants",
                               ",".join(variants)] + (["--device", device] if device else [])) == 0
     out = capsys.readouterr().out

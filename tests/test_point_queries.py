@@ -156,38 +156,6 @@ def test_chunks_single_points_and_distance_agree(device):
     assert empty.point.shape == (0, 3) and empty.distance.shape == (0,)
 
 
-@pytest.mark.parametrize("parts", (2, 5))
-def test_parts_on_two_queues_answer_as_one_launch(parts, device, monkeypatch):
-    """A batch cut into parts that take turns on two queues (points.py's
-    POINT_PIPELINE_PARTS) answers every point query bit for bit as one launch
-    does, and a bad point in a part on either queue gives the same error."""
-    from clrt.query import points as point_queries
-    mesh = primitives.icosphere(2)
-    points = _points(mesh, seed=6)
-    accel = clrt.Accel(mesh, device=device)
-    asks = (lambda a, p: a.closest_points(p), lambda a, p: a.signed_distance(p, sign="normal"),
-            lambda a, p: a.winding_number(p), lambda a, p: a.contains(p))
-    want = [ask(accel, points) for ask in asks]
-    bad = []
-    for row in (len(points) // 2 + 3, len(points) - 2):   # in the middle part and in the last
-        given = points.copy()
-        given[row] = [np.nan, 0.0, 0.0]
-        with pytest.raises(InputError) as error:
-            accel.distance(given)
-        bad.append((given, str(error.value)))
-    monkeypatch.setattr(point_queries, "POINT_PIPELINE_PARTS", parts)
-    assert len({which for _, _, which in accel._point_parts(clrt.query.rays.PointBatch(points), len(points))}) == 2
-    for _ in range(2):   # the second queue kept between batches
-        for ask, answer in zip(asks, want):
-            got = ask(accel, points)
-            for a, b in zip(got, answer) if isinstance(answer, tuple) else [(got, answer)]:
-                np.testing.assert_array_equal(a, b)
-    for given, message in bad:
-        with pytest.raises(InputError) as error:
-            accel.distance(given)
-        assert str(error.value) == message
-
-
 def test_max_distance_makes_misses(device):
     mesh = primitives.icosphere(2)
     accel = clrt.Accel(mesh, device=device)

@@ -12,8 +12,6 @@ buffers and launches.
 
 from __future__ import annotations
 
-from contextlib import contextmanager
-
 import numpy as np
 import pyopencl as cl
 
@@ -30,14 +28,6 @@ from clrt.query.results import INSIDE_FIELDS, POINT_FIELDS, ClosestPoints, asked
 
 #: The kernels that answer closest points (trace.cl's CLOSEST_ITEM_POINTS a work-item).
 CLOSEST_KERNELS = ("query_closest_point", *SIGN_KERNELS.values())
-#: Launches a host batch of points is cut into (each at most chunk_size()
-#: points), taking turns on two queues of the device so that one part's
-#: upload and download overlap another's kernels; 1: one launch a chunk on the
-#: Accel's queue.  Each part orders its own points by cell (point_order.cl),
-#: so smaller parts walk less coherently; two parts' buffers are on the
-#: device at once.  Not yet measured on a GPU (benchmarks/point_stages.py,
-#: "pipelined N"); points on the device and sdf_grid's samples take one queue.
-POINT_PIPELINE_PARTS = 1
 
 
 def point_group_defines(scene) -> dict:
@@ -129,53 +119,6 @@ class PointQueries:
         if name.startswith("query_"):
             self.queue.flush()
 
-    def _point_parts(self, source, n: int) -> list:
-        """(start, stop, queue: 0 or 1) of each launch of ``source``'s ``n``
-        points, right after _begin: its chunks, or POINT_PIPELINE_PARTS parts
-        taking turns on two queues (host batches only; whole packets of
-        rays_per_item each), the second queue first waiting for _begin's reset
-        of the bad-ray flags on the first."""
-        step, parts = self.chunk_size(), POINT_PIPELINE_PARTS
-        if parts <= 1 or not isinstance(source, PointBatch) or source.on_device:
-            return [(start, stop, 0) for start, stop in self._chunks(n)]
-        per = self.rays_per_item
-        step = min(step, -(-n // parts // per) * per or per)
-        launches = [(start, min(n, start + step), k % 2) for k, start in enumerate(range(0, n, step))]
-        if len(launches) > 1:
-            second = self.__dict__.get("_second_queue")
-            if second is None or second[0] is not self.context:
-                second = self._second_queue = (self.context, cl.CommandQueue(
-                    self.context, self.queue.device, properties=self.queue.properties), {})
-            second[2]["bad"] = self._buffers["bad"]
-            cl.enqueue_barrier(second[1], wait_for=[cl.enqueue_marker(self.queue)])
-            self.queue.flush()
-        return launches
-
-    @contextmanager
-    def _on_queue(self, which: int):
-        """While inside, the chunk's commands go to queue ``which``: 0 the
-        Accel's own, 1 the second queue of _point_parts, with chunk buffers of
-        its own (the bad-ray flags shared: the kernels keep the lowest bad
-        point with atomics)."""
-        if which == 0:
-            yield
-            return
-        queue, buffers = self.queue, self._buffers
-        _, self.queue, self._buffers = self._second_queue
-        try:
-            yield
-        finally:
-            self.queue, self._buffers = queue, buffers
-
-    def _join_queues(self, parts: list) -> None:
-        """After a batch's last launch: queue 0 waits for the second queue's
-        commands, so that _check's read there waits for the whole batch."""
-        if any(which for _, _, which in parts):
-            second = self._second_queue[1]
-            marker = cl.enqueue_marker(second)
-            second.flush()
-            cl.enqueue_barrier(self.queue, wait_for=[marker])
-
     def _point_order(self, origins: cl.Buffer, launch: np.ndarray) -> cl.Buffer:
         """The `order` buffer of a launch of point queries (point_order.cl): its
         points sorted by cell of a grid over the scene, by three launches."""
@@ -194,25 +137,21 @@ class PointQueries:
         out = self._point_outputs(n, fields, batch.on_device)
         slots = list(POINT_FIELDS)
         self._begin(batch)
-        parts = self._point_parts(batch, n)
-        for start, stop, which in parts:
-            with self._on_queue(which):
-                m = stop - start
-                rays, launch = self._ray_args(batch, start, stop, 0)
-                origins, _, _, tmaxs, bad = rays
-                order = self._point_order(origins, launch)
-                placed, nbytes = {}, 0
-                for name in fields:   # every field is 4-byte aligned: float32 and int32 values
-                    placed[name] = nbytes
-                    launch["field_at"][slots.index(name)] = nbytes
-                    nbytes += m * 4 * int(np.prod(POINT_FIELDS[name].item_shape, dtype=int))
-                results = self._buffer("results", nbytes)
-                self._launch("query_closest_point", (origins, tmaxs, bad, launch, order, results,
-                                                     *self._point_geometry()),
-                             self._point_items("query_closest_point", m))
-                for name, at in placed.items():
-                    self._copy_out(out[name], start, stop, results, at)
-        self._join_queues(parts)
+        for start, stop in self._chunks(n):
+            m = stop - start
+            rays, launch = self._ray_args(batch, start, stop, 0)
+            origins, _, _, tmaxs, bad = rays
+            order = self._point_order(origins, launch)
+            placed, nbytes = {}, 0
+            for name in fields:   # every field is 4-byte aligned: float32 and int32 values
+                placed[name] = nbytes
+                launch["field_at"][slots.index(name)] = nbytes
+                nbytes += m * 4 * int(np.prod(POINT_FIELDS[name].item_shape, dtype=int))
+            results = self._buffer("results", nbytes)
+            self._launch("query_closest_point", (origins, tmaxs, bad, launch, order, results,
+                                                 *self._point_geometry()), self._point_items("query_closest_point", m))
+            for name, at in placed.items():
+                self._copy_out(out[name], start, stop, results, at)
         self._check(batch)   # also waits for the copies
         return ClosestPoints(*(out.get(name) for name in ClosestPoints._fields))
 
@@ -293,26 +232,23 @@ class PointQueries:
         elif kernel == "query_signed_distance_normal":
             rule = (self._pseudo_normals(),)
         self._begin(source)
-        parts = self._point_parts(source, n)
-        for start, stop, which in parts:
-            with self._on_queue(which):
-                m = stop - start
-                if isinstance(source, GridPoints):
-                    origins, tmaxs, bad, launch = self._grid_args(source, start, stop)
-                else:
-                    (origins, _, _, tmaxs, bad), launch = self._ray_args(source, start, stop, 0)
-                order = self._point_order(origins, launch)
-                placed, nbytes = {}, 0
-                for name, slot in outputs.items():   # the float32 values first: each output stays aligned
-                    placed[name] = nbytes
-                    launch["field_at"][slot] = nbytes
-                    nbytes += m * np.dtype(INSIDE_FIELDS[name].dtype).itemsize
-                results = self._buffer("results", nbytes)
-                self._launch(kernel, (origins, tmaxs, bad, launch, order, results, *rule, *self._point_geometry()),
-                             self._point_items(kernel, m))
-                for name, at in placed.items():
-                    self._copy_out(out[name], start, stop, results, at)
-        self._join_queues(parts)
+        for start, stop in self._chunks(n):
+            m = stop - start
+            if isinstance(source, GridPoints):
+                origins, tmaxs, bad, launch = self._grid_args(source, start, stop)
+            else:
+                (origins, _, _, tmaxs, bad), launch = self._ray_args(source, start, stop, 0)
+            order = self._point_order(origins, launch)
+            placed, nbytes = {}, 0
+            for name, slot in outputs.items():   # the float32 values first: each output stays aligned
+                placed[name] = nbytes
+                launch["field_at"][slot] = nbytes
+                nbytes += m * np.dtype(INSIDE_FIELDS[name].dtype).itemsize
+            results = self._buffer("results", nbytes)
+            self._launch(kernel, (origins, tmaxs, bad, launch, order, results, *rule, *self._point_geometry()),
+                         self._point_items(kernel, m))
+            for name, at in placed.items():
+                self._copy_out(out[name], start, stop, results, at)
         self._check(source)   # also waits for the copies
         return out
 
