@@ -12,17 +12,11 @@ by side in one process:
 - ``as is``: the path as the code has it;
 - ``pageable results``: the results in ordinary numpy arrays (the result
   pool refused), as point queries had them before 2026-12-02;
-- ``pieces N MB``: staged uploads sent in pieces of N MB
-  (clrt.device.pinned.STAGE_PIECE_BYTES), the device reading one while the
-  host fills the next;
 - ``points not staged``: the points handed to the driver as they are
   (pageable memory; clrt.query.accel.RAY_STAGED_MIN_BYTES out of reach);
 - ``two chunks``: the batch in two launches (``chunk_rays`` = N / 2), one
-  after the other: what the smaller chunks of a pipelined batch would cost
-  the kernels (each chunk orders its own points by cell, point_order.cl);
-- ``pipelined N``: the batch in N parts taking turns on two queues
-  (clrt.query.points.POINT_PIPELINE_PARTS), one part's transfers beside
-  another's kernels -- kernel ms then sums kernels that may overlap;
+  after the other: what smaller chunks cost the kernels (each chunk orders
+  its own points by cell, point_order.cl);
 - ``float64 points``: the same points as float64 (numpy's default), converted
   on their way to the device.
 
@@ -73,13 +67,9 @@ def _patched(obj, name: str, value):
 def variant(name: str, accel, points: np.ndarray):
     """The path of variant ``name`` (see the module docstring) while inside;
     gives the points to ask with."""
-    from clrt.device import pinned
     from clrt.query import accel as query_accel
     if name == "pageable results":
         with _patched(accel.result_pool, "take", lambda nbytes: None):
-            yield points
-    elif name.startswith("pieces"):
-        with _patched(pinned, "STAGE_PIECE_BYTES", int(float(name.split()[1]) * (1 << 20))):
             yield points
     elif name == "points not staged":
         with _patched(query_accel, "RAY_STAGED_MIN_BYTES", 1 << 62):
@@ -87,18 +77,13 @@ def variant(name: str, accel, points: np.ndarray):
     elif name == "two chunks":
         with _patched(accel, "chunk_rays", -(-len(points) // 2)):
             yield points
-    elif name.startswith("pipelined"):
-        from clrt.query import points as point_queries
-        with _patched(point_queries, "POINT_PIPELINE_PARTS", int(name.split()[1])):
-            yield points
     elif name == "float64 points":
         yield points.astype(np.float64)
     else:
         yield points
 
 
-VARIANTS = ("as is", "pageable results", "pieces 4 MB", "pieces 2 MB", "pieces 1 MB", "points not staged",
-            "two chunks", "pipelined 2", "pipelined 4", "float64 points")
+VARIANTS = ("as is", "pageable results", "points not staged", "two chunks", "float64 points")
 
 
 def _median(call, accel, repeat: int, warmup: int) -> tuple[float, float]:

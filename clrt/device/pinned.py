@@ -77,13 +77,11 @@ class PinnedPool:
 
 # ----------------------------------------------------------------------------- staged upload
 
-STAGE_BYTES = 64 << 20       # one page-locked staging block; two are kept per context
-# A block is filled and sent in pieces of this size, each submitted at once
-# (clFlush), so that the device reads one piece while the host fills the
-# next: a 12 MB array of points or rays otherwise waits for its whole host
-# copy before its DMA starts.  STAGE_BYTES: one piece a block (before
-# 2026-12-02); benchmarks/point_stages.py measures the choices.
-STAGE_PIECE_BYTES = STAGE_BYTES
+# One page-locked staging block; two are kept per context.  A block is filled
+# whole before its copy is sent: sending it in pieces of 1-4 MB, the device
+# reading one while the host fills the next, was slower on an H200
+# (docs/benchmarks.md, 2026-12-02).
+STAGE_BYTES = 64 << 20
 STAGED_MIN_BYTES = 16 << 20  # smaller arrays go straight to the driver
 PARALLEL_COPY_MIN_BYTES = 4 << 20   # smaller copies into a staging block take one thread
 _stages: dict[int, list] = {}
@@ -121,12 +119,12 @@ def _parallel_copy(dst: np.ndarray, src: np.ndarray, threads: int | None = None)
 
 
 def _staging_blocks(context: cl.Context, queue: cl.CommandQueue) -> list | None:
-    """The context's two staging blocks, each [block, its copies not yet
-    waited for]; None where page-locked memory is scarce.  Call under _stage_lock."""
+    """The context's two staging blocks, each [block, its last copy not yet
+    waited for, or None]; None where page-locked memory is scarce.  Call under _stage_lock."""
     stages = _stages.get(context.int_ptr)
     if stages is None:
         try:
-            stages = [[mapped_block(context, queue, STAGE_BYTES), []] for _ in range(2)]
+            stages = [[mapped_block(context, queue, STAGE_BYTES), None] for _ in range(2)]
         except (cl.Error, MemoryError):
             return None
         _stages[context.int_ptr] = stages
@@ -144,10 +142,9 @@ def upload(context: cl.Context, queue: cl.CommandQueue, buffer: cl.Buffer, array
     one thread copying into it: about 8 GB/s on the H200's host, so two thirds
     of a 10M-triangle device build.  Large arrays go through two page-locked
     blocks instead, filled (and converted: one pass over the caller's array)
-    by several threads while the device reads the other block, a piece of
-    STAGE_PIECE_BYTES at a time.  CPU devices and arrays below
-    STAGED_MIN_BYTES take the plain copy (``staged`` None); True or False
-    choose (ray chunks, tests, benchmarks).
+    by several threads while the device reads the other block.  CPU devices
+    and arrays below STAGED_MIN_BYTES take the plain copy (``staged`` None);
+    True or False choose (ray chunks, tests, benchmarks).
     """
     dtype = np.dtype(array.dtype if dtype is None else dtype)
     item = dtype.itemsize
@@ -168,22 +165,19 @@ def _staged_copy(queue: cl.CommandQueue, buffer: cl.Buffer, flat: np.ndarray, dt
                  stages: list) -> cl.Event | None:
     """upload's staged path: ``flat`` (1-D, any dtype) as ``dtype`` through the blocks."""
     item = dtype.itemsize
-    per_block, per_piece = STAGE_BYTES // item, max(1, STAGE_PIECE_BYTES // item)
-    copies: list = []
+    per_block = STAGE_BYTES // item
+    event = None
     for start in range(0, len(flat), per_block):
         # The blocks take turns across calls too: successive small uploads (a
         # ray chunk's arrays) fill one block while the device reads the other.
         stage = stages[0]
         stages.append(stages.pop(0))
-        if stage[1]:
-            stage[1][-1].wait()                       # the device has read this block's last chunk
+        if stage[1] is not None:
+            stage[1].wait()                           # the device has read this block's last chunk
         chunk = flat[start:start + per_block]
         target = stage[0][:len(chunk) * item].view(dtype)
-        copies = stage[1] = []                        # kept: letting one go would wait for it
-        for at in range(0, len(chunk), per_piece):
-            piece = slice(at, at + per_piece)
-            _parallel_copy(target[piece], chunk[piece])
-            copies.append(cl.enqueue_copy(queue, buffer, target[piece], dst_offset=(start + at) * item,
-                                          is_blocking=False))
-            queue.flush()                             # the device reads it while the host fills the next
-    return copies[-1] if copies else None
+        _parallel_copy(target, chunk)
+        # Kept in the block's entry: letting the event go would wait for it.
+        event = stage[1] = cl.enqueue_copy(queue, buffer, target, dst_offset=start * item, is_blocking=False)
+        queue.flush()                                 # the device reads it while the host fills the next block
+    return event
