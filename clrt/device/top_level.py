@@ -15,9 +15,9 @@ one wait at the end.  The host's twin is clrt.accel.instances
 (instance_table, the same rows bit for bit; top_level, a binned SAH tree):
 a scene built with a host builder moves there.
 
-A place() holds the device builder's lock of the context (it shares the
-builder's scratch buffers: the state, the sort's keys and ids); the table,
-the rows and their scratch are this object's own.
+The table, the rows and all their scratch (the sort's keys, ids and state
+too) are this object's own, and so are its kernel objects, whose arguments
+are set once (_LaunchSites): a place() takes no lock of the builder's.
 """
 
 from __future__ import annotations
@@ -32,10 +32,11 @@ from clrt.accel.instances import lbvh_depth_bound, top_rows
 from clrt.accel.rows import child_refs, tree_levels
 from clrt.device.build import (BUILD_GROUP, GROUP_RESULTS, MAX_REDUCE_GROUPS, STATE_INTS, build_defines,
                                queue_sort)
-from clrt.device.build_kernels import build_queue, workspace
+from clrt.device.build_kernels import BUILD_KERNELS, Workspace, build_queue, workspace
 from clrt.device.context import device_kind
 from clrt.device.pinned import mapped_block
 from clrt.device.program import build_program
+from clrt.device.signature import typed_kernels
 from clrt.layouts import BVH_PAIR_NODE, INSTANCE
 
 # Phases of a place(), in order, as its timings name them.
@@ -44,6 +45,32 @@ PHASES = ("upload", "place", "rows", "sort", "nodes", "fit")
 
 def _groups(n: int) -> int:
     return max(-(-int(n) // BUILD_GROUP), 1)
+
+
+class _LaunchSites:
+    """The build kernels by name, as ``ws.kernels_of`` gives them, but a
+    kernel object of its own for each launch of a place() in order (the
+    sort launches one kernel eight times, with other arguments each pass):
+    every place() of one top level makes the same launches with the same
+    arguments -- its own buffers, the same count -- so each object's
+    arguments are set at the first and kept (``bound``).  A move is a dozen
+    launches, and setting their arguments anew was a good part of its host
+    time."""
+
+    def __init__(self, program: cl.Program, defines: dict):
+        self.program, self.defines = program, defines
+        self.kernels: list[cl.Kernel] = []
+        self.next = 0
+
+    def __getitem__(self, name: str) -> cl.Kernel:
+        if self.next == len(self.kernels):
+            kernel = typed_kernels(self.program, BUILD_KERNELS, self.defines)[name]
+            kernel.bound, kernel.site_name = False, name
+            self.kernels.append(kernel)
+        kernel = self.kernels[self.next]
+        assert kernel.site_name == name, "a place() launched other kernels than the last"
+        self.next += 1
+        return kernel
 
 
 class DeviceTopLevel:
@@ -74,6 +101,10 @@ class DeviceTopLevel:
         self.group_results = cl.Buffer(context, mf.READ_WRITE, 8 * GROUP_RESULTS * self.groups)
         self.results = np.empty((self.groups, GROUP_RESULTS))
         self.frame = cl.Buffer(context, mf.READ_ONLY, 48)
+        # Scratch of its own (the sort's keys, ids and state): the builder's
+        # grow and go, and the launch sites keep their arguments.
+        self.scratch = Workspace(context)
+        self.sites = _LaunchSites(self.program, self.defines)
         self.num_rows = top_rows(n)
         self.rows = cl.Buffer(context, mf.READ_WRITE, self.num_rows * BVH_PAIR_NODE.itemsize)
         self.exact_rows = cl.Buffer(context, mf.READ_WRITE, self.num_rows * BVH_PAIR_NODE.itemsize)
@@ -128,61 +159,60 @@ class DeviceTopLevel:
         events = {phase: [] for phase in PHASES}
 
         def launch(phase, kernel, groups, *args, group=BUILD_GROUP):
-            if args:
+            if not kernel.bound:
                 kernel.set_args(*args)
+                kernel.bound = True
             event = cl.enqueue_nd_range_kernel(queue, kernel, (groups * group,), (group,))
             events[phase].append(event)
             return event
 
-        ws = workspace(self.context)
-        with ws.lock:
-            start = time.perf_counter()
-            k = ws.kernels_of(self.program, self.defines)
-            state = ws.get("state", 4 * STATE_INTS)
-            keys = [ws.get("keys0", 4 * n), ws.get("keys1", 4 * n)]
-            ids = [ws.get("ids0", 4 * n), ws.get("ids1", 4 * n)]
-            np.copyto(self.staged, transforms)
-            upload = cl.enqueue_copy(queue, self.transforms, self.staged, is_blocking=False)
-            events["upload"].append(upload)
-            launch("place", k["place_instances"], self.groups, self.transforms, self.mesh_of, self.meshes,
-                   np.uint32(n), self.group_results, state)
-            queued = time.perf_counter()
-            cl.enqueue_copy(queue, self.results, self.group_results, is_blocking=True)
-            read = time.perf_counter()
-            r = self.results
-            bounds = np.stack([r[:, 0:3].min(axis=0), r[:, 3:6].max(axis=0)])
-            first = [int(r[:, 12 + j].min()) for j in range(2)]
-            origin = np.asarray(frame_of(*[f if f < n else None for f in first], bounds), np.float64)
-            # The Morton codes' box: the centres' bounds in the device's frame.
-            frame = np.zeros((3, 4), np.float32)
-            frame[0, :3] = origin
-            frame[1, :3], frame[2, :3] = r[:, 6:9].min(axis=0) - origin, r[:, 9:12].max(axis=0) - origin
-            # (pyopencl waits for a write from host memory when its event goes:
-            # the writes' events stay until the next place, done by then.)
-            self.writes = (upload, cl.enqueue_copy(queue, self.frame, frame, is_blocking=False))
-            last = launch("rows", k["instance_rows"], _groups(n), self.transforms, self.mesh_of, self.meshes,
-                          self.frame, np.uint32(n), self.table, keys[0], ids[0], self.arrivals)
-            sorted_ids = ids[0]
-            if n > 1:
-                sorted_ids = queue_sort(k, launch, ws, self.kind, n, keys, ids, state)
-                launch("nodes", k["lbvh_nodes"], _groups(n - 1), keys[0], np.uint32(n), self.children,
-                       self.parents)
-            last = launch("fit", k["lbvh_fit"], _groups(n), self.children, self.parents, sorted_ids, self.table,
-                          np.uint32(n), self.boxes, self.arrivals, self.rows, self.exact_rows)
-            self.last = last
-            self.place_ms = 1e3 * (time.perf_counter() - start)
+        ws = self.scratch
+        start = time.perf_counter()
+        k = self.sites
+        k.next = 0
+        state = ws.get("state", 4 * STATE_INTS)
+        keys = [ws.get("keys0", 4 * n), ws.get("keys1", 4 * n)]
+        ids = [ws.get("ids0", 4 * n), ws.get("ids1", 4 * n)]
+        np.copyto(self.staged, transforms)
+        upload = cl.enqueue_copy(queue, self.transforms, self.staged, is_blocking=False)
+        events["upload"].append(upload)
+        launch("place", k["place_instances"], self.groups, self.transforms, self.mesh_of, self.meshes,
+               np.uint32(n), self.group_results, state)
+        queued = time.perf_counter()
+        cl.enqueue_copy(queue, self.results, self.group_results, is_blocking=True)
+        read = time.perf_counter()
+        low, high = self.results.min(axis=0), self.results.max(axis=0)   # each column needs one of them
+        bounds = np.stack([low[0:3], high[3:6]])
+        first = [int(low[12 + j]) for j in range(2)]
+        origin = np.asarray(frame_of(*[f if f < n else None for f in first], bounds), np.float64)
+        # The Morton codes' box: the centres' bounds in the device's frame.
+        frame = np.zeros((3, 4), np.float32)
+        frame[0, :3] = origin
+        frame[1, :3], frame[2, :3] = low[6:9] - origin, high[9:12] - origin
+        # (pyopencl waits for a write from host memory when its event goes:
+        # the writes' events stay until the next place, done by then.)
+        self.writes = (upload, cl.enqueue_copy(queue, self.frame, frame, is_blocking=False))
+        last = launch("rows", k["instance_rows"], _groups(n), self.transforms, self.mesh_of, self.meshes,
+                      self.frame, np.uint32(n), self.table, keys[0], ids[0], self.arrivals)
+        sorted_ids = ids[0]
+        if n > 1:
+            sorted_ids = queue_sort(k, launch, ws, self.kind, n, keys, ids, state)
+            launch("nodes", k["lbvh_nodes"], _groups(n - 1), keys[0], np.uint32(n), self.children,
+                   self.parents)
+        last = launch("fit", k["lbvh_fit"], _groups(n), self.children, self.parents, sorted_ids, self.table,
+                      np.uint32(n), self.boxes, self.arrivals, self.rows, self.exact_rows)
+        self.last = last
+        self.place_ms = 1e3 * (time.perf_counter() - start)
+        if timings is not None:
+            timings["host"] = 1e3 * ((queued - start) + (time.perf_counter() - read))
+            timings["first pass"] = 1e3 * (read - queued)
+        # (the next place's launches reuse the scratch: on the build queue
+        # they queue behind these; a queue of the caller's is waited for)
+        if profiled:
+            last.wait()
             if timings is not None:
-                timings["host"] = 1e3 * ((queued - start) + (time.perf_counter() - read))
-                timings["first pass"] = 1e3 * (read - queued)
-            # The next build on this context reuses the keys and ids: on the
-            # build queue its launches queue behind these (and the callers
-            # wait for the end before they return); a queue of the caller's
-            # is waited for here.
-            if profiled:
-                last.wait()
-                if timings is not None:
-                    for phase, done in events.items():
-                        timings[phase] = 1e-6 * sum(e.profile.end - e.profile.start for e in done)
+                for phase, done in events.items():
+                    timings[phase] = 1e-6 * sum(e.profile.end - e.profile.start for e in done)
         return last
 
     def read(self) -> tuple[np.ndarray, Acceleration]:

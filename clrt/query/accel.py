@@ -215,7 +215,8 @@ class Accel(PointQueries, SceneMoves):
     # by them, which for a pickle may be another machine's.
     def __repr__(self) -> str:
         what = (f"{len(self.mesh.faces):,} triangles" if self.instances is None
-                else f"{len(self.instances):,} instances of {len(self.instances.meshes):,} meshes")
+                else f"{len(self.instances):,} instances of {len(self.instances.meshes):,} "
+                     f"mesh{'es' if len(self.instances.meshes) > 1 else ''}")
         if "acceleration" not in self.__dict__:   # _rebuilt_accel's shell
             return f"<clrt.Accel of {what}, unpickled where OpenCL cannot run>"
         return f"<clrt.Accel of {what}, {self.acceleration.accel} ({self.acceleration.builder}) on {self.device}>"
