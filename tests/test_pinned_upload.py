@@ -121,3 +121,45 @@ def test_scene_buffers_through_staging_render_the_same_image(device, monkeypatch
             assert np.array_equal(got.image, frame.image) and np.array_equal(got.prim, frame.prim)
     finally:
         pinned._stages.pop(renderers[0].context.int_ptr, None)
+
+
+def test_points_converted_in_the_staging_give_the_same_answers(device, monkeypatch):
+    """float64 points converted to float32 on their way through the page-locked
+    blocks (forced on every device; blocks of 4 kB, several threads)
+    give bit for bit the answers of the same points given as float32 -- also
+    a strided view -- and a point beyond float32, or NaN, the same error."""
+    import clrt
+    from clrt.errors import InputError
+    from clrt.scene import primitives
+    mesh = primitives.torus(1.0, 0.35, 24, 12)
+    points = np.random.default_rng(13).normal(size=(5000, 3)) * 1.2
+    wide = np.concatenate([points, np.ones((len(points), 1))], axis=1)   # rows of 4: a strided (N, 3) view
+    plain = clrt.Accel(mesh, device=device, chunk_rays=700)
+    as_float32 = points.astype(np.float32)
+    want = plain.closest_points(as_float32)
+    want_sign, want_wn = plain.signed_distance(as_float32, sign="normal"), plain.winding_number(as_float32)
+    bad = {}
+    for row in ([1e39, 0.0, 0.0], [0.0, np.nan, 1.0]):
+        given = points.copy()
+        given[1234] = row
+        with pytest.raises(InputError) as error:
+            plain.distance(given)
+        bad[tuple(row)] = (given, str(error.value))
+    monkeypatch.setattr(pinned, "PARALLEL_COPY_MIN_BYTES", 1024)
+    _stage_every_ray_array(monkeypatch)
+    staged = clrt.Accel(mesh, device=device, chunk_rays=700)
+    pinned._stages.pop(staged.context.int_ptr, None)          # blocks of the patched size
+    try:
+        for given in (points, wide[:, :3]):
+            got = staged.closest_points(given)
+            assert (got.prim >= 0).all()
+            for field in want._fields:
+                assert np.array_equal(getattr(got, field), getattr(want, field)), field
+            assert np.array_equal(staged.signed_distance(given, sign="normal"), want_sign)
+            assert np.array_equal(staged.winding_number(given), want_wn)
+        for given, message in bad.values():
+            with pytest.raises(InputError) as error:
+                staged.distance(given)
+            assert str(error.value) == message and "point 1234" in message
+    finally:
+        pinned._stages.pop(staged.context.int_ptr, None)

@@ -77,7 +77,11 @@ class PinnedPool:
 
 # ----------------------------------------------------------------------------- staged upload
 
-STAGE_BYTES = 64 << 20       # one page-locked staging block; two are kept per context
+# One page-locked staging block; two are kept per context.  A block is filled
+# whole before its copy is sent: sending it in pieces of 1-4 MB, the device
+# reading one while the host fills the next, was slower on an H200
+# (docs/benchmarks.md, 2026-12-02).
+STAGE_BYTES = 64 << 20
 STAGED_MIN_BYTES = 16 << 20  # smaller arrays go straight to the driver
 PARALLEL_COPY_MIN_BYTES = 4 << 20   # smaller copies into a staging block take one thread
 _stages: dict[int, list] = {}
@@ -90,60 +94,90 @@ def _copy_threads() -> int:
     return max(1, min(8, (os.cpu_count() or 1) // 2))
 
 
+def _cast(dst: np.ndarray, src: np.ndarray) -> None:
+    """dst[:] = src, converted as ``astype`` converts (beyond float32: inf; the
+    kernels report it), in the calling thread's own error state."""
+    with np.errstate(over="ignore"):
+        np.copyto(dst, src, casting="unsafe")
+
+
 def _parallel_copy(dst: np.ndarray, src: np.ndarray, threads: int | None = None) -> None:
-    """dst[:] = src in slices on a few threads (numpy releases the GIL while copying)."""
+    """dst[:] = src (converted to dst's dtype where the two differ) in slices on
+    a few threads (numpy releases the GIL while copying)."""
     global _copier
     threads = threads or _copy_threads()
-    if threads == 1 or len(src) < PARALLEL_COPY_MIN_BYTES:
-        dst[:] = src
+    if threads == 1 or dst.nbytes < PARALLEL_COPY_MIN_BYTES:
+        _cast(dst, src)
         return
     if _copier is None:
         from concurrent.futures import ThreadPoolExecutor
         _copier = ThreadPoolExecutor(8, thread_name_prefix="clrt-stage")
     step = -(-len(src) // threads)
-    jobs = [_copier.submit(np.copyto, dst[k:k + step], src[k:k + step]) for k in range(0, len(src), step)]
+    jobs = [_copier.submit(_cast, dst[k:k + step], src[k:k + step]) for k in range(0, len(src), step)]
     for job in jobs:
         job.result()
 
 
+def _staging_blocks(context: cl.Context, queue: cl.CommandQueue) -> list | None:
+    """The context's two staging blocks, each [block, its last copy not yet
+    waited for, or None]; None where page-locked memory is scarce.  Call under _stage_lock."""
+    stages = _stages.get(context.int_ptr)
+    if stages is None:
+        try:
+            stages = [[mapped_block(context, queue, STAGE_BYTES), None] for _ in range(2)]
+        except (cl.Error, MemoryError):
+            return None
+        _stages[context.int_ptr] = stages
+    return stages
+
+
 def upload(context: cl.Context, queue: cl.CommandQueue, buffer: cl.Buffer, array: np.ndarray,
-           staged: bool | None = None) -> cl.Event:
-    """Copy a C-contiguous host array into ``buffer`` (from offset 0); returns
-    the event of the last copy.
+           staged: bool | None = None, dtype=None) -> cl.Event:
+    """Copy a host array into ``buffer`` (from offset 0) as ``dtype`` (default
+    its own; converted on the way as ``astype`` converts); returns the event of
+    the last copy.  pyopencl waits for a copy whose event is let go: keep the
+    event until the queue has run it, so that the host need not wait.
 
     A GPU reads ordinary (pageable) memory through the driver's own staging,
     one thread copying into it: about 8 GB/s on the H200's host, so two thirds
     of a 10M-triangle device build.  Large arrays go through two page-locked
-    blocks instead, filled by several threads while the device reads the
-    other block.  CPU devices and arrays below STAGED_MIN_BYTES take the plain
-    copy (``staged`` None); True or False choose (ray chunks, tests, benchmarks).
+    blocks instead, filled (and converted: one pass over the caller's array)
+    by several threads while the device reads the other block.  CPU devices
+    and arrays below STAGED_MIN_BYTES take the plain copy (``staged`` None);
+    True or False choose (ray chunks, tests, benchmarks).
     """
-    flat = array.reshape(-1).view(np.uint8)
+    dtype = np.dtype(array.dtype if dtype is None else dtype)
+    item = dtype.itemsize
     if staged is None:
-        staged = len(flat) >= STAGED_MIN_BYTES and device_kind(queue.device) == "gpu"
-    if not staged:
-        return cl.enqueue_copy(queue, buffer, array, is_blocking=False)
+        staged = array.size * item >= STAGED_MIN_BYTES and device_kind(queue.device) == "gpu"
     # One upload at a time per context: the blocks are the context's, and
     # each thread may have its own Accel on the process's one context.
     with _stage_lock:
-        stages = _stages.get(context.int_ptr)
-        if stages is None:
-            try:
-                stages = [[mapped_block(context, queue, STAGE_BYTES), None] for _ in range(2)]
-            except (cl.Error, MemoryError):          # page-locked memory is scarce: the plain copy
-                return cl.enqueue_copy(queue, buffer, array, is_blocking=False)
-            _stages[context.int_ptr] = stages
-        event = None
-        for start in range(0, len(flat), STAGE_BYTES):
-            # The blocks take turns across calls too: successive small uploads (a
-            # ray chunk's arrays) fill one block while the device reads the other.
-            stage = stages[0]
-            stages.append(stages.pop(0))
-            block, last_copy = stage
-            if last_copy is not None:
-                last_copy.wait()                      # the device has read this block's last chunk
-            chunk = flat[start:start + STAGE_BYTES]
-            _parallel_copy(block[:len(chunk)], chunk)
-            event = stage[1] = cl.enqueue_copy(queue, buffer, block[:len(chunk)], dst_offset=start,
-                                               is_blocking=False)
-        return event
+        stages = _staging_blocks(context, queue) if staged else None
+        if stages is not None:
+            return _staged_copy(queue, buffer, array.reshape(-1), dtype, stages)
+    with np.errstate(over="ignore"):   # the plain copy (also where page-locked memory is scarce)
+        host = np.ascontiguousarray(array, dtype)
+    return cl.enqueue_copy(queue, buffer, host, is_blocking=False)
+
+
+def _staged_copy(queue: cl.CommandQueue, buffer: cl.Buffer, flat: np.ndarray, dtype: np.dtype,
+                 stages: list) -> cl.Event | None:
+    """upload's staged path: ``flat`` (1-D, any dtype) as ``dtype`` through the blocks."""
+    item = dtype.itemsize
+    per_block = STAGE_BYTES // item
+    event = None
+    for start in range(0, len(flat), per_block):
+        # The blocks take turns across calls too: successive small uploads (a
+        # ray chunk's arrays) fill one block while the device reads the other.
+        stage = stages[0]
+        stages.append(stages.pop(0))
+        if stage[1] is not None:
+            stage[1].wait()                           # the device has read this block's last chunk
+        chunk = flat[start:start + per_block]
+        target = stage[0][:len(chunk) * item].view(dtype)
+        _parallel_copy(target, chunk)
+        # Kept in the block's entry: letting the event go would wait for it.
+        event = stage[1] = cl.enqueue_copy(queue, buffer, target, dst_offset=start * item, is_blocking=False)
+        queue.flush()                                 # the device reads it while the host fills the next block
+    return event

@@ -99,6 +99,7 @@ RESULT_POOL_MAX_BYTES = 1 << 30     # larger results go to ordinary memory
 LAUNCHES_KEPT = 64
 _ZERO = np.zeros(1, np.float32)
 _INFINITY = np.full(1, np.inf, np.float32)
+_NO_BAD_RAY = np.full(len(RAY_CHECKS), np.iinfo(np.int32).max, np.int32)   # read by uploads that don't wait
 
 
 def check_fields(fields) -> list:
@@ -255,6 +256,9 @@ class Accel(PointQueries, SceneMoves):
         self._buffers: dict[str, cl.Buffer] = {}
         self._hits_per_ray = float(ALL_HITS_PER_RAY)
         self.launches: list[cl.Event] = []   # query launches, see kernel_ms
+        # The batch's transfers of host memory: pyopencl waits for one whose event is let go, so they are
+        # kept until _check has waited for the whole batch (the host enqueues on while the device works).
+        self._transfers: list[cl.Event] = []
         self._launches_ns = 0                  # kernel time of launches let go since kernel_ms
         self.result_pool = PinnedPool(self.context, self.queue, RESULT_POOL_SIZE, RESULT_POOL_MAX_BYTES)
 
@@ -306,7 +310,8 @@ class Accel(PointQueries, SceneMoves):
         chunk's ``results``, into ``out`` (the caller's array: host memory, or
         a device array, copied on the device), without waiting."""
         if isinstance(out, np.ndarray):
-            cl.enqueue_copy(self.queue, out[start:stop], results, src_offset=offset, is_blocking=False)
+            self._transfers.append(cl.enqueue_copy(self.queue, out[start:stop], results, src_offset=offset,
+                                                   is_blocking=False))
             return
         row = out.nbytes // max(len(out), 1)
         cl.enqueue_copy(self.queue, out.data, results, byte_count=(stop - start) * row, src_offset=offset,
@@ -348,8 +353,8 @@ class Accel(PointQueries, SceneMoves):
         self._batch_launch = launch
         if len(self.launches) >= LAUNCHES_KEPT:   # all finished: the last query waited for its results
             self._sum_launches()
-        cl.enqueue_copy(self.queue, self._buffer("bad", 4 * len(RAY_CHECKS)),
-                        np.full(len(RAY_CHECKS), np.iinfo(np.int32).max, np.int32), is_blocking=True)
+        self._transfers = [cl.enqueue_copy(self.queue, self._buffer("bad", 4 * len(RAY_CHECKS)), _NO_BAD_RAY,
+                                           is_blocking=False)]
 
     def _check_reach(self, source) -> None:
         """InputError when a camera's eye lies so far from the scene that the
@@ -365,6 +370,7 @@ class Accel(PointQueries, SceneMoves):
         """After the last chunk: InputError for the first bad ray the kernels saw."""
         bad = np.empty(len(RAY_CHECKS), np.int32)
         cl.enqueue_copy(self.queue, bad, self._buffer("bad", bad.nbytes))   # waits for the whole batch
+        self._transfers = []   # all done: the caller's arrays let go
         if (bad < np.iinfo(np.int32).max).any():
             kind = int(np.argmin(bad))          # the lowest ray; on a tie, the first check
             raise InputError(source.bad_ray_message(RAY_CHECKS[kind], int(bad[kind]), self.geometry.reach))
@@ -384,7 +390,8 @@ class Accel(PointQueries, SceneMoves):
                 kernel.set_args(dirs, source.camera_value, np.uint64(start), np.uint32(m))
                 cl.enqueue_nd_range_kernel(self.queue, kernel, *launch_size(m, CAMERA_RAYS_GROUP[self._kind]))
             else:
-                cl.enqueue_copy(self.queue, dirs, source.directions(start, stop), is_blocking=False)
+                self._transfers.append(cl.enqueue_copy(self.queue, dirs, source.directions(start, stop),
+                                                       is_blocking=False))
             inputs = [(self._upload("in_0", eye), 0), (dirs, 3), (self._upload("in_2", _ZERO), 0),
                       (self._upload("in_3", _INFINITY), 0)]
             in_first = 0
@@ -395,7 +402,7 @@ class Accel(PointQueries, SceneMoves):
                        else self._upload(f"in_{k}", a), stride) for k, (a, stride) in enumerate(source.inputs)]
             in_first = start
         else:
-            inputs = [(self._upload(f"in_{k}", source.host_chunk(k, start, stop)), stride)
+            inputs = [(self._upload(f"in_{k}", source.host_chunk(k, start, stop), np.float32), stride)
                       for k, (_, stride) in enumerate(source.inputs)]
             in_first = 0
         launch = self._batch_launch.copy()
@@ -405,15 +412,17 @@ class Accel(PointQueries, SceneMoves):
         launch["field_at"] = NO_RESULT
         return (*(buf for buf, _ in inputs), self._buffer("bad", 4 * len(RAY_CHECKS))), launch
 
-    def _upload(self, name: str, array: np.ndarray) -> cl.Buffer:
-        """``array`` into the kept buffer ``name``, without waiting (the queue
-        is in order: the launch that reads it comes after); on a GPU, arrays of
+    def _upload(self, name: str, array: np.ndarray, dtype=None) -> cl.Buffer:
+        """``array`` into the kept buffer ``name`` as ``dtype`` (default its own;
+        converted on the way), without waiting (the queue is in order: the
+        launch that reads it comes after); on a GPU, arrays of
         RAY_STAGED_MIN_BYTES or more through page-locked staging (clrt.device.pinned;
         RAY_STAGING)."""
-        buf = self._buffer(name, array.nbytes)
-        if array.nbytes:
-            staged = RAY_STAGING[self._kind] and array.nbytes >= RAY_STAGED_MIN_BYTES
-            pinned.upload(self.context, self.queue, buf, np.ascontiguousarray(array), staged)
+        nbytes = array.size * np.dtype(array.dtype if dtype is None else dtype).itemsize
+        buf = self._buffer(name, nbytes)
+        if nbytes:
+            staged = RAY_STAGING[self._kind] and nbytes >= RAY_STAGED_MIN_BYTES
+            self._transfers.append(pinned.upload(self.context, self.queue, buf, array, staged, dtype))
         return buf
 
     def _run(self, name: str, rays: tuple, launch: np.ndarray, results: cl.Buffer) -> None:
@@ -427,6 +436,7 @@ class Accel(PointQueries, SceneMoves):
             m = -(-m // self.rays_per_item)      # trace.cl's ITEM_RAYS rays a work-item
             group = PACKET_GROUP[self._kind]
         self.launches.append(cl.enqueue_nd_range_kernel(self.queue, kernel, *launch_size(m, group)))
+        self.queue.flush()   # the device starts on it while the host enqueues the copies and the next chunk
 
     @one_at_a_time
     def kernel_ms(self) -> float:
@@ -486,8 +496,8 @@ class Accel(PointQueries, SceneMoves):
             results = self._buffer("results", nbytes)
             self._run("query_closest", rays, launch, results)
             if directions_out is not None:     # before the next chunk's rays replace them
-                cl.enqueue_copy(self.queue, directions_out[start:stop], self._buffer("in_1", 12 * m),
-                                is_blocking=False)
+                self._transfers.append(cl.enqueue_copy(self.queue, directions_out[start:stop],
+                                                       self._buffer("in_1", 12 * m), is_blocking=False))
             for name, at in placed.items():
                 self._copy_out(out[name], start, stop, results, at)
         self._check(source)   # also waits for the copies

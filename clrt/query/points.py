@@ -59,7 +59,27 @@ class PointQueries:
             import pyopencl.array as cla
             return {name: cla.empty(self.queue, shapes[name], POINT_FIELDS[name].dtype)   # no bool among them
                     for name in fields}
-        return {name: np.empty(shapes[name], POINT_FIELDS[name].dtype) for name in fields}
+        return self._host_outputs({name: (shapes[name], POINT_FIELDS[name].dtype) for name in fields})
+
+    def _host_outputs(self, specs: dict) -> dict:
+        """numpy arrays by name (``specs``: name -> (shape, dtype)) for the
+        chunks' results to land in: views of one block of the result pool's
+        page-locked memory when it has one, as the ray queries' (the device
+        writes there by DMA, several times faster than into ordinary memory,
+        and no page of it is touched for the first time during the copy);
+        else ordinary arrays.  Laid out in the order given: callers put the
+        4-byte values first, so that every view stays aligned."""
+        sizes = {name: int(np.prod(shape, dtype=np.int64)) * np.dtype(dtype).itemsize
+                 for name, (shape, dtype) in specs.items()}
+        total = sum(sizes.values())
+        block = self.result_pool.take(total) if total else None
+        if block is None:
+            return {name: np.empty(shape, dtype) for name, (shape, dtype) in specs.items()}
+        out, offset = {}, 0
+        for name, (shape, dtype) in specs.items():
+            out[name] = block[offset:offset + sizes[name]].view(dtype).reshape(shape)
+            offset += sizes[name]
+        return out
 
     def _point_geometry(self) -> tuple:
         """The geometry's arguments for the point queries' kernels (GEOMETRY_PARAMS):
@@ -89,11 +109,15 @@ class PointQueries:
 
     def _launch(self, name: str, args: tuple, items: int, group: int | None = None) -> None:
         """Kernel ``name`` (QUERY_KERNELS) with ``args`` over ``items`` work-items,
-        its event kept for kernel_ms."""
+        its event kept for kernel_ms; a query kernel submitted at once
+        (clFlush), so that the device runs the chunk while the host enqueues
+        its copies and makes the next chunk's points."""
         kernel = self.kernels[name]
         kernel.set_args(*args)
         self.launches.append(cl.enqueue_nd_range_kernel(
             self.queue, kernel, *launch_size(items, group or QUERY_GROUP[self._kind])))
+        if name.startswith("query_"):
+            self.queue.flush()
 
     def _point_order(self, origins: cl.Buffer, launch: np.ndarray) -> cl.Buffer:
         """The `order` buffer of a launch of point queries (point_order.cl): its
@@ -196,15 +220,12 @@ class PointQueries:
         its output slot in the kernel; ``out``: arrays to fill, by value (else
         made here: numpy, or device arrays for points given on the device)."""
         n = len(source)
-        if out is None:
-            out = {}
-            for name in outputs:
-                dtype = INSIDE_FIELDS[name].dtype
-                if source.on_device:
-                    import pyopencl.array as cla
-                    out[name] = cla.empty(self.queue, (n,), np.uint8 if dtype is np.bool_ else dtype)
-                else:
-                    out[name] = np.empty(n, dtype)
+        if out is None and source.on_device:
+            import pyopencl.array as cla
+            out = {name: cla.empty(self.queue, (n,), np.uint8 if INSIDE_FIELDS[name].dtype is np.bool_
+                                   else INSIDE_FIELDS[name].dtype) for name in outputs}
+        elif out is None:   # the float32 values first (outputs' order): every view stays aligned
+            out = self._host_outputs({name: ((n,), INSIDE_FIELDS[name].dtype) for name in outputs})
         rule = ()
         if kernel in ("query_winding_number", "query_signed_distance_winding"):
             rule = (self._winding_nodes(),)
@@ -301,6 +322,6 @@ class PointQueries:
         kernel = sign_kernel(sign)
         scene = self.mesh if self.instances is None else self.instances
         grid = GridPoints(*grid_axes(resolution, bounds, scene.bounds))
-        volume = np.empty(grid.shape, np.float32)
+        volume = self._host_outputs({"volume": (grid.shape, np.float32)})["volume"]   # page-locked where it can be
         self._inside(grid, kernel, {"signed_distance": 0}, {"signed_distance": volume.reshape(-1)})
         return volume

@@ -268,7 +268,10 @@ class PointBatch:
     the origins, ``max_distance`` (one number for all) in tmax; directions
     and tmin unused.  ``points``: (3,) or (N, 3), a numpy array of any real
     dtype or a float32 ``pyopencl.array.Array``; the kernels report the first
-    point that is not finite."""
+    point that is not finite.  A C-contiguous numpy array is converted to
+    float32 only on its way to the device, a chunk at a time (on a GPU by the
+    threads that fill the page-locked staging: clrt.device.pinned.upload), so
+    the host makes one pass over it."""
 
     normalise = False
 
@@ -281,9 +284,12 @@ class PointBatch:
         else:
             a = host_rows(points, "points")
             self.n = len(a)
-            host_memory_for_rays(self.n, 0 if a.dtype == np.float32 else 12 * self.n)
-            with np.errstate(over="ignore"):   # beyond float32: inf, reported by the kernel as not finite
-                flat = np.ascontiguousarray(a, dtype=np.float32).reshape(-1)
+            host_memory_for_rays(self.n, 0 if a.flags.c_contiguous else 12 * self.n)
+            if a.flags.c_contiguous:   # as given: a chunk at a time to float32 on its way (Accel._upload)
+                flat = a.reshape(-1)
+            else:
+                with np.errstate(over="ignore"):   # beyond float32: inf, reported by the kernel as not finite
+                    flat = np.ascontiguousarray(a, dtype=np.float32).reshape(-1)
         if not checks.is_number(max_distance) or not float(max_distance) > 0:   # NaN fails too
             raise checks.fail("max_distance", "a number > 0 (inf: no limit)", max_distance)
         limit = float(max_distance)
