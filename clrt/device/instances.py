@@ -150,7 +150,7 @@ def move_instances(scene: DeviceScene, instances: Instances, transforms, profile
         with scene.out_of_memory():
             changed, copied = scene.geometry.place_instances(scene.queue, two.device_top, last, bounds,
                                                              frame["origin"])
-        m = two.device_top.staged_copy()    # the moved Instances' own, while the device works
+        m = two.device_top.transforms_copy()    # the moved Instances' own, while the device works
         copied.wait()
         two.pending = two.device_top.read
         times["finish"] = 1e3 * (time.perf_counter() - placed)

@@ -9,7 +9,7 @@ world boxes (build_instances.cl, in the device builder's program; docs/instances
 
 What it is for: moving instances (clrt.device.instances.move_instances)
 rebuilds only the table and the top level, and their host part must be
-tiny -- one copy of the transforms into page-locked memory, the launches
+tiny -- the transforms' upload, the launches
 (fourteen on a GPU) queued at once, the device choosing the world's frame
 itself, one read of a dozen numbers for the host's checks.  The host's twin is clrt.accel.instances
 (instance_table, the same rows bit for bit; top_level, a binned SAH tree):
@@ -34,16 +34,15 @@ from clrt.device.build import (BUILD_GROUP, GROUP_RESULTS, MAX_REDUCE_GROUPS, ST
                                queue_sort)
 from clrt.device.build_kernels import BUILD_KERNELS, Workspace, build_queue, workspace
 from clrt.device.context import device_kind
-from clrt.device.pinned import mapped_block
 from clrt.device.program import build_program
 from clrt.device.signature import typed_kernels
 from clrt.layouts import BVH_PAIR_NODE, INSTANCE
 from clrt.scene import arrays
 
-# (The transforms' copies into page-locked memory and out take one thread:
-# 10k instances moved in 0.82 ms so on the H200, 0.98 with the copies on two
-# threads, 1.18 on four, 1.58 on eight -- the pool's hand-offs cost more than
-# the 1.28 MB copies they split; 2026-12-02.)
+# (The copy of the moved transforms takes one thread: 10k instances moved in
+# 0.82 ms so on the H200, 0.98 with the copies on two threads, 1.18 on four,
+# 1.58 on eight -- the pool's hand-offs cost more than the 1.28 MB copies they
+# split; 2026-12-02.)
 
 # Phases of a place(), in order, as its timings name them.
 PHASES = ("upload", "place", "rows", "sort", "nodes", "fit")
@@ -120,14 +119,11 @@ class DeviceTopLevel:
         self.parents = cl.Buffer(context, mf.READ_WRITE, 4 * (2 * n - 1))
         self.boxes = cl.Buffer(context, mf.READ_WRITE, 32 * (2 * n - 1))
         self.arrivals = cl.Buffer(context, mf.READ_WRITE, 4 * max(n - 1, 1))
-        # The transforms go through page-locked memory: the DMA reads it at
-        # full speed, where a driver's own staging of ordinary memory runs at
-        # a third of it (clrt.device.pinned).
-        try:
-            self.staged = mapped_block(context, build_queue(context, device), 128 * n).view(np.float64)
-            self.staged = self.staged.reshape(n, 4, 4)
-        except (cl.Error, MemoryError):    # page-locked memory is scarce: ordinary memory
-            self.staged = np.empty((n, 4, 4))
+        # The transforms are uploaded from the caller's memory (the driver
+        # stages them): a copy into page-locked memory first, whose DMA is
+        # three times faster, took longer in all for 1.28 MB (10k instances:
+        # a move in 0.83 ms so on the H200, 0.78 without; 2026-12-02).
+        self.source = np.empty((n, 4, 4))     # the last place's transforms
         self.last: cl.Event | None = None
         self.writes = ()
         self.place_ms = 0.0     # host ms of the last place() (its launches queued, not done)
@@ -186,8 +182,8 @@ class DeviceTopLevel:
         state = ws.get("state", 4 * STATE_INTS)
         keys = [ws.get("keys0", 4 * n), ws.get("keys1", 4 * n)]
         ids = [ws.get("ids0", 4 * n), ws.get("ids1", 4 * n)]
-        np.copyto(self.staged, transforms)
-        upload = cl.enqueue_copy(queue, self.transforms, self.staged, is_blocking=False)
+        self.source = np.ascontiguousarray(transforms, np.float64)
+        upload = cl.enqueue_copy(queue, self.transforms, self.source, is_blocking=False)
         events["upload"].append(upload)
         launch("place", k["place_instances"], self.groups, self.transforms, self.mesh_of, self.meshes,
                np.uint32(n), self.group_results, state)
@@ -228,9 +224,9 @@ class DeviceTopLevel:
                     timings[phase] = 1e-6 * sum(e.profile.end - e.profile.start for e in done)
         return last
 
-    def staged_copy(self) -> np.ndarray:
+    def transforms_copy(self) -> np.ndarray:
         """A copy of the transforms of the last place(), (I, 4, 4) float64."""
-        return self.staged.copy()
+        return self.source.copy()
 
     def read(self) -> tuple[np.ndarray, Acceleration]:
         """Host copies of the last place(): the table (I,) INSTANCE, and the
