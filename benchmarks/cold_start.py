@@ -11,8 +11,9 @@ Three cases, each a fresh process timed from its start to its exit:
                  4096 rays (``python -m benchmarks.cold_start --child accel MESH``).
 
 A run of a case is two processes: the first with empty caches -- the
-driver's (``POCL_CACHE_DIR``) and clrt's (``CLRT_CACHE_DIR``) pointed at a
-new temporary folder -- the second at once with the caches the first left.
+drivers' (``POCL_CACHE_DIR``, NVIDIA's ``CUDA_CACHE_PATH``) and clrt's
+(``CLRT_CACHE_DIR``) pointed at a new temporary folder -- the second at once
+with the caches the first left.
 Each case prints the median, min and max of both over ``--runs`` runs, and
 the median (and range) of each run's cold / warm ratio; the runs take turns
 so that the other work of a shared machine falls on both alike.
@@ -70,7 +71,9 @@ def _run(command: list, caches: Path) -> tuple[float, str]:
     """Seconds from starting ``command`` to its exit, with the program caches in
     ``caches``, and its standard output; SystemExit with its error if it fails."""
     env = repo_env()
-    env.update(POCL_CACHE_DIR=str(caches / "pocl"), CLRT_CACHE_DIR=str(caches / "clrt"))
+    # (CUDA_CACHE_PATH: NVIDIA's OpenCL keeps its compiled programs there)
+    env.update(POCL_CACHE_DIR=str(caches / "pocl"), CLRT_CACHE_DIR=str(caches / "clrt"),
+               CUDA_CACHE_PATH=str(caches / "nv"))
     env.pop("CLRT_NO_PROGRAM_CACHE", None)
     start = time.perf_counter()
     done = subprocess.run(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
