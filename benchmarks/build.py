@@ -21,7 +21,12 @@ on the OpenCL device, clrt.device.build), one table row:
   at 1920x1080 (``trace_camera``), the scene's trees launched in turn for
   TRACE_ROUNDS rounds, on the fixed cameras of benchmarks.speed for its
   meshes, and a framing camera for the generated scenes: ``--triangles N``
-  makes a grid of copies of the bunny (benchmarks.scale.instanced).
+  makes a grid of copies of the bunny (benchmarks.scale.instanced);
+* ``random ms``: median kernel time of closest hits of ``--random`` rays
+  (1M by default; benchmarks.raysets' random set, seed 0: origins in the
+  mesh's box, directions uniform), rays and results on the device, in the
+  same rounds as the primary rays; ``hits`` of those rays (every tree must
+  give the same).
 
 Then a second table, the whole calls a user waits for beside the build
 (``--calls``; for the host builders and ``device``): ``upload ms``, the
@@ -47,6 +52,7 @@ if not __package__:   # run as a script, python benchmarks/NAME.py: import from 
     sys.path[0] = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 import argparse
+import contextlib
 import statistics
 import time
 from pathlib import Path
@@ -78,9 +84,26 @@ def _host_build(context, queue, corners, volume, builder, leaf_size) -> tuple[di
 
 # Variants of the device builder, side by side with it (``--builders``):
 # without ploc_tail (every PLOC iteration three launches, as before it), and
-# with the triangles uploaded from pageable memory (no page-locked staging).
+# with the triangles uploaded from pageable memory (no page-locked staging);
+# and the tree a GPU builds, on any device (``device/as-gpu``: the GPU's
+# choices of clrt.device.build -- treelets, ploc_tail's work-group, the SAH
+# partition from PART_MIN_TRIANGLES -- e.g. a GPU's tree on PoCL).
 DEVICE_VARIANTS = {"device": {}, "device/no-tail": {"tail_threshold": 1},
-                   "device/plain-upload": {"staged_upload": False}}
+                   "device/plain-upload": {"staged_upload": False}, "device/as-gpu": {}}
+
+
+@contextlib.contextmanager
+def device_choices(builder: str):
+    """While in it, the device builder makes ``builder``'s choices of device
+    type: a GPU's for ``device/as-gpu``, the device's own otherwise."""
+    from clrt.device import build
+    saved = build.device_kind
+    if builder == "device/as-gpu":
+        build.device_kind = lambda device: "gpu"
+    try:
+        yield
+    finally:
+        build.device_kind = saved
 
 
 def time_builds(context, queue, corners, volume, builder, leaf_size, repeat):
@@ -153,22 +176,44 @@ def _traced_accel(mesh, volume, builder, leaf_size, device):
 # clock falls on all of them alike (timed one tree after the other, the same
 # tree's figure moved by 2-3 % between runs).
 TRACE_ROUNDS = 15
+RANDOM_RAYS = 1_000_000
 
 
-def trace_and_refit_ms(mesh, camera, volume, builders, leaf_size, device) -> dict:
+def trace_and_refit_ms(mesh, camera, volume, builders, leaf_size, device, random_rays: int = 0) -> dict:
     """builder -> (median primary-ray kernel ms over TRACE_ROUNDS interleaved
-    rounds after two, warm wall ms of Accel.refit to vertices moved by 1 %)."""
+    rounds after two, warm wall ms of Accel.refit to vertices moved by 1 %,
+    median kernel ms of ``random_rays`` random rays' closest hits in the same
+    rounds (nan for none), their hits)."""
+    from benchmarks.raysets import _queries, random_rays as make_random_rays
     from clrt import layouts
-    accels = {b: _traced_accel(mesh, volume, b, leaf_size, device) for b in builders}
+    accels = {}
+    for b in builders:
+        with device_choices(b):
+            accels[b] = _traced_accel(mesh, volume, b, leaf_size, device)
     hits = {b: cl.Buffer(a.context, cl.mem_flags.READ_WRITE, camera.width * camera.height * layouts.HIT.itemsize)
             for b, a in accels.items()}
+    queries = {}
+    if random_rays:
+        origins, directions = make_random_rays(mesh, random_rays)
+        queries = {b: _queries(a, origins, directions, np.inf)["closest"] for b, a in accels.items()}
     kernel = {b: [] for b in accels}
+    random_kernel = {b: [] for b in accels}
+    random_hits = {b: -1 for b in accels}
     for round_ in range(2 + TRACE_ROUNDS):
         for b, accel in accels.items():
             event = accel.launch_camera(camera, hits[b])
             accel.queue.finish()
             if round_ >= 2:
                 kernel[b].append(1e-6 * (event.profile.end - event.profile.start))
+            if b in queries:
+                accel.kernel_ms()
+                result = queries[b]()
+                accel.queue.finish()
+                if round_ >= 2:
+                    random_kernel[b].append(accel.kernel_ms())
+                if round_ == 0:
+                    prim = result.prim.get() if hasattr(result.prim, "get") else result.prim
+                    random_hits[b] = int((np.asarray(prim) >= 0).sum())
     for buffer in hits.values():
         buffer.release()
     moved = mesh.vertices * np.float32(1.01)
@@ -180,7 +225,8 @@ def trace_and_refit_ms(mesh, camera, volume, builders, leaf_size, device) -> dic
             accel.refit(moved)
             accel.queue.finish()
             walls.append(1e3 * (time.perf_counter() - start))
-        out[b] = (statistics.median(kernel[b]), statistics.median(walls[1:]))
+        out[b] = (statistics.median(kernel[b]), statistics.median(walls[1:]),
+                  statistics.median(random_kernel[b]) if random_kernel[b] else float("nan"), random_hits[b])
     return out
 
 
@@ -298,41 +344,45 @@ WHOLE_CALL_HEADER = ("| scene | triangles | builder | build warm ms | upload ms 
 
 
 def run(mesh_dir, meshes, counts, builders, volume="box", leaf_size=4, device=None, repeat=5, trace=True,
-        out=None, embree=False, profile=False, calls=CALLS):
+        out=None, embree=False, profile=False, calls=CALLS, random_rays=RANDOM_RAYS):
     from clrt.device.context import create_context, device_label
     out = out or sys.stdout
     context, queue = create_context(device)
     print(f"device: {device_label(queue.device)}; volume {volume}, leaf size {leaf_size}; build: first, "
-          f"then median of {repeat}; trace: {SIZE[0]}x{SIZE[1]} primary rays, kernel ms\n", file=out)
+          f"then median of {repeat}; trace: {SIZE[0]}x{SIZE[1]} primary rays and {random_rays:,} random rays, "
+          "closest hits, kernel ms\n", file=out)
     print("| scene | triangles | builder | build first ms | build warm ms | device ms | phases (device ms) "
-          "| SAH cost | SAH / sah | depth | device MiB | trace ms | Mrays/s | refit ms |", file=out)
-    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|", file=out)
+          "| SAH cost | SAH / sah | depth | device MiB | trace ms | Mrays/s | random ms | hits | refit ms |", file=out)
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|", file=out)
     profiles, call_rows = [], []
     for name, mesh, camera in scenes(mesh_dir, meshes, counts):
         corners = triangle_corners(mesh)
         results = {}
         for builder in builders:
-            results[builder] = time_builds(context, queue, corners, volume, builder, leaf_size, repeat)
+            with device_choices(builder):
+                results[builder] = time_builds(context, queue, corners, volume, builder, leaf_size, repeat)
         # The trees of the host builders and of the device variants that change the tree.
-        traced = [b for b in builders if trace and (b not in DEVICE_VARIANTS or b == "device"
+        traced = [b for b in builders if trace and (b not in DEVICE_VARIANTS or b in ("device", "device/as-gpu")
                                                     or b.startswith(("device/treelets=", "device/treelet-min=",
                                                                          "device/sah-top=", "device/partition=")))]
-        traces = trace_and_refit_ms(mesh, camera, volume, traced, leaf_size, device) if traced else {}
-        results = {b: (*r, *traces.get(b, (float("nan"), float("nan")))) for b, r in results.items()}
+        traces = trace_and_refit_ms(mesh, camera, volume, traced, leaf_size, device, random_rays) if traced else {}
+        untraced = (float("nan"), float("nan"), float("nan"), -1)
+        results = {b: (*r, *traces.get(b, untraced)) for b, r in results.items()}
         sah_cost = results["sah"][2]["sah_cost"] if "sah" in results else None
-        for builder, (first, warm, stats, timings, trace_ms, refit_ms) in results.items():
+        for builder, (first, warm, stats, timings, trace_ms, refit_ms, random_ms, hits) in results.items():
             device_ms = "-" if timings is None else f"{timings['device']:.2f}"
             phases = "-" if timings is None else " / ".join(
                 f"{k} {v:.1f}" for k, v in timings.items() if k not in ("device", "wall"))
             ratio = f"{stats['sah_cost'] / sah_cost:.3f}" if sah_cost else "-"
             print(f"| {name} | {len(corners):,} | {builder} | {first:,.1f} | {warm:,.1f} | {device_ms} | {phases} "
                   f"| {stats['sah_cost']:.2f} | {ratio} | {stats['depth']} | {stats['device_bytes'] / 2**20:,.1f} "
-                  f"| {trace_ms:.3f} | {rate(SIZE[0] * SIZE[1] / trace_ms / 1e3)} | {refit_ms:.2f} |", file=out,
+                  f"| {trace_ms:.3f} | {rate(SIZE[0] * SIZE[1] / trace_ms / 1e3)} | {random_ms:.3f} "
+                  f"| {hits if hits >= 0 else '-'} | {refit_ms:.2f} |", file=out,
                   flush=True)
         if embree:
             first, warm = embree_build_ms(mesh, repeat)
             print(f"| {name} | {len(corners):,} | Embree (embreex, host CPU) | {first:,.1f} | {warm:,.1f} | - | - "
-                  "| - | - | - | - | - | - | - |", file=out, flush=True)
+                  "| - | - | - | - | - | - | - | - | - |", file=out, flush=True)
         if profile:
             profiles += [(name, b, launch_profile(context, queue, corners, volume, b, leaf_size))
                          for b in builders if b in DEVICE_VARIANTS]
@@ -356,8 +406,9 @@ def launch_profile(context, queue, corners, volume, builder, leaf_size) -> list[
     time per kernel and the idle gaps between launches (host-bound stretches)."""
     from clrt.device.build import build_on_device
     # (Warm: time_builds has built this variant of the scene already.)
-    bvh = build_on_device(context, queue, corners, volume=volume, leaf_size=leaf_size, profile=True,
-                          **DEVICE_VARIANTS[builder])
+    with device_choices(builder):
+        bvh = build_on_device(context, queue, corners, volume=volume, leaf_size=leaf_size, profile=True,
+                              **DEVICE_VARIANTS[builder])
     bvh.release()
     launches = bvh.launches
     per_kernel: dict[str, list] = {}
@@ -400,7 +451,9 @@ def main(argv=None) -> int:
     p.add_argument("--leaf-size", type=int_at_least(1, MAX_LEAF_SIZE), default=4,
                    help="most triangles per leaf (default 4)")
     p.add_argument("--repeat", type=NON_NEGATIVE, default=5, help="warm builds timed after the first (default 5)")
-    p.add_argument("--no-trace", action="store_true", help="skip the primary-ray timing")
+    p.add_argument("--no-trace", action="store_true", help="skip the primary- and random-ray timing")
+    p.add_argument("--random", type=lambda s: 0 if s.strip() == "0" else parse_count(s), default=RANDOM_RAYS,
+                   help=f"random rays traced beside the primary rays (default {RANDOM_RAYS:,}; 0: none)")
     p.add_argument("--calls", type=lambda s: [x for x in s.split(",") if x], default=list(CALLS),
                    help=f"whole calls timed beside the build, comma-separated of {', '.join(CALLS)} "
                         "('' for none; default all)")
@@ -446,7 +499,7 @@ def main(argv=None) -> int:
             p.error("--embree needs embreex: pip install -e '.[raybench]'")
     return exit_code(run, args.mesh_dir, args.meshes, args.triangles, args.builders, args.volume,
                      args.leaf_size, args.device, args.repeat, not args.no_trace, embree=args.embree,
-                     profile=args.profile, calls=args.calls)
+                     profile=args.profile, calls=args.calls, random_rays=args.random)
 
 
 if __name__ == "__main__":

@@ -32,6 +32,26 @@ def test_build_bench_prints_every_variant(device, capsys, monkeypatch):
     assert ("| radix_scatter | 8 |" in out or "| radix_scatter_lookback | 8 |" in out) and "| ploc_tail | 1 |" in out
 
 
+def test_random_rays_are_traced_beside_the_primary_rays(device, capsys, monkeypatch):
+    """--random: each tree's kernel ms for the random rays' closest hits and
+    their hits, the same for every tree; device/as-gpu, the tree a GPU
+    builds (treelets), no dearer than the device's own."""
+    monkeypatch.setattr(build, "TRACE_ROUNDS", 2)
+    code = build.main(["--device", device or "cpu", "--meshes", "knot50k", "--builders", "sah,device,device/as-gpu",
+                       "--repeat", "1", "--random", "20K", "--calls", ""])
+    assert code == 0
+    out = capsys.readouterr().out
+    assert "and 20,000 random rays" in out
+    header = next(line for line in out.splitlines() if line.startswith("| scene "))
+    columns = [c.strip() for c in header.split("|")]
+    rows = {r[3].strip(): r for r in (line.split("|") for line in out.splitlines() if line.startswith("| knot50k "))}
+    assert list(rows) == ["sah", "device", "device/as-gpu"]
+    random_ms, hits, sah = (columns.index(name) for name in ("random ms", "hits", "SAH cost"))
+    assert all(float(r[random_ms]) > 0 for r in rows.values())
+    assert len({r[hits] for r in rows.values()}) == 1 and 0 < int(rows["sah"][hits]) < 20_000
+    assert float(rows["device/as-gpu"][sah]) <= float(rows["device"][sah])
+
+
 def test_whole_calls_are_printed_beside_the_build(device, capsys):
     """The second table: for each builder, the warm build of the first beside
     the upload alone, Accel() and Renderer() walls and their ratios to build
