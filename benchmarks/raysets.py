@@ -31,7 +31,9 @@ GIL while it traces, so that is Embree on one core; ``--embree-processes N``
 adds Embree on N cores (N processes, each tracing its share of the rays),
 taking turns with clrt's first variant query by query, and prints the speed
 ratio of each turn's pair: on a shared machine whose speed drifts, the
-paired ratio is the figure that holds still.
+paired ratio is the figure that holds still.  ``--open3d`` adds Open3D's
+RaycastingScene (Embree 4, all cores) to those turns, and both peers' builds
+from the arrays beside clrt's Accel (benchmarks.peer_turns).
 """
 
 from __future__ import annotations
@@ -51,7 +53,7 @@ import numpy as np
 
 from benchmarks.common import (NON_NEGATIVE, POSITIVE, builder_label, rate, exit_code, median_wall_ms, parse_count,
                                parse_groups, parse_size, parse_walks, ray_memory, walk)
-from clrt.config import ACCELS, BUILDERS
+from clrt.config import ACCELS, BUILDER_CHOICES
 from clrt.errors import InputError
 
 RAY_SETS = ("random", "camera", "diffuse", "ao")
@@ -252,23 +254,25 @@ def embree_measure(mesh, origins, directions, tmax=np.inf, repeat: int = 5, warm
 def _embree_worker(vertices, faces, origins, directions, limit, go, done):
     """One process of embree_processes_measure: its share of the rays, one
     query for each "INTERSECT" or "OCCLUDED" it takes from ``go``, its seconds
-    put in ``done`` (None: stop; an error goes there as its text)."""
+    and the rays that hit put in ``done`` (None: stop; an error goes there as
+    its text)."""
     try:
         scene = _embree_scene(vertices, faces)
         while (query := go.get()) is not None:
             start = time.perf_counter()
             if query == "INTERSECT":
-                scene.run(origins, directions, dists=limit.copy(), output=1)
+                got = scene.run(origins, directions, dists=limit.copy(), output=1)["primID"]
             else:
-                scene.run(origins, directions, dists=limit.copy(), query=query)
-            done.put(time.perf_counter() - start)
+                got = scene.run(origins, directions, dists=limit.copy(), query=query)
+            seconds = time.perf_counter() - start
+            done.put((seconds, int((np.asarray(got) >= 0).sum())))
     except Exception as exc:
         done.put(f"{type(exc).__name__}: {exc}")
 
 
-def _turn_times(workers, done) -> list[float]:
-    """Each worker's seconds for the query just started; a worker that failed
-    or died ends the measurement with a one-line error instead of a wait."""
+def _turn_times(workers, done) -> list[tuple[float, int]]:
+    """Each worker's seconds and hits for the query just started; a worker that
+    failed or died ends the measurement with a one-line error instead of a wait."""
     import queue
     times = []
     while len(times) < len(workers):
@@ -295,8 +299,9 @@ def embree_processes_measure(mesh, origins, directions, tmax=np.inf, processes: 
     With ``turn``, a callable ``turn(query, counted)`` ("closest" or "any"),
     this process runs it before each of Embree's queries, while Embree's
     processes wait: clrt and Embree take turns on the same cores, so that a
-    slow spell of a shared machine falls on both (measure_beside_embree).
-    ``times`` holds each repetition's slowest wall ms, (repetition, query)."""
+    slow spell of a shared machine falls on both (benchmarks.peer_turns).
+    ``times`` holds each repetition's slowest wall ms, (repetition, query);
+    ``hits`` the rays that hit, closest and occlusion, in the last one."""
     import multiprocessing
     context = multiprocessing.get_context("spawn")
     vertices, faces = np.asarray(mesh.vertices, np.float32), np.asarray(mesh.faces, np.int32)
@@ -308,7 +313,7 @@ def embree_processes_measure(mesh, origins, directions, tmax=np.inf, processes: 
                for a, b, go in zip(bounds[:-1], bounds[1:], gos)]
     for w in workers:
         w.start()
-    slowest = []
+    slowest, hits = [], [0, 0]
     try:
         for i in range(warmup + repeat):
             row = []
@@ -317,7 +322,9 @@ def embree_processes_measure(mesh, origins, directions, tmax=np.inf, processes: 
                     turn(query, i >= warmup)
                 for go in gos:              # Embree's processes start together ...
                     go.put(embree_query)
-                row.append(1e3 * max(_turn_times(workers, done)))   # ... and the last one to finish counts
+                got = _turn_times(workers, done)
+                row.append(1e3 * max(seconds for seconds, _ in got))   # ... and the last one to finish counts
+                hits[len(row) - 1] = sum(count for _, count in got)
             if i >= warmup:
                 slowest.append(row)
     finally:
@@ -329,33 +336,7 @@ def embree_processes_measure(mesh, origins, directions, tmax=np.inf, processes: 
                 w.terminate()
     slowest = np.array(slowest)
     return {"closest_wall_ms": float(np.median(slowest[:, 0])), "any_wall_ms": float(np.median(slowest[:, 1])),
-            "times": slowest}
-
-
-def measure_beside_embree(accel, mesh, origins, directions, tmax=np.inf, processes: int = 2, repeat: int = 5,
-                          warmup: int = 2) -> dict:
-    """clrt (``accel``, rays and results on the device) and Embree on
-    ``processes`` cores taking turns, query by query (embree_processes_measure):
-    each one's median wall ms, and the speed ratio -- Embree's wall time over
-    clrt's -- as the median of the repetitions' ratios, closest hit and any hit.
-    On a machine whose speed drifts by 15-20 % from run to run, the paired
-    ratio is what stays put."""
-    calls = _queries(accel, origins, directions, tmax)
-    ours = {"closest": [], "any": []}
-
-    def turn(query, counted):
-        start = time.perf_counter()
-        calls[query]()
-        accel.queue.finish()
-        if counted:
-            ours[query].append(1e3 * (time.perf_counter() - start))
-
-    theirs = embree_processes_measure(mesh, origins, directions, tmax, processes, repeat, warmup, turn)
-    out = {"embree_closest_wall_ms": theirs["closest_wall_ms"], "embree_any_wall_ms": theirs["any_wall_ms"]}
-    for k, query in enumerate(("closest", "any")):
-        out[f"clrt_{query}_wall_ms"] = statistics.median(ours[query])
-        out[f"{query}_speed"] = statistics.median(float(e / c) for e, c in zip(theirs["times"][:, k], ours[query]))
-    return out
+            "times": slowest, "hits": hits}
 
 
 def _check_groups(accel, groups) -> None:
@@ -373,7 +354,7 @@ def _check_groups(accel, groups) -> None:
 def run(mesh_path=None, sets=RAY_SETS, count: int = 1_000_000, seed: int = 0, variants=(("box", "sah"),),
         device=None, size=(1920, 1080), write_dir=None, read_files=(), tmax=np.inf, repeat: int = 5,
         warmup: int = 2, embree: bool = False, groups=("default",), embree_processes: int = 0,
-        out=None, walks=("default",), force: bool = False) -> list[dict]:
+        out=None, walks=("default",), force: bool = False, open3d: bool = False) -> list[dict]:
     from clrt.query import Accel
     from clrt.scene import primitives
     from clrt.scene.load import load_mesh
@@ -445,20 +426,16 @@ def run(mesh_path=None, sets=RAY_SETS, count: int = 1_000_000, seed: int = 0, va
                   f"| {m['sum_t']:.6f} | {m['any_wall_ms']:.3f} (wall) | {rate(n / m['any_wall_ms'] / 1e3)} "
                   f"| {'yes' if m['any_agrees'] else 'NO'} |", file=out, flush=True)
             rows.append({"rays": label, "accel": "embree", "builder": "-", **m})
-    if embree_processes:
-        # clrt's first variant and Embree take turns, query by query: both rows
-        # come from the same stretch of time, and the speed ratio from each turn.
-        print(f"\nclrt ({variants[0][0]}, {builder_label(*variants[0], 'default')}) and Embree on "
-              f"{embree_processes} processes, taking turns (median of {repeat} after {warmup}; wall ms; "
-              f"speed: Embree's time over clrt's, the median of the turns' ratios):", file=out)
-        print("\n| rays | count | clrt closest | Embree closest | speed | clrt any | Embree any | speed |", file=out)
-        print("|---|---|---|---|---|---|---|---|", file=out)
-        for label, o, d, reach in ray_sets:
-            m = measure_beside_embree(first, mesh, o, d, reach, embree_processes, repeat, warmup)
-            print(f"| {label} | {len(o):,} | {m['clrt_closest_wall_ms']:.3f} | {m['embree_closest_wall_ms']:.3f} "
-                  f"| {m['closest_speed']:.2f}x | {m['clrt_any_wall_ms']:.3f} | {m['embree_any_wall_ms']:.3f} "
-                  f"| {m['any_speed']:.2f}x |", file=out, flush=True)
-            rows.append({"rays": label, "accel": f"embree x{embree_processes}", "builder": "-", **m})
+    if embree_processes or open3d:
+        # clrt's first variant and the peers take turns, query by query: all rows
+        # come from the same stretch of time, and the speed ratios from each turn.
+        from benchmarks.peer_turns import print_turns
+        accel_name, builder = variants[0]
+        chosen = first.device_scene.acceleration.builder
+        label = f"{accel_name}, " + (f"auto: {chosen}" if builder == "auto" else builder_label(accel_name, builder,
+                                                                                             "default"))
+        rows += print_turns(out, first, label, mesh, ray_sets, {"accel": accel_name, "builder": builder}, device,
+                            open3d, embree_processes, repeat, warmup)
     return rows
 
 
@@ -478,7 +455,8 @@ def main(argv=None) -> int:
                    help="run the rays of these files instead of generating sets (repeatable)")
     p.add_argument("--tmax", type=float, default=np.inf, help="longest hit distance of --read rays (default inf)")
     p.add_argument("--accel", action="append", choices=ACCELS, help="repeatable (default: box)")
-    p.add_argument("--builder", action="append", choices=BUILDERS, help="repeatable (default: sah)")
+    p.add_argument("--builder", action="append", choices=BUILDER_CHOICES,
+                   help="repeatable (default: sah; auto: clrt.Accel's default)")
     p.add_argument("--device", help="'gpu', 'cpu' or P:D (default: clrt's choice, the first GPU if any)")
     p.add_argument("--repeat", type=POSITIVE, default=5, help="timed queries, median reported (default 5)")
     p.add_argument("--warmup", type=NON_NEGATIVE, default=2, help="untimed queries first (default 2)")
@@ -494,6 +472,10 @@ def main(argv=None) -> int:
     p.add_argument("--embree-processes", type=int, default=0, metavar="N",
                    help="also run Embree in N processes at once, each on its share of the rays (Embree on N "
                         "cores), taking turns with clrt's first variant; prints the paired speed ratios")
+    p.add_argument("--open3d", action="store_true",
+                   help="also run Open3D's RaycastingScene (Embree 4; pip install open3d-cpu) on the same rays, "
+                        "all cores, taking turns with clrt's first variant (and Embree's processes); prints the "
+                        "paired speed ratios and each one's build from the arrays")
     args = p.parse_args(argv)
     if not args.tmax > 0:
         p.error("--tmax must be positive")
@@ -508,6 +490,11 @@ def main(argv=None) -> int:
             import embreex  # noqa: F401
         except ImportError:
             p.error("--embree needs embreex: pip install -e '.[raybench]'")
+    if args.open3d:
+        try:
+            import open3d  # noqa: F401
+        except ImportError:
+            p.error("--open3d needs Open3D: pip install open3d-cpu")
     if args.write is not None:
         try:
             args.write.mkdir(parents=True, exist_ok=True)
@@ -517,7 +504,7 @@ def main(argv=None) -> int:
     return exit_code(run, args.mesh, tuple(args.set or RAY_SETS), args.rays, args.seed, variants, args.device,
                      args.size, args.write, tuple(args.read or ()), args.tmax, args.repeat, args.warmup,
                      args.embree, tuple(args.group), args.embree_processes, None, tuple(args.walks),
-                     args.force)
+                     args.force, args.open3d)
 
 
 if __name__ == "__main__":

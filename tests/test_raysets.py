@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 import clrt
-from benchmarks import raysets
+from benchmarks import peer_turns, raysets
 from clrt.config import BUILDERS, VOLUMES
 from clrt.errors import InputError
 from clrt.reference import intersect
@@ -129,11 +129,14 @@ def test_clrt_and_embree_take_turns(torus, sets, device, monkeypatch):
     for name in ("trace", "any_hit"):
         method = getattr(accel, name)
         monkeypatch.setattr(accel, name, lambda *a, _m=method, _n=name, **k: (calls.append(_n), _m(*a, **k))[1])
-    m = raysets.measure_beside_embree(accel, torus, o[:4000], d[:4000], reach, processes=2, repeat=3, warmup=1)
+    m = peer_turns.measure_in_turns(accel, torus, o[:4000], d[:4000], reach, open3d=False, embree_processes=2,
+                                    repeat=3, warmup=1)
     assert calls == ["trace", "any_hit"] * 4
     for query in ("closest", "any"):
-        assert m[f"clrt_{query}_wall_ms"] > 0 and m[f"embree_{query}_wall_ms"] > 0
-        assert m[f"{query}_speed"] > 0
+        assert len(m["times"]["clrt"][query]) == len(m["times"]["Embree x2"][query]) == 3
+        assert min(m["times"]["clrt"][query] + m["times"]["Embree x2"][query]) > 0
+        # the processes' hits, summed over their shares, are clrt's hits
+        assert m["hits"]["Embree x2"][query] == m["hits"]["clrt"][query] > 0
 
 
 @pytest.mark.parametrize("content, message", [
