@@ -190,10 +190,15 @@ def turns_row(case: str, count, times: dict, hits=None, differ=None) -> str:
     if hits is None:
         cells.append("-")
     else:
-        odd = [f"{p} {hits[p]:,}" + (f" ({differ[p]:,} rays differ)" if differ and differ.get(p) else "")
+        odd = [f"{p} {hits[p]:,}" + (f" ({_rays(differ[p])} differ{'s' if differ[p] == 1 else ''})"
+                                     if differ and differ.get(p) else "")
                for p in peers if hits[p] != hits["clrt"] or (differ and differ.get(p))]
         cells.append(f"{hits['clrt']:,}" + ("; " + ", ".join(odd) if odd else (", all equal" if peers else "")))
     return "| " + " | ".join(cells) + " |"
+
+
+def _rays(count: int) -> str:
+    return f"{count:,} ray" + ("" if count == 1 else "s")
 
 
 QUERY_NAMES = {"closest": "closest", "any": "occlusion"}

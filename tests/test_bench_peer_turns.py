@@ -46,6 +46,9 @@ def test_the_table_has_a_cell_per_column_and_names_differing_hits():
     assert [c.strip() for c in build.split("|")[1:3]] == ["build from arrays", "-"]
     assert build.split("|")[3].strip() == "11.0" and build.split("|")[-2].strip() == "-"
     assert odd.split("|")[-2].strip() == "7; Open3D 7 (2 rays differ), Embree x2 9"
+    one = peer_turns.turns_row("random, closest", 10, times, {"clrt": 7, "Open3D": 6, "Embree x2": 7},
+                               {"clrt": 0, "Open3D": 1})
+    assert one.split("|")[-2].strip() == "7; Open3D 6 (1 ray differs)"
     alone = peer_turns.turns_row("camera, occlusion", 10, {"clrt": [1.0]}, {"clrt": 3}, {"clrt": 0})
     assert alone.split("|")[-3:-1] == [" - ", " 3 "]
 
