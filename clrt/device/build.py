@@ -18,8 +18,9 @@ The algorithm (kernels in ``clrt/kernels/build_*.cl``, entry ``build_bvh.cl``):
    along the Morton curve did worse (docs/benchmark-log.md, session 13);
 2. a least-significant-digit radix sort of (code, triangle id), ``RADIX_BITS``
    per pass: on GPUs one launch a pass (the tiles' offsets by decoupled
-   look-back) after one that counts the digits of every pass, on CPU devices
-   three launches a pass;
+   look-back) after one that counts the digits of every pass; on CPU devices
+   the host sorts (clrt.device.host_sort: as fast, and three kernels fewer to
+   compile on a first call);
 3. PLOC (Meister & Bittner 2018; the one-block search of PLOC++, Benthin et
    al. 2022): clusters start as the sorted triangles; in each iteration every
    cluster finds the cluster within ``PLOC_RADIUS`` places on either side whose
@@ -87,7 +88,8 @@ from clrt.accel.topdown import C_INTERSECT, C_TRAVERSAL
 from clrt.config import VOLUME_DEFINES, VOLUMES
 from clrt.device import pinned
 from clrt.device.context import device_kind
-from clrt.device.build_kernels import build_queue, one_build_per_context, workspace
+from clrt.device.build_kernels import build_queue, cpu_kernels, one_build_per_context, workspace
+from clrt.device.host_sort import sort_on_host
 from clrt.device.program import build_program
 from clrt.errors import DeviceError, InputError
 
@@ -425,7 +427,10 @@ def build_on_device(context: cl.Context, queue: cl.CommandQueue, corners, volume
         partition = SAH_PARTITION[kind] and F >= PART_MIN_TRIANGLES
     segmented = bool(partition) and 1 < top_clusters < F
     defines = build_defines(volume, kind, treelet_leaves, tail_group, top_clusters, segmented)
-    program = build_program(context, "build_bvh.cl", defines)
+    treelets = TREELET_LEAVES[kind] if treelet_leaves is None else int(treelet_leaves)
+    treelets = treelets if F > 2 else 0
+    program = build_program(context, "build_bvh.cl", defines,
+                            kernels=cpu_kernels(segmented, treelets > 0) if kind == "cpu" else None)
     ws = workspace(context)
     k = ws.kernels_of(program, defines)
     num_nodes = 2 * F - 1
@@ -472,8 +477,11 @@ def build_on_device(context: cl.Context, queue: cl.CommandQueue, corners, volume
     else:
         launch("morton", k["morton_codes"], _groups(F), corners_buf, np.uint32(F), state, keys[0], ids[0])
 
-    # 2. Radix sort.
-    sorted_ids = queue_sort(k, launch, ws, kind, F, keys, ids, state)
+    # 2. Radix sort; a CPU device's by the host (host_sort.py says why).
+    if kind == "cpu":
+        sorted_ids = sort_on_host(queue, F, keys[0], ids[0])   # (sorted in keys[0], as queue_sort leaves them)
+    else:
+        sorted_ids = queue_sort(k, launch, ws, kind, F, keys, ids, state)
 
     # 3. PLOC.
     nodes = ws.get("nodes", layouts.BUILD_NODE.itemsize * num_nodes)
@@ -495,8 +503,6 @@ def build_on_device(context: cl.Context, queue: cl.CommandQueue, corners, volume
     launch("ploc", k["ploc_tail"], 1, last, spare, tile_kept, nodes, heights, F, state, queued, leaf_size,
            group=tail_group)
     launch("ploc", k["ploc_top"], 1, last, spare, nodes, heights, F, state, leaf_size, group=tail_group)
-    treelets = TREELET_LEAVES[kind] if treelet_leaves is None else int(treelet_leaves)
-    treelets = treelets if F > 2 else 0
 
     # 3b. Treelet restructuring: the nodes with a treelet counted per height
     # and listed by height, then one launch (build_treelet.cl) of as many
@@ -677,7 +683,7 @@ def _ploc(queue, k, launch, F, clusters, merged, tile_kept, tile_status, nodes, 
             launch("ploc", k["ploc_merge_tiles"], workers, clusters, merged, tile_kept, nearest, nodes,
                    heights, F, state, iteration, leaf_size, group=1)
             k["ploc_count_kept"].set_args(tile_kept, state, iteration)
-            launch("ploc", k["ploc_count_kept"], 1)
+            launch("ploc", k["ploc_count_kept"], 1, group=1)
             k["ploc_compact"].set_args(merged, clusters, tile_kept, state, iteration)
             launch("ploc", k["ploc_compact"], groups)
             iteration += 1

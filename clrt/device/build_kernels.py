@@ -73,6 +73,26 @@ BUILD_KERNELS = {
 }
 
 
+def cpu_kernels(segmented: bool = False, treelets: bool = False) -> tuple[str, ...]:
+    """The kernels a build on a CPU device launches (clrt.device.build: the
+    host sorts, and PLOC iterates in four plain passes), with the SAH
+    partition's and the treelets' where the build makes them: its program
+    keeps only these (clrt.device.program.keep_kernels), since PoCL's front
+    end works on every kernel of a program (docs/benchmarks.md, "The first
+    call with empty caches")."""
+    partition = tuple(name for name in BUILD_KERNELS if name.startswith("partition_"))
+    return ("init_build_state", "centroid_bounds", *(partition if segmented else ("morton_codes",)), "init_leaves",
+            "ploc_nearest_tiles", "ploc_merge_tiles", "ploc_count_kept", "ploc_compact", "ploc_tail", "ploc_top",
+            *(("treelet_levels", "treelet_order", "treelet_restructure") if treelets else ()),
+            "init_root_paths", "jump_root_paths", "emit_tree")
+
+
+#: The kernels of the top level of a scene of instances on a CPU device
+#: (clrt.device.top_level, whose sort is the device's).
+CPU_TOP_LEVEL_KERNELS = ("place_instances", "instance_rows", "radix_histogram", "scan_counts", "radix_scatter",
+                         "lbvh_nodes", "lbvh_fit")
+
+
 class Workspace:
     """What the builds on one context share: scratch buffers, kept between
     builds and grown when a build needs more (allocations are not free on a
