@@ -40,11 +40,13 @@ def test_the_host_sort_is_the_device_sort(n, cpu_queue):
     assert np.array_equal(got_keys, keys[want]) and np.array_equal(got_ids, ids[want])
 
 
-@pytest.mark.parametrize("options", [{}, {"treelet_leaves": 7}, {"partition": True, "top_clusters": 16}])
+@pytest.mark.parametrize("options", [{}, {"treelet_leaves": 7}, {"partition": True, "top_clusters": 16},
+                                     {"tail_threshold": 300}])
 def test_a_cpu_build_compiles_the_kernels_it_launches_and_no_other(options, cpu_queue, monkeypatch):
     """On a CPU device the builder's program keeps exactly the kernels the
-    build launches (the treelets' and the SAH partition's only when asked
-    for), and the tree is the one the whole program builds."""
+    build launches (the treelets', the SAH partition's and ploc_tail only when
+    asked for), and the tree is the one the GPU driver's launches of the whole
+    program build (with ploc_tail from 2048 clusters on)."""
     context, queue = cpu_queue
     options = {"treelet_leaves": 0, "tail_group": 256, "top_clusters": 128, "partition": False, **options}
     rng = np.random.default_rng(4)
@@ -52,14 +54,14 @@ def test_a_cpu_build_compiles_the_kernels_it_launches_and_no_other(options, cpu_
     built = build.build_on_device(context, queue, corners, leaf_size=4, profile=True, **options)
     launched = {name for name, _, _ in built.launches}
     segmented = bool(options.get("partition"))
-    kept = cpu_kernels(segmented, options["treelet_leaves"] > 0)
+    tail = options.get("tail_threshold", 1) > options["top_clusters"]     # (by default the passes go all the way)
+    kept = cpu_kernels(segmented, options["treelet_leaves"] > 0, tail)
     assert launched == set(kept), launched ^ set(kept)
     defines = build.build_defines("box", "cpu", options["treelet_leaves"], 256, options["top_clusters"], segmented)
     assert set(program.build_program(context, "build_bvh.cl", defines, kernels=kept).kernel_names.split(";")) \
         == set(kept)
-    # the same tree as the GPU driver's launches of the whole program make on this device
     monkeypatch.setattr(build, "device_kind", lambda device: "gpu")
-    whole = build.build_on_device(context, queue, corners, leaf_size=4, **options)
+    whole = build.build_on_device(context, queue, corners, leaf_size=4, **{**options, "tail_threshold": 2048})
     for a, b in zip(built.read_back(), whole.read_back()):
         assert np.array_equal(a.view(np.uint8), b.view(np.uint8))
 
