@@ -43,14 +43,25 @@ def test_start_ignores_other_devices(monkeypatch):
 
 
 def test_the_cpu_warm_up_builds_on_the_first_cpu_device(monkeypatch):
-    """--device cpu: the compiler is started on the first CPU device, and no
-    GPU context is made."""
-    built = []
-    monkeypatch.setattr(warmup, "_start_compiler", lambda lib, device: built.append(device.value))
-    warmup._warm(True, False, True)
+    """--device cpu: the compiler is started on the first CPU device, in the
+    context create_context then adopts (a working one), and no GPU context
+    is made."""
     cpus = [d for p in cl.get_platforms() for d in p.get_devices() if d.type & cl.device_type.CPU]
-    assert built == ([cpus[0].int_ptr] if cpus else [])
-    assert warmup.take_context(cpus[0].int_ptr if cpus else 0) is None
+    started = []
+    real = warmup._start_compiler
+    monkeypatch.setattr(warmup, "_start_compiler", lambda lib, device: (started.append(device), real(lib, device)))
+    warmup._warm(True, False, True)
+    assert started == [cpus[0].int_ptr]
+    made = warmup.take_context(cpus[0].int_ptr)
+    assert made, "no context was left for create_context"
+    context = cl.Context.from_int_ptr(made, retain=False)
+    program = cl.Program(context, "__kernel void twice(__global int* a) { a[0] *= 2; }").build()
+    buffer = cl.Buffer(context, cl.mem_flags.READ_WRITE | cl.mem_flags.COPY_HOST_PTR, hostbuf=np.int32([21]))
+    queue = cl.CommandQueue(context)
+    program.twice(queue, (1,), None, buffer)
+    out = np.empty(1, np.int32)
+    cl.enqueue_copy(queue, out, buffer, is_blocking=True)
+    assert out[0] == 42
 
 
 def test_the_cpu_warm_up_leaves_its_program_in_the_drivers_cache(tmp_path):

@@ -16,12 +16,13 @@ only if the device it resolved is that very device, and releases it
 otherwise.  Any failure here is silent: the ordinary path reports problems.
 
 Where clrt's device will be a CPU (``--device cpu``, or no GPU at all), the
-thread instead builds a one-line program on the first CPU device, in a
-context of its own: PoCL's first build of a process starts its compiler
+thread instead makes the context for the first CPU device and builds a
+one-line program in it: PoCL's first build in a context starts its compiler
 (LLVM, the kernel library), 0.45 s of a first ``clrt render`` on 2 cores
-with empty caches, which then overlaps the imports too; later builds, in
-any context, find it started.  (The program lands in PoCL's cache, a few
-kB, and a warm start builds it from there in milliseconds.)
+with empty caches, which then overlaps the imports.  create_context adopts
+that context as a GPU's (PoCL keeps the compiler's state per context).
+(The program lands in PoCL's cache, a few kB, and a warm start builds it
+from there in milliseconds.)
 
 This module imports neither numpy nor pyopencl.
 """
@@ -108,26 +109,28 @@ def _warm(make_context: bool, gpu: bool, cpu_compiler: bool) -> None:
         for platform in platforms if cpu_compiler else ():
             cpus = _ids(lib.clGetDeviceIDs, ctypes.c_void_p(platform), ctypes.c_uint64(CL_DEVICE_TYPE_CPU))
             if cpus:
-                _start_compiler(lib, ctypes.c_void_p(cpus[0]))
+                _start_compiler(lib, cpus[0])
                 return
     except Exception:     # noqa: BLE001 -- the ordinary path reports any real problem
         return
 
 
-def _start_compiler(lib, device) -> None:
-    """Build FIRST_PROGRAM on ``device`` in a context of its own, then let both go."""
+def _start_compiler(lib, device_id: int) -> None:
+    """Build FIRST_PROGRAM on the device in a context that create_context
+    then adopts, as a GPU's: PoCL keeps its compiler's state with the
+    context, and one let go takes it along (the next context's first build
+    started it again, 0.5 s)."""
     error = ctypes.c_int(0)
+    device = ctypes.c_void_p(device_id)
     context = lib.clCreateContext(None, 1, ctypes.byref(device), None, None, ctypes.byref(error))
     if error.value or not context:
         return
-    try:
-        source = ctypes.c_char_p(FIRST_PROGRAM)
-        program = lib.clCreateProgramWithSource(context, 1, ctypes.byref(source), None, ctypes.byref(error))
-        if error.value == 0 and program:
-            lib.clBuildProgram(program, 0, None, b"", None, None)
-            lib.clReleaseProgram(program)
-    finally:
-        lib.clReleaseContext(context)
+    source = ctypes.c_char_p(FIRST_PROGRAM)
+    program = lib.clCreateProgramWithSource(context, 1, ctypes.byref(source), None, ctypes.byref(error))
+    if error.value == 0 and program:
+        lib.clBuildProgram(program, 0, None, b"", None, None)
+        lib.clReleaseProgram(program)
+    _made.update(device=device_id, context=context, release=lib.clReleaseContext)
 
 
 def start(spec: str | None) -> None:
