@@ -88,7 +88,8 @@ from clrt.accel.topdown import C_INTERSECT, C_TRAVERSAL
 from clrt.config import VOLUME_DEFINES, VOLUMES
 from clrt.device import pinned
 from clrt.device.context import device_kind
-from clrt.device.build_kernels import build_queue, check_tuning, cpu_kernels, one_build_per_context, workspace
+from clrt.device.build_kernels import (SAH_TOP_MAX, build_queue, check_tuning, cpu_kernels, one_build_per_context,
+                                       workspace)
 from clrt.device.host_sort import sort_on_host
 from clrt.device.program import build_program
 from clrt.errors import DeviceError, InputError
@@ -124,7 +125,6 @@ TAIL_GROUP = {"gpu": 1024, "cpu": BUILD_GROUP}
 # On the H200 (docs/benchmark-log.md, session 12), 1M random rays: bunny00 -5 %,
 # camel -4 % (128 against none; 256: -7 % and -5 % for 0.1 ms more build).
 SAH_TOP_CLUSTERS = {"gpu": 128, "cpu": 128}
-SAH_TOP_MAX = 256
 # The SAH partition before PLOC (build_partition.cl): the triangles split
 # top-down by the binned SAH into at most as many segments as the SAH top
 # takes, of about F / that many triangles, PART_BINS bins an axis, in at most

@@ -14,6 +14,11 @@ from clrt.device.signature import buffer as B
 from clrt.device.signature import typed_kernels, value
 
 
+# The most clusters the SAH top takes (build_top.cl's tables in ploc_top's
+# local memory; clrt.device.build.SAH_TOP_CLUSTERS says more).
+SAH_TOP_MAX = 256
+
+
 def U(name: str):
     return value(name, np.uint32)
 
@@ -79,7 +84,6 @@ def check_tuning(tail_threshold=None, treelet_leaves=None, treelet_min=None, tai
     these names) that the kernels cannot take, rather than a failed program
     build or a wrong tree; ``largest_group``: the device's work-group limit."""
     from clrt import checks
-    from clrt.device.build import SAH_TOP_MAX   # (build.py imports this module)
     if tail_threshold is not None:
         checks.integer("tail_threshold", tail_threshold, 1)
     if treelet_leaves is not None and checks.integer("treelet_leaves", treelet_leaves, 0, 8) in (1, 2):
