@@ -15,31 +15,18 @@ first GPU in platform order, see context._resolve); create_context adopts it
 only if the device it resolved is that very device, and releases it
 otherwise.  Any failure here is silent: the ordinary path reports problems.
 
-Where clrt's device will be a CPU (``--device cpu``, or no GPU at all), the
-thread instead makes the context for the first CPU device and builds a
-one-line program in it: PoCL's first build in a context starts its compiler
-(LLVM, the kernel library), 0.45 s of a first ``clrt render`` on 2 cores
-with empty caches, which then overlaps the imports.  create_context adopts
-that context as a GPU's (PoCL keeps the compiler's state per context).
-(The program lands in PoCL's cache, a few kB, and a warm start builds it
-from there in milliseconds.)
-
 This module imports neither numpy nor pyopencl.
 """
 
 from __future__ import annotations
 
-import atexit
 import ctypes
 import glob
 import importlib.util
 import os
 import threading
 
-CL_DEVICE_TYPE_CPU = 1 << 1
 CL_DEVICE_TYPE_GPU = 1 << 2
-# What the CPU warm-up builds (the kernel's name says whose it is in the driver's cache).
-FIRST_PROGRAM = b"__kernel void clrt_warmup(__global int* a) { a[0] = 0; }\n"
 
 _thread: threading.Thread | None = None
 _made: dict = {}               # "device": cl_device_id, "context": cl_context (ints)
@@ -72,10 +59,6 @@ def _declare(lib) -> None:
     lib.clCreateContext.argtypes = [P, U, ctypes.POINTER(P), P, P, ctypes.POINTER(ctypes.c_int)]
     lib.clCreateContext.restype = P
     lib.clReleaseContext.argtypes = [P]
-    lib.clCreateProgramWithSource.argtypes = [P, U, ctypes.POINTER(ctypes.c_char_p), P, ctypes.POINTER(ctypes.c_int)]
-    lib.clCreateProgramWithSource.restype = P
-    lib.clBuildProgram.argtypes = [P, U, P, ctypes.c_char_p, P, P]
-    lib.clReleaseProgram.argtypes = [P]
 
 
 def _ids(query, *args) -> list:
@@ -88,12 +71,11 @@ def _ids(query, *args) -> list:
     return [i for i in ids]
 
 
-def _warm(make_context: bool, gpu: bool, cpu_compiler: bool) -> None:
+def _warm(make_context: bool) -> None:
     try:
         lib = ctypes.CDLL(_loader_path())
         _declare(lib)
-        platforms = _ids(lib.clGetPlatformIDs)
-        for platform in platforms if gpu else ():
+        for platform in _ids(lib.clGetPlatformIDs):
             gpus = _ids(lib.clGetDeviceIDs, ctypes.c_void_p(platform), ctypes.c_uint64(CL_DEVICE_TYPE_GPU))
             if not gpus or not make_context:
                 continue
@@ -103,59 +85,28 @@ def _warm(make_context: bool, gpu: bool, cpu_compiler: bool) -> None:
             if error.value == 0 and context:
                 _made.update(device=gpus[0], context=context, release=lib.clReleaseContext)
             return
-        if gpu and any(_ids(lib.clGetDeviceIDs, ctypes.c_void_p(p), ctypes.c_uint64(CL_DEVICE_TYPE_GPU))
-                       for p in platforms):
-            return                        # a GPU is clrt's choice ("driver" mode: only the loader started)
-        for platform in platforms if cpu_compiler else ():
-            cpus = _ids(lib.clGetDeviceIDs, ctypes.c_void_p(platform), ctypes.c_uint64(CL_DEVICE_TYPE_CPU))
-            if cpus:
-                _start_compiler(lib, cpus[0])
-                return
     except Exception:     # noqa: BLE001 -- the ordinary path reports any real problem
         return
-
-
-def _start_compiler(lib, device_id: int) -> None:
-    """Build FIRST_PROGRAM on the device in a context that create_context
-    then adopts, as a GPU's: PoCL keeps its compiler's state with the
-    context, and one let go takes it along (the next context's first build
-    started it again, 0.5 s)."""
-    error = ctypes.c_int(0)
-    device = ctypes.c_void_p(device_id)
-    context = lib.clCreateContext(None, 1, ctypes.byref(device), None, None, ctypes.byref(error))
-    if error.value or not context:
-        return
-    source = ctypes.c_char_p(FIRST_PROGRAM)
-    program = lib.clCreateProgramWithSource(context, 1, ctypes.byref(source), None, ctypes.byref(error))
-    if error.value == 0 and program:
-        lib.clBuildProgram(program, 0, None, b"", None, None)
-        lib.clReleaseProgram(program)
-    _made.update(device=device_id, context=context, release=lib.clReleaseContext)
 
 
 def start(spec: str | None) -> None:
     """Warm the driver for a render on device ``spec`` (the --device value),
     where clrt would pick the first GPU: with "gpu", or with no spec (a
-    PYOPENCL_CTX then may name another device: the driver is only started);
-    and the CPU driver's compiler with "cpu", or with no spec and no GPU."""
+    PYOPENCL_CTX then may name another device: the driver is only started)."""
     global _thread
     spec = (spec or "").strip().lower()
     mode = os.environ.get("CLRT_WARMUP", "context").strip().lower()   # context | driver | off
-    if spec not in ("", "gpu", "cpu") or _thread is not None or mode in ("off", "0", "no"):
+    if spec not in ("", "gpu") or _thread is not None or mode in ("off", "0", "no"):
         return
-    chosen_by_clrt = not os.environ.get("PYOPENCL_CTX", "").strip()
-    make_context = mode != "driver" and (spec == "gpu" or chosen_by_clrt)
-    cpu_compiler = mode != "driver" and (spec == "cpu" or (spec == "" and chosen_by_clrt))
+    make_context = mode != "driver" and (spec == "gpu" or not os.environ.get("PYOPENCL_CTX", "").strip())
     # Drivers start up with deep call chains: the thread gets a main thread's
     # stack, not the smaller default of new threads.
     previous = threading.stack_size(64 << 20)
     try:
-        _thread = threading.Thread(target=_warm, args=(make_context, spec != "cpu", cpu_compiler),
-                                   name="clrt-warmup", daemon=True)
+        _thread = threading.Thread(target=_warm, args=(make_context,), name="clrt-warmup", daemon=True)
         _thread.start()
     finally:
         threading.stack_size(previous)
-    atexit.register(wait)      # a process that ends first does not end under a compiling driver
 
 
 def wait() -> None:
