@@ -28,7 +28,7 @@ The algorithm (kernels in ``clrt/kernels/build_*.cl``, entry ``build_bvh.cl``):
    launch an iteration on GPUs (the kept clusters placed by a decoupled
    look-back across the work-groups), four on CPU devices (two plain merge
    passes, a prefix sum, a compaction), until at most ``tail_threshold``
-   clusters are left;
+   clusters are left (on CPU devices ``SAH_TOP_CLUSTERS``: no tail);
    then one work-group runs the remaining iterations in one launch
    (``ploc_tail``, the same choices in a loop: the tree does not depend on
    where the host hands over) until ``SAH_TOP_CLUSTERS`` clusters are left,
