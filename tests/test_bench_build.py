@@ -28,8 +28,11 @@ def test_build_bench_prints_every_variant(device, capsys, monkeypatch):
     assert all(float(r[5].replace(",", "")) > 0 for r in rows)            # warm build ms
     # --profile: one launch-by-launch table per device variant, the sort's passes in it
     assert out.count("one warm build:") == 4
-    # (the scatter of each pass: radix_scatter on CPU devices, radix_scatter_lookback on GPUs)
-    assert ("| radix_scatter | 8 |" in out or "| radix_scatter_lookback | 8 |" in out) and "| ploc_tail | 1 |" in out
+    # (the sort's passes: radix_scatter_lookback's on GPUs; on CPU devices the host sorts, and PLOC's
+    # passes go down to the SAH top: no ploc_tail)
+    assert "| radix_scatter_lookback | 8 |" in out or "| radix_scatter |" not in out
+    assert "| ploc_tail | 1 |" in out or "| ploc_count_kept |" in out
+    assert "| ploc_top | 1 |" in out
 
 
 def test_random_rays_are_traced_beside_the_primary_rays(device, capsys, monkeypatch):

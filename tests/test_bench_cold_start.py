@@ -31,7 +31,7 @@ def test_the_breakdown_lists_every_program_build_and_first_launch(tmp_path, devi
     assert {b["entry"] for b in found["builds"]} == {"build_bvh.cl", "trace.cl"}
     assert all(b["kernels"] > 0 and b["source_bytes"] > 0 and b["ms"] > 0 for b in found["builds"])
     launched = [x["key"][0] for x in found["launches"]]
-    assert "ploc_tail" in launched and "query_closest" in launched and len(launched) == len(set(map(tuple, (
+    assert "ploc_top" in launched and "query_closest" in launched and len(launched) == len(set(map(tuple, (
         x["key"] for x in found["launches"]))))
     cold_start._print_breakdown("accel", found, json.loads(json.dumps(found)), None)
     out = capsys.readouterr().out

@@ -18,8 +18,9 @@ The algorithm (kernels in ``clrt/kernels/build_*.cl``, entry ``build_bvh.cl``):
    along the Morton curve did worse (docs/benchmark-log.md, session 13);
 2. a least-significant-digit radix sort of (code, triangle id), ``RADIX_BITS``
    per pass: on GPUs one launch a pass (the tiles' offsets by decoupled
-   look-back) after one that counts the digits of every pass, on CPU devices
-   three launches a pass;
+   look-back) after one that counts the digits of every pass; on CPU devices
+   the host sorts (clrt.device.host_sort: as fast, and three kernels fewer to
+   compile on a first call);
 3. PLOC (Meister & Bittner 2018; the one-block search of PLOC++, Benthin et
    al. 2022): clusters start as the sorted triangles; in each iteration every
    cluster finds the cluster within ``PLOC_RADIUS`` places on either side whose
@@ -27,7 +28,7 @@ The algorithm (kernels in ``clrt/kernels/build_*.cl``, entry ``build_bvh.cl``):
    launch an iteration on GPUs (the kept clusters placed by a decoupled
    look-back across the work-groups), four on CPU devices (two plain merge
    passes, a prefix sum, a compaction), until at most ``tail_threshold``
-   clusters are left;
+   clusters are left (on CPU devices ``SAH_TOP_CLUSTERS``: no tail);
    then one work-group runs the remaining iterations in one launch
    (``ploc_tail``, the same choices in a loop: the tree does not depend on
    where the host hands over) until ``SAH_TOP_CLUSTERS`` clusters are left,
@@ -87,7 +88,9 @@ from clrt.accel.topdown import C_INTERSECT, C_TRAVERSAL
 from clrt.config import VOLUME_DEFINES, VOLUMES
 from clrt.device import pinned
 from clrt.device.context import device_kind
-from clrt.device.build_kernels import build_queue, one_build_per_context, workspace
+from clrt.device.build_kernels import (SAH_TOP_MAX, build_queue, check_tuning, cpu_kernels, one_build_per_context,
+                                       workspace)
+from clrt.device.host_sort import sort_on_host
 from clrt.device.program import build_program
 from clrt.errors import DeviceError, InputError
 
@@ -108,9 +111,12 @@ PLOC_RADIUS = 16
 # Clusters at which the host hands over to ploc_tail, per device type: a GPU
 # runs a few thousand clusters' iteration in one work-group faster than three
 # launches (on the H200, 2048 against 4096: bunny00 2.07 against 2.12 ms,
-# 1M triangles 7.7 against 7.9 ms, 10M the same); a CPU runs a work-group on
-# one core, so it hands over later.
-TAIL_THRESHOLD = {"gpu": 2048, "cpu": 2048}
+# 1M triangles 7.7 against 7.9 ms, 10M the same).  A CPU device's passes go
+# on down to the SAH top (1: never), and ploc_tail is not launched: the same
+# tree in about the same time warm (bunny00 on 2 cores ~86 ms either way),
+# and on a first call PoCL does not compile ploc_tail (0.3-0.7 s on 2 cores,
+# docs/benchmarks.md, "The first call with empty caches").
+TAIL_THRESHOLD = {"gpu": 2048, "cpu": 1}
 TAIL_MAX = 32768         # ploc_tail counts its clusters in 16 bits
 TAIL_GROUP = {"gpu": 1024, "cpu": BUILD_GROUP}
 # PLOC stops at this many clusters, and ploc_top splits them top-down by the
@@ -119,7 +125,6 @@ TAIL_GROUP = {"gpu": 1024, "cpu": BUILD_GROUP}
 # On the H200 (docs/benchmark-log.md, session 12), 1M random rays: bunny00 -5 %,
 # camel -4 % (128 against none; 256: -7 % and -5 % for 0.1 ms more build).
 SAH_TOP_CLUSTERS = {"gpu": 128, "cpu": 128}
-SAH_TOP_MAX = 256
 # The SAH partition before PLOC (build_partition.cl): the triangles split
 # top-down by the binned SAH into at most as many segments as the SAH top
 # takes, of about F / that many triangles, PART_BINS bins an axis, in at most
@@ -343,28 +348,6 @@ class _Phases:
         return out
 
 
-def check_tuning(tail_threshold=None, treelet_leaves=None, treelet_min=None, tail_group=None,
-                 largest_group: int = 4096, top_clusters=None, partition=None) -> None:
-    """InputError for a benchmark's tuning value (build_on_device's arguments of
-    these names) that the kernels cannot take, rather than a failed program
-    build or a wrong tree; ``largest_group``: the device's work-group limit."""
-    from clrt import checks
-    if tail_threshold is not None:
-        checks.integer("tail_threshold", tail_threshold, 1)
-    if treelet_leaves is not None and checks.integer("treelet_leaves", treelet_leaves, 0, 8) in (1, 2):
-        raise checks.fail("treelet_leaves", "0 (none) or an integer in 3..8", treelet_leaves)
-    if treelet_min is not None:
-        checks.integer("treelet_min", treelet_min, 0)
-    if tail_group is not None:
-        group = checks.integer("tail_group", tail_group, 1, largest_group)
-        if group & (group - 1):
-            raise checks.fail("tail_group", f"a power of two in 1..{largest_group}", tail_group)
-    if top_clusters is not None:
-        checks.integer("top_clusters", top_clusters, 1, SAH_TOP_MAX)
-    if partition is not None:
-        checks.integer("partition", partition, 0, 1)
-
-
 @one_build_per_context
 def build_on_device(context: cl.Context, queue: cl.CommandQueue, corners, volume: str = "box",
                     leaf_size: int = 4, keep_boxes: bool = False,
@@ -380,7 +363,8 @@ def build_on_device(context: cl.Context, queue: cl.CommandQueue, corners, volume
     volume: one of ``VOLUMES``; leaf_size: 1..255, the most triangles per leaf.
     keep_boxes: also keep the exact child boxes (``DeviceBvh.stats``).
     tail_threshold: clusters at which PLOC hands over to one work-group
-        (default: TAIL_THRESHOLD of the device type; for benchmarks).
+        (default: TAIL_THRESHOLD of the device type; for benchmarks); at
+        most top_clusters: no hand-over, ploc_tail is not launched.
     staged_upload: the triangles through page-locked staging or not
         (default: clrt.device.pinned.upload's choice; for benchmarks).
     treelet_leaves: leaves of the treelets restructured after PLOC (0: the
@@ -425,7 +409,10 @@ def build_on_device(context: cl.Context, queue: cl.CommandQueue, corners, volume
         partition = SAH_PARTITION[kind] and F >= PART_MIN_TRIANGLES
     segmented = bool(partition) and 1 < top_clusters < F
     defines = build_defines(volume, kind, treelet_leaves, tail_group, top_clusters, segmented)
-    program = build_program(context, "build_bvh.cl", defines)
+    treelets = TREELET_LEAVES[kind] if treelet_leaves is None else int(treelet_leaves)
+    treelets = treelets if F > 2 else 0
+    program = build_program(context, "build_bvh.cl", defines, kernels=cpu_kernels(
+        segmented, treelets > 0, tail_threshold > top_clusters) if kind == "cpu" else None)
     ws = workspace(context)
     k = ws.kernels_of(program, defines)
     num_nodes = 2 * F - 1
@@ -472,8 +459,11 @@ def build_on_device(context: cl.Context, queue: cl.CommandQueue, corners, volume
     else:
         launch("morton", k["morton_codes"], _groups(F), corners_buf, np.uint32(F), state, keys[0], ids[0])
 
-    # 2. Radix sort.
-    sorted_ids = queue_sort(k, launch, ws, kind, F, keys, ids, state)
+    # 2. Radix sort; a CPU device's by the host (host_sort.py says why).
+    if kind == "cpu":
+        sorted_ids = sort_on_host(queue, F, keys[0], ids[0])   # (sorted in keys[0], as queue_sort leaves them)
+    else:
+        sorted_ids = queue_sort(k, launch, ws, kind, F, keys, ids, state)
 
     # 3. PLOC.
     nodes = ws.get("nodes", layouts.BUILD_NODE.itemsize * num_nodes)
@@ -490,13 +480,15 @@ def build_on_device(context: cl.Context, queue: cl.CommandQueue, corners, volume
                    leaf_size, max(tail_threshold, top_clusters), nearest)
     # ploc_tail starts from the clusters of the last iteration: on the CPU
     # passes always `clusters` (compacted back into it), from ploc_merge the
-    # two buffers in turn.
+    # two buffers in turn.  With no more than the SAH top's clusters left it
+    # would merge nothing: the host writes what it would leave ploc_top.
     last, spare = (merged, clusters) if nearest is None and queued % 2 else (clusters, merged)
-    launch("ploc", k["ploc_tail"], 1, last, spare, tile_kept, nodes, heights, F, state, queued, leaf_size,
-           group=tail_group)
+    if tail_threshold > top_clusters:
+        launch("ploc", k["ploc_tail"], 1, last, spare, tile_kept, nodes, heights, F, state, queued, leaf_size,
+               group=tail_group)
+    else:
+        _hand_over(queue, state, queued)
     launch("ploc", k["ploc_top"], 1, last, spare, nodes, heights, F, state, leaf_size, group=tail_group)
-    treelets = TREELET_LEAVES[kind] if treelet_leaves is None else int(treelet_leaves)
-    treelets = treelets if F > 2 else 0
 
     # 3b. Treelet restructuring: the nodes with a treelet counted per height
     # and listed by height, then one launch (build_treelet.cl) of as many
@@ -605,6 +597,18 @@ def queue_sort(k, launch, ws, kind: str, n: int, keys: list, ids: list, state: c
     return ids[SORT_PASSES % 2]
 
 
+def _hand_over(queue, state: cl.Buffer, first_iteration: int) -> None:
+    """Write at STATE_TAIL what ploc_tail leaves ploc_top when it merges
+    nothing (build_state.cl's TAIL_COUNT, TAIL_NEXT_NODE, TAIL_ITERATIONS,
+    TAIL_FLAGS, in this order): the count before ``first_iteration``, the
+    node counter and the iterations that merged, as they stand."""
+    head = np.empty(STATE_INTS, np.int32)
+    cl.enqueue_copy(queue, head, state, is_blocking=True)
+    tail = np.array([head[STATE["STATE_COUNTS"] + first_iteration % STATE["COUNT_RING"]],
+                     head[STATE["STATE_NEXT_NODE"]], head[STATE["STATE_ITERATIONS"]], 0], np.int32)
+    cl.enqueue_copy(queue, state, tail, dst_offset=4 * STATE["STATE_TAIL"], is_blocking=True)
+
+
 def _root_height(queue, heights: cl.Buffer, F: int) -> int:
     """Nodes on the longest root-to-leaf path (blocking read of the root's height)."""
     if F == 1:
@@ -677,7 +681,7 @@ def _ploc(queue, k, launch, F, clusters, merged, tile_kept, tile_status, nodes, 
             launch("ploc", k["ploc_merge_tiles"], workers, clusters, merged, tile_kept, nearest, nodes,
                    heights, F, state, iteration, leaf_size, group=1)
             k["ploc_count_kept"].set_args(tile_kept, state, iteration)
-            launch("ploc", k["ploc_count_kept"], 1)
+            launch("ploc", k["ploc_count_kept"], 1, group=1)
             k["ploc_compact"].set_args(merged, clusters, tile_kept, state, iteration)
             launch("ploc", k["ploc_compact"], groups)
             iteration += 1

@@ -14,6 +14,11 @@ from clrt.device.signature import buffer as B
 from clrt.device.signature import typed_kernels, value
 
 
+# The most clusters the SAH top takes (build_top.cl's tables in ploc_top's
+# local memory; clrt.device.build.SAH_TOP_CLUSTERS says more).
+SAH_TOP_MAX = 256
+
+
 def U(name: str):
     return value(name, np.uint32)
 
@@ -73,6 +78,49 @@ BUILD_KERNELS = {
     "lbvh_fit": (B("children"), B("parents"), B("sorted_ids"), B("table"), U("num_instances"), B("boxes"),
         B("arrivals"), B("rows"), B("exact_rows")),
 }
+
+
+def check_tuning(tail_threshold=None, treelet_leaves=None, treelet_min=None, tail_group=None,
+                 largest_group: int = 4096, top_clusters=None, partition=None) -> None:
+    """InputError for a benchmark's tuning value (build_on_device's arguments of
+    these names) that the kernels cannot take, rather than a failed program
+    build or a wrong tree; ``largest_group``: the device's work-group limit."""
+    from clrt import checks
+    if tail_threshold is not None:
+        checks.integer("tail_threshold", tail_threshold, 1)
+    if treelet_leaves is not None and checks.integer("treelet_leaves", treelet_leaves, 0, 8) in (1, 2):
+        raise checks.fail("treelet_leaves", "0 (none) or an integer in 3..8", treelet_leaves)
+    if treelet_min is not None:
+        checks.integer("treelet_min", treelet_min, 0)
+    if tail_group is not None:
+        group = checks.integer("tail_group", tail_group, 1, largest_group)
+        if group & (group - 1):
+            raise checks.fail("tail_group", f"a power of two in 1..{largest_group}", tail_group)
+    if top_clusters is not None:
+        checks.integer("top_clusters", top_clusters, 1, SAH_TOP_MAX)
+    if partition is not None:
+        checks.integer("partition", partition, 0, 1)
+
+
+def cpu_kernels(segmented: bool = False, treelets: bool = False, tail: bool = False) -> tuple[str, ...]:
+    """The kernels a build on a CPU device launches (clrt.device.build: the
+    host sorts, and PLOC iterates in four plain passes), with the SAH
+    partition's, the treelets' and ploc_tail where the build launches them: its program
+    keeps only these (clrt.device.program.keep_kernels), since PoCL's front
+    end works on every kernel of a program (docs/benchmarks.md, "The first
+    call with empty caches")."""
+    partition = tuple(name for name in BUILD_KERNELS if name.startswith("partition_"))
+    return ("init_build_state", "centroid_bounds", *(partition if segmented else ("morton_codes",)), "init_leaves",
+            "ploc_nearest_tiles", "ploc_merge_tiles", "ploc_count_kept", "ploc_compact",
+            *(("ploc_tail",) if tail else ()), "ploc_top",
+            *(("treelet_levels", "treelet_order", "treelet_restructure") if treelets else ()),
+            "init_root_paths", "jump_root_paths", "emit_tree")
+
+
+#: The kernels of the top level of a scene of instances on a CPU device
+#: (clrt.device.top_level, whose sort is the device's).
+CPU_TOP_LEVEL_KERNELS = ("place_instances", "instance_frame", "instance_rows", "radix_histogram", "scan_counts",
+                         "radix_scatter", "lbvh_nodes", "lbvh_fit")
 
 
 class Workspace:

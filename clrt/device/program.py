@@ -84,6 +84,53 @@ def _has_guard(name: str) -> bool:
             and lines[1].startswith("#define ") and lines[0].split()[1] == lines[1].split()[1])
 
 
+# A kernel's head: __kernel, its attributes, void and its name.
+_KERNEL_HEAD = re.compile(r"__kernel\s+(?:__attribute__\(\((?:[^()]|\([^()]*\))*\)\)\s*)*void\s+(\w+)\s*\(")
+
+
+def keep_kernels(source: str, kernels) -> str:
+    """``source`` without the kernels not named in ``kernels``: each left-out
+    kernel's head and body are cut out (its helpers stay, and the compiler
+    drops those that nothing calls).  Raises KernelBuildError for a named
+    kernel that the source lacks."""
+    wanted = set(kernels)
+    out, position, found = [], 0, set()
+    for head in _KERNEL_HEAD.finditer(source):
+        if head.start() < position:
+            continue
+        if head.group(1) in wanted:
+            found.add(head.group(1))
+            continue
+        out.append(source[position:head.start()])
+        position = _body_end(source, head.end())
+    missing = wanted - found
+    if missing:
+        raise KernelBuildError(f"no kernel {', '.join(sorted(missing))} in the program")
+    return "".join(out) + source[position:]
+
+
+def _body_end(source: str, start: int) -> int:
+    """Where the body of the function whose parameters open before ``start``
+    ends (after its closing brace), comments skipped."""
+    depth, i = 0, start
+    while i < len(source):
+        if source.startswith("//", i):
+            i = source.find("\n", i)
+            i = len(source) if i < 0 else i
+            continue
+        if source.startswith("/*", i):
+            i = source.index("*/", i) + 2
+            continue
+        if source[i] == "{":
+            depth += 1
+        elif source[i] == "}":
+            depth -= 1
+            if depth == 0:
+                return i + 1
+        i += 1
+    raise KernelBuildError("a kernel's body does not end")
+
+
 _programs: dict[tuple, cl.Program] = {}
 
 
@@ -118,15 +165,19 @@ def build_options(context: cl.Context, defines: dict | None = None,
 
 
 def build_program(context: cl.Context, entry: str, defines: dict | None = None,
-                  extra_options: tuple[str, ...] = ()) -> cl.Program:
+                  extra_options: tuple[str, ...] = (), kernels=None) -> cl.Program:
     """Build (once per context, source and options) the program whose entry file is ``entry``.
 
     ``defines`` become ``-D NAME=VALUE`` options: this is how build-time choices
     (the acceleration structure, the bounding-volume shape) reach the kernels.
+    ``kernels``: the names of the kernels to keep (:func:`keep_kernels`), or
+    None for all of them.  (The device builder keeps only those its build
+    launches on CPU devices: PoCL's front end then spends about half as long
+    on the program, docs/benchmarks.md.)
     Raises :class:`KernelBuildError` with the compiler log on failure.
     """
     options = build_options(context, defines, extra_options)
-    source = expand_source(entry)
+    source = expand_source(entry) if kernels is None else keep_kernels(expand_source(entry), kernels)
     key = (context.int_ptr, source, tuple(options))
     program = _programs.get(key)
     if program is None:

@@ -1,0 +1,79 @@
+"""What a first call compiles on a CPU device (docs/benchmarks.md, "The first
+call with empty caches"): the device builder's program holds only the
+kernels its build launches, and the host sorts for it -- in the order of the
+device's radix sort."""
+
+import numpy as np
+import pyopencl as cl
+import pytest
+
+from clrt.device import build, host_sort, program
+from clrt.device.build_kernels import cpu_kernels
+from clrt.device.context import create_context
+from clrt.errors import KernelBuildError
+
+
+@pytest.fixture(scope="module")
+def cpu_queue():
+    return create_context("cpu")
+
+
+@pytest.mark.parametrize("n", [1, 2, 5000, 70_001])
+def test_the_host_sort_is_the_device_sort(n, cpu_queue):
+    """The host's order is the device radix sort's (build_sort.cl): stable by
+    the whole 32-bit key, equal keys in input order -- pairs read back from the
+    buffers sorted in place, against numpy's stable sort of the keys."""
+    context, queue = cpu_queue
+    rng = np.random.default_rng(n)
+    keys = rng.integers(0, 1 << 32, n, dtype=np.uint64).astype(np.uint32)
+    keys[rng.random(n) < 0.6] = keys[0]           # a long run of one key
+    keys[::7] &= np.uint32(0xFFFF0000)            # keys alike in their high half only
+    keys[1::7] &= np.uint32(0x0000FFFF)           # and in their low half only
+    ids = rng.permutation(n).astype(np.uint32)
+    flags = cl.mem_flags.READ_WRITE | cl.mem_flags.COPY_HOST_PTR
+    key_buffer, id_buffer = cl.Buffer(context, flags, hostbuf=keys), cl.Buffer(context, flags, hostbuf=ids)
+    assert host_sort.sort_on_host(queue, n, key_buffer, id_buffer) is id_buffer
+    got_keys, got_ids = np.empty_like(keys), np.empty_like(ids)
+    cl.enqueue_copy(queue, got_keys, key_buffer)
+    cl.enqueue_copy(queue, got_ids, id_buffer, is_blocking=True)
+    want = np.argsort(keys, kind="stable")
+    assert np.array_equal(got_keys, keys[want]) and np.array_equal(got_ids, ids[want])
+
+
+@pytest.mark.parametrize("options", [{}, {"treelet_leaves": 7}, {"partition": True, "top_clusters": 16},
+                                     {"tail_threshold": 300}])
+def test_a_cpu_build_compiles_the_kernels_it_launches_and_no_other(options, cpu_queue, monkeypatch):
+    """On a CPU device the builder's program keeps exactly the kernels the
+    build launches (the treelets', the SAH partition's and ploc_tail only when
+    asked for), and the tree is the one the GPU driver's launches of the whole
+    program build (with ploc_tail from 2048 clusters on)."""
+    context, queue = cpu_queue
+    options = {"treelet_leaves": 0, "tail_group": 256, "top_clusters": 128, "partition": False, **options}
+    rng = np.random.default_rng(4)
+    corners = (rng.random((3000, 1, 3)) + 0.02 * rng.standard_normal((3000, 3, 3))).astype(np.float32)
+    built = build.build_on_device(context, queue, corners, leaf_size=4, profile=True, **options)
+    launched = {name for name, _, _ in built.launches}
+    segmented = bool(options.get("partition"))
+    tail = options.get("tail_threshold", 1) > options["top_clusters"]     # (by default the passes go all the way)
+    kept = cpu_kernels(segmented, options["treelet_leaves"] > 0, tail)
+    assert launched == set(kept), launched ^ set(kept)
+    defines = build.build_defines("box", "cpu", options["treelet_leaves"], 256, options["top_clusters"], segmented)
+    assert set(program.build_program(context, "build_bvh.cl", defines, kernels=kept).kernel_names.split(";")) \
+        == set(kept)
+    monkeypatch.setattr(build, "device_kind", lambda device: "gpu")
+    whole = build.build_on_device(context, queue, corners, leaf_size=4, **{**options, "tail_threshold": 2048})
+    for a, b in zip(built.read_back(), whole.read_back()):
+        assert np.array_equal(a.view(np.uint8), b.view(np.uint8))
+
+
+def test_keep_kernels_cuts_the_others_out_and_names_a_missing_one(cpu_queue):
+    context, _ = cpu_queue
+    defines = build.build_defines("box", "cpu")
+    source = program.expand_source("build_bvh.cl")
+    kept = program.keep_kernels(source, ["emit_tree", "ploc_top"])
+    assert "void emit_tree(" in kept and "void ploc_top(" in kept and "void ploc_tail(" not in kept
+    assert "inline void clear_build_state" in kept            # helpers stay: the compiler drops the unused
+    built = program.build_program(context, "build_bvh.cl", defines, kernels=("emit_tree", "ploc_top"))
+    assert sorted(built.kernel_names.split(";")) == ["emit_tree", "ploc_top"]
+    with pytest.raises(KernelBuildError, match="no kernel ploc_nowhere"):
+        program.keep_kernels(source, ["emit_tree", "ploc_nowhere"])
