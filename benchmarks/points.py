@@ -28,6 +28,12 @@ after ``--warmup`` untimed ones, from numpy points to numpy answers (wall),
 with clrt's kernel time (profiling events) beside its wall time.  The last
 columns say whether the answers agree: the mean distance, and the share of
 points inside.
+
+``--turns`` instead runs clrt and Open3D taking turns, query by query, on
+closest points, distances and signed distances (clrt's by the normal rule):
+wall and process CPU times, and the paired ratio -- the median over the
+repetitions of Open3D's time over clrt's in the same one, the figure that
+holds still on a shared machine whose speed drifts (issue 36's 10x on PoCL).
 """
 
 from __future__ import annotations
@@ -183,6 +189,66 @@ def warp_rows(mesh, points, repeat, warmup):
             for name, kernel in (("distance", unsigned), ("signed distance", winding))]
 
 
+#: The queries --turns times, clrt's call and Open3D's, each giving distances.
+TURN_QUERIES = ("closest points", "distance", "signed distance (normal)")
+
+
+def turn_rows(mesh, points, device, repeat: int, warmup: int) -> list[tuple]:
+    """clrt and Open3D taking turns on the same points, query by query: each
+    repetition runs clrt's call, then Open3D's, so that a slow spell of a
+    shared machine falls on both.  Rows (query, clrt wall ms, clrt CPU ms,
+    Open3D wall ms, Open3D CPU ms, paired wall ratio, paired CPU ratio, the
+    largest difference of their distances): medians; a ratio is the median
+    over the repetitions of Open3D's time over clrt's in the same one (above
+    1: clrt is faster); CPU time is the process's (every thread's)."""
+    import open3d as o3d
+
+    import clrt
+    accel = clrt.Accel(mesh, device=device)
+    scene = o3d.t.geometry.RaycastingScene()
+    scene.add_triangles(o3d.core.Tensor(np.asarray(mesh.vertices, np.float32)),
+                        o3d.core.Tensor(np.asarray(mesh.faces, np.uint32)))
+    p = o3d.core.Tensor(points)
+    calls = {"closest points": (lambda: accel.closest_points(points, fields=("point", "distance")).distance,
+                                lambda: np.linalg.norm(scene.compute_closest_points(p)["points"].numpy() - points,
+                                                       axis=1)),
+             "distance": (lambda: accel.distance(points), lambda: scene.compute_distance(p).numpy()),
+             "signed distance (normal)": (lambda: np.abs(accel.signed_distance(points, sign="normal")),
+                                          lambda: np.abs(scene.compute_signed_distance(p).numpy()))}
+    rows = []
+    for name in TURN_QUERIES:
+        times = []   # per repetition: (clrt wall, clrt CPU, Open3D wall, Open3D CPU)
+        answers = [None, None]
+        for turn in range(warmup + repeat):
+            took = []
+            for k, call in enumerate(calls[name]):
+                wall, cpu = time.perf_counter(), time.process_time()
+                answers[k] = call()
+                took += [1e3 * (time.perf_counter() - wall), 1e3 * (time.process_time() - cpu)]
+            if turn >= warmup:
+                times.append(took)
+        t = np.array(times)
+        differ = float(np.max(np.abs(np.asarray(answers[0], np.float64) - answers[1])))
+        rows.append((name, *np.median(t, axis=0), float(np.median(t[:, 2] / t[:, 0])),
+                     float(np.median(t[:, 3] / t[:, 1])), differ))
+    return rows
+
+
+def print_turns(mesh_paths, count, seed, device, repeat, warmup) -> None:
+    """--turns: the table of turn_rows for each mesh."""
+    from clrt.scene.sources import as_mesh
+
+    print("| mesh | triangles | query | clrt wall (CPU) ms | Open3D wall (CPU) ms | Open3D / clrt: wall (CPU) "
+          "| distances differ by |")
+    print("|---|---|---|---|---|---|---|")
+    for path in mesh_paths:
+        mesh = as_mesh(path)
+        points = make_points(mesh, count, seed)
+        for name, cw, cc, ow, oc, ratio, cpu_ratio, differ in turn_rows(mesh, points, device, repeat, warmup):
+            print(f"| {path.name} | {len(mesh.faces):,} | {name} | {cw:.1f} ({cc:.1f}) | {ow:.1f} ({oc:.1f}) "
+                  f"| **{ratio:.2f}x** ({cpu_ratio:.2f}x) | {differ:.1e} |")
+
+
 def subdivided(mesh, times: int):
     """``mesh`` with each triangle split into 4^times (trimesh's midpoint subdivision)."""
     if not times:
@@ -231,10 +297,21 @@ def main(argv=None) -> int:
                    help="also sdf_grid of this many samples a side (default 0: none)")
     p.add_argument("--subdivide", type=NON_NEGATIVE, default=0,
                    help="split each triangle into 4^N first (default 0; 2 makes bunny00 1.2M triangles)")
+    p.add_argument("--turns", action="store_true",
+                   help="instead: clrt and Open3D taking turns on closest points, distances and signed distances "
+                        "(paired ratios; needs Open3D and mesh files)")
     args = p.parse_args(argv)
     for path in args.mesh:
         if not path.is_file():
             raise SystemExit(f"benchmarks.points: no mesh file {path}")
+    if args.turns:
+        try:
+            import open3d  # noqa: F401
+        except ImportError:
+            raise SystemExit("benchmarks.points: --turns needs Open3D: pip install open3d-cpu") from None
+        if not args.mesh:
+            raise SystemExit("benchmarks.points: --turns needs mesh files")
+        return exit_code(print_turns, args.mesh, args.points, args.seed, args.device, args.repeat, args.warmup)
     if args.grid == 1:
         raise SystemExit("benchmarks.points: --grid must be 0 (none) or at least 2")
     return exit_code(run, args.mesh or [None], args.points, args.seed, args.device, args.repeat, args.warmup,
