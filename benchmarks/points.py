@@ -204,6 +204,7 @@ def turn_rows(mesh, points, device, repeat: int, warmup: int) -> list[tuple]:
     import open3d as o3d
 
     import clrt
+    from benchmarks.peer_turns import paired_ratio
     accel = clrt.Accel(mesh, device=device)
     scene = o3d.t.geometry.RaycastingScene()
     scene.add_triangles(o3d.core.Tensor(np.asarray(mesh.vertices, np.float32)),
@@ -229,8 +230,8 @@ def turn_rows(mesh, points, device, repeat: int, warmup: int) -> list[tuple]:
                 times.append(took)
         t = np.array(times)
         differ = float(np.max(np.abs(np.asarray(answers[0], np.float64) - answers[1])))
-        rows.append((name, *np.median(t, axis=0), float(np.median(t[:, 2] / t[:, 0])),
-                     float(np.median(t[:, 3] / t[:, 1])), differ))
+        rows.append((name, *np.median(t, axis=0), paired_ratio(t[:, 0], t[:, 2]), paired_ratio(t[:, 1], t[:, 3]),
+                     differ))
     return rows
 
 
