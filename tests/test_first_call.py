@@ -8,7 +8,7 @@ import pyopencl as cl
 import pytest
 
 from clrt.device import build, host_sort, program
-from clrt.device.build_kernels import cpu_kernels
+from clrt.device.build_kernels import launched_kernels
 from clrt.device.context import create_context
 from clrt.errors import KernelBuildError
 
@@ -42,11 +42,11 @@ def test_the_host_sort_is_the_device_sort(n, cpu_queue):
 
 @pytest.mark.parametrize("options", [{}, {"treelet_leaves": 7}, {"partition": True, "top_clusters": 16},
                                      {"tail_threshold": 300}])
-def test_a_cpu_build_compiles_the_kernels_it_launches_and_no_other(options, cpu_queue, monkeypatch):
-    """On a CPU device the builder's program keeps exactly the kernels the
-    build launches (the treelets', the SAH partition's and ploc_tail only when
-    asked for), and the tree is the one the GPU driver's launches of the whole
-    program build (with ploc_tail from 2048 clusters on)."""
+def test_a_build_compiles_the_kernels_it_launches_and_no_other(options, cpu_queue, monkeypatch):
+    """On either kind of device the builder's program keeps exactly the
+    kernels the build launches (the treelets', the SAH partition's and
+    ploc_tail only when asked for), and the CPU's tree is the one the GPU
+    driver's launches build (with ploc_tail from 2048 clusters on), run here."""
     context, queue = cpu_queue
     options = {"treelet_leaves": 0, "tail_group": 256, "top_clusters": 128, "partition": False, **options}
     rng = np.random.default_rng(4)
@@ -55,14 +55,17 @@ def test_a_cpu_build_compiles_the_kernels_it_launches_and_no_other(options, cpu_
     launched = {name for name, _, _ in built.launches}
     segmented = bool(options.get("partition"))
     tail = options.get("tail_threshold", 1) > options["top_clusters"]     # (by default the passes go all the way)
-    kept = cpu_kernels(segmented, options["treelet_leaves"] > 0, tail)
+    kept = launched_kernels("cpu", segmented, options["treelet_leaves"] > 0, tail)
     assert launched == set(kept), launched ^ set(kept)
     defines = build.build_defines("box", "cpu", options["treelet_leaves"], 256, options["top_clusters"], segmented)
     assert set(program.build_program(context, "build_bvh.cl", defines, kernels=kept).kernel_names.split(";")) \
         == set(kept)
     monkeypatch.setattr(build, "device_kind", lambda device: "gpu")
-    whole = build.build_on_device(context, queue, corners, leaf_size=4, **{**options, "tail_threshold": 2048})
-    for a, b in zip(built.read_back(), whole.read_back()):
+    gpu = build.build_on_device(context, queue, corners, leaf_size=4, profile=True,
+                                **{**options, "tail_threshold": 2048})
+    launched = {name for name, _, _ in gpu.launches}
+    assert launched == set(launched_kernels("gpu", segmented, options["treelet_leaves"] > 0, True)), launched
+    for a, b in zip(built.read_back(), gpu.read_back()):
         assert np.array_equal(a.view(np.uint8), b.view(np.uint8))
 
 
@@ -77,3 +80,32 @@ def test_keep_kernels_cuts_the_others_out_and_names_a_missing_one(cpu_queue):
     assert sorted(built.kernel_names.split(";")) == ["emit_tree", "ploc_top"]
     with pytest.raises(KernelBuildError, match="no kernel ploc_nowhere"):
         program.keep_kernels(source, ["emit_tree", "ploc_nowhere"])
+
+
+@pytest.mark.parametrize("kind", ["cpu", "gpu"])
+def test_a_top_level_compiles_the_kernels_it_launches_and_no_other(kind, monkeypatch):
+    """The top level of a scene of instances keeps exactly the kernels its
+    place() launches on either kind of device (the GPU driver's launches run
+    here), and both kinds' trees answer as the host-built top level."""
+    import clrt
+    from clrt.device import top_level
+    from clrt.device.build_kernels import top_level_kernels
+    from clrt.scene.instances import Instances
+    from conftest import TEST_MESHES
+
+    monkeypatch.setattr(top_level, "device_kind", lambda device: kind)
+    rng = np.random.default_rng(5)
+    transforms = np.tile(np.eye(4), (40, 1, 1))
+    transforms[:, :3, 3] = rng.uniform(-5.0, 5.0, (40, 3))
+    instances = Instances([TEST_MESHES["torus"](), TEST_MESHES["box"]()], rng.integers(0, 2, 40), transforms)
+    on_device = clrt.Accel(instances, builder="device", device="cpu")
+    on_host = clrt.Accel(instances, builder="sah", device="cpu")
+    top = on_device.acceleration.device_top
+    assert {kernel.site_name for kernel in top.sites.kernels} == set(top_level_kernels(kind))
+    assert set(top.program.kernel_names.split(";")) == set(top_level_kernels(kind))
+    origins = rng.uniform(-8.0, 8.0, (500, 3))
+    directions = rng.normal(size=(500, 3))
+    want, got = on_host.trace(origins, directions), on_device.trace(origins, directions)
+    assert want.hit.sum() > 50
+    for field in want._fields:
+        assert np.array_equal(getattr(got, field), getattr(want, field)), field

@@ -88,8 +88,8 @@ from clrt.accel.topdown import C_INTERSECT, C_TRAVERSAL
 from clrt.config import VOLUME_DEFINES, VOLUMES
 from clrt.device import pinned
 from clrt.device.context import device_kind
-from clrt.device.build_kernels import (SAH_TOP_MAX, build_queue, check_tuning, cpu_kernels, one_build_per_context,
-                                       workspace)
+from clrt.device.build_kernels import (SAH_TOP_MAX, build_queue, check_tuning, launched_kernels,
+                                       one_build_per_context, workspace)
 from clrt.device.host_sort import sort_on_host
 from clrt.device.program import build_program
 from clrt.errors import DeviceError, InputError
@@ -411,8 +411,8 @@ def build_on_device(context: cl.Context, queue: cl.CommandQueue, corners, volume
     defines = build_defines(volume, kind, treelet_leaves, tail_group, top_clusters, segmented)
     treelets = TREELET_LEAVES[kind] if treelet_leaves is None else int(treelet_leaves)
     treelets = treelets if F > 2 else 0
-    program = build_program(context, "build_bvh.cl", defines, kernels=cpu_kernels(
-        segmented, treelets > 0, tail_threshold > top_clusters) if kind == "cpu" else None)
+    program = build_program(context, "build_bvh.cl", defines, kernels=launched_kernels(
+        kind, segmented, treelets > 0, tail_threshold > top_clusters))
     ws = workspace(context)
     k = ws.kernels_of(program, defines)
     num_nodes = 2 * F - 1

@@ -102,25 +102,35 @@ def check_tuning(tail_threshold=None, treelet_leaves=None, treelet_min=None, tai
         checks.integer("partition", partition, 0, 1)
 
 
-def cpu_kernels(segmented: bool = False, treelets: bool = False, tail: bool = False) -> tuple[str, ...]:
-    """The kernels a build on a CPU device launches (clrt.device.build: the
-    host sorts, and PLOC iterates in four plain passes), with the SAH
-    partition's, the treelets' and ploc_tail where the build launches them: its program
-    keeps only these (clrt.device.program.keep_kernels), since PoCL's front
-    end works on every kernel of a program (docs/benchmarks.md, "The first
-    call with empty caches")."""
+def launched_kernels(kind: str, segmented: bool = False, treelets: bool = False,
+                     tail: bool = False) -> tuple[str, ...]:
+    """The kernels a build on a ``kind`` ("cpu" or "gpu") device launches
+    (clrt.device.build: a GPU sorts by a look-back radix sort and merges by
+    ploc_merge; on a CPU the host sorts and PLOC iterates in four plain
+    passes), with the SAH partition's, the treelets' and ploc_tail where the
+    build launches them.  The program keeps only these
+    (clrt.device.program.keep_kernels): every kernel of a program costs its
+    first build, PoCL's front end and NVIDIA's compiler alike -- build_bvh.cl
+    whole 3.8-4.3 s on the H200, its 15 kernels of a bunny00 build 1.6 s
+    (docs/benchmarks.md, "Time to the first image")."""
     partition = tuple(name for name in BUILD_KERNELS if name.startswith("partition_"))
-    return ("init_build_state", "centroid_bounds", *(partition if segmented else ("morton_codes",)), "init_leaves",
-            "ploc_nearest_tiles", "ploc_merge_tiles", "ploc_count_kept", "ploc_compact",
-            *(("ploc_tail",) if tail else ()), "ploc_top",
+    if kind == "gpu":
+        sort, ploc = ("radix_digit_counts", "radix_scatter_lookback"), ("ploc_merge",)
+    else:
+        sort, ploc = (), ("ploc_nearest_tiles", "ploc_merge_tiles", "ploc_count_kept", "ploc_compact")
+    return ("init_build_state", "centroid_bounds", *(partition if segmented else ("morton_codes",)), *sort,
+            "init_leaves", *ploc, *(("ploc_tail",) if tail else ()), "ploc_top",
             *(("treelet_levels", "treelet_order", "treelet_restructure") if treelets else ()),
             "init_root_paths", "jump_root_paths", "emit_tree")
 
 
-#: The kernels of the top level of a scene of instances on a CPU device
-#: (clrt.device.top_level, whose sort is the device's).
-CPU_TOP_LEVEL_KERNELS = ("place_instances", "instance_frame", "instance_rows", "radix_histogram", "scan_counts",
-                         "radix_scatter", "lbvh_nodes", "lbvh_fit")
+def top_level_kernels(kind: str) -> tuple[str, ...]:
+    """The kernels the top level of a scene of instances launches on a
+    ``kind`` device (clrt.device.top_level: its sort is the device's, as a
+    build's on that kind would be)."""
+    sort = (("radix_digit_counts", "radix_scatter_lookback") if kind == "gpu"
+            else ("radix_histogram", "scan_counts", "radix_scatter"))
+    return ("place_instances", "instance_frame", "instance_rows", *sort, "lbvh_nodes", "lbvh_fit")
 
 
 class Workspace:

@@ -32,7 +32,7 @@ from clrt.accel.instances import lbvh_depth_bound, top_rows
 from clrt.accel.rows import child_refs, tree_levels
 from clrt.device.build import (BUILD_GROUP, GROUP_RESULTS, MAX_REDUCE_GROUPS, STATE_INTS, build_defines,
                                queue_sort)
-from clrt.device.build_kernels import BUILD_KERNELS, CPU_TOP_LEVEL_KERNELS, Workspace, build_queue
+from clrt.device.build_kernels import BUILD_KERNELS, top_level_kernels, Workspace, build_queue
 from clrt.device.context import device_kind
 from clrt.device.program import build_program
 from clrt.device.signature import typed_kernels
@@ -95,7 +95,7 @@ class DeviceTopLevel:
         self.kind = device_kind(device)
         self.defines = build_defines(volume, self.kind)
         self.program = build_program(context, "build_bvh.cl", self.defines,
-                                     kernels=CPU_TOP_LEVEL_KERNELS if self.kind == "cpu" else None)
+                                     kernels=top_level_kernels(self.kind))
         meshes = np.zeros((len(mesh_bounds), 3, 4))
         meshes[:, :2, :3], meshes[:, 2, :3] = mesh_bounds, mesh_origins
         mf, n = cl.mem_flags, self.count
