@@ -97,6 +97,11 @@ class DeviceAcceleration(Acceleration):
         self._slotted = None        # the triangles as built, slot order, once settled
         self._counts = (int(bvh.num_rows), int(bvh.num_triangles))
 
+    @property
+    def frame(self) -> np.ndarray | None:
+        """Built from a Mesh: its box and device origin (DeviceBvh.frame)."""
+        return self._bvh.frame
+
     @functools.cached_property
     def rows(self) -> np.ndarray:
         return self._source().read_rows()

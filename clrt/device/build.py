@@ -93,6 +93,8 @@ from clrt.device.build_kernels import (SAH_TOP_MAX, build_queue, check_tuning, l
 from clrt.device.host_sort import sort_on_host
 from clrt.device.program import build_program
 from clrt.errors import DeviceError, InputError
+from clrt.scene import arrays
+from clrt.scene.mesh import Mesh
 
 BUILD_GROUP = 256        # work-items per work-group of every build kernel
 RADIX_BITS = 4           # digit of one radix-sort pass: 16 bins, 8 passes for 30-bit codes
@@ -188,6 +190,9 @@ TREELET_LEVELS = 64
 MIN_SHRINK = 0.83
 CPU_TILE_WORKERS = 4     # work-items per core of the CPU merge passes (build_ploc.cl)
 MAX_REDUCE_GROUPS = 256  # work-groups of the bounds reduction (grid-stride beyond)
+# gather_corners' box before it: min xyz from the largest, max xyz from the
+# smallest order-preserving bits (build_morton.cl's ordered_bits).
+_EMPTY_BOX = np.array([0xFFFFFFFF] * 3 + [0] * 3, np.uint32)
 EARLY_ROWS_BYTES = 64 << 20   # row buffers made before the row count is known, up to this size
 EMIT_JUMPS = 7           # pointer jumps queued without reading the tree's height (2**7 levels)
 GROUP_RESULTS = 14       # doubles each work-group of place_instances writes (build_instances.cl)
@@ -254,6 +259,9 @@ class DeviceBvh:
                ``device`` is their sum).
     launches:  with ``profile``, (kernel name, device start ns, end ns) of
                every launch, in order.
+    frame:     built from a Mesh, the box of its used vertices (lo, hi:
+               clrt.scene.mesh.Mesh.bounds) and the device origin chosen for
+               it (clrt.scene.arrays.device_origin), rows of a (3, 3) array.
     """
 
     rows: cl.Buffer
@@ -270,6 +278,7 @@ class DeviceBvh:
     exact_rows: cl.Buffer | None = field(default=None, repr=False)
     builder: str = "device"
     launches: list = field(default_factory=list, repr=False)
+    frame: np.ndarray | None = field(default=None, repr=False)   # from a Mesh: (3, 3) lo, hi, origin
     _stats: dict | None = field(default=None, repr=False)
 
     @property
@@ -359,7 +368,10 @@ def build_on_device(context: cl.Context, queue: cl.CommandQueue, corners, volume
     """Build a BVH over ``corners`` on the queue's device.
 
     corners: (F, 3, 3) triangle corners (converted to float32, checked as
-        clrt.accel.build checks them); row order is the triangle id.
+        clrt.accel.build checks them); row order is the triangle id.  Or a
+        Mesh: its vertices and faces are uploaded, the corners gathered on
+        the device and moved into the device frame there
+        (build_frame.cl), which ``DeviceBvh.frame`` gives.
     volume: one of ``VOLUMES``; leaf_size: 1..255, the most triangles per leaf.
     keep_boxes: also keep the exact child boxes (``DeviceBvh.stats``).
     tail_threshold: clusters at which PLOC hands over to one work-group
@@ -394,7 +406,8 @@ def build_on_device(context: cl.Context, queue: cl.CommandQueue, corners, volume
         raise InputError(f"unknown bounding volume {volume!r} (choose from {', '.join(VOLUMES)})")
     check_options(volume, "device", leaf_size)
     leaf_size = int(leaf_size)
-    tri = as_triangles(corners, check_finite=False)     # checked on the device
+    indexed = isinstance(corners, Mesh)
+    tri = None if indexed else as_triangles(corners, check_finite=False)     # checked on the device
     device = queue.device
     check_tuning(tail_threshold, treelet_leaves, treelet_min, tail_group, int(device.max_work_group_size),
                  top_clusters)
@@ -404,7 +417,7 @@ def build_on_device(context: cl.Context, queue: cl.CommandQueue, corners, volume
     tail_threshold = min(TAIL_THRESHOLD[kind] if tail_threshold is None else int(tail_threshold), TAIL_MAX)
     tail_group = TAIL_GROUP[kind] if tail_group is None else int(tail_group)
     top_clusters = sah_top_clusters(kind, tail_group, top_clusters)
-    F = len(tri)
+    F = len(corners.faces) if indexed else len(tri)
     if partition is None:
         partition = SAH_PARTITION[kind] and F >= PART_MIN_TRIANGLES
     segmented = bool(partition) and 1 < top_clusters < F
@@ -412,7 +425,7 @@ def build_on_device(context: cl.Context, queue: cl.CommandQueue, corners, volume
     treelets = TREELET_LEAVES[kind] if treelet_leaves is None else int(treelet_leaves)
     treelets = treelets if F > 2 else 0
     program = build_program(context, "build_bvh.cl", defines, kernels=launched_kernels(
-        kind, segmented, treelets > 0, tail_threshold > top_clusters))
+        kind, segmented, treelets > 0, tail_threshold > top_clusters, indexed))
     ws = workspace(context)
     k = ws.kernels_of(program, defines)
     num_nodes = 2 * F - 1
@@ -432,10 +445,18 @@ def build_on_device(context: cl.Context, queue: cl.CommandQueue, corners, volume
         return event if phases is None else phases.add(phase, event)
 
     state = ws.get("state", 4 * STATE_INTS)
-    corners_buf = ws.get("corners", tri.nbytes)
-    uploaded = pinned.upload(context, queue, corners_buf, tri, staged_upload)
+    corners_buf = ws.get("corners", 36 * F)
+    if indexed:
+        vertices, faces = ws.get("vertices", corners.vertices.nbytes), ws.get("faces", corners.faces.nbytes)
+        uploads = [pinned.upload(context, queue, vertices, corners.vertices, staged_upload),
+                   pinned.upload(context, queue, faces, corners.faces, staged_upload)]
+        box, frame = ws.get("box", 4 * 6), ws.get("frame", 8 * 9)
+        uploads.append(cl.enqueue_copy(queue, box, _EMPTY_BOX, is_blocking=False))
+    else:
+        uploads = [pinned.upload(context, queue, corners_buf, tri, staged_upload)]
     if phases is not None:
-        phases.add("upload", uploaded)
+        for uploaded in uploads:
+            phases.add("upload", uploaded)
     # The outputs are made while the device works: making them between the
     # last launches cost 0.2 ms (bunny00) to 0.4 ms (1M) on the H200.  The
     # rows' count is known at the end; up to EARLY_ROWS_BYTES they are made
@@ -452,6 +473,11 @@ def build_on_device(context: cl.Context, queue: cl.CommandQueue, corners, volume
 
     # 1. Morton codes.
     launch("morton", k["init_build_state"], 1, state, np.uint32(F))
+    if indexed:
+        groups = min(_groups(F), MAX_REDUCE_GROUPS)
+        launch("morton", k["gather_corners"], groups, vertices, faces, np.uint32(F), corners_buf, box)
+        launch("morton", k["shift_corners"], groups, corners_buf, np.uint32(F), box,
+               np.float64(arrays.RECENTRE_DISTANCE), frame)
     launch("morton", k["centroid_bounds"], min(_groups(F), MAX_REDUCE_GROUPS), corners_buf, np.uint32(F), state)
     if segmented:
         _partition(k, launch, ws, F, top_clusters, corners_buf, state, sample_part=ids[1], keys=keys[0],
@@ -537,6 +563,9 @@ def build_on_device(context: cl.Context, queue: cl.CommandQueue, corners, volume
     jump_and_emit(0, jumps)
     head = np.empty(STATE_INTS, np.int32)
     cl.enqueue_copy(queue, root_rows, nodes, src_offset=offset, is_blocking=False)
+    placed = np.empty((3, 3)) if indexed else None      # lo, hi, origin
+    if indexed:
+        cl.enqueue_copy(queue, placed, frame, is_blocking=False)
     cl.enqueue_copy(queue, head, state, is_blocking=True)
     if head[STATE["STATE_ERROR"]] and guessed:      # a taller tree: more jumps, emit again
         more = _root_height(queue, heights, F).bit_length()
@@ -559,7 +588,7 @@ def build_on_device(context: cl.Context, queue: cl.CommandQueue, corners, volume
     return DeviceBvh(rows=rows, tri_verts=tri_verts, prim_ids=prim_ids, num_rows=num_rows, num_triangles=F,
                      depth=int(head[STATE["STATE_DEPTH"]]), volume=volume, leaf_size=leaf_size,
                      iterations=iterations, timings=timings, queue=caller_queue, exact_rows=exact_rows,
-                     launches=launches)
+                     launches=launches, frame=placed)
 
 
 def _row_buffers(context: cl.Context, num_rows: int, keep_boxes: bool):

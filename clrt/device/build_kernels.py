@@ -32,6 +32,8 @@ def I(name: str):   # noqa: E743 -- the table reads as the kernels' own lists
 # of (clrt.device.program.typed_kernel); tests/test_kernel_args.py checks the table.
 BUILD_KERNELS = {
     "init_build_state": (B("state"), U("num_tris")),
+    "gather_corners": (B("vertices"), B("faces"), U("num_tris"), B("corners"), B("box")),
+    "shift_corners": (B("corners"), U("num_tris"), B("box"), value("recentre_distance", np.float64), B("frame")),
     "centroid_bounds": (B("corners"), U("num_tris"), B("state")),
     "morton_codes": (B("corners"), U("num_tris"), B("state"), B("keys"), B("ids")),
     "radix_histogram": (B("keys"), U("n"), U("shift"), B("tile_counts")),
@@ -103,12 +105,13 @@ def check_tuning(tail_threshold=None, treelet_leaves=None, treelet_min=None, tai
 
 
 def launched_kernels(kind: str, segmented: bool = False, treelets: bool = False,
-                     tail: bool = False) -> tuple[str, ...]:
+                     tail: bool = False, indexed: bool = False) -> tuple[str, ...]:
     """The kernels a build on a ``kind`` ("cpu" or "gpu") device launches
     (clrt.device.build: a GPU sorts by a look-back radix sort and merges by
     ploc_merge; on a CPU the host sorts and PLOC iterates in four plain
-    passes), with the SAH partition's, the treelets' and ploc_tail where the
-    build launches them.  The program keeps only these
+    passes), with the SAH partition's, the treelets', ploc_tail and (from a
+    mesh's vertices and faces) the corners' gather where the build launches
+    them.  The program keeps only these
     (clrt.device.program.keep_kernels): every kernel of a program costs its
     first build, PoCL's front end and NVIDIA's compiler alike -- build_bvh.cl
     whole 3.8-4.3 s on the H200, its 15 kernels of a bunny00 build 1.6 s
@@ -118,7 +121,8 @@ def launched_kernels(kind: str, segmented: bool = False, treelets: bool = False,
         sort, ploc = ("radix_digit_counts", "radix_scatter_lookback"), ("ploc_merge",)
     else:
         sort, ploc = (), ("ploc_nearest_tiles", "ploc_merge_tiles", "ploc_count_kept", "ploc_compact")
-    return ("init_build_state", "centroid_bounds", *(partition if segmented else ("morton_codes",)), *sort,
+    return ("init_build_state", *(("gather_corners", "shift_corners") if indexed else ()), "centroid_bounds",
+            *(partition if segmented else ("morton_codes",)), *sort,
             "init_leaves", *ploc, *(("ploc_tail",) if tail else ()), "ploc_top",
             *(("treelet_levels", "treelet_order", "treelet_restructure") if treelets else ()),
             "init_root_paths", "jump_root_paths", "emit_tree")

@@ -20,11 +20,12 @@ from clrt.config import MAX_PARTS, VOLUME_DEFINES, stack_size
 from clrt.device import pinned
 from clrt.device.args import scene_value
 from clrt.device.context import device_kind, format_bytes
-from clrt.device.reach import Reach
+from clrt.device.reach import MEASURE_DIAGONAL, Reach
 from clrt.device.signature import buffer, typed_kernels, value
 from clrt.errors import DeviceMemoryError, InputError
 from clrt.layouts import BVH_PAIR_NODE, INSTANCE, TRIANGLE_VERTS
-from clrt.scene.arrays import triangle_verts
+from clrt.scene.arrays import triangle_corners, triangle_verts
+from clrt.scene.mesh import Mesh
 
 
 # Device kinds (clrt.device.context.device_kind) that walk the wide BVH of
@@ -148,6 +149,18 @@ class DeviceGeometry:
                  fits: Callable[[int], None] | None = None, max_buffer_label: str = "max_buffer_bytes",
                  bounds=None, origin=None, queue: cl.CommandQueue | None = None):
         self.acceleration = acceleration
+        mesh = corners if isinstance(corners, Mesh) else None    # gathered by the device's build (DeviceScene)
+        if mesh is not None:
+            lo, hi, origin = acceleration.frame
+            bounds = np.array([lo, hi])
+            mesh.__dict__.setdefault("_bounds", bounds)      # the same numbers Mesh.bounds would find
+            measure = float(np.linalg.norm(hi - lo)) > MEASURE_DIAGONAL
+            corners = triangle_corners(mesh, origin) if measure else None     # (Reach's largest triangle)
+
+        def host_corners() -> np.ndarray:
+            """The corners in the device frame, made on the host where a device build gathered them."""
+            return corners if corners is not None else triangle_corners(mesh, origin)
+
         self._place(corners, bounds, origin)
         # A tree built on this context's device is on it already, with its
         # triangles in slot order: taken over (once), not uploaded again, and
@@ -159,7 +172,7 @@ class DeviceGeometry:
                       "nodes": _stand_in(BVH_PAIR_NODE, acceleration.num_rows),
                       "prim_ids": _stand_in(np.int32, acceleration.num_slots)}
         else:
-            arrays = _host_arrays(corners, acceleration)
+            arrays = _host_arrays(host_corners(), acceleration)
         for name, array in {**(extra or {}), **({} if acceleration.instances is None
                                                else {"instances": acceleration.instances})}.items():
             arrays[name] = np.ascontiguousarray(array)
@@ -172,9 +185,10 @@ class DeviceGeometry:
             acceleration.keep_on_host()
             built.release()
             built = None
-            arrays.update(_host_arrays(corners, acceleration))
+            arrays.update(_host_arrays(host_corners(), acceleration))
         # The wide BVH only where it is walked: other devices pay nothing.
-        self.wide = (collapse(acceleration.rows, corners[acceleration.slot_order()].astype(np.float32, copy=False))
+        self.wide = (collapse(acceleration.rows,
+                              host_corners()[acceleration.slot_order()].astype(np.float32, copy=False))
                      if walks_wide(context, acceleration, self.shifts is not None) else None)
         # The wide BVH's nodes and packets in one buffer (geometry.cl says why),
         # the packets from byte packets_at on (a multiple of a node's 256 B).

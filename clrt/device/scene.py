@@ -27,6 +27,28 @@ from clrt.device.geometry import DeviceGeometry, check_fits, packet_rays
 from clrt.device.program import build_program
 from clrt.device.signature import typed_kernels
 from clrt.errors import DeviceMemoryError
+from clrt.scene.arrays import device_origin, triangle_corners
+from clrt.scene.mesh import Mesh
+
+
+def gathers_on_device(accel: str, builder: str, device: str | None) -> bool:
+    """Does a DeviceScene of a Mesh with these options upload its vertices and
+    faces, to be gathered into corners by the device's build?  Where a GPU
+    builds the tree: the host's gather and box (mesh_corners) took twice the
+    device build's time on the H200's host (docs/benchmarks.md).  A CPU
+    device's wide BVH is collapsed on the host from the corners (and the
+    host's gather costs it no copy across a bus)."""
+    if accel == "none" or builder not in ("device", "auto"):
+        return False
+    queue = create_context(device)[1]
+    return device_kind(queue.device) == "gpu" and "cl_khr_fp64" in queue.device.extensions
+
+
+def mesh_corners(mesh: Mesh) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A mesh's corners in the device frame, their box in the caller's frame
+    and the frame's origin, made on the host."""
+    origin = device_origin(mesh.bounds)
+    return triangle_corners(mesh, origin), mesh.bounds, origin
 
 
 class stage:
@@ -50,7 +72,10 @@ class DeviceScene:
 
     ``corners``: (F, 3, 3) float32 in the device's frame (moved by
     ``-origin``; clrt.scene.arrays.device_origin), input order; ``bounds``:
-    their (2, 3) box in the caller's frame.  ``accel``, ``builder``,
+    their (2, 3) box in the caller's frame.  Or a Mesh (``bounds`` and
+    ``origin`` None): where the device builds its tree, its vertices and
+    faces are uploaded and the device gathers the corners and chooses the
+    frame (clrt.device.build); elsewhere the host does (mesh_corners).  ``accel``, ``builder``,
     ``leaf_size``, ``device``: checked options, as Renderer and Accel take
     them.  ``extra``: per-slot or per-vertex arrays the kernels index beside
     the geometry (split with it when large), by parameter name, or a function
@@ -74,6 +99,9 @@ class DeviceScene:
                  max_buffer_bytes: int | None = None, max_buffer_label: str = "max_buffer_bytes",
                  timings: dict | None = None, acceleration=None):
         with stage(timings, "acceleration build"):
+            if isinstance(corners, Mesh) and not (acceleration is None and max_buffer_bytes is None
+                                                  and gathers_on_device(accel, builder, device)):
+                corners, bounds, origin = mesh_corners(corners)
             self.acceleration = (acceleration if acceleration is not None
                                  else build_acceleration(corners, accel, builder, leaf_size, device))
             if callable(extra):

@@ -1,5 +1,6 @@
 // The device BVH builder (issue #17), one program: triangles -> SAH partition
-// into segments (GPUs) -> Morton codes
+// into segments (GPUs) -> Morton codes (from vertices and faces: corners
+// gathered and moved into the device frame first, build_frame.cl)
 // -> radix sort -> PLOC merging with SAH leaf collapse -> treelet
 // restructuring -> depth-first
 // BvhPairNode rows, slot-ordered triangles and slot -> triangle ids.  The
@@ -18,4 +19,5 @@
 #include "build_ploc.cl"
 #include "build_treelet.cl"
 #include "build_emit.cl"
+#include "build_frame.cl"
 #include "build_instances.cl"

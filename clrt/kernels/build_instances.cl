@@ -203,26 +203,6 @@ void place_instances(const global double4* transforms, const global int* mesh_of
     }
 }
 
-// clrt.scene.arrays.device_origin on one axis: the box lo..hi on it, the
-// box's diagonal (its rounding as the host's: no contraction, same order).
-inline double origin_on_axis(double lo, double hi, double diagonal, double recentre_distance)
-{
-    const double near = fmin(fabs(lo), fabs(hi));
-    if (lo * hi <= 0.0 || !(near >= recentre_distance * diagonal))
-        return 0.0;
-    const double far = fmax(fabs(lo), fabs(hi));
-    const float far32 = convert_float(far);
-    double grain = (double)(nextafter(far32, INFINITY) - far32);     // numpy's spacing of a float32
-    if (diagonal > 0.0) {
-        int e;
-        frexp(diagonal / 4.0, &e);                                    // 2^(e - 1) <= diagonal / 4 < 2^e
-        grain = fmax(grain, ldexp(1.0, e - 1));
-    }
-    const double c = rint(0.5 * (lo + hi) / grain) * grain;          // rint: ties to even, as Python's round
-    return (double)convert_float(c) == c && c * lo > 0.0 && fabs(c) <= 2.0 * near && far <= 2.0 * fabs(c) ? c
-                                                                                                        : 0.0;
-}
-
 // The world's device frame from place_instances' per-group results (`groups`
 // of them, at most MAX_REDUCE_GROUPS: one work-item reads them all): the
 // device origin of the instances' box, as the host's device_origin chooses
@@ -243,20 +223,15 @@ __kernel void instance_frame(const global double* group_results, const uint grou
         for (int k = 0; k < GROUP_RESULTS; ++k)                      // lo xyz, hi xyz, mid lo, mid hi, firsts
             r[k] = (k / 3) % 2 == 0 || k >= 12 ? fmin(r[k], o[k]) : fmax(r[k], o[k]);
     }
-    const double dx = r[3] - r[0], dy = r[4] - r[1], dz = r[5] - r[2];
-    const double diagonal = sqrt((dx * dx + dy * dy) + dz * dz);
-    double origin[3] = {0.0, 0.0, 0.0};
-    if (isfinite(diagonal))
-        for (int k = 0; k < 3; ++k)
-            origin[k] = origin_on_axis(r[k], r[3 + k], diagonal, recentre_distance);
-    const double3 o3 = (double3)(origin[0], origin[1], origin[2]);
+    const double3 o3 = frame_origin((double3)(r[0], r[1], r[2]), (double3)(r[3], r[4], r[5]), recentre_distance);
     frame[0] = (float4)(convert_float3(o3), 0.0f);
     frame[1] = (float4)(convert_float3((double3)(r[6], r[7], r[8]) - o3), 0.0f);
     frame[2] = (float4)(convert_float3((double3)(r[9], r[10], r[11]) - o3), 0.0f);
     for (int k = 0; k < 6; ++k)
         summary[k] = r[k];
-    for (int k = 0; k < 3; ++k)
-        summary[6 + k] = origin[k];
+    summary[6] = o3.x;
+    summary[7] = o3.y;
+    summary[8] = o3.z;
     summary[9] = r[12];
     summary[10] = r[13];
 }

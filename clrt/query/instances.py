@@ -40,8 +40,8 @@ def query_scene(source, *, accel: str, builder: str, leaf_size: int, device: str
         mesh = placed_meshes(source) if is_instance_list(source) or is_gltf_file(source) else as_mesh(source)
     if isinstance(mesh, Instances):
         return None, mesh, instanced_scene(mesh, **options)
-    origin = device_origin(mesh.bounds)   # the device's frame (clrt.scene.arrays)
-    return mesh, None, DeviceScene(triangle_corners(mesh, origin), bounds=mesh.bounds, origin=origin, **options)
+    # Its corners and the device's frame (clrt.scene.arrays) made by DeviceScene: on a GPU by its build.
+    return mesh, None, DeviceScene(mesh, bounds=None, origin=None, **options)
 
 
 def source_of(mesh: Mesh | None, instances: Instances | None):
