@@ -486,6 +486,102 @@ void ploc_top(global BuildCluster* clusters, global BuildCluster* spare, global 
 //                       ploc_merge makes), into `nearest`
 //   ploc_merge_tiles    mutual pairs merge, in place order; new nodes from
 //                       one atomic per tile, consecutive within the iteration.
+#if PLOC_RADIUS == 16 && !defined(PLOC_SEGMENTS) && !defined(PLOC_SCALAR_SEARCH)
+// The search in float16 lanes: PoCL runs these one-work-item groups as
+// scalar code, and the scalar search (below) took 55 of bunny00's 86 ms of
+// PLOC on 2 cores.  A work-item copies its tile's boxes and PLOC_RADIUS
+// places on each side into six rows of floats (lo xyz, hi xyz), so that the
+// 16 places behind p and the 16 ahead are each one unaligned load a row;
+// both sides' merged areas are computed (twice the scalar search's area
+// work, which PLOC_RADIUS lanes repay).  The least area is the choice where
+// one candidate has it; a tie, or no finite area, takes the scalar choice of
+// consider over the same areas (the rule of the hashes), so the tree is
+// ploc_merge's bit for bit (tests/test_device_build.py).
+#define SEARCH_WINDOW (BUILD_GROUP + 2 * PLOC_RADIUS)   // places a tile's search reads
+
+// Merged half areas (half_area, lane by lane) of the box at window place
+// `self` with those at places first .. first + 15.
+inline float16 window_areas(const float* window, int self, int first)
+{
+    const float16 dx = fmax(window[3 * SEARCH_WINDOW + self], vload16(0, window + 3 * SEARCH_WINDOW + first))
+                     - fmin(window[self], vload16(0, window + first));
+    const float16 dy = fmax(window[4 * SEARCH_WINDOW + self], vload16(0, window + 4 * SEARCH_WINDOW + first))
+                     - fmin(window[SEARCH_WINDOW + self], vload16(0, window + SEARCH_WINDOW + first));
+    const float16 dz = fmax(window[5 * SEARCH_WINDOW + self], vload16(0, window + 5 * SEARCH_WINDOW + first))
+                     - fmin(window[2 * SEARCH_WINDOW + self], vload16(0, window + 2 * SEARCH_WINDOW + first));
+    const float16 a = dx * dy + dy * dz + dz * dx;           // half_area's expression, lane by lane
+    return select(a, (float16)(INFINITY), isnan(a));
+}
+
+inline float least_lane(float16 v)
+{
+    const float8 a = fmin(v.lo, v.hi);
+    const float4 b = fmin(a.lo, a.hi);
+    const float2 c = fmin(b.lo, b.hi);
+    return fmin(c.x, c.y);
+}
+
+inline int least_int_lane(int16 v)
+{
+    const int8 a = min(v.lo, v.hi);
+    const int4 b = min(a.lo, a.hi);
+    const int2 c = min(b.lo, b.hi);
+    return min(c.x, c.y);
+}
+
+__kernel void ploc_nearest_tiles(const global BuildCluster* clusters, global int* nearest,
+                                 const global int* state, const int iteration)
+{
+    const int count = state[CLUSTERS_BEFORE(iteration)];
+    if (PLOC_DONE(count))
+        return;
+    float window[6 * SEARCH_WINDOW];
+    // Candidate k of place p is place p - 16 + k: behind 0..15, ahead 17..32 (16: p itself).
+    const int16 lanes = (int16)(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
+    for (int start = get_global_id(0) * BUILD_GROUP; start < count; start += get_global_size(0) * BUILD_GROUP) {
+        const int end = min(start + BUILD_GROUP, count);
+        const int base = start - PLOC_RADIUS;              // the place at window[0]
+        for (int k = 0; k < end - base + PLOC_RADIUS; ++k) {
+            const int q = base + k;
+            // No place: an infinite box, whose merged area (infinite) is no choice.
+            const bool there = q >= 0 && q < count;
+            const float4 lo = there ? clusters[q].lo : (float4)(-INFINITY);
+            const float4 hi = there ? clusters[q].hi : (float4)(INFINITY);
+            window[k] = lo.x;
+            window[SEARCH_WINDOW + k] = lo.y;
+            window[2 * SEARCH_WINDOW + k] = lo.z;
+            window[3 * SEARCH_WINDOW + k] = hi.x;
+            window[4 * SEARCH_WINDOW + k] = hi.y;
+            window[5 * SEARCH_WINDOW + k] = hi.z;
+        }
+        for (int p = start; p < end; ++p) {
+            const int i = p - base;
+            const float16 behind = window_areas(window, i, i - PLOC_RADIUS);   // candidates 0..15
+            const float16 ahead = window_areas(window, i, i + 1);              // candidates 17..32
+            const float least = least_lane(fmin(behind, ahead));
+            const int16 at_behind = select((int16)(INT_MAX), lanes, behind == least);
+            const int16 at_ahead = select((int16)(INT_MAX), lanes + (PLOC_RADIUS + 1), ahead == least);
+            const int first = least_int_lane(min(at_behind, at_ahead));
+            const bool tie = any((at_behind != first) & (at_behind != INT_MAX))
+                          || any((at_ahead != first) & (at_ahead != INT_MAX));
+            if (isfinite(least) && !tie) {
+                nearest[p] = p - PLOC_RADIUS + first;
+                continue;
+            }
+            float areas[2 * PLOC_RADIUS];
+            vstore16(behind, 0, areas);
+            vstore16(ahead, 0, areas + PLOC_RADIUS);
+            Nearest n = {-1, INFINITY, 0u, false};
+            for (int k = 0; k < 2 * PLOC_RADIUS; ++k) {
+                const int q = k < PLOC_RADIUS ? p - PLOC_RADIUS + k : p + 1 + k - PLOC_RADIUS;
+                if (q >= 0 && q < count)
+                    consider(&n, p, q, areas[k]);
+            }
+            nearest[p] = n.best;
+        }
+    }
+}
+#else
 __kernel void ploc_nearest_tiles(const global BuildCluster* clusters, global int* nearest,
                                  const global int* state, const int iteration)
 {
@@ -519,6 +615,7 @@ __kernel void ploc_nearest_tiles(const global BuildCluster* clusters, global int
         }
     }
 }
+#endif
 
 __kernel void ploc_merge_tiles(const global BuildCluster* clusters, global BuildCluster* merged,
                                global uint* tile_kept, const global int* nearest, global BuildNode* nodes,
