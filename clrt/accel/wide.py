@@ -54,6 +54,15 @@ class WideBvh:
     depth: int
     sources: np.ndarray
 
+    @property
+    def packets_at(self) -> int:
+        """Byte offset of the packets after the nodes in one buffer."""
+        return self.nodes.nbytes
+
+    @property
+    def nbytes(self) -> int:
+        return self.nodes.nbytes + self.packets.nbytes
+
     def refit(self, rows: np.ndarray, slotted: np.ndarray) -> None:
         """Take the boxes of refitted ``rows`` (the same tree) and the corners of
         ``slotted`` (moved triangles, the same slots)."""
