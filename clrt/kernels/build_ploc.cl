@@ -500,25 +500,28 @@ void ploc_top(global BuildCluster* clusters, global BuildCluster* spare, global 
 #define SEARCH_WINDOW (BUILD_GROUP + 2 * PLOC_RADIUS)   // places a tile's search reads
 
 // Merged half areas (half_area, lane by lane) of the box at window place
-// `self` with those at places first .. first + 15.
+// `self` with those at places first .. first + 15.  (min and max: fmin's NaN
+// rule costs a compare and a blend a lane, and a NaN corner fails the build
+// anyway -- STATE_BAD_TRIANGLE.)
+__attribute__((always_inline))
 inline float16 window_areas(const float* window, int self, int first)
 {
-    const float16 dx = fmax(window[3 * SEARCH_WINDOW + self], vload16(0, window + 3 * SEARCH_WINDOW + first))
-                     - fmin(window[self], vload16(0, window + first));
-    const float16 dy = fmax(window[4 * SEARCH_WINDOW + self], vload16(0, window + 4 * SEARCH_WINDOW + first))
-                     - fmin(window[SEARCH_WINDOW + self], vload16(0, window + SEARCH_WINDOW + first));
-    const float16 dz = fmax(window[5 * SEARCH_WINDOW + self], vload16(0, window + 5 * SEARCH_WINDOW + first))
-                     - fmin(window[2 * SEARCH_WINDOW + self], vload16(0, window + 2 * SEARCH_WINDOW + first));
+    const float16 dx = max(window[3 * SEARCH_WINDOW + self], vload16(0, window + 3 * SEARCH_WINDOW + first))
+                     - min(window[self], vload16(0, window + first));
+    const float16 dy = max(window[4 * SEARCH_WINDOW + self], vload16(0, window + 4 * SEARCH_WINDOW + first))
+                     - min(window[SEARCH_WINDOW + self], vload16(0, window + SEARCH_WINDOW + first));
+    const float16 dz = max(window[5 * SEARCH_WINDOW + self], vload16(0, window + 5 * SEARCH_WINDOW + first))
+                     - min(window[2 * SEARCH_WINDOW + self], vload16(0, window + 2 * SEARCH_WINDOW + first));
     const float16 a = dx * dy + dy * dz + dz * dx;           // half_area's expression, lane by lane
     return select(a, (float16)(INFINITY), isnan(a));
 }
 
 inline float least_lane(float16 v)
 {
-    const float8 a = fmin(v.lo, v.hi);
-    const float4 b = fmin(a.lo, a.hi);
-    const float2 c = fmin(b.lo, b.hi);
-    return fmin(c.x, c.y);
+    const float8 a = min(v.lo, v.hi);
+    const float4 b = min(a.lo, a.hi);
+    const float2 c = min(b.lo, b.hi);
+    return min(c.x, c.y);
 }
 
 inline int least_int_lane(int16 v)
@@ -527,6 +530,14 @@ inline int least_int_lane(int16 v)
     const int4 b = min(a.lo, a.hi);
     const int2 c = min(b.lo, b.hi);
     return min(c.x, c.y);
+}
+
+inline int greatest_int_lane(int16 v)
+{
+    const int8 a = max(v.lo, v.hi);
+    const int4 b = max(a.lo, a.hi);
+    const int2 c = max(b.lo, b.hi);
+    return max(c.x, c.y);
 }
 
 __kernel void ploc_nearest_tiles(const global BuildCluster* clusters, global int* nearest,
@@ -558,13 +569,14 @@ __kernel void ploc_nearest_tiles(const global BuildCluster* clusters, global int
             const int i = p - base;
             const float16 behind = window_areas(window, i, i - PLOC_RADIUS);   // candidates 0..15
             const float16 ahead = window_areas(window, i, i + 1);              // candidates 17..32
-            const float least = least_lane(fmin(behind, ahead));
-            const int16 at_behind = select((int16)(INT_MAX), lanes, behind == least);
-            const int16 at_ahead = select((int16)(INT_MAX), lanes + (PLOC_RADIUS + 1), ahead == least);
-            const int first = least_int_lane(min(at_behind, at_ahead));
-            const bool tie = any((at_behind != first) & (at_behind != INT_MAX))
-                          || any((at_ahead != first) & (at_ahead != INT_MAX));
-            if (isfinite(least) && !tie) {
+            const float least = least_lane(min(behind, ahead));
+            const int16 is_behind = behind == least, is_ahead = ahead == least;
+            const int16 ahead_lanes = lanes + (PLOC_RADIUS + 1);
+            const int first = least_int_lane(min(select((int16)(INT_MAX), lanes, is_behind),
+                                                 select((int16)(INT_MAX), ahead_lanes, is_ahead)));
+            const int last = greatest_int_lane(max(select((int16)(-1), lanes, is_behind),
+                                                   select((int16)(-1), ahead_lanes, is_ahead)));
+            if (isfinite(least) && first == last) {       // one candidate has the least area
                 nearest[p] = p - PLOC_RADIUS + first;
                 continue;
             }
