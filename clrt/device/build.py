@@ -28,10 +28,10 @@ The algorithm (kernels in ``clrt/kernels/build_*.cl``, entry ``build_bvh.cl``):
    launch an iteration on GPUs (the kept clusters placed by a decoupled
    look-back across the work-groups), four on CPU devices (two plain merge
    passes, a prefix sum, a compaction), until at most ``tail_threshold``
-   clusters are left (on CPU devices ``SAH_TOP_CLUSTERS``: no tail);
-   then one work-group runs the remaining iterations in one launch
-   (``ploc_tail``, the same choices in a loop: the tree does not depend on
-   where the host hands over) until ``SAH_TOP_CLUSTERS`` clusters are left,
+   clusters are left; then one work-group runs the remaining iterations in
+   one launch (``ploc_tail``; on CPU devices one work-item,
+   ``ploc_tail_serial``; the same choices in a loop: the tree does not depend
+   on where the host hands over) until ``SAH_TOP_CLUSTERS`` clusters are left,
    and one more (``ploc_top``) splits those top-down by the SAH
    (``build_top.cl``: exact splits over the clusters, weighted by their
    triangles).  Every new node decides
@@ -111,12 +111,13 @@ PLOC_RADIUS = 16
 # Clusters at which the host hands over to ploc_tail, per device type: a GPU
 # runs a few thousand clusters' iteration in one work-group faster than three
 # launches (on the H200, 2048 against 4096: bunny00 2.07 against 2.12 ms,
-# 1M triangles 7.7 against 7.9 ms, 10M the same).  A CPU device's passes go
-# on down to the SAH top (1: never), and ploc_tail is not launched: the same
-# tree in about the same time warm (bunny00 on 2 cores ~86 ms either way),
-# and on a first call PoCL does not compile ploc_tail (0.3-0.7 s on 2 cores,
-# docs/benchmarks.md, "The first call with empty caches").
-TAIL_THRESHOLD = {"gpu": 2048, "cpu": 1}
+# 1M triangles 7.7 against 7.9 ms, 10M the same).  A CPU device hands over to
+# ploc_tail_serial, one work-item without barriers (PoCL compiled ploc_tail's
+# barriers in 0.3-0.7 s of a first call on 2 cores, docs/benchmarks.md, "The
+# first call with empty caches"): bunny00's last 8192 clusters' iterations
+# take it about a millisecond, where four launches an iteration took several
+# (build 20-35 ms on 2 cores, medians about 2 ms lower; camel 8.6 -> 7.7 ms).
+TAIL_THRESHOLD = {"gpu": 2048, "cpu": 8192}
 TAIL_MAX = 32768         # ploc_tail counts its clusters in 16 bits
 TAIL_GROUP = {"gpu": 1024, "cpu": BUILD_GROUP}
 # PLOC stops at this many clusters, and ploc_top splits them top-down by the
@@ -363,8 +364,8 @@ def build_on_device(context: cl.Context, queue: cl.CommandQueue, corners, volume
     volume: one of ``VOLUMES``; leaf_size: 1..255, the most triangles per leaf.
     keep_boxes: also keep the exact child boxes (``DeviceBvh.stats``).
     tail_threshold: clusters at which PLOC hands over to one work-group
-        (default: TAIL_THRESHOLD of the device type; for benchmarks); at
-        most top_clusters: no hand-over, ploc_tail is not launched.
+        (a CPU's: one work-item; default: TAIL_THRESHOLD of the device type;
+        for benchmarks); at most top_clusters: no hand-over, no tail is launched.
     staged_upload: the triangles through page-locked staging or not
         (default: clrt.device.pinned.upload's choice; for benchmarks).
     treelet_leaves: leaves of the treelets restructured after PLOC (0: the
@@ -483,7 +484,10 @@ def build_on_device(context: cl.Context, queue: cl.CommandQueue, corners, volume
     # two buffers in turn.  With no more than the SAH top's clusters left it
     # would merge nothing: the host writes what it would leave ploc_top.
     last, spare = (merged, clusters) if nearest is None and queued % 2 else (clusters, merged)
-    if tail_threshold > top_clusters:
+    if tail_threshold > top_clusters and nearest is not None:    # a CPU's: one work-item (build_ploc.cl)
+        launch("ploc", k["ploc_tail_serial"], 1, last, spare, nearest, nodes, heights, F, state, queued, leaf_size,
+               group=1)
+    elif tail_threshold > top_clusters:
         launch("ploc", k["ploc_tail"], 1, last, spare, tile_kept, nodes, heights, F, state, queued, leaf_size,
                group=tail_group)
     else:

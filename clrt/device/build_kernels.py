@@ -48,6 +48,8 @@ BUILD_KERNELS = {
     "ploc_compact": (B("merged"), B("clusters"), B("tile_offsets"), B("state"), I("iteration")),
     "ploc_tail": (B("clusters"), B("spare"), B("nearest"), B("nodes"), B("heights"), I("num_tris"), B("state"),
         I("first_iteration"), U("leaf_size")),
+    "ploc_tail_serial": (B("clusters"), B("spare"), B("nearest"), B("nodes"), B("heights"), I("num_tris"),
+        B("state"), I("first_iteration"), U("leaf_size")),
     "ploc_top": (B("clusters"), B("spare"), B("nodes"), B("heights"), I("num_tris"), B("state"), U("leaf_size")),
     "ploc_nearest_tiles": (B("clusters"), B("nearest"), B("state"), I("iteration")),
     "ploc_merge_tiles": (B("clusters"), B("merged"), B("tile_kept"), B("nearest"), B("nodes"), B("heights"),
@@ -112,7 +114,7 @@ def cpu_kernels(segmented: bool = False, treelets: bool = False, tail: bool = Fa
     partition = tuple(name for name in BUILD_KERNELS if name.startswith("partition_"))
     return ("init_build_state", "centroid_bounds", *(partition if segmented else ("morton_codes",)), "init_leaves",
             "ploc_nearest_tiles", "ploc_merge_tiles", "ploc_count_kept", "ploc_compact",
-            *(("ploc_tail",) if tail else ()), "ploc_top",
+            *(("ploc_tail_serial",) if tail else ()), "ploc_top",
             *(("treelet_levels", "treelet_order", "treelet_restructure") if treelets else ()),
             "init_root_paths", "jump_root_paths", "emit_tree")
 

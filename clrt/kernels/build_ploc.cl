@@ -489,20 +489,21 @@ void ploc_top(global BuildCluster* clusters, global BuildCluster* spare, global 
 #if PLOC_RADIUS == 16 && !defined(PLOC_SEGMENTS) && !defined(PLOC_SCALAR_SEARCH)
 // The search in float16 lanes: PoCL runs these one-work-item groups as
 // scalar code, and the scalar search (below) took 55 of bunny00's 86 ms of
-// PLOC on 2 cores.  A work-item copies its tile's boxes and PLOC_RADIUS
-// places on each side into six rows of floats (lo xyz, hi xyz), so that the
-// 16 places behind p and the 16 ahead are each one unaligned load a row;
-// both sides' merged areas are computed (twice the scalar search's area
-// work, which PLOC_RADIUS lanes repay).  The least area is the choice where
-// one candidate has it; a tie, or no finite area, takes the scalar choice of
-// consider over the same areas (the rule of the hashes), so the tree is
-// ploc_merge's bit for bit (tests/test_device_build.py).
+// PLOC on 2 cores (5 ms now).  A work-item copies its tile's boxes and
+// PLOC_RADIUS places on each side into six rows of floats (lo xyz, hi xyz),
+// so that the 16 places behind p and the 16 ahead are each one unaligned
+// load a row; both sides' merged areas are computed (twice the scalar
+// search's area work, which PLOC_RADIUS lanes repay).  The least area is the
+// choice where one candidate has it; a tie, or no finite area, takes the
+// scalar choice of consider over the same areas (the rule of the hashes), so
+// the tree is ploc_merge's bit for bit (tests/test_device_build.py).
 #define SEARCH_WINDOW (BUILD_GROUP + 2 * PLOC_RADIUS)   // places a tile's search reads
+#define TILE_SCRATCH (6 * SEARCH_WINDOW)                 // floats of tile_nearest's scratch
 
 // Merged half areas (half_area, lane by lane) of the box at window place
 // `self` with those at places first .. first + 15.  (min and max: fmin's NaN
 // rule costs a compare and a blend a lane, and a NaN corner fails the build
-// anyway -- STATE_BAD_TRIANGLE.)
+// anyway -- STATE_BAD_TRIANGLE.  Inlined: PoCL called it, through memory.)
 __attribute__((always_inline))
 inline float16 window_areas(const float* window, int self, int first)
 {
@@ -516,6 +517,7 @@ inline float16 window_areas(const float* window, int self, int first)
     return select(a, (float16)(INFINITY), isnan(a));
 }
 
+// Reductions of sixteen lanes by halves (PoCL's any() tested the lanes one by one).
 inline float least_lane(float16 v)
 {
     const float8 a = min(v.lo, v.hi);
@@ -540,94 +542,96 @@ inline int greatest_int_lane(int16 v)
     return max(c.x, c.y);
 }
 
-__kernel void ploc_nearest_tiles(const global BuildCluster* clusters, global int* nearest,
-                                 const global int* state, const int iteration)
+// The nearest neighbour of places start .. end - 1 (a tile of at most
+// BUILD_GROUP) among `count` clusters, into `nearest`; window: TILE_SCRATCH floats.
+inline void tile_nearest(const global BuildCluster* clusters, int count, int start, int end, float* window,
+                         global int* nearest)
 {
-    const int count = state[CLUSTERS_BEFORE(iteration)];
-    if (PLOC_DONE(count))
-        return;
-    float window[6 * SEARCH_WINDOW];
     // Candidate k of place p is place p - 16 + k: behind 0..15, ahead 17..32 (16: p itself).
     const int16 lanes = (int16)(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
-    for (int start = get_global_id(0) * BUILD_GROUP; start < count; start += get_global_size(0) * BUILD_GROUP) {
-        const int end = min(start + BUILD_GROUP, count);
-        const int base = start - PLOC_RADIUS;              // the place at window[0]
-        for (int k = 0; k < end - base + PLOC_RADIUS; ++k) {
-            const int q = base + k;
-            // No place: an infinite box, whose merged area (infinite) is no choice.
-            const bool there = q >= 0 && q < count;
-            const float4 lo = there ? clusters[q].lo : (float4)(-INFINITY);
-            const float4 hi = there ? clusters[q].hi : (float4)(INFINITY);
-            window[k] = lo.x;
-            window[SEARCH_WINDOW + k] = lo.y;
-            window[2 * SEARCH_WINDOW + k] = lo.z;
-            window[3 * SEARCH_WINDOW + k] = hi.x;
-            window[4 * SEARCH_WINDOW + k] = hi.y;
-            window[5 * SEARCH_WINDOW + k] = hi.z;
+    const int base = start - PLOC_RADIUS;                  // the place at window[0]
+    for (int k = 0; k < end - base + PLOC_RADIUS; ++k) {
+        const int q = base + k;
+        // No place: an infinite box, whose merged area (infinite) is no choice.
+        const bool there = q >= 0 && q < count;
+        const float4 lo = there ? clusters[q].lo : (float4)(-INFINITY);
+        const float4 hi = there ? clusters[q].hi : (float4)(INFINITY);
+        window[k] = lo.x;
+        window[SEARCH_WINDOW + k] = lo.y;
+        window[2 * SEARCH_WINDOW + k] = lo.z;
+        window[3 * SEARCH_WINDOW + k] = hi.x;
+        window[4 * SEARCH_WINDOW + k] = hi.y;
+        window[5 * SEARCH_WINDOW + k] = hi.z;
+    }
+    for (int p = start; p < end; ++p) {
+        const int i = p - base;
+        const float16 behind = window_areas(window, i, i - PLOC_RADIUS);   // candidates 0..15
+        const float16 ahead = window_areas(window, i, i + 1);              // candidates 17..32
+        const float least = least_lane(min(behind, ahead));
+        const int16 is_behind = behind == least, is_ahead = ahead == least;
+        const int16 ahead_lanes = lanes + (PLOC_RADIUS + 1);
+        const int first = least_int_lane(min(select((int16)(INT_MAX), lanes, is_behind),
+                                             select((int16)(INT_MAX), ahead_lanes, is_ahead)));
+        const int last = greatest_int_lane(max(select((int16)(-1), lanes, is_behind),
+                                               select((int16)(-1), ahead_lanes, is_ahead)));
+        if (isfinite(least) && first == last) {           // one candidate has the least area
+            nearest[p] = p - PLOC_RADIUS + first;
+            continue;
         }
-        for (int p = start; p < end; ++p) {
-            const int i = p - base;
-            const float16 behind = window_areas(window, i, i - PLOC_RADIUS);   // candidates 0..15
-            const float16 ahead = window_areas(window, i, i + 1);              // candidates 17..32
-            const float least = least_lane(min(behind, ahead));
-            const int16 is_behind = behind == least, is_ahead = ahead == least;
-            const int16 ahead_lanes = lanes + (PLOC_RADIUS + 1);
-            const int first = least_int_lane(min(select((int16)(INT_MAX), lanes, is_behind),
-                                                 select((int16)(INT_MAX), ahead_lanes, is_ahead)));
-            const int last = greatest_int_lane(max(select((int16)(-1), lanes, is_behind),
-                                                   select((int16)(-1), ahead_lanes, is_ahead)));
-            if (isfinite(least) && first == last) {       // one candidate has the least area
-                nearest[p] = p - PLOC_RADIUS + first;
-                continue;
-            }
-            float areas[2 * PLOC_RADIUS];
-            vstore16(behind, 0, areas);
-            vstore16(ahead, 0, areas + PLOC_RADIUS);
-            Nearest n = {-1, INFINITY, 0u, false};
-            for (int k = 0; k < 2 * PLOC_RADIUS; ++k) {
-                const int q = k < PLOC_RADIUS ? p - PLOC_RADIUS + k : p + 1 + k - PLOC_RADIUS;
-                if (q >= 0 && q < count)
-                    consider(&n, p, q, areas[k]);
-            }
-            nearest[p] = n.best;
+        float areas[2 * PLOC_RADIUS];
+        vstore16(behind, 0, areas);
+        vstore16(ahead, 0, areas + PLOC_RADIUS);
+        Nearest n = {-1, INFINITY, 0u, false};
+        for (int k = 0; k < 2 * PLOC_RADIUS; ++k) {
+            const int q = k < PLOC_RADIUS ? p - PLOC_RADIUS + k : p + 1 + k - PLOC_RADIUS;
+            if (q >= 0 && q < count)
+                consider(&n, p, q, areas[k]);
         }
+        nearest[p] = n.best;
     }
 }
 #else
+#define TILE_SCRATCH ((PLOC_RADIUS + 1) * PLOC_RADIUS)  // floats of tile_nearest's scratch
+
+// tile_nearest one candidate at a time (a radius other than 16, or the SAH
+// partition's segments).  Each pair's area once, as ploc_merge's table does:
+// row p % (PLOC_RADIUS + 1) of `ahead` holds the areas of (p, p + o), o =
+// 1..PLOC_RADIUS, and serves p's places ahead now and theirs behind later
+// (the rows of the PLOC_RADIUS places before p are still there).  The area
+// of a pair is the same from either end (fmin and fmax commute).
+inline void tile_nearest(const global BuildCluster* clusters, int count, int start, int end, float* ahead,
+                         global int* nearest)
+{
+    for (int p = max(start - PLOC_RADIUS, 0); p < end; ++p) {
+        const float3 lo = clusters[p].lo.xyz, hi = clusters[p].hi.xyz;
+        float* row = ahead + (p % (PLOC_RADIUS + 1)) * PLOC_RADIUS;
+        for (int o = 1; o <= PLOC_RADIUS && p + o < count; ++o)
+            row[o - 1] = half_area(fmin(lo, clusters[p + o].lo.xyz), fmax(hi, clusters[p + o].hi.xyz));
+        if (p < start)
+            continue;
+        const int segment = cluster_segment(clusters[p].hi);
+        Nearest n = {-1, INFINITY, 0u, false};
+        for (int q = max(p - PLOC_RADIUS, 0); q < p; ++q)
+            if (SAME_SEGMENT(cluster_segment(clusters[q].hi), segment))
+                consider(&n, p, q, ahead[(q % (PLOC_RADIUS + 1)) * PLOC_RADIUS + (p - q - 1)]);
+        for (int q = p + 1; q <= min(p + PLOC_RADIUS, count - 1); ++q)
+            if (SAME_SEGMENT(cluster_segment(clusters[q].hi), segment))
+                consider(&n, p, q, row[q - p - 1]);
+        nearest[p] = n.best;
+    }
+}
+#endif
+
 __kernel void ploc_nearest_tiles(const global BuildCluster* clusters, global int* nearest,
                                  const global int* state, const int iteration)
 {
     const int count = state[CLUSTERS_BEFORE(iteration)];
     if (PLOC_DONE(count))
         return;
-    // Each pair's area once, as ploc_merge's table does: row p % (PLOC_RADIUS
-    // + 1) holds the areas of (p, p + o), o = 1..PLOC_RADIUS, and serves p's
-    // places ahead now and theirs behind later (the rows of the PLOC_RADIUS
-    // places before p are still there).  The area of a pair is the same from
-    // either end (fmin and fmax commute).
-    float ahead[(PLOC_RADIUS + 1) * PLOC_RADIUS];
-    for (int start = get_global_id(0) * BUILD_GROUP; start < count; start += get_global_size(0) * BUILD_GROUP) {
-        const int end = min(start + BUILD_GROUP, count);
-        for (int p = max(start - PLOC_RADIUS, 0); p < end; ++p) {
-            const float3 lo = clusters[p].lo.xyz, hi = clusters[p].hi.xyz;
-            float* row = ahead + (p % (PLOC_RADIUS + 1)) * PLOC_RADIUS;
-            for (int o = 1; o <= PLOC_RADIUS && p + o < count; ++o)
-                row[o - 1] = half_area(fmin(lo, clusters[p + o].lo.xyz), fmax(hi, clusters[p + o].hi.xyz));
-            if (p < start)
-                continue;
-            const int segment = cluster_segment(clusters[p].hi);
-            Nearest n = {-1, INFINITY, 0u, false};
-            for (int q = max(p - PLOC_RADIUS, 0); q < p; ++q)
-                if (SAME_SEGMENT(cluster_segment(clusters[q].hi), segment))
-                    consider(&n, p, q, ahead[(q % (PLOC_RADIUS + 1)) * PLOC_RADIUS + (p - q - 1)]);
-            for (int q = p + 1; q <= min(p + PLOC_RADIUS, count - 1); ++q)
-                if (SAME_SEGMENT(cluster_segment(clusters[q].hi), segment))
-                    consider(&n, p, q, row[q - p - 1]);
-            nearest[p] = n.best;
-        }
-    }
+    float scratch[TILE_SCRATCH];
+    for (int start = get_global_id(0) * BUILD_GROUP; start < count; start += get_global_size(0) * BUILD_GROUP)
+        tile_nearest(clusters, count, start, min(start + BUILD_GROUP, count), scratch, nearest);
 }
-#endif
 
 __kernel void ploc_merge_tiles(const global BuildCluster* clusters, global BuildCluster* merged,
                                global uint* tile_kept, const global int* nearest, global BuildNode* nodes,
@@ -656,6 +660,52 @@ __kernel void ploc_merge_tiles(const global BuildCluster* clusters, global Build
         }
         tile_kept[tile] = (uint)rank;
     }
+}
+
+// ploc_tail for CPU devices: the same iterations by one work-item, with no
+// barriers (PoCL runs a work-group's barriers as loops over its work-items,
+// and compiles them slowly: ploc_tail took 0.3-0.7 s of a first build).  The
+// last few thousand clusters' iterations, each of four launches
+// (ploc_nearest_tiles, ploc_merge_tiles, ploc_count_kept, ploc_compact), cost
+// more in launches than in work on 2 cores; here they take about a
+// millisecond.  The same choices (tile_nearest) and the same merges in place
+// order, the kept and merged clusters written in order to the other buffer;
+// leaves at STATE_TAIL what ploc_tail leaves, for ploc_top.
+__kernel __attribute__((reqd_work_group_size(1, 1, 1)))
+void ploc_tail_serial(global BuildCluster* clusters, global BuildCluster* spare, global int* nearest,
+                      global BuildNode* nodes, global int* heights, const int num_tris, global int* state,
+                      const int first_iteration, const uint leaf_size)
+{
+    int count = state[CLUSTERS_BEFORE(first_iteration)];
+    int next_node = state[STATE_NEXT_NODE];
+    int iteration = first_iteration;
+    global BuildCluster* from = clusters;
+    global BuildCluster* to = spare;
+    float scratch[TILE_SCRATCH];
+    while (!PLOC_DONE(count)) {
+        for (int start = 0; start < count; start += BUILD_GROUP)
+            tile_nearest(from, count, start, min(start + BUILD_GROUP, count), scratch, nearest);
+        int kept = 0;
+        for (int p = 0; p < count; ++p) {
+            const int j = nearest[p];                   // -1: alone in its segment
+            const bool mutual = j >= 0 && nearest[j] == p;
+            if (!mutual)
+                to[kept++] = from[p];
+            else if (p < j)
+                to[kept++] = make_node(nodes, heights, num_tris, next_node++, from[p], from[j], leaf_size);
+        }
+        count = kept;
+        ++iteration;
+        global BuildCluster* t = from;
+        from = to;
+        to = t;
+    }
+    const bool merged_here = iteration > first_iteration;
+    state[STATE_TAIL + TAIL_COUNT] = count;
+    state[STATE_TAIL + TAIL_NEXT_NODE] = next_node;
+    state[STATE_TAIL + TAIL_ITERATIONS] = merged_here ? iteration : state[STATE_ITERATIONS];
+    state[STATE_TAIL + TAIL_FLAGS] = (merged_here ? TAIL_MERGED : 0)
+                                   | ((iteration - first_iteration) % 2 ? TAIL_IN_SPARE : 0);
 }
 
 #endif
