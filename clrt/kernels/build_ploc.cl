@@ -503,8 +503,7 @@ void ploc_top(global BuildCluster* clusters, global BuildCluster* spare, global 
 // Merged half areas (half_area, lane by lane) of the box at window place
 // `self` with those at places first .. first + 15.  (min and max: fmin's NaN
 // rule costs a compare and a blend a lane, and a NaN corner fails the build
-// anyway -- STATE_BAD_TRIANGLE.  Inlined: PoCL called it, through memory.)
-__attribute__((always_inline))
+// anyway -- STATE_BAD_TRIANGLE.)
 inline float16 window_areas(const float* window, int self, int first)
 {
     const float16 dx = max(window[3 * SEARCH_WINDOW + self], vload16(0, window + 3 * SEARCH_WINDOW + first))
