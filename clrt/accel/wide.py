@@ -42,6 +42,13 @@ C_NODE = 1.0
 C_PACKET = 1.0
 
 
+def collapse_defines() -> dict:
+    """The constants above as program defines, for the collapse on the device
+    (kernels/build_wide.cl; repr of a float is a C double literal of the same value)."""
+    return {"WIDE": WIDE, "PACKET": PACKET, "MERGE": MERGE, "C_NODE": f"((double){C_NODE!r})",
+            "C_PACKET": f"((double){C_PACKET!r})"}
+
+
 @dataclass
 class WideBvh:
     """nodes: (N,) BVH_WIDE_NODE, the root at 0; packets: (P,) TRIANGLE_PACKET;

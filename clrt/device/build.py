@@ -81,7 +81,7 @@ import numpy as np
 import pyopencl as cl
 
 from clrt import layouts
-from clrt.accel import as_triangles, check_options, volumes
+from clrt.accel import as_triangles, check_options, volumes, wide
 from clrt.accel.instances import instance_defines
 from clrt.accel.rows import tree_stats
 from clrt.accel.topdown import C_INTERSECT, C_TRAVERSAL
@@ -234,7 +234,7 @@ def build_defines(volume: str, kind: str = "gpu", treelet_leaves: int | None = N
         "GROUP_RESULTS": GROUP_RESULTS,
         **({"PLOC_SEGMENTS": None} if segmented else {}),
         "C_TRAVERSAL": f"((float){C_TRAVERSAL!r})", "C_INTERSECT": f"((float){C_INTERSECT!r})",
-        **volumes.fit_defines(), **instance_defines(),
+        **volumes.fit_defines(), **instance_defines(), **wide.collapse_defines(),
     }
 
 
@@ -249,6 +249,8 @@ class DeviceBvh:
                box layout, only when built with ``keep_boxes``; for statistics.
     depth:     nodes on the longest root-to-leaf path (root counts 1): the
                traversal stack (BVH_STACK_SIZE) must hold it.
+    kernels:   the program's kernels (the wide BVH of CPU devices is
+               collapsed by two of them: clrt.device.wide_build).
     iterations: PLOC iterations; timings: ``wall`` (host clock, from the
                call to the rows being ready), and when built with
                ``device_times``, device ms per phase (profiling events;
@@ -271,6 +273,7 @@ class DeviceBvh:
     exact_rows: cl.Buffer | None = field(default=None, repr=False)
     builder: str = "device"
     launches: list = field(default_factory=list, repr=False)
+    kernels: dict | None = field(default=None, repr=False)
     _stats: dict | None = field(default=None, repr=False)
 
     @property
@@ -413,7 +416,7 @@ def build_on_device(context: cl.Context, queue: cl.CommandQueue, corners, volume
     treelets = TREELET_LEAVES[kind] if treelet_leaves is None else int(treelet_leaves)
     treelets = treelets if F > 2 else 0
     program = build_program(context, "build_bvh.cl", defines, kernels=cpu_kernels(
-        segmented, treelets > 0, tail_threshold > top_clusters) if kind == "cpu" else None)
+        segmented, treelets > 0, tail_threshold > top_clusters, volume == "box") if kind == "cpu" else None)
     ws = workspace(context)
     k = ws.kernels_of(program, defines)
     num_nodes = 2 * F - 1
@@ -563,7 +566,7 @@ def build_on_device(context: cl.Context, queue: cl.CommandQueue, corners, volume
     return DeviceBvh(rows=rows, tri_verts=tri_verts, prim_ids=prim_ids, num_rows=num_rows, num_triangles=F,
                      depth=int(head[STATE["STATE_DEPTH"]]), volume=volume, leaf_size=leaf_size,
                      iterations=iterations, timings=timings, queue=caller_queue, exact_rows=exact_rows,
-                     launches=launches)
+                     launches=launches, kernels=k)
 
 
 def _row_buffers(context: cl.Context, num_rows: int, keep_boxes: bool):

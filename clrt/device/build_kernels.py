@@ -69,6 +69,11 @@ BUILD_KERNELS = {
     "jump_root_paths": (B("ancestor"), B("path"), U("num_nodes"), B("ancestor_out"), B("path_out")),
     "emit_tree": (B("nodes"), U("num_nodes"), I("root"), B("corners"), B("sorted_ids"), B("ancestor"), B("path"),
         B("rows"), B("exact_rows"), B("tris"), B("prim_ids"), B("state")),
+    # The wide BVH of CPU devices from the rows (build_wide.cl, clrt/device/wide_build.py).
+    "wide_plan": (B("rows"), I("num_rows"), B("cost"), B("choice"), B("best"), B("subtree"), B("node_rows"),
+        B("stack"), B("lanes"), B("leaves"), B("state")),
+    "wide_write": (B("rows"), B("tris"), B("lanes"), B("leaves"), I("num_nodes"), I("num_leaves"), B("wide"),
+        value("packets_at", np.uint64), B("sources")),
     # The top level of a scene of instances (build_instances.cl, clrt/device/top_level.py).
     "place_instances": (B("transforms"), B("mesh_of"), B("meshes"), U("num_instances"), B("group_results"),
         B("state")),
@@ -104,10 +109,13 @@ def check_tuning(tail_threshold=None, treelet_leaves=None, treelet_min=None, tai
         checks.integer("partition", partition, 0, 1)
 
 
-def cpu_kernels(segmented: bool = False, treelets: bool = False, tail: bool = False) -> tuple[str, ...]:
+def cpu_kernels(segmented: bool = False, treelets: bool = False, tail: bool = False,
+                wide: bool = False) -> tuple[str, ...]:
     """The kernels a build on a CPU device launches (clrt.device.build: the
     host sorts, and PLOC iterates in four plain passes), with the SAH
-    partition's, the treelets' and ploc_tail where the build launches them: its program
+    partition's, the treelets' and ploc_tail_serial where the build launches
+    them, and with ``wide`` (box volumes) the wide collapse's, which the
+    geometry launches on the built tree (clrt.device.wide_build): its program
     keeps only these (clrt.device.program.keep_kernels), since PoCL's front
     end works on every kernel of a program (docs/benchmarks.md, "The first
     call with empty caches")."""
@@ -116,7 +124,7 @@ def cpu_kernels(segmented: bool = False, treelets: bool = False, tail: bool = Fa
             "ploc_nearest_tiles", "ploc_merge_tiles", "ploc_count_kept", "ploc_compact",
             *(("ploc_tail_serial",) if tail else ()), "ploc_top",
             *(("treelet_levels", "treelet_order", "treelet_restructure") if treelets else ()),
-            "init_root_paths", "jump_root_paths", "emit_tree")
+            "init_root_paths", "jump_root_paths", "emit_tree", *(("wide_plan", "wide_write") if wide else ()))
 
 
 #: The kernels of the top level of a scene of instances on a CPU device
@@ -148,12 +156,11 @@ class Workspace:
             self.buffers[name] = buffer
         return buffer
 
-    def kernels_of(self, program: cl.Program, defines: dict, table: dict | None = None) -> dict:
-        """The kernels of ``table`` (default: the build kernels) in ``program``
-        (built with ``defines``), made once."""
+    def kernels_of(self, program: cl.Program, defines: dict) -> dict:
+        """The build kernels of ``program`` (built with ``defines``), made once."""
         key = program.int_ptr
         if key not in self.kernels:
-            self.kernels[key] = typed_kernels(program, BUILD_KERNELS if table is None else table, defines)
+            self.kernels[key] = typed_kernels(program, BUILD_KERNELS, defines)
         return self.kernels[key]
 
 

@@ -189,7 +189,7 @@ class DeviceGeometry:
                     if fits is not None:
                         fits(self.nbytes + wide_bytes)
                 self.wide = collapse_on_device(context, queue or built.queue, built.rows, acceleration.num_rows,
-                                               built.tri_verts, fits=fits_wide)
+                                               built.tri_verts, built.kernels, fits=fits_wide)
             else:
                 self.wide = collapse(acceleration.rows,
                                      corners[acceleration.slot_order()].astype(np.float32, copy=False))

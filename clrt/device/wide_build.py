@@ -1,7 +1,8 @@
 """The wide BVH of CPU devices (clrt/accel/wide.py) collapsed on the device
-from a tree the device built (kernels in clrt/kernels/build_wide.cl).
+from a tree the device built (kernels in clrt/kernels/build_wide.cl, part of
+the device builder's program).
 
-    >>> wide = collapse_on_device(context, queue, bvh.rows, bvh.num_rows, bvh.tri_verts)
+    >>> wide = collapse_on_device(context, queue, bvh.rows, bvh.num_rows, bvh.tri_verts, bvh.kernels)
     >>> wide.buffer, wide.packets_at        # nodes then packets, ready for accel_wide.cl
     >>> wide.nodes, wide.packets, wide.sources   # host copies, read when first asked for
 
@@ -21,29 +22,21 @@ import functools
 import numpy as np
 import pyopencl as cl
 
-from clrt.accel.wide import C_NODE, C_PACKET, MERGE, PACKET, WIDE, fill_boxes, fill_packets
-from clrt.device.build_kernels import one_build_per_context, workspace
+from clrt.accel.wide import WIDE, fill_boxes, fill_packets
+from clrt.device.build import BUILD_GROUP, build_defines, device_kind
+from clrt.device.build_kernels import cpu_kernels, one_build_per_context, workspace
 from clrt.device.program import build_program
-from clrt.device.signature import buffer as B
-from clrt.device.signature import value
 from clrt.layouts import BVH_WIDE_NODE, TRIANGLE_PACKET
 
-WIDE_WRITE_GROUP = 64     # work-items per work-group of wide_write
 WIDE_STATE_INTS = 4       # wide_plan's counts: nodes, leaves, packets, levels (build_wide.cl)
 
-WIDE_KERNELS = {
-    "wide_plan": (B("rows"), value("num_rows", np.int32), B("cost"), B("choice"), B("best"), B("subtree"),
-                  B("node_rows"), B("stack"), B("lanes"), B("leaves"), B("state")),
-    "wide_write": (B("rows"), B("tris"), B("lanes"), B("leaves"), value("num_nodes", np.int32),
-                   value("num_leaves", np.int32), B("wide"), value("packets_at", np.uint64), B("sources")),
-}
 
-
-def wide_defines() -> dict:
-    """The program's defines: clrt/accel/wide.py's constants (repr of a float
-    is a C double literal of the same value) and the write kernel's group."""
-    return {"WIDE": WIDE, "PACKET": PACKET, "MERGE": MERGE, "C_NODE": f"((double){C_NODE!r})",
-            "C_PACKET": f"((double){C_PACKET!r})", "WIDE_WRITE_GROUP": WIDE_WRITE_GROUP}
+def wide_kernels(context: cl.Context) -> dict:
+    """The device builder's kernels (its program holds the collapse's) as a
+    box build on the context's CPU device has them."""
+    defines = build_defines("box", device_kind(context.devices[0]))
+    return workspace(context).kernels_of(build_program(context, "build_bvh.cl", defines,
+                                                       kernels=cpu_kernels(wide=True)), defines)
 
 
 class DeviceWideBvh:
@@ -89,16 +82,16 @@ class DeviceWideBvh:
 
 @one_build_per_context
 def collapse_on_device(context: cl.Context, queue: cl.CommandQueue, rows: cl.Buffer, num_rows: int,
-                       tris: cl.Buffer, fits=None) -> DeviceWideBvh:
+                       tris: cl.Buffer, kernels: dict | None = None, fits=None) -> DeviceWideBvh:
     """The wide BVH of ``num_rows`` BVH_PAIR_NODE rows (box volumes) in
     ``rows`` over the slot-ordered TRIANGLE_VERTS in ``tris``, on the queue's
-    device; complete when this returns.  ``fits``: called with the wide
-    BVH's bytes before its buffer is made (DeviceGeometry's memory check).
-    Builds take turns with the device builder's on the context (they share
-    its scratch buffers)."""
-    defines = wide_defines()
+    device; complete when this returns.  ``kernels``: the device builder's
+    (clrt.device.build.DeviceBvh.kernels; default :func:`wide_kernels`).
+    ``fits``: called with the wide BVH's bytes before its buffer is made
+    (DeviceGeometry's memory check).  Builds take turns with the device
+    builder's on the context (they share its scratch buffers)."""
+    kernels = wide_kernels(context) if kernels is None else kernels
     ws = workspace(context)
-    kernels = ws.kernels_of(build_program(context, "build_wide.cl", defines), defines, WIDE_KERNELS)
     R = max(int(num_rows), 1)
     budgets = WIDE + 1
     # A wide node per row at most, a leaf per binary leaf (R + 1) at most.
@@ -118,8 +111,8 @@ def collapse_on_device(context: cl.Context, queue: cl.CommandQueue, rows: cl.Buf
         fits(nbytes)
     wide = cl.Buffer(context, cl.mem_flags.READ_WRITE, nbytes)
     sources = cl.Buffer(context, cl.mem_flags.READ_WRITE, 4 * WIDE * num_nodes)
-    items = -(-max(num_nodes, num_leaves) // WIDE_WRITE_GROUP) * WIDE_WRITE_GROUP
+    items = -(-max(num_nodes, num_leaves) // BUILD_GROUP) * BUILD_GROUP
     kernels["wide_write"].set_args(rows, tris, lanes, leaves, np.int32(num_nodes), np.int32(num_leaves), wide,
                                    np.uint64(num_nodes * BVH_WIDE_NODE.itemsize), sources)
-    cl.enqueue_nd_range_kernel(queue, kernels["wide_write"], (items,), (WIDE_WRITE_GROUP,)).wait()
+    cl.enqueue_nd_range_kernel(queue, kernels["wide_write"], (items,), (BUILD_GROUP,)).wait()
     return DeviceWideBvh(queue, wide, sources, num_nodes, num_packets, depth)

@@ -13,8 +13,12 @@
 // and the packets in slot order (wide_plan); then every node and every leaf's
 // packets are written in parallel (wide_write).
 //
-// Entry file of its own program, built with WIDE, PACKET, MERGE, C_NODE,
-// C_PACKET (clrt/accel/wide.py) and WIDE_WRITE_GROUP.
+// Part of the device builder's program (build_bvh.cl: one program front end
+// on a first call, not two), which passes the constants of clrt/accel/wide.py
+// as WIDE, PACKET, MERGE, C_NODE and C_PACKET.
+#ifndef CLRT_BUILD_WIDE_CL
+#define CLRT_BUILD_WIDE_CL
+
 #include "layouts.h"
 
 #pragma OPENCL EXTENSION cl_khr_fp64 : enable
@@ -22,8 +26,8 @@
 #pragma OPENCL FP_CONTRACT OFF
 
 #if !defined(WIDE) || !defined(PACKET) || !defined(MERGE) || !defined(C_NODE) || !defined(C_PACKET) \
-    || !defined(WIDE_WRITE_GROUP)
-#error "build with the constants of clrt/accel/wide.py (WIDE, PACKET, MERGE, C_NODE, C_PACKET) and WIDE_WRITE_GROUP"
+    || !defined(BUILD_GROUP)
+#error "build with the constants of clrt/accel/wide.py (WIDE, PACKET, MERGE, C_NODE, C_PACKET) and BUILD_GROUP"
 #endif
 #if WIDE != 8 || PACKET != 4
 #error "the wide nodes hold float8 lanes and the packets float4 lanes"
@@ -235,7 +239,7 @@ void wide_plan(const global BvhPairNode* rows, const int num_rows, global double
 // `sources`, and leaf i's packets (corners from the slot-ordered triangles,
 // empty lanes zeros and slot -1).  `wide`: the nodes, then the packets from
 // byte packets_at on (geometry.cl's layout).
-__kernel __attribute__((reqd_work_group_size(WIDE_WRITE_GROUP, 1, 1)))
+__kernel __attribute__((reqd_work_group_size(BUILD_GROUP, 1, 1)))
 void wide_write(const global BvhPairNode* rows, const global TriangleVerts* tris, const global int4* lanes,
                 const global int4* leaves, const int num_nodes, const int num_leaves, global char* wide,
                 const ulong packets_at, global int* sources)
@@ -306,3 +310,5 @@ void wide_write(const global BvhPairNode* rows, const global TriangleVerts* tris
         }
     }
 }
+
+#endif
