@@ -26,8 +26,8 @@ The algorithm (kernels in ``clrt/kernels/build_*.cl``, entry ``build_bvh.cl``):
    cluster finds the cluster within ``PLOC_RADIUS`` places on either side whose
    merged box has the least area, and mutual nearest neighbours merge; one
    launch an iteration on GPUs (the kept clusters placed by a decoupled
-   look-back across the work-groups), four on CPU devices (two plain merge
-   passes, a prefix sum, a compaction), until at most ``tail_threshold``
+   look-back across the work-groups), three on CPU devices (two plain merge
+   passes, a compaction), until at most ``tail_threshold``
    clusters are left; then one work-group runs the remaining iterations in
    one launch (``ploc_tail``; on CPU devices one work-item,
    ``ploc_tail_serial``; the same choices in a loop: the tree does not depend
@@ -663,8 +663,8 @@ def _ploc(queue, k, launch, F, clusters, merged, tile_kept, tile_status, nodes, 
     On a GPU one launch of ploc_merge makes an iteration, from one cluster
     buffer into the other.  With ``nearest`` (a CPU device),
     ploc_nearest_tiles and ploc_merge_tiles write every place's cluster into
-    ``merged``, ploc_count_kept sums the tiles' kept counts, and ploc_compact
-    moves the kept ones back into ``clusters`` (build_ploc.cl says why).
+    ``merged`` and ploc_compact moves the kept ones back into ``clusters``
+    (build_ploc.cl says why).
     """
     ring = STATE["COUNT_RING"]
     known = F                         # clusters before iteration `iteration` (at most)
@@ -687,10 +687,8 @@ def _ploc(queue, k, launch, F, clusters, merged, tile_kept, tile_status, nodes, 
             launch("ploc", k["ploc_nearest_tiles"], workers, clusters, nearest, state, iteration, group=1)
             launch("ploc", k["ploc_merge_tiles"], workers, clusters, merged, tile_kept, nearest, nodes,
                    heights, F, state, iteration, leaf_size, group=1)
-            k["ploc_count_kept"].set_args(tile_kept, state, iteration)
-            launch("ploc", k["ploc_count_kept"], 1, group=1)
             k["ploc_compact"].set_args(merged, clusters, tile_kept, state, iteration)
-            launch("ploc", k["ploc_compact"], groups)
+            launch("ploc", k["ploc_compact"], workers, group=1)
             iteration += 1
         cl.enqueue_copy(queue, count, state, src_offset=4 * (STATE["STATE_COUNTS"] + iteration % ring),
                         is_blocking=True)

@@ -44,8 +44,7 @@ BUILD_KERNELS = {
         B("clusters"), B("tile_status"), B("treelet_done")),
     "ploc_merge": (B("clusters"), B("next"), B("tile_status"), B("nodes"), B("heights"), I("num_tris"), B("state"),
         I("iteration"), U("leaf_size")),
-    "ploc_count_kept": (B("tile_kept"), B("state"), I("iteration")),
-    "ploc_compact": (B("merged"), B("clusters"), B("tile_offsets"), B("state"), I("iteration")),
+    "ploc_compact": (B("merged"), B("clusters"), B("tile_kept"), B("state"), I("iteration")),
     "ploc_tail": (B("clusters"), B("spare"), B("nearest"), B("nodes"), B("heights"), I("num_tris"), B("state"),
         I("first_iteration"), U("leaf_size")),
     "ploc_tail_serial": (B("clusters"), B("spare"), B("nearest"), B("nodes"), B("heights"), I("num_tris"),
@@ -112,7 +111,7 @@ def check_tuning(tail_threshold=None, treelet_leaves=None, treelet_min=None, tai
 def cpu_kernels(segmented: bool = False, treelets: bool = False, tail: bool = False,
                 wide: bool = False) -> tuple[str, ...]:
     """The kernels a build on a CPU device launches (clrt.device.build: the
-    host sorts, and PLOC iterates in four plain passes), with the SAH
+    host sorts, and PLOC iterates in three plain passes), with the SAH
     partition's, the treelets' and ploc_tail_serial where the build launches
     them, and with ``wide`` (box volumes) the wide collapse's, which the
     geometry launches on the built tree (clrt.device.wide_build): its program
@@ -121,7 +120,7 @@ def cpu_kernels(segmented: bool = False, treelets: bool = False, tail: bool = Fa
     call with empty caches")."""
     partition = tuple(name for name in BUILD_KERNELS if name.startswith("partition_"))
     return ("init_build_state", "centroid_bounds", *(partition if segmented else ("morton_codes",)), "init_leaves",
-            "ploc_nearest_tiles", "ploc_merge_tiles", "ploc_count_kept", "ploc_compact",
+            "ploc_nearest_tiles", "ploc_merge_tiles", "ploc_compact",
             *(("ploc_tail_serial",) if tail else ()), "ploc_top",
             *(("treelet_levels", "treelet_order", "treelet_restructure") if treelets else ()),
             "init_root_paths", "jump_root_paths", "emit_tree", *(("wide_plan", "wide_write") if wide else ()))

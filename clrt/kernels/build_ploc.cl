@@ -19,9 +19,8 @@
 // lower place, the higher one drops out), learns where its kept clusters go
 // from the tiles before it (decoupled look-back, build_scan.cl) and writes
 // them there, in order, into the other cluster buffer.  On a CPU an iteration
-// is four plain passes (ploc_nearest_tiles, ploc_merge_tiles, then
-// ploc_count_kept: a prefix sum of the tiles' kept counts by one work-item,
-// and ploc_compact, which moves the kept clusters together; below says why).
+// is three plain passes (ploc_nearest_tiles, ploc_merge_tiles, then
+// ploc_compact, which moves the kept clusters together; below says why).
 // Each kernel reads the cluster count from the state buffer, so the host can
 // queue iterations without waiting for one; once SAH_TOP_CLUSTERS or fewer
 // are left (PLOC_DONE) the kernels do nothing, and ploc_top makes the top of
@@ -319,42 +318,43 @@ void ploc_merge(const global BuildCluster* clusters, global BuildCluster* next, 
     }
 }
 
-// One work-item (CPU devices only): exclusive prefix sum of the tiles' kept
-// counts (where each tile's clusters go) and the next iteration's cluster
-// count.  A plain loop: a few hundred tiles take microseconds on one core,
-// and PoCL compiles it in a fifth of the time of a work-group's scan with
-// barriers (about 0.2 s of a first build on 2 cores).
-__kernel __attribute__((reqd_work_group_size(1, 1, 1)))
-void ploc_count_kept(global uint* tile_kept, global int* state, const int iteration)
+// CPU devices: the kept clusters of ploc_merge_tiles moved together, in
+// order, and the next iteration's cluster count.  Work-item w of the launch
+// takes a run of consecutive tiles (a CPU hands each core a run of
+// work-items): their first place is the sum of the kept counts of the tiles
+// before (a few hundred at most: a plain loop), and each kept cluster goes to
+// that place plus its rank.  (Before: a prefix sum by one work-item, then a
+// launch of a work-item a place -- two launches an iteration, and at 60 us
+// each, most of the later iterations' time.)
+__kernel void ploc_compact(const global BuildCluster* merged, global BuildCluster* clusters,
+                           const global uint* tile_kept, global int* state, const int iteration)
 {
     const int count = state[CLUSTERS_BEFORE(iteration)];
+    const int w = get_global_id(0), workers = get_global_size(0);
     if (PLOC_DONE(count)) {             // a launch past the end: the count carries on
-        state[CLUSTERS_BEFORE(iteration + 1)] = count;
+        if (w == 0)
+            state[CLUSTERS_BEFORE(iteration + 1)] = count;
         return;
     }
-    uint next = 0;
-    for (int tile = 0; tile < (count + BUILD_GROUP - 1) / BUILD_GROUP; ++tile) {
-        const uint kept = tile_kept[tile];
-        tile_kept[tile] = next;
-        next += kept;
+    const int tiles = (count + BUILD_GROUP - 1) / BUILD_GROUP;
+    const int first = (int)((long)tiles * w / workers), last = (int)((long)tiles * (w + 1) / workers);
+    uint place = 0;
+    for (int tile = 0; tile < first; ++tile)
+        place += tile_kept[tile];
+    for (int tile = first; tile < last; ++tile) {
+        for (int p = tile * BUILD_GROUP; p < min((tile + 1) * BUILD_GROUP, count); ++p) {
+            const BuildCluster c = merged[p];
+            const int rank = (as_int(c.hi.w) >> SEGMENT_BITS) - 1;
+            if (rank >= 0)
+                clusters[place + rank] = c;
+        }
+        place += tile_kept[tile];
     }
-    state[CLUSTERS_BEFORE(iteration + 1)] = (int)next;
-    if (PLOC_DONE((int)next))
-        state[STATE_ITERATIONS] = iteration + 1;    // the last one that merged
-}
-
-__kernel __attribute__((reqd_work_group_size(BUILD_GROUP, 1, 1)))
-void ploc_compact(const global BuildCluster* merged, global BuildCluster* clusters,
-                  const global uint* tile_offsets, const global int* state, const int iteration)
-{
-    const int count = state[CLUSTERS_BEFORE(iteration)];
-    const int i = get_global_id(0);
-    if (PLOC_DONE(count) || i >= count)
-        return;
-    const BuildCluster c = merged[i];
-    const int rank = (as_int(c.hi.w) >> SEGMENT_BITS) - 1;
-    if (rank >= 0)
-        clusters[tile_offsets[get_group_id(0)] + rank] = c;
+    if (w == workers - 1) {             // its place is past every kept cluster: the next count
+        state[CLUSTERS_BEFORE(iteration + 1)] = (int)place;
+        if (PLOC_DONE((int)place))
+            state[STATE_ITERATIONS] = iteration + 1;    // the last one that merged
+    }
 }
 
 // The cluster at place p's nearest neighbour among the PLOC_RADIUS places on
@@ -380,7 +380,7 @@ inline int tail_nearest(const global BuildCluster* clusters, int count, int p)
 // the clusters at the start) and `spare`; nearest: scratch of at least the
 // starting count of ints.  Leaves at STATE_TAIL what ploc_top, launched next,
 // needs: the clusters left, the node counter, the iterations that merged
-// (this loop's count, or else the total that ploc_merge or ploc_count_kept
+// (this loop's count, or else the total that ploc_merge or ploc_compact
 // wrote: the host may have queued more launches, which merged nothing, so
 // that the total does not depend on where the host handed over), and
 // whether this loop merged and left the clusters in `spare`.
@@ -451,7 +451,7 @@ void ploc_tail(global BuildCluster* clusters, global BuildCluster* spare, global
 // the clusters it left (build_top.cl; each of its levels counts as an
 // iteration).  Writes the node counter, the iteration total and the last
 // count to the state, unless nothing merged since ploc_merge or
-// ploc_count_kept wrote them.
+// ploc_compact wrote them.
 __kernel __attribute__((reqd_work_group_size(TAIL_GROUP, 1, 1)))
 void ploc_top(global BuildCluster* clusters, global BuildCluster* spare, global BuildNode* nodes,
               global int* heights, const int num_tris, global int* state, const uint leaf_size)
@@ -477,8 +477,7 @@ void ploc_top(global BuildCluster* clusters, global BuildCluster* spare, global 
 // barriers and local tables cost far more than its arithmetic (6 ms a launch
 // for bunny00's first iterations on 2 cores, 125 of a 130 ms build).  The same
 // choices in two plain passes over tiles of BUILD_GROUP places leave
-// tile_kept and the ranks as ploc_merge does, for ploc_count_kept and
-// ploc_compact.  Work-item w takes tiles w, w + size, ... of the clusters
+// tile_kept and the ranks as ploc_merge does, for ploc_compact.  Work-item w takes tiles w, w + size, ... of the clusters
 // there are now: the host sizes a batch's launches for the count before it,
 // and a CPU hands each core a contiguous run of work-items, so one per tile
 // left one core idle as the count fell.
@@ -664,8 +663,8 @@ __kernel void ploc_merge_tiles(const global BuildCluster* clusters, global Build
 // ploc_tail for CPU devices: the same iterations by one work-item, with no
 // barriers (PoCL runs a work-group's barriers as loops over its work-items,
 // and compiles them slowly: ploc_tail took 0.3-0.7 s of a first build).  The
-// last few thousand clusters' iterations, each of four launches
-// (ploc_nearest_tiles, ploc_merge_tiles, ploc_count_kept, ploc_compact), cost
+// last few thousand clusters' iterations, each of three launches
+// (ploc_nearest_tiles, ploc_merge_tiles, ploc_compact), cost
 // more in launches than in work on 2 cores; here they take about a
 // millisecond.  The same choices (tile_nearest) and the same merges in place
 // order, the kept and merged clusters written in order to the other buffer;
