@@ -617,7 +617,7 @@ def test_let_go_buffers_are_freed_after_the_host_copies_are_read(device, queue):
 @pytest.mark.parametrize("top_clusters", (1, 128))
 @pytest.mark.parametrize("name", ["random", "soup", "torus", "degenerate", "F=3"])
 def test_cpu_and_gpu_ploc_kernels_make_the_same_tree(name, top_clusters, partition, queue, monkeypatch):
-    """A CPU device merges with ploc_nearest_tiles / ploc_merge_tiles and
+    """A CPU device merges with ploc_merge_tiles / ploc_compact and
     then ploc_tail_serial, a GPU with ploc_merge and then ploc_tail: on the
     same device, both give the same rows bit for bit,
     with the SAH partition's segments (which only the kernels' segment test

@@ -26,8 +26,8 @@ The algorithm (kernels in ``clrt/kernels/build_*.cl``, entry ``build_bvh.cl``):
    cluster finds the cluster within ``PLOC_RADIUS`` places on either side whose
    merged box has the least area, and mutual nearest neighbours merge; one
    launch an iteration on GPUs (the kept clusters placed by a decoupled
-   look-back across the work-groups), three on CPU devices (two plain merge
-   passes, a compaction), until at most ``tail_threshold``
+   look-back across the work-groups), two on CPU devices (the neighbours and
+   merges of tiles, a compaction), until at most ``tail_threshold``
    clusters are left; then one work-group runs the remaining iterations in
    one launch (``ploc_tail``; on CPU devices one work-item,
    ``ploc_tail_serial``; the same choices in a loop: the tree does not depend
@@ -473,22 +473,22 @@ def build_on_device(context: cl.Context, queue: cl.CommandQueue, corners, volume
     nodes = ws.get("nodes", layouts.BUILD_NODE.itemsize * num_nodes)
     clusters = ws.get("clusters", layouts.BUILD_CLUSTER.itemsize * F)
     merged = ws.get("merged", layouts.BUILD_CLUSTER.itemsize * F)
-    tile_kept = ws.get("tile_kept", 4 * max(_groups(F), F))    # also ploc_tail's nearest neighbours
+    tile_kept = ws.get("tile_kept", 4 * max(_groups(F), F))    # also the tails' nearest neighbours
     tile_status = ws.get("tile_status", 8 * _groups(F))         # ploc_merge's look-back, two halves
     heights = ws.get("heights", 4 * max(F - 1, 1))             # of the inner nodes, index - F
     treelet_done = keys[1]             # the sort keys are spent: F ints each
     launch("ploc", k["init_leaves"], _groups(F), corners_buf, sorted_ids, keys[0], np.int32(segmented),
            np.uint32(F), nodes, clusters, tile_status, treelet_done)
-    nearest = ws.get("nearest", 4 * F) if kind == "cpu" else None     # the CPU kernels' neighbours
+    cpu = kind == "cpu"
     queued = _ploc(queue, k, launch, F, clusters, merged, tile_kept, tile_status, nodes, heights, state,
-                   leaf_size, max(tail_threshold, top_clusters), nearest)
+                   leaf_size, max(tail_threshold, top_clusters), cpu)
     # ploc_tail starts from the clusters of the last iteration: on the CPU
     # passes always `clusters` (compacted back into it), from ploc_merge the
     # two buffers in turn.  With no more than the SAH top's clusters left it
     # would merge nothing: the host writes what it would leave ploc_top.
-    last, spare = (merged, clusters) if nearest is None and queued % 2 else (clusters, merged)
-    if tail_threshold > top_clusters and nearest is not None:    # a CPU's: one work-item (build_ploc.cl)
-        launch("ploc", k["ploc_tail_serial"], 1, last, spare, nearest, nodes, heights, F, state, queued, leaf_size,
+    last, spare = (merged, clusters) if not cpu and queued % 2 else (clusters, merged)
+    if tail_threshold > top_clusters and cpu:    # one work-item (build_ploc.cl)
+        launch("ploc", k["ploc_tail_serial"], 1, last, spare, tile_kept, nodes, heights, F, state, queued, leaf_size,
                group=1)
     elif tail_threshold > top_clusters:
         launch("ploc", k["ploc_tail"], 1, last, spare, tile_kept, nodes, heights, F, state, queued, leaf_size,
@@ -653,7 +653,7 @@ def _partition(k, launch, ws, F: int, budget: int, corners, state, sample_part, 
 
 
 def _ploc(queue, k, launch, F, clusters, merged, tile_kept, tile_status, nodes, heights, state, leaf_size,
-          tail_threshold, nearest=None) -> int:
+          tail_threshold, cpu: bool = False) -> int:
     """Queue PLOC iterations until at most ``tail_threshold`` clusters are
     left (ploc_tail does the rest); returns how many were queued.
 
@@ -661,10 +661,10 @@ def _ploc(queue, k, launch, F, clusters, merged, tile_kept, tile_status, nodes, 
     host queues a batch of iterations sized for the last count it read (an
     upper bound: counts only fall), then reads the count after the batch.
     On a GPU one launch of ploc_merge makes an iteration, from one cluster
-    buffer into the other.  With ``nearest`` (a CPU device),
-    ploc_nearest_tiles and ploc_merge_tiles write every place's cluster into
-    ``merged`` and ploc_compact moves the kept ones back into ``clusters``
-    (build_ploc.cl says why).
+    buffer into the other.  On a ``cpu`` device,
+    ploc_merge_tiles writes every place's cluster into ``merged`` and
+    ploc_compact moves the kept ones back into ``clusters`` (build_ploc.cl
+    says why).
     """
     ring = STATE["COUNT_RING"]
     known = F                         # clusters before iteration `iteration` (at most)
@@ -676,7 +676,7 @@ def _ploc(queue, k, launch, F, clusters, merged, tile_kept, tile_status, nodes, 
         batch = min(batch, ring - 1)  # the ring holds the counts of one batch
         for _ in range(batch):
             groups = _groups(known)
-            if nearest is None:
+            if not cpu:
                 k["ploc_merge"].set_args(buffers[iteration % 2], buffers[1 - iteration % 2], tile_status, nodes,
                                          heights, F, state, iteration, leaf_size)
                 launch("ploc", k["ploc_merge"], groups)
@@ -684,9 +684,8 @@ def _ploc(queue, k, launch, F, clusters, merged, tile_kept, tile_status, nodes, 
                 continue
             # a few work-items a core, striding over the tiles
             workers = min(groups, CPU_TILE_WORKERS * queue.device.max_compute_units)
-            launch("ploc", k["ploc_nearest_tiles"], workers, clusters, nearest, state, iteration, group=1)
-            launch("ploc", k["ploc_merge_tiles"], workers, clusters, merged, tile_kept, nearest, nodes,
-                   heights, F, state, iteration, leaf_size, group=1)
+            launch("ploc", k["ploc_merge_tiles"], workers, clusters, merged, tile_kept, nodes, heights, F, state,
+                   iteration, leaf_size, group=1)
             k["ploc_compact"].set_args(merged, clusters, tile_kept, state, iteration)
             launch("ploc", k["ploc_compact"], workers, group=1)
             iteration += 1

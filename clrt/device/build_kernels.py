@@ -50,9 +50,8 @@ BUILD_KERNELS = {
     "ploc_tail_serial": (B("clusters"), B("spare"), B("nearest"), B("nodes"), B("heights"), I("num_tris"),
         B("state"), I("first_iteration"), U("leaf_size")),
     "ploc_top": (B("clusters"), B("spare"), B("nodes"), B("heights"), I("num_tris"), B("state"), U("leaf_size")),
-    "ploc_nearest_tiles": (B("clusters"), B("nearest"), B("state"), I("iteration")),
-    "ploc_merge_tiles": (B("clusters"), B("merged"), B("tile_kept"), B("nearest"), B("nodes"), B("heights"),
-        I("num_tris"), B("state"), I("iteration"), U("leaf_size")),
+    "ploc_merge_tiles": (B("clusters"), B("merged"), B("tile_kept"), B("nodes"), B("heights"), I("num_tris"),
+        B("state"), I("iteration"), U("leaf_size")),
     "partition_clear": (B("bins"), B("sample_part"), U("samples")),
     "partition_init": (B("parts"), B("state"), I("samples"), I("limit")),
     "partition_bin": (B("corners"), U("samples"), U("stride"), B("sample_part"), B("parts"), B("bins"), B("state")),
@@ -111,7 +110,7 @@ def check_tuning(tail_threshold=None, treelet_leaves=None, treelet_min=None, tai
 def cpu_kernels(segmented: bool = False, treelets: bool = False, tail: bool = False,
                 wide: bool = False) -> tuple[str, ...]:
     """The kernels a build on a CPU device launches (clrt.device.build: the
-    host sorts, and PLOC iterates in three plain passes), with the SAH
+    host sorts, and PLOC iterates in two plain passes), with the SAH
     partition's, the treelets' and ploc_tail_serial where the build launches
     them, and with ``wide`` (box volumes) the wide collapse's, which the
     geometry launches on the built tree (clrt.device.wide_build): its program
@@ -120,7 +119,7 @@ def cpu_kernels(segmented: bool = False, treelets: bool = False, tail: bool = Fa
     call with empty caches")."""
     partition = tuple(name for name in BUILD_KERNELS if name.startswith("partition_"))
     return ("init_build_state", "centroid_bounds", *(partition if segmented else ("morton_codes",)), "init_leaves",
-            "ploc_nearest_tiles", "ploc_merge_tiles", "ploc_compact",
+            "ploc_merge_tiles", "ploc_compact",
             *(("ploc_tail_serial",) if tail else ()), "ploc_top",
             *(("treelet_levels", "treelet_order", "treelet_restructure") if treelets else ()),
             "init_root_paths", "jump_root_paths", "emit_tree", *(("wide_plan", "wide_write") if wide else ()))

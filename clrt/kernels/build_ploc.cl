@@ -19,8 +19,9 @@
 // lower place, the higher one drops out), learns where its kept clusters go
 // from the tiles before it (decoupled look-back, build_scan.cl) and writes
 // them there, in order, into the other cluster buffer.  On a CPU an iteration
-// is three plain passes (ploc_nearest_tiles, ploc_merge_tiles, then
-// ploc_compact, which moves the kept clusters together; below says why).
+// is two plain passes (ploc_merge_tiles: the neighbours and the merges of a
+// tile of places; ploc_compact, which moves the kept clusters together;
+// below says why).
 // Each kernel reads the cluster count from the state buffer, so the host can
 // queue iterations without waiting for one; once SAH_TOP_CLUSTERS or fewer
 // are left (PLOC_DONE) the kernels do nothing, and ploc_top makes the top of
@@ -476,19 +477,22 @@ void ploc_top(global BuildCluster* clusters, global BuildCluster* spare, global 
 // work-items, one stretch between barriers at a time, and there ploc_merge's
 // barriers and local tables cost far more than its arithmetic (6 ms a launch
 // for bunny00's first iterations on 2 cores, 125 of a 130 ms build).  The same
-// choices in two plain passes over tiles of BUILD_GROUP places leave
-// tile_kept and the ranks as ploc_merge does, for ploc_compact.  Work-item w takes tiles w, w + size, ... of the clusters
-// there are now: the host sizes a batch's launches for the count before it,
-// and a CPU hands each core a contiguous run of work-items, so one per tile
-// left one core idle as the count fell.
-//   ploc_nearest_tiles  every place's nearest neighbour (the choice
-//                       ploc_merge makes), into `nearest`
-//   ploc_merge_tiles    mutual pairs merge, in place order; new nodes from
-//                       one atomic per tile, consecutive within the iteration.
+// choices in a plain pass over tiles of BUILD_GROUP places (ploc_merge_tiles)
+// leave tile_kept and the ranks as ploc_merge does, for ploc_compact.
+// Work-item w takes tiles w, w + size, ... of the clusters there are now: the
+// host sizes a batch's launches for the count before it, and a CPU hands each
+// core a contiguous run of work-items, so one per tile left one core idle as
+// the count fell.  A tile finds the nearest neighbours of its places and of
+// PLOC_RADIUS places on each side (find_nearest: whether a neighbour's choice
+// is mutual), then merges mutual pairs in place order, its new nodes from one
+// atomic, consecutive within the iteration.  (The neighbours of every place
+// were first a launch of their own: one launch more an iteration, for an
+// eighth less search.)
+#define SEARCH_PLACES (BUILD_GROUP + 2 * PLOC_RADIUS)   // places a search finds the neighbours of, at most
 #if PLOC_RADIUS == 16 && !defined(PLOC_SEGMENTS) && !defined(PLOC_SCALAR_SEARCH)
 // The search in float16 lanes: PoCL runs these one-work-item groups as
 // scalar code, and the scalar search (below) took 55 of bunny00's 86 ms of
-// PLOC on 2 cores (5 ms now).  A work-item copies its tile's boxes and
+// PLOC on 2 cores (3 ms now).  A work-item copies the boxes of its places and
 // PLOC_RADIUS places on each side into six rows of floats (lo xyz, hi xyz),
 // so that the 16 places behind p and the 16 ahead are each one unaligned
 // load a row; both sides' merged areas are computed (twice the scalar
@@ -496,8 +500,8 @@ void ploc_top(global BuildCluster* clusters, global BuildCluster* spare, global 
 // choice where one candidate has it; a tie, or no finite area, takes the
 // scalar choice of consider over the same areas (the rule of the hashes), so
 // the tree is ploc_merge's bit for bit (tests/test_device_build.py).
-#define SEARCH_WINDOW (BUILD_GROUP + 2 * PLOC_RADIUS)   // places a tile's search reads
-#define TILE_SCRATCH (6 * SEARCH_WINDOW)                 // floats of tile_nearest's scratch
+#define SEARCH_WINDOW (SEARCH_PLACES + 2 * PLOC_RADIUS)  // places a search reads
+#define SEARCH_SCRATCH (6 * SEARCH_WINDOW)               // floats of find_nearest's scratch
 
 // Merged half areas (half_area, lane by lane) of the box at window place
 // `self` with those at places first .. first + 15.  (min and max: fmin's NaN
@@ -540,14 +544,14 @@ inline int greatest_int_lane(int16 v)
     return max(c.x, c.y);
 }
 
-// The nearest neighbour of places start .. end - 1 (a tile of at most
-// BUILD_GROUP) among `count` clusters, into `nearest`; window: TILE_SCRATCH floats.
-inline void tile_nearest(const global BuildCluster* clusters, int count, int start, int end, float* window,
-                         global int* nearest)
+// The nearest neighbour of places first .. end - 1 (at most SEARCH_PLACES)
+// among `count` clusters, into found[p - first]; window: SEARCH_SCRATCH floats.
+inline void find_nearest(const global BuildCluster* clusters, int count, int first, int end, float* window,
+                         int* found)
 {
     // Candidate k of place p is place p - 16 + k: behind 0..15, ahead 17..32 (16: p itself).
     const int16 lanes = (int16)(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
-    const int base = start - PLOC_RADIUS;                  // the place at window[0]
+    const int base = first - PLOC_RADIUS;                  // the place at window[0]
     for (int k = 0; k < end - base + PLOC_RADIUS; ++k) {
         const int q = base + k;
         // No place: an infinite box, whose merged area (infinite) is no choice.
@@ -561,19 +565,19 @@ inline void tile_nearest(const global BuildCluster* clusters, int count, int sta
         window[4 * SEARCH_WINDOW + k] = hi.y;
         window[5 * SEARCH_WINDOW + k] = hi.z;
     }
-    for (int p = start; p < end; ++p) {
+    for (int p = first; p < end; ++p) {
         const int i = p - base;
         const float16 behind = window_areas(window, i, i - PLOC_RADIUS);   // candidates 0..15
         const float16 ahead = window_areas(window, i, i + 1);              // candidates 17..32
         const float least = least_lane(min(behind, ahead));
         const int16 is_behind = behind == least, is_ahead = ahead == least;
         const int16 ahead_lanes = lanes + (PLOC_RADIUS + 1);
-        const int first = least_int_lane(min(select((int16)(INT_MAX), lanes, is_behind),
-                                             select((int16)(INT_MAX), ahead_lanes, is_ahead)));
+        const int best = least_int_lane(min(select((int16)(INT_MAX), lanes, is_behind),
+                                            select((int16)(INT_MAX), ahead_lanes, is_ahead)));
         const int last = greatest_int_lane(max(select((int16)(-1), lanes, is_behind),
                                                select((int16)(-1), ahead_lanes, is_ahead)));
-        if (isfinite(least) && first == last) {           // one candidate has the least area
-            nearest[p] = p - PLOC_RADIUS + first;
+        if (isfinite(least) && best == last) {            // one candidate has the least area
+            found[p - first] = p - PLOC_RADIUS + best;
             continue;
         }
         float areas[2 * PLOC_RADIUS];
@@ -585,27 +589,27 @@ inline void tile_nearest(const global BuildCluster* clusters, int count, int sta
             if (q >= 0 && q < count)
                 consider(&n, p, q, areas[k]);
         }
-        nearest[p] = n.best;
+        found[p - first] = n.best;
     }
 }
 #else
-#define TILE_SCRATCH ((PLOC_RADIUS + 1) * PLOC_RADIUS)  // floats of tile_nearest's scratch
+#define SEARCH_SCRATCH ((PLOC_RADIUS + 1) * PLOC_RADIUS)  // floats of find_nearest's scratch
 
-// tile_nearest one candidate at a time (a radius other than 16, or the SAH
+// find_nearest one candidate at a time (a radius other than 16, or the SAH
 // partition's segments).  Each pair's area once, as ploc_merge's table does:
 // row p % (PLOC_RADIUS + 1) of `ahead` holds the areas of (p, p + o), o =
 // 1..PLOC_RADIUS, and serves p's places ahead now and theirs behind later
 // (the rows of the PLOC_RADIUS places before p are still there).  The area
 // of a pair is the same from either end (fmin and fmax commute).
-inline void tile_nearest(const global BuildCluster* clusters, int count, int start, int end, float* ahead,
-                         global int* nearest)
+inline void find_nearest(const global BuildCluster* clusters, int count, int first, int end, float* ahead,
+                         int* found)
 {
-    for (int p = max(start - PLOC_RADIUS, 0); p < end; ++p) {
+    for (int p = max(first - PLOC_RADIUS, 0); p < end; ++p) {
         const float3 lo = clusters[p].lo.xyz, hi = clusters[p].hi.xyz;
         float* row = ahead + (p % (PLOC_RADIUS + 1)) * PLOC_RADIUS;
         for (int o = 1; o <= PLOC_RADIUS && p + o < count; ++o)
             row[o - 1] = half_area(fmin(lo, clusters[p + o].lo.xyz), fmax(hi, clusters[p + o].hi.xyz));
-        if (p < start)
+        if (p < first)
             continue;
         const int segment = cluster_segment(clusters[p].hi);
         Nearest n = {-1, INFINITY, 0u, false};
@@ -615,40 +619,34 @@ inline void tile_nearest(const global BuildCluster* clusters, int count, int sta
         for (int q = p + 1; q <= min(p + PLOC_RADIUS, count - 1); ++q)
             if (SAME_SEGMENT(cluster_segment(clusters[q].hi), segment))
                 consider(&n, p, q, row[q - p - 1]);
-        nearest[p] = n.best;
+        found[p - first] = n.best;
     }
 }
 #endif
 
-__kernel void ploc_nearest_tiles(const global BuildCluster* clusters, global int* nearest,
-                                 const global int* state, const int iteration)
-{
-    const int count = state[CLUSTERS_BEFORE(iteration)];
-    if (PLOC_DONE(count))
-        return;
-    float scratch[TILE_SCRATCH];
-    for (int start = get_global_id(0) * BUILD_GROUP; start < count; start += get_global_size(0) * BUILD_GROUP)
-        tile_nearest(clusters, count, start, min(start + BUILD_GROUP, count), scratch, nearest);
-}
-
 __kernel void ploc_merge_tiles(const global BuildCluster* clusters, global BuildCluster* merged,
-                               global uint* tile_kept, const global int* nearest, global BuildNode* nodes,
-                               global int* heights, const int num_tris, global int* state, const int iteration,
-                               const uint leaf_size)
+                               global uint* tile_kept, global BuildNode* nodes, global int* heights,
+                               const int num_tris, global int* state, const int iteration, const uint leaf_size)
 {
     const int count = state[CLUSTERS_BEFORE(iteration)];
     if (PLOC_DONE(count))
         return;
+    float scratch[SEARCH_SCRATCH];
+    int found[SEARCH_PLACES];
     for (int tile = get_global_id(0); tile * BUILD_GROUP < count; tile += get_global_size(0)) {
         const int start = tile * BUILD_GROUP, end = min(start + BUILD_GROUP, count);
+        // The neighbours of the tile and of those its places may choose.
+        const int first = max(start - PLOC_RADIUS, 0);
+        find_nearest(clusters, count, first, min(end + PLOC_RADIUS, count), scratch, found);
+#define NEAREST(p) found[(p) - first]
         int merges = 0;
         for (int p = start; p < end; ++p)
-            merges += nearest[p] >= 0 && nearest[nearest[p]] == p && p < nearest[p];
+            merges += NEAREST(p) >= 0 && NEAREST(NEAREST(p)) == p && p < NEAREST(p);
         int node = merges > 0 ? atomic_add(state + STATE_NEXT_NODE, merges) : 0;
         int rank = 0;
         for (int p = start; p < end; ++p) {
-            const int j = nearest[p];
-            const bool mutual = j >= 0 && nearest[j] == p;
+            const int j = NEAREST(p);                       // -1: alone in its segment
+            const bool mutual = j >= 0 && NEAREST(j) == p;
             BuildCluster out = clusters[p];
             if (mutual && p < j)
                 out = make_node(nodes, heights, num_tris, node++, out, clusters[j], leaf_size);
@@ -656,6 +654,7 @@ __kernel void ploc_merge_tiles(const global BuildCluster* clusters, global Build
             out.hi.w = as_float(cluster_segment(out.hi) | (!mutual || p < j ? ++rank : 0) << SEGMENT_BITS);
             merged[p] = out;
         }
+#undef NEAREST
         tile_kept[tile] = (uint)rank;
     }
 }
@@ -663,12 +662,12 @@ __kernel void ploc_merge_tiles(const global BuildCluster* clusters, global Build
 // ploc_tail for CPU devices: the same iterations by one work-item, with no
 // barriers (PoCL runs a work-group's barriers as loops over its work-items,
 // and compiles them slowly: ploc_tail took 0.3-0.7 s of a first build).  The
-// last few thousand clusters' iterations, each of three launches
-// (ploc_nearest_tiles, ploc_merge_tiles, ploc_compact), cost
-// more in launches than in work on 2 cores; here they take about a
-// millisecond.  The same choices (tile_nearest) and the same merges in place
-// order, the kept and merged clusters written in order to the other buffer;
-// leaves at STATE_TAIL what ploc_tail leaves, for ploc_top.
+// last few thousand clusters' iterations, each of two launches
+// (ploc_merge_tiles, ploc_compact), cost more in launches than in work on 2
+// cores; here they take about a millisecond.  The same choices
+// (find_nearest, every place's into `nearest` first) and the same merges in
+// place order, the kept and merged clusters written in order to the other
+// buffer; leaves at STATE_TAIL what ploc_tail leaves, for ploc_top.
 __kernel __attribute__((reqd_work_group_size(1, 1, 1)))
 void ploc_tail_serial(global BuildCluster* clusters, global BuildCluster* spare, global int* nearest,
                       global BuildNode* nodes, global int* heights, const int num_tris, global int* state,
@@ -679,10 +678,15 @@ void ploc_tail_serial(global BuildCluster* clusters, global BuildCluster* spare,
     int iteration = first_iteration;
     global BuildCluster* from = clusters;
     global BuildCluster* to = spare;
-    float scratch[TILE_SCRATCH];
+    float scratch[SEARCH_SCRATCH];
+    int found[SEARCH_PLACES];
     while (!PLOC_DONE(count)) {
-        for (int start = 0; start < count; start += BUILD_GROUP)
-            tile_nearest(from, count, start, min(start + BUILD_GROUP, count), scratch, nearest);
+        for (int start = 0; start < count; start += BUILD_GROUP) {
+            const int end = min(start + BUILD_GROUP, count);
+            find_nearest(from, count, start, end, scratch, found);
+            for (int p = start; p < end; ++p)
+                nearest[p] = found[p - start];
+        }
         int kept = 0;
         for (int p = 0; p < count; ++p) {
             const int j = nearest[p];                   // -1: alone in its segment
