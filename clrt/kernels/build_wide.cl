@@ -145,13 +145,20 @@ inline void plan_row(Plan* plan, const global BvhPairNode* rows, int r)
     plan->subtree[r] = (int2)(below_left.x, below_left.y + right_tris);
 }
 
-// The decision for binary child `entry` at lane budget k.
-inline int decision(Plan* plan, const global BvhPairNode* rows, int entry, int k)
+// Binary child `entry`'s reference and count (pair_child without the area).
+inline int2 pair_ref(const global BvhPairNode* rows, int entry)
 {
-    const PairChild c = pair_child(rows, entry);
-    if (k == 0 || c.count < 0)
+    const global BvhPairNode* row = rows + (entry >> 1);
+    return entry & 1 ? (int2)(as_int(row->right_a.w), as_int(row->right_b.w))
+                     : (int2)(as_int(row->left_a.w), as_int(row->left_b.w));
+}
+
+// The decision for a binary child (pair_ref) at lane budget k.
+inline int decision(Plan* plan, int2 child, int k)
+{
+    if (k == 0 || child.y < 0)
         return CHOICE_ABSENT;
-    return c.count > 0 ? CHOICE_LEAF : plan->choice[c.ref * BUDGETS + k];
+    return child.y > 0 ? CHOICE_LEAF : plan->choice[child.x * BUDGETS + k];
 }
 
 // One work-item: the plan bottom up, then the wide nodes numbered breadth
@@ -186,20 +193,20 @@ void wide_plan(const global BvhPairNode* rows, const int num_rows, global double
         stack[top++] = (int2)(2 * r, split);
         while (top > 0) {
             const int2 at = stack[--top];
-            const int c = decision(&plan, rows, at.x, at.y);
+            const int2 child = pair_ref(rows, at.x);       // (reference, count)
+            const int c = decision(&plan, child, at.y);
             if (c == CHOICE_ABSENT)
                 continue;
-            const PairChild child = pair_child(rows, at.x);
             if (c > 0) {                                   // spread over its children's lanes
-                stack[top++] = (int2)(2 * child.ref + 1, at.y - c);
-                stack[top++] = (int2)(2 * child.ref, c);
+                stack[top++] = (int2)(2 * child.x + 1, at.y - c);
+                stack[top++] = (int2)(2 * child.x, c);
                 continue;
             }
             if (c == CHOICE_NODE) {
-                node_rows[num_nodes] = child.ref;
+                node_rows[num_nodes] = child.x;
                 lanes[node * WIDE + lane] = (int4)(num_nodes++, 0, at.x, 0);
             } else {                                       // a leaf: its subtree's slots
-                const int2 slots = child.count > 0 ? (int2)(child.ref, child.count) : plan.subtree[child.ref];
+                const int2 slots = child.y > 0 ? child : plan.subtree[child.x];
                 leaves[num_leaves] = (int4)(slots, 0, 0);
                 lanes[node * WIDE + lane] = (int4)(num_leaves++, packets_of(slots.y), at.x, 0);
             }
