@@ -18,6 +18,7 @@
 #include "build_sort.cl"
 #include "build_partition.cl"
 #include "build_ploc.cl"
+#include "build_ploc_cpu.cl"
 #include "build_treelet.cl"
 #include "build_emit.cl"
 #include "build_instances.cl"
