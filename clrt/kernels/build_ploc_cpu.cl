@@ -26,7 +26,7 @@
 // were first a launch of their own: one launch more an iteration, for an
 // eighth less search.)
 #define SEARCH_PLACES (BUILD_GROUP + 2 * PLOC_RADIUS)   // places a search finds the neighbours of, at most
-#if PLOC_RADIUS == 16 && !defined(PLOC_SEGMENTS) && !defined(PLOC_SCALAR_SEARCH)
+#if PLOC_RADIUS == 16 && !defined(PLOC_SEGMENTS)
 // The search in float16 lanes: PoCL runs these one-work-item groups as
 // scalar code, and the scalar search (below) took 55 of bunny00's 86 ms of
 // PLOC on 2 cores (3 ms now).  A work-item copies the boxes of its places and
