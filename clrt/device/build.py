@@ -114,9 +114,10 @@ PLOC_RADIUS = 16
 # 1M triangles 7.7 against 7.9 ms, 10M the same).  A CPU device hands over to
 # ploc_tail_serial, one work-item without barriers (PoCL compiled ploc_tail's
 # barriers in 0.3-0.7 s of a first call on 2 cores, docs/benchmarks.md, "The
-# first call with empty caches"): bunny00's last 8192 clusters' iterations
-# take it about a millisecond, where four launches an iteration took several
-# (build 20-35 ms on 2 cores, medians about 2 ms lower; camel 8.6 -> 7.7 ms).
+# first call with empty caches"): the last 8192 clusters' iterations take it
+# under a millisecond, less than the passes' launches (paired builds on 2
+# cores: bunny00 0.8 ms less, camel 6.64 -> 5.68 ms, homer 3.75 -> 3.06;
+# a tail from 32768 clusters: camel the same, bunny00 1.8 ms more).
 TAIL_THRESHOLD = {"gpu": 2048, "cpu": 8192}
 TAIL_MAX = 32768         # ploc_tail counts its clusters in 16 bits
 TAIL_GROUP = {"gpu": 1024, "cpu": BUILD_GROUP}
@@ -187,7 +188,7 @@ TREELET_LEVELS = 64
 # (about 50 us on the H200); one too many only does the tail's work in a
 # launch, about 15 us more.
 MIN_SHRINK = 0.83
-CPU_TILE_WORKERS = 4     # work-items per core of the CPU merge passes (build_ploc.cl)
+CPU_TILE_WORKERS = 4     # work-items per core of the CPU merge passes (build_ploc_cpu.cl)
 MAX_REDUCE_GROUPS = 256  # work-groups of the bounds reduction (grid-stride beyond)
 EARLY_ROWS_BYTES = 64 << 20   # row buffers made before the row count is known, up to this size
 EMIT_JUMPS = 7           # pointer jumps queued without reading the tree's height (2**7 levels)
@@ -487,7 +488,7 @@ def build_on_device(context: cl.Context, queue: cl.CommandQueue, corners, volume
     # two buffers in turn.  With no more than the SAH top's clusters left it
     # would merge nothing: the host writes what it would leave ploc_top.
     last, spare = (merged, clusters) if not cpu and queued % 2 else (clusters, merged)
-    if tail_threshold > top_clusters and cpu:    # one work-item (build_ploc.cl)
+    if tail_threshold > top_clusters and cpu:    # one work-item (build_ploc_cpu.cl)
         launch("ploc", k["ploc_tail_serial"], 1, last, spare, tile_kept, nodes, heights, F, state, queued, leaf_size,
                group=1)
     elif tail_threshold > top_clusters:
@@ -663,7 +664,7 @@ def _ploc(queue, k, launch, F, clusters, merged, tile_kept, tile_status, nodes, 
     On a GPU one launch of ploc_merge makes an iteration, from one cluster
     buffer into the other.  On a ``cpu`` device,
     ploc_merge_tiles writes every place's cluster into ``merged`` and
-    ploc_compact moves the kept ones back into ``clusters`` (build_ploc.cl
+    ploc_compact moves the kept ones back into ``clusters`` (build_ploc_cpu.cl
     says why).
     """
     ring = STATE["COUNT_RING"]
