@@ -29,9 +29,9 @@ def test_build_bench_prints_every_variant(device, capsys, monkeypatch):
     # --profile: one launch-by-launch table per device variant, the sort's passes in it
     assert out.count("one warm build:") == 4
     # (the sort's passes: radix_scatter_lookback's on GPUs; on CPU devices the host sorts, and PLOC's
-    # passes go down to the SAH top: no ploc_tail)
+    # last iterations are one work-item's: ploc_tail_serial)
     assert "| radix_scatter_lookback | 8 |" in out or "| radix_scatter |" not in out
-    assert "| ploc_tail | 1 |" in out or "| ploc_count_kept |" in out
+    assert "| ploc_tail | 1 |" in out or "| ploc_tail_serial | 1 |" in out
     assert "| ploc_top | 1 |" in out
 
 

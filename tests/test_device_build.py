@@ -617,8 +617,9 @@ def test_let_go_buffers_are_freed_after_the_host_copies_are_read(device, queue):
 @pytest.mark.parametrize("top_clusters", (1, 128))
 @pytest.mark.parametrize("name", ["random", "soup", "torus", "degenerate", "F=3"])
 def test_cpu_and_gpu_ploc_kernels_make_the_same_tree(name, top_clusters, partition, queue, monkeypatch):
-    """A CPU device merges with ploc_nearest_tiles / ploc_merge_tiles, a GPU
-    with ploc_merge: on the same device, both give the same rows bit for bit,
+    """A CPU device merges with ploc_merge_tiles / ploc_compact and
+    then ploc_tail_serial, a GPU with ploc_merge and then ploc_tail: on the
+    same device, both give the same rows bit for bit,
     with the SAH partition's segments (which only the kernels' segment test
     keeps apart) or without.  The host queues PLOC launches in batches, so
     some run after PLOC is done (SAH_TOP_CLUSTERS left); the hand-overs below
@@ -627,7 +628,8 @@ def test_cpu_and_gpu_ploc_kernels_make_the_same_tree(name, top_clusters, partiti
     from clrt.device import build
     corners = CORNERS[name]()
     results = []
-    for kind, threshold in (("cpu", 16), ("gpu", 1), ("gpu", 16), ("gpu", 300), ("gpu", 700)):
+    for kind, threshold in (("cpu", 16), ("cpu", 300), ("cpu", 700), ("gpu", 1), ("gpu", 16), ("gpu", 300),
+                            ("gpu", 700)):
         monkeypatch.setattr(build, "device_kind", lambda device, kind=kind: kind)
         bvh = build_on_device(*queue, corners, leaf_size=4, treelet_leaves=0, tail_threshold=threshold,
                               top_clusters=top_clusters, partition=partition)

@@ -79,5 +79,5 @@ def test_a_gathering_build_launches_the_gather(monkeypatch):
     context, queue = create_context("cpu")
     built = build.build_on_device(context, queue, _meshes()["far"], profile=True)
     launched = {name for name, _, _ in built.launches}
-    assert launched == set(launched_kernels("cpu", indexed=True)), launched
+    assert {"gather_corners", "shift_corners"} <= launched <= set(launched_kernels("cpu", tail=True, indexed=True))
     assert built.frame[2].any()

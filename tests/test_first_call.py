@@ -10,6 +10,7 @@ import pytest
 from clrt.device import build, host_sort, program
 from clrt.device.build_kernels import launched_kernels
 from clrt.device.context import create_context
+from clrt.device.wide_build import collapse_on_device
 from clrt.errors import KernelBuildError
 
 
@@ -41,25 +42,30 @@ def test_the_host_sort_is_the_device_sort(n, cpu_queue):
 
 
 @pytest.mark.parametrize("options", [{}, {"treelet_leaves": 7}, {"partition": True, "top_clusters": 16},
-                                     {"tail_threshold": 300}])
+                                     {"tail_threshold": 1}])
 def test_a_build_compiles_the_kernels_it_launches_and_no_other(options, cpu_queue, monkeypatch):
     """On either kind of device the builder's program keeps exactly the
-    kernels the build launches (the treelets', the SAH partition's and
-    ploc_tail only when asked for), and the CPU's tree is the one the GPU
-    driver's launches build (with ploc_tail from 2048 clusters on), run here."""
+    kernels the build launches (the treelets', the SAH partition's and the
+    tail's only when asked for) -- on a CPU device also the two that collapse
+    the built tree into the wide BVH (clrt.device.wide_build, launched by the
+    geometry) --, and the CPU's tree is the one the GPU driver's launches
+    build (with ploc_tail from 2048 clusters on), run here."""
     context, queue = cpu_queue
     options = {"treelet_leaves": 0, "tail_group": 256, "top_clusters": 128, "partition": False, **options}
     rng = np.random.default_rng(4)
-    corners = (rng.random((3000, 1, 3)) + 0.02 * rng.standard_normal((3000, 3, 3))).astype(np.float32)
+    n = 12_000          # more than the serial tail takes (TAIL_THRESHOLD): the passes run first
+    corners = (rng.random((n, 1, 3)) + 0.02 * rng.standard_normal((n, 3, 3))).astype(np.float32)
     built = build.build_on_device(context, queue, corners, leaf_size=4, profile=True, **options)
     launched = {name for name, _, _ in built.launches}
     segmented = bool(options.get("partition"))
-    tail = options.get("tail_threshold", 1) > options["top_clusters"]     # (by default the passes go all the way)
-    kept = launched_kernels("cpu", segmented, options["treelet_leaves"] > 0, tail)
-    assert launched == set(kept), launched ^ set(kept)
+    tail = options.get("tail_threshold", build.TAIL_THRESHOLD["cpu"]) > options["top_clusters"]
+    kept = launched_kernels("cpu", segmented, options["treelet_leaves"] > 0, tail, wide=True)
+    assert launched | {"wide_plan", "wide_write"} == set(kept), launched ^ set(kept)
     defines = build.build_defines("box", "cpu", options["treelet_leaves"], 256, options["top_clusters"], segmented)
     assert set(program.build_program(context, "build_bvh.cl", defines, kernels=kept).kernel_names.split(";")) \
         == set(kept)
+    wide = collapse_on_device(context, queue, built.rows, built.num_rows, built.tri_verts, built.kernels)
+    assert wide.num_packets >= len(corners) / 4        # (tests/test_wide_build.py: its every byte)
     monkeypatch.setattr(build, "device_kind", lambda device: "gpu")
     gpu = build.build_on_device(context, queue, corners, leaf_size=4, profile=True,
                                 **{**options, "tail_threshold": 2048})

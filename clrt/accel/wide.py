@@ -42,6 +42,13 @@ C_NODE = 1.0
 C_PACKET = 1.0
 
 
+def collapse_defines() -> dict:
+    """The constants above as program defines, for the collapse on the device
+    (kernels/build_wide.cl; repr of a float is a C double literal of the same value)."""
+    return {"WIDE": WIDE, "PACKET": PACKET, "MERGE": MERGE, "C_NODE": f"((double){C_NODE!r})",
+            "C_PACKET": f"((double){C_PACKET!r})"}
+
+
 @dataclass
 class WideBvh:
     """nodes: (N,) BVH_WIDE_NODE, the root at 0; packets: (P,) TRIANGLE_PACKET;
@@ -53,6 +60,15 @@ class WideBvh:
     packets: np.ndarray
     depth: int
     sources: np.ndarray
+
+    @property
+    def packets_at(self) -> int:
+        """Byte offset of the packets after the nodes in one buffer."""
+        return self.nodes.nbytes
+
+    @property
+    def nbytes(self) -> int:
+        return self.nodes.nbytes + self.packets.nbytes
 
     def refit(self, rows: np.ndarray, slotted: np.ndarray) -> None:
         """Take the boxes of refitted ``rows`` (the same tree) and the corners of

@@ -26,7 +26,7 @@ from clrt.errors import DeviceMemoryError
 
 # Device scratch of a build, per triangle: the corners (36 bytes), sort keys and
 # ids (16), build nodes (96), clusters twice (64), heights and per-place ints
-# (8, 12 on CPUs), path sums and ancestors (80); tests/test_device_build.py
+# (8), path sums and ancestors (80); tests/test_device_build.py
 # checks it against the workspace's buffers.
 SCRATCH_BYTES_PER_TRIANGLE = 300
 # The SAH partition's buffers, 0.7 MB whatever the mesh: not per triangle, so

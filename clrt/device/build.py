@@ -26,12 +26,12 @@ The algorithm (kernels in ``clrt/kernels/build_*.cl``, entry ``build_bvh.cl``):
    cluster finds the cluster within ``PLOC_RADIUS`` places on either side whose
    merged box has the least area, and mutual nearest neighbours merge; one
    launch an iteration on GPUs (the kept clusters placed by a decoupled
-   look-back across the work-groups), four on CPU devices (two plain merge
-   passes, a prefix sum, a compaction), until at most ``tail_threshold``
-   clusters are left (on CPU devices ``SAH_TOP_CLUSTERS``: no tail);
-   then one work-group runs the remaining iterations in one launch
-   (``ploc_tail``, the same choices in a loop: the tree does not depend on
-   where the host hands over) until ``SAH_TOP_CLUSTERS`` clusters are left,
+   look-back across the work-groups), two on CPU devices (the neighbours and
+   merges of tiles, a compaction), until at most ``tail_threshold``
+   clusters are left; then one work-group runs the remaining iterations in
+   one launch (``ploc_tail``; on CPU devices one work-item,
+   ``ploc_tail_serial``; the same choices in a loop: the tree does not depend
+   on where the host hands over) until ``SAH_TOP_CLUSTERS`` clusters are left,
    and one more (``ploc_top``) splits those top-down by the SAH
    (``build_top.cl``: exact splits over the clusters, weighted by their
    triangles).  Every new node decides
@@ -81,7 +81,7 @@ import numpy as np
 import pyopencl as cl
 
 from clrt import layouts
-from clrt.accel import as_triangles, check_options, volumes
+from clrt.accel import as_triangles, check_options, volumes, wide
 from clrt.accel.instances import instance_defines
 from clrt.accel.rows import tree_stats
 from clrt.accel.topdown import C_INTERSECT, C_TRAVERSAL
@@ -113,12 +113,14 @@ PLOC_RADIUS = 16
 # Clusters at which the host hands over to ploc_tail, per device type: a GPU
 # runs a few thousand clusters' iteration in one work-group faster than three
 # launches (on the H200, 2048 against 4096: bunny00 2.07 against 2.12 ms,
-# 1M triangles 7.7 against 7.9 ms, 10M the same).  A CPU device's passes go
-# on down to the SAH top (1: never), and ploc_tail is not launched: the same
-# tree in about the same time warm (bunny00 on 2 cores ~86 ms either way),
-# and on a first call PoCL does not compile ploc_tail (0.3-0.7 s on 2 cores,
-# docs/benchmarks.md, "The first call with empty caches").
-TAIL_THRESHOLD = {"gpu": 2048, "cpu": 1}
+# 1M triangles 7.7 against 7.9 ms, 10M the same).  A CPU device hands over to
+# ploc_tail_serial, one work-item without barriers (PoCL compiled ploc_tail's
+# barriers in 0.3-0.7 s of a first call on 2 cores, docs/benchmarks.md, "The
+# first call with empty caches"): the last 8192 clusters' iterations take it
+# under a millisecond, less than the passes' launches (paired builds on 2
+# cores: bunny00 0.8 ms less, camel 6.64 -> 5.68 ms, homer 3.75 -> 3.06;
+# a tail from 32768 clusters: camel the same, bunny00 1.8 ms more).
+TAIL_THRESHOLD = {"gpu": 2048, "cpu": 8192}
 TAIL_MAX = 32768         # ploc_tail counts its clusters in 16 bits
 TAIL_GROUP = {"gpu": 1024, "cpu": BUILD_GROUP}
 # PLOC stops at this many clusters, and ploc_top splits them top-down by the
@@ -188,7 +190,7 @@ TREELET_LEVELS = 64
 # (about 50 us on the H200); one too many only does the tail's work in a
 # launch, about 15 us more.
 MIN_SHRINK = 0.83
-CPU_TILE_WORKERS = 4     # work-items per core of the CPU merge passes (build_ploc.cl)
+CPU_TILE_WORKERS = 4     # work-items per core of the CPU merge passes (build_ploc_cpu.cl)
 MAX_REDUCE_GROUPS = 256  # work-groups of the bounds reduction (grid-stride beyond)
 # gather_corners' box before it: min xyz from the largest, max xyz from the
 # smallest order-preserving bits (build_morton.cl's ordered_bits).
@@ -238,7 +240,7 @@ def build_defines(volume: str, kind: str = "gpu", treelet_leaves: int | None = N
         "GROUP_RESULTS": GROUP_RESULTS,
         **({"PLOC_SEGMENTS": None} if segmented else {}),
         "C_TRAVERSAL": f"((float){C_TRAVERSAL!r})", "C_INTERSECT": f"((float){C_INTERSECT!r})",
-        **volumes.fit_defines(), **instance_defines(),
+        **volumes.fit_defines(), **instance_defines(), **wide.collapse_defines(),
     }
 
 
@@ -253,6 +255,8 @@ class DeviceBvh:
                box layout, only when built with ``keep_boxes``; for statistics.
     depth:     nodes on the longest root-to-leaf path (root counts 1): the
                traversal stack (BVH_STACK_SIZE) must hold it.
+    kernels:   the program's kernels (the wide BVH of CPU devices is
+               collapsed by two of them: clrt.device.wide_build).
     iterations: PLOC iterations; timings: ``wall`` (host clock, from the
                call to the rows being ready), and when built with
                ``device_times``, device ms per phase (profiling events;
@@ -279,6 +283,7 @@ class DeviceBvh:
     builder: str = "device"
     launches: list = field(default_factory=list, repr=False)
     frame: np.ndarray | None = field(default=None, repr=False)   # from a Mesh: (3, 3) lo, hi, origin
+    kernels: dict | None = field(default=None, repr=False)
     _stats: dict | None = field(default=None, repr=False)
 
     @property
@@ -375,8 +380,8 @@ def build_on_device(context: cl.Context, queue: cl.CommandQueue, corners, volume
     volume: one of ``VOLUMES``; leaf_size: 1..255, the most triangles per leaf.
     keep_boxes: also keep the exact child boxes (``DeviceBvh.stats``).
     tail_threshold: clusters at which PLOC hands over to one work-group
-        (default: TAIL_THRESHOLD of the device type; for benchmarks); at
-        most top_clusters: no hand-over, ploc_tail is not launched.
+        (a CPU's: one work-item; default: TAIL_THRESHOLD of the device type;
+        for benchmarks); at most top_clusters: no hand-over, no tail is launched.
     staged_upload: the triangles through page-locked staging or not
         (default: clrt.device.pinned.upload's choice; for benchmarks).
     treelet_leaves: leaves of the treelets restructured after PLOC (0: the
@@ -425,7 +430,7 @@ def build_on_device(context: cl.Context, queue: cl.CommandQueue, corners, volume
     treelets = TREELET_LEAVES[kind] if treelet_leaves is None else int(treelet_leaves)
     treelets = treelets if F > 2 else 0
     program = build_program(context, "build_bvh.cl", defines, kernels=launched_kernels(
-        kind, segmented, treelets > 0, tail_threshold > top_clusters, indexed))
+        kind, segmented, treelets > 0, tail_threshold > top_clusters, indexed, volume == "box"))
     ws = workspace(context)
     k = ws.kernels_of(program, defines)
     num_nodes = 2 * F - 1
@@ -495,21 +500,24 @@ def build_on_device(context: cl.Context, queue: cl.CommandQueue, corners, volume
     nodes = ws.get("nodes", layouts.BUILD_NODE.itemsize * num_nodes)
     clusters = ws.get("clusters", layouts.BUILD_CLUSTER.itemsize * F)
     merged = ws.get("merged", layouts.BUILD_CLUSTER.itemsize * F)
-    tile_kept = ws.get("tile_kept", 4 * max(_groups(F), F))    # also ploc_tail's nearest neighbours
+    tile_kept = ws.get("tile_kept", 4 * max(_groups(F), F))    # also the tails' nearest neighbours
     tile_status = ws.get("tile_status", 8 * _groups(F))         # ploc_merge's look-back, two halves
     heights = ws.get("heights", 4 * max(F - 1, 1))             # of the inner nodes, index - F
     treelet_done = keys[1]             # the sort keys are spent: F ints each
     launch("ploc", k["init_leaves"], _groups(F), corners_buf, sorted_ids, keys[0], np.int32(segmented),
            np.uint32(F), nodes, clusters, tile_status, treelet_done)
-    nearest = ws.get("nearest", 4 * F) if kind == "cpu" else None     # the CPU kernels' neighbours
+    cpu = kind == "cpu"
     queued = _ploc(queue, k, launch, F, clusters, merged, tile_kept, tile_status, nodes, heights, state,
-                   leaf_size, max(tail_threshold, top_clusters), nearest)
+                   leaf_size, max(tail_threshold, top_clusters), cpu)
     # ploc_tail starts from the clusters of the last iteration: on the CPU
     # passes always `clusters` (compacted back into it), from ploc_merge the
     # two buffers in turn.  With no more than the SAH top's clusters left it
     # would merge nothing: the host writes what it would leave ploc_top.
-    last, spare = (merged, clusters) if nearest is None and queued % 2 else (clusters, merged)
-    if tail_threshold > top_clusters:
+    last, spare = (merged, clusters) if not cpu and queued % 2 else (clusters, merged)
+    if tail_threshold > top_clusters and cpu:    # one work-item (build_ploc_cpu.cl)
+        launch("ploc", k["ploc_tail_serial"], 1, last, spare, tile_kept, nodes, heights, F, state, queued, leaf_size,
+               group=1)
+    elif tail_threshold > top_clusters:
         launch("ploc", k["ploc_tail"], 1, last, spare, tile_kept, nodes, heights, F, state, queued, leaf_size,
                group=tail_group)
     else:
@@ -588,7 +596,7 @@ def build_on_device(context: cl.Context, queue: cl.CommandQueue, corners, volume
     return DeviceBvh(rows=rows, tri_verts=tri_verts, prim_ids=prim_ids, num_rows=num_rows, num_triangles=F,
                      depth=int(head[STATE["STATE_DEPTH"]]), volume=volume, leaf_size=leaf_size,
                      iterations=iterations, timings=timings, queue=caller_queue, exact_rows=exact_rows,
-                     launches=launches, frame=placed)
+                     launches=launches, frame=placed, kernels=k)
 
 
 def _row_buffers(context: cl.Context, num_rows: int, keep_boxes: bool):
@@ -675,7 +683,7 @@ def _partition(k, launch, ws, F: int, budget: int, corners, state, sample_part, 
 
 
 def _ploc(queue, k, launch, F, clusters, merged, tile_kept, tile_status, nodes, heights, state, leaf_size,
-          tail_threshold, nearest=None) -> int:
+          tail_threshold, cpu: bool = False) -> int:
     """Queue PLOC iterations until at most ``tail_threshold`` clusters are
     left (ploc_tail does the rest); returns how many were queued.
 
@@ -683,10 +691,10 @@ def _ploc(queue, k, launch, F, clusters, merged, tile_kept, tile_status, nodes, 
     host queues a batch of iterations sized for the last count it read (an
     upper bound: counts only fall), then reads the count after the batch.
     On a GPU one launch of ploc_merge makes an iteration, from one cluster
-    buffer into the other.  With ``nearest`` (a CPU device),
-    ploc_nearest_tiles and ploc_merge_tiles write every place's cluster into
-    ``merged``, ploc_count_kept sums the tiles' kept counts, and ploc_compact
-    moves the kept ones back into ``clusters`` (build_ploc.cl says why).
+    buffer into the other.  On a ``cpu`` device,
+    ploc_merge_tiles writes every place's cluster into ``merged`` and
+    ploc_compact moves the kept ones back into ``clusters`` (build_ploc_cpu.cl
+    says why).
     """
     ring = STATE["COUNT_RING"]
     known = F                         # clusters before iteration `iteration` (at most)
@@ -698,7 +706,7 @@ def _ploc(queue, k, launch, F, clusters, merged, tile_kept, tile_status, nodes, 
         batch = min(batch, ring - 1)  # the ring holds the counts of one batch
         for _ in range(batch):
             groups = _groups(known)
-            if nearest is None:
+            if not cpu:
                 k["ploc_merge"].set_args(buffers[iteration % 2], buffers[1 - iteration % 2], tile_status, nodes,
                                          heights, F, state, iteration, leaf_size)
                 launch("ploc", k["ploc_merge"], groups)
@@ -706,13 +714,10 @@ def _ploc(queue, k, launch, F, clusters, merged, tile_kept, tile_status, nodes, 
                 continue
             # a few work-items a core, striding over the tiles
             workers = min(groups, CPU_TILE_WORKERS * queue.device.max_compute_units)
-            launch("ploc", k["ploc_nearest_tiles"], workers, clusters, nearest, state, iteration, group=1)
-            launch("ploc", k["ploc_merge_tiles"], workers, clusters, merged, tile_kept, nearest, nodes,
-                   heights, F, state, iteration, leaf_size, group=1)
-            k["ploc_count_kept"].set_args(tile_kept, state, iteration)
-            launch("ploc", k["ploc_count_kept"], 1, group=1)
+            launch("ploc", k["ploc_merge_tiles"], workers, clusters, merged, tile_kept, nodes, heights, F, state,
+                   iteration, leaf_size, group=1)
             k["ploc_compact"].set_args(merged, clusters, tile_kept, state, iteration)
-            launch("ploc", k["ploc_compact"], groups)
+            launch("ploc", k["ploc_compact"], workers, group=1)
             iteration += 1
         cl.enqueue_copy(queue, count, state, src_offset=4 * (STATE["STATE_COUNTS"] + iteration % ring),
                         is_blocking=True)

@@ -46,14 +46,14 @@ BUILD_KERNELS = {
         B("clusters"), B("tile_status"), B("treelet_done")),
     "ploc_merge": (B("clusters"), B("next"), B("tile_status"), B("nodes"), B("heights"), I("num_tris"), B("state"),
         I("iteration"), U("leaf_size")),
-    "ploc_count_kept": (B("tile_kept"), B("state"), I("iteration")),
-    "ploc_compact": (B("merged"), B("clusters"), B("tile_offsets"), B("state"), I("iteration")),
+    "ploc_compact": (B("merged"), B("clusters"), B("tile_kept"), B("state"), I("iteration")),
     "ploc_tail": (B("clusters"), B("spare"), B("nearest"), B("nodes"), B("heights"), I("num_tris"), B("state"),
         I("first_iteration"), U("leaf_size")),
+    "ploc_tail_serial": (B("clusters"), B("spare"), B("nearest"), B("nodes"), B("heights"), I("num_tris"),
+        B("state"), I("first_iteration"), U("leaf_size")),
     "ploc_top": (B("clusters"), B("spare"), B("nodes"), B("heights"), I("num_tris"), B("state"), U("leaf_size")),
-    "ploc_nearest_tiles": (B("clusters"), B("nearest"), B("state"), I("iteration")),
-    "ploc_merge_tiles": (B("clusters"), B("merged"), B("tile_kept"), B("nearest"), B("nodes"), B("heights"),
-        I("num_tris"), B("state"), I("iteration"), U("leaf_size")),
+    "ploc_merge_tiles": (B("clusters"), B("merged"), B("tile_kept"), B("nodes"), B("heights"), I("num_tris"),
+        B("state"), I("iteration"), U("leaf_size")),
     "partition_clear": (B("bins"), B("sample_part"), U("samples")),
     "partition_init": (B("parts"), B("state"), I("samples"), I("limit")),
     "partition_bin": (B("corners"), U("samples"), U("stride"), B("sample_part"), B("parts"), B("bins"), B("state")),
@@ -69,6 +69,11 @@ BUILD_KERNELS = {
     "jump_root_paths": (B("ancestor"), B("path"), U("num_nodes"), B("ancestor_out"), B("path_out")),
     "emit_tree": (B("nodes"), U("num_nodes"), I("root"), B("corners"), B("sorted_ids"), B("ancestor"), B("path"),
         B("rows"), B("exact_rows"), B("tris"), B("prim_ids"), B("state")),
+    # The wide BVH of CPU devices from the rows (build_wide.cl, clrt/device/wide_build.py).
+    "wide_plan": (B("rows"), I("num_rows"), B("cost"), B("choice"), B("best"), B("subtree"), B("node_rows"),
+        B("stack"), B("lanes"), B("leaves"), B("state")),
+    "wide_write": (B("rows"), B("tris"), B("lanes"), B("leaves"), I("num_nodes"), I("num_leaves"), B("wide"),
+        value("packets_at", np.uint64), B("sources")),
     # The top level of a scene of instances (build_instances.cl, clrt/device/top_level.py).
     "place_instances": (B("transforms"), B("mesh_of"), B("meshes"), U("num_instances"), B("group_results"),
         B("state")),
@@ -104,28 +109,31 @@ def check_tuning(tail_threshold=None, treelet_leaves=None, treelet_min=None, tai
         checks.integer("partition", partition, 0, 1)
 
 
-def launched_kernels(kind: str, segmented: bool = False, treelets: bool = False,
-                     tail: bool = False, indexed: bool = False) -> tuple[str, ...]:
+def launched_kernels(kind: str, segmented: bool = False, treelets: bool = False, tail: bool = False,
+                     indexed: bool = False, wide: bool = False) -> tuple[str, ...]:
     """The kernels a build on a ``kind`` ("cpu" or "gpu") device launches
     (clrt.device.build: a GPU sorts by a look-back radix sort and merges by
-    ploc_merge; on a CPU the host sorts and PLOC iterates in four plain
-    passes), with the SAH partition's, the treelets', ploc_tail and (from a
-    mesh's vertices and faces) the corners' gather where the build launches
-    them.  The program keeps only these
-    (clrt.device.program.keep_kernels): every kernel of a program costs its
-    first build, PoCL's front end and NVIDIA's compiler alike -- build_bvh.cl
-    whole 3.8-4.3 s on the H200, its 15 kernels of a bunny00 build 1.6 s
-    (docs/benchmarks.md, "Time to the first image")."""
+    ploc_merge; on a CPU the host sorts and PLOC iterates in two plain
+    passes), with the SAH partition's, the treelets', the tail's (ploc_tail,
+    on a CPU ploc_tail_serial), from a mesh's vertices and faces the corners'
+    gather, and with ``wide`` (box volumes, CPU devices) the wide collapse's,
+    which the geometry launches on the built tree (clrt.device.wide_build).
+    The program keeps only these (clrt.device.program.keep_kernels): every
+    kernel of a program costs its first build, PoCL's front end and NVIDIA's
+    compiler alike -- build_bvh.cl whole 3.8-4.3 s on the H200, its 15
+    kernels of a bunny00 build 1.6 s (docs/benchmarks.md, "Time to the first
+    image")."""
     partition = tuple(name for name in BUILD_KERNELS if name.startswith("partition_"))
     if kind == "gpu":
-        sort, ploc = ("radix_digit_counts", "radix_scatter_lookback"), ("ploc_merge",)
+        sort, ploc, tail_kernel = ("radix_digit_counts", "radix_scatter_lookback"), ("ploc_merge",), "ploc_tail"
     else:
-        sort, ploc = (), ("ploc_nearest_tiles", "ploc_merge_tiles", "ploc_count_kept", "ploc_compact")
+        sort, ploc, tail_kernel = (), ("ploc_merge_tiles", "ploc_compact"), "ploc_tail_serial"
     return ("init_build_state", *(("gather_corners", "shift_corners") if indexed else ()), "centroid_bounds",
             *(partition if segmented else ("morton_codes",)), *sort,
-            "init_leaves", *ploc, *(("ploc_tail",) if tail else ()), "ploc_top",
+            "init_leaves", *ploc, *((tail_kernel,) if tail else ()), "ploc_top",
             *(("treelet_levels", "treelet_order", "treelet_restructure") if treelets else ()),
-            "init_root_paths", "jump_root_paths", "emit_tree")
+            "init_root_paths", "jump_root_paths", "emit_tree",
+            *(("wide_plan", "wide_write") if wide and kind == "cpu" else ()))
 
 
 def top_level_kernels(kind: str) -> tuple[str, ...]:

@@ -22,6 +22,7 @@ from clrt.device.args import scene_value
 from clrt.device.context import device_kind, format_bytes
 from clrt.device.reach import MEASURE_DIAGONAL, Reach
 from clrt.device.signature import buffer, typed_kernels, value
+from clrt.device.wide_build import DeviceWideBvh, collapse_on_device
 from clrt.errors import DeviceMemoryError, InputError
 from clrt.layouts import BVH_PAIR_NODE, INSTANCE, TRIANGLE_VERTS
 from clrt.scene.arrays import triangle_corners, triangle_verts
@@ -186,21 +187,31 @@ class DeviceGeometry:
             built.release()
             built = None
             arrays.update(_host_arrays(host_corners(), acceleration))
-        # The wide BVH only where it is walked: other devices pay nothing.
-        self.wide = (collapse(acceleration.rows,
-                              host_corners()[acceleration.slot_order()].astype(np.float32, copy=False))
-                     if walks_wide(context, acceleration, self.shifts is not None) else None)
-        # The wide BVH's nodes and packets in one buffer (geometry.cl says why),
-        # the packets from byte packets_at on (a multiple of a node's 256 B).
-        self.packets_at = 0
-        if self.wide is not None:
-            self.packets_at = self.wide.nodes.nbytes
-            arrays["wide"] = np.concatenate([self.wide.nodes.view(np.uint8).ravel(),
-                                             self.wide.packets.view(np.uint8).ravel()])
-        self.defines = dict(accel_defines(acceleration, self.wide))
         # The bytes the buffers hold (parts of a split array add up to it).
         self.nbytes = int(sum(a.nbytes for a in arrays.values()))
-        if fits is not None:
+        # The wide BVH only where it is walked: other devices pay nothing.  Its
+        # nodes and packets lie in one buffer (geometry.cl says why), the
+        # packets from byte packets_at on (a multiple of a node's 256 B).  A
+        # tree built on this device is collapsed there (clrt.device.wide_build:
+        # the same nodes and packets, checked by ``fits`` before its buffer is
+        # made), else on the host and uploaded.
+        self.wide = None
+        if walks_wide(context, acceleration, self.shifts is not None):
+            if built is not None:
+                def fits_wide(wide_bytes: int) -> None:
+                    if fits is not None:
+                        fits(self.nbytes + wide_bytes)
+                self.wide = collapse_on_device(context, queue or built.queue, built.rows, acceleration.num_rows,
+                                               built.tri_verts, built.kernels, fits=fits_wide)
+            else:
+                self.wide = collapse(acceleration.rows,
+                                     host_corners()[acceleration.slot_order()].astype(np.float32, copy=False))
+                arrays["wide"] = np.concatenate([self.wide.nodes.view(np.uint8).ravel(),
+                                                 self.wide.packets.view(np.uint8).ravel()])
+            self.nbytes += self.wide.nbytes
+        self.packets_at = 0 if self.wide is None else self.wide.packets_at
+        self.defines = dict(accel_defines(acceleration, self.wide))
+        if fits is not None and not isinstance(self.wide, DeviceWideBvh):   # (else checked by the collapse)
             fits(self.nbytes)
         if self.shifts is not None:
             self.defines["SPLIT_BUFFERS"] = None
@@ -221,6 +232,8 @@ class DeviceGeometry:
         self.buffers: dict[str, tuple] = {}
         if built is not None:
             self.buffers.update(tris=(built.tri_verts,), nodes=(built.rows,), prim_ids=(built.prim_ids,))
+            if self.wide is not None:
+                self.buffers["wide"] = (self.wide.buffer,)
         for name, array in arrays.items():
             if name in self.buffers:
                 continue

@@ -101,6 +101,11 @@ class KernelTable(Mapping):
             self._made[name] = kernel
         return kernel
 
+    def compiled(self, name: str) -> bool:
+        """Does the program hold kernel ``name`` (one built with only some of
+        its kernels, clrt.device.program.keep_kernels, may not)?"""
+        return name in self._program.kernel_names.split(";")
+
     def __iter__(self):
         return iter(self._table)
 

@@ -6,7 +6,9 @@
 // BvhPairNode rows, slot-ordered triangles and slot -> triangle ids.  The
 // host driver, and the order of the launches, is clrt/device/build.py.
 // Also the top level of a scene of instances (build_instances.cl, driven by
-// clrt/device/top_level.py), which shares the sort and the volume fit.
+// clrt/device/top_level.py), which shares the sort and the volume fit, and
+// the wide BVH of CPU devices collapsed from the rows (build_wide.cl, driven
+// by clrt/device/wide_build.py).
 // Build-time choices arrive as -D defines: BUILD_GROUP, RADIX_BITS,
 // PLOC_RADIUS, the state offsets, the SAH constants of clrt/accel/topdown.py, the
 // padding constants of clrt/accel/volumes.py and the volume shape (VOLUME_*).
@@ -17,7 +19,9 @@
 #include "build_sort.cl"
 #include "build_partition.cl"
 #include "build_ploc.cl"
+#include "build_ploc_cpu.cl"
 #include "build_treelet.cl"
 #include "build_emit.cl"
 #include "build_frame.cl"
 #include "build_instances.cl"
+#include "build_wide.cl"

@@ -19,9 +19,9 @@
 // lower place, the higher one drops out), learns where its kept clusters go
 // from the tiles before it (decoupled look-back, build_scan.cl) and writes
 // them there, in order, into the other cluster buffer.  On a CPU an iteration
-// is four plain passes (ploc_nearest_tiles, ploc_merge_tiles, then
-// ploc_count_kept: a prefix sum of the tiles' kept counts by one work-item,
-// and ploc_compact, which moves the kept clusters together; below says why).
+// is two plain passes (ploc_merge_tiles: the neighbours and the merges of a
+// tile of places; ploc_compact, which moves the kept clusters together;
+// build_ploc_cpu.cl says why).
 // Each kernel reads the cluster count from the state buffer, so the host can
 // queue iterations without waiting for one; once SAH_TOP_CLUSTERS or fewer
 // are left (PLOC_DONE) the kernels do nothing, and ploc_top makes the top of
@@ -32,8 +32,9 @@
 // 75k triangles) run on a few thousand clusters, where a launch costs more
 // than its work.  Below a threshold the host queues ploc_tail instead: one
 // work-group that runs all remaining iterations in a loop, with barriers in
-// place of launches.  It makes the same choices as the other kernels, so the
-// tree does not depend on where the host hands over.  (A wider search in the
+// place of launches (on a CPU ploc_tail_serial: one work-item, no barriers).
+// It makes the same choices as the other kernels, so the tree does not depend
+// on where the host hands over.  (A wider search in the
 // tail, where it is cheap, was tried: SAH cost over the host SAH builder's
 // went from 1.110 to 1.064 on camel at radius 32, but from 1.082 to 1.089 on
 // bunny00, and 1.101 at radius 64.)
@@ -319,44 +320,6 @@ void ploc_merge(const global BuildCluster* clusters, global BuildCluster* next, 
     }
 }
 
-// One work-item (CPU devices only): exclusive prefix sum of the tiles' kept
-// counts (where each tile's clusters go) and the next iteration's cluster
-// count.  A plain loop: a few hundred tiles take microseconds on one core,
-// and PoCL compiles it in a fifth of the time of a work-group's scan with
-// barriers (about 0.2 s of a first build on 2 cores).
-__kernel __attribute__((reqd_work_group_size(1, 1, 1)))
-void ploc_count_kept(global uint* tile_kept, global int* state, const int iteration)
-{
-    const int count = state[CLUSTERS_BEFORE(iteration)];
-    if (PLOC_DONE(count)) {             // a launch past the end: the count carries on
-        state[CLUSTERS_BEFORE(iteration + 1)] = count;
-        return;
-    }
-    uint next = 0;
-    for (int tile = 0; tile < (count + BUILD_GROUP - 1) / BUILD_GROUP; ++tile) {
-        const uint kept = tile_kept[tile];
-        tile_kept[tile] = next;
-        next += kept;
-    }
-    state[CLUSTERS_BEFORE(iteration + 1)] = (int)next;
-    if (PLOC_DONE((int)next))
-        state[STATE_ITERATIONS] = iteration + 1;    // the last one that merged
-}
-
-__kernel __attribute__((reqd_work_group_size(BUILD_GROUP, 1, 1)))
-void ploc_compact(const global BuildCluster* merged, global BuildCluster* clusters,
-                  const global uint* tile_offsets, const global int* state, const int iteration)
-{
-    const int count = state[CLUSTERS_BEFORE(iteration)];
-    const int i = get_global_id(0);
-    if (PLOC_DONE(count) || i >= count)
-        return;
-    const BuildCluster c = merged[i];
-    const int rank = (as_int(c.hi.w) >> SEGMENT_BITS) - 1;
-    if (rank >= 0)
-        clusters[tile_offsets[get_group_id(0)] + rank] = c;
-}
-
 // The cluster at place p's nearest neighbour among the PLOC_RADIUS places on
 // each side, read from global memory: ploc_merge's choice (least area, then
 // least pair hash; the area of a pair is the same from either end, since
@@ -380,7 +343,7 @@ inline int tail_nearest(const global BuildCluster* clusters, int count, int p)
 // the clusters at the start) and `spare`; nearest: scratch of at least the
 // starting count of ints.  Leaves at STATE_TAIL what ploc_top, launched next,
 // needs: the clusters left, the node counter, the iterations that merged
-// (this loop's count, or else the total that ploc_merge or ploc_count_kept
+// (this loop's count, or else the total that ploc_merge or ploc_compact
 // wrote: the host may have queued more launches, which merged nothing, so
 // that the total does not depend on where the host handed over), and
 // whether this loop merged and left the clusters in `spare`.
@@ -451,7 +414,7 @@ void ploc_tail(global BuildCluster* clusters, global BuildCluster* spare, global
 // the clusters it left (build_top.cl; each of its levels counts as an
 // iteration).  Writes the node counter, the iteration total and the last
 // count to the state, unless nothing merged since ploc_merge or
-// ploc_count_kept wrote them.
+// ploc_compact wrote them.
 __kernel __attribute__((reqd_work_group_size(TAIL_GROUP, 1, 1)))
 void ploc_top(global BuildCluster* clusters, global BuildCluster* spare, global BuildNode* nodes,
               global int* heights, const int num_tris, global int* state, const uint leaf_size)
@@ -469,83 +432,6 @@ void ploc_top(global BuildCluster* clusters, global BuildCluster* spare, global 
         state[STATE_NEXT_NODE] = next_node + (levels ? count - 1 : 0);
         state[STATE_ITERATIONS] = merged_iterations + levels;
         state[CLUSTERS_BEFORE(merged_iterations + levels)] = levels ? 1 : count;
-    }
-}
-
-// ploc_merge for CPU devices.  A CPU runs a work-group as a loop over its
-// work-items, one stretch between barriers at a time, and there ploc_merge's
-// barriers and local tables cost far more than its arithmetic (6 ms a launch
-// for bunny00's first iterations on 2 cores, 125 of a 130 ms build).  The same
-// choices in two plain passes over tiles of BUILD_GROUP places leave
-// tile_kept and the ranks as ploc_merge does, for ploc_count_kept and
-// ploc_compact.  Work-item w takes tiles w, w + size, ... of the clusters
-// there are now: the host sizes a batch's launches for the count before it,
-// and a CPU hands each core a contiguous run of work-items, so one per tile
-// left one core idle as the count fell.
-//   ploc_nearest_tiles  every place's nearest neighbour (the choice
-//                       ploc_merge makes), into `nearest`
-//   ploc_merge_tiles    mutual pairs merge, in place order; new nodes from
-//                       one atomic per tile, consecutive within the iteration.
-__kernel void ploc_nearest_tiles(const global BuildCluster* clusters, global int* nearest,
-                                 const global int* state, const int iteration)
-{
-    const int count = state[CLUSTERS_BEFORE(iteration)];
-    if (PLOC_DONE(count))
-        return;
-    // Each pair's area once, as ploc_merge's table does: row p % (PLOC_RADIUS
-    // + 1) holds the areas of (p, p + o), o = 1..PLOC_RADIUS, and serves p's
-    // places ahead now and theirs behind later (the rows of the PLOC_RADIUS
-    // places before p are still there).  The area of a pair is the same from
-    // either end (fmin and fmax commute).
-    float ahead[(PLOC_RADIUS + 1) * PLOC_RADIUS];
-    for (int start = get_global_id(0) * BUILD_GROUP; start < count; start += get_global_size(0) * BUILD_GROUP) {
-        const int end = min(start + BUILD_GROUP, count);
-        for (int p = max(start - PLOC_RADIUS, 0); p < end; ++p) {
-            const float3 lo = clusters[p].lo.xyz, hi = clusters[p].hi.xyz;
-            float* row = ahead + (p % (PLOC_RADIUS + 1)) * PLOC_RADIUS;
-            for (int o = 1; o <= PLOC_RADIUS && p + o < count; ++o)
-                row[o - 1] = half_area(fmin(lo, clusters[p + o].lo.xyz), fmax(hi, clusters[p + o].hi.xyz));
-            if (p < start)
-                continue;
-            const int segment = cluster_segment(clusters[p].hi);
-            Nearest n = {-1, INFINITY, 0u, false};
-            for (int q = max(p - PLOC_RADIUS, 0); q < p; ++q)
-                if (SAME_SEGMENT(cluster_segment(clusters[q].hi), segment))
-                    consider(&n, p, q, ahead[(q % (PLOC_RADIUS + 1)) * PLOC_RADIUS + (p - q - 1)]);
-            for (int q = p + 1; q <= min(p + PLOC_RADIUS, count - 1); ++q)
-                if (SAME_SEGMENT(cluster_segment(clusters[q].hi), segment))
-                    consider(&n, p, q, row[q - p - 1]);
-            nearest[p] = n.best;
-        }
-    }
-}
-
-__kernel void ploc_merge_tiles(const global BuildCluster* clusters, global BuildCluster* merged,
-                               global uint* tile_kept, const global int* nearest, global BuildNode* nodes,
-                               global int* heights, const int num_tris, global int* state, const int iteration,
-                               const uint leaf_size)
-{
-    const int count = state[CLUSTERS_BEFORE(iteration)];
-    if (PLOC_DONE(count))
-        return;
-    for (int tile = get_global_id(0); tile * BUILD_GROUP < count; tile += get_global_size(0)) {
-        const int start = tile * BUILD_GROUP, end = min(start + BUILD_GROUP, count);
-        int merges = 0;
-        for (int p = start; p < end; ++p)
-            merges += nearest[p] >= 0 && nearest[nearest[p]] == p && p < nearest[p];
-        int node = merges > 0 ? atomic_add(state + STATE_NEXT_NODE, merges) : 0;
-        int rank = 0;
-        for (int p = start; p < end; ++p) {
-            const int j = nearest[p];
-            const bool mutual = j >= 0 && nearest[j] == p;
-            BuildCluster out = clusters[p];
-            if (mutual && p < j)
-                out = make_node(nodes, heights, num_tris, node++, out, clusters[j], leaf_size);
-            // 1 + its rank (0: merged away) above its segment, for ploc_compact.
-            out.hi.w = as_float(cluster_segment(out.hi) | (!mutual || p < j ? ++rank : 0) << SEGMENT_BITS);
-            merged[p] = out;
-        }
-        tile_kept[tile] = (uint)rank;
     }
 }
 

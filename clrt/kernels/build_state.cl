@@ -6,7 +6,7 @@
 //   STATE_BAD_TRIANGLE   least index of a triangle with a NaN or infinite
 //                        corner (the input is checked here, not on the host:
 //                        a host pass over 10M triangles costs more than the build)
-//   STATE_ITERATIONS     PLOC iterations that merged (ploc_merge, ploc_count_kept or ploc_top)
+//   STATE_ITERATIONS     PLOC iterations that merged (ploc_merge, ploc_compact, a tail or ploc_top)
 //   STATE_TICKETS + 0, 1 ploc_merge's tile tickets of even and odd iterations
 //   STATE_TREELET_TICKET treelet_restructure's tickets
 //   STATE_BOUNDS + 0..5  centre bounds min xyz, max xyz (order-preserving bits)
