@@ -22,13 +22,12 @@
 // where a_i is the lowest common ancestor of N and X (the junction): from a_i
 // up, the boxes hold N before and after.  So the search climbs from P, keeps
 // the credit (the first line, negated) and, at each ancestor a_i (up to
-// REINSERT_CLIMB of them), tries a_i
-// itself (P' above it: the gain is the credit less A(a_i without N)) and
-// descends into a_i's other child (and at first into S) depth first, pruned
-// by the bound credit - induced - A(N) (the insertion cost below a node is at
-// least the growth of its ancestors plus A(N)).  Only the tree the traversal
-// walks is searched: nodes inside a leaf (a proper ancestor with rows == 0)
-// neither move nor take a node.
+// REINSERT_CLIMB of them), tries a_i itself (P' above it: the gain is the
+// credit less A(a_i without N)) and descends into a_i's other child (and at
+// first into S) depth first, pruned by the bound credit - induced - A(N) (the
+// insertion cost below a node is at least the growth of its ancestors plus
+// A(N)).  Only the tree the traversal walks is searched: nodes inside a leaf
+// (a proper ancestor with rows == 0) neither move nor take a node.
 //
 // Conflicts: a move rewires N, P, S, P's parent, X and X's parent; each takes
 // the highest gain at each of these six nodes (reinsert_search), and of the
