@@ -162,7 +162,8 @@ def run(mesh_dir: Path, meshes, builders, size=(1920, 1080), random_count=1_000_
         for builder in builders:
             rows, slotted, stats, ms = build_tree(context, queue, corners, builder, leaf_size)
             if stats["depth"] > STACK:
-                raise InputError(f"{name} {builder}: depth {stats['depth']} exceeds the counting walk's stack ({STACK})")
+                raise InputError(f"{name} {builder}: depth {stats['depth']} exceeds the counting walk's "
+                                 f"stack ({STACK})")
             sah = stats["sah_cost"]
             for set_name, (origins, directions) in sets.items():
                 counts = count_walks(context, queue, rows, slotted, origins, directions)

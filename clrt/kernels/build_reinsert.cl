@@ -6,13 +6,14 @@
 // made; then the tree is refitted, and the next iteration looks again.
 //
 // Why: PLOC's merges (with the SAH top and the treelets) group the triangles
-// worse than the host's top-down SAH at every scale -- on bunny00 the node
-// areas summed per subtree size, from 16 to 4096 triangles, are 5-10 % above
-// the host tree's (SAH cost +5.5 %, rows opened by primary rays +13 %:
-// benchmarks/tree_counts.py).  A treelet only reshapes the top of a subtree
-// over 7 fixed parts, and more rounds of them gained 0.5 %; a reinsertion
-// takes a subtree anywhere.  It runs before the treelets, which then polish
-// the moved nodes' neighbourhoods (0.2-0.4 % cheaper trees than after them).
+// worse than the host's top-down SAH at every scale -- on bunny00 the half
+// areas of the inner nodes of 16 to 4096 triangles sum to 11 % more than the
+// host tree's (SAH cost +5.5 %, rows opened by primary rays +13 %:
+// benchmarks/tree_counts.py, docs/benchmark-log.md, session 18).  A treelet
+// only reshapes the top of a subtree over 7 fixed parts, and more rounds of
+// them gained 0.5-0.7 %; a reinsertion takes a subtree anywhere.  It runs
+// before the treelets, which then polish the moved nodes' neighbourhoods
+// (0.2-0.4 % cheaper trees than after them).
 //
 // The search of node N (parent P, sibling S) does not take N out of the tree:
 // moving N next to X (a new parent P' in X's place, P's place taken by S)
