@@ -41,21 +41,24 @@ def test_the_host_sort_is_the_device_sort(n, cpu_queue):
 
 
 @pytest.mark.parametrize("options", [{}, {"treelet_leaves": 7}, {"partition": True, "top_clusters": 16},
-                                     {"tail_threshold": 300}])
+                                     {"tail_threshold": 300}, {"reinsert_iterations": 2}])
 def test_a_build_compiles_the_kernels_it_launches_and_no_other(options, cpu_queue, monkeypatch):
     """On either kind of device the builder's program keeps exactly the
-    kernels the build launches (the treelets', the SAH partition's and
-    ploc_tail only when asked for), and the CPU's tree is the one the GPU
-    driver's launches build (with ploc_tail from 2048 clusters on), run here."""
+    kernels the build launches (the treelets', the SAH partition's, the
+    reinsertion's and ploc_tail only when asked for), and the CPU's tree is
+    the one the GPU driver's launches build (with ploc_tail from 2048 clusters
+    on), run here."""
     context, queue = cpu_queue
-    options = {"treelet_leaves": 0, "tail_group": 256, "top_clusters": 128, "partition": False, **options}
+    options = {"treelet_leaves": 0, "tail_group": 256, "top_clusters": 128, "partition": False,
+               "reinsert_iterations": 0, **options}
     rng = np.random.default_rng(4)
     corners = (rng.random((3000, 1, 3)) + 0.02 * rng.standard_normal((3000, 3, 3))).astype(np.float32)
     built = build.build_on_device(context, queue, corners, leaf_size=4, profile=True, **options)
     launched = {name for name, _, _ in built.launches}
     segmented = bool(options.get("partition"))
     tail = options.get("tail_threshold", 1) > options["top_clusters"]     # (by default the passes go all the way)
-    kept = launched_kernels("cpu", segmented, options["treelet_leaves"] > 0, tail)
+    kept = launched_kernels("cpu", segmented, options["treelet_leaves"] > 0, tail,
+                            reinsertion=options["reinsert_iterations"] > 0)
     assert launched == set(kept), launched ^ set(kept)
     defines = build.build_defines("box", "cpu", options["treelet_leaves"], 256, options["top_clusters"], segmented)
     assert set(program.build_program(context, "build_bvh.cl", defines, kernels=kept).kernel_names.split(";")) \
@@ -64,7 +67,8 @@ def test_a_build_compiles_the_kernels_it_launches_and_no_other(options, cpu_queu
     gpu = build.build_on_device(context, queue, corners, leaf_size=4, profile=True,
                                 **{**options, "tail_threshold": 2048})
     launched = {name for name, _, _ in gpu.launches}
-    assert launched == set(launched_kernels("gpu", segmented, options["treelet_leaves"] > 0, True)), launched
+    assert launched == set(launched_kernels("gpu", segmented, options["treelet_leaves"] > 0, True,
+                                            reinsertion=options["reinsert_iterations"] > 0)), launched
     for a, b in zip(built.read_back(), gpu.read_back()):
         assert np.array_equal(a.view(np.uint8), b.view(np.uint8))
 
