@@ -92,18 +92,30 @@ DEVICE_VARIANTS = {"device": {}, "device/no-tail": {"tail_threshold": 1},
                    "device/plain-upload": {"staged_upload": False}, "device/as-gpu": {}}
 
 
+# Variants' settings that are constants of clrt.device.build rather than
+# arguments of build_on_device: builder -> {constant: value} (device_choices).
+DEVICE_CONSTANTS: dict[str, dict] = {}
+
+
 @contextlib.contextmanager
 def device_choices(builder: str):
     """While in it, the device builder makes ``builder``'s choices of device
-    type: a GPU's for ``device/as-gpu``, the device's own otherwise."""
+    type: a GPU's for ``device/as-gpu``, the device's own otherwise; and
+    takes the variant's DEVICE_CONSTANTS."""
     from clrt.device import build
     saved = build.device_kind
+    constants = DEVICE_CONSTANTS.get(builder, {})
+    saved_constants = {name: getattr(build, name) for name in constants}
     if builder == "device/as-gpu":
         build.device_kind = lambda device: "gpu"
+    for name, value in constants.items():
+        setattr(build, name, value)
     try:
         yield
     finally:
         build.device_kind = saved
+        for name, value in saved_constants.items():
+            setattr(build, name, value)
 
 
 def time_builds(context, queue, corners, volume, builder, leaf_size, repeat):
@@ -148,6 +160,10 @@ def _traced_accel(mesh, volume, builder, leaf_size, device):
     minimum = DEVICE_VARIANTS.get(builder, {}).get("treelet_min")
     top = DEVICE_VARIANTS.get(builder, {}).get("top_clusters")
     partition = DEVICE_VARIANTS.get(builder, {}).get("partition")
+    reinsert = DEVICE_VARIANTS.get(builder, {}).get("reinsert_iterations")
+    saved_reinsert = dict(build.REINSERT_ITERATIONS)
+    if reinsert is not None:
+        build.REINSERT_ITERATIONS.update({kind: reinsert for kind in saved_reinsert})
     saved, saved_min = dict(build.TREELET_LEAVES), build.TREELET_MIN_TRIANGLES
     saved_top, saved_partition = dict(build.SAH_TOP_CLUSTERS), dict(build.SAH_PARTITION)
     if leaves is not None:                   # the variant's treelets for this one build
@@ -169,6 +185,7 @@ def _traced_accel(mesh, volume, builder, leaf_size, device):
         build.SAH_TOP_CLUSTERS.update(saved_top)
         build.SAH_PARTITION.update(saved_partition)
         build.PART_MIN_TRIANGLES = saved_minimum
+        build.REINSERT_ITERATIONS.update(saved_reinsert)
 
 
 # Trace times of trees a few per cent apart are compared in one loop: every
@@ -363,8 +380,8 @@ def run(mesh_dir, meshes, counts, builders, volume="box", leaf_size=4, device=No
                 results[builder] = time_builds(context, queue, corners, volume, builder, leaf_size, repeat)
         # The trees of the host builders and of the device variants that change the tree.
         traced = [b for b in builders if trace and (b not in DEVICE_VARIANTS or b in ("device", "device/as-gpu")
-                                                    or b.startswith(("device/treelets=", "device/treelet-min=",
-                                                                         "device/sah-top=", "device/partition=")))]
+                                                    or set(DEVICE_VARIANTS[b]) & set(TREE_SETTINGS)
+                                                    or DEVICE_CONSTANTS.get(b))]
         traces = trace_and_refit_ms(mesh, camera, volume, traced, leaf_size, device, random_rays) if traced else {}
         untraced = (float("nan"), float("nan"), float("nan"), -1)
         results = {b: (*r, *traces.get(b, untraced)) for b, r in results.items()}
@@ -431,6 +448,31 @@ def launch_profile(context, queue, corners, volume, builder, leaf_size) -> list[
     return lines
 
 
+# Device builder settings of a variant, device/NAME=N[/NAME=N...]: NAME ->
+# build_on_device's keyword.
+TUNING = {"tail": "tail_threshold",            # the hand-over to ploc_tail at another count
+          "treelets": "treelet_leaves",        # leaves per restructured treelet (0: none)
+          "treelet-min": "treelet_min",        # triangles a node needs for its treelet
+          "tail-group": "tail_group",          # work-items of ploc_tail
+          "sah-top": "top_clusters",           # clusters the SAH top takes from PLOC (1: none)
+          "partition": "partition",            # the SAH partition before PLOC (0: off, 1: on)
+          "reinsert": "reinsert_iterations",   # iterations of reinsertion (0: none)
+          "part-levels": "PART_LEVELS"}        # levels of the SAH partition (a constant of clrt.device.build)
+# The settings that change the tree (its trace is timed).
+TREE_SETTINGS = ("treelet_leaves", "treelet_min", "top_clusters", "partition", "reinsert_iterations")
+
+
+def tuned_variant(builder: str) -> dict:
+    """build_on_device's keywords of ``device/NAME=N[/NAME=N...]``; KeyError
+    for an unknown NAME, ValueError for a value that is not an integer."""
+    settings = {}
+    for item in builder.split("/")[1:]:
+        name, _, value = item.partition("=")
+        setting = TUNING[name]
+        settings[setting] = parse_count(value) if setting == "tail_threshold" else int(value)
+    return settings
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(prog="python -m benchmarks.build", description=__doc__.split("\n")[0])
     mesh_names = sorted(CASES) + sorted(GENERATED)     # what --meshes accepts
@@ -443,8 +485,9 @@ def main(argv=None) -> int:
                    help="also grids of bunny copies of about these many triangles, e.g. 1M,10M")
     p.add_argument("--builders", type=lambda s: s.split(","), default=list(HOST_BUILDERS) + ["device"],
                    help=f"comma-separated, of {', '.join(list(HOST_BUILDERS) + list(DEVICE_VARIANTS))}, "
-                        "device/tail=N, device/tail-group=N, device/treelets=N, device/treelet-min=N, device/sah-top=N, "
-                        "device/partition=0|1 "
+                        "device/tail=N, device/tail-group=N, device/treelets=N, device/treelet-min=N, "
+                        "device/sah-top=N, device/partition=0|1, device/part-levels=N (with partition=1), "
+                        "device/reinsert=N, or several settings in one, e.g. device/treelets=0/reinsert=8 "
                         "(default: paper, sah, device)")
     p.add_argument("--volume", default="box", choices=("box", "sphere", "ellipse"),
                    help="bounding-volume shape (default box)")
@@ -464,20 +507,18 @@ def main(argv=None) -> int:
     p.add_argument("--embree", action="store_true", help="also time Embree's build of each scene on the host CPU "
                                                          "(needs embreex: the raybench extra)")
     args = p.parse_args(argv)
-    tuning = {"device/tail=": "tail_threshold",        # the hand-over to ploc_tail at another count
-              "device/treelets=": "treelet_leaves",      # leaves per restructured treelet (0: none)
-              "device/treelet-min=": "treelet_min",      # triangles a node needs for its treelet
-              "device/tail-group=": "tail_group",        # work-items of ploc_tail
-              "device/sah-top=": "top_clusters",         # clusters the SAH top takes from PLOC (1: none)
-              "device/partition=": "partition"}          # the SAH partition before PLOC (0: off, 1: on)
     for b in args.builders:
-        for prefix, setting in tuning.items():
-            if b.startswith(prefix):
-                try:
-                    DEVICE_VARIANTS[b] = {setting: parse_count(b[len(prefix):]) if setting == "tail_threshold"
-                                          else int(b[len(prefix):])}
-                except (ValueError, argparse.ArgumentTypeError):
-                    p.error(f"--builders: {b!r} needs an integer after '='")
+        if b.startswith("device/") and "=" in b:
+            try:
+                settings = tuned_variant(b)
+                DEVICE_CONSTANTS[b] = {k: v for k, v in settings.items() if k.isupper()}
+                DEVICE_VARIANTS[b] = {k: v for k, v in settings.items() if not k.isupper()}
+                if not 1 <= DEVICE_CONSTANTS[b].get("PART_LEVELS", 1) < 64:
+                    p.error(f"--builders: {b!r}: part-levels must be in 1..63")
+            except (ValueError, argparse.ArgumentTypeError):
+                p.error(f"--builders: {b!r} needs an integer after '='")
+            except KeyError as exc:
+                p.error(f"--builders: {b!r}: unknown setting {exc.args[0]!r} (choose from {', '.join(TUNING)})")
         if b in DEVICE_VARIANTS:   # a bad setting fails now, before any mesh is made
             from clrt.device.build import check_tuning
             exit = exit_code(check_tuning, **{key: value for key, value in DEVICE_VARIANTS[b].items()

@@ -357,6 +357,17 @@ nodes F..2F-2 in the order they are made, the root last:
                        an iteration, 1 + its rank among the kept clusters of its block
                        (bits 8..: 0 when merged away)
 
+``BuildMove`` (16 B) -- per BuildNode, its best move in an iteration of the device
+builder's reinsertion (build_reinsert.cl):
+    0: target    int    the node to move next to (a new parent takes its place); -1: none
+    4: gain      float  the SAH cost the move saves (half areas, C_TRAVERSAL units)
+    8: junction  int    the lowest common ancestor of the node and the target
+   12: pad       int
+
+``BuildLock`` (8 B) -- per BuildNode, which reinsertion move may rewire it:
+    0: gain      uint   the highest gain (its float's bits) of the moves that rewire it
+    4: owner     int    the lowest moving node among the moves of that gain
+
 ``BuildPart`` (64 B) -- one node of the device builder's SAH partition of the
 triangles into segments (build_partition.cl), before PLOC; node 0 is all of them:
     0: centre_lo  uint4  xyz: min corner of its triangles' box centres, as
@@ -414,6 +425,8 @@ PSEUDO_NORMALS = np.dtype([("edge", float4, 3), ("vertex", float4, 3)])
 BUILD_NODE = np.dtype([("lo", float4), ("hi", float4), ("parent", np.int32), ("count", np.int32),
                        ("rows", np.int32), ("cost", np.float32)])
 BUILD_CLUSTER = np.dtype([("lo", float4), ("hi", float4)])
+BUILD_MOVE = np.dtype([("target", np.int32), ("gain", np.float32), ("junction", np.int32), ("pad", np.int32)])
+BUILD_LOCK = np.dtype([("gain", np.uint32), ("owner", np.int32)])
 BUILD_PART = np.dtype([("centre_lo", np.uint32, 4), ("centre_hi", np.uint32, 4), ("count", np.int32),
                        ("child", np.int32), ("axis", np.int32), ("split", np.int32), ("segment", np.int32),
                        ("open", np.int32), ("pad", np.int32, 2)])
@@ -468,6 +481,8 @@ STRUCTS = {
     "PseudoNormals": PSEUDO_NORMALS,
     "BuildNode": BUILD_NODE,
     "BuildCluster": BUILD_CLUSTER,
+    "BuildMove": BUILD_MOVE,
+    "BuildLock": BUILD_LOCK,
     "BuildPart": BUILD_PART,
     "Camera": CAMERA,
     "QueryLaunch": QUERY_LAUNCH,

@@ -81,6 +81,20 @@ def test_whole_calls_are_printed_beside_the_build(device, capsys):
             assert printed == pytest.approx(whole / total, abs=(0.05 + 0.1 * whole / total) / total + 0.005)
 
 
+def test_settings_combine_in_one_variant(device, capsys, monkeypatch):
+    """device/NAME=N/NAME=N: several settings in one variant, each applied
+    (here: reinsertion after the treelets lowers the SAH cost)."""
+    monkeypatch.setattr(build, "DEVICE_VARIANTS", dict(build.DEVICE_VARIANTS))
+    code = build.main(["--device", device or "cpu", "--meshes", "knot50k", "--builders",
+                       "device/treelets=7/reinsert=0,device/treelets=7/reinsert=2", "--repeat", "0", "--no-trace",
+                       "--calls", ""])
+    assert code == 0
+    assert build.DEVICE_VARIANTS["device/treelets=7/reinsert=2"] == {"treelet_leaves": 7, "reinsert_iterations": 2}
+    rows = [line.split("|") for line in capsys.readouterr().out.splitlines() if line.startswith("| knot50k ")]
+    sah = {r[3].strip(): float(r[8]) for r in rows}
+    assert sah["device/treelets=7/reinsert=2"] < sah["device/treelets=7/reinsert=0"], sah
+
+
 @pytest.mark.parametrize("builder, message", [
     ("device/treelets=abc", "error: --builders: 'device/treelets=abc' needs an integer after '='"),
     ("device/tail=inf", "error: --builders: 'device/tail=inf' needs an integer after '='"),
@@ -89,6 +103,9 @@ def test_whole_calls_are_printed_beside_the_build(device, capsys):
     ("device/sah-top=0", "clrt: top_clusters must be an integer in 1..256, got 0"),
     ("device/treelets=-3", "clrt: treelet_leaves must be an integer in 0..8, got -3"),
     ("device/treelets=2", "clrt: treelet_leaves must be 0 (none) or an integer in 3..8, got 2"),
+    ("device/reinsert=65", "clrt: reinsert_iterations must be an integer in 0..64, got 65"),
+    ("device/treelets=0/reinsert=x", "error: --builders: 'device/treelets=0/reinsert=x' needs an integer after '='"),
+    ("device/treelets=0/colour=3", "error: --builders: 'device/treelets=0/colour=3': unknown setting 'colour'"),
 ])
 def test_bad_builder_settings_fail_in_one_line(builder, message, device, capsys, monkeypatch):
     monkeypatch.setattr(build, "DEVICE_VARIANTS", dict(build.DEVICE_VARIANTS))

@@ -631,8 +631,8 @@ def test_cpu_and_gpu_ploc_kernels_make_the_same_tree(name, top_clusters, partiti
     for kind, threshold in (("cpu", 16), ("cpu", 300), ("cpu", 700), ("gpu", 1), ("gpu", 16), ("gpu", 300),
                             ("gpu", 700)):
         monkeypatch.setattr(build, "device_kind", lambda device, kind=kind: kind)
-        bvh = build_on_device(*queue, corners, leaf_size=4, treelet_leaves=0, tail_threshold=threshold,
-                              top_clusters=top_clusters, partition=partition)
+        bvh = build_on_device(*queue, corners, leaf_size=4, treelet_leaves=0, reinsert_iterations=0,
+                              tail_threshold=threshold, top_clusters=top_clusters, partition=partition)
         results.append(bvh.read_back())
     for other in results[1:]:
         assert all(np.array_equal(a.view(np.uint8), b.view(np.uint8)) for a, b in zip(results[0], other))

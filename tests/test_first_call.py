@@ -42,16 +42,18 @@ def test_the_host_sort_is_the_device_sort(n, cpu_queue):
 
 
 @pytest.mark.parametrize("options", [{}, {"treelet_leaves": 7}, {"partition": True, "top_clusters": 16},
-                                     {"tail_threshold": 1}])
+                                     {"tail_threshold": 1}, {"reinsert_iterations": 2}])
 def test_a_build_compiles_the_kernels_it_launches_and_no_other(options, cpu_queue, monkeypatch):
     """On either kind of device the builder's program keeps exactly the
-    kernels the build launches (the treelets', the SAH partition's and the
-    tail's only when asked for) -- on a CPU device also the two that collapse
-    the built tree into the wide BVH (clrt.device.wide_build, launched by the
-    geometry) --, and the CPU's tree is the one the GPU driver's launches
-    build (with ploc_tail from 2048 clusters on), run here."""
+    kernels the build launches (the treelets', the SAH partition's, the
+    reinsertion's and the tail's only when asked for) -- on a CPU device also
+    the two that collapse the built tree into the wide BVH
+    (clrt.device.wide_build, launched by the geometry) --, and the CPU's tree
+    is the one the GPU driver's launches build (with ploc_tail from 2048
+    clusters on), run here."""
     context, queue = cpu_queue
-    options = {"treelet_leaves": 0, "tail_group": 256, "top_clusters": 128, "partition": False, **options}
+    options = {"treelet_leaves": 0, "tail_group": 256, "top_clusters": 128, "partition": False,
+               "reinsert_iterations": 0, **options}
     rng = np.random.default_rng(4)
     n = 12_000          # more than the serial tail takes (TAIL_THRESHOLD): the passes run first
     corners = (rng.random((n, 1, 3)) + 0.02 * rng.standard_normal((n, 3, 3))).astype(np.float32)
@@ -59,7 +61,8 @@ def test_a_build_compiles_the_kernels_it_launches_and_no_other(options, cpu_queu
     launched = {name for name, _, _ in built.launches}
     segmented = bool(options.get("partition"))
     tail = options.get("tail_threshold", build.TAIL_THRESHOLD["cpu"]) > options["top_clusters"]
-    kept = launched_kernels("cpu", segmented, options["treelet_leaves"] > 0, tail, wide=True)
+    kept = launched_kernels("cpu", segmented, options["treelet_leaves"] > 0, tail, wide=True,
+                            reinsertion=options["reinsert_iterations"] > 0)
     assert launched | {"wide_plan", "wide_write"} == set(kept), launched ^ set(kept)
     defines = build.build_defines("box", "cpu", options["treelet_leaves"], 256, options["top_clusters"], segmented)
     assert set(program.build_program(context, "build_bvh.cl", defines, kernels=kept).kernel_names.split(";")) \
@@ -70,7 +73,8 @@ def test_a_build_compiles_the_kernels_it_launches_and_no_other(options, cpu_queu
     gpu = build.build_on_device(context, queue, corners, leaf_size=4, profile=True,
                                 **{**options, "tail_threshold": 2048})
     launched = {name for name, _, _ in gpu.launches}
-    assert launched == set(launched_kernels("gpu", segmented, options["treelet_leaves"] > 0, True)), launched
+    assert launched == set(launched_kernels("gpu", segmented, options["treelet_leaves"] > 0, True,
+                                            reinsertion=options["reinsert_iterations"] > 0)), launched
     for a, b in zip(built.read_back(), gpu.read_back()):
         assert np.array_equal(a.view(np.uint8), b.view(np.uint8))
 

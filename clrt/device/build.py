@@ -37,6 +37,7 @@ The algorithm (kernels in ``clrt/kernels/build_*.cl``, entry ``build_bvh.cl``):
    triangles).  Every new node decides
    by the SAH whether its subtree (at most ``leaf_size`` triangles) is emitted
    as one leaf, and records its height;
+3a. reinsertion (clrt.device.reinsert; GPUs only by default): subtrees moved where the SAH falls most;
 3b. treelet restructuring (Karras & Aila 2013, ``TREELET_LEAVES``; GPUs only
    by default): one launch, a work-group per node (of at least
    ``TREELET_MIN_TRIANGLES`` on large meshes), lowest first, each waiting
@@ -92,6 +93,7 @@ from clrt.device.build_kernels import (SAH_TOP_MAX, build_queue, check_tuning, l
                                        one_build_per_context, workspace)
 from clrt.device.host_sort import sort_on_host
 from clrt.device.program import build_program
+from clrt.device.reinsert import REINSERT_ITERATIONS, check_iterations, queue_reinsertion, reinsert_defines
 from clrt.errors import DeviceError, InputError
 from clrt.scene import arrays
 from clrt.scene.mesh import Mesh
@@ -235,7 +237,7 @@ def build_defines(volume: str, kind: str = "gpu", treelet_leaves: int | None = N
         "TREELET_SMALL_LEAVES": min(TREELET_SMALL[kind][0], TREELET_LEAVES[kind] if treelet_leaves is None
                                     else int(treelet_leaves)),
         "TREELET_FULL_MIN": TREELET_SMALL[kind][1],
-        "TREELET_GROUP": TREELET_GROUP, "TREELET_LEVELS": TREELET_LEVELS, **STATE,
+        "TREELET_GROUP": TREELET_GROUP, "TREELET_LEVELS": TREELET_LEVELS, **reinsert_defines(), **STATE,
         "PART_BINS": PART_BINS, "PART_MAX_NODES": PART_MAX_NODES, "PART_LEVELS": PART_LEVELS,
         "GROUP_RESULTS": GROUP_RESULTS,
         **({"PLOC_SEGMENTS": None} if segmented else {}),
@@ -368,7 +370,7 @@ def build_on_device(context: cl.Context, queue: cl.CommandQueue, corners, volume
                     tail_threshold: int | None = None, staged_upload: bool | None = None,
                     treelet_leaves: int | None = None, treelet_min: int | None = None,
                     tail_group: int | None = None, top_clusters: int | None = None,
-                    partition: bool | None = None,
+                    partition: bool | None = None, reinsert_iterations: int | None = None,
                     device_times: bool = False, profile: bool = False) -> DeviceBvh:
     """Build a BVH over ``corners`` on the queue's device.
 
@@ -396,6 +398,7 @@ def build_on_device(context: cl.Context, queue: cl.CommandQueue, corners, volume
     partition: the SAH partition into at most top_clusters segments before
         PLOC (default: SAH_PARTITION of the device type, from
         PART_MIN_TRIANGLES triangles on; for benchmarks).
+    reinsert_iterations: reinsertion's iterations (0: none; default: REINSERT_ITERATIONS of the device type).
     device_times: time the phases on the device (``DeviceBvh.timings``; for
         benchmarks).  The build then runs on ``queue``, which must have
         profiling enabled (clrt.device.context.create_context's does);
@@ -419,6 +422,7 @@ def build_on_device(context: cl.Context, queue: cl.CommandQueue, corners, volume
     if "cl_khr_fp64" not in device.extensions:
         raise DeviceError(f"the device BVH builder fits volumes in float64, which {device.name.strip()} lacks")
     kind = device_kind(device)
+    reinserts = check_iterations(REINSERT_ITERATIONS[kind] if reinsert_iterations is None else reinsert_iterations)
     tail_threshold = min(TAIL_THRESHOLD[kind] if tail_threshold is None else int(tail_threshold), TAIL_MAX)
     tail_group = TAIL_GROUP[kind] if tail_group is None else int(tail_group)
     top_clusters = sah_top_clusters(kind, tail_group, top_clusters)
@@ -430,7 +434,8 @@ def build_on_device(context: cl.Context, queue: cl.CommandQueue, corners, volume
     treelets = TREELET_LEAVES[kind] if treelet_leaves is None else int(treelet_leaves)
     treelets = treelets if F > 2 else 0
     program = build_program(context, "build_bvh.cl", defines, kernels=launched_kernels(
-        kind, segmented, treelets > 0, tail_threshold > top_clusters, indexed, volume == "box"))
+        kind, segmented, treelets > 0, tail_threshold > top_clusters, indexed, volume == "box",
+        reinserts > 0 and F > 2))
     ws = workspace(context)
     k = ws.kernels_of(program, defines)
     num_nodes = 2 * F - 1
@@ -524,6 +529,8 @@ def build_on_device(context: cl.Context, queue: cl.CommandQueue, corners, volume
         _hand_over(queue, state, queued)
     launch("ploc", k["ploc_top"], 1, last, spare, nodes, heights, F, state, leaf_size, group=tail_group)
 
+    # 3a. Reinsertion (build_reinsert.cl), in PLOC's spent cluster buffers.
+    queue_reinsertion(k, launch, _groups, reinserts, F, nodes, heights, clusters, merged, tile_kept, leaf_size)
     # 3b. Treelet restructuring: the nodes with a treelet counted per height
     # and listed by height, then one launch (build_treelet.cl) of as many
     # work-groups as the device runs at once, which take the listed nodes

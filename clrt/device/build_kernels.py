@@ -65,6 +65,12 @@ BUILD_KERNELS = {
     "treelet_order": (B("nodes"), B("heights"), I("num_tris"), U("min_count"), B("state"), B("order")),
     "treelet_restructure": (B("nodes"), B("heights"), B("order"), B("treelet_done"), B("state"), I("num_tris"),
         U("min_count"), U("leaf_size")),
+    "reinsert_clear": (B("locks"), I("num_nodes")),
+    "reinsert_search": (B("nodes"), B("moves"), B("locks"), B("arrivals"), I("num_tris")),
+    "reinsert_claim": (B("nodes"), B("moves"), B("locks"), I("num_tris")),
+    "reinsert_check": (B("nodes"), B("moves"), B("locks"), I("num_tris")),
+    "reinsert_apply": (B("nodes"), B("moves"), B("locks"), I("num_tris")),
+    "reinsert_refit": (B("nodes"), B("heights"), B("arrivals"), I("num_tris"), U("leaf_size")),
     "init_root_paths": (B("nodes"), U("num_nodes"), B("ancestor"), B("path")),
     "jump_root_paths": (B("ancestor"), B("path"), U("num_nodes"), B("ancestor_out"), B("path_out")),
     "emit_tree": (B("nodes"), U("num_nodes"), I("root"), B("corners"), B("sorted_ids"), B("ancestor"), B("path"),
@@ -88,7 +94,7 @@ BUILD_KERNELS = {
 
 
 def check_tuning(tail_threshold=None, treelet_leaves=None, treelet_min=None, tail_group=None,
-                 largest_group: int = 4096, top_clusters=None, partition=None) -> None:
+                 largest_group: int = 4096, top_clusters=None, partition=None, reinsert_iterations=None) -> None:
     """InputError for a benchmark's tuning value (build_on_device's arguments of
     these names) that the kernels cannot take, rather than a failed program
     build or a wrong tree; ``largest_group``: the device's work-group limit."""
@@ -107,22 +113,25 @@ def check_tuning(tail_threshold=None, treelet_leaves=None, treelet_min=None, tai
         checks.integer("top_clusters", top_clusters, 1, SAH_TOP_MAX)
     if partition is not None:
         checks.integer("partition", partition, 0, 1)
+    if reinsert_iterations is not None:
+        from clrt.device.reinsert import check_iterations
+        check_iterations(reinsert_iterations)
 
 
 def launched_kernels(kind: str, segmented: bool = False, treelets: bool = False, tail: bool = False,
-                     indexed: bool = False, wide: bool = False) -> tuple[str, ...]:
+                     indexed: bool = False, wide: bool = False, reinsertion: bool = False) -> tuple[str, ...]:
     """The kernels a build on a ``kind`` ("cpu" or "gpu") device launches
     (clrt.device.build: a GPU sorts by a look-back radix sort and merges by
     ploc_merge; on a CPU the host sorts and PLOC iterates in two plain
-    passes), with the SAH partition's, the treelets', the tail's (ploc_tail,
-    on a CPU ploc_tail_serial), from a mesh's vertices and faces the corners'
-    gather, and with ``wide`` (box volumes, CPU devices) the wide collapse's,
-    which the geometry launches on the built tree (clrt.device.wide_build).
-    The program keeps only these (clrt.device.program.keep_kernels): every
-    kernel of a program costs its first build, PoCL's front end and NVIDIA's
-    compiler alike -- build_bvh.cl whole 3.8-4.3 s on the H200, its 15
-    kernels of a bunny00 build 1.6 s (docs/benchmarks.md, "Time to the first
-    image")."""
+    passes), with the SAH partition's, the reinsertion's, the treelets', the
+    tail's (ploc_tail, on a CPU ploc_tail_serial), from a mesh's vertices and
+    faces the corners' gather, and with ``wide`` (box volumes, CPU devices)
+    the wide collapse's, which the geometry launches on the built tree
+    (clrt.device.wide_build).  The program keeps only these
+    (clrt.device.program.keep_kernels): every kernel of a program costs its
+    first build, PoCL's front end and NVIDIA's compiler alike -- build_bvh.cl
+    whole 3.8-4.3 s on the H200, its 15 kernels of a bunny00 build 1.6 s
+    (docs/benchmarks.md, "Time to the first image")."""
     partition = tuple(name for name in BUILD_KERNELS if name.startswith("partition_"))
     if kind == "gpu":
         sort, ploc, tail_kernel = ("radix_digit_counts", "radix_scatter_lookback"), ("ploc_merge",), "ploc_tail"
@@ -132,6 +141,7 @@ def launched_kernels(kind: str, segmented: bool = False, treelets: bool = False,
             *(partition if segmented else ("morton_codes",)), *sort,
             "init_leaves", *ploc, *((tail_kernel,) if tail else ()), "ploc_top",
             *(("treelet_levels", "treelet_order", "treelet_restructure") if treelets else ()),
+            *((name for name in BUILD_KERNELS if name.startswith("reinsert_")) if reinsertion else ()),
             "init_root_paths", "jump_root_paths", "emit_tree",
             *(("wide_plan", "wide_write") if wide and kind == "cpu" else ()))
 

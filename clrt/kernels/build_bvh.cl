@@ -1,8 +1,8 @@
 // The device BVH builder (issue #17), one program: triangles -> SAH partition
 // into segments (GPUs) -> Morton codes (from vertices and faces: corners
 // gathered and moved into the device frame first, build_frame.cl)
-// -> radix sort -> PLOC merging with SAH leaf collapse -> treelet
-// restructuring -> depth-first
+// -> radix sort -> PLOC merging with SAH leaf collapse -> reinsertion ->
+// treelet restructuring -> depth-first
 // BvhPairNode rows, slot-ordered triangles and slot -> triangle ids.  The
 // host driver, and the order of the launches, is clrt/device/build.py.
 // Also the top level of a scene of instances (build_instances.cl, driven by
@@ -20,6 +20,7 @@
 #include "build_partition.cl"
 #include "build_ploc.cl"
 #include "build_ploc_cpu.cl"
+#include "build_reinsert.cl"
 #include "build_treelet.cl"
 #include "build_emit.cl"
 #include "build_frame.cl"

@@ -251,6 +251,18 @@ typedef struct {
 } BuildNode;
 
 typedef struct {
+    int target;     // the node to move next to (-1: none)
+    float gain;     // the SAH cost it saves, half areas
+    int junction;   // the lowest common ancestor of the node and the target
+    int pad;
+} BuildMove;
+
+typedef struct {
+    uint gain;      // the highest gain (as_uint) of the moves that rewire the node
+    int owner;      // of those, the lowest moving node
+} BuildLock;
+
+typedef struct {
     float4 lo;      // xyz: min corner of the cluster's box; w: as_int, its BuildNode
     float4 hi;      // xyz: max corner; w: as_int, segment (bits 0..7) and on CPUs 1 + rank (8..)
 } BuildCluster;
