@@ -50,7 +50,7 @@ def _hard_points(accel, rng) -> np.ndarray:
     return np.concatenate([near, mixed, inside, odd])
 
 
-def test_the_host_gives_each_point_the_kernels_cell_and_place(device):
+def test_the_host_gives_each_point_the_kernels_cell_and_place(device, monkeypatch):
     rng = np.random.default_rng(5)
     accel = clrt.Accel(primitives.torus(1.0, 0.35, 24, 12), device=device)   # no extent a power of 2
     points = _hard_points(accel, rng)
@@ -59,6 +59,8 @@ def test_the_host_gives_each_point_the_kernels_cell_and_place(device):
     host_cells = host_order.point_cells(points, launch)                       # from the float64 points
     np.testing.assert_array_equal(host_cells, cells)
     np.testing.assert_array_equal(host_order.point_cells(points.astype(np.float32), launch), cells)
+    monkeypatch.setattr(host_order, "CELL_BLOCK", 500)                        # in blocks, the last one short
+    np.testing.assert_array_equal(host_order.point_cells(points, launch), cells)
     assert len(np.unique(cells)) > 1000                                       # many cells, border cells among them
     host_visit = host_order.cell_order(host_cells)
     np.testing.assert_array_equal(host_visit, np.argsort(cells, kind="stable"))
