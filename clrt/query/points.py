@@ -20,6 +20,7 @@ from clrt.config import (NO_RESULT, POINT_CANDIDATES, POINT_CELLS, POINT_GROUPS,
                          RAY_CHECKS)
 from clrt.device.program import launch_size
 from clrt.device.sharing import one_at_a_time
+from clrt.query.host_order import upload_order
 from clrt.query.inside import SIGN_KERNELS, GridPoints, grid_axes, pseudo_normals, sign_kernel, winding_nodes
 from clrt.query.kernels import QUERY_GROUP
 from clrt.query.rays import PointBatch
@@ -119,9 +120,26 @@ class PointQueries:
         if name.startswith("query_"):
             self.queue.flush()
 
-    def _point_order(self, origins: cl.Buffer, launch: np.ndarray) -> cl.Buffer:
+    def _point_order(self, origins: cl.Buffer, launch: np.ndarray, points: np.ndarray | None) -> cl.Buffer:
         """The `order` buffer of a launch of point queries (point_order.cl): its
-        points sorted by cell of a grid over the scene, by three launches."""
+        points sorted by cell of a grid over the scene.  ``points``: the
+        launch's points as the host has them (the chunk of the caller's array),
+        or None where they were made or given on the device.  A CPU device's
+        order is the host's (clrt/query/host_order.py says why): from
+        ``points``, else from the launch's points read back (the device's
+        memory is the host's, so a copy)."""
+        if self._kind != "cpu":
+            return self._device_point_order(origins, launch)
+        m = int(launch["num_rays"])
+        order = self._buffer("order", 4 * (POINT_CELLS + 2 * m))
+        if points is None:   # waits for the queue: the launch before may still be writing them
+            points = np.empty(3 * m, np.float32)
+            cl.enqueue_copy(self.queue, points, origins, src_offset=12 * int(launch["in_first"]), is_blocking=True)
+        self._transfers.append(upload_order(self.queue, order, points, launch))
+        return order
+
+    def _device_point_order(self, origins: cl.Buffer, launch: np.ndarray) -> cl.Buffer:
+        """_point_order by point_order.cl's three launches (GPUs; tests on any device)."""
         m = int(launch["num_rays"])
         order = self._buffer("order", 4 * (POINT_CELLS + 2 * m))
         cl.enqueue_fill_buffer(self.queue, order, np.uint32(0), 0, 4 * POINT_CELLS)
@@ -141,7 +159,7 @@ class PointQueries:
             m = stop - start
             rays, launch = self._ray_args(batch, start, stop, 0)
             origins, _, _, tmaxs, bad = rays
-            order = self._point_order(origins, launch)
+            order = self._point_order(origins, launch, None if batch.on_device else batch.host_chunk(0, start, stop))
             placed, nbytes = {}, 0
             for name in fields:   # every field is 4-byte aligned: float32 and int32 values
                 placed[name] = nbytes
@@ -234,11 +252,13 @@ class PointQueries:
         self._begin(source)
         for start, stop in self._chunks(n):
             m = stop - start
+            points = None   # where the host has them: a host batch's
             if isinstance(source, GridPoints):
                 origins, tmaxs, bad, launch = self._grid_args(source, start, stop)
             else:
                 (origins, _, _, tmaxs, bad), launch = self._ray_args(source, start, stop, 0)
-            order = self._point_order(origins, launch)
+                points = None if source.on_device else source.host_chunk(0, start, stop)
+            order = self._point_order(origins, launch, points)
             placed, nbytes = {}, 0
             for name, slot in outputs.items():   # the float32 values first: each output stays aligned
                 placed[name] = nbytes
