@@ -56,13 +56,13 @@ def test_hits_agree_with_clrt_and_rows_are_counted_per_row(queue):
 
 @pytest.mark.skipif(not SHARED_MESHES.is_dir(), reason="needs ../shared/meshes")
 def test_the_table_compares_the_trees(device, capsys):
-    code = tree_counts.main(["--meshes", "camel", "--builders", "sah,device/reinsert=0,device", "--size", "96x54",
+    code = tree_counts.main(["--meshes", "camel", "--builders", "sah,device/reinsert=0,device/reinsert=4", "--size", "96x54",
                              "--random", "3K"] + (["--device", device] if device else []))
     assert code == 0
     rows = [line.split("|") for line in capsys.readouterr().out.splitlines() if line.startswith("| camel ")]
-    assert [(r[2].strip(), r[6].strip()) for r in rows] == [(b, s) for b in ("sah", "device/reinsert=0", "device")
+    assert [(r[2].strip(), r[6].strip()) for r in rows] == [(b, s) for b in ("sah", "device/reinsert=0", "device/reinsert=4")
                                                              for s in ("primary", "random")]
     sah = {r[2].strip(): float(r[4]) for r in rows}
     assert float(rows[0][5]) == 1.0 and float(rows[0][11]) == 1.0          # ratios to the first builder
-    assert sah["device"] < sah["device/reinsert=0"]
+    assert sah["device/reinsert=4"] < sah["device/reinsert=0"]
     assert all(float(r[14]) == 100.0 for r in rows)                         # every tree hits the same rays
