@@ -49,16 +49,14 @@ inline double3 frame_origin(double3 lo, double3 hi, double recentre_distance)
 }
 
 // corners[t] = the vertices faces[t] names (indices checked on the host),
-// and the box of them all: a tree reduction per work-group, then 6 atomics
-// on order-preserving bits (build_morton.cl) into `box` (min xyz, max xyz;
-// the host clears it to the largest and smallest values).  fmin and fmax
+// and the box of them all (build_morton.cl's reduce_box) in `box` (min xyz,
+// max xyz; the host clears it to the largest and smallest values).  fmin and fmax
 // drop a NaN: centroid_bounds then finds the triangle and the build fails.
 __kernel __attribute__((reqd_work_group_size(BUILD_GROUP, 1, 1)))
 void gather_corners(const global float* vertices, const global int* faces, const uint num_tris,
                     global float* corners, global uint* box)
 {
     local float3 lo[BUILD_GROUP], hi[BUILD_GROUP];
-    const uint lid = get_local_id(0);
     float3 my_lo = (float3)(INFINITY), my_hi = (float3)(-INFINITY);
     for (uint tri = get_global_id(0); tri < num_tris; tri += get_global_size(0)) {
         for (uint k = 0; k < 3; ++k) {
@@ -68,24 +66,7 @@ void gather_corners(const global float* vertices, const global int* faces, const
             my_hi = fmax(my_hi, v);
         }
     }
-    lo[lid] = my_lo;
-    hi[lid] = my_hi;
-    barrier(CLK_LOCAL_MEM_FENCE);
-    for (uint stride = BUILD_GROUP / 2; stride > 0; stride >>= 1) {
-        if (lid < stride) {
-            lo[lid] = fmin(lo[lid], lo[lid + stride]);
-            hi[lid] = fmax(hi[lid], hi[lid + stride]);
-        }
-        barrier(CLK_LOCAL_MEM_FENCE);
-    }
-    if (lid == 0 && lo[0].x <= hi[0].x) {      // the group had (finite) corners
-        atomic_min(box + 0, ordered_bits(lo[0].x));
-        atomic_min(box + 1, ordered_bits(lo[0].y));
-        atomic_min(box + 2, ordered_bits(lo[0].z));
-        atomic_max(box + 3, ordered_bits(hi[0].x));
-        atomic_max(box + 4, ordered_bits(hi[0].y));
-        atomic_max(box + 5, ordered_bits(hi[0].z));
-    }
+    reduce_box(lo, hi, my_lo, my_hi, box);
 }
 
 // Every corner moved by the origin device_origin chooses for `box` (each

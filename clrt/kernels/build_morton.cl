@@ -41,6 +41,33 @@ inline float from_ordered_bits(uint k)
     return as_float((k & 0x80000000u) ? (k & 0x7fffffffu) : ~k);
 }
 
+// A work-group's boxes my_lo..my_hi (one a work-item) reduced in local
+// memory (lo, hi: BUILD_GROUP entries each), then folded into `box` (min
+// xyz, max xyz as order-preserving bits) by 6 atomics -- where the group
+// had any (finite) box.  Every work-item of the group calls it.
+inline void reduce_box(local float3* lo, local float3* hi, float3 my_lo, float3 my_hi, global uint* box)
+{
+    const uint lid = get_local_id(0);
+    lo[lid] = my_lo;
+    hi[lid] = my_hi;
+    barrier(CLK_LOCAL_MEM_FENCE);
+    for (uint stride = BUILD_GROUP / 2; stride > 0; stride >>= 1) {
+        if (lid < stride) {
+            lo[lid] = fmin(lo[lid], lo[lid + stride]);
+            hi[lid] = fmax(hi[lid], hi[lid + stride]);
+        }
+        barrier(CLK_LOCAL_MEM_FENCE);
+    }
+    if (lid == 0 && lo[0].x <= hi[0].x) {
+        atomic_min(box + 0, ordered_bits(lo[0].x));
+        atomic_min(box + 1, ordered_bits(lo[0].y));
+        atomic_min(box + 2, ordered_bits(lo[0].z));
+        atomic_max(box + 3, ordered_bits(hi[0].x));
+        atomic_max(box + 4, ordered_bits(hi[0].y));
+        atomic_max(box + 5, ordered_bits(hi[0].z));
+    }
+}
+
 // Bounds of the box centres: a tree reduction in local memory per
 // work-group (each work-item first folds a grid-stride share of the
 // triangles), then 6 atomics per work-group into the build state.
@@ -48,7 +75,6 @@ __kernel __attribute__((reqd_work_group_size(BUILD_GROUP, 1, 1)))
 void centroid_bounds(const global float* corners, const uint num_tris, global uint* state)
 {
     local float3 lo[BUILD_GROUP], hi[BUILD_GROUP];
-    const uint lid = get_local_id(0);
     float3 my_lo = (float3)(INFINITY), my_hi = (float3)(-INFINITY);
     for (uint tri = get_global_id(0); tri < num_tris; tri += get_global_size(0)) {
         float3 box_lo, box_hi;
@@ -61,25 +87,7 @@ void centroid_bounds(const global float* corners, const uint num_tris, global ui
         my_lo = fmin(my_lo, c);
         my_hi = fmax(my_hi, c);
     }
-    lo[lid] = my_lo;
-    hi[lid] = my_hi;
-    barrier(CLK_LOCAL_MEM_FENCE);
-    for (uint stride = BUILD_GROUP / 2; stride > 0; stride >>= 1) {
-        if (lid < stride) {
-            lo[lid] = fmin(lo[lid], lo[lid + stride]);
-            hi[lid] = fmax(hi[lid], hi[lid + stride]);
-        }
-        barrier(CLK_LOCAL_MEM_FENCE);
-    }
-    if (lid == 0 && lo[0].x <= hi[0].x) {      // the group had triangles
-        global uint* bounds = state + STATE_BOUNDS;
-        atomic_min(bounds + 0, ordered_bits(lo[0].x));
-        atomic_min(bounds + 1, ordered_bits(lo[0].y));
-        atomic_min(bounds + 2, ordered_bits(lo[0].z));
-        atomic_max(bounds + 3, ordered_bits(hi[0].x));
-        atomic_max(bounds + 4, ordered_bits(hi[0].y));
-        atomic_max(bounds + 5, ordered_bits(hi[0].z));
-    }
+    reduce_box(lo, hi, my_lo, my_hi, state + STATE_BOUNDS);
 }
 
 // 10 bits -> every third bit of 30.

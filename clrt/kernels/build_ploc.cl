@@ -400,14 +400,8 @@ void ploc_tail(global BuildCluster* clusters, global BuildCluster* spare, global
         from = to;
         to = t;
     }
-    if (lid == 0) {
-        const bool merged_here = iteration > first_iteration;
-        state[STATE_TAIL + TAIL_COUNT] = count;
-        state[STATE_TAIL + TAIL_NEXT_NODE] = next_node;
-        state[STATE_TAIL + TAIL_ITERATIONS] = merged_here ? iteration : state[STATE_ITERATIONS];
-        state[STATE_TAIL + TAIL_FLAGS] = (merged_here ? TAIL_MERGED : 0)
-                                       | ((iteration - first_iteration) % 2 ? TAIL_IN_SPARE : 0);
-    }
+    if (lid == 0)
+        hand_over_to_top(state, count, next_node, iteration, first_iteration);
 }
 
 // One work-group, after ploc_tail (with the same buffers): the SAH top over

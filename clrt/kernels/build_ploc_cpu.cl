@@ -239,12 +239,7 @@ void ploc_tail_serial(global BuildCluster* clusters, global BuildCluster* spare,
         from = to;
         to = t;
     }
-    const bool merged_here = iteration > first_iteration;
-    state[STATE_TAIL + TAIL_COUNT] = count;
-    state[STATE_TAIL + TAIL_NEXT_NODE] = next_node;
-    state[STATE_TAIL + TAIL_ITERATIONS] = merged_here ? iteration : state[STATE_ITERATIONS];
-    state[STATE_TAIL + TAIL_FLAGS] = (merged_here ? TAIL_MERGED : 0)
-                                   | ((iteration - first_iteration) % 2 ? TAIL_IN_SPARE : 0);
+    hand_over_to_top(state, count, next_node, iteration, first_iteration);
 }
 
 // CPU devices: the kept clusters of ploc_merge_tiles moved together, in

@@ -42,6 +42,20 @@
 #define TAIL_MERGED 1         // ploc_tail's loop merged
 #define TAIL_IN_SPARE 2       // and left the clusters in its `spare` buffer
 
+// What a tail (ploc_tail, ploc_tail_serial) leaves ploc_top at STATE_TAIL:
+// the clusters left, the node counter, the iterations that merged (the
+// state's own where the tail merged none) and where the clusters lie (one
+// work-item writes it).
+inline void hand_over_to_top(global int* state, int count, int next_node, int iteration, int first_iteration)
+{
+    const bool merged_here = iteration > first_iteration;
+    state[STATE_TAIL + TAIL_COUNT] = count;
+    state[STATE_TAIL + TAIL_NEXT_NODE] = next_node;
+    state[STATE_TAIL + TAIL_ITERATIONS] = merged_here ? iteration : state[STATE_ITERATIONS];
+    state[STATE_TAIL + TAIL_FLAGS] = (merged_here ? TAIL_MERGED : 0)
+                                   | ((iteration - first_iteration) % 2 ? TAIL_IN_SPARE : 0);
+}
+
 // The state before a build of num_tris triangles (one work-item writes it).
 inline void clear_build_state(global uint* state, const uint num_tris)
 {
