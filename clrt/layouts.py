@@ -425,7 +425,7 @@ PSEUDO_NORMALS = np.dtype([("edge", float4, 3), ("vertex", float4, 3)])
 BUILD_NODE = np.dtype([("lo", float4), ("hi", float4), ("parent", np.int32), ("count", np.int32),
                        ("rows", np.int32), ("cost", np.float32)])
 BUILD_CLUSTER = np.dtype([("lo", float4), ("hi", float4)])
-BUILD_MOVE = np.dtype([("target", np.int32), ("gain", np.float32), ("junction", np.int32), ("pad", np.int32)])
+BUILD_MOVE = np.dtype([("target", np.int32), ("gain", np.float32), ("junction", np.int32), ("made", np.int32)])
 BUILD_LOCK = np.dtype([("gain", np.uint32), ("owner", np.int32)])
 BUILD_PART = np.dtype([("centre_lo", np.uint32, 4), ("centre_hi", np.uint32, 4), ("count", np.int32),
                        ("child", np.int32), ("axis", np.int32), ("split", np.int32), ("segment", np.int32),

@@ -42,7 +42,7 @@ def test_the_host_sort_is_the_device_sort(n, cpu_queue):
 
 
 @pytest.mark.parametrize("options", [{}, {"treelet_leaves": 7}, {"partition": True, "top_clusters": 16},
-                                     {"tail_threshold": 1}])
+                                     {"tail_threshold": 1}, {"reinsert_iterations": 2}])
 def test_a_build_compiles_the_kernels_it_launches_and_no_other(options, cpu_queue, monkeypatch):
     """On either kind of device the builder's program keeps exactly the
     kernels the build launches (the treelets', the SAH partition's, the

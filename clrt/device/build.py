@@ -721,9 +721,8 @@ def _ploc(queue, k, launch, F, clusters, merged, tile_kept, tile_status, nodes, 
                 continue
             # a few work-items a core, striding over the tiles
             workers = min(groups, CPU_TILE_WORKERS * queue.device.max_compute_units)
-            launch("ploc", k["ploc_merge_tiles"], workers, clusters, merged, tile_kept, nodes, heights, F, state,
-                   iteration, leaf_size, group=1)
-            k["ploc_compact"].set_args(merged, clusters, tile_kept, state, iteration)
+            launch("ploc", k["ploc_merge_tiles"], workers, clusters, merged, tile_kept, state, iteration, group=1)
+            k["ploc_compact"].set_args(merged, clusters, tile_kept, nodes, heights, F, state, iteration, leaf_size)
             launch("ploc", k["ploc_compact"], workers, group=1)
             iteration += 1
         cl.enqueue_copy(queue, count, state, src_offset=4 * (STATE["STATE_COUNTS"] + iteration % ring),

@@ -21,9 +21,11 @@ from clrt import layouts
 # Not measured on a GPU yet (docs/benchmarks.md gives the command).  On a
 # CPU the build is what a user waits for (each iteration costs bunny00 about
 # 30 ms on 2 cores, 14 x bunny00 0.6 s): off there, as the treelets are.
-# Off by default on GPUs too until the H200 has measured it and its trees are
-# the same from build to build (a CPU build and the GPU driver's launches of
-# the same reinsertion differed in some runs: tests/test_reinsert.py).
+# Off by default on GPUs too until the H200 has measured it.  (Its trees
+# differed from build to build while PLOC numbered its nodes by an atomic
+# counter, in the order its tiles ran: reinsertion breaks ties of gain by node
+# number.  PLOC's numbers are the same in every build now:
+# tests/test_reinsert.py.)
 REINSERT_ITERATIONS = {"gpu": 0, "cpu": 0}
 REINSERT_MAX = 64        # the most iterations a build takes (build_on_device checks)
 # Subtrees one search holds postponed (build_reinsert.cl): a search that

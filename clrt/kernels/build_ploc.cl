@@ -180,6 +180,20 @@ inline BuildCluster make_node(global BuildNode* nodes, global int* heights, int 
     return merged;
 }
 
+// The number of the first node made by the pairs of the tile at place
+// `start`, in an iteration that starts with `count` clusters: the leaves are
+// nodes 0 .. num_tris - 1, each merge so far made one node and took one
+// cluster away, and the pairs of this iteration are numbered in the order of
+// their first places -- those before `start` are the places merged away
+// before it (start - kept_before) and the pairs that straddle it.  The same
+// numbers however the tiles are scheduled (an atomic counter numbered them
+// in the order the work-groups ran, and the reinsertion, which breaks ties
+// of gain by node number, then made different trees from build to build).
+inline int first_node_of_tile(int num_tris, int count, int start, int kept_before, int straddling)
+{
+    return 2 * num_tris - count + (start - kept_before) + straddling;
+}
+
 // One PLOC iteration on a GPU, one launch: clusters (count of them, from the
 // state) -> next (the kept and merged clusters, compacted in order), and the
 // next iteration's count in the state.  Tiles are numbered by tickets in the
@@ -287,18 +301,23 @@ void ploc_merge(const global BuildCluster* clusters, global BuildCluster* next, 
         if (mutual && i < j)
             partner = j;
     }
-    // New nodes: consecutive indices per work-group, from one atomic.
+    // New nodes: numbered in the order of their pairs' first places (first_node_of_tile).
     uint merges;
     const uint my_merge = group_exclusive_scan(partner >= 0 ? 1u : 0u, scratch, &merges);
-    if (lid == 0)
-        node_base = merges > 0 ? atomic_add(state + STATE_NEXT_NODE, (int)merges) : 0;
     uint kept_in_tile;
-    const uint rank = group_exclusive_scan(kept ? 1u : 0u, scratch, &kept_in_tile);   // its barriers publish node_base
+    const uint rank = group_exclusive_scan(kept ? 1u : 0u, scratch, &kept_in_tile);
     if (lid == 0) {
         tile_offset = tile_exclusive_prefix(status, tile, kept_in_tile);
+        int straddling = 0;             // pairs from the places before the tile into it
+        for (int q = max(start - PLOC_RADIUS, 0); q < start; ++q) {
+            const int j = nearest[q - start + PLOC_RADIUS];
+            straddling += j >= start && nearest[j - start + PLOC_RADIUS] == q;
+        }
+        node_base = first_node_of_tile(num_tris, count, start, (int)tile_offset, straddling);
         if (tile == tiles - 1) {      // the last tile knows the total
             const int left = (int)(tile_offset + kept_in_tile);
             state[CLUSTERS_BEFORE(iteration + 1)] = left;
+            state[STATE_NEXT_NODE] = first_node_of_tile(num_tris, left, 0, 0, 0);
             if (PLOC_DONE(left))
                 state[STATE_ITERATIONS] = iteration + 1;    // the last one that merged
         }

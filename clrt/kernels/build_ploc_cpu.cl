@@ -25,6 +25,15 @@
 // atomic, consecutive within the iteration.  (The neighbours of every place
 // were first a launch of their own: one launch more an iteration, for an
 // eighth less search.)
+// A place's hi.w between ploc_merge_tiles and ploc_compact: its segment
+// (bits 0..7), 1 + its rank in its tile (0: merged away), and the distance
+// to the partner it merges with (0: none).
+#define RANK_MASK 0xffff
+#define PARTNER_SHIFT 24
+#define PARTNER_MASK 0x7f
+#if PLOC_RADIUS > PARTNER_MASK || BUILD_GROUP >= RANK_MASK || SEGMENT_BITS + 16 > PARTNER_SHIFT
+#error "a place's segment, rank and partner do not fit in hi.w"
+#endif
 #define SEARCH_PLACES (BUILD_GROUP + 2 * PLOC_RADIUS)   // places a search finds the neighbours of, at most
 #if PLOC_RADIUS == 16 && !defined(PLOC_SEGMENTS)
 // The search in float16 lanes: PoCL runs these one-work-item groups as
@@ -162,8 +171,7 @@ inline void find_nearest(const global BuildCluster* clusters, int count, int fir
 #endif
 
 __kernel void ploc_merge_tiles(const global BuildCluster* clusters, global BuildCluster* merged,
-                               global uint* tile_kept, global BuildNode* nodes, global int* heights,
-                               const int num_tris, global int* state, const int iteration, const uint leaf_size)
+                               global uint* tile_kept, global int* state, const int iteration)
 {
     const int count = state[CLUSTERS_BEFORE(iteration)];
     if (PLOC_DONE(count))
@@ -176,20 +184,18 @@ __kernel void ploc_merge_tiles(const global BuildCluster* clusters, global Build
         const int first = max(start - PLOC_RADIUS, 0);
         find_nearest(clusters, count, first, min(end + PLOC_RADIUS, count), scratch, found);
 #define NEAREST(p) found[(p) - first]
-        int merges = 0;
-        for (int p = start; p < end; ++p)
-            merges += NEAREST(p) >= 0 && NEAREST(NEAREST(p)) == p && p < NEAREST(p);
-        int node = merges > 0 ? atomic_add(state + STATE_NEXT_NODE, merges) : 0;
         int rank = 0;
         for (int p = start; p < end; ++p) {
             const int j = NEAREST(p);                       // -1: alone in its segment
             const bool mutual = j >= 0 && NEAREST(j) == p;
-            BuildCluster out = clusters[p];
-            if (mutual && p < j)
-                out = make_node(nodes, heights, num_tris, node++, out, clusters[j], leaf_size);
-            // 1 + its rank (0: merged away) above its segment, for ploc_compact.
-            out.hi.w = as_float(cluster_segment(out.hi) | (!mutual || p < j ? ++rank : 0) << SEGMENT_BITS);
-            merged[p] = out;
+            const BuildCluster c = clusters[p];
+            // 1 + its rank (0: merged away) above its segment, and the distance
+            // to the partner it merges with (0: none), for ploc_compact, which
+            // makes the pair's node (it knows how many pairs come before).
+            merged[p].lo = c.lo;
+            merged[p].hi = (float4)(c.hi.xyz, as_float(cluster_segment(c.hi)
+                                                       | (!mutual || p < j ? ++rank : 0) << SEGMENT_BITS
+                                                       | (mutual && p < j ? j - p : 0) << PARTNER_SHIFT));
         }
 #undef NEAREST
         tile_kept[tile] = (uint)rank;
@@ -242,16 +248,27 @@ void ploc_tail_serial(global BuildCluster* clusters, global BuildCluster* spare,
     hand_over_to_top(state, count, next_node, iteration, first_iteration);
 }
 
+// The distance from place p to the partner it merges with (0: none), as
+// ploc_merge_tiles leaves it.
+inline int merged_partner(const global BuildCluster* merged, int p)
+{
+    return (as_int(merged[p].hi.w) >> PARTNER_SHIFT) & PARTNER_MASK;
+}
+
 // CPU devices: the kept clusters of ploc_merge_tiles moved together, in
-// order, and the next iteration's cluster count.  Work-item w of the launch
-// takes a run of consecutive tiles (a CPU hands each core a run of
-// work-items): their first place is the sum of the kept counts of the tiles
-// before (a few hundred at most: a plain loop), and each kept cluster goes to
-// that place plus its rank.  (Before: a prefix sum by one work-item, then a
-// launch of a work-item a place -- two launches an iteration, and at 60 us
-// each, most of the later iterations' time.)
+// order, the merged pairs' nodes made, and the next iteration's cluster
+// count.  Work-item w of the launch takes a run of consecutive tiles (a CPU
+// hands each core a run of work-items): their first place is the sum of the
+// kept counts of the tiles before (a few hundred at most: a plain loop), and
+// each kept cluster goes to that place plus its rank.  The pairs before a
+// tile are the places merged away before it plus those that straddle its
+// start, which numbers its nodes as ploc_merge does (first_node_of_tile).
+// (Before: a prefix sum by one work-item, then a launch of a work-item a
+// place -- two launches an iteration, and at 60 us each, most of the later
+// iterations' time.)
 __kernel void ploc_compact(const global BuildCluster* merged, global BuildCluster* clusters,
-                           const global uint* tile_kept, global int* state, const int iteration)
+                           const global uint* tile_kept, global BuildNode* nodes, global int* heights,
+                           const int num_tris, global int* state, const int iteration, const uint leaf_size)
 {
     const int count = state[CLUSTERS_BEFORE(iteration)];
     const int w = get_global_id(0), workers = get_global_size(0);
@@ -266,9 +283,17 @@ __kernel void ploc_compact(const global BuildCluster* merged, global BuildCluste
     for (int tile = 0; tile < first; ++tile)
         place += tile_kept[tile];
     for (int tile = first; tile < last; ++tile) {
-        for (int p = tile * BUILD_GROUP; p < min((tile + 1) * BUILD_GROUP, count); ++p) {
-            const BuildCluster c = merged[p];
-            const int rank = (as_int(c.hi.w) >> SEGMENT_BITS) - 1;
+        const int start = tile * BUILD_GROUP;
+        int straddling = 0;
+        for (int q = max(start - PLOC_RADIUS, 0); q < start; ++q)
+            straddling += q + merged_partner(merged, q) >= start;
+        int node = first_node_of_tile(num_tris, count, start, (int)place, straddling);
+        for (int p = start; p < min(start + BUILD_GROUP, count); ++p) {
+            BuildCluster c = merged[p];
+            const int rank = ((as_int(c.hi.w) >> SEGMENT_BITS) & RANK_MASK) - 1;
+            const int partner = merged_partner(merged, p);
+            if (partner > 0)
+                c = make_node(nodes, heights, num_tris, node++, c, merged[p + partner], leaf_size);
             if (rank >= 0)
                 clusters[place + rank] = c;
         }
@@ -276,6 +301,7 @@ __kernel void ploc_compact(const global BuildCluster* merged, global BuildCluste
     }
     if (w == workers - 1) {             // its place is past every kept cluster: the next count
         state[CLUSTERS_BEFORE(iteration + 1)] = (int)place;
+        state[STATE_NEXT_NODE] = first_node_of_tile(num_tris, (int)place, 0, 0, 0);
         if (PLOC_DONE((int)place))
             state[STATE_ITERATIONS] = iteration + 1;    // the last one that merged
     }

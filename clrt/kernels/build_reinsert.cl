@@ -34,9 +34,12 @@
 // the highest gain at each of these six nodes (reinsert_search), and of the
 // moves at the highest gain the lowest N (reinsert_claim); a move that holds
 // all six is made.  Moves made at once can make a cycle (N1 into N2's subtree
-// while N2 moves into N1's); a move into the subtree of another moved node
-// below the junction is dropped (reinsert_check).  The search, the choices and
-// the refit depend only on the tree, not on the order the work-items run in.
+// while N2 moves into N1's); a move into the subtree of another node that
+// holds its six, below the junction, is dropped (reinsert_check).  The
+// search, the choices and the refit depend only on the tree, not on the
+// order the work-items run in: no launch reads what another work-item of it
+// writes (reinsert_check writes its verdict beside the move, which it reads
+// only of its own node).
 #ifndef CLRT_BUILD_REINSERT_CL
 #define CLRT_BUILD_REINSERT_CL
 
@@ -207,18 +210,20 @@ void reinsert_claim(const global BuildNode* nodes, const global BuildMove* moves
         atomic_min(&locks[touched[k]].owner, n);
 }
 
-// Is node a's move made (so far: a move dropped here reads as not made,
-// which only drops more)?
-inline bool moves_now(const global BuildNode* nodes, const global BuildMove* moves, const global BuildLock* locks,
-                      int a)
+// Does node a hold the six nodes of its move?  (Read of the search's moves
+// and the claims, which no work-item of reinsert_check changes: a move that
+// holds its nodes but is dropped for a cycle of its own still drops the
+// moves below it, so the verdicts do not depend on the order of the checks.)
+inline bool holds_its_nodes(const global BuildNode* nodes, const global BuildMove* moves,
+                            const global BuildLock* locks, int a)
 {
     const int target = moves[a].target;
     return target >= 0 && holds_all(nodes, locks, a, target);
 }
 
-// One work-item per node with a move: dropped unless it holds its six
-// nodes and no made move's node lies on the way down from the junction to
-// its target (a cycle).
+// One work-item per node with a move: made (moves[n].made) if it holds its
+// six nodes and no node on the way down from the junction to its target
+// holds the six of a move of its own (a cycle).
 __kernel __attribute__((reqd_work_group_size(BUILD_GROUP, 1, 1)))
 void reinsert_check(const global BuildNode* nodes, global BuildMove* moves, const global BuildLock* locks,
                     const int num_tris)
@@ -227,17 +232,14 @@ void reinsert_check(const global BuildNode* nodes, global BuildMove* moves, cons
     if (n >= 2 * num_tris - 1)
         return;
     const BuildMove move = moves[n];
-    if (move.target < 0)
-        return;
-    bool made = holds_all(nodes, locks, n, move.target);
+    bool made = holds_its_nodes(nodes, moves, locks, n);
     if (made && move.target != move.junction)
         for (int a = nodes[move.target].parent; a != move.junction; a = nodes[a].parent)
-            if (moves_now(nodes, moves, locks, a)) {
+            if (holds_its_nodes(nodes, moves, locks, a)) {
                 made = false;
                 break;
             }
-    if (!made)
-        moves[n].target = -1;
+    moves[n].made = made;
 }
 
 inline void replace_child(global BuildNode* nodes, int parent, int old_child, int new_child)
@@ -260,9 +262,9 @@ void reinsert_apply(global BuildNode* nodes, const global BuildMove* moves, glob
         return;
     locks[n].gain = 0u;
     locks[n].owner = NO_OWNER;
-    const int x = moves[n].target;
-    if (x < 0)
+    if (!moves[n].made)
         return;
+    const int x = moves[n].target;
     const int p = nodes[n].parent, s = other_child(nodes, p, n), g = nodes[p].parent;
     const int q = nodes[x].parent;        // (read before any write: q may be g, or s)
     replace_child(nodes, g, p, s);

@@ -254,7 +254,7 @@ typedef struct {
     int target;     // the node to move next to (-1: none)
     float gain;     // the SAH cost it saves, half areas
     int junction;   // the lowest common ancestor of the node and the target
-    int pad;
+    int made;       // reinsert_check's verdict: 1 if the move is made this iteration
 } BuildMove;
 
 typedef struct {
