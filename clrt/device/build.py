@@ -37,7 +37,8 @@ The algorithm (kernels in ``clrt/kernels/build_*.cl``, entry ``build_bvh.cl``):
    triangles).  Every new node decides
    by the SAH whether its subtree (at most ``leaf_size`` triangles) is emitted
    as one leaf, and records its height;
-3a. reinsertion (clrt.device.reinsert; GPUs only by default): subtrees moved where the SAH falls most;
+3a. reinsertion (clrt.device.reinsert; by default on GPUs, below a million
+   triangles): subtrees moved where the SAH falls most;
 3b. treelet restructuring (Karras & Aila 2013, ``TREELET_LEAVES``; GPUs only
    by default): one launch, a work-group per node (of at least
    ``TREELET_MIN_TRIANGLES`` on large meshes), lowest first, each waiting
@@ -93,7 +94,7 @@ from clrt.device.build_kernels import (SAH_TOP_MAX, build_queue, check_tuning, l
                                        one_build_per_context, workspace)
 from clrt.device.host_sort import sort_on_host
 from clrt.device.program import build_program
-from clrt.device.reinsert import REINSERT_ITERATIONS, check_iterations, queue_reinsertion, reinsert_defines
+from clrt.device.reinsert import check_iterations, default_iterations, queue_reinsertion, reinsert_defines
 from clrt.errors import DeviceError, InputError
 from clrt.scene import arrays
 from clrt.scene.mesh import Mesh
@@ -125,6 +126,10 @@ PLOC_RADIUS = 16
 TAIL_THRESHOLD = {"gpu": 2048, "cpu": 8192}
 TAIL_MAX = 32768         # ploc_tail counts its clusters in 16 bits
 TAIL_GROUP = {"gpu": 1024, "cpu": BUILD_GROUP}
+# ploc_top's work-items: a GPU's tail group, one place each; on a CPU one
+# work-item in plain loops (build_top.cl: PoCL compiled the group's barriers
+# in 0.5-0.7 s of a first call).
+TOP_GROUP = {"gpu": None, "cpu": 1}
 # PLOC stops at this many clusters, and ploc_top splits them top-down by the
 # SAH (build_top.cl says why; 1: PLOC up to the root).  At most the tail's
 # work-group and SAH_TOP_MAX (its tables in local memory).
@@ -223,6 +228,11 @@ def sah_top_clusters(kind: str, tail_group: int | None = None, top_clusters: int
     return min(SAH_TOP_CLUSTERS[kind] if top_clusters is None else int(top_clusters), group)
 
 
+def top_group(kind: str, tail_group: int | None = None) -> int:
+    """Work-items of ploc_top (TOP_GROUP, else the tail's group)."""
+    return TOP_GROUP[kind] or (TAIL_GROUP[kind] if tail_group is None else int(tail_group))
+
+
 def build_defines(volume: str, kind: str = "gpu", treelet_leaves: int | None = None,
                   tail_group: int | None = None, top_clusters: int | None = None, segmented: bool = False) -> dict:
     """Program defines: the shape, the work-group and state layout, and the
@@ -232,6 +242,7 @@ def build_defines(volume: str, kind: str = "gpu", treelet_leaves: int | None = N
         VOLUME_DEFINES[volume]: None, "BUILD_GROUP": BUILD_GROUP, "RADIX_BITS": RADIX_BITS,
         "SORT_PASSES": SORT_PASSES,
         "PLOC_RADIUS": PLOC_RADIUS, "TAIL_GROUP": TAIL_GROUP[kind] if tail_group is None else int(tail_group),
+        "TOP_GROUP": top_group(kind, tail_group),
         "SAH_TOP_CLUSTERS": sah_top_clusters(kind, tail_group, top_clusters),
         "TREELET_LEAVES": TREELET_LEAVES[kind] if treelet_leaves is None else int(treelet_leaves),
         "TREELET_SMALL_LEAVES": min(TREELET_SMALL[kind][0], TREELET_LEAVES[kind] if treelet_leaves is None
@@ -398,7 +409,7 @@ def build_on_device(context: cl.Context, queue: cl.CommandQueue, corners, volume
     partition: the SAH partition into at most top_clusters segments before
         PLOC (default: SAH_PARTITION of the device type, from
         PART_MIN_TRIANGLES triangles on; for benchmarks).
-    reinsert_iterations: reinsertion's iterations (0: none; default: REINSERT_ITERATIONS of the device type).
+    reinsert_iterations: reinsertion's iterations (0: none; default: clrt.device.reinsert.default_iterations).
     device_times: time the phases on the device (``DeviceBvh.timings``; for
         benchmarks).  The build then runs on ``queue``, which must have
         profiling enabled (clrt.device.context.create_context's does);
@@ -422,11 +433,11 @@ def build_on_device(context: cl.Context, queue: cl.CommandQueue, corners, volume
     if "cl_khr_fp64" not in device.extensions:
         raise DeviceError(f"the device BVH builder fits volumes in float64, which {device.name.strip()} lacks")
     kind = device_kind(device)
-    reinserts = check_iterations(REINSERT_ITERATIONS[kind] if reinsert_iterations is None else reinsert_iterations)
     tail_threshold = min(TAIL_THRESHOLD[kind] if tail_threshold is None else int(tail_threshold), TAIL_MAX)
     tail_group = TAIL_GROUP[kind] if tail_group is None else int(tail_group)
     top_clusters = sah_top_clusters(kind, tail_group, top_clusters)
     F = len(corners.faces) if indexed else len(tri)
+    reinserts = check_iterations(default_iterations(kind, F) if reinsert_iterations is None else reinsert_iterations)
     if partition is None:
         partition = SAH_PARTITION[kind] and F >= PART_MIN_TRIANGLES
     segmented = bool(partition) and 1 < top_clusters < F
@@ -527,7 +538,8 @@ def build_on_device(context: cl.Context, queue: cl.CommandQueue, corners, volume
                group=tail_group)
     else:
         _hand_over(queue, state, queued)
-    launch("ploc", k["ploc_top"], 1, last, spare, nodes, heights, F, state, leaf_size, group=tail_group)
+    launch("ploc", k["ploc_top"], 1, last, spare, nodes, heights, F, state, leaf_size,
+           group=top_group(kind, tail_group))
 
     # 3a. Reinsertion (build_reinsert.cl), in PLOC's spent cluster buffers.
     queue_reinsertion(k, launch, _groups, reinserts, F, nodes, heights, clusters, merged, tile_kept, leaf_size)

@@ -428,7 +428,7 @@ void ploc_tail(global BuildCluster* clusters, global BuildCluster* spare, global
 // iteration).  Writes the node counter, the iteration total and the last
 // count to the state, unless nothing merged since ploc_merge or
 // ploc_compact wrote them.
-__kernel __attribute__((reqd_work_group_size(TAIL_GROUP, 1, 1)))
+__kernel __attribute__((reqd_work_group_size(TOP_GROUP, 1, 1)))
 void ploc_top(global BuildCluster* clusters, global BuildCluster* spare, global BuildNode* nodes,
               global int* heights, const int num_tris, global int* state, const uint leaf_size)
 {
