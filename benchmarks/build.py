@@ -154,16 +154,17 @@ def time_builds(context, queue, corners, volume, builder, leaf_size, repeat):
 def _traced_accel(mesh, volume, builder, leaf_size, device):
     """clrt.Accel over ``mesh`` from ``builder`` (a device variant's settings
     applied to its one build)."""
-    from clrt.device import build
+    from clrt.device import build, reinsert as reinsertion
     from clrt.query import Accel
     leaves = DEVICE_VARIANTS.get(builder, {}).get("treelet_leaves")
     minimum = DEVICE_VARIANTS.get(builder, {}).get("treelet_min")
     top = DEVICE_VARIANTS.get(builder, {}).get("top_clusters")
     partition = DEVICE_VARIANTS.get(builder, {}).get("partition")
     reinsert = DEVICE_VARIANTS.get(builder, {}).get("reinsert_iterations")
-    saved_reinsert = dict(build.REINSERT_ITERATIONS)
-    if reinsert is not None:
-        build.REINSERT_ITERATIONS.update({kind: reinsert for kind in saved_reinsert})
+    saved_reinsert, saved_reinsert_max = dict(reinsertion.REINSERT_ITERATIONS), reinsertion.REINSERT_MAX_TRIANGLES
+    if reinsert is not None:                 # at any size
+        reinsertion.REINSERT_ITERATIONS.update({kind: reinsert for kind in saved_reinsert})
+        reinsertion.REINSERT_MAX_TRIANGLES = 1 << 62
     saved, saved_min = dict(build.TREELET_LEAVES), build.TREELET_MIN_TRIANGLES
     saved_top, saved_partition = dict(build.SAH_TOP_CLUSTERS), dict(build.SAH_PARTITION)
     if leaves is not None:                   # the variant's treelets for this one build
@@ -185,7 +186,8 @@ def _traced_accel(mesh, volume, builder, leaf_size, device):
         build.SAH_TOP_CLUSTERS.update(saved_top)
         build.SAH_PARTITION.update(saved_partition)
         build.PART_MIN_TRIANGLES = saved_minimum
-        build.REINSERT_ITERATIONS.update(saved_reinsert)
+        reinsertion.REINSERT_ITERATIONS.update(saved_reinsert)
+        reinsertion.REINSERT_MAX_TRIANGLES = saved_reinsert_max
 
 
 # Trace times of trees a few per cent apart are compared in one loop: every

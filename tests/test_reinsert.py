@@ -105,9 +105,10 @@ def test_reinserted_trees_cost_about_the_host_sah_trees(name, queue):
 
 def test_reinserted_trees_give_brute_force_hits(device, monkeypatch):
     """The no-detail-loss invariant through clrt.Accel with reinsertion on
-    (the GPU default; CPU devices build without), grazing rays included."""
-    from clrt.device import build
-    monkeypatch.setitem(build.REINSERT_ITERATIONS, "cpu", 4)
+    (the GPU default below a million triangles; CPU devices build without),
+    grazing rays included."""
+    from clrt.device import reinsert
+    monkeypatch.setitem(reinsert.REINSERT_ITERATIONS, "cpu", 4)
     for name in ("torus", "icosphere"):
         mesh = TEST_MESHES[name]()
         o, d = _hard_rays(mesh, np.random.default_rng(12))

@@ -12,21 +12,21 @@ import numpy as np
 
 from clrt import layouts
 
-# Iterations per device type (0: none).  Each is five launches over the
-# nodes.  The GPU's trees (treelets after the reinsertion), SAH cost after
-# 0 / 2 / 4 / 8 iterations, measured on PoCL (python -m benchmarks.tree_counts;
-# docs/benchmarks.md has the rays' traversal counts): bunny00 35.82 / 34.37 /
-# 33.98 / 33.76 (host SAH tree 33.95), camel 24.52 / 23.50 / 23.04 / 22.84
-# (23.21), 14 x bunny00 (1.06M triangles) 45.85 / 44.03 / 43.48 (43.10).
-# Not measured on a GPU yet (docs/benchmarks.md gives the command).  On a
-# CPU the build is what a user waits for (each iteration costs bunny00 about
-# 30 ms on 2 cores, 14 x bunny00 0.6 s): off there, as the treelets are.
-# Off by default on GPUs too until the H200 has measured it.  (Its trees
-# differed from build to build while PLOC numbered its nodes by an atomic
-# counter, in the order its tiles ran: reinsertion breaks ties of gain by node
-# number.  PLOC's numbers are the same in every build now:
-# tests/test_reinsert.py.)
-REINSERT_ITERATIONS = {"gpu": 0, "cpu": 0}
+# Iterations per device type (0: none), on meshes of fewer than
+# REINSERT_MAX_TRIANGLES.  Each is five launches over the nodes.  On the H200
+# (docs/benchmarks.md, "Building the BVH on the device"), 0 / 2 / 4
+# iterations: SAH cost over the host SAH tree's bunny00 1.055 / 1.013 /
+# 1.001, camel 1.057 / 1.013 / 0.993; primary rays 1.039 / 1.028 / 1.011 and
+# 1.088 / 0.990 / 0.980 of the host SAH tree's time, random rays 1.081 /
+# 1.066 / 1.049 and 1.062 / 1.022 / 1.003; the build 2.2 / 2.6 / 2.8 ms
+# (bunny00).  Above a million triangles an iteration costs 1 ms a million
+# (10M: 52 -> 91 ms with 4), where the build's time is what issue 38 counts
+# against Warp's: off there for now.  On a CPU the build is what a user waits
+# for (each iteration costs bunny00 about 30 ms on 2 cores): off, as the
+# treelets are.  The trees are the same from build to build (PLOC numbers its
+# nodes in a fixed order: reinsertion breaks ties of gain by node number).
+REINSERT_ITERATIONS = {"gpu": 4, "cpu": 0}
+REINSERT_MAX_TRIANGLES = 1_000_000
 REINSERT_MAX = 64        # the most iterations a build takes (build_on_device checks)
 # Subtrees one search holds postponed (build_reinsert.cl): a search that
 # would hold more leaves the rest unsearched (the tree stays valid).
@@ -41,6 +41,12 @@ REINSERT_CLIMB = 16
 
 def reinsert_defines() -> dict:
     return {"REINSERT_STACK": REINSERT_STACK, "REINSERT_CLIMB": REINSERT_CLIMB}
+
+
+def default_iterations(kind: str, num_tris: int) -> int:
+    """Reinsertion's iterations when the caller does not say: REINSERT_ITERATIONS
+    of the device type below REINSERT_MAX_TRIANGLES, else none."""
+    return REINSERT_ITERATIONS[kind] if num_tris < REINSERT_MAX_TRIANGLES else 0
 
 
 def check_iterations(iterations) -> int:
