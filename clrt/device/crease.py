@@ -20,7 +20,7 @@ the joins -- numbered in corner order, and the same float64 sums in the same
 order.  The launches, in order:
 
 1. ``area_normals``; with a crease angle ``weld_insert``, ``weld_read``,
-   ``edge_insert``, ``edge_joins``, then rounds of ``hook_joins`` and
+   ``edge_ends``, ``edge_insert``, ``edge_joins``, then rounds of ``hook_joins`` and
    ``compress_labels`` until a round joins nothing (the host reads a flag
    after each: a mesh takes a few), and the roots numbered (a prefix sum)
    into the split faces (``split_vertices``);
@@ -62,8 +62,9 @@ CREASE_KERNELS = {
     "weld_insert": (B("vertex_bits"), U("num_vertices"), B("table"), U("mask"), B("slot_of")),
     "weld_read": (B("table"), B("slot_of"), U("num_vertices"), B("weld")),
     "area_normals": (B("vertices"), B("faces"), U("num_faces"), B("area")),
-    "edge_insert": (B("faces"), B("weld"), U("num_corners"), B("table"), U("mask"), B("slot_of"), B("next")),
-    "edge_joins": (B("faces"), B("weld"), B("area"), U("num_corners"), B("table"), B("slot_of"), B("next"),
+    "edge_ends": (B("faces"), B("weld"), U("num_corners"), B("ends")),
+    "edge_insert": (B("ends"), U("num_corners"), B("table"), U("mask"), B("slot_of"), B("next")),
+    "edge_joins": (B("ends"), B("area"), U("num_corners"), B("table"), B("slot_of"), B("next"),
                    value("cos_limit", np.float64), B("joins"), B("label")),
     "hook_joins": (B("joins"), U("num_joins"), B("label"), B("changed")),
     "compress_labels": (B("label"), U("num_corners"), B("is_root")),
@@ -80,11 +81,13 @@ CREASE_KERNELS = {
 
 SCAN_ITEMS = 8                       # entries a work-item of a prefix sum takes (build_scan.cl's SCAN_ITEMS)
 SCAN_TILE = BUILD_GROUP * SCAN_ITEMS
-# Device scratch per triangle of a split, about (a closed mesh: V = F / 2):
-# the area normals (24 B), the weld's table and ids (12), the edges' table,
-# slots and lists (24 + 12 + 12; the table has 2-4 slots per half-edge), the
-# joins (48), labels, roots and the split faces (36), the corner lists (12).
-SCRATCH_BYTES_PER_TRIANGLE = 200
+# Device scratch per triangle of a split, at most about (a closed mesh: V =
+# F / 2): the area normals (24 B), the weld's table, slots and ids (12), the
+# edges' ends, table, slots and lists (24 + 48 + 12 + 12: the table has 2-4
+# slots per half-edge), the joins (48), labels, roots and the split faces
+# (36), the corner lists and their ends (16).  The Workspace keeps them
+# for the next call, as it keeps a build's.
+SCRATCH_BYTES_PER_TRIANGLE = 240
 
 
 def crease_defines() -> dict:
@@ -96,8 +99,8 @@ def crease_kernels(split: bool, per_slot: bool) -> tuple[str, ...]:
     the BVH's slots (``per_slot``) -- which its program keeps
     (clrt.device.program.keep_kernels: a kernel costs its first build)."""
     scan = ("scan_tiles", "scan_tile_sums", "scan_apply")
-    splitting = ("weld_insert", "weld_read", "edge_insert", "edge_joins", "hook_joins", "compress_labels",
-                 "split_vertices") if split else ()
+    splitting = ("weld_insert", "weld_read", "edge_ends", "edge_insert", "edge_joins", "hook_joins",
+                 "compress_labels", "split_vertices") if split else ()
     return ("area_normals", *splitting, *scan, "count_corners", "place_corners", "vertex_normals",
             *(("triangle_info",) if per_slot else ()))
 
@@ -238,13 +241,13 @@ def _shade(context, device, mesh, crease, prim_ids, face_material, material_base
         launch("weld_read", _groups(V), table, slot_of, np.uint32(V), weld)
         # The edges: each half-edge into its edge's list, then paired with the next by index.
         size = _table_size(corners)
-        table = ws.get("crease_edge_table", 4 * size)
+        ends, table = ws.get("crease_edge_ends", 8 * corners), ws.get("crease_edge_table", 4 * size)
         slot_of, after = ws.get("crease_edge_slots", 4 * corners), ws.get("crease_edge_next", 4 * corners)
+        launch("edge_ends", _groups(corners), mesh.faces, weld, np.uint32(corners), ends)
         fill(table, -1, 4 * size)
-        launch("edge_insert", _groups(corners), mesh.faces, weld, np.uint32(corners), table, np.uint32(size - 1),
-               slot_of, after)
+        launch("edge_insert", _groups(corners), ends, np.uint32(corners), table, np.uint32(size - 1), slot_of, after)
         joins, label = ws.get("crease_joins", 16 * corners), ws.get("crease_label", 4 * corners)
-        launch("edge_joins", _groups(corners), mesh.faces, weld, area, np.uint32(corners), table, slot_of, after,
+        launch("edge_joins", _groups(corners), ends, area, np.uint32(corners), table, slot_of, after,
                np.float64(crease_cos_limit(crease)), joins, label)
         # Union-find: rounds until one joins nothing.
         is_root, changed = ws.get("crease_roots", 4 * corners), ws.get("crease_changed", 4)

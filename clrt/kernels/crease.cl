@@ -4,6 +4,7 @@
 //   weld_insert, weld_read   each vertex's smallest-index twin at the same
 //                            position, bitwise (a hash table, atomic_min)
 //   area_normals             each face's cross product, in float64
+//   edge_ends                each half-edge's welded ends
 //   edge_insert              each half-edge into a hash table by its two welded
 //                            ends; the half-edges of one edge in a list
 //   edge_joins               each half-edge paired with the next one (by index)
@@ -120,24 +121,34 @@ inline double3 unit_normal(const global double* area, uint f)
 
 // ------------------------------------------------------------------ edges
 //
-// An edge: its two welded ends, the smaller first.
-inline int2 edge_ends(const global int* faces, const global int* weld, uint h)
+// ends[h]: half-edge h's welded start and end, so that a probe compares
+// another half-edge's edge in one load.
+__kernel __attribute__((reqd_work_group_size(BUILD_GROUP, 1, 1)))
+void edge_ends(const global int* faces, const global int* weld, const uint num_corners, global int* ends)
 {
-    const int a = weld[faces[h]], b = weld[faces[next_corner(h)]];
-    return (int2)(min(a, b), max(a, b));
+    const uint h = get_global_id(0);
+    if (h < num_corners)
+        vstore2((int2)(weld[faces[h]], weld[faces[next_corner(h)]]), h, ends);
+}
+
+// An edge: its two welded ends, the smaller first.
+inline int2 edge_of(const global int* ends, uint h)
+{
+    const int2 e = vload2(h, ends);
+    return (int2)(min(e.x, e.y), max(e.x, e.y));
 }
 
 // table[s]: the last half-edge entered of the slot's edge (EMPTY: none);
 // next[h]: the one entered before h (EMPTY: h was the first), so that the
 // slot heads a list of its edge's half-edges, in no particular order.
 __kernel __attribute__((reqd_work_group_size(BUILD_GROUP, 1, 1)))
-void edge_insert(const global int* faces, const global int* weld, const uint num_corners, volatile global int* table,
-                 const uint mask, global uint* slot_of, global int* next)
+void edge_insert(const global int* ends, const uint num_corners, volatile global int* table, const uint mask,
+                 global uint* slot_of, global int* next)
 {
     const uint h = get_global_id(0);
     if (h >= num_corners)
         return;
-    const int2 key = edge_ends(faces, weld, h);
+    const int2 key = edge_of(ends, h);
     uint s = mix32(mix32((uint)key.x) ^ (uint)key.y) & mask;
     for (;;) {
         int held = table[s];
@@ -148,7 +159,7 @@ void edge_insert(const global int* faces, const global int* weld, const uint num
                 break;
             }
         }
-        if (all(edge_ends(faces, weld, (uint)held) == key)) {
+        if (all(edge_of(ends, (uint)held) == key)) {
             next[h] = atomic_xchg(&table[s], (int)h);
             break;
         }
@@ -164,9 +175,9 @@ void edge_insert(const global int* faces, const global int* weld, const uint num
 // h2's end.  joins[2 h1], joins[2 h1 + 1]: the two joins, (-1, -1) where
 // there are none.  Also label[h1] = h1: every corner starts as its own root.
 __kernel __attribute__((reqd_work_group_size(BUILD_GROUP, 1, 1)))
-void edge_joins(const global int* faces, const global int* weld, const global double* area, const uint num_corners,
-                const global int* table, const global uint* slot_of, const global int* next,
-                const double cos_limit, global int* joins, global int* label)
+void edge_joins(const global int* ends, const global double* area, const uint num_corners, const global int* table,
+                const global uint* slot_of, const global int* next, const double cos_limit, global int* joins,
+                global int* label)
 {
     const uint h1 = get_global_id(0);
     if (h1 >= num_corners)
@@ -182,7 +193,7 @@ void edge_joins(const global int* faces, const global int* weld, const global do
         const double3 n1 = unit_normal(area, f1), n2 = unit_normal(area, f2);
         if (f1 != f2 && (n1.x * n2.x + n1.y * n2.y) + n1.z * n2.z >= cos_limit) {
             const int e1 = (int)next_corner(h1), e2 = (int)next_corner((uint)h2);
-            const bool straight = weld[faces[h1]] == weld[faces[h2]];
+            const bool straight = ends[2 * h1] == ends[2 * h2];        // the same welded start
             pair = (int4)((int)h1, straight ? h2 : e2, e1, straight ? e2 : h2);
         }
     }
