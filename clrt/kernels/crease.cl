@@ -46,6 +46,17 @@ inline uint mix32(uint h)
     return h;
 }
 
+// x rounded to a double where it stands: a product passed through here
+// is never fused with the sum it enters into one FMA, which would round
+// once where the host rounds twice.  FP_CONTRACT OFF asks the same of the
+// compiler; this makes sure of it whatever a compiler does with the pragma
+// (NVIDIA's fuses float products regardless: triangle.cl).
+inline double rounded(const double x)
+{
+    volatile double kept = x;
+    return kept;
+}
+
 // Half-edge h = 3f + k runs from corner k of face f to corner k + 1 (mod 3).
 inline uint next_corner(uint h)
 {
@@ -107,15 +118,21 @@ void area_normals(const global float* vertices, const global int* faces, const u
     const double3 p0 = convert_double3(vload3(faces[3 * f], vertices));
     const double3 e1 = convert_double3(vload3(faces[3 * f + 1], vertices)) - p0;
     const double3 e2 = convert_double3(vload3(faces[3 * f + 2], vertices)) - p0;
-    vstore3((double3)(e1.y * e2.z - e1.z * e2.y, e1.z * e2.x - e1.x * e2.z, e1.x * e2.y - e1.y * e2.x), f, area);
+    vstore3((double3)(rounded(e1.y * e2.z) - rounded(e1.z * e2.y), rounded(e1.z * e2.x) - rounded(e1.x * e2.z),
+                      rounded(e1.x * e2.y) - rounded(e1.y * e2.x)), f, area);
 }
 
-// Mesh.face_normals of one face: the area normal over its length
-// sqrt((x x + y y) + z z), zero for a zero-area face.
-inline double3 unit_normal(const global double* area, uint f)
+// (a.x b.x + a.y b.y) + a.z b.z, each product rounded first.
+inline double dot_rounded(const double3 a, const double3 b)
 {
-    const double3 n = vload3(f, area);
-    const double length = sqrt((n.x * n.x + n.y * n.y) + n.z * n.z);
+    return (rounded(a.x * b.x) + rounded(a.y * b.y)) + rounded(a.z * b.z);
+}
+
+// n over its length sqrt((x x + y y) + z z) (clrt.scene.mesh.unit_rows),
+// zero where the length is 0.
+inline double3 unit(const double3 n)
+{
+    const double length = sqrt(dot_rounded(n, n));
     return length > 0.0 ? n / length : (double3)(0.0);
 }
 
@@ -170,7 +187,8 @@ void edge_insert(const global int* ends, const uint num_corners, volatile global
 
 // Half-edge h1 and the next half-edge h2 of its edge (by index), as the
 // host's stable sort pairs them: where their faces differ and meet at no
-// more than the crease angle, the corners at each end of the edge are
+// more than the crease angle (the cosine of Mesh.face_normals', summed x,
+// y, z), the corners at each end of the edge are
 // joined -- h1's start with h2's start if both run the same way, else with
 // h2's end.  joins[2 h1], joins[2 h1 + 1]: the two joins, (-1, -1) where
 // there are none.  Also label[h1] = h1: every corner starts as its own root.
@@ -190,8 +208,7 @@ void edge_joins(const global int* ends, const global double* area, const uint nu
     int4 pair = (int4)(-1);
     if (h2 != NO_CORNER) {
         const uint f1 = h1 / 3u, f2 = (uint)h2 / 3u;
-        const double3 n1 = unit_normal(area, f1), n2 = unit_normal(area, f2);
-        if (f1 != f2 && (n1.x * n2.x + n1.y * n2.y) + n1.z * n2.z >= cos_limit) {
+        if (f1 != f2 && dot_rounded(unit(vload3(f1, area)), unit(vload3(f2, area))) >= cos_limit) {
             const int e1 = (int)next_corner(h1), e2 = (int)next_corner((uint)h2);
             const bool straight = ends[2 * h1] == ends[2 * h2];        // the same welded start
             pair = (int4)((int)h1, straight ? h2 : e2, e1, straight ? e2 : h2);
@@ -384,7 +401,7 @@ inline void heap_sort(global uint* list, const uint n, const uint num_faces)
 
 // Mesh.vertex_normals for vertex v: the area normals of the faces at its
 // corners summed from 0.0 in the host's order (sum_rank), each component on
-// its own, then over the length as unit_normal does, rounded to float32 (w 0).
+// its own, then over their length (unit), rounded to float32 (w 0).
 __kernel __attribute__((reqd_work_group_size(BUILD_GROUP, 1, 1)))
 void vertex_normals(global uint* corner_list, const global uint* ends, const uint num_vertices, const uint num_faces,
                     const global double* area, global float* normals)
@@ -411,9 +428,7 @@ void vertex_normals(global uint* corner_list, const global uint* ends, const uin
         for (uint i = 0; i < n; ++i)
             sum += vload3(list[i] / 3u, area);
     }
-    const double length = sqrt((sum.x * sum.x + sum.y * sum.y) + sum.z * sum.z);
-    const double3 unit = length > 0.0 ? sum / length : (double3)(0.0);
-    vstore4((float4)(convert_float3(unit), 0.0f), v, normals);
+    vstore4((float4)(convert_float3(unit(sum)), 0.0f), v, normals);
 }
 
 // --------------------------------------------------------- triangle info
