@@ -22,8 +22,8 @@ order.  The launches, in order:
 1. ``area_normals``; with a crease angle ``weld_insert``, ``weld_read``,
    ``edge_ends``, ``edge_insert``, ``edge_joins``, then rounds of ``hook_joins`` and
    ``compress_labels`` until a round joins nothing (the host reads a flag
-   after each: a mesh takes a few), and the roots numbered (a prefix sum)
-   into the split faces (``split_vertices``);
+   after every ROUNDS_PER_READ: a mesh takes a few), and the roots numbered
+   (a prefix sum, its total read) into the split faces (``split_vertices``);
 2. ``count_corners``, a prefix sum, ``place_corners``: each vertex's corners
    in one list; ``vertex_normals`` puts each list in the host's order and
    sums it;
@@ -79,6 +79,10 @@ CREASE_KERNELS = {
                       value("per_face", np.int32), value("material_base", np.int32), B("tri_info")),
 }
 
+# Union-find rounds queued before the host reads whether the last joined
+# anything (a wait for the device each time): the meshes of the tests and
+# benchmarks take 2-3 rounds, the last joining nothing.
+ROUNDS_PER_READ = 2
 SCAN_ITEMS = 8                       # entries a work-item of a prefix sum takes (build_scan.cl's SCAN_ITEMS)
 SCAN_TILE = BUILD_GROUP * SCAN_ITEMS
 # Device scratch per triangle of a split, at most about (a closed mesh: V =
@@ -215,16 +219,19 @@ def _shade(context, device, mesh, crease, prim_ids, face_material, material_base
     def fill(buffer: cl.Buffer, word: int, nbytes: int) -> None:
         cl.enqueue_fill_buffer(queue, buffer, np.int32(word), 0, nbytes)
 
-    def prefix_sum(data: cl.Buffer, n: int) -> int:
-        """data[0, n) exclusively summed in place; returns the total (read: the host sizes buffers by it)."""
+    def prefix_sum(data: cl.Buffer, n: int, total: bool = True) -> int | None:
+        """data[0, n) exclusively summed in place; with ``total``, returns the
+        sum (read, a wait for the device: the host sizes buffers by it)."""
         tiles = _groups(-(-n // SCAN_ITEMS))
         sums = ws.get("crease_tile_sums", 4 * (tiles + 1))
         launch("scan_tiles", tiles, data, np.uint32(n), sums)
         launch("scan_tile_sums", 1, sums, np.uint32(tiles))
         launch("scan_apply", tiles, data, np.uint32(n), sums)
-        total = np.empty(1, np.uint32)
-        cl.enqueue_copy(queue, total, sums, src_offset=4 * tiles, is_blocking=True)
-        return int(total[0])
+        if not total:
+            return None
+        read = np.empty(1, np.uint32)
+        cl.enqueue_copy(queue, read, sums, src_offset=4 * tiles, is_blocking=True)
+        return int(read[0])
 
     F, V = mesh.num_faces, mesh.num_vertices
     corners = 3 * F
@@ -249,17 +256,17 @@ def _shade(context, device, mesh, crease, prim_ids, face_material, material_base
         joins, label = ws.get("crease_joins", 16 * corners), ws.get("crease_label", 4 * corners)
         launch("edge_joins", _groups(corners), ends, area, np.uint32(corners), table, slot_of, after,
                np.float64(crease_cos_limit(crease)), joins, label)
-        # Union-find: rounds until one joins nothing.
+        # Union-find: rounds until one joins nothing, ROUNDS_PER_READ queued
+        # before the host reads the last one's flag.
         is_root, changed = ws.get("crease_roots", 4 * corners), ws.get("crease_changed", 4)
-        flag = np.empty(1, np.int32)
-        while True:
-            fill(changed, 0, 4)
-            launch("hook_joins", _groups(2 * corners), joins, np.uint32(2 * corners), label, changed)
-            launch("compress_labels", _groups(corners), label, np.uint32(corners), is_root)
+        flag = np.ones(1, np.int32)
+        while flag[0]:
+            for _ in range(ROUNDS_PER_READ):
+                fill(changed, 0, 4)
+                launch("hook_joins", _groups(2 * corners), joins, np.uint32(2 * corners), label, changed)
+                launch("compress_labels", _groups(corners), label, np.uint32(corners), is_root)
             cl.enqueue_copy(queue, flag, changed, is_blocking=True)
-            rounds += 1
-            if not flag[0]:
-                break
+            rounds += ROUNDS_PER_READ
         # The roots, numbered in corner order, are the new vertices.
         count = prefix_sum(is_root, corners)
         corner_vertex = ws.get("crease_faces", 4 * corners)
@@ -275,7 +282,7 @@ def _shade(context, device, mesh, crease, prim_ids, face_material, material_base
     ends, corner_list = ws.get("crease_ends", 4 * count), ws.get("crease_corner_list", 4 * corners)
     fill(ends, 0, 4 * max(count, 1))
     launch("count_corners", _groups(corners), corner_vertex, np.uint32(corners), ends)
-    prefix_sum(ends, count)
+    prefix_sum(ends, count, total=False)      # (3F: every corner is listed)
     launch("place_corners", _groups(corners), corner_vertex, np.uint32(corners), ends, corner_list)
     normals = cl.Buffer(context, cl.mem_flags.READ_WRITE, 16 * max(count, 1))
     launch("vertex_normals", _groups(count), corner_list, ends, np.uint32(count), np.uint32(F), area, normals)
