@@ -145,7 +145,10 @@ class Renderer:
     ``timings``: the set-up's stages, in ms, reported once here rather than
     in every frame's: "initialisation", "acceleration build", "copy to
     device" (the context, the upload and the programs), and "program build"
-    once the path tracer's program is built (its first frame).
+    once the path tracer's program is built (its first frame).  Where a GPU
+    builds the tree from a one-object scene's mesh, it also makes the crease
+    split, the vertex normals and the per-slot shading data, in
+    "acceleration build" (clrt.device.crease): the host makes none of them.
 
     Threads may share a Renderer: its renders, refits and light changes take
     turns (clrt.device.sharing), so a frame shows the scene as it was when
