@@ -6,15 +6,25 @@
 On a torus of about each count of triangles (vertices float32, faces int32,
 as a caller's arrays arrive), the median wall ms of ``--repeat`` runs of each
 host stage -- the mesh's checks, its bounds (the vertices its faces use), the
-corner gather into the device's frame, ``scene_from_mesh`` (the crease split
-for smooth shading), ``flatten_scene`` -- then the whole calls,
-``clrt.Accel(V, F)`` and ``clrt.Renderer(scene)`` (warm: one untimed call of
-each first), beside the build they contain (``Acceleration.build_ms``: the
-device build, its upload included) and ``Renderer.timings``.  What a whole
-call spends beyond its build and the stages above is the rest of the host's
-set-up (context, programs, uploads).  ``--no-split`` leaves the crease split
-out (a flat-shaded scene), which takes seconds from a few million triangles
-on; ``--no-calls`` times the stages alone.  Timing is done here, never in tests.
+corner gather into the device's frame, ``scene_from_mesh`` (which leaves the
+crease split for smooth shading to its first use), the crease split and the
+split's vertex normals made on the host, ``flatten_scene`` (the host's
+arrays) -- and their device twins where the device has float64 (the
+vertices and faces uploaded, then split and normals made there:
+clrt.device.crease, which a Renderer on a GPU uses); then the whole calls,
+``clrt.Accel(V, F)``, ``clrt.Renderer(scene)`` of one scene made before
+(warm: one untimed call of each first) and ``clrt.Renderer(V, F)`` (a new
+mesh every call, as a user's first call: its checks, bounds, scene and any
+crease split included), beside the build they contain
+(``Acceleration.build_ms``: the device build, its upload included) and
+``Renderer.timings``.  Last, issue 38's yardstick: the device build from
+corners (warm, as ``benchmarks.build`` times it) and the corners' upload
+alone, and each whole call over their sum (the issue asks for at most 1.5).
+What a whole call spends beyond its build and the stages above is the rest
+of the host's set-up (context, programs, uploads).  ``--no-split`` leaves
+the crease split out (a flat-shaded scene), which takes the host seconds
+from a few million triangles on; ``--no-calls`` times the stages alone.
+Timing is done here, never in tests.
 """
 
 from __future__ import annotations
@@ -59,6 +69,8 @@ def _median_ms(make, repeat: int, before=None) -> tuple[float, object]:
 def stages(vertices, faces, device, repeat: int, split: bool, calls: bool = True) -> dict:
     """Stage name -> median ms for one mesh (see the module docstring)."""
     import clrt
+    from clrt.config import DEFAULT_CREASE_ANGLE
+    from clrt.device.context import create_context
     from clrt.scene.arrays import device_origin, flatten_scene, triangle_corners
     from clrt.scene.mesh import Mesh
     from clrt.scene.scene import scene_from_mesh
@@ -67,20 +79,83 @@ def stages(vertices, faces, device, repeat: int, split: bool, calls: bool = True
     out["Mesh.bounds (used vertices)"], bounds = _median_ms(lambda m: m.bounds, repeat,
                                                             lambda: Mesh(vertices, faces))
     origin = device_origin(bounds)
-    out["triangle_corners (gather, frame)"], _ = _median_ms(lambda: triangle_corners(mesh, origin), repeat)
+    out["triangle_corners (gather, frame)"], corners = _median_ms(lambda: triangle_corners(mesh, origin), repeat)
     material = None if split else {"smooth": False}
-    name = "scene_from_mesh (crease split)" if split else "scene_from_mesh (flat: no split)"
+    name = "scene_from_mesh (the split left for later)" if split else "scene_from_mesh (flat: no split)"
     out[name], scene = _median_ms(lambda m: scene_from_mesh(m, material), repeat, lambda: Mesh(vertices, faces))
-    out["flatten_scene"], _ = _median_ms(lambda: flatten_scene(scene), repeat)
-    for call, make in () if not calls else (("Accel(V, F)", lambda: clrt.Accel((vertices, faces), device=device)),
-                       ("Renderer(scene)", lambda: clrt.Renderer(scene, device=device))):
-        make()   # programs built, driver warm
-        out[f"{call}: whole call"], made = _median_ms(lambda: _finished(make()), repeat)
+    shaded = Mesh(vertices, faces)
+    if split:
+        out["crease split on the host (area normals included)"], shaded = _median_ms(
+            lambda m: _made(m.split_at_creases(DEFAULT_CREASE_ANGLE)), repeat, lambda: Mesh(vertices, faces))
+    out["vertex normals on the host"], _ = _median_ms(lambda: shaded.vertex_normals(), repeat)
+    out["flatten_scene"], _ = _median_ms(lambda: flatten_scene(scene), repeat)   # (its split made by the first)
+    context, queue = create_context(device)
+    if "cl_khr_fp64" in queue.device.extensions:
+        from clrt.device.crease import shade_on_device, upload_mesh
+        out["upload_mesh (vertices, faces)"], uploaded = _median_ms(lambda: upload_mesh(context, queue, mesh),
+                                                                   repeat)
+        crease = DEFAULT_CREASE_ANGLE if split else None
+        shade_on_device(context, queue, uploaded, crease)   # the program built
+        out["shade_on_device (split, normals)"], _ = _median_ms(
+            lambda: shade_on_device(context, queue, uploaded, crease), repeat)
+    if not calls:
+        return out
+    fresh = (lambda: (vertices.copy(), faces.copy()))     # (a new Mesh each call: nothing cached)
+    for call, make, before in (
+            ("Accel(V, F)", lambda: clrt.Accel((vertices, faces), device=device), None),
+            ("Renderer(scene)", lambda: clrt.Renderer(scene, device=device), None),
+            ("Renderer(V, F)", lambda arrays: clrt.Renderer(scene_from_mesh(arrays, material), device=device),
+             fresh)):
+        made = make(before()) if before else make()   # programs built, driver warm
+        del made
+        out[f"{call}: whole call"], made = _median_ms(
+            (lambda arrays: _finished(make(arrays))) if before else (lambda: _finished(make())), repeat, before)
         out[f"{call}: of it the build"] = made.acceleration.build_ms
         if call.startswith("Renderer"):
             out.update({f"{call}: {stage}": ms for stage, ms in made.timings.items()})
         del made
+    if "cl_khr_fp64" in queue.device.extensions:   # issue 38's yardstick: build + upload of the corners
+        build = out["device build from corners (warm)"] = _build_ms(context, queue, corners, repeat)
+        upload = out["upload of the corners"] = _upload_ms(context, queue, corners, repeat)
+        for call in ("Accel(V, F)", "Renderer(scene)", "Renderer(V, F)"):
+            out[f"{call} / (build + upload) (ratio)"] = out[f"{call}: whole call"] / (build + upload)
     return out
+
+
+def _made(mesh):
+    """A crease split made (its faces asked for)."""
+    mesh.faces   # noqa: B018
+    return mesh
+
+
+def _build_ms(context, queue, corners, repeat: int) -> float:
+    """Warm median wall ms of a device build from the corners in host memory."""
+    from clrt.device.build import build_on_device
+    build_on_device(context, queue, corners).release()
+    walls = []
+    for _ in range(repeat):
+        start = time.perf_counter()
+        built = build_on_device(context, queue, corners)
+        queue.finish()
+        walls.append(1e3 * (time.perf_counter() - start))
+        built.release()
+    return statistics.median(walls)
+
+
+def _upload_ms(context, queue, corners, repeat: int) -> float:
+    """Warm median wall ms of the corners alone copied to the device, as the
+    device build copies them (clrt.device.pinned.upload: staged on GPUs)."""
+    import pyopencl as cl
+    from clrt.device import pinned
+    buffer = cl.Buffer(context, cl.mem_flags.READ_WRITE, corners.nbytes)
+    walls = []
+    for _ in range(1 + repeat):
+        start = time.perf_counter()
+        pinned.upload(context, queue, buffer, corners)
+        queue.finish()
+        walls.append(1e3 * (time.perf_counter() - start))
+    buffer.release()
+    return statistics.median(walls[1:])
 
 
 def _finished(made):
@@ -100,7 +175,8 @@ def run(counts, device=None, repeat=3, split=True, out=None, calls=True):
     print("| stage | " + " | ".join(f"{n:,} triangles" for n in columns) + " |", file=out)
     print("|---|" + "---|" * len(columns), file=out)
     for stage in next(iter(columns.values())):
-        print(f"| {stage} | " + " | ".join(f"{c[stage]:,.1f}" for c in columns.values()) + " |", file=out)
+        digits = 2 if stage.endswith("(ratio)") else 1
+        print(f"| {stage} | " + " | ".join(f"{c[stage]:,.{digits}f}" for c in columns.values()) + " |", file=out)
 
 
 def main(argv=None) -> int:

@@ -1,5 +1,8 @@
 """benchmarks.host_stages prints the host's stages of an Accel and a Renderer
-beside the whole calls on the test device."""
+(and their device twins) beside the whole calls on the test device, and each
+call over the device build and upload of the corners."""
+
+import pytest
 
 from benchmarks import host_stages
 
@@ -12,10 +15,15 @@ def test_host_stages_print_every_stage_and_the_whole_calls(device, capsys):
             for r in (line.split("|") for line in out.splitlines())
             if len(r) == 5 and r[1].strip()[:1].isalpha() and r[1].strip() != "stage"}
     for stage in ("Mesh(V, F): the checks", "Mesh.bounds (used vertices)", "triangle_corners (gather, frame)",
-                  "scene_from_mesh (flat: no split)", "flatten_scene", "Accel(V, F): whole call",
-                  "Renderer(scene): copy to device"):
+                  "scene_from_mesh (flat: no split)", "vertex normals on the host", "flatten_scene",
+                  "upload_mesh (vertices, faces)", "shade_on_device (split, normals)", "Accel(V, F): whole call",
+                  "Renderer(scene): copy to device", "Renderer(V, F): whole call", "device build from corners (warm)",
+                  "upload of the corners", "Renderer(V, F) / (build + upload) (ratio)"):
         assert len(rows[stage]) == 2 and all(ms >= 0.0 for ms in rows[stage]), stage
-    for call in ("Accel(V, F)", "Renderer(scene)"):   # a whole call holds its build
+    for call in ("Accel(V, F)", "Renderer(scene)", "Renderer(V, F)"):   # a whole call holds its build
         assert all(whole >= build for whole, build in zip(rows[f"{call}: whole call"],
                                                           rows[f"{call}: of it the build"]))
+        assert rows[f"{call} / (build + upload) (ratio)"][0] == pytest.approx(
+            rows[f"{call}: whole call"][0] / (rows["device build from corners (warm)"][0]
+                                              + rows["upload of the corners"][0]), rel=0.05, abs=0.02)   # (printed rounded)
     assert "| stage | 3,0" in out or "| stage | 2,9" in out      # about 3K triangles in the first column

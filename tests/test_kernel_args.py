@@ -98,3 +98,15 @@ def test_the_refit_signatures_match(device):
     defines = build_defines("sphere")
     _check(context, "refit.cl", defines, typed_kernels(build_program(context, "refit.cl", defines), REFIT_KERNELS,
                                                        defines))
+
+
+def test_the_crease_signatures_match(device):
+    """The device's crease split and vertex normals (crease.cl, clrt.device.crease)."""
+    from clrt.device.context import create_context
+    from clrt.device.crease import CREASE_KERNELS, crease_defines
+    from clrt.device.program import build_program
+    from clrt.device.signature import typed_kernels
+    context, _ = create_context(device)
+    defines = crease_defines()
+    _check(context, "crease.cl", defines, typed_kernels(build_program(context, "crease.cl", defines),
+                                                        CREASE_KERNELS, defines))

@@ -23,6 +23,7 @@ from clrt.config import HOST_BUILDERS, HOST_DEFAULT_BUILDER
 from clrt.device.build import build_on_device
 from clrt.device.context import create_context, format_bytes, is_out_of_memory
 from clrt.errors import DeviceMemoryError
+from clrt.scene.mesh import Mesh
 
 # Device scratch of a build, per triangle: the corners (36 bytes), sort keys and
 # ids (16), build nodes (96), clusters twice (64), heights and per-place ints
@@ -35,7 +36,7 @@ FIXED_SCRATCH = ("parts", "part_bins")
 
 
 def build_acceleration(corners: np.ndarray, accel: str, builder: str, leaf_size: int,
-                       device: str | None = None, statistics: bool = False) -> Acceleration:
+                       device: str | None = None, statistics: bool = False, uploaded=None) -> Acceleration:
     """The acceleration structure over ``corners`` (F, 3, 3): clrt.accel.build for
     the host builders, for ``builder="device"`` a build on ``device`` (clrt's
     device choice, as the renderer and queries use it), and for "auto" the
@@ -48,6 +49,8 @@ def build_acceleration(corners: np.ndarray, accel: str, builder: str, leaf_size:
     (refit, statistics, per-slot data: DeviceAcceleration).  ``statistics``:
     the caller will ask for ``stats()`` (``clrt info``): a device build then
     writes the exact boxes too, read back rather than made on the host.
+    ``uploaded``: a Mesh's vertices and faces on the device already
+    (clrt.device.crease.UploadedMesh), for a device build.
     """
     if builder == "auto" and accel != "none":
         builder = "device" if "cl_khr_fp64" in create_context(device)[1].device.extensions else HOST_DEFAULT_BUILDER
@@ -57,13 +60,15 @@ def build_acceleration(corners: np.ndarray, accel: str, builder: str, leaf_size:
     start = time.perf_counter()
     context, queue = create_context(device)
     try:
-        bvh = build_on_device(context, queue, corners, volume=accel, leaf_size=leaf_size, keep_boxes=statistics)
+        bvh = build_on_device(context, queue, corners, volume=accel, leaf_size=leaf_size, keep_boxes=statistics,
+                              uploaded=uploaded)
     except (cl.Error, MemoryError) as exc:
         if not is_out_of_memory(exc):
             raise
+        count = corners.num_triangles if isinstance(corners, Mesh) else len(corners)
         raise DeviceMemoryError(
-            f"out of device memory building the BVH of {len(corners):,} triangles on "
-            f"{queue.device.name.strip()}: it needs about {format_bytes(SCRATCH_BYTES_PER_TRIANGLE * len(corners))} "
+            f"out of device memory building the BVH of {count:,} triangles on "
+            f"{queue.device.name.strip()}: it needs about {format_bytes(SCRATCH_BYTES_PER_TRIANGLE * count)} "
             "of scratch memory; use --builder sah (built on the host)") from None
     return DeviceAcceleration(bvh, accel, build_ms=1e3 * (time.perf_counter() - start))
 

@@ -382,7 +382,7 @@ def build_on_device(context: cl.Context, queue: cl.CommandQueue, corners, volume
                     treelet_leaves: int | None = None, treelet_min: int | None = None,
                     tail_group: int | None = None, top_clusters: int | None = None,
                     partition: bool | None = None, reinsert_iterations: int | None = None,
-                    device_times: bool = False, profile: bool = False) -> DeviceBvh:
+                    device_times: bool = False, profile: bool = False, uploaded=None) -> DeviceBvh:
     """Build a BVH over ``corners`` on the queue's device.
 
     corners: (F, 3, 3) triangle corners (converted to float32, checked as
@@ -390,6 +390,9 @@ def build_on_device(context: cl.Context, queue: cl.CommandQueue, corners, volume
         Mesh: its vertices and faces are uploaded, the corners gathered on
         the device and moved into the device frame there
         (build_frame.cl), which ``DeviceBvh.frame`` gives.
+    uploaded: for a Mesh, its vertices and faces on the device already (the
+        buffers of clrt.device.crease.UploadedMesh, the copies complete): not
+        uploaded again.
     volume: one of ``VOLUMES``; leaf_size: 1..255, the most triangles per leaf.
     keep_boxes: also keep the exact child boxes (``DeviceBvh.stats``).
     tail_threshold: clusters at which PLOC hands over to one work-group
@@ -467,10 +470,13 @@ def build_on_device(context: cl.Context, queue: cl.CommandQueue, corners, volume
 
     state = ws.get("state", 4 * STATE_INTS)
     corners_buf = ws.get("corners", 36 * F)
-    if indexed:
+    if indexed and uploaded is not None:
+        vertices, faces, uploads = uploaded.vertices, uploaded.faces, []
+    elif indexed:
         vertices, faces = ws.get("vertices", corners.vertices.nbytes), ws.get("faces", corners.faces.nbytes)
         uploads = [pinned.upload(context, queue, vertices, corners.vertices, staged_upload),
                    pinned.upload(context, queue, faces, corners.faces, staged_upload)]
+    if indexed:
         box, frame = ws.get("box", 4 * 6), ws.get("frame", 8 * 9)
         uploads.append(cl.enqueue_copy(queue, box, _EMPTY_BOX, is_blocking=False))
     else:

@@ -178,11 +178,12 @@ class Workspace:
             self.buffers[name] = buffer
         return buffer
 
-    def kernels_of(self, program: cl.Program, defines: dict) -> dict:
-        """The build kernels of ``program`` (built with ``defines``), made once."""
+    def kernels_of(self, program: cl.Program, defines: dict, table: dict | None = None) -> dict:
+        """The kernels of ``program`` (built with ``defines``) in signature
+        ``table`` (default BUILD_KERNELS), made once."""
         key = program.int_ptr
         if key not in self.kernels:
-            self.kernels[key] = typed_kernels(program, BUILD_KERNELS, defines)
+            self.kernels[key] = typed_kernels(program, BUILD_KERNELS if table is None else table, defines)
         return self.kernels[key]
 
 

@@ -8,6 +8,7 @@ by ``clrt.accel``; here it is only uploaded.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Callable
 
 import numpy as np
@@ -79,9 +80,34 @@ def packet_rays(context: cl.Context, geometry: "DeviceGeometry") -> int:
     return PACKET_RAYS if packets else 1
 
 
-def _stand_in(dtype, count: int) -> np.ndarray:
-    """(count,) of ``dtype`` in no memory: the size of an array kept on the device."""
-    return np.broadcast_to(np.zeros(1, dtype), (count,))
+def _stand_in(dtype, count: int, row=()) -> np.ndarray:
+    """(count, *row) of ``dtype`` in no memory: the size of an array kept on the device."""
+    return np.broadcast_to(np.zeros((1, *row), dtype), (count, *row))
+
+
+@dataclass(frozen=True)
+class DeviceArray:
+    """An ``extra`` array that the device made itself (clrt.device.crease):
+    its buffer, holding ``count`` rows of ``row`` elements of ``dtype``
+    (TRIANGLE_INFO, ``()``; float32, ``(4,)``)."""
+
+    buffer: cl.Buffer
+    dtype: np.dtype
+    count: int
+    row: tuple = ()
+
+    @property
+    def nbytes(self) -> int:
+        return self.count * int(np.prod(self.row, dtype=np.int64)) * np.dtype(self.dtype).itemsize
+
+    def stand_in(self) -> np.ndarray:
+        return _stand_in(self.dtype, self.count, self.row)
+
+    def read(self, queue: cl.CommandQueue) -> np.ndarray:
+        """A host copy (a scene split into parts uploads its arrays from the host)."""
+        out = np.empty((self.count, *self.row), self.dtype)
+        cl.enqueue_copy(queue, out, self.buffer, is_blocking=True)
+        return out
 
 
 def _host_arrays(corners: np.ndarray, acceleration: Acceleration) -> dict:
@@ -118,7 +144,9 @@ class DeviceGeometry:
     renderer's shading data), by their kernel parameter names.
 
     ``corners``: (F, 3, 3) float32 in input order; ``acceleration``: its
-    :class:`clrt.accel.Acceleration`.  A buffer larger than the device's largest
+    :class:`clrt.accel.Acceleration`.  An ``extra`` array may be a
+    :class:`DeviceArray`, made on the device already: its buffer is taken as
+    it is.  A buffer larger than the device's largest
     allocation -- or than ``max_buffer_bytes``, which tests and benchmarks lower
     to split small scenes -- is uploaded in parts (see split.cl): then every
     buffer here is, and ``defines`` says so to the program build.
@@ -174,9 +202,10 @@ class DeviceGeometry:
                       "prim_ids": _stand_in(np.int32, acceleration.num_slots)}
         else:
             arrays = _host_arrays(host_corners(), acceleration)
+        made = {name: array for name, array in (extra or {}).items() if isinstance(array, DeviceArray)}
         for name, array in {**(extra or {}), **({} if acceleration.instances is None
                                                else {"instances": acceleration.instances})}.items():
-            arrays[name] = np.ascontiguousarray(array)
+            arrays[name] = array.stand_in() if name in made else np.ascontiguousarray(array)
         limit = min(d.max_mem_alloc_size for d in context.devices)
         source = "the device's largest allocation"
         if max_buffer_bytes is not None and int(max_buffer_bytes) < limit:
@@ -187,6 +216,10 @@ class DeviceGeometry:
             built.release()
             built = None
             arrays.update(_host_arrays(host_corners(), acceleration))
+        if made and self.shifts is not None:
+            reader = queue or cl.CommandQueue(context)
+            arrays.update({name: array.read(reader) for name, array in made.items()})
+            made = {}
         # The bytes the buffers hold (parts of a split array add up to it).
         self.nbytes = int(sum(a.nbytes for a in arrays.values()))
         # The wide BVH only where it is walked: other devices pay nothing.  Its
@@ -234,6 +267,7 @@ class DeviceGeometry:
             self.buffers.update(tris=(built.tri_verts,), nodes=(built.rows,), prim_ids=(built.prim_ids,))
             if self.wide is not None:
                 self.buffers["wide"] = (self.wide.buffer,)
+        self.buffers.update({name: (array.buffer,) for name, array in made.items()})
         for name, array in arrays.items():
             if name in self.buffers:
                 continue

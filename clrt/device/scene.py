@@ -85,7 +85,9 @@ class DeviceScene:
     ``timings``: where the stages' wall times go ("acceleration build",
     "copy to device"), if given.  ``acceleration``: one built already (a
     two-level scene's, clrt.device.instances: ``corners`` are then its
-    meshes' corners, mesh after mesh).
+    meshes' corners, mesh after mesh).  ``uploaded``: a Mesh's vertices and
+    faces on the device already (clrt.device.crease.UploadedMesh: the
+    Renderer's, which the device shades too), for the build that gathers them.
 
     Attributes: ``acceleration``, ``context``, ``queue``, ``device`` (its
     label), ``kind`` ("gpu" or "cpu"), ``geometry`` (DeviceGeometry),
@@ -97,13 +99,14 @@ class DeviceScene:
     def __init__(self, corners: np.ndarray, *, accel: str, builder: str, leaf_size: int, device: str | None,
                  bounds, origin, extra: dict | Callable | None = None, whole_bytes: int = 0, reserve: int = 0,
                  max_buffer_bytes: int | None = None, max_buffer_label: str = "max_buffer_bytes",
-                 timings: dict | None = None, acceleration=None):
+                 timings: dict | None = None, acceleration=None, uploaded=None):
         with stage(timings, "acceleration build"):
             if isinstance(corners, Mesh) and not (acceleration is None and max_buffer_bytes is None
                                                   and gathers_on_device(accel, builder, device)):
                 corners, bounds, origin = mesh_corners(corners)
             self.acceleration = (acceleration if acceleration is not None
-                                 else build_acceleration(corners, accel, builder, leaf_size, device))
+                                 else build_acceleration(corners, accel, builder, leaf_size, device,
+                                                         uploaded=uploaded if isinstance(corners, Mesh) else None))
             if callable(extra):
                 extra = extra(self.acceleration)
         with stage(timings, "copy to device"):

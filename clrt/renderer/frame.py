@@ -31,8 +31,11 @@ from clrt import checks
 from clrt import options as opts
 from clrt.config import (DEFAULT_ACCEL, DEFAULT_BUILDER, DEFAULT_LEAF_SIZE, DEFAULT_MAX_DEPTH,
                          DEFAULT_PATH_MAX_DEPTH, DEFAULT_SPP, INTEGRATORS, PATH_STRATEGIES)
+from clrt.device import scene as device_scene
 from clrt.device.args import camera_value
+from clrt.device.context import create_context
 from clrt.device.context import format_bytes as _size
+from clrt.device.crease import shade_on_device, upload_mesh
 from clrt.device.geometry import replace_buffer
 from clrt.device.instances import instanced_scene, move_instances, refit_meshes
 from clrt.device.pinned import PinnedPool
@@ -142,7 +145,10 @@ class Renderer:
     ``timings``: the set-up's stages, in ms, reported once here rather than
     in every frame's: "initialisation", "acceleration build", "copy to
     device" (the context, the upload and the programs), and "program build"
-    once the path tracer's program is built (its first frame).
+    once the path tracer's program is built (its first frame).  Where a GPU
+    builds the tree from a one-object scene's mesh, it also makes the crease
+    split, the vertex normals and the per-slot shading data, in
+    "acceleration build" (clrt.device.crease): the host makes none of them.
 
     Threads may share a Renderer: its renders, refits and light changes take
     turns (clrt.device.sharing), so a frame shows the scene as it was when
@@ -168,7 +174,10 @@ class Renderer:
             # The path tracer's textures (emission, metallic-roughness, normal
             # maps) for scenes made for it; Whitted reads base colours only.
             self._pbr_textures = self.scene.integrator == "path"
-            self.arrays = flatten_scene(self.scene, pbr_textures=self._pbr_textures)
+            # Where a GPU builds the tree from the mesh, it makes a plain
+            # mesh's shading arrays too: no crease split on the host (clrt.device.crease).
+            shades = max_buffer_bytes is None and device_scene.gathers_on_device(accel, builder, device)
+            self.arrays = flatten_scene(self.scene, pbr_textures=self._pbr_textures, device_shading=shades)
         a = self.arrays
 
         def shading_arrays(acceleration) -> dict:
@@ -186,6 +195,8 @@ class Renderer:
         self.instances = a.instances   # placed meshes: a two-level scene (docs/instances.md), else None
         if a.instances is not None:
             self.device_scene = instanced_scene(a.instances, material_base=a.material_base, **upload)
+        elif a.shading is not None:
+            self.device_scene = self._shaded_on_device(upload)
         else:
             self.device_scene = DeviceScene(a.corners, bounds=a.bounds, origin=a.origin, **upload)
         scene_on_device = self.device_scene
@@ -205,6 +216,28 @@ class Renderer:
         self._max_group = min(   # work-items a launch's group may have, see _launch_shape
             k.get_work_group_info(cl.kernel_work_group_info.WORK_GROUP_SIZE, self.queue.device)
             for name, k in self.kernels.items() if name != "encode_srgb8")
+
+    def _shaded_on_device(self, upload: dict) -> DeviceScene:
+        """The DeviceScene of a one-object scene whose shading arrays the device
+        makes (SceneArrays.shading): the mesh's vertices and faces uploaded
+        once, the tree built and the corners gathered from them, then the
+        crease split, the vertex normals and the per-slot TriangleInfo made
+        there (clrt.device.crease) -- bit for bit the host's arrays."""
+        source = self.arrays.shading
+        context, queue = create_context(upload["device"])
+        with stage(self.timings, "acceleration build"):
+            uploaded = upload_mesh(context, queue, source.mesh)
+
+        def shading_arrays(acceleration) -> dict:
+            try:
+                made = shade_on_device(context, queue, uploaded, source.crease, acceleration.device_buffers.prim_ids,
+                                       source.mesh.face_material, source.material_base)
+            finally:
+                uploaded.release()
+            return made.extra()
+
+        return DeviceScene(source.mesh, bounds=None, origin=None, uploaded=uploaded,
+                           **{**upload, "extra": shading_arrays})
 
     @property
     def device_bytes(self) -> int:
@@ -285,7 +318,7 @@ class Renderer:
         if not job.seen:   # one warning, saying why where it can (clrt render prints it as one line)
             warnings.warn(nothing_visible(self.arrays.corners, self.arrays.bounds, job.camera),
                           NothingVisibleWarning, stacklevel=4)   # past one_at_a_time and keyword_options
-        return Frame(job.image, job.prim, job.t, job.timings, self.device, len(self.arrays.corners), tiles=tiles,
+        return Frame(job.image, job.prim, job.t, job.timings, self.device, self.arrays.num_triangles, tiles=tiles,
                      visible=job.seen)
 
     def _render_path(self, camera, linear, hits, max_depth, seed, spp, exposure, strategy, progress,
@@ -316,7 +349,7 @@ class Renderer:
         if preview is not None:
             def shown(image, done):
                 preview(Frame(image if linear else tone_map(image, exposure), None, None, {}, self.device,
-                              len(self.arrays.corners), spp=done))
+                              self.arrays.num_triangles, spp=done))
         with stage(timings, "path tracing"):
             out = self._path.render(camera, spp=spp, max_depth=depth, seed=seed, strategy=strategy,
                                     progress=progress or (lambda n: None), wait=lambda e: wait_for(e),
@@ -326,7 +359,7 @@ class Renderer:
         if not out["seen"]:
             warnings.warn(nothing_visible(self.arrays.corners, self.arrays.bounds, camera),
                           NothingVisibleWarning, stacklevel=4)
-        return Frame(image, None, None, timings, self.device, len(self.arrays.corners), tiles=out["tiles"],
+        return Frame(image, None, None, timings, self.device, self.arrays.num_triangles, tiles=out["tiles"],
                      visible=out["seen"], albedo=out["albedo"], normal=out["normal"], spp=out["spp"],
                      interrupted=out["interrupted"])
 
@@ -387,8 +420,8 @@ class Renderer:
         arrays = flatten_scene(scene, pbr_textures=self._pbr_textures)
         # The same triangles of the same objects; their vertex normals may be
         # split differently (the crease angle looks at the moved faces).
-        same = (arrays.corners.shape == self.arrays.corners.shape
-                and np.array_equal(arrays.tri_info["material"], self.arrays.tri_info["material"])
+        same = (arrays.num_triangles == self.arrays.num_triangles
+                and np.array_equal(arrays.triangle_materials, self.arrays.triangle_materials)
                 and len(arrays.materials) == len(self.arrays.materials))
         moved = moved_meshes(self.arrays, arrays)   # a scene of placed meshes: those whose vertices moved
         if not same or (moved is None) != (self.instances is None):
@@ -453,7 +486,7 @@ class Renderer:
         if "arrays" not in self.__dict__:   # _rebuilt_renderer's shell
             return f"<clrt.Renderer of {self.scene.num_triangles:,} triangles, unpickled where OpenCL cannot run>"
         placed = f" in {len(self.instances):,} placements" if self.instances is not None else ""
-        return (f"<clrt.Renderer of {self.arrays.corners.shape[0]:,} triangles{placed}, {len(self.arrays.lights)} "
+        return (f"<clrt.Renderer of {self.arrays.num_triangles:,} triangles{placed}, {len(self.arrays.lights)} "
                 f"light(s), {self.acceleration.accel} ({self.acceleration.builder}) on {self.device}>")
 
     def add_follower(self, queries) -> None:

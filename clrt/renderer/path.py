@@ -139,7 +139,7 @@ class PathTracer:
         self.renderer = renderer
         detail = {"SURFACE_DETAIL": None} if renderer.arrays.detail is not None else None
         defines = {**renderer.device_scene.defines(detail), **bsdf_defines(renderer.arrays.materials,
-                                                                             renderer.arrays.tri_info["material"])}
+                                                                             renderer.arrays.triangle_materials)}
         program = build_program(renderer.context, "path.cl", defines, register_cap(renderer.queue.device))
         self.kernels = typed_kernels(program, PATH_KERNELS, defines)
         self.kernel = self.kernels["path_trace"]

@@ -25,15 +25,71 @@ from clrt.scene.scene import MATERIAL_TEXTURES, Scene
 from clrt.scene.texture import srgb_decode
 
 
+class Later:
+    """What a SceneArrays field holds in place of an array that a device made a
+    copy of itself (:class:`ShadingSource`): ``make()`` makes it on the host,
+    where it is first asked for; ``length``: its length, where known."""
+
+    def __init__(self, make, length: int | None = None):
+        self.make, self.length = make, length
+
+
+class _MadeOnUse:
+    """A SceneArrays field that may hold a :class:`Later`: the array is made
+    on first use and kept."""
+
+    def __set_name__(self, owner, name: str):
+        self.name, self.key = name, f"_{name}"
+
+    def __get__(self, arrays, owner=None):
+        if arrays is None:                 # (a dataclass field without a default)
+            raise AttributeError(self.name)
+        value = arrays.__dict__[self.key]
+        if isinstance(value, Later):
+            value = arrays.__dict__[self.key] = value.make()
+        return value
+
+    def __set__(self, arrays, value) -> None:
+        arrays.__dict__[self.key] = value
+
+
+@dataclass(frozen=True)
+class ShadingSource:
+    """What a device needs to make a scene's per-triangle and per-vertex
+    shading arrays itself (clrt.device.crease), where the scene is one object
+    of one mesh without authored normals, textures or colours, not placed:
+    ``mesh``, the object's mesh before any crease split (its triangles are
+    the split's, bit for bit); ``crease``, the split's angle for a smooth
+    material (Mesh.split_at_creases), None for a flat one (the mesh's own
+    vertices); ``material_base``, the row of the object's material (a
+    triangle's row is it, or ``material_base + 1 + face_material``)."""
+
+    mesh: Mesh
+    crease: float | None
+    material_base: int = 0
+
+    def triangle_materials(self) -> np.ndarray:
+        """(F,) int32 material row of each triangle, as flatten_scene gives it."""
+        ids = self.mesh.face_material
+        if ids is None:
+            return np.full(len(self.mesh.faces), self.material_base, np.int32)
+        return (self.material_base + 1 + ids).astype(np.int32)
+
+
 @dataclass
 class SceneArrays:
     """The scene as the kernels see it, triangles in input order, positions in
     the device's frame: the scene's own, moved by ``-origin``
-    (:func:`device_origin`; zeros for a scene near the origin)."""
+    (:func:`device_origin`; zeros for a scene near the origin).
 
-    corners: np.ndarray          # (F, 3, 3) float32 triangle corners, device frame
-    tri_info: np.ndarray         # (F,) TRIANGLE_INFO
-    vertex_normals: np.ndarray   # (V, 4) float32
+    Where ``shading`` is set, a device makes ``tri_info`` and
+    ``vertex_normals`` itself (and the corners, gathered from the uploaded
+    vertices): those three hold :class:`Later` and are made on the host only
+    if asked for."""
+
+    corners: np.ndarray = _MadeOnUse()          # (F, 3, 3) float32 triangle corners, device frame
+    tri_info: np.ndarray = _MadeOnUse()         # (F,) TRIANGLE_INFO
+    vertex_normals: np.ndarray = _MadeOnUse()   # (V, 4) float32
     materials: np.ndarray        # (M,) MATERIAL
     lights: np.ndarray           # (L,) LIGHT, at least one record (OpenCL buffers cannot be empty), device frame
     bounds: np.ndarray           # (2, 3) float64, the scene's own frame
@@ -42,6 +98,20 @@ class SceneArrays:
     #                                                                    origin, in the scene's frame
     instances: "Instances | None" = None     # an instanced scene's placements (placed_arrays), else None
     material_base: np.ndarray | None = None  # (I,) int32: each instance's first material row
+    shading: ShadingSource | None = None     # the device makes the shading arrays (flatten_scene)
+
+    @property
+    def num_triangles(self) -> int:
+        corners = self.__dict__["_corners"]      # (not made for a count)
+        return corners.length if isinstance(corners, Later) else len(corners)
+
+    @property
+    def triangle_materials(self) -> np.ndarray:
+        """(F,) int32: ``tri_info["material"]`` (without the crease split where
+        the device made ``tri_info``)."""
+        if self.shading is not None and isinstance(self.__dict__["_tri_info"], Later):
+            return self.shading.triangle_materials()
+        return self.tri_info["material"]
 
 
 @dataclass
@@ -157,7 +227,7 @@ def triangle_verts(corners: np.ndarray) -> np.ndarray:
     return records
 
 
-def flatten_scene(scene: Scene, pbr_textures: bool = False) -> SceneArrays:
+def flatten_scene(scene: Scene, pbr_textures: bool = False, device_shading: bool = False) -> SceneArrays:
     """One triangle list for all objects, each triangle tagged with its material:
     each object's ``material`` then its ``materials``, object after object.
     (An instanced scene, ``Scene.instanced``, is not flattened: it gives
@@ -167,9 +237,18 @@ def flatten_scene(scene: Scene, pbr_textures: bool = False) -> SceneArrays:
     metallic-roughness, normal maps); without it only base colour textures
     get rows (the others' rows are -1), as the Whitted renderer reads no
     other -- a scene whose only textures are those then builds the plain
-    program, and renders bit for bit as it did before they were read."""
+    program, and renders bit for bit as it did before they were read.
+
+    ``device_shading``: the caller's device can make the shading arrays
+    (clrt.device.crease): for a scene :func:`shading_source` finds one for,
+    the arrays come back with ``shading`` set and the corners, tri_info and
+    vertex normals left for the host to make only if asked for -- no crease
+    split, no normals, no gather on the host."""
     if scene.instanced:
         return placed_arrays(scene, pbr_textures)
+    source = shading_source(scene) if device_shading else None
+    if source is not None:
+        return _shaded_on_device(scene, source, pbr_textures)
     meshes = [o.mesh for o in scene.objects]
     mesh = meshes[0] if len(meshes) == 1 else Mesh.concatenate(meshes)   # (one object: no copy)
     object_materials = [(o.material, *o.materials) for o in scene.objects]
@@ -201,6 +280,50 @@ def flatten_scene(scene: Scene, pbr_textures: bool = False) -> SceneArrays:
     origin = device_origin(bounds)
     return SceneArrays(triangle_corners(mesh, origin), tri_info, normals, materials,
                        light_records(scene.lights, origin), bounds, detail, origin)
+
+
+def shading_source(scene: Scene) -> ShadingSource | None:
+    """The ShadingSource of a scene whose shading arrays a device can make
+    itself -- one object, not placed, whose mesh has no authored normals and
+    no corner colours, whose materials name no texture it could show --
+    else None."""
+    if len(scene.objects) != 1 or scene.instanced:
+        return None
+    o = scene.objects[0]
+    mesh = o.mesh
+    textured = mesh.uv is not None and any(getattr(m, name) is not None
+                                           for m in (o.material, *o.materials) for name in MATERIAL_TEXTURES)
+    if mesh.normals is not None or mesh.colors is not None or textured:
+        return None
+    split_of = mesh.crease_split_of
+    if split_of is not None:
+        return ShadingSource(split_of[0], split_of[1])
+    return ShadingSource(mesh, None)
+
+
+def _shaded_on_device(scene: Scene, source: ShadingSource, pbr_textures: bool) -> SceneArrays:
+    """flatten_scene of a one-object scene whose shading arrays the device
+    makes: the host's corners, tri_info and vertex normals are Later."""
+    o = scene.objects[0]
+    materials = material_rows(_texture_rows((o.material, *o.materials), False, pbr_textures, {}))
+    bounds = scene.bounds
+    origin = device_origin(bounds)
+    mesh, count = o.mesh, source.mesh.num_triangles
+
+    def tri_info() -> np.ndarray:
+        info = np.zeros(count, TRIANGLE_INFO)
+        info["vertex"] = mesh.faces        # (the crease split, made here)
+        info["material"] = source.triangle_materials()
+        return info
+
+    def vertex_normals() -> np.ndarray:
+        normals = np.zeros((len(mesh.vertices), 4), np.float32)
+        normals[:, :3] = mesh.vertex_normals()
+        return normals
+
+    return SceneArrays(Later(lambda: triangle_corners(source.mesh, origin), count), Later(tri_info, count),
+                       Later(vertex_normals), materials, light_records(scene.lights, origin), bounds, None,
+                       origin, shading=source)
 
 
 def _texture_rows(materials, uv: bool, pbr_textures: bool, textures: dict) -> list:

@@ -127,13 +127,13 @@ def emitting_triangles(arrays, order: np.ndarray) -> tuple:
     slot and its instance -- one light per placed emitter, so that a mesh
     placed K times emits K times."""
     if arrays.instances is None:
-        return arrays.corners[order], arrays.tri_info["material"][order], None, None
+        return arrays.corners[order], arrays.triangle_materials[order], None, None
     placed = arrays.instances
     emits = materials_emit(arrays.materials)
     slot_of = np.empty(len(order), np.int64)
     slot_of[order] = np.arange(len(order))
     first = np.cumsum([0] + [len(m.faces) for m in placed.meshes])
-    local = arrays.tri_info["material"].astype(np.int64)
+    local = arrays.triangle_materials.astype(np.int64)
     corners, material_of, slots, instances = [], [], [], []
     pairs = np.stack([placed.mesh_of, arrays.material_base.astype(np.int64)], axis=1)
     for k, base in np.unique(pairs, axis=0):

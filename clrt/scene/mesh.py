@@ -99,6 +99,23 @@ def _column_bounds(points: np.ndarray) -> np.ndarray:
     return np.stack([rows.min(axis=0), rows.max(axis=0)]).astype(np.float64)
 
 
+def crease_cos_limit(crease: float) -> float:
+    """The least cosine of the angle between two faces' normals at which the
+    crease split (Mesh.split_at_creases) smooths their edge: cos(crease),
+    less 1e-6 for the rounding of normals of float32 positions (~1e-7)."""
+    return math.cos(math.radians(float(crease))) - 1e-6
+
+
+def unit_rows(n: np.ndarray) -> np.ndarray:
+    """(N, 3) float64 rows ``n`` divided by their lengths, zero rows where the
+    length is 0.  Each length is sqrt((x*x + y*y) + z*z) in float64, in that
+    order (what np.linalg.norm gives along a row of three), so that a device
+    taking the same steps gets the same bits (kernels/crease.cl)."""
+    x, y, z = n[:, 0], n[:, 1], n[:, 2]
+    length = np.sqrt((x * x + y * y) + z * z)[:, None]
+    return np.divide(n, length, out=np.zeros_like(n), where=length > 0)
+
+
 def vertex_text(vertices, index: int) -> str:
     """'vertex 3 at (0, -4.4e28, 0)', for errors: coordinates to 3 significant
     digits, or 9 where 3 would round one past +-MAX_COORDINATE into range."""
@@ -181,8 +198,13 @@ class Mesh:
 
     def __repr__(self) -> str:
         detail = [key for key in self.DETAIL if getattr(self, key) is not None]
-        return (f"Mesh({self.name!r}, {len(self.vertices):,} vertices, {len(self.faces):,} triangles"
-                + (f", with {', '.join(detail)}" if detail else "") + ")")
+        split_of = self.crease_split_of
+        if split_of is not None and "faces" not in self.__dict__:   # (not made for a repr)
+            counts = (f"{self.num_triangles:,} triangles split at creases of {split_of[1]:g} degrees "
+                      "when first used")
+        else:
+            counts = f"{len(self.vertices):,} vertices, {len(self.faces):,} triangles"
+        return f"Mesh({self.name!r}, {counts}" + (f", with {', '.join(detail)}" if detail else "") + ")"
 
     def with_detail(self, normals=None, uv=None, colors=None, face_material=None) -> "Mesh":
         """A copy with the surface detail given (not None) checked and set;
@@ -224,7 +246,32 @@ class Mesh:
     def __getstate__(self) -> dict:
         state = dict(self.__dict__)
         state.pop("_variants", None)   # weak references do not pickle (and a copy makes its own)
+        if "_split_of" in state:       # a crease split travels as its mesh and angle, made again where used
+            for key in ("vertices", "faces", "_bounds", "_area_normals"):
+                state.pop(key, None)
         return state
+
+    def __getattr__(self, name: str):
+        # Reached only for what the instance lacks: the vertices and faces of a
+        # crease split not made yet (split_at_creases), made here on first use.
+        split_of = self.__dict__.get("_split_of")
+        if split_of is not None and name in ("vertices", "faces"):
+            vertices, faces = split_of[0]._split(split_of[1])
+            self.__dict__.update(vertices=vertices, faces=faces)
+            return self.__dict__[name]
+        raise AttributeError(f"'Mesh' object has no attribute {name!r}")
+
+    @property
+    def num_triangles(self) -> int:
+        """``len(faces)``, without making a crease split for it."""
+        split_of = self.crease_split_of
+        return len(self.faces) if split_of is None else split_of[0].num_triangles
+
+    @property
+    def crease_split_of(self) -> "tuple[Mesh, float] | None":
+        """``(mesh, crease)`` where this Mesh is ``mesh.split_at_creases(crease)``
+        (made or not yet), else None."""
+        return self.__dict__.get("_split_of")
 
     def variant(self, key, make) -> "Mesh":
         """``make()``, a Mesh derived from this one, made once for each ``key``
@@ -250,7 +297,10 @@ class Mesh:
         # Computed once: scenes, cameras and lights ask for the bounds again and
         # again (a mesh is not changed after it is made).  The float32 minima
         # and maxima are exact: no float64 copy; no copy at all where every
-        # vertex is used (the usual mesh).
+        # vertex is used (the usual mesh).  A crease split's are its mesh's
+        # (the same corners), not a reason to make it.
+        if self.crease_split_of is not None:
+            return self.crease_split_of[0]._bounds
         used = np.zeros(len(self.vertices), bool)
 
         def mark(start: int, stop: int) -> None:
@@ -266,6 +316,8 @@ class Mesh:
         normal times twice the area.  Computed once, read only: the crease split
         needs them, and then the split mesh's vertex normals, which are the same
         numbers (its triangles are bitwise the same)."""
+        if self.crease_split_of is not None:
+            return self.crease_split_of[0]._area_normals
         # The corners gathered in float32 (np.take: several times faster than
         # v[index], numpy 2.4), the edges in float64, and np.cross's products
         # written out (the same operations, so the same bits, at 2/3 of the time).
@@ -278,9 +330,7 @@ class Mesh:
 
     def face_normals(self) -> np.ndarray:
         """(F, 3) float64 unit geometric normals (zero for zero-area triangles)."""
-        n = self._area_normals
-        length = np.linalg.norm(n, axis=1, keepdims=True)
-        return np.divide(n, length, out=np.zeros_like(n), where=length > 0)
+        return unit_rows(self._area_normals)
 
     def vertex_normals(self) -> np.ndarray:
         """(V, 3) float32 vertex normals for smooth shading: the file's own (unit
@@ -292,12 +342,12 @@ class Mesh:
         area_n = self._area_normals
         # Sums in a fixed order -- every face's corner 0, then corner 1, then corner 2,
         # faces in order -- with np.bincount, which adds its weights in index order
-        # (as three np.add.at calls would, at a few times their speed).
+        # (as three np.add.at calls would, at a few times their speed), from 0.0.
+        # The device's twin (kernels/crease.cl, vertex_normals) adds in this order too.
         corners = self.faces.T.reshape(-1)
         acc = np.stack([np.bincount(corners, weights=np.tile(area_n[:, k], 3), minlength=len(self.vertices))
                         for k in range(3)], axis=1)
-        length = np.linalg.norm(acc, axis=1, keepdims=True)
-        return np.divide(acc, length, out=np.zeros_like(acc), where=length > 0).astype(np.float32)
+        return unit_rows(acc).astype(np.float32)
 
     def split_at_creases(self, crease: float = config.DEFAULT_CREASE_ANGLE) -> "Mesh":
         """The same triangles, in the same order and at the same (bitwise)
@@ -312,16 +362,36 @@ class Mesh:
 
         Each corner starts as its own vertex; the two corners that a smooth
         edge's faces have at each end of the edge are joined (union-find), so
-        a vertex's faces fall into the fans between its creases.
+        a vertex's faces fall into the fans between its creases.  The
+        half-edges of one edge (between the same two merged positions) are
+        taken in index order (half-edge 3f + k runs from corner k of face f to
+        corner k + 1), and each is paired with the next: an edge of three or
+        more faces is joined as a chain in that order.  Each group of corners
+        becomes one vertex, numbered in the order of their smallest corners.
+
+        The split is made when first needed: the Mesh returned holds this mesh
+        and the angle (:attr:`crease_split_of`) until its vertices or faces are
+        asked for -- a Renderer on a GPU has the device split the uploaded
+        triangles instead (clrt.device.crease), bit for bit the same, and the
+        host never makes it.
 
         A mesh with authored normals is returned as it is: the file already
         says where its edges are hard (by giving a vertex one normal per side).
         """
         if self.normals is not None:
             return self
-        return self.variant(("split", float(crease)), lambda: self._split(crease))
+        crease = float(crease)
+        return self.variant(("split", crease), lambda: self._split_later(crease))
 
-    def _split(self, crease: float) -> "Mesh":
+    def _split_later(self, crease: float) -> "Mesh":
+        """split_at_creases' Mesh, its vertices and faces made on first use (__getattr__)."""
+        split = object.__new__(Mesh)
+        split.__dict__.update(name=self.name, normals=None, uv=self.uv, colors=self.colors,
+                              face_material=self.face_material, _split_of=(self, crease))
+        return split
+
+    def _split(self, crease: float) -> tuple[np.ndarray, np.ndarray]:
+        """The vertices and faces of split_at_creases(crease), made on the host."""
         faces = self.faces
         n_faces = len(faces)
         weld = _welded(self.vertices)
@@ -330,13 +400,17 @@ class Mesh:
         # Half-edge 3f + k runs from corner k to corner k + 1 of face f.
         a, b = welded.reshape(-1), np.roll(welded, -1, axis=1).reshape(-1)
         key = np.minimum(a, b).astype(np.int64) * (int(weld.max()) + 1) + np.maximum(a, b)
-        order = np.argsort(key)
+        # Stable: the half-edges of one edge in index order (the rule of the
+        # docstring, which the device follows; numpy's default sort is not stable).
+        order = np.argsort(key, kind="stable")
         sorted_key = key[order]
         same = np.flatnonzero(sorted_key[1:] == sorted_key[:-1])
         h1, h2 = order[same], order[same + 1]                           # half-edges of one edge
         f1, f2 = h1 // 3, h2 // 3
-        cos_limit = math.cos(math.radians(float(crease))) - 1e-6         # float32 positions: ~1e-7
-        cosine = np.einsum("ij,ij->i", np.take(normals, f1, axis=0), np.take(normals, f2, axis=0))
+        cos_limit = crease_cos_limit(crease)
+        n1, n2 = np.take(normals, f1, axis=0), np.take(normals, f2, axis=0)
+        # (x1 x2 + y1 y2) + z1 z2, in this order (einsum adds in an order of its own)
+        cosine = (n1[:, 0] * n2[:, 0] + n1[:, 1] * n2[:, 1]) + n1[:, 2] * n2[:, 2]
         smooth = (f1 != f2) & (cosine >= cos_limit)
         h1, h2, f1, f2 = h1[smooth], h2[smooth], f1[smooth], f2[smooth]
         n1 = 3 * f1 + (h1 + 1) % 3                                      # corner at the half-edge's end
@@ -365,9 +439,7 @@ class Mesh:
         is_root = label == np.arange(3 * n_faces, dtype=np.int32)
         corner_vertex = (np.cumsum(is_root, dtype=np.int32) - 1)[label]
         vertices = np.take(self.vertices, faces.reshape(-1)[is_root], axis=0)
-        split = self._keep_detail(vertices, corner_vertex.reshape(n_faces, 3).astype(np.int32), self.name)
-        object.__setattr__(split, "_area_normals", self._area_normals)   # the same triangles, bit for bit
-        return split
+        return vertices, corner_vertex.reshape(n_faces, 3).astype(np.int32)
 
     def transformed(self, matrix: np.ndarray) -> "Mesh":
         """A copy with a 4x4 affine transform applied to the vertices (and to

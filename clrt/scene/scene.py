@@ -498,7 +498,7 @@ class Scene:
     @property
     def num_triangles(self) -> int:
         """Triangles as placed (a mesh placed K times counts K times)."""
-        return sum(len(o.mesh.faces) * o.placements for o in self.objects)
+        return sum(o.mesh.num_triangles * o.placements for o in self.objects)
 
     @property
     def instanced(self) -> bool:
