@@ -273,15 +273,22 @@ void compress_labels(volatile global int* label, const uint num_corners, global 
 // scanned from its tile's start.
 #define SCAN_TILE (BUILD_GROUP * SCAN_ITEMS)
 
+// The sum of a work-item's SCAN_ITEMS values from `first` (those below n).
+inline uint items_sum(const global uint* data, uint n, uint first)
+{
+    uint sum = 0;
+    for (uint k = 0; k < SCAN_ITEMS; ++k)
+        if (first + k < n)
+            sum += data[first + k];
+    return sum;
+}
+
 __kernel __attribute__((reqd_work_group_size(BUILD_GROUP, 1, 1)))
 void scan_tiles(const global uint* data, const uint n, global uint* tile_sums)
 {
     local uint scratch[BUILD_GROUP];
     const uint first = get_group_id(0) * SCAN_TILE + get_local_id(0) * SCAN_ITEMS;
-    uint sum = 0;
-    for (uint k = 0; k < SCAN_ITEMS; ++k)
-        if (first + k < n)
-            sum += data[first + k];
+    const uint sum = items_sum(data, n, first);
     uint total;
     group_exclusive_scan(sum, scratch, &total);
     if (get_local_id(0) == 0)
@@ -302,10 +309,7 @@ void scan_apply(global uint* data, const uint n, const global uint* tile_sums)
 {
     local uint scratch[BUILD_GROUP];
     const uint first = get_group_id(0) * SCAN_TILE + get_local_id(0) * SCAN_ITEMS;
-    uint sum = 0;
-    for (uint k = 0; k < SCAN_ITEMS; ++k)
-        if (first + k < n)
-            sum += data[first + k];
+    const uint sum = items_sum(data, n, first);
     uint total;
     uint prefix = tile_sums[get_group_id(0)] + group_exclusive_scan(sum, scratch, &total);
     for (uint k = 0; k < SCAN_ITEMS; ++k)
