@@ -189,7 +189,8 @@ def build_program(context: cl.Context, entry: str, defines: dict | None = None,
         from_disk, stored = program is not None, 0.0
         if program is None:
             program, stored = _compile(context, entry, source, options)
-        kernels = len([name for name in program.kernel_names.split(";") if name])
+        # (not KERNEL_NAMES: NVIDIA's driver crashes on it for a program without kernels)
+        kernels = program.get_info(cl.program_info.NUM_KERNELS)
         builds.append(ProgramBuild(entry, dict(defines or {}), len(source), kernels, time.perf_counter() - start,
                                    stored, from_disk))
         _programs[key] = program
