@@ -272,8 +272,8 @@ inline int sah_top(const global BuildCluster* clusters, int count, global BuildC
     // middles.  A split is made by the work-item of its middle, as node
     // next_node + (splits of deeper levels) + (splits of its level before it).
     for (int level = levels - 1; level >= 0; --level) {
-        for (int m = max(lid, 1); m < count; m += group) {
-            if (s->split_level[m] != level)
+        for (int m = lid; m < count; m += group) {
+            if (m == 0 || s->split_level[m] != level)    // place 0 is no middle
                 continue;
             int index = next_node;
             for (int q = 1; q < count; ++q) {
