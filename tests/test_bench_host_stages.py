@@ -2,8 +2,6 @@
 (and their device twins) beside the whole calls on the test device, and each
 call over the device build and upload of the corners."""
 
-import pytest
-
 from benchmarks import host_stages
 
 
@@ -23,7 +21,10 @@ def test_host_stages_print_every_stage_and_the_whole_calls(device, capsys):
     for call in ("Accel(V, F)", "Renderer(scene)", "Renderer(V, F)"):   # a whole call holds its build
         assert all(whole >= build for whole, build in zip(rows[f"{call}: whole call"],
                                                           rows[f"{call}: of it the build"]))
-        assert rows[f"{call} / (build + upload) (ratio)"][0] == pytest.approx(
-            rows[f"{call}: whole call"][0] / (rows["device build from corners (warm)"][0]
-                                              + rows["upload of the corners"][0]), rel=0.05, abs=0.02)   # (printed rounded)
+        # the ratio of the unrounded times: within what the printed ones
+        # (to 0.1 ms; a GPU's are a few tenths) and its own two places allow
+        whole = rows[f"{call}: whole call"][0]
+        parts = rows["device build from corners (warm)"][0] + rows["upload of the corners"][0]
+        ratio = rows[f"{call} / (build + upload) (ratio)"][0]
+        assert (whole - 0.05) / (parts + 0.1) - 0.005 <= ratio <= (whole + 0.05) / max(parts - 0.1, 1e-9) + 0.005, call
     assert "| stage | 3,0" in out or "| stage | 2,9" in out      # about 3K triangles in the first column
