@@ -235,7 +235,9 @@ void reinsert_check(const global BuildNode* nodes, global BuildMove* moves, cons
     bool made = holds_its_nodes(nodes, moves, locks, n);
     if (made && move.target != move.junction)
         for (int a = nodes[move.target].parent; a != move.junction; a = nodes[a].parent)
-            if (holds_its_nodes(nodes, moves, locks, a)) {
+            // (a < 0: past the root, never on a valid tree, where the junction
+            // is an ancestor of the target; a bound on the walk all the same)
+            if (a < 0 || holds_its_nodes(nodes, moves, locks, a)) {
                 made = false;
                 break;
             }
