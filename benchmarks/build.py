@@ -161,10 +161,9 @@ def _traced_accel(mesh, volume, builder, leaf_size, device):
     top = DEVICE_VARIANTS.get(builder, {}).get("top_clusters")
     partition = DEVICE_VARIANTS.get(builder, {}).get("partition")
     reinsert = DEVICE_VARIANTS.get(builder, {}).get("reinsert_iterations")
-    saved_reinsert, saved_reinsert_max = dict(reinsertion.REINSERT_ITERATIONS), reinsertion.REINSERT_MAX_TRIANGLES
+    saved_reinsert = dict(reinsertion.REINSERT_ITERATIONS)
     if reinsert is not None:                 # at any size
-        reinsertion.REINSERT_ITERATIONS.update({kind: reinsert for kind in saved_reinsert})
-        reinsertion.REINSERT_MAX_TRIANGLES = 1 << 62
+        reinsertion.REINSERT_ITERATIONS.update({kind: ((1 << 62, reinsert),) for kind in saved_reinsert})
     saved, saved_min = dict(build.TREELET_LEAVES), build.TREELET_MIN_TRIANGLES
     saved_top, saved_partition = dict(build.SAH_TOP_CLUSTERS), dict(build.SAH_PARTITION)
     if leaves is not None:                   # the variant's treelets for this one build
@@ -187,7 +186,6 @@ def _traced_accel(mesh, volume, builder, leaf_size, device):
         build.SAH_PARTITION.update(saved_partition)
         build.PART_MIN_TRIANGLES = saved_minimum
         reinsertion.REINSERT_ITERATIONS.update(saved_reinsert)
-        reinsertion.REINSERT_MAX_TRIANGLES = saved_reinsert_max
 
 
 # Trace times of trees a few per cent apart are compared in one loop: every

@@ -108,7 +108,7 @@ def test_reinserted_trees_give_brute_force_hits(device, monkeypatch):
     (the GPU default below a million triangles; CPU devices build without),
     grazing rays included."""
     from clrt.device import reinsert
-    monkeypatch.setitem(reinsert.REINSERT_ITERATIONS, "cpu", 4)
+    monkeypatch.setitem(reinsert.REINSERT_ITERATIONS, "cpu", ((1 << 62, 4),))
     for name in ("torus", "icosphere"):
         mesh = TEST_MESHES[name]()
         o, d = _hard_rays(mesh, np.random.default_rng(12))
@@ -123,3 +123,13 @@ def test_reinserted_trees_give_brute_force_hits(device, monkeypatch):
 def test_bad_iterations_raise_input_error(bad, queue):
     with pytest.raises(InputError, match="reinsert_iterations"):
         build_on_device(*queue, CORNERS["torus"](), reinsert_iterations=bad)
+
+
+def test_default_iterations_by_device_type_and_size():
+    """The tiers of REINSERT_ITERATIONS: the first a mesh is below applies, none above the last."""
+    from clrt.device.reinsert import REINSERT_ITERATIONS, default_iterations
+    tiers = REINSERT_ITERATIONS["gpu"]
+    assert [default_iterations("gpu", below - 1) for below, _ in tiers] == [n for _, n in tiers]
+    assert default_iterations("gpu", tiers[-1][0]) == 0
+    assert default_iterations("gpu", 3) == tiers[0][1] > 0
+    assert default_iterations("cpu", 75_408) == 0

@@ -12,21 +12,26 @@ import numpy as np
 
 from clrt import layouts
 
-# Iterations per device type (0: none), on meshes of fewer than
-# REINSERT_MAX_TRIANGLES.  Each is five launches over the nodes.  On the H200
-# (docs/benchmarks.md, "Building the BVH on the device"), 0 / 2 / 4
-# iterations: SAH cost over the host SAH tree's bunny00 1.055 / 1.013 /
+# Iterations per device type: (fewer triangles than, iterations), the first
+# that applies; none above the last.  Each is five launches over the nodes.
+# On the H200 (docs/benchmarks.md, "Building the BVH on the device"), 0 / 2 /
+# 4 iterations: SAH cost over the host SAH tree's bunny00 1.055 / 1.013 /
 # 1.001, camel 1.057 / 1.013 / 0.993; primary rays 1.039 / 1.028 / 1.011 and
 # 1.088 / 0.990 / 0.980 of the host SAH tree's time, random rays 1.081 /
 # 1.066 / 1.049 and 1.062 / 1.022 / 1.003; the build 2.2 / 2.6 / 2.8 ms
-# (bunny00).  Above a million triangles an iteration costs 1 ms a million
-# (10M: 52 -> 91 ms with 4), where the build's time is what issue 38 counts
-# against Warp's: off there for now.  On a CPU the build is what a user waits
-# for (each iteration costs bunny00 about 30 ms on 2 cores): off, as the
-# treelets are.  The trees are the same from build to build (PLOC numbers its
-# nodes in a fixed order: reinsertion breaks ties of gain by node number).
-REINSERT_ITERATIONS = {"gpu": 4, "cpu": 0}
-REINSERT_MAX_TRIANGLES = 1_000_000
+# (bunny00).  Counted on PoCL (benchmarks/tree_counts.py, random rays' warp
+# cost, which followed the H200's random-ray times within 1 %), 4 / 8 / 12 /
+# 24 iterations: bunny00 1.044 / 1.037 / 1.010 / 1.010, elephant 1.038 /
+# 1.020 / 1.017 / 1.016, camel 0.994 / - / 0.986 / 0.985, homer 0.998 / 0.990
+# / 0.988 / 0.988 of the host SAH tree's: 12 below 250,000 triangles, where
+# they cost about 2 ms more.  Above a million triangles an iteration costs 1
+# ms a million (10M: 52 -> 91 ms with 4), where the build's time is what
+# issue 38 counts against Warp's: off there for now.  On a CPU the build is
+# what a user waits for (each iteration costs bunny00 about 30 ms on 2
+# cores): off, as the treelets are.  The trees are the same from build to
+# build (PLOC numbers its nodes in a fixed order: reinsertion breaks ties of
+# gain by node number).
+REINSERT_ITERATIONS = {"gpu": ((250_000, 12), (1_000_000, 4)), "cpu": ()}
 REINSERT_MAX = 64        # the most iterations a build takes (build_on_device checks)
 # Subtrees one search holds postponed (build_reinsert.cl): a search that
 # would hold more leaves the rest unsearched (the tree stays valid).
@@ -44,9 +49,9 @@ def reinsert_defines() -> dict:
 
 
 def default_iterations(kind: str, num_tris: int) -> int:
-    """Reinsertion's iterations when the caller does not say: REINSERT_ITERATIONS
-    of the device type below REINSERT_MAX_TRIANGLES, else none."""
-    return REINSERT_ITERATIONS[kind] if num_tris < REINSERT_MAX_TRIANGLES else 0
+    """Reinsertion's iterations when the caller does not say: the first of
+    REINSERT_ITERATIONS' tiers of the device type that num_tris is below, else none."""
+    return next((iterations for below, iterations in REINSERT_ITERATIONS[kind] if num_tris < below), 0)
 
 
 def check_iterations(iterations) -> int:
