@@ -179,7 +179,11 @@ kernel takes which is declared once, in the signature tables
   200: env_height   uint
   204: marginal_at  uint    ... of its rows' CDF (env_height + 1 floats)
   208: conditional_at uint  ... of each row's CDF over its texels (env_height rows of env_width + 1 floats)
-  212: pad          uint[3]
+  212: record_at    uint    -DPATH_RECORD_RAYS (benchmarks): byte offset in `frame` of the rays
+                            recorded (PathTracer.record_rays: two uint counts, 8 bytes of padding,
+                            then record_capacity Ray rows of bounces and as many of shadow rays)
+  216: record_capacity uint rays of each kind the record holds
+  220: pad          uint
 
 ``SceneInfo`` (80 B) -- the uploaded scene's values (geometry.cl, shading.cl)
     0: ambient_light float4  linear RGB, w unused (renderer only, as the rest but
@@ -450,7 +454,7 @@ PATH_LAUNCH = np.dtype([("cam", CAMERA), ("background", float4), ("environment",
                         ("strategy", np.uint32), ("entries_at", np.uint32), ("num_entries", np.uint32),
                         ("inv_power", np.float32), ("env_at", np.uint32), ("env_width", np.uint32),
                         ("env_height", np.uint32), ("marginal_at", np.uint32), ("conditional_at", np.uint32),
-                        ("pad", np.uint32, 3)])
+                        ("record_at", np.uint32), ("record_capacity", np.uint32), ("pad", np.uint32)])
 SCENE_INFO = np.dtype([("ambient_light", float4), ("background", float4), ("packets_at", np.uint64),
                        ("num_tris", np.uint32), ("num_lights", np.uint32), ("materials_at", np.uint32),
                        ("lights_at", np.uint32), ("textures_at", np.uint32), ("srgb_at", np.uint32),

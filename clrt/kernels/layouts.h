@@ -141,7 +141,8 @@ typedef struct {
     uint entries_at, num_entries;
     float inv_power;             // 1 / the power of all lights
     uint env_at, env_width, env_height, marginal_at, conditional_at;
-    uint pad[3];
+    uint record_at, record_capacity;   // -DPATH_RECORD_RAYS: where the traced rays are copied
+    uint pad;
 } PathLaunch;
 
 // What kernels know of the uploaded scene by value: the triangle count, where

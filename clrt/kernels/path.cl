@@ -26,6 +26,30 @@
 #define PATH_SEEN(frame) ((__global uint*)(frame))
 #define PATH_SUMS(frame, at) ((__global float4*)((frame) + (at)))
 
+// With -DPATH_RECORD_RAYS (clrt.renderer.path.PathTracer.record_rays, for
+// benchmarks/path_rays.py): each ray a launch traces after the camera's --
+// the bounces (closest hit) and the shadow rays (any hit up to the light) --
+// copied to `frame` at record_at, up to record_capacity of each kind, so that
+// the ray queries can be timed on the rays a path tracer really traces.
+#ifdef PATH_RECORD_RAYS
+#define RECORD_BOUNCE 0u
+#define RECORD_SHADOW 1u
+inline void record_ray(__global uchar* frame, const PathLaunch* launch, uint kind, float3 origin, float3 dir,
+                       float tmax)
+{
+    __global uint* counts = (__global uint*)(frame + launch->record_at);
+    const uint k = atomic_inc(counts + kind);
+    if (k < launch->record_capacity) {
+        __global Ray* rays = (__global Ray*)(frame + launch->record_at + 16u);
+        rays[kind * launch->record_capacity + k].origin = (float4)(origin, 0.0f);
+        rays[kind * launch->record_capacity + k].dir = (float4)(dir, tmax);
+    }
+}
+#define RECORD_RAY(frame, launch, kind, origin, dir, tmax) record_ray(frame, launch, kind, origin, dir, tmax)
+#else
+#define RECORD_RAY(frame, launch, kind, origin, dir, tmax)
+#endif
+
 // Dimension groups of a sample (random4): the camera jitter, then two a vertex.
 #define GROUP_CAMERA 0u
 #define GROUP_LIGHT(depth) (2u * (depth) - 1u)    // light choice, its point (2), Russian roulette
@@ -81,11 +105,13 @@ inline Path start_path(const PathLaunch* launch, uint px, uint py, uint pixel, u
 // hit, the emission seen there, next-event estimation and the BSDF-sampled
 // continuation; true when the path has ended (p->radiance is then its sample).
 inline bool path_segment(const Geometry* g, const Shading* sh, const Lights* lights, const PathLaunch* launch,
-                         uint pixel, uint last, Path* p, FirstHits* first)
+                         uint pixel, uint last, Path* p, FirstHits* first, __global uchar* frame)
 {
     const uint depth = p->depth, sample = p->sample, seed = launch->seed;
     const uint strategy = launch->strategy;
     const float3 dir = p->dir;
+    if (depth > 1u)
+        RECORD_RAY(frame, launch, RECORD_BOUNCE, p->origin, dir, INFINITY);
     int instance;
     const Hit hit = closest_instance_hit(g, p->origin, dir, 0.0f, INFINITY, depth > 1u, &instance);
     // Light found by this BSDF-sampled ray: all of it after a delta choice
@@ -135,7 +161,10 @@ inline bool path_segment(const Geometry* g, const Shading* sh, const Lights* lig
     LightSample ls;
     if (strategy != PATH_BSDF && sample_light(g, sh, lights, &s, ul.xyz, &ls)) {
         const float3 f = bsdf_eval(&b, n, ng, wo, ls.wi);
-        if (max_component(f * ls.radiance) > 0.0f && !any_hit(g, ls.origin, ls.wi, 0.0f, ls.tmax, true)) {
+        const bool traced = max_component(f * ls.radiance) > 0.0f;
+        if (traced)
+            RECORD_RAY(frame, launch, RECORD_SHADOW, ls.origin, ls.wi, ls.tmax);
+        if (traced && !any_hit(g, ls.origin, ls.wi, 0.0f, ls.tmax, true)) {
             const float w = ls.delta || strategy == PATH_LIGHT ? 1.0f
                           : mis_weight(ls.pdf, bsdf_pdf(&b, n, ng, wo, ls.wi));
             p->radiance += p->beta * f * ls.radiance * (w / ls.pdf);
@@ -202,7 +231,7 @@ __kernel void path_trace(__global uchar* frame, const PathLaunch launch, GEOMETR
         uint k = 0u;
         Path p = start_path(&launch, px, py, pixel, launch.sample_first);
         for (;;) {
-            if (!path_segment(&g, &sh, &lights, &launch, pixel, last, &p, &first))
+            if (!path_segment(&g, &sh, &lights, &launch, pixel, last, &p, &first, frame))
                 continue;
             // A sample that is not finite (a pdf that underflowed) is dropped
             // rather than let it poison the pixel's sum for good.

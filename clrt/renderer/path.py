@@ -33,7 +33,7 @@ from clrt.device.context import device_kind
 from clrt.device.geometry import replace_buffer
 from clrt.device.program import build_program, launch_size
 from clrt.device.signature import typed_kernels
-from clrt.layouts import PATH_LAUNCH
+from clrt.layouts import PATH_LAUNCH, RAY
 from clrt.renderer.kernels import FRAME_HEADER, PATH_ARRAYS, PATH_KERNELS, pack_tables
 from clrt.scene.emitters import emitting_triangles, light_tables
 from clrt.scene.texture import srgb_encode8
@@ -141,6 +141,7 @@ class PathTracer:
         defines = {**renderer.device_scene.defines(detail), **bsdf_defines(renderer.arrays.materials,
                                                                              renderer.arrays.triangle_materials)}
         program = build_program(renderer.context, "path.cl", defines, register_cap(renderer.queue.device))
+        self._defines = defines
         self.kernels = typed_kernels(program, PATH_KERNELS, defines)
         self.kernel = self.kernels["path_trace"]
         self.max_group = self.kernel.get_work_group_info(cl.kernel_work_group_info.WORK_GROUP_SIZE,
@@ -218,22 +219,13 @@ class PathTracer:
         cl.enqueue_nd_range_kernel(self.renderer.queue, resolve, *launch_size(int(pixels), self.resolve_group))
         return cl.enqueue_copy(self.renderer.queue, host, means, is_blocking=False)
 
-    def render(self, camera, *, spp: int, max_depth: int, seed: int, strategy: str, progress: Callable,
-               wait: Callable, limits, preview: Callable | None = None) -> dict:
-        """Render ``spp`` samples a pixel; return the linear image, the albedo
-        and normal images (H, W, 3 float32), the samples done, whether Ctrl-C
-        ended it early, whether a camera ray hit anything, the tiles
-        (launches), the kernel milliseconds and the read-back's.
-        ``preview(image, samples)``, if given, gets the linear image after
-        each pass but the last.  ``wait(event)`` waits for a launch (or a
-        preview's copy), in the order they were queued."""
+    def _path_launch(self, camera, seed: int, max_depth: int, strategy: str) -> tuple:
+        """path_trace's PathLaunch (the image's array offsets set, the
+        rectangle and samples left to the caller) and its other arguments."""
         r = self.renderer
         scene = r.scene
         values = self._light_tables(scene)
-        w, h = camera.width, camera.height
-        pixels = w * h
-        frame, means = self._buffers(pixels)
-        cl.enqueue_fill_buffer(r.queue, frame, np.zeros(1, np.uint32), 0, FRAME_HEADER)
+        pixels = camera.width * camera.height
         launch = np.zeros((), PATH_LAUNCH)
         launch["cam"] = camera_value(camera, r.arrays.origin)
         launch["background"] = vec4(scene.background)
@@ -253,6 +245,23 @@ class PathTracer:
                                              num_lights=len(r.arrays.lights), **self._scene_offsets)
         detail = (*b["tri_detail"], *b["texels"]) if r.arrays.detail is not None else ()
         args = (*r.geometry.buffer_args, scene_value, *b["tri_info"], *b["vertex_normals"], self.tables, *detail)
+        return launch, args
+
+    def render(self, camera, *, spp: int, max_depth: int, seed: int, strategy: str, progress: Callable,
+               wait: Callable, limits, preview: Callable | None = None) -> dict:
+        """Render ``spp`` samples a pixel; return the linear image, the albedo
+        and normal images (H, W, 3 float32), the samples done, whether Ctrl-C
+        ended it early, whether a camera ray hit anything, the tiles
+        (launches), the kernel milliseconds and the read-back's.
+        ``preview(image, samples)``, if given, gets the linear image after
+        each pass but the last.  ``wait(event)`` waits for a launch (or a
+        preview's copy), in the order they were queued."""
+        r = self.renderer
+        w, h = camera.width, camera.height
+        pixels = w * h
+        frame, means = self._buffers(pixels)
+        cl.enqueue_fill_buffer(r.queue, frame, np.zeros(1, np.uint32), 0, FRAME_HEADER)
+        launch, args = self._path_launch(camera, seed, max_depth, strategy)
         # The means come back into page-locked memory where the pool has some.
         block = r.image_pool.take(MEAN_BYTES_PER_PIXEL * pixels)
         host = (block.view(np.float32) if block is not None else np.empty(3 * len(PATH_ARRAYS) * pixels, np.float32))
@@ -317,6 +326,47 @@ class PathTracer:
         images = host.reshape(len(PATH_ARRAYS), h, w, 3)
         return dict(image=images[0], albedo=images[1], normal=images[2], spp=queued, interrupted=interrupted,
                     seen=bool(seen[0]), tiles=launches, kernel_ms=stats["kernel_ms"], read_ms=read_ms)
+
+    def record_rays(self, camera, *, spp: int, max_depth: int, seed: int, capacity: int,
+                    strategy: str = "mis") -> dict:
+        """The rays path_trace traces after the camera's for ``spp`` samples of
+        every pixel of ``camera``'s image (path.cl's -DPATH_RECORD_RAYS, a
+        program of its own; for benchmarks): {"bounce": (origins,
+        directions), "shadow": (origins, directions, tmax), "traced":
+        {"bounce": n, "shadow": n}}, float32 in the scene's coordinates, at
+        most ``capacity`` of each kind (the first recorded, in the order the
+        work-items ran; "traced" counts them all).  One launch over the image."""
+        r = self.renderer
+        kernel = typed_kernels(build_program(r.context, "path.cl", {**self._defines, "PATH_RECORD_RAYS": None},
+                                             register_cap(r.queue.device)), PATH_KERNELS, self._defines)["path_trace"]
+        w, h = camera.width, camera.height
+        record_at = FRAME_HEADER + PATH_BYTES_PER_PIXEL * w * h
+        ray_bytes = RAY.itemsize
+        with r.device_scene.out_of_memory():
+            frame = cl.Buffer(r.context, cl.mem_flags.READ_WRITE, record_at + 16 + 2 * capacity * ray_bytes)
+        try:
+            cl.enqueue_fill_buffer(r.queue, frame, np.zeros(1, np.uint32), 0, FRAME_HEADER)
+            cl.enqueue_fill_buffer(r.queue, frame, np.zeros(1, np.uint32), record_at, 16)
+            launch, args = self._path_launch(camera, seed, max_depth, strategy)
+            launch["x"], launch["y"], launch["w"], launch["h"] = 0, 0, w, h
+            launch["sample_first"], launch["sample_count"], launch["samples_before"] = 0, spp, 0
+            launch["record_at"], launch["record_capacity"] = record_at, capacity
+            kernel.set_args(frame, launch, *args)
+            cl.enqueue_nd_range_kernel(r.queue, kernel, *self._launch_shape(w, h, r.limits))
+            counts = np.empty(4, np.uint32)
+            rays = np.empty(2 * capacity, RAY)
+            cl.enqueue_copy(r.queue, counts, frame, src_offset=record_at)
+            cl.enqueue_copy(r.queue, rays, frame, src_offset=record_at + 16, is_blocking=True)
+        finally:
+            frame.release()
+        out = {"traced": {}}
+        for kind, name in enumerate(("bounce", "shadow")):
+            kept = rays[kind * capacity:kind * capacity + min(int(counts[kind]), capacity)]
+            origins = (kept["origin"][:, :3].astype(np.float64) + r.arrays.origin).astype(np.float32)
+            rows = (origins, np.ascontiguousarray(kept["dir"][:, :3]))
+            out[name] = rows if name == "bounce" else (*rows, np.ascontiguousarray(kept["dir"][:, 3]))
+            out["traced"][name] = int(counts[kind])
+        return out
 
     def _launch_shape(self, w: int, h: int, limits) -> tuple:
         bw, bh = limits.block or (0, 0)

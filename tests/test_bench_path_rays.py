@@ -1,0 +1,57 @@
+"""The path tracer's rays recorded for benchmarks (PathTracer.record_rays,
+path.cl -DPATH_RECORD_RAYS) are the rays it traces: bounces from points on
+the surface, shadow rays from the surface to the light; and
+benchmarks.path_rays times them beside the random set."""
+
+import numpy as np
+
+import clrt
+from benchmarks import path_rays
+from clrt.scene.scene import Camera, scene_from_mesh
+
+from conftest import TEST_MESHES
+
+
+def _recorded(device, max_depth, capacity=100_000):
+    mesh = TEST_MESHES["torus"]()
+    camera = Camera.framing(mesh.bounds, 48, 32)
+    scene = scene_from_mesh(mesh)
+    return mesh, scene, path_rays.recorded_rays(mesh, camera, device, 2, max_depth, 7, capacity)
+
+
+def test_recorded_rays_start_on_the_surface_and_shadow_rays_end_at_the_light(device):
+    mesh, scene, out = _recorded(device, 3)
+    (bounce_o, bounce_d), (shadow_o, shadow_d, shadow_t) = out["bounce"], out["shadow"]
+    assert out["traced"] == {"bounce": len(bounce_o), "shadow": len(shadow_o)}
+    assert len(bounce_o) > 100 and len(shadow_o) > 100
+    diagonal = float(np.linalg.norm(np.subtract(*mesh.bounds)))
+    accel = clrt.Accel(mesh, device=device)
+    for origins, directions in ((bounce_o, bounce_d), (shadow_o, shadow_d)):
+        assert accel.distance(origins).max() < 1e-4 * diagonal    # from a path vertex, the scene's coordinates
+        assert np.abs(np.linalg.norm(directions, axis=1) - 1).max() < 1e-5
+    (light,) = scene.lights                                       # the default point light
+    ends = shadow_o.astype(np.float64) + shadow_t[:, None] * shadow_d
+    assert np.abs(ends - np.asarray(light.position)).max() < 1e-4 * diagonal
+
+
+def test_paths_of_depth_one_trace_nothing_and_the_capacity_caps_the_record(device):
+    assert _recorded(device, 1)[2]["traced"] == {"bounce": 0, "shadow": 0}
+    _, _, capped = _recorded(device, 3, capacity=50)
+    assert len(capped["bounce"][0]) == len(capped["shadow"][0]) == 50
+    assert capped["traced"]["bounce"] > 50 and capped["traced"]["shadow"] > 50
+
+
+def test_the_benchmark_prints_each_set_and_closest_agrees_with_any_hit(device, tmp_path, capsys):
+    mesh = TEST_MESHES["torus"]()
+    path = tmp_path / "torus.obj"
+    path.write_text("".join(f"v {x} {y} {z}\n" for x, y, z in mesh.vertices)
+                    + "".join(f"f {a + 1} {b + 1} {c + 1}\n" for a, b, c in mesh.faces))
+    assert path_rays.main([str(path), "--device", device or "cpu", "--size", "48x32", "--spp", "2",
+                           "--repeat", "1", "--warmup", "0", "--builder", "auto,sah"]) == 0
+    rows = [[c.strip() for c in line.split("|")[1:-1]] for line in capsys.readouterr().out.splitlines()
+            if line.startswith("| auto") or line.startswith("| sah")]
+    assert [(r[0], r[1]) for r in rows] == [(b, s) for b in ("auto", "sah") for s in ("bounce", "shadow", "random")]
+    for row in rows:
+        assert int(row[2].replace(",", "")) > 0
+        assert row[9] == row[10]          # a closest hit within tmax exactly where any hit is
+    assert [r[9] for r in rows[:3]] == [r[9] for r in rows[3:]]   # the same hits from either tree
