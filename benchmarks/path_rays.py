@@ -14,7 +14,8 @@ of the ``random`` set of benchmarks.raysets (origins in the box enlarged by
 up to their own lengths), kernel ms (median of the launches' profiling times
 after a warm-up) and Mrays/s of it, and the wall ms of the call.  This is issue
 39's "diffuse bounce rays and shadow rays of the path tracer ... beside the
-random set".
+random set".  ``--embree`` adds Embree's wall ms for the same rays on the host
+CPU (embreex: one core, as benchmarks.raysets says).
 """
 
 from __future__ import annotations
@@ -30,7 +31,7 @@ import argparse
 import numpy as np
 
 from benchmarks.common import NON_NEGATIVE, POSITIVE, exit_code, parse_count, parse_size, rate
-from benchmarks.raysets import random_rays, reference_camera, time_queries
+from benchmarks.raysets import embree_measure, random_rays, reference_camera, time_queries
 from clrt.config import BUILDER_CHOICES
 
 
@@ -60,7 +61,7 @@ def time_set(accel, origins, directions, tmax, repeat: int, warmup: int) -> dict
 
 
 def run(mesh_path, device=None, size=(1920, 1080), spp: int = 1, max_depth: int = 3, builders=("auto",),
-        count: int = 1_000_000, seed: int = 0, repeat: int = 20, warmup: int = 3) -> None:
+        count: int = 1_000_000, seed: int = 0, repeat: int = 20, warmup: int = 3, embree: bool = False) -> None:
     import clrt
     from clrt.device.context import create_context, device_label
     mesh = clrt.load_mesh(mesh_path)
@@ -90,6 +91,12 @@ def run(mesh_path, device=None, size=(1920, 1080), spp: int = 1, max_depth: int 
                   f"{rate(len(o) / m['closest_kernel_ms'] / 1e3)} | {m['closest_wall_ms']:.3f} | "
                   f"{m['any_kernel_ms']:.3f} | {rate(len(o) / m['any_kernel_ms'] / 1e3)} | {m['any_wall_ms']:.3f} | "
                   f"{m['hits']:,} | {m['blocked']:,} |")
+    if embree:
+        for name, o, d, tmax in sets:
+            if len(o):
+                e = embree_measure(mesh, o, d, tmax, repeat, warmup)
+                print(f"| Embree (embreex, 1 core) | {name} | {len(o):,} | | | {e['closest_wall_ms']:.3f} | | | "
+                      f"{e['any_wall_ms']:.3f} | {e['hits']:,} | |")
 
 
 def main(argv=None) -> int:
@@ -105,6 +112,7 @@ def main(argv=None) -> int:
     p.add_argument("--seed", type=NON_NEGATIVE, default=0, help="of the path tracer's samples and the random set")
     p.add_argument("--repeat", type=POSITIVE, default=20, help="timed queries of each set (the median is printed)")
     p.add_argument("--warmup", type=NON_NEGATIVE, default=3, help="untimed queries before them")
+    p.add_argument("--embree", action="store_true", help="Embree's times for the same rays (needs embreex)")
     args = p.parse_args(argv)
     builders = tuple(b.strip() for b in args.builder.split(",") if b.strip())
     bad = [b for b in builders if b not in BUILDER_CHOICES]
@@ -113,7 +121,7 @@ def main(argv=None) -> int:
     if args.rays < 1:
         p.error("--rays must be at least 1")
     return exit_code(run, args.mesh, args.device, args.size, args.spp, args.max_depth, builders, args.rays,
-                     args.seed, args.repeat, args.warmup)
+                     args.seed, args.repeat, args.warmup, args.embree)
 
 
 if __name__ == "__main__":

@@ -230,8 +230,8 @@ def _embree_scene(vertices, faces):
 
 
 def _embree_limits(count: int, tmax) -> np.ndarray:
-    """Embree's per-ray far distances for ``tmax`` (its rays take no infinity)."""
-    return np.full(count, min(tmax, 3e38), np.float32)
+    """Embree's per-ray far distances for ``tmax``, one for all or one a ray (its rays take no infinity)."""
+    return np.minimum(np.broadcast_to(np.asarray(tmax, np.float64), (count,)), 3e38).astype(np.float32)
 
 
 def embree_measure(mesh, origins, directions, tmax=np.inf, repeat: int = 5, warmup: int = 2) -> dict:

@@ -4,6 +4,7 @@ the surface, shadow rays from the surface to the light; and
 benchmarks.path_rays times them beside the random set."""
 
 import numpy as np
+import pytest
 
 import clrt
 from benchmarks import path_rays
@@ -41,17 +42,37 @@ def test_paths_of_depth_one_trace_nothing_and_the_capacity_caps_the_record(devic
     assert capped["traced"]["bounce"] > 50 and capped["traced"]["shadow"] > 50
 
 
-def test_the_benchmark_prints_each_set_and_closest_agrees_with_any_hit(device, tmp_path, capsys):
+def _torus_file(tmp_path):
     mesh = TEST_MESHES["torus"]()
     path = tmp_path / "torus.obj"
     path.write_text("".join(f"v {x} {y} {z}\n" for x, y, z in mesh.vertices)
                     + "".join(f"f {a + 1} {b + 1} {c + 1}\n" for a, b, c in mesh.faces))
-    assert path_rays.main([str(path), "--device", device or "cpu", "--size", "48x32", "--spp", "2",
+    return path
+
+
+def _rows(out, *starts):
+    return [[c.strip() for c in line.split("|")[1:-1]] for line in out.splitlines()
+            if any(line.startswith(f"| {start}") for start in starts)]
+
+
+def test_the_benchmark_prints_each_set_and_closest_agrees_with_any_hit(device, tmp_path, capsys):
+    assert path_rays.main([str(_torus_file(tmp_path)), "--device", device or "cpu", "--size", "48x32", "--spp", "2",
                            "--repeat", "1", "--warmup", "0", "--builder", "auto,sah"]) == 0
-    rows = [[c.strip() for c in line.split("|")[1:-1]] for line in capsys.readouterr().out.splitlines()
-            if line.startswith("| auto") or line.startswith("| sah")]
+    rows = _rows(capsys.readouterr().out, "auto", "sah")
     assert [(r[0], r[1]) for r in rows] == [(b, s) for b in ("auto", "sah") for s in ("bounce", "shadow", "random")]
     for row in rows:
         assert int(row[2].replace(",", "")) > 0
         assert row[9] == row[10]          # a closest hit within tmax exactly where any hit is
     assert [r[9] for r in rows[:3]] == [r[9] for r in rows[3:]]   # the same hits from either tree
+
+
+def test_embree_hits_the_same_rays_alike(device, tmp_path, capsys):
+    """--embree: the same sets through Embree, the shadow rays each up to its
+    own length (raysets._embree_limits takes one a ray)."""
+    pytest.importorskip("embreex", reason="Embree comparison needs the raybench extra (the test extra has it)")
+    assert path_rays.main([str(_torus_file(tmp_path)), "--device", device or "cpu", "--size", "48x32", "--spp", "2",
+                           "--repeat", "1", "--warmup", "0", "--embree"]) == 0
+    out = capsys.readouterr().out
+    ours, theirs = _rows(out, "auto"), _rows(out, "Embree")
+    assert [r[1] for r in theirs] == [r[1] for r in ours] == ["bounce", "shadow", "random"]
+    assert [r[9] for r in theirs] == [r[9] for r in ours]
