@@ -197,12 +197,13 @@ def time_queries(accel, call, repeat: int, warmup: int):
 
 
 def _queries(accel, origins, directions, tmax) -> dict:
-    """The two timed queries of a ray set, rays and results on the device:
-    {"closest": call, "any": call}."""
+    """The two timed queries of a ray set, rays (and a ray's own ``tmax``
+    where it is an array) and results on the device: {"closest": call, "any": call}."""
     import pyopencl.array as cla
     o_dev, d_dev = cla.to_device(accel.queue, origins), cla.to_device(accel.queue, directions)
-    return {"closest": lambda: accel.trace(o_dev, d_dev, tmax=tmax, fields=("t", "prim")),
-            "any": lambda: accel.any_hit(o_dev, d_dev, tmax=tmax)}
+    limit = cla.to_device(accel.queue, np.asarray(tmax, np.float32)) if np.ndim(tmax) else tmax
+    return {"closest": lambda: accel.trace(o_dev, d_dev, tmax=limit, fields=("t", "prim")),
+            "any": lambda: accel.any_hit(o_dev, d_dev, tmax=limit)}
 
 
 def measure(accel, origins, directions, tmax=np.inf, repeat: int = 5, warmup: int = 2) -> dict:

@@ -180,10 +180,14 @@ kernel takes which is declared once, in the signature tables
   204: marginal_at  uint    ... of its rows' CDF (env_height + 1 floats)
   208: conditional_at uint  ... of each row's CDF over its texels (env_height rows of env_width + 1 floats)
   212: record_at    uint    -DPATH_RECORD_RAYS (benchmarks): byte offset in `frame` of the rays
-                            recorded (PathTracer.record_rays: two uint counts, 8 bytes of padding,
-                            then record_capacity Ray rows of bounces and as many of shadow rays)
+                            recorded (PathTracer.record_rays): a PathRecordHead, then
+                            record_capacity Ray rows of each kind, kind by kind
   216: record_capacity uint rays of each kind the record holds
   220: pad          uint
+
+``PathRecordHead`` (16 B) -- the head of the rays path_trace records (-DPATH_RECORD_RAYS)
+    0: traced       uint[4] rays of each kind traced (PathTracer.RECORD_KINDS: bounces, shadow
+                            rays), recorded or not
 
 ``SceneInfo`` (80 B) -- the uploaded scene's values (geometry.cl, shading.cl)
     0: ambient_light float4  linear RGB, w unused (renderer only, as the rest but
@@ -455,6 +459,7 @@ PATH_LAUNCH = np.dtype([("cam", CAMERA), ("background", float4), ("environment",
                         ("inv_power", np.float32), ("env_at", np.uint32), ("env_width", np.uint32),
                         ("env_height", np.uint32), ("marginal_at", np.uint32), ("conditional_at", np.uint32),
                         ("record_at", np.uint32), ("record_capacity", np.uint32), ("pad", np.uint32)])
+PATH_RECORD_HEAD = np.dtype([("traced", np.uint32, 4)])
 SCENE_INFO = np.dtype([("ambient_light", float4), ("background", float4), ("packets_at", np.uint64),
                        ("num_tris", np.uint32), ("num_lights", np.uint32), ("materials_at", np.uint32),
                        ("lights_at", np.uint32), ("textures_at", np.uint32), ("srgb_at", np.uint32),
@@ -492,6 +497,7 @@ STRUCTS = {
     "QueryLaunch": QUERY_LAUNCH,
     "Tile": TILE,
     "PathLaunch": PATH_LAUNCH,
+    "PathRecordHead": PATH_RECORD_HEAD,
     "SceneInfo": SCENE_INFO,
     "Instance": INSTANCE,
 }

@@ -105,7 +105,7 @@ def test_reinserted_trees_cost_about_the_host_sah_trees(name, queue):
 
 def test_reinserted_trees_give_brute_force_hits(device, monkeypatch):
     """The no-detail-loss invariant through clrt.Accel with reinsertion on
-    (the GPU default below a million triangles; CPU devices build without),
+    (a GPU default below a million triangles; CPU devices build without),
     grazing rays included."""
     from clrt.device import reinsert
     monkeypatch.setitem(reinsert.REINSERT_ITERATIONS, "cpu", ((1 << 62, 4),))

@@ -53,8 +53,9 @@ from clrt.layouts import TRIANGLE_INFO
 from clrt.scene.mesh import Mesh, crease_cos_limit
 
 
-# Renderer takes the device's path on GPUs when this is True (on CPU devices
-# the host's split is as fast).  tests/test_device_crease.py forces it on any
+# Renderer takes the device's path where a GPU builds the tree from the mesh
+# (device_scene.gathers_on_device: a CPU device's build starts from the host's
+# corners) when this is True.  tests/test_device_crease.py forces it on any
 # device; it passed on the H200 (2026-12-03) as on PoCL, bit for bit the
 # host's although NVIDIA's compiler may fuse products (the kernels keep them
 # apart).  H200, 1M / 10M triangles: the host's split 815 / 12,134 ms, the

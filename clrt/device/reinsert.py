@@ -23,8 +23,9 @@ from clrt import layouts
 # cost, which followed the H200's random-ray times within 1 %), 4 / 8 / 12 /
 # 24 iterations: bunny00 1.044 / 1.037 / 1.010 / 1.010, elephant 1.038 /
 # 1.020 / 1.017 / 1.016, camel 0.994 / - / 0.986 / 0.985, homer 0.998 / 0.990
-# / 0.988 / 0.988 of the host SAH tree's: 12 below 250,000 triangles, where
-# they cost about 2 ms more.  Above a million triangles an iteration costs 1
+# / 0.988 / 0.988 of the host SAH tree's: 12 below 250,000 triangles (the
+# meshes counted have at most 75K; at 250K 8 more iterations would cost about
+# 2 ms, by the 1 ms a million below: an estimate).  Above a million triangles an iteration costs 1
 # ms a million (10M: 52 -> 91 ms with 4), where the build's time is what
 # issue 38 counts against Warp's: off there for now.  On a CPU the build is
 # what a user waits for (each iteration costs bunny00 about 30 ms on 2

@@ -145,6 +145,12 @@ typedef struct {
     uint pad;
 } PathLaunch;
 
+// The head of the rays path_trace records (-DPATH_RECORD_RAYS, at PathLaunch's
+// record_at); record_capacity Ray rows of each kind follow it, kind by kind.
+typedef struct {
+    uint traced[4];              // rays of each kind traced, recorded or not (RECORD_BOUNCE, ...)
+} PathRecordHead;
+
 // What kernels know of the uploaded scene by value: the triangle count, where
 // the packets start in the wide BVH's buffer, and (the renderer) the light
 // and colours and where each table lies in the `tables` buffer.

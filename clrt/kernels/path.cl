@@ -32,17 +32,18 @@
 // copied to `frame` at record_at, up to record_capacity of each kind, so that
 // the ray queries can be timed on the rays a path tracer really traces.
 #ifdef PATH_RECORD_RAYS
-#define RECORD_BOUNCE 0u
-#define RECORD_SHADOW 1u
+#if !defined(RECORD_BOUNCE) || !defined(RECORD_SHADOW)
+#error "build with the kinds' numbers, -DRECORD_BOUNCE=0u -DRECORD_SHADOW=1u (PathTracer.RECORD_KINDS)"
+#endif
 inline void record_ray(__global uchar* frame, const PathLaunch* launch, uint kind, float3 origin, float3 dir,
                        float tmax)
 {
-    __global uint* counts = (__global uint*)(frame + launch->record_at);
-    const uint k = atomic_inc(counts + kind);
+    __global PathRecordHead* head = (__global PathRecordHead*)(frame + launch->record_at);
+    const uint k = atomic_inc(head->traced + kind);
     if (k < launch->record_capacity) {
-        __global Ray* rays = (__global Ray*)(frame + launch->record_at + 16u);
-        rays[kind * launch->record_capacity + k].origin = (float4)(origin, 0.0f);
-        rays[kind * launch->record_capacity + k].dir = (float4)(dir, tmax);
+        __global Ray* ray = (__global Ray*)(head + 1) + kind * launch->record_capacity + k;
+        ray->origin = (float4)(origin, 0.0f);
+        ray->dir = (float4)(dir, tmax);
     }
 }
 #define RECORD_RAY(frame, launch, kind, origin, dir, tmax) record_ray(frame, launch, kind, origin, dir, tmax)

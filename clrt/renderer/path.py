@@ -33,7 +33,7 @@ from clrt.device.context import device_kind
 from clrt.device.geometry import replace_buffer
 from clrt.device.program import build_program, launch_size
 from clrt.device.signature import typed_kernels
-from clrt.layouts import PATH_LAUNCH, RAY
+from clrt.layouts import PATH_LAUNCH, PATH_RECORD_HEAD, RAY
 from clrt.renderer.kernels import FRAME_HEADER, PATH_ARRAYS, PATH_KERNELS, pack_tables
 from clrt.scene.emitters import emitting_triangles, light_tables
 from clrt.scene.texture import srgb_encode8
@@ -327,49 +327,65 @@ class PathTracer:
         return dict(image=images[0], albedo=images[1], normal=images[2], spp=queued, interrupted=interrupted,
                     seen=bool(seen[0]), tiles=launches, kernel_ms=stats["kernel_ms"], read_ms=read_ms)
 
+    #: The kinds of rays record_rays returns, in PathRecordHead's order (path.cl's RECORD_<KIND>).
+    RECORD_KINDS = ("bounce", "shadow")
+
     def record_rays(self, camera, *, spp: int, max_depth: int, seed: int, capacity: int,
                     strategy: str = "mis") -> dict:
         """The rays path_trace traces after the camera's for ``spp`` samples of
         every pixel of ``camera``'s image (path.cl's -DPATH_RECORD_RAYS, a
         program of its own; for benchmarks): {"bounce": (origins,
         directions), "shadow": (origins, directions, tmax), "traced":
-        {"bounce": n, "shadow": n}}, float32 in the scene's coordinates, at
-        most ``capacity`` of each kind (the first recorded, in the order the
+        {"bounce": n, "shadow": n}}, in the scene's coordinates (origins
+        float64, the rest float32), at most ``capacity`` of each kind (the first recorded, in the order the
         work-items ran; "traced" counts them all).  One launch over the image."""
         r = self.renderer
-        kernel = typed_kernels(build_program(r.context, "path.cl", {**self._defines, "PATH_RECORD_RAYS": None},
-                                             register_cap(r.queue.device)), PATH_KERNELS, self._defines)["path_trace"]
+        kinds = {f"RECORD_{name.upper()}": f"{k}u" for k, name in enumerate(self.RECORD_KINDS)}
+        program = build_program(r.context, "path.cl", {**self._defines, "PATH_RECORD_RAYS": None, **kinds},
+                                register_cap(r.queue.device))
+        kernel = typed_kernels(program, PATH_KERNELS, self._defines)["path_trace"]
+        max_group = kernel.get_work_group_info(cl.kernel_work_group_info.WORK_GROUP_SIZE, r.queue.device)
         w, h = camera.width, camera.height
         record_at = FRAME_HEADER + PATH_BYTES_PER_PIXEL * w * h
-        ray_bytes = RAY.itemsize
+        nbytes = record_at + PATH_RECORD_HEAD.itemsize + len(self.RECORD_KINDS) * capacity * RAY.itemsize
+        if nbytes > r.queue.device.max_mem_alloc_size:
+            raise r.device_scene.memory_error(MemoryError("the record exceeds one allocation"),
+                                              f" and {nbytes:,} bytes for the path tracer's recorded rays")
         with r.device_scene.out_of_memory():
-            frame = cl.Buffer(r.context, cl.mem_flags.READ_WRITE, record_at + 16 + 2 * capacity * ray_bytes)
+            frame = cl.Buffer(r.context, cl.mem_flags.READ_WRITE, nbytes)
+        head = np.zeros((), PATH_RECORD_HEAD)
+        rays = np.empty(len(self.RECORD_KINDS) * capacity, RAY)
         try:
             cl.enqueue_fill_buffer(r.queue, frame, np.zeros(1, np.uint32), 0, FRAME_HEADER)
-            cl.enqueue_fill_buffer(r.queue, frame, np.zeros(1, np.uint32), record_at, 16)
+            cl.enqueue_copy(r.queue, frame, head, dst_offset=record_at)
             launch, args = self._path_launch(camera, seed, max_depth, strategy)
             launch["x"], launch["y"], launch["w"], launch["h"] = 0, 0, w, h
             launch["sample_first"], launch["sample_count"], launch["samples_before"] = 0, spp, 0
             launch["record_at"], launch["record_capacity"] = record_at, capacity
             kernel.set_args(frame, launch, *args)
-            cl.enqueue_nd_range_kernel(r.queue, kernel, *self._launch_shape(w, h, r.limits))
-            counts = np.empty(4, np.uint32)
-            rays = np.empty(2 * capacity, RAY)
-            cl.enqueue_copy(r.queue, counts, frame, src_offset=record_at)
-            cl.enqueue_copy(r.queue, rays, frame, src_offset=record_at + 16, is_blocking=True)
+            cl.enqueue_nd_range_kernel(r.queue, kernel, *self._launch_shape(w, h, r.limits, max_group))
+            cl.enqueue_copy(r.queue, head, frame, src_offset=record_at)
+            cl.enqueue_copy(r.queue, rays, frame, src_offset=record_at + PATH_RECORD_HEAD.itemsize, is_blocking=True)
         finally:
             frame.release()
         out = {"traced": {}}
-        for kind, name in enumerate(("bounce", "shadow")):
-            kept = rays[kind * capacity:kind * capacity + min(int(counts[kind]), capacity)]
-            origins = (kept["origin"][:, :3].astype(np.float64) + r.arrays.origin).astype(np.float32)
+        for kind, name in enumerate(self.RECORD_KINDS):
+            traced = int(head["traced"][kind])
+            kept = rays[kind * capacity:kind * capacity + min(traced, capacity)]
+            # float64: far from the origin a float32 point may fall behind the
+            # surface a ray leaves (the device frame's spawn offset is smaller
+            # than float32's step there)
+            origins = kept["origin"][:, :3].astype(np.float64) + r.arrays.origin
             rows = (origins, np.ascontiguousarray(kept["dir"][:, :3]))
             out[name] = rows if name == "bounce" else (*rows, np.ascontiguousarray(kept["dir"][:, 3]))
-            out["traced"][name] = int(counts[kind])
+            out["traced"][name] = traced
         return out
 
-    def _launch_shape(self, w: int, h: int, limits) -> tuple:
+    def _launch_shape(self, w: int, h: int, limits, max_group: int | None = None) -> tuple:
+        """path_trace's global and local sizes over w x h pixels: the limits'
+        block where the kernel's work-groups may be that large (``max_group``:
+        its most work-items, by default the rendering kernel's)."""
         bw, bh = limits.block or (0, 0)
-        if not 0 < bw * bh <= self.max_group:
+        if not 0 < bw * bh <= (max_group or self.max_group):
             return (w, h), None
         return (-(-w // bw) * bw, -(-h // bh) * bh), (bw, bh)
