@@ -56,7 +56,7 @@ def point_cells(points: np.ndarray, launch: np.ndarray) -> np.ndarray:
     cells = np.empty(len(rows), CELL_DTYPE)
     # One row an axis: each step is one contiguous pass over a block.
     coords = np.empty((3, CELL_BLOCK), np.float32)
-    grid = np.empty((3, CELL_BLOCK), np.uint16)
+    grid = np.empty((3, CELL_BLOCK), CELL_DTYPE)
     with np.errstate(all="ignore"):   # points that are not finite: the query kernel reports them
         for first in range(0, len(rows), CELL_BLOCK):
             block = rows[first:first + CELL_BLOCK]
