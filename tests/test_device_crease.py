@@ -189,7 +189,6 @@ def _force_device_path(monkeypatch):
     the shading arrays made by the device (as on a GPU)."""
     from clrt.device import geometry
     monkeypatch.setattr(device_scene, "gathers_on_device", lambda accel, builder, device: True)
-    monkeypatch.setattr(device_crease, "ON_GPUS", True)
     monkeypatch.setattr(geometry, "WIDE_BVH_KINDS", ())
     monkeypatch.setattr(geometry, "RAY_PACKET_KINDS", ())
 

@@ -3,7 +3,8 @@ mesh's uploaded vertices and faces (kernels/crease.cl): where a GPU builds a
 Renderer's tree from the mesh (clrt.device.scene.gathers_on_device), the host
 neither splits, nor sums normals, nor gathers per-slot data (issue 38: on the
 H200's host those took 172 ms of a 1M-triangle Renderer, against 8 ms of
-device build).
+device build; the split alone 815 / 12,134 ms at 1M / 10M triangles, the
+device's 1.3 / 9.9 ms, python -m benchmarks.host_stages, 2026-12-03).
 
     >>> uploaded = upload_mesh(context, queue, mesh)      # vertices and faces, once
     >>> acceleration = build_acceleration(mesh, "box", "device", 4, uploaded=uploaded)
@@ -51,16 +52,6 @@ from clrt.device.signature import value
 from clrt.errors import DeviceError, DeviceMemoryError
 from clrt.layouts import TRIANGLE_INFO
 from clrt.scene.mesh import Mesh, crease_cos_limit
-
-
-# Renderer takes the device's path where a GPU builds the tree from the mesh
-# (device_scene.gathers_on_device: a CPU device's build starts from the host's
-# corners) when this is True.  tests/test_device_crease.py forces it on any
-# device; it passed on the H200 (2026-12-03) as on PoCL, bit for bit the
-# host's although NVIDIA's compiler may fuse products (the kernels keep them
-# apart).  H200, 1M / 10M triangles: the host's split 815 / 12,134 ms, the
-# device's 1.3 / 9.9 ms (python -m benchmarks.host_stages).
-ON_GPUS = True
 
 
 def U(name: str):

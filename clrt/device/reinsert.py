@@ -25,13 +25,13 @@ from clrt import layouts
 # 1.020 / 1.017 / 1.016, camel 0.994 / - / 0.986 / 0.985, homer 0.998 / 0.990
 # / 0.988 / 0.988 of the host SAH tree's: 12 below 250,000 triangles (the
 # meshes counted have at most 75K; at 250K 8 more iterations would cost about
-# 2 ms, by the 1 ms a million below: an estimate).  Above a million triangles an iteration costs 1
-# ms a million (10M: 52 -> 91 ms with 4), where the build's time is what
-# issue 38 counts against Warp's: off there for now.  On a CPU the build is
-# what a user waits for (each iteration costs bunny00 about 30 ms on 2
-# cores): off, as the treelets are.  The trees are the same from build to
-# build (PLOC numbers its nodes in a fixed order: reinsertion breaks ties of
-# gain by node number).
+# 2 ms, by the 1 ms a million below: an estimate).  Above a million triangles
+# an iteration costs 1 ms a million (10M: 52 -> 91 ms with 4), where the
+# build's time is what issue 38 counts against Warp's: off there for now.  On
+# a CPU the build is what a user waits for (each iteration costs bunny00
+# about 30 ms on 2 cores): off, as the treelets are.  The trees are the same
+# from build to build (PLOC numbers its nodes in a fixed order: reinsertion
+# breaks ties of gain by node number).
 REINSERT_ITERATIONS = {"gpu": ((250_000, 12), (1_000_000, 4)), "cpu": ()}
 REINSERT_MAX = 64        # the most iterations a build takes (build_on_device checks)
 # Subtrees one search holds postponed (build_reinsert.cl): a search that

@@ -35,7 +35,6 @@ from clrt.device import scene as device_scene
 from clrt.device.args import camera_value
 from clrt.device.context import create_context
 from clrt.device.context import format_bytes as _size
-from clrt.device import crease as device_crease
 from clrt.device.crease import shade_on_device, upload_mesh
 from clrt.device.geometry import replace_buffer
 from clrt.device.instances import instanced_scene, move_instances, refit_meshes
@@ -177,8 +176,7 @@ class Renderer:
             self._pbr_textures = self.scene.integrator == "path"
             # Where a GPU builds the tree from the mesh, it makes a plain
             # mesh's shading arrays too: no crease split on the host (clrt.device.crease).
-            shades = (device_crease.ON_GPUS and max_buffer_bytes is None
-                      and device_scene.gathers_on_device(accel, builder, device))
+            shades = max_buffer_bytes is None and device_scene.gathers_on_device(accel, builder, device)
             self.arrays = flatten_scene(self.scene, pbr_textures=self._pbr_textures, device_shading=shades)
         a = self.arrays
 

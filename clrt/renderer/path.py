@@ -337,8 +337,9 @@ class PathTracer:
         program of its own; for benchmarks): {"bounce": (origins,
         directions), "shadow": (origins, directions, tmax), "traced":
         {"bounce": n, "shadow": n}}, in the scene's coordinates (origins
-        float64, the rest float32), at most ``capacity`` of each kind (the first recorded, in the order the
-        work-items ran; "traced" counts them all).  One launch over the image."""
+        float64, the rest float32), at most ``capacity`` of each kind (the
+        first recorded, in the order the work-items ran; "traced" counts them
+        all).  One launch over the image."""
         r = self.renderer
         kinds = {f"RECORD_{name.upper()}": f"{k}u" for k, name in enumerate(self.RECORD_KINDS)}
         program = build_program(r.context, "path.cl", {**self._defines, "PATH_RECORD_RAYS": None, **kinds},
@@ -353,11 +354,11 @@ class PathTracer:
                                               f" and {nbytes:,} bytes for the path tracer's recorded rays")
         with r.device_scene.out_of_memory():
             frame = cl.Buffer(r.context, cl.mem_flags.READ_WRITE, nbytes)
-        head = np.zeros((), PATH_RECORD_HEAD)
+        head = np.empty((), PATH_RECORD_HEAD)
         rays = np.empty(len(self.RECORD_KINDS) * capacity, RAY)
         try:
             cl.enqueue_fill_buffer(r.queue, frame, np.zeros(1, np.uint32), 0, FRAME_HEADER)
-            cl.enqueue_copy(r.queue, frame, head, dst_offset=record_at)
+            cl.enqueue_fill_buffer(r.queue, frame, np.zeros(1, np.uint32), record_at, PATH_RECORD_HEAD.itemsize)
             launch, args = self._path_launch(camera, seed, max_depth, strategy)
             launch["x"], launch["y"], launch["w"], launch["h"] = 0, 0, w, h
             launch["sample_first"], launch["sample_count"], launch["samples_before"] = 0, spp, 0
