@@ -476,11 +476,13 @@ def test_a_sampled_partition_lowers_the_sah_cost_too(queue, monkeypatch):
     from clrt.scene import primitives
     mesh = primitives.torus(1.0, 0.35, 96, 48)
     corners = mesh.vertices[mesh.faces].astype(np.float32)
+    # Without reinsertion (a GPU's default below 1M triangles), which narrows
+    # the gap the partition makes: on the H200 33.15 against 32.87.
     plain = build_on_device(*queue, corners, leaf_size=4, keep_boxes=True, treelet_leaves=7,
-                            partition=False).stats()["sah_cost"]
+                            partition=False, reinsert_iterations=0).stats()["sah_cost"]
     monkeypatch.setattr(build, "PART_SAMPLES", 2048)
     sampled = build_on_device(*queue, corners, leaf_size=4, keep_boxes=True, treelet_leaves=7,
-                              partition=True).stats()["sah_cost"]
+                              partition=True, reinsert_iterations=0).stats()["sah_cost"]
     assert sampled < 0.98 * plain, (plain, sampled)
 
 

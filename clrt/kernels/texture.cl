@@ -55,7 +55,7 @@ inline int wrap_texel(int i, int n, uint mode)
     return m < 0 ? m + n : m;
 }
 
-inline float3 texel(const TextureSet* ts, __global const Texture* tex, int x, int y)
+inline float3 texel(const TextureSet* ts, __global const volatile Texture* tex, int x, int y)
 {
     const uchar4 c = *SPLIT_AT(ts, texels, tex->first + (uint)y * (uint)tex->width + (uint)x);
     if (tex->linear)   // one correctly rounded product: the same on every device and in numpy
@@ -76,7 +76,13 @@ inline int texel_floor(float x, float* frac)
 inline float3 sample_texture(const TextureSet* ts, int index, float2 uv)
 {
     #pragma OPENCL FP_CONTRACT OFF
-    __global const Texture* tex = ts->table + index;
+    // The row is read through a volatile pointer: read in place, NVIDIA's
+    // compiler (driver 580.159, H200, 2026-12-03) made a path_trace of a
+    // two-level scene with a normal map that never finished, and any change
+    // to the code about these reads (constants in place of the row, a printf
+    // of it; not the texel index clamped, nor the register cap) made one that
+    // finishes: tests/test_instanced_render.py's normal-map test on the GPU.
+    __global const volatile Texture* tex = ts->table + index;
     const int w = tex->width, h = tex->height;
     float fx, fy;
     const int x = texel_floor(uv.x * (float)w - 0.5f, &fx);
