@@ -24,7 +24,7 @@ import pyopencl as cl
 from clrt.device.acceleration import build_acceleration
 from clrt.device.context import create_context, device_kind, device_label, error_name, format_bytes, is_out_of_memory
 from clrt.device.geometry import DeviceGeometry, check_fits, packet_rays
-from clrt.device.program import build_program
+from clrt.device.program import build_program, keeps_binaries
 from clrt.device.signature import typed_kernels
 from clrt.errors import DeviceMemoryError
 from clrt.scene.arrays import device_origin, triangle_corners
@@ -156,8 +156,19 @@ class DeviceScene:
             defines["RAY_PACKETS"] = self.rays_per_item
         return {**defines, **(extra or {})}
 
-    def kernels(self, entry: str, table: dict, extra_defines: dict | None = None) -> dict[str, cl.Kernel]:
+    def kernels(self, entry: str, table: dict, extra_defines: dict | None = None,
+                groups: tuple | None = None) -> dict[str, cl.Kernel]:
         """The kernels of ``table`` (clrt.device.signature) in the program whose
-        entry file is ``entry``, built for this scene."""
+        entry file is ``entry``, built for this scene.  ``groups``: the
+        table's kernels in groups (tuples of names) that PoCL builds as
+        programs of their own, each when one of its kernels is first asked
+        for.  PoCL's front end takes a program's kernels whole (trace.cl's 17
+        took 1.0 s of a first Accel, the ray queries' alone 0.5:
+        docs/benchmarks.md); elsewhere the program is built whole, as it is
+        kept on disk (clrt.device.program.keeps_binaries)."""
         defines = self.defines(extra_defines)
-        return typed_kernels(build_program(self.context, entry, defines), table, defines)
+        if groups is None or keeps_binaries(self.context):
+            return typed_kernels(build_program(self.context, entry, defines), table, defines)
+        group_of = {name: tuple(group) for group in groups for name in group}
+        return typed_kernels(lambda name: build_program(self.context, entry, defines, kernels=group_of[name]),
+                             table, defines)

@@ -75,11 +75,13 @@ def parameters(signature, defines: dict) -> list[tuple[str, np.dtype | None]]:
     return out
 
 
-def typed_kernels(program: cl.Program, table: dict, defines: dict) -> "KernelTable":
+def typed_kernels(program, table: dict, defines: dict) -> "KernelTable":
     """The kernels of ``table`` (name -> signature) in ``program``, built with
     ``defines``, with their argument types declared; each keeps its parameter
-    names as ``arg_names`` (for the check)."""
-    return KernelTable(program, table, defines)
+    names as ``arg_names`` (for the check).  ``program``: a cl.Program, or a
+    function of a kernel's name that gives the program holding it (built
+    when first asked for: clrt.device.scene.DeviceScene.kernels)."""
+    return KernelTable(program if callable(program) else (lambda name: program), table, defines)
 
 
 class KernelTable(Mapping):
@@ -88,15 +90,15 @@ class KernelTable(Mapping):
     looked up in an on-disk cache) cost about 0.3 ms a kernel on the 2-core
     development machine, and an Accel uses one or two of its program's 17."""
 
-    def __init__(self, program: cl.Program, table: dict, defines: dict):
-        self._program, self._table, self._defines = program, table, defines
+    def __init__(self, program_of, table: dict, defines: dict):
+        self._program_of, self._table, self._defines = program_of, table, defines
         self._made: dict[str, cl.Kernel] = {}
 
     def __getitem__(self, name: str) -> cl.Kernel:
         kernel = self._made.get(name)
         if kernel is None:
             params = parameters(self._table[name], self._defines)
-            kernel = typed_kernel(self._program, name, [dtype for _, dtype in params])
+            kernel = typed_kernel(self._program_of(name), name, [dtype for _, dtype in params])
             kernel.arg_names = [p for p, _ in params]
             self._made[name] = kernel
         return kernel
@@ -104,7 +106,7 @@ class KernelTable(Mapping):
     def compiled(self, name: str) -> bool:
         """Does the program hold kernel ``name`` (one built with only some of
         its kernels, clrt.device.program.keep_kernels, may not)?"""
-        return name in self._program.kernel_names.split(";")
+        return name in self._program_of(name).kernel_names.split(";")
 
     def __iter__(self):
         return iter(self._table)

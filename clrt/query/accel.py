@@ -50,7 +50,7 @@ from clrt.device.sharing import one_at_a_time
 from clrt.errors import InputError
 from clrt.config import NO_RESULT, RAY_CHECKS
 from clrt.layouts import QUERY_LAUNCH
-from clrt.query.kernels import QUERY_GROUP, QUERY_KERNELS, point_defines
+from clrt.query.kernels import QUERY_GROUP, QUERY_KERNELS, QUERY_PROGRAMS, point_defines
 from clrt.query.points import PointQueries, point_group_defines
 from clrt.query.instances import SceneMoves, query_scene, source_of
 from clrt.query.rays import CameraRays, PinholeRays, RayBatch, cull_code, is_device_array
@@ -251,7 +251,7 @@ class Accel(PointQueries, SceneMoves):
         # Closest points many at a time on CPU devices (clrt/query/points.py); the point walks of GPUs
         # (clrt.query.kernels.point_defines).
         self.point_defines = point_group_defines(scene)
-        self.kernels = scene.kernels("trace.cl", QUERY_KERNELS, self.trace_defines())
+        self.kernels = scene.kernels("trace.cl", QUERY_KERNELS, self.trace_defines(), QUERY_PROGRAMS)
         self._scene_value = scene.geometry.scene_value()
         self._buffers: dict[str, cl.Buffer] = {}
         self._hits_per_ray = float(ALL_HITS_PER_RAY)

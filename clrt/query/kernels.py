@@ -80,3 +80,13 @@ QUERY_KERNELS = {
     "trace_camera": (buffer("hits"), value("cam", CAMERA), *GEOMETRY),
     "occlude_camera": (buffer("occluded"), value("cam", CAMERA), *GEOMETRY),
 }
+
+#: The query program's kernels by what a call asks: on PoCL each group is a
+#: program of its own, built when a call first needs one of its kernels
+#: (clrt.device.scene.DeviceScene.kernels); elsewhere one program holds all.
+QUERY_PROGRAMS = (
+    ("query_closest", "query_any", "query_count", "query_all", "camera_rays", "trace_camera", "occlude_camera"),
+    ("query_closest_point", "point_cells", "point_offsets", "point_scatter", "grid_points",
+     "query_signed_distance_parity", "query_signed_distance_normal"),
+    ("query_winding_number", "query_signed_distance_winding", "winding_nodes"),
+)
