@@ -13,6 +13,11 @@ import pytest
 from clrt.scene import primitives
 from clrt.scene.mesh import Mesh
 
+# "auto" builds on the device in every test, whatever PoCL's cache holds (a
+# machine's first builds on PoCL run on the host: clrt.device.pocl_warmup,
+# tests/test_pocl_warmup.py turns it on).  Set before any test's subprocess.
+os.environ["CLRT_POCL_WARMUP"] = "0"
+
 REPO = Path(__file__).resolve().parents[1]
 SHARED_MESHES = REPO.parent / "shared" / "meshes"
 

@@ -375,6 +375,38 @@ class _Phases:
         return out
 
 
+class _BuildChoice:
+    """What build_on_device makes of its tuning options for ``F`` triangles on
+    a device of ``kind`` (None: the device type's defaults): the program's
+    defines and kernels, and the settings the launches take."""
+
+    def __init__(self, kind: str, volume: str, F: int, indexed: bool, tail_threshold=None, treelet_leaves=None,
+                 tail_group=None, top_clusters=None, partition=None, reinsert_iterations=None):
+        self.tail_threshold = min(TAIL_THRESHOLD[kind] if tail_threshold is None else int(tail_threshold), TAIL_MAX)
+        self.tail_group = TAIL_GROUP[kind] if tail_group is None else int(tail_group)
+        self.top_clusters = sah_top_clusters(kind, self.tail_group, top_clusters)
+        self.reinserts = check_iterations(default_iterations(kind, F) if reinsert_iterations is None
+                                          else reinsert_iterations)
+        if partition is None:
+            partition = SAH_PARTITION[kind] and F >= PART_MIN_TRIANGLES
+        self.segmented = bool(partition) and 1 < self.top_clusters < F
+        self.defines = build_defines(volume, kind, treelet_leaves, self.tail_group, self.top_clusters,
+                                     self.segmented)
+        treelets = TREELET_LEAVES[kind] if treelet_leaves is None else int(treelet_leaves)
+        self.treelets = treelets if F > 2 else 0
+        self.kernels = launched_kernels(kind, self.segmented, self.treelets > 0,
+                                        self.tail_threshold > self.top_clusters, indexed, volume == "box",
+                                        self.reinserts > 0 and F > 2)
+
+
+def default_build_program(context: cl.Context, volume: str, num_tris: int) -> tuple[str, dict, tuple]:
+    """The entry, defines and kernels of the program that build_on_device
+    builds with its default options for ``num_tris`` triangles on ``context``
+    (clrt.device.pocl_warmup keys its record on them)."""
+    choice = _BuildChoice(device_kind(context.devices[0]), volume, int(num_tris), False)
+    return "build_bvh.cl", choice.defines, tuple(choice.kernels)
+
+
 @one_build_per_context
 def build_on_device(context: cl.Context, queue: cl.CommandQueue, corners, volume: str = "box",
                     leaf_size: int = 4, keep_boxes: bool = False,
@@ -436,20 +468,12 @@ def build_on_device(context: cl.Context, queue: cl.CommandQueue, corners, volume
     if "cl_khr_fp64" not in device.extensions:
         raise DeviceError(f"the device BVH builder fits volumes in float64, which {device.name.strip()} lacks")
     kind = device_kind(device)
-    tail_threshold = min(TAIL_THRESHOLD[kind] if tail_threshold is None else int(tail_threshold), TAIL_MAX)
-    tail_group = TAIL_GROUP[kind] if tail_group is None else int(tail_group)
-    top_clusters = sah_top_clusters(kind, tail_group, top_clusters)
     F = len(corners.faces) if indexed else len(tri)
-    reinserts = check_iterations(default_iterations(kind, F) if reinsert_iterations is None else reinsert_iterations)
-    if partition is None:
-        partition = SAH_PARTITION[kind] and F >= PART_MIN_TRIANGLES
-    segmented = bool(partition) and 1 < top_clusters < F
-    defines = build_defines(volume, kind, treelet_leaves, tail_group, top_clusters, segmented)
-    treelets = TREELET_LEAVES[kind] if treelet_leaves is None else int(treelet_leaves)
-    treelets = treelets if F > 2 else 0
-    program = build_program(context, "build_bvh.cl", defines, kernels=launched_kernels(
-        kind, segmented, treelets > 0, tail_threshold > top_clusters, indexed, volume == "box",
-        reinserts > 0 and F > 2))
+    choice = _BuildChoice(kind, volume, F, indexed, tail_threshold, treelet_leaves, tail_group, top_clusters,
+                          partition, reinsert_iterations)
+    tail_threshold, tail_group, top_clusters = choice.tail_threshold, choice.tail_group, choice.top_clusters
+    reinserts, segmented, defines, treelets = choice.reinserts, choice.segmented, choice.defines, choice.treelets
+    program = build_program(context, "build_bvh.cl", defines, kernels=choice.kernels)
     ws = workspace(context)
     k = ws.kernels_of(program, defines)
     num_nodes = 2 * F - 1

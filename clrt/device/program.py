@@ -234,10 +234,8 @@ def keeps_binaries(context: cl.Context) -> bool:
     return not any(d.platform.name == "Portable Computing Language" for d in context.devices)
 
 
-def _cache_path(context: cl.Context, source: str, options: list[str]) -> Path | None:
-    folder = cache_dir()
-    if folder is None or not keeps_binaries(context):
-        return None
+def _digest(context: cl.Context, source: str, options: list[str]) -> str:
+    """A program's identity: its expanded source, options, pyopencl and the devices and drivers."""
     h = hashlib.sha256()
     for part in (source, "\0".join(options), cl.VERSION_TEXT):
         h.update(part.encode())
@@ -246,7 +244,22 @@ def _cache_path(context: cl.Context, source: str, options: list[str]) -> Path | 
         for part in (d.platform.name, d.platform.version, d.name, d.driver_version, d.version):
             h.update(part.encode(errors="replace"))
             h.update(b"\1")
-    return folder / f"{h.hexdigest()}.bin"
+    return h.hexdigest()
+
+
+def program_digest(context: cl.Context, entry: str, defines: dict | None = None, kernels=None) -> str:
+    """The identity (a hex digest) of the program that build_program would
+    build from these arguments: what clrt's disk cache and
+    clrt.device.pocl_warmup key their files on."""
+    source = expand_source(entry) if kernels is None else keep_kernels(expand_source(entry), kernels)
+    return _digest(context, source, build_options(context, defines))
+
+
+def _cache_path(context: cl.Context, source: str, options: list[str]) -> Path | None:
+    folder = cache_dir()
+    if folder is None or not keeps_binaries(context):
+        return None
+    return folder / f"{_digest(context, source, options)}.bin"
 
 
 def _load_cached(context: cl.Context, source: str, options: list[str]) -> cl.Program | None:
