@@ -1,5 +1,5 @@
 # Source this on the lent GPU machine (see ../shared/device/README.md): installs
-# the carried wheels and registers NVIDIA's OpenCL driver, which the image has
+# the carried wheels (scripts/gpu-wheels.sh makes them) and registers NVIDIA's OpenCL driver, which the image has
 # but no ICD file names.  Keeps PoCL available beside it.
 python3 -m pip install -q --no-index --no-deps --no-compile --upgrade --target /tmp/site .whl/*.whl || return 1
 export PYTHONPATH=/tmp/site:$PWD PYTHONUNBUFFERED=1
