@@ -7,6 +7,10 @@ on, with clrt's cache in a folder of their own (PoCL's own cache may hold
 the builder's kernels already: the rule goes by clrt's record of them).
 """
 
+import os
+import sys
+import time
+
 import numpy as np
 import pytest
 
@@ -22,13 +26,17 @@ def fresh(tmp_path, monkeypatch):
     monkeypatch.setenv("CLRT_POCL_WARMUP", "1")
     monkeypatch.setenv("CLRT_CACHE_DIR", str(tmp_path))
     monkeypatch.delenv("CLRT_NO_PROGRAM_CACHE", raising=False)
-    monkeypatch.setattr(pocl_warmup, "_started", set())
+    monkeypatch.delenv("POCL_KERNEL_CACHE", raising=False)
     monkeypatch.setattr(pocl_warmup, "_helpers", [])
     return tmp_path / "pocl-ready"
 
 
 def _on_pocl(device) -> bool:
     return all(d.platform.name == "Portable Computing Language" for d in create_context(device)[0].devices)
+
+
+def _files(folder) -> list[str]:
+    return sorted(p.name for p in folder.iterdir()) if folder.exists() else []
 
 
 def _rays(mesh, n=3000):
@@ -38,65 +46,108 @@ def _rays(mesh, n=3000):
     return origins, rng.normal(size=(n, 3))
 
 
-def _answers(accel, origins, directions):
-    hits = accel.trace(origins, directions)
-    return hits.prim, hits.t
+def _same_answers(accels, mesh, device, n=3000):
+    """Each Accel's closest hits are brute force's, triangle and distance."""
+    origins, directions = _rays(mesh, n)
+    brute = clrt.Accel(mesh, device=device, accel="none").trace(origins, directions)
+    for accel in accels:
+        hits = accel.trace(origins, directions)
+        assert np.array_equal(hits.prim, brute.prim) and np.array_equal(hits.t, brute.t)
+    assert (brute.prim >= 0).sum() > n // 10
 
 
 def test_first_build_on_the_host_then_on_the_device(fresh, device):
     mesh = primitives.torus(1.0, 0.3, 40, 20)
-    origins, directions = _rays(mesh)
     first = clrt.Accel(mesh, device=device)
     if not _on_pocl(device):     # (the suite on a GPU: the rule is PoCL's alone)
-        assert first.acceleration.builder == "device" and not pocl_warmup._helpers
+        assert first.acceleration.builder == "device" and not pocl_warmup._helpers and not _files(fresh)
         return
     assert first.acceleration.builder == "sah" and len(pocl_warmup._helpers) == 1
-    pocl_warmup.wait(600)
-    assert pocl_warmup._helpers[0].returncode == 0
-    records = sorted(p.name for p in fresh.iterdir())
-    assert len(records) == 1 and records[0].endswith("-small"), records   # no lock, no corners left
+    during = clrt.Accel(mesh, device=device)     # while it runs (or just after): no second background build
+    assert len(pocl_warmup._helpers) == 1 and during.acceleration.builder in ("sah", "device")
+    assert pocl_warmup.wait(600) == [0]
+    name = pocl_warmup.record_name(create_context(device)[0], "box", len(mesh.faces))
+    assert _files(fresh) == [name]               # the record; no lock, no corners left
     second = clrt.Accel(mesh, device=device)
-    assert second.acceleration.builder == "device" and len(pocl_warmup._helpers) == 1
-    brute = clrt.Accel(mesh, device=device, accel="none")
-    want = _answers(brute, origins, directions)
-    for accel in (first, second):
-        prim, t = _answers(accel, origins, directions)
-        assert np.array_equal(prim, want[0]) and np.array_equal(t, want[1])
-    assert (want[0] >= 0).sum() > 500
+    assert second.acceleration.builder == "device" and not pocl_warmup._helpers
+    _same_answers([first, second], mesh, device)
 
 
-def test_off_too_large_or_asked_for_the_device_builds_on_the_device(fresh, device, monkeypatch):
+def test_off_too_large_statistics_or_asked_for_the_device_builds_on_the_device(fresh, device, monkeypatch):
+    """Each case builds on the device and starts nothing; each starts from no
+    record (a device build writes one, which would hide a broken rule)."""
+    from clrt.device.acceleration import build_acceleration
     mesh = primitives.torus(1.0, 0.3, 12, 8)
-    assert clrt.Accel(mesh, device=device, builder="device").acceleration.builder == "device"
-    monkeypatch.setattr(pocl_warmup, "HOST_FIRST_MAX_TRIANGLES", len(mesh.faces) - 1)
-    assert clrt.Accel(mesh, device=device).acceleration.builder == "device"
-    monkeypatch.setattr(pocl_warmup, "HOST_FIRST_MAX_TRIANGLES", 10 ** 6)
-    monkeypatch.setenv("CLRT_POCL_WARMUP", "0")
-    assert clrt.Accel(mesh, device=device).acceleration.builder == "device"
+    corners = mesh.vertices[mesh.faces].astype(np.float32)
+
+    def forget() -> None:
+        for p in (fresh.iterdir() if fresh.exists() else ()):
+            p.unlink()
+
+    def on_the_device(**options) -> bool:
+        built = clrt.Accel(mesh, device=device, **options).acceleration.builder == "device"
+        forget()
+        return built and not pocl_warmup._helpers
+
+    monkeypatch.setenv("CLRT_POCL_WARMUP", "off")
+    assert on_the_device()
+    monkeypatch.setenv("CLRT_POCL_WARMUP", "1")
+    with monkeypatch.context() as m:
+        m.setattr(sys, "executable", "/opt/app/bin/blender")     # no Python to start
+        assert on_the_device()
+    with monkeypatch.context() as m:
+        m.setattr(pocl_warmup, "HOST_FIRST_MAX_TRIANGLES", len(mesh.faces) - 1)
+        assert on_the_device()
+    assert on_the_device(builder="device")
+    assert build_acceleration(corners, "box", "auto", 4, device, statistics=True).builder == "device"
     assert not pocl_warmup._helpers
+    forget()
+    assert not on_the_device() or not _on_pocl(device)            # and the rule itself, on PoCL: the host
+    pocl_warmup.wait(600)
 
 
-def test_a_failed_background_build_is_marked_and_not_started_again(fresh, device):
+def test_an_unwritable_cache_builds_on_the_device(tmp_path, fresh, device, monkeypatch):
+    (tmp_path / "afile").write_text("")
+    monkeypatch.setenv("CLRT_CACHE_DIR", str(tmp_path / "afile" / "clrt"))
+    mesh = primitives.torus(1.0, 0.3, 12, 8)
+    assert clrt.Accel(mesh, device=device).acceleration.builder == "device" and not pocl_warmup._helpers
+
+
+def test_a_failed_background_build_leaves_its_kind_to_the_call(fresh, device):
     """The background process's own failure (here: its corners unreadable)
-    leaves NAME.failed in place of its lock, and no other starts while it
-    is recent: the builds go on on the host, with the right answers."""
-    if not _on_pocl(device):
-        assert not pocl_warmup.applies(create_context(device)[0])
-        return
+    leaves NAME.failed and frees the lock; that kind then builds in the call
+    (on the device, as without the rule), with the right answers; a lock
+    left older than LOCK_SECONDS counts as a failure too."""
     mesh = primitives.torus(1.0, 0.3, 16, 8)
     context = create_context(device)[0]
+    if not _on_pocl(device):
+        assert not pocl_warmup.applies(context)
+        return
     name = pocl_warmup.record_name(context, "box", len(mesh.faces))
     fresh.mkdir(parents=True)
-    lock = fresh / f"{name}.lock"
-    assert pocl_warmup._take(lock)
+    lock = fresh / pocl_warmup.LOCK
+    lock.write_text(name)
     bad = fresh / "bad.npy"
     bad.write_bytes(b"not an array")
     assert pocl_warmup_process.main([str(bad), "box", "4", "", name, str(lock)]) == 1
-    assert sorted(p.name for p in fresh.iterdir()) == [f"{name}.failed"]
-    assert not pocl_warmup._take(lock)
+    assert _files(fresh) == [f"{name}.failed"]
     accel = clrt.Accel(mesh, device=device)
-    assert accel.acceleration.builder == "sah" and not pocl_warmup._helpers
-    origins, directions = _rays(mesh, 500)
-    want = _answers(clrt.Accel(mesh, device=device, accel="none"), origins, directions)
-    got = _answers(accel, origins, directions)
-    assert np.array_equal(got[0], want[0]) and np.array_equal(got[1], want[1])
+    assert accel.acceleration.builder == "device" and not pocl_warmup._helpers
+    _same_answers([accel], mesh, device, 500)
+
+    for p in fresh.iterdir():
+        p.unlink()
+    lock.write_text(name)                        # a background build that died: its lock, long ago
+    old = time.time() - pocl_warmup.LOCK_SECONDS - 5
+    os.utime(lock, (old, old))
+    assert clrt.Accel(mesh, device=device).acceleration.builder == "device" and not pocl_warmup._helpers
+    assert f"{name}.failed" in _files(fresh) and pocl_warmup.LOCK not in _files(fresh)
+
+
+def test_a_background_build_that_cannot_start_frees_the_lock(fresh, device, monkeypatch):
+    mesh = primitives.torus(1.0, 0.3, 16, 8)
+    if not _on_pocl(device):
+        return
+    monkeypatch.setattr(pocl_warmup.subprocess, "Popen", lambda *a, **k: (_ for _ in ()).throw(OSError("no")))
+    assert clrt.Accel(mesh, device=device).acceleration.builder == "device"
+    assert [n for n in _files(fresh) if n.endswith((".lock", ".npy"))] == []

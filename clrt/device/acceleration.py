@@ -56,7 +56,8 @@ def build_acceleration(corners: np.ndarray, accel: str, builder: str, leaf_size:
     if builder == "auto" and accel != "none":
         builder = "device" if "cl_khr_fp64" in create_context(device)[1].device.extensions else HOST_DEFAULT_BUILDER
         # A machine's first builds on PoCL: on the host while the builder compiles (pocl_warmup).
-        if builder == "device" and pocl_warmup.builds_on_host_first(corners, accel, leaf_size, device):
+        if (builder == "device" and not statistics
+                and pocl_warmup.builds_on_host_first(corners, accel, leaf_size, device)):
             builder = HOST_DEFAULT_BUILDER
     if builder not in ("device", "auto") or accel == "none":
         return build_on_host(corners, accel, builder if builder in HOST_BUILDERS else HOST_DEFAULT_BUILDER,

@@ -81,7 +81,7 @@ def typed_kernels(program, table: dict, defines: dict) -> "KernelTable":
     names as ``arg_names`` (for the check).  ``program``: a cl.Program, or a
     function of a kernel's name that gives the program holding it (built
     when first asked for: clrt.device.scene.DeviceScene.kernels)."""
-    return KernelTable(program if callable(program) else (lambda name: program), table, defines)
+    return KernelTable((lambda name: program) if isinstance(program, cl.Program) else program, table, defines)
 
 
 class KernelTable(Mapping):
