@@ -1,6 +1,6 @@
 """Run the test suite on a lent GPU file by file, within a time budget.
 
-    python tools/gpu_suite.py [--device gpu] [--from tests/test_x.py] [--budget 540] [--file-timeout 150] [--out DIR]
+    python tools/gpu_suite.py [--device gpu] [--from tests/test_x.py | --only A,B] [--budget 540] [--file-timeout 150] [--out DIR]
 
 The whole suite on an H200 takes longer than one device call (the NVIDIA
 compiler builds each program variant anew on a fresh machine), and one hung
@@ -31,6 +31,7 @@ def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--device", default="gpu", help="CLRT_TEST_DEVICE for the tests (default gpu)")
     p.add_argument("--from", dest="start", default="", help="the first test file to run (default: the first)")
+    p.add_argument("--only", default="", help="comma-separated test files to run instead of all")
     p.add_argument("--budget", type=float, default=540.0, help="seconds for all files (default 540)")
     p.add_argument("--file-timeout", type=float, default=150.0, help="seconds one file may take (default 150)")
     p.add_argument("--out", default=os.environ.get("OUT", "."), help="folder of each file's output")
@@ -41,6 +42,11 @@ def main(argv=None) -> int:
         if args.start not in names:
             p.error(f"--from {args.start}: no such test file")
         files = files[names.index(args.start):]
+    if args.only:
+        wanted = [f.strip() for f in args.only.split(",") if f.strip()]
+        if set(wanted) - set(names):
+            p.error(f"--only: no such test file: {', '.join(sorted(set(wanted) - set(names)))}")
+        files = [f for f in files if f"tests/{f.name}" in wanted]
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     env = dict(os.environ, CLRT_TEST_DEVICE=args.device, PYTHONPATH=os.pathsep.join(
