@@ -56,20 +56,23 @@ def _same_answers(accels, mesh, device, n=3000):
     assert (brute.prim >= 0).sum() > n // 10
 
 
-def test_first_build_on_the_host_then_on_the_device(fresh, device):
+def test_first_build_on_the_host_then_on_the_device(fresh, device, monkeypatch):
+    started = []
+    popen = pocl_warmup.subprocess.Popen
+    monkeypatch.setattr(pocl_warmup.subprocess, "Popen", lambda *a, **k: started.append(a) or popen(*a, **k))
     mesh = primitives.torus(1.0, 0.3, 40, 20)
     first = clrt.Accel(mesh, device=device)
     if not _on_pocl(device):     # (the suite on a GPU: the rule is PoCL's alone)
-        assert first.acceleration.builder == "device" and not pocl_warmup._helpers and not _files(fresh)
+        assert first.acceleration.builder == "device" and not started and not _files(fresh)
         return
-    assert first.acceleration.builder == "sah" and len(pocl_warmup._helpers) == 1
+    assert first.acceleration.builder == "sah" and len(started) == 1
     during = clrt.Accel(mesh, device=device)     # while it runs (or just after): no second background build
-    assert len(pocl_warmup._helpers) == 1 and during.acceleration.builder in ("sah", "device")
-    assert pocl_warmup.wait(600) == [0]
+    assert len(started) == 1 and during.acceleration.builder in ("sah", "device")
+    assert pocl_warmup.wait(600) in ([0], [])    # ([]: it ended before, collected by the second call)
     name = pocl_warmup.record_name(create_context(device)[0], "box", len(mesh.faces))
     assert _files(fresh) == [name]               # the record; no lock, no corners left
     second = clrt.Accel(mesh, device=device)
-    assert second.acceleration.builder == "device" and not pocl_warmup._helpers
+    assert second.acceleration.builder == "device" and len(started) == 1
     _same_answers([first, second], mesh, device)
 
 
