@@ -17,6 +17,7 @@ import pytest
 import clrt
 from clrt.device import pocl_warmup, pocl_warmup_process
 from clrt.device.context import create_context
+from clrt.device.program import on_pocl
 from clrt.scene import primitives
 
 
@@ -32,7 +33,7 @@ def fresh(tmp_path, monkeypatch):
 
 
 def _on_pocl(device) -> bool:
-    return all(d.platform.name == "Portable Computing Language" for d in create_context(device)[0].devices)
+    return on_pocl(create_context(device)[0])
 
 
 def _files(folder) -> list[str]:

@@ -46,7 +46,7 @@ import pyopencl as cl
 
 from clrt.device.build import TAIL_THRESHOLD, default_build_program
 from clrt.device.context import create_context
-from clrt.device.program import cache_dir, program_digest
+from clrt.device.program import cache_dir, on_pocl, program_digest
 
 #: The most triangles built on the host while the builder compiles: the
 #: host's SAH build of 250K triangles takes about as long as the compile.
@@ -81,7 +81,7 @@ def applies(context: cl.Context) -> bool:
         return False
     if getattr(sys, "frozen", False) or not os.path.basename(sys.executable or "").startswith("python"):
         return False
-    return all(d.platform.name == "Portable Computing Language" for d in context.devices)
+    return on_pocl(context)
 
 
 def size_class(num_tris: int) -> int:

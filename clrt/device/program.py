@@ -180,7 +180,7 @@ def build_program(context: cl.Context, entry: str, defines: dict | None = None,
     Raises :class:`KernelBuildError` with the compiler log on failure.
     """
     options = build_options(context, defines, extra_options)
-    source = expand_source(entry) if kernels is None else keep_kernels(expand_source(entry), kernels)
+    source = _program_source(entry, kernels)
     key = (context.int_ptr, source, tuple(options))
     program = _programs.get(key)
     if program is None:
@@ -231,7 +231,12 @@ def keeps_binaries(context: cl.Context) -> bool:
     work-group size, kernels that then run compiled anew for their own sizes
     or never run: 16 of the 17 s of build_bvh.cl's first build on 2 cores
     (``python -m benchmarks.cold_start``, docs/benchmark-log.md "Ready at once")."""
-    return not any(d.platform.name == "Portable Computing Language" for d in context.devices)
+    return not on_pocl(context)
+
+
+def on_pocl(context: cl.Context) -> bool:
+    """Is ``context`` PoCL's (whose kernel cache is its own, keeps_binaries)?"""
+    return any(d.platform.name == "Portable Computing Language" for d in context.devices)
 
 
 def _digest(context: cl.Context, source: str, options: list[str]) -> str:
@@ -251,8 +256,12 @@ def program_digest(context: cl.Context, entry: str, defines: dict | None = None,
     """The identity (a hex digest) of the program that build_program would
     build from these arguments: what clrt's disk cache and
     clrt.device.pocl_warmup key their files on."""
-    source = expand_source(entry) if kernels is None else keep_kernels(expand_source(entry), kernels)
-    return _digest(context, source, build_options(context, defines))
+    return _digest(context, _program_source(entry, kernels), build_options(context, defines))
+
+
+def _program_source(entry: str, kernels) -> str:
+    """The expanded source of ``entry``, with only ``kernels`` kept (None: all)."""
+    return expand_source(entry) if kernels is None else keep_kernels(expand_source(entry), kernels)
 
 
 def _cache_path(context: cl.Context, source: str, options: list[str]) -> Path | None:
