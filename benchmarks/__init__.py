@@ -4,9 +4,9 @@ never imported by clrt.  docs/benchmarks.md gives today's figures and the comman
 
 import os
 
-# Benchmarks time the device builder as it runs with its kernels compiled: on
-# PoCL a machine's first builds would run on the host while a background
-# process compiles them (clrt.device.pocl_warmup).  benchmarks.cold_start,
+# Benchmarks time the device builder as it runs with its kernels compiled: a
+# machine's first builds would run on the host while a background process
+# compiles them (clrt.device.first_build).  benchmarks.cold_start,
 # which times that first call, gives its processes the setting found here.
-POCL_WARMUP_GIVEN = os.environ.get("CLRT_POCL_WARMUP")
-os.environ.setdefault("CLRT_POCL_WARMUP", "0")
+FIRST_BUILD_GIVEN = os.environ.get("CLRT_FIRST_BUILD")
+os.environ.setdefault("CLRT_FIRST_BUILD", "0")

@@ -14,7 +14,7 @@ A run of a case is two processes: the first with empty caches -- the
 drivers' (``POCL_CACHE_DIR``, NVIDIA's ``CUDA_CACHE_PATH``) and clrt's
 (``CLRT_CACHE_DIR``) pointed at a new temporary folder -- the second at once
 with the caches the first left (on PoCL after the background build a cold
-call may start has ended: clrt.device.pocl_warmup).
+call may start has ended: clrt.device.first_build).
 Each case prints the median, min and max of both over ``--runs`` runs, and
 the median (and range) of each run's cold / warm ratio; the runs take turns
 so that the other work of a shared machine falls on both alike.
@@ -47,7 +47,7 @@ import textwrap
 import time
 from pathlib import Path
 
-from benchmarks import POCL_WARMUP_GIVEN
+from benchmarks import FIRST_BUILD_GIVEN
 from benchmarks.common import POSITIVE, SHARED_MESHES, module_command, repo_env
 
 CASES = ("render", "render-mesh", "accel")
@@ -77,8 +77,8 @@ def _run(command: list, caches: Path) -> tuple[float, str]:
     env.update(POCL_CACHE_DIR=str(caches / "pocl"), CLRT_CACHE_DIR=str(caches / "clrt"),
                CUDA_CACHE_PATH=str(caches / "nv"))
     env.pop("CLRT_NO_PROGRAM_CACHE", None)
-    if POCL_WARMUP_GIVEN is None:   # a user's first call: host builds while PoCL compiles the builder
-        env["CLRT_POCL_WARMUP"] = "1"   # (clrt's default; set, so that a --child keeps it)
+    if FIRST_BUILD_GIVEN is None:   # a user's first call: host builds while the builder compiles
+        env["CLRT_FIRST_BUILD"] = "1"   # (clrt's default; set, so that a --child keeps it)
     start = time.perf_counter()
     done = subprocess.run(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
     seconds = time.perf_counter() - start
@@ -93,13 +93,13 @@ def _pair(case, mesh, device, folder: Path, breakdown: bool = False) -> tuple:
     caches = Path(tempfile.mkdtemp(prefix="caches-", dir=folder))
     command = _case_command(case, mesh, device, folder / "out.png", breakdown)
     cold = _run(command, caches)
-    _settle(caches / "clrt" / "pocl-ready")
+    _settle(caches / "clrt" / "first-build")
     return cold, _run(command, caches)
 
 
 def _settle(ready: Path, timeout: float = 300.0) -> None:
-    """Wait until the background builds a cold run started on PoCL
-    (clrt.device.pocl_warmup: each holds a lock file there) have ended, so
+    """Wait until the background builds a cold run started
+    (clrt.device.first_build: each holds a lock file there) have ended, so
     that the warm run finds what they compiled."""
     end = time.monotonic() + timeout
     while ready.is_dir() and any(ready.glob("*.lock")) and time.monotonic() < end:

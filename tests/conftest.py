@@ -14,9 +14,9 @@ from clrt.scene import primitives
 from clrt.scene.mesh import Mesh
 
 # "auto" builds on the device in every test, whatever PoCL's cache holds (a
-# machine's first builds on PoCL run on the host: clrt.device.pocl_warmup,
-# tests/test_pocl_warmup.py turns it on).  Set before any test's subprocess.
-os.environ["CLRT_POCL_WARMUP"] = "0"
+# machine's first builds run on the host: clrt.device.first_build,
+# tests/test_first_build.py turns it on).  Set before any test's subprocess.
+os.environ["CLRT_FIRST_BUILD"] = "0"
 
 REPO = Path(__file__).resolve().parents[1]
 SHARED_MESHES = REPO.parent / "shared" / "meshes"

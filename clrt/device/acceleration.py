@@ -20,7 +20,7 @@ from clrt.accel import Acceleration
 from clrt.accel import build as build_on_host
 from clrt.accel.rows import exact_rows
 from clrt.config import HOST_BUILDERS, HOST_DEFAULT_BUILDER
-from clrt.device import pocl_warmup
+from clrt.device import first_build
 from clrt.device.build import build_on_device
 from clrt.device.context import create_context, format_bytes, is_out_of_memory
 from clrt.errors import DeviceMemoryError
@@ -55,9 +55,10 @@ def build_acceleration(corners: np.ndarray, accel: str, builder: str, leaf_size:
     """
     if builder == "auto" and accel != "none":
         builder = "device" if "cl_khr_fp64" in create_context(device)[1].device.extensions else HOST_DEFAULT_BUILDER
-        # A machine's first builds on PoCL: on the host while the builder compiles (pocl_warmup).
-        if (builder == "device" and not statistics
-                and pocl_warmup.builds_on_host_first(corners, accel, leaf_size, device)):
+        # A machine's first builds: on the host while the builder compiles (first_build).
+        # (A Mesh is a GPU's, whose rule gathers_on_device has applied.)
+        if (builder == "device" and not statistics and not isinstance(corners, Mesh)
+                and first_build.builds_on_host_first(corners, accel, device, leaf_size)):
             builder = HOST_DEFAULT_BUILDER
     if builder not in ("device", "auto") or accel == "none":
         return build_on_host(corners, accel, builder if builder in HOST_BUILDERS else HOST_DEFAULT_BUILDER,
@@ -67,8 +68,8 @@ def build_acceleration(corners: np.ndarray, accel: str, builder: str, leaf_size:
     try:
         bvh = build_on_device(context, queue, corners, volume=accel, leaf_size=leaf_size, keep_boxes=statistics,
                               uploaded=uploaded)
-        if pocl_warmup.applies(context) and isinstance(corners, np.ndarray):
-            pocl_warmup.record(context, accel, len(corners))
+        if first_build.applies(context) and isinstance(corners, np.ndarray):
+            first_build.record(context, accel, len(corners))
     except (cl.Error, MemoryError) as exc:
         if not is_out_of_memory(exc):
             raise

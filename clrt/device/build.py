@@ -399,11 +399,13 @@ class _BuildChoice:
                                         self.reinserts > 0 and F > 2)
 
 
-def default_build_program(context: cl.Context, volume: str, num_tris: int) -> tuple[str, dict, tuple]:
+def default_build_program(context: cl.Context, volume: str, num_tris: int,
+                          indexed: bool = False) -> tuple[str, dict, tuple]:
     """The entry, defines and kernels of the program that build_on_device
     builds with its default options for ``num_tris`` triangles on ``context``
-    (clrt.device.pocl_warmup keys its record on them)."""
-    choice = _BuildChoice(device_kind(context.devices[0]), volume, int(num_tris), False)
+    -- from a Mesh's vertices and faces where ``indexed`` --
+    (clrt.device.first_build keys its record on them)."""
+    choice = _BuildChoice(device_kind(context.devices[0]), volume, int(num_tris), bool(indexed))
     return "build_bvh.cl", choice.defines, tuple(choice.kernels)
 
 

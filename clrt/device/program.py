@@ -255,7 +255,7 @@ def _digest(context: cl.Context, source: str, options: list[str]) -> str:
 def program_digest(context: cl.Context, entry: str, defines: dict | None = None, kernels=None) -> str:
     """The identity (a hex digest) of the program that build_program would
     build from these arguments: what clrt's disk cache and
-    clrt.device.pocl_warmup key their files on."""
+    clrt.device.first_build key their files on."""
     return _digest(context, _program_source(entry, kernels), build_options(context, defines))
 
 

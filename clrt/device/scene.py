@@ -21,6 +21,7 @@ from typing import Callable
 import numpy as np
 import pyopencl as cl
 
+from clrt.device import first_build
 from clrt.device.acceleration import build_acceleration
 from clrt.device.context import create_context, device_kind, device_label, error_name, format_bytes, is_out_of_memory
 from clrt.device.geometry import DeviceGeometry, check_fits, packet_rays
@@ -31,17 +32,21 @@ from clrt.scene.arrays import device_origin, triangle_corners
 from clrt.scene.mesh import Mesh
 
 
-def gathers_on_device(accel: str, builder: str, device: str | None) -> bool:
+def gathers_on_device(accel: str, builder: str, device: str | None, mesh: Mesh | None = None) -> bool:
     """Does a DeviceScene of a Mesh with these options upload its vertices and
     faces, to be gathered into corners by the device's build?  Where a GPU
     builds the tree: the host's gather and box (mesh_corners) took twice the
     device build's time on the H200's host (docs/benchmarks.md).  A CPU
     device's wide BVH is collapsed on the host from the corners (and the
-    host's gather costs it no copy across a bus)."""
+    host's gather costs it no copy across a bus).  Not for an "auto" build
+    of ``mesh`` that runs on the host while the builder compiles
+    (clrt.device.first_build)."""
     if accel == "none" or builder not in ("device", "auto"):
         return False
     queue = create_context(device)[1]
-    return device_kind(queue.device) == "gpu" and "cl_khr_fp64" in queue.device.extensions
+    if device_kind(queue.device) != "gpu" or "cl_khr_fp64" not in queue.device.extensions:
+        return False
+    return not (builder == "auto" and mesh is not None and first_build.builds_on_host_first(mesh, accel, device))
 
 
 def mesh_corners(mesh: Mesh) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -102,7 +107,7 @@ class DeviceScene:
                  timings: dict | None = None, acceleration=None, uploaded=None):
         with stage(timings, "acceleration build"):
             if isinstance(corners, Mesh) and not (acceleration is None and max_buffer_bytes is None
-                                                  and gathers_on_device(accel, builder, device)):
+                                                  and gathers_on_device(accel, builder, device, corners)):
                 corners, bounds, origin = mesh_corners(corners)
             self.acceleration = (acceleration if acceleration is not None
                                  else build_acceleration(corners, accel, builder, leaf_size, device,

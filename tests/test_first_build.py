@@ -1,6 +1,8 @@
-"""A machine's first builds on PoCL (clrt.device.pocl_warmup): on the host,
-while a background process compiles the device builder's kernels; later
-builds on the device; the same answers either way.
+"""A machine's first builds (clrt.device.first_build): on the host, while a
+background process makes the device builder ready -- on PoCL by building on
+the device, on a GPU by compiling the builder's and the crease split's
+programs into clrt's cache; later builds on the device; the same answers
+and images either way.
 
 The rest of the suite turns the rule off (conftest.py); these tests turn it
 on, with clrt's cache in a folder of their own (PoCL's own cache may hold
@@ -15,7 +17,7 @@ import numpy as np
 import pytest
 
 import clrt
-from clrt.device import pocl_warmup, pocl_warmup_process
+from clrt.device import first_build, first_build_process
 from clrt.device.context import create_context
 from clrt.device.program import on_pocl
 from clrt.scene import primitives
@@ -24,12 +26,12 @@ from clrt.scene import primitives
 @pytest.fixture
 def fresh(tmp_path, monkeypatch):
     """The rule on, no record yet, no background build started."""
-    monkeypatch.setenv("CLRT_POCL_WARMUP", "1")
+    monkeypatch.setenv("CLRT_FIRST_BUILD", "1")
     monkeypatch.setenv("CLRT_CACHE_DIR", str(tmp_path))
     monkeypatch.delenv("CLRT_NO_PROGRAM_CACHE", raising=False)
     monkeypatch.delenv("POCL_KERNEL_CACHE", raising=False)
-    monkeypatch.setattr(pocl_warmup, "_helpers", [])
-    return tmp_path / "pocl-ready"
+    monkeypatch.setattr(first_build, "_helpers", [])
+    return tmp_path / "first-build"
 
 
 def _on_pocl(device) -> bool:
@@ -57,24 +59,49 @@ def _same_answers(accels, mesh, device, n=3000):
     assert (brute.prim >= 0).sum() > n // 10
 
 
+def _ready_file(fresh, device, mesh) -> str:
+    """What says the builder is ready after a background build for ``mesh``:
+    PoCL's record, a GPU's program binary (the program for a Mesh's vertices
+    and faces, which a GPU gathers itself)."""
+    context = create_context(device)[0]
+    name = first_build.record_name(context, "box", len(mesh.faces), indexed=not on_pocl(context))
+    return str(fresh / name) if on_pocl(context) else str(fresh.parent / "programs" / f"{name}.bin")
+
+
 def test_first_build_on_the_host_then_on_the_device(fresh, device, monkeypatch):
     started = []
-    popen = pocl_warmup.subprocess.Popen
-    monkeypatch.setattr(pocl_warmup.subprocess, "Popen", lambda *a, **k: started.append(a) or popen(*a, **k))
+    popen = first_build.subprocess.Popen
+    monkeypatch.setattr(first_build.subprocess, "Popen", lambda *a, **k: started.append(a) or popen(*a, **k))
     mesh = primitives.torus(1.0, 0.3, 40, 20)
     first = clrt.Accel(mesh, device=device)
-    if not _on_pocl(device):     # (the suite on a GPU: the rule is PoCL's alone)
-        assert first.acceleration.builder == "device" and not started and not _files(fresh)
-        return
     assert first.acceleration.builder == "sah" and len(started) == 1
     during = clrt.Accel(mesh, device=device)     # while it runs (or just after): no second background build
     assert len(started) == 1 and during.acceleration.builder in ("sah", "device")
-    assert pocl_warmup.wait(600) in ([0], [])    # ([]: it ended before, collected by the second call)
-    name = pocl_warmup.record_name(create_context(device)[0], "box", len(mesh.faces))
-    assert _files(fresh) == [name]               # the record; no lock, no corners left
+    assert first_build.wait(600) in ([0], [])    # ([]: it ended before, collected by the second call)
+    assert os.path.exists(_ready_file(fresh, device, mesh))
+    assert [p for p in _files(fresh) if not p.endswith(".bin")] == (
+        [os.path.basename(_ready_file(fresh, device, mesh))] if _on_pocl(device) else [])   # no lock, no corners
     second = clrt.Accel(mesh, device=device)
     assert second.acceleration.builder == "device" and len(started) == 1
     _same_answers([first, second], mesh, device)
+
+
+def test_a_first_render_on_the_host_is_the_later_renders_image(fresh, device):
+    """A Renderer's first build on the host (on a GPU its gather and crease
+    split too), the next on the device: the same image and hits."""
+    mesh = primitives.torus(1.0, 0.3, 48, 24)
+    camera = clrt.Camera.framing(mesh.bounds, 96, 64)
+    first = clrt.Renderer(mesh, device=device)
+    assert first.acceleration.builder == "sah"
+    expected = first.render(camera, hits=True)
+    first_build.wait(600)
+    assert os.path.exists(_ready_file(fresh, device, mesh))
+    second = clrt.Renderer(mesh, device=device)
+    assert second.acceleration.builder == "device"
+    frame = second.render(camera, hits=True)
+    for field in ("image", "prim", "t"):
+        assert np.array_equal(getattr(frame, field), getattr(expected, field)), field
+    assert (frame.prim >= 0).sum() > 300
 
 
 def test_off_too_large_statistics_or_asked_for_the_device_builds_on_the_device(fresh, device, monkeypatch):
@@ -91,30 +118,30 @@ def test_off_too_large_statistics_or_asked_for_the_device_builds_on_the_device(f
     def on_the_device(**options) -> bool:
         built = clrt.Accel(mesh, device=device, **options).acceleration.builder == "device"
         forget()
-        return built and not pocl_warmup._helpers
+        return built and not first_build._helpers
 
-    monkeypatch.setenv("CLRT_POCL_WARMUP", "off")
+    monkeypatch.setenv("CLRT_FIRST_BUILD", "off")
     assert on_the_device()
-    monkeypatch.setenv("CLRT_POCL_WARMUP", "1")
+    monkeypatch.setenv("CLRT_FIRST_BUILD", "1")
     with monkeypatch.context() as m:
         m.setattr(sys, "executable", "/opt/app/bin/blender")     # no Python to start
         assert on_the_device()
     with monkeypatch.context() as m:
-        m.setattr(pocl_warmup, "HOST_FIRST_MAX_TRIANGLES", len(mesh.faces) - 1)
+        m.setattr(first_build, "HOST_FIRST_MAX_TRIANGLES", len(mesh.faces) - 1)
         assert on_the_device()
     assert on_the_device(builder="device")
     assert build_acceleration(corners, "box", "auto", 4, device, statistics=True).builder == "device"
-    assert not pocl_warmup._helpers
+    assert not first_build._helpers
     forget()
-    assert not on_the_device() or not _on_pocl(device)            # and the rule itself, on PoCL: the host
-    pocl_warmup.wait(600)
+    assert not on_the_device()                                     # and the rule itself: the host
+    first_build.wait(600)
 
 
 def test_an_unwritable_cache_builds_on_the_device(tmp_path, fresh, device, monkeypatch):
     (tmp_path / "afile").write_text("")
     monkeypatch.setenv("CLRT_CACHE_DIR", str(tmp_path / "afile" / "clrt"))
     mesh = primitives.torus(1.0, 0.3, 12, 8)
-    assert clrt.Accel(mesh, device=device).acceleration.builder == "device" and not pocl_warmup._helpers
+    assert clrt.Accel(mesh, device=device).acceleration.builder == "device" and not first_build._helpers
 
 
 def test_a_failed_background_build_leaves_its_kind_to_the_call(fresh, device):
@@ -124,34 +151,29 @@ def test_a_failed_background_build_leaves_its_kind_to_the_call(fresh, device):
     left older than LOCK_SECONDS counts as a failure too."""
     mesh = primitives.torus(1.0, 0.3, 16, 8)
     context = create_context(device)[0]
-    if not _on_pocl(device):
-        assert not pocl_warmup.applies(context)
-        return
-    name = pocl_warmup.record_name(context, "box", len(mesh.faces))
+    name = first_build.record_name(context, "box", len(mesh.faces), indexed=not on_pocl(context))
     fresh.mkdir(parents=True)
-    lock = fresh / pocl_warmup.LOCK
+    lock = fresh / first_build.LOCK
     lock.write_text(name)
     bad = fresh / "bad.npy"
     bad.write_bytes(b"not an array")
-    assert pocl_warmup_process.main([str(bad), "box", "4", "", name, str(lock)]) == 1
+    assert first_build_process.main(["build", str(bad), "box", "4", "", name, str(lock)]) == 1
     assert _files(fresh) == [f"{name}.failed"]
     accel = clrt.Accel(mesh, device=device)
-    assert accel.acceleration.builder == "device" and not pocl_warmup._helpers
+    assert accel.acceleration.builder == "device" and not first_build._helpers
     _same_answers([accel], mesh, device, 500)
 
     for p in fresh.iterdir():
         p.unlink()
     lock.write_text(name)                        # a background build that died: its lock, long ago
-    old = time.time() - pocl_warmup.LOCK_SECONDS - 5
+    old = time.time() - first_build.LOCK_SECONDS - 5
     os.utime(lock, (old, old))
-    assert clrt.Accel(mesh, device=device).acceleration.builder == "device" and not pocl_warmup._helpers
-    assert f"{name}.failed" in _files(fresh) and pocl_warmup.LOCK not in _files(fresh)
+    assert clrt.Accel(mesh, device=device).acceleration.builder == "device" and not first_build._helpers
+    assert f"{name}.failed" in _files(fresh) and first_build.LOCK not in _files(fresh)
 
 
 def test_a_background_build_that_cannot_start_frees_the_lock(fresh, device, monkeypatch):
     mesh = primitives.torus(1.0, 0.3, 16, 8)
-    if not _on_pocl(device):
-        return
-    monkeypatch.setattr(pocl_warmup.subprocess, "Popen", lambda *a, **k: (_ for _ in ()).throw(OSError("no")))
+    monkeypatch.setattr(first_build.subprocess, "Popen", lambda *a, **k: (_ for _ in ()).throw(OSError("no")))
     assert clrt.Accel(mesh, device=device).acceleration.builder == "device"
     assert [n for n in _files(fresh) if n.endswith((".lock", ".npy"))] == []
