@@ -279,6 +279,10 @@ def scenes(mesh_dir: Path, meshes, counts):
             lo, hi = mesh.bounds
             yield name, mesh, Camera.framing(np.array([lo, hi]), *SIZE)
             continue
+        if name not in CASES:    # another mesh of the folder, NAME.off: framed by its box
+            mesh = load_mesh(mesh_dir / f"{name}.off")
+            yield name, mesh, Camera.framing(np.array(mesh.bounds), *SIZE)
+            continue
         file, eye, target = CASES[name]
         yield name, load_mesh(mesh_dir / file), Camera(eye, target, (0.0, 1.0, 0.0), 45.0, *SIZE)
     if counts:
@@ -479,7 +483,7 @@ def main(argv=None) -> int:
     default_dir = SHARED_MESHES
     p.add_argument("--mesh-dir", type=Path, default=default_dir, help=f"folder of the meshes (default {default_dir})")
     p.add_argument("--meshes", type=lambda s: [x for x in s.split(",") if x], default=sorted(CASES),
-                   help=f"comma-separated, of {', '.join(mesh_names)} (default {', '.join(sorted(CASES))}; "
+                   help=f"comma-separated, of {', '.join(mesh_names)} or NAME for NAME.off in --mesh-dir (default {', '.join(sorted(CASES))}; "
                         f"'' for none)")
     p.add_argument("--triangles", type=lambda s: [parse_count(x) for x in s.split(",")], default=[],
                    help="also grids of bunny copies of about these many triangles, e.g. 1M,10M")
@@ -531,8 +535,8 @@ def main(argv=None) -> int:
         if c not in CALLS:
             p.error(f"unknown call {c!r} (choose from {', '.join(CALLS)})")
     for m in args.meshes:
-        if m not in mesh_names:
-            p.error(f"unknown mesh {m!r} (choose from {', '.join(mesh_names)})")
+        if m not in mesh_names and not (args.mesh_dir / f"{m}.off").is_file():
+            p.error(f"unknown mesh {m!r} (choose from {', '.join(mesh_names)}, or NAME for NAME.off in --mesh-dir)")
     if args.embree:
         try:
             import embreex  # noqa: F401

@@ -25,7 +25,7 @@ from clrt.device import first_build
 from clrt.device.acceleration import build_acceleration
 from clrt.device.context import create_context, device_kind, device_label, error_name, format_bytes, is_out_of_memory
 from clrt.device.geometry import DeviceGeometry, check_fits, packet_rays
-from clrt.device.program import build_program, keeps_binaries
+from clrt.device.program import build_program
 from clrt.device.signature import typed_kernels
 from clrt.errors import DeviceMemoryError
 from clrt.scene.arrays import device_origin, triangle_corners
@@ -165,14 +165,14 @@ class DeviceScene:
                 groups: tuple | None = None) -> dict[str, cl.Kernel]:
         """The kernels of ``table`` (clrt.device.signature) in the program whose
         entry file is ``entry``, built for this scene.  ``groups``: the
-        table's kernels in groups (tuples of names) that PoCL builds as
-        programs of their own, each when one of its kernels is first asked
-        for.  PoCL's front end takes a program's kernels whole (trace.cl's 17
-        took 1.0 s of a first Accel, the ray queries' alone 0.5:
-        docs/benchmarks.md); elsewhere the program is built whole, as it is
-        kept on disk (clrt.device.program.keeps_binaries)."""
+        table's kernels in groups (tuples of names), each built as a
+        program of its own when one of its kernels is first asked for (and
+        kept on disk as such: clrt.device.program).  A compiler takes a
+        program's kernels whole: of a first Accel, trace.cl's 17 took 1.0 s
+        on PoCL (the ray queries' alone 0.5) and about 3 s on the H200 (1.5)
+        (docs/benchmarks.md)."""
         defines = self.defines(extra_defines)
-        if groups is None or keeps_binaries(self.context):
+        if groups is None:
             return typed_kernels(build_program(self.context, entry, defines), table, defines)
         group_of = {name: tuple(group) for group in groups for name in group}
         return typed_kernels(lambda name: build_program(self.context, entry, defines, kernels=group_of[name]),

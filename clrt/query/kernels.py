@@ -81,9 +81,9 @@ QUERY_KERNELS = {
     "occlude_camera": (buffer("occluded"), value("cam", CAMERA), *GEOMETRY),
 }
 
-#: The query program's kernels by what a call asks: on PoCL each group is a
-#: program of its own, built when a call first needs one of its kernels
-#: (clrt.device.scene.DeviceScene.kernels); elsewhere one program holds all.
+#: The query program's kernels by what a call asks: each group is a program
+#: of its own, built when a call first needs one of its kernels
+#: (clrt.device.scene.DeviceScene.kernels).
 QUERY_PROGRAMS = (
     ("query_closest", "query_any", "query_count", "query_all", "camera_rays", "trace_camera", "occlude_camera"),
     ("query_closest_point", "point_cells", "point_offsets", "point_scatter", "grid_points",
