@@ -85,7 +85,7 @@ QUERY_KERNELS = {
 #: of its own, built when a call first needs one of its kernels
 #: (clrt.device.scene.DeviceScene.kernels).
 QUERY_PROGRAMS = (
-    ("query_closest", "query_any", "query_count", "query_all", "camera_rays", "trace_camera", "occlude_camera"),
+    ("query_closest",), ("query_any",), ("query_count", "query_all"), ("camera_rays", "trace_camera", "occlude_camera"),
     ("query_closest_point", "point_cells", "point_offsets", "point_scatter", "grid_points",
      "query_signed_distance_parity", "query_signed_distance_normal"),
     ("query_winding_number", "query_signed_distance_winding", "winding_nodes"),
