@@ -123,9 +123,10 @@ def test_a_top_level_compiles_the_kernels_it_launches_and_no_other(kind, monkeyp
 
 def test_a_query_compiles_the_group_of_kernels_it_launches(monkeypatch):
     """An Accel builds trace.cl in the groups of QUERY_PROGRAMS, each when a
-    call first needs one of its kernels: ray queries build the rays' group
-    and no other, a point query then its own, the winding group never --
-    with the same answers as the whole program's (no groups given)."""
+    call first needs one of its kernels: a trace builds query_closest's
+    group and no other, an any-hit query then its own, a point query the
+    points' group, the winding group never -- with the same answers as the
+    whole program's (no groups given)."""
     import clrt
     from clrt.device import scene as device_scene
     from clrt.query import accel as query_accel
@@ -150,9 +151,11 @@ def test_a_query_compiles_the_group_of_kernels_it_launches(monkeypatch):
     assert asked == []
     hits = accel.trace(origins, directions)
     accel.any_hit(origins, directions)
-    assert asked == [set(QUERY_PROGRAMS[0])]
+    group_of = {name: set(group) for group in QUERY_PROGRAMS for name in group}
+    assert asked == [group_of["query_closest"], group_of["query_any"]]
     near = accel.closest_points(points)
-    assert asked == [set(QUERY_PROGRAMS[0]), set(QUERY_PROGRAMS[1])]
+    assert asked == [group_of["query_closest"], group_of["query_any"], group_of["query_closest_point"]]
+    assert group_of["query_winding_number"] not in asked
     with monkeypatch.context() as m:
         m.setattr(query_accel, "QUERY_PROGRAMS", None)
         whole = clrt.Accel(mesh, device="cpu")
