@@ -188,7 +188,7 @@ def _force_device_path(monkeypatch):
     """The Renderer's GPU path on this device: the tree built from the mesh,
     the shading arrays made by the device (as on a GPU)."""
     from clrt.device import geometry
-    monkeypatch.setattr(device_scene, "gathers_on_device", lambda accel, builder, device, mesh=None: True)
+    monkeypatch.setattr(device_scene, "gathers_on_device", lambda accel, builder, device: True)
     monkeypatch.setattr(geometry, "WIDE_BVH_KINDS", ())
     monkeypatch.setattr(geometry, "RAY_PACKET_KINDS", ())
 

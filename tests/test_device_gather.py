@@ -38,10 +38,10 @@ def test_corners_gathered_by_the_device_are_the_hosts(name, device, monkeypatch)
     mesh = _meshes()[name]
     monkeypatch.setattr(geometry, "WIDE_BVH_KINDS", ())
     monkeypatch.setattr(geometry, "RAY_PACKET_KINDS", ())
-    monkeypatch.setattr(scene, "gathers_on_device", lambda accel, builder, device, mesh=None: False)
+    monkeypatch.setattr(scene, "gathers_on_device", lambda accel, builder, device: False)
     host = clrt.Accel(mesh, builder="device", device=device)
     assert host.acceleration.frame is None
-    monkeypatch.setattr(scene, "gathers_on_device", lambda accel, builder, device, mesh=None: True)
+    monkeypatch.setattr(scene, "gathers_on_device", lambda accel, builder, device: True)
     fresh = Mesh.from_arrays(mesh.vertices, mesh.faces)      # no bounds computed yet
     gathered = clrt.Accel(fresh, builder="device", device=device)
     lo, hi, origin = gathered.acceleration.frame

@@ -177,3 +177,77 @@ def test_a_background_build_that_cannot_start_frees_the_lock(fresh, device, monk
     monkeypatch.setattr(first_build.subprocess, "Popen", lambda *a, **k: (_ for _ in ()).throw(OSError("no")))
     assert clrt.Accel(mesh, device=device).acceleration.builder == "device"
     assert [n for n in _files(fresh) if n.endswith((".lock", ".npy"))] == []
+
+
+class _NotStarted:
+    """A background build that is only recorded (its command), never run."""
+
+    def __init__(self, command, **kwargs):
+        self.command = command
+
+    def poll(self):
+        return 0
+
+    def wait(self, timeout=None):
+        return 0
+
+
+def test_a_gpus_record_is_the_program_a_build_from_a_mesh_compiles(device, monkeypatch):
+    """Elsewhere than on PoCL the record is the builder's binary in clrt's
+    cache: record_name(indexed=True) must name the program build_on_device
+    builds from a Mesh (and indexed=False the one from corners)."""
+    from clrt.device import build as device_build
+    from clrt.device.program import program_digest
+    monkeypatch.setattr(first_build, "on_pocl", lambda context: False)
+    monkeypatch.setattr(first_build, "_names", {})
+    built = []
+
+    def spy(context, entry, defines=None, extra_options=(), kernels=None):
+        built.append(program_digest(context, entry, defines, kernels))
+        return real(context, entry, defines, extra_options, kernels)
+    real = device_build.build_program
+    monkeypatch.setattr(device_build, "build_program", spy)
+    mesh = primitives.torus(1.0, 0.3, 40, 20)
+    context, queue = create_context(device)
+    device_build.build_on_device(context, queue, mesh)
+    device_build.build_on_device(context, queue, mesh.vertices[mesh.faces].astype(np.float32))
+    assert built == [first_build.record_name(context, "box", len(mesh.faces), indexed=True),
+                     first_build.record_name(context, "box", len(mesh.faces), indexed=False)]
+    assert built[0] != built[1]
+
+
+def test_a_gpus_first_render_shades_on_the_host_while_the_programs_compile(fresh, device, monkeypatch):
+    """The GPU's rule on this device (the device gathering a mesh as a GPU
+    does, the record a program binary): the first Renderer builds on the
+    host and shades there (no upload of the mesh), and starts one background
+    build that compiles the builder for a mesh; once its binary is there,
+    the next Renderer gathers and shades on the device -- the same image."""
+    from clrt.device import geometry
+    from clrt.device import scene as device_scene
+    from clrt.device.program import cache_dir
+    monkeypatch.setattr(first_build, "on_pocl", lambda context: False)
+    monkeypatch.setattr(first_build, "_names", {})
+    monkeypatch.setattr(device_scene, "gathers_on_device", lambda accel, builder, device: builder in ("device", "auto"))
+    monkeypatch.setattr(geometry, "WIDE_BVH_KINDS", ())
+    monkeypatch.setattr(geometry, "RAY_PACKET_KINDS", ())
+    started = []
+    monkeypatch.setattr(first_build.subprocess, "Popen", lambda command, **k: started.append(command)
+                        or _NotStarted(command))
+    mesh = primitives.torus(1.0, 0.3, 48, 24)
+    camera = clrt.Camera.framing(mesh.bounds, 96, 64)
+    first = clrt.Renderer(mesh, device=device)
+    assert first.acceleration.builder == "sah" and first.arrays.shading is None
+    name = first_build.record_name(create_context(device)[0], "box", len(mesh.faces), indexed=True)
+    assert len(started) == 1 and started[0][3:] == ["compile", "box", str(len(mesh.faces)), "indexed",
+                                                   device or "", name, str(fresh / first_build.LOCK)]
+    expected = first.render(camera, hits=True)
+    assert clrt.Renderer(mesh, device=device).acceleration.builder == "sah" and len(started) == 1   # (lock held)
+
+    (fresh / first_build.LOCK).unlink()          # what the background build leaves: the binary, no lock
+    cache_dir().mkdir(parents=True, exist_ok=True)
+    (cache_dir() / f"{name}.bin").write_bytes(b"")
+    second = clrt.Renderer(mesh, device=device)
+    assert second.acceleration.builder == "device" and second.arrays.shading is not None and len(started) == 1
+    frame = second.render(camera, hits=True)
+    for field in ("image", "prim", "t"):
+        assert np.array_equal(getattr(frame, field), getattr(expected, field)), field

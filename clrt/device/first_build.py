@@ -22,9 +22,9 @@ for meshes of up to HOST_FIRST_MAX_TRIANGLES, and one background process
   vertices and faces (which a GPU gathers itself) the crease split's that a
   Renderer runs after it -- whose binaries in clrt's cache are the record.
 
-A GPU's Mesh is decided before its upload (gathers_on_device asks
-builds_on_host_first with the mesh): the host then gathers its corners and
-splits its creases, as for a CPU device.  Builds that find the record build
+A GPU's Mesh is decided once, before its upload (clrt.device.scene's
+first_builder, for Renderer and Accel): the host then gathers its corners
+and splits its creases, as for a CPU device.  Builds that find the record build
 on the device, and so does every build once a background build has failed
 (``NAME.failed``, or its lock left older than LOCK_SECONDS): as before this
 rule, compiling in the call.  The trees differ; the answers do not (every
@@ -48,6 +48,7 @@ import os
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 from pathlib import Path
 
@@ -74,7 +75,8 @@ SIZE_CLASSES = (TAIL_THRESHOLD["cpu"], 32_767, 65_534)
 LOCK = "build.lock"
 
 _names: dict[tuple, str] = {}       # record_name's, per context, volume, size and input kind
-_helpers: list[subprocess.Popen] = []   # background builds this process started
+_helpers: list[subprocess.Popen] = []   # background builds this process started (threads may build at once:
+_helpers_lock = threading.Lock()        # they take turns on the list)
 
 
 def _folder() -> Path | None:
@@ -140,7 +142,7 @@ def builds_on_host_first(corners, volume: str, device: str | None, leaf_size: in
     host instead, the builder not yet ready here and a background build that
     makes it ready running (started now, or by another call or process)."""
     indexed = isinstance(corners, Mesh)
-    num_tris = len(corners.faces) if indexed else len(corners) if isinstance(corners, np.ndarray) else 0
+    num_tris = corners.num_triangles if indexed else len(corners) if isinstance(corners, np.ndarray) else 0
     if not 0 < num_tris <= HOST_FIRST_MAX_TRIANGLES:
         return False
     context = create_context(device)[0]
@@ -156,11 +158,11 @@ def builds_on_host_first(corners, volume: str, device: str | None, leaf_size: in
         held_by = lock.read_text().strip()
         age = time.time() - lock.stat().st_mtime
     except OSError:
-        return _start(folder, lock, name, start, corners, volume, leaf_size, device)
+        return _start(context, folder, lock, name, start, corners, volume, leaf_size, device)
     if age < LOCK_SECONDS:
         return True                  # a background build runs (this one's or another's)
     _fail(folder, held_by, lock)     # it died without a word: its kind builds in the call from now on
-    return held_by != name and _start(folder, lock, name, start, corners, volume, leaf_size, device)
+    return held_by != name and _start(context, folder, lock, name, start, corners, volume, leaf_size, device)
 
 
 def _build_command(folder: Path, corners: np.ndarray, volume: str, leaf_size: int) -> tuple[list, Path]:
@@ -177,29 +179,34 @@ def _build_command(folder: Path, corners: np.ndarray, volume: str, leaf_size: in
 
 def _compile_command(folder: Path, corners, volume: str, leaf_size: int) -> tuple[list, None]:
     """The background build elsewhere: the programs compiled, no corners needed."""
-    num_tris = len(corners.faces) if isinstance(corners, Mesh) else len(corners)
+    num_tris = corners.num_triangles if isinstance(corners, Mesh) else len(corners)
     return ["compile", volume, str(num_tris), "indexed" if isinstance(corners, Mesh) else "corners"], None
 
 
-def _start(folder: Path, lock: Path, name: str, command_of, corners, volume: str, leaf_size: int,
-           device: str | None) -> bool:
+def _start(context: cl.Context, folder: Path, lock: Path, name: str, command_of, corners, volume: str,
+           leaf_size: int, device: str | None) -> bool:
     """Start the background build of ``name`` (``command_of``: its arguments);
-    false where it cannot start (the cache folder not writable, another
-    process took the lock first, no process to start): the call then builds
-    on the device."""
+    false where it cannot start (the cache folder not writable, no process
+    to start) or need not (a background build made it ready a moment ago):
+    the call then builds on the device."""
     path = None
     try:
         folder.mkdir(parents=True, exist_ok=True)
         fd = os.open(lock, os.O_CREAT | os.O_EXCL | os.O_WRONLY)
         with os.fdopen(fd, "w") as fh:
             fh.write(name)
+        if _ready(context, folder, name):   # (one that ended between the caller's look and the lock)
+            remove(lock)
+            return False
         arguments, path = command_of(folder, corners, volume, leaf_size)
         env = dict(os.environ, CLRT_FIRST_BUILD="0",           # (its own build records nothing early)
                    PYTHONPATH=os.pathsep.join(p for p in sys.path if p))   # the clrt, numpy, pyopencl of this one
         command = [sys.executable, "-m", "clrt.device.first_build_process", *arguments, device or "", name,
                    str(lock)]
-        _helpers.append(subprocess.Popen(command, env=env, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
-                                         stderr=subprocess.DEVNULL, start_new_session=True))
+        helper = subprocess.Popen(command, env=env, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
+                                  stderr=subprocess.DEVNULL, start_new_session=True)
+        with _helpers_lock:
+            _helpers.append(helper)
         return True
     except FileExistsError:          # another process started one a moment ago
         return True
@@ -229,11 +236,13 @@ def remove(path) -> None:
 
 def _reap() -> None:
     """Collect the background builds of this process that have ended (no zombies)."""
-    _helpers[:] = [h for h in _helpers if h.poll() is None]
+    with _helpers_lock:
+        _helpers[:] = [h for h in _helpers if h.poll() is None]
 
 
 def wait(timeout: float | None = None) -> list[int]:
     """Wait for the background builds this process started; their exit codes (tests, benchmarks)."""
-    codes = [h.wait(timeout) for h in _helpers]
-    _helpers.clear()
-    return codes
+    with _helpers_lock:
+        helpers = list(_helpers)
+        _helpers.clear()
+    return [h.wait(timeout) for h in helpers]

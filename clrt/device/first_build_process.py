@@ -60,11 +60,11 @@ def main(argv: list[str]) -> int:
     mode, *arguments, device, name, lock = argv
     folder = Path(lock).parent
     faulthandler.dump_traceback_later(LOCK_SECONDS - 60, exit=True)   # a hung build frees nothing else
-    try:     # the call that started it comes first: its own compiles wait on no core for this one
-        os.nice(10)
-    except OSError:
-        pass
     try:
+        try:     # the call that started it comes first: its own compiles wait on no core for this one
+            os.nice(10)
+        except (OSError, AttributeError):   # (no os.nice on Windows)
+            pass
         if mode == "build":
             build(*arguments, device or None)
             (folder / name).touch()
@@ -78,7 +78,11 @@ def main(argv: list[str]) -> int:
             pass
         return 1
     finally:
-        remove(lock)
+        try:     # its own lock only: one taken over as stale (LOCK_SECONDS) is another build's now
+            if Path(lock).read_text().strip() == name:
+                remove(lock)
+        except OSError:
+            pass
 
 
 if __name__ == "__main__":

@@ -21,6 +21,7 @@ from typing import Callable
 import numpy as np
 import pyopencl as cl
 
+from clrt.config import HOST_DEFAULT_BUILDER
 from clrt.device import first_build
 from clrt.device.acceleration import build_acceleration
 from clrt.device.context import create_context, device_kind, device_label, error_name, format_bytes, is_out_of_memory
@@ -32,21 +33,28 @@ from clrt.scene.arrays import device_origin, triangle_corners
 from clrt.scene.mesh import Mesh
 
 
-def gathers_on_device(accel: str, builder: str, device: str | None, mesh: Mesh | None = None) -> bool:
+def gathers_on_device(accel: str, builder: str, device: str | None) -> bool:
     """Does a DeviceScene of a Mesh with these options upload its vertices and
     faces, to be gathered into corners by the device's build?  Where a GPU
     builds the tree: the host's gather and box (mesh_corners) took twice the
     device build's time on the H200's host (docs/benchmarks.md).  A CPU
     device's wide BVH is collapsed on the host from the corners (and the
-    host's gather costs it no copy across a bus).  Not for an "auto" build
-    of ``mesh`` that runs on the host while the builder compiles
-    (clrt.device.first_build)."""
+    host's gather costs it no copy across a bus)."""
     if accel == "none" or builder not in ("device", "auto"):
         return False
     queue = create_context(device)[1]
-    if device_kind(queue.device) != "gpu" or "cl_khr_fp64" not in queue.device.extensions:
-        return False
-    return not (builder == "auto" and mesh is not None and first_build.builds_on_host_first(mesh, accel, device))
+    return device_kind(queue.device) == "gpu" and "cl_khr_fp64" in queue.device.extensions
+
+
+def first_builder(mesh, accel: str, builder: str, leaf_size: int, device: str | None) -> str:
+    """``builder``, or the host's for an "auto" build of ``mesh`` (a Mesh, or
+    None) that runs on the host while the device builder compiles
+    (clrt.device.first_build) -- decided once, before anything is uploaded,
+    so that a GPU's host then gathers the corners and splits the creases."""
+    if builder == "auto" and isinstance(mesh, Mesh) and first_build.builds_on_host_first(mesh, accel, device,
+                                                                                         leaf_size):
+        return HOST_DEFAULT_BUILDER
+    return builder
 
 
 def mesh_corners(mesh: Mesh) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -106,8 +114,10 @@ class DeviceScene:
                  max_buffer_bytes: int | None = None, max_buffer_label: str = "max_buffer_bytes",
                  timings: dict | None = None, acceleration=None, uploaded=None):
         with stage(timings, "acceleration build"):
+            if acceleration is None and uploaded is None and max_buffer_bytes is None:   # (else decided)
+                builder = first_builder(corners, accel, builder, leaf_size, device)
             if isinstance(corners, Mesh) and not (acceleration is None and max_buffer_bytes is None
-                                                  and gathers_on_device(accel, builder, device, corners)):
+                                                  and gathers_on_device(accel, builder, device)):
                 corners, bounds, origin = mesh_corners(corners)
             self.acceleration = (acceleration if acceleration is not None
                                  else build_acceleration(corners, accel, builder, leaf_size, device,

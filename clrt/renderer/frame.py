@@ -177,8 +177,9 @@ class Renderer:
             # Where a GPU builds the tree from the mesh, it makes a plain
             # mesh's shading arrays too: no crease split on the host (clrt.device.crease).
             objects = self.scene.objects
-            only_mesh = objects[0].mesh if len(objects) == 1 and not self.scene.instanced else None
-            shades = max_buffer_bytes is None and device_scene.gathers_on_device(accel, builder, device, only_mesh)
+            if max_buffer_bytes is None and len(objects) == 1 and not self.scene.instanced:
+                builder = device_scene.first_builder(objects[0].mesh, accel, builder, leaf_size, device)
+            shades = max_buffer_bytes is None and device_scene.gathers_on_device(accel, builder, device)
             self.arrays = flatten_scene(self.scene, pbr_textures=self._pbr_textures, device_shading=shades)
         a = self.arrays
 
