@@ -227,7 +227,8 @@ def test_a_gpus_first_render_shades_on_the_host_while_the_programs_compile(fresh
     from clrt.device.program import cache_dir
     monkeypatch.setattr(first_build, "on_pocl", lambda context: False)
     monkeypatch.setattr(first_build, "_names", {})
-    monkeypatch.setattr(device_scene, "gathers_on_device", lambda accel, builder, device: builder in ("device", "auto"))
+    monkeypatch.setattr(device_scene, "gathers_on_device",
+                        lambda accel, builder, device: accel != "none" and builder in ("device", "auto"))
     monkeypatch.setattr(geometry, "WIDE_BVH_KINDS", ())
     monkeypatch.setattr(geometry, "RAY_PACKET_KINDS", ())
     started = []
@@ -235,6 +236,7 @@ def test_a_gpus_first_render_shades_on_the_host_while_the_programs_compile(fresh
                         or _NotStarted(command))
     mesh = primitives.torus(1.0, 0.3, 48, 24)
     camera = clrt.Camera.framing(mesh.bounds, 96, 64)
+    assert clrt.Accel(mesh, device=device, accel="none").acceleration.builder != "sah" and not started   # no tree
     first = clrt.Renderer(mesh, device=device)
     assert first.acceleration.builder == "sah" and first.arrays.shading is None
     name = first_build.record_name(create_context(device)[0], "box", len(mesh.faces), indexed=True)

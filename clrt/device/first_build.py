@@ -141,6 +141,8 @@ def builds_on_host_first(corners, volume: str, device: str | None, leaf_size: in
     gathers itself) that would run on the device: true when it runs on the
     host instead, the builder not yet ready here and a background build that
     makes it ready running (started now, or by another call or process)."""
+    if volume == "none":             # (no tree: nothing to build)
+        return False
     indexed = isinstance(corners, Mesh)
     num_tris = corners.num_triangles if indexed else len(corners) if isinstance(corners, np.ndarray) else 0
     if not 0 < num_tris <= HOST_FIRST_MAX_TRIANGLES:
