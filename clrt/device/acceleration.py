@@ -56,7 +56,7 @@ def build_acceleration(corners: np.ndarray, accel: str, builder: str, leaf_size:
     if builder == "auto" and accel != "none":
         builder = "device" if "cl_khr_fp64" in create_context(device)[1].device.extensions else HOST_DEFAULT_BUILDER
         # A machine's first builds: on the host while the builder compiles (first_build).
-        # (A Mesh is a GPU's, whose rule gathers_on_device has applied.)
+        # (A Mesh is a GPU's, which clrt.device.scene.first_builder has decided.)
         if (builder == "device" and not statistics and not isinstance(corners, Mesh)
                 and first_build.builds_on_host_first(corners, accel, device, leaf_size)):
             builder = HOST_DEFAULT_BUILDER

@@ -175,7 +175,8 @@ class Renderer:
             # maps) for scenes made for it; Whitted reads base colours only.
             self._pbr_textures = self.scene.integrator == "path"
             # Where a GPU builds the tree from the mesh, it makes a plain
-            # mesh's shading arrays too: no crease split on the host (clrt.device.crease).
+            # mesh's shading arrays too: no crease split on the host (clrt.device.crease)
+            # -- but for a machine's first build, on the host (clrt.device.first_build).
             objects = self.scene.objects
             if max_buffer_bytes is None and len(objects) == 1 and not self.scene.instanced:
                 builder = device_scene.first_builder(objects[0].mesh, accel, builder, leaf_size, device)
