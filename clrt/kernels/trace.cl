@@ -351,36 +351,44 @@ typedef struct {
     __global int* instance;
 } ClosestPointOutputs;
 
-// Point i's answer `best` into the outputs that are there.
-inline void write_closest_point(const ClosestPointOutputs* out, uint i, const PointHit* best, float3 shift)
+// A point's answer as the outputs take it, in 32 bytes: (point, distance)
+// and (prim, u, v, instance) as bits.
+typedef struct {
+    float4 point_distance;
+    int4 prim_u_v_instance;
+} ClosestPointRecord;
+
+inline ClosestPointRecord closest_point_record(const PointHit* best, float3 shift)
 {
     const bool found = best->prim >= 0;
-    if (out->point)
-        vstore3(found ? convert_float3(best->point + TO_POINT_REAL3(shift)) : (float3)(NAN), i, out->point);
-    if (out->distance)
-        out->distance[i] = found ? (float)best->dist : INFINITY;
-    if (out->prim)
-        out->prim[i] = best->prim;
-    if (out->u)
-        out->u[i] = found ? best->u : 0.0f;
-    if (out->v)
-        out->v[i] = found ? best->v : 0.0f;
-    if (out->instance)
-        out->instance[i] = found ? best->instance : -1;
+    ClosestPointRecord r;
+    r.point_distance = (float4)(found ? convert_float3(best->point + TO_POINT_REAL3(shift)) : (float3)(NAN),
+                                found ? (float)best->dist : INFINITY);
+    r.prim_u_v_instance = (int4)(best->prim, as_int(found ? best->u : 0.0f), as_int(found ? best->v : 0.0f),
+                                 found ? best->instance : -1);
+    return r;
 }
 
-// A work-item answers CLOSEST_ITEM_POINTS points, consecutive in the order of
-// point_order.cl: ITEM_RAYS in turn, each walk starting from the nearest
-// triangle of the one before (closest_point's seed), which took a third off
-// the walks of points in a mesh's box on PoCL; or POINT_GROUPS groups of
-// POINT_LANES (closest_points_of_group).
-__kernel void query_closest_point(POINT_INPUT_PARAMS, __global uchar* results, GEOMETRY_PARAMS)
+// Point i's answer `r` into the outputs that are there.
+inline void write_closest_record(const ClosestPointOutputs* out, uint i, ClosestPointRecord r)
 {
-    const uint first = CLOSEST_ITEM_POINTS * get_global_id(0);
-    if (first >= launch.num_rays && !WARP_WALKS)   // (else it walks with its warp: closest_point_item)
-        return;
-    const Geometry g = make_geometry(GEOMETRY_ARGS);
-    const RayInput in = make_point_input(POINT_INPUT_ARGS);
+    if (out->point)
+        vstore3(r.point_distance.xyz, i, out->point);
+    if (out->distance)
+        out->distance[i] = r.point_distance.w;
+    if (out->prim)
+        out->prim[i] = r.prim_u_v_instance.x;
+    if (out->u)
+        out->u[i] = as_float(r.prim_u_v_instance.y);
+    if (out->v)
+        out->v[i] = as_float(r.prim_u_v_instance.z);
+    if (out->instance)
+        out->instance[i] = r.prim_u_v_instance.w;
+}
+
+inline ClosestPointOutputs closest_point_outputs(const QueryLaunch* launch_, __global uchar* results)
+{
+    const QueryLaunch launch = *launch_;
     ClosestPointOutputs out;
     out.point = RESULT_AT(float, 0);
     out.distance = RESULT_AT(float, 1);
@@ -388,6 +396,39 @@ __kernel void query_closest_point(POINT_INPUT_PARAMS, __global uchar* results, G
     out.u = RESULT_AT(float, 3);
     out.v = RESULT_AT(float, 4);
     out.instance = RESULT_AT(int, 5);
+    return out;
+}
+
+// Point i's answer `best` into the outputs that are there -- or, where the
+// caller gives `records` (CPU devices, several outputs asked), into record i
+// there, which closest_point_fields then spreads into the outputs in the
+// points' own order: a point's answer written at its index, which the cell
+// order scatters over each output, cost a cache line in every output (on
+// PoCL 25 of homer's 200 ms against 2 for the records: docs/benchmark-log.md).
+inline void write_closest_point(const ClosestPointOutputs* out, __global ClosestPointRecord* records, uint i,
+                                const PointHit* best, float3 shift)
+{
+    const ClosestPointRecord r = closest_point_record(best, shift);
+    if (records)
+        records[i] = r;
+    else
+        write_closest_record(out, i, r);
+}
+
+// A work-item answers CLOSEST_ITEM_POINTS points, consecutive in the order of
+// point_order.cl: ITEM_RAYS in turn, each walk starting from the nearest
+// triangle of the one before (closest_point's seed), which took a third off
+// the walks of points in a mesh's box on PoCL; or POINT_GROUPS groups of
+// POINT_LANES (closest_points_of_group).
+__kernel void query_closest_point(POINT_INPUT_PARAMS, __global uchar* results,
+                                  __global ClosestPointRecord* records, GEOMETRY_PARAMS)
+{
+    const uint first = CLOSEST_ITEM_POINTS * get_global_id(0);
+    if (first >= launch.num_rays && !WARP_WALKS)   // (else it walks with its warp: closest_point_item)
+        return;
+    const Geometry g = make_geometry(GEOMETRY_ARGS);
+    const RayInput in = make_point_input(POINT_INPUT_ARGS);
+    const ClosestPointOutputs out = closest_point_outputs(&launch, results);
 #ifdef POINT_GROUPS
     uint ids[POINT_LANES];
     int seeds[POINT_LANES];
@@ -400,7 +441,7 @@ __kernel void query_closest_point(POINT_INPUT_PARAMS, __global uchar* results, G
         const uint count = closest_points_of_group(&g, &in, order, launch.num_rays, first + POINT_LANES * group, true,
                                                    seeds, ids, points, best, &good);
         for (uint k = 0; k < count; ++k)
-            write_closest_point(&out, ids[k], best + k, in.shift);
+            write_closest_point(&out, records, ids[k], best + k, in.shift);
     }
 #else
     uint ids[ITEM_RAYS];
@@ -418,9 +459,21 @@ __kernel void query_closest_point(POINT_INPUT_PARAMS, __global uchar* results, G
             break;
         if (best.prim >= 0)
             seed = best.slot;
-        write_closest_point(&out, i, &best, in.shift);
+        write_closest_point(&out, records, i, &best, in.shift);
     }
 #endif
+}
+
+// query_closest_point's records (where it wrote them) into the outputs asked
+// for, a work-item a point in the points' own order.
+__kernel void closest_point_fields(__global const ClosestPointRecord* records, QueryLaunch launch,
+                                   __global uchar* results)
+{
+    const uint i = get_global_id(0);
+    if (i >= launch.num_rays)
+        return;
+    const ClosestPointOutputs out = closest_point_outputs(&launch, results);
+    write_closest_record(&out, i, records[i]);
 }
 
 // ---- Inside and outside (winding.cl, point.cl's sign rules).  Points as

@@ -60,7 +60,8 @@ QUERY_KERNELS = {
     "query_all": (*RAY_INPUT, buffer("results"), *GEOMETRY),
     # point queries (point.cl): points in `origins`, their largest distance in `tmaxs`, visited in the
     # order that point_order.cl's three kernels leave in `order`
-    "query_closest_point": (*POINT_INPUT, buffer("results"), *GEOMETRY),
+    "query_closest_point": (*POINT_INPUT, buffer("results"), buffer("records"), *GEOMETRY),
+    "closest_point_fields": (buffer("records"), value("launch", QUERY_LAUNCH), buffer("results")),
     "point_cells": (buffer("origins"), value("launch", QUERY_LAUNCH), buffer("order")),
     "point_offsets": (buffer("order"),),
     "point_scatter": (value("launch", QUERY_LAUNCH), buffer("order")),
@@ -86,7 +87,7 @@ QUERY_KERNELS = {
 #: (clrt.device.scene.DeviceScene.kernels).
 QUERY_PROGRAMS = (
     ("query_closest",), ("query_any",), ("query_count", "query_all"), ("camera_rays", "trace_camera", "occlude_camera"),
-    ("query_closest_point", "point_cells", "point_offsets", "point_scatter", "grid_points",
+    ("query_closest_point", "closest_point_fields", "point_cells", "point_offsets", "point_scatter", "grid_points",
      "query_signed_distance_parity", "query_signed_distance_normal"),
     ("query_winding_number", "query_signed_distance_winding", "winding_nodes"),
 )

@@ -166,8 +166,13 @@ class PointQueries:
                 launch["field_at"][slots.index(name)] = nbytes
                 nbytes += m * 4 * int(np.prod(POINT_FIELDS[name].item_shape, dtype=int))
             results = self._buffer("results", nbytes)
-            self._launch("query_closest_point", (origins, tmaxs, bad, launch, order, results,
+            # Where points walk in groups (CPU devices), several outputs go through one record a point
+            # (trace.cl's write_closest_point says why).
+            records = self._buffer("records", 32 * m) if len(fields) > 1 and self.point_defines else None
+            self._launch("query_closest_point", (origins, tmaxs, bad, launch, order, results, records,
                                                  *self._point_geometry()), self._point_items("query_closest_point", m))
+            if records is not None:
+                self._launch("closest_point_fields", (records, launch, results), m)
             for name, at in placed.items():
                 self._copy_out(out[name], start, stop, results, at)
         self._check(batch)   # also waits for the copies
