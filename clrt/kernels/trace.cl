@@ -459,7 +459,7 @@ __kernel void query_closest_point(POINT_INPUT_PARAMS, __global uchar* results,
             break;
         if (best.prim >= 0)
             seed = best.slot;
-        write_closest_point(&out, records, i, &best, in.shift);
+        write_closest_point(&out, 0, i, &best, in.shift);   // (records: CPU devices' point groups only)
     }
 #endif
 }

@@ -167,11 +167,13 @@ class PointQueries:
                 nbytes += m * 4 * int(np.prod(POINT_FIELDS[name].item_shape, dtype=int))
             results = self._buffer("results", nbytes)
             # Where points walk in groups (CPU devices), several outputs go through one record a point
-            # (trace.cl's write_closest_point says why).
-            records = self._buffer("records", 32 * m) if len(fields) > 1 and self.point_defines else None
+            # (trace.cl's write_closest_point says why); elsewhere the kernel takes none (any buffer
+            # will do: its argument is never read there).
+            grouped = bool(self.point_defines)
+            records = (self._buffer("records", 32 * m) if len(fields) > 1 else None) if grouped else results
             self._launch("query_closest_point", (origins, tmaxs, bad, launch, order, results, records,
                                                  *self._point_geometry()), self._point_items("query_closest_point", m))
-            if records is not None:
+            if grouped and records is not None:
                 self._launch("closest_point_fields", (records, launch, results), m)
             for name, at in placed.items():
                 self._copy_out(out[name], start, stop, results, at)
