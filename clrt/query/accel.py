@@ -251,7 +251,7 @@ class Accel(PointQueries, SceneMoves):
         # Closest points many at a time on CPU devices (clrt/query/points.py); the point walks of GPUs
         # (clrt.query.kernels.point_defines).
         self.point_defines = point_group_defines(scene)
-        self.kernels = scene.kernels("trace.cl", QUERY_KERNELS, self.trace_defines(), QUERY_PROGRAMS)
+        self.kernels = self.query_kernels()
         self._scene_value = scene.geometry.scene_value()
         self._buffers: dict[str, cl.Buffer] = {}
         self._hits_per_ray = float(ALL_HITS_PER_RAY)
@@ -266,6 +266,12 @@ class Accel(PointQueries, SceneMoves):
         """The defines of this Accel's trace.cl program beyond the scene's: the
         device's point walks and, on CPU devices, the point groups."""
         return {**point_defines(self.queue.device), **self.point_defines}
+
+    def query_kernels(self):
+        """This Accel's kernels of trace.cl, in QUERY_PROGRAMS' groups, each built
+        when first asked for (made again where the scene's defines change: a
+        two-level scene's new top level)."""
+        return self.device_scene.kernels("trace.cl", QUERY_KERNELS, self.trace_defines(), QUERY_PROGRAMS)
 
     # ----------------------------------------------------------------------- chunks and memory
 

@@ -17,7 +17,6 @@ from clrt.device.instances import instanced_scene, move_instances, refit_meshes
 from clrt.device.scene import DeviceScene
 from clrt.device.sharing import one_at_a_time
 from clrt.errors import InputError
-from clrt.query.kernels import QUERY_KERNELS, QUERY_PROGRAMS
 from clrt.scene.arrays import device_origin, triangle_corners
 from clrt.scene.instances import Instances, is_gltf_file, is_instance_list, placed_meshes
 from clrt.scene.mesh import Mesh
@@ -97,8 +96,7 @@ class SceneMoves:
         changed = refit_meshes(self.device_scene, moved, [k])
         self.instances = moved
         if changed:   # a deeper or shallower top level: a program of another stack size
-            self.kernels = self.device_scene.kernels("trace.cl", QUERY_KERNELS, self.trace_defines(),
-                                                     QUERY_PROGRAMS)
+            self.kernels = self.query_kernels()
 
     def _refit_mesh_index(self, mesh) -> int:
         """The distinct mesh that ``refit``'s ``mesh`` names (0 for one mesh)."""
@@ -126,5 +124,4 @@ class SceneMoves:
             raise InputError("these queries share a Renderer's scene: use Renderer.move_instances")
         self.instances, changed = move_instances(self.device_scene, self.instances, transforms)
         if changed:   # a deeper or shallower top level: a program of another stack size
-            self.kernels = self.device_scene.kernels("trace.cl", QUERY_KERNELS, self.trace_defines(),
-                                                     QUERY_PROGRAMS)
+            self.kernels = self.query_kernels()

@@ -31,6 +31,10 @@ from clrt.query.results import INSIDE_FIELDS, POINT_FIELDS, ClosestPoints, asked
 CLOSEST_KERNELS = ("query_closest_point", *SIGN_KERNELS.values())
 
 
+#: trace.cl's ClosestPointRecord: a point's answer, (point, distance) and (prim, u, v, instance)
+CLOSEST_POINT_RECORD_BYTES = 32
+
+
 def point_group_defines(scene) -> dict:
     """The defines of the query program (trace.cl) with which the closest-point
     kernels walk POINT_LANES points at a time (point_group.cl's
@@ -167,13 +171,14 @@ class PointQueries:
                 nbytes += m * 4 * int(np.prod(POINT_FIELDS[name].item_shape, dtype=int))
             results = self._buffer("results", nbytes)
             # Where points walk in groups (CPU devices), several outputs go through one record a point
-            # (trace.cl's write_closest_point says why); elsewhere the kernel takes none (any buffer
-            # will do: its argument is never read there).
-            grouped = bool(self.point_defines)
-            records = (self._buffer("records", 32 * m) if len(fields) > 1 else None) if grouped else results
+            # (trace.cl's write_closest_point says why).  Elsewhere the kernel reads no records: any
+            # buffer will do for the argument (GPUs are given no null buffer).
+            spread = bool(self.point_defines) and len(fields) > 1
+            records = (self._buffer("records", CLOSEST_POINT_RECORD_BYTES * m) if spread
+                       else None if self.point_defines else results)
             self._launch("query_closest_point", (origins, tmaxs, bad, launch, order, results, records,
                                                  *self._point_geometry()), self._point_items("query_closest_point", m))
-            if grouped and records is not None:
+            if spread:
                 self._launch("closest_point_fields", (records, launch, results), m)
             for name, at in placed.items():
                 self._copy_out(out[name], start, stop, results, at)
