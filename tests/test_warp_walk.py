@@ -69,3 +69,31 @@ def test_warp_walk_answers_as_the_plain_walk(volume, device, monkeypatch):
         for field in POINT_FIELDS:
             np.testing.assert_array_equal(getattr(got, field), getattr(want, field), err_msg=field)
     np.testing.assert_array_equal(walk.signed_distance(points, sign="normal"), want_signed)
+
+
+def test_the_cells_seeds_are_their_centres_nearest_triangles(device, monkeypatch):
+    """The walks' seeds (point_order.cl's POINT_CELL_SEEDS, made by
+    point_cell_seeds where points walk one a work-item): for every cell of the
+    grid over the scene's box, a triangle as near to the cell's centre as
+    brute force's nearest, to float32 rounding; copied into each launch's
+    order over the cell counts."""
+    import pyopencl as cl
+    from clrt.config import POINT_CELL_BITS, POINT_CELLS
+    from test_point_queries import reference
+
+    mesh = primitives.torus(1.0, 0.35, 40, 20)
+    walk = _accel(mesh, "box", EMULATED, device, monkeypatch)
+    walk.distance(np.zeros((1, 3), np.float32))
+    seeds = np.empty(POINT_CELLS, np.int32)
+    cl.enqueue_copy(walk.queue, seeds, walk._seeds_cache[1])
+    assert (seeds >= 0).all() and (seeds < len(mesh.faces)).all()
+    launch = walk._batch_launch
+    lo, hi = (launch[field][:3].astype(np.float32) for field in ("scene_lo", "scene_hi"))
+    cell = np.random.default_rng(2).choice(POINT_CELLS, 1000, replace=False)   # (a float64 reference of all: 10 GB)
+    q = np.stack([sum(((cell >> (3 * b + axis)) & 1) << b for b in range(POINT_CELL_BITS)) for axis in range(3)], 1)
+    centres = lo + (q.astype(np.float32) + np.float32(0.5)) / np.float32(1 << POINT_CELL_BITS) * (hi - lo)
+    corners = (mesh.vertices[mesh.faces] - launch["shift"][:3]).astype(np.float32)   # the device's frame, near enough
+    distances, _ = reference(centres, corners)
+    nearest = distances.min(axis=1)
+    by_seed = distances[np.arange(len(cell)), walk.acceleration.prim_ids[seeds[cell]]]
+    np.testing.assert_allclose(by_seed, nearest, rtol=0, atol=1e-5 * float(np.abs(corners).max() + 1))

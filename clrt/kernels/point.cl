@@ -584,14 +584,15 @@ inline PointHit closest_point(const Geometry* g, float3 p, float max_dist, float
 }
 
 // The closest point of a work-item's point p, if `taken` (a point there, and
-// valid), as closest_point finds it; else none (prim -1).  Where the warp
-// walks together (WARP_WALKS, point_warp.cl) every work-item of the warp
-// must call it.
-
+// valid), as closest_point finds it (from triangle `seed` first); else none
+// (prim -1).  Where the warp walks together (WARP_WALKS, point_warp.cl)
+// every work-item of the warp must call it.
 inline PointHit closest_point_item(const Geometry* g, float3 p, bool taken, float max_dist, float margin, int seed)
 {
 #if WARP_WALKS
     PointHit best = no_point_hit(max_dist);
+    if (taken && seed >= 0)
+        visit_point_triangle(g, TO_POINT_REAL3(p), 0, seed, &best);
     warp_closest_walk(g, p, taken, margin, &best);
     return best;
 #else

@@ -13,11 +13,22 @@
 //   point_scatter  each point's index to its place
 // They share one buffer, `order`, laid out for a launch of n points as
 //   uint cell_count[POINT_CELLS]  (point_offsets makes them first places,
-//                                  point_scatter moves them on)
+//                                  point_scatter moves them on; then the
+//                                  host copies the cells' seeds over them:
+//                                  int seed[POINT_CELLS], POINT_CELL_SEEDS)
 //   uint cell[n]                  each point's cell
 //   uint order[n]                 point indices in cell order: what
 //                                 query_closest_point reads (POINT_ORDER)
 // and the host zeroes the counts before point_cells.
+//
+// The seeds: the slot of the triangle nearest to each cell's centre (-1:
+// none), made once for a tree (trace.cl's point_cell_seeds) and read by the
+// walks of one point a work-item (the closest points and signed distances
+// of GPUs), which visit their cell's first: a point's best distance then
+// starts within the cell's half diagonal of the centre's and prunes its walk
+// from the root on -- where a warp's points walk together (point_warp.cl),
+// no point's first, distant leaf holds the others to its nodes.  Any
+// triangle visited first changes no answer (point.cl's closest_point).
 #ifndef CLRT_POINT_ORDER_CL
 #define CLRT_POINT_ORDER_CL
 
@@ -28,6 +39,7 @@
 #define POINT_CELLS (1u << (3 * POINT_CELL_BITS))
 #define POINT_CELL_OF(order) ((order) + POINT_CELLS)
 #define POINT_ORDER(order, n) ((order) + POINT_CELLS + (n))
+#define POINT_CELL_SEEDS(order) ((__global const int*)(order))
 
 // The box that steers a point's walk where the walk may take the same steps
 // for every point of a cell (winding.cl's far fields): with
@@ -78,17 +90,42 @@ inline uint spread_cell_bits(uint x)
     return out;
 }
 
+// Bits 0, 3, 6, 9, 12 of x at bits 0..4 (spread_cell_bits undone).
+inline uint gather_cell_bits(uint x)
+{
+    uint out = 0u;
+    for (uint b = 0; b < POINT_CELL_BITS; ++b)
+        out |= ((x >> (3u * b)) & 1u) << b;
+    return out;
+}
+
+// The cell of point p (device frame) in the grid over the scene's box (lo ..
+// hi): its coordinates' bits interleaved, x lowest (Morton order).  A point
+// outside the box lands in the nearest cell; NaN points (reported by the
+// queries) in cell 0 -- convert_uint_sat takes NaN to 0.
+inline uint point_cell(float3 p, float3 lo, float3 hi)
+{
+    const float3 extent = fmax(hi - lo, (float3)(FLT_MIN));
+    const uint3 q = min(convert_uint3_sat((p - lo) / extent * (float)(1 << POINT_CELL_BITS)),
+                        (uint3)((1u << POINT_CELL_BITS) - 1u));
+    return spread_cell_bits(q.x) | (spread_cell_bits(q.y) << 1) | (spread_cell_bits(q.z) << 2);
+}
+
+// The centre of cell `cell` (point_cell) of the grid over lo .. hi.
+inline float3 cell_centre(uint cell, float3 lo, float3 hi)
+{
+    const float3 q = (float3)((float)gather_cell_bits(cell), (float)gather_cell_bits(cell >> 1),
+                              (float)gather_cell_bits(cell >> 2));
+    return lo + (q + 0.5f) / (float)(1 << POINT_CELL_BITS) * (hi - lo);
+}
+
 __kernel void point_cells(__global const float* origins, const QueryLaunch launch, __global uint* order)
 {
     const uint i = get_global_id(0);
     if (i >= launch.num_rays)
         return;
     const float3 p = vload3(0, origins + (size_t)(launch.in_first + i) * launch.origin_stride) - launch.shift.xyz;
-    const float3 extent = fmax(launch.scene_hi.xyz - launch.scene_lo.xyz, (float3)(FLT_MIN));
-    // NaN points (reported by the query) land in cell 0: convert_uint_sat takes NaN to 0.
-    const uint3 q = min(convert_uint3_sat((p - launch.scene_lo.xyz) / extent * (float)(1 << POINT_CELL_BITS)),
-                        (uint3)((1u << POINT_CELL_BITS) - 1u));
-    const uint cell = spread_cell_bits(q.x) | (spread_cell_bits(q.y) << 1) | (spread_cell_bits(q.z) << 2);
+    const uint cell = point_cell(p, launch.scene_lo.xyz, launch.scene_hi.xyz);
     POINT_CELL_OF(order)[i] = cell;
     atomic_inc(order + cell);
 }

@@ -31,6 +31,10 @@ from clrt.query.results import INSIDE_FIELDS, POINT_FIELDS, ClosestPoints, asked
 CLOSEST_KERNELS = ("query_closest_point", *SIGN_KERNELS.values())
 
 
+#: The kernels whose walks start from their cells' seeds (trace.cl's signed_distances says why not the winding rule's).
+SEEDED_KERNELS = ("query_closest_point", SIGN_KERNELS["normal"], SIGN_KERNELS["parity"])
+
+
 #: trace.cl's ClosestPointRecord: a point's answer, (point, distance) and (prim, u, v, instance)
 CLOSEST_POINT_RECORD_BYTES = 32
 
@@ -124,22 +128,27 @@ class PointQueries:
         if name.startswith("query_"):
             self.queue.flush()
 
-    def _point_order(self, origins: cl.Buffer, launch: np.ndarray, points: np.ndarray | None) -> cl.Buffer:
+    def _point_order(self, origins: cl.Buffer, launch: np.ndarray, points: np.ndarray | None,
+                     seeds: cl.Buffer | None = None) -> cl.Buffer:
         """The `order` buffer of a launch of point queries (point_order.cl): its
-        points sorted by cell of a grid over the scene.  ``points``: the
-        launch's points as the host has them (the chunk of the caller's array),
-        or None where they were made or given on the device.  A CPU device's
-        order is the host's (clrt/query/host_order.py says why): from
-        ``points``, else from the launch's points read back (the device's
-        memory is the host's, so a copy)."""
+        points sorted by cell of a grid over the scene, and the cells' seeds
+        ``seeds`` (_cell_seeds) where a closest-point kernel walks them.
+        ``points``: the launch's points as the host has them (the chunk of the
+        caller's array), or None where they were made or given on the device.
+        A CPU device's order is the host's (clrt/query/host_order.py says
+        why): from ``points``, else from the launch's points read back (the
+        device's memory is the host's, so a copy)."""
         if self._kind != "cpu":
-            return self._device_point_order(origins, launch)
-        m = int(launch["num_rays"])
-        order = self._buffer("order", 4 * (POINT_CELLS + 2 * m))
-        if points is None:   # waits for the queue: the launch before may still be writing them
-            points = np.empty(3 * m, np.float32)
-            cl.enqueue_copy(self.queue, points, origins, src_offset=12 * int(launch["in_first"]), is_blocking=True)
-        self._transfers.append(upload_order(self.queue, order, points, launch))
+            order = self._device_point_order(origins, launch)
+        else:
+            m = int(launch["num_rays"])
+            order = self._buffer("order", 4 * (POINT_CELLS + 2 * m))
+            if points is None:   # waits for the queue: the launch before may still be writing them
+                points = np.empty(3 * m, np.float32)
+                cl.enqueue_copy(self.queue, points, origins, src_offset=12 * int(launch["in_first"]), is_blocking=True)
+            self._transfers.append(upload_order(self.queue, order, points, launch))
+        if seeds is not None and not self.point_defines:   # over the cell counts, done with (POINT_CELL_SEEDS)
+            cl.enqueue_copy(self.queue, order, seeds, byte_count=4 * POINT_CELLS)
         return order
 
     def _device_point_order(self, origins: cl.Buffer, launch: np.ndarray) -> cl.Buffer:
@@ -152,6 +161,29 @@ class PointQueries:
         self._launch("point_scatter", (launch, order), m)
         return order
 
+    def _cell_seeds(self) -> cl.Buffer | None:
+        """The closest-point walks' seeds (point_order.cl's POINT_CELL_SEEDS):
+        where points walk one a work-item, the slot of the triangle nearest to
+        the centre of each cell of point_order.cl's grid (trace.cl's
+        point_cell_seeds, over the scene's box as the batch's launch gives it:
+        call after _begin), made on first use and again after a refit (a new
+        ``geometry.reach``); none (-1) in a two-level scene, whose walk takes
+        no seed, and without a BVH, which visits every triangle anyway.  Point
+        groups (CPU devices) start from the group before: None."""
+        if self.point_defines:
+            return None
+        key = (self.geometry, self.geometry.reach)
+        cached = self.__dict__.get("_seeds_cache")
+        if cached is not None and all(a is b for a, b in zip(cached[0], key)):
+            return cached[1]
+        seeds = cl.Buffer(self.context, cl.mem_flags.READ_WRITE, 4 * POINT_CELLS)
+        if self.acceleration.is_bvh and self.instances is None:
+            self._launch("point_cell_seeds", (seeds, self._batch_launch, *self._point_geometry()), POINT_CELLS)
+        else:
+            cl.enqueue_fill_buffer(self.queue, seeds, np.int32(-1), 0, 4 * POINT_CELLS)
+        self._seeds_cache = (key, seeds)
+        return seeds
+
     @one_at_a_time
     def _closest_points(self, batch: PointBatch, fields) -> ClosestPoints:
         fields = asked_fields(fields, POINT_FIELDS, "point")
@@ -159,11 +191,13 @@ class PointQueries:
         out = self._point_outputs(n, fields, batch.on_device)
         slots = list(POINT_FIELDS)
         self._begin(batch)
+        seeds = self._cell_seeds()
         for start, stop in self._chunks(n):
             m = stop - start
             rays, launch = self._ray_args(batch, start, stop, 0)
             origins, _, _, tmaxs, bad = rays
-            order = self._point_order(origins, launch, None if batch.on_device else batch.host_chunk(0, start, stop))
+            order = self._point_order(origins, launch, None if batch.on_device else batch.host_chunk(0, start, stop),
+                                      seeds)
             placed, nbytes = {}, 0
             for name in fields:   # every field is 4-byte aligned: float32 and int32 values
                 placed[name] = nbytes
@@ -262,6 +296,7 @@ class PointQueries:
         elif kernel == "query_signed_distance_normal":
             rule = (self._pseudo_normals(),)
         self._begin(source)
+        seeds = self._cell_seeds() if kernel in SEEDED_KERNELS else None
         for start, stop in self._chunks(n):
             m = stop - start
             points = None   # where the host has them: a host batch's
@@ -270,7 +305,7 @@ class PointQueries:
             else:
                 (origins, _, _, tmaxs, bad), launch = self._ray_args(source, start, stop, 0)
                 points = None if source.on_device else source.host_chunk(0, start, stop)
-            order = self._point_order(origins, launch, points)
+            order = self._point_order(origins, launch, points, seeds)
             placed, nbytes = {}, 0
             for name, slot in outputs.items():   # the float32 values first: each output stays aligned
                 placed[name] = nbytes
