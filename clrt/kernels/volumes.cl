@@ -95,6 +95,19 @@ inline VolumeRay volume_ray(float3 origin, float3 dir, float3 reach)
     return r;
 }
 
+// The length of v for the point walks' lower bounds (point_bound), within
+// some 3 ulps: through rsqrt (2 ulps), not sqrt, which the programs' option
+// -cl-fp32-correctly-rounded-divide-sqrt (clrt.device.program) rounds exactly
+// at several times the cost -- a fifth of the H200's closest-point walk
+// (docs/benchmark-log.md).  point.cl's POINT_MARGIN (at least some 2^-17 of
+// any distance) covers the difference.  Squares that would overflow or
+// underflow take length()'s careful path.
+inline float bound_length(float3 v)
+{
+    const float d2 = dot(v, v);
+    return d2 > 0x1p-100f && d2 < 0x1p100f ? d2 * rsqrt(d2) : length(v);
+}
+
 #if defined(VOLUME_BOX)
 // Slab test (Kay & Kajiya).  fmin/fmax drop the NaN of 0 * inf, which only
 // arises for a ray lying exactly in a padded face plane -- outside all content.
@@ -131,7 +144,7 @@ inline bool volume_hit(const VolumeRay* r, float4 bound_a, float4 bound_b, float
 // a few ulps; point.cl's POINT_MARGIN covers that.
 inline float point_bound(float3 p, float4 bound_a, float4 bound_b)
 {
-    return length(fmax(fmax(bound_a.xyz - p, p - bound_b.xyz), (float3)(0.0f)));
+    return bound_length(fmax(fmax(bound_a.xyz - p, p - bound_b.xyz), (float3)(0.0f)));
 }
 
 #ifdef BVH_WIDE
@@ -331,7 +344,7 @@ inline bool volume_hit(const VolumeRay* r, float4 bound_a, float4 bound_b, float
 // A lower bound of the distance from point p to the sphere (point.cl's walk).
 inline float point_bound(float3 p, float4 bound_a, float4 bound_b)
 {
-    return fmax(length(p - bound_a.xyz) - bound_b.x, 0.0f);
+    return fmax(bound_length(p - bound_a.xyz) - bound_b.x, 0.0f);
 }
 #elif defined(VOLUME_ELLIPSE)
 // Axis-aligned ellipsoid: scale space so it becomes the unit sphere; the ray
@@ -360,8 +373,8 @@ inline bool volume_hit(const VolumeRay* r, float4 bound_a, float4 bound_b, float
 // holds it (the nearest point of the ellipsoid lies no nearer than its box).
 inline float point_bound(float3 p, float4 bound_a, float4 bound_b)
 {
-    const float3 axes = (float3)(1.0f) / bound_b.xyz;
-    return length(fmax(fmax(bound_a.xyz - axes - p, p - bound_a.xyz - axes), (float3)(0.0f)));
+    const float3 axes = rsqrt(bound_b.xyz * bound_b.xyz);   // 1 / bound_b within some 3 ulps (bound_length)
+    return bound_length(fmax(fmax(bound_a.xyz - axes - p, p - bound_a.xyz - axes), (float3)(0.0f)));
 }
 #elif defined(ACCEL_BVH)
 #error "build with -DVOLUME_BOX, -DVOLUME_SPHERE or -DVOLUME_ELLIPSE"

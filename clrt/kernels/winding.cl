@@ -142,7 +142,8 @@ inline point_real leaf_solid_angle(const Geometry* g, point_real3 p, int first, 
 #define DEFINE_FAR_FIELD(NAME, T) \
 inline T NAME(T x, T y, T z, T r2, T nx, T ny, T nz, __global const T* s1, __global const T* s2) \
 { \
-    const T inv_r2 = 1.0f / r2; \
+    const T inv_r = rsqrt(r2);            /* not 1 / r2: volumes.cl's bound_length says why */ \
+    const T inv_r2 = inv_r * inv_r; \
     const T xx = x * x, yy = y * y, zz = z * z; \
     const T order0 = nx * x + ny * y + nz * z; \
     const T s1rr = s1[0] * xx + s1[3] * yy + s1[5] * zz + 2.0f * (s1[1] * x * y + s1[2] * x * z + s1[4] * y * z); \
@@ -152,7 +153,7 @@ inline T NAME(T x, T y, T z, T r2, T nx, T ny, T nz, __global const T* s1, __glo
                   + y * (s2[6] * yy + 3.0f * (s2[7] * y * z + s2[8] * zz)) + s2[9] * z * zz; \
     const T cr = x * (s2[0] + s2[3] + s2[5]) + y * (s2[1] + s2[6] + s2[8]) + z * (s2[2] + s2[7] + s2[9]); \
     const T order2 = 0.5f * (15.0f * s2rrr * inv_r2 - 9.0f * cr) * inv_r2; \
-    return (order0 + order1 + order2) * inv_r2 * rsqrt(r2); \
+    return (order0 + order1 + order2) * inv_r2 * inv_r; \
 }
 DEFINE_FAR_FIELD(far_field, float)
 #ifdef BVH_WIDE
@@ -176,8 +177,9 @@ DEFINE_FAR_FIELD(far_field_lanes, float8)
 #define DEFINE_REMAINDER_BOUND(NAME, T) \
 inline T NAME(T area, T radius, T r2) \
 { \
-    const T q = radius * rsqrt(r2); \
-    return 1.001f * area / r2 * (q * q * q * (4.0f - 3.0f * q) / ((1.0f - q) * (1.0f - q)) + 0x1p-12f); \
+    const T inv_r = rsqrt(r2); \
+    const T q = radius * inv_r; \
+    return 1.001f * area * inv_r * inv_r * (q * q * q * (4.0f - 3.0f * q) / ((1.0f - q) * (1.0f - q)) + 0x1p-12f); \
 }
 DEFINE_REMAINDER_BOUND(remainder_bound, float)
 #ifdef BVH_WIDE
