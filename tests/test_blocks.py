@@ -8,6 +8,7 @@ import pytest
 
 from clrt.errors import MeshLoadError
 from clrt.scene import blocks
+from clrt.scene import mesh as mesh_module
 from clrt.scene.arrays import device_origin, triangle_corners
 from clrt.scene.mesh import Mesh, column_bounds, min_max
 from clrt.scene.primitives import torus
@@ -49,6 +50,23 @@ def test_bounds_and_corners_in_blocks_are_those_of_one_pass(small_blocks, far):
     assert np.array_equal(triangle_corners(mesh, origin), want)
     assert np.array_equal(triangle_corners(mesh), vertices[faces])
     assert min_max(faces) == (faces.min(), faces.max())
+
+
+@pytest.mark.parametrize("corner", (0, 1, 2, None))
+def test_bounds_mark_the_used_vertices_corner_by_corner(small_blocks, monkeypatch, corner):
+    """Mesh.bounds marks the vertices the faces' first corners use, then the
+    second's, then the third's (casting 16 rows' indices at a time here): a
+    far vertex used by one face's ``corner`` alone (None: by no face) is in
+    the bounds exactly when it is used."""
+    monkeypatch.setattr(mesh_module, "MARK_ROWS", 16)
+    vertices, faces = _mesh()
+    faces = faces.copy()
+    if corner is not None:
+        faces[300, corner] = len(vertices) - 1                     # one of the far vertices
+    used = vertices[np.unique(faces)].astype(np.float64)
+    bounds = Mesh(vertices, faces).bounds
+    assert np.array_equal(bounds, np.stack([used.min(axis=0), used.max(axis=0)]))
+    assert (bounds[1] >= 1e6).all() == (corner is not None)
 
 
 @pytest.mark.parametrize("row", (0, 70, 500, -1))
