@@ -16,9 +16,11 @@ from clrt.scene.primitives import torus
 
 @pytest.fixture
 def small_blocks(monkeypatch):
-    """Blocks of 64 rows on four threads, so that a test mesh spans many."""
+    """Blocks of 64 rows on four threads, so that a test mesh spans many, and
+    min_max reducing 16 rows at a time in each."""
     monkeypatch.setattr(blocks, "BLOCK_ROWS", 64)
     monkeypatch.setattr(blocks, "thread_count", lambda: 4)
+    monkeypatch.setattr(mesh_module, "MIN_MAX_ROWS", 16)
 
 
 def _mesh(seed=3, far=0.0) -> tuple[np.ndarray, np.ndarray]:

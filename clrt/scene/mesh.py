@@ -75,12 +75,20 @@ def _welded(vertices: np.ndarray) -> np.ndarray:
 FOLD_ROWS = 1024
 # Faces whose corners Mesh.bounds marks in one step (its intp indices: 2 MB).
 MARK_ROWS = 1 << 18
+# Rows min_max reduces at a time (1.5 MB of faces or vertices).
+MIN_MAX_ROWS = 1 << 17
 
 
 def min_max(a: np.ndarray) -> tuple:
     """The least and the greatest element of a non-empty array (NaN if one is),
     its blocks of rows reduced side by side (clrt.scene.blocks)."""
-    parts = np.array(map_blocks(lambda start, stop: (a[start:stop].min(), a[start:stop].max()), len(a)))
+    def block(start: int, stop: int) -> list:
+        # A slice at a time: its max reads it from the cache its min left it in
+        # (10M triangles' faces on the 2-core machine: 8 ms against 11).
+        slices = (a[at:min(stop, at + MIN_MAX_ROWS)] for at in range(start, stop, MIN_MAX_ROWS))
+        return [(part.min(), part.max()) for part in slices]
+
+    parts = np.array([pair for pairs in map_blocks(block, len(a)) for pair in pairs])
     return parts[:, 0].min(), parts[:, 1].max()
 
 
