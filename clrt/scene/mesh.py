@@ -326,7 +326,10 @@ class Mesh:
             map_blocks(partial(mark, corner=corner), len(faces))
             if used.all():
                 return column_bounds(self.vertices)
-        return column_bounds(self.vertices[used])
+        # The used rows as 12-byte records: numpy 2.4 copies a (V, 3) array's
+        # rows chosen by a mask 15x slower, three numbers at a time.
+        rows = self.vertices.view(np.dtype((np.void, 12))).reshape(-1)[used]
+        return column_bounds(rows.view(np.float32).reshape(-1, 3))
 
     @cached_property
     def _area_normals(self) -> np.ndarray:
