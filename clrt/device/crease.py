@@ -134,8 +134,9 @@ def upload_mesh(context: cl.Context, queue: cl.CommandQueue, mesh: Mesh) -> Uplo
     mf = cl.mem_flags
     vertices = cl.Buffer(context, mf.READ_ONLY, max(mesh.vertices.nbytes, 4))
     faces = cl.Buffer(context, mf.READ_ONLY, mesh.faces.nbytes)
-    for copy in [pinned.upload(context, queue, vertices, mesh.vertices),
-                 pinned.upload(context, queue, faces, mesh.faces)]:
+    staged = pinned.staged_together(queue, mesh.vertices, mesh.faces)
+    for copy in [pinned.upload(context, queue, vertices, mesh.vertices, staged),
+                 pinned.upload(context, queue, faces, mesh.faces, staged)]:
         copy.wait()
     return UploadedMesh(vertices, faces, len(mesh.vertices), len(mesh.faces))
 
