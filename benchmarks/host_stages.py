@@ -23,7 +23,9 @@ alone, and each whole call over their sum (the issue asks for at most 1.5).
 What a whole call spends beyond its build and the stages above is the rest
 of the host's set-up (context, programs, uploads).  ``--no-split`` leaves
 the crease split out (a flat-shaded scene), which takes the host seconds
-from a few million triangles on; ``--no-calls`` times the stages alone.
+from a few million triangles on; ``--no-host-shading`` leaves out only the
+host's split, normals and flatten_scene, which a GPU's calls do not run
+(minutes at 50M); ``--no-calls`` times the stages alone.
 Timing is done here, never in tests.
 """
 
@@ -66,8 +68,10 @@ def _median_ms(make, repeat: int, before=None) -> tuple[float, object]:
     return statistics.median(walls), result
 
 
-def stages(vertices, faces, device, repeat: int, split: bool, calls: bool = True) -> dict:
-    """Stage name -> median ms for one mesh (see the module docstring)."""
+def stages(vertices, faces, device, repeat: int, split: bool, calls: bool = True, host_shading: bool = True) -> dict:
+    """Stage name -> median ms for one mesh (see the module docstring);
+    without ``host_shading`` the host's crease split, vertex normals and
+    flatten_scene left out."""
     import clrt
     from clrt.config import DEFAULT_CREASE_ANGLE
     from clrt.device.context import create_context
@@ -84,11 +88,12 @@ def stages(vertices, faces, device, repeat: int, split: bool, calls: bool = True
     name = "scene_from_mesh (the split left for later)" if split else "scene_from_mesh (flat: no split)"
     out[name], scene = _median_ms(lambda m: scene_from_mesh(m, material), repeat, lambda: Mesh(vertices, faces))
     shaded = Mesh(vertices, faces)
-    if split:
+    if split and host_shading:
         out["crease split on the host (area normals included)"], shaded = _median_ms(
             lambda m: _made(m.split_at_creases(DEFAULT_CREASE_ANGLE)), repeat, lambda: Mesh(vertices, faces))
-    out["vertex normals on the host"], _ = _median_ms(lambda: shaded.vertex_normals(), repeat)
-    out["flatten_scene"], _ = _median_ms(lambda: flatten_scene(scene), repeat)   # (its split made by the first)
+    if host_shading:
+        out["vertex normals on the host"], _ = _median_ms(lambda: shaded.vertex_normals(), repeat)
+        out["flatten_scene"], _ = _median_ms(lambda: flatten_scene(scene), repeat)   # (its split made by the first)
     context, queue = create_context(device)
     if "cl_khr_fp64" in queue.device.extensions:
         from clrt.device.crease import shade_on_device, upload_mesh
@@ -163,14 +168,14 @@ def _finished(made):
     return made
 
 
-def run(counts, device=None, repeat=3, split=True, out=None, calls=True):
+def run(counts, device=None, repeat=3, split=True, out=None, calls=True, host_shading=True):
     from clrt.device.context import create_context, device_label
     out = out or sys.stdout
     _, queue = create_context(device)
     columns = {}
     for count in counts:
         vertices, faces = torus_arrays(count)
-        columns[len(faces)] = stages(vertices, faces, device, repeat, split, calls)
+        columns[len(faces)] = stages(vertices, faces, device, repeat, split, calls, host_shading)
     print(f"device: {device_label(queue.device)}; medians of {repeat}, ms\n", file=out)
     print("| stage | " + " | ".join(f"{n:,} triangles" for n in columns) + " |", file=out)
     print("|---|" + "---|" * len(columns), file=out)
@@ -187,8 +192,11 @@ def main(argv=None) -> int:
     p.add_argument("--repeat", type=POSITIVE, default=3, help="runs of each stage, median reported (default 3)")
     p.add_argument("--no-split", action="store_true", help="a flat-shaded scene: no crease split")
     p.add_argument("--no-calls", action="store_true", help="the stages alone, not the whole calls")
+    p.add_argument("--no-host-shading", action="store_true",
+                   help="leave out the host's crease split, vertex normals and flatten_scene (minutes at 50M)")
     args = p.parse_args(argv)
-    return exit_code(run, args.triangles, args.device, args.repeat, not args.no_split, calls=not args.no_calls)
+    return exit_code(run, args.triangles, args.device, args.repeat, not args.no_split, calls=not args.no_calls,
+                     host_shading=not args.no_host_shading)
 
 
 if __name__ == "__main__":

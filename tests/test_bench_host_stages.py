@@ -28,3 +28,12 @@ def test_host_stages_print_every_stage_and_the_whole_calls(device, capsys):
         ratio = rows[f"{call} / (build + upload) (ratio)"][0]
         assert (whole - 0.05) / (parts + 0.1) - 0.005 <= ratio <= (whole + 0.05) / max(parts - 0.1, 1e-9) + 0.005, call
     assert "| stage | 3,0" in out or "| stage | 2,9" in out      # about 3K triangles in the first column
+
+
+def test_host_stages_leave_the_host_shading_out_when_asked(device, capsys):
+    assert host_stages.main(["--device", device or "cpu", "--triangles", "3K", "--repeat", "1", "--no-calls",
+                             "--no-host-shading"]) == 0
+    out = capsys.readouterr().out
+    assert "| Mesh.bounds (used vertices) |" in out and "| scene_from_mesh (the split left for later) |" in out
+    for stage in ("crease split on the host", "vertex normals on the host", "flatten_scene"):
+        assert f"| {stage}" not in out, stage
