@@ -33,11 +33,13 @@ def _accel(mesh, volume, defines, device, monkeypatch):
     """An Accel of ``mesh`` whose query program walks the binary rows one point
     a work-item (as a GPU's: no wide BVH, no packets) with point defines ``defines``."""
     import clrt.query.accel as query_accel
+    import clrt.query.points as query_points
     from clrt.device import geometry
 
     monkeypatch.setattr(geometry, "WIDE_BVH_KINDS", ())
     monkeypatch.setattr(geometry, "RAY_PACKET_KINDS", ())
     monkeypatch.setattr(query_accel, "point_defines", lambda _: dict(defines))
+    monkeypatch.setattr(query_points, "SEEDED_MIN_POINTS", 1)   # the seeds' walks for the few points here too
     return clrt.Accel(mesh, accel=volume, device=device)
 
 
@@ -84,9 +86,11 @@ def test_the_cells_seeds_are_their_centres_nearest_triangles(device, monkeypatch
     mesh = primitives.torus(1.0, 0.35, 40, 20)
     walk = _accel(mesh, "box", EMULATED, device, monkeypatch)
     walk.distance(np.zeros((1, 3), np.float32))
-    seeds = np.empty(POINT_CELLS, np.int32)
+    seeds, head = np.empty(POINT_CELLS, np.int32), np.empty(POINT_CELLS, np.int32)
     cl.enqueue_copy(walk.queue, seeds, walk._seeds_cache[1])
+    cl.enqueue_copy(walk.queue, head, walk._buffers["order"])
     assert (seeds >= 0).all() and (seeds < len(mesh.faces)).all()
+    np.testing.assert_array_equal(head, seeds)
     launch = walk._batch_launch
     lo, hi = (launch[field][:3].astype(np.float32) for field in ("scene_lo", "scene_hi"))
     cell = np.random.default_rng(2).choice(POINT_CELLS, 1000, replace=False)   # (a float64 reference of all: 10 GB)
@@ -97,3 +101,26 @@ def test_the_cells_seeds_are_their_centres_nearest_triangles(device, monkeypatch
     nearest = distances.min(axis=1)
     by_seed = distances[np.arange(len(cell)), walk.acceleration.prim_ids[seeds[cell]]]
     np.testing.assert_allclose(by_seed, nearest, rtol=0, atol=1e-5 * float(np.abs(corners).max() + 1))
+
+
+def test_a_batch_of_fewer_points_than_cells_takes_no_seeds(device, monkeypatch):
+    """Below SEEDED_MIN_POINTS (one a cell) the seeds' launch is not made: the
+    launch's order holds no seed (-1s) and the answers are the same."""
+    import pyopencl as cl
+    import clrt.query.points as query_points
+    from clrt.config import POINT_CELLS
+
+    mesh = primitives.torus(1.0, 0.35, 40, 20)
+    points = _points(mesh, np.random.default_rng(8))
+    walk = _accel(mesh, "box", EMULATED, device, monkeypatch)
+    monkeypatch.setattr(query_points, "SEEDED_MIN_POINTS", POINT_CELLS)
+    assert len(points) < POINT_CELLS
+    few = walk.closest_points(points)
+    head = np.empty(POINT_CELLS, np.int32)
+    cl.enqueue_copy(walk.queue, head, walk._buffers["order"])
+    assert "_seeds_cache" not in walk.__dict__ and (head == -1).all()
+    monkeypatch.setattr(query_points, "SEEDED_MIN_POINTS", 1)
+    seeded = walk.closest_points(points)
+    assert "_seeds_cache" in walk.__dict__
+    for field in POINT_FIELDS:
+        np.testing.assert_array_equal(getattr(seeded, field), getattr(few, field), err_msg=field)

@@ -35,6 +35,10 @@ CLOSEST_KERNELS = ("query_closest_point", *SIGN_KERNELS.values())
 SEEDED_KERNELS = ("query_closest_point", SIGN_KERNELS["normal"], SIGN_KERNELS["parity"])
 
 
+#: Points a batch takes the seeds for at least: one a cell of the grid (the seeds' launch walks a point a cell).
+SEEDED_MIN_POINTS = POINT_CELLS
+
+
 #: trace.cl's ClosestPointRecord: a point's answer, (point, distance) and (prim, u, v, instance)
 CLOSEST_POINT_RECORD_BYTES = 32
 
@@ -161,26 +165,31 @@ class PointQueries:
         self._launch("point_scatter", (launch, order), m)
         return order
 
-    def _cell_seeds(self) -> cl.Buffer | None:
-        """The closest-point walks' seeds (point_order.cl's POINT_CELL_SEEDS):
-        where points walk one a work-item, the slot of the triangle nearest to
-        the centre of each cell of point_order.cl's grid (trace.cl's
-        point_cell_seeds, over the scene's box as the batch's launch gives it:
-        call after _begin), made on first use and again after a refit (a new
-        ``geometry.reach``); none (-1) in a two-level scene, whose walk takes
-        no seed, and without a BVH, which visits every triangle anyway.  Point
-        groups (CPU devices) start from the group before: None."""
+    def _cell_seeds(self, points: int) -> cl.Buffer | None:
+        """The closest-point walks' seeds (point_order.cl's POINT_CELL_SEEDS) for
+        a batch of ``points``: where points walk one a work-item, the slot of
+        the triangle nearest to the centre of each cell of point_order.cl's
+        grid (trace.cl's point_cell_seeds, over the scene's box as the batch's
+        launch gives it: call after _begin), made on first use and again after
+        a refit (a new ``geometry.reach``).  None (-1) in a two-level scene,
+        whose walk takes no seed, without a BVH, which visits every triangle
+        anyway, and for a batch of fewer points than cells, which the seeds'
+        launch (a walk a cell) would outweigh.  Point groups (CPU devices)
+        start from the group before: None."""
         if self.point_defines:
             return None
+        if points < SEEDED_MIN_POINTS or not self.acceleration.is_bvh or self.instances is not None:
+            unseeded = self._buffers.get("no_seeds")
+            if unseeded is None:
+                unseeded = self._buffer("no_seeds", 4 * POINT_CELLS)
+                cl.enqueue_fill_buffer(self.queue, unseeded, np.int32(-1), 0, 4 * POINT_CELLS)
+            return unseeded
         key = (self.geometry, self.geometry.reach)
         cached = self.__dict__.get("_seeds_cache")
         if cached is not None and all(a is b for a, b in zip(cached[0], key)):
             return cached[1]
         seeds = cl.Buffer(self.context, cl.mem_flags.READ_WRITE, 4 * POINT_CELLS)
-        if self.acceleration.is_bvh and self.instances is None:
-            self._launch("point_cell_seeds", (seeds, self._batch_launch, *self._point_geometry()), POINT_CELLS)
-        else:
-            cl.enqueue_fill_buffer(self.queue, seeds, np.int32(-1), 0, 4 * POINT_CELLS)
+        self._launch("point_cell_seeds", (seeds, self._batch_launch, *self._point_geometry()), POINT_CELLS)
         self._seeds_cache = (key, seeds)
         return seeds
 
@@ -191,7 +200,7 @@ class PointQueries:
         out = self._point_outputs(n, fields, batch.on_device)
         slots = list(POINT_FIELDS)
         self._begin(batch)
-        seeds = self._cell_seeds()
+        seeds = self._cell_seeds(n)
         for start, stop in self._chunks(n):
             m = stop - start
             rays, launch = self._ray_args(batch, start, stop, 0)
@@ -296,7 +305,7 @@ class PointQueries:
         elif kernel == "query_signed_distance_normal":
             rule = (self._pseudo_normals(),)
         self._begin(source)
-        seeds = self._cell_seeds() if kernel in SEEDED_KERNELS else None
+        seeds = self._cell_seeds(n) if kernel in SEEDED_KERNELS else None
         for start, stop in self._chunks(n):
             m = stop - start
             points = None   # where the host has them: a host batch's
