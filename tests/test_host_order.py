@@ -111,7 +111,7 @@ def test_either_order_gives_the_same_answers_bit_for_bit(device, monkeypatch):
                 "grid": chunked.sdf_grid((14, 12, 10), sign="normal")}
 
     got = answers()
-    monkeypatch.setattr(PointQueries, "_point_order", _device_order)
+    monkeypatch.setattr(PointQueries, "_sorted_points", _device_order)
     want = answers()
     for field in POINT_FIELDS:
         np.testing.assert_array_equal(getattr(got["closest"], field), getattr(want["closest"], field), err_msg=field)

@@ -163,3 +163,27 @@ def test_points_converted_in_the_staging_give_the_same_answers(device, monkeypat
             assert str(error.value) == message and "point 1234" in message
     finally:
         pinned._stages.pop(staged.context.int_ptr, None)
+
+
+def test_arrays_uploaded_together_are_staged_by_their_bytes_together(device, monkeypatch):
+    """pinned.upload_together: a mesh's vertices and faces, each below
+    STAGED_MIN_BYTES, go through the staging together where their sum reaches
+    it on a GPU (a GPU emulated on the test device), and arrive whole."""
+    context, queue = create_context(device)
+    monkeypatch.setattr(pinned, "STAGED_MIN_BYTES", 1 << 20)
+    monkeypatch.setattr(pinned, "device_kind", lambda _: "gpu")
+    chosen = []
+    plain = pinned.upload
+    monkeypatch.setattr(pinned, "upload", lambda *a, **k: chosen.append(a[4]) or plain(*a, **k))
+    rng = np.random.default_rng(4)
+    for nbytes, staged in ((600_000, True), (300_000, False)):
+        arrays = [rng.random(nbytes // 4, dtype=np.float32), rng.integers(0, 9, nbytes // 4, dtype=np.int32)]
+        buffers = [cl.Buffer(context, cl.mem_flags.READ_WRITE, a.nbytes) for a in arrays]
+        chosen.clear()
+        for event in pinned.upload_together(context, queue, list(zip(buffers, arrays))):
+            event.wait()
+        assert chosen == [staged, staged], nbytes
+        for buffer, array in zip(buffers, arrays):
+            back = np.empty_like(array)
+            cl.enqueue_copy(queue, back, buffer, is_blocking=True)
+            assert np.array_equal(back, array), nbytes

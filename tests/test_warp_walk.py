@@ -29,7 +29,7 @@ def _points(mesh, rng):
         .astype(np.float32)
 
 
-def _accel(mesh, volume, defines, device, monkeypatch):
+def _accel(mesh, volume, defines, device, monkeypatch, **options):
     """An Accel of ``mesh`` whose query program walks the binary rows one point
     a work-item (as a GPU's: no wide BVH, no packets) with point defines ``defines``."""
     import clrt.query.accel as query_accel
@@ -40,10 +40,10 @@ def _accel(mesh, volume, defines, device, monkeypatch):
     monkeypatch.setattr(geometry, "RAY_PACKET_KINDS", ())
     monkeypatch.setattr(query_accel, "point_defines", lambda _: dict(defines))
     monkeypatch.setattr(query_points, "SEEDED_MIN_POINTS", 1)   # the seeds' walks for the few points here too
-    return clrt.Accel(mesh, accel=volume, device=device)
+    return clrt.Accel(mesh, accel=volume, device=device, **options)
 
 
-@pytest.mark.parametrize("volume", ["box", "sphere"])
+@pytest.mark.parametrize("volume", ["box", "sphere", "ellipse"])
 def test_warp_walk_answers_as_the_plain_walk(volume, device, monkeypatch):
     """The warp walk, emulated, gives the plain walk's and brute force's
     closest points bit for bit -- with misses beyond max_distance among them
@@ -101,6 +101,20 @@ def test_the_cells_seeds_are_their_centres_nearest_triangles(device, monkeypatch
     nearest = distances.min(axis=1)
     by_seed = distances[np.arange(len(cell)), walk.acceleration.prim_ids[seeds[cell]]]
     np.testing.assert_allclose(by_seed, nearest, rtol=0, atol=1e-5 * float(np.abs(corners).max() + 1))
+    # a GPU's path: the order made by point_order.cl's kernels, the seeds copied over its spent cell
+    # counts, in chunks -- the answers brute force's
+    from clrt.query.points import PointQueries
+    monkeypatch.setattr(PointQueries, "_sorted_points",
+                        lambda self, origins, launch, points: self._device_point_order(origins, launch))
+    points = _points(mesh, np.random.default_rng(6))
+    chunked = _accel(mesh, "box", EMULATED, device, monkeypatch, chunk_rays=300)
+    got = chunked.closest_points(points)
+    cl.enqueue_copy(chunked.queue, head, chunked._buffers["order"])
+    cl.enqueue_copy(chunked.queue, seeds, chunked._seeds_cache[1])
+    np.testing.assert_array_equal(head, seeds)
+    want = clrt.Accel(mesh, accel="none", device=device).closest_points(points)
+    for field in POINT_FIELDS:
+        np.testing.assert_array_equal(getattr(got, field), getattr(want, field), err_msg=field)
 
 
 def test_a_batch_of_fewer_points_than_cells_takes_no_seeds(device, monkeypatch):

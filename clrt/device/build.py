@@ -500,10 +500,8 @@ def build_on_device(context: cl.Context, queue: cl.CommandQueue, corners, volume
         vertices, faces, uploads = uploaded.vertices, uploaded.faces, []
     elif indexed:
         vertices, faces = ws.get("vertices", corners.vertices.nbytes), ws.get("faces", corners.faces.nbytes)
-        staged = (pinned.staged_together(queue, corners.vertices, corners.faces) if staged_upload is None
-                  else staged_upload)
-        uploads = [pinned.upload(context, queue, vertices, corners.vertices, staged),
-                   pinned.upload(context, queue, faces, corners.faces, staged)]
+        uploads = pinned.upload_together(context, queue, [(vertices, corners.vertices), (faces, corners.faces)],
+                                         staged_upload)
     if indexed:
         box, frame = ws.get("box", 4 * 6), ws.get("frame", 8 * 9)
         uploads.append(cl.enqueue_copy(queue, box, _EMPTY_BOX, is_blocking=False))

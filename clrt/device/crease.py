@@ -134,9 +134,7 @@ def upload_mesh(context: cl.Context, queue: cl.CommandQueue, mesh: Mesh) -> Uplo
     mf = cl.mem_flags
     vertices = cl.Buffer(context, mf.READ_ONLY, max(mesh.vertices.nbytes, 4))
     faces = cl.Buffer(context, mf.READ_ONLY, mesh.faces.nbytes)
-    staged = pinned.staged_together(queue, mesh.vertices, mesh.faces)
-    for copy in [pinned.upload(context, queue, vertices, mesh.vertices, staged),
-                 pinned.upload(context, queue, faces, mesh.faces, staged)]:
+    for copy in pinned.upload_together(context, queue, [(vertices, mesh.vertices), (faces, mesh.faces)]):
         copy.wait()
     return UploadedMesh(vertices, faces, len(mesh.vertices), len(mesh.faces))
 

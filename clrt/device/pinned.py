@@ -131,12 +131,15 @@ def _staging_blocks(context: cl.Context, queue: cl.CommandQueue) -> list | None:
     return stages
 
 
-def staged_together(queue: cl.CommandQueue, *arrays: np.ndarray) -> bool:
-    """upload's choice for arrays sent one after the other (a mesh's vertices
-    and faces): staged where their bytes together reach STAGED_MIN_BYTES on a
+def upload_together(context: cl.Context, queue: cl.CommandQueue, copies, staged: bool | None = None) -> list:
+    """upload of each (buffer, array) of ``copies``, sent one after the other
+    (a mesh's vertices and faces), the staged copy chosen once for them all
+    (``staged`` None): where their bytes together reach STAGED_MIN_BYTES on a
     GPU -- a 1M-triangle mesh's 6 + 12 MB, each below it, took the driver's
-    pageable copy in 3.7 ms on the H200."""
-    return sum(a.nbytes for a in arrays) >= STAGED_MIN_BYTES and device_kind(queue.device) == "gpu"
+    pageable copy in 3.7 ms on the H200.  Returns the copies' events."""
+    if staged is None:
+        staged = sum(a.nbytes for _, a in copies) >= STAGED_MIN_BYTES and device_kind(queue.device) == "gpu"
+    return [upload(context, queue, buffer, array, staged) for buffer, array in copies]
 
 
 def upload(context: cl.Context, queue: cl.CommandQueue, buffer: cl.Buffer, array: np.ndarray,

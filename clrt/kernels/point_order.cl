@@ -13,9 +13,10 @@
 //   point_scatter  each point's index to its place
 // They share one buffer, `order`, laid out for a launch of n points as
 //   uint cell_count[POINT_CELLS]  (point_offsets makes them first places,
-//                                  point_scatter moves them on; then the
-//                                  host copies the cells' seeds over them:
-//                                  int seed[POINT_CELLS], POINT_CELL_SEEDS)
+//                                  point_scatter moves them on; for the
+//                                  closest-point kernels the host then
+//                                  copies the cells' seeds over them: int
+//                                  seed[POINT_CELLS], POINT_CELL_SEEDS)
 //   uint cell[n]                  each point's cell
 //   uint order[n]                 point indices in cell order: what
 //                                 query_closest_point reads (POINT_ORDER)
@@ -81,7 +82,7 @@ inline float region_distance2(const PointRegion* r, float3 c)
     return dot(gap, gap);
 }
 
-// Bits 0..4 of x at bits 0, 3, 6, 9, 12.
+// Bits b of x at bits 3b, b < POINT_CELL_BITS.
 inline uint spread_cell_bits(uint x)
 {
     uint out = 0u;
@@ -90,7 +91,7 @@ inline uint spread_cell_bits(uint x)
     return out;
 }
 
-// Bits 0, 3, 6, 9, 12 of x at bits 0..4 (spread_cell_bits undone).
+// Bits 3b of x at bits b, b < POINT_CELL_BITS (spread_cell_bits undone).
 inline uint gather_cell_bits(uint x)
 {
     uint out = 0u;

@@ -417,8 +417,8 @@ inline void write_closest_point(const ClosestPointOutputs* out, __global Closest
 
 // A work-item answers CLOSEST_ITEM_POINTS points, consecutive in the order of
 // point_order.cl: ITEM_RAYS in turn, each walk starting from its cell's seed
-// (POINT_INPUT_PARAMS); or POINT_GROUPS groups of POINT_LANES
-// (closest_points_of_group).
+// (point_order.cl's POINT_CELL_SEEDS); or POINT_GROUPS groups of POINT_LANES
+// (closest_points_of_group), each starting from the group before.
 __kernel void query_closest_point(POINT_INPUT_PARAMS, __global uchar* results,
                                   __global ClosestPointRecord* records, GEOMETRY_PARAMS)
 {
@@ -562,7 +562,7 @@ inline float signed_distance(const Geometry* g, const RayInput* in, const int ru
 }
 
 // The signed distances of the CLOSEST_ITEM_POINTS points from the launch's `first` on
-// (in the order of point_order.cl, each walk seeded as query_closest_point's but by winding numbers)
+// (in the order of point_order.cl, each walk seeded as query_closest_point's but the winding rule's)
 // by `rule` (`winding`, `normals`: the rule's buffer, or 0), into output 0.
 inline void signed_distances(const Geometry* g, const RayInput* in, const QueryLaunch* launch,
                              __global uchar* results, __global const uint* order, uint first, const int rule,

@@ -99,9 +99,10 @@ inline VolumeRay volume_ray(float3 origin, float3 dir, float3 reach)
 // some 3 ulps: through rsqrt (2 ulps), not sqrt, which the programs' option
 // -cl-fp32-correctly-rounded-divide-sqrt (clrt.device.program) rounds exactly
 // at several times the cost -- a fifth of the H200's closest-point walk
-// (docs/benchmark-log.md).  point.cl's POINT_MARGIN (at least some 2^-17 of
-// any distance) covers the difference.  Squares that would overflow or
-// underflow take length()'s careful path.
+// (docs/benchmark-log.md).  point.cl's POINT_MARGIN (2^-16 of the largest
+// coordinate: at least some 2^-18 of any distance a walk compares) covers
+// the difference many times over.  Squares that would overflow or underflow
+// take length()'s careful path.
 inline float bound_length(float3 v)
 {
     const float d2 = dot(v, v);
@@ -373,7 +374,8 @@ inline bool volume_hit(const VolumeRay* r, float4 bound_a, float4 bound_b, float
 // holds it (the nearest point of the ellipsoid lies no nearer than its box).
 inline float point_bound(float3 p, float4 bound_a, float4 bound_b)
 {
-    const float3 axes = rsqrt(bound_b.xyz * bound_b.xyz);   // 1 / bound_b within some 3 ulps (bound_length)
+    const float3 root = rsqrt(bound_b.xyz);   // 1 / bound_b within some 5 ulps (bound_length), no overflow
+    const float3 axes = root * root;
     return bound_length(fmax(fmax(bound_a.xyz - axes - p, p - bound_a.xyz - axes), (float3)(0.0f)));
 }
 #elif defined(ACCEL_BVH)

@@ -171,9 +171,9 @@ DEFINE_FAR_FIELD(far_field_lanes, float8)
 //   A / R^2 * sum_{k >= 3} (k + 1) q^k = A / R^2 * q^3 (4 - 3 q) / (1 - q)^2.
 // Added: 2^-12 A / R^2 for the float32 evaluation (|N| <= A, |S1| <= A r and
 // |S2| <= A r^2 entry by entry, so for q <= 0.4 the products it sums are at
-// most some 30 A / R^2 in all, each rounded at most some 30 times: within
-// 6e-5 A / R^2), and 1/1000 of the whole for the rounding of this bound and
-// of A.
+// most some 30 A / R^2 in all, each rounded at most some 30 times, and 1 /
+// R^2 taken through rsqrt within some 5 ulps: within 7e-5 A / R^2), and
+// 1/1000 of the whole for the rounding of this bound and of A.
 #define DEFINE_REMAINDER_BOUND(NAME, T) \
 inline T NAME(T area, T radius, T r2) \
 { \

@@ -135,28 +135,34 @@ class PointQueries:
     def _point_order(self, origins: cl.Buffer, launch: np.ndarray, points: np.ndarray | None,
                      seeds: cl.Buffer | None = None) -> cl.Buffer:
         """The `order` buffer of a launch of point queries (point_order.cl): its
-        points sorted by cell of a grid over the scene, and the cells' seeds
-        ``seeds`` (_cell_seeds) where a closest-point kernel walks them.
-        ``points``: the launch's points as the host has them (the chunk of the
-        caller's array), or None where they were made or given on the device.
-        A CPU device's order is the host's (clrt/query/host_order.py says
-        why): from ``points``, else from the launch's points read back (the
-        device's memory is the host's, so a copy)."""
-        if self._kind != "cpu":
-            order = self._device_point_order(origins, launch)
-        else:
-            m = int(launch["num_rays"])
-            order = self._buffer("order", 4 * (POINT_CELLS + 2 * m))
-            if points is None:   # waits for the queue: the launch before may still be writing them
-                points = np.empty(3 * m, np.float32)
-                cl.enqueue_copy(self.queue, points, origins, src_offset=12 * int(launch["in_first"]), is_blocking=True)
-            self._transfers.append(upload_order(self.queue, order, points, launch))
-        if seeds is not None and not self.point_defines:   # over the cell counts, done with (POINT_CELL_SEEDS)
+        points sorted by cell of a grid over the scene (_sorted_points), and
+        the cells' seeds ``seeds`` (_cell_seeds: a closest-point kernel's,
+        which walks them; None for the others) copied over its spent cell
+        counts (POINT_CELL_SEEDS)."""
+        order = self._sorted_points(origins, launch, points)
+        if seeds is not None:
             cl.enqueue_copy(self.queue, order, seeds, byte_count=4 * POINT_CELLS)
         return order
 
+    def _sorted_points(self, origins: cl.Buffer, launch: np.ndarray, points: np.ndarray | None) -> cl.Buffer:
+        """_point_order's points by cell.  ``points``: the launch's points as
+        the host has them (the chunk of the caller's array), or None where
+        they were made or given on the device.  A CPU device's order is the
+        host's (clrt/query/host_order.py says why): from ``points``, else from
+        the launch's points read back (the device's memory is the host's, so a
+        copy); a GPU's, point_order.cl's kernels."""
+        if self._kind != "cpu":
+            return self._device_point_order(origins, launch)
+        m = int(launch["num_rays"])
+        order = self._buffer("order", 4 * (POINT_CELLS + 2 * m))
+        if points is None:   # waits for the queue: the launch before may still be writing them
+            points = np.empty(3 * m, np.float32)
+            cl.enqueue_copy(self.queue, points, origins, src_offset=12 * int(launch["in_first"]), is_blocking=True)
+        self._transfers.append(upload_order(self.queue, order, points, launch))
+        return order
+
     def _device_point_order(self, origins: cl.Buffer, launch: np.ndarray) -> cl.Buffer:
-        """_point_order by point_order.cl's three launches (GPUs; tests on any device)."""
+        """_sorted_points by point_order.cl's three launches (GPUs; tests on any device)."""
         m = int(launch["num_rays"])
         order = self._buffer("order", 4 * (POINT_CELLS + 2 * m))
         cl.enqueue_fill_buffer(self.queue, order, np.uint32(0), 0, 4 * POINT_CELLS)
@@ -166,32 +172,46 @@ class PointQueries:
         return order
 
     def _cell_seeds(self, points: int) -> cl.Buffer | None:
-        """The closest-point walks' seeds (point_order.cl's POINT_CELL_SEEDS) for
-        a batch of ``points``: where points walk one a work-item, the slot of
-        the triangle nearest to the centre of each cell of point_order.cl's
-        grid (trace.cl's point_cell_seeds, over the scene's box as the batch's
-        launch gives it: call after _begin), made on first use and again after
-        a refit (a new ``geometry.reach``).  None (-1) in a two-level scene,
-        whose walk takes no seed, without a BVH, which visits every triangle
-        anyway, and for a batch of fewer points than cells, which the seeds'
-        launch (a walk a cell) would outweigh.  Point groups (CPU devices)
-        start from the group before: None."""
+        """The seeds of a closest-point kernel's walks (point_order.cl's
+        POINT_CELL_SEEDS) for a batch of ``points``: where points walk one a
+        work-item, the slot of the triangle nearest to the centre of each cell
+        of point_order.cl's grid (trace.cl's point_cell_seeds, over the
+        scene's box as the batch's launch gives it: call after _begin), made
+        on first use by a batch of at least SEEDED_MIN_POINTS (a smaller one
+        would spend more on them than on its own walks) and again after a
+        refit (a new ``geometry.reach``).  A table of -1 (none) until then,
+        in a two-level scene, whose walk takes no seed, and without a BVH,
+        which visits every triangle anyway.  Point groups (CPU devices) start
+        from the group before: None."""
         if self.point_defines:
             return None
-        if points < SEEDED_MIN_POINTS or not self.acceleration.is_bvh or self.instances is not None:
-            unseeded = self._buffers.get("no_seeds")
-            if unseeded is None:
-                unseeded = self._buffer("no_seeds", 4 * POINT_CELLS)
-                cl.enqueue_fill_buffer(self.queue, unseeded, np.int32(-1), 0, 4 * POINT_CELLS)
-            return unseeded
         key = (self.geometry, self.geometry.reach)
         cached = self.__dict__.get("_seeds_cache")
         if cached is not None and all(a is b for a, b in zip(cached[0], key)):
             return cached[1]
+        if points < SEEDED_MIN_POINTS or not self.acceleration.is_bvh or self.instances is not None:
+            return self._no_seeds()
         seeds = cl.Buffer(self.context, cl.mem_flags.READ_WRITE, 4 * POINT_CELLS)
         self._launch("point_cell_seeds", (seeds, self._batch_launch, *self._point_geometry()), POINT_CELLS)
         self._seeds_cache = (key, seeds)
         return seeds
+
+    def _no_seeds(self) -> cl.Buffer:
+        """A table of seeds that names none (-1 for every cell), made once."""
+        table = self._buffers.get("no_seeds")
+        if table is None:
+            table = self._buffer("no_seeds", 4 * POINT_CELLS)
+            cl.enqueue_fill_buffer(self.queue, table, np.int32(-1), 0, 4 * POINT_CELLS)
+        return table
+
+    def _closest_seeds(self, kernel: str, points: int) -> cl.Buffer | None:
+        """The seeds that closest-point kernel ``kernel`` reads (every one of
+        CLOSEST_KERNELS reads a table where points walk one a work-item; the
+        winding rule's ignores it, so it takes -1s: trace.cl's
+        signed_distances), or None for the other point kernels."""
+        if kernel not in CLOSEST_KERNELS or self.point_defines:
+            return None
+        return self._cell_seeds(points) if kernel in SEEDED_KERNELS else self._no_seeds()
 
     @one_at_a_time
     def _closest_points(self, batch: PointBatch, fields) -> ClosestPoints:
@@ -200,7 +220,7 @@ class PointQueries:
         out = self._point_outputs(n, fields, batch.on_device)
         slots = list(POINT_FIELDS)
         self._begin(batch)
-        seeds = self._cell_seeds(n)
+        seeds = self._closest_seeds("query_closest_point", n)
         for start, stop in self._chunks(n):
             m = stop - start
             rays, launch = self._ray_args(batch, start, stop, 0)
@@ -305,7 +325,7 @@ class PointQueries:
         elif kernel == "query_signed_distance_normal":
             rule = (self._pseudo_normals(),)
         self._begin(source)
-        seeds = self._cell_seeds(n) if kernel in SEEDED_KERNELS else None
+        seeds = self._closest_seeds(kernel, n)
         for start, stop in self._chunks(n):
             m = stop - start
             points = None   # where the host has them: a host batch's
