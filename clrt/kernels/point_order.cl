@@ -56,13 +56,24 @@ typedef struct {
     float3 lo, hi;
 } PointRegion;
 
+// The grid coordinates (0 .. 2^POINT_CELL_BITS - 1 an axis) of point p's
+// cell in the grid over the scene's box (lo .. hi, device frame): a point
+// outside the box lands in the nearest cell; NaN points (reported by the
+// queries) in cell 0 -- convert_uint_sat takes NaN to 0.
+inline uint3 cell_coords(float3 p, float3 lo, float3 hi)
+{
+    const float3 extent = fmax(hi - lo, (float3)(FLT_MIN));
+    return min(convert_uint3_sat((p - lo) / extent * (float)(1 << POINT_CELL_BITS)),
+               (uint3)((1u << POINT_CELL_BITS) - 1u));
+}
+
 inline PointRegion point_region(float3 p, float3 scene_lo, float3 scene_hi)
 {
     PointRegion r;
 #ifdef POINT_CELL_REGIONS
     const float3 extent = fmax(scene_hi - scene_lo, (float3)(FLT_MIN));
     const float3 cells = (float3)(float)(1 << POINT_CELL_BITS);
-    const float3 q = clamp(floor((p - scene_lo) / extent * cells), (float3)(0.0f), cells - 1.0f);
+    const float3 q = convert_float3(cell_coords(p, scene_lo, scene_hi));
     const float3 size = fmax(fmax(fabs(scene_lo), fabs(scene_hi)), extent);
     const float pad = 0x1p-20f * fmax(fmax(size.x, size.y), size.z);
     r.lo = fmin(scene_lo + q / cells * extent - pad, p);
@@ -101,14 +112,10 @@ inline uint gather_cell_bits(uint x)
 }
 
 // The cell of point p (device frame) in the grid over the scene's box (lo ..
-// hi): its coordinates' bits interleaved, x lowest (Morton order).  A point
-// outside the box lands in the nearest cell; NaN points (reported by the
-// queries) in cell 0 -- convert_uint_sat takes NaN to 0.
+// hi): its coordinates' (cell_coords) bits interleaved, x lowest (Morton order).
 inline uint point_cell(float3 p, float3 lo, float3 hi)
 {
-    const float3 extent = fmax(hi - lo, (float3)(FLT_MIN));
-    const uint3 q = min(convert_uint3_sat((p - lo) / extent * (float)(1 << POINT_CELL_BITS)),
-                        (uint3)((1u << POINT_CELL_BITS) - 1u));
+    const uint3 q = cell_coords(p, lo, hi);
     return spread_cell_bits(q.x) | (spread_cell_bits(q.y) << 1) | (spread_cell_bits(q.z) << 2);
 }
 

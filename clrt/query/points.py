@@ -171,7 +171,7 @@ class PointQueries:
         self._launch("point_scatter", (launch, order), m)
         return order
 
-    def _cell_seeds(self, points: int) -> cl.Buffer | None:
+    def _cell_seeds(self, points: int) -> cl.Buffer:
         """The seeds of a closest-point kernel's walks (point_order.cl's
         POINT_CELL_SEEDS) for a batch of ``points``: where points walk one a
         work-item, the slot of the triangle nearest to the centre of each cell
@@ -181,10 +181,8 @@ class PointQueries:
         would spend more on them than on its own walks) and again after a
         refit (a new ``geometry.reach``).  A table of -1 (none) until then,
         in a two-level scene, whose walk takes no seed, and without a BVH,
-        which visits every triangle anyway.  Point groups (CPU devices) start
-        from the group before: None."""
-        if self.point_defines:
-            return None
+        which visits every triangle anyway.  (Point groups, on CPU devices,
+        start from the group before: _closest_seeds asks for none.)"""
         key = (self.geometry, self.geometry.reach)
         cached = self.__dict__.get("_seeds_cache")
         if cached is not None and all(a is b for a, b in zip(cached[0], key)):
