@@ -282,6 +282,19 @@ BATCH_RAY_CHUNK = 1 << 20
 POINT_CELL_BITS = 5
 POINT_OFFSETS_GROUP = 256
 POINT_CELLS = 1 << (3 * POINT_CELL_BITS)
+# CPU devices sort the points by the cells of a finer grid, 2^POINT_RUN_CELL_BITS
+# cells an axis (their walks in groups of neighbours take 3-8 % less time than
+# by POINT_CELL_BITS: docs/benchmark-log.md), counted in runs of consecutive
+# points, a work-item a run with POINT_RUN_CELLS counters of its own
+# (point_order.cl's point_run_*): POINT_RUNS_PER_UNIT runs a compute unit, at
+# most POINT_RUNS_MAX (one work-item adds up all the counters), and no run of
+# fewer than POINT_RUN_POINTS points but one (zeroing its counters would
+# outweigh it).
+POINT_RUN_CELL_BITS = 6
+POINT_RUN_CELLS = 1 << (3 * POINT_RUN_CELL_BITS)
+POINT_RUNS_PER_UNIT = 1
+POINT_RUNS_MAX = 8
+POINT_RUN_POINTS = 1 << 15
 # CPU devices walk closest points POINT_LANES at a time (8 or 16: the lanes
 # of float8 or float16 values; kernels/point_group.cl), POINT_GROUPS such
 # groups a work-item, one after the other, each seeded by the one before, and
@@ -311,6 +324,7 @@ def kernel_defines() -> dict:
         "INSTANCE_MIRROR": f"{INSTANCE_MIRROR}u",
         "POINT_CELL_BITS": POINT_CELL_BITS,
         "POINT_OFFSETS_GROUP": POINT_OFFSETS_GROUP,
+        "POINT_RUN_CELL_BITS": POINT_RUN_CELL_BITS,
     }
 
 

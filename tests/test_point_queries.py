@@ -296,7 +296,7 @@ def test_points_are_visited_in_cell_order_each_once(device):
     batch = PointBatch(points, np.inf)
     accel._begin(batch)
     rays, launch = accel._ray_args(batch, 0, len(points), 0)
-    order = accel._device_point_order(rays[0], launch)   # the host's order: tests/test_host_order.py
+    order = accel._atomic_point_order(rays[0], launch)   # (CPU devices' order: tests/test_point_order.py)
     raw = np.empty(POINT_CELLS + 2 * len(points), np.uint32)
     cl.enqueue_copy(accel.queue, raw, order)
     cells, visit = raw[POINT_CELLS:POINT_CELLS + len(points)], raw[POINT_CELLS + len(points):]

@@ -104,8 +104,7 @@ def test_the_cells_seeds_are_their_centres_nearest_triangles(device, monkeypatch
     # a GPU's path: the order made by point_order.cl's kernels, the seeds copied over its spent cell
     # counts, in chunks -- the answers brute force's
     from clrt.query.points import PointQueries
-    monkeypatch.setattr(PointQueries, "_sorted_points",
-                        lambda self, origins, launch, points: self._device_point_order(origins, launch))
+    monkeypatch.setattr(PointQueries, "_sorted_points", PointQueries._atomic_point_order)
     points = _points(mesh, np.random.default_rng(6))
     chunked = _accel(mesh, "box", EMULATED, device, monkeypatch, chunk_rays=300)
     got = chunked.closest_points(points)

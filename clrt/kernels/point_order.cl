@@ -38,6 +38,7 @@
 // POINT_CELL_BITS (cells an axis: 2^bits) and POINT_OFFSETS_GROUP come from
 // clrt/config.py, as every limit does.
 #define POINT_CELLS (1u << (3 * POINT_CELL_BITS))
+#define POINT_RUN_CELLS (1u << (3 * POINT_RUN_CELL_BITS))
 #define POINT_CELL_OF(order) ((order) + POINT_CELLS)
 #define POINT_ORDER(order, n) ((order) + POINT_CELLS + (n))
 #define POINT_CELL_SEEDS(order) ((__global const int*)(order))
@@ -56,15 +57,23 @@ typedef struct {
     float3 lo, hi;
 } PointRegion;
 
-// The grid coordinates (0 .. 2^POINT_CELL_BITS - 1 an axis) of point p's
-// cell in the grid over the scene's box (lo .. hi, device frame): a point
-// outside the box lands in the nearest cell; NaN points (reported by the
-// queries) in cell 0 -- convert_uint_sat takes NaN to 0.
-inline uint3 cell_coords(float3 p, float3 lo, float3 hi)
+// The grid coordinates (0 .. 2^bits - 1 an axis) of point p's cell in a
+// grid of 2^bits cells an axis over the scene's box (lo .. hi, device
+// frame): a point outside the box lands in the nearest cell; NaN points
+// (reported by the queries) in cell 0 (fmax takes NaN to 0).  The clamp is
+// made on the floats and the conversion signed: CPUs convert float vectors to
+// signed integers in one instruction, to unsigned ones in several.
+inline uint3 grid_coords(float3 p, float3 lo, float3 hi, uint bits)
 {
     const float3 extent = fmax(hi - lo, (float3)(FLT_MIN));
-    return min(convert_uint3_sat((p - lo) / extent * (float)(1 << POINT_CELL_BITS)),
-               (uint3)((1u << POINT_CELL_BITS) - 1u));
+    const float3 q = fmin(fmax((p - lo) / extent * (float)(1u << bits), 0.0f), (float)((1u << bits) - 1u));
+    return as_uint3(convert_int3(q));
+}
+
+// point p's cell of the grid of point_cell (POINT_CELL_BITS an axis).
+inline uint3 cell_coords(float3 p, float3 lo, float3 hi)
+{
+    return grid_coords(p, lo, hi, POINT_CELL_BITS);
 }
 
 inline PointRegion point_region(float3 p, float3 scene_lo, float3 scene_hi)
@@ -93,13 +102,17 @@ inline float region_distance2(const PointRegion* r, float3 c)
     return dot(gap, gap);
 }
 
-// Bits b of x at bits 3b, b < POINT_CELL_BITS.
+// Bits b of x at bits 3b, b < 10: four shifts and masks
+// (bits 8-9, then 4-7, 2-3 and 1 moved into place) rather than a bit at a time.
+#if POINT_CELL_BITS > 10 || POINT_RUN_CELL_BITS > 10
+#error "spread_cell_bits spreads 10 bits at most"
+#endif
 inline uint spread_cell_bits(uint x)
 {
-    uint out = 0u;
-    for (uint b = 0; b < POINT_CELL_BITS; ++b)
-        out |= ((x >> b) & 1u) << (3u * b);
-    return out;
+    x = (x | (x << 16)) & 0x030000FFu;
+    x = (x | (x << 8)) & 0x0300F00Fu;
+    x = (x | (x << 4)) & 0x030C30C3u;
+    return (x | (x << 2)) & 0x09249249u;
 }
 
 // Bits 3b of x at bits b, b < POINT_CELL_BITS (spread_cell_bits undone).
@@ -111,12 +124,16 @@ inline uint gather_cell_bits(uint x)
     return out;
 }
 
-// The cell of point p (device frame) in the grid over the scene's box (lo ..
-// hi): its coordinates' (cell_coords) bits interleaved, x lowest (Morton order).
+// The cell of grid coordinates q: their bits interleaved, x lowest (Morton order).
+inline uint morton_cell(uint3 q)
+{
+    return spread_cell_bits(q.x) | (spread_cell_bits(q.y) << 1) | (spread_cell_bits(q.z) << 2);
+}
+
+// The cell of point p (device frame) in point_cell's grid over the scene's box (lo .. hi).
 inline uint point_cell(float3 p, float3 lo, float3 hi)
 {
-    const uint3 q = cell_coords(p, lo, hi);
-    return spread_cell_bits(q.x) | (spread_cell_bits(q.y) << 1) | (spread_cell_bits(q.z) << 2);
+    return morton_cell(cell_coords(p, lo, hi));
 }
 
 // The centre of cell `cell` (point_cell) of the grid over lo .. hi.
@@ -172,6 +189,79 @@ __kernel void point_scatter(const QueryLaunch launch, __global uint* order)
     if (i >= launch.num_rays)
         return;
     POINT_ORDER(order, launch.num_rays)[atomic_inc(order + POINT_CELL_OF(order)[i])] = i;
+}
+
+// CPU devices' order (PoCL runs atomic increments slowly: a million points
+// took 13-26 ms by the three launches above, 20 by numpy's stable sort on the
+// host, 7-10 by these four), by the cells of a finer grid, 2^POINT_RUN_CELL_BITS
+// cells an axis: the walks of point groups (point_group.cl) take neighbours
+// sixteen at a time, and sixteen neighbours in the finer Morton order lie in
+// a box of 2 x 2 x 1 of its cells, where the coarse order leaves them spread
+// over a whole cell of thirty (3-8 % off the walks: docs/benchmark-log.md).
+// A counting sort without atomics: the launch's points in get_global_size(0)
+// runs of consecutive points (point_run), a work-item a run, each counting
+// its run's cells in a row of POINT_RUN_CELLS counters of its own in
+// `counts`.  Stable: within a cell, runs in order and each run's points in
+// theirs.
+//   point_cell_of      each point's cell (of the finer grid), a work-item a point
+//   point_run_counts   each run's points in each cell
+//   point_run_offsets  those counts into each run's first place in each cell
+//                      (one work-item: POINT_RUN_CELLS additions a run)
+//   point_run_scatter  each point's index to its place
+// In `order` they write `cell` (the finer grid's cells) and `order`, not the
+// cell counts: the closest-point kernels of one point a work-item (CPU
+// devices' walks of two-level scenes) read the seeds copied there, of the
+// coarse grid, by their points' own cells (point_cell).
+inline void point_run(uint n, uint run, uint runs, uint* first, uint* last)
+{
+    *first = (uint)((ulong)n * run / runs);
+    *last = (uint)((ulong)n * (run + 1u) / runs);
+}
+
+__kernel void point_cell_of(__global const float* origins, const QueryLaunch launch, __global uint* order)
+{
+    const uint i = get_global_id(0);
+    if (i >= launch.num_rays)
+        return;
+    const float3 p = vload3(0, origins + (size_t)(launch.in_first + i) * launch.origin_stride) - launch.shift.xyz;
+    const uint3 q = grid_coords(p, launch.scene_lo.xyz, launch.scene_hi.xyz, POINT_RUN_CELL_BITS);
+    POINT_CELL_OF(order)[i] = morton_cell(q);
+}
+
+__kernel void point_run_counts(const QueryLaunch launch, __global uint* order, __global uint* counts)
+{
+    const uint run = get_global_id(0);
+    __global uint* count = counts + (size_t)run * POINT_RUN_CELLS;
+    for (uint c = 0; c < POINT_RUN_CELLS; ++c)
+        count[c] = 0u;
+    uint first, last;
+    point_run(launch.num_rays, run, get_global_size(0), &first, &last);
+    for (uint i = first; i < last; ++i)
+        ++count[POINT_CELL_OF(order)[i]];
+}
+
+__kernel void point_run_offsets(__global uint* counts, const uint runs)
+{
+    uint at = 0u;
+    for (uint c = 0; c < POINT_RUN_CELLS; ++c) {
+        for (uint run = 0; run < runs; ++run) {
+            __global uint* count = counts + (size_t)run * POINT_RUN_CELLS + c;
+            const uint points = *count;
+            *count = at;
+            at += points;
+        }
+    }
+}
+
+__kernel void point_run_scatter(const QueryLaunch launch, __global uint* order, __global uint* counts)
+{
+    const uint run = get_global_id(0);
+    __global uint* place = counts + (size_t)run * POINT_RUN_CELLS;
+    __global uint* visit = POINT_ORDER(order, launch.num_rays);
+    uint first, last;
+    point_run(launch.num_rays, run, get_global_size(0), &first, &last);
+    for (uint i = first; i < last; ++i)
+        visit[place[POINT_CELL_OF(order)[i]]++] = i;
 }
 
 #endif

@@ -65,6 +65,10 @@ QUERY_KERNELS = {
     "point_cells": (buffer("origins"), value("launch", QUERY_LAUNCH), buffer("order")),
     "point_offsets": (buffer("order"),),
     "point_scatter": (value("launch", QUERY_LAUNCH), buffer("order")),
+    "point_cell_of": (buffer("origins"), value("launch", QUERY_LAUNCH), buffer("order")),
+    "point_run_counts": (value("launch", QUERY_LAUNCH), buffer("order"), buffer("counts")),
+    "point_run_offsets": (buffer("counts"), value("runs", np.uint32)),
+    "point_run_scatter": (value("launch", QUERY_LAUNCH), buffer("order"), buffer("counts")),
     "point_cell_seeds": (buffer("seeds"), value("launch", QUERY_LAUNCH), *GEOMETRY),
     # inside and outside (winding.cl, point.cl): points as query_closest_point takes them, and
     # each kernel's rule's buffer -- the tree's WindingNodes or the PseudoNormals
@@ -88,8 +92,8 @@ QUERY_KERNELS = {
 #: (clrt.device.scene.DeviceScene.kernels).
 QUERY_PROGRAMS = (
     ("query_closest",), ("query_any",), ("query_count", "query_all"), ("camera_rays", "trace_camera", "occlude_camera"),
-    ("query_closest_point", "closest_point_fields", "point_cells", "point_offsets", "point_scatter", "point_cell_seeds",
-     "grid_points",
+    ("query_closest_point", "closest_point_fields", "point_cells", "point_offsets", "point_scatter", "point_run_counts",
+     "point_cell_of", "point_run_offsets", "point_run_scatter", "point_cell_seeds", "grid_points",
      "query_signed_distance_parity", "query_signed_distance_normal"),
     ("query_winding_number", "query_signed_distance_winding", "winding_nodes"),
 )

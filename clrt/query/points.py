@@ -17,10 +17,10 @@ import pyopencl as cl
 
 from clrt.accel.disks import packet_corners, wide_disks
 from clrt.config import (NO_RESULT, POINT_CANDIDATES, POINT_CELLS, POINT_GROUPS, POINT_LANES, POINT_OFFSETS_GROUP,
+                         POINT_RUN_CELLS, POINT_RUN_POINTS, POINT_RUNS_MAX, POINT_RUNS_PER_UNIT,
                          RAY_CHECKS)
 from clrt.device.program import launch_size
 from clrt.device.sharing import one_at_a_time
-from clrt.query.host_order import upload_order
 from clrt.query.inside import SIGN_KERNELS, GridPoints, grid_axes, pseudo_normals, sign_kernel, winding_nodes
 from clrt.query.kernels import QUERY_GROUP
 from clrt.query.rays import PointBatch
@@ -51,6 +51,12 @@ def point_group_defines(scene) -> dict:
     if scene.rays_per_item != 8 or scene.geometry.wide is None or "ACCEL_INSTANCES" in scene.geometry.defines:
         return {}
     return {"POINT_LANES": POINT_LANES, "POINT_GROUPS": POINT_GROUPS, "POINT_CANDIDATES": POINT_CANDIDATES}
+
+
+def point_runs(points: int, compute_units: int) -> int:
+    """The runs a CPU device's point order (point_order.cl's point_run_*)
+    takes ``points`` in on a device of ``compute_units`` (clrt.config says why)."""
+    return max(1, min(points // POINT_RUN_POINTS, POINT_RUNS_PER_UNIT * compute_units, POINT_RUNS_MAX))
 
 
 class PointQueries:
@@ -132,43 +138,47 @@ class PointQueries:
         if name.startswith("query_"):
             self.queue.flush()
 
-    def _point_order(self, origins: cl.Buffer, launch: np.ndarray, points: np.ndarray | None,
-                     seeds: cl.Buffer | None = None) -> cl.Buffer:
+    def _point_order(self, origins: cl.Buffer, launch: np.ndarray, seeds: cl.Buffer | None = None) -> cl.Buffer:
         """The `order` buffer of a launch of point queries (point_order.cl): its
         points sorted by cell of a grid over the scene (_sorted_points), and
         the cells' seeds ``seeds`` (_cell_seeds: a closest-point kernel's,
         which walks them; None for the others) copied over its spent cell
         counts (POINT_CELL_SEEDS)."""
-        order = self._sorted_points(origins, launch, points)
+        order = self._sorted_points(origins, launch)
         if seeds is not None:
             cl.enqueue_copy(self.queue, order, seeds, byte_count=4 * POINT_CELLS)
         return order
 
-    def _sorted_points(self, origins: cl.Buffer, launch: np.ndarray, points: np.ndarray | None) -> cl.Buffer:
-        """_point_order's points by cell.  ``points``: the launch's points as
-        the host has them (the chunk of the caller's array), or None where
-        they were made or given on the device.  A CPU device's order is the
-        host's (clrt/query/host_order.py says why): from ``points``, else from
-        the launch's points read back (the device's memory is the host's, so a
-        copy); a GPU's, point_order.cl's kernels."""
-        if self._kind != "cpu":
-            return self._device_point_order(origins, launch)
-        m = int(launch["num_rays"])
-        order = self._buffer("order", 4 * (POINT_CELLS + 2 * m))
-        if points is None:   # waits for the queue: the launch before may still be writing them
-            points = np.empty(3 * m, np.float32)
-            cl.enqueue_copy(self.queue, points, origins, src_offset=12 * int(launch["in_first"]), is_blocking=True)
-        self._transfers.append(upload_order(self.queue, order, points, launch))
-        return order
+    def _sorted_points(self, origins: cl.Buffer, launch: np.ndarray) -> cl.Buffer:
+        """_point_order's points by cell: on a GPU by point_order.cl's
+        counting sort through atomic increments, on a CPU device (where PoCL
+        runs atomics slowly) by its counting sort in runs of points."""
+        if self._kind == "cpu":
+            m = int(launch["num_rays"])
+            return self._run_point_order(origins, launch, point_runs(m, self.queue.device.max_compute_units))
+        return self._atomic_point_order(origins, launch)
 
-    def _device_point_order(self, origins: cl.Buffer, launch: np.ndarray) -> cl.Buffer:
-        """_sorted_points by point_order.cl's three launches (GPUs; tests on any device)."""
+    def _atomic_point_order(self, origins: cl.Buffer, launch: np.ndarray) -> cl.Buffer:
+        """_sorted_points by point_order.cl's point_cells, point_offsets and
+        point_scatter (GPUs; tests on any device)."""
         m = int(launch["num_rays"])
         order = self._buffer("order", 4 * (POINT_CELLS + 2 * m))
         cl.enqueue_fill_buffer(self.queue, order, np.uint32(0), 0, 4 * POINT_CELLS)
         self._launch("point_cells", (origins, launch, order), m)
         self._launch("point_offsets", (order,), POINT_OFFSETS_GROUP, POINT_OFFSETS_GROUP)
         self._launch("point_scatter", (launch, order), m)
+        return order
+
+    def _run_point_order(self, origins: cl.Buffer, launch: np.ndarray, runs: int) -> cl.Buffer:
+        """_sorted_points in ``runs`` runs of points by point_order.cl's
+        point_cell_of and point_run_* (CPU devices; tests on any device)."""
+        m = int(launch["num_rays"])
+        order = self._buffer("order", 4 * (POINT_CELLS + 2 * m))
+        counts = self._buffer("run_counts", 4 * POINT_RUN_CELLS * runs)
+        self._launch("point_cell_of", (origins, launch, order), m)
+        self._launch("point_run_counts", (launch, order, counts), runs, 1)
+        self._launch("point_run_offsets", (counts, np.uint32(runs)), 1, 1)
+        self._launch("point_run_scatter", (launch, order, counts), runs, 1)
         return order
 
     def _cell_seeds(self, points: int) -> cl.Buffer:
@@ -223,8 +233,7 @@ class PointQueries:
             m = stop - start
             rays, launch = self._ray_args(batch, start, stop, 0)
             origins, _, _, tmaxs, bad = rays
-            order = self._point_order(origins, launch, None if batch.on_device else batch.host_chunk(0, start, stop),
-                                      seeds)
+            order = self._point_order(origins, launch, seeds)
             placed, nbytes = {}, 0
             for name in fields:   # every field is 4-byte aligned: float32 and int32 values
                 placed[name] = nbytes
@@ -326,13 +335,11 @@ class PointQueries:
         seeds = self._closest_seeds(kernel, n)
         for start, stop in self._chunks(n):
             m = stop - start
-            points = None   # where the host has them: a host batch's
             if isinstance(source, GridPoints):
                 origins, tmaxs, bad, launch = self._grid_args(source, start, stop)
             else:
                 (origins, _, _, tmaxs, bad), launch = self._ray_args(source, start, stop, 0)
-                points = None if source.on_device else source.host_chunk(0, start, stop)
-            order = self._point_order(origins, launch, points, seeds)
+            order = self._point_order(origins, launch, seeds)
             placed, nbytes = {}, 0
             for name, slot in outputs.items():   # the float32 values first: each output stays aligned
                 placed[name] = nbytes
