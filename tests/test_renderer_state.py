@@ -136,3 +136,29 @@ def test_set_up_timings_are_reported_once_and_frames_report_their_own(device):
     assert set(renderer.timings) == set_up | {"program build"}
     again = renderer.render(cam, integrator="path", spp=1)
     assert set(again.timings) == set(path.timings) and set(renderer.timings) == set_up | {"program build"}
+
+
+def test_frames_follow_the_camera_and_the_renderers_own_changes(device):
+    """Renderer._frame_args keeps a frame's camera and scene records while
+    nothing they are made of changed: frames of cameras taken in turns, equal
+    cameras made anew, and frames after set_lights and a refit are each what a
+    fresh renderer shows."""
+    scene = clrt.scene_from_mesh(TORUS)
+    near, far = _camera(scene), _camera(scene)
+    far = clrt.Camera(tuple(2.0 * np.asarray(far.eye)), far.target, far.up, far.fov, far.width, far.height)
+
+    def fresh(scene, cam):
+        return clrt.Renderer(scene, device=device).render(cam, linear=True).image
+
+    want_near, want_far = fresh(scene, near), fresh(scene, far)
+    assert not np.array_equal(want_near, want_far)
+    renderer = clrt.Renderer(scene, device=device)
+    for cam, want in [(near, want_near), (far, want_far), (near, want_near), (_camera(scene), want_near)]:
+        np.testing.assert_array_equal(renderer.render(cam, linear=True).image, want)
+    light = clrt.Light((-3.0, 0.5, -2.0), (0.9, 0.2, 0.2))
+    renderer.set_lights([light])
+    np.testing.assert_array_equal(renderer.render(near, linear=True).image,
+                                  fresh(clrt.scene_from_mesh(TORUS, lights=[light]), near))
+    moved = clrt.scene_from_mesh(_moved(TORUS))
+    renderer.refit(moved)
+    np.testing.assert_array_equal(renderer.render(near, linear=True).image, fresh(moved, near))
