@@ -613,7 +613,11 @@ class Renderer:
             records = np.empty(count, HIT)
             copies.append(cl.enqueue_copy(q, records, frame, src_offset=at["hits"], is_blocking=False))
         seen = np.zeros(1, np.uint32)   # did a camera ray hit anything (render.cl's TILE_SEEN)
-        copies.append(cl.enqueue_copy(q, seen, frame, src_offset=at["seen"], is_blocking=False))
+        # The last copy blocks: NVIDIA's driver returns from a blocking read 0.06-0.15 ms sooner after the
+        # copy ends than from a wait on its event (a 1080p frame's time above its stages on the H200: 0.16-0.25
+        # -> 0.09-0.10 ms, docs/benchmark-log.md, session 24).  wait_for, the point where Ctrl-C stops a
+        # render, then finds it done.
+        copies.append(cl.enqueue_copy(q, seen, frame, src_offset=at["seen"], is_blocking=True))
         wait_for(copies[-1])
         job.seen = job.seen or bool(seen[0])
         job.progress(count)
