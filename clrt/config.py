@@ -289,7 +289,7 @@ POINT_CELLS = 1 << (3 * POINT_CELL_BITS)
 # (point_order.cl's point_run_*): POINT_RUNS_PER_UNIT runs a compute unit, at
 # most POINT_RUNS_MAX (one work-item adds up all the counters), and no run of
 # fewer than POINT_RUN_POINTS points but one (zeroing its counters would
-# outweigh it).
+# outweigh it); a launch of fewer points takes the atomics' order.
 POINT_RUN_CELL_BITS = 6
 POINT_RUN_CELLS = 1 << (3 * POINT_RUN_CELL_BITS)
 POINT_RUNS_PER_UNIT = 1

@@ -50,7 +50,8 @@ def test_the_kernels_see_the_table(device):
                 "MAX_PATH_DEPTH": config.MAX_PATH_DEPTH,
                 **{f"PATH_{k.upper()}": v for k, v in config.PATH_STRATEGIES.items()},
                 **{f"LIGHT_{k.upper()}": v for k, v in config.LIGHT_KINDS.items()},
-                "POINT_CELL_BITS": config.POINT_CELL_BITS, "POINT_OFFSETS_GROUP": config.POINT_OFFSETS_GROUP}
+                "POINT_CELL_BITS": config.POINT_CELL_BITS, "POINT_OFFSETS_GROUP": config.POINT_OFFSETS_GROUP,
+                "POINT_RUN_CELL_BITS": config.POINT_RUN_CELL_BITS}
     assert dict(zip(names, out.tolist())) == expected
 
 

@@ -100,6 +100,20 @@ def test_each_order_sorts_the_points_by_their_cells_stably(device, order):
     np.testing.assert_array_equal(np.sort(visit), np.arange(len(finite) - start))
 
 
+def test_runs_past_the_points_and_nan_coordinates(device):
+    """More runs than points (the extra runs empty), and a NaN coordinate in
+    the first cell of its axis (its other coordinates' cells kept)."""
+    accel = clrt.Accel(primitives.torus(1.0, 0.35, 24, 12), device=device)
+    points = np.array([[0.3, -0.2, 0.1], [np.nan, 0.2, -0.3], [-1.0, np.nan, 0.25]])
+    origins, launch = _launch(accel, points)
+    for runs in (1, 3, 7, 8):
+        cells, visit = _order_buffer(accel, accel._run_point_order(origins, launch, runs), len(points))
+        np.testing.assert_array_equal(np.sort(visit), np.arange(len(points)))
+        np.testing.assert_array_equal(cells[visit], np.sort(cells))
+        want = _numpy_cells(np.nan_to_num(points, nan=-np.inf), launch, POINT_RUN_CELL_BITS)   # -inf: the first
+        np.testing.assert_array_equal(cells, want)
+
+
 def test_a_cpu_device_counts_in_runs_by_its_units_and_points():
     assert point_runs(0, 2) == point_runs(POINT_RUN_POINTS - 1, 64) == 1
     assert point_runs(100 * POINT_RUN_POINTS, 2) == POINT_RUNS_PER_UNIT * 2
@@ -108,8 +122,10 @@ def test_a_cpu_device_counts_in_runs_by_its_units_and_points():
 
 
 def _other_order(self, origins, launch):
-    """The order the device under test does not take: the atomics' on a CPU device, runs elsewhere."""
-    if self._kind == "cpu":
+    """The order the device under test does not take for this launch: runs
+    where it takes the atomics' (GPUs; CPU devices below POINT_RUN_POINTS
+    points), else the atomics'."""
+    if self._kind == "cpu" and int(launch["num_rays"]) >= POINT_RUN_POINTS:
         return self._atomic_point_order(origins, launch)
     return self._run_point_order(origins, launch, 3)
 
@@ -139,3 +155,15 @@ def test_either_order_gives_the_same_answers_bit_for_bit(device, monkeypatch):
     for name in ("normal", "winding", "grid"):
         np.testing.assert_array_equal(got[name], want[name], err_msg=name)
     assert (got["normal"] < 0).any() and (got["normal"] > 0).any()
+
+
+def test_a_batch_past_the_runs_threshold_gives_the_same_answers_either_way(device, monkeypatch):
+    """A launch of POINT_RUN_POINTS points or more: on a CPU device the order
+    in runs by the finer grid (elsewhere the atomics'), against the other."""
+    points = np.random.default_rng(4).uniform(-1.6, 1.6, (POINT_RUN_POINTS + 999, 3))
+    accel = clrt.Accel(primitives.torus(1.0, 0.35, 24, 12), device=device)
+    got = accel.closest_points(points)
+    monkeypatch.setattr(PointQueries, "_sorted_points", _other_order)
+    want = accel.closest_points(points)
+    for field in POINT_FIELDS:
+        np.testing.assert_array_equal(getattr(got, field), getattr(want, field), err_msg=field)

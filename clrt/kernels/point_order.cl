@@ -1,19 +1,23 @@
 // The order a launch of point queries visits its points in: by cell of a
-// 32 x 32 x 32 grid over the scene's box, cells in Morton order.  Random
-// points in the caller's order send neighbouring work-items down unrelated
-// branches of the BVH; in cell order a work-group's points lie close together
-// and walk much the same nodes (on the H200 this halves the walk of a million
-// random points).  Each point's answer is its own, so the order changes no
-// result: only which work-item computes it.
+// grid over the scene's box, cells in Morton order.  Random points in the
+// caller's order send neighbouring work-items down unrelated branches of the
+// BVH; in cell order a work-group's points lie close together and walk much
+// the same nodes (on the H200 this halves the walk of a million random
+// points).  Each point's answer is its own, so the order changes no result:
+// only which work-item computes it.
 //
-// Three launches, a counting sort (the order within a cell is whatever the
-// atomics make it, which no answer depends on):
+// GPUs (and CPU devices' small launches): a 32 x 32 x 32 grid, three
+// launches, a counting sort (the order within a cell is whatever the atomics
+// make it, which no answer depends on):
 //   point_cells    each point's cell, and the points in each cell
 //   point_offsets  those counts into each cell's first place (one work-group)
 //   point_scatter  each point's index to its place
-// They share one buffer, `order`, laid out for a launch of n points as
+// CPU devices from POINT_RUN_POINTS points on: a finer grid and four
+// launches without atomics (point_run_*, below).  Both share one buffer,
+// `order`, laid out for a launch of n points as
 //   uint cell_count[POINT_CELLS]  (point_offsets makes them first places,
-//                                  point_scatter moves them on; for the
+//                                  point_scatter moves them on; the runs'
+//                                  order leaves them unwritten; for the
 //                                  closest-point kernels the host then
 //                                  copies the cells' seeds over them: int
 //                                  seed[POINT_CELLS], POINT_CELL_SEEDS)
@@ -59,8 +63,9 @@ typedef struct {
 
 // The grid coordinates (0 .. 2^bits - 1 an axis) of point p's cell in a
 // grid of 2^bits cells an axis over the scene's box (lo .. hi, device
-// frame): a point outside the box lands in the nearest cell; NaN points
-// (reported by the queries) in cell 0 (fmax takes NaN to 0).  The clamp is
+// frame): a point outside the box lands in the nearest cell; a NaN
+// coordinate (reported by the queries) in the first cell of its axis (fmax
+// takes NaN to 0).  The clamp is
 // made on the floats and the conversion signed: CPUs convert float vectors to
 // signed integers in one instruction, to unsigned ones in several.
 inline uint3 grid_coords(float3 p, float3 lo, float3 hi, uint bits)
@@ -144,12 +149,18 @@ inline float3 cell_centre(uint cell, float3 lo, float3 hi)
     return lo + (q + 0.5f) / (float)(1 << POINT_CELL_BITS) * (hi - lo);
 }
 
+// Point i of the launch in the device's frame.
+inline float3 launch_point(__global const float* origins, const QueryLaunch* launch, uint i)
+{
+    return vload3(0, origins + (size_t)(launch->in_first + i) * launch->origin_stride) - launch->shift.xyz;
+}
+
 __kernel void point_cells(__global const float* origins, const QueryLaunch launch, __global uint* order)
 {
     const uint i = get_global_id(0);
     if (i >= launch.num_rays)
         return;
-    const float3 p = vload3(0, origins + (size_t)(launch.in_first + i) * launch.origin_stride) - launch.shift.xyz;
+    const float3 p = launch_point(origins, &launch, i);
     const uint cell = point_cell(p, launch.scene_lo.xyz, launch.scene_hi.xyz);
     POINT_CELL_OF(order)[i] = cell;
     atomic_inc(order + cell);
@@ -209,9 +220,10 @@ __kernel void point_scatter(const QueryLaunch launch, __global uint* order)
 //                      (one work-item: POINT_RUN_CELLS additions a run)
 //   point_run_scatter  each point's index to its place
 // In `order` they write `cell` (the finer grid's cells) and `order`, not the
-// cell counts: the closest-point kernels of one point a work-item (CPU
-// devices' walks of two-level scenes) read the seeds copied there, of the
-// coarse grid, by their points' own cells (point_cell).
+// cell counts: the closest-point kernels of one point a work-item (on CPU
+// devices those without point groups: two-level scenes, no BVH) read the
+// seeds copied there, of the coarse grid, by their points' own cells
+// (point_cell).
 inline void point_run(uint n, uint run, uint runs, uint* first, uint* last)
 {
     *first = (uint)((ulong)n * run / runs);
@@ -223,7 +235,7 @@ __kernel void point_cell_of(__global const float* origins, const QueryLaunch lau
     const uint i = get_global_id(0);
     if (i >= launch.num_rays)
         return;
-    const float3 p = vload3(0, origins + (size_t)(launch.in_first + i) * launch.origin_stride) - launch.shift.xyz;
+    const float3 p = launch_point(origins, &launch, i);
     const uint3 q = grid_coords(p, launch.scene_lo.xyz, launch.scene_hi.xyz, POINT_RUN_CELL_BITS);
     POINT_CELL_OF(order)[i] = morton_cell(q);
 }

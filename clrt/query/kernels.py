@@ -92,8 +92,8 @@ QUERY_KERNELS = {
 #: (clrt.device.scene.DeviceScene.kernels).
 QUERY_PROGRAMS = (
     ("query_closest",), ("query_any",), ("query_count", "query_all"), ("camera_rays", "trace_camera", "occlude_camera"),
-    ("query_closest_point", "closest_point_fields", "point_cells", "point_offsets", "point_scatter", "point_run_counts",
-     "point_cell_of", "point_run_offsets", "point_run_scatter", "point_cell_seeds", "grid_points",
+    ("query_closest_point", "closest_point_fields", "point_cells", "point_offsets", "point_scatter", "point_cell_of",
+     "point_run_counts", "point_run_offsets", "point_run_scatter", "point_cell_seeds", "grid_points",
      "query_signed_distance_parity", "query_signed_distance_normal"),
     ("query_winding_number", "query_signed_distance_winding", "winding_nodes"),
 )

@@ -401,8 +401,9 @@ class Renderer:
         this renderer's own methods (refit, set_lights, move_instances):
         shade_pixels' GEOMETRY_PARAMS and SHADING_PARAMS.  The two records are
         made again only where what they are made of changed (compared by
-        identity, the camera by value): making them took 35-40 us of a 1080p
-        frame's 0.2 ms of host time on the H200's host."""
+        identity, the camera by value; those methods also drop them): making
+        them took 35-40 us of a 1080p frame's 0.2 ms of host time on the
+        H200's host."""
         g, scene, arrays = self.geometry, self.scene, self.arrays
         key = (camera, g, g.num_tris, g.packets_at, g.num_instances, scene, scene.ambient_light, scene.background,
                arrays, arrays.lights, self._table_offsets)
@@ -481,6 +482,7 @@ class Renderer:
         self.arrays = dataclasses.replace(self.arrays, instances=instances, bounds=instances.bounds, origin=origin,
                                           lights=light_records(self.scene.lights, origin))
         self.tables = replace_buffer(self.queue, self.tables, self._tables())
+        self._frame_records = None   # (the key would also see it; this lets the old scene go now)
         if changed:   # a top level of another depth: programs of another stack size
             detail = {"SURFACE_DETAIL": None} if self.arrays.detail is not None else None
             self.kernels, self._path = self.device_scene.kernels("render.cl", RENDER_KERNELS, detail), None
@@ -516,6 +518,7 @@ class Renderer:
         self.scene.lights = list(lights)
         self.arrays.lights = light_records(self.scene.lights, self.arrays.origin)
         self.tables = replace_buffer(self.queue, self.tables, self._tables())
+        self._frame_records = None   # (the key would also see it; this lets the old records go now)
 
     # ----------------------------------------------------------------------- memory
 
