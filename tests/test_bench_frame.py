@@ -20,9 +20,10 @@ def test_frame_bench_without_and_with_a_bvh(device, capsys):
     assert [(r[0], r[1], r[2]) for r in rows] == [("none", "-", "48x32"), ("box", "sah", "48x32")]
     assert all(r[-1] == "yes" for r in rows)        # the BVH's image is brute force's, pixel for pixel
     for r in rows:   # the whole call beside its stages, the frame's wall beside its stages
-        build, copy, made, gen, colour, read, wall, host = (float(c.split()[0]) for c in r[3:11])
+        build, copy, made, gen, colour, read, wall, host, above = (float(c.split()[0]) for c in r[3:12])
         assert made >= build + copy - 0.2
         assert host == pytest.approx(wall - gen - colour - read, abs=0.01)
+        assert above == pytest.approx(wall - gen - colour, abs=0.01) and above >= host - 0.01
 
 
 @pytest.mark.parametrize("module, args", [
