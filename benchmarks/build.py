@@ -461,7 +461,8 @@ TUNING = {"tail": "tail_threshold",            # the hand-over to ploc_tail at a
           "sah-top": "top_clusters",           # clusters the SAH top takes from PLOC (1: none)
           "partition": "partition",            # the SAH partition before PLOC (0: off, 1: on)
           "reinsert": "reinsert_iterations",   # iterations of reinsertion (0: none)
-          "part-levels": "PART_LEVELS"}        # levels of the SAH partition (a constant of clrt.device.build)
+          "part-levels": "PART_LEVELS",        # levels of the SAH partition (a constant of clrt.device.build)
+          "ploc-radius": "PLOC_RADIUS"}        # clusters PLOC searches on each side (a constant too)
 # The settings that change the tree (its trace is timed).
 TREE_SETTINGS = ("treelet_leaves", "treelet_min", "top_clusters", "partition", "reinsert_iterations")
 
@@ -519,6 +520,10 @@ def main(argv=None) -> int:
                 DEVICE_VARIANTS[b] = {k: v for k, v in settings.items() if not k.isupper()}
                 if not 1 <= DEVICE_CONSTANTS[b].get("PART_LEVELS", 1) < 64:
                     p.error(f"--builders: {b!r}: part-levels must be in 1..63")
+                if not 1 <= DEVICE_CONSTANTS[b].get("PLOC_RADIUS", 1) <= 24:   # ploc_merge's local tables
+                    p.error(f"--builders: {b!r}: ploc-radius must be in 1..24")
+                if "PLOC_RADIUS" in DEVICE_CONSTANTS[b]:   # (a constant per device type)
+                    DEVICE_CONSTANTS[b]["PLOC_RADIUS"] = dict.fromkeys(("gpu", "cpu"), DEVICE_CONSTANTS[b]["PLOC_RADIUS"])
             except (ValueError, argparse.ArgumentTypeError):
                 p.error(f"--builders: {b!r} needs an integer after '='")
             except KeyError as exc:

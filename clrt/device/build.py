@@ -107,12 +107,22 @@ RADIX_BITS = 4           # digit of one radix-sort pass: 16 bins, 8 passes for 3
 # (treelet_done).
 SORT_PASSES = -(-32 // RADIX_BITS)
 assert SORT_PASSES % 2 == 0, "init_leaves reads the sorted keys from keys[0]"
-# Clusters searched on each side (Meister & Bittner's default; PLOC++ uses 8).
-# Measured SAH cost over the host SAH builder's (leaf size 4): camel 1.13 / 1.11
-# / 1.06 and bunny 1.09 / 1.08 / - at radius 8 / 16 / 32; the search time grows
-# with the radius, and at 32 the pair table no longer fits 48 KiB of local
-# memory.  ``python -m benchmarks.build`` prints the ratio.
-PLOC_RADIUS = 16
+# Clusters searched on each side, per device type (Meister & Bittner's default
+# 16; PLOC++ uses 8).  Of PLOC alone, the SAH cost over the host SAH builder's
+# (leaf size 4) was camel 1.13 / 1.11 / 1.06 and bunny 1.09 / 1.08 / - at radius
+# 8 / 16 / 32; with the reinsertion and treelets after it, radius 16, 8 and 4
+# give trees that trace alike on bunny00, camel, elephant, homer and knot1
+# (within the runs' 2-4 %), and at 10M and 50M triangles radius 4's trace
+# 2-4 % faster (H200: 10M primary / random 0.246 / 0.739 ms against 0.255 /
+# 0.747 at 8), while the search time grows with the radius: a GPU takes 4
+# (PLOC's merges at 10M 17.6 / 12.4 / 11.1 ms at 16 / 8 / 4, at 50M 62.0 ->
+# 54.3 from 8 to 4: docs/benchmark-log.md, sessions 25-26).  A CPU device
+# keeps 16, which its merge passes search sixteen lanes at a time
+# (build_ploc_cpu.cl; at 8 bunny00's PLOC took 23-25 ms on 2 cores against
+# 9-20).  At 32 the pair table no longer fits 48 KiB of local memory.
+# ``python -m benchmarks.build`` prints the ratio (``--builders
+# device/ploc-radius=N``).
+PLOC_RADIUS = {"gpu": 4, "cpu": 16}
 # Clusters at which the host hands over to ploc_tail, per device type: a GPU
 # runs a few thousand clusters' iteration in one work-group faster than three
 # launches (on the H200, 2048 against 4096: bunny00 2.07 against 2.12 ms,
@@ -181,11 +191,18 @@ TREELET_GROUPS_PER_UNIT = 32   # treelet work-groups launched per compute unit (
 #   bunny00 trace     +3.8 %             +5.4 %      +6.0 %   (over the host SAH tree)
 #   camel trace       +3.0 %             +2.0 %      +5.0 %
 #   SAH cost (bunny)  1.061              1.062       1.065
-#   build 1M / 10M / 50M ms   10.2 / 65 / 331   8.8 / 60 / 299   8.2 / 51 / 241
-# Restructuring every node keeps primary rays within 5 % of the host SAH
-# trees; from half a million triangles on, the small subtrees' treelets
-# (60 % of the restructuring's time for 0.4 % of SAH cost) are left out.
-TREELET_MIN_TRIANGLES = ((0, 0), (500_000, 16))
+# Restructuring every node keeps small meshes' primary rays near the host SAH
+# trees'.  On large meshes the small subtrees' treelets take most of the
+# restructuring's time for a few tenths of a percent of SAH cost, and their
+# trace times are one within the runs' 1-2 % (2026-12-04, PLOC radius 8;
+# device ms, then primary / random ms):
+#   minimum        16                      32                      64
+#   1M             4.74  0.213 / 0.569     4.27  0.213 / 0.573
+#   2M             8.36  0.227 / 0.635     7.30  0.218 / 0.637
+#   4M            13.90  0.236 / 0.681    12.23  0.238 / 0.682    11.11  0.236 / 0.684
+#   10M           30.78  0.259 / 0.738    26.40  0.258 / 0.742    23.61  0.254 / 0.745
+#   50M          145.49  0.289 / 0.896   121.68  0.283 / 0.898   110.26  0.287 / 0.895
+TREELET_MIN_TRIANGLES = ((0, 0), (500_000, 32), (4_000_000, 64))
 # Heights by which the nodes to restructure are listed (lowest first): a
 # taller tree (PLOC's are about 30 high at 1M triangles, 40 at 50M) keeps
 # PLOC's shape.
@@ -241,7 +258,7 @@ def build_defines(volume: str, kind: str = "gpu", treelet_leaves: int | None = N
     return {
         VOLUME_DEFINES[volume]: None, "BUILD_GROUP": BUILD_GROUP, "RADIX_BITS": RADIX_BITS,
         "SORT_PASSES": SORT_PASSES,
-        "PLOC_RADIUS": PLOC_RADIUS, "TAIL_GROUP": TAIL_GROUP[kind] if tail_group is None else int(tail_group),
+        "PLOC_RADIUS": PLOC_RADIUS[kind], "TAIL_GROUP": TAIL_GROUP[kind] if tail_group is None else int(tail_group),
         "TOP_GROUP": top_group(kind, tail_group),
         "SAH_TOP_CLUSTERS": sah_top_clusters(kind, tail_group, top_clusters),
         "TREELET_LEAVES": TREELET_LEAVES[kind] if treelet_leaves is None else int(treelet_leaves),
