@@ -50,7 +50,7 @@ def test_a_build_compiles_the_kernels_it_launches_and_no_other(options, cpu_queu
     the two that collapse the built tree into the wide BVH
     (clrt.device.wide_build, launched by the geometry) --, and the CPU's tree
     is the one the GPU driver's launches build (with ploc_tail from 2048
-    clusters on), run here."""
+    clusters on, and the CPU's PLOC radius: a GPU's own is smaller), run here."""
     context, queue = cpu_queue
     options = {"treelet_leaves": 0, "tail_group": 256, "top_clusters": 128, "partition": False,
                "reinsert_iterations": 0, **options}
@@ -70,6 +70,7 @@ def test_a_build_compiles_the_kernels_it_launches_and_no_other(options, cpu_queu
     wide = collapse_on_device(context, queue, built.rows, built.num_rows, built.tri_verts, built.kernels)
     assert wide.num_packets >= len(corners) / 4        # (tests/test_wide_build.py: its every byte)
     monkeypatch.setattr(build, "device_kind", lambda device: "gpu")
+    monkeypatch.setattr(build, "PLOC_RADIUS", dict.fromkeys(("cpu", "gpu"), build.PLOC_RADIUS["cpu"]))
     gpu = build.build_on_device(context, queue, corners, leaf_size=4, profile=True,
                                 **{**options, "tail_threshold": 2048})
     launched = {name for name, _, _ in gpu.launches}
