@@ -95,6 +95,23 @@ def test_settings_combine_in_one_variant(device, capsys, monkeypatch):
     assert sah["device/treelets=7/reinsert=2"] < sah["device/treelets=7/reinsert=0"], sah
 
 
+def test_the_ploc_radius_is_set_for_the_variant_alone(device, capsys, monkeypatch):
+    """device/ploc-radius=N: PLOC searches N clusters on each side on either
+    kind of device for that variant's builds (another tree here), and the
+    module's own radii are back after it."""
+    from clrt.device import build as device_build
+    monkeypatch.setattr(build, "DEVICE_VARIANTS", dict(build.DEVICE_VARIANTS))
+    saved = dict(device_build.PLOC_RADIUS)
+    code = build.main(["--device", device or "cpu", "--meshes", "knot50k", "--builders",
+                       "device/treelets=0/reinsert=0,device/treelets=0/reinsert=0/ploc-radius=1", "--repeat", "0",
+                       "--no-trace", "--calls", ""])
+    assert code == 0 and device_build.PLOC_RADIUS == saved
+    assert build.DEVICE_CONSTANTS["device/treelets=0/reinsert=0/ploc-radius=1"] == {"PLOC_RADIUS": {"gpu": 1, "cpu": 1}}
+    rows = [line.split("|") for line in capsys.readouterr().out.splitlines() if line.startswith("| knot50k ")]
+    sah = {r[3].strip(): float(r[8]) for r in rows}
+    assert sah["device/treelets=0/reinsert=0/ploc-radius=1"] != sah["device/treelets=0/reinsert=0"], sah
+
+
 @pytest.mark.parametrize("builder, message", [
     ("device/treelets=abc", "error: --builders: 'device/treelets=abc' needs an integer after '='"),
     ("device/tail=inf", "error: --builders: 'device/tail=inf' needs an integer after '='"),
@@ -104,6 +121,8 @@ def test_settings_combine_in_one_variant(device, capsys, monkeypatch):
     ("device/treelets=-3", "clrt: treelet_leaves must be an integer in 0..8, got -3"),
     ("device/treelets=2", "clrt: treelet_leaves must be 0 (none) or an integer in 3..8, got 2"),
     ("device/reinsert=65", "clrt: reinsert_iterations must be an integer in 0..64, got 65"),
+    ("device/ploc-radius=0", "error: --builders: 'device/ploc-radius=0': ploc-radius must be in 1..24"),
+    ("device/ploc-radius=25", "error: --builders: 'device/ploc-radius=25': ploc-radius must be in 1..24"),
     ("device/treelets=0/reinsert=x", "error: --builders: 'device/treelets=0/reinsert=x' needs an integer after '='"),
     ("device/treelets=0/colour=3", "error: --builders: 'device/treelets=0/colour=3': unknown setting 'colour'"),
 ])
