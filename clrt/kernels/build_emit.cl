@@ -104,7 +104,12 @@ void emit_tree(const global BuildNode* nodes, const uint num_nodes, const int ro
     const BuildNode node = nodes[n];
     global BvhPairNode* exact = 0;
     if (node.rows == 0) {
-        atomic_max(state + STATE_DEPTH, at.z);
+        // Most leaves are no deeper than one seen already: a plain read skips
+        // their atomic, which queued every leaf on one word (H200, 10M
+        // triangles: emit_tree 1.55 -> 1.24 ms).  The depth only grows, so a
+        // stale read can only let an atomic through.
+        if (at.z > ((volatile global int*)state)[STATE_DEPTH])
+            atomic_max(state + STATE_DEPTH, at.z);
         if ((int)n == root) {            // the whole tree is one leaf: on the left of a root row
             if (exact_rows)
                 exact = exact_rows;
