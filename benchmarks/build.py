@@ -524,7 +524,8 @@ def main(argv=None) -> int:
                 if not 1 <= DEVICE_CONSTANTS[b].get("PLOC_RADIUS", 1) <= 24:   # ploc_merge's local tables
                     p.error(f"--builders: {b!r}: ploc-radius must be in 1..24")
                 if "PLOC_RADIUS" in DEVICE_CONSTANTS[b]:   # (a constant per device type)
-                    DEVICE_CONSTANTS[b]["PLOC_RADIUS"] = dict.fromkeys(("gpu", "cpu"), DEVICE_CONSTANTS[b]["PLOC_RADIUS"])
+                    radius = DEVICE_CONSTANTS[b]["PLOC_RADIUS"]
+                    DEVICE_CONSTANTS[b]["PLOC_RADIUS"] = dict.fromkeys(("gpu", "cpu"), radius)
             except (ValueError, argparse.ArgumentTypeError):
                 p.error(f"--builders: {b!r} needs an integer after '='")
             except KeyError as exc:

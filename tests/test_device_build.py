@@ -450,11 +450,12 @@ def test_the_partition_makes_segments_of_the_sah(queue):
 def test_the_partition_lowers_the_sah_cost(name, queue):
     """On meshes, the SAH partition's trees cost less than PLOC's alone, with
     and without treelets -- or, where PLOC alone already beats the host SAH
-    builder (the torus at a GPU's radius 8: 21.94, with the partition 21.97,
-    the host's 22.27), no more than the host's -- and come within 5 % of the
-    host SAH builder's (PLOC alone: 15 %).  (Not on the random soup, whose large triangles overlap: a
-    split by box centres, the host builder's and the partition's, costs more
-    there than PLOC's merges -- 39.5 and 36.2 against 35.0.)"""
+    builder (the torus on the H200 at radius 8: 21.94, with the partition
+    21.97, the host's 22.27), no more than the host's -- and come within 5 %
+    of the host SAH builder's (PLOC alone: 15 %).  (Not on the random soup,
+    whose large triangles overlap: a split by box centres, the host builder's
+    and the partition's, costs more there than PLOC's merges -- 39.5 and 36.2
+    against 35.0.)"""
     if name == "camel":
         mesh = clrt.load_mesh(SHARED_MESHES / "camel.off")
         corners = mesh.vertices[mesh.faces].astype(np.float32)
