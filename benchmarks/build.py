@@ -523,9 +523,9 @@ def main(argv=None) -> int:
                     p.error(f"--builders: {b!r}: part-levels must be in 1..63")
                 if not 1 <= DEVICE_CONSTANTS[b].get("PLOC_RADIUS", 1) <= 24:   # ploc_merge's local tables
                     p.error(f"--builders: {b!r}: ploc-radius must be in 1..24")
-                if "PLOC_RADIUS" in DEVICE_CONSTANTS[b]:   # (a constant per device type)
-                    radius = DEVICE_CONSTANTS[b]["PLOC_RADIUS"]
-                    DEVICE_CONSTANTS[b]["PLOC_RADIUS"] = dict.fromkeys(("gpu", "cpu"), radius)
+                if "PLOC_RADIUS" in DEVICE_CONSTANTS[b]:   # (a constant per device type: one for every type)
+                    from clrt.device.build import PLOC_RADIUS
+                    DEVICE_CONSTANTS[b]["PLOC_RADIUS"] = dict.fromkeys(PLOC_RADIUS, DEVICE_CONSTANTS[b]["PLOC_RADIUS"])
             except (ValueError, argparse.ArgumentTypeError):
                 p.error(f"--builders: {b!r} needs an integer after '='")
             except KeyError as exc:

@@ -639,7 +639,7 @@ def test_cpu_and_gpu_ploc_kernels_make_the_same_tree(name, radius, top_clusters,
     make odd and even numbers of them, and ploc_tail must find the clusters
     either way."""
     from clrt.device import build
-    monkeypatch.setattr(build, "PLOC_RADIUS", dict.fromkeys(("cpu", "gpu"), build.PLOC_RADIUS[radius]))
+    monkeypatch.setattr(build, "PLOC_RADIUS", dict.fromkeys(build.PLOC_RADIUS, build.PLOC_RADIUS[radius]))
     corners = CORNERS[name]()
     results = []
     for kind, threshold in (("cpu", 16), ("cpu", 300), ("cpu", 700), ("gpu", 1), ("gpu", 16), ("gpu", 300),

@@ -70,7 +70,7 @@ def test_a_build_compiles_the_kernels_it_launches_and_no_other(options, cpu_queu
     wide = collapse_on_device(context, queue, built.rows, built.num_rows, built.tri_verts, built.kernels)
     assert wide.num_packets >= len(corners) / 4        # (tests/test_wide_build.py: its every byte)
     monkeypatch.setattr(build, "device_kind", lambda device: "gpu")
-    monkeypatch.setattr(build, "PLOC_RADIUS", dict.fromkeys(("cpu", "gpu"), build.PLOC_RADIUS["cpu"]))
+    monkeypatch.setattr(build, "PLOC_RADIUS", dict.fromkeys(build.PLOC_RADIUS, build.PLOC_RADIUS["cpu"]))
     gpu = build.build_on_device(context, queue, corners, leaf_size=4, profile=True,
                                 **{**options, "tail_threshold": 2048})
     launched = {name for name, _, _ in gpu.launches}
