@@ -462,9 +462,10 @@ TUNING = {"tail": "tail_threshold",            # the hand-over to ploc_tail at a
           "partition": "partition",            # the SAH partition before PLOC (0: off, 1: on)
           "reinsert": "reinsert_iterations",   # iterations of reinsertion (0: none)
           "part-levels": "PART_LEVELS",        # levels of the SAH partition (a constant of clrt.device.build)
-          "ploc-radius": "PLOC_RADIUS"}        # clusters PLOC searches on each side (a constant too)
+          "ploc-radius": "PLOC_RADIUS",        # clusters PLOC searches on each side (a constant too)
+          "hierarchy": "hierarchy"}            # with the partition, PLOC up the linear BVH (1) or by iterations (0)
 # The settings that change the tree (its trace is timed).
-TREE_SETTINGS = ("treelet_leaves", "treelet_min", "top_clusters", "partition", "reinsert_iterations")
+TREE_SETTINGS = ("treelet_leaves", "treelet_min", "top_clusters", "partition", "reinsert_iterations", "hierarchy")
 
 
 def tuned_variant(builder: str) -> dict:
@@ -492,7 +493,8 @@ def main(argv=None) -> int:
                    help=f"comma-separated, of {', '.join(list(HOST_BUILDERS) + list(DEVICE_VARIANTS))}, "
                         "device/tail=N, device/tail-group=N, device/treelets=N, device/treelet-min=N, "
                         "device/sah-top=N, device/partition=0|1, device/part-levels=N (with partition=1), "
-                        "device/reinsert=N, device/ploc-radius=N (1..24), or several settings in one, e.g. "
+                        "device/reinsert=N, device/ploc-radius=N (1..24), device/hierarchy=0|1, "
+                        "or several settings in one, e.g. "
                         "device/treelets=0/reinsert=8 "
                         "(default: paper, sah, device)")
     p.add_argument("--volume", default="box", choices=("box", "sphere", "ellipse"),

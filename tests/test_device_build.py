@@ -379,24 +379,28 @@ def test_restructured_trees_give_brute_force_hits(volume, device, monkeypatch):
             assert np.array_equal(getattr(hits, field), getattr(base, field)), (name, volume, field)
 
 
+@pytest.mark.parametrize("hierarchy", (False, True))
 @pytest.mark.parametrize("samples", (None, 300))
 @pytest.mark.parametrize("top_clusters", (16, 128))
 @pytest.mark.parametrize("leaf_size", (1, 4))
 @pytest.mark.parametrize("name", sorted(CORNERS))
-def test_partitioned_trees_are_valid(name, leaf_size, top_clusters, samples, queue, monkeypatch):
+def test_partitioned_trees_are_valid(name, leaf_size, top_clusters, samples, hierarchy, queue, monkeypatch):
     """The SAH partition before PLOC (build_partition.cl; GPUs do it by
-    default, here forced on the test device): a valid tree with conservative
-    boxes for every test mesh, and the same bytes from a second build (the
-    splits are granted in node order, not in the order the work-items happen
-    to run) -- also when the partition decides on a sample of the triangles
-    (PART_SAMPLES, here 300) and takes the others down its splits after."""
+    default, here forced on the test device), then PLOC by iterations or up
+    the linear BVH (``hierarchy``, build_hierarchy.cl: a GPU's default): a
+    valid tree with conservative boxes for every test mesh, and the same
+    bytes from a second build (the splits are granted in node order, not in
+    the order the work-items happen to run; the hierarchy's nodes are
+    numbered by their places) -- also when the partition decides on a sample
+    of the triangles (PART_SAMPLES, here 300) and takes the others down its
+    splits after."""
     from clrt.device import build
     if samples:
         monkeypatch.setattr(build, "PART_SAMPLES", samples)
     corners = CORNERS[name]()
     F = len(corners)
     builds = [build_on_device(*queue, corners, leaf_size=leaf_size, keep_boxes=True, partition=True,
-                              top_clusters=top_clusters) for _ in range(2)]
+                              top_clusters=top_clusters, hierarchy=hierarchy) for _ in range(2)]
     rows, prim_ids = builds[0].read_back()
     assert np.array_equal(np.sort(prim_ids), np.arange(F))
     tris = builds[0].read_triangles()
@@ -494,10 +498,76 @@ def test_a_sampled_partition_lowers_the_sah_cost_too(queue, monkeypatch):
     assert sampled < 0.99 * plain and sampled <= 1.02 * whole, (plain, whole, sampled)
 
 
+@pytest.mark.parametrize("name", ["torus", "icosphere", "heightfield", "random"]
+                         + (["camel", "bunny00"] if SHARED_MESHES.is_dir() else []))
+def test_the_hierarchy_merges_as_well_as_ploc(name, queue):
+    """PLOC up the linear BVH (build_hierarchy.cl: every merge among the 32
+    clusters of a node's two children) against PLOC's iterations over every
+    cluster, both after the SAH partition: trees of about the same SAH cost
+    (on the H200: bunny00 35.55 against 35.68, 10M triangles 57.97 against
+    58.04), within 2 % either way."""
+    if name in ("camel", "bunny00"):
+        mesh = clrt.load_mesh(SHARED_MESHES / f"{name}.off")
+        corners = mesh.vertices[mesh.faces].astype(np.float32)
+    else:
+        corners = CORNERS[name]()
+    costs = [build_on_device(*queue, corners, leaf_size=4, keep_boxes=True, partition=True, treelet_leaves=0,
+                             reinsert_iterations=0, hierarchy=h).stats()["sah_cost"] for h in (False, True)]
+    print(name, costs)
+    assert abs(costs[1] / costs[0] - 1) <= 0.02, costs
+
+
+def test_the_hierarchy_numbers_nodes_by_place(queue):
+    """The hierarchy's inner nodes: every number num_tris .. 2 num_tris - 2
+    once, each node's children pointing back at it, the root the last
+    (2 num_tris - 2, made by ploc_top above the segments), each segment's
+    nodes numbered within its own run of num_tris + first - segment ..
+    (build_hierarchy.cl says why)."""
+    import pyopencl as cl
+
+    from clrt import layouts
+    from clrt.device import build_kernels
+    corners = CORNERS["random"]()
+    F = len(corners)
+    build_on_device(*queue, corners, leaf_size=4, partition=True, top_clusters=16, treelet_leaves=0,
+                    reinsert_iterations=0, hierarchy=True).release()
+    ws = build_kernels.workspaces[queue[0].int_ptr]
+    nodes = np.empty(2 * F - 1, layouts.BUILD_NODE)
+    keys = np.empty(F, np.uint32)
+    cl.enqueue_copy(queue[1], nodes, ws.buffers["nodes"], is_blocking=True)
+    cl.enqueue_copy(queue[1], keys, ws.buffers["keys0"], is_blocking=True)
+    left = nodes["lo"][F:, 3].view(np.int32)
+    right = nodes["hi"][F:, 3].view(np.int32)
+    children = np.concatenate([left, right])
+    assert np.array_equal(np.sort(children), np.arange(2 * F - 2))     # every node but the root, once
+    parent = nodes["parent"]
+    inner = np.arange(F, 2 * F - 1)
+    assert np.array_equal(parent[left], inner) and np.array_equal(parent[right], inner)
+    assert parent[2 * F - 2] == -1
+    # a node below the segments has its leaves in one segment, and its number in that segment's run
+    segment = (keys >> 24).astype(np.int64)
+    segments = int(segment.max()) + 1
+    first_place = np.searchsorted(segment, np.arange(segments))
+    leaf_segment = np.empty(2 * F - 1, np.int64)
+    leaf_segment[:F] = segment
+    order = np.argsort(nodes["count"][F:], kind="stable")     # children (fewer triangles) before parents
+    for i in order:
+        n = F + i
+        a, b = left[i], right[i]
+        leaf_segment[n] = leaf_segment[a] if leaf_segment[a] == leaf_segment[b] else -1
+    below = leaf_segment[F:] >= 0
+    runs_first = F + first_place - np.arange(segments)
+    runs_end = np.append(runs_first[1:], 2 * F - segments)
+    s = leaf_segment[F:][below]
+    numbers = inner[below]
+    assert np.all((numbers >= runs_first[s]) & (numbers < runs_end[s]))
+    assert below.sum() == F - segments
+
+
 def test_gpus_partition_large_meshes_by_default(queue, monkeypatch):
     """The default: GPUs partition from PART_MIN_TRIANGLES triangles on (below,
-    the build stays PLOC's: faster, for a tree a few per cent dearer), CPU
-    devices never."""
+    where 128 segments would hold a few triangles each, the build stays
+    PLOC's), CPU devices never."""
     import pyopencl as cl
 
     from clrt.device import build, build_kernels
@@ -515,12 +585,15 @@ def test_gpus_partition_large_meshes_by_default(queue, monkeypatch):
     assert segments[("gpu", len(corners) + 1)] == 0 and segments[("cpu", 0)] == 0
 
 
+@pytest.mark.parametrize("hierarchy", (False, True))
 @pytest.mark.parametrize("volume", VOLUMES)
-def test_partitioned_trees_give_brute_force_hits(volume, device, monkeypatch):
+def test_partitioned_trees_give_brute_force_hits(volume, hierarchy, device, monkeypatch):
     """The no-detail-loss invariant for trees built with the SAH partition (the
-    GPU default; the CPU default builds without), grazing rays included."""
+    GPU default; the CPU default builds without), merged by PLOC's iterations
+    or up the linear BVH (the GPU default), grazing rays included."""
     from clrt.device import build
     monkeypatch.setattr(build, "SAH_PARTITION", {"gpu": True, "cpu": True})
+    monkeypatch.setattr(build, "HIERARCHY", {"gpu": hierarchy, "cpu": hierarchy})
     monkeypatch.setattr(build, "PART_MIN_TRIANGLES", 0)
     monkeypatch.setattr(build, "SAH_TOP_CLUSTERS", {"gpu": 16, "cpu": 16})
     monkeypatch.setattr(build, "PART_SAMPLES", 500)       # the torus and icosphere sampled
@@ -646,7 +719,8 @@ def test_cpu_and_gpu_ploc_kernels_make_the_same_tree(name, radius, top_clusters,
                             ("gpu", 700)):
         monkeypatch.setattr(build, "device_kind", lambda device, kind=kind: kind)
         bvh = build_on_device(*queue, corners, leaf_size=4, treelet_leaves=0, reinsert_iterations=0,
-                              tail_threshold=threshold, top_clusters=top_clusters, partition=partition)
+                              tail_threshold=threshold, top_clusters=top_clusters, partition=partition,
+                              hierarchy=False)
         results.append(bvh.read_back())
     for other in results[1:]:
         assert all(np.array_equal(a.view(np.uint8), b.view(np.uint8)) for a, b in zip(results[0], other))

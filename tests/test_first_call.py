@@ -50,7 +50,9 @@ def test_a_build_compiles_the_kernels_it_launches_and_no_other(options, cpu_queu
     the two that collapse the built tree into the wide BVH
     (clrt.device.wide_build, launched by the geometry) --, and the CPU's tree
     is the one the GPU driver's launches build (with ploc_tail from 2048
-    clusters on, and the CPU's PLOC radius: a GPU's own is smaller), run here."""
+    clusters on, and the CPU's PLOC radius: a GPU's own is smaller), run here
+    -- PLOC by iterations: with the partition a GPU climbs the linear BVH
+    instead (build_hierarchy.cl), another tree."""
     context, queue = cpu_queue
     options = {"treelet_leaves": 0, "tail_group": 256, "top_clusters": 128, "partition": False,
                "reinsert_iterations": 0, **options}
@@ -72,12 +74,18 @@ def test_a_build_compiles_the_kernels_it_launches_and_no_other(options, cpu_queu
     monkeypatch.setattr(build, "device_kind", lambda device: "gpu")
     monkeypatch.setattr(build, "PLOC_RADIUS", dict.fromkeys(build.PLOC_RADIUS, build.PLOC_RADIUS["cpu"]))
     gpu = build.build_on_device(context, queue, corners, leaf_size=4, profile=True,
-                                **{**options, "tail_threshold": 2048})
+                                **{**options, "tail_threshold": 2048, "hierarchy": False})
     launched = {name for name, _, _ in gpu.launches}
     assert launched == set(launched_kernels("gpu", segmented, options["treelet_leaves"] > 0, True,
                                             reinsertion=options["reinsert_iterations"] > 0)), launched
     for a, b in zip(built.read_back(), gpu.read_back()):
         assert np.array_equal(a.view(np.uint8), b.view(np.uint8))
+    if segmented:      # a GPU's default with the partition: PLOC up the linear BVH, no ploc_merge, no tail
+        hierarchical = build.build_on_device(context, queue, corners, leaf_size=4, profile=True, **options)
+        launched = {name for name, _, _ in hierarchical.launches}
+        assert launched == set(launched_kernels("gpu", segmented, options["treelet_leaves"] > 0, True,
+                                                reinsertion=options["reinsert_iterations"] > 0,
+                                                hierarchical=True)), launched
 
 
 def test_keep_kernels_cuts_the_others_out_and_names_a_missing_one(cpu_queue):

@@ -157,10 +157,23 @@ SAH_TOP_CLUSTERS = {"gpu": 128, "cpu": 128}
 # 1.1 ms more build (1.9 -> 3.0 ms), of 1M triangles (14 bunnies) by 2 % for
 # 1 ms more, of 10M by 11 % and of 50M by 28 % for no more build time (its
 # segments' own Morton codes are finer than one code over the whole mesh).
-# So by default only from PART_MIN_TRIANGLES on, where it costs nothing;
-# below, the build stays near 2 ms (benchmarks: --builders device/partition=1).
+# Since PLOC below the segments climbs the linear BVH (HIERARCHY), the
+# partition pays on small meshes too: on the H200 (2026-12-04, primary /
+# random rays over the host SAH tree's) camel 1.04 / 1.00 -> 0.99 / 1.02,
+# elephant 1.04 / 1.02 -> 0.98 / 1.02, bunny00 1.01 / 1.01 -> 0.99 / 1.00
+# for 0.2-0.6 ms more build, and 1M triangles trace 4 % / 2 % faster for 0.1
+# ms more.  So GPUs partition from PART_MIN_TRIANGLES on: 128 segments of 32
+# triangles; below, each would hold a leaf's few (benchmarks: --builders
+# device/partition=0|1).
 SAH_PARTITION = {"gpu": True, "cpu": False}
-PART_MIN_TRIANGLES = 2_000_000
+PART_MIN_TRIANGLES = 4096
+# PLOC's merges below the partition's segments by climbing the sorted keys'
+# linear BVH, in one launch (build_hierarchy.cl, H-PLOC), instead of one
+# ploc_merge launch an iteration over every cluster; only with the partition
+# (above its segments ploc_top's SAH top does the rest), per device type.
+# It searches PLOC_RADIUS clusters on each side, as ploc_merge.
+HIERARCHY = {"gpu": True, "cpu": False}
+SEGMENT_BITS = 8         # a key's top bits that hold its segment (at most 1 << SEGMENT_BITS segments)
 PART_BINS = 16
 PART_LEVELS = 10
 PART_SAMPLES = 1 << 17
@@ -222,6 +235,9 @@ _EMPTY_BOX = np.array([0xFFFFFFFF] * 3 + [0] * 3, np.uint32)
 EARLY_ROWS_BYTES = 64 << 20   # row buffers made before the row count is known, up to this size
 EMIT_JUMPS = 7           # pointer jumps queued without reading the tree's height (2**7 levels)
 GROUP_RESULTS = 14       # doubles each work-group of place_instances writes (build_instances.cl)
+HIERARCHY_GROUP = 32     # work-items that merge together in ploc_hierarchy (build_hierarchy.cl's HIERARCHY_GROUP)
+# Of those, a work-group's where they are a warp (-DHIERARCHY_WARP_VOTE).
+HIERARCHY_WARPS = 4
 
 # The state buffer (build_state.cl): int offsets, and the ring of cluster counts.
 STATE = {"STATE_NEXT_NODE": 0, "STATE_DEPTH": 1, "STATE_ERROR": 2, "STATE_BAD_TRIANGLE": 3, "STATE_BOUNDS": 4,
@@ -239,6 +255,11 @@ STATE["STATE_TAIL"] = STATE["STATE_PART_NODES"] + 4
 TAIL_INTS = 4            # ploc_tail's hand-over to ploc_top (build_state.cl's TAIL_*)
 STATE_INTS = STATE["STATE_INTS"] = STATE["STATE_TAIL"] + TAIL_INTS
 
+def hierarchy_warps(warp_vote: bool) -> int:
+    """Teams of HIERARCHY_GROUP work-items in a work-group of ploc_hierarchy."""
+    return HIERARCHY_WARPS if warp_vote else 1
+
+
 def sah_top_clusters(kind: str, tail_group: int | None = None, top_clusters: int | None = None) -> int:
     """Clusters the SAH top takes (SAH_TOP_CLUSTERS), no more than ploc_tail's work-items."""
     group = TAIL_GROUP[kind] if tail_group is None else int(tail_group)
@@ -251,7 +272,8 @@ def top_group(kind: str, tail_group: int | None = None) -> int:
 
 
 def build_defines(volume: str, kind: str = "gpu", treelet_leaves: int | None = None,
-                  tail_group: int | None = None, top_clusters: int | None = None, segmented: bool = False) -> dict:
+                  tail_group: int | None = None, top_clusters: int | None = None, segmented: bool = False,
+                  warp_vote: bool = False) -> dict:
     """Program defines: the shape, the work-group and state layout, and the
     constants of topdown.py, volumes.py and instances.py (one source of truth:
     repr() of a float is a C double literal of the same value)."""
@@ -267,8 +289,10 @@ def build_defines(volume: str, kind: str = "gpu", treelet_leaves: int | None = N
         "TREELET_FULL_MIN": TREELET_SMALL[kind][1],
         "TREELET_GROUP": TREELET_GROUP, "TREELET_LEVELS": TREELET_LEVELS, **reinsert_defines(), **STATE,
         "PART_BINS": PART_BINS, "PART_MAX_NODES": PART_MAX_NODES, "PART_LEVELS": PART_LEVELS,
+        "SEGMENT_BITS": SEGMENT_BITS,
         "GROUP_RESULTS": GROUP_RESULTS,
-        **({"PLOC_SEGMENTS": None} if segmented else {}),
+        **({"PLOC_SEGMENTS": None} if segmented else {}), "HIERARCHY_WARPS": hierarchy_warps(warp_vote),
+        **({"HIERARCHY_WARP_VOTE": None} if warp_vote else {}),
         "C_TRAVERSAL": f"((float){C_TRAVERSAL!r})", "C_INTERSECT": f"((float){C_INTERSECT!r})",
         **volumes.fit_defines(), **instance_defines(), **wide.collapse_defines(),
     }
@@ -397,8 +421,10 @@ class _BuildChoice:
     a device of ``kind`` (None: the device type's defaults): the program's
     defines and kernels, and the settings the launches take."""
 
-    def __init__(self, kind: str, volume: str, F: int, indexed: bool, tail_threshold=None, treelet_leaves=None,
-                 tail_group=None, top_clusters=None, partition=None, reinsert_iterations=None):
+    def __init__(self, device: cl.Device, volume: str, F: int, indexed: bool, tail_threshold=None,
+                 treelet_leaves=None, tail_group=None, top_clusters=None, partition=None, reinsert_iterations=None,
+                 hierarchy=None):
+        kind = device_kind(device)
         self.tail_threshold = min(TAIL_THRESHOLD[kind] if tail_threshold is None else int(tail_threshold), TAIL_MAX)
         self.tail_group = TAIL_GROUP[kind] if tail_group is None else int(tail_group)
         self.top_clusters = sah_top_clusters(kind, self.tail_group, top_clusters)
@@ -407,13 +433,16 @@ class _BuildChoice:
         if partition is None:
             partition = SAH_PARTITION[kind] and F >= PART_MIN_TRIANGLES
         self.segmented = bool(partition) and 1 < self.top_clusters < F
+        self.hierarchical = self.segmented and bool(HIERARCHY[kind] if hierarchy is None else hierarchy)
+        # (ploc_hierarchy's ballots: a PTX vote where the compiler takes PTX)
+        warp_vote = self.hierarchical and "cl_nv_compiler_options" in device.extensions.split()
         self.defines = build_defines(volume, kind, treelet_leaves, self.tail_group, self.top_clusters,
-                                     self.segmented)
+                                     self.segmented, warp_vote)
         treelets = TREELET_LEAVES[kind] if treelet_leaves is None else int(treelet_leaves)
         self.treelets = treelets if F > 2 else 0
         self.kernels = launched_kernels(kind, self.segmented, self.treelets > 0,
                                         self.tail_threshold > self.top_clusters, indexed, volume == "box",
-                                        self.reinserts > 0 and F > 2)
+                                        self.reinserts > 0 and F > 2, self.hierarchical)
 
 
 def default_build_program(context: cl.Context, volume: str, num_tris: int,
@@ -422,7 +451,7 @@ def default_build_program(context: cl.Context, volume: str, num_tris: int,
     builds with its default options for ``num_tris`` triangles on ``context``
     -- from a Mesh's vertices and faces where ``indexed`` --
     (clrt.device.first_build keys its record on them)."""
-    choice = _BuildChoice(device_kind(context.devices[0]), volume, int(num_tris), bool(indexed))
+    choice = _BuildChoice(context.devices[0], volume, int(num_tris), bool(indexed))
     return "build_bvh.cl", choice.defines, tuple(choice.kernels)
 
 
@@ -433,7 +462,7 @@ def build_on_device(context: cl.Context, queue: cl.CommandQueue, corners, volume
                     treelet_leaves: int | None = None, treelet_min: int | None = None,
                     tail_group: int | None = None, top_clusters: int | None = None,
                     partition: bool | None = None, reinsert_iterations: int | None = None,
-                    device_times: bool = False, profile: bool = False, uploaded=None) -> DeviceBvh:
+                    hierarchy: bool | None = None, device_times: bool = False, profile: bool = False, uploaded=None) -> DeviceBvh:
     """Build a BVH over ``corners`` on the queue's device.
 
     corners: (F, 3, 3) triangle corners (converted to float32, checked as
@@ -464,6 +493,9 @@ def build_on_device(context: cl.Context, queue: cl.CommandQueue, corners, volume
         PLOC (default: SAH_PARTITION of the device type, from
         PART_MIN_TRIANGLES triangles on; for benchmarks).
     reinsert_iterations: reinsertion's iterations (0: none; default: clrt.device.reinsert.default_iterations).
+    hierarchy: with the partition, PLOC's merges up the linear BVH in one
+        launch (build_hierarchy.cl) or, False, ploc_merge's iterations
+        (default: HIERARCHY of the device type; for benchmarks and tests).
     device_times: time the phases on the device (``DeviceBvh.timings``; for
         benchmarks).  The build then runs on ``queue``, which must have
         profiling enabled (clrt.device.context.create_context's does);
@@ -488,8 +520,8 @@ def build_on_device(context: cl.Context, queue: cl.CommandQueue, corners, volume
         raise DeviceError(f"the device BVH builder fits volumes in float64, which {device.name.strip()} lacks")
     kind = device_kind(device)
     F = len(corners.faces) if indexed else len(tri)
-    choice = _BuildChoice(kind, volume, F, indexed, tail_threshold, treelet_leaves, tail_group, top_clusters,
-                          partition, reinsert_iterations)
+    choice = _BuildChoice(device, volume, F, indexed, tail_threshold, treelet_leaves, tail_group, top_clusters,
+                          partition, reinsert_iterations, hierarchy)
     tail_threshold, tail_group, top_clusters = choice.tail_threshold, choice.tail_group, choice.top_clusters
     reinserts, segmented, defines, treelets = choice.reinserts, choice.segmented, choice.defines, choice.treelets
     program = build_program(context, "build_bvh.cl", defines, kernels=choice.kernels)
@@ -564,7 +596,7 @@ def build_on_device(context: cl.Context, queue: cl.CommandQueue, corners, volume
     # 3. PLOC.
     nodes = ws.get("nodes", layouts.BUILD_NODE.itemsize * num_nodes)
     clusters = ws.get("clusters", layouts.BUILD_CLUSTER.itemsize * F)
-    merged = ws.get("merged", layouts.BUILD_CLUSTER.itemsize * F)
+    merged = ws.get("merged", layouts.BUILD_CLUSTER.itemsize * max(F, 1 << SEGMENT_BITS))   # (also ploc_hierarchy's top)
     tile_kept = ws.get("tile_kept", 4 * max(_groups(F), F))    # also the tails' nearest neighbours
     tile_status = ws.get("tile_status", 8 * _groups(F))         # ploc_merge's look-back, two halves
     heights = ws.get("heights", 4 * max(F - 1, 1))             # of the inner nodes, index - F
@@ -572,23 +604,37 @@ def build_on_device(context: cl.Context, queue: cl.CommandQueue, corners, volume
     launch("ploc", k["init_leaves"], _groups(F), corners_buf, sorted_ids, keys[0], np.int32(segmented),
            np.uint32(F), nodes, clusters, tile_status, treelet_done)
     cpu = kind == "cpu"
-    queued = _ploc(queue, k, launch, F, clusters, merged, tile_kept, tile_status, nodes, heights, state,
-                   leaf_size, max(tail_threshold, top_clusters), cpu)
-    # ploc_tail starts from the clusters of the last iteration: on the CPU
-    # passes always `clusters` (compacted back into it), from ploc_merge the
-    # two buffers in turn.  With no more than the SAH top's clusters left it
-    # would merge nothing: the host writes what it would leave ploc_top.
-    last, spare = (merged, clusters) if not cpu and queued % 2 else (clusters, merged)
-    if tail_threshold > top_clusters and cpu:    # one work-item (build_ploc_cpu.cl)
-        launch("ploc", k["ploc_tail_serial"], 1, last, spare, tile_kept, nodes, heights, F, state, queued, leaf_size,
-               group=1)
-    elif tail_threshold > top_clusters:
-        launch("ploc", k["ploc_tail"], 1, last, spare, tile_kept, nodes, heights, F, state, queued, leaf_size,
-               group=tail_group)
+    if choice.hierarchical:
+        # PLOC up the linear BVH to one cluster a segment, in `merged`
+        # (build_hierarchy.cl), then the SAH top over them.  Scratch: the
+        # climb's bounds in the sort's spare ids, the spare node numbers in
+        # tile_kept.
+        bounds, spare_numbers = ids[1], tile_kept
+        launch("ploc", k["hierarchy_clear"], _groups(max(F, 1 << SEGMENT_BITS)), bounds, merged, np.uint32(F))
+        group = HIERARCHY_GROUP * defines["HIERARCHY_WARPS"]
+        launch("ploc", k["ploc_hierarchy"], -(-F // group), clusters, keys[0], bounds, spare_numbers,
+               nodes, heights, np.int32(F), merged, np.uint32(leaf_size), group=group)
+        launch("ploc", k["hierarchy_top"], 1, merged, np.int32(F), state, group=1 << SEGMENT_BITS)
+        launch("ploc", k["ploc_top"], 1, merged, clusters, nodes, heights, F, state, leaf_size,
+               group=top_group(kind, tail_group))
     else:
-        _hand_over(queue, state, queued)
-    launch("ploc", k["ploc_top"], 1, last, spare, nodes, heights, F, state, leaf_size,
-           group=top_group(kind, tail_group))
+        queued = _ploc(queue, k, launch, F, clusters, merged, tile_kept, tile_status, nodes, heights, state,
+                       leaf_size, max(tail_threshold, top_clusters), cpu)
+        # ploc_tail starts from the clusters of the last iteration: on the CPU
+        # passes always `clusters` (compacted back into it), from ploc_merge the
+        # two buffers in turn.  With no more than the SAH top's clusters left it
+        # would merge nothing: the host writes what it would leave ploc_top.
+        last, spare = (merged, clusters) if not cpu and queued % 2 else (clusters, merged)
+        if tail_threshold > top_clusters and cpu:    # one work-item (build_ploc_cpu.cl)
+            launch("ploc", k["ploc_tail_serial"], 1, last, spare, tile_kept, nodes, heights, F, state, queued,
+                   leaf_size, group=1)
+        elif tail_threshold > top_clusters:
+            launch("ploc", k["ploc_tail"], 1, last, spare, tile_kept, nodes, heights, F, state, queued, leaf_size,
+                   group=tail_group)
+        else:
+            _hand_over(queue, state, queued)
+        launch("ploc", k["ploc_top"], 1, last, spare, nodes, heights, F, state, leaf_size,
+               group=top_group(kind, tail_group))
 
     # 3a. Reinsertion (build_reinsert.cl), in PLOC's spent cluster buffers.
     queue_reinsertion(k, launch, _groups, reinserts, F, nodes, heights, clusters, merged, tile_kept, leaf_size)

@@ -54,6 +54,10 @@ BUILD_KERNELS = {
         B("state"), I("first_iteration"), U("leaf_size")),
     "ploc_top": (B("clusters"), B("spare"), B("nodes"), B("heights"), I("num_tris"), B("state"), U("leaf_size")),
     "ploc_merge_tiles": (B("clusters"), B("merged"), B("tile_kept"), B("state"), I("iteration")),
+    "hierarchy_clear": (B("bounds"), B("top"), U("num_tris")),
+    "ploc_hierarchy": (B("clusters"), B("keys"), B("bounds"), B("spare_numbers"), B("nodes"), B("heights"),
+        I("num_tris"), B("top"), U("leaf_size")),
+    "hierarchy_top": (B("top"), I("num_tris"), B("state")),
     "partition_clear": (B("bins"), B("sample_part"), U("samples")),
     "partition_init": (B("parts"), B("state"), I("samples"), I("limit")),
     "partition_bin": (B("corners"), U("samples"), U("stride"), B("sample_part"), B("parts"), B("bins"), B("state")),
@@ -94,7 +98,8 @@ BUILD_KERNELS = {
 
 
 def check_tuning(tail_threshold=None, treelet_leaves=None, treelet_min=None, tail_group=None,
-                 largest_group: int = 4096, top_clusters=None, partition=None, reinsert_iterations=None) -> None:
+                 largest_group: int = 4096, top_clusters=None, partition=None, reinsert_iterations=None,
+                 hierarchy=None) -> None:
     """InputError for a benchmark's tuning value (build_on_device's arguments of
     these names) that the kernels cannot take, rather than a failed program
     build or a wrong tree; ``largest_group``: the device's work-group limit."""
@@ -113,17 +118,21 @@ def check_tuning(tail_threshold=None, treelet_leaves=None, treelet_min=None, tai
         checks.integer("top_clusters", top_clusters, 1, SAH_TOP_MAX)
     if partition is not None:
         checks.integer("partition", partition, 0, 1)
+    if hierarchy is not None:
+        checks.integer("hierarchy", hierarchy, 0, 1)
     if reinsert_iterations is not None:
         from clrt.device.reinsert import check_iterations
         check_iterations(reinsert_iterations)
 
 
 def launched_kernels(kind: str, segmented: bool = False, treelets: bool = False, tail: bool = False,
-                     indexed: bool = False, wide: bool = False, reinsertion: bool = False) -> tuple[str, ...]:
+                     indexed: bool = False, wide: bool = False, reinsertion: bool = False,
+                     hierarchical: bool = False) -> tuple[str, ...]:
     """The kernels a build on a ``kind`` ("cpu" or "gpu") device launches
     (clrt.device.build: a GPU sorts by a look-back radix sort and merges by
     ploc_merge; on a CPU the host sorts and PLOC iterates in two plain
-    passes), with the SAH partition's, the reinsertion's, the treelets', the
+    passes; ``hierarchical``: PLOC up the linear BVH in ploc_hierarchy
+    instead, with the partition), with the SAH partition's, the reinsertion's, the treelets', the
     tail's (ploc_tail, on a CPU ploc_tail_serial), from a mesh's vertices and
     faces the corners' gather, and with ``wide`` (box volumes, CPU devices)
     the wide collapse's, which the geometry launches on the built tree
@@ -137,6 +146,8 @@ def launched_kernels(kind: str, segmented: bool = False, treelets: bool = False,
         sort, ploc, tail_kernel = ("radix_digit_counts", "radix_scatter_lookback"), ("ploc_merge",), "ploc_tail"
     else:
         sort, ploc, tail_kernel = (), ("ploc_merge_tiles", "ploc_compact"), "ploc_tail_serial"
+    if hierarchical:
+        ploc, tail = ("hierarchy_clear", "ploc_hierarchy", "hierarchy_top"), False
     return ("init_build_state", *(("gather_corners", "shift_corners") if indexed else ()), "centroid_bounds",
             *(partition if segmented else ("morton_codes",)), *sort,
             "init_leaves", *ploc, *((tail_kernel,) if tail else ()), "ploc_top",

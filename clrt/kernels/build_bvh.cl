@@ -19,6 +19,7 @@
 #include "build_sort.cl"
 #include "build_partition.cl"
 #include "build_ploc.cl"
+#include "build_hierarchy.cl"
 #include "build_ploc_cpu.cl"
 #include "build_reinsert.cl"
 #include "build_treelet.cl"

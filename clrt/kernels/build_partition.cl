@@ -46,7 +46,12 @@
 #endif
 
 #define PART_VALUES 7       // a bin: count, box min xyz, box max xyz (ordered bits)
-#define SEGMENT_BITS 8      // segments in a cluster's hi.w and above a Morton key's 24 bits
+#ifndef SEGMENT_BITS
+#error "build with -DSEGMENT_BITS=<a key's top bits that hold its segment> (clrt/device/build.py)"
+#endif
+#if SEGMENT_BITS != 8
+#error "partition_morton_codes keys a segment above a 24-bit Morton code"
+#endif
 #define SEGMENT_MASK ((1 << SEGMENT_BITS) - 1)
 
 // Where a node's bin on an axis starts in the bins buffer.
