@@ -22,9 +22,14 @@ The algorithm (kernels in ``clrt/kernels/build_*.cl``, entry ``build_bvh.cl``):
    the host sorts (clrt.device.host_sort: as fast, and three kernels fewer to
    compile on a first call);
 3. PLOC (Meister & Bittner 2018; the one-block search of PLOC++, Benthin et
-   al. 2022): clusters start as the sorted triangles; in each iteration every
-   cluster finds the cluster within ``PLOC_RADIUS`` places on either side whose
-   merged box has the least area, and mutual nearest neighbours merge; one
+   al. 2022).  With the partition, on GPUs (``HIERARCHY``): up the sorted
+   keys' linear BVH in one launch (``build_hierarchy.cl``, H-PLOC, Benthin et
+   al. 2024): each node of more than 16 triangles merges its children's at
+   most 16 clusters each by PLOC's rule down to 16, a segment to one; then
+   ploc_top as below.  Otherwise clusters start as the sorted triangles; in
+   each iteration every cluster finds the cluster within ``PLOC_RADIUS``
+   places on either side whose merged box has the least area, and mutual
+   nearest neighbours merge; one
    launch an iteration on GPUs (the kept clusters placed by a decoupled
    look-back across the work-groups), two on CPU devices (the neighbours and
    merges of tiles, a compaction), until at most ``tail_threshold``
