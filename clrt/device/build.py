@@ -594,7 +594,8 @@ def build_on_device(context: cl.Context, queue: cl.CommandQueue, corners, volume
 
     # 2. Radix sort; a CPU device's by the host (host_sort.py says why).
     if kind == "cpu":
-        sorted_ids = sort_on_host(queue, F, keys[0], ids[0])   # (sorted in keys[0], as queue_sort leaves them)
+        # (the sorted keys in keys[0], as queue_sort leaves them, where init_leaves reads their segments)
+        sorted_ids = sort_on_host(queue, F, keys[0], ids[0], keep_keys=segmented)
     else:
         sorted_ids = queue_sort(k, launch, ws, kind, F, keys, ids, state)
 

@@ -26,14 +26,18 @@ def stable_key_order(keys: np.ndarray) -> np.ndarray:
     return order[np.argsort((keys[order] >> 16).astype(np.uint16), kind="stable")]
 
 
-def sort_on_host(queue: cl.CommandQueue, n: int, keys: cl.Buffer, ids: cl.Buffer) -> cl.Buffer:
+def sort_on_host(queue: cl.CommandQueue, n: int, keys: cl.Buffer, ids: cl.Buffer, keep_keys: bool = True) -> cl.Buffer:
     """Sort the n (key, id) pairs in ``keys`` and ``ids`` (uint32 each) by
-    key, in place, once the launches queued before are done; returns ``ids``."""
+    key, in place, once the launches queued before are done; returns ``ids``.
+    The ids are the places 0 .. n - 1 (morton_codes writes them so), so the
+    sorted ids are the sort's order itself: only the keys are read.  The
+    sorted keys are written back only where ``keep_keys`` (a partitioned
+    build reads their segments); the writes are queued, not waited for (the
+    launches after them, on the same queue, see them)."""
     host_keys = np.empty(n, np.uint32)
-    host_ids = np.empty(n, np.uint32)
-    cl.enqueue_copy(queue, host_keys, keys, is_blocking=False)
-    cl.enqueue_copy(queue, host_ids, ids, is_blocking=True)
+    cl.enqueue_copy(queue, host_keys, keys, is_blocking=True)
     order = stable_key_order(host_keys)
-    cl.enqueue_copy(queue, keys, host_keys[order], is_blocking=True)
-    cl.enqueue_copy(queue, ids, host_ids[order], is_blocking=True)
+    cl.enqueue_copy(queue, ids, order.astype(np.uint32), is_blocking=False)
+    if keep_keys:
+        cl.enqueue_copy(queue, keys, host_keys[order], is_blocking=False)
     return ids
