@@ -564,6 +564,51 @@ def test_the_hierarchy_numbers_nodes_by_place(queue):
     assert below.sum() == F - segments
 
 
+def test_segment_ranks_skip_segments_without_triangles(queue):
+    """The hierarchy numbers a segment's nodes by its rank among the segments
+    that hold triangles (segment_ranks: a binary search of the sorted keys a
+    segment, then a prefix sum), so that a segment the partition left empty
+    -- which it does not make -- would shift no number onto another's."""
+    import pyopencl as cl
+
+    from clrt.device import build
+    from clrt.device.program import build_program
+    context, q = queue
+    defines = build.build_defines("box", "gpu", segmented=True)
+    kernel = build_program(context, "build_bvh.cl", defines, kernels=("segment_ranks",)).segment_ranks
+    rng = np.random.default_rng(3)
+    segments = 1 << build.SEGMENT_BITS
+    for held in (np.arange(segments), np.array([0]), np.array([segments - 1]), np.array([2, 3, 7, 200, 255]),
+                 np.sort(rng.choice(segments, 40, replace=False))):
+        counts = rng.integers(1, 50, len(held))
+        keys = np.sort(np.concatenate([(np.uint32(s) << np.uint32(24)) + rng.integers(0, 1 << 24, c).astype(np.uint32)
+                                       for s, c in zip(held, counts)]).astype(np.uint32))
+        keys_buf = cl.Buffer(context, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR, hostbuf=keys)
+        ranks_buf = cl.Buffer(context, cl.mem_flags.READ_WRITE, 4 * (segments + 1))
+        kernel(q, (segments,), (segments,), keys_buf, np.uint32(len(keys)), ranks_buf)
+        ranks = np.empty(segments + 1, np.int32)
+        cl.enqueue_copy(q, ranks, ranks_buf, is_blocking=True)
+        want = np.cumsum(np.isin(np.arange(segments), held)) - np.isin(np.arange(segments), held)
+        assert np.array_equal(ranks[:segments], want) and ranks[segments] == len(held), held
+
+
+def test_nvidias_warp_votes_make_the_barriers_tree(queue, monkeypatch):
+    """On NVIDIA's GPUs the hierarchy's teams are warps, four a work-group,
+    voting by PTX (WARP_VOTES); the tree is the one teams of a work-group each
+    make with barriers and local memory: the same bytes.  (On other devices
+    the two builds are one: the test still compares them.)"""
+    from clrt.device import build
+    mesh = TEST_MESHES["torus"]()
+    corners = np.concatenate([mesh.vertices[mesh.faces] + 2.5 * k for k in range(8)]).astype(np.float32)
+    assert len(corners) >= build.PART_MIN_TRIANGLES
+    monkeypatch.setattr(build, "device_kind", lambda device: "gpu")
+    results = []
+    for votes in (True, False):
+        monkeypatch.setattr(build, "WARP_VOTES", votes)
+        results.append(build_on_device(*queue, corners, leaf_size=4, keep_boxes=True).read_back())
+    assert all(np.array_equal(a.view(np.uint8), b.view(np.uint8)) for a, b in zip(*results))
+
+
 def test_gpus_partition_large_meshes_by_default(queue, monkeypatch):
     """The default: GPUs partition from PART_MIN_TRIANGLES triangles on (below,
     where 128 segments would hold a few triangles each, the build stays

@@ -31,9 +31,9 @@ from clrt.scene.mesh import Mesh
 # (8), path sums and ancestors (80); tests/test_device_build.py
 # checks it against the workspace's buffers.
 SCRATCH_BYTES_PER_TRIANGLE = 300
-# The SAH partition's buffers, 0.7 MB whatever the mesh: not per triangle, so
-# left out of the estimate above (and of its test).
-FIXED_SCRATCH = ("parts", "part_bins")
+# The SAH partition's buffers, 0.7 MB whatever the mesh, and the hierarchy's
+# segment ranks: not per triangle, so left out of the estimate above (and of its test).
+FIXED_SCRATCH = ("parts", "part_bins", "segment_ranks")
 
 
 def build_acceleration(corners: np.ndarray, accel: str, builder: str, leaf_size: int,

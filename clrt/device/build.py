@@ -178,6 +178,10 @@ PART_MIN_TRIANGLES = 4096
 # (above its segments ploc_top's SAH top does the rest), per device type.
 # It searches PLOC_RADIUS clusters on each side, as ploc_merge.
 HIERARCHY = {"gpu": True, "cpu": False}
+# Its teams of 32 vote by PTX and sync by `bar.warp.sync` where the compiler
+# takes PTX (NVIDIA's), four teams a work-group; False: barriers and local
+# memory, one team a work-group, as elsewhere (the same trees; for tests).
+WARP_VOTES = True
 SEGMENT_BITS = 8         # a key's top bits that hold its segment (at most 1 << SEGMENT_BITS segments)
 PART_BINS = 16
 PART_LEVELS = 10
@@ -440,7 +444,7 @@ class _BuildChoice:
         self.segmented = bool(partition) and 1 < self.top_clusters < F
         self.hierarchical = self.segmented and bool(HIERARCHY[kind] if hierarchy is None else hierarchy)
         # (ploc_hierarchy's ballots: a PTX vote where the compiler takes PTX)
-        warp_vote = self.hierarchical and "cl_nv_compiler_options" in device.extensions.split()
+        warp_vote = self.hierarchical and WARP_VOTES and "cl_nv_compiler_options" in device.extensions.split()
         self.defines = build_defines(volume, kind, treelet_leaves, self.tail_group, self.top_clusters,
                                      self.segmented, warp_vote)
         treelets = TREELET_LEAVES[kind] if treelet_leaves is None else int(treelet_leaves)
@@ -616,11 +620,13 @@ def build_on_device(context: cl.Context, queue: cl.CommandQueue, corners, volume
         # climb's bounds in the sort's spare ids, the spare node numbers in
         # tile_kept.
         bounds, spare_numbers = ids[1], tile_kept
-        launch("ploc", k["hierarchy_clear"], _groups(max(F, 1 << SEGMENT_BITS)), bounds, merged, np.uint32(F))
+        ranks = ws.get("segment_ranks", 4 * ((1 << SEGMENT_BITS) + 1))
+        launch("ploc", k["hierarchy_clear"], _groups(F), bounds, np.uint32(F))
+        launch("ploc", k["segment_ranks"], 1, keys[0], np.uint32(F), ranks, group=1 << SEGMENT_BITS)
         group = HIERARCHY_GROUP * defines["HIERARCHY_WARPS"]
-        launch("ploc", k["ploc_hierarchy"], -(-F // group), clusters, keys[0], bounds, spare_numbers,
+        launch("ploc", k["ploc_hierarchy"], -(-F // group), clusters, keys[0], ranks, bounds, spare_numbers,
                nodes, heights, np.int32(F), merged, np.uint32(leaf_size), group=group)
-        launch("ploc", k["hierarchy_top"], 1, merged, np.int32(F), state, group=1 << SEGMENT_BITS)
+        launch("ploc", k["hierarchy_top"], 1, ranks, np.int32(F), state, group=1)
         launch("ploc", k["ploc_top"], 1, merged, clusters, nodes, heights, F, state, leaf_size,
                group=top_group(kind, tail_group))
     else:

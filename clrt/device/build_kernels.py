@@ -54,10 +54,11 @@ BUILD_KERNELS = {
         B("state"), I("first_iteration"), U("leaf_size")),
     "ploc_top": (B("clusters"), B("spare"), B("nodes"), B("heights"), I("num_tris"), B("state"), U("leaf_size")),
     "ploc_merge_tiles": (B("clusters"), B("merged"), B("tile_kept"), B("state"), I("iteration")),
-    "hierarchy_clear": (B("bounds"), B("top"), U("num_tris")),
-    "ploc_hierarchy": (B("clusters"), B("keys"), B("bounds"), B("spare_numbers"), B("nodes"), B("heights"),
-        I("num_tris"), B("top"), U("leaf_size")),
-    "hierarchy_top": (B("top"), I("num_tris"), B("state")),
+    "hierarchy_clear": (B("bounds"), U("num_tris")),
+    "segment_ranks": (B("keys"), U("num_tris"), B("ranks")),
+    "ploc_hierarchy": (B("clusters"), B("keys"), B("ranks"), B("bounds"), B("spare_numbers"), B("nodes"),
+        B("heights"), I("num_tris"), B("top"), U("leaf_size")),
+    "hierarchy_top": (B("ranks"), I("num_tris"), B("state")),
     "partition_clear": (B("bins"), B("sample_part"), U("samples")),
     "partition_init": (B("parts"), B("state"), I("samples"), I("limit")),
     "partition_bin": (B("corners"), U("samples"), U("stride"), B("sample_part"), B("parts"), B("bins"), B("state")),
@@ -147,7 +148,7 @@ def launched_kernels(kind: str, segmented: bool = False, treelets: bool = False,
     else:
         sort, ploc, tail_kernel = (), ("ploc_merge_tiles", "ploc_compact"), "ploc_tail_serial"
     if hierarchical:
-        ploc, tail = ("hierarchy_clear", "ploc_hierarchy", "hierarchy_top"), False
+        ploc, tail = ("hierarchy_clear", "segment_ranks", "ploc_hierarchy", "hierarchy_top"), False
     return ("init_build_state", *(("gather_corners", "shift_corners") if indexed else ()), "centroid_bounds",
             *(partition if segmented else ("morton_codes",)), *sort,
             "init_leaves", *ploc, *((tail_kernel,) if tail else ()), "ploc_top",

@@ -25,16 +25,18 @@
 // every segment is one subtree.  No work-item waits for another: the launch
 // cannot stall, however the work-groups are scheduled.
 //
-// A work-group is HIERARCHY_GROUP work-items (a warp on NVIDIA GPUs): the
-// nodes its work-items reach in one step of the climb are merged one after
-// the other by the whole group, each of the group's work-items one cluster.
+// A team is HIERARCHY_GROUP work-items (a warp on NVIDIA GPUs, whose
+// work-groups hold HIERARCHY_WARPS teams; elsewhere a work-group is one
+// team): the nodes its work-items reach in one step of the climb are merged
+// one after the other by the whole team, each work-item one cluster.
 //
 // Where things lie.  A node's clusters are at its first places in
 // `clusters` (the leaves' own places until then), the valid ones first (a
 // node of lo.w -1 ends them); a node of at most HIERARCHY_KEEP triangles is
 // never merged and holds its leaves.  The nodes made: every range of places
-// [first, last] of segment j owns BuildNode numbers num_tris + first - j ..
-// num_tris + last - 1 - j (one per inner node of the linear BVH under it:
+// [first, last] of the segment of rank j (its place among the segments that
+// hold triangles, segment_ranks) owns BuildNode numbers num_tris + first - j
+// .. num_tris + last - 1 - j (one per inner node of the linear BVH under it:
 // its left child's, its own split's, its right child's), so the numbers do
 // not depend on the order the work-groups run in, and the segments' nodes
 // fill num_tris .. 2 num_tris - 1 - segments, leaving ploc_top the last
@@ -49,6 +51,7 @@
 #include "build_state.cl"
 #include "build_partition.cl"
 #include "build_ploc.cl"
+#include "build_scan.cl"
 
 #if !defined(HIERARCHY_WARPS)
 #error "build with -DHIERARCHY_WARPS=<warps a work-group>"
@@ -56,7 +59,7 @@
 
 #define HIERARCHY_GROUP 32                      // work-items that merge together (one bit each in a ballot)
 #define HIERARCHY_KEEP (HIERARCHY_GROUP / 2)    // clusters a node keeps (each child brings at most this many)
-#define TOP_SEGMENTS (1 << SEGMENT_BITS)        // hierarchy_top's list, one entry a segment
+#define TOP_SEGMENTS (1 << SEGMENT_BITS)        // segment_ranks' table, one entry a segment
 #define NO_CLUSTER (-1)                         // lo.w of a place past a node's clusters
 
 // The HIERARCHY_GROUP work-items that merge together, and their
@@ -131,10 +134,10 @@ inline bool whole_segment(const global uint* keys, int n, int first, int last)
 }
 
 // The first of the BuildNode numbers owned by the range starting at place
-// `first` of segment `segment`.
-inline int first_number(int num_tris, int first, int segment)
+// `first` of the segment of rank `rank`.
+inline int first_number(int num_tris, int first, int rank)
 {
-    return num_tris + first - segment;
+    return num_tris + first - rank;
 }
 
 inline uint bits_below(uint bits, uint lane)
@@ -181,14 +184,14 @@ inline void put_slot(local HierarchyScratch* s, int to, float4 lo, float4 hi, in
 // The whole team merges the node of places [first, last] whose right child
 // starts at `split`: its children's clusters are gathered, merged until at
 // most HIERARCHY_KEEP are left (one for a whole segment: it goes to
-// top[segment]) and written back at `first`.  A new node's numbers are
+// top[its rank]) and written back at `first`.  A new node's numbers are
 // refresh_node's, from its children's in local memory.
 inline void merge_node(volatile global BuildCluster* clusters, const global uint* keys,
-                       volatile global int* spare_numbers, volatile global BuildNode* nodes,
+                       const global int* ranks, volatile global int* spare_numbers, volatile global BuildNode* nodes,
                        volatile global int* heights, int num_tris, global BuildCluster* top, uint leaf_size,
                        int first, int split, int last, bool whole, uint lane, local HierarchyScratch* s)
 {
-    const int segment = segment_of_place(keys, first);
+    const int rank = ranks[segment_of_place(keys, first)];         // (first_number says why a rank)
     const bool right = lane >= HIERARCHY_KEEP;
     const int k = right ? lane - HIERARCHY_KEEP : lane;
     // Each child: its clusters, and the node numbers it left unused (a child
@@ -219,9 +222,9 @@ inline void merge_node(volatile global BuildCluster* clusters, const global uint
     const int child_spare = (right ? count0 - left_count : left_count) - 1;
     if (k < child_spare)
         s->numbers[(right ? left_count : 0) + k] = merged_child ? spare_numbers[place]
-                                                              : first_number(num_tris, child_first, segment) + k;
+                                                              : first_number(num_tris, child_first, rank) + k;
     if (lane == 0)
-        s->numbers[left_count - 1] = first_number(num_tris, split - 1, segment);
+        s->numbers[left_count - 1] = first_number(num_tris, split - 1, rank);
     if (valid)
         put_slot(s, right ? left_count + k : k, c.lo, c.hi, count, cost, rows, height);
     TEAM_SYNC();
@@ -288,8 +291,8 @@ inline void merge_node(volatile global BuildCluster* clusters, const global uint
 
     if (whole) {
         if (lane == 0) {
-            top[segment].lo = s->lo[0];
-            top[segment].hi = s->hi[0];
+            top[rank].lo = s->lo[0];
+            top[rank].hi = s->hi[0];
         }
     } else if (lane < HIERARCHY_KEEP) {       // the node has more places than that
         clusters[first + lane].lo = (int)lane < left ? s->lo[lane] : (float4)(0.0f, 0.0f, 0.0f, as_float(NO_CLUSTER));
@@ -303,25 +306,50 @@ inline void merge_node(volatile global BuildCluster* clusters, const global uint
     TEAM_SYNC();
 }
 
-// bounds: num_tris - 1 ints for the climb's exchanges (-1: nobody yet);
-// top: ploc_hierarchy's one cluster a segment (NO_CLUSTER: none).
+// bounds: num_tris - 1 ints for the climb's exchanges (-1: nobody yet).
 __kernel __attribute__((reqd_work_group_size(BUILD_GROUP, 1, 1)))
-void hierarchy_clear(global int* bounds, global BuildCluster* top, const uint num_tris)
+void hierarchy_clear(global int* bounds, const uint num_tris)
 {
     const uint i = get_global_id(0);
     if (i + 1 < num_tris)
         bounds[i] = -1;
-    if (i < TOP_SEGMENTS)
-        top[i].lo.w = as_float(NO_CLUSTER);
+}
+
+// One work-group of TOP_SEGMENTS work-items: ranks[s], the rank of segment s
+// among the segments that hold triangles (found by a binary search of the
+// sorted keys), and ranks[TOP_SEGMENTS] their count.  The partition makes
+// none empty (each holds the samples that made it), so the ranks are the
+// segments themselves; the numbering does not rest on it.
+__kernel __attribute__((reqd_work_group_size(TOP_SEGMENTS, 1, 1)))
+void segment_ranks(const global uint* keys, const uint num_tris, global int* ranks)
+{
+    local uint scratch[TOP_SEGMENTS];
+    const uint s = get_local_id(0);
+    // The first place whose segment is s or later.
+    uint lo = 0, hi = num_tris;
+    while (lo < hi) {
+        const uint mid = lo + (hi - lo) / 2;
+        if ((keys[mid] >> (32 - SEGMENT_BITS)) < s)
+            lo = mid + 1;
+        else
+            hi = mid;
+    }
+    const bool held = lo < num_tris && (keys[lo] >> (32 - SEGMENT_BITS)) == s;
+    uint total;
+    const uint rank = group_exclusive_scan(held ? 1u : 0u, scratch, &total);
+    ranks[s] = (int)rank;
+    if (s == 0)
+        ranks[TOP_SEGMENTS] = (int)total;
 }
 
 // Every merge of PLOC below the segments, in one launch of one work-item per
 // triangle (after init_leaves; keys: the sorted keys, segment above Morton
-// code).  Leaves each segment's one cluster at top[segment].
+// code; ranks: segment_ranks').  Leaves each segment's one cluster at
+// top[its rank].
 __kernel __attribute__((reqd_work_group_size(HIERARCHY_GROUP * HIERARCHY_WARPS, 1, 1)))
-void ploc_hierarchy(volatile global BuildCluster* clusters, const global uint* keys, global int* bounds,
-                    volatile global int* spare_numbers, volatile global BuildNode* nodes, volatile global int* heights,
-                    const int num_tris, global BuildCluster* top, const uint leaf_size)
+void ploc_hierarchy(volatile global BuildCluster* clusters, const global uint* keys, const global int* ranks,
+                    global int* bounds, volatile global int* spare_numbers, volatile global BuildNode* nodes,
+                    volatile global int* heights, const int num_tris, global BuildCluster* top, const uint leaf_size)
 {
     local HierarchyScratch scratch[HIERARCHY_WARPS];
     const uint lane = get_local_id(0) % HIERARCHY_GROUP;
@@ -331,7 +359,7 @@ void ploc_hierarchy(volatile global BuildCluster* clusters, const global uint* k
     bool active = leaf < n;
     if (active && whole_segment(keys, n, leaf, leaf)) {      // a segment of one triangle
         const BuildCluster c = load_cluster(clusters, leaf);
-        top[segment_of_place(keys, leaf)] = c;
+        top[ranks[segment_of_place(keys, leaf)]] = c;
         active = false;
     }
     // (The loop tests the team's ballot at its top: PoCL 5's compiler
@@ -368,39 +396,22 @@ void ploc_hierarchy(volatile global BuildCluster* clusters, const global uint* k
             const int t = 31 - clz(tasks & (0u - tasks));
             tasks &= tasks - 1u;
             const int t_last = s->task_last[t];
-            merge_node(clusters, keys, spare_numbers, nodes, heights, n, top, leaf_size, s->task_first[t],
+            merge_node(clusters, keys, ranks, spare_numbers, nodes, heights, n, top, leaf_size, s->task_first[t],
                        s->task_split[t], t_last < 0 ? -1 - t_last : t_last, t_last < 0, lane, s);
         }
     }
 }
 
-// One work-group of TOP_SEGMENTS work-items after ploc_hierarchy: the
-// segments' clusters to the front of `top`, in segment order, and what
-// ploc_top reads at STATE_TAIL (build_state.cl) -- a missing segment (which
-// the partition never makes: each holds its samples) is an error.
-__kernel __attribute__((reqd_work_group_size(TOP_SEGMENTS, 1, 1)))
-void hierarchy_top(global BuildCluster* top, const int num_tris, global int* state)
+// One work-item after ploc_hierarchy: what ploc_top reads at STATE_TAIL
+// (build_state.cl) -- the segments' clusters, in `top` in rank order, their
+// count and the node counter (ploc_hierarchy made num_tris - count nodes).
+__kernel void hierarchy_top(const global int* ranks, const int num_tris, global int* state)
 {
-    local int missing;
-    const int lid = get_local_id(0);
-    const int segments = state[STATE_PART_SEGMENTS];
-    if (lid == 0)
-        missing = 0;
-    BuildCluster c;
-    c.lo = top[lid].lo;
-    c.hi = top[lid].hi;
-    barrier(CLK_LOCAL_MEM_FENCE | CLK_GLOBAL_MEM_FENCE);
-    if (lid < segments && as_int(c.lo.w) == NO_CLUSTER)
-        missing = 1;
-    barrier(CLK_LOCAL_MEM_FENCE);
-    if (lid == 0) {
-        if (missing)
-            state[STATE_ERROR] = 1;
-        state[STATE_TAIL + TAIL_COUNT] = segments;
-        state[STATE_TAIL + TAIL_NEXT_NODE] = 2 * num_tris - segments;
-        state[STATE_TAIL + TAIL_ITERATIONS] = 0;
-        state[STATE_TAIL + TAIL_FLAGS] = TAIL_MERGED;
-    }
+    const int count = ranks[TOP_SEGMENTS];
+    state[STATE_TAIL + TAIL_COUNT] = count;
+    state[STATE_TAIL + TAIL_NEXT_NODE] = 2 * num_tris - count;
+    state[STATE_TAIL + TAIL_ITERATIONS] = 0;
+    state[STATE_TAIL + TAIL_FLAGS] = TAIL_MERGED;
 }
 
 #endif
