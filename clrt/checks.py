@@ -80,23 +80,22 @@ def is_number(value) -> bool:
 
 def integer(name: str, value, lo: int, hi: int | None = None) -> int:
     """An integer (not a bool, not a float such as 2.0) in lo..hi."""
+    if isinstance(value, Integral) and not isinstance(value, bool) and lo <= value and (hi is None or value <= hi):
+        return int(value)
     rule = f"an integer in {lo}..{hi}" if hi is not None else f"an integer >= {lo}"
     if is_number(value) and not isinstance(value, Integral):
         # A float shows as one (2.0, not 2), so that the value does not look valid.
         text = repr(float(value)).replace("e+", "e")
         raise InputError(f"{name} must be {rule}, got {text}")
-    if not isinstance(value, Integral) or isinstance(value, bool) or value < lo or (hi is not None and value > hi):
-        raise fail(name, rule, value)
-    return int(value)
+    raise fail(name, rule, value)
 
 
 def number(name: str, value, **limits) -> float:
     """A finite number within ``limits`` (gt, ge, lt, le), e.g. ``number("fov", x, gt=0, lt=180)``."""
-    rule = "a number" + _range_text(limits)
     if not is_number(value) or not math.isfinite(value) or not all(
             _OPS[op][1](float(value), bound) for op, bound in limits.items()):
-        raise fail(name, rule, value)
-    return float(value)
+        raise fail(name, "a number" + _range_text(limits), value)    # (the rule's text only for a message:
+    return float(value)                                              # renders check numbers every frame)
 
 
 def vector(name: str, value, n: int = 3, **limits) -> tuple:
@@ -104,17 +103,16 @@ def vector(name: str, value, n: int = 3, **limits) -> tuple:
     and within +-MAX_COORDINATE (the device computes in float32); a tuple of floats.
     A NaN or infinity is named as such ("3 finite numbers"), and a value past the
     largest float32 (3.4e38, finite as a Python float) as overflowing float32."""
-    rule = f"{n} numbers" + _range_text(limits)
     try:
         items = list(value) if not isinstance(value, (str, bytes, dict)) else None
     except TypeError:
         items = None
     if items is None or len(items) != n or not all(is_number(v) for v in items):
-        raise fail(name, rule, value)
+        raise fail(name, f"{n} numbers" + _range_text(limits), value)
     if not all(math.isfinite(v) for v in items):
         raise fail(name, f"{n} finite numbers" + _range_text(limits), value)
     if not all(all(_OPS[op][1](float(v), b) for op, b in limits.items()) for v in items):
-        raise fail(name, rule, value)
+        raise fail(name, f"{n} numbers" + _range_text(limits), value)
     largest = max(abs(float(v)) for v in items)
     if largest > config.MAX_COORDINATE:
         error = fail(name, f"{n} numbers within +-{_number_text(config.MAX_COORDINATE)} "

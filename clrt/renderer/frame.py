@@ -583,14 +583,13 @@ class Renderer:
         count = w * h
         size, local = self._launch_shape(w, h)
         n = job.samples * job.samples
-        tile = np.zeros((), TILE)
-        tile["x"], tile["y"], tile["w"], tile["h"] = x, y, w, h
-        tile["rays_at"], tile["hits_at"], tile["image_at"] = at["rays"], at["hits"], at["image"]
-        tile["samples_per_axis"], tile["seed"], tile["max_depth"] = job.samples, job.seed, job.max_depth
-        tile["sample_weight"] = np.float32(1.0 / n)
+        # (made whole: setting a structured scalar's fields one by one cost several us a frame)
+        tile = np.array((x, y, w, h, at["rays"], at["hits"], at["image"], 0, job.samples, job.seed, job.max_depth,
+                         1.0 / n, 1), TILE)
         launches = []
         for sample in range(n):   # (a launch takes its arguments' values when they are set)
-            tile["sample"], tile["first_sample"] = sample, sample == 0
+            if sample:
+                tile["sample"], tile["first_sample"] = sample, 0
             gen = self._launch("generate_rays", size, local, frame, job.camera_args, tile)
             shade = self._launch("shade_pixels", *self._launch_shape(w, h, self.rays_per_item), frame, tile,
                                  *job.scene_args)
