@@ -564,6 +564,132 @@ def test_the_hierarchy_numbers_nodes_by_place(queue):
     assert below.sum() == F - segments
 
 
+def _hierarchy_reference(boxes_lo, boxes_hi, keys, radius, keep=16):
+    """PLOC up the linear BVH as build_hierarchy.cl describes it, in plain
+    Python over the sorted places: the linear BVH of (key, place) split at the
+    highest differing bit (Karras; the tree Apetrei's climb builds), a node of
+    more than ``keep`` places merging its children's clusters by PLOC's rule
+    (least merged half area in float32, ties by the pair hash of the places in
+    the node's list; mutual pairs merge into the lower place) down to
+    ``keep``, a whole segment to one.  Returns the set of the merged nodes'
+    triangle sets (as frozensets of places)."""
+    f32 = np.float32
+
+    def half_area(lo, hi):
+        d = (hi - lo).astype(f32)
+        a = f32(f32(d[0] * d[1]) + f32(d[1] * d[2])) + f32(d[2] * d[0])
+        return np.inf if np.isnan(a) else float(a)
+
+    def pair_hash(lower, upper):
+        m = 0xFFFFFFFF
+        h = ((lower * 0x9E3779B1) & m) ^ (((upper + 0x7F4A7C15) & m) * 0x85EBCA77 & m)
+        h ^= h >> 15
+        h = (h * 0x2C1B3C6D) & m
+        return h ^ (h >> 12)
+
+    made = set()
+
+    def merge(clusters, target):             # clusters: [(lo, hi, frozenset)], in order
+        while len(clusters) > target:
+            nearest = []
+            for p in range(len(clusters)):
+                best, best_area, best_hash = -1, np.inf, None
+                for q in range(max(0, p - radius), min(len(clusters), p + radius + 1)):
+                    if q == p:
+                        continue
+                    area = half_area(np.minimum(clusters[p][0], clusters[q][0]),
+                                     np.maximum(clusters[p][1], clusters[q][1]))
+                    if best < 0 or area < best_area:
+                        best, best_area, best_hash = q, area, None
+                    elif area == best_area:
+                        if best_hash is None:
+                            best_hash = pair_hash(min(p, best), max(p, best))
+                        h = pair_hash(min(p, q), max(p, q))
+                        if h < best_hash:
+                            best, best_hash = q, h
+                nearest.append(best)
+            out = []
+            for p, j in enumerate(nearest):
+                if j >= 0 and nearest[j] == p:
+                    if p < j:
+                        a, b = clusters[p], clusters[j]
+                        node = (np.minimum(a[0], b[0]), np.maximum(a[1], b[1]), a[2] | b[2])
+                        made.add(node[2])
+                        out.append(node)
+                else:
+                    out.append(clusters[p])
+            clusters = out
+        return clusters
+
+    wide = [(int(k) << 32) | p for p, k in enumerate(keys)]
+    segment = [int(k) >> 24 for k in keys]
+
+    def build(first, last):                  # -> its clusters
+        if first == last:
+            return [(boxes_lo[first], boxes_hi[first], frozenset([first]))]
+        split = (wide[first] ^ wide[last]).bit_length() - 1     # highest differing bit
+        mid = first
+        while mid < last and not (wide[mid + 1] >> split) & 1:
+            mid += 1
+        clusters = build(first, mid) + build(mid + 1, last)
+        whole = segment[first] == segment[last]
+        whole = whole and (first == 0 or segment[first - 1] != segment[first]) \
+            and (last == len(keys) - 1 or segment[last + 1] != segment[last])
+        if whole or last - first + 1 > keep:
+            clusters = merge(clusters, 1 if whole else keep)
+        return clusters
+
+    def segments(first, last):               # the linear BVH above the segments: no merges
+        if segment[first] == segment[last]:
+            build(first, last)
+            return
+        split = (wide[first] ^ wide[last]).bit_length() - 1
+        mid = first
+        while mid < last and not (wide[mid + 1] >> split) & 1:
+            mid += 1
+        segments(first, mid)
+        segments(mid + 1, last)
+
+    segments(0, len(keys) - 1)
+    return made
+
+
+@pytest.mark.parametrize("name", ["random", "torus", "degenerate"])
+def test_the_hierarchy_is_its_python_reference(name, queue, monkeypatch):
+    """The tree of build_hierarchy.cl below the segments is the plain Python
+    reference's (_hierarchy_reference: the linear BVH by recursion instead of
+    the atomic climb, each node's merges as PLOC's rule says) node for node,
+    at the GPU's radius and at the CPU's: random triangles (nodes merged at
+    every level of 16 segments of about 90), a torus (equal areas everywhere:
+    the pair hash decides) and points, needles and duplicates (equal keys)."""
+    import pyopencl as cl
+
+    from clrt import layouts
+    from clrt.device import build, build_kernels
+    corners = _random_triangles(1500, seed=8) if name == "random" else CORNERS[name]()
+    F = len(corners)
+    for radius in sorted(set(build.PLOC_RADIUS.values())):
+        monkeypatch.setattr(build, "PLOC_RADIUS", dict.fromkeys(build.PLOC_RADIUS, radius))
+        build_on_device(*queue, corners, leaf_size=4, partition=True, top_clusters=16, treelet_leaves=0,
+                        reinsert_iterations=0, hierarchy=True).release()
+        ws = build_kernels.workspaces[queue[0].int_ptr]
+        nodes = np.empty(2 * F - 1, layouts.BUILD_NODE)
+        keys, ids = np.empty(F, np.uint32), np.empty(F, np.uint32)
+        cl.enqueue_copy(queue[1], nodes, ws.buffers["nodes"])
+        cl.enqueue_copy(queue[1], keys, ws.buffers["keys0"])
+        cl.enqueue_copy(queue[1], ids, ws.buffers["ids0"], is_blocking=True)
+        lo, hi = corners[ids].min(axis=1), corners[ids].max(axis=1)
+        want = _hierarchy_reference(lo, hi, keys, radius)
+        # the built tree's nodes as sets of places (leaf node i is place i), those within one segment
+        left, right = nodes["lo"][F:, 3].view(np.int32), nodes["hi"][F:, 3].view(np.int32)
+        places = [frozenset([p]) for p in range(F)] + [None] * (F - 1)
+        for i in np.argsort(nodes["count"][F:], kind="stable"):
+            places[F + i] = places[left[i]] | places[right[i]]
+        segment = keys >> 24
+        got = {s for s in places[F:] if len({int(segment[p]) for p in s}) == 1}
+        assert len(want) == F - len(np.unique(segment)) and got == want, radius
+
+
 def test_segment_ranks_skip_segments_without_triangles(queue):
     """The hierarchy numbers a segment's nodes by its rank among the segments
     that hold triangles (segment_ranks: a binary search of the sorted keys a
