@@ -471,7 +471,8 @@ def build_on_device(context: cl.Context, queue: cl.CommandQueue, corners, volume
                     treelet_leaves: int | None = None, treelet_min: int | None = None,
                     tail_group: int | None = None, top_clusters: int | None = None,
                     partition: bool | None = None, reinsert_iterations: int | None = None,
-                    hierarchy: bool | None = None, device_times: bool = False, profile: bool = False, uploaded=None) -> DeviceBvh:
+                    hierarchy: bool | None = None, device_times: bool = False, profile: bool = False,
+                    uploaded=None) -> DeviceBvh:
     """Build a BVH over ``corners`` on the queue's device.
 
     corners: (F, 3, 3) triangle corners (converted to float32, checked as
@@ -606,7 +607,8 @@ def build_on_device(context: cl.Context, queue: cl.CommandQueue, corners, volume
     # 3. PLOC.
     nodes = ws.get("nodes", layouts.BUILD_NODE.itemsize * num_nodes)
     clusters = ws.get("clusters", layouts.BUILD_CLUSTER.itemsize * F)
-    merged = ws.get("merged", layouts.BUILD_CLUSTER.itemsize * max(F, 1 << SEGMENT_BITS))   # (also ploc_hierarchy's top)
+    # (also ploc_hierarchy's top: a cluster a segment)
+    merged = ws.get("merged", layouts.BUILD_CLUSTER.itemsize * max(F, 1 << SEGMENT_BITS))
     tile_kept = ws.get("tile_kept", 4 * max(_groups(F), F))    # also the tails' nearest neighbours
     tile_status = ws.get("tile_status", 8 * _groups(F))         # ploc_merge's look-back, two halves
     heights = ws.get("heights", 4 * max(F - 1, 1))             # of the inner nodes, index - F

@@ -369,7 +369,8 @@ void ploc_hierarchy(volatile global BuildCluster* clusters, const global uint* k
         bool whole = false, merge = false;
         if (active) {
             // Up one level: to the parent on the side of the nearer key.
-            const bool left_child = first == 0 || (last != n - 1 && key_distance(keys, last) < key_distance(keys, first - 1));
+            const bool left_child = first == 0
+                                    || (last != n - 1 && key_distance(keys, last) < key_distance(keys, first - 1));
             const int at = left_child ? last : first - 1;
             const int other = atomic_xchg(bounds + at, left_child ? first : last);
             if (other < 0) {
