@@ -494,8 +494,7 @@ def main(argv=None) -> int:
                         "device/tail=N, device/tail-group=N, device/treelets=N, device/treelet-min=N, "
                         "device/sah-top=N, device/partition=0|1, device/part-levels=N (with partition=1), "
                         "device/reinsert=N, device/ploc-radius=N (1..24), device/hierarchy=0|1, "
-                        "or several settings in one, e.g. "
-                        "device/treelets=0/reinsert=8 "
+                        "or several settings in one, e.g. device/treelets=0/reinsert=8 "
                         "(default: paper, sah, device)")
     p.add_argument("--volume", default="box", choices=("box", "sphere", "ellipse"),
                    help="bounding-volume shape (default box)")

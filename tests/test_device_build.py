@@ -517,25 +517,45 @@ def test_the_hierarchy_merges_as_well_as_ploc(name, queue):
     assert abs(costs[1] / costs[0] - 1) <= 0.02, costs
 
 
+def _hierarchy_tree(queue, corners):
+    """PLOC's own tree up the linear BVH (no treelets, no reinsertion; 16
+    segments at most), as the build leaves it in its workspace: the
+    BuildNodes, the sorted keys and the sorted triangle ids."""
+    import pyopencl as cl
+
+    from clrt import layouts
+    from clrt.device import build_kernels
+    F = len(corners)
+    build_on_device(*queue, corners, leaf_size=4, partition=True, top_clusters=16, treelet_leaves=0,
+                    reinsert_iterations=0, hierarchy=True).release()
+    ws = build_kernels.workspaces[queue[0].int_ptr]
+    nodes = np.empty(2 * F - 1, layouts.BUILD_NODE)
+    keys, ids = np.empty(F, np.uint32), np.empty(F, np.uint32)
+    cl.enqueue_copy(queue[1], nodes, ws.buffers["nodes"])
+    cl.enqueue_copy(queue[1], keys, ws.buffers["keys0"])
+    cl.enqueue_copy(queue[1], ids, ws.buffers["ids0"], is_blocking=True)
+    return nodes, keys, ids
+
+
+def _node_places(nodes, F: int) -> list:
+    """Every node's places, as a frozenset (leaf node p is place p; an inner
+    node's, its children's, made after them: they hold fewer triangles)."""
+    left, right = nodes["lo"][F:, 3].view(np.int32), nodes["hi"][F:, 3].view(np.int32)
+    places = [frozenset([p]) for p in range(F)] + [None] * (F - 1)
+    for i in np.argsort(nodes["count"][F:], kind="stable"):
+        places[F + i] = places[left[i]] | places[right[i]]
+    return places
+
+
 def test_the_hierarchy_numbers_nodes_by_place(queue):
     """The hierarchy's inner nodes: every number num_tris .. 2 num_tris - 2
     once, each node's children pointing back at it, the root the last
     (2 num_tris - 2, made by ploc_top above the segments), each segment's
     nodes numbered within its own run of num_tris + first - segment ..
     (build_hierarchy.cl says why)."""
-    import pyopencl as cl
-
-    from clrt import layouts
-    from clrt.device import build_kernels
     corners = CORNERS["random"]()
     F = len(corners)
-    build_on_device(*queue, corners, leaf_size=4, partition=True, top_clusters=16, treelet_leaves=0,
-                    reinsert_iterations=0, hierarchy=True).release()
-    ws = build_kernels.workspaces[queue[0].int_ptr]
-    nodes = np.empty(2 * F - 1, layouts.BUILD_NODE)
-    keys = np.empty(F, np.uint32)
-    cl.enqueue_copy(queue[1], nodes, ws.buffers["nodes"], is_blocking=True)
-    cl.enqueue_copy(queue[1], keys, ws.buffers["keys0"], is_blocking=True)
+    nodes, keys, _ = _hierarchy_tree(queue, corners)
     left = nodes["lo"][F:, 3].view(np.int32)
     right = nodes["hi"][F:, 3].view(np.int32)
     children = np.concatenate([left, right])
@@ -548,17 +568,11 @@ def test_the_hierarchy_numbers_nodes_by_place(queue):
     segment = (keys >> 24).astype(np.int64)
     segments = int(segment.max()) + 1
     first_place = np.searchsorted(segment, np.arange(segments))
-    leaf_segment = np.empty(2 * F - 1, np.int64)
-    leaf_segment[:F] = segment
-    order = np.argsort(nodes["count"][F:], kind="stable")     # children (fewer triangles) before parents
-    for i in order:
-        n = F + i
-        a, b = left[i], right[i]
-        leaf_segment[n] = leaf_segment[a] if leaf_segment[a] == leaf_segment[b] else -1
-    below = leaf_segment[F:] >= 0
+    node_segments = [{int(segment[p]) for p in places} for places in _node_places(nodes, F)[F:]]
+    below = np.array([len(found) == 1 for found in node_segments])
     runs_first = F + first_place - np.arange(segments)
     runs_end = np.append(runs_first[1:], 2 * F - segments)
-    s = leaf_segment[F:][below]
+    s = np.array([min(found) for found, one in zip(node_segments, below) if one])
     numbers = inner[below]
     assert np.all((numbers >= runs_first[s]) & (numbers < runs_end[s]))
     assert below.sum() == F - segments
@@ -662,31 +676,17 @@ def test_the_hierarchy_is_its_python_reference(name, queue, monkeypatch):
     at the GPU's radius and at the CPU's: random triangles (nodes merged at
     every level of 16 segments of about 90), a torus (equal areas everywhere:
     the pair hash decides) and points, needles and duplicates (equal keys)."""
-    import pyopencl as cl
-
-    from clrt import layouts
-    from clrt.device import build, build_kernels
+    from clrt.device import build
     corners = _random_triangles(1500, seed=8) if name == "random" else CORNERS[name]()
     F = len(corners)
     for radius in sorted(set(build.PLOC_RADIUS.values())):
         monkeypatch.setattr(build, "PLOC_RADIUS", dict.fromkeys(build.PLOC_RADIUS, radius))
-        build_on_device(*queue, corners, leaf_size=4, partition=True, top_clusters=16, treelet_leaves=0,
-                        reinsert_iterations=0, hierarchy=True).release()
-        ws = build_kernels.workspaces[queue[0].int_ptr]
-        nodes = np.empty(2 * F - 1, layouts.BUILD_NODE)
-        keys, ids = np.empty(F, np.uint32), np.empty(F, np.uint32)
-        cl.enqueue_copy(queue[1], nodes, ws.buffers["nodes"])
-        cl.enqueue_copy(queue[1], keys, ws.buffers["keys0"])
-        cl.enqueue_copy(queue[1], ids, ws.buffers["ids0"], is_blocking=True)
+        nodes, keys, ids = _hierarchy_tree(queue, corners)
         lo, hi = corners[ids].min(axis=1), corners[ids].max(axis=1)
         want = _hierarchy_reference(lo, hi, keys, radius)
-        # the built tree's nodes as sets of places (leaf node i is place i), those within one segment
-        left, right = nodes["lo"][F:, 3].view(np.int32), nodes["hi"][F:, 3].view(np.int32)
-        places = [frozenset([p]) for p in range(F)] + [None] * (F - 1)
-        for i in np.argsort(nodes["count"][F:], kind="stable"):
-            places[F + i] = places[left[i]] | places[right[i]]
+        # the built tree's inner nodes as sets of places, those within one segment
         segment = keys >> 24
-        got = {s for s in places[F:] if len({int(segment[p]) for p in s}) == 1}
+        got = {s for s in _node_places(nodes, F)[F:] if len({int(segment[p]) for p in s}) == 1}
         assert len(want) == F - len(np.unique(segment)) and got == want, radius
 
 

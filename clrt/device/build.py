@@ -244,9 +244,8 @@ _EMPTY_BOX = np.array([0xFFFFFFFF] * 3 + [0] * 3, np.uint32)
 EARLY_ROWS_BYTES = 64 << 20   # row buffers made before the row count is known, up to this size
 EMIT_JUMPS = 7           # pointer jumps queued without reading the tree's height (2**7 levels)
 GROUP_RESULTS = 14       # doubles each work-group of place_instances writes (build_instances.cl)
-HIERARCHY_GROUP = 32     # work-items that merge together in ploc_hierarchy (build_hierarchy.cl's HIERARCHY_GROUP)
-# Of those, a work-group's where they are a warp (-DHIERARCHY_WARP_VOTE).
-HIERARCHY_WARPS = 4
+HIERARCHY_GROUP = 32     # work-items that merge together in ploc_hierarchy (a team: a warp on NVIDIA's GPUs)
+HIERARCHY_WARPS = 4      # teams a work-group where they are warps (-DHIERARCHY_WARP_VOTE; else one)
 
 # The state buffer (build_state.cl): int offsets, and the ring of cluster counts.
 STATE = {"STATE_NEXT_NODE": 0, "STATE_DEPTH": 1, "STATE_ERROR": 2, "STATE_BAD_TRIANGLE": 3, "STATE_BOUNDS": 4,
@@ -263,11 +262,6 @@ STATE["STATE_PART_END"] = STATE["STATE_PART_NODES"] + 3
 STATE["STATE_TAIL"] = STATE["STATE_PART_NODES"] + 4
 TAIL_INTS = 4            # ploc_tail's hand-over to ploc_top (build_state.cl's TAIL_*)
 STATE_INTS = STATE["STATE_INTS"] = STATE["STATE_TAIL"] + TAIL_INTS
-
-def hierarchy_warps(warp_vote: bool) -> int:
-    """Teams of HIERARCHY_GROUP work-items in a work-group of ploc_hierarchy."""
-    return HIERARCHY_WARPS if warp_vote else 1
-
 
 def sah_top_clusters(kind: str, tail_group: int | None = None, top_clusters: int | None = None) -> int:
     """Clusters the SAH top takes (SAH_TOP_CLUSTERS), no more than ploc_tail's work-items."""
@@ -300,7 +294,8 @@ def build_defines(volume: str, kind: str = "gpu", treelet_leaves: int | None = N
         "PART_BINS": PART_BINS, "PART_MAX_NODES": PART_MAX_NODES, "PART_LEVELS": PART_LEVELS,
         "SEGMENT_BITS": SEGMENT_BITS,
         "GROUP_RESULTS": GROUP_RESULTS,
-        **({"PLOC_SEGMENTS": None} if segmented else {}), "HIERARCHY_WARPS": hierarchy_warps(warp_vote),
+        **({"PLOC_SEGMENTS": None} if segmented else {}), "HIERARCHY_GROUP": HIERARCHY_GROUP,
+        "HIERARCHY_WARPS": HIERARCHY_WARPS if warp_vote else 1,
         **({"HIERARCHY_WARP_VOTE": None} if warp_vote else {}),
         "C_TRAVERSAL": f"((float){C_TRAVERSAL!r})", "C_INTERSECT": f"((float){C_INTERSECT!r})",
         **volumes.fit_defines(), **instance_defines(), **wide.collapse_defines(),

@@ -26,7 +26,8 @@ def stable_key_order(keys: np.ndarray) -> np.ndarray:
     return order[np.argsort((keys[order] >> 16).astype(np.uint16), kind="stable")]
 
 
-def sort_on_host(queue: cl.CommandQueue, n: int, keys: cl.Buffer, ids: cl.Buffer, keep_keys: bool = True) -> cl.Buffer:
+def sort_on_host(queue: cl.CommandQueue, n: int, keys: cl.Buffer, ids: cl.Buffer,
+                 keep_keys: bool = True) -> cl.Buffer:
     """Sort the n (key, id) pairs in ``keys`` and ``ids`` (uint32 each) by
     key, in place, once the launches queued before are done; returns ``ids``.
     The ids are the places 0 .. n - 1 (morton_codes writes them so), so the

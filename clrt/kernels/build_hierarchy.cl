@@ -53,11 +53,13 @@
 #include "build_ploc.cl"
 #include "build_scan.cl"
 
-#if !defined(HIERARCHY_WARPS)
-#error "build with -DHIERARCHY_WARPS=<warps a work-group>"
+#if !defined(HIERARCHY_GROUP) || !defined(HIERARCHY_WARPS)
+#error "build with -DHIERARCHY_GROUP=<work-items that merge together> and -DHIERARCHY_WARPS=<teams a work-group>"
+#endif
+#if HIERARCHY_GROUP != 32
+#error "a team's ballot holds one bit for each of its work-items: 32"
 #endif
 
-#define HIERARCHY_GROUP 32                      // work-items that merge together (one bit each in a ballot)
 #define HIERARCHY_KEEP (HIERARCHY_GROUP / 2)    // clusters a node keeps (each child brings at most this many)
 #define TOP_SEGMENTS (1 << SEGMENT_BITS)        // segment_ranks' table, one entry a segment
 #define NO_CLUSTER (-1)                         // lo.w of a place past a node's clusters
@@ -153,15 +155,12 @@ inline BuildCluster load_cluster(const volatile global BuildCluster* clusters, i
     return c;
 }
 
-// A team's clusters while it merges one node: box (w: the BuildNode, the
-// segment) and what refresh_node would read of the BuildNode, so that a
-// merge reads nothing from global memory.
+// A team's clusters while it merges one node: each as the BuildNode that
+// refresh_node would read (lo.w: the node's number, hi.w: the cluster's
+// segment, as a BuildCluster's) and its height, so that a merge reads
+// nothing from global memory.
 typedef struct {
-    float4 lo[HIERARCHY_GROUP];
-    float4 hi[HIERARCHY_GROUP];
-    int count[HIERARCHY_GROUP];
-    float cost[HIERARCHY_GROUP];
-    int rows[HIERARCHY_GROUP];
+    BuildNode slot[HIERARCHY_GROUP];
     int height[HIERARCHY_GROUP];
     int nearest[HIERARCHY_GROUP];
     int numbers[HIERARCHY_GROUP];           // the node numbers this node may use, in order
@@ -169,23 +168,11 @@ typedef struct {
     int task_first[HIERARCHY_GROUP], task_split[HIERARCHY_GROUP], task_last[HIERARCHY_GROUP];
 } HierarchyScratch;
 
-// Slot `to` takes a cluster and its node's numbers.
-inline void put_slot(local HierarchyScratch* s, int to, float4 lo, float4 hi, int count, float cost, int rows,
-                     int height)
-{
-    s->lo[to] = lo;
-    s->hi[to] = hi;
-    s->count[to] = count;
-    s->cost[to] = cost;
-    s->rows[to] = rows;
-    s->height[to] = height;
-}
-
 // The whole team merges the node of places [first, last] whose right child
 // starts at `split`: its children's clusters are gathered, merged until at
 // most HIERARCHY_KEEP are left (one for a whole segment: it goes to
 // top[its rank]) and written back at `first`.  A new node's numbers are
-// refresh_node's, from its children's in local memory.
+// refresh_node's (join_children), from its children's in local memory.
 inline void merge_node(volatile global BuildCluster* clusters, const global uint* keys,
                        const global int* ranks, volatile global int* spare_numbers, volatile global BuildNode* nodes,
                        volatile global int* heights, int num_tris, global BuildCluster* top, uint leaf_size,
@@ -206,14 +193,16 @@ inline void merge_node(volatile global BuildCluster* clusters, const global uint
         c = load_cluster(clusters, place);
     const int node = as_int(c.lo.w);
     const bool valid = place <= child_last && node != NO_CLUSTER;
-    int count = 1, rows = 0, height = 1;
-    float cost = C_INTERSECT * half_area(c.lo.xyz, c.hi.xyz);      // a triangle's (init_leaves)
+    BuildNode own = leaf_node(c.lo.xyz, c.hi.xyz);                 // a triangle's (init_leaves)
+    int height = 1;
     if (valid && node >= num_tris) {
-        count = nodes[node].count;
-        cost = nodes[node].cost;
-        rows = nodes[node].rows;
+        own.count = nodes[node].count;
+        own.cost = nodes[node].cost;
+        own.rows = nodes[node].rows;
         height = heights[node - num_tris];
     }
+    own.lo.w = c.lo.w;
+    own.hi.w = c.hi.w;
     uint valid_bits, unused;
     team_ballot(valid, false, s->flags, lane, &valid_bits, &unused);
     const int left_count = popcount(valid_bits & ((1u << HIERARCHY_KEEP) - 1u));
@@ -225,8 +214,11 @@ inline void merge_node(volatile global BuildCluster* clusters, const global uint
                                                               : first_number(num_tris, child_first, rank) + k;
     if (lane == 0)
         s->numbers[left_count - 1] = first_number(num_tris, split - 1, rank);
-    if (valid)
-        put_slot(s, right ? left_count + k : k, c.lo, c.hi, count, cost, rows, height);
+    if (valid) {
+        const int at = right ? left_count + k : k;
+        s->slot[at] = own;
+        s->height[at] = height;
+    }
     TEAM_SYNC();
 
     const int target = whole ? 1 : HIERARCHY_KEEP;
@@ -234,11 +226,11 @@ inline void merge_node(volatile global BuildCluster* clusters, const global uint
     while (left > target) {             // the same in every work-item
         Nearest n = {-1, INFINITY, 0u, false};
         if ((int)lane < left) {
-            const float3 lo = s->lo[lane].xyz, hi = s->hi[lane].xyz;
+            const float3 lo = s->slot[lane].lo.xyz, hi = s->slot[lane].hi.xyz;
             for (int o = -PLOC_RADIUS; o <= PLOC_RADIUS; ++o) {
                 const int q = (int)lane + o;
                 if (o != 0 && q >= 0 && q < left)
-                    consider(&n, lane, q, half_area(fmin(lo, s->lo[q].xyz), fmax(hi, s->hi[q].xyz)));
+                    consider(&n, lane, q, half_area(fmin(lo, s->slot[q].lo.xyz), fmax(hi, s->slot[q].hi.xyz)));
             }
             s->nearest[lane] = n.best;
         }
@@ -249,41 +241,33 @@ inline void merge_node(volatile global BuildCluster* clusters, const global uint
         const bool merges = mutual && (int)lane < j;
         uint kept_bits, merge_bits;
         team_ballot(kept, merges, s->flags, lane, &kept_bits, &merge_bits);
-        float4 lo, hi;
+        BuildNode out;
         if (kept) {
-            lo = s->lo[lane];
-            hi = s->hi[lane];
-            count = s->count[lane];
-            cost = s->cost[lane];
-            rows = s->rows[lane];
+            out = s->slot[lane];
             height = s->height[lane];
         }
-        if (merges) {
-            // refresh_node's numbers of the node merging lane (left) and j (right)
+        if (merges) {                   // the node over lane (left) and j (right)
+            const BuildNode b = s->slot[j];
             const int index = s->numbers[used + bits_below(merge_bits, lane)];
-            const int a = as_int(lo.w), b = as_int(s->lo[j].w);
-            lo = (float4)(fmin(lo.xyz, s->lo[j].xyz), as_float(a));
-            hi = (float4)(fmax(hi.xyz, s->hi[j].xyz), as_float(b));
-            const float area = half_area(lo.xyz, hi.xyz);
-            count += s->count[j];
-            cost = C_TRAVERSAL * area + cost + s->cost[j];
-            rows = emitted_as_leaf(area, count, leaf_size, &cost) ? 0 : 1 + rows + s->rows[j];
+            const int segment = as_int(out.hi.w);
+            BuildNode made = join_children(&out, &b, leaf_size);
+            made.lo.w = out.lo.w;                   // its children
+            made.hi.w = b.lo.w;
+            nodes[index] = made;
             height = 1 + max(height, s->height[j]);
-            nodes[index].lo = lo;
-            nodes[index].hi = hi;
-            nodes[index].parent = -1;
-            nodes[index].count = count;
-            nodes[index].rows = rows;
-            nodes[index].cost = cost;
             heights[index - num_tris] = height;
-            nodes[a].parent = index;
-            nodes[b].parent = index;
-            lo.w = as_float(index);
-            hi.w = s->hi[lane].w;                   // the segment
+            nodes[as_int(out.lo.w)].parent = index;
+            nodes[as_int(b.lo.w)].parent = index;
+            out = made;                             // as the cluster: its number and segment
+            out.lo.w = as_float(index);
+            out.hi.w = as_float(segment);
         }
         TEAM_SYNC();
-        if (kept)
-            put_slot(s, bits_below(kept_bits, lane), lo, hi, count, cost, rows, height);
+        if (kept) {
+            const int at = bits_below(kept_bits, lane);
+            s->slot[at] = out;
+            s->height[at] = height;
+        }
         used += popcount(merge_bits);
         left = popcount(kept_bits);
         TEAM_SYNC();
@@ -291,12 +275,13 @@ inline void merge_node(volatile global BuildCluster* clusters, const global uint
 
     if (whole) {
         if (lane == 0) {
-            top[rank].lo = s->lo[0];
-            top[rank].hi = s->hi[0];
+            top[rank].lo = s->slot[0].lo;
+            top[rank].hi = s->slot[0].hi;
         }
     } else if (lane < HIERARCHY_KEEP) {       // the node has more places than that
-        clusters[first + lane].lo = (int)lane < left ? s->lo[lane] : (float4)(0.0f, 0.0f, 0.0f, as_float(NO_CLUSTER));
-        clusters[first + lane].hi = (int)lane < left ? s->hi[lane] : (float4)(0.0f);
+        clusters[first + lane].lo = (int)lane < left ? s->slot[lane].lo
+                                                     : (float4)(0.0f, 0.0f, 0.0f, as_float(NO_CLUSTER));
+        clusters[first + lane].hi = (int)lane < left ? s->slot[lane].hi : (float4)(0.0f);
         if ((int)lane < left - 1)
             spare_numbers[first + lane] = s->numbers[used + lane];
     }

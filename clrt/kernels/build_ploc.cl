@@ -115,6 +115,20 @@ inline void consider(Nearest* n, int p, int q, float area)
     }
 }
 
+// The leaf node of a triangle of box lo, hi (children -1; ploc_hierarchy
+// makes a leaf's numbers from its cluster's box by it too).
+inline BuildNode leaf_node(float3 lo, float3 hi)
+{
+    BuildNode node;
+    node.lo = (float4)(lo, as_float(-1));
+    node.hi = (float4)(hi, as_float(-1));
+    node.parent = -1;
+    node.count = 1;
+    node.rows = 0;
+    node.cost = C_INTERSECT * half_area(lo, hi);
+    return node;
+}
+
 // Leaf nodes and the first clusters: node i is the triangle ids[i], the i-th
 // in Morton order; the look-back entries of ploc_merge's first iteration and
 // the inner nodes' flags of treelet_restructure, cleared.
@@ -132,14 +146,7 @@ void init_leaves(const global float* corners, const global uint* sorted_ids, con
         return;
     float3 lo, hi;
     triangle_box(corners, sorted_ids[i], &lo, &hi);
-    BuildNode node;
-    node.lo = (float4)(lo, as_float(-1));
-    node.hi = (float4)(hi, as_float(-1));
-    node.parent = -1;
-    node.count = 1;
-    node.rows = 0;
-    node.cost = C_INTERSECT * half_area(lo, hi);
-    nodes[i] = node;
+    nodes[i] = leaf_node(lo, hi);
     clusters[i].lo = (float4)(lo, as_float((int)i));
     // Its segment: the top bits of the key (partition_morton_codes), else 0.
     clusters[i].hi = (float4)(hi, as_float(segmented ? (int)(sorted_keys[i] >> (32 - SEGMENT_BITS)) : 0));

@@ -105,8 +105,25 @@ inline bool emitted_as_leaf(float area, int count, uint leaf_size, float* cost)
     return false;
 }
 
-// Box, count, cost, rows (0: emitted as a leaf, emitted_as_leaf) and height
-// of inner node n from its children, whose references it holds.  The height
+// The box, count, cost and rows (0: emitted as a leaf, emitted_as_leaf) of
+// the node over children a and b, from theirs (its children's references and
+// parent are the caller's).  refresh_node and ploc_hierarchy's merges
+// (build_hierarchy.cl, whose children are in local memory) make nodes by it.
+inline BuildNode join_children(const BuildNode* a, const BuildNode* b, uint leaf_size)
+{
+    BuildNode n;
+    n.lo = (float4)(fmin(a->lo.xyz, b->lo.xyz), 0.0f);
+    n.hi = (float4)(fmax(a->hi.xyz, b->hi.xyz), 0.0f);
+    const float area = half_area(n.lo.xyz, n.hi.xyz);
+    n.count = a->count + b->count;
+    n.cost = C_TRAVERSAL * area + a->cost + b->cost;
+    n.rows = emitted_as_leaf(area, n.count, leaf_size, &n.cost) ? 0 : 1 + a->rows + b->rows;
+    n.parent = -1;
+    return n;
+}
+
+// Box, count, cost, rows and height of inner node n from its children, whose
+// references it holds.  The height
 // (nodes on the longest path down; a triangle has 1) bounds the emit pass's
 // pointer jumps.  PLOC's make_node and the treelet restructuring both make
 // nodes through it.
@@ -114,16 +131,12 @@ inline void refresh_node(shared_nodes nodes, shared_ints heights, int n, int num
 {
     const int l = left_of(nodes, n), r = right_of(nodes, n);
     const BuildNode a = load_node(nodes, l), b = load_node(nodes, r);
-    const float3 lo = fmin(a.lo.xyz, b.lo.xyz), hi = fmax(a.hi.xyz, b.hi.xyz);
-    const float area = half_area(lo, hi);
-    const int count = a.count + b.count;
-    float cost = C_TRAVERSAL * area + a.cost + b.cost;
-    const int rows = emitted_as_leaf(area, count, leaf_size, &cost) ? 0 : 1 + a.rows + b.rows;
-    nodes[n].lo.xyz = lo;
-    nodes[n].hi.xyz = hi;
-    nodes[n].count = count;
-    nodes[n].cost = cost;
-    nodes[n].rows = rows;
+    const BuildNode joined = join_children(&a, &b, leaf_size);
+    nodes[n].lo.xyz = joined.lo.xyz;
+    nodes[n].hi.xyz = joined.hi.xyz;
+    nodes[n].count = joined.count;
+    nodes[n].cost = joined.cost;
+    nodes[n].rows = joined.rows;
     heights[n - num_tris] = 1 + max(height_of(heights, l, num_tris), height_of(heights, r, num_tris));
 }
 
