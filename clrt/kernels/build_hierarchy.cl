@@ -273,16 +273,17 @@ inline void merge_node(volatile global BuildCluster* clusters, const global uint
         TEAM_SYNC();
     }
 
-    if (whole) {
-        if (lane == 0) {
-            top[rank].lo = s->slot[0].lo;
-            top[rank].hi = s->slot[0].hi;
-        }
-    } else if (lane < HIERARCHY_KEEP) {       // the node has more places than that
-        clusters[first + lane].lo = (int)lane < left ? s->slot[lane].lo
-                                                     : (float4)(0.0f, 0.0f, 0.0f, as_float(NO_CLUSTER));
-        clusters[first + lane].hi = (int)lane < left ? s->slot[lane].hi : (float4)(0.0f);
-        if ((int)lane < left - 1)
+    // The clusters left: a whole segment's one to the top (lane 0), else the
+    // node's to its first HIERARCHY_KEEP places (it has more places than that).
+    // (One branch: PoCL 5.0 asserted forming the work-group function of an
+    // if / else-if here, after the loop's last barrier.)
+    if (whole ? lane == 0 : lane < HIERARCHY_KEEP) {
+        volatile global BuildCluster* to = whole ? (volatile global BuildCluster*)(top + rank)
+                                                 : clusters + first + lane;
+        const bool kept = (int)lane < left;
+        to->lo = kept ? s->slot[lane].lo : (float4)(0.0f, 0.0f, 0.0f, as_float(NO_CLUSTER));
+        to->hi = kept ? s->slot[lane].hi : (float4)(0.0f);
+        if (!whole && (int)lane < left - 1)
             spare_numbers[first + lane] = s->numbers[used + lane];
     }
     // Everything written before the node's work-item passes its range on
