@@ -7,7 +7,7 @@ to device) are timed once per variant, as a user meets them (the first
 variant's copy includes the context and program build), beside ``Renderer()``,
 the wall time of the whole call.  Frame stages are medians over ``--repeat``
 frames after ``--warmup`` frames (``Frame.timings``); their times come from
-OpenCL profiling events (read back: the encode kernel and the copies, and
+OpenCL profiling events (read back: the copies of the sRGB image and the tile's flag, and
 any host copy after them), ``frame wall`` is the host clock around a whole
 ``Renderer.render`` (without reading back the hit buffer), ``wall -
 stages`` what the host adds to the three, and ``wall - kernels`` what the

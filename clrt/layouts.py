@@ -143,7 +143,7 @@ kernel takes which is declared once, in the signature tables
                  each output (query_closest: CLOSEST_FIELDS in order; query_all:
                  ray ids, prims, ts, then the hit counter), NO_RESULT: not asked for
 
-``Tile`` (52 B) -- one launch over a tile of the image (render.cl)
+``Tile`` (56 B) -- one launch over a tile of the image (render.cl)
     0: x, y, w, h   uint  pixels (x, y) .. (x + w - 1, y + h - 1) of the image
    16: rays_at      uint  byte offset in the frame buffer of the tile's Ray array
    20: hits_at      uint  ... of its Hit array
@@ -154,6 +154,8 @@ kernel takes which is declared once, in the signature tables
    40: max_depth    uint  reflection / refraction bounces
    44: sample_weight float 1 / samples
    48: first_sample uint  1: the image starts from this sample
+   52: srgb_at      uint  0, or the byte offset in the frame buffer of the tile's packed
+                          8-bit sRGB colours, which this launch (the last sample) writes
 
 ``PathLaunch`` (224 B) -- one launch of the path tracer (path.cl) over a rectangle of the image
     0: cam          Camera  as above (80 B)
@@ -449,7 +451,8 @@ QUERY_LAUNCH = np.dtype([("shift", float4), ("scene_lo", float4), ("scene_hi", f
 TILE = np.dtype([("x", np.uint32), ("y", np.uint32), ("w", np.uint32), ("h", np.uint32),
                  ("rays_at", np.uint32), ("hits_at", np.uint32), ("image_at", np.uint32),
                  ("sample", np.uint32), ("samples_per_axis", np.uint32), ("seed", np.uint32),
-                 ("max_depth", np.uint32), ("sample_weight", np.float32), ("first_sample", np.uint32)])
+                 ("max_depth", np.uint32), ("sample_weight", np.float32), ("first_sample", np.uint32),
+                 ("srgb_at", np.uint32)])
 PATH_LAUNCH = np.dtype([("cam", CAMERA), ("background", float4), ("environment", float4),
                         ("image_at", np.uint64), ("albedo_at", np.uint64), ("normal_at", np.uint64),
                         ("x", np.uint32), ("y", np.uint32), ("w", np.uint32), ("h", np.uint32),

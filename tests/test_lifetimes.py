@@ -109,5 +109,5 @@ def test_batches_of_many_sizes_take_one_work_group_size(device, monkeypatch):
             accel.all_hits(origins[:n], directions[:n])
         accels[0].camera_images(Camera(eye=(0, 1, 3), target=(0, 0, 0), width=n % 50 + 3, height=5))
         renderer.render(Camera(eye=(0, 1, 3), target=(0, 0, 0), width=n % 50 + 3, height=7))
-    assert {"query_count", "query_all", "query_closest", "camera_rays", "encode_srgb8"} <= {k for k, _ in groups}
+    assert {"query_count", "query_all", "query_closest", "camera_rays", "shade_pixels"} <= {k for k, _ in groups}
     assert all(len(sizes) == 1 and None not in sizes for sizes in groups.values()), groups

@@ -125,6 +125,7 @@ typedef struct {
     uint max_depth;              // reflection / refraction bounces
     float sample_weight;         // 1 / samples
     uint first_sample;           // 1: the image starts from this sample
+    uint srgb_at;                // 0, or (the last sample) the byte offset in `frame` of the packed sRGB8 colours
 } Tile;
 
 // One launch of the path tracer (path.cl) over a rectangle of the image; the

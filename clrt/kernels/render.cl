@@ -1,8 +1,9 @@
 // Entry file of the render program: the paper's two global kernels (ray
-// generation, pixel colour) plus the conversion of linear colour to 8-bit
-// sRGB.  The acceleration structure is chosen when the program is built
-// (accel.cl).  Anti-aliasing runs the pair once per sample, accumulating
-// into the linear image, so memory stays one ray per pixel.
+// generation, pixel colour).  The acceleration structure is chosen when the
+// program is built (accel.cl).  Anti-aliasing runs the pair once per sample,
+// accumulating into the linear image, so memory stays one ray per pixel; the
+// last sample's pixel colour also writes the 8-bit sRGB image the host reads
+// back (no launch of its own: one pass over the linear image fewer).
 #include "layouts.h"
 #include "camera.cl"
 #include "geometry.cl"
@@ -18,14 +19,16 @@
 // work-groups are blocks of neighbouring pixels: their rays walk much the same
 // BVH nodes.  The tile's per-pixel arrays (rays, hits, linear colours) lie in
 // one buffer, `frame`, at the byte offsets the Tile gives (layouts.h), each
-// holding the tile's pixels in row-major order.  The buffer's first word, before
-// them, says whether any camera ray of the tile's first sample hit a triangle
-// (0 or 1): the host's "nothing visible" warning (frame.py), without reading
-// back the hits.
+// holding the tile's pixels in row-major order; so do its packed sRGB8 colours
+// (3 bytes a pixel: the host array's own layout, read back without repacking).
+// The buffer's first word, before them, says whether any camera ray of the
+// tile's first sample hit a triangle (0 or 1): the host's "nothing visible"
+// warning (frame.py), without reading back the hits.
 #define TILE_SEEN(frame) ((__global uint*)(frame))
 #define TILE_RAYS(frame, tile) ((__global Ray*)((frame) + (tile).rays_at))
 #define TILE_HITS(frame, tile) ((__global Hit*)((frame) + (tile).hits_at))
 #define TILE_IMAGE(frame, tile) ((__global float4*)((frame) + (tile).image_at))
+#define TILE_SRGB(frame, tile) ((frame) + (tile).srgb_at)
 
 // Rays of the tile's pixels, into its ray array.
 __kernel void generate_rays(__global uchar* frame, const Camera cam, const Tile tile)
@@ -40,11 +43,20 @@ __kernel void generate_rays(__global uchar* frame, const Camera cam, const Tile 
     TILE_RAYS(frame, tile)[gy * tile.w + gx] = camera_ray(&cam, px, py, o.x, o.y);
 }
 
+// IEC 61966-2-1 transfer function; linear values are clamped to [0, 1].
+inline float srgb_encode(float c)
+{
+    c = clamp(c, 0.0f, 1.0f);
+    return c <= 0.0031308f ? 12.92f * c : 1.055f * pow(c, 1.0f / 2.4f) - 0.055f;
+}
+
 // image = (first sample ? 0 : image) + sample_weight * colour, pixel i of the
-// tile; its hit record receives the camera ray's hit (of the first sample).
-// (hit_known: the camera ray's hit is `hit`; lit_known: bit i of `lit` says
-// whether light i reaches it.)  The tile's output arrays are found here, after
-// the walks: made before them, their pointers would be held through them.
+// tile -- on the last sample (tile->srgb_at set) as 8-bit sRGB, the linear
+// image then unwritten --; its hit record receives the camera ray's hit (of
+// the first sample).  (hit_known: the camera ray's hit is `hit`; lit_known:
+// bit i of `lit` says whether light i reaches it.)  The tile's output arrays
+// are found here, after the walks: made before them, their pointers would be
+// held through them.
 inline void shade_pixel(const Geometry* g, const Shading* sh, const Ray ray, __global uchar* frame,
                         const Tile* tile, const uint i, Hit hit, const bool hit_known, const bool lit_known,
                         const uint lit)
@@ -52,13 +64,21 @@ inline void shade_pixel(const Geometry* g, const Shading* sh, const Ray ray, __g
     const float3 c = trace_whitted(g, sh, tile->max_depth, ray.origin.xyz, ray.dir.xyz, ray.origin.w, ray.dir.w,
                                    &hit, hit_known, lit_known, lit);
     __global float4* image = TILE_IMAGE(frame, *tile);
+    float3 total = tile->sample_weight * c;
     if (tile->first_sample) {
         if (hit.prim >= 0 && !*TILE_SEEN(frame))   // read first: one write per tile, near enough
             *TILE_SEEN(frame) = 1u;
         TILE_HITS(frame, *tile)[i] = reported_hit(g, hit);
-        image[i] = (float4)(tile->sample_weight * c, 1.0f);
     } else {
-        image[i] += (float4)(tile->sample_weight * c, 0.0f);
+        total += image[i].xyz;
+    }
+    if (tile->srgb_at) {
+        __global uchar* out = TILE_SRGB(frame, *tile) + 3 * i;
+        out[0] = convert_uchar_sat_rte(255.0f * srgb_encode(total.x));
+        out[1] = convert_uchar_sat_rte(255.0f * srgb_encode(total.y));
+        out[2] = convert_uchar_sat_rte(255.0f * srgb_encode(total.z));
+    } else {
+        image[i] = (float4)(total, 1.0f);
     }
 }
 
@@ -156,24 +176,4 @@ __kernel void shade_pixels(__global uchar* frame, const Tile tile, GEOMETRY_PARA
     const uint i = gy * tile_w + gx;
     shade_pixel(&g, &sh, rays[i], frame, &tile, i, miss_hit(), false, false, 0u);
 #endif
-}
-
-// IEC 61966-2-1 transfer function; linear values are clamped to [0, 1].
-inline float srgb_encode(float c)
-{
-    c = clamp(c, 0.0f, 1.0f);
-    return c <= 0.0031308f ? 12.92f * c : 1.055f * pow(c, 1.0f / 2.4f) - 0.055f;
-}
-
-// Packed RGB, 3 bytes a pixel: the host array's own layout, so no repacking
-// there.  One work-item a pixel of the tile's linear colours.
-__kernel void encode_srgb8(__global const uchar* frame, const Tile tile, __global uchar* out)
-{
-    const uint i = get_global_id(0);
-    if (i >= tile.w * tile.h)
-        return;
-    const float4 c = ((__global const float4*)(frame + tile.image_at))[i];
-    out[3 * i] = convert_uchar_sat_rte(255.0f * srgb_encode(c.x));
-    out[3 * i + 1] = convert_uchar_sat_rte(255.0f * srgb_encode(c.y));
-    out[3 * i + 2] = convert_uchar_sat_rte(255.0f * srgb_encode(c.z));
 }

@@ -5,8 +5,9 @@
                           tests every ray against every triangle) (clrt.accel)
 3. copy to device      -- context, program build, buffer upload (once per Renderer)
 4. ray generation      -- ``generate_rays`` kernel, one ray per pixel
-5. pixel colour        -- ``shade_pixels`` kernel: nearest hit, Phong, shadow rays
-6. read back           -- ``encode_srgb8`` (or the linear image) copied to the host
+5. pixel colour        -- ``shade_pixels`` kernel: nearest hit, Phong, shadow rays;
+                          the last sample's also encodes the pixel as 8-bit sRGB
+6. read back           -- the sRGB image (or the linear one) copied to the host
 
 Stages 1-3 happen when a :class:`Renderer` is made; 4-6 on every ``render`` call,
 so frames after the first reuse the uploaded scene and the built program.
@@ -39,7 +40,6 @@ from clrt.device.crease import shade_on_device, upload_mesh
 from clrt.device.geometry import replace_buffer
 from clrt.device.instances import instanced_scene, move_instances, refit_meshes
 from clrt.device.pinned import PinnedPool
-from clrt.device.program import launch_size
 from clrt.device.scene import DeviceScene, stage
 from clrt.device.sharing import check_process, forked_after_start, one_at_a_time
 from clrt.errors import DeviceMemoryError, InputError, NothingVisibleWarning
@@ -206,7 +206,6 @@ class Renderer:
         scene_on_device = self.device_scene
         self.acceleration, self.geometry = scene_on_device.acceleration, scene_on_device.geometry
         self.context, self.queue, self.device = scene_on_device.context, scene_on_device.queue, scene_on_device.device
-        self._kind = scene_on_device.kind   # which ENCODE_GROUP applies
         self.rays_per_item = scene_on_device.rays_per_item
         with stage(self.timings, "copy to device"), scene_on_device.out_of_memory():
             self.tables = cl.Buffer(self.context, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR, hostbuf=tables)
@@ -220,7 +219,7 @@ class Renderer:
         self._frame_records = None   # see _frame_args
         self._max_group = min(   # work-items a launch's group may have, see _launch_shape
             k.get_work_group_info(cl.kernel_work_group_info.WORK_GROUP_SIZE, self.queue.device)
-            for name, k in self.kernels.items() if name != "encode_srgb8")
+            for k in self.kernels.values())
 
     def _shaded_on_device(self, upload: dict) -> DeviceScene:
         """The DeviceScene of a one-object scene whose shading arrays the device
@@ -542,7 +541,6 @@ class Renderer:
             self._frame_buffers = {
                 # The rays, hits and linear colours of a tile (render.cl, frame_offsets).
                 "frame": cl.Buffer(self.context, mf.READ_WRITE, frame_offsets(pixels)["end"]),
-                "srgb8": cl.Buffer(self.context, mf.WRITE_ONLY, pixels * 3),
                 # Page-locked host memory for tiles that cannot be read back in place.
                 "staging": cl.Buffer(self.context, mf.READ_WRITE | mf.ALLOC_HOST_PTR, pixels * 3),
             }
@@ -583,13 +581,15 @@ class Renderer:
         count = w * h
         size, local = self._launch_shape(w, h)
         n = job.samples * job.samples
+        srgb_at = 0 if job.linear else at["srgb"]   # the last sample's pixel colour writes the sRGB image too
         # (made whole: setting a structured scalar's fields one by one cost several us a frame)
         tile = np.array((x, y, w, h, at["rays"], at["hits"], at["image"], 0, job.samples, job.seed, job.max_depth,
-                         1.0 / n, 1), TILE)
+                         1.0 / n, 1, srgb_at if n == 1 else 0), TILE)
         launches = []
         for sample in range(n):   # (a launch takes its arguments' values when they are set)
             if sample:
                 tile["sample"], tile["first_sample"] = sample, 0
+                tile["srgb_at"] = srgb_at if sample == n - 1 else 0
             gen = self._launch("generate_rays", size, local, frame, job.camera_args, tile)
             shade = self._launch("shade_pixels", *self._launch_shape(w, h, self.rays_per_item), frame, tile,
                                  *job.scene_args)
@@ -607,10 +607,8 @@ class Renderer:
             out = np.empty((count, 4), np.float32)
             copies = [cl.enqueue_copy(q, out, frame, src_offset=at["image"], is_blocking=False)]
         else:
-            copies = [self._launch("encode_srgb8", *launch_size(count, ENCODE_GROUP[self._kind]), frame, tile,
-                                   buf["srgb8"])]
             out = image.reshape(count * 3) if direct else self._staging[:count]
-            copies.append(cl.enqueue_copy(q, out, buf["srgb8"], is_blocking=False))
+            copies = [cl.enqueue_copy(q, out, frame, src_offset=srgb_at, is_blocking=False)]
         if job.prim is not None:
             records = np.empty(count, HIT)
             copies.append(cl.enqueue_copy(q, records, frame, src_offset=at["hits"], is_blocking=False))
@@ -631,7 +629,7 @@ class Renderer:
         if job.prim is not None:
             job.prim[y:y + h, x:x + w] = records["prim"].reshape(h, w)
             job.t[y:y + h, x:x + w] = records["t"].reshape(h, w)
-        # Read back: the encode kernel, the copies and any host copy after them.
+        # Read back: the copies and any host copy after them.
         job.timings["read back"] += sum(_event_ms(e) for e in copies) + 1e3 * (time.perf_counter() - host_start)
         slowest = 0.0
         for gen, shade in launches:
@@ -654,18 +652,12 @@ class Renderer:
         return (-(-w // bw) * bw, -(-h // bh) * bh), (bw, bh)
 
 
-# Device bytes per pixel of a tile: its ray, hit record and linear colour in
-# the frame buffer (FRAME_ARRAYS), and its sRGB colour.
-FRAME_ARRAY_BYTES = sum(FRAME_ARRAYS.values())
-FRAME_BYTES_PER_PIXEL = FRAME_ARRAY_BYTES + 3
+# Device bytes per pixel of a tile: its ray, hit record, linear and sRGB
+# colours in the frame buffer (FRAME_ARRAYS).
+FRAME_ARRAY_BYTES = FRAME_BYTES_PER_PIXEL = sum(FRAME_ARRAYS.values())
 MIN_FRAME_BYTES = 256 * FRAME_BYTES_PER_PIXEL
 MAX_TILE_PIXELS = 1 << 23   # 8M pixels (a 4K frame), 536 MiB of tile buffers
 IMAGE_POOL_SIZE = 3         # page-locked images per renderer (clrt/device/pinned.py)
-# Work-items per work-group of encode_srgb8 (one a pixel): the driver's choice
-# on a GPU; fixed on a CPU device, where PoCL keeps a compiled variant for
-# every size it runs and would choose one from each tile's pixel count
-# (clrt.device.program.launch_size).
-ENCODE_GROUP: dict = {"gpu": None, "cpu": 64}
 HOST_CHECK_BYTES = 1 << 28  # frames needing more host memory than this check that it is there
 
 

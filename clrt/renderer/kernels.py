@@ -19,7 +19,6 @@ SHADING = (buffer("tri_info", split=True), buffer("vertex_normals", split=True),
 RENDER_KERNELS = {
     "generate_rays": (buffer("frame"), value("cam", CAMERA), value("tile", TILE)),
     "shade_pixels": (buffer("frame"), value("tile", TILE), *GEOMETRY, *SHADING),
-    "encode_srgb8": (buffer("frame"), value("tile", TILE), buffer("out")),
 }
 
 #: The path tracer's program (path.cl): a megakernel that traces whole paths,
@@ -37,10 +36,11 @@ PATH_KERNELS = {
 PATH_ARRAYS = ("image", "albedo", "normal")
 
 #: Bytes of a tile's per-pixel arrays in its frame buffer: its ray, its hit
-#: record and its linear colour (float4), in that order (Tile in layouts.h),
+#: record, its linear colour (float4) and its packed 8-bit sRGB colour (the
+#: last sample's), in that order (Tile in layouts.h),
 #: after FRAME_HEADER bytes whose first uint says whether a camera ray of the
 #: tile hit anything (render.cl's TILE_SEEN).
-FRAME_ARRAYS = {"rays": RAY.itemsize, "hits": HIT.itemsize, "image": 16}
+FRAME_ARRAYS = {"rays": RAY.itemsize, "hits": HIT.itemsize, "image": 16, "srgb": 3}
 FRAME_HEADER = 16
 TABLE_ALIGN = 16   # every table of the `tables` buffer starts at a multiple (float4 rows)
 

@@ -27,7 +27,7 @@ def srgb_decode(values) -> np.ndarray:
 def srgb_encode(linear, bits: int = 8) -> np.ndarray:
     """sRGB codes of linear values (IEC 61966-2-1), clamped to 0..1 (NaN as 0)
     and rounded to the nearest code: uint8 for ``bits`` 8 -- what the kernels'
-    encode_srgb8 does -- or uint16 for 16 (code 257 * k is the 8-bit code k)."""
+    pixel colour does (render.cl) -- or uint16 for 16 (code 257 * k is the 8-bit code k)."""
     dtype = {8: np.uint8, 16: np.uint16}[bits]
     c = np.clip(np.nan_to_num(np.asarray(linear, dtype=np.float64), nan=0.0), 0.0, 1.0)
     codes = float(np.iinfo(dtype).max) * np.where(c <= 0.0031308, 12.92 * c, 1.055 * c ** (1 / 2.4) - 0.055)
@@ -35,7 +35,7 @@ def srgb_encode(linear, bits: int = 8) -> np.ndarray:
 
 
 def srgb_encode8(linear) -> np.ndarray:
-    """8-bit sRGB codes (uint8) of linear values, clamped to 0..1 (what the kernels' encode_srgb8 does)."""
+    """8-bit sRGB codes (uint8) of linear values, clamped to 0..1 (what render.cl's pixel colour writes)."""
     return srgb_encode(linear, 8)
 
 
