@@ -526,7 +526,7 @@ class Renderer:
         at most half of what the scene leaves free and one buffer's size limit."""
         dev = self.queue.device
         free = max(dev.global_mem_size - self.device_bytes, 0) // 2
-        cap = min(pixels, MAX_TILE_PIXELS, (dev.max_mem_alloc_size - FRAME_HEADER) // FRAME_ARRAY_BYTES,
+        cap = min(pixels, MAX_TILE_PIXELS, (dev.max_mem_alloc_size - FRAME_HEADER) // FRAME_BYTES_PER_PIXEL,
                   free // FRAME_BYTES_PER_PIXEL)
         cap = max(cap, min(pixels, self.limits.min_tile_pixels))   # if even that fails, the error says so
         if self.limits.max_tile_pixels is not None:
@@ -539,7 +539,7 @@ class Renderer:
             self._release_frame_buffers()
             mf = cl.mem_flags
             self._frame_buffers = {
-                # The rays, hits and linear colours of a tile (render.cl, frame_offsets).
+                # The rays, hits, linear and sRGB colours of a tile (render.cl, frame_offsets).
                 "frame": cl.Buffer(self.context, mf.READ_WRITE, frame_offsets(pixels)["end"]),
                 # Page-locked host memory for tiles that cannot be read back in place.
                 "staging": cl.Buffer(self.context, mf.READ_WRITE | mf.ALLOC_HOST_PTR, pixels * 3),
@@ -653,8 +653,8 @@ class Renderer:
 
 
 # Device bytes per pixel of a tile: its ray, hit record, linear and sRGB
-# colours in the frame buffer (FRAME_ARRAYS).
-FRAME_ARRAY_BYTES = FRAME_BYTES_PER_PIXEL = sum(FRAME_ARRAYS.values())
+# colours, all in the one frame buffer (FRAME_ARRAYS).
+FRAME_BYTES_PER_PIXEL = sum(FRAME_ARRAYS.values())
 MIN_FRAME_BYTES = 256 * FRAME_BYTES_PER_PIXEL
 MAX_TILE_PIXELS = 1 << 23   # 8M pixels (a 4K frame), 536 MiB of tile buffers
 IMAGE_POOL_SIZE = 3         # page-locked images per renderer (clrt/device/pinned.py)
