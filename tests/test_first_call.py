@@ -176,3 +176,79 @@ def test_a_query_compiles_the_group_of_kernels_it_launches(monkeypatch):
     assert asked[-1] is None                                   # the whole program
     assert np.array_equal(got.prim, hits.prim) and np.array_equal(got.t, hits.t) and (hits.prim >= 0).sum() > 50
     assert np.array_equal(whole.closest_points(points).distance, near.distance)
+
+
+def test_a_program_two_threads_ask_for_is_built_once(cpu_queue, monkeypatch, tmp_path):
+    """build_program from two threads at once: one compiles, the other waits
+    for it and gets the same program; where the first thread's build fails,
+    the waiting one builds it itself."""
+    import threading
+    import time
+    context, _ = cpu_queue
+    monkeypatch.setenv("CLRT_CACHE_DIR", str(tmp_path))
+    compiled, real = [], program._compile
+
+    def slow_compile(*args):
+        compiled.append(threading.current_thread().name)
+        time.sleep(0.3)                   # (long enough for the other thread to ask meanwhile)
+        if len(compiled) == 1 and fail_first:
+            raise KernelBuildError("the first build failed")
+        return real(*args)
+
+    monkeypatch.setattr(program, "_compile", slow_compile)
+    for fail_first in (False, True):
+        compiled.clear()
+        defines = {"ACCEL_BVH": None, "VOLUME_SPHERE": None, "BVH_STACK_SIZE": 96 + fail_first}   # (a new key)
+        got = {}
+
+        def ask(name):
+            try:
+                got[name] = program.build_program(context, "render.cl", defines)
+            except KernelBuildError as exc:
+                got[name] = exc
+
+        threads = [threading.Thread(target=ask, args=(name,), name=name) for name in ("a", "b")]
+        threads[0].start()
+        time.sleep(0.05)
+        threads[1].start()
+        for t in threads:
+            t.join()
+        if fail_first:
+            assert compiled == ["a", "b"] and isinstance(got["a"], KernelBuildError)
+            assert isinstance(got["b"], cl.Program)
+        else:
+            assert compiled == ["a"] and got["a"] is got["b"]
+
+
+@pytest.mark.parametrize("accel", ["box", "sphere", "none"])
+def test_a_renderer_builds_its_program_beside_its_tree(device, accel, monkeypatch):
+    """A Renderer starts building render.cl in a thread before its tree is
+    built, where the program's defines are foreseen (not a CPU's wide walk of
+    boxes): the program its kernels come from is that one -- the foreseen
+    defines are the scene's own -- and no thread builds it twice."""
+    import threading
+    import clrt
+    from clrt.device import scene as device_scene
+    from clrt.scene import primitives
+    from clrt.scene.scene import Camera
+    asked = []
+
+    def spy(context, entry, defines=None, extra_options=(), kernels=None):
+        built = program.build_program(context, entry, defines, extra_options, kernels)
+        if entry == "render.cl":
+            asked.append((threading.current_thread().name, dict(defines), built))
+        return built
+
+    monkeypatch.setattr(device_scene, "build_program", spy)
+    renderer = clrt.Renderer(primitives.torus(1.0, 0.3, 48, 24), device=device, accel=accel)
+    foreseen = device_scene.foreseen_defines(accel, device)
+    used = renderer.device_scene.defines()
+    if foreseen is None:
+        assert renderer.device_scene.kind == "cpu" and accel == "box" and used["BVH_WIDE"] is None
+        assert [name for name, _, _ in asked] == ["MainThread"]
+    else:
+        assert foreseen == used
+        assert [name for name, _, _ in asked] == ["clrt-build-render.cl", "MainThread"]
+        assert asked[0][1] == asked[1][1] and asked[0][2] is asked[1][2]
+    assert next(iter(renderer.kernels.values())).program.int_ptr == asked[-1][2].int_ptr
+    assert renderer.render(Camera.framing(renderer.scene.bounds, 24, 16)).visible

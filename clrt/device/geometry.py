@@ -49,21 +49,40 @@ RAY_PACKET_KINDS = ("cpu",)
 PACKET_RAYS = 8      # the float8 lanes of rays.cl and accel_packet.cl (rays.cl checks it)
 
 
-def accel_defines(acceleration: Acceleration, wide: WideBvh | None = None) -> dict:
-    """Program build options that select the traversal of ``acceleration``
-    (with ``wide``, its wide BVH: the walk of accel_wide.cl)."""
+# A binary walk's stack holds a tree of up to this depth whatever the tree
+# (a deeper one's: stack_size's steps above it), so that a program's defines
+# are known before its tree is built: a Renderer on a GPU compiles its
+# program while the tree builds (traversal_defines; clrt.renderer.frame).  On
+# the H200 a stack of 64 entries against 32 made no difference to bunny00's or
+# the built-in scene's 1080p frames (docs/benchmark-log.md, session 28).  The
+# wide walk of CPU devices keeps stack_size's own (WIDE - 1 entries a level).
+STACK_DEPTH = 64
+
+
+def traversal_defines(accel: str, depth: int = 1, wide: bool = False, instanced: bool = False) -> dict:
+    """Program build options that select the traversal of an acceleration
+    ``accel`` ("none": no tree) of ``depth`` levels (``wide``: its wide BVH,
+    the walk of accel_wide.cl; ``instanced``: a two-level scene's)."""
     # A two-level scene (clrt.accel.instances): its walk (docs/instances.md).
-    instanced = {"ACCEL_INSTANCES": None} if acceleration.instances is not None else {}
-    if not acceleration.is_bvh:
-        return instanced
-    defines = {"ACCEL_BVH": None, VOLUME_DEFINES[acceleration.accel]: None,
-               "BVH_STACK_SIZE": stack_size(acceleration.depth), **instanced}
-    if wide is not None:
+    defines = {"ACCEL_INSTANCES": None} if instanced else {}
+    if accel == "none":
+        return defines
+    if not wide:
+        depth = max(depth, STACK_DEPTH)
+    defines.update({"ACCEL_BVH": None, VOLUME_DEFINES[accel]: None, "BVH_STACK_SIZE": stack_size(depth)})
+    if wide:
         # Each node on the path pushes at most WIDE - 1 children and takes one;
         # the wide tree is no deeper than the binary one, whose rounded depth
         # keeps trees of similar depth on one program.
         defines.update(BVH_WIDE=None, WIDE_STACK_SIZE=(WIDE - 1) * defines["BVH_STACK_SIZE"] + 1)
     return defines
+
+
+def accel_defines(acceleration: Acceleration, wide: WideBvh | None = None) -> dict:
+    """Program build options that select the traversal of ``acceleration``
+    (with ``wide``, its wide BVH: the walk of accel_wide.cl)."""
+    return traversal_defines(acceleration.accel, acceleration.depth, wide is not None,
+                             acceleration.instances is not None)
 
 
 def walks_wide(context: cl.Context, acceleration: Acceleration, split: bool) -> bool:

@@ -20,6 +20,7 @@ import hashlib
 import os
 import re
 import tempfile
+import threading
 import time
 import warnings
 from dataclasses import dataclass
@@ -135,6 +136,11 @@ def _body_end(source: str, start: int) -> int:
 
 
 _programs: dict[tuple, cl.Program] = {}
+# Programs a thread is building now (build_program): another thread that asks
+# for one waits for it instead of compiling it a second time (a Renderer
+# builds its program ahead, beside the tree: clrt.device.scene.build_ahead).
+_building: dict[tuple, threading.Event] = {}
+_building_lock = threading.Lock()
 
 
 @dataclass(frozen=True)
@@ -182,8 +188,19 @@ def build_program(context: cl.Context, entry: str, defines: dict | None = None,
     options = build_options(context, defines, extra_options)
     source = _program_source(entry, kernels)
     key = (context.int_ptr, source, tuple(options))
-    program = _programs.get(key)
-    if program is None:
+    while True:
+        program = _programs.get(key)
+        if program is not None:
+            return program
+        with _building_lock:
+            program, building = _programs.get(key), _building.get(key)
+            if program is None and building is None:
+                building = _building[key] = threading.Event()
+                break                        # this thread builds it
+        if program is not None:
+            return program
+        building.wait()                      # (built there, or failed there: then tried here)
+    try:
         start = time.perf_counter()
         program = _load_cached(context, source, options)
         from_disk, stored = program is not None, 0.0
@@ -194,6 +211,10 @@ def build_program(context: cl.Context, entry: str, defines: dict | None = None,
         builds.append(ProgramBuild(entry, dict(defines or {}), len(source), kernels, time.perf_counter() - start,
                                    stored, from_disk))
         _programs[key] = program
+    finally:
+        with _building_lock:
+            del _building[key]
+        building.set()
     return program
 
 

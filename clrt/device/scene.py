@@ -15,6 +15,7 @@ signature table (clrt.device.signature).
 from __future__ import annotations
 
 import contextlib
+import threading
 import time
 from typing import Callable
 
@@ -25,7 +26,7 @@ from clrt.config import HOST_DEFAULT_BUILDER
 from clrt.device import first_build
 from clrt.device.acceleration import build_acceleration
 from clrt.device.context import create_context, device_kind, device_label, error_name, format_bytes, is_out_of_memory
-from clrt.device.geometry import DeviceGeometry, check_fits, packet_rays
+from clrt.device.geometry import WIDE_BVH_KINDS, DeviceGeometry, check_fits, packet_rays, traversal_defines
 from clrt.device.program import build_program
 from clrt.device.signature import typed_kernels
 from clrt.errors import DeviceMemoryError
@@ -55,6 +56,47 @@ def first_builder(mesh, accel: str, builder: str, leaf_size: int, device: str | 
                                                                                          leaf_size):
         return HOST_DEFAULT_BUILDER
     return builder
+
+
+def foreseen_defines(accel: str, device: str | None, instanced: bool = False) -> dict | None:
+    """The defines a DeviceScene of ``accel`` on ``device`` will call for
+    (DeviceScene.defines), known before its tree is built -- where they do not
+    depend on the tree: not a CPU device's wide walk (its stack follows the
+    tree's depth), not a two-level scene's; else None.  (A scene too large for
+    one buffer per array, split into parts, is not foreseen: a program built
+    ahead for it is then not the one it asks for.)"""
+    kind = device_kind(create_context(device)[1].device)
+    if instanced or (accel == "box" and kind in WIDE_BVH_KINDS):
+        return None
+    return traversal_defines(accel)      # (one ray a work-item: packets go with the wide walk)
+
+
+def build_ahead(entry: str, accel: str, device: str | None, extra: dict | None = None,
+                instanced: bool = False) -> threading.Thread | None:
+    """Start building the program whose entry file is ``entry`` for a scene of
+    ``accel`` on ``device`` (with the defines ``extra``) in a thread, where
+    its defines are foreseen; the thread, or None.  The scene's own build of
+    it then waits for this one (clrt.device.program.build_program) instead of
+    compiling it: a first call's compile runs beside its tree's build (a
+    GPU's compiler, 0.5 s for render.cl on the H200, beside the host's first
+    build; docs/benchmarks.md, "Time to the first image").  A failure here is
+    left to the scene's own build to report."""
+    defines = foreseen_defines(accel, device, instanced)
+    if defines is None:
+        return None
+    context = create_context(device)[0]
+
+    def build() -> None:
+        try:
+            build_program(context, entry, {**defines, **(extra or {})})
+        except Exception:      # (the scene's own build of it raises it, named)
+            pass
+
+    # Not a daemon: a process that ends (or fails) meanwhile waits for the
+    # driver's compile rather than leave it in the middle of one.
+    thread = threading.Thread(target=build, name=f"clrt-build-{entry}")
+    thread.start()
+    return thread
 
 
 def mesh_corners(mesh: Mesh) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -183,6 +183,9 @@ class Renderer:
             shades = max_buffer_bytes is None and device_scene.gathers_on_device(accel, builder, device)
             self.arrays = flatten_scene(self.scene, pbr_textures=self._pbr_textures, device_shading=shades)
         a = self.arrays
+        detail = {"SURFACE_DETAIL": None} if a.detail is not None else None
+        if max_buffer_bytes is None:   # (the program compiles while the tree builds, where its defines are foreseen)
+            device_scene.build_ahead("render.cl", accel, device, detail, instanced=a.instances is not None)
 
         def shading_arrays(acceleration) -> dict:
             """Per-slot and per-vertex arrays (split with the geometry when large)."""
@@ -209,8 +212,7 @@ class Renderer:
         self.rays_per_item = scene_on_device.rays_per_item
         with stage(self.timings, "copy to device"), scene_on_device.out_of_memory():
             self.tables = cl.Buffer(self.context, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR, hostbuf=tables)
-            self.kernels = scene_on_device.kernels(
-                "render.cl", RENDER_KERNELS, {"SURFACE_DETAIL": None} if a.detail is not None else None)
+            self.kernels = scene_on_device.kernels("render.cl", RENDER_KERNELS, detail)
         self._frame_buffers: dict[str, cl.Buffer] = {}
         self._frame_pixels = -1
         self._staging = None
