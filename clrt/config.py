@@ -44,7 +44,8 @@ MAX_LEAF_SIZE = 255
 
 #: Traversal stacks are sized from the tree's depth, rounded up to a multiple of
 #: this, so one compiled program serves every tree of about the same depth
-#: instead of one program per depth.
+#: instead of one program per depth (a binary walk's holds at least
+#: clrt.device.geometry.STACK_DEPTH levels: one program for most trees).
 STACK_SIZE_STEP = 16
 
 # --------------------------------------------------------------------------- rendering

@@ -184,6 +184,7 @@ def test_a_program_two_threads_ask_for_is_built_once(cpu_queue, monkeypatch, tmp
     the waiting one builds it itself."""
     import threading
     import time
+    import uuid
     context, _ = cpu_queue
     monkeypatch.setenv("CLRT_CACHE_DIR", str(tmp_path))
     compiled, real = [], program._compile
@@ -198,7 +199,8 @@ def test_a_program_two_threads_ask_for_is_built_once(cpu_queue, monkeypatch, tmp
     monkeypatch.setattr(program, "_compile", slow_compile)
     for fail_first in (False, True):
         compiled.clear()
-        defines = {"ACCEL_BVH": None, "VOLUME_SPHERE": None, "BVH_STACK_SIZE": 96 + fail_first}   # (a new key)
+        defines = {"ACCEL_BVH": None, "VOLUME_SPHERE": None, "BVH_STACK_SIZE": 96 + fail_first,
+                   "CLRT_TEST_KEY": uuid.uuid4().hex}        # (a key no build of this process had)
         got = {}
 
         def ask(name):
@@ -227,6 +229,7 @@ def test_a_renderer_builds_its_program_beside_its_tree(device, accel, monkeypatc
     boxes): the program its kernels come from is that one -- the foreseen
     defines are the scene's own -- and no thread builds it twice."""
     import threading
+    import warnings
     import clrt
     from clrt.device import scene as device_scene
     from clrt.scene import primitives
@@ -240,7 +243,9 @@ def test_a_renderer_builds_its_program_beside_its_tree(device, accel, monkeypatc
         return built
 
     monkeypatch.setattr(device_scene, "build_program", spy)
-    renderer = clrt.Renderer(primitives.torus(1.0, 0.3, 48, 24), device=device, accel=accel)
+    filters = list(warnings.filters)
+    renderer = clrt.Renderer(primitives.torus(1.0, 0.3, 48, 24), device=device, accel=accel, builder="device")
+    assert warnings.filters == filters, "two threads' builds left a warning filter behind"
     foreseen = device_scene.foreseen_defines(accel, device)
     used = renderer.device_scene.defines()
     if foreseen is None:
@@ -248,7 +253,8 @@ def test_a_renderer_builds_its_program_beside_its_tree(device, accel, monkeypatc
         assert [name for name, _, _ in asked] == ["MainThread"]
     else:
         assert foreseen == used
-        assert [name for name, _, _ in asked] == ["clrt-build-render.cl", "MainThread"]
+        assert sorted(name for name, _, _ in asked) == ["MainThread", "clrt-build-render.cl"]
         assert asked[0][1] == asked[1][1] and asked[0][2] is asked[1][2]
+    assert not [t for t in threading.enumerate() if t.name.startswith("clrt-build")], "waited for at the end"
     assert next(iter(renderer.kernels.values())).program.int_ptr == asked[-1][2].int_ptr
     assert renderer.render(Camera.framing(renderer.scene.bounds, 24, 16)).visible

@@ -141,6 +141,12 @@ _programs: dict[tuple, cl.Program] = {}
 # builds its program ahead, beside the tree: clrt.device.scene.build_ahead).
 _building: dict[tuple, threading.Event] = {}
 _building_lock = threading.Lock()
+# catch_warnings swaps the process's warning filters and puts them back:
+# builds in two threads at once would put back each other's (a filter left
+# behind), so clrt's builds take turns at it (a Renderer's build ahead of its
+# tree overlaps the tree's build, which compiles nothing on the host's first
+# build of a cold call).
+_warnings_lock = threading.Lock()
 
 
 @dataclass(frozen=True)
@@ -188,19 +194,18 @@ def build_program(context: cl.Context, entry: str, defines: dict | None = None,
     options = build_options(context, defines, extra_options)
     source = _program_source(entry, kernels)
     key = (context.int_ptr, source, tuple(options))
-    while True:
-        program = _programs.get(key)
-        if program is not None:
-            return program
-        with _building_lock:
-            program, building = _programs.get(key), _building.get(key)
-            if program is None and building is None:
-                building = _building[key] = threading.Event()
-                break                        # this thread builds it
-        if program is not None:
-            return program
-        building.wait()                      # (built there, or failed there: then tried here)
+    building = None
     try:
+        while True:
+            with _building_lock:
+                program, waiting = _programs.get(key), _building.get(key)
+                if program is None and waiting is None:
+                    building = _building[key] = threading.Event()    # this thread builds it
+            if program is not None:
+                return program
+            if building is not None:
+                break
+            waiting.wait()                   # (built there, or failed there: then tried here)
         start = time.perf_counter()
         program = _load_cached(context, source, options)
         from_disk, stored = program is not None, 0.0
@@ -212,16 +217,17 @@ def build_program(context: cl.Context, entry: str, defines: dict | None = None,
                                    stored, from_disk))
         _programs[key] = program
     finally:
-        with _building_lock:
-            del _building[key]
-        building.set()
+        if building is not None:   # (also where Ctrl-C came first: no one waits for it then)
+            with _building_lock:
+                del _building[key]
+            building.set()
     return program
 
 
 def _compile(context: cl.Context, entry: str, source: str, options: list[str]) -> tuple[cl.Program, float]:
     """The program compiled from ``source``, and the seconds its binary took to store."""
     try:
-        with warnings.catch_warnings():
+        with _warnings_lock, warnings.catch_warnings():
             # pyopencl turns any non-empty build log into a warning; the
             # log is only worth showing when the build fails.
             warnings.simplefilter("ignore", cl.CompilerWarning)
@@ -301,7 +307,7 @@ def _load_cached(context: cl.Context, source: str, options: list[str]) -> cl.Pro
     except OSError:
         return None
     try:
-        with warnings.catch_warnings():
+        with _warnings_lock, warnings.catch_warnings():
             warnings.simplefilter("ignore", cl.CompilerWarning)
             return cl.Program(context, context.devices, [binary]).build(" ".join(options))
     except (cl.Error, cl.RuntimeError):   # a stale or damaged binary: compile instead

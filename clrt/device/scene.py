@@ -71,32 +71,52 @@ def foreseen_defines(accel: str, device: str | None, instanced: bool = False) ->
     return traversal_defines(accel)      # (one ray a work-item: packets go with the wide walk)
 
 
-def build_ahead(entry: str, accel: str, device: str | None, extra: dict | None = None,
-                instanced: bool = False) -> threading.Thread | None:
-    """Start building the program whose entry file is ``entry`` for a scene of
-    ``accel`` on ``device`` (with the defines ``extra``) in a thread, where
-    its defines are foreseen; the thread, or None.  The scene's own build of
-    it then waits for this one (clrt.device.program.build_program) instead of
-    compiling it: a first call's compile runs beside its tree's build (a
-    GPU's compiler, 0.5 s for render.cl on the H200, beside the host's first
-    build; docs/benchmarks.md, "Time to the first image").  A failure here is
-    left to the scene's own build to report."""
+@contextlib.contextmanager
+def build_ahead(entry: str, accel: str, device: str | None, extra: dict | None = None, instanced: bool = False):
+    """A block during which the program whose entry file is ``entry``, for a
+    scene of ``accel`` on ``device`` (with the defines ``extra``), builds in a
+    thread where its defines are foreseen; the block's end waits for it.  The
+    scene's own build of it, within the block, waits for that one
+    (clrt.device.program.build_program) instead of compiling it: a first
+    call's compile runs beside its tree's build (a GPU's compiler, 0.5 s for
+    render.cl on the H200, beside the host's first build; docs/benchmarks.md,
+    "Time to the first image").  A failure there is left to the scene's own
+    build to report.  (Waited for at the end, so that no build of clrt's is
+    left running in the caller's code: a failed call's, or one of defines
+    that turned out otherwise.)"""
     defines = foreseen_defines(accel, device, instanced)
-    if defines is None:
-        return None
-    context = create_context(device)[0]
+    thread = None
+    if defines is not None:
+        context = create_context(device)[0]
 
-    def build() -> None:
-        try:
-            build_program(context, entry, {**defines, **(extra or {})})
-        except Exception:      # (the scene's own build of it raises it, named)
-            pass
+        def build() -> None:
+            try:
+                build_program(context, entry, {**defines, **(extra or {})})
+            except Exception:      # (the scene's own build of it raises it, named)
+                pass
 
-    # Not a daemon: a process that ends (or fails) meanwhile waits for the
-    # driver's compile rather than leave it in the middle of one.
-    thread = threading.Thread(target=build, name=f"clrt-build-{entry}")
-    thread.start()
-    return thread
+        thread = threading.Thread(target=build, name=f"clrt-build-{entry}")
+        with _thread_stack_lock:   # drivers compile with deep call chains (as clrt.device.warmup's thread)
+            previous = threading.stack_size(AHEAD_STACK_BYTES)
+            try:
+                thread.start()
+            finally:
+                threading.stack_size(previous)
+    try:
+        yield
+    finally:
+        if thread is not None:
+            thread.join()
+
+
+@contextlib.contextmanager
+def not_ahead(entry: str, accel: str, device: str | None, extra: dict | None = None, instanced: bool = False):
+    """build_ahead's place where nothing is built ahead (a scene the caller splits)."""
+    yield
+
+
+AHEAD_STACK_BYTES = 64 << 20
+_thread_stack_lock = threading.Lock()
 
 
 def mesh_corners(mesh: Mesh) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

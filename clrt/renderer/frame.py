@@ -184,8 +184,6 @@ class Renderer:
             self.arrays = flatten_scene(self.scene, pbr_textures=self._pbr_textures, device_shading=shades)
         a = self.arrays
         detail = {"SURFACE_DETAIL": None} if a.detail is not None else None
-        if max_buffer_bytes is None:   # (the program compiles while the tree builds, where its defines are foreseen)
-            device_scene.build_ahead("render.cl", accel, device, detail, instanced=a.instances is not None)
 
         def shading_arrays(acceleration) -> dict:
             """Per-slot and per-vertex arrays (split with the geometry when large)."""
@@ -200,19 +198,23 @@ class Renderer:
                       whole_bytes=tables.nbytes, reserve=MIN_FRAME_BYTES, max_buffer_bytes=max_buffer_bytes,
                       timings=self.timings)
         self.instances = a.instances   # placed meshes: a two-level scene (docs/instances.md), else None
-        if a.instances is not None:
-            self.device_scene = instanced_scene(a.instances, material_base=a.material_base, **upload)
-        elif a.shading is not None:
-            self.device_scene = self._shaded_on_device(upload)
-        else:
-            self.device_scene = DeviceScene(a.corners, bounds=a.bounds, origin=a.origin, **upload)
-        scene_on_device = self.device_scene
-        self.acceleration, self.geometry = scene_on_device.acceleration, scene_on_device.geometry
-        self.context, self.queue, self.device = scene_on_device.context, scene_on_device.queue, scene_on_device.device
-        self.rays_per_item = scene_on_device.rays_per_item
-        with stage(self.timings, "copy to device"), scene_on_device.out_of_memory():
-            self.tables = cl.Buffer(self.context, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR, hostbuf=tables)
-            self.kernels = scene_on_device.kernels("render.cl", RENDER_KERNELS, detail)
+        # The program compiles while the tree builds, where its defines are foreseen (build_ahead).
+        ahead = device_scene.build_ahead if max_buffer_bytes is None else device_scene.not_ahead
+        with ahead("render.cl", accel, device, detail, instanced=a.instances is not None):
+            if a.instances is not None:
+                self.device_scene = instanced_scene(a.instances, material_base=a.material_base, **upload)
+            elif a.shading is not None:
+                self.device_scene = self._shaded_on_device(upload)
+            else:
+                self.device_scene = DeviceScene(a.corners, bounds=a.bounds, origin=a.origin, **upload)
+            on_device = self.device_scene
+            self.acceleration, self.geometry = on_device.acceleration, on_device.geometry
+            self.context, self.queue, self.device = on_device.context, on_device.queue, on_device.device
+            self.rays_per_item = on_device.rays_per_item
+            with stage(self.timings, "copy to device"), on_device.out_of_memory():
+                self.tables = cl.Buffer(self.context, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR,
+                                        hostbuf=tables)
+                self.kernels = on_device.kernels("render.cl", RENDER_KERNELS, detail)
         self._frame_buffers: dict[str, cl.Buffer] = {}
         self._frame_pixels = -1
         self._staging = None
