@@ -29,6 +29,7 @@ from clrt.device.context import create_context, device_kind, device_label, error
 from clrt.device.geometry import WIDE_BVH_KINDS, DeviceGeometry, check_fits, packet_rays, traversal_defines
 from clrt.device.program import build_program
 from clrt.device.signature import typed_kernels
+from clrt.device.warmup import start_driver_thread
 from clrt.errors import DeviceMemoryError
 from clrt.scene.arrays import device_origin, triangle_corners
 from clrt.scene.mesh import Mesh
@@ -58,33 +59,35 @@ def first_builder(mesh, accel: str, builder: str, leaf_size: int, device: str | 
     return builder
 
 
-def foreseen_defines(accel: str, device: str | None, instanced: bool = False) -> dict | None:
+def foreseen_defines(accel: str, device: str | None, instanced: bool = False, split: bool = False) -> dict | None:
     """The defines a DeviceScene of ``accel`` on ``device`` will call for
     (DeviceScene.defines), known before its tree is built -- where they do not
     depend on the tree: not a CPU device's wide walk (its stack follows the
-    tree's depth), not a two-level scene's; else None.  (A scene too large for
-    one buffer per array, split into parts, is not foreseen: a program built
-    ahead for it is then not the one it asks for.)"""
+    tree's depth), not a two-level scene's, not a scene the caller ``split``
+    into parts; else None.  (A scene too large for one buffer per array,
+    split on its own, is not foreseen: a program built ahead for it is then
+    not the one it asks for.)"""
     kind = device_kind(create_context(device)[1].device)
-    if instanced or (accel == "box" and kind in WIDE_BVH_KINDS):
+    if instanced or split or (accel == "box" and kind in WIDE_BVH_KINDS):
         return None
     return traversal_defines(accel)      # (one ray a work-item: packets go with the wide walk)
 
 
 @contextlib.contextmanager
-def build_ahead(entry: str, accel: str, device: str | None, extra: dict | None = None, instanced: bool = False):
+def build_ahead(entry: str, accel: str, device: str | None, extra: dict | None = None, instanced: bool = False,
+                split: bool = False):
     """A block during which the program whose entry file is ``entry``, for a
     scene of ``accel`` on ``device`` (with the defines ``extra``), builds in a
-    thread where its defines are foreseen; the block's end waits for it.  The
-    scene's own build of it, within the block, waits for that one
-    (clrt.device.program.build_program) instead of compiling it: a first
-    call's compile runs beside its tree's build (a GPU's compiler, 0.5 s for
-    render.cl on the H200, beside the host's first build; docs/benchmarks.md,
-    "Time to the first image").  A failure there is left to the scene's own
-    build to report.  (Waited for at the end, so that no build of clrt's is
-    left running in the caller's code: a failed call's, or one of defines
-    that turned out otherwise.)"""
-    defines = foreseen_defines(accel, device, instanced)
+    thread where its defines are foreseen (foreseen_defines); the block's end
+    waits for it.  The scene's own build of it, within the block, waits for
+    that one (clrt.device.program.build_program) instead of compiling it: a
+    first call's compile runs beside its tree's build (a GPU's compiler, 0.5 s
+    for render.cl on the H200, beside the host's first build;
+    docs/benchmarks.md, "Time to the first image").  A failure there is left
+    to the scene's own build to report.  (Waited for at the end, so that no
+    build of clrt's is left running in the caller's code: a failed call's, or
+    one of defines that turned out otherwise.)"""
+    defines = foreseen_defines(accel, device, instanced, split)
     thread = None
     if defines is not None:
         context = create_context(device)[0]
@@ -95,28 +98,12 @@ def build_ahead(entry: str, accel: str, device: str | None, extra: dict | None =
             except Exception:      # (the scene's own build of it raises it, named)
                 pass
 
-        thread = threading.Thread(target=build, name=f"clrt-build-{entry}")
-        with _thread_stack_lock:   # drivers compile with deep call chains (as clrt.device.warmup's thread)
-            previous = threading.stack_size(AHEAD_STACK_BYTES)
-            try:
-                thread.start()
-            finally:
-                threading.stack_size(previous)
+        thread = start_driver_thread(threading.Thread(target=build, name=f"clrt-build-{entry}"))
     try:
         yield
     finally:
         if thread is not None:
             thread.join()
-
-
-@contextlib.contextmanager
-def not_ahead(entry: str, accel: str, device: str | None, extra: dict | None = None, instanced: bool = False):
-    """build_ahead's place where nothing is built ahead (a scene the caller splits)."""
-    yield
-
-
-AHEAD_STACK_BYTES = 64 << 20
-_thread_stack_lock = threading.Lock()
 
 
 def mesh_corners(mesh: Mesh) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

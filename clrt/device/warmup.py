@@ -99,14 +99,25 @@ def start(spec: str | None) -> None:
     if spec not in ("", "gpu") or _thread is not None or mode in ("off", "0", "no"):
         return
     make_context = mode != "driver" and (spec == "gpu" or not os.environ.get("PYOPENCL_CTX", "").strip())
-    # Drivers start up with deep call chains: the thread gets a main thread's
-    # stack, not the smaller default of new threads.
-    previous = threading.stack_size(64 << 20)
-    try:
-        _thread = threading.Thread(target=_warm, args=(make_context,), name="clrt-warmup", daemon=True)
-        _thread.start()
-    finally:
-        threading.stack_size(previous)
+    _thread = start_driver_thread(threading.Thread(target=_warm, args=(make_context,), name="clrt-warmup",
+                                                  daemon=True))
+
+
+# Drivers start up and compile with deep call chains: their threads get a main
+# thread's stack, not the smaller default of new threads.
+DRIVER_STACK_BYTES = 64 << 20
+_stack_lock = threading.Lock()      # (threading.stack_size is the process's: set and put back in turns)
+
+
+def start_driver_thread(thread: threading.Thread) -> threading.Thread:
+    """Start ``thread``, which calls into an OpenCL driver, with a driver's stack; return it."""
+    with _stack_lock:
+        previous = threading.stack_size(DRIVER_STACK_BYTES)
+        try:
+            thread.start()
+        finally:
+            threading.stack_size(previous)
+    return thread
 
 
 def wait() -> None:

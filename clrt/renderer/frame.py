@@ -199,8 +199,8 @@ class Renderer:
                       timings=self.timings)
         self.instances = a.instances   # placed meshes: a two-level scene (docs/instances.md), else None
         # The program compiles while the tree builds, where its defines are foreseen (build_ahead).
-        ahead = device_scene.build_ahead if max_buffer_bytes is None else device_scene.not_ahead
-        with ahead("render.cl", accel, device, detail, instanced=a.instances is not None):
+        with device_scene.build_ahead("render.cl", accel, device, detail, instanced=a.instances is not None,
+                                      split=max_buffer_bytes is not None):
             if a.instances is not None:
                 self.device_scene = instanced_scene(a.instances, material_base=a.material_base, **upload)
             elif a.shading is not None:
