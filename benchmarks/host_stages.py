@@ -13,11 +13,12 @@ arrays) -- and their device twins where the device has float64 (the
 vertices and faces uploaded, then split and normals made there:
 clrt.device.crease, which a Renderer on a GPU uses); then the whole calls,
 ``clrt.Accel(V, F)``, ``clrt.Renderer(scene)`` of one scene made before
-(warm: one untimed call of each first) and ``clrt.Renderer(V, F)`` (a new
-mesh every call, as a user's first call: its checks, bounds, scene and any
-crease split included), beside the build they contain
-(``Acceleration.build_ms``: the device build, its upload included) and
-``Renderer.timings``.  Last, issue 38's yardstick: the device build from
+(warm: one untimed call of each first) and ``clrt.Renderer((V, F))`` (new
+arrays every call, as a user's first call: its checks, bounds, scene and any
+crease split included; with ``--no-split``, of ``scene_from_mesh((V, F),
+flat)``), beside the build they contain (``Acceleration.build_ms``: the
+device build, its upload included), ``Renderer.timings`` and what the whole
+call spent beyond those stages.  Last, issue 38's yardstick: the device build from
 corners (warm, as ``benchmarks.build`` times it) and the corners' upload
 alone, and each whole call over their sum (the issue asks for at most 1.5).
 What a whole call spends beyond its build and the stages above is the rest
@@ -109,8 +110,8 @@ def stages(vertices, faces, device, repeat: int, split: bool, calls: bool = True
     for call, make, before in (
             ("Accel(V, F)", lambda: clrt.Accel((vertices, faces), device=device), None),
             ("Renderer(scene)", lambda: clrt.Renderer(scene, device=device), None),
-            ("Renderer(V, F)", lambda arrays: clrt.Renderer(scene_from_mesh(arrays, material), device=device),
-             fresh)):
+            ("Renderer(V, F)", lambda arrays: clrt.Renderer(arrays if split else scene_from_mesh(arrays, material),
+                                                            device=device), fresh)):
         made = make(before()) if before else make()   # programs built, driver warm
         del made
         out[f"{call}: whole call"], made = _median_ms(
@@ -118,6 +119,7 @@ def stages(vertices, faces, device, repeat: int, split: bool, calls: bool = True
         out[f"{call}: of it the build"] = made.acceleration.build_ms
         if call.startswith("Renderer"):
             out.update({f"{call}: {stage}": ms for stage, ms in made.timings.items()})
+            out[f"{call}: beyond its stages"] = out[f"{call}: whole call"] - sum(made.timings.values())
         del made
     if "cl_khr_fp64" in queue.device.extensions:   # issue 38's yardstick: build + upload of the corners
         build = out["device build from corners (warm)"] = _build_ms(context, queue, corners, repeat)

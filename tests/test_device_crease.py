@@ -235,6 +235,38 @@ def test_a_renderer_on_the_device_path_renders_the_hosts_image(material, device,
     assert _bits(renderer.arrays.corners) == _bits(host.arrays.corners)
 
 
+@pytest.mark.parametrize("given", ["arrays", "mesh"])
+def test_a_bare_meshs_tree_is_built_before_its_scene(given, device, monkeypatch):
+    """Renderer((V, F)) on the device path builds the tree first and frames
+    the scene by the box the build found: the host never finds the mesh's
+    bounds, and the scene, image and hits are those of the scene made first
+    (its bounds found by the host).  Some vertices unused, so that the box is
+    the used vertices' (as Mesh.bounds)."""
+    from clrt.scene import mesh as mesh_module
+    knot = load_mesh(REPO / "assets" / "meshes" / "knot.obj")
+    far = np.array([[40.0, -7.0, 3.0], [-9.0, 50.0, 1.0]], np.float32)     # used by no face
+    vertices = np.concatenate([knot.vertices, far]).astype(np.float32)
+    faces = np.ascontiguousarray(knot.faces, np.int32)
+    made_first = scene_from_mesh(Mesh.from_arrays(vertices, faces))
+    camera = Camera.framing(made_first.bounds, 64, 48)
+    _force_device_path(monkeypatch)
+    expected = clrt.Renderer(made_first, device=device).render(camera, hits=True)
+
+    def no_host_bounds(points):
+        raise AssertionError("the host found the mesh's bounds")
+
+    monkeypatch.setattr(mesh_module, "column_bounds", no_host_bounds)
+    source = (vertices, faces) if given == "arrays" else Mesh.from_arrays(vertices, faces)
+    renderer = clrt.Renderer(source, device=device)
+    assert renderer.arrays.shading is not None and renderer.timings["acceleration build"] > 0
+    assert np.array_equal(renderer.scene.bounds, made_first.bounds)
+    assert renderer.scene.camera == made_first.camera and renderer.scene.lights == made_first.lights
+    frame = renderer.render(camera, hits=True)
+    for field in ("image", "prim", "t"):
+        assert np.array_equal(getattr(frame, field), getattr(expected, field)), field
+    assert np.array_equal(renderer.render().image, clrt.Renderer(made_first, device=device).render().image)
+
+
 def test_scenes_the_device_does_not_shade_take_the_host_path(device, monkeypatch):
     """Several objects, authored normals, corner colours, placed meshes: the
     host's arrays, on the device path as elsewhere."""

@@ -147,7 +147,8 @@ class DeviceScene:
     ``timings``: where the stages' wall times go ("acceleration build",
     "copy to device"), if given.  ``acceleration``: one built already (a
     two-level scene's, clrt.device.instances: ``corners`` are then its
-    meshes' corners, mesh after mesh).  ``uploaded``: a Mesh's vertices and
+    meshes' corners, mesh after mesh; or a Mesh's, built from its vertices
+    and faces on the device: the Renderer's _tree_first).  ``uploaded``: a Mesh's vertices and
     faces on the device already (clrt.device.crease.UploadedMesh: the
     Renderer's, which the device shades too), for the build that gathers them.
 
@@ -165,8 +166,9 @@ class DeviceScene:
         with stage(timings, "acceleration build"):
             if acceleration is None and uploaded is None and max_buffer_bytes is None:   # (else decided)
                 builder = first_builder(corners, accel, builder, leaf_size, device)
-            if isinstance(corners, Mesh) and not (acceleration is None and max_buffer_bytes is None
-                                                  and gathers_on_device(accel, builder, device)):
+            gathered = (getattr(acceleration, "frame", None) is not None if acceleration is not None   # from a Mesh
+                        else max_buffer_bytes is None and gathers_on_device(accel, builder, device))
+            if isinstance(corners, Mesh) and not gathered:
                 corners, bounds, origin = mesh_corners(corners)
             self.acceleration = (acceleration if acceleration is not None
                                  else build_acceleration(corners, accel, builder, leaf_size, device,

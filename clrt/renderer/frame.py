@@ -16,6 +16,7 @@ Tiling and the memory fallback: tiles.py; page-locked images: clrt/device/pinned
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import inspect
 import threading
@@ -36,7 +37,9 @@ from clrt.device import scene as device_scene
 from clrt.device.args import camera_value
 from clrt.device.context import create_context
 from clrt.device.context import format_bytes as _size
-from clrt.device.crease import shade_on_device, upload_mesh
+from clrt.accel.bvh import Acceleration
+from clrt.device.acceleration import build_acceleration
+from clrt.device.crease import UploadedMesh, shade_on_device, upload_mesh
 from clrt.device.geometry import replace_buffer
 from clrt.device.instances import instanced_scene, move_instances, refit_meshes
 from clrt.device.pinned import PinnedPool
@@ -49,6 +52,8 @@ from clrt.renderer.path import PathTracer, tone_map
 from clrt.renderer.tiles import TileLimits, run_tiles
 from clrt.renderer.visible import nothing_visible
 from clrt.scene.arrays import flatten_scene, light_records, moved_meshes, uses_pbr_textures
+from clrt.scene.instances import is_instance_list
+from clrt.scene.mesh import Mesh
 from clrt.scene.placed import moved_scene
 from clrt.scene.scene import Camera, Scene, far_triangle
 from clrt.scene.render_setup import render_frame
@@ -114,6 +119,34 @@ def _own_copy(scene: Scene) -> Scene:
     return dataclasses.replace(scene, objects=list(scene.objects), lights=list(scene.lights))
 
 
+def _bare_mesh(source) -> Mesh | None:
+    """``source``'s Mesh where it is a bare mesh -- a Mesh or ``(vertices,
+    faces)`` (checked here, as the scene would check it), without authored
+    normals or corner colours, not a crease split -- whose scene is its default
+    framing, light and material; else None."""
+    if isinstance(source, Mesh):
+        mesh = source
+    elif isinstance(source, (tuple, list)) and len(source) == 2 and not is_instance_list(source):
+        mesh = Mesh.from_arrays(*source)
+    else:
+        return None
+    return mesh if mesh.normals is None and mesh.colors is None and mesh.crease_split_of is None else None
+
+
+@dataclass
+class _TreeFirst:
+    """A bare mesh, its vertices and faces on the device and the tree built
+    from them, before its scene was made (Renderer._tree_first)."""
+
+    mesh: Mesh
+    uploaded: UploadedMesh
+    acceleration: Acceleration
+
+    def release(self) -> None:
+        """Let go of the uploaded mesh (the tree's buffers go with the last reference)."""
+        self.uploaded.release()
+
+
 class Renderer:
     """A scene uploaded to one OpenCL device, ready to render frames.
 
@@ -169,42 +202,54 @@ class Renderer:
         self.timings: dict[str, float] = {}
         self._lock = threading.RLock()
         self._followers = weakref.WeakSet()   # Accel.from_renderer's queries, kept on this scene
-        with stage(self.timings, "initialisation"):
-            self.scene = _own_copy(as_scene(scene))   # or a mesh, a mesh or scene file: what clrt.render takes
-            # The path tracer's textures (emission, metallic-roughness, normal
-            # maps) for scenes made for it; Whitted reads base colours only.
-            self._pbr_textures = self.scene.integrator == "path"
-            # Where a GPU builds the tree from the mesh, it makes a plain
-            # mesh's shading arrays too: no crease split on the host (clrt.device.crease)
-            # -- but for a machine's first build, on the host (clrt.device.first_build).
-            objects = self.scene.objects
-            if max_buffer_bytes is None and len(objects) == 1 and not self.scene.instanced:
-                builder = device_scene.first_builder(objects[0].mesh, accel, builder, leaf_size, device)
-            shades = max_buffer_bytes is None and device_scene.gathers_on_device(accel, builder, device)
-            self.arrays = flatten_scene(self.scene, pbr_textures=self._pbr_textures, device_shading=shades)
-        a = self.arrays
-        detail = {"SURFACE_DETAIL": None} if a.detail is not None else None
+        with contextlib.ExitStack() as ahead:
+            # A bare mesh that a GPU builds and shades: its tree first, so that
+            # the scene's framing and lights read the box the build found.
+            first = self._tree_first(scene, accel, builder, leaf_size, device, ahead) \
+                if max_buffer_bytes is None else None
+            with stage(self.timings, "initialisation"):
+                self.scene = _own_copy(as_scene(scene if first is None else first.mesh))
+                # The path tracer's textures (emission, metallic-roughness, normal
+                # maps) for scenes made for it; Whitted reads base colours only.
+                self._pbr_textures = self.scene.integrator == "path"
+                # Where a GPU builds the tree from the mesh, it makes a plain
+                # mesh's shading arrays too: no crease split on the host (clrt.device.crease)
+                # -- but for a machine's first build, on the host (clrt.device.first_build).
+                objects = self.scene.objects
+                if first is not None:
+                    builder = first.acceleration.builder
+                elif max_buffer_bytes is None and len(objects) == 1 and not self.scene.instanced:
+                    builder = device_scene.first_builder(objects[0].mesh, accel, builder, leaf_size, device)
+                shades = max_buffer_bytes is None and device_scene.gathers_on_device(accel, builder, device)
+                self.arrays = flatten_scene(self.scene, pbr_textures=self._pbr_textures, device_shading=shades)
+            a = self.arrays
+            if first is not None and (a.shading is None or a.shading.mesh is not first.mesh):
+                first.release()   # (a bare mesh's scene is shaded on the device: not met)
+                first = None
+            detail = {"SURFACE_DETAIL": None} if a.detail is not None else None
 
-        def shading_arrays(acceleration) -> dict:
-            """Per-slot and per-vertex arrays (split with the geometry when large)."""
-            slots = acceleration.slot_order()   # shading data in slot order
-            split = {"tri_info": a.tri_info[slots], "vertex_normals": a.vertex_normals}
-            if a.detail is not None:   # textures or colours: the -DSURFACE_DETAIL program (texture.cl)
-                split.update(tri_detail=a.detail.tri_detail[slots], texels=a.detail.texels)
-            return split
+            def shading_arrays(acceleration) -> dict:
+                """Per-slot and per-vertex arrays (split with the geometry when large)."""
+                slots = acceleration.slot_order()   # shading data in slot order
+                split = {"tri_info": a.tri_info[slots], "vertex_normals": a.vertex_normals}
+                if a.detail is not None:   # textures or colours: the -DSURFACE_DETAIL program (texture.cl)
+                    split.update(tri_detail=a.detail.tri_detail[slots], texels=a.detail.texels)
+                return split
 
-        tables = self._tables()
-        upload = dict(accel=accel, builder=builder, leaf_size=leaf_size, device=device, extra=shading_arrays,
-                      whole_bytes=tables.nbytes, reserve=MIN_FRAME_BYTES, max_buffer_bytes=max_buffer_bytes,
-                      timings=self.timings)
-        self.instances = a.instances   # placed meshes: a two-level scene (docs/instances.md), else None
-        # The program compiles while the tree builds, where its defines are foreseen (build_ahead).
-        with device_scene.build_ahead("render.cl", accel, device, detail, instanced=a.instances is not None,
-                                      split=max_buffer_bytes is not None):
+            tables = self._tables()
+            upload = dict(accel=accel, builder=builder, leaf_size=leaf_size, device=device, extra=shading_arrays,
+                          whole_bytes=tables.nbytes, reserve=MIN_FRAME_BYTES, max_buffer_bytes=max_buffer_bytes,
+                          timings=self.timings)
+            self.instances = a.instances   # placed meshes: a two-level scene (docs/instances.md), else None
+            # The program compiles while the tree builds, where its defines are foreseen (build_ahead).
+            if first is None:
+                ahead.enter_context(device_scene.build_ahead("render.cl", accel, device, detail,
+                                                             instanced=a.instances is not None,
+                                                             split=max_buffer_bytes is not None))
             if a.instances is not None:
                 self.device_scene = instanced_scene(a.instances, material_base=a.material_base, **upload)
             elif a.shading is not None:
-                self.device_scene = self._shaded_on_device(upload)
+                self.device_scene = self._shaded_on_device(upload, first)
             else:
                 self.device_scene = DeviceScene(a.corners, bounds=a.bounds, origin=a.origin, **upload)
             on_device = self.device_scene
@@ -225,16 +270,49 @@ class Renderer:
             k.get_work_group_info(cl.kernel_work_group_info.WORK_GROUP_SIZE, self.queue.device)
             for k in self.kernels.values())
 
-    def _shaded_on_device(self, upload: dict) -> DeviceScene:
+    def _tree_first(self, source, accel: str, builder: str, leaf_size: int, device: str | None,
+                    ahead: contextlib.ExitStack) -> "_TreeFirst | None":
+        """Where ``source`` is a bare mesh (:func:`_bare_mesh`) whose tree the
+        device builds from its vertices and faces and whose shading it makes:
+        the mesh uploaded and its tree built before its scene is made (with
+        render.cl building beside it: build_ahead, entered on ``ahead``), its
+        bounds those the build found -- the host's Mesh.bounds, which the
+        scene's framing and light would ask for first, is not computed (3-6
+        ms at 1M triangles on the H200's hosts; docs/benchmarks.md).  Else None."""
+        with stage(self.timings, "initialisation"):
+            mesh = _bare_mesh(source)
+            if mesh is None:
+                return None
+            builder = device_scene.first_builder(mesh, accel, builder, leaf_size, device)
+            if not device_scene.gathers_on_device(accel, builder, device):
+                return None
+        ahead.enter_context(device_scene.build_ahead("render.cl", accel, device))
+        context, queue = create_context(device)
+        with stage(self.timings, "acceleration build"):
+            uploaded = upload_mesh(context, queue, mesh)
+            try:
+                acceleration = build_acceleration(mesh, accel, builder, leaf_size, device, uploaded=uploaded)
+            except BaseException:
+                uploaded.release()
+                raise
+        lo, hi, _ = acceleration.frame
+        mesh.__dict__.setdefault("_bounds", np.array([lo, hi]))   # the numbers Mesh.bounds would find
+        return _TreeFirst(mesh, uploaded, acceleration)
+
+    def _shaded_on_device(self, upload: dict, first: "_TreeFirst | None") -> DeviceScene:
         """The DeviceScene of a one-object scene whose shading arrays the device
         makes (SceneArrays.shading): the mesh's vertices and faces uploaded
-        once, the tree built and the corners gathered from them, then the
+        once, the tree built and the corners gathered from them (or ``first``'s,
+        built before the scene: _tree_first), then the
         crease split, the vertex normals and the per-slot TriangleInfo made
         there (clrt.device.crease) -- bit for bit the host's arrays."""
         source = self.arrays.shading
         context, queue = create_context(upload["device"])
-        with stage(self.timings, "acceleration build"):
-            uploaded = upload_mesh(context, queue, source.mesh)
+        if first is not None:
+            uploaded = first.uploaded
+        else:
+            with stage(self.timings, "acceleration build"):
+                uploaded = upload_mesh(context, queue, source.mesh)
 
         def shading_arrays(acceleration) -> dict:
             try:
@@ -245,6 +323,7 @@ class Renderer:
             return made.extra()
 
         return DeviceScene(source.mesh, bounds=None, origin=None, uploaded=uploaded,
+                           acceleration=None if first is None else first.acceleration,
                            **{**upload, "extra": shading_arrays})
 
     @property
