@@ -98,11 +98,18 @@ inline void answer_rays(const Geometry* g, const RayInput* in, uint first, uint 
         if (make_ray_packet(&lanes, &shear, &volume, &packet)) {
             answer_ray_packet(g, &packet, lanes.tmax, query, cull, hits);
         } else {
+            ShearRayTable shears;
+            VolumeRayTable volumes;
+            float tmin[RAY_PACKETS], tmax[RAY_PACKETS];
+            shear_ray_table(&shear, &shears);
+            volume_ray_table(&volume, &volumes);
+            vstore8(lanes.tmin, 0, tmin);
+            vstore8(lanes.tmax, 0, tmax);
             for (int k = 0; k < RAY_PACKETS; ++k) {
-                const ShearedRay r = sheared_ray_lane(&shear, origins[k], k);
-                const VolumeRay vr = volume_ray_lane(&volume, origins[k], dirs[k], k);
+                const ShearedRay r = sheared_ray_lane(&shears, origins[k], k);
+                const VolumeRay vr = volume_ray_lane(&volumes, origins[k], dirs[k], k);
                 HitSink options = query_options(cull);
-                hits[k] = walk_ray(g, &r, &vr, lanes.tmin[k], lanes.tmax[k], query, &options);
+                hits[k] = walk_ray(g, &r, &vr, tmin[k], tmax[k], query, &options);
             }
         }
         for (int k = 0; k < RAY_PACKETS; ++k)

@@ -272,13 +272,33 @@ inline ShearRayLanes shear_ray_lanes(float8 dx, float8 dy, float8 dz)
     return s;
 }
 
-// Lane k of `s` as shear_ray(origin, dir, false, tmax) would give it.
-inline ShearedRay sheared_ray_lane(const ShearRayLanes* s, float3 origin, int k)
+// ShearRayLanes stored as arrays, a row per field, from which each ray's
+// ShearedRay is read by plain loads (sheared_ray_lane).  Taking lane k of the
+// float8 values themselves, k known only at run time, made PoCL copy every
+// vector to the stack again for each ray: rays that miss the scene 6-11 %
+// slower (docs/benchmark-log.md).
+typedef struct {
+    int axis[3][RAY_PACKETS];       // kx, ky, kz
+    float shear[3][RAY_PACKETS];
+} ShearRayTable;
+
+inline void shear_ray_table(const ShearRayLanes* s, ShearRayTable* t)
+{
+    vstore8(s->kx, 0, t->axis[0]);
+    vstore8(s->ky, 0, t->axis[1]);
+    vstore8(s->kz, 0, t->axis[2]);
+    vstore8(s->shear_x, 0, t->shear[0]);
+    vstore8(s->shear_y, 0, t->shear[1]);
+    vstore8(s->shear_z, 0, t->shear[2]);
+}
+
+// Ray k of `t` as shear_ray(origin, dir, false, tmax) would give it.
+inline ShearedRay sheared_ray_lane(const ShearRayTable* t, float3 origin, int k)
 {
     ShearedRay r;
     r.origin = (float4)(origin, 0.0f);
-    r.perm = (uint4)((uint)s->kx[k], (uint)s->ky[k], (uint)s->kz[k], 3u);
-    r.shear = (float3)(s->shear_x[k], s->shear_y[k], s->shear_z[k]);
+    r.perm = (uint4)((uint)t->axis[0][k], (uint)t->axis[1][k], (uint)t->axis[2][k], 3u);
+    r.shear = (float3)(t->shear[0][k], t->shear[1][k], t->shear[2][k]);
     r.end = INFINITY;
     r.spawned = 0;
     return r;

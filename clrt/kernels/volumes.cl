@@ -237,15 +237,34 @@ inline VolumeRayLanes volume_ray_lanes(float8 ox, float8 oy, float8 oz, float8 d
     return v;
 }
 
-// Lane k of `v` as volume_ray(origin, dir, reach) would give it.
-inline VolumeRay volume_ray_lane(const VolumeRayLanes* v, float3 origin, float3 dir, int k)
+// VolumeRayLanes stored as arrays, a row per axis, for plain loads of ray k
+// (volume_ray_lane; triangle.cl's ShearRayTable says why).
+typedef struct {
+    float inv[3][RAY_PACKETS], lo[3][RAY_PACKETS], hi[3][RAY_PACKETS];
+} VolumeRayTable;
+
+inline void volume_ray_table(const VolumeRayLanes* v, VolumeRayTable* t)
+{
+    vstore8(v->inv_x, 0, t->inv[0]);
+    vstore8(v->inv_y, 0, t->inv[1]);
+    vstore8(v->inv_z, 0, t->inv[2]);
+    vstore8(v->lo_x, 0, t->lo[0]);
+    vstore8(v->lo_y, 0, t->lo[1]);
+    vstore8(v->lo_z, 0, t->lo[2]);
+    vstore8(v->hi_x, 0, t->hi[0]);
+    vstore8(v->hi_y, 0, t->hi[1]);
+    vstore8(v->hi_z, 0, t->hi[2]);
+}
+
+// Ray k of `t` as volume_ray(origin, dir, reach) would give it.
+inline VolumeRay volume_ray_lane(const VolumeRayTable* t, float3 origin, float3 dir, int k)
 {
     VolumeRay r;
     r.origin = origin;
     r.dir = dir;
-    r.inv_dir = (float3)(v->inv_x[k], v->inv_y[k], v->inv_z[k]);
-    r.lo_shift = (float3)(v->lo_x[k], v->lo_y[k], v->lo_z[k]);
-    r.hi_shift = (float3)(v->hi_x[k], v->hi_y[k], v->hi_z[k]);
+    r.inv_dir = (float3)(t->inv[0][k], t->inv[1][k], t->inv[2][k]);
+    r.lo_shift = (float3)(t->lo[0][k], t->lo[1][k], t->lo[2][k]);
+    r.hi_shift = (float3)(t->hi[0][k], t->hi[1][k], t->hi[2][k]);
     r.oblique = all(isfinite(r.lo_shift)) && all(isfinite(r.hi_shift));
     return r;
 }
