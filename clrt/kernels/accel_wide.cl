@@ -56,11 +56,10 @@ inline bool visit_packet(const Geometry* g, const ShearedRay* r, int packet, flo
 // take them in lane order and keep no distances: on PoCL that made any-hit
 // 3-9 % faster on random and diffuse rays (the binary walk's any-hit stays
 // near first: in its order it was up to 6 % slower on the H200).
-// Forced inline, as walk_ray is, into each caller: PoCL kept both as calls,
-// and answer_rays' eight rays paid a call each whose entry stored the ray's
-// float8 constants to the stack -- inlined, 1M random rays 2-4 % faster on
-// camel and bunny00, rays that miss the scene 12 % (docs/benchmark-log.md).
-__attribute__((always_inline))
+// Left a call (PoCL does not inline it): forced inline into the queries,
+// whose eight rays each pay its entry (the ray's float8 constants stored to
+// the stack), 1M random rays were 2-4 % faster, but PoCL's first compile of
+// a query 0.4-0.8 s longer (docs/benchmark-log.md, session 30).
 inline Hit walk_wide_tree(const Geometry* g, const ShearedRay* r, const VolumeRay* vr, const bool oblique,
                           float tmin, float tmax, const int query, HitSink* sink)
 {
@@ -134,7 +133,6 @@ inline Hit walk_wide_tree(const Geometry* g, const ShearedRay* r, const VolumeRa
 // Answer `query` for one ray set up by shear_ray and volume_ray (or their
 // lane forms: trace.cl's answer_rays sets up eight rays at a time); Hit.prim
 // is a slot.
-__attribute__((always_inline))
 inline Hit walk_ray(const Geometry* g, const ShearedRay* r, const VolumeRay* vr, float tmin, float tmax,
                     const int query, HitSink* sink)
 {
