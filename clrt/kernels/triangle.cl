@@ -275,8 +275,8 @@ inline ShearRayLanes shear_ray_lanes(float8 dx, float8 dy, float8 dz)
 // ShearRayLanes stored as arrays, a row per field, from which each ray's
 // ShearedRay is read by plain loads (sheared_ray_lane).  Taking lane k of the
 // float8 values themselves, k known only at run time, made PoCL copy every
-// vector to the stack again for each ray: rays that miss the scene 6-11 %
-// slower (docs/benchmark-log.md).
+// vector to the stack again for each ray: 1M random rays 2-4 % slower, rays
+// that miss the scene 6-9 % (docs/benchmark-log.md, session 30).
 typedef struct {
     int axis[3][RAY_PACKETS];       // kx, ky, kz
     float shear[3][RAY_PACKETS];
