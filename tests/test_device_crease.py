@@ -188,7 +188,7 @@ def _force_device_path(monkeypatch):
     """The Renderer's GPU path on this device: the tree built from the mesh,
     the shading arrays made by the device (as on a GPU)."""
     from clrt.device import geometry
-    monkeypatch.setattr(device_scene, "gathers_on_device", lambda accel, builder, device: True)
+    monkeypatch.setattr(device_scene, "shades_on_device", lambda accel, builder, device: True)
     monkeypatch.setattr(geometry, "WIDE_BVH_KINDS", ())
     monkeypatch.setattr(geometry, "RAY_PACKET_KINDS", ())
 
@@ -205,7 +205,7 @@ def test_a_renderer_on_the_device_path_renders_the_hosts_image(material, device,
     scene = scene_from_mesh(mesh, material)
     camera = Camera.framing(scene.bounds, 64, 48)
     with monkeypatch.context() as m:    # the host's path on any device (a GPU's own would take the device's)
-        m.setattr(device_scene, "gathers_on_device", lambda accel, builder, device: False)
+        m.setattr(device_scene, "shades_on_device", lambda accel, builder, device: False)
         host = clrt.Renderer(scene, device=device)
     assert host.arrays.shading is None
     expected = host.render(camera, hits=True)

@@ -1,6 +1,7 @@
 """A mesh's corners gathered on the device by its build (build_frame.cl), as
-Accel does on GPUs (clrt.device.scene.gathers_on_device), against the host's
-gather on the same device with the GPU's choices (binary rows, no packets): the device frame, the box,
+Accel does (clrt.device.scene.gathers_on_device), against the host's gather
+on the same device, with the GPU's choices (binary rows, no packets) and with
+the device's own (a CPU's wide BVH and packets): the device frame, the box,
 the uploaded triangles, the tree and every answer are the host path's, bit for
 bit -- near the origin, far from it (a moved frame), with vertices no face
 uses (outside the box), and so spread that the reach measures the corners."""
@@ -33,11 +34,13 @@ def _read(queue, buffer):
     return out
 
 
-@pytest.mark.parametrize("name", ["torus", "far", "unused", "spread"])
-def test_corners_gathered_by_the_device_are_the_hosts(name, device, monkeypatch):
+@pytest.mark.parametrize("name, rows", [("torus", "binary"), ("far", "binary"), ("unused", "binary"),
+                                        ("spread", "binary"), ("torus", "own"), ("far", "own")])
+def test_corners_gathered_by_the_device_are_the_hosts(name, rows, device, monkeypatch):
     mesh = _meshes()[name]
-    monkeypatch.setattr(geometry, "WIDE_BVH_KINDS", ())
-    monkeypatch.setattr(geometry, "RAY_PACKET_KINDS", ())
+    if rows == "binary":
+        monkeypatch.setattr(geometry, "WIDE_BVH_KINDS", ())
+        monkeypatch.setattr(geometry, "RAY_PACKET_KINDS", ())
     monkeypatch.setattr(scene, "gathers_on_device", lambda accel, builder, device: False)
     host = clrt.Accel(mesh, builder="device", device=device)
     assert host.acceleration.frame is None
@@ -53,6 +56,9 @@ def test_corners_gathered_by_the_device_are_the_hosts(name, device, monkeypatch)
     used = {"tris": TRIANGLE_VERTS.itemsize * len(mesh.faces), "prim_ids": 4 * len(mesh.faces),
             "nodes": BVH_PAIR_NODE.itemsize * host.acceleration.num_rows}    # (the buffers may hold more)
     assert gathered.acceleration.num_rows == host.acceleration.num_rows
+    if host.geometry.wide is not None:      # (a CPU's own: the wide nodes and packets collapsed on the device)
+        assert gathered.geometry.wide.nbytes == host.geometry.wide.nbytes
+        used["wide"] = host.geometry.wide.nbytes
     for name, nbytes in used.items():
         a, b = (_read(queue, accel.geometry.buffers[name][0])[:nbytes] for accel in (host, gathered))
         assert len(a) == nbytes and np.array_equal(a, b), name

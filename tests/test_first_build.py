@@ -59,12 +59,13 @@ def _same_answers(accels, mesh, device, n=3000):
     assert (brute.prim >= 0).sum() > n // 10
 
 
-def _ready_file(fresh, device, mesh) -> str:
+def _ready_file(fresh, device, mesh, indexed: bool = True) -> str:
     """What says the builder is ready after a background build for ``mesh``:
-    PoCL's record, a GPU's program binary (the program for a Mesh's vertices
-    and faces, which a GPU gathers itself)."""
+    PoCL's record, a GPU's program binary -- of the program for a Mesh's
+    vertices and faces, which the device gathers itself (an Accel's; a
+    Renderer's on a GPU), else for its corners."""
     context = create_context(device)[0]
-    name = first_build.record_name(context, "box", len(mesh.faces), indexed=not on_pocl(context))
+    name = first_build.record_name(context, "box", len(mesh.faces), indexed=indexed)
     return str(fresh / name) if on_pocl(context) else str(fresh.parent / "programs" / f"{name}.bin")
 
 
@@ -83,6 +84,7 @@ def test_first_build_on_the_host_then_on_the_device(fresh, device, monkeypatch):
         [os.path.basename(_ready_file(fresh, device, mesh))] if _on_pocl(device) else [])   # no lock, no corners
     second = clrt.Accel(mesh, device=device)
     assert second.acceleration.builder == "device" and len(started) == 1
+    assert second.acceleration.frame is not None     # (its corners gathered by the device)
     _same_answers([first, second], mesh, device)
 
 
@@ -95,7 +97,7 @@ def test_a_first_render_on_the_host_is_the_later_renders_image(fresh, device):
     assert first.acceleration.builder == "sah"
     expected = first.render(camera, hits=True)
     first_build.wait(600)
-    assert os.path.exists(_ready_file(fresh, device, mesh))
+    assert os.path.exists(_ready_file(fresh, device, mesh, indexed=not _on_pocl(device)))   # (PoCL: corners)
     second = clrt.Renderer(mesh, device=device)
     assert second.acceleration.builder == "device"
     frame = second.render(camera, hits=True)
@@ -151,7 +153,7 @@ def test_a_failed_background_build_leaves_its_kind_to_the_call(fresh, device):
     left older than LOCK_SECONDS counts as a failure too."""
     mesh = primitives.torus(1.0, 0.3, 16, 8)
     context = create_context(device)[0]
-    name = first_build.record_name(context, "box", len(mesh.faces), indexed=not on_pocl(context))
+    name = first_build.record_name(context, "box", len(mesh.faces), indexed=True)
     fresh.mkdir(parents=True)
     lock = fresh / first_build.LOCK
     lock.write_text(name)
@@ -227,7 +229,7 @@ def test_a_gpus_first_render_shades_on_the_host_while_the_programs_compile(fresh
     from clrt.device.program import cache_dir
     monkeypatch.setattr(first_build, "on_pocl", lambda context: False)
     monkeypatch.setattr(first_build, "_names", {})
-    monkeypatch.setattr(device_scene, "gathers_on_device",
+    monkeypatch.setattr(device_scene, "shades_on_device",
                         lambda accel, builder, device: accel != "none" and builder in ("device", "auto"))
     monkeypatch.setattr(geometry, "WIDE_BVH_KINDS", ())
     monkeypatch.setattr(geometry, "RAY_PACKET_KINDS", ())

@@ -56,7 +56,7 @@ def build_acceleration(corners: np.ndarray, accel: str, builder: str, leaf_size:
     if builder == "auto" and accel != "none":
         builder = "device" if "cl_khr_fp64" in create_context(device)[1].device.extensions else HOST_DEFAULT_BUILDER
         # A machine's first builds: on the host while the builder compiles (first_build).
-        # (A Mesh is a GPU's, which clrt.device.scene.first_builder has decided.)
+        # (A Mesh's is decided before its upload: clrt.device.scene.first_builder.)
         if (builder == "device" and not statistics and not isinstance(corners, Mesh)
                 and first_build.builds_on_host_first(corners, accel, device, leaf_size)):
             builder = HOST_DEFAULT_BUILDER
@@ -68,8 +68,9 @@ def build_acceleration(corners: np.ndarray, accel: str, builder: str, leaf_size:
     try:
         bvh = build_on_device(context, queue, corners, volume=accel, leaf_size=leaf_size, keep_boxes=statistics,
                               uploaded=uploaded)
-        if first_build.applies(context) and isinstance(corners, np.ndarray):
-            first_build.record(context, accel, len(corners))
+        if first_build.applies(context):
+            indexed = isinstance(corners, Mesh)
+            first_build.record(context, accel, corners.num_triangles if indexed else len(corners), indexed)
     except (cl.Error, MemoryError) as exc:
         if not is_out_of_memory(exc):
             raise

@@ -1,6 +1,6 @@
 """The crease split and the smooth vertex normals, made by the device from a
 mesh's uploaded vertices and faces (kernels/crease.cl): where a GPU builds a
-Renderer's tree from the mesh (clrt.device.scene.gathers_on_device), the host
+Renderer's tree from the mesh (clrt.device.scene.shades_on_device), the host
 neither splits, nor sums normals, nor gathers per-slot data (issue 38: on the
 H200's host those took 172 ms of a 1M-triangle Renderer, against 8 ms of
 device build; the split alone 815 / 12,134 ms at 1M / 10M triangles, the

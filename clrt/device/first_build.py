@@ -14,17 +14,18 @@ for meshes of up to HOST_FIRST_MAX_TRIANGLES, and one background process
 (``python -m clrt.device.first_build_process``) makes it ready:
 
 - on PoCL, which compiles a kernel when it first runs it (for the grid widths
-  it runs with), by making the same build on the device as an Accel does,
-  then writing a record (``$CLRT_CACHE_DIR/first-build/NAME``: the
+  it runs with), by making the same build on the device as the call would
+  (from the corners, or a mesh's vertices and faces, which the device
+  gathers), then writing a record (``$CLRT_CACHE_DIR/first-build/NAME``: the
   program's identity and the size class of the mesh, which decides the
   kernels a build launches and the widths);
 - elsewhere by building the programs -- the builder's, and for a mesh's
   vertices and faces (which a GPU gathers itself) the crease split's that a
   Renderer runs after it -- whose binaries in clrt's cache are the record.
 
-A GPU's Mesh is decided once, before its upload (clrt.device.scene's
+A Mesh is decided once, before its upload (clrt.device.scene's
 first_builder, for Renderer and Accel): the host then gathers its corners
-and splits its creases, as for a CPU device.  Builds that find the record build
+(and on a GPU splits its creases, as a CPU device always does).  Builds that find the record build
 on the device, and so does every build once a background build has failed
 (``NAME.failed``, or its lock left older than LOCK_SECONDS): as before this
 rule, compiling in the call.  The trees differ; the answers do not (every
@@ -123,22 +124,23 @@ def _ready(context: cl.Context, folder: Path, name: str) -> bool:
     return (folder / name).exists() if on_pocl(context) else (cache_dir() / f"{name}.bin").exists()
 
 
-def record(context: cl.Context, volume: str, num_tris: int) -> None:
-    """Note that a device build of this kind ran here, its kernels now in
-    PoCL's cache (elsewhere the program's binary in clrt's is the record)."""
+def record(context: cl.Context, volume: str, num_tris: int, indexed: bool = False) -> None:
+    """Note that a device build of this kind ran here (``indexed``: from a
+    Mesh), its kernels now in PoCL's cache (elsewhere the program's binary
+    in clrt's is the record)."""
     if not on_pocl(context):
         return
     folder = _folder()
     try:
         folder.mkdir(parents=True, exist_ok=True)
-        (folder / record_name(context, volume, num_tris)).touch()
+        (folder / record_name(context, volume, num_tris, indexed)).touch()
     except OSError:    # a read-only cache: the rule stands aside (builds_on_host_first)
         pass
 
 
 def builds_on_host_first(corners, volume: str, device: str | None, leaf_size: int = DEFAULT_LEAF_SIZE) -> bool:
-    """For an "auto" build of ``corners`` ((F, 3, 3) or a Mesh, which a GPU
-    gathers itself) that would run on the device: true when it runs on the
+    """For an "auto" build of ``corners`` ((F, 3, 3) or a Mesh, which the
+    device gathers itself) that would run on the device: true when it runs on the
     host instead, the builder not yet ready here and a background build that
     makes it ready running (started now, or by another call or process)."""
     if volume == "none":             # (no tree: nothing to build)
@@ -148,7 +150,7 @@ def builds_on_host_first(corners, volume: str, device: str | None, leaf_size: in
     if not 0 < num_tris <= HOST_FIRST_MAX_TRIANGLES:
         return False
     context = create_context(device)[0]
-    if not applies(context) or (indexed and on_pocl(context)):   # (PoCL gathers on the host)
+    if not applies(context):
         return False
     _reap()
     folder, name = _folder(), record_name(context, volume, num_tris, indexed)
@@ -167,15 +169,19 @@ def builds_on_host_first(corners, volume: str, device: str | None, leaf_size: in
     return held_by != name and _start(context, folder, lock, name, start, corners, volume, leaf_size, device)
 
 
-def _build_command(folder: Path, corners: np.ndarray, volume: str, leaf_size: int) -> tuple[list, Path]:
-    """PoCL's background build: the corners in a file of the folder, the
-    command's arguments and that file."""
-    for stale in folder.glob("*.npy"):       # a background build killed before it read its corners
+def _build_command(folder: Path, corners, volume: str, leaf_size: int) -> tuple[list, Path]:
+    """PoCL's background build: the corners (a Mesh's vertices and faces,
+    .npz) in a file of the folder, the command's arguments and that file."""
+    for stale in [*folder.glob("*.npy"), *folder.glob("*.npz")]:   # a background build killed before it read them
         if time.time() - stale.stat().st_mtime > LOCK_SECONDS:
             remove(stale)
-    fd, path = tempfile.mkstemp(dir=folder, suffix=".npy")
+    indexed = isinstance(corners, Mesh)
+    fd, path = tempfile.mkstemp(dir=folder, suffix=".npz" if indexed else ".npy")
     with os.fdopen(fd, "wb") as fh:
-        np.save(fh, np.ascontiguousarray(corners, dtype=np.float32))
+        if indexed:
+            np.savez(fh, vertices=corners.vertices, faces=corners.faces)
+        else:
+            np.save(fh, np.ascontiguousarray(corners, dtype=np.float32))
     return ["build", path, volume, str(leaf_size)], Path(path)
 
 

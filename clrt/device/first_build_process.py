@@ -1,12 +1,13 @@
 """The background process of clrt.device.first_build: it makes the device
 builder ready on this machine, then the record says so.
 
-    python -m clrt.device.first_build_process build CORNERS.npy VOLUME LEAF_SIZE DEVICE NAME LOCK
+    python -m clrt.device.first_build_process build CORNERS.npy|MESH.npz VOLUME LEAF_SIZE DEVICE NAME LOCK
     python -m clrt.device.first_build_process compile VOLUME NUM_TRIS INDEXED|corners DEVICE NAME LOCK
 
-``build`` (PoCL): one device build of the corners, as an Accel of them makes
-it (PoCL compiles each kernel as it first runs it), then the record NAME
-beside LOCK; it removes CORNERS.npy as soon as it has read it.  ``compile``
+``build`` (PoCL): one device build of the corners or of a mesh's vertices
+and faces, as an Accel of them makes it (PoCL compiles each kernel as it
+first runs it), then the record NAME beside LOCK; it removes its input file
+as soon as it has read it.  ``compile``
 (devices whose binaries clrt keeps): the builder's program for NUM_TRIS
 triangles, and from a mesh's vertices and faces (``indexed``) the crease
 split's programs that a Renderer runs after it; their binaries in clrt's
@@ -31,15 +32,21 @@ from clrt.device.crease import crease_defines, crease_kernels
 from clrt.device.first_build import LOCK_SECONDS, remove
 from clrt.device.program import build_program, cache_dir
 from clrt.device.scene import DeviceScene
+from clrt.scene.mesh import Mesh
 
 
 def build(path: str, volume: str, leaf_size: str, device: str | None) -> None:
     try:
-        corners = np.load(path)
+        if path.endswith(".npz"):
+            with np.load(path) as mesh:
+                corners = Mesh.from_arrays(mesh["vertices"], mesh["faces"])
+        else:
+            corners = np.load(path)
     finally:
         remove(path)
-    # As an Accel of the corners: the build, and on CPU devices the wide
-    # BVH collapsed by the builder's program too (wide_build).
+    # As an Accel of the corners or of the mesh (gathered by the device): the
+    # build, and on CPU devices the wide BVH collapsed by the builder's
+    # program too (wide_build).
     scene = DeviceScene(corners, accel=volume, builder="device", leaf_size=int(leaf_size), device=device,
                         bounds=None, origin=None)
     scene.queue.finish()

@@ -36,23 +36,31 @@ from clrt.scene.mesh import Mesh
 
 
 def gathers_on_device(accel: str, builder: str, device: str | None) -> bool:
-    """Does a DeviceScene of a Mesh with these options upload its vertices and
-    faces, to be gathered into corners by the device's build?  Where a GPU
-    builds the tree: the host's gather and box (mesh_corners) took twice the
-    device build's time on the H200's host (docs/benchmarks.md).  A CPU
-    device's wide BVH is collapsed on the host from the corners (and the
-    host's gather costs it no copy across a bus)."""
+    """Does a DeviceScene of a Mesh (an Accel's, a Renderer's that the device
+    shades) with these options upload its vertices and faces, to be gathered
+    into corners by the device's build?  Where the device builds the tree: on
+    the H200's host the gather and box (mesh_corners) took twice the device
+    build's time; on PoCL (two cores) an ``Accel((V, F))`` took 2.5-8 % less
+    wall time than with the host's gather (docs/benchmark-log.md, session 31)."""
     if accel == "none" or builder not in ("device", "auto"):
         return False
-    queue = create_context(device)[1]
-    return device_kind(queue.device) == "gpu" and "cl_khr_fp64" in queue.device.extensions
+    return "cl_khr_fp64" in create_context(device)[1].device.extensions
+
+
+def shades_on_device(accel: str, builder: str, device: str | None) -> bool:
+    """Does a Renderer of one plain mesh with these options have the device
+    make its crease split, vertex normals and per-slot data (clrt.device.crease)
+    from the vertices and faces its build gathers?  On GPUs.  A CPU device
+    splits on the host: a scene keeps the host's split for its next Renderer,
+    and PoCL would compile the split's kernels in a first call."""
+    return gathers_on_device(accel, builder, device) and device_kind(create_context(device)[1].device) == "gpu"
 
 
 def first_builder(mesh, accel: str, builder: str, leaf_size: int, device: str | None) -> str:
     """``builder``, or the host's for an "auto" build of ``mesh`` (a Mesh, or
     None) that runs on the host while the device builder compiles
     (clrt.device.first_build) -- decided once, before anything is uploaded,
-    so that a GPU's host then gathers the corners and splits the creases."""
+    so that the host then gathers the corners (and splits the creases)."""
     if builder == "auto" and isinstance(mesh, Mesh) and first_build.builds_on_host_first(mesh, accel, device,
                                                                                          leaf_size):
         return HOST_DEFAULT_BUILDER

@@ -218,9 +218,10 @@ class Renderer:
                 objects = self.scene.objects
                 if first is not None:
                     builder = first.acceleration.builder
-                elif max_buffer_bytes is None and len(objects) == 1 and not self.scene.instanced:
+                elif (max_buffer_bytes is None and len(objects) == 1 and not self.scene.instanced
+                      and device_scene.shades_on_device(accel, builder, device)):   # (else built from corners)
                     builder = device_scene.first_builder(objects[0].mesh, accel, builder, leaf_size, device)
-                shades = max_buffer_bytes is None and device_scene.gathers_on_device(accel, builder, device)
+                shades = max_buffer_bytes is None and device_scene.shades_on_device(accel, builder, device)
                 self.arrays = flatten_scene(self.scene, pbr_textures=self._pbr_textures, device_shading=shades)
             a = self.arrays
             if first is not None and (a.shading is None or a.shading.mesh is not first.mesh):
@@ -281,10 +282,10 @@ class Renderer:
         ms at 1M triangles on the H200's hosts; docs/benchmarks.md).  Else None."""
         with stage(self.timings, "initialisation"):
             mesh = _bare_mesh(source)
-            if mesh is None:
+            if mesh is None or not device_scene.shades_on_device(accel, builder, device):
                 return None
             builder = device_scene.first_builder(mesh, accel, builder, leaf_size, device)
-            if not device_scene.gathers_on_device(accel, builder, device):
+            if not device_scene.shades_on_device(accel, builder, device):
                 return None
         ahead.enter_context(device_scene.build_ahead("render.cl", accel, device))
         context, queue = create_context(device)
