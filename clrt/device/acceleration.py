@@ -69,8 +69,7 @@ def build_acceleration(corners: np.ndarray, accel: str, builder: str, leaf_size:
         bvh = build_on_device(context, queue, corners, volume=accel, leaf_size=leaf_size, keep_boxes=statistics,
                               uploaded=uploaded)
         if first_build.applies(context):
-            indexed = isinstance(corners, Mesh)
-            first_build.record(context, accel, corners.num_triangles if indexed else len(corners), indexed)
+            first_build.record(context, accel, corners)
     except (cl.Error, MemoryError) as exc:
         if not is_out_of_memory(exc):
             raise

@@ -124,16 +124,24 @@ def _ready(context: cl.Context, folder: Path, name: str) -> bool:
     return (folder / name).exists() if on_pocl(context) else (cache_dir() / f"{name}.bin").exists()
 
 
-def record(context: cl.Context, volume: str, num_tris: int, indexed: bool = False) -> None:
-    """Note that a device build of this kind ran here (``indexed``: from a
-    Mesh), its kernels now in PoCL's cache (elsewhere the program's binary
-    in clrt's is the record)."""
+def _input_size(corners) -> tuple[int, bool]:
+    """(triangles, indexed) of a build's input: (F, 3, 3) corners, or a Mesh
+    (indexed: its vertices and faces, which the device gathers); 0 for anything else."""
+    if isinstance(corners, Mesh):
+        return corners.num_triangles, True
+    return (len(corners) if isinstance(corners, np.ndarray) else 0), False
+
+
+def record(context: cl.Context, volume: str, corners) -> None:
+    """Note that a device build of ``corners`` (as builds_on_host_first takes
+    them) ran here, its kernels now in PoCL's cache (elsewhere the program's
+    binary in clrt's is the record)."""
     if not on_pocl(context):
         return
     folder = _folder()
     try:
         folder.mkdir(parents=True, exist_ok=True)
-        (folder / record_name(context, volume, num_tris, indexed)).touch()
+        (folder / record_name(context, volume, *_input_size(corners))).touch()
     except OSError:    # a read-only cache: the rule stands aside (builds_on_host_first)
         pass
 
@@ -145,8 +153,7 @@ def builds_on_host_first(corners, volume: str, device: str | None, leaf_size: in
     makes it ready running (started now, or by another call or process)."""
     if volume == "none":             # (no tree: nothing to build)
         return False
-    indexed = isinstance(corners, Mesh)
-    num_tris = corners.num_triangles if indexed else len(corners) if isinstance(corners, np.ndarray) else 0
+    num_tris, indexed = _input_size(corners)
     if not 0 < num_tris <= HOST_FIRST_MAX_TRIANGLES:
         return False
     context = create_context(device)[0]
@@ -187,8 +194,8 @@ def _build_command(folder: Path, corners, volume: str, leaf_size: int) -> tuple[
 
 def _compile_command(folder: Path, corners, volume: str, leaf_size: int) -> tuple[list, None]:
     """The background build elsewhere: the programs compiled, no corners needed."""
-    num_tris = corners.num_triangles if isinstance(corners, Mesh) else len(corners)
-    return ["compile", volume, str(num_tris), "indexed" if isinstance(corners, Mesh) else "corners"], None
+    num_tris, indexed = _input_size(corners)
+    return ["compile", volume, str(num_tris), "indexed" if indexed else "corners"], None
 
 
 def _start(context: cl.Context, folder: Path, lock: Path, name: str, command_of, corners, volume: str,
