@@ -578,6 +578,113 @@ def test_the_hierarchy_numbers_nodes_by_place(queue):
     assert below.sum() == F - segments
 
 
+def _tree_faults(nodes, F: int) -> list:
+    """What is wrong with a BuildNode tree over F triangles, as sentences
+    (none: a tree): every node but the root the child of exactly one inner
+    node, which its parent names; the root's parent -1; counts that add up;
+    every node reached from the root (so no cycle either)."""
+    faults = []
+    root = 2 * F - 2
+    left, right = nodes["lo"][F:, 3].view(np.int32), nodes["hi"][F:, 3].view(np.int32)
+    children = np.concatenate([left, right])
+    if children.min() < 0 or children.max() > root:
+        return [f"children out of range: {children.min()} .. {children.max()}"]
+    times = np.bincount(children, minlength=2 * F - 1)
+    if times[root] or (times[:root] != 1).any():
+        faults.append(f"{np.count_nonzero(times[:root] == 0)} nodes no child, "
+                      f"{np.count_nonzero(times[:root] > 1)} a child more than once")
+    inner, parent, count = np.arange(F, 2 * F - 1), nodes["parent"], nodes["count"]
+    if parent[root] != -1 or (parent[left] != inner).any() or (parent[right] != inner).any():
+        faults.append("parents that do not name the node holding them")
+    if (count[:F] != 1).any() or (count[F:] != count[left] + count[right]).any():
+        faults.append("counts that do not add up")
+    level, reached = np.array([root]), 1
+    while len(level) and reached < 2 * F:
+        level = level[level >= F] - F
+        level = np.concatenate([left[level], right[level]])
+        reached += len(level)
+    if reached != 2 * F - 1:
+        faults.append(f"{reached} nodes reached from the root of {2 * F - 1}")
+    return faults
+
+
+def test_repeated_builds_keep_every_triangle(queue):
+    """The whole build of a GPU -- the SAH partition, PLOC up the linear BVH,
+    reinsertion and treelets, forced on where the device's defaults differ --
+    again and again on one mesh: every tree holds every triangle once.  The
+    work-groups of ploc_hierarchy, the treelets and reinsertion's refit hand
+    each other nodes within a launch; with fences of the work-group's scope
+    (fences.cl says why) an H100 lost triangles in 4-7 % of builds of a 1M-
+    triangle torus, and hung in others.  So on a GPU that torus, 40 builds
+    (the bug's odds of passing: under 10 %); elsewhere a 20,000-triangle one, twice."""
+    import pyopencl as cl
+
+    from clrt import layouts
+    from clrt.device import build_kernels
+    from clrt.device.context import device_kind
+    from clrt.scene import primitives
+    gpu = device_kind(queue[1].device) == "gpu"
+    mesh = primitives.torus(1.0, 0.35, 1000, 500) if gpu else primitives.torus(1.0, 0.35, 200, 50)
+    F = len(mesh.faces)
+    nodes = np.empty(2 * F - 1, layouts.BUILD_NODE)
+    for build in range(40 if gpu else 2):
+        bvh = build_on_device(*queue, mesh, partition=True, hierarchy=True, treelet_leaves=7,
+                              reinsert_iterations=4)
+        ws = build_kernels.workspaces[queue[0].int_ptr]
+        cl.enqueue_copy(queue[1], nodes, ws.buffers["nodes"], is_blocking=True)
+        prim_ids = bvh.read_prim_ids()
+        bvh.release()
+        assert _tree_faults(nodes, F) == [], build
+        assert np.array_equal(np.sort(prim_ids), np.arange(F)), build
+
+
+def test_kernels_fence_global_memory_through_fences_cl():
+    """No kernel orders global memory with mem_fence(CLK_GLOBAL_MEM_FENCE),
+    which NVIDIA's compiler scopes to the work-group (fences.cl says why and
+    what to use): every such fence is fences.cl's release_fence or
+    acquire_fence (the next test reads what they compile to)."""
+    import re
+    from importlib import resources
+
+    sources = [path for path in resources.files("clrt.kernels").iterdir() if path.name.endswith((".cl", ".h"))]
+    assert len(sources) > 30
+    found = [f"{path.name}:{number}" for path in sorted(sources, key=lambda p: p.name) if path.name != "fences.cl"
+             for number, line in enumerate(path.read_text().splitlines(), 1)
+             if re.search(r"(?<![a-z_])mem_fence\s*\(\s*CLK_GLOBAL", line.split("//")[0])]
+    assert found == []
+
+
+def test_work_groups_hand_over_through_device_wide_fences(queue):
+    """fences.cl: what one work-group of the builder hands another within a
+    launch (ploc_hierarchy's climb, the treelets' flags, reinsertion's and
+    the instances' refits) is fenced for the whole device -- on NVIDIA's
+    OpenCL, PTX membar.gl and never mem_fence's membar.cta, read from the
+    programs it compiles.  (The PTX is NVIDIA's: other devices' binaries
+    are not text; there it is skipped.)"""
+    import pyopencl as cl
+
+    from clrt.device.build import build_defines, default_build_program
+    from clrt.device.build_kernels import top_level_kernels
+    from clrt.device.context import device_kind
+    from clrt.device.program import build_program
+    context = queue[0]
+    kind = device_kind(context.devices[0])
+    entry, defines, kernels = default_build_program(context, "box", 100_000, indexed=True)
+    programs = {"builder": (build_program(context, entry, defines, kernels=kernels),
+                            ("ploc_hierarchy", "treelet_restructure", "reinsert_refit")),
+                "top level": (build_program(context, "build_bvh.cl", build_defines("box", kind),
+                                            kernels=top_level_kernels(kind)), ("lbvh_fit",))}
+    for name, (program, handing_over) in programs.items():
+        binary = program.get_info(cl.program_info.BINARIES)[0]
+        if b".entry" not in binary:
+            pytest.skip("the fences are read from NVIDIA's PTX")
+        ptx = binary.decode()
+        assert "membar.cta" not in ptx, name
+        entries = {e.split("(")[0].split()[-1]: e for e in ptx.split(".entry")[1:]}
+        for kernel in handing_over:
+            assert "membar.gl" in entries[kernel], (name, kernel)
+
+
 def _hierarchy_reference(boxes_lo, boxes_hi, keys, radius, keep=16):
     """PLOC up the linear BVH as build_hierarchy.cl describes it, in plain
     Python over the sorted places: the linear BVH of (key, place) split at the

@@ -48,6 +48,7 @@
 #define CLRT_BUILD_HIERARCHY_CL
 
 #include "layouts.h"
+#include "fences.cl"
 #include "build_state.cl"
 #include "build_partition.cl"
 #include "build_ploc.cl"
@@ -287,8 +288,10 @@ inline void merge_node(volatile global BuildCluster* clusters, const global uint
             spare_numbers[first + lane] = s->numbers[used + lane];
     }
     // Everything written before the node's work-item passes its range on
-    // (the exchange in ploc_hierarchy's climb), and before local memory is reused.
-    mem_fence(CLK_GLOBAL_MEM_FENCE);
+    // (the exchange in ploc_hierarchy's climb) -- each writer's own fence,
+    // ordered before that work-item's exchange by the team's sync --, and
+    // before local memory is reused.
+    release_fence();
     TEAM_SYNC();
 }
 
@@ -362,7 +365,7 @@ void ploc_hierarchy(volatile global BuildCluster* clusters, const global uint* k
             if (other < 0) {
                 active = false;          // the sibling's work-item goes on
             } else {
-                mem_fence(CLK_GLOBAL_MEM_FENCE);    // the sibling's writes, read after its exchange
+                acquire_fence();    // the sibling's writes, read after its exchange
                 split = at + 1;
                 if (left_child)
                     last = other;

@@ -27,6 +27,7 @@
 #define CLRT_BUILD_INSTANCES_CL
 
 #include "layouts.h"
+#include "fences.cl"
 #include "build_state.cl"
 #include "build_morton.cl"
 #include "build_fit.cl"
@@ -364,10 +365,10 @@ void lbvh_fit(const global int2* children, const global int* parents, const glob
         return;
     }
     for (int node = parents[n - 1 + leaf]; node >= 0; node = parents[node]) {
-        mem_fence(CLK_GLOBAL_MEM_FENCE);            // this child's box before its arrival
+        release_fence();                            // this child's box before its arrival
         if (atomic_inc(arrivals + node) == 0u)
             return;                                 // the sibling's work-item goes on
-        mem_fence(CLK_GLOBAL_MEM_FENCE);
+        acquire_fence();
         const int2 child = children[node];
         const volatile global float4* shared = boxes;
         const int l = child.x >= 0 ? child.x : n - 1 + ~child.x, r = child.y >= 0 ? child.y : n - 1 + ~child.y;

@@ -44,6 +44,7 @@
 #define CLRT_BUILD_REINSERT_CL
 
 #include "layouts.h"
+#include "fences.cl"
 #include "build_treelet.cl"
 
 #if !defined(REINSERT_STACK) || !defined(REINSERT_CLIMB)
@@ -289,12 +290,13 @@ void reinsert_refit(global BuildNode* nodes, global int* heights, global uint* a
     if (i >= num_tris)
         return;
     shared_nodes shared = nodes;
+    // (A triangle's node: nothing of this work-item's to hand over yet.)
     for (int n = shared[i].parent; n >= 0; n = shared[n].parent) {
-        mem_fence(CLK_GLOBAL_MEM_FENCE);     // this child's refresh before its arrival
         if (atomic_inc(arrivals + (n - num_tris)) != 1u)
             return;                          // the first: the other child is not done, its climb goes on
-        mem_fence(CLK_GLOBAL_MEM_FENCE);
+        acquire_fence();
         refresh_node(shared, heights, n, num_tris, leaf_size);
+        release_fence();                     // the refresh before this node's arrival at its parent
     }
 }
 

@@ -35,6 +35,7 @@
 #define CLRT_BUILD_TREELET_CL
 
 #include "layouts.h"
+#include "fences.cl"
 
 #if !defined(TREELET_LEAVES) || !defined(TREELET_GROUP) || !defined(TREELET_LEVELS) \
     || !defined(TREELET_SMALL_LEAVES) || !defined(TREELET_FULL_MIN)
@@ -348,7 +349,7 @@ void treelet_restructure(global BuildNode* nodes, global int* heights, const glo
                     while (atomic_or(treelet_done + (c - num_tris), 0u) == 0u)
                         ;
             }
-            mem_fence(CLK_GLOBAL_MEM_FENCE);
+            acquire_fence();
         }
         // (A barrier as well as the fences, here and before the flag: PoCL's
         // compiler keeps no memory access on the wrong side of a barrier.)
@@ -414,7 +415,7 @@ void treelet_restructure(global BuildNode* nodes, global int* heights, const glo
         }
         barrier(CLK_GLOBAL_MEM_FENCE);
         if (lid == 0) {
-            mem_fence(CLK_GLOBAL_MEM_FENCE);       // the subtree's writes before the flag
+            release_fence();       // the subtree's writes before the flag
             atomic_xchg(treelet_done + (root - num_tris), 1u);
             const int ticket = atomic_inc(state + STATE_TREELET_TICKET);
             root = ticket < listed ? order[ticket] : -1;
